@@ -1,0 +1,3 @@
+from cdprhost.cli.main import main
+import sys
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""cdprhost.calibration.readers"""

@@ -1,0 +1,1 @@
+"""Small file helpers used by the shells (CLI, wizard, job)."""

@@ -1,0 +1,1 @@
+"""Wire protocol shared by the host and the (simulated) firmware."""

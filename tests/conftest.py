@@ -1,0 +1,45 @@
+"""Shared fixtures: shipped profiles, the fixture G-code, workspace samplers."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import settings
+
+from cdprhost.kinematics import MachineModel
+from cdprhost.profile import load_profile
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("CDPRHOST_SHARED", REPO.parent / "shared"))
+FIXTURE_GCODE = SHARED / "fixtures" / "part-prusaslicer.gcode"
+
+settings.register_profile("ci", max_examples=200, deadline=None)
+settings.register_profile("dev", max_examples=100, deadline=None)
+settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+PAPER_TRUTH_OUTLETS = np.array([(-260.0, -150.111, 78.0), (260.0, -150.111, 78.0), (0.0, 300.222, 78.0)])
+
+
+@pytest.fixture(scope="session")
+def sim_profile():
+    return load_profile("paper-simulation")
+
+
+@pytest.fixture(scope="session")
+def proto_profile():
+    return load_profile("paper-prototype")
+
+
+@pytest.fixture(scope="session")
+def sim_model(sim_profile):
+    return MachineModel.from_profile(sim_profile)
+
+
+@pytest.fixture(scope="session")
+def fixture_gcode() -> Path:
+    if not FIXTURE_GCODE.is_file():
+        pytest.skip(f"fixture not found: {FIXTURE_GCODE}")
+    return FIXTURE_GCODE
