@@ -1,1 +1,16 @@
-"""cdprhost.job"""
+"""The print job: a state machine (``state``), its log (``log``), and the runner.
+
+Public API used by the CLI and the TUI:
+
+- :class:`cdprhost.job.runner.PrintJob` ``(gcode, profile, link_factory, options, on_event)``:
+  ``run() -> PrintResult`` (blocking; run it in a worker thread), and the
+  thread-safe requests ``request_pause()``, ``request_resume()``,
+  ``request_cancel()``. Every change is reported as an event
+  (:mod:`cdprhost.job.state`) through ``on_event``; fold events with
+  ``state.reduce`` into a :class:`~cdprhost.job.state.JobSnapshot` to display.
+- :class:`cdprhost.job.runner.PrintOptions`: resume-from-layer, log path,
+  resume-point folder, heater policy override.
+- :class:`cdprhost.job.runner.PrintResult`: the contract's ``print --json``
+  fields (status, segments, retransmits, final_steps, last_line, last_layer,
+  print_time_s, violations).
+"""

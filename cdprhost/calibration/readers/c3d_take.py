@@ -1,0 +1,112 @@
+"""C3D binary takes through the ``c3d`` package: read into / write from :class:`Take`.
+
+Marker names come from ``POINT:LABELS`` (and ``LABELS2``... for large files), the
+unit from ``POINT:UNITS`` (mm, cm or m), and a negative residual marks a gap.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+
+import numpy as np
+
+from cdprhost.calibration.readers.take import Take, unit_scale
+from cdprhost.errors import InputError
+from cdprhost.fileio.atomic import atomic_open
+
+FORMAT = "c3d"
+
+
+def looks_like_c3d(head: bytes) -> bool:
+    """C3D header: byte 0 points at the parameter block, byte 1 is the key 0x50."""
+    return len(head) >= 2 and head[1] == 0x50 and head[0] >= 1
+
+
+def _labels(reader) -> list[str]:
+    labels: list[str] = []
+    for key in ["LABELS"] + [f"LABELS{i}" for i in range(2, 10)]:
+        param = reader.get(f"POINT:{key}")
+        if param is None:
+            break
+        labels.extend(str(s).strip() for s in param.string_array)
+    return labels
+
+
+def read_c3d(path: str | os.PathLike[str]) -> Take:
+    import c3d
+
+    src = str(path)
+    try:
+        with open(path, "rb") as fh, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            reader = c3d.Reader(fh)
+            n_points = int(reader.point_used)
+            labels = _labels(reader)
+            units_param = reader.get("POINT:UNITS")
+            units = units_param.string_value.strip() if units_param is not None else ""
+            rate = float(reader.point_rate)
+            frames = [p[:, :4].copy() for _, p, _ in reader.read_frames(copy=True)]
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", source=src) from None
+    except InputError:
+        raise
+    except Exception as exc:  # the library raises assorted errors on corrupt files
+        raise InputError(f"not a readable C3D file: {exc}", source=src) from None
+    notes: list[str] = []
+    if len(labels) < n_points:
+        notes.append(f"POINT:LABELS names {len(labels)} of {n_points} points; the rest are called P<n>")
+        labels += [f"P{i + 1}" for i in range(len(labels), n_points)]
+    labels = labels[:n_points]
+    names, keep = _unique(labels, notes)
+    if not units:
+        notes.append("no POINT:UNITS; assumed mm")
+    scale = unit_scale(units or "mm", src, "parameter POINT:UNITS")
+    data = np.array(frames, dtype=float).reshape(len(frames), n_points, 4)[:, keep]
+    positions = data[..., :3] * scale
+    positions[data[..., 3] < 0] = np.nan
+    times = np.arange(len(frames)) / rate if rate > 0 else np.arange(len(frames), dtype=float)
+    if not rate > 0:
+        notes.append("POINT:RATE is not positive; times are frame numbers")
+    return Take(tuple(names), positions, times, src, FORMAT, tuple(notes))
+
+
+def _unique(labels: list[str], notes: list[str]) -> tuple[list[str], list[int]]:
+    names: list[str] = []
+    keep: list[int] = []
+    for i, label in enumerate(labels):
+        if label in names:
+            notes.append(f"duplicate point label {label}; kept the first")
+            continue
+        names.append(label)
+        keep.append(i)
+    return names, keep
+
+
+def write_c3d(path: str | os.PathLike[str], take: Take, *, units: str = "mm", rate_hz: float | None = None) -> None:
+    """Write ``take`` as a float C3D file (gaps get residual -1), atomically."""
+    import c3d
+
+    scale = unit_scale(units, str(path), "units")
+    rate = rate_hz if rate_hz is not None else _rate_of(take.times_s)
+    writer = c3d.Writer(point_rate=float(rate), point_units=units.ljust(4))
+    writer.set_point_labels(list(take.marker_names))
+    pts = np.zeros((take.n_frames, len(take.marker_names), 5), dtype=np.float32)
+    gap = np.isnan(take.positions).any(axis=2)
+    pts[..., :3] = np.where(gap[..., None], 0.0, take.positions / scale)
+    pts[..., 3] = np.where(gap, -1.0, 0.0)
+    pts[..., 4] = np.where(gap, 0.0, 7.0)  # three cameras saw it
+    empty = np.zeros((0, 0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        writer.add_frames([(p, empty) for p in pts])
+        with atomic_open(path, "wb") as fh:
+            writer.write(fh)
+
+
+def _rate_of(times_s: np.ndarray) -> float:
+    if len(times_s) > 1:
+        dt = float(np.median(np.diff(times_s)))
+        if dt > 0:
+            return 1.0 / dt
+    return 120.0

@@ -1,0 +1,30 @@
+"""`cdprhost check FILE.gcode --profile P [--json R]`: preflight, exit 1 on any violation."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from cdprhost.cli.profile_arg import add_profile_argument, load_model
+from cdprhost.fileio.atomic import write_text_atomic
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("check", help="preflight a G-code file: workspace along every move, extrusion, commands")
+    p.add_argument("gcode", metavar="FILE.gcode", help="sliced G-code file")
+    add_profile_argument(p)
+    p.add_argument("--json", metavar="R", help="write the report as JSON to R")
+    p.add_argument("--max-rows", type=int, default=20, help="violations printed (default 20; all are in the JSON)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cdprhost.preflight import preflight
+    from cdprhost.preflight.render import render_text
+
+    profile, model = load_model(args.profile)
+    report = preflight(args.gcode, profile, model)
+    print(render_text(report, max_rows=args.max_rows))
+    if args.json:
+        write_text_atomic(args.json, json.dumps(report.model_dump(mode="json"), indent=1) + "\n")
+    return 0 if report.ok else 1

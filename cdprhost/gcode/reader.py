@@ -1,0 +1,265 @@
+"""`read_program`: stream a G-code file as move chunks and command records, in file order.
+
+Each block of lines is tokenised and resolved with numpy; Python only visits the
+few lines that are not plain moves. Errors name the file, line and column, and are
+raised in file order: everything before the offending line has been yielded.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import replace
+
+import numpy as np
+
+from cdprhost.gcode import annotations, commands, segment
+from cdprhost.gcode.annotations import Annotation, LayerStyle
+from cdprhost.gcode.classify import Classified, Other, Problem, classify
+from cdprhost.gcode.errors import GcodeError
+from cdprhost.gcode.items import LayerChange, MoveChunk, ProgramItem
+from cdprhost.gcode.line_parser import TEXT_COMMANDS, ParsedLine, find_column, parse_line
+from cdprhost.gcode.source import BLOCK_BYTES, BLOCK_LINES, Block, iter_blocks, source_name
+from cdprhost.gcode.state import ModalState
+from cdprhost.gcode.tokenize import Tokens, tokenize
+
+Source = str | os.PathLike[str] | Iterable[str | bytes]
+
+
+def read_program(
+    source: Source,
+    *,
+    arc_tolerance_mm: float = 0.01,
+    chunk_moves: int = 65536,
+    home_position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    name: str | None = None,
+    block_bytes: int = BLOCK_BYTES,
+    block_lines: int = BLOCK_LINES,
+) -> Iterator[ProgramItem]:
+    """Yield `MoveChunk` and command records of ``source`` (a path, or an iterable of lines).
+
+    ``home_position``: where G28 (and the start) puts the effector, in the G-code frame.
+    Chunks end at every command record, after ``chunk_moves`` moves and at block ends.
+    """
+    if not (arc_tolerance_mm > 0 and math.isfinite(arc_tolerance_mm)):
+        raise ValueError(f"arc_tolerance_mm must be a positive number, got {arc_tolerance_mm!r}")
+    if chunk_moves < 1:
+        raise ValueError(f"chunk_moves must be at least 1, got {chunk_moves!r}")
+    path = source_name(source, name)
+    blocks = iter_blocks(source, path, block_bytes=block_bytes, block_lines=block_lines)
+    return _read(blocks, path, ModalState(home=np.asarray(home_position, dtype=float)), arc_tolerance_mm, chunk_moves)
+
+
+def _read(blocks: Iterator[Block], path: str, st: ModalState, tol: float, chunk_moves: int) -> Iterator[ProgramItem]:
+    for block in blocks:
+        yield from _BlockReader(block, path, st, tol, chunk_moves).run()
+    if st.pending_layer is not None:
+        yield st.pending_layer
+        st.pending_layer = None
+
+
+class _BlockReader:
+    """Reads one block against the shared modal state."""
+
+    def __init__(self, block: Block, path: str, st: ModalState, tol: float, chunk_moves: int):
+        self.data = block.data
+        self.first = block.first_line
+        self.path = path
+        self.st = st
+        self.tol = tol
+        self.chunk_moves = chunk_moves
+        self._lines: list[bytes] | None = None
+
+    # -- helpers -------------------------------------------------------------
+    def text(self, index: int) -> str:
+        if self._lines is None:
+            self._lines = self.data.split(b"\n")
+        return self._lines[index].decode("utf-8", "surrogateescape")
+
+    def error(self, index: int, reason: str, letter: str | None = None, occurrence: int = 0) -> GcodeError:
+        column = find_column(self.text(index), letter, occurrence) if letter else 0
+        return GcodeError(self.path, self.first + index, column, reason)
+
+    # -- the block -----------------------------------------------------------
+    def run(self) -> Iterator[ProgramItem]:
+        st = self.st
+        anns = annotations.scan(self.data)
+        if st.layer_style is None and anns:  # undecided until annotations or an extruding move
+            st.layer_style = annotations.choose_style(anns)
+        tok = tokenize(annotations.strip_comments(self.data))
+        texts: dict[int, str] = {}
+        slow_error: GcodeError | None = None
+        if tok.slow.size:
+            tok, texts, slow_error = self._slow_lines(tok)
+        cls = classify(tok, self.first, texts)
+        stop, error = self._first_error(cls, slow_error)
+        events: list[tuple[int, int, object]] = [(o.index, 1, o) for o in cls.others if o.index < stop]
+        events += [(a.index, 0, a) for a in anns if a.index < stop and self._counts(a)]
+        events.sort(key=lambda e: (e[0], e[1]))
+        rows = cls.rows
+        if stop < tok.n_lines:
+            rows = rows.part(0, int(np.searchsorted(rows.line, self.first + stop)))
+        yield from self._walk(rows, events)
+        if error is not None:
+            raise error
+
+    def _counts(self, a: Annotation) -> bool:
+        style = self.st.layer_style
+        if style is LayerStyle.PRUSA:
+            return a.tag in ("LAYER_CHANGE", "Z:")
+        return style is LayerStyle.CURA and a.tag == "LAYER:"
+
+    def _first_error(self, cls: Classified, slow_error: GcodeError | None) -> tuple[int, GcodeError | None]:
+        p: Problem | None = cls.problem
+        error = None
+        if p is not None:
+            error = self.error(p.index, p.reason, p.letter, p.occurrence)
+        if slow_error is not None and (error is None or slow_error.line < error.line):
+            error = slow_error
+        if error is None:
+            return 1 << 62, None
+        return error.line - self.first, error
+
+    def _slow_lines(self, tok: Tokens) -> tuple[Tokens, dict[int, str], GcodeError | None]:
+        """Parse the slow lines exactly; check N numbers; merge their words into ``tok``."""
+        lines, letters, values = [], [], []
+        texts: dict[int, str] = {}
+        error = None
+        st = self.st
+        for index in tok.slow.tolist():
+            number = self.first + index
+            text = self.text(index)
+            try:
+                parsed = parse_line(
+                    text, number, self.path, strict_params=commands.KNOWN, flag_commands=commands.FLAG_COMMANDS
+                )
+                self._line_number(parsed, text, number)
+            except GcodeError as exc:
+                error = exc
+                break
+            for w in parsed.words:
+                lines.append(index)
+                letters.append(ord(w.letter))
+                values.append(math.nan if w.value is None else w.value)
+            if parsed.text is not None:
+                texts[index] = parsed.text
+        if lines:
+            line = np.concatenate([tok.line, np.asarray(lines, dtype=np.int64)])
+            order = np.argsort(line, kind="stable")
+            letter = np.concatenate([tok.letter, np.asarray(letters, dtype=np.uint8)])[order]
+            value = np.concatenate([tok.value, np.asarray(values, dtype=np.float64)])[order]
+            tok = Tokens(line[order], letter, value, tok.n_lines, tok.slow)
+        return tok, texts, error
+
+    def _line_number(self, parsed: ParsedLine, text: str, number: int) -> None:
+        """N words go up by one; ``M110 N<n>`` (or the N of its line) restarts the count."""
+        st = self.st
+        if parsed.n is not None:
+            if st.next_n is not None and parsed.n != st.next_n:
+                reason = f"line number N{parsed.n} out of sequence (expected N{st.next_n})"
+                raise GcodeError(self.path, number, find_column(text, "N"), reason)
+            st.next_n = parsed.n + 1
+        if parsed.words and parsed.words[0].raw == "M110":
+            reset = next((w.value for w in parsed.words[1:] if w.letter == "N" and w.value is not None), None)
+            if reset is not None:
+                st.next_n = int(reset) + 1
+
+    # -- in-order walk ---------------------------------------------------------
+    def _walk(self, rows: segment.Rows, events: list[tuple[int, int, object]]) -> Iterator[ProgramItem]:
+        """Runs of rows between modal commands are resolved at once; events are cut in."""
+        row_index = rows.line - self.first
+        r0 = 0
+        passive: list[tuple[int, int, object]] = []
+        for ev in events:
+            if ev[1] == 1 and commands.is_modal(ev[2]):
+                r1 = int(np.searchsorted(row_index, ev[0]))
+                yield from self._run(rows.part(r0, r1), passive)
+                passive, r0 = [], r1
+                yield from self._command(ev[2])
+            else:
+                passive.append(ev)
+        yield from self._run(rows.part(r0, len(rows)), passive)
+
+    def _run(self, rows: segment.Rows, events: list[tuple[int, int, object]]) -> Iterator[ProgramItem]:
+        st = self.st
+        moves = None
+        error = None
+        if len(rows):
+            layer_lines = np.asarray(
+                [self.first + i for i, kind, a in events if kind == 0 and a.tag in _LAYER_TAGS], dtype=np.int64
+            )
+            res = segment.compute(rows, st, self.tol, layer_lines)
+            moves, error = res.moves, res.error
+            if res.layer_starts:
+                events = sorted(events + [(lc.line - self.first, 0, lc) for lc in res.layer_starts], key=lambda e: e[0])
+        done = 0
+        for index, _, payload in events:
+            line = self.first + index
+            if error is not None and line >= error[0]:
+                break
+            if moves is not None:
+                cut = int(np.searchsorted(moves.line, line))
+                yield from self._chunks(moves, done, cut)
+                done = cut
+            yield from self._event(index, payload)
+        if error is not None:
+            cut = int(np.searchsorted(moves.line, error[0]))
+            yield from self._chunks(moves, done, cut)
+            raise self.error(error[0] - self.first, error[1], "G")
+        if moves is not None:
+            yield from self._chunks(moves, done, len(moves))
+
+    def _chunks(self, moves: MoveChunk, a: int, b: int) -> Iterator[ProgramItem]:
+        if a >= b:
+            return
+        if self.st.pending_layer is not None:
+            yield self.st.pending_layer
+            self.st.pending_layer = None
+        if a == 0 and b == len(moves) and b <= self.chunk_moves:
+            yield moves
+            return
+        for s in range(a, b, self.chunk_moves):
+            e = min(s + self.chunk_moves, b)
+            yield MoveChunk(*(getattr(moves, f)[s:e] for f in segment._FIELDS))
+
+    def _event(self, index: int, payload) -> Iterator[ProgramItem]:
+        st = self.st
+        if isinstance(payload, Other):
+            yield from self._command(payload)
+        elif isinstance(payload, LayerChange):  # detected from heights
+            st.layer = payload.index
+            yield from self._flush_layer()
+            yield payload
+        elif payload.tag == "Z:":
+            if st.pending_layer is not None:
+                yield replace(st.pending_layer, z=payload.value)
+                st.pending_layer = None
+        else:
+            yield from self._flush_layer()
+            st.layer += 1
+            st.pending_layer = LayerChange(self.first + index, st.layer, None)
+
+    def _command(self, other: Other) -> Iterator[ProgramItem]:
+        line = self.first + other.index
+
+        def fail(reason: str, letter: str | None = None):
+            if other.word not in reason:
+                reason = f"{reason} in {other.word}"
+            raise self.error(other.index, reason, letter)
+
+        if other.word in TEXT_COMMANDS and other.text is None:  # e.g. "M117 X5" took the fast path
+            text = parse_line(self.text(other.index), line, self.path).text
+            other = replace(other, text=text)
+        item = commands.apply(other, line, self.st, fail)
+        if item is not None:
+            yield from self._flush_layer()
+            yield item
+
+    def _flush_layer(self) -> Iterator[ProgramItem]:
+        if self.st.pending_layer is not None:
+            yield self.st.pending_layer
+            self.st.pending_layer = None
+
+
+_LAYER_TAGS = ("LAYER_CHANGE", "LAYER:")

@@ -1,0 +1,83 @@
+"""`ProgramSummary`: counts and totals over the reader's items, and line -> layer lookup."""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cdprhost.gcode.items import LayerChange, MoveChunk, MoveKind, ProgramItem, Unknown
+
+
+@dataclass
+class ProgramSummary:
+    """Accumulates over items (``add`` or the pass-through ``observe``).
+
+    ``filament_mm``: filament fed during extruding moves (what slicers report as
+    "filament used"); ``retracted_mm``: total pulled back by retractions and wipes.
+    ``layer_start_lines[i]`` is the line where layer ``i`` starts.
+    """
+
+    moves: int = 0
+    filament_mm: float = 0.0
+    retracted_mm: float = 0.0
+    travel_mm: float = 0.0
+    extrude_path_mm: float = 0.0
+    last_line: int = 0
+    layer_start_lines: list[int] = field(default_factory=list)
+    unknown: list[Unknown] = field(default_factory=list)
+    extrude_min: np.ndarray | None = None  # (3,) bounds of extruding moves
+    extrude_max: np.ndarray | None = None
+
+    @property
+    def layers(self) -> int:
+        return len(self.layer_start_lines)
+
+    @classmethod
+    def of(cls, items: Iterable[ProgramItem]) -> ProgramSummary:
+        """Summary of all ``items`` (consumes them)."""
+        s = cls()
+        for item in items:
+            s.add(item)
+        return s
+
+    def observe(self, items: Iterable[ProgramItem]) -> Iterator[ProgramItem]:
+        """Yield ``items`` unchanged while accumulating them."""
+        for item in items:
+            self.add(item)
+            yield item
+
+    def add(self, item: ProgramItem) -> None:
+        if isinstance(item, MoveChunk):
+            self._add_moves(item)
+        else:
+            self.last_line = max(self.last_line, item.line)
+            if isinstance(item, LayerChange):
+                self.layer_start_lines.append(item.line)
+            elif isinstance(item, Unknown):
+                self.unknown.append(item)
+
+    def _add_moves(self, c: MoveChunk) -> None:
+        n = len(c)
+        if n == 0:
+            return
+        self.moves += n
+        self.last_line = max(self.last_line, int(c.line[-1]))
+        de = c.de
+        extruding = c.kind == MoveKind.EXTRUDE
+        self.filament_mm += float(de[extruding].sum())
+        self.retracted_mm -= float(de[de < 0].sum())
+        length = c.length
+        self.extrude_path_mm += float(length[extruding].sum())
+        self.travel_mm += float(length[(c.kind == MoveKind.TRAVEL) | (c.kind == MoveKind.Z_ONLY)].sum())
+        if extruding.any():
+            pts = np.concatenate([c.start[extruding], c.end[extruding]])
+            lo, hi = pts.min(axis=0), pts.max(axis=0)
+            self.extrude_min = lo if self.extrude_min is None else np.minimum(self.extrude_min, lo)
+            self.extrude_max = hi if self.extrude_max is None else np.maximum(self.extrude_max, hi)
+
+    def layer_of_line(self, line: int) -> int:
+        """Layer that source ``line`` belongs to (-1 before the first layer)."""
+        return bisect.bisect_right(self.layer_start_lines, line) - 1

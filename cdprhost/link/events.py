@@ -1,0 +1,142 @@
+"""What the link tells its users: identity, progress, status, events, counters."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+from firmware_protocol.messages import Error, ErrorCode, Event, EventCode, Flag, Ident, Status
+
+
+@dataclass(frozen=True)
+class Identity:
+    protocol: tuple[int, int]
+    firmware_name: str
+    firmware_version: str
+    axes: int
+    queue_capacity: int
+    clock_hz: int
+    max_step_rate: int
+    max_payload: int
+    boot_id: int
+    heaters: int
+    fans: int
+
+    @classmethod
+    def from_message(cls, m: Ident) -> "Identity":
+        return cls((m.major, m.minor), m.firmware_name, m.firmware_version, m.axes, m.queue_capacity, m.clock_hz,
+                   m.max_step_rate, m.max_payload, m.boot_id, m.heaters, m.fans)
+
+
+@dataclass(frozen=True)
+class Progress:
+    """Executed so far (device counters since boot): queue items and move segments."""
+
+    items_done: int
+    segments_done: int
+    queue_free: int
+    flags: int
+
+    @property
+    def moving(self) -> bool:
+        return bool(self.flags & Flag.MOVING)
+
+    @property
+    def fault(self) -> bool:
+        return bool(self.flags & Flag.FAULT)
+
+
+@dataclass(frozen=True)
+class DeviceStatus:
+    flags: int
+    queue_free: int
+    items_done: int
+    segments_done: int
+    motion_time_s: float
+    steps: tuple[int, int, int, int]
+    hotend_c: float
+    hotend_target_c: float
+    bed_c: float
+    bed_target_c: float
+    fan: int
+    enabled_mask: int
+    homed_mask: int
+    last_error: int
+    device_bad_frames: int
+    device_retransmits: int
+    device_naks_sent: int
+    device_duplicates: int
+    received_at: float  # host link time
+
+    @classmethod
+    def from_message(cls, m: Status, identity: Identity | None, now: float) -> "DeviceStatus":
+        clock = identity.clock_hz if identity else 100_000
+        return cls(m.flags, m.queue_free, m.items_done, m.segments_done, m.motion_ticks / clock, m.steps,
+                   m.hotend_dc / 10, m.hotend_target_dc / 10, m.bed_dc / 10, m.bed_target_dc / 10, m.fan,
+                   m.enabled_mask, m.homed_mask, m.last_error, m.bad_frames, m.retransmits, m.naks_sent,
+                   m.duplicates, now)
+
+
+@dataclass(frozen=True)
+class DeviceEvent:
+    """HOMED (values: the three module positions), HEATER_REACHED (heater, temp in 0.1 C), FAULT_CLEARED."""
+
+    name: str
+    item: int
+    values: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class DeviceErrorEvent:
+    name: str
+    code: int
+    item: int
+    segment: int
+    axis: int
+    value: int
+    text: str
+
+
+@dataclass(frozen=True)
+class LinkCounters:
+    retransmits: int
+    timeouts: int
+    naks_received: int
+    naks_sent: int
+    bad_frames: int
+    frames_sent: int
+    frames_received: int
+    bytes_sent: int
+    bytes_received: int
+    duplicates: int
+
+
+LinkEvent = Union[Progress, DeviceEvent, DeviceErrorEvent]
+
+
+def _name(enum, code: int) -> str:
+    try:
+        return enum(code).name.lower()
+    except ValueError:
+        return f"code_{code}"
+
+
+def error_text(m: Error) -> str:
+    name = _name(ErrorCode, m.code)
+    axis = "" if m.axis == 0xFF else f", axis {m.axis}"
+    detail = {
+        ErrorCode.UNDERRUN: "the move queue ran empty while moving",
+        ErrorCode.THERMAL_RUNAWAY: f"heater temperature {m.value / 10:g} C not following its target",
+        ErrorCode.ENDSTOP_HIT: f"endstop hit during motion at physical step {m.value}",
+        ErrorCode.STEP_RATE: f"step rate {m.value}/s over the limit",
+        ErrorCode.OVERTEMP: f"temperature {m.value / 10:g} C over the maximum",
+        ErrorCode.HEATER_RANGE: f"target {m.value / 10:g} C over the maximum",
+        ErrorCode.HOMING_FAILED: f"no endstop within travel ({m.value} steps)",
+    }.get(m.code, "")
+    return f"{name} at item {m.item}, segment {m.segment}{axis}" + (f": {detail}" if detail else "")
+
+
+def device_event(m: Error | Event) -> DeviceEvent | DeviceErrorEvent:
+    if isinstance(m, Error):
+        return DeviceErrorEvent(_name(ErrorCode, m.code), m.code, m.item, m.segment, m.axis, m.value, error_text(m))
+    return DeviceEvent(_name(EventCode, m.code), m.item, m.values)

@@ -1,0 +1,90 @@
+"""A pyserial port as a byte transport: opened exclusively, every failure named.
+
+``open_serial(port, baud)`` accepts a device path or any pyserial URL
+(``loop://``, ``socket://host:port``, ``rfc2217://...``). Errors: PortNotFound,
+PortBusy (another process holds it), PortVanished (unplugged, EIO), LinkError
+(permission and everything else).
+"""
+
+from __future__ import annotations
+
+import errno
+import time
+
+import serial
+
+from cdprhost.link.errors import LinkError, PortBusy, PortNotFound, PortVanished
+
+READ_SLICE_S = 0.02
+
+
+def _open_error(port: str, exc: Exception) -> LinkError:
+    code = getattr(exc, "errno", None)
+    text = str(exc)
+    if "exclusively lock" in text or code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK):
+        return PortBusy(f"{port}: port is in use by another program (close it, or check with `fuser {port}`)")
+    if code == errno.ENOENT or "No such file" in text:
+        return PortNotFound(f"{port}: no such port (is the device plugged in? try `ls /dev/tty*`)")
+    if code == errno.EACCES:
+        return LinkError(f"{port}: permission denied (add yourself to the 'dialout' group)")
+    return LinkError(f"{port}: cannot open: {text}")
+
+
+class SerialTransport:
+    """Byte transport over an open pyserial port (``write``, ``read``, ``now``, ``close``)."""
+
+    def __init__(self, ser: serial.SerialBase, name: str):
+        self._ser = ser
+        self.name = name
+
+    def now(self) -> float:
+        return time.monotonic()
+
+    def write(self, data: bytes) -> None:
+        try:
+            self._ser.write(data)
+        except serial.SerialTimeoutException:
+            raise LinkError(f"{self.name}: write timed out (flow control stuck or device not reading)") from None
+        except (serial.SerialException, OSError) as exc:
+            raise PortVanished(f"{self.name}: port failed on write ({exc}); was it unplugged?") from None
+
+    def read(self, timeout: float) -> bytes:
+        """Bytes available now, or the first ones to arrive within ``timeout`` seconds."""
+        deadline = time.monotonic() + max(0.0, timeout)
+        try:
+            while True:
+                waiting = self._ser.in_waiting
+                if waiting:
+                    return self._ser.read(waiting)
+                if time.monotonic() >= deadline:
+                    return b""
+                data = self._ser.read(1)  # blocks at most READ_SLICE_S
+                if data:
+                    more = self._ser.in_waiting
+                    return data + (self._ser.read(more) if more else b"")
+        except (serial.SerialException, OSError) as exc:
+            raise PortVanished(f"{self.name}: port failed on read ({exc}); was it unplugged?") from None
+
+    def close(self) -> None:
+        try:
+            self._ser.close()
+        except (serial.SerialException, OSError):
+            pass
+
+
+def open_serial(port: str, baud: int = 250_000, *, write_timeout_s: float = 2.0) -> SerialTransport:
+    """Open ``port`` exclusively (device path or pyserial URL) and drop stale input."""
+    try:
+        ser = serial.serial_for_url(port, do_not_open=True)
+        ser.baudrate = baud
+        ser.timeout = READ_SLICE_S
+        ser.write_timeout = write_timeout_s
+        ser.exclusive = True
+        ser.open()
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise _open_error(port, exc) from None
+    try:
+        ser.reset_input_buffer()
+    except (serial.SerialException, OSError):
+        pass
+    return SerialTransport(ser, port)

@@ -1,0 +1,1 @@
+"""Adapters between the UI and the lower layers (no drawing here)."""

@@ -1,0 +1,169 @@
+"""The calibration wizard (:mod:`cdprhost.calibration.wizard`) behind the calibrate screen.
+
+The wizard's own state machine decides what comes next; this adapter lets the
+screen trigger each step (move, ingest a take, identify) and reports the
+outcome as views. The take of a pose is the file the user names; with the
+embedded simulated device and virtual motion capture the newest take in the
+mocap folder is offered.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cdprhost.errors import CdprError, InputError
+from cdprhost.tui.control.views import CalibrationView, IdentificationView, ParameterRow, PoseView
+
+if TYPE_CHECKING:  # pragma: no cover
+    from cdprhost.tui.control.live import LiveBackend
+
+DEFAULT_SESSION = "calibration-session"
+
+
+class _GivenTake:
+    """TakeSource that hands the wizard the file the user picked."""
+
+    def __init__(self) -> None:
+        self.path: Path | None = None
+
+    def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
+        if self.path is None:
+            raise InputError("no take file given")
+        return self.path
+
+
+def _point(p: Any) -> tuple[float, float, float]:
+    return tuple(float(v) for v in np.asarray(p, dtype=float).reshape(3))  # type: ignore[return-value]
+
+
+def identification_view(result: Any, profile_path: str = "") -> IdentificationView:
+    """An :class:`~cdprhost.calibration.identification.Identification` as rows and totals."""
+    before = np.concatenate([result.nominal.outlets.ravel(), result.nominal.initial_lengths])
+    after = np.concatenate([result.geometry.outlets.ravel(), result.geometry.initial_lengths])
+    rows = tuple(
+        ParameterRow(name, float(before[i]), float(after[i]),
+                     float(result.stderr[i]) if np.isfinite(result.stderr[i]) else None,
+                     float(result.ci95[i][0]) if np.isfinite(result.ci95[i][0]) else None,
+                     float(result.ci95[i][1]) if np.isfinite(result.ci95[i][1]) else None)
+        for i, name in enumerate(result.names)
+    )
+    warnings = tuple(result.problems())
+    if result.correlations:
+        worst = max(result.correlations, key=lambda c: abs(c[2]))
+        warnings += (f"{len(result.correlations)} parameter pair(s) correlate above 0.95 "
+                     f"(strongest {worst[0]} / {worst[1]}: {worst[2]:.3f}); check poses tell how well it predicts",)
+    return IdentificationView(rows, float(result.rms_before_mm), float(result.rms_after_mm), int(result.iterations),
+                              int(result.poses_used), result.check_rms_before_mm, result.check_rms_after_mm,
+                              warnings, profile_path)
+
+
+class LiveCalibration:
+    def __init__(self, backend: LiveBackend, *, mocap_dir: str | None = None):
+        self.backend = backend
+        observer = backend.sim_options.get("observer")
+        self.mocap_dir = mocap_dir or (str(observer.directory) if observer is not None else None)
+        self.wizard: Any = None
+        self.source = _GivenTake()
+        self.messages: list[str] = []
+
+    # --------------------------------------------------------------- views
+    def _view(self, stage: str, message: str = "", current: int | None = None) -> CalibrationView:
+        w = self.wizard
+        state, plan = w.state, w.plan
+        poses = []
+        for i, p in enumerate(plan.poses):
+            status = "take ok" if i in state.recorded else "skipped" if i in state.skipped else "planned"
+            detail = ""
+            if i == state.at and status == "planned":
+                status = "settled"
+                detail = state.last_problem or ""
+            poses.append(PoseView(i + 1, _point(p), str(plan.roles[i]), status, detail))
+        return CalibrationView(stage, tuple(poses), current, str(w.dir), tuple(sorted(plan.indices.items())),
+                               None, message)
+
+    def _pose(self, index: int) -> PoseView:
+        return self._view("measuring").poses[index - 1]
+
+    def _log(self, text: str) -> None:
+        self.messages.append(text)
+
+    # ---------------------------------------------------------------- steps
+    def plan(self, n_fit: int, n_check: int, session_dir: str | None) -> CalibrationView:
+        from cdprhost.calibration.wizard import CalibrationWizard, LinkDevice, WizardOptions
+
+        b = self.backend
+        mocap = None
+        if b.sim_options.get("observer") is not None:
+            from firmware_protocol.device.virtual_mocap import mocap_config
+
+            mocap = mocap_config(b.profile_name).mocap
+        device = LinkDevice(b.link, b.profile, b.model)
+        self.wizard = CalibrationWizard(session_dir or DEFAULT_SESSION, b.profile, device, self.source, mocap=mocap,
+                                        options=WizardOptions(n_poses=n_fit, n_check=n_check), log=self._log,
+                                        profile_ref=b.profile_name)
+        return self._view("planned", self.messages[-1] if self.messages else "")
+
+    def _require(self, kind: type, index: int | None = None) -> Any:
+        if self.wizard is None:
+            raise CdprError("plan the poses first (n)")
+        action = self.wizard.state.next_action()
+        if not isinstance(action, kind) or (index is not None and action.index != index - 1):
+            raise CdprError(f"the wizard expects {type(action).__name__} next, not {kind.__name__}")
+        return action
+
+    def move_to(self, pose: PoseView) -> PoseView:
+        from cdprhost.calibration.wizard import MoveTo
+
+        self._require(MoveTo, pose.index)
+        self._sync_device()
+        seen = self._takes()
+        self.wizard.step()
+        new = sorted(set(self._takes()) - set(seen), key=lambda p: p.stat().st_mtime)
+        view = self._pose(pose.index)
+        return PoseView(view.index, view.point, view.role, "settled", "settled: record a take",
+                        take=str(new[-1]) if new else "")
+
+    def _sync_device(self) -> None:
+        """Start the wizard's planner from where the device really is (the user may have jogged)."""
+        from cdprhost.motion.segments import SegmentState
+
+        b, device = self.backend, self.wizard.device
+        status = b.device_status()
+        if status is None or not status.homed or status.position is None:
+            return
+        device.segmenter.state = SegmentState(np.asarray(status.steps, dtype=np.int64),
+                                              np.asarray(status.position, dtype=float), np.ones(3))
+        device.homed = True
+
+    def _takes(self) -> list[Path]:
+        if not self.mocap_dir or not Path(self.mocap_dir).is_dir():
+            return []
+        return [p for p in Path(self.mocap_dir).iterdir() if p.is_file()]
+
+    def ingest(self, pose: PoseView, take_path: str) -> PoseView:
+        from cdprhost.calibration.wizard import RecordTake
+
+        self._require(RecordTake, pose.index)
+        self.source.path = Path(take_path)
+        before = len(self.messages)
+        self.wizard.step()
+        view = self._pose(pose.index)
+        if view.status == "take ok":
+            detail = self.messages[-1].split(": ", 1)[-1] if len(self.messages) > before else "recorded"
+            return PoseView(view.index, view.point, view.role, "take ok", detail)
+        problem = self.wizard.state.last_problem or "rejected"
+        status = "skipped" if view.status == "skipped" else "rejected"
+        return PoseView(view.index, view.point, view.role, status, problem)
+
+    def identify(self) -> IdentificationView:
+        from cdprhost.calibration.wizard import Identify
+
+        self._require(Identify)
+        self.wizard.step()
+        outcome = self.wizard.outcome
+        if outcome.identification is None:
+            raise CdprError("identification did not run")
+        return identification_view(outcome.identification, str(outcome.profile_path or ""))

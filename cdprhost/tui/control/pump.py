@@ -1,0 +1,42 @@
+"""A thread-safe hand-over of job events from worker threads to the UI thread.
+
+Workers ``put`` events tagged with their job id; the first put after a drain
+calls ``wake`` (which posts one message to the app). The UI thread ``drain``s
+everything queued, in order, and folds it with the job reducer. So there is one
+writer of UI state (the UI thread), events keep their order, a burst costs one
+repaint, and events of a job the UI has already left are recognisable by id.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+
+class EventPump:
+    def __init__(self, wake: Callable[[], Any]):
+        self._wake = wake
+        self._items: deque[tuple[int, Any]] = deque()
+        self._lock = threading.Lock()
+        self._pending = False
+
+    def put(self, job_id: int, event: Any) -> None:
+        with self._lock:
+            self._items.append((job_id, event))
+            if self._pending:
+                return
+            self._pending = True
+        self._wake()
+
+    def sink(self, job_id: int) -> Callable[[Any], None]:
+        """An ``on_event`` callback bound to one job id."""
+        return lambda event: self.put(job_id, event)
+
+    def drain(self) -> list[tuple[int, Any]]:
+        with self._lock:
+            items = list(self._items)
+            self._items.clear()
+            self._pending = False
+        return items

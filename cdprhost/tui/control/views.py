@@ -1,0 +1,141 @@
+"""Plain, immutable data the screens display.
+
+Backends (the real layers or test fakes) return these; the UI never reads the
+lower layers' own objects directly, so a change below touches one adapter only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class PortChoice:
+    """A port the user can pick: ``port`` is what ``connect`` receives."""
+
+    port: str
+    label: str
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class Violation:
+    line: int
+    rule: str
+    detail: str
+    point: Vec3 | None = None
+
+
+@dataclass(frozen=True)
+class PreflightView:
+    """Result of checking a G-code file before printing."""
+
+    path: str
+    ok: bool
+    violations: tuple[Violation, ...] = ()
+    moves: int = 0
+    layers: int = 0
+    estimated_time_s: float = 0.0
+    filament_mm: float = 0.0
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class DeviceStatus:
+    """What the device reports while no job runs (jog screen, idle panels)."""
+
+    steps: tuple[int, int, int, int] | None = None
+    sliders: Vec3 | None = None
+    position: Vec3 | None = None
+    hotend: float | None = None
+    bed: float | None = None
+    hotend_target: float = 0.0
+    bed_target: float = 0.0
+    motors_on: bool = False
+    homed: bool = False
+    queue_free: int | None = None
+
+
+@dataclass(frozen=True)
+class JogCheck:
+    """Feasibility of a jog target, known before anything moves."""
+
+    target: Vec3
+    ok: bool
+    reason: str = ""
+    target_ok: bool = True  # False: the target itself is infeasible (not only the path to it)
+
+
+# ----------------------------------------------------------------- calibration
+
+
+@dataclass(frozen=True)
+class PoseView:
+    index: int  # 1-based
+    point: Vec3
+    role: str = "fit"  # fit | check
+    status: str = "planned"  # planned | moving | settled | take ok | rejected | done
+    detail: str = ""
+    measured: Vec3 | None = None
+    take: str = ""  # a take file waiting for this pose (virtual motion capture), offered to the user
+
+
+@dataclass(frozen=True)
+class ParameterRow:
+    name: str
+    before: float
+    after: float
+    stderr: float | None = None
+    ci_low: float | None = None
+    ci_high: float | None = None
+
+
+@dataclass(frozen=True)
+class IdentificationView:
+    rows: tuple[ParameterRow, ...]
+    rms_before_mm: float
+    rms_after_mm: float
+    iterations: int = 0
+    poses_used: int = 0
+    check_before_mm: float | None = None
+    check_after_mm: float | None = None
+    warnings: tuple[str, ...] = ()
+    profile_path: str = ""
+
+
+@dataclass(frozen=True)
+class CalibrationView:
+    stage: str = "idle"  # idle | planning | planned | measuring | identifying | done | error
+    poses: tuple[PoseView, ...] = ()
+    current: int | None = None  # index of the pose awaiting a take
+    session_dir: str = ""
+    indices: tuple[tuple[str, float], ...] = ()  # observability indices of the plan
+    result: IdentificationView | None = None
+    message: str = ""
+
+
+# ------------------------------------------------------------------- diagnosis
+
+
+@dataclass(frozen=True)
+class CandidateRow:
+    name: str
+    p_value: float | None
+    delta_bic: float | None
+    heldout_rms_mm: float | None
+
+
+@dataclass(frozen=True)
+class DiagnosisView:
+    verdict: str  # named | none | ambiguous | unexplained
+    effect: str | None
+    where: str
+    candidates: tuple[CandidateRow, ...]
+    heldout_rms_before_mm: float
+    heldout_rms_after_mm: float
+    noise_floor_mm: float
+    per_pose_before_mm: tuple[float, ...] = ()
+    per_pose_after_mm: tuple[float, ...] = ()
+    parameters: tuple[tuple[str, str], ...] = field(default=())

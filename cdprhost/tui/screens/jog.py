@@ -1,0 +1,162 @@
+"""The jog screen: step the effector, seeing first whether the target is feasible."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal
+from textual.widgets import Input, Label
+
+from cdprhost.tui.control.jog import STEPS_MM
+from cdprhost.tui.screens.base import AppScreen
+from cdprhost.tui.state import UiState, live_position
+from cdprhost.tui.widgets.position_panel import PositionPanel
+from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
+from cdprhost.tui.widgets.tension_bars import TensionBars
+
+KEYS_HELP = "←→ x  ↓↑ y  PgDn/PgUp z  1-4 step size  Enter move  Esc clear"
+
+
+def target_text(state: UiState) -> Text:
+    jog = state.jog
+    out = Text("target  ", style="bold")
+    if jog is None:
+        return out.append("none: press an arrow key", style="dim")
+    out.append("({:.2f}, {:.2f}, {:.2f}) mm  ".format(*jog.target))
+    if jog.ok:
+        return out.append("feasible · Enter moves", style="bold green")
+    return out.append(f"NOT feasible · {jog.reason}", style="bold red")
+
+
+class JogScreen(AppScreen):
+    MODE = "jog"
+    AUTO_FOCUS = ""
+    BINDINGS = [
+        Binding("left", "jog('x', -1)", "x-", show=False),
+        Binding("right", "jog('x', 1)", "x+", show=False),
+        Binding("down", "jog('y', -1)", "y-", show=False),
+        Binding("up", "jog('y', 1)", "y+", show=False),
+        Binding("pagedown", "jog('z', -1)", "z-", show=False),
+        Binding("pageup", "jog('z', 1)", "z+", show=False),
+        *(Binding(str(i + 1), f"step({i})", f"{s:g} mm", show=False) for i, s in enumerate(STEPS_MM)),
+        Binding("enter", "go", "Move"),
+        Binding("escape", "clear", "Clear", show=False),
+        Binding("h", "home", "Home"),
+        Binding("m", "motors_off", "Motors off"),
+        Binding("t", "heaters", "Set heaters"),
+    ]
+
+    def __init__(self) -> None:
+        super().__init__(id="jog-screen")
+        self.step_index = 1
+
+    def compose_body(self) -> ComposeResult:
+        statics = self.app.backend.model.statics
+        with Horizontal(id="jog-top"):
+            yield PositionPanel(id="jog-position")
+            yield TensionBars(statics.t_min, statics.t_max, id="jog-tensions")
+        yield Label(id="jog-step")
+        yield Label(id="jog-target")
+        yield Label(KEYS_HELP, id="jog-help")
+        yield Label(id="jog-busy")
+        with Horizontal(id="heater-row"):
+            yield Label("hotend °C ")
+            yield Input("0", type="number", compact=True, id="hotend-input")
+            yield Label(" bed °C ")
+            yield Input("0", type="number", compact=True, id="bed-input")
+            yield Label("  t sets both", classes="hint")
+        yield TemperatureGraph(id="jog-temperatures")
+
+    def on_mount(self) -> None:
+        super().on_mount()
+
+    def render_state(self, state: UiState) -> None:
+        position, sliders, _ = live_position(state)
+        steps = state.device.steps if state.device else None
+        self.query_one(PositionPanel).show(position, sliders, steps)
+        self.query_one("#jog-step", Label).update(
+            Text.assemble(("step  ", "bold"), *((f" {s:g} ", "reverse" if i == self.step_index else "dim")
+                                                 for i, s in enumerate(STEPS_MM)), ("  mm", "dim")))
+        self.query_one("#jog-target", Label).update(target_text(state))
+        busy = state.busy or ("print running: jog disabled" if state.job_active else "")
+        if not state.connected:
+            busy = "not connected"
+        self.query_one("#jog-busy", Label).update(Text(busy, style="yellow"))
+        target = state.jog.target if state.jog is not None else position
+        self.query_one(TensionBars).show(self.screen_tensions(target))
+        dev = state.device
+        graph = self.query_one(TemperatureGraph)
+        if dev is None:
+            graph.show((None, None), (0.0, 0.0), ())
+        else:
+            graph.show((dev.hotend, dev.bed), (dev.hotend_target, dev.bed_target), state.device_temps)
+
+    def screen_tensions(self, point: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        """Static tensions at the pending target (or the current position)."""
+        if point is None:
+            return None
+        import numpy as np
+
+        from cdprhost.kinematics import tensions
+
+        model = self.app.backend.model
+        t = tensions(np.asarray([point], dtype=float), model.geometry.outlets, model.statics)[0]
+        return tuple(float(v) for v in t) if np.all(np.isfinite(t)) else None
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        self.action_heaters()
+
+    # ------------------------------------------------------------ actions
+    def _can_move(self) -> bool:
+        s = self.app.state
+        return s.connected and not s.job_active and not s.busy
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action in ("go", "home", "motors_off", "heaters"):
+            if not self._can_move():
+                return None
+            if action == "go":
+                return True if self.app.state.jog is not None and self.app.state.jog.ok else None
+        return True
+
+    def action_jog(self, axis: str, sign: int) -> None:
+        if self._can_move():
+            self.app.controller.preview_jog(axis, sign * STEPS_MM[self.step_index])
+
+    def action_step(self, index: int) -> None:
+        self.step_index = index
+        self.render_state(self.app.state)
+
+    def action_go(self) -> None:
+        if self._can_move():
+            self.app.controller.jog_go()
+
+    def action_clear(self) -> None:
+        self.set_focus(None)
+        self.app.controller.clear_jog()
+
+    def action_home(self) -> None:
+        if self._can_move():
+            self.app.confirm("Home: drive the three modules to their endstops?", self.app.controller.home)
+
+    def action_motors_off(self) -> None:
+        if self._can_move():
+            self.app.controller.motors_off()
+
+    def action_heaters(self) -> None:
+        if not self._can_move():
+            return
+        try:
+            hotend = float(self.query_one("#hotend-input", Input).value or 0)
+            bed = float(self.query_one("#bed-input", Input).value or 0)
+        except ValueError:
+            self.app.notify("heater targets must be numbers", severity="error")
+            return
+        heaters = self.app.backend.profile.heaters
+        if not (0 <= hotend <= heaters.hotend_max_c and 0 <= bed <= heaters.bed_max_c):
+            self.app.notify(f"targets must be within 0-{heaters.hotend_max_c:g} / 0-{heaters.bed_max_c:g} °C",
+                            severity="error")
+            return
+        self.set_focus(None)
+        self.app.controller.set_heaters(hotend, bed)

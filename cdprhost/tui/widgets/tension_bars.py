@@ -1,0 +1,42 @@
+"""Cable tensions as bars against the profile's tension limits."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.widget import Widget
+
+from cdprhost.tui.widgets.charts import hbar, tension_level
+
+LEVEL_STYLE = {"ok": "green", "near": "yellow", "bad": "bold red"}
+
+
+class TensionBars(Widget):
+    def __init__(self, t_min: float, t_max: float, *, id: str | None = None, classes: str | None = None):
+        super().__init__(id=id, classes=classes)
+        self.t_min, self.t_max = t_min, t_max
+        self._tensions: tuple[float, float, float] | None = None
+
+    def show(self, tensions: tuple[float, float, float] | None) -> None:
+        self._tensions = None if tensions is None else tuple(float(t) for t in tensions)
+        self.refresh()
+
+    def levels(self) -> tuple[str, ...]:
+        if self._tensions is None:
+            return ()
+        return tuple(tension_level(t, self.t_min, self.t_max) for t in self._tensions)
+
+    def render(self) -> Text:
+        out = Text(no_wrap=True, overflow="crop")
+        out.append(f"tension  limits [{self.t_min:g}, {self.t_max:g}] N", style="bold")
+        bar_w = max(self.size.width - 14, 4)
+        for k in range(3):
+            out.append("\n")
+            if self._tensions is None:
+                out.append(f"T{k + 1} " + "·" * bar_w + "     -- N", style="dim")
+                continue
+            t = self._tensions[k]
+            style = LEVEL_STYLE[tension_level(t, self.t_min, self.t_max)]
+            out.append(f"T{k + 1} ")
+            out.append(hbar(t, self.t_max, bar_w), style=style)
+            out.append(f" {t:6.1f} N", style=style)
+        return out

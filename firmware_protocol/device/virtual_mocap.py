@@ -1,0 +1,118 @@
+"""Virtual motion capture for the simulated device (``--truth PROFILE --mocap-dir DIR``).
+
+The simulated device calls ``on_settled(steps, device_time_s)`` whenever motion
+has stopped and the queue has stayed empty for its settle time
+(``SimConfig.settle_s``). The observer works out where the effector of a hidden
+*true* machine really is for those absolute steps (the truth profile's forward
+kinematics with its effects: backlash needs each module's last direction of
+motion, drift the time) and writes a motion-capture take of that point into the
+mocap folder, an OptiTrack Motive CSV (in metres) by default, with the noise of a
+real system. Takes use the synthetic session layout's markers
+(:mod:`cdprhost.calibration.synthetic`); :func:`mocap_config` is the matching
+``[mocap]`` configuration. ``make_observer(None, None)`` is None (no observer).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from cdprhost.calibration.readers import EXTENSIONS
+from cdprhost.calibration.synthetic import DEFAULT_BASE_MARKERS, DEFAULT_EFFECTOR_MARKERS, synthesize_take, synthetic_config
+from cdprhost.effects.base import MotionContext
+from cdprhost.errors import InputError
+from cdprhost.kinematics import MachineModel
+from cdprhost.profile import load_profile
+
+
+class VirtualMocap:
+    """Observer writing one take per settle into ``directory`` (``take-0001.csv``, ...).
+
+    ``directions`` (sign of each module's last motion) feed the truth's backlash:
+    passed by the device, or read from the device's record of executed segments
+    (:meth:`attach_record`), or else inferred from the change of steps since the
+    previous settle (right only for moves straight into a pose).
+    """
+
+    def __init__(self, truth: MachineModel, directory: str | os.PathLike[str], *, noise_mm: float = 0.05,
+                 jitter_mm: float = 0.02, n_frames: int = 60, seed: int | None = 0, format: str = "motive-csv",
+                 writer_options: dict | None = None):
+        self.truth = truth
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.noise_mm = float(noise_mm)
+        self.jitter_mm = float(jitter_mm)
+        self.n_frames = int(n_frames)
+        self.format = format
+        default_options = {"units": "Meters", "version": "1.23"} if format == "motive-csv" else {}
+        self.writer_options = dict(default_options if writer_options is None else writer_options)
+        self._rng = np.random.default_rng(seed)
+        self._lock = threading.Lock()
+        self._last_steps: np.ndarray | None = None
+        self._dirs = np.ones(3)
+        self.count = sum(1 for p in self.directory.glob("take-*") if not p.name.startswith("."))
+        self.written: list[Path] = []
+        self._record: list[dict] | None = None
+
+    def attach_record(self, record: list[dict]) -> None:
+        """Read last-motion directions from the device's (growing) record of executed segments."""
+        self._record = record
+
+    def _record_directions(self, window: int = 4096) -> np.ndarray | None:
+        if not self._record:
+            return None
+        steps = np.array([e["steps"][:3] for e in self._record[-window:]], dtype=np.int64)
+        moves = np.diff(steps, axis=0)
+        dirs = self._dirs.copy()
+        for k in range(3):  # three columns; the record window is vectorised
+            nz = np.flatnonzero(moves[:, k])
+            if nz.size:
+                dirs[k] = np.sign(moves[nz[-1], k])
+        return dirs
+
+    def effector_point(self, steps, device_time_s: float, directions=None) -> np.ndarray:
+        """Where the true effector is for absolute module steps (the first three of ``steps``)."""
+        n = np.asarray(steps, dtype=float)[:3]
+        dirs = self._dirs if directions is None else np.asarray(directions, dtype=float)[:3]
+        ctx = MotionContext(t_s=np.array([float(device_time_s)]), directions=dirs[None, :])
+        return self.truth.fk(self.truth.sliders_from_steps(n)[None, :], ctx)[0]
+
+    def on_settled(self, steps, device_time_s: float, directions=None) -> Path | None:
+        """Write a take of the settled effector; returns its path (None if the cables cannot meet)."""
+        with self._lock:
+            n = np.asarray(steps, dtype=np.int64)[:3]
+            from_record = self._record_directions() if directions is None else None
+            if from_record is not None:
+                self._dirs = from_record
+            elif self._last_steps is not None:
+                moved = n - self._last_steps
+                self._dirs = np.where(moved != 0, np.sign(moved), self._dirs)
+            self._last_steps = n
+            point = self.effector_point(n, device_time_s, directions)
+            if not np.isfinite(point).all():
+                return None
+            self.count += 1
+            path = self.directory / f"take-{self.count:04d}{EXTENSIONS[self.format]}"
+            synthesize_take(point, noise_mm=self.noise_mm, jitter_mm=self.jitter_mm, n_frames=self.n_frames,
+                            rng=self._rng, path=path, format=self.format, **self.writer_options)
+            self.written.append(path)
+            return path
+
+
+def mocap_config(profile_name: str = "truth", format: str = "motive-csv"):
+    """The session configuration that reads this observer's takes."""
+    return synthetic_config(profile_name, format, DEFAULT_BASE_MARKERS, DEFAULT_EFFECTOR_MARKERS)
+
+
+def make_observer(truth_profile_path, mocap_dir, **options) -> VirtualMocap | None:
+    """The device's observer factory: both arguments, or neither (None)."""
+    if truth_profile_path is None and mocap_dir is None:
+        return None
+    if truth_profile_path is None or mocap_dir is None:
+        given, missing = ("--truth", "--mocap-dir") if mocap_dir is None else ("--mocap-dir", "--truth")
+        raise InputError(f"{given} needs {missing} too (virtual motion capture needs a true machine and a folder for its takes)")
+    truth = MachineModel.from_profile(load_profile(truth_profile_path))
+    return VirtualMocap(truth, mocap_dir, **options)

@@ -1,0 +1,185 @@
+"""One end of the link (host or device): bytes in, bytes out, no I/O, no clock.
+
+Combines the deframer, a go-back-N :class:`Sender` for this side's DATA frames and
+a :class:`Receiver` for the peer's. ``feed`` consumes received bytes and returns
+what the caller must handle; ``flush`` returns the frames to write now;
+``next_deadline`` says when ``flush`` has something to do again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from firmware_protocol.framing import MAX_PAYLOAD, Deframer, Frame, Kind, encode_frame
+from firmware_protocol.reliability import Receiver, RtoEstimator, Sender
+
+
+@dataclass(frozen=True)
+class Incoming:
+    """``kind``: ``data`` (in-order reliable payload), ``urgent`` (unsequenced) or ``flow`` (ACK/NAK payload)."""
+
+    kind: str
+    payload: bytes
+
+
+@dataclass
+class LinkCounters:
+    frames_sent: int = 0
+    frames_received: int = 0
+    bytes_sent: int = 0
+    bytes_received: int = 0
+    naks_sent: int = 0
+    naks_received: int = 0
+    duplicates: int = 0
+    rejected_frames: int = 0  # good CRC but refused by the owner (no room)
+
+
+class Endpoint:
+    """Sequenced, acknowledged framing for one side.
+
+    ``accept(payload) -> bool`` (optional) is called for each in-order DATA payload
+    before it is acknowledged; returning False leaves it unacknowledged (the peer
+    retransmits). ``flow() -> bytes`` (optional) is the payload of every ACK/NAK
+    this side sends; without it ACKs ride on outgoing DATA frames when possible.
+    ``byte_time`` (seconds per byte on the wire, 0 if unknown) lets the RTT samples
+    start when a frame has left the wire rather than when it was queued; it switches
+    itself off when an acknowledgement proves the wire faster (USB CDC, a pty).
+    """
+
+    def __init__(
+        self,
+        *,
+        window: int = 8,
+        rto_initial: float = 0.25,
+        rto_floor: float = 0.02,
+        rto_ceiling: float = 1.0,
+        nak_holdoff: float = 0.03,
+        accept: Callable[[bytes], bool] | None = None,
+        flow: Callable[[], bytes] | None = None,
+        byte_time: float = 0.0,
+    ):
+        self._window = window
+        self._rto_args = (rto_initial, rto_floor, rto_ceiling)
+        self.nak_holdoff = nak_holdoff
+        self.accept = accept
+        self.flow = flow
+        self.byte_time = byte_time  # wire time per byte, so RTT is measured from the end of transmission
+        self._wire_free = 0.0
+        self.deframer = Deframer()
+        self.counters = LinkCounters()
+        self._urgent: list[bytes] = []
+        self.reset_session()
+
+    def reset_session(self) -> None:
+        """Start sequence numbers from 0 on both directions (after HELLO)."""
+        self.sender = Sender(self._window, RtoEstimator(*self._rto_args))
+        self.receiver = Receiver()
+        self._ack_due = False
+        self._nak_due = False
+        self._last_nak = (-1, -1e9)
+
+    @property
+    def retransmits(self) -> int:
+        return self.sender.retransmits
+
+    @property
+    def bad_frames(self) -> int:
+        return self.deframer.bad_frames + self.deframer.bad_headers
+
+    # ------------------------------------------------------------------ receive
+
+    def feed(self, data: bytes, now: float) -> list[Incoming]:
+        """Deframe ``data`` and :meth:`process` the frames."""
+        self.counters.bytes_received += len(data)
+        return self.process(self.deframer.feed(data), now)
+
+    def process(self, frames: list[Frame], now: float) -> list[Incoming]:
+        """Handle already deframed frames: acks, naks, in-order delivery."""
+        out: list[Incoming] = []
+        if self.deframer.rejected:
+            for kind, seq in self.deframer.rejected:
+                if kind == Kind.DATA and seq == self.receiver.expected:
+                    self._want_nak(now)
+            self.deframer.rejected.clear()
+        for frame in frames:
+            self.counters.frames_received += 1
+            if frame.kind == Kind.URGENT:
+                out.append(Incoming("urgent", frame.payload))
+                continue
+            if self.byte_time and self.sender.outstanding and frame.ack != self.sender.base and \
+                    self.sender.outstanding[0].sent_at > now:
+                self.byte_time = 0.0  # acknowledged before it could have left: the wire is faster (USB, pty)
+            if frame.kind == Kind.NAK:
+                self.counters.naks_received += 1
+                self.sender.on_nak(frame.ack, now)
+            else:
+                self.sender.on_ack(frame.ack, now)
+            if frame.kind != Kind.DATA:
+                if frame.payload:
+                    out.append(Incoming("flow", frame.payload))
+                continue
+            verdict = self.receiver.classify(frame.seq)
+            if verdict == Receiver.NEW:
+                if self.accept is None or self.accept(frame.payload):
+                    self.receiver.accept()
+                    out.append(Incoming("data", frame.payload))
+                else:
+                    self.counters.rejected_frames += 1
+                self._ack_due = True
+            elif verdict == Receiver.DUPLICATE:
+                self.counters.duplicates += 1
+                self._ack_due = True
+            else:
+                self._want_nak(now)
+        return out
+
+    def _want_nak(self, now: float) -> None:
+        expected, when = self._last_nak
+        if expected != self.receiver.expected or now - when >= self.nak_holdoff:
+            self._nak_due = True
+
+    # ------------------------------------------------------------------ send
+
+    def send(self, payload: bytes, items: int = 0) -> None:
+        """Queue a reliable DATA payload; ``items`` is its move-queue slot count."""
+        if len(payload) > MAX_PAYLOAD:
+            raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
+        self.sender.queue(payload, items)
+
+    def send_urgent(self, payload: bytes) -> None:
+        self._urgent.append(payload)
+
+    def request_ack(self) -> None:
+        self._ack_due = True
+
+    def next_deadline(self) -> float | None:
+        if self._urgent or self._ack_due or self._nak_due:
+            return -1.0
+        return self.sender.next_deadline()
+
+    def flush(self, now: float) -> list[bytes]:
+        expected = self.receiver.expected
+        frames = [encode_frame(Kind.URGENT, 0, expected, p) for p in self._urgent]
+        self._urgent.clear()
+        data = self.sender.frames_to_send(now)
+        if self.byte_time:  # frames leave one after the other, after what is still on the wire
+            wire = max(now, self._wire_free) + sum(map(len, frames)) * self.byte_time
+        for seq, p in data:
+            frame = encode_frame(Kind.DATA, seq, expected, p)
+            frames.append(frame)
+            if self.byte_time:
+                wire += len(frame) * self.byte_time
+                self.sender.stamp(seq, wire)
+        if self._nak_due:
+            frames.append(encode_frame(Kind.NAK, 0, expected, self.flow() if self.flow else b""))
+            self.counters.naks_sent += 1
+            self._last_nak = (expected, now)
+        elif self._ack_due and (self.flow is not None or not data):
+            frames.append(encode_frame(Kind.ACK, 0, expected, self.flow() if self.flow else b""))
+        self._ack_due = self._nak_due = False
+        if self.byte_time and frames:
+            self._wire_free = max(now, self._wire_free) + sum(map(len, frames)) * self.byte_time
+        self.counters.frames_sent += len(frames)
+        self.counters.bytes_sent += sum(map(len, frames))
+        return frames

@@ -1,0 +1,248 @@
+"""Timed joint-space move segments: the shared time profile, step timing, and the
+vectorised wire encoder (the device side decodes one segment at a time).
+
+A segment is a duration ``D`` in device ticks, signed step deltas ``n`` for the four
+axes (three slider modules, extruder) and a ramp code. Every axis follows the one
+normalised profile ``p(tau) = 2 r tau + (1 - 2 r) tau**2`` with ``tau = t / D``, so the
+joint-space path is the straight line between the endpoints and the speed changes
+linearly from ``2 r n / D`` (start) to ``(2 - 2 r) n / D`` (end). ``r = code / 255``
+for codes 0..255; ``RAMP_CONSTANT`` (no ramp byte on the wire) is ``r = 1/2``.
+Code 0 starts from rest; code 255 ends at rest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from firmware_protocol.varint import (
+    decode_svarint,
+    decode_uvarint,
+    scatter_uvarints,
+    uvarint_lengths,
+    zigzag_array,
+)
+
+AXES = 4
+RAMP_CONSTANT = -1
+RAMP_FROM_REST = 0
+RAMP_TO_REST = 255
+MAX_TICKS = (1 << 32) - 1
+MAX_DELTA = (1 << 31) - 1
+
+SEG_BASE = 0x80
+F_RAMP = 0x01  # a ramp byte follows the deltas
+F_DURATION = 0x02  # a duration varint follows the opcode; else the previous duration
+F_PREDICTED = 0x04  # coded deltas are differences from the previous segment's deltas
+F_SLIDERS = 0x08  # three slider svarints present; else coded values are 0
+F_EXTRUDER = 0x10  # extruder svarint present; else coded value is 0
+F_RESERVED = 0x60
+
+
+@dataclass(frozen=True)
+class SegmentBatch:
+    """N segments as arrays: ``ticks`` (N,) int64, ``deltas`` (N, 4) int64, ``ramps`` (N,) int16."""
+
+    ticks: np.ndarray
+    deltas: np.ndarray
+    ramps: np.ndarray = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        ticks = np.ascontiguousarray(self.ticks, dtype=np.int64).reshape(-1)
+        deltas = np.ascontiguousarray(self.deltas, dtype=np.int64).reshape(-1, AXES)
+        ramps = (np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16) if self.ramps is None
+                 else np.ascontiguousarray(self.ramps, dtype=np.int16).reshape(-1))
+        if not (len(ticks) == len(deltas) == len(ramps)):
+            raise ValueError(f"segment arrays differ in length: {len(ticks)}, {len(deltas)}, {len(ramps)}")
+        if len(ticks) and (ticks.min() < 1 or ticks.max() > MAX_TICKS):
+            raise ValueError(f"segment durations must be 1..{MAX_TICKS} ticks")
+        if len(ticks) and np.abs(deltas).max() > MAX_DELTA:
+            raise ValueError(f"segment step deltas must be within +-{MAX_DELTA}")
+        if len(ticks) and (ramps.min() < RAMP_CONSTANT or ramps.max() > RAMP_TO_REST):
+            raise ValueError("ramp codes must be -1 (constant) or 0..255")
+        object.__setattr__(self, "ticks", ticks)
+        object.__setattr__(self, "deltas", deltas)
+        object.__setattr__(self, "ramps", ramps)
+
+    def __len__(self) -> int:
+        return len(self.ticks)
+
+    def __getitem__(self, index: slice) -> "SegmentBatch":
+        return SegmentBatch(self.ticks[index], self.deltas[index], self.ramps[index])
+
+    @staticmethod
+    def concat(batches: list["SegmentBatch"]) -> "SegmentBatch":
+        return SegmentBatch(np.concatenate([b.ticks for b in batches]), np.concatenate([b.deltas for b in batches]),
+                            np.concatenate([b.ramps for b in batches]))
+
+
+def segments_from_positions(positions: np.ndarray, ticks: np.ndarray, ramps: np.ndarray | None = None) -> SegmentBatch:
+    """Segments between consecutive absolute step positions ``positions`` (N+1, 4)."""
+    pos = np.asarray(positions, dtype=np.int64)
+    return SegmentBatch(ticks, np.diff(pos, axis=0), ramps)
+
+
+# ------------------------------------------------------------------ profile math
+
+
+def ramp_share(codes: np.ndarray | int) -> np.ndarray:
+    """``r`` for each ramp code (0.5 for RAMP_CONSTANT)."""
+    c = np.asarray(codes, dtype=np.float64)
+    return np.where(c < 0, 0.5, c / 255.0)
+
+
+def ramp_codes_from_speeds(v_start: np.ndarray, v_end: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+    """Ramp codes for segments whose speed goes linearly from ``v_start`` to ``v_end`` (>= 0)."""
+    v0 = np.asarray(v_start, dtype=np.float64)
+    v1 = np.asarray(v_end, dtype=np.float64)
+    total = v0 + v1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        code = np.rint(255.0 * v0 / total)
+    constant = (total <= 0) | (np.abs(v0 - v1) <= tol * total)
+    return np.where(constant, RAMP_CONSTANT, code).astype(np.int16)
+
+
+def profile(tau: np.ndarray, codes: np.ndarray | int) -> np.ndarray:
+    """Normalised position ``p(tau)`` in [0, 1]."""
+    r = ramp_share(codes)
+    t = np.asarray(tau, dtype=np.float64)
+    return 2.0 * r * t + (1.0 - 2.0 * r) * t * t
+
+
+def ends_at_rest(deltas: np.ndarray, codes: np.ndarray | int) -> np.ndarray:
+    d = np.asarray(deltas).reshape(-1, AXES)
+    return (np.asarray(codes).reshape(-1) == RAMP_TO_REST) | ~d.any(axis=1)
+
+
+def peak_step_rates(batch: SegmentBatch, clock_hz: int) -> np.ndarray:
+    """(N, 4) peak step rate of each axis in steps/s: the larger of start and end speed."""
+    r = ramp_share(batch.ramps)
+    factor = np.maximum(2.0 * r, 2.0 - 2.0 * r)
+    return np.abs(batch.deltas) * (factor * clock_hz / batch.ticks)[:, None]
+
+
+def step_times(steps: int, ticks: int, code: int) -> np.ndarray:
+    """Tick offsets of the |steps| step pulses of one axis within a segment.
+
+    Step j (1-based) is issued when ``|n| p(tau)`` crosses ``j - 1/2``, so pulses are
+    spread evenly along the profile and exactly |n| pulses are issued. The form
+    ``x / (r + sqrt(r^2 + (1 - 2r) x))`` is the stable root of ``p(tau) = x``.
+    """
+    n = abs(int(steps))
+    if n == 0:
+        return np.zeros(0)
+    r = float(ramp_share(code))
+    x = (np.arange(1, n + 1) - 0.5) / n
+    tau = x / (r + np.sqrt(r * r + (1.0 - 2.0 * r) * x))
+    return tau * ticks
+
+
+def steps_done(deltas: np.ndarray, code: int, tau: float) -> np.ndarray:
+    """Signed steps already issued at normalised time ``tau`` (consistent with step_times)."""
+    d = np.asarray(deltas, dtype=np.int64)
+    p = float(profile(min(max(tau, 0.0), 1.0), code))
+    return np.sign(d) * np.floor(np.abs(d) * p + 0.5).astype(np.int64)
+
+
+# ------------------------------------------------------------------ wire codec
+
+
+@dataclass
+class SegmentContext:
+    """Coder state shared by consecutive segments of one session (reset by HELLO)."""
+
+    prev_ticks: int = 0
+    prev_deltas: tuple[int, int, int, int] = (0, 0, 0, 0)
+
+    def copy(self) -> "SegmentContext":
+        return SegmentContext(self.prev_ticks, self.prev_deltas)
+
+
+def _coded_cost(z: np.ndarray) -> np.ndarray:
+    """Bytes for coded values ``z`` (N, 4 zigzagged) under the omission flags."""
+    lens = uvarint_lengths(z)
+    sliders = np.where(z[:, :3].any(axis=1), lens[:, :3].sum(axis=1), 0)
+    return sliders + np.where(z[:, 3] != 0, lens[:, 3], 0)
+
+
+def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np.ndarray]:
+    """Encode a batch; returns ``(data, offsets)`` with segment i at ``data[offsets[i]:offsets[i+1]]``.
+
+    Chooses per segment the shorter of plain and predicted deltas, omits a duration
+    equal to the previous one, and advances ``ctx``.
+    """
+    n = len(batch)
+    if n == 0:
+        return b"", np.zeros(1, dtype=np.int64)
+    d = batch.deltas
+    prev_d = np.vstack([np.asarray(ctx.prev_deltas, dtype=np.int64)[None, :], d[:-1]])
+    prev_t = np.concatenate([[ctx.prev_ticks], batch.ticks[:-1]])
+    z_plain = zigzag_array(d)
+    z_pred = zigzag_array(d - prev_d)
+    use_pred = _coded_cost(z_pred) < _coded_cost(z_plain)
+    z = np.where(use_pred[:, None], z_pred, z_plain)
+    has_dur = batch.ticks != prev_t
+    has_sl = z[:, :3].any(axis=1)
+    has_e = z[:, 3] != 0
+    has_r = batch.ramps != RAMP_CONSTANT
+    lens = uvarint_lengths(z)
+    len_dur = np.where(has_dur, uvarint_lengths(batch.ticks.astype(np.uint64)), 0)
+    len_sl = np.where(has_sl[:, None], lens[:, :3], 0)
+    len_e = np.where(has_e, lens[:, 3], 0)
+    seg_len = 1 + len_dur + len_sl.sum(axis=1) + len_e + has_r
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(seg_len, out=offsets[1:])
+    out = np.zeros(int(offsets[-1]), dtype=np.uint8)
+    start = offsets[:-1]
+    out[start] = (SEG_BASE | F_RAMP * has_r | F_DURATION * has_dur | F_PREDICTED * use_pred
+                  | F_SLIDERS * has_sl | F_EXTRUDER * has_e).astype(np.uint8)
+    pos = start + 1
+    scatter_uvarints(out, pos, batch.ticks.astype(np.uint64), len_dur)
+    pos = pos + len_dur
+    for k in range(3):
+        scatter_uvarints(out, pos, z[:, k], len_sl[:, k])
+        pos = pos + len_sl[:, k]
+    scatter_uvarints(out, pos, z[:, 3], len_e)
+    pos = pos + len_e
+    out[pos[has_r]] = batch.ramps[has_r].astype(np.uint8)
+    ctx.prev_ticks = int(batch.ticks[-1])
+    ctx.prev_deltas = tuple(int(v) for v in d[-1])  # type: ignore[assignment]
+    return out.tobytes(), offsets
+
+
+class SegmentDecodeError(ValueError):
+    pass
+
+
+def decode_segment(buf: bytes, pos: int, ctx: SegmentContext) -> tuple[int, tuple[int, int, int, int], int, int]:
+    """Decode the segment whose opcode is at ``buf[pos]``; returns ``(ticks, deltas, ramp, next_pos)``."""
+    op = buf[pos]
+    pos += 1
+    if op & F_RESERVED:
+        raise SegmentDecodeError(f"segment opcode 0x{op:02X} has reserved flag bits set")
+    if op & F_DURATION:
+        ticks, pos = decode_uvarint(buf, pos)
+    else:
+        ticks = ctx.prev_ticks
+    if not 1 <= ticks <= MAX_TICKS:
+        raise SegmentDecodeError(f"segment duration {ticks} ticks out of range")
+    coded = [0, 0, 0, 0]
+    if op & F_SLIDERS:
+        for k in range(3):
+            coded[k], pos = decode_svarint(buf, pos)
+    if op & F_EXTRUDER:
+        coded[3], pos = decode_svarint(buf, pos)
+    if op & F_PREDICTED:
+        coded = [c + p for c, p in zip(coded, ctx.prev_deltas)]
+    if op & F_RAMP:
+        if pos >= len(buf):
+            raise SegmentDecodeError("truncated ramp byte")
+        ramp = buf[pos]
+        pos += 1
+    else:
+        ramp = RAMP_CONSTANT
+    deltas = (coded[0], coded[1], coded[2], coded[3])
+    ctx.prev_ticks = ticks
+    ctx.prev_deltas = deltas
+    return ticks, deltas, ramp, pos

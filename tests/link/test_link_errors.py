@@ -1,0 +1,114 @@
+"""Every wait ends with a clear error: missing, busy, vanished ports; silent, garbled, foreign devices."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import pytest
+import serial
+
+import firmware_protocol.device.firmware as firmware
+from cdprhost.cli.main import main
+from cdprhost.link import (
+    DeviceSilent,
+    PortBusy,
+    PortNotFound,
+    PortVanished,
+    ProtocolMismatch,
+    open_embedded,
+    open_link,
+)
+from firmware_protocol.device.firmware import SimDevice
+from firmware_protocol.device.pty_server import PtyServer
+from firmware_protocol.streams import demo_stream
+
+needs_pty = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+
+
+class ServerThread:
+    def __init__(self, device=None):
+        self.server = PtyServer(device or SimDevice())
+        self.thread = threading.Thread(target=self.server.serve_forever, daemon=True)
+        self.thread.start()
+
+    def close(self):
+        self.server.stop()
+        self.thread.join(2)
+        self.server.close()
+
+
+def test_missing_port():
+    with pytest.raises(PortNotFound, match="no such port") as exc:
+        open_link("/dev/does-not-exist-cdpr")
+    assert exc.value.exit_code == 2
+
+
+def test_silent_device_times_out_with_a_clear_message():
+    t0 = time.monotonic()
+    with pytest.raises(DeviceSilent, match="no answer|no valid frame"):
+        open_link("loop://", timeout_s=0.3)  # hears only its own HELLO frames
+    assert time.monotonic() - t0 < 3
+
+
+@needs_pty
+def test_garbage_suggests_a_wrong_baud_rate():
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    stop = threading.Event()
+
+    def babble():
+        while not stop.is_set():
+            os.write(master, os.urandom(64).replace(b"\xa5", b"\x00"))
+            time.sleep(0.01)
+
+    th = threading.Thread(target=babble, daemon=True)
+    th.start()
+    try:
+        with pytest.raises(DeviceSilent, match="wrong baud rate"):
+            open_link(path, timeout_s=0.4)
+    finally:
+        stop.set()
+        th.join(1)
+        os.close(master)
+        os.close(slave)
+
+
+@needs_pty
+def test_port_in_use_is_refused():
+    srv = ServerThread()
+    try:
+        with serial.Serial(srv.server.path, exclusive=True):
+            with pytest.raises(PortBusy, match="in use"):
+                open_link(srv.server.path)
+    finally:
+        srv.close()
+
+
+@needs_pty
+def test_port_vanishing_mid_session():
+    srv = ServerThread()
+    link = open_link(srv.server.path)
+    link.queue_segments(demo_stream(20, seed=1))
+    srv.close()  # the device side disappears (both pty ends closed)
+    with pytest.raises((PortVanished, DeviceSilent)):
+        link.queue_segments(demo_stream(2000, seed=2))
+        link.wait_idle(5)
+    link.close()
+
+
+def test_protocol_major_mismatch(monkeypatch):
+    monkeypatch.setattr(firmware, "PROTOCOL_MAJOR", 2)
+    with pytest.raises(ProtocolMismatch, match="protocol 2.0") as exc:
+        open_embedded()
+    assert exc.value.device_version == (2, 0) and exc.value.host_version == (1, 0)
+
+
+def test_sim_device_cli_rejects_bad_options(capsys):
+    assert main(["sim-device", "--faults", "corrupt=2"]) == 2
+    assert "--faults: corrupt" in capsys.readouterr().err
+    assert main(["sim-device", "--faults", "bogus=1"]) == 2
+    assert "unknown key 'bogus'" in capsys.readouterr().err
+    assert main(["sim-device", "--truth", "paper-simulation"]) == 2
+    assert "--truth needs --mocap-dir" in capsys.readouterr().err

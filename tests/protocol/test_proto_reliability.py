@@ -1,0 +1,114 @@
+"""Go-back-N delivery between two endpoints over a damaging channel, no device involved."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware_protocol.device.faults import FaultSpec, FaultyChannel
+from firmware_protocol.endpoint import Endpoint
+from firmware_protocol.reliability import Receiver, RtoEstimator, Sender
+
+
+def run_pair(payloads, spec: FaultSpec, window=8, horizon=600.0):
+    """Endpoint a sends ``payloads`` to b; returns what b delivered and the two endpoints."""
+    a, b = Endpoint(window=window), Endpoint(window=window)
+    ab = FaultyChannel(spec, seed_offset=1, baud=250_000)
+    ba = FaultyChannel(spec, seed_offset=2, baud=250_000)
+    got: list[bytes] = []
+    for p in payloads:
+        a.send(p)
+    t = 0.0
+    while t < horizon:
+        for f in a.flush(t):
+            ab.send(f, t)
+        for inc in b.feed(ab.receive(t), t):
+            if inc.kind == "data":
+                got.append(inc.payload)
+        for f in b.flush(t):
+            ba.send(f, t)
+        a.feed(ba.receive(t), t)
+        if len(got) == len(payloads) and a.sender.idle():
+            break
+        times = [x for x in (ab.next_delivery(), ba.next_delivery(), a.next_deadline(), b.next_deadline())
+                 if x is not None]
+        t = max(t + 1e-6, min(times)) if times else t + 0.01
+    return got, a, b
+
+
+def test_clean_channel_delivers_in_order_without_retransmission():
+    payloads = [bytes([i % 256]) * (1 + i % 200) for i in range(300)]
+    got, a, b = run_pair(payloads, FaultSpec())
+    assert got == payloads
+    assert a.retransmits == 0 and a.counters.naks_received == 0
+
+
+@settings(max_examples=12)
+@given(st.integers(0, 10_000), st.sampled_from([1, 4, 8, 32]))
+def test_lossy_channel_delivers_each_payload_exactly_once_in_order(seed, window):
+    payloads = [i.to_bytes(2, "big") * 30 for i in range(200)]
+    spec = FaultSpec(corrupt=0.003, drop=0.003, dup=0.02, latency_ms=3, jitter_ms=2, seed=seed)
+    got, a, b = run_pair(payloads, spec, window=window)
+    assert got == payloads
+    assert a.retransmits > 0
+
+
+def test_gap_triggers_a_nak_and_fast_retransmission():
+    a, b = Endpoint(window=8), Endpoint(window=8)
+    for i in range(3):
+        a.send(bytes([i]))
+    f0, f1, f2 = a.flush(0.0)
+    b.feed(f0 + f2, 0.001)  # frame 1 lost: frame 2 reveals the gap
+    replies = b.flush(0.001)
+    assert b.counters.naks_sent == 1
+    a.feed(b"".join(replies), 0.002)
+    resent = a.flush(0.002)
+    assert len(resent) == 2 and a.retransmits == 2  # go-back-N from frame 1
+    got = [inc.payload for inc in b.feed(b"".join(resent), 0.003) if inc.kind == "data"]
+    assert got == [b"\x01", b"\x02"]
+
+
+def test_receiver_classifies_sequence_numbers():
+    r = Receiver()
+    r.expected = 250
+    assert r.classify(250) == Receiver.NEW
+    assert r.classify(3) == Receiver.GAP  # ahead, across the wrap
+    assert r.classify(249) == Receiver.DUPLICATE
+    r.accept()
+    assert r.expected == 251
+
+
+def test_sender_window_and_cumulative_ack():
+    s = Sender(window=3)
+    for i in range(5):
+        s.queue(bytes([i]), items=2)
+    sent = s.frames_to_send(0.0)
+    assert [seq for seq, _ in sent] == [0, 1, 2] and s.window_free == 0
+    assert s.unacked_items() == 10
+    assert s.on_ack(2, 0.05) == 2  # frames 0 and 1
+    assert [seq for seq, _ in s.frames_to_send(0.05)] == [3, 4]
+    assert s.on_ack(200, 0.06) == 0  # nonsense ack ignored
+
+
+def test_rto_adapts_backs_off_and_respects_bounds():
+    rto = RtoEstimator(initial=0.25, floor=0.02, ceiling=1.0)
+    assert rto.rto == 0.25
+    for _ in range(20):
+        rto.sample(0.010)
+    assert 0.02 <= rto.rto < 0.03
+    for _ in range(8):
+        rto.back_off()
+    assert rto.rto == 1.0
+    rto.sample(0.5)
+    assert rto.rto == pytest.approx(min(1.0, rto.srtt + 4 * rto.rttvar))
+
+
+def test_retransmission_on_timeout_uses_karn_rule():
+    s = Sender(window=2, rto=RtoEstimator(initial=0.1, floor=0.01, ceiling=1.0))
+    s.queue(b"x")
+    s.frames_to_send(0.0)
+    assert s.frames_to_send(0.05) == []
+    assert s.frames_to_send(0.11) == [(0, b"x")] and s.timeouts == 1
+    s.on_ack(1, 0.12)
+    assert s.rto.srtt is None  # no sample from a retransmitted frame

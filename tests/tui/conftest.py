@@ -1,0 +1,67 @@
+"""Helpers for the headless UI tests: an app on the fake backend and waiting on its state."""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+from collections.abc import Callable
+
+import pytest
+
+from cdprhost.tui.app import CdprApp
+from cdprhost.tui.state import UiState
+
+from .fakes import FakeBackend
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_pyfunc_call(pyfuncitem):
+    """Run ``async def`` tests in a fresh event loop (no asyncio plugin needed)."""
+    if inspect.iscoroutinefunction(pyfuncitem.obj):
+        args = {name: pyfuncitem.funcargs[name] for name in pyfuncitem._fixtureinfo.argnames}
+        asyncio.run(pyfuncitem.obj(**args))
+        return True
+    return None
+
+
+async def wait_for(pilot, predicate: Callable[[UiState], bool], timeout: float = 10.0, what: str = "") -> UiState:
+    """Let the app run until ``predicate(app.state)`` holds (fails the test after ``timeout`` s)."""
+    app = pilot.app
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout
+    while not predicate(app.state):
+        if loop.time() > deadline:
+            raise AssertionError(f"timed out waiting for {what or predicate}: state is {app.state.job.state}, "
+                                 f"connection {app.state.connection.status}")
+        await pilot.pause(0.01)
+    return app.state
+
+
+@pytest.fixture
+def fake_backend() -> FakeBackend:
+    return FakeBackend()
+
+
+def make_app(backend, **kw) -> CdprApp:
+    kw.setdefault("status_interval_s", 0)
+    kw.setdefault("health_interval_s", 0)
+    return CdprApp(backend, **kw)
+
+
+@pytest.fixture
+def gcode_file(tmp_path):
+    path = tmp_path / "part.gcode"
+    path.write_text("".join(f"G1 X{i} Y{i} E{0.1 * i:.2f} ; move {i}\n" for i in range(1, 60)), encoding="utf-8")
+    return path
+
+
+def screen_text(app) -> str:
+    """The current screen as plain text, one line per terminal row."""
+    strips = app.screen._compositor.render_strips()
+    return "\n".join("".join(segment.text for segment in strip) for strip in strips)
+
+
+async def shown(pilot) -> str:
+    """Screen text after the pending repaint."""
+    await pilot.pause()
+    return screen_text(pilot.app)

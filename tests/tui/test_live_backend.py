@@ -1,0 +1,147 @@
+"""The UI on the real layers: embedded simulated device, preflight, wizard with virtual mocap, diagnosis."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from textual.widgets import DataTable, Input
+
+from cdprhost.calibration.simulate import commanded_path
+from cdprhost.calibration.synthetic import write_synthetic_session
+from cdprhost.diagnosis.scenarios import hidden_truth, measurement_tour, session_times
+from cdprhost.diagnosis.workflow import FAST
+from cdprhost.effects.base import MotionContext
+from cdprhost.profile import save_profile
+from cdprhost.tui.control.backend import EMBEDDED
+from cdprhost.tui.control.live import LiveBackend
+from cdprhost.tui.control.live_diagnosis import diagnosis_view, parameter_rows
+from firmware_protocol.device.virtual_mocap import make_observer
+
+from .conftest import make_app, shown, wait_for
+
+PAPER_TRUTH = np.array([(-260.0, -150.111, 78.0), (260.0, -150.111, 78.0), (0.0, 300.222, 78.0)])
+
+
+@pytest.fixture
+def live():
+    backend = LiveBackend("paper-prototype", speedup=None)
+    yield backend
+    backend.close()
+
+
+def test_embedded_device_home_jog_heaters(live):
+    rows = dict(live.connect(EMBEDDED, 250000))
+    assert rows["firmware"].startswith("cdpr-sim") and rows["protocol"].startswith("1.")
+    status = live.device_status()
+    assert not status.homed and status.position is None  # position unknown until homed
+    with pytest.raises(Exception, match="not homed"):
+        live.jog_to((0.0, 0.0, 200.0))
+    status = live.home()
+    home = live.model.home_point(np.asarray(live.profile.drive.home_mm))
+    assert status.homed and np.allclose(status.position, home, atol=0.01)
+    target = (12.0, -7.5, 240.0)
+    status = live.jog_to(target)
+    assert np.allclose(status.position, target, atol=0.01)  # steps are absolute: no drift
+    expected = live.model.steps(live.model.ik(np.array([target])))[0]
+    assert status.steps[:3] == tuple(int(v) for v in expected)
+    status = live.set_heaters(205.0, 60.0)
+    assert status.hotend_target == 205.0 and status.bed_target == 60.0
+    assert not live.motors_off().motors_on
+    health = live.link_health()
+    assert health.retransmits == 0 and health.bad_frames == 0
+
+
+def test_preflight_view_on_real_preflight(live, tmp_path):
+    good = tmp_path / "good.gcode"
+    good.write_text("G28\nM104 S200\nM109 S200\nG1 Z0.3 F600\nG1 X10 Y0 E1 F1200\nG1 X10 Y10 E2\n")
+    view = live.preflight(str(good))
+    assert view.ok and view.moves >= 3 and view.violations == ()
+    bad = tmp_path / "bad.gcode"
+    bad.write_text("G28\nM104 S200\nM109 S200\nG1 Z0.3 F600\nG1 X400 Y0 E1 F1200\n")
+    view = live.preflight(str(bad))
+    assert not view.ok and view.violations[0].line == 5
+
+
+def test_diagnosis_view_from_report():
+    report = {"verdict": "named", "effect": "drift", "effects": ["drift"], "where": "cable 2 grows with time",
+              "candidates": [{"name": "drift", "p_value": 1e-12, "delta_bic": -80.0, "heldout_rms_mm": 0.09},
+                             {"name": "backlash", "p_value": float("nan"), "delta_bic": None, "heldout_rms_mm": 0.2}],
+              "heldout_rms_before_mm": 0.3, "heldout_rms_after_mm": 0.09, "noise_floor_mm": 0.088,
+              "poses": {"heldout_before_mm": [0.2, 0.4], "heldout_after_mm": [0.08, 0.1]},
+              "parameters": {"drift": {"table": {"rho": [1e-4, -2e-4, 3e-4], "rho_stderr": [1e-5] * 3},
+                                       "ci95": {"rho": [[0.8e-4, 1.2e-4], [-2.2e-4, -1.8e-4], [2.8e-4, 3.2e-4]]}}}}
+    view = diagnosis_view(report)
+    assert view.verdict == "named" and view.effect == "drift"
+    assert view.candidates[1].p_value is None and view.candidates[1].delta_bic is None
+    assert view.per_pose_before_mm == (0.2, 0.4)
+    rows = dict(parameter_rows(report))
+    assert list(rows) == ["drift.rho"] and rows["drift.rho"].startswith("[0.0001, -0.0002, 0.0003] (95% [8e-05")
+
+
+def write_hidden_session(directory, model, effect, seed):
+    rng = np.random.default_rng(seed)
+    truth = hidden_truth(model, rng, effect)
+    poses = measurement_tour(model, 40, rng)
+    t_s = session_times(40, rng)
+    s_cmd, dirs = commanded_path(model, poses)
+    actual = truth.fk(s_cmd, MotionContext(t_s=t_s, directions=dirs))
+    write_synthetic_session(directory, actual, poses, s_cmd, t_s, dirs.astype(int), "paper-simulation",
+                            noise_mm=0.05, seed=seed + 1)
+
+
+async def test_diagnose_screen_on_a_session_with_a_hidden_effect(tmp_path):
+    backend = LiveBackend("paper-simulation", speedup=None, diagnosis_settings=FAST)
+    write_hidden_session(tmp_path / "session", backend.model, "drive_scale", seed=3)
+    app = make_app(backend, connect_on_start=False)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await pilot.press("f5", "e")
+        app.screen.query_one("#diag-session", Input).value = str(tmp_path / "session")
+        await pilot.press("enter")
+        state = await wait_for(pilot, lambda s: s.diagnose.result is not None or s.diagnose.error, timeout=60)
+        assert state.diagnose.error == ""
+        d = state.diagnose.result
+        assert d.verdict == "named" and d.effect == "drive_scale"
+        assert d.heldout_rms_after_mm < d.heldout_rms_before_mm
+        assert len(d.per_pose_before_mm) == 40
+        text = await shown(pilot)
+        assert "verdict named  effect drive_scale" in text and "drive_scale.eps" in text
+
+
+async def test_calibration_wizard_screen_with_virtual_mocap(sim_profile, tmp_path):
+    truth = tmp_path / "truth.toml"
+    lengths = np.linalg.norm(np.array([0.0, 0.0, 330.0]) - PAPER_TRUTH, axis=1)
+    save_profile(sim_profile.with_geometry(PAPER_TRUTH, lengths, name="hidden-truth"), truth)
+    observer = make_observer(truth, tmp_path / "mocap")
+    backend = LiveBackend(sim_profile, speedup=None, sim_options={"observer": observer})
+    app = make_app(backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected, timeout=20)
+        await pilot.press("f4")
+        screen = app.screen
+        screen.query_one("#check-poses", Input).value = "2"
+        screen.query_one("#session-dir", Input).value = str(tmp_path / "session")
+        await pilot.press("n")
+        state = await wait_for(pilot, lambda s: s.calibration.stage in ("planned", "error"), timeout=60)
+        assert state.calibration.stage == "planned", state.calibration.message
+        n = len(state.calibration.poses)
+        assert n == 6 and sum(p.role == "check" for p in state.calibration.poses) == 2
+        for k in range(1, n + 1):
+            await pilot.press("m")
+            await wait_for(pilot, lambda s, k=k: s.calibration.poses[k - 1].status in ("settled", "error")
+                           or s.calibration.stage == "error", timeout=60, what=f"pose {k} settled")
+            await pilot.pause()
+            take = screen.query_one("#take-input", Input)
+            assert take.value.endswith(f"take-{k:04d}.csv")  # offered by the virtual motion capture
+            await pilot.press("k", "enter")
+            state = await wait_for(pilot, lambda s, k=k: s.calibration.poses[k - 1].status != "settled"
+                                   and not s.busy, timeout=30)
+            assert state.calibration.poses[k - 1].status == "take ok", state.calibration.poses[k - 1].detail
+        await pilot.press("i")
+        state = await wait_for(pilot, lambda s: s.calibration.stage in ("done", "error"), timeout=60)
+        result = state.calibration.result
+        assert result is not None, state.calibration.message
+        assert result.rms_before_mm > 1.0 and result.rms_after_mm < 0.1
+        assert result.check_after_mm < 0.5 < result.check_before_mm  # the check poses confirm it
+        assert screen.query_one("#parameters", DataTable).row_count == 12
+        assert (tmp_path / "session" / "calibrated.toml").is_file()
+        assert result.profile_path.endswith("calibrated.toml")
