@@ -21,6 +21,7 @@ class Incoming:
 
     kind: str
     payload: bytes
+    ack: int = 0  # the frame's ACK field (for ``flow``: the reports count every frame before it)
 
 
 @dataclass
@@ -117,7 +118,7 @@ class Endpoint:
                 self.sender.on_ack(frame.ack, now)
             if frame.kind != Kind.DATA:
                 if frame.payload:
-                    out.append(Incoming("flow", frame.payload))
+                    out.append(Incoming("flow", frame.payload, frame.ack))
                 continue
             verdict = self.receiver.classify(frame.seq)
             if verdict == Receiver.NEW:

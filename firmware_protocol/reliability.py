@@ -70,7 +70,9 @@ class Sender:
         self.rto = rto or RtoEstimator()
         self.next_seq = 0
         self.outstanding: deque[_Outstanding] = deque()
-        self.backlog: deque[tuple[bytes, int]] = deque()
+        self.backlog: deque[tuple[bytes, int, int]] = deque()  # payload, items, cumulative items
+        self.items_queued = 0
+        self._cum_items: dict[int, int] = {}  # seq -> cumulative items through that frame
         self.retransmits = 0
         self.timeouts = 0
         self._resend = False
@@ -89,10 +91,15 @@ class Sender:
 
     def unacked_items(self) -> int:
         """Queue items in frames the peer has not acknowledged yet (sent or not)."""
-        return sum(o.items for o in self.outstanding) + sum(i for _, i in self.backlog)
+        return sum(o.items for o in self.outstanding) + sum(b[1] for b in self.backlog)
+
+    def items_after(self, ack: int) -> int:
+        """Queue items in every frame from sequence number ``ack`` on (sent or not)."""
+        return self.items_queued - self._cum_items.get((ack - 1) % SEQ_MOD, 0)
 
     def queue(self, payload: bytes, items: int = 0) -> None:
-        self.backlog.append((payload, items))
+        self.items_queued += items
+        self.backlog.append((payload, items, self.items_queued))
 
     def on_ack(self, ack: int, now: float) -> int:
         """Release frames before ``ack``; returns how many were released."""
@@ -152,7 +159,8 @@ class Sender:
                 self.retransmits += 1
                 out.append((o.seq, o.payload))
         while self.backlog and len(self.outstanding) < self.window:
-            payload, items = self.backlog.popleft()
+            payload, items, cum = self.backlog.popleft()
+            self._cum_items[self.next_seq] = cum
             o = _Outstanding(self.next_seq, payload, items, now)
             self.next_seq = (self.next_seq + 1) % SEQ_MOD
             self.outstanding.append(o)

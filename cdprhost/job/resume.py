@@ -8,6 +8,8 @@ being printed when the job stopped) and records the device state for the log.
 from __future__ import annotations
 
 import json
+import os
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -41,6 +43,18 @@ class ResumePoint:
             raise InputError(f"not a resume point: {exc}", source=str(path)) from None
 
 
+def state_dir() -> Path:
+    """Where job logs and resume points go by default (never beside the G-code)."""
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(os.environ.get("CDPRHOST_STATE", Path(base) / "cdprhost")) / "jobs"
+
+
 def resume_path_for(gcode: str | Path, folder: str | Path | None = None) -> Path:
     g = Path(gcode)
-    return (Path(folder) if folder else g.parent) / f"{g.stem}.resume.json"
+    return (Path(folder) if folder else state_dir()) / f"{g.stem}.resume.json"
+
+
+def log_path_for(gcode: str | Path, folder: str | Path | None = None) -> Path:
+    g = Path(gcode)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    return (Path(folder) if folder else state_dir()) / f"{g.stem}-{stamp}.jsonl"

@@ -22,6 +22,7 @@ from cdprhost.gcode import items as g
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.device_commands import device_messages, heaters_off
 from cdprhost.job.log import JobLog
+from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import ResumePoint, resume_path_for
 from cdprhost.job.resume_items import from_layer
 from cdprhost.job.segment_map import SegmentMap, first_rest_index
@@ -50,6 +51,7 @@ class PrintOptions:
     log_path: str | Path | None = None
     resume_dir: str | Path | None = None
     idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
+    batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed from the start
 
 
 @dataclass
@@ -192,7 +194,9 @@ class PrintJob:
         totals = PipelineTotals()
         clock = link.identity.clock_hz
         self._set(JobState.PRINTING)
-        for out in segment_program(self._items(), self.profile, self.model, clock_hz=clock, totals=totals):
+        planned = segment_program(self._items(), self.profile, self.model, clock_hz=clock, totals=totals,
+                                  batch_moves=self.options.batch_moves)
+        for out in Prefetch(planned):
             if isinstance(out, SegmentBatch):
                 self._send_segments(out)
             else:
@@ -324,7 +328,7 @@ class PrintJob:
         result.retransmits = link.counters.retransmits
         result.final_steps = list(st.steps)
         result.last_line = info.line if info else None
-        result.last_layer = info.layer if info else None
+        result.last_layer = info.layer + 1 if info else None
         result.print_time_s = round(st.motion_time_s - self._t0_device, 6)
         self._progress()
         self._set(state, status)
@@ -343,7 +347,7 @@ class PrintJob:
         result.segments = done
         result.retransmits = link.counters.retransmits if link else 0
         result.last_line = info.line if info else None
-        result.last_layer = info.layer if info else None
+        result.last_layer = info.layer + 1 if info else None
         result.final_steps = list(info.steps) if info else None
         if link and self.profile.heaters.on_failure == "off":
             try:
@@ -355,7 +359,7 @@ class PrintJob:
         point = ResumePoint(
             str(self.gcode), reason, result.last_line, result.last_layer, info.point if info else None,
             info.steps if info else None, st.hotend_target_c if st else 0.0, st.bed_target_c if st else 0.0,
-            result.last_layer,
+            max(result.last_layer or 1, 1),
         )
         try:
             result.resume_file = str(point.save(resume_path_for(self.gcode, self.options.resume_dir)))

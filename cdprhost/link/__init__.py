@@ -5,10 +5,12 @@ Getting a link (both return a handshaken :class:`HostLink`)::
     open_link(port, baud=250000, timeout_s=2.0) -> HostLink
         port: a device path or any pyserial URL (loop://, socket://host:port, ...);
         opened exclusively.
-    open_embedded(config=None, faults=None, speedup=None, observer=None) -> HostLink
+    open_embedded(config=None, faults=None, speedup=None, observer=None, baud=250000,
+                  timeout_s=2.0) -> HostLink
         the simulated device in process, on a virtual clock (as fast as the CPU
-        allows, or paced to ``speedup`` x real time); ``link.device.record`` is
-        the device's record of executed segments.
+        allows, or paced to ``speedup`` x real time); ``faults`` a --faults spec;
+        ``link.device`` is the SimDevice, ``link.device.record`` its record of
+        executed segments ({"seq", "steps", "t"}, see firmware_protocol/device/record.py).
 
 HostLink (thread-safe; every call pumps the link; nothing runs in the background)::
 
@@ -31,6 +33,8 @@ HostLink (thread-safe; every call pumps the link; nothing runs in the background
     link.clear_fault()       leave the device's fault state (after DeviceFault / e-stop)
     link.counters            LinkCounters(retransmits, timeouts, naks_received, naks_sent,
                              bad_frames, frames_sent, frames_received, bytes_sent, ...)
+    link.handshake()         a new session (e.g. after DeviceReset); numbering continues
+                             from the device's counters
     link.items_sent, link.segments_sent, link.now(), link.close()
 
 Segments (firmware_protocol.segments): ``ticks`` durations in device ticks

@@ -237,7 +237,7 @@ class HostLink:
     # ------------------------------------------------------------------ sending
 
     def _credit(self) -> int:
-        return self._dev.flow_free - self._ep.sender.unacked_items()
+        return self._dev.flow_free - self._ep.sender.items_after(self._dev.flow_ack)
 
     def queue_segments(self, batch: SegmentBatch, timeout: float | None = None) -> range:
         """Stream move segments; returns their segment numbers (as in the device record).
@@ -329,11 +329,11 @@ class HostLink:
 
     def poll(self, timeout: float = 0.0) -> list[LinkEvent]:
         """Pump for up to ``timeout`` seconds (at least once); return the events since the last poll."""
-        start = self._t.now()
+        end = self._t.now() + timeout
         while True:
             with self._lock:
-                self._pump(min(SLICE_S, max(0.0, timeout - (self._t.now() - start))))
-                if self._t.now() - start >= timeout:
+                self._pump(min(SLICE_S, max(0.0, end - self._t.now())))
+                if self._t.now() >= end - 1e-9:
                     break
         with self._lock:
             return self._dev.take_events()

@@ -43,6 +43,7 @@ class DeviceTracker:
         self.identity: Identity | None = None
         self.progress = Progress(0, 0, 0, 0)
         self.flow_free = 0
+        self.flow_ack = 0  # flow_free counts every frame before this sequence number
         self.status: DeviceStatus | None = None
         self.status_count = 0
         self.events: deque[LinkEvent] = deque(maxlen=4096)
@@ -55,6 +56,7 @@ class DeviceTracker:
     def accept_ident(self, msg: Ident, max_payload: int) -> None:
         self.identity = Identity.from_message(msg)
         self.flow_free = msg.queue_capacity - (msg.items_received - msg.items_done)
+        self.flow_ack = 0
         self.progress = Progress(msg.items_done, msg.segments_done, self.flow_free, 0)
         self.failure = None
 
@@ -89,6 +91,7 @@ class DeviceTracker:
         for msg in msgs:
             if isinstance(msg, Flow):
                 self.flow_free = msg.queue_free
+                self.flow_ack = inc.ack
                 self.set_progress(msg.items_done, msg.segments_done, msg.queue_free, msg.flags)
             elif isinstance(msg, Status):
                 self.status = DeviceStatus.from_message(msg, self.identity, now)

@@ -105,7 +105,6 @@ class CdprApp(App[int]):
 
     def _after_job_change(self) -> None:
         job = self.state.job
-        self.refresh_bindings()
         if job.state is JobState.FAILED and self._failure_shown != self.state.job_id:
             self._failure_shown = self.state.job_id
             if isinstance(self.screen, PrintScreen):

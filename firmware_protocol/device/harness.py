@@ -41,7 +41,10 @@ class VirtualBench:
         self.to_device.send(bytes(data), self.t)
 
     def read(self, timeout: float) -> bytes:
-        self.run_until(self.t + max(0.0, timeout), stop_on_data=True)
+        target = self.t + max(0.0, timeout)
+        if timeout > 0 and target <= self.t:  # below float resolution: still move on
+            target = math.nextafter(self.t, math.inf)
+        self.run_until(target, stop_on_data=True)
         out = bytes(self._host_rx)
         self._host_rx.clear()
         return out
@@ -67,9 +70,12 @@ class VirtualBench:
 
     def _set_clock(self, t: float) -> None:
         if self.pace:
-            lag = self._wall0 + t / self.pace - time.monotonic()
-            if lag > 0:
-                time.sleep(lag)
+            now = time.monotonic()
+            ahead = self._wall0 + t / self.pace - now
+            if ahead > 0:
+                time.sleep(ahead)
+            elif ahead < -0.05:  # virtual time stood still (nobody pumped): no catch-up burst
+                self._wall0 -= ahead + 0.05
         self.t = max(self.t, t)
 
     def run_until(self, target: float, stop_on_data: bool = False) -> None:

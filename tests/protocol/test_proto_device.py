@@ -182,3 +182,29 @@ def test_status_reports_are_parsed():
     st = link.request_status()
     assert isinstance(st, DeviceStatus) and st.steps == (0, 0, 0, 0) and st.hotend_c == pytest.approx(25)
     assert st.flags & M.Flag.SYNCED
+
+
+def test_flow_control_holds_with_reports_interleaved():
+    """Device reports carry acknowledgements without flow information; the host's
+    credit must still never exceed the device's free slots (a UI thread polls the
+    status while the job streams)."""
+    import threading
+
+    link = open_embedded(config=SimConfig(queue_capacity=24))
+    batch = demo_stream(1500, seed=8)
+    stop = threading.Event()
+
+    def ui():
+        while not stop.is_set():
+            link.request_status()
+
+    th = threading.Thread(target=ui)
+    th.start()
+    try:
+        link.queue_segments(batch)
+        link.wait_idle(120)
+    finally:
+        stop.set()
+        th.join(10)
+    assert link.device.machine.overflow_rejects == 0
+    assert link.device.record == expected_record(batch)

@@ -112,3 +112,14 @@ def test_retransmission_on_timeout_uses_karn_rule():
     assert s.frames_to_send(0.11) == [(0, b"x")] and s.timeouts == 1
     s.on_ack(1, 0.12)
     assert s.rto.srtt is None  # no sample from a retransmitted frame
+
+
+def test_items_after_an_ack_point():
+    s = Sender(window=4)
+    for items in (3, 0, 5, 2):
+        s.queue(b"p", items=items)
+    s.frames_to_send(0.0)
+    assert s.items_after(0) == 10  # nothing acknowledged yet
+    assert s.items_after(1) == 7 and s.items_after(3) == 2 and s.items_after(4) == 0
+    s.on_ack(3, 0.01)  # releasing frames does not change what a report at ack 1 covers
+    assert s.items_after(1) == 7

@@ -17,17 +17,20 @@ from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen  # noqa: E
 from .conftest import make_app, shown, wait_for  # noqa: E402
 
 
-def small_part(layers: int = 8, side: float = 30.0) -> str:
-    """A square tube, ``layers`` layers of 0.2 mm, with slicer layer annotations."""
+def small_part(layers: int = 10, side: float = 30.0) -> str:
+    """A square tube of 0.2 mm layers with slicer layer annotations; each layer ends with a
+    retraction, so the motion comes to rest there (where a pause takes effect)."""
     out = ["; generated for the UI tests", "G21", "G90", "M82", "M140 S60", "M104 S200", "G28", "G92 E0"]
     e, h = 0.0, side / 2
     corners = [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)]
     for k in range(layers):
         z = 0.3 + 0.2 * k
-        out += [";LAYER_CHANGE", f";Z:{z:.1f}", f"G1 Z{z:.2f} F600", f"G1 X{-h:.2f} Y{-h:.2f} F6000"]
+        out += [";LAYER_CHANGE", f";Z:{z:.1f}", f"G1 Z{z:.2f} F600", f"G1 X{-h:.2f} Y{-h:.2f} F6000",
+                f"G1 E{e:.4f} F2400"]
         for x, y in corners[1:]:
             e += side * 0.033
             out.append(f"G1 X{x:.2f} Y{y:.2f} E{e:.4f} F1800")
+        out.append(f"G1 E{e - 0.8:.4f} F2400")
     out += ["M104 S0", "M140 S0", "G1 Z20 F600"]
     return "\n".join(out) + "\n"
 
@@ -48,7 +51,7 @@ async def open_file(pilot, path):
 
 
 async def test_whole_print_on_the_simulated_device_with_pause_and_resume(part):
-    backend = LiveBackend("paper-prototype", speedup=20.0)
+    backend = LiveBackend("paper-prototype", speedup=25.0)
     app = make_app(backend)
     async with app.run_test(size=(100, 32)) as pilot:
         await wait_for(pilot, lambda s: s.connected, timeout=20)
@@ -68,10 +71,10 @@ async def test_whole_print_on_the_simulated_device_with_pause_and_resume(part):
         await pilot.press("r", "y")
         state = await wait_for(pilot, lambda s: s.job.state.finished, timeout=120)
         assert state.job.state is JobState.DONE, state.job.reason
-        assert state.job.fraction == 1.0 and state.job.layers == 8
+        assert state.job.fraction == 1.0 and state.job.layers == 10
         assert state.job.segments_done > paused_at
         text = await shown(pilot)
-        assert "DONE" in text and "layer 8/8" in text
+        assert "DONE" in text and "layer 10/10" in text
 
 
 async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part):
@@ -90,3 +93,9 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part):
         text = await shown(pilot)
         assert f"last executed line: {failure.last_line}" in text
         assert f"--resume-from-layer {failure.last_layer}" in text
+        await pilot.press("r")  # resume from that layer: the link is re-opened, a new job starts there
+        state = await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, timeout=120)
+        assert state.connection.status in ("connected", "error")
+        second = state.job.failure  # the simulated device resets again after 150 segments
+        assert second is not None and second.last_layer >= failure.last_layer
+        assert second.last_line > failure.last_line

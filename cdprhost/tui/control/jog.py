@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cdprhost.kinematics import MachineModel
+from cdprhost.kinematics import MachineModel, tensions
 from cdprhost.tui.control.views import JogCheck, Vec3
 
 AXES = {"x": 0, "y": 1, "z": 2}
@@ -40,3 +40,11 @@ def check_jog(model: MachineModel, start: Vec3 | None, target: Vec3, spacing_mm:
     where = "target" if i == last else f"path at ({', '.join(f'{v:.1f}' for v in points[i])})"
     reason = f"{where}: {report.rule_name(i)}: {report.describe(i, model.limits)}"
     return JogCheck(tuple(end.tolist()), False, reason, target_ok=bool(ok[last]))
+
+
+def static_tensions(model: MachineModel, point: Vec3 | None) -> tuple[float, float, float] | None:
+    """Cable tensions (N) holding the effector at rest at ``point``; None when unknown or singular."""
+    if point is None:
+        return None
+    t = tensions(np.asarray([point], dtype=float), model.geometry.outlets, model.statics)[0]
+    return (float(t[0]), float(t[1]), float(t[2])) if np.all(np.isfinite(t)) else None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from textual.app import ComposeResult
+from textual.binding import Binding
 from textual.screen import Screen
 from textual.widgets import Footer
 
@@ -37,7 +38,15 @@ class AppScreen(Screen):
     def _state_changed(self, state: UiState) -> None:
         self.query_one(NavBar).show(self.app.backend.profile_name, TABS, self.MODE, state.job.state)
         self.render_state(state)
-        self.refresh_bindings()
+        signature = self._bindings_signature()
+        if signature != getattr(self, "_signature", None):  # rebuilding the key bar is not free
+            self._signature = signature
+            self.refresh_bindings()
+
+    def _bindings_signature(self) -> tuple[bool | None, ...]:
+        """Which of this screen's actions are enabled, greyed or hidden now."""
+        names = dict.fromkeys(b.action.split("(", 1)[0] for b in self.BINDINGS if isinstance(b, Binding))
+        return tuple(self.check_action(name, ()) for name in names)
 
     def render_state(self, state: UiState) -> None:
         """Draw ``state``; called in the UI thread on every change."""

@@ -8,7 +8,7 @@ from textual.binding import Binding
 from textual.containers import Horizontal
 from textual.widgets import Input, Label
 
-from cdprhost.tui.control.jog import STEPS_MM
+from cdprhost.tui.control.jog import STEPS_MM, static_tensions
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState, live_position
 from cdprhost.tui.widgets.position_panel import PositionPanel
@@ -84,25 +84,13 @@ class JogScreen(AppScreen):
             busy = "not connected"
         self.query_one("#jog-busy", Label).update(Text(busy, style="yellow"))
         target = state.jog.target if state.jog is not None else position
-        self.query_one(TensionBars).show(self.screen_tensions(target))
+        self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target))
         dev = state.device
         graph = self.query_one(TemperatureGraph)
         if dev is None:
             graph.show((None, None), (0.0, 0.0), ())
         else:
             graph.show((dev.hotend, dev.bed), (dev.hotend_target, dev.bed_target), state.device_temps)
-
-    def screen_tensions(self, point: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
-        """Static tensions at the pending target (or the current position)."""
-        if point is None:
-            return None
-        import numpy as np
-
-        from cdprhost.kinematics import tensions
-
-        model = self.app.backend.model
-        t = tensions(np.asarray([point], dtype=float), model.geometry.outlets, model.statics)[0]
-        return tuple(float(v) for v in t) if np.all(np.isfinite(t)) else None
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.action_heaters()

@@ -12,6 +12,7 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import Input, Label
 
 from cdprhost.job.state import JobState
+from cdprhost.tui.control.jog import static_tensions
 from cdprhost.tui.control.source import SourceLines
 from cdprhost.tui.screens.dialogs import FailureScreen, failure_text
 from cdprhost.tui.screens.base import AppScreen
@@ -106,8 +107,8 @@ class PrintScreen(AppScreen):
         line_text = self.source.line(job.line) if self.source is not None and job.line else ""
         self.query_one(ProgressPanel).show(job, line_text)
         position, sliders, tensions = live_position(state)
-        if tensions is None and position is not None:
-            tensions = self._tensions_at(position)
+        if tensions is None:
+            tensions = static_tensions(self.app.backend.model, position)
         steps = job.steps if state.job_active or state.device is None else state.device.steps
         self.query_one(PositionPanel).show(position, sliders, steps)
         self.query_one(TensionBars).show(tensions)
@@ -120,15 +121,6 @@ class PrintScreen(AppScreen):
             table.show(violations)
             table._shown = violations
         self._render_source(state)
-
-    def _tensions_at(self, position: tuple[float, float, float]) -> tuple[float, float, float] | None:
-        import numpy as np
-
-        from cdprhost.kinematics import tensions
-
-        model = self.app.backend.model
-        t = tensions(np.asarray([position], dtype=float), model.geometry.outlets, model.statics)[0]
-        return tuple(float(v) for v in t) if np.all(np.isfinite(t)) else None
 
     def _render_temperatures(self, state: UiState) -> None:
         job = state.job

@@ -1,0 +1,146 @@
+"""`cdprhost print FILE.gcode --profile P [--port DEV] ...`: preflight, then print.
+
+Without ``--port`` the job runs on the embedded simulated device (accelerated).
+Ctrl-C pauses at the next rest point and asks whether to resume or cancel.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import queue
+import sys
+import threading
+from pathlib import Path
+
+from cdprhost.cli.profile_arg import add_profile_argument
+from cdprhost.cli.progress_view import ProgressView
+from cdprhost.errors import InputError
+from cdprhost.fileio.atomic import write_text_atomic
+from cdprhost.job.resume import log_path_for
+from cdprhost.job.state import JobState
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("print", help="print a G-code file (embedded simulated device unless --port is given)")
+    p.add_argument("gcode", metavar="FILE.gcode")
+    add_profile_argument(p)
+    p.add_argument("--port", metavar="DEV", help="serial device path or pyserial URL (default: embedded simulated device)")
+    p.add_argument("--baud", type=int, default=None, help="baud rate (default: the profile's)")
+    p.add_argument("--speedup", type=float, default=None,
+                   help="embedded device: run at most X times real time (default: as fast as the host can)")
+    p.add_argument("--json", metavar="R", help="write the job summary as JSON to R")
+    p.add_argument("--resume-from-layer", type=int, metavar="N", help="restart the print at layer N (1-based, as shown)")
+    p.add_argument("--yes", "-y", action="store_true", help="do not ask for confirmation (resume)")
+    p.add_argument("--log", metavar="FILE", help="job log, JSON lines (default: ~/.local/state/cdprhost/jobs/<name>-<time>.jsonl)")
+    p.add_argument("--sim-faults", metavar="SPEC", help="embedded device: inject faults (same SPEC as sim-device --faults)")
+    p.set_defaults(func=run)
+
+
+def _link_factory(args: argparse.Namespace, profile):
+    from cdprhost.link import open_embedded, open_link
+
+    baud = args.baud or profile.serial.baud
+    if args.port:
+        return lambda: open_link(args.port, baud=baud, timeout_s=profile.serial.timeout_s)
+    return lambda: open_embedded(speedup=args.speedup, faults=args.sim_faults)
+
+
+def _confirm(question: str) -> bool:
+    if not sys.stdin.isatty():
+        return False
+    return input(f"{question} [y/N] ").strip().lower() in ("y", "yes")
+
+
+def run(args: argparse.Namespace) -> int:
+    from cdprhost.job.runner import PrintJob, PrintOptions
+    from cdprhost.profile import load_profile
+
+    gcode = Path(args.gcode)
+    if not gcode.is_file():
+        raise InputError("G-code file not found", source=str(gcode))
+    profile = load_profile(args.profile)
+    layer = None
+    if args.resume_from_layer is not None:
+        if args.resume_from_layer < 1:
+            raise InputError(f"--resume-from-layer must be 1 or more, got {args.resume_from_layer}")
+        layer = args.resume_from_layer - 1
+        if not args.yes and not _confirm(f"Resume {gcode.name} from layer {args.resume_from_layer}: the machine homes, "
+                                         "heats, and lowers onto the part. Is the part still on the bed and clear?"):
+            print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
+            return 1
+    options = PrintOptions(resume_from_layer=layer, log_path=args.log or log_path_for(gcode))
+    events: queue.Queue = queue.Queue()
+    job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
+    outcome: dict = {}
+
+    def work() -> None:
+        try:
+            outcome["result"] = job.run()
+        except BaseException as exc:  # re-raised in the main thread
+            outcome["error"] = exc
+        finally:
+            events.put(None)
+
+    worker = threading.Thread(target=work, name="print-job", daemon=True)
+    with ProgressView() as view:
+        worker.start()
+        while True:
+            try:
+                event = events.get()
+                if event is None:
+                    break
+                view.update(event)
+                if event.__class__.__name__ == "StateChanged" and event.state is JobState.PAUSED and "asked" not in outcome:
+                    outcome["asked"] = True
+                    _ask_after_pause(job)
+                    outcome.pop("asked")
+            except KeyboardInterrupt:
+                view._say("Ctrl-C: pausing at the next rest point...")
+                job.request_pause()
+                outcome["interrupted"] = True
+    worker.join()
+    if "error" in outcome:
+        raise outcome["error"]
+    result = outcome["result"]
+    _report(result, args)
+    if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
+        return 2
+    return result.exit_code
+
+
+def _ask_after_pause(job) -> None:
+    if not sys.stdin.isatty():
+        print("paused without a terminal to ask: cancelling", file=sys.stderr)
+        job.request_cancel()
+        return
+    while True:
+        try:
+            answer = input("Paused (heaters kept). [r]esume or [c]ancel? ").strip().lower()
+        except (EOFError, KeyboardInterrupt):
+            answer = "c"
+        if answer in ("r", "resume"):
+            job.request_resume()
+            return
+        if answer in ("c", "cancel"):
+            job.request_cancel()
+            return
+
+
+def _report(result, args: argparse.Namespace) -> None:
+    print(f"status: {result.status}")
+    if result.status == "refused":
+        for v in result.violations[:10]:
+            print(f"  line {v['line']}: {v['rule']}: {v['detail']}")
+        if len(result.violations) > 10:
+            print(f"  ... {len(result.violations) - 10} more (see --json)")
+    else:
+        print(f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
+              f"(estimated {result.estimated_time_s:.1f} s)")
+        print(f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}")
+    if result.reason and result.status != "completed":
+        print(f"reason: {result.reason}")
+    if result.resume_file:
+        print(f"resume point saved: {result.resume_file} (restart with --resume-from-layer {max(result.last_layer or 1, 1)})")
+    if args.json:
+        write_text_atomic(args.json, json.dumps(result.to_json(), indent=1) + "\n")

@@ -1,0 +1,79 @@
+"""Render print-job events on a terminal: a rich progress bar, or plain lines when piped."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn
+
+from cdprhost.job.state import Event, Failure, JobSnapshot, JobState, Notice, StateChanged, reduce
+
+
+def _fmt_s(seconds: float | None) -> str:
+    if seconds is None:
+        return "--:--"
+    s = int(seconds)
+    return f"{s // 3600:d}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+class ProgressView:
+    """Folds events into a snapshot and shows it. Call ``update`` from one thread only."""
+
+    def __init__(self, stream=None):
+        self.stream = stream or sys.stderr
+        self.console = Console(file=self.stream, highlight=False)
+        self.snapshot = JobSnapshot()
+        self.live = self.console.is_terminal
+        self._bar: Progress | None = None
+        self._task = None
+        self._last_plain = -1.0
+        self._t0 = time.monotonic()
+
+    def __enter__(self) -> ProgressView:
+        if self.live:
+            self._bar = Progress(
+                TextColumn("[bold]{task.fields[state]:<10}"), BarColumn(), TaskProgressColumn(),
+                TextColumn("layer {task.fields[layer]}"), TextColumn("line {task.fields[line]}"),
+                TimeElapsedColumn(), TextColumn("ETA {task.fields[eta]}"), console=self.console, transient=False,
+            )
+            self._bar.start()
+            self._task = self._bar.add_task("print", total=1.0, state="", layer="-", line="-", eta="--:--")
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._bar:
+            self._render()
+            self._bar.stop()
+
+    def update(self, event: Event) -> None:
+        self.snapshot = reduce(self.snapshot, event)
+        if isinstance(event, StateChanged) and event.reason and event.state in (JobState.REFUSED, JobState.FAILED, JobState.PAUSED, JobState.HEATING):
+            self._say(f"{event.state.value}: {event.reason}")
+        elif isinstance(event, Notice):
+            self._say(event.text)
+        elif isinstance(event, Failure):
+            where = f"line {event.last_line}, layer {event.last_layer}" if event.last_line else "before any motion"
+            self._say(f"stopped at {where}; position {event.position}; resume point: {event.resume_file}")
+        self._render()
+
+    def _say(self, text: str) -> None:
+        if self._bar:
+            self._bar.console.print(text)
+        else:
+            print(text, file=self.stream, flush=True)
+
+    def _render(self) -> None:
+        s = self.snapshot
+        layer = f"{s.layer + 1}/{s.layers}" if s.layers else "-"
+        if self._bar:
+            self._bar.update(self._task, completed=s.fraction, state=s.state.value, layer=layer, line=s.line or "-",
+                             eta=_fmt_s(s.eta_s))
+            return
+        pct = round(s.fraction * 100)
+        if s.state in (JobState.PRINTING, JobState.DONE) and (pct >= self._last_plain + 10 or s.state is JobState.DONE) and pct != self._last_plain:
+            self._last_plain = pct
+            elapsed = time.monotonic() - self._t0
+            print(f"{s.state.value:<9} {pct:3d}%  layer {layer}  line {s.line}  elapsed {_fmt_s(elapsed)}  "
+                  f"ETA {_fmt_s(s.eta_s)} (device time)", file=self.stream, flush=True)
