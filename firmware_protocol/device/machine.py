@@ -331,6 +331,7 @@ class Machine:
         reports.append(self.fail(ErrorCode.ESTOP, self.items_done, self.segments_done, T))
         self.estopped = True
         self.enabled_mask = 0
+        self.homed_mask = 0  # motors released: positions are no longer trustworthy
         return reports
 
 

@@ -46,6 +46,8 @@ def preflight_summary(state: UiState) -> Text:
                    style="bold red")
     out.append(f" · {p.moves} moves · {p.layers} layers · est {hms(p.estimated_time_s)} · {p.filament_mm:.0f} mm filament",
                style="dim")
+    if p.notes:
+        out.append(f" · {len(p.notes)} note{'s' * (len(p.notes) != 1)} (harmless commands skipped)", style="dim")
     return out
 
 
