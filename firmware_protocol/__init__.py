@@ -1,1 +1,10 @@
-"""Wire protocol shared by the host and the (simulated) firmware."""
+"""Wire protocol shared by the host and the (simulated) firmware; see PROTOCOL.md.
+
+- ``crc``, ``varint``: checksums (CRC-16/CCITT-FALSE, CRC-8/SMBUS) and compact integers.
+- ``framing``: frame layout, ``encode_frame`` and the resynchronising ``Deframer``.
+- ``segments``: move-segment semantics (shared ramp profile, step timing) and the
+  vectorised segment coder; ``messages``: the whole message set and its codec.
+- ``reliability``, ``endpoint``: go-back-N delivery, adaptive RTO, one link end.
+- ``streams``: a deterministic demonstration stream and its expected device record.
+- ``device``: the simulated firmware, its fault injector and pseudo-terminal runner.
+"""

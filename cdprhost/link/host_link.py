@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +61,7 @@ class HostLink:
         self.timeout_s = float(timeout_s)
         self.device = device  # the SimDevice when embedded, else None
         self._lock = threading.RLock()
+        self._waiters = 0
         self._ep = Endpoint(window=window, rto_initial=min(0.25, self.timeout_s / 4), rto_floor=0.01,
                             rto_ceiling=min(1.0, self.timeout_s / 2), byte_time=10.0 / baud if baud else 0.0)
         self._ctx = SegmentContext()
@@ -72,6 +75,23 @@ class HostLink:
         self._garbage_since_valid = 0
         self._keepalive_at = -1.0
         self._last_retx = 0
+
+    # ------------------------------------------------------------------ locking
+
+    @contextmanager
+    def _locked(self) -> Iterator[None]:
+        self._waiters += 1
+        self._lock.acquire()
+        self._waiters -= 1
+        try:
+            yield
+        finally:
+            self._lock.release()
+
+    def _let_others_in(self) -> None:
+        """Between pump slices, let a thread that waits for the lock have its turn."""
+        if self._waiters:
+            time.sleep(0.0005)
 
     # ------------------------------------------------------------------ properties
 
@@ -109,7 +129,7 @@ class HostLink:
 
     def handshake(self) -> Identity:
         """HELLO with a fresh nonce until the device answers IDENT; check the protocol version."""
-        with self._lock:
+        with self._locked():
             nonce = int.from_bytes(os.urandom(2), "little") or 1
             self._ep.reset_session()
             self._ctx = SegmentContext()
@@ -226,7 +246,8 @@ class HostLink:
     def _wait(self, done: Callable[[], bool], timeout: float | None, what: str) -> None:
         start = self._t.now()
         while True:
-            with self._lock:
+            self._let_others_in()
+            with self._locked():
                 if done():
                     return
                 if timeout is not None and self._t.now() - start > timeout:
@@ -257,14 +278,15 @@ class HostLink:
             raise ValueError(f"segment {i} of the batch: peak step rate {rates[i].max():.0f}/s exceeds the device "
                              f"limit {self.identity.max_step_rate}/s")
         start = self._t.now()
-        with self._lock:
+        with self._locked():
             saved = self._ctx.copy()
             data, offsets = encode_segments(batch, self._ctx)
             first = self._segments_sent + 1
         i = 0
         try:
             while i < n:
-                with self._lock:
+                self._let_others_in()
+                with self._locked():
                     if self._dev.failure is not None:
                         raise self._dev.failure
                     credit = self._credit()
@@ -290,7 +312,7 @@ class HostLink:
                         raise LinkTimeout(f"{self._t.name}: could not queue segments within {timeout:g} s")
                     self._pump()
         finally:
-            with self._lock:
+            with self._locked():
                 if i < n:  # keep the coder in step with what the device will decode
                     self._ctx = saved if i == 0 else SegmentContext(
                         int(batch.ticks[i - 1]), tuple(int(v) for v in batch.deltas[i - 1]))  # type: ignore[arg-type]
@@ -307,7 +329,8 @@ class HostLink:
             payload = None if is_segment else encode_message(cmd)
             items = 1 if cmd.QUEUED else 0
             while True:
-                with self._lock:
+                self._let_others_in()
+                with self._locked():
                     if self._dev.failure is not None and not isinstance(cmd, (ClearFault, GetStatus)):
                         raise self._dev.failure
                     if self._ep.sender.window_free > 0 and self._credit() >= items:
@@ -331,11 +354,12 @@ class HostLink:
         """Pump for up to ``timeout`` seconds (at least once); return the events since the last poll."""
         end = self._t.now() + timeout
         while True:
-            with self._lock:
+            self._let_others_in()
+            with self._locked():
                 self._pump(min(SLICE_S, max(0.0, end - self._t.now())))
                 if self._t.now() >= end - 1e-9:
                     break
-        with self._lock:
+        with self._locked():
             return self._dev.take_events()
 
     def request_status(self, timeout: float | None = None) -> DeviceStatus:
@@ -364,7 +388,7 @@ class HostLink:
         dev.estop_acked = False
         start = self._t.now()
         frame = self._urgent_frame(EmergencyStop())
-        with self._lock:
+        with self._locked():
             while not dev.estop_acked and self._t.now() - start <= timeout:
                 self._write([frame])
                 failure, dev.failure = dev.failure, None
@@ -386,7 +410,7 @@ class HostLink:
     def clear_fault(self, timeout: float | None = None) -> None:
         """Leave the device's fault state (after a DeviceFault or an emergency stop)."""
         dev = self._dev
-        with self._lock:
+        with self._locked():
             if isinstance(dev.failure, (DeviceReset, DeviceSilent)):
                 raise dev.failure
             dev.failure = None
@@ -397,12 +421,12 @@ class HostLink:
             self._wait(lambda: dev.cleared, timeout or self.timeout_s, "fault clearing")
         finally:
             dev.clearing = False
-        with self._lock:
+        with self._locked():
             dev.failure = None
             self._items_sent = max(self._items_sent, dev.progress.items_done)
 
     def close(self) -> None:
-        with self._lock:
+        with self._locked():
             self._t.close()
 
     def __enter__(self) -> "HostLink":

@@ -189,6 +189,7 @@ def test_flow_control_holds_with_reports_interleaved():
     credit must still never exceed the device's free slots (a UI thread polls the
     status while the job streams)."""
     import threading
+    import time
 
     link = open_embedded(config=SimConfig(queue_capacity=24))
     batch = demo_stream(1500, seed=8)
@@ -197,6 +198,7 @@ def test_flow_control_holds_with_reports_interleaved():
     def ui():
         while not stop.is_set():
             link.request_status()
+            time.sleep(0.002)
 
     th = threading.Thread(target=ui)
     th.start()

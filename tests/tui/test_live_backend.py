@@ -145,3 +145,14 @@ async def test_calibration_wizard_screen_with_virtual_mocap(sim_profile, tmp_pat
         assert screen.query_one("#parameters", DataTable).row_count == 12
         assert (tmp_path / "session" / "calibrated.toml").is_file()
         assert result.profile_path.endswith("calibrated.toml")
+
+
+def test_idle_status_keeps_the_embedded_device_clock_running():
+    backend = LiveBackend("paper-prototype", speedup=None, idle_pump_s=2.0)
+    try:
+        backend.connect(EMBEDDED, 250000)
+        backend.set_heaters(200.0, 0.0)
+        temps = [backend.device_status().hotend for _ in range(4)]
+    finally:
+        backend.close()
+    assert all(b > a for a, b in zip(temps, temps[1:]))  # 2 s of device time per status: it heats

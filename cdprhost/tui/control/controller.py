@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from cdprhost.job.state import JobSnapshot, JobState, StateChanged
 from cdprhost.tui.control.backend import Backend, JobHandle
 from cdprhost.tui.control.jog import check_jog, jog_target
-from cdprhost.tui.control.views import CalibrationView, PoseView
+from cdprhost.tui.control.views import PoseView
 from cdprhost.tui.state import ConnectionView, DiagnoseView, FileView, UiState
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -145,14 +145,31 @@ class Controller:
 
         def done(result: Any) -> None:
             self.app.job_finished(job_id, result, None)
-            self.refresh_device()
+            self.probe_connection()
 
         def fail(exc: BaseException) -> None:
             if not self.state.job.state.finished:  # the runner died without saying so
                 sink(StateChanged(JobState.FAILED, str(exc) or type(exc).__name__))
             self.app.job_finished(job_id, None, exc)
+            self.probe_connection()
 
         self.background("job", work, done, fail)
+
+    def probe_connection(self) -> None:
+        """After a job: is the link alive? (A job may have re-opened it, or lost it.)"""
+        conn = self.state.connection
+        if conn.status not in ("connected", "error") or not self.backend.connected():
+            return
+
+        def done(status: Any) -> None:
+            self.update(connection=replace(self.state.connection, status="connected", error=""))
+            if status is not None:
+                self._device(status)
+
+        def fail(exc: BaseException) -> None:
+            self.update(connection=replace(self.state.connection, status="error", error=str(exc) or type(exc).__name__))
+
+        self.background("status", self.backend.device_status, done, fail, exclusive=True)
 
     def _request(self, what: str) -> None:
         with self._job_lock:
