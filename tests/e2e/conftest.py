@@ -59,6 +59,20 @@ def print_embedded(path: Path, profile_name: str = "paper-prototype") -> PrintRu
     return PrintRun(path, result, record, np.concatenate(steps), np.concatenate(lines), starts, ends, e_final, model, profile)
 
 
+def first_layers(gcode: Path, out_dir: Path, layers: int, tail: tuple[str, ...] = ("M104 S0",)) -> Path:
+    """The start of a sliced file up to (not including) layer ``layers + 1``, plus ``tail``."""
+    lines, seen = [], 0
+    for line in gcode.read_text().splitlines():
+        if line.startswith(";LAYER_CHANGE"):
+            seen += 1
+            if seen > layers:
+                break
+        lines.append(line)
+    path = out_dir / f"first-{layers}-layers.gcode"
+    path.write_text("\n".join([*lines, *tail]) + "\n")
+    return path
+
+
 @pytest.fixture(scope="session")
 def fixture_print(fixture_gcode) -> PrintRun:
     return print_embedded(fixture_gcode)

@@ -7,24 +7,12 @@ import time
 
 from cdprhost.cli.main import main
 from cdprhost.job.resume import ResumePoint
-
-
-def _three_layers(fixture_gcode, tmp_path):
-    lines, layers = [], 0
-    for line in fixture_gcode.read_text().splitlines():
-        if line.startswith(";LAYER_CHANGE"):
-            layers += 1
-            if layers > 3:
-                break
-        lines.append(line)
-    path = tmp_path / "three.gcode"
-    path.write_text("\n".join(lines + ["M104 S0", "G28 X0"]) + "\n")
-    return path
+from tests.e2e.conftest import first_layers
 
 
 def test_reset_mid_print_fails_naming_the_line_then_resume_completes(fixture_gcode, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
-    path = _three_layers(fixture_gcode, tmp_path)
+    path = first_layers(fixture_gcode, tmp_path, 3, ("M104 S0", "G28 X0"))
     report = tmp_path / "job.json"
     t0 = time.monotonic()
     code = main(["print", str(path), "--profile", "paper-prototype", "--sim-faults", "reset_after=1500",
@@ -48,6 +36,6 @@ def test_reset_mid_print_fails_naming_the_line_then_resume_completes(fixture_gco
 
 def test_resume_needs_confirmation_without_yes(fixture_gcode, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
-    path = _three_layers(fixture_gcode, tmp_path)
+    path = first_layers(fixture_gcode, tmp_path, 3, ("M104 S0", "G28 X0"))
     assert main(["print", str(path), "--profile", "paper-prototype", "--resume-from-layer", "2"]) == 1
     assert "not confirmed" in capsys.readouterr().err

@@ -16,22 +16,9 @@ import sys
 import pytest
 
 from cdprhost.cli.main import main
-from tests.e2e.conftest import print_embedded
+from tests.e2e.conftest import first_layers, print_embedded
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminals as on Linux")
-
-
-def _first_layer(fixture_gcode, tmp_path):
-    lines, layers = [], 0
-    for line in fixture_gcode.read_text().splitlines():
-        if line.startswith(";LAYER_CHANGE"):
-            layers += 1
-            if layers > 1:
-                break
-        lines.append(line)
-    path = tmp_path / "layer1.gcode"
-    path.write_text("\n".join(lines + ["M104 S0"]) + "\n")
-    return path
 
 
 def _print_over_pty(gcode, tmp_path, name, faults=None):
@@ -55,7 +42,7 @@ def _print_over_pty(gcode, tmp_path, name, faults=None):
 
 def test_pty_prints_equal_the_embedded_print_with_and_without_faults(fixture_gcode, tmp_path, monkeypatch):
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
-    gcode = _first_layer(fixture_gcode, tmp_path)
+    gcode = first_layers(fixture_gcode, tmp_path, 1)
     embedded = print_embedded(gcode)
     assert embedded.result.status == "completed"
     want = [(r["seq"], r["steps"]) for r in embedded.record]
