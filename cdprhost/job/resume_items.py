@@ -32,7 +32,9 @@ def _travel_chunk(points: list[np.ndarray], e: float, line: int, layer: int, fee
     )
 
 
-def from_layer(items: Iterable[Any], layer: int, *, travel_feedrate: float = 50.0) -> Iterator[Any]:
+def from_layer(items: Iterable[Any], layer: int, *, z_max: float = float("inf"), travel_feedrate: float = 50.0) -> Iterator[Any]:
+    """Items of ``items`` that restart the program at 0-based ``layer``; ``z_max`` caps the
+    clearance lift (G-code frame)."""
     skipped_top = -np.inf
     homed = False
     started = False
@@ -56,10 +58,11 @@ def from_layer(items: Iterable[Any], layer: int, *, travel_feedrate: float = 50.
             i = int(keep[0])
             first = item.start[i]
             e_offset = float(item.e_start[i])
-            here = last_point if last_point is not None else first
-            safe_z = max(skipped_top, float(first[2])) + CLEARANCE_MM
-            route = [here, np.array([here[0], here[1], safe_z]), np.array([first[0], first[1], safe_z]), first]
-            yield _travel_chunk(route, 0.0, int(item.line[i]), layer, travel_feedrate)
+            if last_point is not None:  # something was printed: go over it, not through it
+                here = last_point
+                safe_z = min(max(skipped_top, float(first[2])) + CLEARANCE_MM, z_max)
+                route = [here, np.array([here[0], here[1], safe_z]), np.array([first[0], first[1], safe_z]), first]
+                yield _travel_chunk(route, 0.0, int(item.line[i]), layer, travel_feedrate)
             rest = np.arange(i, len(item.line))
             yield replace(
                 item, start=item.start[rest], end=item.end[rest], e_start=item.e_start[rest] - e_offset,

@@ -142,7 +142,8 @@ class PrintJob:
     def _items(self):
         items = read_items(self.gcode, self.profile, self.model)
         if self.options.resume_from_layer is not None:
-            items = from_layer(items, self.options.resume_from_layer)
+            z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
+            items = from_layer(items, self.options.resume_from_layer, z_max=z_max)
         return items
 
     def run(self) -> PrintResult:
@@ -209,8 +210,6 @@ class PrintJob:
         i, n = 0, len(batch)
         while i < n:
             self._service()
-            if self._take("pause") or self._take("cancel_pending"):
-                pass
             stopping = self._stop_wanted()
             free = link.progress.queue_free
             if free <= 0:
@@ -365,7 +364,9 @@ class PrintJob:
             result.resume_file = str(point.save(resume_path_for(self.gcode, self.options.resume_dir)))
         except OSError:
             result.resume_file = None
-        self._emit(Failure(reason, result.last_line, result.last_layer, info.point if info else None, result.resume_file))
+        # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
+        self._emit(Failure(reason, result.last_line, info.layer if info else None, info.point if info else None,
+                           result.resume_file))
         self._set(JobState.FAILED, reason)
 
 

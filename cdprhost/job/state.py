@@ -148,6 +148,8 @@ class JobSnapshot:
             return 1.0
         if self.segments_total:
             return min(self.segments_done / self.segments_total, 1.0)
+        if self.estimated_time_s:  # device time runs at the planned rate
+            return min(self.device_time_s / self.estimated_time_s, 1.0)
         return 0.0
 
     @property

@@ -119,7 +119,7 @@ async def test_device_reset_mid_print_shows_stop_and_resume_point(gcode_file):
         assert isinstance(app.screen, FailureScreen)
         text = str(app.screen.query_one("#failure-text").render())
         assert "device reset" in text and "last executed line: 22" in text
-        assert "--resume-from-layer 1" in text
+        assert "--resume-from-layer 2" in text
         await pilot.press("r")  # resume from the layer: a new job
         await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, what="second job")
         assert len(backend.jobs) == 2

@@ -159,7 +159,7 @@ def test_failure_text_names_stop_and_resume_point():
     text = failure_text(f, "", "G1 X5", "part.gcode").plain
     assert "reason: device reset" in text and "last executed line: 1234  G1 X5" in text
     assert "last layer: 8 (index 7)" in text and "/x/part.resume.json" in text
-    assert "cdprhost print part.gcode --resume-from-layer 7" in text
+    assert "cdprhost print part.gcode --resume-from-layer 8" in text
 
 
 def test_preflight_summary_names_first_violation():

@@ -54,7 +54,7 @@ def failure_text(failure: Failure | None, reason: str, line_text: str, path: str
     if failure.resume_file:
         out.append(f"resume point saved: {failure.resume_file}\n")
     if failure.last_layer is not None:
-        out.append(f"resume: cdprhost print {path} --resume-from-layer {failure.last_layer}", style="italic")
+        out.append(f"resume: cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}", style="italic")
     return out
 
 

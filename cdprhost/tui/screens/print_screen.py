@@ -188,7 +188,7 @@ class PrintScreen(AppScreen):
 
         def chosen(choice: str | None) -> None:
             if choice == "resume" and failure is not None:
-                self.app.controller.start(resume_from_layer=failure.last_layer)
+                self.app.controller.start(resume_from_layer=max(failure.last_layer, 0))
 
         self.app.push_screen(FailureScreen(text, can_resume), chosen)
 
