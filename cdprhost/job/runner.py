@@ -100,6 +100,7 @@ class PrintJob:
         self._items_sent = 0
         self._t0_device = 0.0
         self._waiting_heat_item = 0
+        self._at_rest = True  # does the queued motion end at rest?
 
     # ------------------------------------------------------------ requests
     def request_pause(self) -> None:
@@ -224,7 +225,8 @@ class PrintJob:
             numbers = link.queue_segments(WireBatch(sub.ticks, sub.delta, codes[i:j]))
             self._map.add(numbers.start, sub)
             i = j
-            if stopping and sub.v_end[-1] <= 1e-9:
+            self._at_rest = bool(sub.v_end[-1] <= 1e-9)
+            if stopping and self._at_rest:
                 self._hold_at_rest()
 
     def _send_command(self, item: Any) -> None:
@@ -238,7 +240,7 @@ class PrintJob:
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self._waiting_heat_item = max(numbers)
             self._set(JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C")
-        if self._stop_wanted():
+        if self._stop_wanted() and self._at_rest:  # mid-motion commands wait for the next rest point
             self._hold_at_rest()
 
     # ------------------------------------------------------- pause/cancel

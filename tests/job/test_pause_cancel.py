@@ -1,0 +1,77 @@
+"""Pause and cancel requests on a real job (embedded device): they act at rest points."""
+
+from __future__ import annotations
+
+import threading
+
+from cdprhost.job.runner import PrintJob
+from cdprhost.job.state import JobState, StateChanged
+from cdprhost.link import open_embedded
+from cdprhost.profile import load_profile
+
+
+def _part(tmp_path, layers=6):
+    lines = ["G28", "M104 S200", "M109 S200", "G92 E0", "M106 S128"]
+    e = 0.0
+    for n in range(layers):
+        lines += [";LAYER_CHANGE", f"G1 Z{0.3 * (n + 1):.2f} F3000"]
+        for x, y in [(20, 0), (20, 20), (0, 20), (0, 0)] * 3:
+            e += 1.0
+            lines.append(f"G1 X{x} Y{y} E{e:.3f} F1800")
+            lines.append(f"M106 S{100 + n}")  # fan changes between moving segments
+        lines += [f"G1 E{e - 1:.3f} F2400", f"G1 E{e:.3f}"]
+    path = tmp_path / "part.gcode"
+    path.write_text("\n".join(lines + ["M104 S0", "M107"]) + "\n")
+    return path
+
+
+def _run_with(tmp_path, on_state):
+    profile = load_profile("paper-prototype")
+    holder = {}
+    job = None
+
+    def factory():
+        holder["link"] = open_embedded()
+        return holder["link"]
+
+    def on_event(e):
+        if isinstance(e, StateChanged):
+            on_state(job, e.state)
+
+    job = PrintJob(_part(tmp_path), profile, factory, on_event=on_event)
+    result = job.run()
+    return job, result, holder["link"].device.record
+
+
+def test_pause_then_resume_completes_with_the_same_steps(tmp_path):
+    _, clean, clean_record = _run_with(tmp_path, lambda job, s: None)
+    seen = []
+
+    def on_state(job, state):
+        seen.append(state)
+        if state is JobState.PRINTING and JobState.PAUSED not in seen:
+            job.request_pause()
+        if state is JobState.PAUSED:
+            threading.Timer(0.05, job.request_resume).start()
+
+    _, result, record = _run_with(tmp_path, on_state)
+    assert JobState.PAUSED in seen and result.status == "completed"
+    assert [r["steps"] for r in record] == [r["steps"] for r in clean_record]
+
+
+def test_cancel_stops_at_rest_with_heaters_off(tmp_path):
+    _, _, full = _run_with(tmp_path, lambda job, s: None)
+    seen = []
+
+    def on_state(job, state):
+        seen.append(state)
+        if state is JobState.PRINTING and JobState.HEATING in seen:  # after the M109 wait
+            job.request_cancel()
+
+    job, result, record = _run_with(tmp_path, on_state)
+    assert result.status == "cancelled" and result.exit_code == 1
+    assert len(record) < len(full)
+    if record:  # whatever ran, ran to a rest point: the last executed segment ends at rest
+        assert result.segments == len(record)
+    status = job.link.request_status()
+    assert status.hotend_target_c == 0 and status.bed_target_c == 0
