@@ -1,7 +1,7 @@
 """Session folder -> observations and noise estimate for the diagnosis (thin shell).
 
-The noise may be declared in ``session.toml`` as ``[mocap] noise_mm`` (needs the
-session model to allow the key) or ``[session] noise_mm`` (accepted today); see :mod:`cdprhost.diagnosis.noise` for the fallbacks.
+The noise may be declared in ``session.toml`` as ``[mocap] noise_mm`` or
+``[session] noise_mm``; see :mod:`cdprhost.diagnosis.noise` for the fallbacks.
 """
 
 from __future__ import annotations
