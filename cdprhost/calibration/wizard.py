@@ -363,40 +363,32 @@ class LinkDevice:
 
     def __init__(self, link, profile: MachineProfile, model: MachineModel, *, feed_mm_s: float = 40.0,
                  settle_s: float = 0.5, timeout_s: float = 300.0):
-        from cdprhost.motion.limits import Caps
-        from cdprhost.motion.segments import Segmenter
+        from cdprhost.motion.segments import SegmentState
 
         self.link, self.profile, self.model = link, profile, model
         self.feed, self.settle_s, self.timeout_s = float(feed_mm_s), float(settle_s), float(timeout_s)
-        self.caps = Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2)
-        self.segmenter = Segmenter(model, profile.drive.home_mm, e_steps_per_mm=profile.extruder.steps_per_mm,
-                                   clock_hz=link.identity.clock_hz)
+        self.state = SegmentState.at_home(model, profile.drive.home_mm)
         self.homed = False
 
     def home(self) -> None:
-        from firmware_protocol.messages import Enable, Home
+        from cdprhost.job.device_commands import home_message
+        from cdprhost.motion.segments import SegmentState
+        from firmware_protocol.messages import Enable
 
-        home_steps = self.model.steps(np.asarray(self.profile.drive.home_mm, float)[None])[0]
-        self.link.send(Enable(0b1111), Home(0b111, tuple(int(v) for v in home_steps)))
+        self.link.send(Enable(0b1111), home_message(self.model, self.profile.drive.home_mm))
         self.link.wait_idle(self.timeout_s)
-        self.segmenter.home()
+        self.state = SegmentState.at_home(self.model, self.profile.drive.home_mm, int(self.state.steps[3]))
         self.homed = True
 
     def move_through(self, points: np.ndarray) -> tuple[np.ndarray, float]:
-        from cdprhost.motion.moves import MoveBlock
-        from cdprhost.motion.planner import Planner
-        from firmware_protocol.segments import SegmentBatch, ramp_codes_from_speeds
+        from cdprhost.motion.direct import direct_path
 
         if not self.homed:
             self.home()
-        pts = np.asarray(points, dtype=float).reshape(-1, 3)
-        start = np.vstack([self.segmenter.state.point[None], pts[:-1]])
-        planner = Planner(self.caps, self.model.geometry.outlets)
-        for planned in planner.push(MoveBlock.from_arrays(start, pts, feedrate=self.feed)) + planner.flush():
-            seg = self.segmenter(planned)
-            if len(seg):
-                self.link.queue_segments(SegmentBatch(seg.ticks, seg.delta, ramp_codes_from_speeds(seg.v_start, seg.v_end)),
-                                         timeout=self.timeout_s)
+        wire, _, self.state = direct_path(self.profile, self.model, self.state, points, feedrate_mm_s=self.feed,
+                                          clock_hz=self.link.identity.clock_hz)
+        if len(wire):
+            self.link.queue_segments(wire, timeout=self.timeout_s)
         self.link.wait_idle(self.timeout_s)
         self.link.poll(self.settle_s)  # let it come to rest (the device's settle time)
-        return self.segmenter.state.steps[:3].copy(), float(self.link.now())
+        return self.state.steps[:3].copy(), float(self.link.now())

@@ -32,13 +32,12 @@ from cdprhost.job.state import (
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tensions
 from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
+from cdprhost.motion.direct import to_wire
 from cdprhost.motion.pipeline import PipelineTotals, segment_program
 from cdprhost.motion.program import read_items
 from cdprhost.motion.segments import SegmentBatch
 from cdprhost.preflight.run import preflight, preflight_items
 from cdprhost.profile.models import MachineProfile
-from firmware_protocol.segments import SegmentBatch as WireBatch
-from firmware_protocol.segments import ramp_codes_from_speeds
 
 POLL_S = 0.05
 PROGRESS_EVERY_S = 0.1
@@ -207,7 +206,6 @@ class PrintJob:
 
     def _send_segments(self, batch: SegmentBatch) -> None:
         link = self.link
-        codes = ramp_codes_from_speeds(batch.v_start, batch.v_end)
         i, n = 0, len(batch)
         while i < n:
             self._service()
@@ -222,7 +220,7 @@ class PrintJob:
                 if rest is not None and rest < j:
                     j = rest + 1
             sub = _slice(batch, i, j)
-            numbers = link.queue_segments(WireBatch(sub.ticks, sub.delta, codes[i:j]))
+            numbers = link.queue_segments(to_wire(sub))
             self._map.add(numbers.start, sub)
             i = j
             self._at_rest = bool(sub.v_end[-1] <= 1e-9)

@@ -134,8 +134,8 @@ class LiveCalibration:
         status = b.device_status()
         if status is None or not status.homed or status.position is None:
             return
-        device.segmenter.state = SegmentState(np.asarray(status.steps, dtype=np.int64),
-                                              np.asarray(status.position, dtype=float), np.ones(3))
+        device.state = SegmentState(np.asarray(status.steps, dtype=np.int64),
+                                    np.asarray(status.position, dtype=float), np.ones(3))
         device.homed = True
 
     def _takes(self) -> list[Path]:
