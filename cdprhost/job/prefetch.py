@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 from collections.abc import Iterable, Iterator
 from typing import Any
 
@@ -41,6 +42,13 @@ class Prefetch:
             self._put(("__error__", exc))
             return
         self._put(_DONE)
+
+    def wait_filled(self, count: int, timeout: float = 30.0) -> None:
+        """Block until ``count`` items are ready (or the producer has finished): a head start
+        so the device never drains its queue while the first chunks are still being planned."""
+        deadline = time.monotonic() + timeout
+        while self._q.qsize() < count and self._thread.is_alive() and time.monotonic() < deadline:
+            time.sleep(0.005)
 
     def __iter__(self) -> Iterator[Any]:
         try:

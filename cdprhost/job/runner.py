@@ -197,7 +197,9 @@ class PrintJob:
         self._set(JobState.PRINTING)
         planned = segment_program(self._items(), self.profile, self.model, clock_hz=clock, totals=totals,
                                   batch_moves=self.options.batch_moves)
-        for out in Prefetch(planned):
+        ahead = Prefetch(planned)
+        ahead.wait_filled(4)
+        for out in ahead:
             if isinstance(out, SegmentBatch):
                 self._send_segments(out)
             else:
