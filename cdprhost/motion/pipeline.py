@@ -17,7 +17,7 @@ from typing import Any
 
 from cdprhost.gcode.items import Home, MoveChunk
 from cdprhost.kinematics.machine import MachineModel
-from cdprhost.motion.program import MarkedMoves, ProgramPlanner
+from cdprhost.motion.program import MarkedMoves, ProgramPlanner, split_at_marks
 from cdprhost.motion.segments import DEFAULT_CLOCK_HZ, SegmentBatch, Segmenter
 from cdprhost.profile.models import MachineProfile
 
@@ -41,16 +41,7 @@ class SegmentBlock:
 
     def split(self) -> list[Any]:
         """Batches and commands in program order."""
-        out: list[Any] = []
-        lo = 0
-        for cut, cmd in self.marks:
-            if cut > lo:
-                out.append(self.batch.take(slice(lo, cut)))
-                lo = cut
-            out.append(cmd)
-        if lo < len(self.batch):
-            out.append(self.batch.take(slice(lo, None)) if lo else self.batch)
-        return out
+        return split_at_marks(self.batch, self.marks)
 
 
 def segment_blocks(items: Iterable[Any], profile: MachineProfile, model: MachineModel, *,

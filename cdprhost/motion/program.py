@@ -53,17 +53,22 @@ class MarkedMoves:
     marks: tuple[tuple[int, Any], ...]
 
     def split(self) -> list[Any]:
-        out: list[Any] = []
-        lo = 0
-        for at, cmd in self.marks:
-            if at > lo:
-                out.append(self.planned.take(slice(lo, at)))
-                lo = at
-            out.append(cmd)
-        n = len(self.planned)
-        if lo < n:
-            out.append(self.planned.take(slice(lo, n)) if lo else self.planned)
-        return out
+        return split_at_marks(self.planned, self.marks)
+
+
+def split_at_marks(block: Any, marks: tuple[tuple[int, Any], ...]) -> list[Any]:
+    """``block`` (anything with ``len`` and ``take(slice)``) cut at ``marks`` = (rows before it,
+    command), the commands placed between the pieces: the plain program order."""
+    out: list[Any] = []
+    lo = 0
+    for at, cmd in marks:
+        if at > lo:
+            out.append(block.take(slice(lo, at)))
+            lo = at
+        out.append(cmd)
+    if lo < len(block):
+        out.append(block.take(slice(lo, None)) if lo else block)
+    return out
 
 
 class ProgramPlanner:
