@@ -126,7 +126,6 @@ class _BlockReader:
         lines, letters, values = [], [], []
         texts: dict[int, str] = {}
         error = None
-        st = self.st
         for index in tok.slow.tolist():
             number = self.first + index
             text = self.text(index)

@@ -33,7 +33,7 @@ from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tensions
 from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
 from cdprhost.motion.direct import to_wire
-from cdprhost.motion.pipeline import PipelineTotals, segment_program
+from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.program import read_items
 from cdprhost.motion.segments import SegmentBatch
 from cdprhost.preflight.run import preflight, preflight_items
@@ -96,9 +96,9 @@ class PrintJob:
         self._map = SegmentMap()
         self._last_progress = 0.0
         self._last_status = 0.0
-        self._items_sent = 0
         self._t0_device = 0.0
         self._waiting_heat_item = 0
+        self._status: DeviceStatus | None = None
         self._at_rest = True  # does the queued motion end at rest?
 
     # ------------------------------------------------------------ requests
@@ -178,7 +178,7 @@ class PrintJob:
         except _Stop:
             self._cancel_tail(result)
         except LinkError as exc:
-            self._fail(result, f"{type(exc).__name__}: {exc}")
+            self._fail(result, f"{type(exc).__name__}: {exc}", getattr(exc, "last_segment", None))
         except GcodeError as exc:  # cannot happen after a clean preflight, but never lose it
             self._fail(result, str(exc))
         return result
@@ -192,10 +192,9 @@ class PrintJob:
     def _stream(self, result: PrintResult) -> None:
         link = self.link
         assert link is not None
-        totals = PipelineTotals()
         clock = link.identity.clock_hz
         self._set(JobState.PRINTING)
-        planned = segment_program(self._items(), self.profile, self.model, clock_hz=clock, totals=totals,
+        planned = segment_program(self._items(), self.profile, self.model, clock_hz=clock,
                                   batch_moves=self.options.batch_moves)
         ahead = Prefetch(planned)
         ahead.wait_filled(4)
@@ -236,7 +235,6 @@ class PrintJob:
         if not msgs:
             return
         numbers = self.link.send(*msgs)
-        self._items_sent = max(numbers)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self._waiting_heat_item = max(numbers)
             self._set(JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C")
@@ -339,11 +337,11 @@ class PrintJob:
         self._drain()
         self._finish(JobState.CANCELLED, "cancelled", result)
 
-    def _fail(self, result: PrintResult, reason: str) -> None:
+    def _fail(self, result: PrintResult, reason: str, last_segment: int | None = None) -> None:
+        """``last_segment``: the last executed segment when the error knows it (a device reset)."""
         link = self.link
         done = link.progress.segments_done if link else 0
-        exact = getattr(getattr(link, "last_reset", None), "last_segment", None)
-        info = self._map.lookup(exact if exact else done)
+        info = self._map.lookup(last_segment if last_segment else done)
         result.status, result.reason = "failed", reason
         result.segments = done
         result.retransmits = link.counters.retransmits if link else 0
@@ -356,7 +354,7 @@ class PrintJob:
                 link.send(*heaters_off(), timeout=1.0)
             except (LinkError, OSError):
                 pass  # link lost: the firmware's own watchdog must turn heaters off
-        st = getattr(self, "_status", None)
+        st = self._status
         point = ResumePoint(
             str(self.gcode), reason, result.last_line, result.last_layer, info.point if info else None,
             info.steps if info else None, st.hotend_target_c if st else 0.0, st.bed_target_c if st else 0.0,

@@ -151,7 +151,6 @@ class SimDevice:
                 if inc.kind == "urgent":
                     self._urgent(inc.payload, now)
             self._report(self.machine.advance(T, now))
-        mc = self.machine
         if self.synced and self._flow_wanted(now):
             self.endpoint.request_ack()
         if not self.synced and now >= self._boot_sent + self.config.boot_announce_s:
