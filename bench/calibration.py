@@ -21,7 +21,12 @@ import numpy as np
 
 from cdprhost.calibration.identification import identify
 from cdprhost.calibration.planning import TABLE1_POSES, plan_poses
-from cdprhost.calibration.simulate import achieved_points, perturbed_geometry, simulate_observations, validation_grid
+from cdprhost.calibration.simulate import (
+    achieved_points,
+    perturbed_geometry,
+    simulate_observations,
+    validation_grid,
+)
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import load_profile
 
@@ -34,8 +39,13 @@ def validation_rms(truth: MachineModel, commanding: MachineModel, grid: np.ndarr
     return float(np.sqrt(np.nanmean(err**2))) if np.isfinite(err).any() else float("inf")
 
 
-def session_scores(nominal: MachineModel, pose_sets: dict[str, np.ndarray], seeds: range,
-                   noise_mm: float = 0.05, amplitude_mm: float = 3.0) -> dict[str, np.ndarray]:
+def session_scores(
+    nominal: MachineModel,
+    pose_sets: dict[str, np.ndarray],
+    seeds: range,
+    noise_mm: float = 0.05,
+    amplitude_mm: float = 3.0,
+) -> dict[str, np.ndarray]:
     """Validation RMS after calibration, per pose set and seed; key ``before`` = nominal."""
     grid = validation_grid(nominal)
     scores: dict[str, list[float]] = {"before": [], **{k: [] for k in pose_sets}}
@@ -45,11 +55,15 @@ def session_scores(nominal: MachineModel, pose_sets: dict[str, np.ndarray], seed
         scores["before"].append(validation_rms(truth, nominal, grid))
         for name, poses in pose_sets.items():
             obs = simulate_observations(truth, nominal, poses, noise_mm=noise_mm, rng=rng)
-            if not np.isfinite(obs.measured).all():  # the true effector cannot reach a commanded pose
+            if not np.isfinite(
+                obs.measured
+            ).all():  # the true effector cannot reach a commanded pose
                 scores[name].append(float("inf"))
                 continue
             result = identify(obs, nominal)
-            scores[name].append(validation_rms(truth, result.model, grid) if result.converged else float("inf"))
+            scores[name].append(
+                validation_rms(truth, result.model, grid) if result.converged else float("inf")
+            )
     return {k: np.asarray(v) for k, v in scores.items()}
 
 
@@ -75,16 +89,26 @@ def main() -> int:
     np.seterr(invalid="ignore")  # medians and ratios over failed (inf) sessions
     t_run = time.perf_counter() - t0 - t_plan
     base = float(np.median(scores["Table 1"]))
-    print(f"{args.seeds} seeds, mocap noise {args.noise} mm/coordinate, true errors U(-3, 3) mm; "
-          f"planning {t_plan:.1f} s, sessions {t_run:.1f} s")
-    print("validation RMS (mm) over", len(validation_grid(nominal)), "grid points; 'failed' = a pose the true machine cannot reach or no convergence")
-    print(f"{'pose set':<12} {'median':>10} {'p90':>10} {'failed':>7} {'vs Table 1':>11} {'target':>9}")
+    print(
+        f"{args.seeds} seeds, mocap noise {args.noise} mm/coordinate, true errors U(-3, 3) mm; "
+        f"planning {t_plan:.1f} s, sessions {t_run:.1f} s"
+    )
+    print(
+        "validation RMS (mm) over",
+        len(validation_grid(nominal)),
+        "grid points; 'failed' = a pose the true machine cannot reach or no convergence",
+    )
+    print(
+        f"{'pose set':<12} {'median':>10} {'p90':>10} {'failed':>7} {'vs Table 1':>11} {'target':>9}"
+    )
     for name, vals in scores.items():
         med = float(np.median(vals))
         target = TARGETS_MM.get(name)
         mark = "" if target is None else (f"{target:g} ok" if med <= target else f"{target:g} MISS")
-        print(f"{name:<12} {med:10.4f} {np.sort(vals)[int(0.9 * (vals.size - 1))]:10.4f} {int(np.sum(~np.isfinite(vals))):7d} "
-              f"{base / med:10.1f}x {mark:>9}")
+        print(
+            f"{name:<12} {med:10.4f} {np.sort(vals)[int(0.9 * (vals.size - 1))]:10.4f} {int(np.sum(~np.isfinite(vals))):7d} "
+            f"{base / med:10.1f}x {mark:>9}"
+        )
     return 0 if all(float(np.median(scores[k])) <= v for k, v in TARGETS_MM.items()) else 1
 
 

@@ -21,7 +21,12 @@ import numpy as np
 from cdprhost.calibration.fitting import CableModelFit
 from cdprhost.calibration.simulate import commanded_path
 from cdprhost.calibration.synthetic import write_synthetic_session
-from cdprhost.diagnosis.scenarios import hidden_truth, measurement_tour, session_times, simulate_session
+from cdprhost.diagnosis.scenarios import (
+    hidden_truth,
+    measurement_tour,
+    session_times,
+    simulate_session,
+)
 from cdprhost.diagnosis.session_input import load_session_data
 from cdprhost.diagnosis.workflow import FAST, DiagnosisSettings, diagnose
 from cdprhost.effects.base import MotionContext
@@ -45,14 +50,20 @@ def write_session(directory: Path, nominal: MachineModel, effect: str, n_poses: 
     t_s = session_times(n_poses, rng)
     s_cmd, dirs = commanded_path(nominal, poses)
     actual = truth.fk(s_cmd, MotionContext(t_s=t_s, directions=dirs))
-    write_synthetic_session(directory, actual, poses, s_cmd, t_s, dirs.astype(int), "paper-simulation")
+    write_synthetic_session(
+        directory, actual, poses, s_cmd, t_s, dirs.astype(int), "paper-simulation"
+    )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--runs", type=int, default=5)
     ap.add_argument("--poses", type=int, default=40)
-    ap.add_argument("--effect", default="cable_elasticity", help="hidden effect (default: the slowest to fit)")
+    ap.add_argument(
+        "--effect", default="cable_elasticity", help="hidden effect (default: the slowest to fit)"
+    )
     args = ap.parse_args()
     nominal = MachineModel.from_profile(load_profile("paper-simulation"))
     rng = np.random.default_rng(0)
@@ -61,19 +72,27 @@ def main() -> None:
 
     base = median_time(lambda: CableModelFit().fit(obs, nominal), max(args.runs, 5))
     verdicts = []
-    full = median_time(lambda: verdicts.append(diagnose(obs, nominal, settings=DiagnosisSettings())), args.runs)
+    full = median_time(
+        lambda: verdicts.append(diagnose(obs, nominal, settings=DiagnosisSettings())), args.runs
+    )
     fast = median_time(lambda: diagnose(obs, nominal, settings=FAST), args.runs)
     with tempfile.TemporaryDirectory() as tmp:
         write_session(Path(tmp), nominal, args.effect, args.poses)
         read = median_time(lambda: load_session_data(tmp), max(1, args.runs // 2))
 
     d = verdicts[-1]
-    print(f"{args.poses} poses, hidden {args.effect}: verdict {d.verdict} {', '.join(d.effects)}; "
-          f"held-out {d.base.heldout_rms_mm:.3f} -> {d.final.heldout_rms_mm:.3f} mm, noise floor {d.noise_floor_mm:.3f} mm")
+    print(
+        f"{args.poses} poses, hidden {args.effect}: verdict {d.verdict} {', '.join(d.effects)}; "
+        f"held-out {d.base.heldout_rms_mm:.3f} -> {d.final.heldout_rms_mm:.3f} mm, noise floor {d.noise_floor_mm:.3f} mm"
+    )
     print(f"{'step':<42}{'median s':>10}{'vs base fit':>13}{'target':>10}")
     print(f"{'baseline: base-model fit (12 parameters)':<42}{base:>10.4f}{1.0:>12.0f}x")
-    print(f"{'diagnosis, full (8 folds, all candidates)':<42}{full:>10.3f}{full / base:>12.0f}x{'< 10 s':>10}")
-    print(f"{'diagnosis, fast (4 folds, tests)':<42}{fast:>10.3f}{fast / base:>12.0f}x{'< 0.5 s':>10}")
+    print(
+        f"{'diagnosis, full (8 folds, all candidates)':<42}{full:>10.3f}{full / base:>12.0f}x{'< 10 s':>10}"
+    )
+    print(
+        f"{'diagnosis, fast (4 folds, tests)':<42}{fast:>10.3f}{fast / base:>12.0f}x{'< 0.5 s':>10}"
+    )
     print(f"{'read + average 40 Motive takes':<42}{read:>10.3f}{read / base:>12.0f}x")
 
 

@@ -66,7 +66,9 @@ def child_peak_rss_mb(path: str) -> float:
         "for _ in read_program(sys.argv[1]): pass\n"
         "print(base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
     )
-    out = subprocess.run([sys.executable, "-c", code, path], capture_output=True, text=True, check=True).stdout.split()
+    out = subprocess.run(
+        [sys.executable, "-c", code, path], capture_output=True, text=True, check=True
+    ).stdout.split()
     return int(out[1]) / 1024.0
 
 
@@ -81,7 +83,9 @@ def available(module: str) -> bool:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--file", default=str(FIXTURE))
-    ap.add_argument("--times", type=int, default=10, help="concatenation factor of the long file (default 10)")
+    ap.add_argument(
+        "--times", type=int, default=10, help="concatenation factor of the long file (default 10)"
+    )
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     text = Path(args.file).read_text(encoding="utf-8")
@@ -91,7 +95,9 @@ def main() -> int:
         with open(long_path, "w", encoding="utf-8") as fh:
             for _ in range(args.times):
                 fh.write(text)
-        print(f"file: {args.file} ({n_lines} lines); long file: x{args.times} ({n_lines * args.times} lines)")
+        print(
+            f"file: {args.file} ({n_lines} lines); long file: x{args.times} ({n_lines * args.times} lines)"
+        )
         print(f"{'parser':34s} {'lines':>9s} {'wall s':>8s} {'lines/s':>11s} {'cpu lines/s':>12s}")
         rates: dict[str, float] = {}
 
@@ -99,21 +105,32 @@ def main() -> int:
             rates[name] = lines / wall
             print(f"{name:34s} {lines:9d} {wall:8.3f} {lines / wall:11.0f} {lines / cpu:12.0f}")
 
-        report("cdprhost read_program", n_lines, *timed(lambda: run_reader(args.file), args.repeats))
-        report(f"cdprhost read_program x{args.times}", n_lines * args.times,
-               *timed(lambda: run_reader(long_path), max(1, args.repeats // 2)))
+        report(
+            "cdprhost read_program", n_lines, *timed(lambda: run_reader(args.file), args.repeats)
+        )
+        report(
+            f"cdprhost read_program x{args.times}",
+            n_lines * args.times,
+            *timed(lambda: run_reader(long_path), max(1, args.repeats // 2)),
+        )
         if available("gcodeparser"):
             gp = timed(lambda: run_gcodeparser(text), max(1, args.repeats // 2))
             report("gcodeparser parse_gcode_lines", n_lines, *gp)
         if available("pygcode"):
             sample = text.splitlines()[:20000]
-            report("pygcode Line() (20k-line sample)", len(sample), *timed(lambda: run_pygcode(sample), 1))
+            report(
+                "pygcode Line() (20k-line sample)",
+                len(sample),
+                *timed(lambda: run_pygcode(sample), 1),
+            )
         base = rates["cdprhost read_program"]
         for other in ("gcodeparser parse_gcode_lines", "pygcode Line() (20k-line sample)"):
             if other in rates:
                 print(f"read_program / {other}: {base / rates[other]:.1f}x")
-        print(f"peak RSS reading the x{args.times} file: {child_peak_rss_mb(long_path):.0f} MB "
-              f"(this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB)")
+        print(
+            f"peak RSS reading the x{args.times} file: {child_peak_rss_mb(long_path):.0f} MB "
+            f"(this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB)"
+        )
     return 0
 
 

@@ -50,7 +50,11 @@ def loop_fk(sliders, outlets, l0):
     ey = [a - i * e for a, e in zip(a3, ex)]
     j = math.sqrt(sum(c * c for c in ey))
     ey = [c / j for c in ey]
-    ez = [ex[1] * ey[2] - ex[2] * ey[1], ex[2] * ey[0] - ex[0] * ey[2], ex[0] * ey[1] - ex[1] * ey[0]]
+    ez = [
+        ex[1] * ey[2] - ex[2] * ey[1],
+        ex[2] * ey[0] - ex[0] * ey[2],
+        ex[0] * ey[1] - ex[1] * ey[0],
+    ]
     if ez[2] < 0:
         ez = [-c for c in ez]
         ey = [-c for c in ey]
@@ -61,7 +65,13 @@ def loop_fk(sliders, outlets, l0):
         x = (r1 * r1 - r2 * r2 + d * d) / (2 * d)
         y = (r1 * r1 - r3 * r3 + i * i + j * j) / (2 * j) - i / j * x
         z = math.sqrt(r1 * r1 - x * x - y * y)
-        out.append([x1 + x * ex[0] + y * ey[0] + z * ez[0], y1 + x * ex[1] + y * ey[1] + z * ez[1], z1 + x * ex[2] + y * ey[2] + z * ez[2]])
+        out.append(
+            [
+                x1 + x * ex[0] + y * ey[0] + z * ez[0],
+                y1 + x * ex[1] + y * ey[1] + z * ez[1],
+                z1 + x * ex[2] + y * ey[2] + z * ez[2],
+            ]
+        )
     return out
 
 
@@ -86,8 +96,12 @@ def main() -> None:
     small_s = sliders[:m].tolist()
     loop_fk_rate = best_rate(lambda: loop_fk(small_s, outlets, l0), m, repeats=3)
     print(f"{'operation':<24}{'points/s':>14}{'vs per-point loop':>20}{'target':>12}")
-    print(f"{'IK + steps (numpy)':<24}{ik_rate:>14.3e}{ik_rate / loop_ik_rate:>19.0f}x{'>= 4e6':>12}")
-    print(f"{'FK closed form (numpy)':<24}{fk_rate:>14.3e}{fk_rate / loop_fk_rate:>19.0f}x{'>= 5e6':>12}")
+    print(
+        f"{'IK + steps (numpy)':<24}{ik_rate:>14.3e}{ik_rate / loop_ik_rate:>19.0f}x{'>= 4e6':>12}"
+    )
+    print(
+        f"{'FK closed form (numpy)':<24}{fk_rate:>14.3e}{fk_rate / loop_fk_rate:>19.0f}x{'>= 5e6':>12}"
+    )
     print(f"{'baseline IK loop':<24}{loop_ik_rate:>14.3e}")
     print(f"{'baseline FK loop':<24}{loop_fk_rate:>14.3e}")
 

@@ -21,6 +21,7 @@ per segment, ratio 9.5x. The bench takes about 6 s.
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 
 import numpy as np
@@ -30,7 +31,13 @@ from cdprhost.link import open_embedded
 from cdprhost.profile import load_profile
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.messages import HOTEND, WaitHeater
-from firmware_protocol.segments import RAMP_TO_REST, SegmentBatch, SegmentContext, encode_segments, ramp_codes_from_speeds
+from firmware_protocol.segments import (
+    RAMP_TO_REST,
+    SegmentBatch,
+    SegmentContext,
+    encode_segments,
+    ramp_codes_from_speeds,
+)
 
 CLOCK_HZ = 100_000
 BAUD = 250_000
@@ -42,12 +49,14 @@ def _polyline_profile(points: np.ndarray, v_max: float, rng, chord: tuple[float,
     """Cut a polyline into chords; trapezoidal speed per straight side. Returns points, speeds at points."""
     out_pts = [points[:1]]
     out_v = [np.zeros(1)]
-    for a, b in zip(points[:-1], points[1:]):
+    for a, b in itertools.pairwise(points):
         length = float(np.linalg.norm(b - a))
         n = max(2, int(math.ceil(length / rng.uniform(*chord))))  # from rest to rest needs two
         s = np.linspace(0.0, length, n + 1)[1:]
         v_peak = min(v_max, math.sqrt(ACCEL * length))
-        v = np.minimum.reduce([np.full_like(s, v_peak), np.sqrt(2 * ACCEL * s), np.sqrt(2 * ACCEL * (length - s))])
+        v = np.minimum.reduce(
+            [np.full_like(s, v_peak), np.sqrt(2 * ACCEL * s), np.sqrt(2 * ACCEL * (length - s))]
+        )
         out_pts.append(a + (b - a) * (s / length)[:, None])
         out_v.append(v)
     return np.vstack(out_pts), np.concatenate(out_v)
@@ -120,7 +129,9 @@ def marlin_ascii(cart: np.ndarray, e_mm: np.ndarray, feed_mm_s: np.ndarray) -> b
     for i in range(1, len(cart)):
         x, y, z = cart[i]
         f = round(feed_mm_s[i - 1] * 60)
-        body = f"N{i} G1 X{x:.3f} Y{y:.3f} Z{z:.3f} E{e_mm[i]:.5f}" + (f" F{f}" if f != last_f else "")
+        body = f"N{i} G1 X{x:.3f} Y{y:.3f} Z{z:.3f} E{e_mm[i]:.5f}" + (
+            f" F{f}" if f != last_f else ""
+        )
         last_f = f
         cs = 0
         for ch in body.encode():
@@ -129,7 +140,9 @@ def marlin_ascii(cart: np.ndarray, e_mm: np.ndarray, feed_mm_s: np.ndarray) -> b
     return "".join(lines).encode()
 
 
-def measure(batch: SegmentBatch, cart: np.ndarray, feed_mm_s: np.ndarray, *, e_steps_per_mm: float = 95.5) -> dict:
+def measure(
+    batch: SegmentBatch, cart: np.ndarray, feed_mm_s: np.ndarray, *, e_steps_per_mm: float = 95.5
+) -> dict:
     """Bytes and rates for one stream (``cart``: (N+1, 3) Cartesian endpoints)."""
     n = len(batch)
     payload, _ = encode_segments(batch, SegmentContext())
@@ -171,7 +184,10 @@ def main() -> None:
         ("segments (synthetic print)", f"{r['segments']}"),
         ("motion time", f"{r['motion_s']:.1f} s ({need:.0f} segments/s needed on average)"),
         ("payload bytes / segment", f"{r['payload_bytes_per_segment']:.2f}"),
-        ("wire bytes / segment (framing, retransmit-free)", f"{r['wire_bytes_per_segment']:.2f}  (target <= 12)"),
+        (
+            "wire bytes / segment (framing, retransmit-free)",
+            f"{r['wire_bytes_per_segment']:.2f}  (target <= 12)",
+        ),
         ("segments/s at 250000 baud (25000 B/s / bytes)", f"{r['sustainable_segments_per_s']:.0f}"),
         ("segments/s measured on the simulated wire", f"{r['measured_segments_per_s']:.0f}"),
         ("Marlin ASCII bytes / segment (N.. G1 ..*cs)", f"{r['ascii_bytes_per_segment']:.2f}"),

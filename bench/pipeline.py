@@ -85,13 +85,19 @@ def encoder():
     """The wire-encode hook: the protocol's vectorised segment encoder, when present."""
     try:
         from firmware_protocol.segments import SegmentBatch as WireBatch
-        from firmware_protocol.segments import SegmentContext, encode_segments, ramp_codes_from_speeds
+        from firmware_protocol.segments import (
+            SegmentContext,
+            encode_segments,
+            ramp_codes_from_speeds,
+        )
     except ImportError:
         return None
     ctx = SegmentContext()
 
     def encode(batch):
-        wire = WireBatch(batch.ticks, batch.delta, ramp_codes_from_speeds(batch.v_start, batch.v_end))
+        wire = WireBatch(
+            batch.ticks, batch.delta, ramp_codes_from_speeds(batch.v_start, batch.v_end)
+        )
         return encode_segments(wire, ctx)[0]
 
     return encode
@@ -104,10 +110,17 @@ def run_pipeline(path: Path, profile, model, encode=None) -> dict:
 
     totals = PipelineTotals()
     wire_bytes = 0
-    for out in segment_blocks(read_items(path, profile, model), profile, model, encode=encode, totals=totals):
+    for out in segment_blocks(
+        read_items(path, profile, model), profile, model, encode=encode, totals=totals
+    ):
         if isinstance(out, SegmentBlock) and out.encoded is not None:
             wire_bytes += len(out.encoded)
-    return {"segments": totals.segments, "moves": totals.moves, "time_s": totals.planned_time_s, "wire_bytes": wire_bytes}
+    return {
+        "segments": totals.segments,
+        "moves": totals.moves,
+        "time_s": totals.planned_time_s,
+        "wire_bytes": wire_bytes,
+    }
 
 
 # ----------------------------------------------------------------- memory (subprocess)
@@ -136,8 +149,12 @@ def child(task: str, path: str, profile_name: str) -> None:
 
 
 def peak_mb(task: str, path: Path, profile_name: str) -> float:
-    out = subprocess.run([sys.executable, __file__, "--child", task, str(path), "--profile", profile_name],
-                         check=True, capture_output=True, text=True)
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", task, str(path), "--profile", profile_name],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])["maxrss_mb"]
 
 
@@ -165,7 +182,13 @@ def bench_file(path: Path, profile, model, args) -> dict:
             fn()
             wall[name] = min(wall[name], time.perf_counter() - w0)
             cpu[name] = min(cpu[name], time.process_time() - c0)
-    res = {"file": path.name, "lines": lines, "pygcode_lines": n_py, "encoded": enc is not None, "rounds": rounds}
+    res = {
+        "file": path.name,
+        "lines": lines,
+        "pygcode_lines": n_py,
+        "encoded": enc is not None,
+        "rounds": rounds,
+    }
     res["wall"] = {k: work[k][0] / wall[k] for k in work}
     res["cpu"] = {k: work[k][0] / cpu[k] for k in work}
     res["estimated_time_s"] = keep["report"].estimated_time_s
@@ -176,23 +199,31 @@ def bench_file(path: Path, profile, model, args) -> dict:
 
 def print_rates(results: list[dict], clock: str) -> None:
     print(f"{clock} time: lines/s, best of the rounds; x = rate / gcodeparser rate")
-    print(f"{'file':<24}{'lines':>9}{'gcodeparser':>12}{'pygcode':>9}{'reader':>10}{'preflight':>10}{'x':>5}"
-          f"{'segments':>10}{'x':>5}{'pipeline':>10}{'x':>5}")
+    print(
+        f"{'file':<24}{'lines':>9}{'gcodeparser':>12}{'pygcode':>9}{'reader':>10}{'preflight':>10}{'x':>5}"
+        f"{'segments':>10}{'x':>5}{'pipeline':>10}{'x':>5}"
+    )
     for r in results:
         q = r[clock]
         g = q["gcodeparser"]
-        print(f"{r['file']:<24}{r['lines']:>9}{g:>12.0f}{q['pygcode']:>9.0f}{q['reader']:>10.0f}"
-              f"{q['preflight']:>10.0f}{q['preflight'] / g:>5.1f}{q['segments']:>10.0f}{q['segments'] / g:>5.1f}"
-              f"{q['pipeline']:>10.0f}{q['pipeline'] / g:>5.1f}")
+        print(
+            f"{r['file']:<24}{r['lines']:>9}{g:>12.0f}{q['pygcode']:>9.0f}{q['reader']:>10.0f}"
+            f"{q['preflight']:>10.0f}{q['preflight'] / g:>5.1f}{q['segments']:>10.0f}{q['segments'] / g:>5.1f}"
+            f"{q['pipeline']:>10.0f}{q['pipeline'] / g:>5.1f}"
+        )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--fixture", type=Path, default=DEFAULT_FIXTURE)
     ap.add_argument("--repeat", type=int, default=10, help="copies of the fixture in the big file")
     ap.add_argument("--profile", default="paper-simulation")
     ap.add_argument("--pygcode-lines", type=int, default=150_000)
-    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (one fewer on the big file)")
+    ap.add_argument(
+        "--rounds", type=int, default=3, help="interleaved rounds (one fewer on the big file)"
+    )
     ap.add_argument("--no-memory", action="store_true")
     ap.add_argument("--child", nargs=2, metavar=("TASK", "FILE"), help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -211,7 +242,10 @@ def main() -> None:
         with open(big, "wb") as fh:
             for _ in range(args.repeat):
                 fh.write(data)
-        results = [bench_file(args.fixture, profile, model, args), bench_file(big, profile, model, args)]
+        results = [
+            bench_file(args.fixture, profile, model, args),
+            bench_file(big, profile, model, args),
+        ]
         mem = {}
         if not args.no_memory:
             mem = {t: peak_mb(t, big, args.profile) for t in ("baseline", "preflight", "pipeline")}
@@ -219,15 +253,25 @@ def main() -> None:
     print(f"profile {args.profile}")
     print_rates(results, "wall")
     print_rates(results, "cpu")
-    print("targets: preflight >= 5x, pipeline >= 3x gcodeparser; segments = pipeline without the wire encoder")
+    print(
+        "targets: preflight >= 5x, pipeline >= 3x gcodeparser; segments = pipeline without the wire encoder"
+    )
     for r in results:
-        print(f"{r['file']}: preflight ok={r['ok']}, estimated {r['estimated_time_s']:.1f} s; pipeline "
-              f"{r['pipeline_segments']} segments from {r['pipeline_moves']} moves"
-              + (f", {r['pipeline_wire_bytes']} wire bytes" if r["encoded"] else " (no wire encoder found)")
-              + f"; pygcode over the first {r['pygcode_lines']} lines; {r['rounds']} rounds")
+        print(
+            f"{r['file']}: preflight ok={r['ok']}, estimated {r['estimated_time_s']:.1f} s; pipeline "
+            f"{r['pipeline_segments']} segments from {r['pipeline_moves']} moves"
+            + (
+                f", {r['pipeline_wire_bytes']} wire bytes"
+                if r["encoded"]
+                else " (no wire encoder found)"
+            )
+            + f"; pygcode over the first {r['pygcode_lines']} lines; {r['rounds']} rounds"
+        )
     if mem:
-        print(f"peak RSS on the big file: interpreter+imports {mem['baseline']:.0f} MB, preflight "
-              f"{mem['preflight']:.0f} MB, pipeline {mem['pipeline']:.0f} MB (target < 400 MB)")
+        print(
+            f"peak RSS on the big file: interpreter+imports {mem['baseline']:.0f} MB, preflight "
+            f"{mem['preflight']:.0f} MB, pipeline {mem['pipeline']:.0f} MB (target < 400 MB)"
+        )
 
 
 if __name__ == "__main__":

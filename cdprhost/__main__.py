@@ -1,3 +1,5 @@
-from cdprhost.cli.main import main
 import sys
+
+from cdprhost.cli.main import main
+
 sys.exit(main())

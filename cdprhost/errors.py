@@ -18,7 +18,9 @@ class InputError(CdprError):
 
     exit_code = 2
 
-    def __init__(self, message: str, *, source: str | None = None, problems: list[str] | None = None):
+    def __init__(
+        self, message: str, *, source: str | None = None, problems: list[str] | None = None
+    ):
         self.source = source
         self.problems = list(problems or [])
         text = message if source is None else f"{source}: {message}"

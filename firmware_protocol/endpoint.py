@@ -65,7 +65,9 @@ class Endpoint:
         self.nak_holdoff = nak_holdoff
         self.accept = accept
         self.flow = flow
-        self.byte_time = byte_time  # wire time per byte, so RTT is measured from the end of transmission
+        self.byte_time = (
+            byte_time  # wire time per byte, so RTT is measured from the end of transmission
+        )
         self._wire_free = 0.0
         self.deframer = Deframer()
         self.counters = LinkCounters()
@@ -108,9 +110,15 @@ class Endpoint:
             if frame.kind == Kind.URGENT:
                 out.append(Incoming("urgent", frame.payload))
                 continue
-            if self.byte_time and self.sender.outstanding and frame.ack != self.sender.base and \
-                    self.sender.outstanding[0].sent_at > now:
-                self.byte_time = 0.0  # acknowledged before it could have left: the wire is faster (USB, pty)
+            if (
+                self.byte_time
+                and self.sender.outstanding
+                and frame.ack != self.sender.base
+                and self.sender.outstanding[0].sent_at > now
+            ):
+                self.byte_time = (
+                    0.0  # acknowledged before it could have left: the wire is faster (USB, pty)
+                )
             if frame.kind == Kind.NAK:
                 self.counters.naks_received += 1
                 self.sender.on_nak(frame.ack, now)

@@ -80,7 +80,9 @@ class Deframer:
         self.bad_headers = 0
         self.bad_frames = 0  # header fine, CRC-16 or END wrong
         self.garbage_bytes = 0
-        self.rejected: list[tuple[int, int]] = []  # (kind, seq) of frames with a good header and a bad body
+        self.rejected: list[
+            tuple[int, int]
+        ] = []  # (kind, seq) of frames with a good header and a bad body
 
     @property
     def pending(self) -> int:
@@ -107,7 +109,11 @@ class Deframer:
                 break
             length = buf[pos + 1]
             kind = buf[pos + 2]
-            if crc8(buf[pos + 1 : pos + 5]) != buf[pos + 5] or length > MAX_PAYLOAD or not 1 <= kind <= 4:
+            if (
+                crc8(buf[pos + 1 : pos + 5]) != buf[pos + 5]
+                or length > MAX_PAYLOAD
+                or not 1 <= kind <= 4
+            ):
                 self.bad_headers += 1
                 self.garbage_bytes += 1
                 pos += 1
@@ -144,8 +150,13 @@ class Deframer:
         while 0 <= i <= n - OVERHEAD:
             length = buf[i + 1]
             end = i + 6 + length
-            if (length <= MAX_PAYLOAD and end + 3 <= n and crc8(buf[i + 1 : i + 5]) == buf[i + 5]
-                    and buf[end + 2] == END and crc16(buf[i + 1 : end]) == (buf[end] << 8) | buf[end + 1]):
+            if (
+                length <= MAX_PAYLOAD
+                and end + 3 <= n
+                and crc8(buf[i + 1 : i + 5]) == buf[i + 5]
+                and buf[end + 2] == END
+                and crc16(buf[i + 1 : end]) == (buf[end] << 8) | buf[end + 1]
+            ):
                 return i
             i = buf.find(SYNC, i + 1)
         return -1

@@ -112,6 +112,7 @@ def _text(s: str) -> bytes:
 
 # ------------------------------------------------------------------ messages
 
+
 @dataclass(frozen=True)
 class Message:
     """Base: ``OPCODE`` and ``LAYOUT`` (one codec kind per field, in order)."""
@@ -250,8 +251,25 @@ class Ident(Message):
     segments_received: int
     segments_done: int
     OPCODE: ClassVar[int] = 0x41
-    LAYOUT: ClassVar[tuple[str, ...]] = ("uv", "u8", "u8", "uv", "text", "text", "u8", "uv", "uv", "uv", "u8", "u8",
-                                         "u8", "uv", "uv", "uv", "uv")
+    LAYOUT: ClassVar[tuple[str, ...]] = (
+        "uv",
+        "u8",
+        "u8",
+        "uv",
+        "text",
+        "text",
+        "u8",
+        "uv",
+        "uv",
+        "uv",
+        "u8",
+        "u8",
+        "u8",
+        "uv",
+        "uv",
+        "uv",
+        "uv",
+    )
 
 
 @dataclass(frozen=True)
@@ -275,8 +293,26 @@ class Status(Message):
     naks_sent: int
     duplicates: int
     OPCODE: ClassVar[int] = 0x42
-    LAYOUT: ClassVar[tuple[str, ...]] = ("u8", "uv", "uv", "uv", "uv", "sv4", "sv", "uv", "sv", "uv", "u8", "u8", "u8",
-                                         "u8", "uv", "uv", "uv", "uv")
+    LAYOUT: ClassVar[tuple[str, ...]] = (
+        "u8",
+        "uv",
+        "uv",
+        "uv",
+        "uv",
+        "sv4",
+        "sv",
+        "uv",
+        "sv",
+        "uv",
+        "u8",
+        "u8",
+        "u8",
+        "u8",
+        "uv",
+        "uv",
+        "uv",
+        "uv",
+    )
 
 
 @dataclass(frozen=True)
@@ -337,8 +373,27 @@ class Flow(Message):
 
 _BY_OPCODE: dict[int, type[Message]] = {
     cls.OPCODE: cls
-    for cls in (Identify, GetStatus, ClearFault, Hello, EmergencyStop, SetPosition, Enable, Home, Dwell, SetHeater,
-                SetFan, WaitHeater, Ident, Status, Event, Error, Boot, EstopAck, Flow)
+    for cls in (
+        Identify,
+        GetStatus,
+        ClearFault,
+        Hello,
+        EmergencyStop,
+        SetPosition,
+        Enable,
+        Home,
+        Dwell,
+        SetHeater,
+        SetFan,
+        WaitHeater,
+        Ident,
+        Status,
+        Event,
+        Error,
+        Boot,
+        EstopAck,
+        Flow,
+    )
 }
 
 

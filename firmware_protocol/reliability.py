@@ -147,7 +147,11 @@ class Sender:
     def frames_to_send(self, now: float) -> list[tuple[int, bytes]]:
         """Retransmissions that are due (timeout or NAK) and new frames the window allows."""
         out: list[tuple[int, bytes]] = []
-        if self.outstanding and not self._resend and now >= self.outstanding[0].sent_at + self.rto.rto:
+        if (
+            self.outstanding
+            and not self._resend
+            and now >= self.outstanding[0].sent_at + self.rto.rto
+        ):
             self.timeouts += 1
             self.rto.back_off()
             self._go_back(now)

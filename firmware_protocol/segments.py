@@ -51,10 +51,15 @@ class SegmentBatch:
     def __post_init__(self) -> None:
         ticks = np.ascontiguousarray(self.ticks, dtype=np.int64).reshape(-1)
         deltas = np.ascontiguousarray(self.deltas, dtype=np.int64).reshape(-1, AXES)
-        ramps = (np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16) if self.ramps is None
-                 else np.ascontiguousarray(self.ramps, dtype=np.int16).reshape(-1))
+        ramps = (
+            np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16)
+            if self.ramps is None
+            else np.ascontiguousarray(self.ramps, dtype=np.int16).reshape(-1)
+        )
         if not (len(ticks) == len(deltas) == len(ramps)):
-            raise ValueError(f"segment arrays differ in length: {len(ticks)}, {len(deltas)}, {len(ramps)}")
+            raise ValueError(
+                f"segment arrays differ in length: {len(ticks)}, {len(deltas)}, {len(ramps)}"
+            )
         if len(ticks) and (ticks.min() < 1 or ticks.max() > MAX_TICKS):
             raise ValueError(f"segment durations must be 1..{MAX_TICKS} ticks")
         if len(ticks) and np.abs(deltas).max() > MAX_DELTA:
@@ -68,16 +73,21 @@ class SegmentBatch:
     def __len__(self) -> int:
         return len(self.ticks)
 
-    def __getitem__(self, index: slice) -> "SegmentBatch":
+    def __getitem__(self, index: slice) -> SegmentBatch:
         return SegmentBatch(self.ticks[index], self.deltas[index], self.ramps[index])
 
     @staticmethod
-    def concat(batches: list["SegmentBatch"]) -> "SegmentBatch":
-        return SegmentBatch(np.concatenate([b.ticks for b in batches]), np.concatenate([b.deltas for b in batches]),
-                            np.concatenate([b.ramps for b in batches]))
+    def concat(batches: list[SegmentBatch]) -> SegmentBatch:
+        return SegmentBatch(
+            np.concatenate([b.ticks for b in batches]),
+            np.concatenate([b.deltas for b in batches]),
+            np.concatenate([b.ramps for b in batches]),
+        )
 
 
-def segments_from_positions(positions: np.ndarray, ticks: np.ndarray, ramps: np.ndarray | None = None) -> SegmentBatch:
+def segments_from_positions(
+    positions: np.ndarray, ticks: np.ndarray, ramps: np.ndarray | None = None
+) -> SegmentBatch:
     """Segments between consecutive absolute step positions ``positions`` (N+1, 4)."""
     pos = np.asarray(positions, dtype=np.int64)
     return SegmentBatch(ticks, np.diff(pos, axis=0), ramps)
@@ -155,7 +165,7 @@ class SegmentContext:
     prev_ticks: int = 0
     prev_deltas: tuple[int, int, int, int] = (0, 0, 0, 0)
 
-    def copy(self) -> "SegmentContext":
+    def copy(self) -> SegmentContext:
         return SegmentContext(self.prev_ticks, self.prev_deltas)
 
 
@@ -195,8 +205,14 @@ def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np
     np.cumsum(seg_len, out=offsets[1:])
     out = np.zeros(int(offsets[-1]), dtype=np.uint8)
     start = offsets[:-1]
-    out[start] = (SEG_BASE | F_RAMP * has_r | F_DURATION * has_dur | F_PREDICTED * use_pred
-                  | F_SLIDERS * has_sl | F_EXTRUDER * has_e).astype(np.uint8)
+    out[start] = (
+        SEG_BASE
+        | F_RAMP * has_r
+        | F_DURATION * has_dur
+        | F_PREDICTED * use_pred
+        | F_SLIDERS * has_sl
+        | F_EXTRUDER * has_e
+    ).astype(np.uint8)
     pos = start + 1
     scatter_uvarints(out, pos, batch.ticks.astype(np.uint64), len_dur)
     pos = pos + len_dur
@@ -215,7 +231,9 @@ class SegmentDecodeError(ValueError):
     pass
 
 
-def decode_segment(buf: bytes, pos: int, ctx: SegmentContext) -> tuple[int, tuple[int, int, int, int], int, int]:
+def decode_segment(
+    buf: bytes, pos: int, ctx: SegmentContext
+) -> tuple[int, tuple[int, int, int, int], int, int]:
     """Decode the segment whose opcode is at ``buf[pos]``; returns ``(ticks, deltas, ramp, next_pos)``."""
     op = buf[pos]
     pos += 1

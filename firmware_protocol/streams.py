@@ -7,8 +7,9 @@ import numpy as np
 from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
 
 
-def demo_stream(n: int, seed: int = 0, *, clock_hz: int = 100_000, min_ticks: int = 1000,
-                max_ticks: int = 5000) -> SegmentBatch:
+def demo_stream(
+    n: int, seed: int = 0, *, clock_hz: int = 100_000, min_ticks: int = 1000, max_ticks: int = 5000
+) -> SegmentBatch:
     """``n`` segments of a smooth, bounded joint-space motion (sliders within +-8000 steps
     of the start, the extruder always feeding); the last segment ends at rest."""
     rng = np.random.default_rng(seed)
@@ -25,10 +26,22 @@ def demo_stream(n: int, seed: int = 0, *, clock_hz: int = 100_000, min_ticks: in
     return SegmentBatch(ticks, np.diff(pos, axis=0), ramps)
 
 
-def expected_record(batch: SegmentBatch, *, clock_hz: int = 100_000, start=(0, 0, 0, 0), first_seq: int = 1,
-                    start_ticks: int = 0) -> list[dict]:
+def expected_record(
+    batch: SegmentBatch,
+    *,
+    clock_hz: int = 100_000,
+    start=(0, 0, 0, 0),
+    first_seq: int = 1,
+    start_ticks: int = 0,
+) -> list[dict]:
     """The record a device must produce executing ``batch`` from ``start`` (see device/record.py)."""
     steps = np.asarray(start, dtype=np.int64) + np.cumsum(batch.deltas, axis=0)
     ticks = start_ticks + np.cumsum(batch.ticks)
-    return [{"seq": first_seq + i, "steps": [int(v) for v in steps[i]], "t": round(int(ticks[i]) / clock_hz, 6)}
-            for i in range(len(batch))]
+    return [
+        {
+            "seq": first_seq + i,
+            "steps": [int(v) for v in steps[i]],
+            "t": round(int(ticks[i]) / clock_hz, 6),
+        }
+        for i in range(len(batch))
+    ]

@@ -81,7 +81,9 @@ def uvarint_lengths(values: np.ndarray) -> np.ndarray:
     return n
 
 
-def scatter_uvarints(out: np.ndarray, positions: np.ndarray, values: np.ndarray, lengths: np.ndarray) -> None:
+def scatter_uvarints(
+    out: np.ndarray, positions: np.ndarray, values: np.ndarray, lengths: np.ndarray
+) -> None:
     """Write each ``values[i]`` as a varint of ``lengths[i]`` bytes at ``out[positions[i]:]``.
 
     ``lengths`` may be 0 for fields that are absent; those entries write nothing.

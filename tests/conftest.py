@@ -20,7 +20,9 @@ settings.register_profile("ci", max_examples=200, deadline=None)
 settings.register_profile("dev", max_examples=100, deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
 
-PAPER_TRUTH_OUTLETS = np.array([(-260.0, -150.111, 78.0), (260.0, -150.111, 78.0), (0.0, 300.222, 78.0)])
+PAPER_TRUTH_OUTLETS = np.array(
+    [(-260.0, -150.111, 78.0), (260.0, -150.111, 78.0), (0.0, 300.222, 78.0)]
+)
 
 
 @pytest.fixture(scope="session")

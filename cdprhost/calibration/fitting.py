@@ -30,7 +30,18 @@ from cdprhost.kinematics.jacobian import velocity_jacobian
 from cdprhost.kinematics.machine import MachineModel
 
 GEOMETRY_NAMES = (
-    "x_1a", "y_1a", "z_1a", "x_2a", "y_2a", "z_2a", "x_3a", "y_3a", "z_3a", "L_10", "L_20", "L_30",
+    "x_1a",
+    "y_1a",
+    "z_1a",
+    "x_2a",
+    "y_2a",
+    "z_2a",
+    "x_3a",
+    "y_3a",
+    "z_3a",
+    "L_10",
+    "L_20",
+    "L_30",
 )
 
 
@@ -54,9 +65,11 @@ class Observations:
     def subset(self, index: np.ndarray) -> Observations:
         sig = self.sigma_mm if np.ndim(self.sigma_mm) == 0 else np.asarray(self.sigma_mm)[index]
         return Observations(
-            self.measured[index], self.sliders[index],
+            self.measured[index],
+            self.sliders[index],
             None if self.t_s is None else self.t_s[index],
-            None if self.directions is None else self.directions[index], sig,
+            None if self.directions is None else self.directions[index],
+            sig,
         )
 
 
@@ -121,7 +134,11 @@ class CableModelFit:
             n = len(CATALOGUE[name].vector_names)
             vectors.append(x[offset : offset + n])
             offset += n
-        fixed = [(n, v) for n, v in zip(base.effects.names, base.effects.vectors) if n not in self.effects]
+        fixed = [
+            (n, v)
+            for n, v in zip(base.effects.names, base.effects.vectors)
+            if n not in self.effects
+        ]
         names = [n for n, _ in fixed] + list(self.effects)
         chain = EffectChain.from_vectors(names, [v for _, v in fixed] + vectors)
         return base.with_geometry(geometry, chain)
@@ -143,8 +160,17 @@ class CableModelFit:
                 iterates.append(np.array(x, dtype=float))
             return self._jacobian(base, x, fun)
 
-        result = least_squares(fun, x0, jac=jac, method="lm" if len(obs) * 3 >= len(x0) else "trf",
-                               x_scale="jac", xtol=self.xtol, ftol=self.ftol, gtol=1e-15, max_nfev=self.max_nfev * max(1, len(x0)))
+        result = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            method="lm" if len(obs) * 3 >= len(x0) else "trf",
+            x_scale="jac",
+            xtol=self.xtol,
+            ftol=self.ftol,
+            gtol=1e-15,
+            max_nfev=self.max_nfev * max(1, len(x0)),
+        )
         self.x_ = result.x
         self.model_ = self.model_at(base, result.x)
         self.residuals_ = result.fun.reshape(-1, 3)
@@ -164,8 +190,14 @@ class CableModelFit:
         """Central-difference Jacobian at the solution (more accurate than the solver's)."""
         f0 = fun(x)
         jac = np.empty((f0.size, x.size))
-        for i in range(x.size):  # one column per parameter; each evaluation is vectorised over poses
-            h = 1e-6 * max(1.0, abs(x[i])) if i < 12 or not self.effects else max(1e-9, 1e-4 * abs(x[i]) + 1e-9)
+        for i in range(
+            x.size
+        ):  # one column per parameter; each evaluation is vectorised over poses
+            h = (
+                1e-6 * max(1.0, abs(x[i]))
+                if i < 12 or not self.effects
+                else max(1e-9, 1e-4 * abs(x[i]) + 1e-9)
+            )
             e = np.zeros_like(x)
             e[i] = h
             jac[:, i] = (fun(x + e) - fun(x - e)) / (2 * h)
@@ -186,7 +218,12 @@ class CableModelFit:
             cov = cov * max(self.chi2_ / self.dof_, 1e-300)
         self.covariance_ = cov
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-        sd[np.isin(np.arange(sd.size), np.flatnonzero(np.abs(self.null_space_).max(axis=0) > 0.1) if weak.any() else [])] = np.inf
+        sd[
+            np.isin(
+                np.arange(sd.size),
+                np.flatnonzero(np.abs(self.null_space_).max(axis=0) > 0.1) if weak.any() else [],
+            )
+        ] = np.inf
         self.stderr_ = sd
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = cov / np.outer(sd, sd)
@@ -195,7 +232,11 @@ class CableModelFit:
     def updates_until(self, step_tol: float) -> int:
         """Parameter updates until one changes no parameter by more than ``step_tol``
         (the paper's stopping rule, section 5.2); ``iterations_`` + 1 if none did."""
-        steps = np.abs(np.diff(self.iterates_, axis=0)).max(axis=1) if len(self.iterates_) > 1 else np.zeros(1)
+        steps = (
+            np.abs(np.diff(self.iterates_, axis=0)).max(axis=1)
+            if len(self.iterates_) > 1
+            else np.zeros(1)
+        )
         small = np.flatnonzero(steps <= step_tol)
         return int(small[0] + 1) if small.size else self.iterations_ + 1
 

@@ -95,7 +95,9 @@ class Identification:
     def problems(self) -> list[str]:
         out = []
         if self.poses_used < MIN_POSES:
-            out.append(f"only {self.poses_used} usable fit pose(s); at least {MIN_POSES} are needed for 12 parameters")
+            out.append(
+                f"only {self.poses_used} usable fit pose(s); at least {MIN_POSES} are needed for 12 parameters"
+            )
         if not self.converged:
             out.append("the least-squares fit did not converge")
         if self.unidentifiable:
@@ -112,9 +114,18 @@ class Identification:
         return {
             "ok": self.ok,
             "problems": self.problems(),
-            "parameters": {"outlets": g.outlets.tolist(), "initial_lengths": g.initial_lengths.tolist()},
-            "nominal": {"outlets": self.nominal.outlets.tolist(), "initial_lengths": self.nominal.initial_lengths.tolist()},
-            "stderr": {"outlets": np.reshape(finite(se[:9]), (3, 3)).tolist(), "initial_lengths": finite(se[9:])},
+            "parameters": {
+                "outlets": g.outlets.tolist(),
+                "initial_lengths": g.initial_lengths.tolist(),
+            },
+            "nominal": {
+                "outlets": self.nominal.outlets.tolist(),
+                "initial_lengths": self.nominal.initial_lengths.tolist(),
+            },
+            "stderr": {
+                "outlets": np.reshape(finite(se[:9]), (3, 3)).tolist(),
+                "initial_lengths": finite(se[9:]),
+            },
             "ci95": {n: finite(self.ci95[i]) for i, n in enumerate(self.names)},
             "correlations": [{"a": a, "b": b, "r": r} for a, b, r in self.correlations],
             "singular_values": self.singular_values.tolist(),
@@ -129,16 +140,29 @@ class Identification:
             "dof": self.dof,
             "poses_used": self.poses_used,
             "poses": [
-                {"pose": i + 1, "role": r, "error_before_mm": float(b), "error_after_mm": float(a),
-                 "residual_mm": self.residuals_after[i].tolist(), "sigma_mm": float(self.sigma_mm[i])}
-                for i, (r, b, a) in enumerate(zip(self.roles, self.errors_before, self.errors_after))
+                {
+                    "pose": i + 1,
+                    "role": r,
+                    "error_before_mm": float(b),
+                    "error_after_mm": float(a),
+                    "residual_mm": self.residuals_after[i].tolist(),
+                    "sigma_mm": float(self.sigma_mm[i]),
+                }
+                for i, (r, b, a) in enumerate(
+                    zip(self.roles, self.errors_before, self.errors_after)
+                )
             ],
             "rejected": list(self.rejected),
         }
 
 
-def identify(obs: Observations, base: MachineModel, roles: tuple[str, ...] | list[str] | None = None,
-             *, rejected: tuple[str, ...] = ()) -> Identification:
+def identify(
+    obs: Observations,
+    base: MachineModel,
+    roles: tuple[str, ...] | list[str] | None = None,
+    *,
+    rejected: tuple[str, ...] = (),
+) -> Identification:
     """Fit the geometry on the ``fit`` poses of ``obs``; predict every pose before/after."""
     k = len(obs)
     roles = tuple(roles) if roles is not None else ("fit",) * k
@@ -151,8 +175,26 @@ def identify(obs: Observations, base: MachineModel, roles: tuple[str, ...] | lis
     before = _errors(base, obs)
     if fit_idx.size < MIN_POSES:
         nan = np.full(12, np.inf)
-        return Identification(base.geometry, base.geometry, nan, np.column_stack([-nan, nan]), [], np.zeros(0), [],
-                              roles, before, before, _residuals(base, obs), 0, False, float("nan"), 0, sigma, base, rejected)
+        return Identification(
+            base.geometry,
+            base.geometry,
+            nan,
+            np.column_stack([-nan, nan]),
+            [],
+            np.zeros(0),
+            [],
+            roles,
+            before,
+            before,
+            _residuals(base, obs),
+            0,
+            False,
+            float("nan"),
+            0,
+            sigma,
+            base,
+            rejected,
+        )
     est = CableModelFit(scale_covariance=False).fit(obs.subset(fit_idx), base)
     # Known-noise covariance, inflated (never shrunk) when the misfit exceeds the noise.
     inflate = max(1.0, est.chi2_ / est.dof_) if est.dof_ > 0 else 1.0
@@ -161,12 +203,24 @@ def identify(obs: Observations, base: MachineModel, roles: tuple[str, ...] | lis
     x = est.x_[:12]
     model = est.model_
     return Identification(
-        nominal=base.geometry, geometry=model.geometry, stderr=stderr,
+        nominal=base.geometry,
+        geometry=model.geometry,
+        stderr=stderr,
         ci95=np.column_stack([x - q * stderr, x + q * stderr]),
-        correlations=est.high_correlations(0.95), singular_values=est.singular_values_,
-        unidentifiable=est.unidentifiable(), roles=roles, errors_before=before, errors_after=_errors(model, obs),
-        residuals_after=_residuals(model, obs), iterations=est.iterations_, converged=est.converged_,
-        chi2=est.chi2_, dof=est.dof_, sigma_mm=sigma, model=model, rejected=rejected,
+        correlations=est.high_correlations(0.95),
+        singular_values=est.singular_values_,
+        unidentifiable=est.unidentifiable(),
+        roles=roles,
+        errors_before=before,
+        errors_after=_errors(model, obs),
+        residuals_after=_residuals(model, obs),
+        iterations=est.iterations_,
+        converged=est.converged_,
+        chi2=est.chi2_,
+        dof=est.dof_,
+        sigma_mm=sigma,
+        model=model,
+        rejected=rejected,
     )
 
 
@@ -179,14 +233,15 @@ def _residuals(model: MachineModel, obs: Observations) -> np.ndarray:
     return np.where(np.isfinite(predicted), predicted - obs.measured, np.inf)
 
 
-def calibrated_profile(profile: MachineProfile, result: Identification, *, session: str = "",
-                       date: str | None = None) -> MachineProfile:
+def calibrated_profile(
+    profile: MachineProfile, result: Identification, *, session: str = "", date: str | None = None
+) -> MachineProfile:
     """``profile`` with the identified geometry and a ``calibration`` provenance table."""
     g = result.geometry
     provenance: dict[str, Any] = {
         "method": "cable-length residual least squares (12 geometric parameters)",
         "session": str(session),
-        "date": date or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "date": date or _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "base_profile": profile.name,
         "poses_used": result.poses_used,
         "rms_before_mm": result.rms_before_mm,
@@ -217,12 +272,17 @@ def pose_roles(poses_csv: str | os.PathLike[str]) -> dict[int, str]:
             continue
         role = (row[ir].strip().lower() if ir < len(row) else "") or "fit"
         if role not in ROLES:
-            raise InputError(f"line {n}, column 'role' (column {ir + 1}): must be fit or check, got {role!r}", source=str(poses_csv))
+            raise InputError(
+                f"line {n}, column 'role' (column {ir + 1}): must be fit or check, got {role!r}",
+                source=str(poses_csv),
+            )
         roles[int(row[ip])] = role
     return roles
 
 
-def identify_session(directory: str | os.PathLike[str], base: MachineModel, *, noise_floor_mm: float = 0.05) -> Identification:
+def identify_session(
+    directory: str | os.PathLike[str], base: MachineModel, *, noise_floor_mm: float = 0.05
+) -> Identification:
     """Measure every take of a session folder and identify (rejected takes are listed, not used).
 
     Each pose's sigma combines the take's frame noise (standard error of its mean)
@@ -231,8 +291,11 @@ def identify_session(directory: str | os.PathLike[str], base: MachineModel, *, n
     session = load_session(directory)
     meas = session.measure()
     if len(meas) == 0:
-        raise InputError("no usable take in the session", source=str(directory),
-                         problems=[f"pose {r.pose} ({r.take}): {r.message}" for r in meas.rejected])
+        raise InputError(
+            "no usable take in the session",
+            source=str(directory),
+            problems=[f"pose {r.pose} ({r.take}): {r.message}" for r in meas.rejected],
+        )
     roles_by_pose = pose_roles(Path(directory) / POSES_FILE)
     roles = tuple(roles_by_pose.get(int(p), "fit") for p in meas.pose)
     sem = np.array([t.sem for t in meas.takes]).reshape(-1, 3)

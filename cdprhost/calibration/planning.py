@@ -35,7 +35,12 @@ from cdprhost.kinematics.workspace import triangle_excess
 
 #: The paper's Table 1 poses (mm), all at z = 110.
 TABLE1_POSES = np.array(
-    [(-30.2310, 24.5370, 110.0), (-42.5000, 24.5370, 110.0), (-31.8320, 43.0150, 110.0), (-36.3660, 13.9120, 110.0)]
+    [
+        (-30.2310, 24.5370, 110.0),
+        (-42.5000, 24.5370, 110.0),
+        (-31.8320, 43.0150, 110.0),
+        (-36.3660, 13.9120, 110.0),
+    ]
 )
 CRITERIA = ("D", "I", "O1", "O2", "O3", "O4", "O5")
 INDEX_NAMES = ("O1", "O2", "O3", "O4", "O5")
@@ -64,7 +69,9 @@ def candidate_poses(
     lim = model.limits
     side = lim.build_side
     z_top = lim.z_max - approach_mm
-    heights = np.linspace(lim.z_min, z_top, max(2, int(np.ceil((z_top - lim.z_min) / height_step_mm)) + 1))
+    heights = np.linspace(
+        lim.z_min, z_top, max(2, int(np.ceil((z_top - lim.z_min) / height_step_mm)) + 1)
+    )
     xs = np.arange(-side / 2, side / 2 + 1e-9, spacing_mm)
     ys = np.arange(-side / (2 * np.sqrt(3)), side / np.sqrt(3) + 1e-9, spacing_mm * np.sqrt(3) / 2)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
@@ -76,7 +83,9 @@ def candidate_poses(
     return pts[ok & robust_to_prior(model, pts, prior_mm, clearance_mm)]
 
 
-def robust_to_prior(model: MachineModel, points: np.ndarray, prior_mm: float = 3.0, clearance_mm: float = 10.0) -> np.ndarray:
+def robust_to_prior(
+    model: MachineModel, points: np.ndarray, prior_mm: float = 3.0, clearance_mm: float = 10.0
+) -> np.ndarray:
     """Mask of poses the uncalibrated machine can be commanded to safely.
 
     Each parameter is only known to +-``prior_mm`` (uniform), so the effector
@@ -90,20 +99,29 @@ def robust_to_prior(model: MachineModel, points: np.ndarray, prior_mm: float = 3
     return pts[:, 2] - dz3 - model.geometry.outlets[:, 2].max() >= clearance_mm
 
 
-def feasible_with_margin(model: MachineModel, points: np.ndarray, tension_margin_n: float = 2.0,
-                         tension_max_fraction: float = 0.9, approach_mm: float = 5.0) -> np.ndarray:
+def feasible_with_margin(
+    model: MachineModel,
+    points: np.ndarray,
+    tension_margin_n: float = 2.0,
+    tension_max_fraction: float = 0.9,
+    approach_mm: float = 5.0,
+) -> np.ndarray:
     """Mask of poses whose approach point is reachable and whose tensions keep a margin."""
     pts = np.asarray(points, dtype=float)
     above = pts + np.array([0.0, 0.0, approach_mm])
     ok = model.check(pts).ok & model.check(above).ok
     st = model.statics
     lo, hi = tension_bounds(pts, model.geometry.outlets, st)
-    ok &= (lo.min(axis=1) >= st.t_min + tension_margin_n) & (hi.max(axis=1) <= tension_max_fraction * st.t_max)
+    ok &= (lo.min(axis=1) >= st.t_min + tension_margin_n) & (
+        hi.max(axis=1) <= tension_max_fraction * st.t_max
+    )
     return ok
 
 
 # ------------------------------------------------------------------ information
-def pose_blocks(model: MachineModel, points: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+def pose_blocks(
+    model: MachineModel, points: np.ndarray, scale: np.ndarray | None = None
+) -> np.ndarray:
     """Column-scaled J0 blocks (N, 3, 12); ``scale`` defaults to the RMS column norm over ``points``."""
     j0 = identification_jacobian(np.asarray(points, float), model.geometry).reshape(-1, 3, 12)
     if scale is None:
@@ -136,7 +154,9 @@ def _indices_from_sv(sv: np.ndarray, m: int) -> dict[str, float]:
     return {"O1": o1, "O2": smin / smax, "O3": smin, "O4": smin * smin / smax, "O5": o5}
 
 
-def criterion_values(info: np.ndarray, criterion: str, m: int, weight: np.ndarray | None = None) -> np.ndarray:
+def criterion_values(
+    info: np.ndarray, criterion: str, m: int, weight: np.ndarray | None = None
+) -> np.ndarray:
     """Criterion (larger is better) of stacked information matrices (..., 12, 12)."""
     lam = np.clip(np.linalg.eigvalsh(info), 0.0, None)  # ascending; sigma^2
     if criterion in ("D", "O1"):
@@ -159,13 +179,17 @@ def criterion_values(info: np.ndarray, criterion: str, m: int, weight: np.ndarra
             raise ValueError("criterion I needs the mean candidate information as weight")
         reg = info + 1e-12 * np.eye(info.shape[-1])
         with np.errstate(invalid="ignore"):
-            trace = np.einsum("...ii->...", np.linalg.solve(reg, np.broadcast_to(weight, reg.shape)))
+            trace = np.einsum(
+                "...ii->...", np.linalg.solve(reg, np.broadcast_to(weight, reg.shape))
+            )
         return np.where(lam[..., 0] > 1e-12, -trace, -np.inf)
     raise ValueError(f"unknown criterion {criterion!r} (known: {', '.join(CRITERIA)})")
 
 
 # ------------------------------------------------------------------ designs
-def greedy_design(info: np.ndarray, k: int, criterion: str = "D", weight: np.ndarray | None = None) -> np.ndarray:
+def greedy_design(
+    info: np.ndarray, k: int, criterion: str = "D", weight: np.ndarray | None = None
+) -> np.ndarray:
     """Forward selection: add the candidate that best improves the (ridged) criterion."""
     ridge = 1e-6 * np.trace(info.mean(axis=0)) / info.shape[-1] * np.eye(info.shape[-1])
     chosen: list[int] = []
@@ -179,7 +203,9 @@ def greedy_design(info: np.ndarray, k: int, criterion: str = "D", weight: np.nda
     return np.array(chosen)
 
 
-def _swap_logdet_gain(design_blocks: np.ndarray, cand_blocks: np.ndarray, minv: np.ndarray) -> np.ndarray:
+def _swap_logdet_gain(
+    design_blocks: np.ndarray, cand_blocks: np.ndarray, minv: np.ndarray
+) -> np.ndarray:
     """log det change of swapping design pose i for candidate j, (k, c), by the
     determinant lemma: det(M - X_i^T X_i + X_j^T X_j) / det M = det of a 6x6 matrix."""
     xi, xj = design_blocks @ minv, cand_blocks @ minv
@@ -197,9 +223,17 @@ def _swap_logdet_gain(design_blocks: np.ndarray, cand_blocks: np.ndarray, minv: 
     return np.where(sign > 0, logdet, -np.inf)
 
 
-def fedorov_exchange(info: np.ndarray, start: np.ndarray, criterion: str = "D", weight: np.ndarray | None = None,
-                     *, blocks: np.ndarray | None = None, max_iter: int = 200, rel_tol: float = 1e-9,
-                     chunk: int = 4096) -> tuple[np.ndarray, float]:
+def fedorov_exchange(
+    info: np.ndarray,
+    start: np.ndarray,
+    criterion: str = "D",
+    weight: np.ndarray | None = None,
+    *,
+    blocks: np.ndarray | None = None,
+    max_iter: int = 200,
+    rel_tol: float = 1e-9,
+    chunk: int = 4096,
+) -> tuple[np.ndarray, float]:
     """Best-swap exchange from ``start`` until no swap improves; returns (indices, value).
 
     With ``blocks`` (the scaled J0 blocks behind ``info``) the D criterion uses
@@ -238,9 +272,16 @@ class Design:
     start_values: tuple[float, ...] = field(default=())  # criterion after each restart
 
 
-def optimal_design(info: np.ndarray, k: int, criterion: str = "D", *, restarts: int = 8,
-                   rng: np.random.Generator | None = None, weight: np.ndarray | None = None,
-                   blocks: np.ndarray | None = None) -> Design:
+def optimal_design(
+    info: np.ndarray,
+    k: int,
+    criterion: str = "D",
+    *,
+    restarts: int = 8,
+    rng: np.random.Generator | None = None,
+    weight: np.ndarray | None = None,
+    blocks: np.ndarray | None = None,
+) -> Design:
     """Fedorov exchange from the greedy design and ``restarts`` random starts; best result."""
     rng = rng or np.random.default_rng(0)
     if weight is None and criterion == "I":
@@ -248,12 +289,18 @@ def optimal_design(info: np.ndarray, k: int, criterion: str = "D", *, restarts: 
     if k > info.shape[0]:
         raise ValueError(f"asked for {k} poses but only {info.shape[0]} candidates are feasible")
     search = "D" if criterion == "O1" else criterion  # O1 is a monotone function of det at fixed k
-    starts = [greedy_design(info, k, search, weight)] + [rng.choice(info.shape[0], k, replace=False) for _ in range(restarts)]
+    starts = [greedy_design(info, k, search, weight)] + [
+        rng.choice(info.shape[0], k, replace=False) for _ in range(restarts)
+    ]
     results = [fedorov_exchange(info, s, search, weight, blocks=blocks) for s in starts]
     values = tuple(v for _, v in results)
     best = int(np.argmax(values))
     indices = np.sort(results[best][0])
-    value = values[best] if search == criterion else float(criterion_values(info[indices].sum(axis=0), criterion, k))
+    value = (
+        values[best]
+        if search == criterion
+        else float(criterion_values(info[indices].sum(axis=0), criterion, k))
+    )
     return Design(indices, value, values)
 
 
@@ -333,20 +380,36 @@ class PosePlan:
         return self.poses[np.array(self.roles) == "fit"]
 
 
-def plan_poses(model: MachineModel, n_poses: int = 4, *, n_check: int = 0, criterion: str = "D",
-               restarts: int = 8, approach_mm: float = 5.0, seed: int = 0,
-               candidates: np.ndarray | None = None) -> PosePlan:
+def plan_poses(
+    model: MachineModel,
+    n_poses: int = 4,
+    *,
+    n_check: int = 0,
+    criterion: str = "D",
+    restarts: int = 8,
+    approach_mm: float = 5.0,
+    seed: int = 0,
+    candidates: np.ndarray | None = None,
+) -> PosePlan:
     """Plan ``n_poses`` fit poses (plus ``n_check`` check poses) over the whole workspace."""
     if criterion not in CRITERIA:
         raise ValueError(f"unknown criterion {criterion!r} (known: {', '.join(CRITERIA)})")
     if n_poses < 4:
-        raise ValueError("at least 4 poses are needed to identify 12 parameters (3 equations per pose)")
-    cand = candidate_poses(model, approach_mm=approach_mm) if candidates is None else np.asarray(candidates, float)
+        raise ValueError(
+            "at least 4 poses are needed to identify 12 parameters (3 equations per pose)"
+        )
+    cand = (
+        candidate_poses(model, approach_mm=approach_mm)
+        if candidates is None
+        else np.asarray(candidates, float)
+    )
     j0 = identification_jacobian(cand, model.geometry).reshape(-1, 3, 12)
     scale = column_scale(j0)
     blocks = j0 / scale
     info = information(blocks)
-    design = optimal_design(info, n_poses, criterion, restarts=restarts, rng=np.random.default_rng(seed), blocks=blocks)
+    design = optimal_design(
+        info, n_poses, criterion, restarts=restarts, rng=np.random.default_rng(seed), blocks=blocks
+    )
     checks = check_poses(info, design.indices, n_check) if n_check else np.zeros(0, int)
     chosen = np.concatenate([design.indices, checks])
     roles = np.array(["fit"] * design.indices.size + ["check"] * checks.size)
@@ -361,22 +424,44 @@ def plan_poses(model: MachineModel, n_poses: int = 4, *, n_check: int = 0, crite
     _, dirs = commanded_path(model, waypoints, start_sliders=model.ik(home[None])[0])
     table1 = pose_blocks(model, TABLE1_POSES, scale)
     return PosePlan(
-        poses=poses, roles=tuple(roles[order]), approach=approach, directions=dirs[1::2],
-        criterion=criterion, indices=observability_indices(blocks[design.indices]),
-        table1_indices=observability_indices(table1), value=design.value, n_candidates=cand.shape[0],
+        poses=poses,
+        roles=tuple(roles[order]),
+        approach=approach,
+        directions=dirs[1::2],
+        criterion=criterion,
+        indices=observability_indices(blocks[design.indices]),
+        table1_indices=observability_indices(table1),
+        value=design.value,
+        n_candidates=cand.shape[0],
         travel_mm=tour_length(waypoints, home),
     )
 
 
 # ------------------------------------------------------------------ plan files
-PLAN_COLUMNS = ("pose", "role", "x", "y", "z", "approach_x", "approach_y", "approach_z", "dir1", "dir2", "dir3")
+PLAN_COLUMNS = (
+    "pose",
+    "role",
+    "x",
+    "y",
+    "z",
+    "approach_x",
+    "approach_y",
+    "approach_z",
+    "dir1",
+    "dir2",
+    "dir3",
+)
 
 
 def plan_csv(plan: PosePlan) -> str:
     """The plan as CSV text (``calibrate plan --out`` and a wizard session's plan.csv)."""
     lines = [",".join(PLAN_COLUMNS)]
-    for i, (p, role, a, d) in enumerate(zip(plan.poses, plan.roles, plan.approach, plan.directions)):
-        lines.append(",".join([str(i + 1), role, *(f"{v:.6f}" for v in (*p, *a)), *(str(int(v)) for v in d)]))
+    for i, (p, role, a, d) in enumerate(
+        zip(plan.poses, plan.roles, plan.approach, plan.directions)
+    ):
+        lines.append(
+            ",".join([str(i + 1), role, *(f"{v:.6f}" for v in (*p, *a)), *(str(int(v)) for v in d)])
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -384,7 +469,8 @@ def read_plan_csv(path: str | os.PathLike[str], model: MachineModel | None = Non
     """A plan file back as a :class:`PosePlan` (indices recomputed when ``model`` is given)."""
     src = str(path)
     try:
-        rows = list(csv.reader(io.StringIO(open(path, encoding="utf-8-sig").read())))
+        with open(path, encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(io.StringIO(fh.read())))
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", source=src) from None
     header = [h.strip() for h in rows[0]] if rows else []
@@ -398,20 +484,40 @@ def read_plan_csv(path: str | os.PathLike[str], model: MachineModel | None = Non
             continue
         role = row[col["role"]].strip()
         if role not in ("fit", "check"):
-            raise InputError(f"line {n}, column 'role': must be fit or check, got {role!r}", source=src)
+            raise InputError(
+                f"line {n}, column 'role': must be fit or check, got {role!r}", source=src
+            )
         try:
             values.append([float(row[col[c]]) for c in PLAN_COLUMNS[2:]])
         except (ValueError, IndexError):
-            raise InputError(f"line {n}: expected numbers in columns {', '.join(PLAN_COLUMNS[2:])}", source=src) from None
+            raise InputError(
+                f"line {n}: expected numbers in columns {', '.join(PLAN_COLUMNS[2:])}", source=src
+            ) from None
         roles.append(role)
     v = np.asarray(values, dtype=float).reshape(-1, 9)
     if not np.isfinite(v).all():
         raise InputError("non-finite number in a pose row", source=src)
     fit = v[np.array(roles) == "fit", :3] if roles else np.zeros((0, 3))
-    indices = observability_indices(pose_blocks(model, fit)) if model is not None and len(fit) >= 4 else {}
+    indices = (
+        observability_indices(pose_blocks(model, fit))
+        if model is not None and len(fit) >= 4
+        else {}
+    )
     table1 = observability_indices(pose_blocks(model, TABLE1_POSES)) if model is not None else {}
-    start = model.home_point(np.zeros(3)) if model is not None else v[0, 3:6] if len(v) else np.zeros(3)
+    start = (
+        model.home_point(np.zeros(3)) if model is not None else v[0, 3:6] if len(v) else np.zeros(3)
+    )
     way = np.empty((2 * len(v), 3))
     way[0::2], way[1::2] = v[:, 3:6], v[:, :3]
-    return PosePlan(v[:, :3], tuple(roles), v[:, 3:6], v[:, 6:9], "file", indices, table1, float("nan"), 0,
-                    tour_length(way, start))
+    return PosePlan(
+        v[:, :3],
+        tuple(roles),
+        v[:, 3:6],
+        v[:, 6:9],
+        "file",
+        indices,
+        table1,
+        float("nan"),
+        0,
+        tour_length(way, start),
+    )

@@ -44,7 +44,9 @@ class RigidTransform:
 
     def inverse(self) -> RigidTransform:
         rt = np.swapaxes(self.R, -1, -2)
-        return RigidTransform(rt, -np.einsum("...ij,...j->...i", rt, self.t), self.rms_residual, self.n_points)
+        return RigidTransform(
+            rt, -np.einsum("...ij,...j->...i", rt, self.t), self.rms_residual, self.n_points
+        )
 
 
 def kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> RigidTransform:
@@ -56,7 +58,11 @@ def kabsch(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) 
     s = np.asarray(src, dtype=float)
     d = np.asarray(dst, dtype=float)
     s, d = np.broadcast_arrays(s, d)
-    w = np.ones(s.shape[:-1]) if weights is None else np.broadcast_to(np.asarray(weights, dtype=float), s.shape[:-1])
+    w = (
+        np.ones(s.shape[:-1])
+        if weights is None
+        else np.broadcast_to(np.asarray(weights, dtype=float), s.shape[:-1])
+    )
     gap = np.isnan(s).any(axis=-1) | np.isnan(d).any(axis=-1)
     w = np.where(gap, 0.0, w)
     s = np.where(gap[..., None], 0.0, s)

@@ -9,7 +9,9 @@ from cdprhost.calibration.planning import INDEX_NAMES, PosePlan
 
 
 def _table(header: list[str], rows: list[list[str]]) -> str:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    widths = [
+        max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)
+    ]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
     return "\n".join([line(header), line(["-" * w for w in widths]), *(line(r) for r in rows)])
 
@@ -26,8 +28,17 @@ def plan_text(plan: PosePlan) -> str:
     poses = _table(["pose", "role", "x", "y", "z", "dir1", "dir2", "dir3"], rows)
     idx = _table(
         ["index", "planned", "Table 1", "ratio"],
-        [[n, f"{plan.indices[n]:.4g}", f"{plan.table1_indices[n]:.4g}",
-          f"{plan.indices[n] / plan.table1_indices[n]:.3g}x" if plan.table1_indices[n] > 0 else "-"] for n in INDEX_NAMES],
+        [
+            [
+                n,
+                f"{plan.indices[n]:.4g}",
+                f"{plan.table1_indices[n]:.4g}",
+                f"{plan.indices[n] / plan.table1_indices[n]:.3g}x"
+                if plan.table1_indices[n] > 0
+                else "-",
+            ]
+            for n in INDEX_NAMES
+        ],
     )
     n_fit = sum(r == "fit" for r in plan.roles)
     return (
@@ -41,12 +52,19 @@ def plan_text(plan: PosePlan) -> str:
 def summary_text(r: Identification) -> str:
     """The before/after table."""
     fit, chk = r.fit_mask, ~r.fit_mask
-    rows = [["fit poses RMS", _mm(r.rms_before_mm), _mm(r.rms_after_mm)],
-            ["fit poses max", _mm(r.errors_before[fit].max() if fit.any() else None),
-             _mm(r.errors_after[fit].max() if fit.any() else None)]]
+    rows = [
+        ["fit poses RMS", _mm(r.rms_before_mm), _mm(r.rms_after_mm)],
+        [
+            "fit poses max",
+            _mm(r.errors_before[fit].max() if fit.any() else None),
+            _mm(r.errors_after[fit].max() if fit.any() else None),
+        ],
+    ]
     if chk.any():
-        rows += [["check poses RMS", _mm(r.check_rms_before_mm), _mm(r.check_rms_after_mm)],
-                 ["check poses max", _mm(r.errors_before[chk].max()), _mm(r.errors_after[chk].max())]]
+        rows += [
+            ["check poses RMS", _mm(r.check_rms_before_mm), _mm(r.check_rms_after_mm)],
+            ["check poses max", _mm(r.errors_before[chk].max()), _mm(r.errors_after[chk].max())],
+        ]
     return _table(["position error (mm)", "before", "after"], rows)
 
 
@@ -55,27 +73,46 @@ def parameters_text(r: Identification) -> str:
     for i, name in enumerate(r.names):
         nom, val, se = r.nominal.q[i], r.geometry.q[i], r.stderr[i]
         lo, hi = r.ci95[i]
-        rows.append([name, f"{nom:.4f}", f"{val:.4f}", f"{val - nom:+.4f}", _mm(se), f"[{_mm(lo, 3)}, {_mm(hi, 3)}]"])
+        rows.append(
+            [
+                name,
+                f"{nom:.4f}",
+                f"{val:.4f}",
+                f"{val - nom:+.4f}",
+                _mm(se),
+                f"[{_mm(lo, 3)}, {_mm(hi, 3)}]",
+            ]
+        )
     return _table(["parameter", "nominal", "identified", "change", "stderr", "95% interval"], rows)
 
 
 def poses_text(r: Identification) -> str:
     rows = [
         [str(i + 1), role, _mm(b), _mm(a), *(_mm(v, 4) for v in res), _mm(s)]
-        for i, (role, b, a, res, s) in enumerate(zip(r.roles, r.errors_before, r.errors_after, r.residuals_after, r.sigma_mm))
+        for i, (role, b, a, res, s) in enumerate(
+            zip(r.roles, r.errors_before, r.errors_after, r.residuals_after, r.sigma_mm)
+        )
     ]
     return _table(["pose", "role", "before", "after", "dx", "dy", "dz", "sigma"], rows)
 
 
 def identification_text(r: Identification) -> str:
     parts = [
-        f"poses used {r.poses_used}, iterations {r.iterations}, converged {'yes' if r.converged else 'NO'}, "
-        f"chi2/dof {r.chi2:.3g}/{r.dof}",
-        summary_text(r), parameters_text(r), "per pose (mm; residual = predicted - measured)", poses_text(r),
+        (
+            f"poses used {r.poses_used}, iterations {r.iterations}, "
+            f"converged {'yes' if r.converged else 'NO'}, chi2/dof {r.chi2:.3g}/{r.dof}"
+        ),
+        summary_text(r),
+        parameters_text(r),
+        "per pose (mm; residual = predicted - measured)",
+        poses_text(r),
         "scaled singular values: " + " ".join(f"{v:.3g}" for v in r.singular_values),
     ]
     if r.correlations:
-        parts.append("correlations above 0.95: " + ", ".join(f"{a}~{b} {c:+.3f}" for a, b, c in r.correlations))
+        parts.append(
+            "correlations above 0.95: "
+            + ", ".join(f"{a}~{b} {c:+.3f}" for a, b, c in r.correlations)
+        )
     if r.unidentifiable:
         parts.append("UNIDENTIFIABLE combinations: " + "; ".join(r.unidentifiable))
     if r.rejected:

@@ -26,14 +26,33 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from cdprhost.calibration.readers import EXTENSIONS, Take, read_take, write_take
-from cdprhost.calibration.takes import AcceptanceLimits, MocapConfig, TakeMeasurement, TakeRejected, measure_effector
+from cdprhost.calibration.takes import (
+    AcceptanceLimits,
+    MocapConfig,
+    TakeMeasurement,
+    TakeRejected,
+    measure_effector,
+)
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
 
 SESSION_FILE = "session.toml"
 POSES_FILE = "poses.csv"
 TAKES_DIR = "takes"
-POSE_COLUMNS = ("pose", "take", "t_s", "x_cmd", "y_cmd", "z_cmd", "s1_cmd", "s2_cmd", "s3_cmd", "dir1", "dir2", "dir3")
+POSE_COLUMNS = (
+    "pose",
+    "take",
+    "t_s",
+    "x_cmd",
+    "y_cmd",
+    "z_cmd",
+    "s1_cmd",
+    "s2_cmd",
+    "s3_cmd",
+    "dir1",
+    "dir2",
+    "dir3",
+)
 _FLOAT_COLUMNS = ("t_s", "x_cmd", "y_cmd", "z_cmd", "s1_cmd", "s2_cmd", "s3_cmd")
 
 
@@ -57,7 +76,8 @@ def validation_problems(exc: ValidationError) -> list[str]:
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
         msg = {"missing": "missing required key", "extra_forbidden": "unknown key"}.get(
-            err["type"], err["msg"].removeprefix("Value error, "))
+            err["type"], err["msg"].removeprefix("Value error, ")
+        )
         out.append(f"{loc}: {msg}")
     return out
 
@@ -74,7 +94,9 @@ def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
     try:
         return SessionConfig.model_validate(data)
     except ValidationError as exc:
-        raise InputError("invalid session configuration", source=src, problems=validation_problems(exc)) from None
+        raise InputError(
+            "invalid session configuration", source=src, problems=validation_problems(exc)
+        ) from None
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,11 +130,13 @@ def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
         if not any(c.strip() for c in row):
             continue
 
-        def cell(name: str) -> str:
+        def cell(name: str, row: list[str] = row) -> str:
             return row[col[name]].strip() if col[name] < len(row) else ""
 
-        def fail(name: str, why: str):
-            return InputError(f"line {n}, column '{name}' (column {col[name] + 1}): {why}", source=source)
+        def fail(name: str, why: str, n: int = n) -> InputError:
+            return InputError(
+                f"line {n}, column '{name}' (column {col[name] + 1}): {why}", source=source
+            )
 
         try:
             pose = int(cell("pose"))
@@ -142,10 +166,21 @@ def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
             if v not in (-1.0, 0.0, 1.0):
                 raise fail(name, f"must be +1, -1 or 0, got {cell(name)!r}")
             d.append(int(v))
-        poses.append(pose); takes.append(cell("take")); floats.append(vals); dirs.append(d); lines.append(n)
+        poses.append(pose)
+        takes.append(cell("take"))
+        floats.append(vals)
+        dirs.append(d)
+        lines.append(n)
     f = np.asarray(floats, dtype=float).reshape(-1, 7)
-    table = PoseTable(np.asarray(poses, dtype=int), tuple(takes), f[:, 0], f[:, 1:4], f[:, 4:7],
-                      np.asarray(dirs, dtype=int).reshape(-1, 3), np.asarray(lines, dtype=int))
+    table = PoseTable(
+        np.asarray(poses, dtype=int),
+        tuple(takes),
+        f[:, 0],
+        f[:, 1:4],
+        f[:, 4:7],
+        np.asarray(dirs, dtype=int).reshape(-1, 3),
+        np.asarray(lines, dtype=int),
+    )
     return header, table
 
 
@@ -204,7 +239,9 @@ class Session:
         take = read_take(self.take_path(i), self.config.mocap.format)
         return measure_effector(take, self.config.mocap, limits)
 
-    def measure(self, limits: AcceptanceLimits | None = None, *, strict: bool = False) -> SessionMeasurements:
+    def measure(
+        self, limits: AcceptanceLimits | None = None, *, strict: bool = False
+    ) -> SessionMeasurements:
         """Measure every take. ``strict``: raise on the first rejected or unreadable take."""
         keep: list[int] = []
         results: list[TakeMeasurement] = []
@@ -216,14 +253,23 @@ class Session:
                 keep.append(i)
             except InputError as exc:
                 if strict:
-                    raise InputError(f"pose {p.pose[i]} (poses.csv line {p.lines[i]}): {exc}") from None
+                    raise InputError(
+                        f"pose {p.pose[i]} (poses.csv line {p.lines[i]}): {exc}"
+                    ) from None
                 reason = exc.reason if isinstance(exc, TakeRejected) else "unreadable"
                 rejected.append(RejectedTake(int(p.pose[i]), p.take[i], reason, str(exc)))
         k = np.asarray(keep, dtype=int)
         return SessionMeasurements(
-            p.pose[k], np.array([r.point for r in results]).reshape(-1, 3), p.commanded[k], p.s_cmd[k], p.t_s[k],
-            p.dirs[k], np.array([r.std for r in results]).reshape(-1, 3),
-            np.array([r.base_fit_rms_mm for r in results]), tuple(results), tuple(rejected),
+            p.pose[k],
+            np.array([r.point for r in results]).reshape(-1, 3),
+            p.commanded[k],
+            p.s_cmd[k],
+            p.t_s[k],
+            p.dirs[k],
+            np.array([r.std for r in results]).reshape(-1, 3),
+            np.array([r.base_fit_rms_mm for r in results]),
+            tuple(results),
+            tuple(rejected),
         )
 
 
@@ -255,7 +301,9 @@ def session_toml(config: SessionConfig) -> str:
     import tomli_w
 
     mocap = config.mocap
-    out = ["[session]"] + [f"{k} = {_toml_value(v)}" for k, v in config.session.model_dump().items()]
+    out = ["[session]"] + [
+        f"{k} = {_toml_value(v)}" for k, v in config.session.model_dump().items()
+    ]
     out += ["", "[mocap]"]
     if mocap.format is not None:
         out.append(f"format = {_toml_value(mocap.format)}")
@@ -263,10 +311,16 @@ def session_toml(config: SessionConfig) -> str:
         out.append(f"noise_mm = {_toml_value(mocap.noise_mm)}")
     out += ["", "[mocap.base_markers]"]
     out += [f"{_toml_value(k)} = {_toml_value(list(v))}" for k, v in mocap.base_markers.items()]
-    out += ["", "[mocap.effector]", f"markers = {_toml_value(list(mocap.effector.markers))}",
-            f"offset = {_toml_value(list(mocap.effector.offset))}"]
+    out += [
+        "",
+        "[mocap.effector]",
+        f"markers = {_toml_value(list(mocap.effector.markers))}",
+        f"offset = {_toml_value(list(mocap.effector.offset))}",
+    ]
     if mocap.acceptance != AcceptanceLimits():
-        out += ["", "[mocap.acceptance]"] + [f"{k} = {_toml_value(v)}" for k, v in mocap.acceptance.model_dump().items()]
+        out += ["", "[mocap.acceptance]"] + [
+            f"{k} = {_toml_value(v)}" for k, v in mocap.acceptance.model_dump().items()
+        ]
     text = "\n".join(out) + "\n"
     extra = {k: v for k, v in config.model_dump().items() if k not in ("session", "mocap")}
     return text + ("\n" + tomli_w.dumps(extra) if extra else "")
@@ -291,11 +345,16 @@ class SessionWriter:
         if toml_path.is_file():
             existing = load_session_config(toml_path)
             if config is not None and existing.model_dump() != config.model_dump():
-                raise InputError("session.toml differs from the configuration given; resume with config=None "
-                                 "or start a new folder", source=str(toml_path))
+                raise InputError(
+                    "session.toml differs from the configuration given; resume with config=None "
+                    "or start a new folder",
+                    source=str(toml_path),
+                )
             self.config = existing
         elif config is None:
-            raise InputError("no session.toml: a new session needs its configuration", source=str(self.directory))
+            raise InputError(
+                "no session.toml: a new session needs its configuration", source=str(self.directory)
+            )
         else:
             self.config = config
             (self.directory / TAKES_DIR).mkdir(parents=True, exist_ok=True)
@@ -321,30 +380,60 @@ class SessionWriter:
         fmt = format or self.config.mocap.format or "motive-csv"
         return f"{TAKES_DIR}/pose_{pose or self.next_pose:04d}{EXTENSIONS[fmt]}"
 
-    def append(self, *, take: str, t_s: float, commanded, s_cmd, dirs, pose: int | None = None,
-               extra: dict[str, str] | None = None) -> int:
+    def append(
+        self,
+        *,
+        take: str,
+        t_s: float,
+        commanded,
+        s_cmd,
+        dirs,
+        pose: int | None = None,
+        extra: dict[str, str] | None = None,
+    ) -> int:
         """Add one row to poses.csv (the take file must exist already); returns its pose number."""
         number = self.next_pose if pose is None else int(pose)
         if number <= self._last:
             raise ValueError(f"pose {number} is not after the last pose {self._last}")
         if not (self.directory / take).is_file():
-            raise InputError(f"take file {take!r} does not exist; write it before its row", source=str(self.directory))
+            raise InputError(
+                f"take file {take!r} does not exist; write it before its row",
+                source=str(self.directory),
+            )
         values = {"pose": str(number), "take": take, "t_s": _fmt(float(t_s))}
-        for names, vec in ((("x_cmd", "y_cmd", "z_cmd"), commanded), (("s1_cmd", "s2_cmd", "s3_cmd"), s_cmd)):
-            values.update({n: _fmt(float(v)) for n, v in zip(names, np.asarray(vec, dtype=float).reshape(3))})
-        values.update({f"dir{k + 1}": str(int(d)) for k, d in enumerate(np.asarray(dirs).reshape(3))})
+        for names, vec in (
+            (("x_cmd", "y_cmd", "z_cmd"), commanded),
+            (("s1_cmd", "s2_cmd", "s3_cmd"), s_cmd),
+        ):
+            values.update(
+                {n: _fmt(float(v)) for n, v in zip(names, np.asarray(vec, dtype=float).reshape(3))}
+            )
+        values.update(
+            {f"dir{k + 1}": str(int(d)) for k, d in enumerate(np.asarray(dirs).reshape(3))}
+        )
         values.update(extra or {})
         buf = io.StringIO()
         csv.writer(buf, lineterminator="\n").writerow([values.get(h, "") for h in self._header])
         text = self._text if self._text.endswith("\n") or not self._text else self._text + "\n"
         text += buf.getvalue()
-        parse_poses(text, str(self.directory / POSES_FILE))  # never write a file we could not read back
+        parse_poses(
+            text, str(self.directory / POSES_FILE)
+        )  # never write a file we could not read back
         write_text_atomic(self.directory / POSES_FILE, text)
         self._text, self._last = text, number
         return number
 
-    def add_take(self, take: Take, *, t_s: float, commanded, s_cmd, dirs, format: str | None = None,
-                 **writer_options) -> int:
+    def add_take(
+        self,
+        take: Take,
+        *,
+        t_s: float,
+        commanded,
+        s_cmd,
+        dirs,
+        format: str | None = None,
+        **writer_options,
+    ) -> int:
         """Write ``take`` under takes/ (atomically) and append its row; returns the pose number."""
         fmt = format or self.config.mocap.format or "motive-csv"
         rel = self.take_relpath(self.next_pose, fmt)

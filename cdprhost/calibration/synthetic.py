@@ -27,19 +27,32 @@ from cdprhost.calibration.session import SessionConfig, SessionWriter
 from cdprhost.calibration.takes import EffectorConfig, MocapConfig
 
 # The spec's example base triangle and a small effector triad 12 mm above B.
-DEFAULT_BASE_MARKERS = {"Base:F1": (0.0, 300.0, 0.0), "Base:F2": (-259.8, -150.0, 0.0), "Base:F3": (259.8, -150.0, 0.0)}
-DEFAULT_EFFECTOR_MARKERS = {"EE:E1": (0.0, 25.0, 12.0), "EE:E2": (-21.65, -12.5, 12.0), "EE:E3": (21.65, -12.5, 12.0)}
+DEFAULT_BASE_MARKERS = {
+    "Base:F1": (0.0, 300.0, 0.0),
+    "Base:F2": (-259.8, -150.0, 0.0),
+    "Base:F3": (259.8, -150.0, 0.0),
+}
+DEFAULT_EFFECTOR_MARKERS = {
+    "EE:E1": (0.0, 25.0, 12.0),
+    "EE:E2": (-21.65, -12.5, 12.0),
+    "EE:E3": (21.65, -12.5, 12.0),
+}
 Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # base z-up -> mocap y-up
 
 
-def motive_world_pose(yaw_deg: float = 37.0, translation: Sequence[float] = (1250.0, 40.0, -830.0)) -> tuple[np.ndarray, np.ndarray]:
+def motive_world_pose(
+    yaw_deg: float = 37.0, translation: Sequence[float] = (1250.0, 40.0, -830.0)
+) -> tuple[np.ndarray, np.ndarray]:
     """A base->mocap pose as Motive sees it: Y up, the base turned by ``yaw_deg`` about its z."""
     return Y_UP @ rotation_about_z(np.radians(yaw_deg)), np.asarray(translation, dtype=float)
 
 
 def effector_offset(effector_markers: Mapping[str, Sequence[float]]) -> tuple[float, float, float]:
     """The session's ``offset``: B minus the centroid of markers given relative to B."""
-    return tuple(float(v) + 0.0 for v in -np.mean(np.asarray(list(effector_markers.values()), dtype=float), axis=0))
+    return tuple(
+        float(v) + 0.0
+        for v in -np.mean(np.asarray(list(effector_markers.values()), dtype=float), axis=0)
+    )
 
 
 def synthesize_take(
@@ -95,7 +108,9 @@ def synthetic_config(
     mocap = MocapConfig(
         format=format,
         base_markers={k: tuple(v) for k, v in base_markers.items()},
-        effector=EffectorConfig(markers=tuple(effector_markers), offset=effector_offset(effector_markers)),
+        effector=EffectorConfig(
+            markers=tuple(effector_markers), offset=effector_offset(effector_markers)
+        ),
     )
     return SessionConfig(session={"profile": profile_name}, mocap=mocap)
 
@@ -131,12 +146,29 @@ def write_synthetic_session(
     sl = np.asarray(s_cmd, dtype=float).reshape(k, 3)
     times = np.asarray(t_s, dtype=float).reshape(k)
     d = np.asarray(dirs).reshape(k, 3)
-    writer = SessionWriter(directory, synthetic_config(profile_name, format, base_markers, effector_markers))
+    writer = SessionWriter(
+        directory, synthetic_config(profile_name, format, base_markers, effector_markers)
+    )
     pose = mocap_pose if mocap_pose is not None else motive_world_pose()
     for i in range(k):
-        take = synthesize_take(pts[i], base_markers=base_markers, effector_markers=effector_markers, mocap_pose=pose,
-                               noise_mm=noise_mm, jitter_mm=jitter_mm, n_frames=n_frames, gaps_fraction=gaps_fraction,
-                               rng=rng)
-        writer.add_take(take, t_s=times[i], commanded=cmd[i], s_cmd=sl[i], dirs=d[i], format=format,
-                        **dict(writer_options or {}))
+        take = synthesize_take(
+            pts[i],
+            base_markers=base_markers,
+            effector_markers=effector_markers,
+            mocap_pose=pose,
+            noise_mm=noise_mm,
+            jitter_mm=jitter_mm,
+            n_frames=n_frames,
+            gaps_fraction=gaps_fraction,
+            rng=rng,
+        )
+        writer.add_take(
+            take,
+            t_s=times[i],
+            commanded=cmd[i],
+            s_cmd=sl[i],
+            dirs=d[i],
+            format=format,
+            **dict(writer_options or {}),
+        )
     return Path(directory)

@@ -50,7 +50,9 @@ class AcceptanceLimits(_Strict):
     min_frames: int = Field(10, ge=1)
     outlier_mads: float = Field(5.0, gt=0)
     max_outlier_fraction: float = Field(0.25, ge=0, lt=1)
-    min_scale_mm: float = Field(0.005, gt=0, description="floor of the robust scale (quantised exports)")
+    min_scale_mm: float = Field(
+        0.005, gt=0, description="floor of the robust scale (quantised exports)"
+    )
 
 
 class MocapConfig(_Strict):
@@ -60,7 +62,9 @@ class MocapConfig(_Strict):
     base_markers: dict[str, Vec3]
     effector: EffectorConfig
     acceptance: AcceptanceLimits = AcceptanceLimits()
-    noise_mm: float | None = Field(None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)")
+    noise_mm: float | None = Field(
+        None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)"
+    )
 
     @field_validator("base_markers")
     @classmethod
@@ -68,14 +72,18 @@ class MocapConfig(_Strict):
         if len(markers) < 3:
             raise ValueError(f"need at least 3 base markers, got {len(markers)}")
         if is_degenerate(np.array(list(markers.values()))):
-            raise ValueError("base markers are collinear (or coincide): the base frame would be ambiguous")
+            raise ValueError(
+                "base markers are collinear (or coincide): the base frame would be ambiguous"
+            )
         return markers
 
     @model_validator(mode="after")
     def _disjoint(self) -> MocapConfig:
         both = sorted(set(self.base_markers) & set(self.effector.markers))
         if both:
-            raise ValueError(f"marker(s) {', '.join(both)} listed both on the base and on the effector")
+            raise ValueError(
+                f"marker(s) {', '.join(both)} listed both on the base and on the effector"
+            )
         return self
 
 
@@ -118,7 +126,9 @@ def robust_inliers(points: np.ndarray, n_mads: float, min_scale: float) -> np.nd
     return np.all(dev <= n_mads * scale, axis=1)
 
 
-def measure_effector(take: Take, mocap: MocapConfig, limits: AcceptanceLimits | None = None) -> TakeMeasurement:
+def measure_effector(
+    take: Take, mocap: MocapConfig, limits: AcceptanceLimits | None = None
+) -> TakeMeasurement:
     """Average the effector point of a static take in the base frame (see module doc)."""
     lim = limits or mocap.acceptance
     src = take.source
@@ -127,11 +137,19 @@ def measure_effector(take: Take, mocap: MocapConfig, limits: AcceptanceLimits | 
     missing = [n for n in base + eff if n not in take.marker_names]
     if missing:
         shown = ", ".join(take.marker_names[:20]) + (" ..." if len(take.marker_names) > 20 else "")
-        raise TakeRejected(f"marker(s) {', '.join(missing)} not in the take (it has: {shown})", source=src, reason="missing-marker")
+        raise TakeRejected(
+            f"marker(s) {', '.join(missing)} not in the take (it has: {shown})",
+            source=src,
+            reason="missing-marker",
+        )
     seen = np.isfinite(take.positions).all(axis=2)  # (frames, markers)
     empty = [n for n in base + eff if not seen[:, take.index(n)].any()]
     if empty:
-        raise TakeRejected(f"marker(s) {', '.join(empty)} never seen (gap in every frame)", source=src, reason="missing-marker")
+        raise TakeRejected(
+            f"marker(s) {', '.join(empty)} never seen (gap in every frame)",
+            source=src,
+            reason="missing-marker",
+        )
 
     reg = register_frames(take, mocap.base_markers)
     eff_pos = take.select(eff)
@@ -141,7 +159,9 @@ def measure_effector(take: Take, mocap: MocapConfig, limits: AcceptanceLimits | 
     if n_usable < lim.min_frames:
         raise TakeRejected(
             f"only {n_usable} of {take.n_frames} frames have every effector marker and 3 base markers "
-            f"(need {lim.min_frames})", source=src, reason="too-few-frames",
+            f"(need {lim.min_frames})",
+            source=src,
+            reason="too-few-frames",
         )
     centroid = np.where(eff_ok[:, None, None], eff_pos, 0.0).mean(axis=1)
     points = reg.apply(centroid[:, None, :])[:, 0] + np.asarray(mocap.effector.offset)
@@ -152,7 +172,9 @@ def measure_effector(take: Take, mocap: MocapConfig, limits: AcceptanceLimits | 
         raise TakeRejected(
             f"base-marker fit RMS {base_rms:.3f} mm exceeds {lim.max_base_rms_mm} mm (largest misfit: {worst}, "
             f"{worst_mm:.3f} mm): the base marker positions in session.toml do not match the measured ones, "
-            "or a base marker moved or is mislabelled", source=src, reason="base-fit",
+            "or a base marker moved or is mislabelled",
+            source=src,
+            reason="base-fit",
         )
 
     idx = np.flatnonzero(usable)
@@ -163,18 +185,23 @@ def measure_effector(take: Take, mocap: MocapConfig, limits: AcceptanceLimits | 
         raise TakeRejected(
             f"effector not static: {n_out} of {len(idx)} frames lie beyond {lim.outlier_mads} robust sigmas "
             f"or have a base fit over {lim.max_base_rms_mm} mm (limit {lim.max_outlier_fraction:.0%} of frames)",
-            source=src, reason="not-static",
+            source=src,
+            reason="not-static",
         )
     used = points[idx[inl]]
     if len(used) < lim.min_frames:
-        raise TakeRejected(f"only {len(used)} frames left after outlier rejection (need {lim.min_frames})",
-                           source=src, reason="too-few-frames")
+        raise TakeRejected(
+            f"only {len(used)} frames left after outlier rejection (need {lim.min_frames})",
+            source=src,
+            reason="too-few-frames",
+        )
     point = used.mean(axis=0)
     spread = float(np.max(np.linalg.norm(used - point, axis=1)))
     if spread > lim.max_spread_mm:
         raise TakeRejected(
             f"effector not static: frames spread {spread:.3f} mm from the average (limit {lim.max_spread_mm} mm)",
-            source=src, reason="not-static",
+            source=src,
+            reason="not-static",
         )
     std = used.std(axis=0, ddof=1) if len(used) > 1 else np.zeros(3)
     warnings = list(take.notes)
@@ -185,14 +212,17 @@ def measure_effector(take: Take, mocap: MocapConfig, limits: AcceptanceLimits | 
     partial = int((usable & (reg.n_points < len(base))).sum())
     if partial:
         warnings.append(f"{partial} frame(s) registered without every base marker")
-    return TakeMeasurement(point, std, len(used), take.n_frames, base_rms, spread, tuple(warnings), src)
+    return TakeMeasurement(
+        point, std, len(used), take.n_frames, base_rms, spread, tuple(warnings), src
+    )
 
 
-def _worst_base_marker(take: Take, mocap: MocapConfig, reg, usable: np.ndarray) -> tuple[str, float]:
+def _worst_base_marker(
+    take: Take, mocap: MocapConfig, reg, usable: np.ndarray
+) -> tuple[str, float]:
     names = list(mocap.base_markers)
     nominal = np.asarray([mocap.base_markers[n] for n in names])
     fitted = reg.apply(take.select(names))[usable]
     err = np.nanmedian(np.linalg.norm(fitted - nominal, axis=2), axis=0)
     k = int(np.nanargmax(err))
     return names[k], float(err[k])
-

@@ -81,7 +81,11 @@ class WizardState:
 
     @property
     def pending(self) -> list[int]:
-        return [i for i in range(len(self.plan.poses)) if i not in self.recorded and i not in self.skipped]
+        return [
+            i
+            for i in range(len(self.plan.poses))
+            if i not in self.recorded and i not in self.skipped
+        ]
 
     @property
     def fit_recorded(self) -> int:
@@ -97,24 +101,32 @@ class WizardState:
         if self.identified:
             return Finished("identified")
         if self.fit_recorded < self.min_fit_poses:
-            return Finished(f"only {self.fit_recorded} fit pose(s) recorded; {self.min_fit_poses} are needed")
+            return Finished(
+                f"only {self.fit_recorded} fit pose(s) recorded; {self.min_fit_poses} are needed"
+            )
         return Identify()
 
     def moved(self, index: int) -> WizardState:
         return dataclasses.replace(self, at=index, attempts=0, last_problem=None)
 
     def accepted(self, index: int) -> WizardState:
-        return dataclasses.replace(self, recorded=self.recorded | {index}, attempts=0, last_problem=None)
+        return dataclasses.replace(
+            self, recorded=self.recorded | {index}, attempts=0, last_problem=None
+        )
 
     def rejected(self, index: int, problem: str) -> WizardState:
         """Ask again at the same pose, until ``max_attempts``; then skip it."""
         attempts = self.attempts + 1
         if attempts >= self.max_attempts:
-            return dataclasses.replace(self, skipped=self.skipped | {index}, attempts=0, last_problem=problem)
+            return dataclasses.replace(
+                self, skipped=self.skipped | {index}, attempts=0, last_problem=problem
+            )
         return dataclasses.replace(self, attempts=attempts, last_problem=problem)
 
     def skip(self, index: int) -> WizardState:
-        return dataclasses.replace(self, skipped=self.skipped | {index}, attempts=0, last_problem=None)
+        return dataclasses.replace(
+            self, skipped=self.skipped | {index}, attempts=0, last_problem=None
+        )
 
     def done(self) -> WizardState:
         return dataclasses.replace(self, identified=True)
@@ -139,7 +151,9 @@ class WizardOptions:
     criterion: str = "D"
     seed: int = 0
     noise_floor_mm: float = 0.05
-    max_offset_mm: float = 30.0  # a take further than this from the commanded pose is the wrong take
+    max_offset_mm: float = (
+        30.0  # a take further than this from the commanded pose is the wrong take
+    )
     max_attempts: int = 3
 
 
@@ -164,10 +178,14 @@ def recorded_rows(directory: Path) -> list[dict[str, str]]:
 def resume_state(plan: PosePlan, rows: list[dict[str, str]], max_attempts: int = 3) -> WizardState:
     """The state after the rows already in poses.csv (matched to the plan by ``plan_pose``)."""
     done = {int(r["plan_pose"]) - 1 for r in rows if (r.get("plan_pose") or "").strip()}
-    return WizardState(plan, frozenset(i for i in done if 0 <= i < len(plan.poses)), max_attempts=max_attempts)
+    return WizardState(
+        plan, frozenset(i for i in done if 0 <= i < len(plan.poses)), max_attempts=max_attempts
+    )
 
 
-def validate_take(path: Path, mocap: MocapConfig, pose: np.ndarray, max_offset_mm: float) -> TakeMeasurement:
+def validate_take(
+    path: Path, mocap: MocapConfig, pose: np.ndarray, max_offset_mm: float
+) -> TakeMeasurement:
     """Read and measure a take now (markers, static effector, base fit), and check it was
     taken at this pose; raises :class:`TakeRejected` naming the problem."""
     measurement = measure_effector(read_take(path, mocap.format), mocap)
@@ -175,16 +193,28 @@ def validate_take(path: Path, mocap: MocapConfig, pose: np.ndarray, max_offset_m
     if offset > max_offset_mm:
         raise TakeRejected(
             f"the effector measures {offset:.1f} mm from the commanded pose ({', '.join(f'{v:.1f}' for v in pose)}); "
-            f"limit {max_offset_mm:g} mm: is this the take of another pose?", source=str(path), reason="wrong-pose")
+            f"limit {max_offset_mm:g} mm: is this the take of another pose?",
+            source=str(path),
+            reason="wrong-pose",
+        )
     return measurement
 
 
 class CalibrationWizard:
     """Plan (or resume), visit every pose, record and validate takes, identify."""
 
-    def __init__(self, session_dir: str | Path, profile: MachineProfile, device: WizardDevice, takes: TakeSource, *,
-                 mocap: MocapConfig | None = None, options: WizardOptions = WizardOptions(),
-                 log: Callable[[str], None] = print, profile_ref: str | None = None):
+    def __init__(
+        self,
+        session_dir: str | Path,
+        profile: MachineProfile,
+        device: WizardDevice,
+        takes: TakeSource,
+        *,
+        mocap: MocapConfig | None = None,
+        options: WizardOptions = WizardOptions(),
+        log: Callable[[str], None] = print,
+        profile_ref: str | None = None,
+    ):
         self.dir = Path(session_dir)
         self.profile = profile
         self.model = MachineModel.from_profile(profile)
@@ -196,17 +226,27 @@ class CalibrationWizard:
         plan_path = self.dir / PLAN_FILE
         if plan_path.is_file():
             self.plan = read_plan_csv(plan_path, self.model)
-            self.log(f"resuming session {self.dir}: plan of {len(self.plan.poses)} poses from {PLAN_FILE}")
+            self.log(
+                f"resuming session {self.dir}: plan of {len(self.plan.poses)} poses from {PLAN_FILE}"
+            )
         else:
-            self.plan = plan_poses(self.model, options.n_poses, n_check=options.n_check,
-                                   criterion=options.criterion, seed=options.seed)
+            self.plan = plan_poses(
+                self.model,
+                options.n_poses,
+                n_check=options.n_check,
+                criterion=options.criterion,
+                seed=options.seed,
+            )
             write_text_atomic(plan_path, plan_csv(self.plan))
         if not (self.dir / POSES_FILE).is_file():
             write_text_atomic(self.dir / POSES_FILE, ",".join(POSE_COLUMNS + EXTRA_COLUMNS) + "\n")
         config = None
         if not (self.dir / "session.toml").is_file():
             if mocap is None:
-                raise InputError("a new session needs the motion-capture configuration (markers)", source=str(self.dir))
+                raise InputError(
+                    "a new session needs the motion-capture configuration (markers)",
+                    source=str(self.dir),
+                )
             config = SessionConfig(session={"profile": profile_ref or profile.name}, mocap=mocap)
         self.writer = SessionWriter(self.dir, config)
         rows = recorded_rows(self.dir)
@@ -250,42 +290,65 @@ class CalibrationWizard:
     def _record(self, action: RecordTake) -> None:
         i = action.index
         if action.last_problem:
-            self.log(f"take rejected: {action.last_problem}; attempt {action.attempt} of {self.options.max_attempts}")
+            self.log(
+                f"take rejected: {action.last_problem}; attempt {action.attempt} of {self.options.max_attempts}"
+            )
         else:
             self.log(f"{self._label(i)} has settled: record a take")
         path = Path(self.takes.take_for(i, self.plan.poses[i], action.attempt))
         try:
-            m = validate_take(path, self.writer.config.mocap, self.plan.poses[i], self.options.max_offset_mm)
+            m = validate_take(
+                path, self.writer.config.mocap, self.plan.poses[i], self.options.max_offset_mm
+            )
         except InputError as exc:  # TakeRejected or an unreadable file
             self.state = self.state.rejected(i, str(exc))
             if i in self.state.skipped:
-                self.log(f"{self._label(i)} skipped after {self.options.max_attempts} rejected takes: {exc}")
+                self.log(
+                    f"{self._label(i)} skipped after {self.options.max_attempts} rejected takes: {exc}"
+                )
             return
         rel = f"takes/pose_{self.writer.next_pose:04d}{path.suffix}"  # the take exactly as recorded
         with atomic_open(self.dir / rel, "wb") as out, open(path, "rb") as src:
             shutil.copyfileobj(src, out)
         s_cmd = self.model.sliders_from_steps(self._steps)
-        self.writer.append(take=rel, t_s=self._t, commanded=self.plan.poses[i], s_cmd=s_cmd,
-                           dirs=self.plan.directions[i],
-                           extra={"role": self.plan.roles[i], "plan_pose": str(i + 1), "mocap_file": str(path)})
+        self.writer.append(
+            take=rel,
+            t_s=self._t,
+            commanded=self.plan.poses[i],
+            s_cmd=s_cmd,
+            dirs=self.plan.directions[i],
+            extra={"role": self.plan.roles[i], "plan_pose": str(i + 1), "mocap_file": str(path)},
+        )
         self.state = self.state.accepted(i)
-        self.log(f"recorded {self._label(i)}: base fit {m.base_fit_rms_mm:.3f} mm, spread {m.spread_mm:.3f} mm, "
-                 f"{m.n_frames_used} frames")
+        self.log(
+            f"recorded {self._label(i)}: base fit {m.base_fit_rms_mm:.3f} mm, spread {m.spread_mm:.3f} mm, "
+            f"{m.n_frames_used} frames"
+        )
 
     def _identify(self) -> None:
         self.log("identifying the 12 parameters")
         result = identify_session(self.dir, self.model, noise_floor_mm=self.options.noise_floor_mm)
-        write_text_atomic(self.dir / REPORT_FILE, json.dumps(_json_safe(result.to_json()), indent=2) + "\n")
+        write_text_atomic(
+            self.dir / REPORT_FILE, json.dumps(_json_safe(result.to_json()), indent=2) + "\n"
+        )
         self.identification = result
         if result.ok:
-            self.calibrated = calibrated_profile(self.profile, result, session=str(self.dir.resolve()))
+            self.calibrated = calibrated_profile(
+                self.profile, result, session=str(self.dir.resolve())
+            )
             save_profile(self.calibrated, self.dir / PROFILE_FILE)
         self.state = self.state.done()
 
     @property
     def outcome(self) -> WizardOutcome:
         prof = self.calibrated
-        return WizardOutcome(self.state, self.identification, prof, self.dir / PROFILE_FILE if prof else None, self.dir)
+        return WizardOutcome(
+            self.state,
+            self.identification,
+            prof,
+            self.dir / PROFILE_FILE if prof else None,
+            self.dir,
+        )
 
 
 def _json_safe(obj):
@@ -320,8 +383,11 @@ class FolderWatcher:
     def _files(self) -> dict[Path, int]:
         if not self.folder.is_dir():
             return {}
-        return {p: p.stat().st_size for p in self.folder.iterdir()
-                if p.is_file() and not p.name.startswith(".") and not p.name.endswith(".tmp")}
+        return {
+            p: p.stat().st_size
+            for p in self.folder.iterdir()
+            if p.is_file() and not p.name.startswith(".") and not p.name.endswith(".tmp")
+        }
 
     def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
         deadline = self.clock() + self.timeout_s
@@ -329,13 +395,19 @@ class FolderWatcher:
         while True:
             files = self._files()
             new = {p: s for p, s in files.items() if p not in self.seen}
-            stable = sorted((p for p, s in new.items() if sizes.get(p) == s and s > 0), key=lambda p: p.stat().st_mtime)
+            stable = sorted(
+                (p for p, s in new.items() if sizes.get(p) == s and s > 0),
+                key=lambda p: p.stat().st_mtime,
+            )
             if stable:
                 self.seen.update(new)
                 return stable[-1]
             sizes = new
             if self.clock() > deadline:
-                raise InputError(f"no new take file appeared within {self.timeout_s:g} s", source=str(self.folder))
+                raise InputError(
+                    f"no new take file appeared within {self.timeout_s:g} s",
+                    source=str(self.folder),
+                )
             self.sleep(self.poll_s)
 
 
@@ -353,7 +425,10 @@ class NumberedTakes:
             numbers = re.findall(r"\d+", p.stem)
             if p.is_file() and numbers and int(numbers[-1]) == index + 1:
                 return p
-        raise InputError(f"no take for plan pose {index + 1} (expected a file name ending in {index + 1})", source=str(folder))
+        raise InputError(
+            f"no take for plan pose {index + 1} (expected a file name ending in {index + 1})",
+            source=str(folder),
+        )
 
 
 # ------------------------------------------------------------------ the machine over the link
@@ -361,12 +436,24 @@ class LinkDevice:
     """:class:`WizardDevice` over a :class:`~cdprhost.link.HostLink`: homes once, then moves
     through waypoints with the print pipeline's planner and segmenter and waits ``settle_s``."""
 
-    def __init__(self, link, profile: MachineProfile, model: MachineModel, *, feed_mm_s: float = 40.0,
-                 settle_s: float = 0.5, timeout_s: float = 300.0):
+    def __init__(
+        self,
+        link,
+        profile: MachineProfile,
+        model: MachineModel,
+        *,
+        feed_mm_s: float = 40.0,
+        settle_s: float = 0.5,
+        timeout_s: float = 300.0,
+    ):
         from cdprhost.motion.segments import SegmentState
 
         self.link, self.profile, self.model = link, profile, model
-        self.feed, self.settle_s, self.timeout_s = float(feed_mm_s), float(settle_s), float(timeout_s)
+        self.feed, self.settle_s, self.timeout_s = (
+            float(feed_mm_s),
+            float(settle_s),
+            float(timeout_s),
+        )
         self.state = SegmentState.at_home(model, profile.drive.home_mm)
         self.homed = False
 
@@ -377,7 +464,9 @@ class LinkDevice:
 
         self.link.send(Enable(0b1111), home_message(self.model, self.profile.drive.home_mm))
         self.link.wait_idle(self.timeout_s)
-        self.state = SegmentState.at_home(self.model, self.profile.drive.home_mm, int(self.state.steps[3]))
+        self.state = SegmentState.at_home(
+            self.model, self.profile.drive.home_mm, int(self.state.steps[3])
+        )
         self.homed = True
 
     def move_through(self, points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -385,8 +474,14 @@ class LinkDevice:
 
         if not self.homed:
             self.home()
-        wire, _, self.state = direct_path(self.profile, self.model, self.state, points, feedrate_mm_s=self.feed,
-                                          clock_hz=self.link.identity.clock_hz)
+        wire, _, self.state = direct_path(
+            self.profile,
+            self.model,
+            self.state,
+            points,
+            feedrate_mm_s=self.feed,
+            clock_hz=self.link.identity.clock_hz,
+        )
         if len(wire):
             self.link.queue_segments(wire, timeout=self.timeout_s)
         self.link.wait_idle(self.timeout_s)

@@ -8,9 +8,15 @@ from cdprhost.kinematics import MachineModel
 from cdprhost.profile import MachineProfile, load_profile
 
 
-def add_profile_argument(parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None) -> None:
+def add_profile_argument(
+    parser: argparse.ArgumentParser, *, required: bool = True, default: str | None = None
+) -> None:
     parser.add_argument(
-        "--profile", "-p", required=required and default is None, default=default, metavar="P",
+        "--profile",
+        "-p",
+        required=required and default is None,
+        default=default,
+        metavar="P",
         help="machine profile: a shipped name (paper-simulation, paper-prototype), a name in the user folder, or a TOML path",
     )
 

@@ -34,12 +34,20 @@ class ProgressView:
     def __enter__(self) -> ProgressView:
         if self.live:
             self._bar = Progress(
-                TextColumn("[bold]{task.fields[state]:<10}"), BarColumn(), TaskProgressColumn(),
-                TextColumn("layer {task.fields[layer]}"), TextColumn("line {task.fields[line]}"),
-                TimeElapsedColumn(), TextColumn("ETA {task.fields[eta]}"), console=self.console, transient=False,
+                TextColumn("[bold]{task.fields[state]:<10}"),
+                BarColumn(),
+                TaskProgressColumn(),
+                TextColumn("layer {task.fields[layer]}"),
+                TextColumn("line {task.fields[line]}"),
+                TimeElapsedColumn(),
+                TextColumn("ETA {task.fields[eta]}"),
+                console=self.console,
+                transient=False,
             )
             self._bar.start()
-            self._task = self._bar.add_task("print", total=1.0, state="", layer="-", line="-", eta="--:--")
+            self._task = self._bar.add_task(
+                "print", total=1.0, state="", layer="-", line="-", eta="--:--"
+            )
         return self
 
     def __exit__(self, *exc) -> None:
@@ -49,13 +57,24 @@ class ProgressView:
 
     def update(self, event: Event) -> None:
         self.snapshot = reduce(self.snapshot, event)
-        if isinstance(event, StateChanged) and event.reason and event.state in (JobState.REFUSED, JobState.FAILED, JobState.PAUSED, JobState.HEATING):
+        if (
+            isinstance(event, StateChanged)
+            and event.reason
+            and event.state
+            in (JobState.REFUSED, JobState.FAILED, JobState.PAUSED, JobState.HEATING)
+        ):
             self._say(f"{event.state.value}: {event.reason}")
         elif isinstance(event, Notice):
             self._say(event.text)
         elif isinstance(event, Failure):
-            where = f"line {event.last_line}, layer {event.last_layer}" if event.last_line else "before any motion"
-            self._say(f"stopped at {where}; position {event.position}; resume point: {event.resume_file}")
+            where = (
+                f"line {event.last_line}, layer {event.last_layer}"
+                if event.last_line
+                else "before any motion"
+            )
+            self._say(
+                f"stopped at {where}; position {event.position}; resume point: {event.resume_file}"
+            )
         self._render()
 
     def _say(self, text: str) -> None:
@@ -68,12 +87,26 @@ class ProgressView:
         s = self.snapshot
         layer = f"{s.layer + 1}/{s.layers}" if s.layers else "-"
         if self._bar:
-            self._bar.update(self._task, completed=s.fraction, state=s.state.value, layer=layer, line=s.line or "-",
-                             eta=_fmt_s(s.eta_s))
+            self._bar.update(
+                self._task,
+                completed=s.fraction,
+                state=s.state.value,
+                layer=layer,
+                line=s.line or "-",
+                eta=_fmt_s(s.eta_s),
+            )
             return
         pct = round(s.fraction * 100)
-        if s.state in (JobState.PRINTING, JobState.DONE) and (pct >= self._last_plain + 10 or s.state is JobState.DONE) and pct != self._last_plain:
+        if (
+            s.state in (JobState.PRINTING, JobState.DONE)
+            and (pct >= self._last_plain + 10 or s.state is JobState.DONE)
+            and pct != self._last_plain
+        ):
             self._last_plain = pct
             elapsed = time.monotonic() - self._t0
-            print(f"{s.state.value:<9} {pct:3d}%  layer {layer}  line {s.line}  elapsed {_fmt_s(elapsed)}  "
-                  f"ETA {_fmt_s(s.eta_s)} (device time)", file=self.stream, flush=True)
+            print(
+                f"{s.state.value:<9} {pct:3d}%  layer {layer}  line {s.line}  elapsed {_fmt_s(elapsed)}  "
+                f"ETA {_fmt_s(s.eta_s)} (device time)",
+                file=self.stream,
+                flush=True,
+            )

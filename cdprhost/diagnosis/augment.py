@@ -37,14 +37,18 @@ def _clean(obj: Any) -> Any:
 
 def _toml_intervals(ci: dict[str, Any]) -> dict[str, Any]:
     """TOML has no null: an unbounded interval end becomes the string "inf"."""
+
     def fix(v: Any) -> Any:
         if isinstance(v, list):
             return [fix(x) for x in v]
         return "inf" if v is None else v
+
     return {k: fix(v) for k, v in ci.items()}
 
 
-def augmented_profile(profile: MachineProfile, diagnosis: Diagnosis, *, session: str = "") -> MachineProfile:
+def augmented_profile(
+    profile: MachineProfile, diagnosis: Diagnosis, *, session: str = ""
+) -> MachineProfile:
     """A copy of ``profile`` carrying the diagnosis' final model (see module docstring)."""
     fit = diagnosis.final.fit
     q = fit.x_[:12]
@@ -65,7 +69,10 @@ def augmented_profile(profile: MachineProfile, diagnosis: Diagnosis, *, session:
         "noise_mm": diagnosis.noise.sigma_mm,
         "noise_source": diagnosis.noise.source,
         "poses": diagnosis.n_poses,
-        "ci95": {n: _toml_intervals(_clean(diagnosis.parameters[n]["ci95"])) for n in diagnosis.final.effects},
+        "ci95": {
+            n: _toml_intervals(_clean(diagnosis.parameters[n]["ci95"]))
+            for n in diagnosis.final.effects
+        },
     }
     if dropped:
         record["dropped"] = [f"{n}: fitted parameters are not physical" for n in dropped]
@@ -73,4 +80,6 @@ def augmented_profile(profile: MachineProfile, diagnosis: Diagnosis, *, session:
         record["note"] = f"verdict {diagnosis.verdict}: effects added are tentative"
     calibration = dict(profile.calibration)
     calibration["diagnosis"] = _clean(record)
-    return profile.with_geometry(q[:9].reshape(3, 3), q[9:12], effects=effects, calibration=calibration)
+    return profile.with_geometry(
+        q[:9].reshape(3, 3), q[9:12], effects=effects, calibration=calibration
+    )

@@ -38,7 +38,9 @@ def training_index(n_poses: int, test: np.ndarray) -> np.ndarray:
     return np.flatnonzero(mask)
 
 
-def heldout_errors(obs: Observations, start: MachineModel, effects: Sequence[str], folds: Sequence[np.ndarray]) -> np.ndarray:
+def heldout_errors(
+    obs: Observations, start: MachineModel, effects: Sequence[str], folds: Sequence[np.ndarray]
+) -> np.ndarray:
     """Per-pose held-out 3D error (mm) of the model 'geometry + ``effects``', shape (K,).
 
     ``start`` seeds every fold's fit (use the all-pose fit: folds then converge in a
@@ -57,7 +59,9 @@ def rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(v * v))) if v.size else float("nan")
 
 
-def expected_heldout_sq(jac: np.ndarray, sigma: np.ndarray | float, folds: Sequence[np.ndarray]) -> np.ndarray:
+def expected_heldout_sq(
+    jac: np.ndarray, sigma: np.ndarray | float, folds: Sequence[np.ndarray]
+) -> np.ndarray:
     """Expected squared held-out error per pose for a correct model, shape (K,), mm^2.
 
     ``jac`` is the whitened Jacobian (3K, p) at the all-pose solution."""
@@ -74,6 +78,8 @@ def expected_heldout_sq(jac: np.ndarray, sigma: np.ndarray | float, folds: Seque
     return out
 
 
-def noise_floor_mm(jac: np.ndarray, sigma: np.ndarray | float, folds: Sequence[np.ndarray]) -> float:
+def noise_floor_mm(
+    jac: np.ndarray, sigma: np.ndarray | float, folds: Sequence[np.ndarray]
+) -> float:
     """Held-out RMS (mm) expected from measurement noise alone for a correct model."""
     return float(np.sqrt(np.mean(expected_heldout_sq(jac, sigma, folds))))

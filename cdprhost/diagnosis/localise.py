@@ -32,7 +32,13 @@ class Finding:
     text: str
 
     def as_dict(self) -> dict:
-        return {"kind": self.kind, "cable": self.cable, "statistic": self.statistic, "p_value": self.p_value, "text": self.text}
+        return {
+            "kind": self.kind,
+            "cable": self.cable,
+            "statistic": self.statistic,
+            "p_value": self.p_value,
+            "text": self.text,
+        }
 
 
 def _feature_columns(model: MachineModel, obs: Observations) -> dict[str, np.ndarray]:
@@ -50,14 +56,19 @@ def _feature_columns(model: MachineModel, obs: Observations) -> dict[str, np.nda
 
 _VERBS = {
     "time": ("grow with time", "fall with time"),
-    "approach direction": ("follow module {k}'s approach direction", "oppose module {k}'s approach direction"),
+    "approach direction": (
+        "follow module {k}'s approach direction",
+        "oppose module {k}'s approach direction",
+    ),
     "tension": ("grow with tension", "fall with tension"),
     "slider position": ("grow with slider position", "fall with slider position"),
     "height": ("grow with height", "fall with height"),
 }
 
 
-def correlation_findings(residuals: np.ndarray, features: dict[str, np.ndarray], n_tests: int, alpha: float) -> list[Finding]:
+def correlation_findings(
+    residuals: np.ndarray, features: dict[str, np.ndarray], n_tests: int, alpha: float
+) -> list[Finding]:
     out = []
     for kind, cols in features.items():
         for k in range(3):
@@ -65,11 +76,15 @@ def correlation_findings(residuals: np.ndarray, features: dict[str, np.ndarray],
             p_adj = min(1.0, p * n_tests)
             if p_adj < alpha:
                 verb = _VERBS[kind][0 if r > 0 else 1].format(k=k + 1)
-                out.append(Finding(kind, k + 1, r, p_adj, f"cable {k + 1} residuals {verb} (r = {r:.2f})"))
+                out.append(
+                    Finding(kind, k + 1, r, p_adj, f"cable {k + 1} residuals {verb} (r = {r:.2f})")
+                )
     return out
 
 
-def periodic_scan(s: np.ndarray, y: np.ndarray, min_period: float = 2.0) -> tuple[float, float, float, float]:
+def periodic_scan(
+    s: np.ndarray, y: np.ndarray, min_period: float = 2.0
+) -> tuple[float, float, float, float]:
     """Best sinusoid in slider position after removing a line: (period mm, amplitude mm, F, p).
 
     Scans frequencies 2/span .. 1/min_period at a spacing of 1/(4 span), vectorised;
@@ -108,8 +123,15 @@ def periodic_findings(residuals: np.ndarray, sliders: np.ndarray, alpha: float) 
         period, amp, _, p = periodic_scan(sliders[:, k], residuals[:, k])
         p_adj = min(1.0, 3.0 * p)
         if p_adj < alpha:
-            out.append(Finding("periodic", k + 1, amp, p_adj,
-                               f"cable {k + 1} residuals repeat with slider position (period ~{period:.1f} mm, amplitude {amp:.2f} mm)"))
+            out.append(
+                Finding(
+                    "periodic",
+                    k + 1,
+                    amp,
+                    p_adj,
+                    f"cable {k + 1} residuals repeat with slider position (period ~{period:.1f} mm, amplitude {amp:.2f} mm)",
+                )
+            )
     return out
 
 
@@ -122,7 +144,9 @@ def _sides(points: np.ndarray, outlets: np.ndarray) -> np.ndarray:
     return np.argmax(cos, axis=1)
 
 
-def region_finding(whitened: np.ndarray, points: np.ndarray, outlets: np.ndarray, alpha: float) -> list[Finding]:
+def region_finding(
+    whitened: np.ndarray, points: np.ndarray, outlets: np.ndarray, alpha: float
+) -> list[Finding]:
     """The height band x side cell where the misfit is largest, if it stands out."""
     sq = np.sum(whitened * whitened, axis=1)
     n = sq.size
@@ -155,8 +179,15 @@ def region_finding(whitened: np.ndarray, points: np.ndarray, outlets: np.ndarray
     if p_adj >= alpha:
         return []
     words = ("low", "middle", "high")[b]
-    return [Finding("region", None, f, p_adj,
-                    f"errors largest at {words} z near the A_{s + 1} side ({share:.0%} of the misfit, mean {f:.1f}x the rest)")]
+    return [
+        Finding(
+            "region",
+            None,
+            f,
+            p_adj,
+            f"errors largest at {words} z near the A_{s + 1} side ({share:.0%} of the misfit, mean {f:.1f}x the rest)",
+        )
+    ]
 
 
 def localise(model: MachineModel, obs: Observations, alpha: float = 0.01) -> list[Finding]:
@@ -171,12 +202,22 @@ def localise(model: MachineModel, obs: Observations, alpha: float = 0.01) -> lis
     n_tests = 3 * len(features)
     found = correlation_findings(residuals, features, n_tests, alpha)
     found += periodic_findings(residuals, np.asarray(obs.sliders, float), alpha)
-    found += region_finding(whitened_residuals(model, obs), obs.measured, model.geometry.outlets, alpha)
+    found += region_finding(
+        whitened_residuals(model, obs), obs.measured, model.geometry.outlets, alpha
+    )
     return sorted(found, key=lambda f: (f.p_value, -abs(f.statistic)))
 
 
-def describe(findings: list[Finding], chi2: float, dof: int, gof_p: float, *, gof_alpha: float = 1e-3,
-             explained: bool = False, limit: int = 3) -> str:
+def describe(
+    findings: list[Finding],
+    chi2: float,
+    dof: int,
+    gof_p: float,
+    *,
+    gof_alpha: float = 1e-3,
+    explained: bool = False,
+    limit: int = 3,
+) -> str:
     """One sentence for the report's ``where``.
 
     ``explained``: an effect was named (or candidates are ambiguous), so a
@@ -184,8 +225,10 @@ def describe(findings: list[Finding], chi2: float, dof: int, gof_p: float, *, go
     fit = f"chi2 = {chi2:.1f} on {dof} dof"
     if not findings:
         if gof_p < gof_alpha:
-            return (f"disagreement beyond the noise floor ({fit}) spread over poses and cables, with no pattern "
-                    "in time, approach direction, tension, slider position, height or region")
+            return (
+                f"disagreement beyond the noise floor ({fit}) spread over poses and cables, with no pattern "
+                "in time, approach direction, tension, slider position, height or region"
+            )
         if explained:
             return f"a small disagreement ({fit}, p = {gof_p:.2g}) with no single pattern"
         return f"no disagreement beyond the noise floor ({fit})"

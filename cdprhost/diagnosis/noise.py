@@ -31,8 +31,12 @@ class NoiseEstimate:
         return {"sigma_mm": self.sigma_mm, "source": self.source, "note": self.note}
 
 
-def repeated_pose_sigma(sliders: np.ndarray, measured: np.ndarray, steps_per_mm: np.ndarray | float = 400.0,
-                        min_dof: int = 6) -> tuple[float, int] | None:
+def repeated_pose_sigma(
+    sliders: np.ndarray,
+    measured: np.ndarray,
+    steps_per_mm: np.ndarray | float = 400.0,
+    min_dof: int = 6,
+) -> tuple[float, int] | None:
     """Pooled per-coordinate scatter of poses commanded to identical steps; (sigma, dof) or None."""
     steps = np.rint(np.asarray(sliders, float) * steps_per_mm).astype(np.int64)
     _, group, counts = np.unique(steps, axis=0, return_inverse=True, return_counts=True)
@@ -52,24 +56,34 @@ def repeated_pose_sigma(sliders: np.ndarray, measured: np.ndarray, steps_per_mm:
     return math.sqrt(float(np.sum(dev * dev)) / dof), dof
 
 
-def estimate_noise(declared_mm: float | None = None, *, sliders: np.ndarray | None = None,
-                   measured: np.ndarray | None = None, steps_per_mm: np.ndarray | float = 400.0,
-                   take_std_mm: np.ndarray | None = None) -> NoiseEstimate:
+def estimate_noise(
+    declared_mm: float | None = None,
+    *,
+    sliders: np.ndarray | None = None,
+    measured: np.ndarray | None = None,
+    steps_per_mm: np.ndarray | float = 400.0,
+    take_std_mm: np.ndarray | None = None,
+) -> NoiseEstimate:
     """Pick sigma from the best available source (see module docstring)."""
     if declared_mm is not None and math.isfinite(declared_mm) and declared_mm > 0:
         return NoiseEstimate(float(declared_mm), "declared", "noise_mm declared in session.toml")
     if sliders is not None and measured is not None:
         rep = repeated_pose_sigma(sliders, measured, steps_per_mm)
         if rep is not None:
-            return NoiseEstimate(rep[0], "repeated poses", f"pooled scatter of repeated poses ({rep[1]} dof)")
+            return NoiseEstimate(
+                rep[0], "repeated poses", f"pooled scatter of repeated poses ({rep[1]} dof)"
+            )
     note = f"no noise declared (noise_mm in session.toml) and no repeated poses: assumed {DEFAULT_NOISE_MM} mm"
     if take_std_mm is not None:
         std = np.asarray(take_std_mm, float)
         std = std[np.isfinite(std)]
         scatter = float(np.sqrt(np.median(std * std))) if std.size else 0.0
         if scatter > DEFAULT_NOISE_MM:
-            return NoiseEstimate(scatter, "take scatter",
-                                 "frame-to-frame scatter within takes exceeds the default; static errors not included")
+            return NoiseEstimate(
+                scatter,
+                "take scatter",
+                "frame-to-frame scatter within takes exceeds the default; static errors not included",
+            )
         if scatter > 0:
             note += f" (frame scatter within takes, {scatter:.3g} mm, is only a lower bound)"
     return NoiseEstimate(DEFAULT_NOISE_MM, "default", note)

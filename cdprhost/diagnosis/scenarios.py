@@ -36,7 +36,9 @@ def random_effect_vector(name: str, rng: np.random.Generator) -> np.ndarray:
     return mag * rng.choice([-1.0, 1.0], 3)
 
 
-def measurement_tour(model: MachineModel, n_poses: int, rng: np.random.Generator, margin_mm: float = 5.0) -> np.ndarray:
+def measurement_tour(
+    model: MachineModel, n_poses: int, rng: np.random.Generator, margin_mm: float = 5.0
+) -> np.ndarray:
     """``n_poses`` points spread over the build volume (uniform in the triangle and in z,
     all inside the workspace), in a shuffled visiting order so approach directions vary."""
     lim = model.limits
@@ -45,7 +47,12 @@ def measurement_tour(model: MachineModel, n_poses: int, rng: np.random.Generator
     count = 0
     while count < n_poses:
         m = 4 * n_poses
-        xy = np.column_stack([rng.uniform(-side / 2, side / 2, m), rng.uniform(-side / (2 * np.sqrt(3)), side / np.sqrt(3), m)])
+        xy = np.column_stack(
+            [
+                rng.uniform(-side / 2, side / 2, m),
+                rng.uniform(-side / (2 * np.sqrt(3)), side / np.sqrt(3), m),
+            ]
+        )
         z = rng.uniform(lim.z_min + margin_mm, lim.z_max - margin_mm, m)
         pts = np.column_stack([xy, z])
         pts = pts[model.check(pts).ok]
@@ -55,13 +62,20 @@ def measurement_tour(model: MachineModel, n_poses: int, rng: np.random.Generator
     return pts[rng.permutation(n_poses)]
 
 
-def session_times(n_poses: int, rng: np.random.Generator, seconds: tuple[float, float] = (20.0, 60.0)) -> np.ndarray:
+def session_times(
+    n_poses: int, rng: np.random.Generator, seconds: tuple[float, float] = (20.0, 60.0)
+) -> np.ndarray:
     """Take start times: 20-60 s between poses."""
     return np.cumsum(rng.uniform(*seconds, n_poses))
 
 
-def hidden_truth(nominal: MachineModel, rng: np.random.Generator, effect: str | Effect | None,
-                 vector: np.ndarray | None = None, geometry_mm: float = 2.0) -> MachineModel:
+def hidden_truth(
+    nominal: MachineModel,
+    rng: np.random.Generator,
+    effect: str | Effect | None,
+    vector: np.ndarray | None = None,
+    geometry_mm: float = 2.0,
+) -> MachineModel:
     """The true machine: geometry off the nominal by up to ``geometry_mm`` per parameter,
     plus one hidden effect (a catalogue name, or any Effect object outside the catalogue)."""
     geometry = perturbed_geometry(nominal.geometry, rng, geometry_mm)
@@ -72,8 +86,13 @@ def hidden_truth(nominal: MachineModel, rng: np.random.Generator, effect: str | 
     return nominal.with_geometry(geometry, EffectChain((obj,), (vec,)))
 
 
-def simulate_session(truth: MachineModel, nominal: MachineModel, rng: np.random.Generator, n_poses: int = 40,
-                     noise_mm: float = 0.05) -> tuple[np.ndarray, Observations]:
+def simulate_session(
+    truth: MachineModel,
+    nominal: MachineModel,
+    rng: np.random.Generator,
+    n_poses: int = 40,
+    noise_mm: float = 0.05,
+) -> tuple[np.ndarray, Observations]:
     """Commanded poses and the observations of one simulated session.
 
     Near z_min the cables are almost horizontal, so a few millimetres of geometry
@@ -81,7 +100,9 @@ def simulate_session(truth: MachineModel, nominal: MachineModel, rng: np.random.
     pose; such a session is drawn again (rare)."""
     for _ in range(20):
         poses = measurement_tour(nominal, n_poses, rng)
-        obs = simulate_observations(truth, nominal, poses, noise_mm=noise_mm, rng=rng, t_s=session_times(n_poses, rng))
+        obs = simulate_observations(
+            truth, nominal, poses, noise_mm=noise_mm, rng=rng, t_s=session_times(n_poses, rng)
+        )
         if np.isfinite(obs.measured).all():
             break
     return poses, obs

@@ -25,7 +25,9 @@ from cdprhost.kinematics.machine import MachineModel
 GEOMETRY_STEP_MM = 1e-5
 
 
-def numeric_jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, steps: np.ndarray) -> np.ndarray:
+def numeric_jacobian(
+    fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray, steps: np.ndarray
+) -> np.ndarray:
     """Central-difference Jacobian, one column per parameter (each call vectorised over poses)."""
     x = np.asarray(x, dtype=float)
     cols = []
@@ -53,7 +55,9 @@ def fit_jacobian(fit: CableModelFit, obs: Observations) -> np.ndarray:
     return numeric_jacobian(fun, fit.x_, parameter_steps(fit.x_, 12 if fit.fit_geometry else 0))
 
 
-def effect_signature(model: MachineModel, obs: Observations, effect: Effect) -> tuple[np.ndarray, np.ndarray]:
+def effect_signature(
+    model: MachineModel, obs: Observations, effect: Effect
+) -> tuple[np.ndarray, np.ndarray]:
     """(G, S): whitened-residual Jacobians for the 12 geometric parameters and for ``effect``'s
     parameters, at ``model`` with the effect added at its null vector. Works for any Effect,
     registered in the catalogue or not."""
@@ -63,7 +67,9 @@ def effect_signature(model: MachineModel, obs: Observations, effect: Effect) -> 
     q0 = model.geometry.q
 
     def fun(x: np.ndarray) -> np.ndarray:
-        c = EffectChain(tuple(e for e, _ in keep) + (effect,), tuple(v for _, v in keep) + (x[12:],))
+        c = EffectChain(
+            tuple(e for e, _ in keep) + (effect,), tuple(v for _, v in keep) + (x[12:],)
+        )
         return whitened_residuals(model.with_geometry(CableGeometry.from_q(x[:12]), c), obs).ravel()
 
     x0 = np.concatenate([q0, null])
@@ -98,15 +104,22 @@ class SignatureReport:
     residual_basis: np.ndarray  # orthonormal basis of the signature with the geometry projected out
 
 
-def analyse_signature(name: str, geometry_jac: np.ndarray, signature: np.ndarray,
-                      absorbed_below: float = 1e-3, partly_below: float = 0.1) -> SignatureReport:
+def analyse_signature(
+    name: str,
+    geometry_jac: np.ndarray,
+    signature: np.ndarray,
+    absorbed_below: float = 1e-3,
+    partly_below: float = 0.1,
+) -> SignatureReport:
     basis = orthonormal_span(geometry_jac)
     norms = np.linalg.norm(signature, axis=0)
     unit = signature / np.where(norms > 0, norms, 1.0)
     rest = project_out(basis, unit)
     u, sv, _ = np.linalg.svd(rest, full_matrices=False)
     lo, hi = (float(sv.min()), float(sv.max())) if sv.size else (0.0, 0.0)
-    return SignatureReport(name, lo, hi, hi < absorbed_below, lo < partly_below, u[:, sv > absorbed_below])
+    return SignatureReport(
+        name, lo, hi, hi < absorbed_below, lo < partly_below, u[:, sv > absorbed_below]
+    )
 
 
 def principal_correlation(a: np.ndarray, b: np.ndarray) -> float:
@@ -116,7 +129,9 @@ def principal_correlation(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.clip(np.linalg.svd(a.T @ b, compute_uv=False).max(), 0.0, 1.0))
 
 
-def confusable_pairs(reports: Sequence[SignatureReport], threshold: float = 0.9) -> list[tuple[str, str, float]]:
+def confusable_pairs(
+    reports: Sequence[SignatureReport], threshold: float = 0.9
+) -> list[tuple[str, str, float]]:
     """Pairs of effects whose geometry-free signatures share a direction (|cos| >= threshold)."""
     out = []
     for i, a in enumerate(reports):
@@ -130,5 +145,6 @@ def confusable_pairs(reports: Sequence[SignatureReport], threshold: float = 0.9)
 def pair_correlations(reports: Sequence[SignatureReport]) -> dict[tuple[str, str], float]:
     return {
         (a.name, b.name): principal_correlation(a.residual_basis, b.residual_basis)
-        for i, a in enumerate(reports) for b in reports[i + 1 :]
+        for i, a in enumerate(reports)
+        for b in reports[i + 1 :]
     }

@@ -27,7 +27,9 @@ def goodness_of_fit_p(chi2: float, dof: int) -> float:
     return float(stats.chi2.sf(chi2, dof))
 
 
-def nested_f_test(chi2_small: float, chi2_big: float, extra: int, dof_big: int) -> tuple[float, float]:
+def nested_f_test(
+    chi2_small: float, chi2_big: float, extra: int, dof_big: int
+) -> tuple[float, float]:
     """F statistic and p-value of a nested comparison (big model has ``extra`` more parameters)."""
     if extra <= 0 or dof_big <= 0 or chi2_big <= 0:
         return float("nan"), float("nan")

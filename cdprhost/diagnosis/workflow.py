@@ -85,7 +85,9 @@ class ModelResult:
 
     @property
     def heldout_rms_mm(self) -> float:
-        return float("nan") if self.heldout_errors_mm is None else crossval.rms(self.heldout_errors_mm)
+        return (
+            float("nan") if self.heldout_errors_mm is None else crossval.rms(self.heldout_errors_mm)
+        )
 
 
 @dataclass
@@ -99,7 +101,9 @@ class Candidate:
     delta_bic: float = float("nan")
     unabsorbed: float = float("nan")
     admissible: bool = True
-    status: str = "not significant"  # named | rival | significant | not significant | absorbed | non-physical
+    status: str = (
+        "not significant"  # named | rival | significant | not significant | absorbed | non-physical
+    )
 
     @property
     def heldout_rms_mm(self) -> float:
@@ -140,7 +144,12 @@ class Diagnosis:
         return self.final.fit.model_
 
 
-def fit_model(obs: Observations, start: MachineModel, effects: Sequence[str], folds: Sequence[np.ndarray] | None) -> ModelResult:
+def fit_model(
+    obs: Observations,
+    start: MachineModel,
+    effects: Sequence[str],
+    folds: Sequence[np.ndarray] | None,
+) -> ModelResult:
     fit = CableModelFit(effects=tuple(effects)).fit(obs, start)
     errors = None if folds is None else crossval.heldout_errors(obs, fit.model_, effects, folds)
     return ModelResult(tuple(effects), fit, errors)
@@ -158,8 +167,12 @@ def effect_parameters(fit: CableModelFit, name: str) -> dict:
         a, b = np.asarray(natural_lo[key], float), np.asarray(natural_hi[key], float)
         ci[key] = _interval(np.minimum(a, b), np.maximum(a, b))
     return {
-        "vector_names": list(effect.vector_names), "vector": vec.tolist(), "stderr": sd.tolist(),
-        "ci95_vector": np.stack([lo, hi], axis=1).tolist(), "table": table, "ci95": ci,
+        "vector_names": list(effect.vector_names),
+        "vector": vec.tolist(),
+        "stderr": sd.tolist(),
+        "ci95_vector": np.stack([lo, hi], axis=1).tolist(),
+        "table": table,
+        "ci95": ci,
     }
 
 
@@ -187,21 +200,34 @@ def admissible(fit: CableModelFit, name: str) -> bool:
 
 def geometry_parameters(fit: CableModelFit) -> dict:
     q, sd = fit.x_[:12], fit.stderr_[:12]
-    return {"outlets": q[:9].reshape(3, 3).tolist(), "initial_lengths": q[9:12].tolist(),
-            "stderr": {"outlets": sd[:9].reshape(3, 3).tolist(), "initial_lengths": sd[9:12].tolist()}}
+    return {
+        "outlets": q[:9].reshape(3, 3).tolist(),
+        "initial_lengths": q[9:12].tolist(),
+        "stderr": {"outlets": sd[:9].reshape(3, 3).tolist(), "initial_lengths": sd[9:12].tolist()},
+    }
 
 
 class _Round:
     """Evaluate and rank the candidates of one round against the current model."""
 
-    def __init__(self, obs: Observations, current: ModelResult, names: Sequence[str], index: int,
-                 folds: Sequence[np.ndarray], settings: DiagnosisSettings, unabsorbed: dict[str, float]):
+    def __init__(
+        self,
+        obs: Observations,
+        current: ModelResult,
+        names: Sequence[str],
+        index: int,
+        folds: Sequence[np.ndarray],
+        settings: DiagnosisSettings,
+        unabsorbed: dict[str, float],
+    ):
         self.obs, self.current, self.folds, self.settings = obs, current, folds, settings
         self.candidates = [self._evaluate(n, index, unabsorbed.get(n, float("nan"))) for n in names]
         for c, p in zip(self.candidates, holm([c.p_value for c in self.candidates])):
             c.p_holm = float(p)
             if p < settings.alpha and c.result is not None and c.result.heldout_errors_mm is None:
-                c.result.heldout_errors_mm = crossval.heldout_errors(obs, c.result.fit.model_, c.result.effects, folds)
+                c.result.heldout_errors_mm = crossval.heldout_errors(
+                    obs, c.result.fit.model_, c.result.effects, folds
+                )
             if not c.admissible:
                 c.status = "non-physical"
             elif p < settings.alpha:
@@ -210,25 +236,49 @@ class _Round:
     def _evaluate(self, name: str, index: int, unabsorbed: float) -> Candidate:
         effects = self.current.effects + (name,)
         fit = CableModelFit(effects=effects).fit(self.obs, self.current.fit.model_)
-        errors = crossval.heldout_errors(self.obs, fit.model_, effects, self.folds) if self.settings.heldout_for_all else None
+        errors = (
+            crossval.heldout_errors(self.obs, fit.model_, effects, self.folds)
+            if self.settings.heldout_for_all
+            else None
+        )
         result = ModelResult(effects, fit, errors)
         extra = result.n_params - self.current.n_params
         f, p = nested_f_test(self.current.chi2, result.chi2, extra, result.dof)
-        return Candidate(name, index, result, f, p, delta_bic=result.bic - self.current.bic,
-                         unabsorbed=unabsorbed, admissible=admissible(fit, name))
+        return Candidate(
+            name,
+            index,
+            result,
+            f,
+            p,
+            delta_bic=result.bic - self.current.bic,
+            unabsorbed=unabsorbed,
+            admissible=admissible(fit, name),
+        )
 
     def eligible(self) -> list[Candidate]:
         cur = self.current.heldout_rms_mm
-        ok = [c for c in self.candidates if c.status == "significant" and c.delta_bic < -self.settings.min_bic_gain
-              and c.result is not None and c.heldout_rms_mm < cur]
+        ok = [
+            c
+            for c in self.candidates
+            if c.status == "significant"
+            and c.delta_bic < -self.settings.min_bic_gain
+            and c.result is not None
+            and c.heldout_rms_mm < cur
+        ]
         return sorted(ok, key=lambda c: c.delta_bic)
 
     def same_disagreement(self, best: Candidate, rival: Candidate) -> bool:
         """True when best and rival explain the same thing: their joint fit is not
         significantly better than both of them alone."""
-        joint = CableModelFit(effects=best.result.effects + (rival.name,)).fit(self.obs, best.result.fit.model_)
-        _, p_over_best = nested_f_test(best.result.chi2, joint.chi2_, len(joint.x_) - best.result.n_params, joint.dof_)
-        _, p_over_rival = nested_f_test(rival.result.chi2, joint.chi2_, len(joint.x_) - rival.result.n_params, joint.dof_)
+        joint = CableModelFit(effects=best.result.effects + (rival.name,)).fit(
+            self.obs, best.result.fit.model_
+        )
+        _, p_over_best = nested_f_test(
+            best.result.chi2, joint.chi2_, len(joint.x_) - best.result.n_params, joint.dof_
+        )
+        _, p_over_rival = nested_f_test(
+            rival.result.chi2, joint.chi2_, len(joint.x_) - rival.result.n_params, joint.dof_
+        )
         return not (p_over_best < self.settings.alpha and p_over_rival < self.settings.alpha)
 
 
@@ -238,11 +288,17 @@ def observations_check(obs: Observations) -> None:
     for label, arr in (("measured points", obs.measured), ("commanded sliders", obs.sliders)):
         bad = np.flatnonzero(~np.isfinite(np.asarray(arr, float)).all(axis=1))
         if bad.size:
-            raise InputError(f"{label} are not finite at pose(s) {', '.join(str(i + 1) for i in bad[:10])}")
+            raise InputError(
+                f"{label} are not finite at pose(s) {', '.join(str(i + 1) for i in bad[:10])}"
+            )
 
 
-def diagnose(obs: Observations, base_model: MachineModel, noise: NoiseEstimate | None = None,
-             settings: DiagnosisSettings = DiagnosisSettings()) -> Diagnosis:
+def diagnose(
+    obs: Observations,
+    base_model: MachineModel,
+    noise: NoiseEstimate | None = None,
+    settings: DiagnosisSettings = DiagnosisSettings(),
+) -> Diagnosis:
     """Run the whole workflow on measured poses; ``base_model`` gives the starting geometry
     and any effects already in the profile (refitted, not tested)."""
     observations_check(obs)
@@ -251,8 +307,12 @@ def diagnose(obs: Observations, base_model: MachineModel, noise: NoiseEstimate |
     base = fit_model(obs, base_model, base_model.effects.names, folds)
 
     names = [n for n in (settings.candidates or tuple(CATALOGUE)) if n not in base.effects]
-    reports = {n: signatures.analyse_signature(n, *signatures.effect_signature(base.fit.model_, obs, CATALOGUE[n]))
-               for n in names}
+    reports = {
+        n: signatures.analyse_signature(
+            n, *signatures.effect_signature(base.fit.model_, obs, CATALOGUE[n])
+        )
+        for n in names
+    }
     confusable = signatures.confusable_pairs(list(reports.values()), settings.confusable_threshold)
     remaining = [n for n in names if not reports[n].absorbed]
     unabsorbed = {n: r.unabsorbed_min for n, r in reports.items()}
@@ -267,10 +327,15 @@ def diagnose(obs: Observations, base_model: MachineModel, noise: NoiseEstimate |
         if not eligible:
             break
         best = eligible[0]
-        rivals = [c for c in eligible[1:]
-                  if (c.delta_bic - best.delta_bic < settings.bic_margin
-                      or c.heldout_rms_mm < best.heldout_rms_mm * (1 - settings.heldout_tol))
-                  and rnd.same_disagreement(best, c)]
+        rivals = [
+            c
+            for c in eligible[1:]
+            if (
+                c.delta_bic - best.delta_bic < settings.bic_margin
+                or c.heldout_rms_mm < best.heldout_rms_mm * (1 - settings.heldout_tol)
+            )
+            and rnd.same_disagreement(best, c)
+        ]
         if rivals:
             for c in (best, *rivals):
                 c.status = "rival"
@@ -281,7 +346,11 @@ def diagnose(obs: Observations, base_model: MachineModel, noise: NoiseEstimate |
         current = best.result
         remaining.remove(best.name)
 
-    absorbed = [Candidate(n, 1, unabsorbed=unabsorbed[n], status="absorbed") for n in names if reports[n].absorbed]
+    absorbed = [
+        Candidate(n, 1, unabsorbed=unabsorbed[n], status="absorbed")
+        for n in names
+        if reports[n].absorbed
+    ]
     if absorbed:
         rounds = [rounds[0] + absorbed, *rounds[1:]] if rounds else [absorbed]
     if ambiguous:
@@ -294,8 +363,14 @@ def diagnose(obs: Observations, base_model: MachineModel, noise: NoiseEstimate |
     # the disagreement described: what is left for 'unexplained', what was found otherwise
     described = current if verdict == "unexplained" else base
     findings = localise(described.fit.model_, obs, settings.localise_alpha)
-    where = describe(findings, described.chi2, described.dof, described.gof_p, gof_alpha=settings.gof_alpha,
-                     explained=bool(named) or bool(ambiguous))
+    where = describe(
+        findings,
+        described.chi2,
+        described.dof,
+        described.gof_p,
+        gof_alpha=settings.gof_alpha,
+        explained=bool(named) or bool(ambiguous),
+    )
     if verdict == "named":
         where += f"; explained by {' + '.join(named)}"
 
@@ -306,8 +381,21 @@ def diagnose(obs: Observations, base_model: MachineModel, noise: NoiseEstimate |
     params = {"geometry": geometry_parameters(current.fit)}
     params.update({n: effect_parameters(current.fit, n) for n in current.effects})
     return Diagnosis(
-        verdict=verdict, effects=tuple(named), ambiguous_between=tuple(ambiguous), rounds=rounds,
-        base=base, final=current, noise=noise, noise_floor_mm=float(np.sqrt(np.mean(expected))),
-        noise_floor_base_mm=floor_base, expected_heldout_mm=np.sqrt(expected), parameters=params, where=where,
-        findings=findings, signatures=reports, confusable=confusable, n_poses=len(obs), settings=settings,
+        verdict=verdict,
+        effects=tuple(named),
+        ambiguous_between=tuple(ambiguous),
+        rounds=rounds,
+        base=base,
+        final=current,
+        noise=noise,
+        noise_floor_mm=float(np.sqrt(np.mean(expected))),
+        noise_floor_base_mm=floor_base,
+        expected_heldout_mm=np.sqrt(expected),
+        parameters=params,
+        where=where,
+        findings=findings,
+        signatures=reports,
+        confusable=confusable,
+        n_poses=len(obs),
+        settings=settings,
     )

@@ -27,17 +27,24 @@ class Backlash(Effect):
     stage = "slider"
     params_model = BacklashParams
     vector_names = ("beta_1", "beta_2", "beta_3")
-    description = "each module lags its commanded position by beta_k against its direction of travel"
+    description = (
+        "each module lags its commanded position by beta_k against its direction of travel"
+    )
 
     def to_vector(self, params: BacklashParams) -> np.ndarray:
         return vector3(params.beta)
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:
-        return {"beta": [float(v) for v in vector], **stderr_fields(self.vector_names, stderr, "beta")}
+        return {
+            "beta": [float(v) for v in vector],
+            **stderr_fields(self.vector_names, stderr, "beta"),
+        }
 
     @staticmethod
     def _dirs(s: np.ndarray, ctx: MotionContext) -> np.ndarray:
-        return np.zeros_like(s) if ctx.directions is None else np.asarray(ctx.directions, dtype=float)
+        return (
+            np.zeros_like(s) if ctx.directions is None else np.asarray(ctx.directions, dtype=float)
+        )
 
     def apply(self, s: np.ndarray, vector: np.ndarray, ctx: MotionContext) -> np.ndarray:
         return s - vector * self._dirs(s, ctx)

@@ -33,7 +33,10 @@ class Drift(Effect):
         return vector3(params.rho)
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:
-        return {"rho": [float(v) for v in vector], **stderr_fields(self.vector_names, stderr, "rho")}
+        return {
+            "rho": [float(v) for v in vector],
+            **stderr_fields(self.vector_names, stderr, "rho"),
+        }
 
     def apply(self, s: np.ndarray, vector: np.ndarray, ctx: MotionContext) -> np.ndarray:
         if ctx.t_s is None:

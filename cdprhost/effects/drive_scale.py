@@ -29,7 +29,10 @@ class DriveScale(Effect):
         return vector3(params.eps)
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:
-        return {"eps": [float(v) for v in vector], **stderr_fields(self.vector_names, stderr, "eps")}
+        return {
+            "eps": [float(v) for v in vector],
+            **stderr_fields(self.vector_names, stderr, "eps"),
+        }
 
     def apply(self, s: np.ndarray, vector: np.ndarray, ctx: MotionContext) -> np.ndarray:
         return s * (1.0 + vector)

@@ -16,7 +16,9 @@ from cdprhost.effects.drift import Drift
 from cdprhost.effects.drive_scale import DriveScale
 
 #: Catalogue order is also the order slider effects are applied in prediction.
-CATALOGUE: dict[str, Effect] = {e.name: e for e in (DriveScale(), Backlash(), Drift(), CableElasticity())}
+CATALOGUE: dict[str, Effect] = {
+    e.name: e for e in (DriveScale(), Backlash(), Drift(), CableElasticity())
+}
 
 
 def get_effect(name: str) -> Effect:
@@ -53,12 +55,18 @@ class EffectChain:
     @classmethod
     def from_tables(cls, tables: Mapping[str, Mapping[str, Any]]) -> EffectChain:
         names = [n for n in CATALOGUE if n in tables]
-        return cls(tuple(CATALOGUE[n] for n in names), tuple(CATALOGUE[n].parse(dict(tables[n])) for n in names))
+        return cls(
+            tuple(CATALOGUE[n] for n in names),
+            tuple(CATALOGUE[n].parse(dict(tables[n])) for n in names),
+        )
 
     @classmethod
     def from_vectors(cls, names: Sequence[str], vectors: Sequence[np.ndarray]) -> EffectChain:
         order = sorted(range(len(names)), key=lambda i: list(CATALOGUE).index(names[i]))
-        return cls(tuple(CATALOGUE[names[i]] for i in order), tuple(np.asarray(vectors[i], float) for i in order))
+        return cls(
+            tuple(CATALOGUE[names[i]] for i in order),
+            tuple(np.asarray(vectors[i], float) for i in order),
+        )
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -92,7 +100,9 @@ class EffectChain:
                 length = effect.unstretch(length, tensions, vec)
         return length
 
-    def to_tables(self, stderrs: Sequence[np.ndarray | None] | None = None) -> dict[str, dict[str, Any]]:
+    def to_tables(
+        self, stderrs: Sequence[np.ndarray | None] | None = None
+    ) -> dict[str, dict[str, Any]]:
         stderrs = stderrs or [None] * len(self.effects)
         return {e.name: e.to_params(v, s) for e, v, s in zip(self.effects, self.vectors, stderrs)}
 

@@ -18,7 +18,9 @@ def atomic_open(path: str | os.PathLike[str], mode: str = "w", **kwargs) -> Iter
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     binary = "b" in mode
     try:
-        with os.fdopen(fd, mode, **({} if binary else {"encoding": "utf-8", "newline": ""}), **kwargs) as fh:
+        with os.fdopen(
+            fd, mode, **({} if binary else {"encoding": "utf-8", "newline": ""}), **kwargs
+        ) as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())

@@ -48,9 +48,13 @@ def read_columns(path: str | os.PathLike[str], columns: Sequence[str]) -> np.nda
             try:
                 v = float(cell)
             except ValueError:
-                raise InputError(f"row {r}, column '{c}': not a number: {cell!r}", source=src) from None
+                raise InputError(
+                    f"row {r}, column '{c}': not a number: {cell!r}", source=src
+                ) from None
             if not math.isfinite(v):
-                raise InputError(f"row {r}, column '{c}': not a finite number: {cell!r}", source=src)
+                raise InputError(
+                    f"row {r}, column '{c}': not a finite number: {cell!r}", source=src
+                )
             out[n, j] = v
         n += 1
     return out[:n]
@@ -60,10 +64,18 @@ def data_row_numbers(path: str | os.PathLike[str]) -> np.ndarray:
     """File row number of each non-blank data row (to name rows in later errors)."""
     with open(path, encoding="utf-8", newline="") as fh:
         rows = list(csv.reader(fh))
-    return np.array([r for r, row in enumerate(rows[1:], start=2) if row and any(c.strip() for c in row)], dtype=int)
+    return np.array(
+        [r for r, row in enumerate(rows[1:], start=2) if row and any(c.strip() for c in row)],
+        dtype=int,
+    )
 
 
-def write_columns(path: str | os.PathLike[str], header: Sequence[str], columns: Sequence[np.ndarray], fmts: Sequence[str]) -> None:
+def write_columns(
+    path: str | os.PathLike[str],
+    header: Sequence[str],
+    columns: Sequence[np.ndarray],
+    fmts: Sequence[str],
+) -> None:
     """Write equal-length columns atomically; ``fmts`` are %-formats per column."""
     table = np.column_stack([np.asarray(c) for c in columns]) if columns else np.empty((0, 0))
     buf = io.StringIO()

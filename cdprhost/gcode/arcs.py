@@ -32,7 +32,9 @@ def radius_tolerance(r: np.ndarray) -> np.ndarray:
     return 0.01 + 1e-3 * np.abs(r)
 
 
-def geometry(start: np.ndarray, end: np.ndarray, ij: np.ndarray, r: np.ndarray, clockwise: np.ndarray) -> ArcGeometry:
+def geometry(
+    start: np.ndarray, end: np.ndarray, ij: np.ndarray, r: np.ndarray, clockwise: np.ndarray
+) -> ArcGeometry:
     """``start``/``end`` (n, 2) XY; ``ij`` (n, 2) with NaN where absent; ``r`` (n,) NaN if absent."""
     bad: list[tuple[int, str]] = []
     chord = end - start
@@ -65,7 +67,9 @@ def geometry(start: np.ndarray, end: np.ndarray, ij: np.ndarray, r: np.ndarray, 
         bad.append((k, "arc with zero radius"))
     mismatch = np.abs(r1 - r0) > radius_tolerance(np.maximum(r0, r1))
     for k in np.flatnonzero(mismatch & ~use_r & (r0 > 0)).tolist():
-        bad.append((k, f"arc end is not on the circle: radius {r0[k]:.4f} at start, {r1[k]:.4f} at end"))
+        bad.append(
+            (k, f"arc end is not on the circle: radius {r0[k]:.4f} at start, {r1[k]:.4f} at end")
+        )
     a0 = np.arctan2(v0[:, 1], v0[:, 0])
     a1 = np.arctan2(v1[:, 1], v1[:, 0])
     ccw = np.mod(a1 - a0, 2 * np.pi)
@@ -87,7 +91,9 @@ def segment_counts(geo: ArcGeometry, tolerance: float) -> np.ndarray:
     return np.maximum(np.nan_to_num(n, nan=1.0), 1).astype(np.int64)
 
 
-def chord_ends(geo: ArcGeometry, counts: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+def chord_ends(
+    geo: ArcGeometry, counts: np.ndarray, start: np.ndarray, end: np.ndarray
+) -> np.ndarray:
     """End point (x, y, z, e) of every chord, arcs one after another (sum(counts), 4).
 
     ``start``/``end`` are (n, 4) X, Y, Z, E of each arc; the last chord ends exactly at ``end``.

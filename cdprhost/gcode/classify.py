@@ -66,7 +66,9 @@ def classify(tok: Tokens, first_line: int, texts: dict[int, str]) -> Classified:
     """Split ``tok`` into motion rows and other lines (``texts``: free text of slow lines)."""
     tl, let, val = tok.line, tok.letter, tok.value
     if tl.size == 0:
-        return Classified(Rows(np.empty(0, np.int64), np.empty(0, np.uint8), np.empty((8, 0))), [], None)
+        return Classified(
+            Rows(np.empty(0, np.int64), np.empty(0, np.uint8), np.empty((8, 0))), [], None
+        )
     first = np.empty(tl.size, dtype=bool)
     first[0] = True
     np.not_equal(tl[1:], tl[:-1], out=first[1:])
@@ -94,23 +96,34 @@ def classify(tok: Tokens, first_line: int, texts: dict[int, str]) -> Classified:
         row, col, pval, param = row[ok], col[ok], pval[ok], param[ok]
     number = ~np.isnan(pval)
     if not number.all():
-        problems.append(_problem(tok, param[~number], head, group, "missing number after {w} in {c}"))
+        problems.append(
+            _problem(tok, param[~number], head, group, "missing number after {w} in {c}")
+        )
     nonpos_f = (col == 4) & ~(pval > 0) & number
     if nonpos_f.any():
-        problems.append(_problem(tok, param[nonpos_f], head, group, "feedrate must be positive: {w} in {c}"))
+        problems.append(
+            _problem(tok, param[nonpos_f], head, group, "feedrate must be positive: {w} in {c}")
+        )
     values = np.full((8, m), np.nan)
     values[col, row] = pval
     if np.count_nonzero(~np.isnan(values)) != np.count_nonzero(number):  # a cell written twice
         key = row * 8 + col
         dup = np.bincount(key, minlength=m * 8)[key] > 1
-        problems.append(_problem(tok, param[dup], head, group, "repeated parameter {w} in {c}", second=True))
+        problems.append(
+            _problem(tok, param[dup], head, group, "repeated parameter {w} in {c}", second=True)
+        )
 
     rows = Rows(tl[head[motion]] + first_line, cmd_val[motion].astype(np.uint8), values)
     arc_problem = _arc_problem(rows, tl[head[motion]], kind[motion])
     if arc_problem is not None:
         problems.append(arc_problem)
     others = [
-        Other(int(tl[h]), command_word(int(let[h]), float(val[h])), _params(let, val, h, c), texts.get(int(tl[h])))
+        Other(
+            int(tl[h]),
+            command_word(int(let[h]), float(val[h])),
+            _params(let, val, h, c),
+            texts.get(int(tl[h])),
+        )
         for h, c in zip(head[~motion].tolist(), count[~motion].tolist())
     ]
     problem = min(problems, key=lambda p: p.index) if problems else None
@@ -155,5 +168,9 @@ def _arc_problem(rows: Rows, index: np.ndarray, kind: np.ndarray) -> Problem | N
         cands.append(Problem(int(index[k]), "R", 0, f"G{rows.cmd[k]} has both I/J and R"))
     if neither.any():
         k = int(np.flatnonzero(neither)[0])
-        cands.append(Problem(int(index[k]), "G", 0, f"G{rows.cmd[k]} needs I/J (centre offset) or R (radius)"))
+        cands.append(
+            Problem(
+                int(index[k]), "G", 0, f"G{rows.cmd[k]} needs I/J (centre offset) or R (radius)"
+            )
+        )
     return min(cands, key=lambda p: p.index) if cands else None

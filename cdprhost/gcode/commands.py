@@ -31,8 +31,27 @@ MODAL = frozenset({"G17", "G18", "G19", "G20", "G21", "G28", "G90", "G91", "M82"
 
 # Parameters are checked strictly (bad numbers are errors) for these commands.
 KNOWN = frozenset(
-    {"G0", "G1", "G2", "G3", "G4", "G92", "M104", "M109", "M140", "M190", "M106", "M107", "M84", "M18",
-     "M400", "M117", "M110", "G28"} | MODAL
+    {
+        "G0",
+        "G1",
+        "G2",
+        "G3",
+        "G4",
+        "G92",
+        "M104",
+        "M109",
+        "M140",
+        "M190",
+        "M106",
+        "M107",
+        "M84",
+        "M18",
+        "M400",
+        "M117",
+        "M110",
+        "G28",
+    }
+    | MODAL
 )
 # Known commands whose parameters may be bare letters (G28 X Y).
 FLAG_COMMANDS = frozenset({"G28", "M84", "M18"})
@@ -40,13 +59,56 @@ FLAG_COMMANDS = frozenset({"G28", "M84", "M18"})
 # Skipping these changes neither geometry nor extrusion. Limits, jerk and pressure
 # advance: the host plans with its own profile. Bed levelling: the calibrated
 # kinematics define the bed. Reports, progress, display, sounds, settings storage.
-HARMLESS = frozenset({
-    "G29", "G80", "G81",
-    "M17", "M73", "M75", "M76", "M77", "M105", "M114", "M115", "M118", "M119", "M155", "M27", "M31",
-    "M141", "M191", "M150", "M201", "M202", "M203", "M204", "M205", "M207", "M208", "M209", "M220",
-    "M300", "M355", "M413", "M486", "M500", "M501", "M502", "M503", "M530", "M531", "M532", "M566",
-    "M572", "M593", "M710", "M900", "M907", "M2",
-})
+HARMLESS = frozenset(
+    {
+        "G29",
+        "G80",
+        "G81",
+        "M17",
+        "M73",
+        "M75",
+        "M76",
+        "M77",
+        "M105",
+        "M114",
+        "M115",
+        "M118",
+        "M119",
+        "M155",
+        "M27",
+        "M31",
+        "M141",
+        "M191",
+        "M150",
+        "M201",
+        "M202",
+        "M203",
+        "M204",
+        "M205",
+        "M207",
+        "M208",
+        "M209",
+        "M220",
+        "M300",
+        "M355",
+        "M413",
+        "M486",
+        "M500",
+        "M501",
+        "M502",
+        "M503",
+        "M530",
+        "M531",
+        "M532",
+        "M566",
+        "M572",
+        "M593",
+        "M710",
+        "M900",
+        "M907",
+        "M2",
+    }
+)
 _HARMLESS_PREFIX = ("M862.",)  # Prusa printer/nozzle/firmware checks
 
 Fail = Callable[..., NoReturn]
@@ -144,7 +206,6 @@ def _home(line, p, st, fail, other):
 
 def _set_all_zero(line, p, st, fail, other):
     st.off = st.pos.copy()
-    return None
 
 
 def _motors_off(line, p, st, fail, other):
@@ -161,7 +222,6 @@ def _printable(text: str) -> str:
 def _setter(attr: str, value):
     def handle(line, p, st, fail, other):
         setattr(st, attr, value)
-        return None
 
     return handle
 
@@ -191,4 +251,3 @@ _HANDLERS: dict[str, Callable] = {
     "G18": _setter("plane", 18),
     "G19": _setter("plane", 19),
 }
-

@@ -141,5 +141,16 @@ class Unknown:
     harmless: bool
 
 
-Command = Union[SetTemperature, Fan, Dwell, Home, MotorsOff, WaitMoves, Message, ToolSelect, LayerChange, Unknown]
-ProgramItem = Union[MoveChunk, Command]
+Command = Union[  # noqa: UP007 - a runtime alias used in isinstance checks
+    SetTemperature,
+    Fan,
+    Dwell,
+    Home,
+    MotorsOff,
+    WaitMoves,
+    Message,
+    ToolSelect,
+    LayerChange,
+    Unknown,
+]
+ProgramItem = Union[MoveChunk, Command]  # noqa: UP007

@@ -99,10 +99,14 @@ def parse_line(
                         raise GcodeError(path, line, i + 1, f"number out of range {raw.strip()!r}")
                     value = None
             elif strict:
-                raise GcodeError(path, line, i + 1, f"malformed number {_word_text(code, i)!r}" + _in(command))
+                raise GcodeError(
+                    path, line, i + 1, f"malformed number {_word_text(code, i)!r}" + _in(command)
+                )
         if command is None and letter == "N" and out.n is None and not out.words:
             if value is None or value != int(value) or value < 0:
-                raise GcodeError(path, line, i + 1, f"malformed line number {_word_text(code, i)!r}")
+                raise GcodeError(
+                    path, line, i + 1, f"malformed line number {_word_text(code, i)!r}"
+                )
             out.n = int(value)
             i = end
             continue
@@ -120,7 +124,9 @@ def parse_line(
                 return out
         else:
             if strict and not flags_ok and value is None and end < n and code[end].isalpha():
-                raise GcodeError(path, line, i + 1, f"malformed number {_word_text(code, i)!r}" + _in(command))
+                raise GcodeError(
+                    path, line, i + 1, f"malformed number {_word_text(code, i)!r}" + _in(command)
+                )
             out.words.append(word)
         i = end
     return out
@@ -139,11 +145,10 @@ def find_column(text: str, letter: str, occurrence: int = 0) -> int:
             close = code.find(")", i)
             i = n if close < 0 else close + 1
             continue
-        if ch.isascii() and ch.isalpha():
-            if ch.upper() == letter:
-                if seen == occurrence:
-                    return i + 1
-                seen += 1
+        if ch.isascii() and ch.isalpha() and ch.upper() == letter:
+            if seen == occurrence:
+                return i + 1
+            seen += 1
         i += 1
     return 0
 
@@ -196,11 +201,18 @@ def _verify_checksum(text: str, line: int, path: str) -> str:
         return text
     m = _CHECKSUM.match(text, star)
     if m is None:
-        raise GcodeError(path, line, star + 1, f"malformed checksum {text[star:].split(';')[0].strip()!r}")
+        raise GcodeError(
+            path,
+            line,
+            star + 1,
+            f"malformed checksum {text[star:].split(';', maxsplit=1)[0].strip()!r}",
+        )
     expected = int(m.group(1))
     actual = 0
     for b in text[:star].encode("utf-8", "surrogateescape"):
         actual ^= b
     if actual != expected:
-        raise GcodeError(path, line, star + 1, f"checksum mismatch: line says {expected}, computed {actual}")
+        raise GcodeError(
+            path, line, star + 1, f"checksum mismatch: line says {expected}, computed {actual}"
+        )
     return text[:star]

@@ -48,10 +48,18 @@ def read_program(
         raise ValueError(f"chunk_moves must be at least 1, got {chunk_moves!r}")
     path = source_name(source, name)
     blocks = iter_blocks(source, path, block_bytes=block_bytes, block_lines=block_lines)
-    return _read(blocks, path, ModalState(home=np.asarray(home_position, dtype=float)), arc_tolerance_mm, chunk_moves)
+    return _read(
+        blocks,
+        path,
+        ModalState(home=np.asarray(home_position, dtype=float)),
+        arc_tolerance_mm,
+        chunk_moves,
+    )
 
 
-def _read(blocks: Iterator[Block], path: str, st: ModalState, tol: float, chunk_moves: int) -> Iterator[ProgramItem]:
+def _read(
+    blocks: Iterator[Block], path: str, st: ModalState, tol: float, chunk_moves: int
+) -> Iterator[ProgramItem]:
     for block in blocks:
         yield from _BlockReader(block, path, st, tol, chunk_moves).run()
     if st.pending_layer is not None:
@@ -77,7 +85,9 @@ class _BlockReader:
             self._lines = self.data.split(b"\n")
         return self._lines[index].decode("utf-8", "surrogateescape")
 
-    def error(self, index: int, reason: str, letter: str | None = None, occurrence: int = 0) -> GcodeError:
+    def error(
+        self, index: int, reason: str, letter: str | None = None, occurrence: int = 0
+    ) -> GcodeError:
         column = find_column(self.text(index), letter, occurrence) if letter else 0
         return GcodeError(self.path, self.first + index, column, reason)
 
@@ -94,7 +104,9 @@ class _BlockReader:
             tok, texts, slow_error = self._slow_lines(tok)
         cls = classify(tok, self.first, texts)
         stop, error = self._first_error(cls, slow_error)
-        events: list[tuple[int, int, object]] = [(o.index, 1, o) for o in cls.others if o.index < stop]
+        events: list[tuple[int, int, object]] = [
+            (o.index, 1, o) for o in cls.others if o.index < stop
+        ]
         events += [(a.index, 0, a) for a in anns if a.index < stop and self._counts(a)]
         events.sort(key=lambda e: (e[0], e[1]))
         rows = cls.rows
@@ -110,7 +122,9 @@ class _BlockReader:
             return a.tag in ("LAYER_CHANGE", "Z:")
         return style is LayerStyle.CURA and a.tag == "LAYER:"
 
-    def _first_error(self, cls: Classified, slow_error: GcodeError | None) -> tuple[int, GcodeError | None]:
+    def _first_error(
+        self, cls: Classified, slow_error: GcodeError | None
+    ) -> tuple[int, GcodeError | None]:
         p: Problem | None = cls.problem
         error = None
         if p is not None:
@@ -131,7 +145,11 @@ class _BlockReader:
             text = self.text(index)
             try:
                 parsed = parse_line(
-                    text, number, self.path, strict_params=commands.KNOWN, flag_commands=commands.FLAG_COMMANDS
+                    text,
+                    number,
+                    self.path,
+                    strict_params=commands.KNOWN,
+                    flag_commands=commands.FLAG_COMMANDS,
                 )
                 self._line_number(parsed, text, number)
             except GcodeError as exc:
@@ -160,12 +178,16 @@ class _BlockReader:
                 raise GcodeError(self.path, number, find_column(text, "N"), reason)
             st.next_n = parsed.n + 1
         if parsed.words and parsed.words[0].raw == "M110":
-            reset = next((w.value for w in parsed.words[1:] if w.letter == "N" and w.value is not None), None)
+            reset = next(
+                (w.value for w in parsed.words[1:] if w.letter == "N" and w.value is not None), None
+            )
             if reset is not None:
                 st.next_n = int(reset) + 1
 
     # -- in-order walk ---------------------------------------------------------
-    def _walk(self, rows: segment.Rows, events: list[tuple[int, int, object]]) -> Iterator[ProgramItem]:
+    def _walk(
+        self, rows: segment.Rows, events: list[tuple[int, int, object]]
+    ) -> Iterator[ProgramItem]:
         """Runs of rows between modal commands are resolved at once; events are cut in."""
         row_index = rows.line - self.first
         r0 = 0
@@ -180,18 +202,24 @@ class _BlockReader:
                 passive.append(ev)
         yield from self._run(rows.part(r0, len(rows)), passive)
 
-    def _run(self, rows: segment.Rows, events: list[tuple[int, int, object]]) -> Iterator[ProgramItem]:
+    def _run(
+        self, rows: segment.Rows, events: list[tuple[int, int, object]]
+    ) -> Iterator[ProgramItem]:
         st = self.st
         moves = None
         error = None
         if len(rows):
             layer_lines = np.asarray(
-                [self.first + i for i, kind, a in events if kind == 0 and a.tag in _LAYER_TAGS], dtype=np.int64
+                [self.first + i for i, kind, a in events if kind == 0 and a.tag in _LAYER_TAGS],
+                dtype=np.int64,
             )
             res = segment.compute(rows, st, self.tol, layer_lines)
             moves, error = res.moves, res.error
             if res.layer_starts:
-                events = sorted(events + [(lc.line - self.first, 0, lc) for lc in res.layer_starts], key=lambda e: e[0])
+                events = sorted(
+                    events + [(lc.line - self.first, 0, lc) for lc in res.layer_starts],
+                    key=lambda e: e[0],
+                )
         done = 0
         for index, _, payload in events:
             line = self.first + index

@@ -13,7 +13,7 @@ from cdprhost.gcode.positions import forward_fill, resolve_axis
 from cdprhost.gcode.state import ModalState
 
 # Rows of Rows.values.
-X, Y, Z, E, F, I, J, R = range(8)
+X, Y, Z, E, F, I, J, R = range(8)  # noqa: E741 - G-code's own axis letters
 COLUMNS = "XYZEFIJR"
 G92 = 92
 EPS_MM = 1e-9
@@ -58,7 +58,9 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
     off = st.off.copy()
     for a in range(4):
         absolute = st.abs_xyz if a < 3 else st.abs_e
-        track[1:, a], off[a] = resolve_axis(vals[a], set_row if any_set else None, st.pos[a], st.off[a], absolute)
+        track[1:, a], off[a] = resolve_axis(
+            vals[a], set_row if any_set else None, st.pos[a], st.off[a], absolute
+        )
     feed = forward_fill(vals[F] / 60.0, st.feed)
     st.pos = track[-1].copy()
     st.off = off
@@ -76,8 +78,12 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
             k = int(np.flatnonzero(is_arc)[0])
             error = (int(line[k]), f"unsupported plane G{st.plane} for arcs (only G17, XY)")
         else:
-            counts, before, after, error = _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance)
-            feed, line, cmd, row_layer = (np.repeat(a, counts) for a in (feed, line, cmd, row_layer))
+            counts, before, after, error = _expand_arcs(
+                before, after, vals, cmd, line, is_arc, tolerance
+            )
+            feed, line, cmd, row_layer = (
+                np.repeat(a, counts) for a in (feed, line, cmd, row_layer)
+            )
 
     kind = classify(before, after)
     keep = np.flatnonzero(kind != NO_MOTION)
@@ -158,7 +164,9 @@ def _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance):
     """Replace each arc row by its chords; (counts per row, before, after, first error)."""
     idx = np.flatnonzero(is_arc)
     start, end = before[idx], after[idx]
-    geo = arcs.geometry(start[:, :2], end[:, :2], vals[[I, J]][:, idx].T, vals[R, idx], cmd[idx] == 2)
+    geo = arcs.geometry(
+        start[:, :2], end[:, :2], vals[[I, J]][:, idx].T, vals[R, idx], cmd[idx] == 2
+    )
     error = None
     if geo.bad:
         k, reason = geo.bad[0]

@@ -27,7 +27,9 @@ class Block:
     first_line: int
 
 
-def source_name(source: str | os.PathLike[str] | Iterable[str | bytes], name: str | None = None) -> str:
+def source_name(
+    source: str | os.PathLike[str] | Iterable[str | bytes], name: str | None = None
+) -> str:
     """How errors name the source: ``name`` if given, else the path as written, else ``<lines>``."""
     if name is not None:
         return name
@@ -52,7 +54,7 @@ def iter_blocks(
 
 def _file_blocks(path: str | os.PathLike[str], name: str, block_bytes: int) -> Iterator[Block]:
     try:
-        fh = open(path, "rb")
+        fh = open(path, "rb")  # noqa: SIM115 - closed by the with below; open errors named first
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", source=name) from None
     first_line = 1
@@ -70,7 +72,12 @@ def _file_blocks(path: str | os.PathLike[str], name: str, block_bytes: int) -> I
             cut = data.rfind(b"\n") + 1
             if cut == 0:
                 if len(data) > 4 * block_bytes:
-                    raise GcodeError(name, first_line, 0, f"line longer than {4 * block_bytes} bytes (no newline)")
+                    raise GcodeError(
+                        name,
+                        first_line,
+                        0,
+                        f"line longer than {4 * block_bytes} bytes (no newline)",
+                    )
                 tail = data
                 continue
             tail = data[cut:]
@@ -102,7 +109,9 @@ def _join(batch: list[str | bytes]) -> bytes:
         if joined.count(nl) == len(batch) - 1:  # no line carries a newline
             return _encode(joined + nl)
         joined = empty.join(batch)
-        if joined.count(nl) == len(batch) and all(x.endswith(nl) for x in batch):  # every line ends with one
+        if joined.count(nl) == len(batch) and all(
+            x.endswith(nl) for x in batch
+        ):  # every line ends with one
             return _encode(joined)
     out = []
     for raw in batch:
@@ -110,7 +119,9 @@ def _join(batch: list[str | bytes]) -> bytes:
         if raw.endswith(b"\n"):
             raw = raw[:-1]
         if b"\n" in raw:
-            raise ValueError("a line passed to the G-code reader contains a newline; split the text into lines")
+            raise ValueError(
+                "a line passed to the G-code reader contains a newline; split the text into lines"
+            )
         out.append(raw)
     return b"\n".join(out) + b"\n"
 

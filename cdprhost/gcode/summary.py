@@ -71,7 +71,9 @@ class ProgramSummary:
         self.retracted_mm -= float(de[de < 0].sum())
         length = c.length
         self.extrude_path_mm += float(length[extruding].sum())
-        self.travel_mm += float(length[(c.kind == MoveKind.TRAVEL) | (c.kind == MoveKind.Z_ONLY)].sum())
+        self.travel_mm += float(
+            length[(c.kind == MoveKind.TRAVEL) | (c.kind == MoveKind.Z_ONLY)].sum()
+        )
         if extruding.any():
             pts = np.concatenate([c.start[extruding], c.end[extruding]])
             lo, hi = pts.min(axis=0), pts.max(axis=0)

@@ -74,7 +74,9 @@ def tokenize(code: bytes) -> Tokens:
     if values.size != letters.size:  # cannot happen after _anomalies; stay correct anyway
         every = np.unique(line_of[np.flatnonzero(cls == LETTER)]).astype(np.int64)
         return Tokens(_EMPTY_I, _EMPTY_U8, _EMPTY_F, n_lines, np.union1d(slow, every))
-    return Tokens(line_of[letters].astype(np.int64), arr[letters] & np.uint8(0xDF), values, n_lines, slow)
+    return Tokens(
+        line_of[letters].astype(np.int64), arr[letters] & np.uint8(0xDF), values, n_lines, slow
+    )
 
 
 _EMPTY_I = np.empty(0, dtype=np.int64)
@@ -82,7 +84,9 @@ _EMPTY_U8 = np.empty(0, dtype=np.uint8)
 _EMPTY_F = np.empty(0, dtype=np.float64)
 
 
-def _runs(numchar: np.ndarray, cls: np.ndarray, letters: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _runs(
+    numchar: np.ndarray, cls: np.ndarray, letters: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Start and end (exclusive) of every maximal run of number characters."""
     run_end = np.flatnonzero(numchar[:-1] > numchar[1:]) + 1
     lead = numchar[letters + 1]

@@ -30,12 +30,16 @@ class JobLog:
         self._fh: TextIO | None = None
         if self.path:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = open(self.path, "a", encoding="utf-8")
+            self._fh = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 - held for the job, closed by close()
 
     def write(self, kind: str, **fields: Any) -> None:
         if not self._fh:
             return
-        record = {"t": round(time.time(), 3), "event": kind, **{k: _plain(v) for k, v in fields.items()}}
+        record = {
+            "t": round(time.time(), 3),
+            "event": kind,
+            **{k: _plain(v) for k, v in fields.items()},
+        }
         self._fh.write(json.dumps(record) + "\n")
         self._fh.flush()
 

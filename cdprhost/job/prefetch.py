@@ -21,7 +21,9 @@ class Prefetch:
     def __init__(self, items: Iterable[Any], depth: int = 8):
         self._q: queue.Queue = queue.Queue(maxsize=depth)
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._produce, args=(iter(items),), name="plan-ahead", daemon=True)
+        self._thread = threading.Thread(
+            target=self._produce, args=(iter(items),), name="plan-ahead", daemon=True
+        )
         self._thread.start()
 
     def _put(self, item: Any) -> bool:
@@ -38,7 +40,7 @@ class Prefetch:
             for item in it:
                 if not self._put(item):
                     return
-        except BaseException as exc:  # handed to the consumer, raised there
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
             self._put(("__error__", exc))
             return
         self._put(_DONE)

@@ -22,17 +22,27 @@ from cdprhost.gcode import items as g
 CLEARANCE_MM = 5.0
 
 
-def _travel_chunk(points: list[np.ndarray], e: float, line: int, layer: int, feedrate: float) -> g.MoveChunk:
+def _travel_chunk(
+    points: list[np.ndarray], e: float, line: int, layer: int, feedrate: float
+) -> g.MoveChunk:
     pts = np.asarray(points, dtype=float)
     n = len(pts) - 1
     return g.MoveChunk(
-        start=pts[:-1].copy(), end=pts[1:].copy(), e_start=np.full(n, e), e_end=np.full(n, e),
-        feedrate=np.full(n, feedrate), line=np.full(n, line, dtype=np.int64), layer=np.full(n, layer, dtype=np.int32),
-        kind=np.full(n, int(g.MoveKind.TRAVEL), dtype=np.uint8), rapid=np.ones(n, dtype=bool),
+        start=pts[:-1].copy(),
+        end=pts[1:].copy(),
+        e_start=np.full(n, e),
+        e_end=np.full(n, e),
+        feedrate=np.full(n, feedrate),
+        line=np.full(n, line, dtype=np.int64),
+        layer=np.full(n, layer, dtype=np.int32),
+        kind=np.full(n, int(g.MoveKind.TRAVEL), dtype=np.uint8),
+        rapid=np.ones(n, dtype=bool),
     )
 
 
-def from_layer(items: Iterable[Any], layer: int, *, z_max: float = float("inf"), travel_feedrate: float = 50.0) -> Iterator[Any]:
+def from_layer(
+    items: Iterable[Any], layer: int, *, z_max: float = float("inf"), travel_feedrate: float = 50.0
+) -> Iterator[Any]:
     """Items of ``items`` that restart the program at 0-based ``layer``; ``z_max`` caps the
     clearance lift (G-code frame)."""
     skipped_top = -np.inf
@@ -61,13 +71,25 @@ def from_layer(items: Iterable[Any], layer: int, *, z_max: float = float("inf"),
             if last_point is not None:  # something was printed: go over it, not through it
                 here = last_point
                 safe_z = min(max(skipped_top, float(first[2])) + CLEARANCE_MM, z_max)
-                route = [here, np.array([here[0], here[1], safe_z]), np.array([first[0], first[1], safe_z]), first]
+                route = [
+                    here,
+                    np.array([here[0], here[1], safe_z]),
+                    np.array([first[0], first[1], safe_z]),
+                    first,
+                ]
                 yield _travel_chunk(route, 0.0, int(item.line[i]), layer, travel_feedrate)
             rest = np.arange(i, len(item.line))
             yield replace(
-                item, start=item.start[rest], end=item.end[rest], e_start=item.e_start[rest] - e_offset,
-                e_end=item.e_end[rest] - e_offset, feedrate=item.feedrate[rest], line=item.line[rest],
-                layer=item.layer[rest], kind=item.kind[rest], rapid=item.rapid[rest],
+                item,
+                start=item.start[rest],
+                end=item.end[rest],
+                e_start=item.e_start[rest] - e_offset,
+                e_end=item.e_end[rest] - e_offset,
+                feedrate=item.feedrate[rest],
+                line=item.line[rest],
+                layer=item.layer[rest],
+                kind=item.kind[rest],
+                rapid=item.rapid[rest],
             )
             started = True
         elif isinstance(item, (g.SetTemperature, g.Fan, g.ToolSelect)):
@@ -76,4 +98,6 @@ def from_layer(items: Iterable[Any], layer: int, *, z_max: float = float("inf"),
             homed = True
             yield item
     if not started:
-        raise InputError(f"--resume-from-layer {layer}: the program has no moves in layer {layer} or later")
+        raise InputError(
+            f"--resume-from-layer {layer}: the program has no moves in layer {layer} or later"
+        )

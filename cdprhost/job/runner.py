@@ -27,7 +27,15 @@ from cdprhost.job.resume import ResumePoint, resume_path_for
 from cdprhost.job.resume_items import from_layer
 from cdprhost.job.segment_map import SegmentMap, first_rest_index
 from cdprhost.job.state import (
-    Event, Failure, JobState, LinkHealth, Notice, Planned, Progress, StateChanged, Temperatures,
+    Event,
+    Failure,
+    JobState,
+    LinkHealth,
+    Notice,
+    Planned,
+    Progress,
+    StateChanged,
+    Temperatures,
 )
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tensions
@@ -50,7 +58,9 @@ class PrintOptions:
     log_path: str | Path | None = None
     resume_dir: str | Path | None = None
     idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
-    batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed from the start
+    batch_moves: int = (
+        1024  # planner chunk: small enough to keep the device queue fed from the start
+    )
 
 
 @dataclass
@@ -80,8 +90,14 @@ class _Stop(Exception):
 
 
 class PrintJob:
-    def __init__(self, gcode: str | Path, profile: MachineProfile, link_factory: Callable[[], HostLink],
-                 options: PrintOptions | None = None, on_event: Callable[[Event], None] | None = None):
+    def __init__(
+        self,
+        gcode: str | Path,
+        profile: MachineProfile,
+        link_factory: Callable[[], HostLink],
+        options: PrintOptions | None = None,
+        on_event: Callable[[Event], None] | None = None,
+    ):
         self.gcode = Path(gcode)
         self.profile = profile
         self.model = MachineModel.from_profile(profile)
@@ -158,17 +174,33 @@ class PrintJob:
             if self.options.resume_from_layer is None:
                 report = preflight(self.gcode, self.profile, self.model)
             else:
-                report = preflight_items(self._items(), self.profile, self.model, source=str(self.gcode))
+                report = preflight_items(
+                    self._items(), self.profile, self.model, source=str(self.gcode)
+                )
         except GcodeError as exc:
             self._set(JobState.REFUSED, str(exc))
-            return PrintResult("refused", reason=str(exc), last_line=exc.line,
-                               violations=[{"line": exc.line, "rule": "syntax", "point": None, "detail": exc.reason}])
-        self._emit(Planned(report.layers, report.moves, report.estimated_time_s, report.filament_mm))
+            return PrintResult(
+                "refused",
+                reason=str(exc),
+                last_line=exc.line,
+                violations=[
+                    {"line": exc.line, "rule": "syntax", "point": None, "detail": exc.reason}
+                ],
+            )
+        self._emit(
+            Planned(report.layers, report.moves, report.estimated_time_s, report.filament_mm)
+        )
         if not report.ok:
             first = report.violations[0]
-            self._set(JobState.REFUSED, f"preflight: line {first.line}: {first.rule}: {first.detail}")
-            return PrintResult("refused", violations=[v.model_dump() for v in report.violations],
-                               estimated_time_s=report.estimated_time_s, reason=self._state_reason(report))
+            self._set(
+                JobState.REFUSED, f"preflight: line {first.line}: {first.rule}: {first.detail}"
+            )
+            return PrintResult(
+                "refused",
+                violations=[v.model_dump() for v in report.violations],
+                estimated_time_s=report.estimated_time_s,
+                reason=self._state_reason(report),
+            )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
         try:
             self.link = self.link_factory()
@@ -186,7 +218,9 @@ class PrintJob:
     @staticmethod
     def _state_reason(report) -> str:
         v = report.violations[0]
-        return f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}"
+        return (
+            f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}"
+        )
 
     # ---------------------------------------------------------- streaming
     def _stream(self, result: PrintResult) -> None:
@@ -194,8 +228,13 @@ class PrintJob:
         assert link is not None
         clock = link.identity.clock_hz
         self._set(JobState.PRINTING)
-        planned = segment_program(self._items(), self.profile, self.model, clock_hz=clock,
-                                  batch_moves=self.options.batch_moves)
+        planned = segment_program(
+            self._items(),
+            self.profile,
+            self.model,
+            clock_hz=clock,
+            batch_moves=self.options.batch_moves,
+        )
         ahead = Prefetch(planned)
         ahead.wait_filled(4)
         for out in ahead:
@@ -229,7 +268,12 @@ class PrintJob:
                 self._hold_at_rest()
 
     def _send_command(self, item: Any) -> None:
-        msgs = device_messages(item, model=self.model, home_mm=self.profile.drive.home_mm, clock_hz=self.link.identity.clock_hz)
+        msgs = device_messages(
+            item,
+            model=self.model,
+            home_mm=self.profile.drive.home_mm,
+            clock_hz=self.link.identity.clock_hz,
+        )
         if isinstance(item, g.Message):
             self._emit(Notice(f"line {item.line}: {item.text}"))
         if not msgs:
@@ -237,8 +281,12 @@ class PrintJob:
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self._waiting_heat_item = max(numbers)
-            self._set(JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C")
-        if self._stop_wanted() and self._at_rest:  # mid-motion commands wait for the next rest point
+            self._set(
+                JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
+            )
+        if (
+            self._stop_wanted() and self._at_rest
+        ):  # mid-motion commands wait for the next rest point
             self._hold_at_rest()
 
     # ------------------------------------------------------- pause/cancel
@@ -275,8 +323,13 @@ class PrintJob:
             done = link.progress.items_done
             if done != last:
                 last, since = done, time.monotonic()
-            elif time.monotonic() - since > self.options.idle_timeout_s and self._state is not JobState.HEATING:
-                raise LinkError(f"the device made no progress for {self.options.idle_timeout_s:g} s")
+            elif (
+                time.monotonic() - since > self.options.idle_timeout_s
+                and self._state is not JobState.HEATING
+            ):
+                raise LinkError(
+                    f"the device made no progress for {self.options.idle_timeout_s:g} s"
+                )
         self._service(force_status=True)
 
     # -------------------------------------------------------- observation
@@ -314,8 +367,18 @@ class PrintJob:
         p = np.asarray(info.point)[None, :]
         t = tensions(p, self.model.geometry.outlets, self.model.statics)[0]
         sliders = self.model.sliders_from_steps(np.asarray(info.steps[:3]))
-        self._emit(Progress(self.link.progress.segments_done, info.line, info.layer, info.t_end_s,
-                            info.point, tuple(float(v) for v in sliders), tuple(float(v) for v in t), info.steps))
+        self._emit(
+            Progress(
+                self.link.progress.segments_done,
+                info.line,
+                info.layer,
+                info.t_end_s,
+                info.point,
+                tuple(float(v) for v in sliders),
+                tuple(float(v) for v in t),
+                info.steps,
+            )
+        )
 
     # ------------------------------------------------------------- endings
     def _finish(self, state: JobState, status: str, result: PrintResult) -> None:
@@ -356,17 +419,32 @@ class PrintJob:
                 pass  # link lost: the firmware's own watchdog must turn heaters off
         st = self._status
         point = ResumePoint(
-            str(self.gcode), reason, result.last_line, result.last_layer, info.point if info else None,
-            info.steps if info else None, st.hotend_target_c if st else 0.0, st.bed_target_c if st else 0.0,
+            str(self.gcode),
+            reason,
+            result.last_line,
+            result.last_layer,
+            info.point if info else None,
+            info.steps if info else None,
+            st.hotend_target_c if st else 0.0,
+            st.bed_target_c if st else 0.0,
             max(result.last_layer or 1, 1),
         )
         try:
-            result.resume_file = str(point.save(resume_path_for(self.gcode, self.options.resume_dir)))
+            result.resume_file = str(
+                point.save(resume_path_for(self.gcode, self.options.resume_dir))
+            )
         except OSError:
             result.resume_file = None
         # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
-        self._emit(Failure(reason, result.last_line, info.layer if info else None, info.point if info else None,
-                           result.resume_file))
+        self._emit(
+            Failure(
+                reason,
+                result.last_line,
+                info.layer if info else None,
+                info.point if info else None,
+                result.resume_file,
+            )
+        )
         self._set(JobState.FAILED, reason)
 
 

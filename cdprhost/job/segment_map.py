@@ -49,8 +49,12 @@ class SegmentMap:
     @staticmethod
     def _info(first: int, batch: SegmentBatch, i: int) -> SegmentInfo:
         return SegmentInfo(
-            first + i, int(batch.line[i]), int(batch.layer[i]), tuple(float(v) for v in batch.point[i]),
-            tuple(int(v) for v in batch.steps_abs[i]), float(batch.t_end[i]),
+            first + i,
+            int(batch.line[i]),
+            int(batch.layer[i]),
+            tuple(float(v) for v in batch.point[i]),
+            tuple(int(v) for v in batch.steps_abs[i]),
+            float(batch.t_end[i]),
         )
 
 

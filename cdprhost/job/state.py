@@ -9,10 +9,10 @@ worker threads and the screen (the shells apply events in their own thread).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from enum import Enum
+from enum import StrEnum
 
 
-class JobState(str, Enum):
+class JobState(StrEnum):
     IDLE = "idle"
     PREFLIGHT = "preflight"
     REFUSED = "refused"
@@ -31,7 +31,13 @@ class JobState(str, Enum):
 
     @property
     def active(self) -> bool:
-        return self in (JobState.HEATING, JobState.PRINTING, JobState.PAUSING, JobState.PAUSED, JobState.CANCELLING)
+        return self in (
+            JobState.HEATING,
+            JobState.PRINTING,
+            JobState.PAUSING,
+            JobState.PAUSED,
+            JobState.CANCELLING,
+        )
 
 
 _S = JobState
@@ -43,7 +49,10 @@ ALLOWED: dict[JobState, frozenset[JobState]] = {
     _S.PAUSING: frozenset({_S.PAUSED, _S.CANCELLING, _S.FAILED}),
     _S.PAUSED: frozenset({_S.PRINTING, _S.HEATING, _S.CANCELLING, _S.FAILED}),
     _S.CANCELLING: frozenset({_S.CANCELLED, _S.FAILED}),
-    _S.REFUSED: frozenset(), _S.CANCELLED: frozenset(), _S.FAILED: frozenset(), _S.DONE: frozenset(),
+    _S.REFUSED: frozenset(),
+    _S.CANCELLED: frozenset(),
+    _S.FAILED: frozenset(),
+    _S.DONE: frozenset(),
 }
 
 # ------------------------------------------------------------------ events
@@ -172,16 +181,31 @@ def reduce(snap: JobSnapshot, event: Event) -> JobSnapshot:
             raise IllegalTransition(f"{snap.state.value} -> {event.state.value} is not allowed")
         return replace(snap, state=event.state, reason=event.reason)
     if isinstance(event, Planned):
-        return replace(snap, layers=event.layers, moves=event.moves, estimated_time_s=event.estimated_time_s,
-                       filament_mm=event.filament_mm, segments_total=event.segments)
+        return replace(
+            snap,
+            layers=event.layers,
+            moves=event.moves,
+            estimated_time_s=event.estimated_time_s,
+            filament_mm=event.filament_mm,
+            segments_total=event.segments,
+        )
     if isinstance(event, Progress):
         return replace(
-            snap, segments_done=event.segments_done, line=event.line, layer=event.layer,
-            device_time_s=event.device_time_s, position=event.position or snap.position,
-            sliders=event.sliders or snap.sliders, tensions=event.tensions or snap.tensions, steps=event.steps or snap.steps,
+            snap,
+            segments_done=event.segments_done,
+            line=event.line,
+            layer=event.layer,
+            device_time_s=event.device_time_s,
+            position=event.position or snap.position,
+            sliders=event.sliders or snap.sliders,
+            tensions=event.tensions or snap.tensions,
+            steps=event.steps or snap.steps,
         )
     if isinstance(event, Temperatures):
-        hist = (*snap.temperature_history[-(HISTORY - 1):], (snap.device_time_s, event.hotend, event.bed))
+        hist = (
+            *snap.temperature_history[-(HISTORY - 1) :],
+            (snap.device_time_s, event.hotend, event.bed),
+        )
         return replace(snap, temperatures=event, temperature_history=hist)
     if isinstance(event, LinkHealth):
         return replace(snap, link=event)

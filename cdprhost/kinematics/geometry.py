@@ -93,4 +93,6 @@ def fk_from_lengths(lengths: np.ndarray, outlets: np.ndarray) -> np.ndarray:
 
 def fk_points(sliders: np.ndarray, geometry: CableGeometry) -> np.ndarray:
     """Ideal FK: slider displacements (N, 3) -> effector points (N, 3)."""
-    return fk_from_lengths(np.asarray(sliders, dtype=float) + geometry.initial_lengths, geometry.outlets)
+    return fk_from_lengths(
+        np.asarray(sliders, dtype=float) + geometry.initial_lengths, geometry.outlets
+    )

@@ -32,29 +32,55 @@ class MachineModel:
     limits: WorkspaceLimits
 
     @classmethod
-    def from_profile(cls, profile: MachineProfile, *, effects: EffectChain | None = None) -> MachineModel:
+    def from_profile(
+        cls, profile: MachineProfile, *, effects: EffectChain | None = None
+    ) -> MachineModel:
         geometry = CableGeometry(
-            np.asarray(profile.geometry.outlets, dtype=float), np.asarray(profile.geometry.initial_lengths, dtype=float)
+            np.asarray(profile.geometry.outlets, dtype=float),
+            np.asarray(profile.geometry.initial_lengths, dtype=float),
         )
         statics = StaticsParams.from_profile(profile.statics)
         bv = profile.build_volume
         limits = WorkspaceLimits(
-            geometry.outlets, statics, np.asarray(profile.drive.travel_mm, dtype=float), bv.side_mm, bv.z_min_mm, bv.z_max_mm
+            geometry.outlets,
+            statics,
+            np.asarray(profile.drive.travel_mm, dtype=float),
+            bv.side_mm,
+            bv.z_min_mm,
+            bv.z_max_mm,
         )
         chain = EffectChain.from_tables(profile.effects) if effects is None else effects
-        return cls(geometry, statics, chain, np.asarray(profile.drive.steps_per_mm, dtype=float), limits)
+        return cls(
+            geometry, statics, chain, np.asarray(profile.drive.steps_per_mm, dtype=float), limits
+        )
 
-    def with_geometry(self, geometry: CableGeometry, effects: EffectChain | None = None) -> MachineModel:
-        limits = WorkspaceLimits(geometry.outlets, self.statics, self.limits.travel, self.limits.build_side,
-                                 self.limits.z_min, self.limits.z_max)
-        return MachineModel(geometry, self.statics, self.effects if effects is None else effects, self.steps_per_mm, limits)
+    def with_geometry(
+        self, geometry: CableGeometry, effects: EffectChain | None = None
+    ) -> MachineModel:
+        limits = WorkspaceLimits(
+            geometry.outlets,
+            self.statics,
+            self.limits.travel,
+            self.limits.build_side,
+            self.limits.z_min,
+            self.limits.z_max,
+        )
+        return MachineModel(
+            geometry,
+            self.statics,
+            self.effects if effects is None else effects,
+            self.steps_per_mm,
+            limits,
+        )
 
     @property
     def ideal(self) -> bool:
         return not self.effects.effects
 
     # ---------------------------------------------------------------- inverse
-    def ik(self, points: np.ndarray, ctx: MotionContext | None = None, *, path: bool = False) -> np.ndarray:
+    def ik(
+        self, points: np.ndarray, ctx: MotionContext | None = None, *, path: bool = False
+    ) -> np.ndarray:
         """Commanded slider displacements (N, 3) that put the effector at ``points``.
 
         ``path=True`` treats the points as a path in order: backlash compensation
@@ -66,7 +92,9 @@ class MachineModel:
         if self.ideal:
             return lengths - self.geometry.initial_lengths
         if self.effects.has_cable_stage:
-            lengths = self.effects.unstretch(lengths, tensions(p, self.geometry.outlets, self.statics))
+            lengths = self.effects.unstretch(
+                lengths, tensions(p, self.geometry.outlets, self.statics)
+            )
         s_act = lengths - self.geometry.initial_lengths
         ctx = ctx or _NO_CONTEXT
         if path and ctx.directions is None and "backlash" in self.effects.names:
@@ -81,7 +109,14 @@ class MachineModel:
         return np.asarray(steps, dtype=float) / self.steps_per_mm
 
     # ---------------------------------------------------------------- forward
-    def fk(self, sliders: np.ndarray, ctx: MotionContext | None = None, *, tol: float = 1e-11, max_iter: int = 30) -> np.ndarray:
+    def fk(
+        self,
+        sliders: np.ndarray,
+        ctx: MotionContext | None = None,
+        *,
+        tol: float = 1e-11,
+        max_iter: int = 30,
+    ) -> np.ndarray:
         """Where the effector goes for commanded displacements (N, 3), effects predicted.
 
         Ideal/slider-only models are closed form; cable stretch depends on the
@@ -99,7 +134,9 @@ class MachineModel:
             # Unstretched cables can be too short to meet near the outlets' plane:
             # start those rows from cables stretched at the highest allowed tension.
             t_hi = np.full((int(lost.sum()), 3), self.statics.t_max)
-            points[lost] = fk_from_lengths(self.effects.stretch(unstretched[lost], t_hi), self.geometry.outlets)
+            points[lost] = fk_from_lengths(
+                self.effects.stretch(unstretched[lost], t_hi), self.geometry.outlets
+            )
         for _ in range(max_iter):
             step = self._stretch_newton_step(points, unstretched)
             points = points - step
@@ -111,23 +148,32 @@ class MachineModel:
         t = tensions(points, self.geometry.outlets, self.statics)
         return cable_lengths(points, self.geometry.outlets) - self.effects.stretch(unstretched, t)
 
-    def _stretch_newton_step(self, points: np.ndarray, unstretched: np.ndarray, h: float = 1e-4) -> np.ndarray:
+    def _stretch_newton_step(
+        self, points: np.ndarray, unstretched: np.ndarray, h: float = 1e-4
+    ) -> np.ndarray:
         """One Newton step on |B - A_k| = stretch(u_k, T_k(B)), Jacobian by central differences."""
         r = self._stretch_residual(points, unstretched)
         jac = np.empty(points.shape + (3,))
         for j in range(3):  # three columns, each vectorised over all points
             e = np.zeros(3)
             e[j] = h
-            jac[:, :, j] = (self._stretch_residual(points + e, unstretched) - self._stretch_residual(points - e, unstretched)) / (2 * h)
+            jac[:, :, j] = (
+                self._stretch_residual(points + e, unstretched)
+                - self._stretch_residual(points - e, unstretched)
+            ) / (2 * h)
         return np.linalg.solve(jac, r[..., None])[..., 0]
 
-    def length_residuals(self, points: np.ndarray, sliders: np.ndarray, ctx: MotionContext | None = None) -> np.ndarray:
+    def length_residuals(
+        self, points: np.ndarray, sliders: np.ndarray, ctx: MotionContext | None = None
+    ) -> np.ndarray:
         """|B - A_k| minus the length the model predicts for commanded ``sliders`` (N, 3)."""
         p = np.asarray(points, dtype=float)
         s_act = self.effects.slider_forward(np.asarray(sliders, dtype=float), ctx or _NO_CONTEXT)
         predicted = s_act + self.geometry.initial_lengths
         if self.effects.has_cable_stage:
-            predicted = self.effects.stretch(predicted, tensions(p, self.geometry.outlets, self.statics))
+            predicted = self.effects.stretch(
+                predicted, tensions(p, self.geometry.outlets, self.statics)
+            )
         return cable_lengths(p, self.geometry.outlets) - predicted
 
     # -------------------------------------------------------------- workspace

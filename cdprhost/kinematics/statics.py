@@ -30,8 +30,15 @@ class StaticsParams:
     @classmethod
     def from_profile(cls, s: Statics) -> StaticsParams:
         return cls(
-            s.spring_rate_n_per_mm, s.spring_preload_n, s.spring_ref_z_mm, s.effector_mass_kg,
-            s.gravity_m_s2, np.asarray(s.external_force_n, float), s.tension_min_n, s.tension_max_n, s.a_max_mm_s2,
+            s.spring_rate_n_per_mm,
+            s.spring_preload_n,
+            s.spring_ref_z_mm,
+            s.effector_mass_kg,
+            s.gravity_m_s2,
+            np.asarray(s.external_force_n, float),
+            s.tension_min_n,
+            s.tension_max_n,
+            s.a_max_mm_s2,
         )
 
 
@@ -58,7 +65,9 @@ def static_load(points: np.ndarray, sp: StaticsParams) -> np.ndarray:
     return load - sp.external
 
 
-def tensions(points: np.ndarray, outlets: np.ndarray, sp: StaticsParams, accel: np.ndarray | None = None) -> np.ndarray:
+def tensions(
+    points: np.ndarray, outlets: np.ndarray, sp: StaticsParams, accel: np.ndarray | None = None
+) -> np.ndarray:
     """Cable tensions T (N, 3) in N; ``accel`` (N, 3) in mm/s^2, default at rest."""
     rows = _inverse_rows(cable_units(points, outlets))
     rhs = static_load(points, sp)
@@ -67,7 +76,9 @@ def tensions(points: np.ndarray, outlets: np.ndarray, sp: StaticsParams, accel: 
     return np.einsum("nkj,nj->nk", rows, rhs)
 
 
-def tension_bounds(points: np.ndarray, outlets: np.ndarray, sp: StaticsParams) -> tuple[np.ndarray, np.ndarray]:
+def tension_bounds(
+    points: np.ndarray, outlets: np.ndarray, sp: StaticsParams
+) -> tuple[np.ndarray, np.ndarray]:
     """Worst-case (lowest, highest) tension per cable over all |a| <= a_max: two (N, 3)."""
     rows = _inverse_rows(cable_units(points, outlets))
     t0 = np.einsum("nkj,nj->nk", rows, static_load(points, sp))

@@ -71,7 +71,9 @@ def build_volume_excess(points: np.ndarray, side: float, z_min: float, z_max: fl
     return np.maximum(triangle_excess(p[:, :2], side), z_ex)
 
 
-def check_workspace(points: np.ndarray, sliders: np.ndarray, limits: WorkspaceLimits) -> WorkspaceReport:
+def check_workspace(
+    points: np.ndarray, sliders: np.ndarray, limits: WorkspaceLimits
+) -> WorkspaceReport:
     """Vectorised membership test; ``sliders`` are the commanded displacements at ``points``."""
     p = np.asarray(points, dtype=float)
     n = p.shape[0]

@@ -60,11 +60,33 @@ from cdprhost.link.errors import (
     PortVanished,
     ProtocolMismatch,
 )
-from cdprhost.link.events import DeviceErrorEvent, DeviceEvent, DeviceStatus, Identity, LinkCounters, Progress
+from cdprhost.link.events import (
+    DeviceErrorEvent,
+    DeviceEvent,
+    DeviceStatus,
+    Identity,
+    LinkCounters,
+    Progress,
+)
 from cdprhost.link.host_link import HostLink
 
 __all__ = [
-    "open_link", "open_embedded", "HostLink", "Identity", "Progress", "DeviceStatus", "DeviceEvent",
-    "DeviceErrorEvent", "LinkCounters", "LinkError", "PortNotFound", "PortBusy", "PortVanished", "DeviceSilent",
-    "ProtocolMismatch", "DeviceReset", "DeviceFault", "LinkTimeout",
+    "DeviceErrorEvent",
+    "DeviceEvent",
+    "DeviceFault",
+    "DeviceReset",
+    "DeviceSilent",
+    "DeviceStatus",
+    "HostLink",
+    "Identity",
+    "LinkCounters",
+    "LinkError",
+    "LinkTimeout",
+    "PortBusy",
+    "PortNotFound",
+    "PortVanished",
+    "Progress",
+    "ProtocolMismatch",
+    "open_embedded",
+    "open_link",
 ]

@@ -22,9 +22,16 @@ def open_link(port: str, baud: int = 250_000, timeout_s: float = 2.0, **kwargs) 
     return link
 
 
-def open_embedded(*, config: SimConfig | None = None, faults: FaultSpec | str | None = None,
-                  speedup: float | None = None, observer=None, baud: int | None = DEFAULT_BAUD,
-                  timeout_s: float = 2.0, **kwargs) -> HostLink:
+def open_embedded(
+    *,
+    config: SimConfig | None = None,
+    faults: FaultSpec | str | None = None,
+    speedup: float | None = None,
+    observer=None,
+    baud: int | None = DEFAULT_BAUD,
+    timeout_s: float = 2.0,
+    **kwargs,
+) -> HostLink:
     """A HostLink to a simulated device in this process (no pty, no threads).
 
     Time is virtual and runs as fast as the CPU allows; with ``speedup`` X it is

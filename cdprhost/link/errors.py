@@ -35,7 +35,9 @@ class DeviceSilent(LinkError):
 class ProtocolMismatch(LinkError):
     """The device speaks another protocol major version."""
 
-    def __init__(self, message: str, *, device_version: tuple[int, int], host_version: tuple[int, int]):
+    def __init__(
+        self, message: str, *, device_version: tuple[int, int], host_version: tuple[int, int]
+    ):
         super().__init__(message)
         self.device_version = device_version
         self.host_version = host_version

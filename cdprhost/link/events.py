@@ -23,9 +23,20 @@ class Identity:
     fans: int
 
     @classmethod
-    def from_message(cls, m: Ident) -> "Identity":
-        return cls((m.major, m.minor), m.firmware_name, m.firmware_version, m.axes, m.queue_capacity, m.clock_hz,
-                   m.max_step_rate, m.max_payload, m.boot_id, m.heaters, m.fans)
+    def from_message(cls, m: Ident) -> Identity:
+        return cls(
+            (m.major, m.minor),
+            m.firmware_name,
+            m.firmware_version,
+            m.axes,
+            m.queue_capacity,
+            m.clock_hz,
+            m.max_step_rate,
+            m.max_payload,
+            m.boot_id,
+            m.heaters,
+            m.fans,
+        )
 
 
 @dataclass(frozen=True)
@@ -69,12 +80,29 @@ class DeviceStatus:
     received_at: float  # host link time
 
     @classmethod
-    def from_message(cls, m: Status, identity: Identity | None, now: float) -> "DeviceStatus":
+    def from_message(cls, m: Status, identity: Identity | None, now: float) -> DeviceStatus:
         clock = identity.clock_hz if identity else 100_000
-        return cls(m.flags, m.queue_free, m.items_done, m.segments_done, m.motion_ticks / clock, m.steps,
-                   m.hotend_dc / 10, m.hotend_target_dc / 10, m.bed_dc / 10, m.bed_target_dc / 10, m.fan,
-                   m.enabled_mask, m.homed_mask, m.last_error, m.bad_frames, m.retransmits, m.naks_sent,
-                   m.duplicates, now)
+        return cls(
+            m.flags,
+            m.queue_free,
+            m.items_done,
+            m.segments_done,
+            m.motion_ticks / clock,
+            m.steps,
+            m.hotend_dc / 10,
+            m.hotend_target_dc / 10,
+            m.bed_dc / 10,
+            m.bed_target_dc / 10,
+            m.fan,
+            m.enabled_mask,
+            m.homed_mask,
+            m.last_error,
+            m.bad_frames,
+            m.retransmits,
+            m.naks_sent,
+            m.duplicates,
+            now,
+        )
 
 
 @dataclass(frozen=True)
@@ -111,7 +139,7 @@ class LinkCounters:
     duplicates: int
 
 
-LinkEvent = Union[Progress, DeviceEvent, DeviceErrorEvent]
+LinkEvent = Union[Progress, DeviceEvent, DeviceErrorEvent]  # noqa: UP007
 
 
 def _name(enum, code: int) -> str:
@@ -138,5 +166,7 @@ def error_text(m: Error) -> str:
 
 def device_event(m: Error | Event) -> DeviceEvent | DeviceErrorEvent:
     if isinstance(m, Error):
-        return DeviceErrorEvent(_name(ErrorCode, m.code), m.code, m.item, m.segment, m.axis, m.value, error_text(m))
+        return DeviceErrorEvent(
+            _name(ErrorCode, m.code), m.code, m.item, m.segment, m.axis, m.value, error_text(m)
+        )
     return DeviceEvent(_name(EventCode, m.code), m.item, m.values)

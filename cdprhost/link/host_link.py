@@ -20,7 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdprhost.link.errors import DeviceFault, DeviceReset, DeviceSilent, LinkError, LinkTimeout, ProtocolMismatch
+from cdprhost.link.errors import (
+    DeviceFault,
+    DeviceReset,
+    DeviceSilent,
+    LinkError,
+    LinkTimeout,
+    ProtocolMismatch,
+)
 from cdprhost.link.events import DeviceStatus, Identity, LinkCounters, LinkEvent, Progress
 from cdprhost.link.tracker import DeviceTracker, decode_one
 from firmware_protocol.endpoint import Endpoint
@@ -41,7 +48,12 @@ from firmware_protocol.messages import (
     encode_message,
     encode_messages,
 )
-from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_segments, peak_step_rates
+from firmware_protocol.segments import (
+    SegmentBatch,
+    SegmentContext,
+    encode_segments,
+    peak_step_rates,
+)
 
 SLICE_S = 0.02
 MIN_PAYLOAD = 48
@@ -55,15 +67,28 @@ class _Waiting:
 class HostLink:
     """See the package docstring (:mod:`cdprhost.link`) for the API summary."""
 
-    def __init__(self, transport, *, timeout_s: float = 2.0, window: int = 8, max_payload: int = MAX_PAYLOAD,
-                 baud: int | None = 250_000, device=None):
+    def __init__(
+        self,
+        transport,
+        *,
+        timeout_s: float = 2.0,
+        window: int = 8,
+        max_payload: int = MAX_PAYLOAD,
+        baud: int | None = 250_000,
+        device=None,
+    ):
         self._t = transport
         self.timeout_s = float(timeout_s)
         self.device = device  # the SimDevice when embedded, else None
         self._lock = threading.RLock()
         self._waiters = 0
-        self._ep = Endpoint(window=window, rto_initial=min(0.25, self.timeout_s / 4), rto_floor=0.01,
-                            rto_ceiling=min(1.0, self.timeout_s / 2), byte_time=10.0 / baud if baud else 0.0)
+        self._ep = Endpoint(
+            window=window,
+            rto_initial=min(0.25, self.timeout_s / 4),
+            rto_floor=0.01,
+            rto_ceiling=min(1.0, self.timeout_s / 2),
+            byte_time=10.0 / baud if baud else 0.0,
+        )
         self._ctx = SegmentContext()
         self._max_payload = max_payload
         self._payload_limit = max_payload
@@ -119,8 +144,18 @@ class HostLink:
     def counters(self) -> LinkCounters:
         ep = self._ep
         c = ep.counters
-        return LinkCounters(ep.retransmits, ep.sender.timeouts, c.naks_received, c.naks_sent, ep.bad_frames,
-                            c.frames_sent, c.frames_received, c.bytes_sent, c.bytes_received, c.duplicates)
+        return LinkCounters(
+            ep.retransmits,
+            ep.sender.timeouts,
+            c.naks_received,
+            c.naks_sent,
+            ep.bad_frames,
+            c.frames_sent,
+            c.frames_received,
+            c.bytes_sent,
+            c.bytes_received,
+            c.duplicates,
+        )
 
     def now(self) -> float:
         return self._t.now()
@@ -153,7 +188,7 @@ class HostLink:
                     if isinstance(msg, Ident) and msg.nonce == nonce:
                         self._accept_ident(msg)
                         now = self._t.now()
-                        for inc in self._ep.process(frames[k + 1:], now):
+                        for inc in self._ep.process(frames[k + 1 :], now):
                             self._dev.handle(inc, now)
                         return self.identity  # type: ignore[return-value]
                     if isinstance(msg, Boot) and msg.major != PROTOCOL_MAJOR:
@@ -163,7 +198,9 @@ class HostLink:
         raise ProtocolMismatch(
             f"{self._t.name}: device speaks protocol {major}.{minor}, host speaks {PROTOCOL_MAJOR}.{PROTOCOL_MINOR}; "
             "update the firmware or the host so the major versions match",
-            device_version=(major, minor), host_version=(PROTOCOL_MAJOR, PROTOCOL_MINOR))
+            device_version=(major, minor),
+            host_version=(PROTOCOL_MAJOR, PROTOCOL_MINOR),
+        )
 
     def _accept_ident(self, msg: Ident) -> None:
         if msg.major != PROTOCOL_MAJOR:
@@ -179,11 +216,15 @@ class HostLink:
         p = self._dev.progress
         when = f" {when}" if when else ""
         if rx_bytes and self._ep.deframer.frames == 0:
-            text = (f"{name}: {rx_bytes} bytes but no valid frame{when} within {self.timeout_s:g} s; "
-                    "wrong baud rate, or not a cdpr device?")
+            text = (
+                f"{name}: {rx_bytes} bytes but no valid frame{when} within {self.timeout_s:g} s; "
+                "wrong baud rate, or not a cdpr device?"
+            )
         else:
-            text = (f"{name}: no answer from the device{when} within {self.timeout_s:g} s "
-                    f"(last reported executed segment {p.segments_done}); is it powered and connected?")
+            text = (
+                f"{name}: no answer from the device{when} within {self.timeout_s:g} s "
+                f"(last reported executed segment {p.segments_done}); is it powered and connected?"
+            )
         return DeviceSilent(text, last_segment=p.segments_done, last_item=p.items_done)
 
     # ------------------------------------------------------------------ pumping
@@ -231,7 +272,11 @@ class HostLink:
             ep.send(encode_message(GetStatus()))
             if self._waiting.since is None:
                 self._waiting.since = now
-        if self._waiting.since is not None and now - self._waiting.since > self.timeout_s and quiet > self.timeout_s:
+        if (
+            self._waiting.since is not None
+            and now - self._waiting.since > self.timeout_s
+            and quiet > self.timeout_s
+        ):
             self._dev.failure = self._silent_error(self._garbage_since_valid, "")
             raise self._dev.failure
 
@@ -251,8 +296,10 @@ class HostLink:
                 if done():
                     return
                 if timeout is not None and self._t.now() - start > timeout:
-                    raise LinkTimeout(f"{self._t.name}: {what} did not happen within {timeout:g} s "
-                                      f"(executed {self.progress.items_done} of {self._items_sent} items)")
+                    raise LinkTimeout(
+                        f"{self._t.name}: {what} did not happen within {timeout:g} s "
+                        f"(executed {self.progress.items_done} of {self._items_sent} items)"
+                    )
                 self._pump()
 
     # ------------------------------------------------------------------ sending
@@ -275,8 +322,10 @@ class HostLink:
         over = np.flatnonzero((rates > self.identity.max_step_rate).any(axis=1))
         if over.size:
             i = int(over[0])
-            raise ValueError(f"segment {i} of the batch: peak step rate {rates[i].max():.0f}/s exceeds the device "
-                             f"limit {self.identity.max_step_rate}/s")
+            raise ValueError(
+                f"segment {i} of the batch: peak step rate {rates[i].max():.0f}/s exceeds the device "
+                f"limit {self.identity.max_step_rate}/s"
+            )
         start = self._t.now()
         with self._locked():
             saved = self._ctx.copy()
@@ -292,7 +341,9 @@ class HostLink:
                     credit = self._credit()
                     # like Nagle: wait for a worthwhile batch unless the queue is nearly empty
                     worth = min(n - i, max(1, self.identity.queue_capacity // 4))
-                    if credit >= worth or (credit > 0 and self._dev.flow_free >= self.identity.queue_capacity // 2):
+                    if credit >= worth or (
+                        credit > 0 and self._dev.flow_free >= self.identity.queue_capacity // 2
+                    ):
                         ok = self._ep.sender.window_free > 0
                     else:
                         ok = False
@@ -301,7 +352,7 @@ class HostLink:
                             limit = offsets[i] + self._payload_limit
                             j = int(np.searchsorted(offsets, limit, side="right")) - 1
                             j = max(i + 1, min(j, i + credit, n))
-                            self._ep.send(data[offsets[i]:offsets[j]], items=j - i)
+                            self._ep.send(data[offsets[i] : offsets[j]], items=j - i)
                             self._items_sent += j - i
                             self._segments_sent += j - i
                             credit -= j - i
@@ -309,13 +360,20 @@ class HostLink:
                         self._write(self._ep.flush(self._t.now()))
                         continue
                     if timeout is not None and self._t.now() - start > timeout:
-                        raise LinkTimeout(f"{self._t.name}: could not queue segments within {timeout:g} s")
+                        raise LinkTimeout(
+                            f"{self._t.name}: could not queue segments within {timeout:g} s"
+                        )
                     self._pump()
         finally:
             with self._locked():
                 if i < n:  # keep the coder in step with what the device will decode
-                    self._ctx = saved if i == 0 else SegmentContext(
-                        int(batch.ticks[i - 1]), tuple(int(v) for v in batch.deltas[i - 1]))  # type: ignore[arg-type]
+                    self._ctx = (
+                        saved
+                        if i == 0
+                        else SegmentContext(
+                            int(batch.ticks[i - 1]), tuple(int(v) for v in batch.deltas[i - 1])
+                        )
+                    )  # type: ignore[arg-type]
         return range(first, first + n)
 
     def send(self, *commands: Message, timeout: float | None = None) -> list[int]:
@@ -331,10 +389,14 @@ class HostLink:
             while True:
                 self._let_others_in()
                 with self._locked():
-                    if self._dev.failure is not None and not isinstance(cmd, (ClearFault, GetStatus)):
+                    if self._dev.failure is not None and not isinstance(
+                        cmd, (ClearFault, GetStatus)
+                    ):
                         raise self._dev.failure
                     if self._ep.sender.window_free > 0 and self._credit() >= items:
-                        if is_segment:  # encoded only now: the coder context must follow the send order
+                        if (
+                            is_segment
+                        ):  # encoded only now: the coder context must follow the send order
                             payload = encode_messages([cmd], self._ctx)
                             self._segments_sent += 1
                         self._ep.send(payload, items=items)
@@ -344,7 +406,9 @@ class HostLink:
                         self._write(self._ep.flush(self._t.now()))
                         break
                     if timeout is not None and self._t.now() - start > timeout:
-                        raise LinkTimeout(f"{self._t.name}: could not send {type(cmd).__name__} within {timeout:g} s")
+                        raise LinkTimeout(
+                            f"{self._t.name}: could not send {type(cmd).__name__} within {timeout:g} s"
+                        )
                     self._pump()
         return numbers
 
@@ -365,7 +429,9 @@ class HostLink:
     def request_status(self, timeout: float | None = None) -> DeviceStatus:
         count = self._dev.status_count
         self.send(GetStatus())
-        self._wait(lambda: self._dev.status_count > count, timeout or self.timeout_s, "a status report")
+        self._wait(
+            lambda: self._dev.status_count > count, timeout or self.timeout_s, "a status report"
+        )
         return self._dev.status  # type: ignore[return-value]
 
     def wait_items(self, item: int, timeout: float | None = None) -> Progress:
@@ -375,10 +441,17 @@ class HostLink:
 
     def wait_idle(self, timeout: float | None = None) -> Progress:
         """Until everything queued has executed and motion has stopped."""
+
         def idle() -> bool:
             p = self.progress
-            return (p.items_done >= self._items_sent and self._ep.sender.idle() and not p.flags & Flag.MOVING
-                    and self.identity is not None and p.queue_free >= self.identity.queue_capacity)
+            return (
+                p.items_done >= self._items_sent
+                and self._ep.sender.idle()
+                and not p.flags & Flag.MOVING
+                and self.identity is not None
+                and p.queue_free >= self.identity.queue_capacity
+            )
+
         self._wait(idle, timeout, "the end of motion")
         return self.progress
 
@@ -403,8 +476,14 @@ class HostLink:
                     dev.failure = dev.failure or failure
             if dev.estop_acked and not isinstance(dev.failure, (DeviceReset, DeviceSilent)):
                 p = dev.progress
-                dev.failure = DeviceFault(f"{self._t.name}: emergency stop", code=ErrorCode.ESTOP,
-                                          item=p.items_done, segment=p.segments_done, axis=0xFF, value=0)
+                dev.failure = DeviceFault(
+                    f"{self._t.name}: emergency stop",
+                    code=ErrorCode.ESTOP,
+                    item=p.items_done,
+                    segment=p.segments_done,
+                    axis=0xFF,
+                    value=0,
+                )
             return dev.estop_acked
 
     def clear_fault(self, timeout: float | None = None) -> None:
@@ -429,7 +508,7 @@ class HostLink:
         with self._locked():
             self._t.close()
 
-    def __enter__(self) -> "HostLink":
+    def __enter__(self) -> HostLink:
         return self
 
     def __exit__(self, *exc) -> None:

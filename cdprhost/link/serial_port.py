@@ -8,6 +8,7 @@ PortBusy (another process holds it), PortVanished (unplugged, EIO), LinkError
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import time
 
@@ -22,7 +23,9 @@ def _open_error(port: str, exc: Exception) -> LinkError:
     code = getattr(exc, "errno", None)
     text = str(exc)
     if "exclusively lock" in text or code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK):
-        return PortBusy(f"{port}: port is in use by another program (close it, or check with `fuser {port}`)")
+        return PortBusy(
+            f"{port}: port is in use by another program (close it, or check with `fuser {port}`)"
+        )
     if code == errno.ENOENT or "No such file" in text:
         return PortNotFound(f"{port}: no such port (is the device plugged in? try `ls /dev/tty*`)")
     if code == errno.EACCES:
@@ -44,9 +47,13 @@ class SerialTransport:
         try:
             self._ser.write(data)
         except serial.SerialTimeoutException:
-            raise LinkError(f"{self.name}: write timed out (flow control stuck or device not reading)") from None
+            raise LinkError(
+                f"{self.name}: write timed out (flow control stuck or device not reading)"
+            ) from None
         except (serial.SerialException, OSError) as exc:
-            raise PortVanished(f"{self.name}: port failed on write ({exc}); was it unplugged?") from None
+            raise PortVanished(
+                f"{self.name}: port failed on write ({exc}); was it unplugged?"
+            ) from None
 
     def read(self, timeout: float) -> bytes:
         """Bytes available now, or the first ones to arrive within ``timeout`` seconds."""
@@ -63,13 +70,13 @@ class SerialTransport:
                     more = self._ser.in_waiting
                     return data + (self._ser.read(more) if more else b"")
         except (serial.SerialException, OSError) as exc:
-            raise PortVanished(f"{self.name}: port failed on read ({exc}); was it unplugged?") from None
+            raise PortVanished(
+                f"{self.name}: port failed on read ({exc}); was it unplugged?"
+            ) from None
 
     def close(self) -> None:
-        try:
+        with contextlib.suppress(serial.SerialException, OSError):
             self._ser.close()
-        except (serial.SerialException, OSError):
-            pass
 
 
 def open_serial(port: str, baud: int = 250_000, *, write_timeout_s: float = 2.0) -> SerialTransport:
@@ -83,8 +90,6 @@ def open_serial(port: str, baud: int = 250_000, *, write_timeout_s: float = 2.0)
         ser.open()
     except (serial.SerialException, OSError, ValueError) as exc:
         raise _open_error(port, exc) from None
-    try:
+    with contextlib.suppress(serial.SerialException, OSError):
         ser.reset_input_buffer()
-    except (serial.SerialException, OSError):
-        pass
     return SerialTransport(ser, port)

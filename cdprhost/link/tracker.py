@@ -9,7 +9,14 @@ from __future__ import annotations
 from collections import deque
 
 from cdprhost.link.errors import DeviceFault, DeviceReset, LinkError
-from cdprhost.link.events import DeviceStatus, Identity, LinkEvent, Progress, device_event, error_text
+from cdprhost.link.events import (
+    DeviceStatus,
+    Identity,
+    LinkEvent,
+    Progress,
+    device_event,
+    error_text,
+)
 from firmware_protocol.endpoint import Incoming
 from firmware_protocol.messages import (
     Boot,
@@ -61,7 +68,12 @@ class DeviceTracker:
         self.failure = None
 
     def set_progress(self, items: int, segments: int, free: int, flags: int) -> None:
-        p = Progress(max(items, self.progress.items_done), max(segments, self.progress.segments_done), free, flags)
+        p = Progress(
+            max(items, self.progress.items_done),
+            max(segments, self.progress.segments_done),
+            free,
+            flags,
+        )
         if p != self.progress:
             self.progress = p
             self.progress_dirty = True
@@ -81,8 +93,12 @@ class DeviceTracker:
                 self._on_boot(msg)
             elif isinstance(msg, EstopAck):
                 self.estop_acked = True
-                self.set_progress(msg.items_done, msg.segments_done, self.progress.queue_free,
-                                  self.progress.flags | Flag.ESTOP | Flag.FAULT)
+                self.set_progress(
+                    msg.items_done,
+                    msg.segments_done,
+                    self.progress.queue_free,
+                    self.progress.flags | Flag.ESTOP | Flag.FAULT,
+                )
             return
         try:
             msgs = decode_messages(inc.payload, SegmentContext())
@@ -99,8 +115,14 @@ class DeviceTracker:
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:
-                    self.failure = DeviceFault(f"{self.name}: device error {error_text(msg)}", code=msg.code,
-                                               item=msg.item, segment=msg.segment, axis=msg.axis, value=msg.value)
+                    self.failure = DeviceFault(
+                        f"{self.name}: device error {error_text(msg)}",
+                        code=msg.code,
+                        item=msg.item,
+                        segment=msg.segment,
+                        axis=msg.axis,
+                        value=msg.value,
+                    )
             elif isinstance(msg, Event):
                 self.events.append(device_event(msg))
                 if msg.code == EventCode.FAULT_CLEARED:
@@ -119,4 +141,7 @@ class DeviceTracker:
         self.failure = DeviceReset(
             f"{self.name}: the device reset (boot id {self.identity.boot_id:#010x} -> {msg.boot_id:#010x}); "
             f"last executed segment {seg}{'' if exact else ' (last reported; the device kept no record)'}",
-            last_segment=seg, last_item=item, exact=exact)
+            last_segment=seg,
+            last_item=item,
+            exact=exact,
+        )

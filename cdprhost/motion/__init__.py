@@ -16,13 +16,36 @@ from cdprhost.motion.limits import Caps, MoveCaps, move_caps
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.pipeline import PipelineTotals, SegmentBlock, segment_blocks, segment_program
 from cdprhost.motion.planner import Planner
-from cdprhost.motion.program import (MarkedMoves, ProgramPlanner, flushes_motion, home_position, plan_program,
-                                     read_items)
+from cdprhost.motion.program import (
+    MarkedMoves,
+    ProgramPlanner,
+    flushes_motion,
+    home_position,
+    plan_program,
+    read_items,
+)
 from cdprhost.motion.segments import SegmentBatch, Segmenter, SegmentState, segment_moves
 from cdprhost.motion.trapezoid import PlannedMoves
 
 __all__ = [
-    "Caps", "MarkedMoves", "MoveBlock", "MoveCaps", "PipelineTotals", "PlannedMoves", "Planner", "ProgramPlanner",
-    "SegmentBatch", "SegmentBlock", "SegmentState", "Segmenter", "flushes_motion", "home_position", "move_caps",
-    "plan_program", "read_items", "segment_blocks", "segment_moves", "segment_program",
+    "Caps",
+    "MarkedMoves",
+    "MoveBlock",
+    "MoveCaps",
+    "PipelineTotals",
+    "PlannedMoves",
+    "Planner",
+    "ProgramPlanner",
+    "SegmentBatch",
+    "SegmentBlock",
+    "SegmentState",
+    "Segmenter",
+    "flushes_motion",
+    "home_position",
+    "move_caps",
+    "plan_program",
+    "read_items",
+    "segment_blocks",
+    "segment_moves",
+    "segment_program",
 ]

@@ -32,8 +32,15 @@ def state_at_steps(model: MachineModel, steps) -> SegmentState:
     return SegmentState(arr, point, np.ones(3))
 
 
-def direct_path(profile: MachineProfile, model: MachineModel, state: SegmentState, points, *,
-                feedrate_mm_s: float, clock_hz: int) -> tuple[WireBatch, float, SegmentState]:
+def direct_path(
+    profile: MachineProfile,
+    model: MachineModel,
+    state: SegmentState,
+    points,
+    *,
+    feedrate_mm_s: float,
+    clock_hz: int,
+) -> tuple[WireBatch, float, SegmentState]:
     """Segments through ``points`` (machine frame, in order) starting from ``state``.
 
     Returns the wire batch, its duration in seconds, and the state after it.
@@ -42,9 +49,16 @@ def direct_path(profile: MachineProfile, model: MachineModel, state: SegmentStat
     start = np.vstack([state.point[None, :], pts[:-1]])
     caps = Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2)
     planner = Planner(caps, model.geometry.outlets)
-    segmenter = Segmenter(model, profile.drive.home_mm, e_steps_per_mm=profile.extruder.steps_per_mm, clock_hz=clock_hz)
+    segmenter = Segmenter(
+        model,
+        profile.drive.home_mm,
+        e_steps_per_mm=profile.extruder.steps_per_mm,
+        clock_hz=clock_hz,
+    )
     segmenter.state = state
-    planned = planner.push(MoveBlock.from_arrays(start, pts, feedrate=feedrate_mm_s)) + planner.flush()
+    planned = (
+        planner.push(MoveBlock.from_arrays(start, pts, feedrate=feedrate_mm_s)) + planner.flush()
+    )
     batches = [b for b in (segmenter(p) for p in planned) if len(b)]
     if not batches:
         return WireBatch(np.zeros(0, np.int64), np.zeros((0, 4), np.int64)), 0.0, state

@@ -17,8 +17,13 @@ from __future__ import annotations
 import numpy as np
 
 
-def junction_v2(unit: np.ndarray, kinematic: np.ndarray, accel: np.ndarray, length: np.ndarray,
-                junction_deviation: float) -> np.ndarray:
+def junction_v2(
+    unit: np.ndarray,
+    kinematic: np.ndarray,
+    accel: np.ndarray,
+    length: np.ndarray,
+    junction_deviation: float,
+) -> np.ndarray:
     """Squared speed limit at the n-1 inner junctions of n consecutive moves."""
     if unit.shape[0] < 2:
         return np.zeros(0)
@@ -33,12 +38,14 @@ def junction_v2(unit: np.ndarray, kinematic: np.ndarray, accel: np.ndarray, leng
     a0, a1 = accel[:-1][corner], accel[1:][corner]
     quarter_tan = 0.25 * sin_half[corner] / cos_half[corner]
     d0, d1 = length[:-1][corner], length[1:][corner]
-    v2[corner] = np.minimum.reduce([
-        r_jd * junction_deviation * a0,
-        r_jd * junction_deviation * a1,
-        2.0 * a0 * d0 * quarter_tan,
-        2.0 * a1 * d1 * quarter_tan,
-    ])
+    v2[corner] = np.minimum.reduce(
+        [
+            r_jd * junction_deviation * a0,
+            r_jd * junction_deviation * a1,
+            2.0 * a0 * d0 * quarter_tan,
+            2.0 * a1 * d1 * quarter_tan,
+        ]
+    )
     both = kinematic[:-1] & kinematic[1:]
     v2[~both] = 0.0
     return v2

@@ -44,15 +44,29 @@ class Caps:
     e_accel: float
 
     @classmethod
-    def from_profile(cls, motion: MotionLimits, extruder: Extruder, a_max_statics: float = 0.0,
-                     *, module_limits: bool = True) -> Caps:
-        accel = motion.max_accel_mm_s2 if a_max_statics <= 0 else min(motion.max_accel_mm_s2, a_max_statics)
+    def from_profile(
+        cls,
+        motion: MotionLimits,
+        extruder: Extruder,
+        a_max_statics: float = 0.0,
+        *,
+        module_limits: bool = True,
+    ) -> Caps:
+        accel = (
+            motion.max_accel_mm_s2
+            if a_max_statics <= 0
+            else min(motion.max_accel_mm_s2, a_max_statics)
+        )
         inf = float("inf")
         return cls(
-            motion.max_velocity_mm_s, accel, motion.junction_deviation_mm,
+            motion.max_velocity_mm_s,
+            accel,
+            motion.junction_deviation_mm,
             motion.module_max_velocity_mm_s if module_limits else inf,
             motion.module_max_accel_mm_s2 if module_limits else inf,
-            motion.chord_tolerance_mm, extruder.max_velocity_mm_s, extruder.max_accel_mm_s2,
+            motion.chord_tolerance_mm,
+            extruder.max_velocity_mm_s,
+            extruder.max_accel_mm_s2,
         )
 
 
@@ -66,7 +80,9 @@ class MoveCaps:
     accel: np.ndarray  # (n,) mm/s^2
     v2_cap: np.ndarray  # (n,) (mm/s)^2, all limits
     v2_cartesian: np.ndarray  # (n,) (mm/s)^2, feedrate and Cartesian/extruder limits only
-    chord_step: np.ndarray  # (n,) mm, longest piece within the chord tolerance (inf: no Cartesian motion)
+    chord_step: (
+        np.ndarray
+    )  # (n,) mm, longest piece within the chord tolerance (inf: no Cartesian motion)
 
     @property
     def module_limited(self) -> np.ndarray:
@@ -87,7 +103,9 @@ class _PointTerms:
     cof: tuple | None  # columns of adj(J) (e2 x e3, e3 x e1, e1 x e2) divided by det J
 
     @classmethod
-    def at(cls, x: np.ndarray, y: np.ndarray, z: np.ndarray, outlets: np.ndarray, chord: bool) -> _PointTerms:
+    def at(
+        cls, x: np.ndarray, y: np.ndarray, z: np.ndarray, outlets: np.ndarray, chord: bool
+    ) -> _PointTerms:
         e, inv = [], []
         for k in range(3):  # three cables, each vectorised over points
             dx, dy, dz = x - outlets[k, 0], y - outlets[k, 1], z - outlets[k, 2]
@@ -96,8 +114,13 @@ class _PointTerms:
             inv.append(il)
         cof = None
         if chord:
+
             def cross(a, b):
-                return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+                return (
+                    a[1] * b[2] - a[2] * b[1],
+                    a[2] * b[0] - a[0] * b[2],
+                    a[0] * b[1] - a[1] * b[0],
+                )
 
             c23, c31, c12 = cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])
             inv_det = 1.0 / (e[0][0] * c23[0] + e[0][1] * c23[1] + e[0][2] * c23[2])
@@ -106,10 +129,15 @@ class _PointTerms:
 
     def take(self, idx: slice | np.ndarray) -> _PointTerms:
         pick = lambda t: tuple(a[idx] for a in t)  # noqa: E731
-        return _PointTerms(tuple(pick(v) for v in self.e), pick(self.inv_length),
-                           None if self.cof is None else tuple(pick(c) for c in self.cof))
+        return _PointTerms(
+            tuple(pick(v) for v in self.e),
+            pick(self.inv_length),
+            None if self.cof is None else tuple(pick(c) for c in self.cof),
+        )
 
-    def along(self, ux: np.ndarray, uy: np.ndarray, uz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def along(
+        self, ux: np.ndarray, uy: np.ndarray, uz: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """max_k |c_k|, max_k kappa_k and |J^-1 kappa| for moves of direction u through these points."""
         c, kap = [], []
         for k in range(3):
@@ -119,7 +147,10 @@ class _PointTerms:
             kap.append((1.0 - ck * ck) * self.inv_length[k])
         w = None
         if self.cof is not None:
-            comps = [kap[0] * self.cof[0][i] + kap[1] * self.cof[1][i] + kap[2] * self.cof[2][i] for i in range(3)]
+            comps = [
+                kap[0] * self.cof[0][i] + kap[1] * self.cof[1][i] + kap[2] * self.cof[2][i]
+                for i in range(3)
+            ]
             w = np.sqrt(comps[0] * comps[0] + comps[1] * comps[1] + comps[2] * comps[2])
         return _max3(*c), _max3(*kap), w
 
@@ -167,7 +198,9 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
 
     # endpoints: shared between consecutive moves when the block is a continuous path
     chained = n > 1 and np.array_equal(block.start[1:], block.end[:-1])
-    pts = np.vstack([block.start[:1], block.end]) if chained else np.vstack([block.start, block.end])
+    pts = (
+        np.vstack([block.start[:1], block.end]) if chained else np.vstack([block.start, block.end])
+    )
     terms = _PointTerms.at(pts[:, 0], pts[:, 1], pts[:, 2], outlets, chord)
     i0 = slice(0, n)  # views, not copies
     i1 = slice(1, n + 1) if chained else slice(n, 2 * n)
@@ -178,7 +211,9 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     owner, frac = _interior_samples(np.where(kin, dist, 0.0), SAMPLE_SPACING_MM)
     if owner.size:
         p = block.start[owner] + frac[:, None] * delta[owner]
-        ci, ki, wi = _PointTerms.at(p[:, 0], p[:, 1], p[:, 2], outlets, chord).along(ux[owner], uy[owner], uz[owner])
+        ci, ki, wi = _PointTerms.at(p[:, 0], p[:, 1], p[:, 2], outlets, chord).along(
+            ux[owner], uy[owner], uz[owner]
+        )
         np.maximum.at(c_max, owner, ci)
         np.maximum.at(k_max, owner, ki)
         if chord:

@@ -29,7 +29,9 @@ def limit_passes(lim: np.ndarray, delta: np.ndarray) -> np.ndarray:
     return np.maximum(np.minimum(fwd, back), 0.0)
 
 
-def hump_caps(lim: np.ndarray, delta_smooth: np.ndarray, cruise_v2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def hump_caps(
+    lim: np.ndarray, delta_smooth: np.ndarray, cruise_v2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-move cruise cap from the smoothed profile's hump peaks (Klipper's grouping),
     the smoothed profile itself (v^2 at the junctions) and each move's hump (index of its peak move).
 
@@ -59,9 +61,16 @@ def hump_caps(lim: np.ndarray, delta_smooth: np.ndarray, cruise_v2: np.ndarray) 
     return np.minimum(cruise_v2, peak_v2[owner]), sv, owner
 
 
-def plan_profile(junction_v2: np.ndarray, cruise_v2: np.ndarray, delta: np.ndarray, v2_start: float, v2_end: float,
-                 *, min_cruise_ratio: float = 0.0, smooth_v2_start: float | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+def plan_profile(
+    junction_v2: np.ndarray,
+    cruise_v2: np.ndarray,
+    delta: np.ndarray,
+    v2_start: float,
+    v2_end: float,
+    *,
+    min_cruise_ratio: float = 0.0,
+    smooth_v2_start: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
     """Junction speeds^2 (n+1,), cruise speeds^2 (n,), the smoothed profile (n+1,) and
     where humps start ((n,) bool; every move without smoothing) of n moves.
 

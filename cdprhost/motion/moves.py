@@ -47,8 +47,15 @@ class MoveBlock:
 
     def take(self, index: Any) -> MoveBlock:
         """Rows selected by a slice, a boolean mask or an index array."""
-        return MoveBlock(self.start[index], self.end[index], self.e_start[index], self.e_end[index],
-                         self.feedrate[index], self.line[index], self.layer[index])
+        return MoveBlock(
+            self.start[index],
+            self.end[index],
+            self.e_start[index],
+            self.e_end[index],
+            self.feedrate[index],
+            self.line[index],
+            self.layer[index],
+        )
 
     @classmethod
     def empty(cls) -> MoveBlock:
@@ -65,17 +72,40 @@ class MoveBlock:
         return cls(*(np.concatenate([getattr(b, f) for b in blocks]) for f in _FIELDS))
 
     @classmethod
-    def from_arrays(cls, start: Any, end: Any, e_start: Any = None, e_end: Any = None, feedrate: Any = 50.0,
-                    line: Any = None, layer: Any = 0) -> MoveBlock:
+    def from_arrays(
+        cls,
+        start: Any,
+        end: Any,
+        e_start: Any = None,
+        e_end: Any = None,
+        feedrate: Any = 50.0,
+        line: Any = None,
+        layer: Any = 0,
+    ) -> MoveBlock:
         """Convenience constructor (tests, tools): broadcasts scalars."""
         s = np.atleast_2d(np.asarray(start, dtype=float))
         e = np.atleast_2d(np.asarray(end, dtype=float))
         n = s.shape[0]
-        es = np.zeros(n) if e_start is None else np.broadcast_to(np.asarray(e_start, float), (n,)).copy()
+        es = (
+            np.zeros(n)
+            if e_start is None
+            else np.broadcast_to(np.asarray(e_start, float), (n,)).copy()
+        )
         ee = es.copy() if e_end is None else np.broadcast_to(np.asarray(e_end, float), (n,)).copy()
-        ln = np.arange(1, n + 1, dtype=np.int64) if line is None else np.broadcast_to(np.asarray(line, np.int64), (n,)).copy()
-        return cls(s, e, es, ee, np.broadcast_to(np.asarray(feedrate, float), (n,)).copy(), ln,
-                   np.broadcast_to(np.asarray(layer, np.int32), (n,)).copy())
+        ln = (
+            np.arange(1, n + 1, dtype=np.int64)
+            if line is None
+            else np.broadcast_to(np.asarray(line, np.int64), (n,)).copy()
+        )
+        return cls(
+            s,
+            e,
+            es,
+            ee,
+            np.broadcast_to(np.asarray(feedrate, float), (n,)).copy(),
+            ln,
+            np.broadcast_to(np.asarray(layer, np.int32), (n,)).copy(),
+        )
 
 
 _FIELDS = ("start", "end", "e_start", "e_end", "feedrate", "line", "layer")
@@ -106,7 +136,9 @@ def chain_from(block: MoveBlock, position: np.ndarray) -> MoveBlock:
     start = np.empty_like(block.end)
     start[0] = position
     start[1:] = block.end[:-1]
-    return MoveBlock(start, block.end, block.e_start, block.e_end, block.feedrate, block.line, block.layer)
+    return MoveBlock(
+        start, block.end, block.e_start, block.e_end, block.feedrate, block.line, block.layer
+    )
 
 
 def drop_noops(block: MoveBlock) -> MoveBlock:

@@ -44,12 +44,24 @@ class SegmentBlock:
         return split_at_marks(self.batch, self.marks)
 
 
-def segment_blocks(items: Iterable[Any], profile: MachineProfile, model: MachineModel, *,
-                   clock_hz: float = DEFAULT_CLOCK_HZ, encode: Callable[[SegmentBatch], Any] | None = None,
-                   totals: PipelineTotals | None = None, **planner_options: Any) -> Iterator[Any]:
+def segment_blocks(
+    items: Iterable[Any],
+    profile: MachineProfile,
+    model: MachineModel,
+    *,
+    clock_hz: float = DEFAULT_CLOCK_HZ,
+    encode: Callable[[SegmentBatch], Any] | None = None,
+    totals: PipelineTotals | None = None,
+    **planner_options: Any,
+) -> Iterator[Any]:
     """:class:`SegmentBlock` items and motion-stopping commands, in program order."""
     pp = ProgramPlanner(profile, model, marked=True, **planner_options)
-    seg = Segmenter(model, profile.drive.home_mm, e_steps_per_mm=profile.extruder.steps_per_mm, clock_hz=clock_hz)
+    seg = Segmenter(
+        model,
+        profile.drive.home_mm,
+        e_steps_per_mm=profile.extruder.steps_per_mm,
+        clock_hz=clock_hz,
+    )
     totals = totals if totals is not None else PipelineTotals()
 
     def convert(outputs: list[Any]) -> Iterator[Any]:
@@ -58,7 +70,9 @@ def segment_blocks(items: Iterable[Any], profile: MachineProfile, model: Machine
                 batch, move_end = seg.segment_block(out.planned)
                 totals.moves += len(out.planned)
                 totals.segments += len(batch)
-                marks = tuple((int(move_end[at - 1]) if at > 0 else 0, cmd) for at, cmd in out.marks)
+                marks = tuple(
+                    (int(move_end[at - 1]) if at > 0 else 0, cmd) for at, cmd in out.marks
+                )
                 yield SegmentBlock(batch, marks, None if encode is None else encode(batch))
             else:
                 if isinstance(out, Home):
@@ -71,8 +85,14 @@ def segment_blocks(items: Iterable[Any], profile: MachineProfile, model: Machine
     yield from convert(pp.finish())
 
 
-def segment_program(items: Iterable[Any], profile: MachineProfile, model: MachineModel, *,
-                    encode: Callable[[SegmentBatch], Any] | None = None, **options: Any) -> Iterator[Any]:
+def segment_program(
+    items: Iterable[Any],
+    profile: MachineProfile,
+    model: MachineModel,
+    *,
+    encode: Callable[[SegmentBatch], Any] | None = None,
+    **options: Any,
+) -> Iterator[Any]:
     """Segment batches (or their encodings) and commands, strictly in program order."""
     for out in segment_blocks(items, profile, model, **options):
         if not isinstance(out, SegmentBlock):

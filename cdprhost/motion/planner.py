@@ -37,8 +37,17 @@ class PlannerStats:
 class Planner:
     """Lookahead planner. ``push`` and ``flush`` return planned moves, in order."""
 
-    def __init__(self, caps: Caps, outlets: np.ndarray, *, min_cruise_ratio: float = DEFAULT_MIN_CRUISE_RATIO,
-                 batch_moves: int = 8192, max_pending: int = 262144, t0: float = 0.0, chord: bool = True):
+    def __init__(
+        self,
+        caps: Caps,
+        outlets: np.ndarray,
+        *,
+        min_cruise_ratio: float = DEFAULT_MIN_CRUISE_RATIO,
+        batch_moves: int = 8192,
+        max_pending: int = 262144,
+        t0: float = 0.0,
+        chord: bool = True,
+    ):
         self.caps = caps
         self.outlets = np.asarray(outlets, dtype=float)
         self.min_cruise_ratio = float(min_cruise_ratio)
@@ -82,8 +91,15 @@ class Planner:
         delta = 2.0 * mc.accel * mc.length
         jv2 = junction_v2(mc.unit, mc.kinematic, mc.accel, mc.length, self.caps.junction_deviation)
         v2_start = min(self._v0**2, float(mc.v2_cap[0]))
-        v2, cruise, smooth, hump_start = plan_profile(jv2, mc.v2_cap, delta, v2_start, 0.0, min_cruise_ratio=self.min_cruise_ratio,
-                                          smooth_v2_start=self._sv0)
+        v2, cruise, smooth, hump_start = plan_profile(
+            jv2,
+            mc.v2_cap,
+            delta,
+            v2_start,
+            0.0,
+            min_cruise_ratio=self.min_cruise_ratio,
+            smooth_v2_start=self._sv0,
+        )
         if v2[0] < v2_start * (1.0 - 1e-9) - 1e-9:
             self.stats.start_speed_drops += 1
         cut = n if final else self._commit_point(mc.v2_cap, delta, jv2, hump_start)
@@ -91,15 +107,27 @@ class Planner:
             return []
         speeds = np.sqrt(v2)
         v_cruise = np.sqrt(cruise[:cut])
-        dur = move_durations(mc.length[:cut], mc.accel[:cut], speeds[:cut], v_cruise, speeds[1 : cut + 1])
+        dur = move_durations(
+            mc.length[:cut], mc.accel[:cut], speeds[:cut], v_cruise, speeds[1 : cut + 1]
+        )
         t_start = np.empty(cut)
         t_start[0] = self.time
         np.cumsum(dur[:-1], out=t_start[1:])
         t_start[1:] += self.time
         self.time = float(t_start[-1] + dur[-1])
         head = slice(0, cut)
-        planned = PlannedMoves(block.take(head), mc.length[head], mc.kinematic[head], mc.accel[head], speeds[:cut],
-                               v_cruise, speeds[1 : cut + 1], t_start, mc.chord_step[head], mc.module_limited[head])
+        planned = PlannedMoves(
+            block.take(head),
+            mc.length[head],
+            mc.kinematic[head],
+            mc.accel[head],
+            speeds[:cut],
+            v_cruise,
+            speeds[1 : cut + 1],
+            t_start,
+            mc.chord_step[head],
+            mc.module_limited[head],
+        )
         self.stats.moves += cut
         self.stats.module_limited += int(np.count_nonzero(planned.module_limited))
         rest = block.take(slice(cut, n))
@@ -109,16 +137,22 @@ class Planner:
         self._sv0 = float(smooth[cut]) if (len(rest) and smooth is not None) else None
         return [planned]
 
-    def _commit_point(self, v2_cap: np.ndarray, delta: np.ndarray, jv2: np.ndarray, hump_start: np.ndarray) -> int:
+    def _commit_point(
+        self, v2_cap: np.ndarray, delta: np.ndarray, jv2: np.ndarray, hump_start: np.ndarray
+    ) -> int:
         """Index of the last junction whose plan can no longer change (0: none).
 
         Junction j qualifies when the moves after junction j+1 can brake from any
         allowed speed at the smoothed deceleration (so every smoothed value up to
         j+1, hence the hump grouping up to j, is final) and a hump starts at j.
         """
-        reach = np.cumsum((delta * (1.0 - self.min_cruise_ratio))[::-1])[::-1]  # braking room after junction j
+        reach = np.cumsum((delta * (1.0 - self.min_cruise_ratio))[::-1])[
+            ::-1
+        ]  # braking room after junction j
         need = float(v2_cap.max()) * 1.000001
-        room = np.zeros(reach.shape[0], dtype=bool)  # room[j]: junction j+1 has enough room after it
+        room = np.zeros(
+            reach.shape[0], dtype=bool
+        )  # room[j]: junction j+1 has enough room after it
         room[:-1] = reach[1:] >= need
         ok = np.flatnonzero(room[1:] & hump_start[1:]) + 1
         if not ok.size:

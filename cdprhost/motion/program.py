@@ -77,14 +77,32 @@ class ProgramPlanner:
     With ``marked=True`` planned blocks come whole, as :class:`MarkedMoves`.
     """
 
-    def __init__(self, profile: MachineProfile, model: MachineModel, *, module_limits: bool = True,
-                 min_cruise_ratio: float = DEFAULT_MIN_CRUISE_RATIO, batch_moves: int = 8192, chord: bool = True,
-                 marked: bool = False):
+    def __init__(
+        self,
+        profile: MachineProfile,
+        model: MachineModel,
+        *,
+        module_limits: bool = True,
+        min_cruise_ratio: float = DEFAULT_MIN_CRUISE_RATIO,
+        batch_moves: int = 8192,
+        chord: bool = True,
+        marked: bool = False,
+    ):
         self.origin = np.asarray(profile.build_volume.bed_origin, dtype=float)
         self.home = home_position(profile, model)
-        caps = Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2, module_limits=module_limits)
-        self.planner = Planner(caps, model.geometry.outlets, min_cruise_ratio=min_cruise_ratio, batch_moves=batch_moves,
-                               chord=chord)
+        caps = Caps.from_profile(
+            profile.motion,
+            profile.extruder,
+            profile.statics.a_max_mm_s2,
+            module_limits=module_limits,
+        )
+        self.planner = Planner(
+            caps,
+            model.geometry.outlets,
+            min_cruise_ratio=min_cruise_ratio,
+            batch_moves=batch_moves,
+            chord=chord,
+        )
         self.marked = marked
         self.position = self.home.copy()
         self._pushed = 0  # moves handed to the planner
@@ -142,7 +160,9 @@ class ProgramPlanner:
         return out
 
 
-def read_items(source: Any, profile: MachineProfile, model: MachineModel, **reader_options: Any) -> Iterator[Any]:
+def read_items(
+    source: Any, profile: MachineProfile, model: MachineModel, **reader_options: Any
+) -> Iterator[Any]:
     """``read_program`` with the reader's idea of "home" set to this machine's home point."""
     from cdprhost.gcode import read_program
 
@@ -150,7 +170,9 @@ def read_items(source: Any, profile: MachineProfile, model: MachineModel, **read
     return read_program(source, home_position=tuple(float(v) for v in home), **reader_options)
 
 
-def plan_program(items: Iterable[Any], profile: MachineProfile, model: MachineModel, **options: Any) -> Iterator[Any]:
+def plan_program(
+    items: Iterable[Any], profile: MachineProfile, model: MachineModel, **options: Any
+) -> Iterator[Any]:
     """Planned moves (:class:`PlannedMoves`) and commands of a program, in order."""
     pp = ProgramPlanner(profile, model, **options)
     for item in items:

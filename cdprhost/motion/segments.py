@@ -103,7 +103,9 @@ def _phases(planned: PlannedMoves, min_phase: float) -> tuple[np.ndarray, ...]:
     d_acc = d_acc + np.where(to_acc, d_cru, 0.0)
     d_dec = d_dec + np.where(small_c & ~to_acc, d_cru, 0.0)
     d_cru = np.where(small_c, 0.0, d_cru)
-    d_cru = np.where((d_acc <= 0) & (d_dec <= 0), length, d_cru)  # no phase left: one cruise-like piece
+    d_cru = np.where(
+        (d_acc <= 0) & (d_dec <= 0), length, d_cru
+    )  # no phase left: one cruise-like piece
     return d_acc, d_cru, d_dec
 
 
@@ -117,10 +119,14 @@ def piece_positions(planned: PlannedMoves, min_phase: float = MIN_PHASE_MM) -> P
     n = len(planned)
     d_acc, d_cru, d_dec = _phases(planned, min_phase)
     d = np.stack([d_acc, d_cru, d_dec], axis=1).reshape(-1)  # phase records, 3 per move
-    count = np.where(d > 0, np.maximum(np.ceil(d / np.repeat(planned.chord_step, 3)), 1.0), 0.0).astype(np.int64)
+    count = np.where(
+        d > 0, np.maximum(np.ceil(d / np.repeat(planned.chord_step, 3)), 1.0), 0.0
+    ).astype(np.int64)
     # phase starts: position, speed, time, signed acceleration
     vs, vc, a = planned.v_start, planned.v_cruise, planned.accel
-    v_top = np.minimum(np.sqrt(vs * vs + 2.0 * a * d_acc), vc)  # cruise speed (or where a merged phase left it)
+    v_top = np.minimum(
+        np.sqrt(vs * vs + 2.0 * a * d_acc), vc
+    )  # cruise speed (or where a merged phase left it)
     t_acc = 2.0 * d_acc / np.maximum(vs + v_top, 1e-300)
     t_dec0 = t_acc + d_cru / np.maximum(v_top, 1e-300)
     zero = np.zeros(n)
@@ -149,24 +155,43 @@ def piece_positions(planned: PlannedMoves, min_phase: float = MIN_PHASE_MM) -> P
     return Pieces(owner, x, v, t, ends)
 
 
-def _sliders(model: MachineModel, points: np.ndarray, state: SegmentState) -> tuple[np.ndarray, np.ndarray]:
+def _sliders(
+    model: MachineModel, points: np.ndarray, state: SegmentState
+) -> tuple[np.ndarray, np.ndarray]:
     """Commanded sliders along a path continuing from ``state`` (backlash directions carried)."""
     if "backlash" not in model.effects.names:
         return model.ik(points, path=True), state.directions
-    plain = model.ik(np.vstack([state.point[None, :], points]), MotionContext(directions=np.zeros((points.shape[0] + 1, 3))))
+    plain = model.ik(
+        np.vstack([state.point[None, :], points]),
+        MotionContext(directions=np.zeros((points.shape[0] + 1, 3))),
+    )
     dirs = path_directions(plain, initial=state.directions)[1:]
     return model.ik(points, MotionContext(directions=dirs)), dirs[-1]
 
 
-def segment_moves(planned: PlannedMoves, model: MachineModel, state: SegmentState, *, e_steps_per_mm: float,
-                  clock_hz: float = DEFAULT_CLOCK_HZ) -> tuple[SegmentBatch, SegmentState]:
+def segment_moves(
+    planned: PlannedMoves,
+    model: MachineModel,
+    state: SegmentState,
+    *,
+    e_steps_per_mm: float,
+    clock_hz: float = DEFAULT_CLOCK_HZ,
+) -> tuple[SegmentBatch, SegmentState]:
     """Cut planned moves into joint-space segments; returns the batch and the new state."""
-    batch, state, _ = segment_moves_ends(planned, model, state, e_steps_per_mm=e_steps_per_mm, clock_hz=clock_hz)
+    batch, state, _ = segment_moves_ends(
+        planned, model, state, e_steps_per_mm=e_steps_per_mm, clock_hz=clock_hz
+    )
     return batch, state
 
 
-def segment_moves_ends(planned: PlannedMoves, model: MachineModel, state: SegmentState, *, e_steps_per_mm: float,
-                       clock_hz: float = DEFAULT_CLOCK_HZ) -> tuple[SegmentBatch, SegmentState, np.ndarray]:
+def segment_moves_ends(
+    planned: PlannedMoves,
+    model: MachineModel,
+    state: SegmentState,
+    *,
+    e_steps_per_mm: float,
+    clock_hz: float = DEFAULT_CLOCK_HZ,
+) -> tuple[SegmentBatch, SegmentState, np.ndarray]:
     """:func:`segment_moves`, plus per planned move the number of segments up to its end."""
     pc = piece_positions(planned)
     owner, ends = pc.owner, pc.ends
@@ -192,7 +217,9 @@ def segment_moves_ends(planned: PlannedMoves, model: MachineModel, state: Segmen
         move_first = np.append(0, ends[:-1] + 1)
         t_begin[move_first] = planned.t_start
         v_begin[move_first] = planned.v_start
-    ticks = np.rint(t_end * clock_hz).astype(np.int64) - np.rint(t_begin * clock_hz).astype(np.int64)
+    ticks = np.rint(t_end * clock_hz).astype(np.int64) - np.rint(t_begin * clock_hz).astype(
+        np.int64
+    )
 
     sliders, last_dirs = _sliders(model, point, state)
     steps = np.empty((n, 4), dtype=np.int64)
@@ -201,16 +228,35 @@ def segment_moves_ends(planned: PlannedMoves, model: MachineModel, state: Segmen
     delta = np.diff(steps, axis=0, prepend=state.steps[None, :])
     with np.errstate(invalid="ignore", divide="ignore"):
         ramp = np.where(v_begin + v > 0, v_begin / (v_begin + v), 0.5)
-    batch = SegmentBatch(steps, delta, ticks, ramp, v_begin, v, m.line.take(owner), m.layer.take(owner), point, e, t_end)
+    batch = SegmentBatch(
+        steps,
+        delta,
+        ticks,
+        ramp,
+        v_begin,
+        v,
+        m.line.take(owner),
+        m.layer.take(owner),
+        point,
+        e,
+        t_end,
+    )
     move_end = ends + 1
     if n and ticks.min() < 1:
         batch, move_end = _absorb_empty(batch, state.steps, ends)
     if n:
-        state = replace(state, steps=steps[-1].copy(), point=point[-1].copy(), directions=np.asarray(last_dirs, float))
+        state = replace(
+            state,
+            steps=steps[-1].copy(),
+            point=point[-1].copy(),
+            directions=np.asarray(last_dirs, float),
+        )
     return batch, state, move_end
 
 
-def _absorb_empty(batch: SegmentBatch, prev_steps: np.ndarray, ends: np.ndarray) -> tuple[SegmentBatch, np.ndarray]:
+def _absorb_empty(
+    batch: SegmentBatch, prev_steps: np.ndarray, ends: np.ndarray
+) -> tuple[SegmentBatch, np.ndarray]:
     """Segments shorter than one tick merged into the next one (the device needs >= 1 tick).
 
     Rounded absolute times make such a segment's time part of the next one already;
@@ -223,15 +269,33 @@ def _absorb_empty(batch: SegmentBatch, prev_steps: np.ndarray, ends: np.ndarray)
     ticks[-1] = max(int(ticks[-1]), 1)
     steps = batch.steps_abs[keep]
     delta = np.diff(steps, axis=0, prepend=prev_steps[None, :])
-    kept = SegmentBatch(steps, delta, ticks, batch.ramp[keep], batch.v_start[keep], batch.v_end[keep], batch.line[keep],
-                        batch.layer[keep], batch.point[keep], batch.e[keep], batch.t_end[keep])
+    kept = SegmentBatch(
+        steps,
+        delta,
+        ticks,
+        batch.ramp[keep],
+        batch.v_start[keep],
+        batch.v_end[keep],
+        batch.line[keep],
+        batch.layer[keep],
+        batch.point[keep],
+        batch.e[keep],
+        batch.t_end[keep],
+    )
     return kept, np.cumsum(keep)[ends]
 
 
 class Segmenter:
     """Stateful wrapper: feeds planned blocks through :func:`segment_moves` in order."""
 
-    def __init__(self, model: MachineModel, home_sliders: Any, *, e_steps_per_mm: float, clock_hz: float = DEFAULT_CLOCK_HZ):
+    def __init__(
+        self,
+        model: MachineModel,
+        home_sliders: Any,
+        *,
+        e_steps_per_mm: float,
+        clock_hz: float = DEFAULT_CLOCK_HZ,
+    ):
         self.model = model
         self.home_sliders = np.asarray(home_sliders, dtype=float)
         self.e_steps_per_mm = float(e_steps_per_mm)
@@ -244,8 +308,13 @@ class Segmenter:
 
     def segment_block(self, planned: PlannedMoves) -> tuple[SegmentBatch, np.ndarray]:
         """The batch and, per planned move, the number of segments up to its end."""
-        batch, self.state, move_end = segment_moves_ends(planned, self.model, self.state,
-                                                         e_steps_per_mm=self.e_steps_per_mm, clock_hz=self.clock_hz)
+        batch, self.state, move_end = segment_moves_ends(
+            planned,
+            self.model,
+            self.state,
+            e_steps_per_mm=self.e_steps_per_mm,
+            clock_hz=self.clock_hz,
+        )
         self.segments += len(batch)
         return batch, move_end
 

@@ -37,7 +37,11 @@ class PlannedMoves:
 
     @property
     def decel_distance(self) -> np.ndarray:
-        return np.clip((self.v_cruise**2 - self.v_end**2) / (2.0 * self.accel), 0.0, self.length - self.accel_distance)
+        return np.clip(
+            (self.v_cruise**2 - self.v_end**2) / (2.0 * self.accel),
+            0.0,
+            self.length - self.accel_distance,
+        )
 
     @property
     def duration(self) -> np.ndarray:
@@ -55,17 +59,38 @@ class PlannedMoves:
 
     def time_at(self, move: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Time since the move's start and speed at path position ``x`` of ``move`` (arrays)."""
-        return time_at(x, self.length[move], self.accel[move], self.v_start[move], self.v_cruise[move], self.v_end[move])
+        return time_at(
+            x,
+            self.length[move],
+            self.accel[move],
+            self.v_start[move],
+            self.v_cruise[move],
+            self.v_end[move],
+        )
 
 
-_ARRAYS = ("length", "kinematic", "accel", "v_start", "v_cruise", "v_end", "t_start", "chord_step", "module_limited")
+_ARRAYS = (
+    "length",
+    "kinematic",
+    "accel",
+    "v_start",
+    "v_cruise",
+    "v_end",
+    "t_start",
+    "chord_step",
+    "module_limited",
+)
 
 
 def move_durations(length, accel, v_start, v_cruise, v_end) -> np.ndarray:
     d_acc = np.clip((v_cruise**2 - v_start**2) / (2.0 * accel), 0.0, length)
     d_dec = np.clip((v_cruise**2 - v_end**2) / (2.0 * accel), 0.0, length - d_acc)
     cruise = np.maximum(length - d_acc - d_dec, 0.0)
-    return (v_cruise - v_start) / accel + cruise / np.maximum(v_cruise, 1e-300) + (v_cruise - v_end) / accel
+    return (
+        (v_cruise - v_start) / accel
+        + cruise / np.maximum(v_cruise, 1e-300)
+        + (v_cruise - v_end) / accel
+    )
 
 
 def time_at(x, length, accel, v_start, v_cruise, v_end) -> tuple[np.ndarray, np.ndarray]:
@@ -79,8 +104,14 @@ def time_at(x, length, accel, v_start, v_cruise, v_end) -> tuple[np.ndarray, np.
     v_d = np.sqrt(v_end**2 + 2.0 * accel * np.maximum(length - x, 0.0))
     in_acc = x <= d_acc
     in_dec = x >= x2
-    t = np.where(in_acc, (v_a - v_start) / accel,
-                 np.where(in_dec, total - (np.minimum(v_d, v_cruise) - v_end) / accel,
-                          t_acc + (x - d_acc) / v_cruise))
+    t = np.where(
+        in_acc,
+        (v_a - v_start) / accel,
+        np.where(
+            in_dec,
+            total - (np.minimum(v_d, v_cruise) - v_end) / accel,
+            t_acc + (x - d_acc) / v_cruise,
+        ),
+    )
     v = np.where(in_acc, v_a, np.where(in_dec, np.minimum(v_d, v_cruise), v_cruise))
     return t, v

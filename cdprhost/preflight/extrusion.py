@@ -33,14 +33,26 @@ class ExtrusionLimits:
     bed_max_c: float = 120.0
 
     @classmethod
-    def from_profile(cls, profile: MachineProfile, *, min_extrude_temp_c: float = MIN_EXTRUDE_TEMP_C,
-                     max_flow_mm3_s: float = MAX_FLOW_MM3_S) -> ExtrusionLimits:
+    def from_profile(
+        cls,
+        profile: MachineProfile,
+        *,
+        min_extrude_temp_c: float = MIN_EXTRUDE_TEMP_C,
+        max_flow_mm3_s: float = MAX_FLOW_MM3_S,
+    ) -> ExtrusionLimits:
         d = profile.extruder.filament_diameter_mm
-        return cls(math.pi * d * d / 4.0, min_extrude_temp_c, max_flow_mm3_s,
-                   profile.heaters.hotend_max_c, profile.heaters.bed_max_c)
+        return cls(
+            math.pi * d * d / 4.0,
+            min_extrude_temp_c,
+            max_flow_mm3_s,
+            profile.heaters.hotend_max_c,
+            profile.heaters.bed_max_c,
+        )
 
 
-def cold_extrusion(block: MoveBlock, hotend_target_c: float | None, limits: ExtrusionLimits) -> tuple[int, int] | None:
+def cold_extrusion(
+    block: MoveBlock, hotend_target_c: float | None, limits: ExtrusionLimits
+) -> tuple[int, int] | None:
     """(index of the first forward extrusion, how many) when the hotend is too cold, else None."""
     if hotend_target_c is not None and hotend_target_c >= limits.min_extrude_temp_c:
         return None
@@ -48,11 +60,15 @@ def cold_extrusion(block: MoveBlock, hotend_target_c: float | None, limits: Extr
     return (int(idx[0]), int(idx.size)) if idx.size else None
 
 
-def cold_detail(block: MoveBlock, first: int, count: int, hotend_target_c: float | None, limits: ExtrusionLimits) -> str:
+def cold_detail(
+    block: MoveBlock, first: int, count: int, hotend_target_c: float | None, limits: ExtrusionLimits
+) -> str:
     target = "unset" if hotend_target_c is None else f"{hotend_target_c:g} C"
     more = f"; {count - 1} more extruding move(s) follow at that target" if count > 1 else ""
-    return (f"extrudes {float(block.extrusion[first]):.4g} mm of filament with the hotend target {target} "
-            f"(minimum {limits.min_extrude_temp_c:g} C){more}")
+    return (
+        f"extrudes {float(block.extrusion[first]):.4g} mm of filament with the hotend target {target} "
+        f"(minimum {limits.min_extrude_temp_c:g} C){more}"
+    )
 
 
 def volumetric_flow(planned: PlannedMoves, limits: ExtrusionLimits) -> np.ndarray:

@@ -30,8 +30,9 @@ def render_text(report: PreflightReport, *, max_rows: int = 20) -> str:
     )
     if report.print_box_gcode is not None:
         b = report.print_box_gcode
-        lines.append("printed part (G-code frame): x {:.2f}..{:.2f}, y {:.2f}..{:.2f}, z {:.2f}..{:.2f} mm".format(
-            b.min[0], b.max[0], b.min[1], b.max[1], b.min[2], b.max[2]))
+        lines.append(
+            f"printed part (G-code frame): x {b.min[0]:.2f}..{b.max[0]:.2f}, y {b.min[1]:.2f}..{b.max[1]:.2f}, z {b.min[2]:.2f}..{b.max[2]:.2f} mm"
+        )
     if report.notes:
         notes = ", ".join(f"{n.word} x{n.count} (first at line {n.line})" for n in report.notes)
         lines.append(f"skipped harmless commands: {notes}")

@@ -17,8 +17,10 @@ MAX_PER_RULE = 200
 class Violation(BaseModel):
     model_config = ConfigDict(frozen=True)
     line: int = Field(description="1-based G-code line")
-    rule: str = Field(description="tension, slider_travel, build_volume, cold_extrusion, volumetric_flow, "
-                                  "temperature, unknown_command")
+    rule: str = Field(
+        description="tension, slider_travel, build_volume, cold_extrusion, volumetric_flow, "
+        "temperature, unknown_command"
+    )
     point: tuple[float, float, float] = Field(description="machine-frame point (mm) where it fails")
     detail: str
 
@@ -50,8 +52,12 @@ class PreflightReport(BaseModel):
     estimated_time_s: float
     moves_slowed_by_modules: int
     moves_sampled_densely: int
-    motion_box_machine: Box | None = Field(description="all effector positions, home included (machine frame)")
-    print_box_gcode: Box | None = Field(description="extruding moves (G-code frame): the printed part")
+    motion_box_machine: Box | None = Field(
+        description="all effector positions, home included (machine frame)"
+    )
+    print_box_gcode: Box | None = Field(
+        description="extruding moves (G-code frame): the printed part"
+    )
     min_extrude_temp_c: float
     max_volumetric_flow_mm3_s: float
     max_volumetric_flow_seen_mm3_s: float
@@ -72,7 +78,9 @@ class ViolationLog:
     def add(self, line: int, rule: str, point: np.ndarray, detail: str) -> None:
         self.counts[rule] += 1
         if self.counts[rule] <= self.per_rule:
-            self._kept.append(Violation(line=int(line), rule=rule, point=point3(point), detail=detail))
+            self._kept.append(
+                Violation(line=int(line), rule=rule, point=point3(point), detail=detail)
+            )
 
     @property
     def total(self) -> int:

@@ -19,8 +19,13 @@ from cdprhost.gcode.items import LayerChange, MoveChunk, SetTemperature, Unknown
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.program import MarkedMoves, ProgramPlanner, read_items
-from cdprhost.preflight.extrusion import (ExtrusionLimits, cold_detail, cold_extrusion, temperature_problem,
-                                          volumetric_flow)
+from cdprhost.preflight.extrusion import (
+    ExtrusionLimits,
+    cold_detail,
+    cold_extrusion,
+    temperature_problem,
+    volumetric_flow,
+)
 from cdprhost.preflight.report import BoxAccumulator, NoteLog, PreflightReport, ViolationLog
 from cdprhost.preflight.workspace import PathChecker
 from cdprhost.profile.models import MachineProfile
@@ -29,13 +34,22 @@ from cdprhost.profile.models import MachineProfile
 class Preflight:
     """Incremental preflight: feed items with :meth:`add`, then :meth:`report`."""
 
-    def __init__(self, profile: MachineProfile, model: MachineModel | None = None, *, source: str = "<program>",
-                 limits: ExtrusionLimits | None = None, **planner_options: Any):
+    def __init__(
+        self,
+        profile: MachineProfile,
+        model: MachineModel | None = None,
+        *,
+        source: str = "<program>",
+        limits: ExtrusionLimits | None = None,
+        **planner_options: Any,
+    ):
         self.profile = profile
         self.model = model or MachineModel.from_profile(profile)
         self.source = source
         self.limits = limits or ExtrusionLimits.from_profile(profile)
-        self.planner = ProgramPlanner(profile, self.model, chord=False, marked=True, **planner_options)
+        self.planner = ProgramPlanner(
+            profile, self.model, chord=False, marked=True, **planner_options
+        )
         self.checker = PathChecker(self.model)
         self.violations = ViolationLog()
         self.notes = NoteLog()
@@ -64,8 +78,12 @@ class Preflight:
                 self.notes.add(item.line, item.word, getattr(item, "text", ""))
             else:
                 text = f" ({item.text})" if getattr(item, "text", "") else ""
-                self.violations.add(item.line, "unknown_command", self.planner.position,
-                                    f"{item.word} is not supported and may change what is printed{text}")
+                self.violations.add(
+                    item.line,
+                    "unknown_command",
+                    self.planner.position,
+                    f"{item.word} is not supported and may change what is printed{text}",
+                )
         elif isinstance(item, LayerChange):
             self.layers = max(self.layers, item.index + 1)
         self._planned(self.planner.command(item))
@@ -89,8 +107,12 @@ class Preflight:
         cold = cold_extrusion(block, self.hotend_c, self.limits)
         if cold is not None:
             first, count = cold
-            self.violations.add(int(block.line[first]), "cold_extrusion", block.end[first],
-                                cold_detail(block, first, count, self.hotend_c, self.limits))
+            self.violations.add(
+                int(block.line[first]),
+                "cold_extrusion",
+                block.end[first],
+                cold_detail(block, first, count, self.hotend_c, self.limits),
+            )
         self.motion_box.add(block.end)
         extruding = block.extrusion > 0
         if extruding.any():
@@ -107,36 +129,61 @@ class Preflight:
             if flow.size:
                 self.max_flow = max(self.max_flow, float(flow.max()))
             for i in np.flatnonzero(flow > self.limits.max_flow_mm3_s):
-                self.violations.add(int(out.moves.line[i]), "volumetric_flow", out.moves.end[i],
-                                    f"melt flow {flow[i]:.3g} mm^3/s at {out.v_cruise[i]:.4g} mm/s exceeds "
-                                    f"{self.limits.max_flow_mm3_s:g} mm^3/s by {flow[i] - self.limits.max_flow_mm3_s:.3g}")
+                self.violations.add(
+                    int(out.moves.line[i]),
+                    "volumetric_flow",
+                    out.moves.end[i],
+                    f"melt flow {flow[i]:.3g} mm^3/s at {out.v_cruise[i]:.4g} mm/s exceeds "
+                    f"{self.limits.max_flow_mm3_s:g} mm^3/s by {flow[i] - self.limits.max_flow_mm3_s:.3g}",
+                )
 
     def report(self) -> PreflightReport:
         self._planned(self.planner.finish())
         origin = self.planner.origin
         return PreflightReport(
-            source=self.source, profile=self.profile.name, ok=self.violations.total == 0,
-            violations=self.violations.ordered(), violations_total=self.violations.total,
-            violations_by_rule=dict(self.violations.counts), notes=self.notes.ordered(),
-            moves=self.moves, layers=self.layers, filament_mm=round(self.filament_mm, 4),
-            estimated_time_s=round(self.planner.time, 3), moves_slowed_by_modules=self.slowed,
+            source=self.source,
+            profile=self.profile.name,
+            ok=self.violations.total == 0,
+            violations=self.violations.ordered(),
+            violations_total=self.violations.total,
+            violations_by_rule=dict(self.violations.counts),
+            notes=self.notes.ordered(),
+            moves=self.moves,
+            layers=self.layers,
+            filament_mm=round(self.filament_mm, 4),
+            estimated_time_s=round(self.planner.time, 3),
+            moves_slowed_by_modules=self.slowed,
             moves_sampled_densely=self.checker.sampled_moves,
-            motion_box_machine=self.motion_box.box(), print_box_gcode=self.print_box.box(origin),
-            min_extrude_temp_c=self.limits.min_extrude_temp_c, max_volumetric_flow_mm3_s=self.limits.max_flow_mm3_s,
+            motion_box_machine=self.motion_box.box(),
+            print_box_gcode=self.print_box.box(origin),
+            min_extrude_temp_c=self.limits.min_extrude_temp_c,
+            max_volumetric_flow_mm3_s=self.limits.max_flow_mm3_s,
             max_volumetric_flow_seen_mm3_s=round(self.max_flow, 4),
         )
 
 
-def preflight_items(items: Iterable[Any], profile: MachineProfile, model: MachineModel | None = None, *,
-                    source: str = "<program>", **options: Any) -> PreflightReport:
+def preflight_items(
+    items: Iterable[Any],
+    profile: MachineProfile,
+    model: MachineModel | None = None,
+    *,
+    source: str = "<program>",
+    **options: Any,
+) -> PreflightReport:
     pf = Preflight(profile, model, source=source, **options)
     for item in items:
         pf.add(item)
     return pf.report()
 
 
-def preflight(path: str | os.PathLike[str], profile: MachineProfile, model: MachineModel | None = None,
-              **options: Any) -> PreflightReport:
+def preflight(
+    path: str | os.PathLike[str],
+    profile: MachineProfile,
+    model: MachineModel | None = None,
+    **options: Any,
+) -> PreflightReport:
     """Read and check a G-code file; raises `GcodeError` (exit 2) on malformed input."""
     model = model or MachineModel.from_profile(profile)
-    return preflight_items(read_items(path, profile, model), profile, model, source=os.fspath(path), **options)
+    return preflight_items(
+        read_items(path, profile, model), profile, model, source=os.fspath(path), **options
+    )

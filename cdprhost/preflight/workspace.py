@@ -49,7 +49,11 @@ def _certify_grid(model: MachineModel, h: float) -> tuple[bool | None, float]:
     """True: certified; None: undecided at this spacing; False: a grid point inside fails."""
     lim = model.limits
     side, r = lim.build_side, lim.build_side / np.sqrt(3.0)
-    spans = ((-side / 2, side / 2), (-r / 2, r), (lim.z_min, lim.z_max))  # the build volume's bounding box
+    spans = (
+        (-side / 2, side / 2),
+        (-r / 2, r),
+        (lim.z_min, lim.z_max),
+    )  # the build volume's bounding box
     axes = [np.linspace(a, b, max(int(np.ceil((b - a) / h)), 1) + 1) for a, b in spans]
     steps = np.array([ax[1] - ax[0] for ax in axes])
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
@@ -61,12 +65,16 @@ def _certify_grid(model: MachineModel, h: float) -> tuple[bool | None, float]:
 
     def corners(a: np.ndarray, op) -> np.ndarray:
         sx, sy, sz = (n - 1 for n in a.shape)
-        return op.reduce([a[i:sx + i, j:sy + j, k:sz + k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        return op.reduce(
+            [a[i : sx + i, j : sy + j, k : sz + k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+        )
 
     half_diag = 0.5 * float(np.linalg.norm(steps))
     bound = corners(margin, np.minimum) - 1.5 * corners(grad, np.maximum) * half_diag
     centre = grid[:-1, :-1, :-1, :2] + steps[:2] / 2.0
-    touches = triangle_excess(centre.reshape(-1, 2), side).reshape(bound.shape) <= 0.5 * float(np.linalg.norm(steps[:2]))
+    touches = triangle_excess(centre.reshape(-1, 2), side).reshape(bound.shape) <= 0.5 * float(
+        np.linalg.norm(steps[:2])
+    )
     inside = build_volume_excess(grid.reshape(-1, 3), side, lim.z_min, lim.z_max) <= 1e-9
     g_max = float(np.max(grad.reshape(-1)[inside])) * 1.5 if inside.any() else np.inf
     inside = inside.reshape(margin.shape)
@@ -75,7 +83,9 @@ def _certify_grid(model: MachineModel, h: float) -> tuple[bool | None, float]:
     return (True if np.all(bound[touches] > 0) else None), g_max
 
 
-def tension_certificate(model: MachineModel, spacings: tuple[float, ...] = (10.0, 5.0, 2.5)) -> tuple[bool, float]:
+def tension_certificate(
+    model: MachineModel, spacings: tuple[float, ...] = (10.0, 5.0, 2.5)
+) -> tuple[bool, float]:
     """(whole build volume tension-feasible, gradient bound G of the margin in N/mm).
 
     Margins on a grid over the build volume's bounding box; a cell counts when its
@@ -98,7 +108,9 @@ class PathChecker:
         self.volume_certified, self.gradient_bound = tension_certificate(model)
         lim = model.limits
         shortest = float(np.min(model.geometry.initial_lengths + lim.travel[:, 0]))
-        self.shortest_cable = shortest if shortest > 0 else 0.0  # 0: every move near s_min gets sampled
+        self.shortest_cable = (
+            shortest if shortest > 0 else 0.0
+        )  # 0: every move near s_min gets sampled
         self.sampled_moves = 0
 
     def _volume_excess(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -115,7 +127,11 @@ class PathChecker:
             return []
         model, lim = self.model, self.model.limits
         chained = np.array_equal(block.start[1:], block.end[:-1])
-        pts = np.vstack([block.start[:1], block.end]) if chained else np.vstack([block.start, block.end])
+        pts = (
+            np.vstack([block.start[:1], block.end])
+            if chained
+            else np.vstack([block.start, block.end])
+        )
         i0 = np.arange(n)
         i1 = i0 + 1 if chained else i0 + n
         bv = self._volume_excess(pts[:, 0], pts[:, 1], pts[:, 2])
@@ -133,7 +149,11 @@ class PathChecker:
         suspect |= np.minimum(room_lo[i0], room_lo[i1]) - dip <= SLIDER_MARGIN_MM
         if not self.volume_certified:
             g = _tension_margin(pts, model)
-            suspect |= ~(g[i0] > 0) | ~(g[i1] > 0) | ~(g[i0] + g[i1] > self.gradient_bound * np.sqrt(dist2))
+            suspect |= (
+                ~(g[i0] > 0)
+                | ~(g[i1] > 0)
+                | ~(g[i0] + g[i1] > self.gradient_bound * np.sqrt(dist2))
+            )
         idx = np.flatnonzero(suspect)
         return self._sample(block, idx) if idx.size else []
 
@@ -158,6 +178,10 @@ class PathChecker:
             worst = int(same[np.argmax(report.excess[same])])
             detail = report.describe(worst, self.model.limits)
             if worst != i:
-                detail += " at worst, at ({:.2f}, {:.2f}, {:.2f}); it first fails here".format(*pts[worst])
-            failures.append(PathFailure(int(idx[o]), str(report.rule_name(i)), pts[i].copy(), detail))
+                detail += " at worst, at ({:.2f}, {:.2f}, {:.2f}); it first fails here".format(
+                    *pts[worst]
+                )
+            failures.append(
+                PathFailure(int(idx[o]), str(report.rule_name(i)), pts[i].copy(), detail)
+            )
         return failures

@@ -66,7 +66,11 @@ def _format_errors(exc: ValidationError) -> list[str]:
             msg = f"must be a finite number, got {err.get('input')!r}"
         else:
             msg = err["msg"].removeprefix("Value error, ")
-            if "input" in err and kind not in ("value_error", "assertion_error") and not isinstance(err["input"], dict):
+            if (
+                "input" in err
+                and kind not in ("value_error", "assertion_error")
+                and not isinstance(err["input"], dict)
+            ):
                 msg += f" (got {err['input']!r})"
         problems.append(f"{loc}: {msg}")
     return problems
@@ -75,7 +79,9 @@ def _format_errors(exc: ValidationError) -> list[str]:
 def _non_finite(data: Any, path: str = "") -> list[str]:
     """TOML allows nan/inf literals; name every one (pydantic may stop at the first)."""
     if isinstance(data, dict):
-        return [p for k, v in data.items() for p in _non_finite(v, f"{path}.{k}" if path else str(k))]
+        return [
+            p for k, v in data.items() for p in _non_finite(v, f"{path}.{k}" if path else str(k))
+        ]
     if isinstance(data, list):
         return [p for i, v in enumerate(data) for p in _non_finite(v, f"{path}.{i}")]
     if isinstance(data, float) and not math.isfinite(data):
@@ -83,7 +89,9 @@ def _non_finite(data: Any, path: str = "") -> list[str]:
     return []
 
 
-def profile_from_dict(data: dict[str, Any], *, source: str = "<profile>", default_name: str = "") -> MachineProfile:
+def profile_from_dict(
+    data: dict[str, Any], *, source: str = "<profile>", default_name: str = ""
+) -> MachineProfile:
     data = dict(data)
     data.setdefault("name", default_name)
     try:

@@ -25,7 +25,9 @@ class Geometry(_Strict):
     """The 12 kinematic parameters: virtual cable outlets A_k and initial lengths L_k0."""
 
     outlets: tuple[Vec3, Vec3, Vec3] = Field(description="A_1, A_2, A_3 in the base frame (mm)")
-    initial_lengths: tuple[Positive, Positive, Positive] = Field(description="L_10, L_20, L_30 (mm)")
+    initial_lengths: tuple[Positive, Positive, Positive] = Field(
+        description="L_10, L_20, L_30 (mm)"
+    )
 
     @field_validator("outlets")
     @classmethod
@@ -34,7 +36,9 @@ class Geometry(_Strict):
         area2 = float(np.linalg.norm(np.cross(a[1] - a[0], a[2] - a[0])))
         span = float(np.max(np.linalg.norm(a - a.mean(axis=0), axis=1)))
         if area2 <= 1e-6 * max(span, 1.0) ** 2:
-            raise ValueError("the three outlets are collinear (or coincide); the forward kinematics has no unique solution")
+            raise ValueError(
+                "the three outlets are collinear (or coincide); the forward kinematics has no unique solution"
+            )
         return outlets
 
 
@@ -43,13 +47,17 @@ class Drive(_Strict):
     travel_mm: tuple[tuple[Finite, Finite], tuple[Finite, Finite], tuple[Finite, Finite]] = Field(
         description="[s_min, s_max] slider travel per module (mm)"
     )
-    home_mm: Vec3 = Field(default=(0.0, 0.0, 0.0), description="slider position at the module endstop (mm)")
+    home_mm: Vec3 = Field(
+        default=(0.0, 0.0, 0.0), description="slider position at the module endstop (mm)"
+    )
 
     @model_validator(mode="after")
     def _travel_ordered(self) -> Drive:
         for k, (lo, hi) in enumerate(self.travel_mm):
             if not lo < hi:
-                raise ValueError(f"travel_mm[{k}] must be [min, max] with min < max, got [{lo}, {hi}]")
+                raise ValueError(
+                    f"travel_mm[{k}] must be [min, max] with min < max, got [{lo}, {hi}]"
+                )
             if not lo <= self.home_mm[k] <= hi:
                 raise ValueError(f"home_mm[{k}] = {self.home_mm[k]} lies outside travel_mm[{k}]")
         return self
@@ -74,10 +82,14 @@ class Statics(_Strict):
 
 
 class BuildVolume(_Strict):
-    side_mm: Positive = Field(description="side of the equilateral build triangle, one vertex on +y")
+    side_mm: Positive = Field(
+        description="side of the equilateral build triangle, one vertex on +y"
+    )
     z_min_mm: Finite
     z_max_mm: Finite
-    bed_origin: Vec3 = Field(default=(0.0, 0.0, 110.0), description="machine point of G-code (0,0,0)")
+    bed_origin: Vec3 = Field(
+        default=(0.0, 0.0, 110.0), description="machine point of G-code (0,0,0)"
+    )
 
     @model_validator(mode="after")
     def _z_order(self) -> BuildVolume:
@@ -144,7 +156,9 @@ class MachineProfile(_Strict):
     heaters: Heaters = Heaters()
     serial: Serial = Serial()
     effects: dict[str, dict[str, Any]] = Field(default_factory=dict)
-    calibration: dict[str, Any] = Field(default_factory=dict, description="provenance of a calibrated profile")
+    calibration: dict[str, Any] = Field(
+        default_factory=dict, description="provenance of a calibrated profile"
+    )
 
     @model_validator(mode="after")
     def _outlets_below_build_volume(self) -> MachineProfile:
@@ -154,7 +168,9 @@ class MachineProfile(_Strict):
                 f"geometry.outlets: the highest outlet (z = {top} mm) is not below the build volume "
                 f"(z_min_mm = {self.build_volume.z_min_mm}); the effector must hang above the outlets"
             )
-        from cdprhost.effects.registry import validate_effects  # local: effects import profile types
+        from cdprhost.effects.registry import (
+            validate_effects,
+        )  # local: effects import profile types
 
         validate_effects(self.effects)
         return self

@@ -8,6 +8,7 @@ the job reducer, so the screen can never disagree with the job.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -32,7 +33,12 @@ from cdprhost.tui.state import UiState, fold_job_events
 SCREENS_ORDER = (
     ("connection", "f1", "Connect", "Connection: port, baud, device identity, link health"),
     ("print", "f2", "Print", "Print: open a file, preflight, start/pause/resume/cancel, progress"),
-    ("jog", "f3", "Jog", "Jog: move by steps with feasibility shown first, home, motors off, heaters"),
+    (
+        "jog",
+        "f3",
+        "Jog",
+        "Jog: move by steps with feasibility shown first, home, motors off, heaters",
+    ),
     ("calibrate", "f4", "Calibrate", "Calibrate: planned poses, takes, identification results"),
     ("diagnose", "f5", "Diagnose", "Diagnose: verdict, where, held-out gap before/after"),
 )
@@ -44,22 +50,42 @@ class EventsReady(Message):
 
 class CdprApp(App[int]):
     TITLE = "cdprhost"
-    CSS_PATH = ["app.tcss", "print.tcss", "connection.tcss", "jog.tcss", "calibrate.tcss", "diagnose.tcss"]
+    CSS_PATH = [
+        "app.tcss",
+        "print.tcss",
+        "connection.tcss",
+        "jog.tcss",
+        "calibrate.tcss",
+        "diagnose.tcss",
+    ]
     MODES = {
-        "connection": ConnectionScreen, "print": PrintScreen, "jog": JogScreen,
-        "calibrate": CalibrateScreen, "diagnose": DiagnoseScreen,
+        "connection": ConnectionScreen,
+        "print": PrintScreen,
+        "jog": JogScreen,
+        "calibrate": CalibrateScreen,
+        "diagnose": DiagnoseScreen,
     }
     DEFAULT_MODE = "print"
     BINDINGS = [
-        *(Binding(key, f"app.switch_mode('{mode}')", label, tooltip=help_, show=False)
-          for mode, key, label, help_ in SCREENS_ORDER),
+        *(
+            Binding(key, f"app.switch_mode('{mode}')", label, tooltip=help_, show=False)
+            for mode, key, label, help_ in SCREENS_ORDER
+        ),
         Binding("ctrl+q", "quit", "Quit", priority=True),
     ]
 
     state: var[UiState] = var(UiState, init=False)
 
-    def __init__(self, backend: Backend, *, port: str = EMBEDDED, baud: int | None = None,
-                 connect_on_start: bool = True, health_interval_s: float = 0.5, status_interval_s: float = 1.0):
+    def __init__(
+        self,
+        backend: Backend,
+        *,
+        port: str = EMBEDDED,
+        baud: int | None = None,
+        connect_on_start: bool = True,
+        health_interval_s: float = 0.5,
+        status_interval_s: float = 1.0,
+    ):
         super().__init__()
         self.backend = backend
         self.pump = EventPump(lambda: self.post_message(EventsReady()))
@@ -83,17 +109,13 @@ class CdprApp(App[int]):
 
     def on_unmount(self) -> None:
         self.controller.cancel()
-        try:
+        with contextlib.suppress(Exception):  # closing must not mask the exit
             self.backend.close()
-        except Exception:  # noqa: BLE001 - closing must not mask the exit
-            pass
 
     def call_later_safe(self, fn: Callable[..., Any], *args: Any) -> None:
         """From a worker thread: run ``fn`` in the UI thread (dropped once the app has closed)."""
-        try:
+        with contextlib.suppress(RuntimeError):
             self.call_from_thread(fn, *args)
-        except RuntimeError:
-            pass
 
     # ------------------------------------------------------------ events
     def on_events_ready(self, _: EventsReady) -> None:
@@ -118,7 +140,9 @@ class CdprApp(App[int]):
         if job_id != self.state.job_id:
             return
         if error is not None:
-            self.notify(str(error) or type(error).__name__, title="print", severity="error", timeout=10)
+            self.notify(
+                str(error) or type(error).__name__, title="print", severity="error", timeout=10
+            )
         elif self.state.job.state is JobState.DONE:
             self.notify("print finished", title="print")
 
@@ -151,13 +175,18 @@ class CdprApp(App[int]):
         self.confirm("Resume the print?", self.controller.resume)
 
     def action_cancel_print(self) -> None:
-        self.confirm("Cancel the print? The machine stops at the end of the queued moves.", self.controller.cancel)
+        self.confirm(
+            "Cancel the print? The machine stops at the end of the queued moves.",
+            self.controller.cancel,
+        )
 
     def check_print_action(self, action: str) -> bool | None:
         """Enabled state of the print actions from the job state (None: shown greyed)."""
         s, pre = self.state.job.state, self.state.file.preflight
         if action == "start_print":
-            ready = bool(self.state.file.path) and pre is not None and pre.ok and self.state.connected
+            ready = (
+                bool(self.state.file.path) and pre is not None and pre.ok and self.state.connected
+            )
             return None if self.state.job_active or not ready else True
         if action == "pause_print":
             return s in (JobState.PRINTING, JobState.HEATING)
@@ -170,7 +199,9 @@ class CdprApp(App[int]):
     # ---------------------------------------------------- command palette
     def get_system_commands(self, screen: Screen) -> Iterable[SystemCommand]:
         for mode, key, label, help_ in SCREENS_ORDER:
-            yield SystemCommand(f"Screen: {label} ({key})", help_, lambda m=mode: self.switch_mode(m))
+            yield SystemCommand(
+                f"Screen: {label} ({key})", help_, lambda m=mode: self.switch_mode(m)
+            )
         c = self.controller
         for action, title, help_ in (
             ("start_print", "Print: start", "Start printing the open file (asks first)"),
@@ -184,8 +215,13 @@ class CdprApp(App[int]):
             yield SystemCommand("Device: disconnect", "Close the link", c.disconnect)
             if not self.state.job_active:
                 yield SystemCommand("Device: home", "Drive the modules to their endstops", c.home)
-                yield SystemCommand("Device: motors off", "Disable the stepper drivers", c.motors_off)
+                yield SystemCommand(
+                    "Device: motors off", "Disable the stepper drivers", c.motors_off
+                )
         else:
-            yield SystemCommand("Device: connect", f"Connect to {self._port}",
-                                lambda: c.connect(self._port, self._baud))
+            yield SystemCommand(
+                "Device: connect",
+                f"Connect to {self._port}",
+                lambda: c.connect(self._port, self._baud),
+            )
         yield from super().get_system_commands(screen)

@@ -12,7 +12,14 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from cdprhost.job.state import IllegalTransition, JobSnapshot, JobState, LinkHealth, reduce
-from cdprhost.tui.control.views import CalibrationView, DeviceStatus, DiagnosisView, JogCheck, PreflightView, Vec3
+from cdprhost.tui.control.views import (
+    CalibrationView,
+    DeviceStatus,
+    DiagnosisView,
+    JogCheck,
+    PreflightView,
+    Vec3,
+)
 
 
 @dataclass(frozen=True)
@@ -84,7 +91,9 @@ def fold_job_events(state: UiState, items: list[tuple[int, Any]]) -> tuple[UiSta
     return replace(state, job=snap), problems
 
 
-def live_position(state: UiState) -> tuple[Vec3 | None, Vec3 | None, tuple[float, float, float] | None]:
+def live_position(
+    state: UiState,
+) -> tuple[Vec3 | None, Vec3 | None, tuple[float, float, float] | None]:
     """(effector position, sliders, tensions): from the job while it runs, else the device."""
     job = state.job
     if job.position is not None and (state.job_active or state.device is None):

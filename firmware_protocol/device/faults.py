@@ -37,7 +37,7 @@ class FaultSpec:
         return bool(self.corrupt or self.drop or self.dup)
 
     @classmethod
-    def parse(cls, spec: str | None) -> "FaultSpec":
+    def parse(cls, spec: str | None) -> FaultSpec:
         if not spec:
             return cls()
         known = {f.name: f for f in fields(cls)}
@@ -53,7 +53,9 @@ class FaultSpec:
             if key not in known:
                 raise FaultSpecError(f"unknown key '{key}' (known: {', '.join(known)})")
             try:
-                value: float | int = int(raw) if key in ("reset_after", "stall_after", "seed") else float(raw)
+                value: float | int = (
+                    int(raw) if key in ("reset_after", "stall_after", "seed") else float(raw)
+                )
             except ValueError:
                 raise FaultSpecError(f"{key}: '{raw}' is not a number") from None
             if key in ("corrupt", "drop", "dup") and not 0.0 <= value <= 1.0:
@@ -71,7 +73,9 @@ class FaultyChannel:
     by ``now``; ``next_delivery()`` is the next time something becomes due.
     """
 
-    def __init__(self, spec: FaultSpec | None = None, *, seed_offset: int = 0, baud: int | None = None):
+    def __init__(
+        self, spec: FaultSpec | None = None, *, seed_offset: int = 0, baud: int | None = None
+    ):
         self.spec = spec or FaultSpec()
         self.baud = baud
         self._rng = np.random.default_rng([self.spec.seed, seed_offset])

@@ -55,12 +55,16 @@ MAX_REPORT_BACKLOG = 256
 class SimDevice:
     """The simulated firmware. ``record`` lists every executed segment (see record.py)."""
 
-    def __init__(self, config: SimConfig | None = None, faults: FaultSpec | None = None, observer=None):
+    def __init__(
+        self, config: SimConfig | None = None, faults: FaultSpec | None = None, observer=None
+    ):
         self.config = config or SimConfig()
         self.faults = faults or FaultSpec()
         self.observer = observer
         self.record: list[dict] = []
-        if hasattr(observer, "attach_record"):  # the observer may read motion directions from the record
+        if hasattr(
+            observer, "attach_record"
+        ):  # the observer may read motion directions from the record
             observer.attach_record(self.record)
         self.boots = 0
         self.reset_times: list[float] = []  # link times of simulated resets
@@ -76,15 +80,23 @@ class SimDevice:
         cfg = self.config
         self.cause = int(cause)
         self.boot_id = (cfg.seed * 2654435761 + self.boots * 40503 + 0x5EED) & 0xFFFFFFFF
-        self.machine = Machine(cfg, self.record, boot=self.boots, physical=physical, observer=self.observer)
+        self.machine = Machine(
+            cfg, self.record, boot=self.boots, physical=physical, observer=self.observer
+        )
         if self.faults.reset_after and not self._reset_done:
             self.machine.halt_at = self.faults.reset_after
         elif self.faults.stall_after:
             self.machine.halt_at = self.faults.stall_after
         if self.faults.heater_fail_after is not None:
             self.machine.heater_fail_at = self.faults.heater_fail_after
-        self.endpoint = Endpoint(window=cfg.window, accept=self._accept, flow=self._flow_payload,
-                                 rto_initial=0.25, rto_floor=0.02, rto_ceiling=1.0)
+        self.endpoint = Endpoint(
+            window=cfg.window,
+            accept=self._accept,
+            flow=self._flow_payload,
+            rto_initial=0.25,
+            rto_floor=0.02,
+            rto_ceiling=1.0,
+        )
         self.synced = False
         self.nonce: int | None = None
         self.ctx = SegmentContext()
@@ -112,24 +124,62 @@ class SimDevice:
 
     def _boot_message(self) -> Boot:
         prev = self._prev or (0, 0)
-        return Boot(self.boot_id, self.cause, PROTOCOL_MAJOR, PROTOCOL_MINOR, int(self._prev is not None), *prev)
+        return Boot(
+            self.boot_id,
+            self.cause,
+            PROTOCOL_MAJOR,
+            PROTOCOL_MINOR,
+            int(self._prev is not None),
+            *prev,
+        )
 
     def ident(self, nonce: int) -> Ident:
         c, mc = self.config, self.machine
-        return Ident(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR, self.boot_id, c.firmware_name, c.firmware_version, 4,
-                     c.queue_capacity, c.clock_hz, c.max_step_rate, c.max_payload, 2, 1, mc.items_received,
-                     mc.items_done, mc.segments_received, mc.segments_done)
+        return Ident(
+            nonce,
+            PROTOCOL_MAJOR,
+            PROTOCOL_MINOR,
+            self.boot_id,
+            c.firmware_name,
+            c.firmware_version,
+            4,
+            c.queue_capacity,
+            c.clock_hz,
+            c.max_step_rate,
+            c.max_payload,
+            2,
+            1,
+            mc.items_received,
+            mc.items_done,
+            mc.segments_received,
+            mc.segments_done,
+        )
 
     def status(self) -> Status:
         mc = self.machine
         T = self.device_time(self._now)
         h, b = mc.heaters
         ep = self.endpoint
-        return Status(mc.flags() | (Flag.SYNCED if self.synced else 0), max(0, mc.free_slots()), mc.items_done,
-                      mc.segments_done, mc.motion_ticks, tuple(mc.steps_now(T)), round(h.temp * 10),
-                      round(h.target * 10), round(b.temp * 10), round(b.target * 10), mc.fan, mc.enabled_mask,
-                      mc.homed_mask, mc.last_error, ep.bad_frames, ep.retransmits, ep.counters.naks_sent,
-                      ep.counters.duplicates)
+        return Status(
+            mc.flags() | (Flag.SYNCED if self.synced else 0),
+            max(0, mc.free_slots()),
+            mc.items_done,
+            mc.segments_done,
+            mc.motion_ticks,
+            tuple(mc.steps_now(T)),
+            round(h.temp * 10),
+            round(h.target * 10),
+            round(b.temp * 10),
+            round(b.target * 10),
+            mc.fan,
+            mc.enabled_mask,
+            mc.homed_mask,
+            mc.last_error,
+            ep.bad_frames,
+            ep.retransmits,
+            ep.counters.naks_sent,
+            ep.counters.duplicates,
+        )
 
     # ------------------------------------------------------------------ main loop
 
@@ -201,15 +251,19 @@ class SimDevice:
         mc = self.machine
         if (mc.items_done, mc.flags()) == self._flow_sent:
             return False
-        return mc.free_slots() >= self._flow_free_sent + self._flow_step or now >= self._flow_time + \
-            self.config.flow_interval_s
+        return (
+            mc.free_slots() >= self._flow_free_sent + self._flow_step
+            or now >= self._flow_time + self.config.flow_interval_s
+        )
 
     def _flow_payload(self) -> bytes:
         mc = self.machine
         self._flow_sent = (mc.items_done, mc.flags())
         self._flow_free_sent = mc.free_slots()
         self._flow_time = self._now
-        return encode_message(Flow(mc.flags(), max(0, mc.free_slots()), mc.items_done, mc.segments_done))
+        return encode_message(
+            Flow(mc.flags(), max(0, mc.free_slots()), mc.items_done, mc.segments_done)
+        )
 
     def _report(self, reports: list[Message]) -> None:
         if not self.synced:
@@ -251,7 +305,9 @@ class SimDevice:
         try:
             msgs = decode_messages(payload, work)
         except MessageError:
-            self._report([mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, mc.segments_received, T)])
+            self._report(
+                [mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, mc.segments_received, T)]
+            )
             return True
         queued = sum(1 for x in msgs if x.QUEUED)
         if queued > mc.free_slots() and not mc.fault:
@@ -270,7 +326,9 @@ class SimDevice:
                 if mc.clear_fault():
                     reports.append(Event(EventCode.FAULT_CLEARED, mc.items_done, ()))
             else:
-                reports.append(mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, mc.segments_received, T))
+                reports.append(
+                    mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, mc.segments_received, T)
+                )
         self._report(reports)
         return True
 

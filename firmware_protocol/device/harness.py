@@ -20,8 +20,14 @@ DEFAULT_BAUD = 250_000
 class VirtualBench:
     name = "embedded simulated device"
 
-    def __init__(self, device: SimDevice | None = None, *, faults: FaultSpec | None = None,
-                 baud: int | None = DEFAULT_BAUD, pace: float | None = None):
+    def __init__(
+        self,
+        device: SimDevice | None = None,
+        *,
+        faults: FaultSpec | None = None,
+        baud: int | None = DEFAULT_BAUD,
+        pace: float | None = None,
+    ):
         self.device = device or SimDevice(faults=faults)
         spec = faults or self.device.faults
         self.to_device = FaultyChannel(spec, seed_offset=1, baud=baud)
@@ -85,8 +91,11 @@ class VirtualBench:
             deadline = self._settle()
             if stop_on_data and self._host_rx:
                 return
-            times = [x for x in (self.to_host.next_delivery(), self.to_device.next_delivery(), deadline)
-                     if x is not None]
+            times = [
+                x
+                for x in (self.to_host.next_delivery(), self.to_device.next_delivery(), deadline)
+                if x is not None
+            ]
             nxt = min(times, default=math.inf)
             if nxt > target:
                 self._set_clock(target)

@@ -28,10 +28,17 @@ class HeaterModel:
     reached_band_c: float = 1.0
 
 
-HOTEND_MODEL = HeaterModel("hotend", tau_s=30.0, gain_c=300.0, max_c=285.0, runaway_period_s=20.0,
-                           runaway_hysteresis_c=15.0)
-BED_MODEL = HeaterModel("bed", tau_s=90.0, gain_c=100.0, max_c=120.0, runaway_period_s=60.0,
-                        runaway_hysteresis_c=10.0)
+HOTEND_MODEL = HeaterModel(
+    "hotend",
+    tau_s=30.0,
+    gain_c=300.0,
+    max_c=285.0,
+    runaway_period_s=20.0,
+    runaway_hysteresis_c=15.0,
+)
+BED_MODEL = HeaterModel(
+    "bed", tau_s=90.0, gain_c=100.0, max_c=120.0, runaway_period_s=60.0, runaway_hysteresis_c=10.0
+)
 
 
 class Heater:
@@ -104,12 +111,11 @@ class Heater:
                     self._window = (t, self.temp)
             else:
                 self._window = None
+        elif self.temp < self.target - m.runaway_hysteresis_c:
+            if self._below_since is None:
+                self._below_since = t
+            elif t - self._below_since >= m.runaway_period_s:
+                return out + ["runaway"]
         else:
-            if self.temp < self.target - m.runaway_hysteresis_c:
-                if self._below_since is None:
-                    self._below_since = t
-                elif t - self._below_since >= m.runaway_period_s:
-                    return out + ["runaway"]
-            else:
-                self._below_since = None
+            self._below_since = None
         return out

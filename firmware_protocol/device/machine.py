@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from itertools import islice
 from dataclasses import dataclass
+from itertools import islice
 
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.heaters import Heater
@@ -23,8 +23,14 @@ from firmware_protocol.segments import RAMP_TO_REST, ramp_share, steps_done
 SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT = range(8)
 TIMED = (SEG, DWELL, HOME)
 _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
-    int(Flag.MOVING), int(Flag.FAULT), int(Flag.ESTOP), int(Flag.HOMED), int(Flag.ENABLED), int(Flag.HEATING),
-    int(Flag.WAITING))
+    int(Flag.MOVING),
+    int(Flag.FAULT),
+    int(Flag.ESTOP),
+    int(Flag.HOMED),
+    int(Flag.ENABLED),
+    int(Flag.HEATING),
+    int(Flag.WAITING),
+)
 
 
 @dataclass(slots=True)
@@ -40,7 +46,9 @@ class Item:
 
 
 class Machine:
-    def __init__(self, cfg: SimConfig, record: list[dict], *, boot: int = 0, physical=None, observer=None):
+    def __init__(
+        self, cfg: SimConfig, record: list[dict], *, boot: int = 0, physical=None, observer=None
+    ):
         self.cfg = cfg
         self.record = record
         self.boot = boot
@@ -103,7 +111,7 @@ class Machine:
         t = self.cur_end
         clock = self.cfg.clock_hz
         for it in islice(self.queue, max(0, k - 1)):
-            if it.kind == WAIT or it.kind == HOME:
+            if it.kind in (WAIT, HOME):
                 return math.inf
             t += it.ticks / clock if it.kind in (SEG, DWELL) else 0.0
         return t
@@ -137,9 +145,11 @@ class Machine:
         self.last_enqueue_link = link_now
         return []
 
-    def fail(self, code: int, item: int, segment: int, T: float, axis: int = 0xFF, value: int = 0) -> Error:
+    def fail(
+        self, code: int, item: int, segment: int, T: float, axis: int = 0xFF, value: int = 0
+    ) -> Error:
         """Enter the fault state: stop, flush the queue; heaters off for thermal faults and e-stop."""
-        if self.current is not None and self.current.kind == SEG and T < self.cur_end:
+        if self.current is not None and self.current.kind == SEG and self.cur_end > T:
             cur = self.current
             tau = (T - self.cur_start) / (cur.ticks / self.cfg.clock_hz)
             self._apply_partial(cur, tau, ErrorCode(code).name.lower())
@@ -165,7 +175,9 @@ class Machine:
     # ------------------------------------------------------------------ execution
 
     def _may_start(self, link_now: float) -> bool:
-        need = self.cfg.start_buffer_s * self.cfg.speedup * self.cfg.clock_hz  # real-time worth of motion
+        need = (
+            self.cfg.start_buffer_s * self.cfg.speedup * self.cfg.clock_hz
+        )  # real-time worth of motion
         total = 0
         for it in self.queue:
             if it.kind != SEG:
@@ -179,7 +191,7 @@ class Machine:
 
     def advance(self, T: float, link_now: float) -> list:
         reports: list = []
-        if self.heater_fail_at is not None and T >= self.heater_fail_at:
+        if self.heater_fail_at is not None and self.heater_fail_at <= T:
             self.heaters[HOTEND].element_ok = False
         while not self.halted and not self.fault:
             cur = self.current
@@ -204,8 +216,14 @@ class Machine:
             reports += self._start(head, start)
         if not self.fault:
             reports += self._heaters_to(T)
-        if (self.observer is not None and not self.settled and self.current is None and not self.queue
-                and self.at_rest and T >= self.t_free + self.cfg.settle_s):
+        if (
+            self.observer is not None
+            and not self.settled
+            and self.current is None
+            and not self.queue
+            and self.at_rest
+            and self.t_free + self.cfg.settle_s <= T
+        ):
             self.settled = True
             self.observer.on_settled(tuple(self.pos), self.t_free + self.cfg.settle_s)
         return reports
@@ -215,10 +233,16 @@ class Machine:
         for hid, h in enumerate(self.heaters):
             for ev in h.advance(T):
                 if ev == "reached":
-                    out.append(Event(EventCode.HEATER_REACHED, self.items_done, (hid, round(h.temp * 10))))
+                    out.append(
+                        Event(EventCode.HEATER_REACHED, self.items_done, (hid, round(h.temp * 10)))
+                    )
                 elif not self.fault:
                     code = ErrorCode.THERMAL_RUNAWAY if ev == "runaway" else ErrorCode.OVERTEMP
-                    out.append(self.fail(code, self.items_done, self.segments_done, T, hid, round(h.temp * 10)))
+                    out.append(
+                        self.fail(
+                            code, self.items_done, self.segments_done, T, hid, round(h.temp * 10)
+                        )
+                    )
         return out
 
     def _start(self, it: Item, t: float) -> list:
@@ -235,7 +259,10 @@ class Machine:
             self.at_rest = True
             if it.kind == HOME:
                 mask = it.arg[0]
-                dist = max((abs(self.pos[k] + self.offset[k]) for k in range(3) if mask >> k & 1), default=0)
+                dist = max(
+                    (abs(self.pos[k] + self.offset[k]) for k in range(3) if mask >> k & 1),
+                    default=0,
+                )
                 if dist > self.cfg.homing_max_steps:
                     return [self.fail(ErrorCode.HOMING_FAILED, it.item, 0, t, 0xFF, dist)]
                 it.ticks = math.ceil(dist / self.cfg.homing_rate * clock)
@@ -282,7 +309,11 @@ class Machine:
         self.pos = [p + int(d) for p, d in zip(self.pos, done)]
         part = round(tau * it.ticks)
         self.motion_ticks += part
-        self.record.append(record_entry(it.seg, list(self.pos), self.motion_ticks, self.cfg.clock_hz, self.boot, error))
+        self.record.append(
+            record_entry(
+                it.seg, list(self.pos), self.motion_ticks, self.cfg.clock_hz, self.boot, error
+            )
+        )
 
     def _complete(self, t: float) -> list:
         it = self.current
@@ -295,15 +326,27 @@ class Machine:
                 self._abort = None
                 self.current = it  # so fail() applies the partial segment
                 self.cur_end = math.inf
-                return [self.fail(ErrorCode.ENDSTOP_HIT, it.item, it.seg, self.cur_start + tau * it.ticks
-                                  / self.cfg.clock_hz, axis, phys)]
+                return [
+                    self.fail(
+                        ErrorCode.ENDSTOP_HIT,
+                        it.item,
+                        it.seg,
+                        self.cur_start + tau * it.ticks / self.cfg.clock_hz,
+                        axis,
+                        phys,
+                    )
+                ]
             d = it.deltas
             p = self.pos
             self.pos = [p[0] + d[0], p[1] + d[1], p[2] + d[2], p[3] + d[3]]
             self.motion_ticks += it.ticks
             self.segments_done = it.seg
             self.items_done = it.item
-            self.record.append(record_entry(it.seg, list(self.pos), self.motion_ticks, self.cfg.clock_hz, self.boot))
+            self.record.append(
+                record_entry(
+                    it.seg, list(self.pos), self.motion_ticks, self.cfg.clock_hz, self.boot
+                )
+            )
             self.at_rest = it.ramp == RAMP_TO_REST or not any(d)
             if self.halt_at is not None and self.segments_done >= self.halt_at:
                 self.halted = True
@@ -335,4 +378,17 @@ class Machine:
         return reports
 
 
-__all__ = ["Machine", "Item", "SEG", "DWELL", "HOME", "SETPOS", "ENABLE", "HEATER", "FAN", "WAIT", "BED", "HOTEND"]
+__all__ = [
+    "BED",
+    "DWELL",
+    "ENABLE",
+    "FAN",
+    "HEATER",
+    "HOME",
+    "HOTEND",
+    "SEG",
+    "SETPOS",
+    "WAIT",
+    "Item",
+    "Machine",
+]

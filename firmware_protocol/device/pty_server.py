@@ -8,6 +8,7 @@ Faults (corruption, drops, duplication, latency, jitter) apply in both direction
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 import select
@@ -54,8 +55,15 @@ class PtyServer:
     def serve_step(self, max_wait: float = IDLE_WAIT_S) -> None:
         """One turn of the loop: wait for input or the next deadline, then run the device."""
         now = self.now()
-        times = [x for x in (self.device.next_deadline(now), self.rx.next_delivery(), self.tx.next_delivery())
-                 if x is not None]
+        times = [
+            x
+            for x in (
+                self.device.next_deadline(now),
+                self.rx.next_delivery(),
+                self.tx.next_delivery(),
+            )
+            if x is not None
+        ]
         wait = min([max_wait] + [max(0.0, x - now) for x in times])
         ready, _, _ = select.select([self.master], [], [], wait)
         now = self.now()
@@ -84,7 +92,5 @@ class PtyServer:
 
     def close(self) -> None:
         for fd in (self.master, self.slave):
-            try:
+            with contextlib.suppress(OSError):
                 os.close(fd)
-            except OSError:
-                pass

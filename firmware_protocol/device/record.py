@@ -16,8 +16,14 @@ import os
 from cdprhost.fileio.atomic import atomic_open
 
 
-def record_entry(seq: int, steps: list[int], motion_ticks: int, clock_hz: int, boot: int = 0,
-                 error: str | None = None) -> dict:
+def record_entry(
+    seq: int,
+    steps: list[int],
+    motion_ticks: int,
+    clock_hz: int,
+    boot: int = 0,
+    error: str | None = None,
+) -> dict:
     entry: dict = {"seq": seq, "steps": steps, "t": round(motion_ticks / clock_hz, 6)}
     if boot:
         entry["boot"] = boot

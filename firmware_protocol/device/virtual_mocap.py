@@ -21,7 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.readers import EXTENSIONS
-from cdprhost.calibration.synthetic import DEFAULT_BASE_MARKERS, DEFAULT_EFFECTOR_MARKERS, synthesize_take, synthetic_config
+from cdprhost.calibration.synthetic import (
+    DEFAULT_BASE_MARKERS,
+    DEFAULT_EFFECTOR_MARKERS,
+    synthesize_take,
+    synthetic_config,
+)
 from cdprhost.effects.base import MotionContext
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
@@ -37,9 +42,18 @@ class VirtualMocap:
     previous settle (right only for moves straight into a pose).
     """
 
-    def __init__(self, truth: MachineModel, directory: str | os.PathLike[str], *, noise_mm: float = 0.05,
-                 jitter_mm: float = 0.02, n_frames: int = 60, seed: int | None = 0, format: str = "motive-csv",
-                 writer_options: dict | None = None):
+    def __init__(
+        self,
+        truth: MachineModel,
+        directory: str | os.PathLike[str],
+        *,
+        noise_mm: float = 0.05,
+        jitter_mm: float = 0.02,
+        n_frames: int = 60,
+        seed: int | None = 0,
+        format: str = "motive-csv",
+        writer_options: dict | None = None,
+    ):
         self.truth = truth
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
@@ -96,8 +110,16 @@ class VirtualMocap:
                 return None
             self.count += 1
             path = self.directory / f"take-{self.count:04d}{EXTENSIONS[self.format]}"
-            synthesize_take(point, noise_mm=self.noise_mm, jitter_mm=self.jitter_mm, n_frames=self.n_frames,
-                            rng=self._rng, path=path, format=self.format, **self.writer_options)
+            synthesize_take(
+                point,
+                noise_mm=self.noise_mm,
+                jitter_mm=self.jitter_mm,
+                n_frames=self.n_frames,
+                rng=self._rng,
+                path=path,
+                format=self.format,
+                **self.writer_options,
+            )
             self.written.append(path)
             return path
 
@@ -112,7 +134,11 @@ def make_observer(truth_profile_path, mocap_dir, **options) -> VirtualMocap | No
     if truth_profile_path is None and mocap_dir is None:
         return None
     if truth_profile_path is None or mocap_dir is None:
-        given, missing = ("--truth", "--mocap-dir") if mocap_dir is None else ("--mocap-dir", "--truth")
-        raise InputError(f"{given} needs {missing} too (virtual motion capture needs a true machine and a folder for its takes)")
+        given, missing = (
+            ("--truth", "--mocap-dir") if mocap_dir is None else ("--mocap-dir", "--truth")
+        )
+        raise InputError(
+            f"{given} needs {missing} too (virtual motion capture needs a true machine and a folder for its takes)"
+        )
     truth = MachineModel.from_profile(load_profile(truth_profile_path))
     return VirtualMocap(truth, mocap_dir, **options)

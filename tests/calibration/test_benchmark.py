@@ -12,7 +12,9 @@ from tests.conftest import REPO
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_calibration", REPO / "bench" / "calibration.py")
+    spec = importlib.util.spec_from_file_location(
+        "bench_calibration", REPO / "bench" / "calibration.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -24,7 +26,9 @@ def test_planned_poses_reach_the_accuracy_targets(bench, sim_model, plan4, plan1
     med = {k: float(np.median(v)) for k, v in scores.items()}
     assert med["planned 12"] < 0.15
     assert med["planned 4"] < 0.4
-    assert med["Table 1"] > 20 * med["planned 4"]  # the paper's coplanar set: errors of millimetres or worse
+    assert (
+        med["Table 1"] > 20 * med["planned 4"]
+    )  # the paper's coplanar set: errors of millimetres or worse
     assert med["Table 1"] > 50 * med["planned 12"]
     assert np.isfinite(scores["planned 4"]).all() and np.isfinite(scores["planned 12"]).all()
     assert med["before"] > 1.0

@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from cdprhost.calibration.planning import read_plan_csv
-from cdprhost.calibration.simulate import achieved_points, perturbed_geometry, simulate_observations, validation_grid
+from cdprhost.calibration.simulate import (
+    achieved_points,
+    perturbed_geometry,
+    simulate_observations,
+    validation_grid,
+)
 from cdprhost.calibration.synthetic import write_synthetic_session
 from cdprhost.cli.main import main
 from cdprhost.kinematics import MachineModel
@@ -19,8 +24,24 @@ from cdprhost.profile import load_profile
 
 def test_plan_writes_poses_and_indices(tmp_path, sim_model, capsys):
     out, rep = tmp_path / "poses.csv", tmp_path / "plan.json"
-    code = main(["calibrate", "plan", "--profile", "paper-simulation", "--poses", "5", "--check-poses", "2",
-                 "--out", str(out), "--json", str(rep), "--restarts", "2"])
+    code = main(
+        [
+            "calibrate",
+            "plan",
+            "--profile",
+            "paper-simulation",
+            "--poses",
+            "5",
+            "--check-poses",
+            "2",
+            "--out",
+            str(out),
+            "--json",
+            str(rep),
+            "--restarts",
+            "2",
+        ]
+    )
     assert code == 0
     data = json.loads(rep.read_text())
     assert np.array(data["poses"]).shape == (7, 3) and data["roles"].count("check") == 2
@@ -28,7 +49,9 @@ def test_plan_writes_poses_and_indices(tmp_path, sim_model, capsys):
     assert all(data["indices"][k] > data["table1_indices"][k] for k in data["indices"])
     rows = list(csv.DictReader(open(out)))
     assert [r["pose"] for r in rows] == [str(i) for i in range(1, 8)]
-    np.testing.assert_allclose([[float(r[c]) for c in "xyz"] for r in rows], data["poses"], atol=1e-5)
+    np.testing.assert_allclose(
+        [[float(r[c]) for c in "xyz"] for r in rows], data["poses"], atol=1e-5
+    )
     plan = read_plan_csv(out, sim_model)
     assert plan.roles == tuple(data["roles"]) and (plan.directions == -1).all()
     assert "Table 1" in capsys.readouterr().out
@@ -36,42 +59,92 @@ def test_plan_writes_poses_and_indices(tmp_path, sim_model, capsys):
 
 def test_plan_rejects_fewer_than_four_poses(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
-        main(["calibrate", "plan", "--profile", "paper-simulation", "--poses", "3", "--out", str(tmp_path / "p.csv")])
+        main(
+            [
+                "calibrate",
+                "plan",
+                "--profile",
+                "paper-simulation",
+                "--poses",
+                "3",
+                "--out",
+                str(tmp_path / "p.csv"),
+            ]
+        )
     assert exc.value.code == 2 and "at least 4" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
 def session_case(sim_model, plan12):
-    truth = sim_model.with_geometry(perturbed_geometry(sim_model.geometry, np.random.default_rng(21)))
-    obs = simulate_observations(truth, sim_model, plan12.poses, noise_mm=0.0, rng=np.random.default_rng(22))
+    truth = sim_model.with_geometry(
+        perturbed_geometry(sim_model.geometry, np.random.default_rng(21))
+    )
+    obs = simulate_observations(
+        truth, sim_model, plan12.poses, noise_mm=0.0, rng=np.random.default_rng(22)
+    )
     return truth, obs
 
 
 def write_session(path, obs, poses, fmt, **options):
-    return write_synthetic_session(path, obs.measured, poses, obs.sliders, obs.t_s, obs.directions, "paper-simulation",
-                                   format=fmt, noise_mm=0.05, seed=3, **options)
+    return write_synthetic_session(
+        path,
+        obs.measured,
+        poses,
+        obs.sliders,
+        obs.t_s,
+        obs.directions,
+        "paper-simulation",
+        format=fmt,
+        noise_mm=0.05,
+        seed=3,
+        **options,
+    )
 
 
-@pytest.mark.parametrize("fmt,options", [
-    ("motive-csv", {"writer_options": {"units": "Meters", "version": "1.23"}}),
-    ("motive-csv", {"writer_options": {"units": "Millimeters", "version": "1.25"}, "gaps_fraction": 0.05}),
-    ("motive-csv", {"writer_options": {"units": "Centimeters", "version": "1.21"}}),
-    ("vicon-csv", {}),
-    ("qualisys-tsv", {}),
-])
-def test_identify_recovers_a_machine_at_the_noise_floor(tmp_path, sim_model, plan12, session_case, fmt, options):
+@pytest.mark.parametrize(
+    "fmt,options",
+    [
+        ("motive-csv", {"writer_options": {"units": "Meters", "version": "1.23"}}),
+        (
+            "motive-csv",
+            {"writer_options": {"units": "Millimeters", "version": "1.25"}, "gaps_fraction": 0.05},
+        ),
+        ("motive-csv", {"writer_options": {"units": "Centimeters", "version": "1.21"}}),
+        ("vicon-csv", {}),
+        ("qualisys-tsv", {}),
+    ],
+)
+def test_identify_recovers_a_machine_at_the_noise_floor(
+    tmp_path, sim_model, plan12, session_case, fmt, options
+):
     truth, obs = session_case
     session = write_session(tmp_path / "s", obs, plan12.poses, fmt, **options)
     out, rep = tmp_path / "cal.toml", tmp_path / "r.json"
-    code = main(["calibrate", "identify", str(session), "--profile", "paper-simulation", "--out", str(out), "--json", str(rep)])
+    code = main(
+        [
+            "calibrate",
+            "identify",
+            str(session),
+            "--profile",
+            "paper-simulation",
+            "--out",
+            str(out),
+            "--json",
+            str(rep),
+        ]
+    )
     assert code == 0
     data = json.loads(rep.read_text())
     assert data["poses_used"] == 12 and data["rms_before_mm"] > 1.0 and data["rms_after_mm"] < 0.12
     assert np.array(data["stderr"]["outlets"]).shape == (3, 3) and data["iterations"] >= 1
     cal = MachineModel.from_profile(load_profile(out))
     grid = validation_grid(sim_model)
-    err = np.linalg.norm(achieved_points(truth.with_geometry(truth.geometry), cal, grid) - grid, axis=1)
-    assert np.sqrt(np.mean(err**2)) < 0.12  # workspace error at the noise floor (0.05 mm per coordinate)
+    err = np.linalg.norm(
+        achieved_points(truth.with_geometry(truth.geometry), cal, grid) - grid, axis=1
+    )
+    assert (
+        np.sqrt(np.mean(err**2)) < 0.12
+    )  # workspace error at the noise floor (0.05 mm per coordinate)
 
 
 def test_identify_uses_role_column_for_check_poses(tmp_path, plan4, session_case, sim_model):
@@ -85,10 +158,26 @@ def test_identify_uses_role_column_for_check_poses(tmp_path, plan4, session_case
     with open(session / "poses.csv", "w", newline="") as fh:
         csv.writer(fh).writerows(rows)
     rep = tmp_path / "r.json"
-    assert main(["calibrate", "identify", str(session), "--profile", "paper-simulation", "--out",
-                 str(tmp_path / "c.toml"), "--json", str(rep)]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "identify",
+                str(session),
+                "--profile",
+                "paper-simulation",
+                "--out",
+                str(tmp_path / "c.toml"),
+                "--json",
+                str(rep),
+            ]
+        )
+        == 0
+    )
     data = json.loads(rep.read_text())
-    assert data["poses_used"] == 4 and data["check_rms_after_mm"] < 0.6 < data["check_rms_before_mm"]
+    assert (
+        data["poses_used"] == 4 and data["check_rms_after_mm"] < 0.6 < data["check_rms_before_mm"]
+    )
 
 
 def test_invalid_sessions_give_clear_errors(tmp_path, plan12, session_case, capsys):
@@ -110,7 +199,9 @@ def test_invalid_sessions_give_clear_errors(tmp_path, plan12, session_case, caps
     broken = tmp_path / "b"
     shutil.copytree(session, broken)
     (broken / "poses.csv").write_text("\n".join(text) + "\n")
-    (broken / "session.toml").write_text((broken / "session.toml").read_text().replace('"Base:F3"', '"Base:F9"'))
+    (broken / "session.toml").write_text(
+        (broken / "session.toml").read_text().replace('"Base:F3"', '"Base:F9"')
+    )
     assert main(["calibrate", "identify", str(broken), *args]) == 2
     err = capsys.readouterr().err
     assert "no usable take" in err and "Base:F9" in err

@@ -38,11 +38,15 @@ def test_iterates_record_each_parameter_update(sim_model, paper_truth):
 
 @pytest.fixture(scope="module")
 def noisy_truth(sim_model):
-    return sim_model.with_geometry(perturbed_geometry(sim_model.geometry, np.random.default_rng(11)))
+    return sim_model.with_geometry(
+        perturbed_geometry(sim_model.geometry, np.random.default_rng(11))
+    )
 
 
 def test_planned_session_recovers_truth_within_stated_uncertainty(sim_model, noisy_truth, plan12):
-    obs = simulate_observations(noisy_truth, sim_model, plan12.poses, noise_mm=0.05, rng=np.random.default_rng(12))
+    obs = simulate_observations(
+        noisy_truth, sim_model, plan12.poses, noise_mm=0.05, rng=np.random.default_rng(12)
+    )
     r = identify(obs, sim_model)
     assert r.ok and r.poses_used == 12 and r.dof == 24
     assert r.rms_before_mm > 1.0 and r.rms_after_mm < 0.1
@@ -55,11 +59,15 @@ def test_planned_session_recovers_truth_within_stated_uncertainty(sim_model, noi
 
 
 def test_check_poses_are_predicted_not_fitted(sim_model, noisy_truth, plan4):
-    obs = simulate_observations(noisy_truth, sim_model, plan4.poses, noise_mm=0.05, rng=np.random.default_rng(13))
+    obs = simulate_observations(
+        noisy_truth, sim_model, plan4.poses, noise_mm=0.05, rng=np.random.default_rng(13)
+    )
     r = identify(obs, sim_model, plan4.roles)
     assert r.poses_used == 4 and r.dof == 0
     assert r.rms_after_mm < 1e-6  # 4 poses fit exactly (no redundancy)...
-    assert 0.0 < r.check_rms_after_mm < 1.0 < r.check_rms_before_mm  # ...the check poses tell the truth
+    assert (
+        0.0 < r.check_rms_after_mm < 1.0 < r.check_rms_before_mm
+    )  # ...the check poses tell the truth
     only_fit = identify(obs.subset(np.flatnonzero(np.array(plan4.roles) == "fit")), sim_model)
     np.testing.assert_allclose(only_fit.geometry.q, r.geometry.q, atol=1e-8)
 
@@ -78,8 +86,12 @@ def test_degenerate_poses_are_named_unidentifiable(sim_model, noisy_truth):
     assert r.unidentifiable and all("*" in combo for combo in r.unidentifiable)
 
 
-def test_calibrated_profile_round_trips_with_provenance(sim_profile, sim_model, noisy_truth, plan12, tmp_path):
-    obs = simulate_observations(noisy_truth, sim_model, plan12.poses, noise_mm=0.05, rng=np.random.default_rng(14))
+def test_calibrated_profile_round_trips_with_provenance(
+    sim_profile, sim_model, noisy_truth, plan12, tmp_path
+):
+    obs = simulate_observations(
+        noisy_truth, sim_model, plan12.poses, noise_mm=0.05, rng=np.random.default_rng(14)
+    )
     r = identify(obs, sim_model)
     prof = calibrated_profile(sim_profile, r, session="/data/session-1")
     save_profile(prof, tmp_path / "cal.toml")
@@ -93,11 +105,16 @@ def test_calibrated_profile_round_trips_with_provenance(sim_profile, sim_model, 
 
 
 def test_report_json_has_contract_fields(sim_model, noisy_truth, plan12):
-    obs = simulate_observations(noisy_truth, sim_model, plan12.poses, noise_mm=0.05, rng=np.random.default_rng(15))
+    obs = simulate_observations(
+        noisy_truth, sim_model, plan12.poses, noise_mm=0.05, rng=np.random.default_rng(15)
+    )
     data = identify(obs, sim_model).to_json()
     assert np.array(data["parameters"]["outlets"]).shape == (3, 3)
     assert len(data["parameters"]["initial_lengths"]) == 3
-    assert np.array(data["stderr"]["outlets"]).shape == (3, 3) and len(data["stderr"]["initial_lengths"]) == 3
+    assert (
+        np.array(data["stderr"]["outlets"]).shape == (3, 3)
+        and len(data["stderr"]["initial_lengths"]) == 3
+    )
     for key in ("rms_before_mm", "rms_after_mm", "iterations", "poses_used"):
         assert key in data
     assert data["poses_used"] == 12 and len(data["poses"]) == 12

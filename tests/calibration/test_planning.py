@@ -81,11 +81,20 @@ def test_exchange_beats_greedy_and_random_sets(info, k):
     g_val = float(pl.criterion_values(mats[greedy].sum(0), "D", k))
     design = pl.optimal_design(mats, k, "D", restarts=4, rng=rng, blocks=info[0])
     assert design.value >= g_val - 1e-9
-    assert design.value == pytest.approx(float(pl.criterion_values(mats[design.indices].sum(0), "D", k)))
-    randoms = [pl.criterion_values(mats[rng.choice(len(mats), k, replace=False)].sum(0), "D", k) for _ in range(300)]
-    assert design.value > max(randoms) + 1.0  # log det: e-fold better than the best of 300 random sets
+    assert design.value == pytest.approx(
+        float(pl.criterion_values(mats[design.indices].sum(0), "D", k))
+    )
+    randoms = [
+        pl.criterion_values(mats[rng.choice(len(mats), k, replace=False)].sum(0), "D", k)
+        for _ in range(300)
+    ]
+    assert (
+        design.value > max(randoms) + 1.0
+    )  # log det: e-fold better than the best of 300 random sets
     # a random start improved by exchange is also better than the greedy start on its own
-    ex, ex_val = pl.fedorov_exchange(mats, rng.choice(len(mats), k, replace=False), "D", blocks=info[0])
+    ex, ex_val = pl.fedorov_exchange(
+        mats, rng.choice(len(mats), k, replace=False), "D", blocks=info[0]
+    )
     assert ex_val > max(randoms)
 
 
@@ -111,7 +120,9 @@ def test_plan_poses_are_spread_over_heights_and_approached_from_above(sim_model,
         z = plan.fit_poses[:, 2]
         assert z.max() - z.min() > 100  # not one plane, unlike Table 1
         assert sim_model.check(plan.poses).ok.all() and sim_model.check(plan.approach).ok.all()
-        np.testing.assert_allclose(plan.approach - plan.poses, np.tile([0, 0, 5.0], (len(plan.poses), 1)))
+        np.testing.assert_allclose(
+            plan.approach - plan.poses, np.tile([0, 0, 5.0], (len(plan.poses), 1))
+        )
         assert (plan.directions == -1).all()  # every cable shortens into every pose
 
 

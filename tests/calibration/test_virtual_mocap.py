@@ -25,7 +25,9 @@ def test_factory_needs_both_options_or_none(tmp_path):
 
 def test_take_measures_the_true_effector(sim_profile, tmp_path):
     g = paper_truth_geometry()
-    save_profile(sim_profile.with_geometry(g.outlets, g.initial_lengths, name="truth"), tmp_path / "t.toml")
+    save_profile(
+        sim_profile.with_geometry(g.outlets, g.initial_lengths, name="truth"), tmp_path / "t.toml"
+    )
     obs = make_observer(tmp_path / "t.toml", tmp_path / "mocap", noise_mm=0.0)
     truth = MachineModel.from_profile(sim_profile).with_geometry(g)
     steps = (np.array([-20.0, -30.0, -25.0]) * 400).astype(int)
@@ -46,9 +48,15 @@ def test_other_formats(sim_model, tmp_path, fmt):
 
 
 def test_backlash_uses_directions_from_the_device_record(sim_profile, tmp_path):
-    truth = MachineModel.from_profile(sim_profile.model_copy(update={"effects": {"backlash": {"beta": [0.5, 0.5, 0.5]}}}))
+    truth = MachineModel.from_profile(
+        sim_profile.model_copy(update={"effects": {"backlash": {"beta": [0.5, 0.5, 0.5]}}})
+    )
     obs = VirtualMocap(truth, tmp_path, noise_mm=0.0)
-    record = [{"steps": [0, 0, 0, 0]}, {"steps": [-4000, -4000, -4000, 0]}, {"steps": [-4400, -3600, -4000, 0]}]
+    record = [
+        {"steps": [0, 0, 0, 0]},
+        {"steps": [-4000, -4000, -4000, 0]},
+        {"steps": [-4400, -3600, -4000, 0]},
+    ]
     obs.attach_record(record)
     steps = np.array([-4400, -3600, -4000])
     got = obs.effector_point(steps, 0.0, obs._record_directions())

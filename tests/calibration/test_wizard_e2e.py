@@ -48,13 +48,25 @@ def print_path_errors(profile, truth: MachineModel, path: np.ndarray) -> np.ndar
     try:
         dev = LinkDevice(link, profile, model)
         dev.home()
-        planner = Planner(Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2), model.geometry.outlets)
-        seg = Segmenter(model, profile.drive.home_mm, e_steps_per_mm=profile.extruder.steps_per_mm, clock_hz=link.identity.clock_hz)
+        planner = Planner(
+            Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2),
+            model.geometry.outlets,
+        )
+        seg = Segmenter(
+            model,
+            profile.drive.home_mm,
+            e_steps_per_mm=profile.extruder.steps_per_mm,
+            clock_hz=link.identity.clock_hz,
+        )
         start = np.vstack([model.home_point(np.zeros(3))[None], path[:-1]])
         points, sent = [], 0
-        for planned in planner.push(MoveBlock.from_arrays(start, path, feedrate=60.0)) + planner.flush():
+        for planned in (
+            planner.push(MoveBlock.from_arrays(start, path, feedrate=60.0)) + planner.flush()
+        ):
             b = seg(planned)
-            link.queue_segments(SegmentBatch(b.ticks, b.delta, ramp_codes_from_speeds(b.v_start, b.v_end)))
+            link.queue_segments(
+                SegmentBatch(b.ticks, b.delta, ramp_codes_from_speeds(b.v_start, b.v_end))
+            )
             points.append(b.point)
             sent += len(b)
         link.wait_idle(120)
@@ -66,14 +78,22 @@ def print_path_errors(profile, truth: MachineModel, path: np.ndarray) -> np.ndar
     return np.linalg.norm(achieved - np.vstack(points), axis=1)
 
 
-def test_wizard_calibrates_then_printing_gets_accurate(sim_profile, sim_model, truth_path, tmp_path):
+def test_wizard_calibrates_then_printing_gets_accurate(
+    sim_profile, sim_model, truth_path, tmp_path
+):
     truth = MachineModel.from_profile(load_profile(truth_path))
     link = embedded(truth_path, tmp_path / "mocap")
     logs: list[str] = []
     try:
-        wiz = CalibrationWizard(tmp_path / "session", sim_profile, LinkDevice(link, sim_profile, sim_model),
-                                FolderWatcher(tmp_path / "mocap", timeout_s=5, poll_s=0.01),
-                                mocap=mocap_config().mocap, options=WizardOptions(), log=logs.append)
+        wiz = CalibrationWizard(
+            tmp_path / "session",
+            sim_profile,
+            LinkDevice(link, sim_profile, sim_model),
+            FolderWatcher(tmp_path / "mocap", timeout_s=5, poll_s=0.01),
+            mocap=mocap_config().mocap,
+            options=WizardOptions(),
+            log=logs.append,
+        )
         out = wiz.run()
     finally:
         link.close()
@@ -81,7 +101,9 @@ def test_wizard_calibrates_then_printing_gets_accurate(sim_profile, sim_model, t
     assert r.ok and r.poses_used == 4 and list(r.roles).count("check") == 3
     assert r.rms_before_mm > 5.0 and r.rms_after_mm < 1e-3
     assert r.check_rms_before_mm > 2.0 and r.check_rms_after_mm < 0.5
-    assert (tmp_path / "session" / "calibrated.toml").is_file() and (tmp_path / "session" / "identification.json").is_file()
+    assert (tmp_path / "session" / "calibrated.toml").is_file() and (
+        tmp_path / "session" / "identification.json"
+    ).is_file()
     cal = load_profile(out.profile_path)
     cal_model = MachineModel.from_profile(cal)
 
@@ -91,7 +113,12 @@ def test_wizard_calibrates_then_printing_gets_accurate(sim_profile, sim_model, t
     assert np.sqrt(np.mean(before**2)) > 5.0 and np.sqrt(np.mean(after**2)) < 0.3
 
     t = np.linspace(0, 2 * np.pi, 40)
-    path = np.vstack([np.column_stack([25 * np.cos(t), 25 * np.sin(t), np.full(t.size, z)]) for z in (140.0, 220.0)])
+    path = np.vstack(
+        [
+            np.column_stack([25 * np.cos(t), 25 * np.sin(t), np.full(t.size, z)])
+            for z in (140.0, 220.0)
+        ]
+    )
     err_nominal = print_path_errors(sim_profile, truth, path)
     err_calibrated = print_path_errors(cal, truth, path)
     assert np.sqrt(np.mean(err_nominal**2)) > 5.0
@@ -112,13 +139,21 @@ class InterruptAfter:
         return self.inner.take_for(index, pose, attempt)
 
 
-def test_interrupted_session_resumes_without_losing_takes(sim_profile, sim_model, truth_path, tmp_path):
+def test_interrupted_session_resumes_without_losing_takes(
+    sim_profile, sim_model, truth_path, tmp_path
+):
     session, mocap = tmp_path / "session", tmp_path / "mocap"
     link = embedded(truth_path, mocap)
     try:
         takes = InterruptAfter(FolderWatcher(mocap, timeout_s=5, poll_s=0.01), 4)
-        wiz = CalibrationWizard(session, sim_profile, LinkDevice(link, sim_profile, sim_model), takes,
-                                mocap=mocap_config().mocap, log=lambda m: None)
+        wiz = CalibrationWizard(
+            session,
+            sim_profile,
+            LinkDevice(link, sim_profile, sim_model),
+            takes,
+            mocap=mocap_config().mocap,
+            log=lambda m: None,
+        )
         with pytest.raises(KeyboardInterrupt):
             wiz.run()
     finally:
@@ -129,8 +164,14 @@ def test_interrupted_session_resumes_without_losing_takes(sim_profile, sim_model
 
     link = embedded(truth_path, mocap)  # a new device (power cycle): homes again
     try:
-        wiz = CalibrationWizard(session, sim_profile, LinkDevice(link, sim_profile, sim_model),
-                                FolderWatcher(mocap, timeout_s=5, poll_s=0.01), mocap=None, log=lambda m: None)
+        wiz = CalibrationWizard(
+            session,
+            sim_profile,
+            LinkDevice(link, sim_profile, sim_model),
+            FolderWatcher(mocap, timeout_s=5, poll_s=0.01),
+            mocap=None,
+            log=lambda m: None,
+        )
         assert wiz.state.pending == [3, 4, 5, 6]
         out = wiz.run()
     finally:
@@ -155,15 +196,24 @@ class WrongThenRight:
         return self.inner.take_for(index, pose, attempt)
 
 
-def test_wrong_take_is_rejected_at_once_and_asked_again(sim_profile, sim_model, truth_path, tmp_path):
+def test_wrong_take_is_rejected_at_once_and_asked_again(
+    sim_profile, sim_model, truth_path, tmp_path
+):
     mocap = tmp_path / "mocap"
     link = embedded(truth_path, mocap)
     logs: list[str] = []
     try:
         watcher = FolderWatcher(mocap, timeout_s=5, poll_s=0.01)
         source = WrongThenRight(watcher, mocap / "take-0001.csv")
-        wiz = CalibrationWizard(tmp_path / "s", sim_profile, LinkDevice(link, sim_profile, sim_model), source,
-                                mocap=mocap_config().mocap, options=WizardOptions(n_check=1), log=logs.append)
+        wiz = CalibrationWizard(
+            tmp_path / "s",
+            sim_profile,
+            LinkDevice(link, sim_profile, sim_model),
+            source,
+            mocap=mocap_config().mocap,
+            options=WizardOptions(n_check=1),
+            log=logs.append,
+        )
         out = wiz.run()
     finally:
         link.close()
@@ -174,9 +224,24 @@ def test_wrong_take_is_rejected_at_once_and_asked_again(sim_profile, sim_model, 
 
 def test_wizard_cli_end_to_end(truth_path, tmp_path, capsys):
     report = tmp_path / "r.json"
-    code = main(["calibrate", "wizard", "--profile", "paper-simulation", "--session", str(tmp_path / "s"),
-                 "--sim-truth", str(truth_path), "--sim-mocap-dir", str(tmp_path / "mocap"),
-                 "--out", str(tmp_path / "cal.toml"), "--json", str(report)])
+    code = main(
+        [
+            "calibrate",
+            "wizard",
+            "--profile",
+            "paper-simulation",
+            "--session",
+            str(tmp_path / "s"),
+            "--sim-truth",
+            str(truth_path),
+            "--sim-mocap-dir",
+            str(tmp_path / "mocap"),
+            "--out",
+            str(tmp_path / "cal.toml"),
+            "--json",
+            str(report),
+        ]
+    )
     assert code == 0
     out = capsys.readouterr().out
     assert "before/after" in out and "check poses RMS" in out
@@ -185,13 +250,38 @@ def test_wizard_cli_end_to_end(truth_path, tmp_path, capsys):
     assert load_profile(tmp_path / "cal.toml").calibration["poses_used"] == 4
 
     # the same takes, recorded beforehand, through --takes-from (no virtual mocap this time)
-    code = main(["calibrate", "wizard", "--profile", "paper-simulation", "--session", str(tmp_path / "again"),
-                 "--takes-from", str(tmp_path / "s" / "takes"), "--mocap-config", str(tmp_path / "s" / "session.toml"),
-                 "--json", str(tmp_path / "again.json")])
+    code = main(
+        [
+            "calibrate",
+            "wizard",
+            "--profile",
+            "paper-simulation",
+            "--session",
+            str(tmp_path / "again"),
+            "--takes-from",
+            str(tmp_path / "s" / "takes"),
+            "--mocap-config",
+            str(tmp_path / "s" / "session.toml"),
+            "--json",
+            str(tmp_path / "again.json"),
+        ]
+    )
     assert code == 0
     again = json.loads((tmp_path / "again.json").read_text())
-    np.testing.assert_allclose(again["parameters"]["outlets"], data["parameters"]["outlets"], atol=1e-6)
+    np.testing.assert_allclose(
+        again["parameters"]["outlets"], data["parameters"]["outlets"], atol=1e-6
+    )
     capsys.readouterr()
-    code = main(["calibrate", "wizard", "--profile", "paper-simulation", "--session", str(tmp_path / "t"),
-                 "--sim-mocap-dir", str(tmp_path / "m2")])
+    code = main(
+        [
+            "calibrate",
+            "wizard",
+            "--profile",
+            "paper-simulation",
+            "--session",
+            str(tmp_path / "t"),
+            "--sim-mocap-dir",
+            str(tmp_path / "m2"),
+        ]
+    )
     assert code == 2 and "--truth" in capsys.readouterr().err

@@ -5,13 +5,22 @@ from __future__ import annotations
 import numpy as np
 
 from cdprhost.calibration.planning import PosePlan
-from cdprhost.calibration.wizard import Finished, Identify, MoveTo, RecordTake, WizardState, resume_state
+from cdprhost.calibration.wizard import (
+    Finished,
+    Identify,
+    MoveTo,
+    RecordTake,
+    WizardState,
+    resume_state,
+)
 
 
 def small_plan(roles=("fit", "fit", "check", "fit", "fit")) -> PosePlan:
     n = len(roles)
     poses = np.column_stack([np.arange(n) * 10.0, np.zeros(n), np.full(n, 200.0)])
-    return PosePlan(poses, tuple(roles), poses + [0, 0, 5.0], -np.ones((n, 3)), "D", {}, {}, 0.0, 0, 0.0)
+    return PosePlan(
+        poses, tuple(roles), poses + [0, 0, 5.0], -np.ones((n, 3)), "D", {}, {}, 0.0, 0, 0.0
+    )
 
 
 def test_moves_then_records_each_pose_then_identifies():
@@ -57,7 +66,11 @@ def test_too_few_fit_poses_finishes_without_identifying():
 
 def test_resume_skips_recorded_poses():
     plan = small_plan()
-    rows = [{"plan_pose": "1", "t_s": "0"}, {"plan_pose": "3", "t_s": "5"}, {"plan_pose": "", "t_s": "9"}]
+    rows = [
+        {"plan_pose": "1", "t_s": "0"},
+        {"plan_pose": "3", "t_s": "5"},
+        {"plan_pose": "", "t_s": "9"},
+    ]
     state = resume_state(plan, rows)
     assert state.recorded == frozenset({0, 2})
     assert state.pending == [1, 3, 4]

@@ -7,7 +7,11 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.readers import Take
-from cdprhost.calibration.synthetic import DEFAULT_BASE_MARKERS, DEFAULT_EFFECTOR_MARKERS, effector_offset
+from cdprhost.calibration.synthetic import (
+    DEFAULT_BASE_MARKERS,
+    DEFAULT_EFFECTOR_MARKERS,
+    effector_offset,
+)
 from cdprhost.calibration.takes import EffectorConfig, MocapConfig
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -36,14 +40,21 @@ offset = [0.0, 0.0, -12.0]              # ...plus this vector (base frame, mm) i
 def mocap_config(rename=lambda n: n, **acceptance) -> MocapConfig:
     return MocapConfig(
         base_markers={rename(k): v for k, v in DEFAULT_BASE_MARKERS.items()},
-        effector=EffectorConfig(markers=tuple(rename(k) for k in DEFAULT_EFFECTOR_MARKERS),
-                                offset=effector_offset(DEFAULT_EFFECTOR_MARKERS)),
+        effector=EffectorConfig(
+            markers=tuple(rename(k) for k in DEFAULT_EFFECTOR_MARKERS),
+            offset=effector_offset(DEFAULT_EFFECTOR_MARKERS),
+        ),
         acceptance=acceptance or {},
     )
 
 
-def random_take(rng: np.random.Generator, n_frames: int = 15, names=("Base:F1", "Base:F2", "EE:E1", "EE:E2"),
-                gaps: float = 0.1, spread_mm: float = 800.0) -> Take:
+def random_take(
+    rng: np.random.Generator,
+    n_frames: int = 15,
+    names=("Base:F1", "Base:F2", "EE:E1", "EE:E2"),
+    gaps: float = 0.1,
+    spread_mm: float = 800.0,
+) -> Take:
     pos = rng.uniform(-spread_mm, spread_mm, (n_frames, len(names), 3))
     pos[rng.random(pos.shape[:2]) < gaps] = np.nan
     return Take(tuple(names), pos, np.arange(n_frames) / 120.0, "<random>", "motive-csv")

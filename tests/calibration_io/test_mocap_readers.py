@@ -10,15 +10,28 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cdprhost.calibration.readers import EXTENSIONS, FORMATS, Take, detect_format, read_take, write_take
+from cdprhost.calibration.readers import (
+    EXTENSIONS,
+    FORMATS,
+    Take,
+    detect_format,
+    read_take,
+    write_take,
+)
 from cdprhost.calibration.readers.writers import write_motive
 from cdprhost.calibration.takes import measure_effector
 from cdprhost.errors import InputError
 from tests.calibration_io.helpers import DATA, SAMPLE_POINT, mocap_config, random_take
 
 # Worst rounding of each writer's text: Motive 6 decimals of the unit, Vicon 5, QTM 3 (mm).
-TOL_MM = {"Meters": 5.1e-4, "Centimeters": 5.1e-5, "Millimeters": 5.1e-7, "vicon-csv": 5.1e-6, "qualisys-tsv": 5.1e-4,
-          "c3d": 1e-4}
+TOL_MM = {
+    "Meters": 5.1e-4,
+    "Centimeters": 5.1e-5,
+    "Millimeters": 5.1e-7,
+    "vicon-csv": 5.1e-6,
+    "qualisys-tsv": 5.1e-4,
+    "c3d": 1e-4,
+}
 
 
 def roundtrip(tmp_path, take: Take, fmt: str, **options) -> Take:
@@ -47,7 +60,9 @@ def test_motive_rigid_body_columns_before_markers_are_skipped(tmp_path):
     rng = np.random.default_rng(3)
     take = random_take(rng, names=("Base:F1", "EE:E1", "EE:E2", "EE:E3"), gaps=0.2)
     path = tmp_path / "rb.csv"
-    write_motive(path, take, version="1.25", units="Meters", rigid_bodies={"EE": ["EE:E1", "EE:E2", "EE:E3"]})
+    write_motive(
+        path, take, version="1.25", units="Meters", rigid_bodies={"EE": ["EE:E1", "EE:E2", "EE:E3"]}
+    )
     lines = path.read_text().splitlines()
     assert lines[2].split(",")[2] == "Rigid Body" and ",Parent," in path.read_text()
     read = read_take(path)
@@ -55,11 +70,19 @@ def test_motive_rigid_body_columns_before_markers_are_skipped(tmp_path):
     assert_same(read, take, TOL_MM["Meters"])
 
 
-@pytest.mark.parametrize("fmt,options", [
-    ("vicon-csv", {}), ("vicon-csv", {"devices_section": True}), ("vicon-csv", {"units": "m"}),
-    ("qualisys-tsv", {}), ("qualisys-tsv", {"zero_gaps": False}), ("qualisys-tsv", {"column_header": False}),
-    ("c3d", {}), ("c3d", {"units": "m"}),
-])
+@pytest.mark.parametrize(
+    "fmt,options",
+    [
+        ("vicon-csv", {}),
+        ("vicon-csv", {"devices_section": True}),
+        ("vicon-csv", {"units": "m"}),
+        ("qualisys-tsv", {}),
+        ("qualisys-tsv", {"zero_gaps": False}),
+        ("qualisys-tsv", {"column_header": False}),
+        ("c3d", {}),
+        ("c3d", {"units": "m"}),
+    ],
+)
 def test_other_formats_roundtrip_with_gaps(tmp_path, fmt, options):
     take = random_take(np.random.default_rng(len(str(options))), n_frames=20, gaps=0.15)
     read = roundtrip(tmp_path, take, fmt, **options)
@@ -107,7 +130,9 @@ def test_motive_sample_units_and_gaps():
     unl = meters.marker("Unlabeled 1021")
     assert np.isnan(unl[4:]).all() and np.isfinite(unl[:4]).all()
     mm = read_take(DATA / "motive_1.25_parent_mm.csv")
-    assert np.isnan(mm.positions[5, 4]).all() and np.isfinite(np.delete(mm.positions, 5, axis=0)).all()
+    assert (
+        np.isnan(mm.positions[5, 4]).all() and np.isfinite(np.delete(mm.positions, 5, axis=0)).all()
+    )
     qtm = read_take(DATA / "qualisys_qtm.tsv")
     assert np.isnan(qtm.positions[2, 5]).all()  # written as 0.000 0.000 0.000
     vic = read_take(DATA / "vicon_nexus_crlf.csv")
@@ -121,21 +146,29 @@ def write(tmp_path, name: str, text: str, newline: str = "\n"):
 
 
 def motive_text(units="Millimeters", cell="1.5"):
-    return (f"Format Version,1.23,Take Name,t,Capture Frame Rate,100,Length Units,{units}\n\n"
-            ",Type,Marker,Marker,Marker\n,Name,EE:E1,EE:E1,EE:E1\n,ID,1,1,1\n"
-            ",,Position,Position,Position\nFrame,Time (Seconds),X,Y,Z\n"
-            f"0,0.0,1.0,2.0,3.0\n1,0.01,1.0,{cell},3.0\n")
+    return (
+        f"Format Version,1.23,Take Name,t,Capture Frame Rate,100,Length Units,{units}\n\n"
+        ",Type,Marker,Marker,Marker\n,Name,EE:E1,EE:E1,EE:E1\n,ID,1,1,1\n"
+        ",,Position,Position,Position\nFrame,Time (Seconds),X,Y,Z\n"
+        f"0,0.0,1.0,2.0,3.0\n1,0.01,1.0,{cell},3.0\n"
+    )
 
 
 def test_motive_errors_name_line_column_and_marker(tmp_path):
-    with pytest.raises(InputError, match=r"bad\.csv: line 9, column 4 \(EE:E1 Y\): not a finite number: 'abc'") as err:
+    with pytest.raises(
+        InputError, match=r"bad\.csv: line 9, column 4 \(EE:E1 Y\): not a finite number: 'abc'"
+    ) as err:
         read_take(write(tmp_path, "bad.csv", motive_text(cell="abc")))
     assert err.value.exit_code == 2
-    with pytest.raises(InputError, match=r"line 1, key 'Length Units': unknown length unit 'Furlongs'"):
+    with pytest.raises(
+        InputError, match=r"line 1, key 'Length Units': unknown length unit 'Furlongs'"
+    ):
         read_take(write(tmp_path, "u.csv", motive_text(units="Furlongs")))
     with pytest.raises(InputError, match="no 'Frame,Time"):
         read_take(write(tmp_path, "t.csv", motive_text().split("Frame,")[0]))
-    rb_only = motive_text().replace(",Type,Marker,Marker,Marker", ",Type,Rigid Body,Rigid Body,Rigid Body")
+    rb_only = motive_text().replace(
+        ",Type,Marker,Marker,Marker", ",Type,Rigid Body,Rigid Body,Rigid Body"
+    )
     with pytest.raises(InputError, match="no Marker position columns"):
         read_take(write(tmp_path, "rb.csv", rb_only))
     with pytest.raises(InputError, match="marker 'EE:E2' not in take"):
@@ -193,8 +226,13 @@ NAME = st.from_regex(r"[A-Za-z][A-Za-z0-9_:\- ]{0,14}[A-Za-z0-9]", fullmatch=Tru
 
 
 @settings(max_examples=40, deadline=None)
-@given(fmt=st.sampled_from(FORMATS), names=st.lists(NAME, min_size=1, max_size=6, unique=True),
-       seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 30), gaps=st.floats(0.0, 0.6))
+@given(
+    fmt=st.sampled_from(FORMATS),
+    names=st.lists(NAME, min_size=1, max_size=6, unique=True),
+    seed=st.integers(0, 2**32 - 1),
+    frames=st.integers(1, 30),
+    gaps=st.floats(0.0, 0.6),
+)
 def test_any_names_and_gaps_survive_every_format(fmt, names, seed, frames, gaps):
     take = random_take(np.random.default_rng(seed), n_frames=frames, names=tuple(names), gaps=gaps)
     with tempfile.TemporaryDirectory() as tmp:

@@ -8,20 +8,32 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from cdprhost.calibration.readers import Take
-from cdprhost.calibration.registration import is_degenerate, kabsch, register_frames, rotation_about_z
+from cdprhost.calibration.registration import (
+    is_degenerate,
+    kabsch,
+    register_frames,
+    rotation_about_z,
+)
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     q = rng.normal(size=4)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 12), planar=st.booleans(), scale=st.floats(1.0, 2000.0))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(3, 12),
+    planar=st.booleans(),
+    scale=st.floats(1.0, 2000.0),
+)
 def test_kabsch_recovers_random_rigid_transforms(seed, n, planar, scale):
     rng = np.random.default_rng(seed)
     src = rng.uniform(-scale, scale, (n, 3))
@@ -41,7 +53,9 @@ def test_kabsch_recovers_random_rigid_transforms(seed, n, planar, scale):
 @given(seed=st.integers(0, 2**32 - 1))
 def test_kabsch_batch_equals_per_frame_and_gaps_drop_out(seed):
     rng = np.random.default_rng(seed)
-    spread = np.array([(0, 300, 0), (-260, -150, 0), (260, -150, 0), (0, 0, 200), (100, 50, -150)], dtype=float)
+    spread = np.array(
+        [(0, 300, 0), (-260, -150, 0), (260, -150, 0), (0, 0, 200), (100, 50, -150)], dtype=float
+    )
     nominal = spread + rng.uniform(-30, 30, (5, 3))
     rots = np.array([random_rotation(rng) for _ in range(6)])
     ts = rng.uniform(-1000, 1000, (6, 3))
@@ -57,7 +71,9 @@ def test_kabsch_batch_equals_per_frame_and_gaps_drop_out(seed):
         np.testing.assert_allclose(batch.R[f], one.R, atol=1e-10)
         np.testing.assert_allclose(batch.t[f], one.t, atol=1e-7)
         assert batch.rms_residual[f] == pytest.approx(float(one.rms_residual), rel=1e-9)
-        np.testing.assert_allclose(batch.R[f], rots[f].T, atol=2e-3)  # mocap -> nominal undoes the pose
+        np.testing.assert_allclose(
+            batch.R[f], rots[f].T, atol=2e-3
+        )  # mocap -> nominal undoes the pose
     assert list(batch.n_points) == [5, 5, 4, 5, 4, 5]
 
 
@@ -72,21 +88,35 @@ def test_kabsch_marks_impossible_fits_invalid():
 
 def test_register_frames_maps_a_take_into_the_base_frame():
     nominal = {"F1": (0.0, 300.0, 0.0), "F2": (-259.8, -150.0, 0.0), "F3": (259.8, -150.0, 0.0)}
-    rot = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]) @ rotation_about_z(0.7)  # Motive Y-up world
+    rot = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]) @ rotation_about_z(
+        0.7
+    )  # Motive Y-up world
     t = np.array([900.0, 15.0, -400.0])
     base = np.array(list(nominal.values()))
     effector = np.array([[10.0, 20.0, 150.0]])
     world = np.vstack([base, effector]) @ rot.T + t
-    take = Take(("F1", "F2", "F3", "E"), np.repeat(world[None], 4, axis=0), np.arange(4) / 100, "s", "motive-csv")
+    take = Take(
+        ("F1", "F2", "F3", "E"),
+        np.repeat(world[None], 4, axis=0),
+        np.arange(4) / 100,
+        "s",
+        "motive-csv",
+    )
     reg = register_frames(take, nominal)
     assert reg.R.shape == (4, 3, 3) and reg.valid.all()
-    np.testing.assert_allclose(reg.apply(take.select(["E"])), np.broadcast_to(effector, (4, 1, 3)), atol=1e-9)
+    np.testing.assert_allclose(
+        reg.apply(take.select(["E"])), np.broadcast_to(effector, (4, 1, 3)), atol=1e-9
+    )
 
 
 # --- Paper, section 6.2 (Table 5 and eq. 24) -------------------------------------------------
-TABLE5 = np.array([(547.7330, 160.4733, 24.0144), (362.9547, -147.6336, 22.0150), (716.6375, -158.7557, 23.4959)])
+TABLE5 = np.array(
+    [(547.7330, 160.4733, 24.0144), (362.9547, -147.6336, 22.0150), (716.6375, -158.7557, 23.4959)]
+)
 PRINTED_ORIGIN = np.array([542.4536, 48.4085, 23.1651])
-EQ24 = np.array([[0.483768011, 0.875196271, 0.0], [-0.875196271, 0.483768011, 0.0], [0.0, 0.0, 1.0]])  # B in A
+EQ24 = np.array(
+    [[0.483768011, 0.875196271, 0.0], [-0.875196271, 0.483768011, 0.0], [0.0, 0.0, 1.0]]
+)  # B in A
 
 
 def test_paper_origin_is_the_marker_centroid_with_y_sign_corrected():
@@ -103,7 +133,9 @@ def test_paper_rotation_is_the_y_axis_from_F2_to_the_origin():
     y = (origin - TABLE5[1])[:2]
     y /= np.linalg.norm(y)
     np.testing.assert_allclose(EQ24[:2, 1], y, atol=1e-4)
-    np.testing.assert_allclose(EQ24[:2, 0], [y[1], -y[0]], atol=1e-4)  # x = y turned -90 deg about z
+    np.testing.assert_allclose(
+        EQ24[:2, 0], [y[1], -y[0]], atol=1e-4
+    )  # x = y turned -90 deg about z
 
 
 def test_kabsch_reproduces_eq24_from_the_surveyed_base_positions():
@@ -116,7 +148,9 @@ def test_kabsch_reproduces_eq24_from_the_surveyed_base_positions():
     nominal = np.array([(-180.26, 105.67, 0.85), (0.01, -205.10, -1.15), (180.84, 99.06, 0.33)])
     fit = kabsch(TABLE5, nominal)  # mocap (A) -> base (B)
     r_b_in_a = fit.R.T
-    assert r_b_in_a[0, 0] == pytest.approx(0.483768, abs=1e-4) and r_b_in_a[1, 0] == pytest.approx(-0.875196, abs=1e-4)
+    assert r_b_in_a[0, 0] == pytest.approx(0.483768, abs=1e-4) and r_b_in_a[1, 0] == pytest.approx(
+        -0.875196, abs=1e-4
+    )
     np.testing.assert_allclose(r_b_in_a, EQ24, atol=1e-4)
     origin_in_a = fit.inverse().t
     np.testing.assert_allclose(origin_in_a, PRINTED_ORIGIN * [1, -1, 1], atol=0.02)

@@ -16,7 +16,11 @@ from cdprhost.calibration.session import (
     read_poses,
     session_toml,
 )
-from cdprhost.calibration.synthetic import synthesize_take, synthetic_config, write_synthetic_session
+from cdprhost.calibration.synthetic import (
+    synthesize_take,
+    synthetic_config,
+    write_synthetic_session,
+)
 from cdprhost.errors import InputError
 from tests.calibration_io.helpers import DATA, SAMPLE_POINT, SPEC_SESSION_TOML
 
@@ -34,10 +38,25 @@ def pose_arrays(k: int, seed: int = 0):
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_synthetic_session_roundtrip(tmp_path, fmt):
     points, commanded, s_cmd, t_s, dirs = pose_arrays(6, seed=len(fmt))
-    write_synthetic_session(tmp_path / "s", points, commanded, s_cmd, t_s, dirs, "paper-simulation",
-                            format=fmt, noise_mm=0.0, jitter_mm=0.02, seed=1, n_frames=40, gaps_fraction=0.02)
+    write_synthetic_session(
+        tmp_path / "s",
+        points,
+        commanded,
+        s_cmd,
+        t_s,
+        dirs,
+        "paper-simulation",
+        format=fmt,
+        noise_mm=0.0,
+        jitter_mm=0.02,
+        seed=1,
+        n_frames=40,
+        gaps_fraction=0.02,
+    )
     session = load_session(tmp_path / "s")
-    assert session.config.mocap.format == fmt and session.config.session.profile == "paper-simulation"
+    assert (
+        session.config.mocap.format == fmt and session.config.session.profile == "paper-simulation"
+    )
     m = session.measure()
     assert len(m) == 6 and m.rejected == ()
     np.testing.assert_array_equal(m.pose, np.arange(1, 7))
@@ -73,7 +92,9 @@ def test_spec_example_folder_assembled_by_hand(tmp_path):
 
 def test_rejected_and_unreadable_takes_are_listed_not_used(tmp_path):
     points, commanded, s_cmd, t_s, dirs = pose_arrays(4)
-    root = write_synthetic_session(tmp_path / "s", points, commanded, s_cmd, t_s, dirs, "p", n_frames=20, seed=3)
+    root = write_synthetic_session(
+        tmp_path / "s", points, commanded, s_cmd, t_s, dirs, "p", n_frames=20, seed=3
+    )
     bad = synthesize_take(points[1], n_frames=20, base_error_mm=3.0, rng=np.random.default_rng(0))
     from cdprhost.calibration.readers import write_take
 
@@ -84,21 +105,29 @@ def test_rejected_and_unreadable_takes_are_listed_not_used(tmp_path):
     np.testing.assert_array_equal(m.pose, [1, 3])
     assert [(r.pose, r.reason) for r in m.rejected] == [(2, "base-fit"), (4, "unreadable")]
     assert "pose_0002.csv" in m.rejected[0].message
-    with pytest.raises(InputError, match=r"pose 2 \(poses.csv line 3\): .*pose_0002.csv: base-marker fit RMS"):
+    with pytest.raises(
+        InputError, match=r"pose 2 \(poses.csv line 3\): .*pose_0002.csv: base-marker fit RMS"
+    ):
         session.measure(strict=True)
 
 
 def test_writer_resumes_and_continues_numbering(tmp_path):
     points, commanded, s_cmd, t_s, dirs = pose_arrays(5)
     root = tmp_path / "s"
-    write_synthetic_session(root, points[:3], commanded[:3], s_cmd[:3], t_s[:3], dirs[:3], "p", n_frames=15, seed=1)
+    write_synthetic_session(
+        root, points[:3], commanded[:3], s_cmd[:3], t_s[:3], dirs[:3], "p", n_frames=15, seed=1
+    )
     writer = SessionWriter(root)  # resume: configuration read from the folder
     assert writer.next_pose == 4
-    write_synthetic_session(root, points[3:], commanded[3:], s_cmd[3:], t_s[3:], dirs[3:], "p", n_frames=15, seed=2)
+    write_synthetic_session(
+        root, points[3:], commanded[3:], s_cmd[3:], t_s[3:], dirs[3:], "p", n_frames=15, seed=2
+    )
     table = read_poses(root / "poses.csv")
     np.testing.assert_array_equal(table.pose, [1, 2, 3, 4, 5])
     assert table.take[3] == "takes/pose_0004.csv"
-    np.testing.assert_allclose(load_session(root).measure().measured, points, atol=0.3)  # noise_mm 0.05
+    np.testing.assert_allclose(
+        load_session(root).measure().measured, points, atol=0.3
+    )  # noise_mm 0.05
     with pytest.raises(InputError, match="session.toml differs"):
         SessionWriter(root, synthetic_config("another-profile"))
     with pytest.raises(InputError, match="needs its configuration"):
@@ -111,12 +140,18 @@ def test_writer_keeps_poses_readable_when_a_take_fails(tmp_path):
     assert writer.add_take(take, t_s=0, commanded=[0, 0, 200], s_cmd=[1, 2, 3], dirs=[1, 1, 1]) == 1
     before = (tmp_path / "poses.csv").read_text()
     with pytest.raises(TypeError):
-        writer.add_take(take, t_s=1, commanded=[0, 0, 200], s_cmd=[1, 2, 3], dirs=[1, 1, 1], bogus_option=1)
+        writer.add_take(
+            take, t_s=1, commanded=[0, 0, 200], s_cmd=[1, 2, 3], dirs=[1, 1, 1], bogus_option=1
+        )
     with pytest.raises(InputError, match="does not exist"):
-        writer.append(take="takes/nothing.csv", t_s=1, commanded=[0, 0, 0], s_cmd=[0, 0, 0], dirs=[0, 0, 0])
+        writer.append(
+            take="takes/nothing.csv", t_s=1, commanded=[0, 0, 0], s_cmd=[0, 0, 0], dirs=[0, 0, 0]
+        )
     assert (tmp_path / "poses.csv").read_text() == before
     assert not [p for p in tmp_path.rglob("*.tmp")]  # no half-written files left behind
-    assert writer.add_take(take, t_s=2, commanded=[0, 0, 200], s_cmd=[1, 2, 3], dirs=[-1, 0, 1]) == 2
+    assert (
+        writer.add_take(take, t_s=2, commanded=[0, 0, 200], s_cmd=[1, 2, 3], dirs=[-1, 0, 1]) == 2
+    )
     assert (tmp_path / "takes" / "pose_0002.csv").is_file()
 
 
@@ -125,10 +160,19 @@ def test_writer_appends_under_a_hand_made_header(tmp_path):
     (tmp_path / "takes").mkdir()
     shutil.copy(DATA / "motive_1.25_parent_mm.csv", tmp_path / "takes" / "a.csv")
     header = "note," + ",".join(reversed(POSE_COLUMNS))
-    (tmp_path / "poses.csv").write_text(header + "\nhello,0,0,0,0,0,0,1,2,3,0,takes/a.csv,7")  # no final newline
+    (tmp_path / "poses.csv").write_text(
+        header + "\nhello,0,0,0,0,0,0,1,2,3,0,takes/a.csv,7"
+    )  # no final newline
     writer = SessionWriter(tmp_path)
     assert writer.next_pose == 8
-    writer.append(take="takes/a.csv", t_s=5, commanded=[1, 2, 3], s_cmd=[4, 5, 6], dirs=[1, 0, -1], extra={"note": "x"})
+    writer.append(
+        take="takes/a.csv",
+        t_s=5,
+        commanded=[1, 2, 3],
+        s_cmd=[4, 5, 6],
+        dirs=[1, 0, -1],
+        extra={"note": "x"},
+    )
     table = read_poses(tmp_path / "poses.csv")
     np.testing.assert_array_equal(table.pose, [7, 8])
     np.testing.assert_allclose(table.commanded[1], [1, 2, 3])
@@ -146,20 +190,37 @@ def test_session_toml_roundtrip_and_spec_layout(tmp_path):
     assert load_session_config(tmp_path / "noisy.toml").mocap.noise_mm == 0.07
     (tmp_path / "spec.toml").write_text(SPEC_SESSION_TOML)
     spec = load_session_config(tmp_path / "spec.toml")
-    assert spec.mocap.effector.offset == (0.0, 0.0, -12.0) and spec.mocap.acceptance.max_base_rms_mm == 0.5
+    assert (
+        spec.mocap.effector.offset == (0.0, 0.0, -12.0)
+        and spec.mocap.acceptance.max_base_rms_mm == 0.5
+    )
 
 
-@pytest.mark.parametrize("edit,problem", [
-    (lambda t: t.replace('"Base:F3" = [259.8, -150.0, 0.0]', '"Base:F3" = [259.8, 750.0, 0.0]'), "collinear"),
-    (lambda t: t.replace('"Base:F3" = [259.8, -150.0, 0.0]\n', ""), "at least 3 base markers"),
-    (lambda t: t.replace('format = "motive-csv"', 'format = "fbx"'), "mocap.format"),
-    (lambda t: t.replace('offset =', 'ofset ='), "mocap.effector.ofset: unknown key"),
-    (lambda t: t.replace('profile = "paper-simulation"', ''), "session.profile: missing required key"),
-    (lambda t: t.replace('"EE:E3"]', '"Base:F1"]'), "Base:F1 listed both"),
-    (lambda t: t + "\n[mocap.acceptance]\nmax_base_rms_mm = -1\n", "mocap.acceptance.max_base_rms_mm"),
-    (lambda t: t.replace('[mocap]', '[mocap]\nnoise_mm = 0'), "mocap.noise_mm"),
-    (lambda t: t.replace("[mocap]", "[mocap"), "not valid TOML"),
-])
+@pytest.mark.parametrize(
+    "edit,problem",
+    [
+        (
+            lambda t: t.replace(
+                '"Base:F3" = [259.8, -150.0, 0.0]', '"Base:F3" = [259.8, 750.0, 0.0]'
+            ),
+            "collinear",
+        ),
+        (lambda t: t.replace('"Base:F3" = [259.8, -150.0, 0.0]\n', ""), "at least 3 base markers"),
+        (lambda t: t.replace('format = "motive-csv"', 'format = "fbx"'), "mocap.format"),
+        (lambda t: t.replace("offset =", "ofset ="), "mocap.effector.ofset: unknown key"),
+        (
+            lambda t: t.replace('profile = "paper-simulation"', ""),
+            "session.profile: missing required key",
+        ),
+        (lambda t: t.replace('"EE:E3"]', '"Base:F1"]'), "Base:F1 listed both"),
+        (
+            lambda t: t + "\n[mocap.acceptance]\nmax_base_rms_mm = -1\n",
+            "mocap.acceptance.max_base_rms_mm",
+        ),
+        (lambda t: t.replace("[mocap]", "[mocap]\nnoise_mm = 0"), "mocap.noise_mm"),
+        (lambda t: t.replace("[mocap]", "[mocap"), "not valid TOML"),
+    ],
+)
 def test_session_toml_errors(tmp_path, edit, problem):
     path = tmp_path / "session.toml"
     path.write_text(edit(SPEC_SESSION_TOML))
@@ -171,18 +232,32 @@ def test_session_toml_errors(tmp_path, edit, problem):
 GOOD_ROW = "1,takes/a.csv,0,1,2,3,4,5,6,1,-1,0"
 
 
-@pytest.mark.parametrize("text,message", [
-    ("pose,take,t_s\n", "line 1: header lacks column(s) x_cmd, y_cmd"),
-    (GOOD_ROW.replace(",2,3,", ",two,3,"), "line 2, column 'y_cmd' (column 5): not a number: 'two'"),
-    (GOOD_ROW.replace("1,-1,0", "2,-1,0"), "line 2, column 'dir1' (column 10): must be +1, -1 or 0"),
-    (GOOD_ROW.replace("takes/a.csv", ""), "line 2, column 'take' (column 2): empty"),
-    (GOOD_ROW.replace(",0,1,2", ",nan,1,2"), "column 't_s' (column 3): not a finite number"),
-    (GOOD_ROW + "\n" + GOOD_ROW, "line 3, column 'pose' (column 1): pose 1 already given on line 2"),
-    (GOOD_ROW.replace("1,takes", "0,takes"), "must be >= 1"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("pose,take,t_s\n", "line 1: header lacks column(s) x_cmd, y_cmd"),
+        (
+            GOOD_ROW.replace(",2,3,", ",two,3,"),
+            "line 2, column 'y_cmd' (column 5): not a number: 'two'",
+        ),
+        (
+            GOOD_ROW.replace("1,-1,0", "2,-1,0"),
+            "line 2, column 'dir1' (column 10): must be +1, -1 or 0",
+        ),
+        (GOOD_ROW.replace("takes/a.csv", ""), "line 2, column 'take' (column 2): empty"),
+        (GOOD_ROW.replace(",0,1,2", ",nan,1,2"), "column 't_s' (column 3): not a finite number"),
+        (
+            GOOD_ROW + "\n" + GOOD_ROW,
+            "line 3, column 'pose' (column 1): pose 1 already given on line 2",
+        ),
+        (GOOD_ROW.replace("1,takes", "0,takes"), "must be >= 1"),
+    ],
+)
 def test_poses_csv_errors_name_line_and_column(tmp_path, text, message):
     path = tmp_path / "poses.csv"
-    path.write_text(text if text.startswith("pose,take,t_s\n") else ",".join(POSE_COLUMNS) + "\n" + text + "\n")
+    path.write_text(
+        text if text.startswith("pose,take,t_s\n") else ",".join(POSE_COLUMNS) + "\n" + text + "\n"
+    )
     with pytest.raises(InputError) as err:
         read_poses(path)
     assert message in str(err.value) and "poses.csv" in str(err.value)

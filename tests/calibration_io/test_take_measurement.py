@@ -8,7 +8,12 @@ import pytest
 from cdprhost.calibration.readers import Take, read_take
 from cdprhost.calibration.registration import rotation_about_z
 from cdprhost.calibration.synthetic import motive_world_pose, synthesize_take
-from cdprhost.calibration.takes import AcceptanceLimits, TakeRejected, measure_effector, robust_inliers
+from cdprhost.calibration.takes import (
+    AcceptanceLimits,
+    TakeRejected,
+    measure_effector,
+    robust_inliers,
+)
 from tests.calibration_io.helpers import mocap_config
 
 POINT = np.array([-35.0, 60.0, 210.0])
@@ -40,7 +45,7 @@ def test_outlier_frames_are_dropped_and_reported():
     m = measure_effector(bad, mocap_config())
     np.testing.assert_allclose(m.point, POINT, atol=0.02)
     assert m.n_frames_used == 57 and any("3 outlier frame(s)" in w for w in m.warnings)
-    plain = (bad.positions.reshape(60, -1).mean(axis=0) - take.positions.reshape(60, -1).mean(axis=0))
+    plain = bad.positions.reshape(60, -1).mean(axis=0) - take.positions.reshape(60, -1).mean(axis=0)
     assert np.abs(plain).max() > 0.2  # a plain mean would have been pulled off
 
 
@@ -54,8 +59,16 @@ def test_robust_inliers_mask():
 
 def test_gapped_frames_are_skipped(tmp_path):
     rng = np.random.default_rng(9)
-    take = synthesize_take(POINT, jitter_mm=0.02, n_frames=80, gaps_fraction=0.05, rng=rng,
-                           path=tmp_path / "g.csv", format="motive-csv", units="Meters")
+    take = synthesize_take(
+        POINT,
+        jitter_mm=0.02,
+        n_frames=80,
+        gaps_fraction=0.05,
+        rng=rng,
+        path=tmp_path / "g.csv",
+        format="motive-csv",
+        units="Meters",
+    )
     m = measure_effector(read_take(tmp_path / "g.csv"), mocap_config())
     n_ok = int(np.isfinite(take.positions).all(axis=(1, 2)).sum())
     assert m.n_frames_used <= n_ok < 80 and any("skipped for gaps" in w for w in m.warnings)
@@ -64,12 +77,20 @@ def test_gapped_frames_are_skipped(tmp_path):
 
 def test_reject_misplaced_base_markers_naming_file_and_marker(tmp_path):
     rng = np.random.default_rng(10)
-    base = {"Base:F1": (0.0, 300.0, 0.0), "Base:F2": (-259.8, -150.0, 0.0), "Base:F3": (259.8, -150.0, 0.0),
-            "Base:F4": (0.0, 0.0, 0.0)}
+    base = {
+        "Base:F1": (0.0, 300.0, 0.0),
+        "Base:F2": (-259.8, -150.0, 0.0),
+        "Base:F3": (259.8, -150.0, 0.0),
+        "Base:F4": (0.0, 0.0, 0.0),
+    }
     path = tmp_path / "take7.csv"
-    take = synthesize_take(POINT, base_markers={**base, "Base:F4": (0.0, 0.0, 6.0)}, rng=rng, path=path)
+    take = synthesize_take(
+        POINT, base_markers={**base, "Base:F4": (0.0, 0.0, 6.0)}, rng=rng, path=path
+    )
     config = mocap_config().model_copy(update={"base_markers": base})
-    with pytest.raises(TakeRejected, match=r"take7\.csv: base-marker fit RMS .*\(largest misfit: Base:F4") as err:
+    with pytest.raises(
+        TakeRejected, match=r"take7\.csv: base-marker fit RMS .*\(largest misfit: Base:F4"
+    ) as err:
         measure_effector(read_take(path), config)
     assert err.value.reason == "base-fit" and err.value.exit_code == 2
     loose = AcceptanceLimits(max_base_rms_mm=5.0)  # thresholds are configurable
@@ -83,10 +104,14 @@ def test_reject_moving_effector():
     pos = take.positions.copy()
     pos[:, 3:] += drift
     moving = Take(take.marker_names, pos, take.times_s, "drift.csv", take.format)
-    with pytest.raises(TakeRejected, match=r"drift\.csv: effector not static: frames spread") as err:
+    with pytest.raises(
+        TakeRejected, match=r"drift\.csv: effector not static: frames spread"
+    ) as err:
         measure_effector(moving, mocap_config())
     assert err.value.reason == "not-static"
-    jumpy = shifted(take, list(range(0, 60, 3)), ["EE:E1", "EE:E2", "EE:E3"], np.array([0.0, 0.0, 3.0]))
+    jumpy = shifted(
+        take, list(range(0, 60, 3)), ["EE:E1", "EE:E2", "EE:E3"], np.array([0.0, 0.0, 3.0])
+    )
     with pytest.raises(TakeRejected, match="effector not static: 20 of 60 frames") as err:
         measure_effector(jumpy, mocap_config())
 
@@ -94,9 +119,16 @@ def test_reject_moving_effector():
 def test_reject_missing_never_seen_and_too_few_frames():
     rng = np.random.default_rng(12)
     take = synthesize_take(POINT, n_frames=30, rng=rng)
-    renamed = mocap_config().model_copy(update={"effector": mocap_config().effector.model_copy(
-        update={"markers": ("EE:E1", "EE:E2", "EE:E4")})})
-    with pytest.raises(TakeRejected, match=r"marker\(s\) EE:E4 not in the take \(it has: Base:F1") as err:
+    renamed = mocap_config().model_copy(
+        update={
+            "effector": mocap_config().effector.model_copy(
+                update={"markers": ("EE:E1", "EE:E2", "EE:E4")}
+            )
+        }
+    )
+    with pytest.raises(
+        TakeRejected, match=r"marker\(s\) EE:E4 not in the take \(it has: Base:F1"
+    ) as err:
         measure_effector(take, renamed)
     assert err.value.reason == "missing-marker"
     pos = take.positions.copy()
@@ -114,10 +146,15 @@ def test_noise_mm_is_the_std_of_the_measured_point():
     """``noise_mm`` survives averaging (a static per-take error); per-frame jitter does not."""
     rng = np.random.default_rng(13)
     cfg = mocap_config()
-    errors = np.array([
-        measure_effector(synthesize_take(POINT, noise_mm=0.05, jitter_mm=0.02, n_frames=30, rng=rng), cfg).point - POINT
-        for _ in range(300)
-    ])
+    errors = np.array(
+        [
+            measure_effector(
+                synthesize_take(POINT, noise_mm=0.05, jitter_mm=0.02, n_frames=30, rng=rng), cfg
+            ).point
+            - POINT
+            for _ in range(300)
+        ]
+    )
     std = errors.std(axis=0)
     assert np.all((std > 0.044) & (std < 0.057)), std
     assert np.abs(errors.mean(axis=0)).max() < 0.012

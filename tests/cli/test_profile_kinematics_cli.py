@@ -35,7 +35,9 @@ def test_ik_then_fk_round_trip(tmp_path, sim_model):
     assert main(["ik", "--profile", "paper-simulation", "--in", str(src), "--out", str(out)]) == 0
     table = read_columns(out, ("x", "y", "z", "s1", "s2", "s3", "n1", "n2", "n3"))
     a = np.array(sim_model.geometry.outlets)
-    expected = np.sqrt(((pts[:, None, :] - a[None]) ** 2).sum(-1)) - sim_model.geometry.initial_lengths
+    expected = (
+        np.sqrt(((pts[:, None, :] - a[None]) ** 2).sum(-1)) - sim_model.geometry.initial_lengths
+    )
     np.testing.assert_allclose(table[:, 3:6], expected, atol=1e-6)
     np.testing.assert_array_equal(table[:, 6:9], np.rint(expected * 400))
     back = tmp_path / "back.csv"
@@ -56,5 +58,18 @@ def test_ik_refuses_points_outside_and_writes_nothing(tmp_path, capsys):
 def test_ik_bad_csv_names_row_and_column(tmp_path, capsys):
     src = tmp_path / "points.csv"
     src.write_text("x,y,z\n0,0,200\n0,abc,200\n")
-    assert main(["ik", "--profile", "paper-simulation", "--in", str(src), "--out", str(tmp_path / "o.csv")]) == 2
+    assert (
+        main(
+            [
+                "ik",
+                "--profile",
+                "paper-simulation",
+                "--in",
+                str(src),
+                "--out",
+                str(tmp_path / "o.csv"),
+            ]
+        )
+        == 2
+    )
     assert "row 3, column 'y'" in capsys.readouterr().err

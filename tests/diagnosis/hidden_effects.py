@@ -75,7 +75,12 @@ class SliderOffset(Effect):
         return s - vector
 
 
-def periodic_vector(rng: np.random.Generator, amplitude_mm: tuple[float, float] = (0.12, 0.25),
-                    period_mm: float = 8.0) -> np.ndarray:
+def periodic_vector(
+    rng: np.random.Generator,
+    amplitude_mm: tuple[float, float] = (0.12, 0.25),
+    period_mm: float = 8.0,
+) -> np.ndarray:
     """A periodic lead error of realistic size: 0.12-0.25 mm amplitude, one lead (8 mm) period."""
-    return np.concatenate([rng.uniform(*amplitude_mm, 3), [period_mm], rng.uniform(0, 2 * np.pi, 3)])
+    return np.concatenate(
+        [rng.uniform(*amplitude_mm, 3), [period_mm], rng.uniform(0, 2 * np.pi, 3)]
+    )

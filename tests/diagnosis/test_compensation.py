@@ -29,8 +29,10 @@ def test_augmented_model_compensates_while_printing(make_session, sim_model, eff
     assert d.effects == (effect,)
     grid = validation_grid(sim_model, spacing_mm=25.0)
     path = np.concatenate([grid, grid[::-1]])  # both directions of travel
-    err = {name: np.linalg.norm(printed_points(truth, m, path) - path[1:], axis=1)
-           for name, m in (("base", d.base.fit.model_), ("augmented", d.final_model))}
+    err = {
+        name: np.linalg.norm(printed_points(truth, m, path) - path[1:], axis=1)
+        for name, m in (("base", d.base.fit.model_), ("augmented", d.final_model))
+    }
     rms = {k: float(np.sqrt(np.mean(v**2))) for k, v in err.items()}
     assert rms["augmented"] < 0.5 * rms["base"]
     assert rms["augmented"] < 0.12
@@ -42,4 +44,6 @@ def test_drift_is_reported_not_compensated(make_session, sim_model):
     assert d.effects == ("drift",)
     grid = validation_grid(sim_model, spacing_mm=40.0)
     no_drift = d.final_model.with_geometry(d.final_model.geometry, d.base.fit.model_.effects)
-    np.testing.assert_allclose(d.final_model.ik(grid), no_drift.ik(grid))  # t unknown while printing
+    np.testing.assert_allclose(
+        d.final_model.ik(grid), no_drift.ik(grid)
+    )  # t unknown while printing

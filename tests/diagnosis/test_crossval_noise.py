@@ -4,7 +4,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from cdprhost.calibration.fitting import CableModelFit
-from cdprhost.diagnosis.crossval import expected_heldout_sq, heldout_errors, noise_floor_mm, pose_folds, rms
+from cdprhost.diagnosis.crossval import (
+    expected_heldout_sq,
+    heldout_errors,
+    noise_floor_mm,
+    pose_folds,
+    rms,
+)
 from cdprhost.diagnosis.noise import DEFAULT_NOISE_MM, estimate_noise, repeated_pose_sigma
 from cdprhost.diagnosis.signatures import fit_jacobian
 
@@ -49,7 +55,9 @@ def test_noise_floor_matches_heldout_rms_of_a_correct_model(make_session, sim_mo
         held = rms(heldout_errors(obs, fit.model_, (), folds))
         ratios.append(held / noise_floor_mm(fit_jacobian(fit, obs), obs.sigma_mm, folds))
     assert 0.93 < np.mean(ratios) < 1.07  # a correct model sits on its noise floor
-    assert 1.6 < noise_floor_mm(fit_jacobian(fit, obs), 0.05, folds) / 0.05 < 2.0  # ~ sqrt(3 + leverage)
+    assert (
+        1.6 < noise_floor_mm(fit_jacobian(fit, obs), 0.05, folds) / 0.05 < 2.0
+    )  # ~ sqrt(3 + leverage)
 
 
 def test_declared_noise_wins():
@@ -69,7 +77,13 @@ def test_noise_from_repeated_poses():
 def test_default_noise_and_frame_scatter_as_a_lower_bound():
     rng = np.random.default_rng(6)
     sliders = rng.uniform(-100, 0, (20, 3))
-    small = estimate_noise(None, sliders=sliders, measured=np.zeros((20, 3)), take_std_mm=np.full((20, 3), 0.01))
-    assert small.source == "default" and small.sigma_mm == DEFAULT_NOISE_MM and "lower bound" in small.note
+    small = estimate_noise(
+        None, sliders=sliders, measured=np.zeros((20, 3)), take_std_mm=np.full((20, 3), 0.01)
+    )
+    assert (
+        small.source == "default"
+        and small.sigma_mm == DEFAULT_NOISE_MM
+        and "lower bound" in small.note
+    )
     big = estimate_noise(None, take_std_mm=np.full((20, 3), 0.09))
     assert big.source == "take scatter" and big.sigma_mm == pytest.approx(0.09)

@@ -50,7 +50,9 @@ def test_names_the_hidden_catalogue_effect(make_session, sim_model, effect):
 def test_says_none_on_clean_data(make_session, sim_model):
     verdicts = [run(make_session, sim_model, None, seed) for seed in SEEDS]
     none = [d for d in verdicts if d.verdict == "none"]
-    assert len(none) >= 0.95 * len(SEEDS), [(d.verdict, d.effects) for d in verdicts if d.verdict != "none"]
+    assert len(none) >= 0.95 * len(SEEDS), [
+        (d.verdict, d.effects) for d in verdicts if d.verdict != "none"
+    ]
     assert np.mean([d.final.heldout_rms_mm <= 1.3 * d.noise_floor_mm for d in none]) >= 0.95
     assert all(d.effect is None and not d.final.effects for d in none)
 
@@ -65,7 +67,9 @@ def test_out_of_catalogue_effect_is_unexplained(make_session, sim_model):
     assert len(unexplained) >= 0.95 * len(SEEDS)
     assert all(d.effect is None for d in verdicts if d.verdict != "named")
     # 'where' points at the slider-position pattern in most sessions
-    assert sum("repeat with slider position" in d.where for d in unexplained) >= 0.8 * len(unexplained)
+    assert sum("repeat with slider position" in d.where for d in unexplained) >= 0.8 * len(
+        unexplained
+    )
 
 
 @pytest.mark.parametrize("effect", [None, *CATALOGUE])
@@ -73,5 +77,7 @@ def test_full_settings_agree(make_session, sim_model, effect):
     d = run(make_session, sim_model, effect, 7, settings=DiagnosisSettings())
     assert d.verdict == ("none" if effect is None else "named")
     assert d.effects == (() if effect is None else (effect,))
-    assert all(np.isfinite(c.heldout_rms_mm) for c in d.candidates)  # every candidate cross-validated
+    assert all(
+        np.isfinite(c.heldout_rms_mm) for c in d.candidates
+    )  # every candidate cross-validated
     assert d.final.heldout_rms_mm <= 1.3 * d.noise_floor_mm

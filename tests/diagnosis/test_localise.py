@@ -13,7 +13,9 @@ def base_findings(make_session, sim_model, effect, seed, vector=None):
 
 
 def test_drift_shows_up_against_time(make_session, sim_model):
-    findings, _ = base_findings(make_session, sim_model, "drift", 1, vector=np.array([4e-4, -3e-4, 3e-4]))
+    findings, _ = base_findings(
+        make_session, sim_model, "drift", 1, vector=np.array([4e-4, -3e-4, 3e-4])
+    )
     assert findings[0].kind == "time"
     kinds = {(f.kind, f.cable) for f in findings}
     assert {("time", 1), ("time", 2), ("time", 3)} <= kinds
@@ -23,7 +25,9 @@ def test_drift_shows_up_against_time(make_session, sim_model):
 
 
 def test_backlash_shows_up_against_approach_direction(make_session, sim_model):
-    findings, _ = base_findings(make_session, sim_model, "backlash", 2, vector=np.array([0.25, 0.0, 0.0]))
+    findings, _ = base_findings(
+        make_session, sim_model, "backlash", 2, vector=np.array([0.25, 0.0, 0.0])
+    )
     top = findings[0]
     assert (top.kind, top.cable) == ("approach direction", 1) and top.statistic < -0.6
     assert "oppose module 1's approach direction" in top.text
@@ -34,7 +38,11 @@ def test_periodic_lead_error_is_found_with_its_period(make_session, sim_model):
     findings, _ = base_findings(make_session, sim_model, PeriodicLeadError(), 3, vector=vec)
     periodic = [f for f in findings if f.kind == "periodic"]
     assert periodic and periodic[0].cable == 1
-    assert "period ~8.0 mm" in periodic[0].text or "period ~7.9 mm" in periodic[0].text or "period ~8.1 mm" in periodic[0].text
+    assert (
+        "period ~8.0 mm" in periodic[0].text
+        or "period ~7.9 mm" in periodic[0].text
+        or "period ~8.1 mm" in periodic[0].text
+    )
 
 
 def test_periodic_scan_recovers_a_sinusoid_and_ignores_a_line():
@@ -42,7 +50,9 @@ def test_periodic_scan_recovers_a_sinusoid_and_ignores_a_line():
     s = rng.uniform(-150, 20, 40)
     y = 0.15 * np.sin(2 * np.pi * s / 6.0 + 1.0) + 0.01 * s + rng.normal(0, 0.03, 40)
     period, amp, _, p = periodic_scan(s, y)
-    assert period == pytest.approx(6.0, rel=0.02) and amp == pytest.approx(0.15, rel=0.2) and p < 1e-6
+    assert (
+        period == pytest.approx(6.0, rel=0.02) and amp == pytest.approx(0.15, rel=0.2) and p < 1e-6
+    )
     assert periodic_scan(s, 0.01 * s + rng.normal(0, 0.03, 40))[3] > 0.01
 
 

@@ -3,7 +3,12 @@ import pytest
 
 from cdprhost.calibration.fitting import CableModelFit
 from cdprhost.diagnosis.signatures import (
-    analyse_signature, confusable_pairs, effect_signature, fit_jacobian, numeric_jacobian, principal_correlation,
+    analyse_signature,
+    confusable_pairs,
+    effect_signature,
+    fit_jacobian,
+    numeric_jacobian,
+    principal_correlation,
 )
 from cdprhost.effects import CATALOGUE
 from tests.diagnosis.hidden_effects import SliderOffset
@@ -17,7 +22,9 @@ def base_fit(make_session, sim_model):
 
 def test_numeric_jacobian_of_a_known_function():
     a = np.array([[1.0, 2.0], [0.5, -1.0], [3.0, 0.0]])
-    jac = numeric_jacobian(lambda x: a @ x + np.sin(x[0]), np.array([0.3, -0.2]), np.array([1e-6, 1e-6]))
+    jac = numeric_jacobian(
+        lambda x: a @ x + np.sin(x[0]), np.array([0.3, -0.2]), np.array([1e-6, 1e-6])
+    )
     expected = a.copy()
     expected[:, 0] += np.cos(0.3)
     np.testing.assert_allclose(jac, expected, rtol=1e-7)
@@ -50,7 +57,9 @@ def test_effects_without_context_have_no_signature(base_fit, sim_model):
 
     blind = replace(obs, t_s=None, directions=None)
     for name in ("drift", "backlash"):
-        assert analyse_signature(name, *effect_signature(fit.model_, blind, CATALOGUE[name])).absorbed
+        assert analyse_signature(
+            name, *effect_signature(fit.model_, blind, CATALOGUE[name])
+        ).absorbed
 
 
 def test_an_effect_is_confusable_with_itself_and_not_with_an_orthogonal_one(base_fit):

@@ -4,7 +4,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy import stats
 
-from cdprhost.diagnosis.stat_tests import bic, goodness_of_fit_p, holm, likelihood_ratio_p, nested_f_test, pearson
+from cdprhost.diagnosis.stat_tests import (
+    bic,
+    goodness_of_fit_p,
+    holm,
+    likelihood_ratio_p,
+    nested_f_test,
+    pearson,
+)
 
 p_lists = st.lists(st.floats(0.0, 1.0, allow_nan=False), min_size=1, max_size=12)
 

@@ -56,10 +56,23 @@ def print_embedded(path: Path, profile_name: str = "paper-prototype") -> PrintRu
         if isinstance(out, SegmentBatch):
             steps.append(out.steps_abs)
             lines.append(out.line)
-    return PrintRun(path, result, record, np.concatenate(steps), np.concatenate(lines), starts, ends, e_final, model, profile)
+    return PrintRun(
+        path,
+        result,
+        record,
+        np.concatenate(steps),
+        np.concatenate(lines),
+        starts,
+        ends,
+        e_final,
+        model,
+        profile,
+    )
 
 
-def first_layers(gcode: Path, out_dir: Path, layers: int, tail: tuple[str, ...] = ("M104 S0",)) -> Path:
+def first_layers(
+    gcode: Path, out_dir: Path, layers: int, tail: tuple[str, ...] = ("M104 S0",)
+) -> Path:
     """The start of a sliced file up to (not including) layer ``layers + 1``, plus ``tail``."""
     lines, seen = [], 0
     for line in gcode.read_text().splitlines():

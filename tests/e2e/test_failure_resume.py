@@ -10,13 +10,25 @@ from cdprhost.job.resume import ResumePoint
 from tests.e2e.conftest import first_layers
 
 
-def test_reset_mid_print_fails_naming_the_line_then_resume_completes(fixture_gcode, tmp_path, monkeypatch, capsys):
+def test_reset_mid_print_fails_naming_the_line_then_resume_completes(
+    fixture_gcode, tmp_path, monkeypatch, capsys
+):
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
     path = first_layers(fixture_gcode, tmp_path, 3, ("M104 S0", "G28 X0"))
     report = tmp_path / "job.json"
     t0 = time.monotonic()
-    code = main(["print", str(path), "--profile", "paper-prototype", "--sim-faults", "reset_after=1500",
-                 "--json", str(report)])
+    code = main(
+        [
+            "print",
+            str(path),
+            "--profile",
+            "paper-prototype",
+            "--sim-faults",
+            "reset_after=1500",
+            "--json",
+            str(report),
+        ]
+    )
     assert code == 1 and time.monotonic() - t0 < 60
     data = json.loads(report.read_text())
     assert data["status"] == "failed" and "Reset" in data["reason"]
@@ -27,8 +39,19 @@ def test_reset_mid_print_fails_naming_the_line_then_resume_completes(fixture_gco
     assert point.last_line == data["last_line"] and point.suggested_layer == data["last_layer"]
 
     again = tmp_path / "resume.json"
-    code = main(["print", str(path), "--profile", "paper-prototype", "--resume-from-layer", str(point.suggested_layer),
-                 "--yes", "--json", str(again)])
+    code = main(
+        [
+            "print",
+            str(path),
+            "--profile",
+            "paper-prototype",
+            "--resume-from-layer",
+            str(point.suggested_layer),
+            "--yes",
+            "--json",
+            str(again),
+        ]
+    )
     resumed = json.loads(again.read_text())
     assert code == 0 and resumed["status"] == "completed"
     assert resumed["last_layer"] == 3
@@ -37,5 +60,7 @@ def test_reset_mid_print_fails_naming_the_line_then_resume_completes(fixture_gco
 def test_resume_needs_confirmation_without_yes(fixture_gcode, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
     path = first_layers(fixture_gcode, tmp_path, 3, ("M104 S0", "G28 X0"))
-    assert main(["print", str(path), "--profile", "paper-prototype", "--resume-from-layer", "2"]) == 1
+    assert (
+        main(["print", str(path), "--profile", "paper-prototype", "--resume-from-layer", "2"]) == 1
+    )
     assert "not confirmed" in capsys.readouterr().err

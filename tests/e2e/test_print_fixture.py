@@ -57,8 +57,12 @@ def test_executed_path_stays_within_0_02_mm_of_the_gcode_path(fixture_print: Pri
     mids = run.model.fk((steps + prev) / 2 / spm)
     a = np.array([run.moves_start[ln] for ln in run.lines])
     b = np.array([run.moves_end[ln] for ln in run.lines])
-    first = np.r_[True, run.lines[1:] != run.lines[:-1]]  # a move's first segment starts at the previous move's end
+    first = np.r_[
+        True, run.lines[1:] != run.lines[:-1]
+    ]  # a move's first segment starts at the previous move's end
     d_end = _distance_to_segments(ends, a, b)
     d_mid = _distance_to_segments(mids[~first], a[~first], b[~first])
-    assert d_end.max() < 0.02, f"worst segment end {d_end.max():.4f} mm at line {run.lines[d_end.argmax()]}"
+    assert d_end.max() < 0.02, (
+        f"worst segment end {d_end.max():.4f} mm at line {run.lines[d_end.argmax()]}"
+    )
     assert d_mid.max() < 0.02, f"worst segment midpoint {d_mid.max():.4f} mm"

@@ -23,15 +23,37 @@ pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminal
 
 def _print_over_pty(gcode, tmp_path, name, faults=None):
     record = tmp_path / f"{name}.jsonl"
-    cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--speedup", "25", "--record", str(record)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "cdprhost",
+        "sim-device",
+        "--speedup",
+        "25",
+        "--record",
+        str(record),
+    ]
     if faults:
         cmd += ["--faults", faults]
     dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         pty = dev.stdout.readline().strip()
-        assert pty.startswith("/dev/"), f"sim-device printed {pty!r}: {dev.stderr.read() if dev.poll() is not None else ''}"
+        assert pty.startswith("/dev/"), (
+            f"sim-device printed {pty!r}: {dev.stderr.read() if dev.poll() is not None else ''}"
+        )
         report = tmp_path / f"{name}.json"
-        code = main(["print", str(gcode), "--profile", "paper-prototype", "--port", pty, "--json", str(report)])
+        code = main(
+            [
+                "print",
+                str(gcode),
+                "--profile",
+                "paper-prototype",
+                "--port",
+                pty,
+                "--json",
+                str(report),
+            ]
+        )
         result = json.loads(report.read_text())
     finally:
         dev.send_signal(signal.SIGTERM)
@@ -40,7 +62,9 @@ def _print_over_pty(gcode, tmp_path, name, faults=None):
     return code, result, rows
 
 
-def test_pty_prints_equal_the_embedded_print_with_and_without_faults(fixture_gcode, tmp_path, monkeypatch):
+def test_pty_prints_equal_the_embedded_print_with_and_without_faults(
+    fixture_gcode, tmp_path, monkeypatch
+):
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
     gcode = first_layers(fixture_gcode, tmp_path, 1)
     embedded = print_embedded(gcode)
@@ -49,7 +73,9 @@ def test_pty_prints_equal_the_embedded_print_with_and_without_faults(fixture_gco
     code, clean, rows = _print_over_pty(gcode, tmp_path, "clean")
     assert code == 0 and clean["status"] == "completed"
     assert [(r["seq"], r["steps"]) for r in rows] == want
-    code, faulty, frows = _print_over_pty(gcode, tmp_path, "faulty", "corrupt=0.001,drop=0.001,dup=0.001,seed=7")
+    code, faulty, frows = _print_over_pty(
+        gcode, tmp_path, "faulty", "corrupt=0.001,drop=0.001,dup=0.001,seed=7"
+    )
     assert code == 0 and faulty["status"] == "completed"
     assert frows == rows  # seq, steps and device time all identical
     assert faulty["retransmits"] > clean["retransmits"]

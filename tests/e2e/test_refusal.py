@@ -10,8 +10,19 @@ from cdprhost.cli.main import main
 from cdprhost.job.runner import PrintJob
 from cdprhost.profile import load_profile
 
-GOOD = ["G28", "M104 S200", "M109 S200", "G92 E0", "G1 Z0.3 F3000", ";LAYER_CHANGE", "G1 X10 Y0 E1 F1800",
-        "G1 X10 Y10 E2", "G1 X0 Y10 E3", "G1 X0 Y0 E4", "M104 S0"]
+GOOD = [
+    "G28",
+    "M104 S200",
+    "M109 S200",
+    "G92 E0",
+    "G1 Z0.3 F3000",
+    ";LAYER_CHANGE",
+    "G1 X10 Y0 E1 F1800",
+    "G1 X10 Y10 E2",
+    "G1 X0 Y10 E3",
+    "G1 X0 Y0 E4",
+    "M104 S0",
+]
 
 
 def _write(tmp_path, bad_line: str, at: int = 8):
@@ -21,10 +32,13 @@ def _write(tmp_path, bad_line: str, at: int = 8):
     return path, at + 1
 
 
-@pytest.mark.parametrize("bad, rule", [
-    ("G1 X150 Y0", None),  # outside the build triangle
-    ("G1 Z300", None),  # too tall (machine z 410 > 330)
-])
+@pytest.mark.parametrize(
+    "bad, rule",
+    [
+        ("G1 X150 Y0", None),  # outside the build triangle
+        ("G1 Z300", None),  # too tall (machine z 410 > 330)
+    ],
+)
 def test_unreachable_moves_are_refused_and_nothing_moves(tmp_path, bad, rule):
     path, line = _write(tmp_path, bad)
     opened = []
@@ -51,6 +65,14 @@ def test_cli_print_small_file_completes(tmp_path):
     report = tmp_path / "r.json"
     assert main(["print", str(path), "--profile", "paper-prototype", "--json", str(report)]) == 0
     data = json.loads(report.read_text())
-    for key in ("status", "segments", "retransmits", "final_steps", "last_line", "last_layer", "print_time_s"):
+    for key in (
+        "status",
+        "segments",
+        "retransmits",
+        "final_steps",
+        "last_line",
+        "last_layer",
+        "print_time_s",
+    ):
         assert key in data
     assert data["status"] == "completed" and data["segments"] > 0 and len(data["final_steps"]) == 4

@@ -119,9 +119,13 @@ def test_radius_too_small_is_refused():
 
 
 @given(
-    cx=st.floats(-50, 50), cy=st.floats(-50, 50), r=st.floats(0.5, 80),
-    a0=st.floats(-math.pi, math.pi), sweep=st.floats(0.05, 2 * math.pi - 0.05),
-    cw=st.booleans(), tol=st.sampled_from([0.001, 0.01, 0.05]),
+    cx=st.floats(-50, 50),
+    cy=st.floats(-50, 50),
+    r=st.floats(0.5, 80),
+    a0=st.floats(-math.pi, math.pi),
+    sweep=st.floats(0.05, 2 * math.pi - 0.05),
+    cw=st.booleans(),
+    tol=st.sampled_from([0.001, 0.01, 0.05]),
 )
 def test_tolerance_holds_for_any_arc(cx, cy, r, a0, sweep, cw, tol):
     a1 = a0 - sweep if cw else a0 + sweep
@@ -135,5 +139,11 @@ def test_tolerance_holds_for_any_arc(cx, cy, r, a0, sweep, cw, tol):
     np.testing.assert_allclose(ends, r, atol=2e-6)
     mids = np.linalg.norm((arc["start"][:, :2] + arc["end"][:, :2]) / 2 - (cx, cy), axis=1)
     assert np.all(r - mids <= tol + 2e-6)
-    turned = np.abs(np.diff(np.unwrap(np.arctan2(np.r_[y0, arc["end"][:, 1]] - cy, np.r_[x0, arc["end"][:, 0]] - cx))))
+    turned = np.abs(
+        np.diff(
+            np.unwrap(
+                np.arctan2(np.r_[y0, arc["end"][:, 1]] - cy, np.r_[x0, arc["end"][:, 0]] - cx)
+            )
+        )
+    )
     assert turned.sum() == pytest.approx(sweep, abs=1e-4)

@@ -53,7 +53,7 @@ from .helpers import commands, moves, read
         ("T0", ToolSelect(1, 0)),
         ("M73 P10 R5", Unknown(1, "M73", harmless=True)),
         ("M204 S1000", Unknown(1, "M204", harmless=True)),
-        ("M862.3 P \"MK3S\" ; printer model check", Unknown(1, "M862.3", harmless=True)),
+        ('M862.3 P "MK3S" ; printer model check', Unknown(1, "M862.3", harmless=True)),
         ("M115 U3.10.0", Unknown(1, "M115", harmless=True)),
         ("M221 S100", Unknown(1, "M221", harmless=True)),
         ("M221 S95", Unknown(1, "M221", harmless=False)),
@@ -121,7 +121,10 @@ def test_annotations_prusa_style():
 def test_annotations_cura_style():
     text = ";LAYER_COUNT:2\n;LAYER:0\nG1 X1 Y1 Z0.2 E1 F600\n;TYPE:WALL-OUTER\n;LAYER:1\nG1 Z0.4\nG1 X2 E2\n"
     items = read(text)
-    assert [i for i in items if isinstance(i, LayerChange)] == [LayerChange(2, 0, None), LayerChange(5, 1, None)]
+    assert [i for i in items if isinstance(i, LayerChange)] == [
+        LayerChange(2, 0, None),
+        LayerChange(5, 1, None),
+    ]
     assert moves(items)["layer"].tolist() == [0, 1, 1]
 
 

@@ -71,7 +71,9 @@ def test_earliest_error_wins_across_kinds():
 
 
 def test_good_checksums_and_line_numbers():
-    text = "\n".join(checksummed(b) for b in ["N1 G1 X1 F600", "N2 G1 X2 Y3", "N3 M110 N10", "N11 G1 X4"])
+    text = "\n".join(
+        checksummed(b) for b in ["N1 G1 X1 F600", "N2 G1 X2 Y3", "N3 M110 N10", "N11 G1 X4"]
+    )
     m = moves(read(text))
     assert m["end"][:, 0].tolist() == [1, 2, 4]
 

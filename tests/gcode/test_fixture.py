@@ -58,7 +58,9 @@ def test_layers_from_annotations(fixture_items, fixture_gcode):
 def test_filament_matches_independent_count_and_slicer(fixture_items, fixture_gcode):
     summary = ProgramSummary.of(fixture_items)
     assert summary.filament_mm == pytest.approx(simple_filament(fixture_gcode), abs=1e-6)
-    assert summary.filament_mm == pytest.approx(12173.73, abs=0.01)  # "; filament used [mm]" in the file
+    assert summary.filament_mm == pytest.approx(
+        12173.73, abs=0.01
+    )  # "; filament used [mm]" in the file
 
 
 def test_moves_are_continuous_and_ordered(fixture_items):
@@ -78,6 +80,7 @@ def test_moves_are_continuous_and_ordered(fixture_items):
 
 def test_small_blocks_give_the_same_program(fixture_items, fixture_gcode):
     small = list(read_program(fixture_gcode, block_bytes=50_000))
+
     def records(items):
         return [i for i in items if not isinstance(i, MoveChunk)]
 

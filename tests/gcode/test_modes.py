@@ -120,7 +120,8 @@ def test_chunks_are_bounded_and_read_only():
 
 def test_blocks_do_not_change_the_result():
     text = "".join(
-        f"G1 X{i % 17} Y{i % 5} E{i * 0.1:.3f} F{600 + i}\n" + ("G92 E0\n" if i % 7 == 0 else "") for i in range(500)
+        f"G1 X{i % 17} Y{i % 5} E{i * 0.1:.3f} F{600 + i}\n" + ("G92 E0\n" if i % 7 == 0 else "")
+        for i in range(500)
     )
     ref = moves(read(text))
     small = moves(read(text, block_lines=37))

@@ -12,9 +12,13 @@ num = st.integers(-2000, 2000).map(lambda k: k / 8)  # exact in binary: sums sta
 axes = st.lists(st.sampled_from("XYZE"), min_size=1, max_size=4, unique=True)
 four = st.lists(num, min_size=4, max_size=4)
 statement = st.one_of(
-    st.tuples(st.sampled_from(["G0", "G1"]), axes, four, st.one_of(st.none(), st.integers(1, 9000))),
+    st.tuples(
+        st.sampled_from(["G0", "G1"]), axes, four, st.one_of(st.none(), st.integers(1, 9000))
+    ),
     st.tuples(st.just("G92"), axes, four, st.none()),
-    st.sampled_from(["G90", "G91", "M82", "M83", "G20", "G21", "G92", "G28", "M106 S9", ";LAYER_CHANGE"]),
+    st.sampled_from(
+        ["G90", "G91", "M82", "M83", "G20", "G21", "G92", "G28", "M106 S9", ";LAYER_CHANGE"]
+    ),
 )
 
 
@@ -78,5 +82,7 @@ def test_reader_matches_plain_interpreter(stmts, block_lines):
     home = (1.0, -2.0, 30.0)
     want = reference(stmts, home)
     m = moves(read(render(stmts), home_position=home, block_lines=block_lines))
-    got = np.column_stack([m["start"], m["e_start"], m["end"], m["e_end"], m["feedrate"], m["line"]])
+    got = np.column_stack(
+        [m["start"], m["e_start"], m["end"], m["e_end"], m["feedrate"], m["line"]]
+    )
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)

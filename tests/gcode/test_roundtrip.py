@@ -14,13 +14,15 @@ from cdprhost.gcode.tokenize import tokenize
 from .helpers import moves, read
 
 coord = st.floats(-500, 500, allow_nan=False, allow_infinity=False)
-style = st.fixed_dictionaries({
-    "decimals": st.integers(0, 6),
-    "lower": st.booleans(),
-    "glued": st.booleans(),
-    "lead": st.sampled_from(["", " ", "\t"]),
-    "strip_zero": st.booleans(),
-})
+style = st.fixed_dictionaries(
+    {
+        "decimals": st.integers(0, 6),
+        "lower": st.booleans(),
+        "glued": st.booleans(),
+        "lead": st.sampled_from(["", " ", "\t"]),
+        "strip_zero": st.booleans(),
+    }
+)
 
 
 def fmt(v: float, decimals: int, strip_zero: bool) -> str:
@@ -30,7 +32,14 @@ def fmt(v: float, decimals: int, strip_zero: bool) -> str:
     return s
 
 
-@given(st.lists(st.tuples(coord, coord, coord, st.floats(0, 50), st.floats(1, 20000)), min_size=1, max_size=40), style)
+@given(
+    st.lists(
+        st.tuples(coord, coord, coord, st.floats(0, 50), st.floats(1, 20000)),
+        min_size=1,
+        max_size=40,
+    ),
+    style,
+)
 def test_formatted_moves_round_trip(points, s):
     lines, expected = [], []
     e_total = 0.0
@@ -56,8 +65,37 @@ def test_formatted_moves_round_trip(points, s):
 
 
 piece = st.sampled_from(
-    ["G1", "g0", "M104", "X", "y", "E", "F", "S", "N", " ", " ", "\t", "1", "-2", "+3", ".5", "5.", "0.25", "1.2.3",
-     "--1", "-", ".", "#", "(c)", "*7", "12345678901234567", "007", "-.0", "T0"]
+    [
+        "G1",
+        "g0",
+        "M104",
+        "X",
+        "y",
+        "E",
+        "F",
+        "S",
+        "N",
+        " ",
+        " ",
+        "\t",
+        "1",
+        "-2",
+        "+3",
+        ".5",
+        "5.",
+        "0.25",
+        "1.2.3",
+        "--1",
+        "-",
+        ".",
+        "#",
+        "(c)",
+        "*7",
+        "12345678901234567",
+        "007",
+        "-.0",
+        "T0",
+    ]
 )
 
 
@@ -72,6 +110,8 @@ def test_fast_tokens_equal_exact_parser(lines):
         if index in slow:
             assert not got
             continue
-        words = parse_line(text, index + 1, "t").words  # the fast path only takes lines the exact parser reads cleanly
+        words = parse_line(
+            text, index + 1, "t"
+        ).words  # the fast path only takes lines the exact parser reads cleanly
         assert got == [(w.letter, w.value) for w in words]
         assert all(w.value is not None for w in words)

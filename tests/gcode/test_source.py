@@ -17,7 +17,12 @@ TEXT = (
 
 @pytest.mark.parametrize(
     "raw",
-    [TEXT.encode(), TEXT.replace("\n", "\r\n").encode(), b"\xef\xbb\xbf" + TEXT.encode(), TEXT.rstrip("\n").encode()],
+    [
+        TEXT.encode(),
+        TEXT.replace("\n", "\r\n").encode(),
+        b"\xef\xbb\xbf" + TEXT.encode(),
+        TEXT.rstrip("\n").encode(),
+    ],
     ids=["lf", "crlf", "bom", "no-final-newline"],
 )
 def test_file_variants(tmp_path, raw):
@@ -31,9 +36,9 @@ def test_file_variants(tmp_path, raw):
 
 def _same(a, b) -> bool:
     ma, mb = moves(a), moves(b)
-    return all(np.array_equal(ma[k], mb[k]) for k in ma) and [x for x in a if not hasattr(x, "start")] == [
-        x for x in b if not hasattr(x, "start")
-    ]
+    return all(np.array_equal(ma[k], mb[k]) for k in ma) and [
+        x for x in a if not hasattr(x, "start")
+    ] == [x for x in b if not hasattr(x, "start")]
 
 
 def test_lines_with_newlines_and_bytes():

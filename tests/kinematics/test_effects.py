@@ -44,10 +44,15 @@ def test_spec_equations_for_each_effect(sim_profile):
     np.testing.assert_allclose(lash.ik(p, ctx), s + np.array([0.2, 0.15, 0.3]) * [1, -1, 1])
     drift = model_with(sim_profile, {"drift": ALL_EFFECTS["drift"]})
     np.testing.assert_allclose(drift.ik(p), s)  # no compensation while printing
-    np.testing.assert_allclose(drift.fk(s, ctx), ideal.fk(s + np.array([3e-4, -2e-4, 4e-4]) * 100.0))
+    np.testing.assert_allclose(
+        drift.fk(s, ctx), ideal.fk(s + np.array([3e-4, -2e-4, 4e-4]) * 100.0)
+    )
     ela = model_with(sim_profile, {"cable_elasticity": {"EA": 20000.0}})
     t = tensions(p, ideal.geometry.outlets, ideal.statics)
-    expected = cable_lengths(p, ideal.geometry.outlets) / (1 + t / 20000.0) - ideal.geometry.initial_lengths
+    expected = (
+        cable_lengths(p, ideal.geometry.outlets) / (1 + t / 20000.0)
+        - ideal.geometry.initial_lengths
+    )
     np.testing.assert_allclose(ela.ik(p), expected)
 
 

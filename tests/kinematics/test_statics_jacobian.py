@@ -33,7 +33,13 @@ def test_velocity_jacobian_matches_finite_differences(sim_model, p):
     g = sim_model.geometry
     jac = velocity_jacobian(p[None], g.outlets)[0]
     h = 1e-6
-    fd = np.stack([(ik_sliders((p + h * e)[None], g) - ik_sliders((p - h * e)[None], g))[0] / (2 * h) for e in np.eye(3)], axis=1)
+    fd = np.stack(
+        [
+            (ik_sliders((p + h * e)[None], g) - ik_sliders((p - h * e)[None], g))[0] / (2 * h)
+            for e in np.eye(3)
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(jac, fd, atol=1e-7)
 
 
@@ -56,7 +62,14 @@ def test_identification_jacobian_matches_finite_differences(sim_model, p):
 
 def test_coplanar_poses_leave_outlet_heights_poorly_observed(sim_model):
     """The paper's Table 1 poses (one plane, close together) give a near-singular J0."""
-    table1 = np.array([[-30.231, 24.537, 110], [-42.5, 24.537, 110], [-31.832, 43.015, 110], [-36.366, 13.912, 110]])
+    table1 = np.array(
+        [
+            [-30.231, 24.537, 110],
+            [-42.5, 24.537, 110],
+            [-31.832, 43.015, 110],
+            [-36.366, 13.912, 110],
+        ]
+    )
     sv = np.linalg.svd(identification_jacobian(table1, sim_model.geometry), compute_uv=False)
     spread = np.random.default_rng(1).uniform([-50, -40, 120], [50, 40, 320], (12, 3))
     sv_spread = np.linalg.svd(identification_jacobian(spread, sim_model.geometry), compute_uv=False)

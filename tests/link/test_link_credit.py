@@ -31,8 +31,25 @@ class ScriptedDevice:
         for f in self._deframer.feed(data):
             msgs = decode_messages(f.payload, SegmentContext()) if f.kind != Kind.DATA else None
             if f.kind == Kind.URGENT and isinstance(msgs[0], M.Hello):
-                ident = M.Ident(msgs[0].nonce, 1, 0, 7, "scripted", "0", 4, self.capacity, 100_000, 100_000, 248, 2,
-                                1, 0, 0, 0, 0)
+                ident = M.Ident(
+                    msgs[0].nonce,
+                    1,
+                    0,
+                    7,
+                    "scripted",
+                    "0",
+                    4,
+                    self.capacity,
+                    100_000,
+                    100_000,
+                    248,
+                    2,
+                    1,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
                 self.inbox += encode_frame(Kind.URGENT, 0, 0, encode_message(ident))
             self.written.append(f)
 
@@ -51,8 +68,11 @@ def segments(n: int) -> SegmentBatch:
 
 
 def queued_items(frames) -> list[int]:
-    return [sum(1 for m in decode_messages(f.payload, SegmentContext()) if m.QUEUED)
-            for f in frames if f.kind == Kind.DATA]
+    return [
+        sum(1 for m in decode_messages(f.payload, SegmentContext()) if m.QUEUED)
+        for f in frames
+        if f.kind == Kind.DATA
+    ]
 
 
 def test_a_report_acknowledging_frames_does_not_grant_credit():

@@ -23,8 +23,12 @@ pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo
 
 def start_device(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, str, Path]:
     record = tmp_path / "record.jsonl"
-    proc = subprocess.Popen([sys.executable, "-m", "cdprhost", "sim-device", "--record", str(record), *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cdprhost", "sim-device", "--record", str(record), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     path = proc.stdout.readline().strip()
     assert path.startswith("/dev/"), proc.stderr.read()
     return proc, path, record
@@ -56,7 +60,12 @@ def test_stream_disconnect_reconnect_and_record(tmp_path):
                 frames += [f for f in d.feed(port.read(256)) if f.kind == Kind.URGENT]
                 if frames:
                     break
-            idents = [m for f in frames for m in decode_messages(f.payload, SegmentContext()) if isinstance(m, Ident)]
+            idents = [
+                m
+                for f in frames
+                for m in decode_messages(f.payload, SegmentContext())
+                if isinstance(m, Ident)
+            ]
             assert idents and idents[0].nonce == 77 and idents[0].firmware_name == "cdpr-sim"
         first = demo_stream(300, seed=1)
         link = open_link(path)
@@ -73,8 +82,9 @@ def test_stream_disconnect_reconnect_and_record(tmp_path):
         assert stop_device(proc) == 0
     rec = read_record(record)
     exp = expected_record(first)
-    exp += expected_record(second, start=exp[-1]["steps"], first_seq=301,
-                           start_ticks=round(exp[-1]["t"] * 100_000))
+    exp += expected_record(
+        second, start=exp[-1]["steps"], first_seq=301, start_ticks=round(exp[-1]["t"] * 100_000)
+    )
     assert rec == exp
 
 
@@ -85,7 +95,9 @@ def test_faulty_device_record_equals_clean_record(tmp_path):
     for faults in (None, "corrupt=0.001,drop=0.001,dup=0.001,seed=4"):
         sub = tmp_path / ("clean" if faults is None else "faulty")
         sub.mkdir()
-        proc, path, record = start_device(sub, "--speedup", "20", *(["--faults", faults] if faults else []))
+        proc, path, record = start_device(
+            sub, "--speedup", "20", *(["--faults", faults] if faults else [])
+        )
         try:
             link = open_link(path)
             link.queue_segments(batch)

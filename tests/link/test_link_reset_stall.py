@@ -8,7 +8,9 @@ from cdprhost.link import DeviceReset, DeviceSilent, open_embedded
 from firmware_protocol.streams import demo_stream
 
 
-@pytest.mark.parametrize("faults", ["reset_after=1234", "reset_after=1234,corrupt=0.001,drop=0.001,latency_ms=3,seed=2"])
+@pytest.mark.parametrize(
+    "faults", ["reset_after=1234", "reset_after=1234,corrupt=0.001,drop=0.001,latency_ms=3,seed=2"]
+)
 def test_reset_mid_stream_is_detected_within_one_second(faults):
     link = open_embedded(faults=faults)
     with pytest.raises(DeviceReset) as exc:

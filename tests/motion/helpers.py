@@ -21,13 +21,20 @@ def path_block(points, feedrate=100.0, e_per_mm=0.0, e0=0.0) -> MoveBlock:
 
 
 def caps_for(profile, *, module_limits=True) -> Caps:
-    return Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2, module_limits=module_limits)
+    return Caps.from_profile(
+        profile.motion, profile.extruder, profile.statics.a_max_mm_s2, module_limits=module_limits
+    )
 
 
-def plan_all(block: MoveBlock, profile, model, *, pieces: int = 1, **options) -> tuple[list[PlannedMoves], Planner]:
+def plan_all(
+    block: MoveBlock, profile, model, *, pieces: int = 1, **options
+) -> tuple[list[PlannedMoves], Planner]:
     """Plan a block pushed in ``pieces`` parts, flushed at the end."""
-    planner = Planner(caps_for(profile, module_limits=options.pop("module_limits", True)), model.geometry.outlets,
-                      **options)
+    planner = Planner(
+        caps_for(profile, module_limits=options.pop("module_limits", True)),
+        model.geometry.outlets,
+        **options,
+    )
     out: list[PlannedMoves] = []
     bounds = np.linspace(0, len(block), pieces + 1).astype(int)
     for a, b in zip(bounds[:-1], bounds[1:]):
@@ -44,7 +51,9 @@ def concat_planned(parts: list[PlannedMoves]) -> dict[str, np.ndarray]:
     }
 
 
-def segment_all(parts: list[PlannedMoves], profile, model, start_point=None) -> tuple[list[SegmentBatch], Segmenter]:
+def segment_all(
+    parts: list[PlannedMoves], profile, model, start_point=None
+) -> tuple[list[SegmentBatch], Segmenter]:
     seg = Segmenter(model, profile.drive.home_mm, e_steps_per_mm=profile.extruder.steps_per_mm)
     if start_point is not None:
         from dataclasses import replace
@@ -56,7 +65,18 @@ def segment_all(parts: list[PlannedMoves], profile, model, start_point=None) -> 
 
 
 def concat_batches(batches: list[SegmentBatch]) -> dict[str, np.ndarray]:
-    keys = ("steps_abs", "delta", "ticks", "ramp", "v_start", "v_end", "line", "point", "e", "t_end")
+    keys = (
+        "steps_abs",
+        "delta",
+        "ticks",
+        "ramp",
+        "v_start",
+        "v_end",
+        "line",
+        "point",
+        "e",
+        "t_end",
+    )
     return {k: np.concatenate([getattr(b, k) for b in batches]) for k in keys}
 
 

@@ -50,17 +50,30 @@ def klipper_peaks(lim, smooth_delta, cruise):
     return peaks
 
 
-@given(st.integers(1, 40).flatmap(lambda n: st.tuples(arrays(float, n + 1, elements=speeds2),
-                                                       arrays(float, n, elements=deltas))))
+@given(
+    st.integers(1, 40).flatmap(
+        lambda n: st.tuples(
+            arrays(float, n + 1, elements=speeds2), arrays(float, n, elements=deltas)
+        )
+    )
+)
 def test_limit_passes_match_sequential(case):
     lim, delta = case
-    np.testing.assert_allclose(limit_passes(lim, delta), sequential_passes(lim, delta), rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(
+        limit_passes(lim, delta), sequential_passes(lim, delta), rtol=1e-9, atol=1e-6
+    )
 
 
-@given(st.integers(2, 40).flatmap(lambda n: st.tuples(arrays(float, n - 1, elements=speeds2),
-                                                       arrays(float, n, elements=st.floats(1.0, 40000.0)),
-                                                       arrays(float, n, elements=st.floats(1.0, 20000.0)))),
-       st.sampled_from([0.0, 0.5]))
+@given(
+    st.integers(2, 40).flatmap(
+        lambda n: st.tuples(
+            arrays(float, n - 1, elements=speeds2),
+            arrays(float, n, elements=st.floats(1.0, 40000.0)),
+            arrays(float, n, elements=st.floats(1.0, 20000.0)),
+        )
+    ),
+    st.sampled_from([0.0, 0.5]),
+)
 def test_profile_is_feasible(case, ratio):
     jv2, cruise_cap, delta = case
     v2, cruise, _, _ = plan_profile(jv2, cruise_cap, delta, 0.0, 0.0, min_cruise_ratio=ratio)
@@ -74,9 +87,15 @@ def test_profile_is_feasible(case, ratio):
     assert np.all((2 * cruise - v2[:-1] - v2[1:]) <= delta + tol)
 
 
-@given(st.integers(2, 30).flatmap(lambda n: st.tuples(arrays(float, n + 1, elements=speeds2),
-                                                       arrays(float, n, elements=st.floats(1.0, 10000.0)),
-                                                       arrays(float, n, elements=st.floats(1.0, 40000.0)))))
+@given(
+    st.integers(2, 30).flatmap(
+        lambda n: st.tuples(
+            arrays(float, n + 1, elements=speeds2),
+            arrays(float, n, elements=st.floats(1.0, 10000.0)),
+            arrays(float, n, elements=st.floats(1.0, 40000.0)),
+        )
+    )
+)
 def test_hump_caps_match_klipper_grouping(case):
     lim, smooth_delta, cruise = case
     lim = lim.copy()
@@ -91,7 +110,9 @@ def test_hump_caps_match_klipper_grouping(case):
 
 def test_smoothing_lowers_peaks_of_short_zigzags():
     n = 20
-    delta = np.full(n, 2 * 2000 * 0.5)  # 0.5 mm moves at 2000 mm/s^2: 10 mm, never reaching 200 mm/s
+    delta = np.full(
+        n, 2 * 2000 * 0.5
+    )  # 0.5 mm moves at 2000 mm/s^2: 10 mm, never reaching 200 mm/s
     jv2 = np.full(n - 1, 1e9)
     cap = np.full(n, 200.0**2)
     _, plain, _, _ = plan_profile(jv2, cap, delta, 0.0, 0.0, min_cruise_ratio=0.0)

@@ -45,7 +45,9 @@ def test_square_corners_at_square_corner_velocity(sim_profile, sim_model):
     pts = np.column_stack([c, np.full(5, 150.0)])
     parts, _ = plan_all(path_block(pts, feedrate=100.0), sim_profile, sim_model)
     p = concat_planned(parts)
-    np.testing.assert_allclose(p["v_end"][:-1], sim_profile.motion.square_corner_velocity_mm_s, rtol=1e-9)
+    np.testing.assert_allclose(
+        p["v_end"][:-1], sim_profile.motion.square_corner_velocity_mm_s, rtol=1e-9
+    )
     np.testing.assert_allclose(p["v_start"][1:], p["v_end"][:-1])
     assert p["v_end"][-1] == 0.0
 
@@ -56,7 +58,9 @@ def test_plans_stay_within_limits(sim_profile, sim_model, seed, step, ratio):
     pts = random_path(seed, 150, step)
     feed = np.random.default_rng(seed).uniform(5, 300, len(pts) - 1)
     block = path_block(pts, feedrate=1.0)
-    block = drop_noops(MoveBlock(block.start, block.end, block.e_start, block.e_end, feed, block.line, block.layer))
+    block = drop_noops(
+        MoveBlock(block.start, block.end, block.e_start, block.e_end, feed, block.line, block.layer)
+    )
     feed = block.feedrate
     parts, _ = plan_all(block, sim_profile, sim_model, module_limits=False, min_cruise_ratio=ratio)
     p = concat_planned(parts)

@@ -11,7 +11,14 @@ from cdprhost.kinematics import MachineModel
 from cdprhost.motion.segments import DEFAULT_CLOCK_HZ, piece_positions
 from cdprhost.profile import MachineProfile
 
-from .helpers import concat_batches, concat_planned, path_block, plan_all, segment_all, triangle_corners
+from .helpers import (
+    concat_batches,
+    concat_planned,
+    path_block,
+    plan_all,
+    segment_all,
+    triangle_corners,
+)
 
 
 def long_moves(seed: int, n: int = 12) -> np.ndarray:
@@ -39,7 +46,9 @@ def line_distance(points, a, b):
 
 @settings(max_examples=12, deadline=None)
 @given(st.integers(0, 2**31), st.sampled_from(["sim", "proto"]))
-def test_joint_space_midpoints_stay_within_the_chord_tolerance(sim_profile, proto_profile, seed, which):
+def test_joint_space_midpoints_stay_within_the_chord_tolerance(
+    sim_profile, proto_profile, seed, which
+):
     profile = sim_profile if which == "sim" else proto_profile
     model = MachineModel.from_profile(profile)
     block, _, seg, _, _ = run(profile, model, long_moves(seed))
@@ -56,8 +65,12 @@ def test_move_ends_are_segment_ends_with_absolute_steps(sim_profile, sim_model):
     block, plan, seg, _, segmenter = run(sim_profile, sim_model, long_moves(3))
     last = np.flatnonzero(np.diff(np.append(seg["line"], -1)) != 0)
     np.testing.assert_array_equal(seg["point"][last], block.end)
-    np.testing.assert_array_equal(seg["steps_abs"][last, :3], sim_model.steps(sim_model.ik(block.end)))
-    np.testing.assert_array_equal(seg["steps_abs"][last, 3], np.rint(block.e_end * sim_profile.extruder.steps_per_mm))
+    np.testing.assert_array_equal(
+        seg["steps_abs"][last, :3], sim_model.steps(sim_model.ik(block.end))
+    )
+    np.testing.assert_array_equal(
+        seg["steps_abs"][last, 3], np.rint(block.e_end * sim_profile.extruder.steps_per_mm)
+    )
     start = np.append(sim_model.steps(sim_model.ik(block.start[:1]))[0], 0)
     np.testing.assert_array_equal(seg["delta"].sum(axis=0), seg["steps_abs"][-1] - start)
     np.testing.assert_array_equal(segmenter.state.steps, seg["steps_abs"][-1])
@@ -77,7 +90,9 @@ def test_segments_have_speed_linear_in_time(sim_profile, sim_model):
     prev = np.vstack([block.start[:1], seg["point"][:-1]])
     length = np.linalg.norm(seg["point"] - prev, axis=1)
     dt = np.diff(np.append(0.0, seg["t_end"]))
-    np.testing.assert_allclose(length, 0.5 * (seg["v_start"] + seg["v_end"]) * dt, rtol=1e-6, atol=2e-4)
+    np.testing.assert_allclose(
+        length, 0.5 * (seg["v_start"] + seg["v_end"]) * dt, rtol=1e-6, atol=2e-4
+    )
     # one acceleration per segment: +a, 0 or -a (phases are never mixed)
     accel = (seg["v_end"] - seg["v_start"]) / dt
     a = plan["accel"][seg["line"] - 1]
@@ -87,7 +102,9 @@ def test_segments_have_speed_linear_in_time(sim_profile, sim_model):
 
 
 def test_phase_boundaries_split_moves(sim_profile, sim_model):
-    parts, _ = plan_all(path_block([[0, -40, 150], [0, 40, 150]], feedrate=150.0), sim_profile, sim_model)
+    parts, _ = plan_all(
+        path_block([[0, -40, 150], [0, 40, 150]], feedrate=150.0), sim_profile, sim_model
+    )
     x = piece_positions(parts[0]).x
     d_acc = 150.0**2 / (2 * parts[0].accel[0])
     assert np.any(np.isclose(x, d_acc)) and np.any(np.isclose(x, 80.0 - d_acc))
@@ -95,7 +112,9 @@ def test_phase_boundaries_split_moves(sim_profile, sim_model):
 
 
 def tight_profile(profile: MachineProfile) -> MachineProfile:
-    motion = profile.motion.model_copy(update={"module_max_velocity_mm_s": 40.0, "module_max_accel_mm_s2": 400.0})
+    motion = profile.motion.model_copy(
+        update={"module_max_velocity_mm_s": 40.0, "module_max_accel_mm_s2": 400.0}
+    )
     return profile.model_copy(update={"motion": motion})
 
 
@@ -137,25 +156,35 @@ def test_backlash_directions_carry_across_batches(sim_profile):
     halves = [parts[0].take(slice(0, 7)), parts[0].take(slice(7, None))]
     split = concat_batches(segment_all(halves, profile, model, start_point=pts[0])[0])
     np.testing.assert_array_equal(split["steps_abs"], whole["steps_abs"])
-    assert not np.array_equal(whole["steps_abs"][:, :3], model.steps(model.ik(whole["point"])))  # backlash acts
+    assert not np.array_equal(
+        whole["steps_abs"][:, :3], model.steps(model.ik(whole["point"]))
+    )  # backlash acts
 
 
 def test_home_resets_the_step_counters(sim_profile, sim_model):
     from cdprhost.motion.segments import Segmenter
 
-    seg = Segmenter(sim_model, sim_profile.drive.home_mm, e_steps_per_mm=sim_profile.extruder.steps_per_mm)
+    seg = Segmenter(
+        sim_model, sim_profile.drive.home_mm, e_steps_per_mm=sim_profile.extruder.steps_per_mm
+    )
     np.testing.assert_array_equal(seg.state.steps, [0, 0, 0, 0])
     np.testing.assert_allclose(seg.state.point, sim_model.home_point(np.zeros(3)))
     assert seg.state.point[2] == pytest.approx(327.34, abs=0.01)
 
 
 def test_tiny_moves_never_make_empty_segments(sim_profile, sim_model):
-    pts = np.array([[0, 0, 150], [0, 20, 150], [0, 20 + 2e-6, 150], [0, 20 + 4e-6, 150], [0, 40, 150]], float)
+    pts = np.array(
+        [[0, 0, 150], [0, 20, 150], [0, 20 + 2e-6, 150], [0, 20 + 4e-6, 150], [0, 40, 150]], float
+    )
     block, plan, seg, planner, _ = run(sim_profile, sim_model, pts, feedrate=200.0)
     assert np.all(seg["ticks"] >= 1)
-    np.testing.assert_array_equal(seg["steps_abs"][-1, :3], sim_model.steps(sim_model.ik(pts[-1:]))[0])
-    np.testing.assert_array_equal(np.cumsum(seg["delta"], axis=0)[-1], seg["steps_abs"][-1] - seg["steps_abs"][0]
-                                  + seg["delta"][0])
+    np.testing.assert_array_equal(
+        seg["steps_abs"][-1, :3], sim_model.steps(sim_model.ik(pts[-1:]))[0]
+    )
+    np.testing.assert_array_equal(
+        np.cumsum(seg["delta"], axis=0)[-1],
+        seg["steps_abs"][-1] - seg["steps_abs"][0] + seg["delta"][0],
+    )
     assert abs(seg["ticks"].sum() - planner.time * DEFAULT_CLOCK_HZ) <= 1.0
 
 
@@ -163,7 +192,9 @@ def test_extrude_only_moves_are_cut_at_their_phases(sim_profile, sim_model):
     from cdprhost.motion.moves import MoveBlock
 
     p = np.array([0.0, 0.0, 150.0])
-    block = MoveBlock.from_arrays([p, p], [p, p], [0.0, -6.0], [-6.0, 0.0], feedrate=40.0)  # retract, prime
+    block = MoveBlock.from_arrays(
+        [p, p], [p, p], [0.0, -6.0], [-6.0, 0.0], feedrate=40.0
+    )  # retract, prime
     parts, planner = plan_all(block, sim_profile, sim_model)
     seg = concat_batches(segment_all(parts, sim_profile, sim_model, start_point=p)[0])
     de = np.abs(np.diff(np.append(0.0, seg["e"])))
@@ -183,15 +214,21 @@ def test_fixture_pipeline_is_consistent(fixture_gcode, sim_profile, sim_model):
     ticks = 0
     steps = np.zeros(4, dtype=np.int64)
     last = None
-    for out in segment_program(read_items(fixture_gcode, sim_profile, sim_model), sim_profile, sim_model, totals=totals):
+    for out in segment_program(
+        read_items(fixture_gcode, sim_profile, sim_model), sim_profile, sim_model, totals=totals
+    ):
         if isinstance(out, SegmentBatch):
-            assert out.ticks.min() >= 1 and 0.0 <= out.ramp.min() and out.ramp.max() <= 1.0
+            assert out.ticks.min() >= 1 and out.ramp.min() >= 0.0 and out.ramp.max() <= 1.0
             ticks += int(out.ticks.sum())
             steps += out.delta.sum(axis=0)
-            np.testing.assert_array_equal(steps, out.steps_abs[-1])  # no homing inside the print body
+            np.testing.assert_array_equal(
+                steps, out.steps_abs[-1]
+            )  # no homing inside the print body
             last = out
         elif type(out).__name__ == "Home":
             steps[:3] = 0
     assert totals.moves == 122769
     assert abs(ticks / DEFAULT_CLOCK_HZ - totals.planned_time_s) < 1e-3
-    np.testing.assert_array_equal(last.steps_abs[-1, :3], sim_model.steps(sim_model.ik(last.point[-1:]))[0])
+    np.testing.assert_array_equal(
+        last.steps_abs[-1, :3], sim_model.steps(sim_model.ik(last.point[-1:]))[0]
+    )

@@ -15,7 +15,9 @@ START = [
 ]
 
 
-def write_program(tmp_path: Path, body: list[str], *, start: list[str] | None = None, name: str = "part.gcode") -> Path:
+def write_program(
+    tmp_path: Path, body: list[str], *, start: list[str] | None = None, name: str = "part.gcode"
+) -> Path:
     lines = (START if start is None else start) + body
     path = tmp_path / name
     path.write_text("\n".join(lines) + "\n")
@@ -30,7 +32,9 @@ def line_of(path: Path, text: str) -> int:
     raise ValueError(text)
 
 
-def square_body(z: float = 0.3, half: float = 20.0, e_per_mm: float = 0.033, feed: float = 1800.0) -> list[str]:
+def square_body(
+    z: float = 0.3, half: float = 20.0, e_per_mm: float = 0.033, feed: float = 1800.0
+) -> list[str]:
     """A printed square at height z (G-code frame), absolute E."""
     pts = [(-half, -half), (half, -half), (half, half), (-half, half), (-half, -half)]
     out = [f"G1 Z{z} F600", f"G1 X{pts[0][0]} Y{pts[0][1]} F6000"]

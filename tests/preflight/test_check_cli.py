@@ -18,7 +18,9 @@ def run(capsys, *argv):
 def test_clean_file_exits_0_with_json(tmp_path, capsys):
     path = write_program(tmp_path, square_body())
     report = tmp_path / "out" / "report.json"
-    code, out, _ = run(capsys, "check", str(path), "--profile", "paper-simulation", "--json", str(report))
+    code, out, _ = run(
+        capsys, "check", str(path), "--profile", "paper-simulation", "--json", str(report)
+    )
     assert code == 0
     assert ": OK" in out.splitlines()[0]
     data = json.loads(report.read_text())
@@ -57,7 +59,9 @@ def test_malformed_gcode_exits_2_naming_line_and_column(tmp_path, capsys):
 
 
 def test_missing_file_and_bad_profile_exit_2(tmp_path, capsys):
-    code, _, err = run(capsys, "check", str(tmp_path / "nope.gcode"), "--profile", "paper-simulation")
+    code, _, err = run(
+        capsys, "check", str(tmp_path / "nope.gcode"), "--profile", "paper-simulation"
+    )
     assert code == 2 and "nope.gcode" in err
     path = write_program(tmp_path, square_body())
     code, _, err = run(capsys, "check", str(path), "--profile", str(tmp_path / "missing.toml"))

@@ -20,7 +20,9 @@ def test_clean_square_passes(tmp_path, sim_profile, sim_model):
     assert r.moves == 6
     assert r.filament_mm == pytest.approx(0.033 * 160, rel=1e-6)
     assert r.estimated_time_s > 160 / 30  # 160 mm at 30 mm/s plus the travel from home
-    assert r.print_box_gcode.min == pytest.approx((-20, -20, 0.3)) and r.print_box_gcode.max == pytest.approx((20, 20, 0.3))
+    assert r.print_box_gcode.min == pytest.approx(
+        (-20, -20, 0.3)
+    ) and r.print_box_gcode.max == pytest.approx((20, 20, 0.3))
 
 
 def test_unreachable_move_in_the_middle_is_named_first(tmp_path, sim_profile, sim_model):
@@ -106,7 +108,9 @@ def test_violation_between_valid_endpoints_is_found(tmp_path, sim_profile, sim_m
 
 def test_uncertified_tension_region_is_checked(tmp_path, sim_profile):
     data = sim_profile.model_dump()
-    data["statics"]["tension_min_n"] = 10.0  # the top of the volume no longer holds 10 N under a_max
+    data["statics"]["tension_min_n"] = (
+        10.0  # the top of the volume no longer holds 10 N under a_max
+    )
     profile = MachineProfile.model_validate(data)
     model = MachineModel.from_profile(profile)
     body = square_body() + ["G1 Z215 F600"]
@@ -125,15 +129,21 @@ def test_cold_extrusion(tmp_path, sim_profile, sim_model):
     assert len(cold) == 1 and "unset" in cold[0].detail
     path = write_program(tmp_path, square_body(), start=["M104 S150", "G28", "G92 E0"])
     r = preflight(path, sim_profile, sim_model)
-    assert [v.rule for v in r.violations] == ["cold_extrusion"] and "150 C" in r.violations[0].detail
+    assert [v.rule for v in r.violations] == ["cold_extrusion"] and "150 C" in r.violations[
+        0
+    ].detail
 
 
 def test_volumetric_flow_limit(tmp_path, sim_profile, sim_model):
-    path = write_program(tmp_path, square_body(e_per_mm=0.2, feed=6000))  # 0.2 mm/mm at 100 mm/s: 48 mm^3/s
+    path = write_program(
+        tmp_path, square_body(e_per_mm=0.2, feed=6000)
+    )  # 0.2 mm/mm at 100 mm/s: 48 mm^3/s
     r = preflight(path, sim_profile, sim_model)
     flows = [v for v in r.violations if v.rule == "volumetric_flow"]
     assert flows and all("exceeds 25" in v.detail for v in flows)
-    assert r.max_volumetric_flow_seen_mm3_s == pytest.approx(0.2 * 100 * np.pi * 1.75**2 / 4, rel=0.01)
+    assert r.max_volumetric_flow_seen_mm3_s == pytest.approx(
+        0.2 * 100 * np.pi * 1.75**2 / 4, rel=0.01
+    )
 
 
 def test_heater_targets_and_unknown_commands(tmp_path, sim_profile, sim_model):
@@ -155,7 +165,9 @@ def test_fixture_passes_with_both_profiles(fixture_gcode, sim_profile, proto_pro
         assert r.moves == 122769 and r.layers == 149
         assert r.moves_sampled_densely <= 2  # only the long first travel from home needs sampling
         times[profile.name] = r.estimated_time_s
-        assert 0.95 * 8587.2 < r.estimated_time_s < 1.05 * 8587.2  # Klipper's estimate, same Cartesian limits
+        assert (
+            0.95 * 8587.2 < r.estimated_time_s < 1.05 * 8587.2
+        )  # Klipper's estimate, same Cartesian limits
     assert r.filament_mm == pytest.approx(independent_filament(fixture_gcode), abs=1e-3)
 
 

@@ -42,7 +42,12 @@ def _data():
         (lambda d: d["drive"].update(steps_per_mm=(-400, 400, 400)), "drive.steps_per_mm.0"),
         (lambda d: d["statics"].update(effector_mass_kg=float("nan")), "statics.effector_mass_kg"),
         (lambda d: d["geometry"].update(outlets=((0, 0, 0), (1, 1, 1), (2, 2, 2))), "collinear"),
-        (lambda d: d["geometry"].update(outlets=((-258, -149, 120), (263, -148, 77), (0, 301, 78))), "not below the build volume"),
+        (
+            lambda d: d["geometry"].update(
+                outlets=((-258, -149, 120), (263, -148, 77), (0, 301, 78))
+            ),
+            "not below the build volume",
+        ),
         (lambda d: d["build_volume"].update(side_mm="wide"), "build_volume.side_mm"),
     ],
 )
@@ -65,7 +70,11 @@ def test_every_problem_is_listed_once():
 
 def test_resolution_by_user_folder(tmp_path, monkeypatch):
     monkeypatch.setenv("CDPRHOST_PROFILES", str(tmp_path))
-    (tmp_path / "mine.toml").write_text(profile_to_toml(load_profile("paper-prototype")).replace('name = "paper-prototype"', 'name = "mine"'))
+    (tmp_path / "mine.toml").write_text(
+        profile_to_toml(load_profile("paper-prototype")).replace(
+            'name = "paper-prototype"', 'name = "mine"'
+        )
+    )
     assert load_profile("mine").name == "mine"
     with pytest.raises(InputError, match="unknown profile 'nope'"):
         load_profile("nope")
@@ -73,5 +82,7 @@ def test_resolution_by_user_folder(tmp_path, monkeypatch):
 
 def test_with_geometry_replaces_parameters():
     sim = load_profile("paper-simulation")
-    new = sim.with_geometry(np.zeros((3, 3)) + [[-260, -150, 78], [260, -150, 78], [0, 300, 78]], [392, 392, 392])
+    new = sim.with_geometry(
+        np.zeros((3, 3)) + [[-260, -150, 78], [260, -150, 78], [0, 300, 78]], [392, 392, 392]
+    )
     assert new.geometry.initial_lengths == (392.0, 392.0, 392.0)

@@ -42,14 +42,28 @@ def test_crc16_detects_every_single_bit_flip(data, bit):
     assert crc16(bytes(flipped)) != crc16(data)
 
 
-@pytest.mark.parametrize("value, encoded", [(0, "00"), (1, "01"), (127, "7F"), (128, "80 01"), (300, "AC 02"),
-                                            (16384, "80 80 01")])
+@pytest.mark.parametrize(
+    "value, encoded",
+    [(0, "00"), (1, "01"), (127, "7F"), (128, "80 01"), (300, "AC 02"), (16384, "80 80 01")],
+)
 def test_uvarint_examples(value, encoded):
     assert encode_uvarint(value) == bytes.fromhex(encoded)
 
 
-@pytest.mark.parametrize("value, encoded", [(0, "00"), (-1, "01"), (1, "02"), (-2, "03"), (63, "7E"), (-64, "7F"),
-                                            (64, "80 01"), (400, "A0 06"), (-300, "D7 04")])
+@pytest.mark.parametrize(
+    "value, encoded",
+    [
+        (0, "00"),
+        (-1, "01"),
+        (1, "02"),
+        (-2, "03"),
+        (63, "7E"),
+        (-64, "7F"),
+        (64, "80 01"),
+        (400, "A0 06"),
+        (-300, "D7 04"),
+    ],
+)
 def test_svarint_examples(value, encoded):
     assert encode_svarint(value) == bytes.fromhex(encoded)
 

@@ -39,7 +39,9 @@ def test_queue_never_overflows_and_capacity_is_announced():
 
 def test_underrun_is_reported_with_the_last_segment():
     batch = demo_stream(50, seed=2)
-    moving_end = SegmentBatch(batch.ticks, batch.deltas, np.full(50, -1))  # last one does not end at rest
+    moving_end = SegmentBatch(
+        batch.ticks, batch.deltas, np.full(50, -1)
+    )  # last one does not end at rest
     link = open_embedded()
     link.queue_segments(moving_end)
     with pytest.raises(DeviceFault) as exc:
@@ -52,7 +54,9 @@ def test_underrun_is_reported_with_the_last_segment():
 def test_motion_waits_for_a_worthwhile_buffer_before_starting():
     link = open_embedded()
     dev = link.device
-    link.queue_segments(SegmentBatch([2000], [[100, 0, 0, 0]], [0]))  # starts from rest, ends moving
+    link.queue_segments(
+        SegmentBatch([2000], [[100, 0, 0, 0]], [0])
+    )  # starts from rest, ends moving
     link.poll(0.05)  # less than start_delay: nothing started yet
     assert dev.record == [] and dev.machine.current is None
     link.queue_segments(SegmentBatch([2000], [[100, 0, 0, 0]], [RAMP_TO_REST]))
@@ -78,7 +82,9 @@ def test_endstop_hit_during_motion_stops_at_the_switch():
     link.queue_segments(SegmentBatch([100_000], [[30_000, 0, 0, 0]], [RAMP_TO_REST]))
     with pytest.raises(DeviceFault) as exc:
         link.wait_idle(10)
-    assert exc.value.code == ErrorCode.ENDSTOP_HIT and exc.value.axis == 0 and exc.value.segment == 1
+    assert (
+        exc.value.code == ErrorCode.ENDSTOP_HIT and exc.value.axis == 0 and exc.value.segment == 1
+    )
     last = link.device.record[-1]
     assert last["error"] == "endstop_hit"
     assert last["steps"][0] == cfg.overtravel_steps + 1 - cfg.boot_physical[0]
@@ -98,12 +104,17 @@ def test_homing_sets_positions_and_reports():
     link.queue_segments(SegmentBatch([200_000], [[20_000, 0, 0, 0]], [RAMP_TO_REST]))
     with pytest.raises(DeviceFault) as exc:
         link.wait_idle(10)
-    assert exc.value.code == ErrorCode.ENDSTOP_HIT and link.device.record[-1]["steps"][0] == 1000 + 16_401
+    assert (
+        exc.value.code == ErrorCode.ENDSTOP_HIT
+        and link.device.record[-1]["steps"][0] == 1000 + 16_401
+    )
 
 
 def test_set_position_enable_dwell_fan():
     link = open_embedded()
-    n = link.send(M.SetPosition((10, 20, 30, 40)), M.Enable(0b1111), M.Dwell(50_000), M.SetFan(0, 128))
+    n = link.send(
+        M.SetPosition((10, 20, 30, 40)), M.Enable(0b1111), M.Dwell(50_000), M.SetFan(0, 128)
+    )
     assert n == [1, 2, 3, 4]
     link.queue_segments(SegmentBatch([1000], [[1, 2, 3, 4]], [RAMP_TO_REST]))
     link.wait_idle(5)
@@ -114,8 +125,12 @@ def test_set_position_enable_dwell_fan():
 
 def test_heating_and_waiting_for_temperature():
     link = open_embedded()
-    link.send(M.SetHeater(M.HOTEND, 2100), M.SetHeater(M.BED, 600), M.WaitHeater(M.HOTEND, 20),
-              M.WaitHeater(M.BED, 20))
+    link.send(
+        M.SetHeater(M.HOTEND, 2100),
+        M.SetHeater(M.BED, 600),
+        M.WaitHeater(M.HOTEND, 20),
+        M.WaitHeater(M.BED, 20),
+    )
     link.queue_segments(SegmentBatch([1000], [[1, 0, 0, 0]], [RAMP_TO_REST]))
     link.wait_idle(600)
     st = link.request_status()
@@ -147,7 +162,9 @@ def test_heater_target_over_the_maximum_is_refused():
 
 def test_emergency_stop_mid_segment_then_clear_and_continue():
     link = open_embedded()
-    link.queue_segments(SegmentBatch([100_000, 100_000], [[10_000, 0, 0, 0], [-10_000, 0, 0, 0]], [0, 255]))
+    link.queue_segments(
+        SegmentBatch([100_000, 100_000], [[10_000, 0, 0, 0], [-10_000, 0, 0, 0]], [0, 255])
+    )
     link.poll(0.6)
     assert link.emergency_stop()
     with pytest.raises(DeviceFault):
@@ -159,7 +176,10 @@ def test_emergency_stop_mid_segment_then_clear_and_continue():
     link.clear_fault()
     link.queue_segments(SegmentBatch([1000, 1000], [[5, 0, 0, 0], [5, 0, 0, 0]], [-1, 255]))
     link.wait_idle(5)
-    assert [r["steps"][0] for r in link.device.record[1:]] == [rec[0]["steps"][0] + 5, rec[0]["steps"][0] + 10]
+    assert [r["steps"][0] for r in link.device.record[1:]] == [
+        rec[0]["steps"][0] + 5,
+        rec[0]["steps"][0] + 10,
+    ]
 
 
 def test_observer_is_told_when_motion_settles():
@@ -180,7 +200,11 @@ def test_observer_is_told_when_motion_settles():
 def test_status_reports_are_parsed():
     link = open_embedded()
     st = link.request_status()
-    assert isinstance(st, DeviceStatus) and st.steps == (0, 0, 0, 0) and st.hotend_c == pytest.approx(25)
+    assert (
+        isinstance(st, DeviceStatus)
+        and st.steps == (0, 0, 0, 0)
+        and st.hotend_c == pytest.approx(25)
+    )
     assert st.flags & M.Flag.SYNCED
 
 

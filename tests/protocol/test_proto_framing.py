@@ -7,11 +7,23 @@ import random
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_protocol.framing import END, MAX_PAYLOAD, OVERHEAD, SYNC, Deframer, Frame, Kind, encode_frame
+from firmware_protocol.framing import (
+    END,
+    MAX_PAYLOAD,
+    OVERHEAD,
+    SYNC,
+    Deframer,
+    Frame,
+    Kind,
+    encode_frame,
+)
 
 frames_st = st.builds(
-    lambda kind, seq, ack, payload: Frame(kind, seq, ack, payload),
-    st.sampled_from(list(Kind)), st.integers(0, 255), st.integers(0, 255), st.binary(max_size=MAX_PAYLOAD),
+    Frame,
+    st.sampled_from(list(Kind)),
+    st.integers(0, 255),
+    st.integers(0, 255),
+    st.binary(max_size=MAX_PAYLOAD),
 )
 
 
@@ -60,12 +72,15 @@ def test_every_single_byte_drop_is_detected(frame):
     good = wire(frame)
     follower = encode_frame(Kind.DATA, 1, 2, b"after")
     for pos in range(len(good)):
-        got = Deframer().feed(good[:pos] + good[pos + 1:] + follower)
+        got = Deframer().feed(good[:pos] + good[pos + 1 :] + follower)
         assert got == [Frame(Kind.DATA, 1, 2, b"after")]
 
 
-@given(st.lists(frames_st, min_size=1, max_size=6), st.lists(st.binary(max_size=300), min_size=1, max_size=7),
-       st.randoms(use_true_random=False))
+@given(
+    st.lists(frames_st, min_size=1, max_size=6),
+    st.lists(st.binary(max_size=300), min_size=1, max_size=7),
+    st.randoms(use_true_random=False),
+)
 def test_resync_after_random_garbage(frames, garbage, rnd):
     """Frames interleaved with random garbage (rich in SYNC bytes) are all recovered, in order."""
     stream = bytearray()
@@ -80,10 +95,10 @@ def test_resync_after_random_garbage(frames, garbage, rnd):
     pos = 0
     while pos < len(stream):
         step = rnd.randint(1, 64)
-        out += d.feed(bytes(stream[pos:pos + step]))
+        out += d.feed(bytes(stream[pos : pos + step]))
         pos += step
     # a frame can only be lost if garbage ends inside... never: garbage precedes each frame entirely
-    assert out[-len(frames):] == frames or out == frames
+    assert out[-len(frames) :] == frames or out == frames
     assert [f for f in out if f in frames] == frames
 
 

@@ -23,15 +23,30 @@ text = st.text(alphabet=st.characters(min_codepoint=32, max_codepoint=126), max_
 sv4 = st.tuples(sv, sv, sv, sv)
 
 message_st = st.one_of(
-    st.builds(M.Segment, st.integers(1, 2**32 - 1), st.tuples(*[st.integers(-(2**31) + 1, 2**31 - 1)] * 4),
-              st.integers(-1, 255)),
-    st.just(M.Identify()), st.just(M.GetStatus()), st.just(M.ClearFault()), st.just(M.EmergencyStop()),
+    st.builds(
+        M.Segment,
+        st.integers(1, 2**32 - 1),
+        st.tuples(*[st.integers(-(2**31) + 1, 2**31 - 1)] * 4),
+        st.integers(-1, 255),
+    ),
+    st.just(M.Identify()),
+    st.just(M.GetStatus()),
+    st.just(M.ClearFault()),
+    st.just(M.EmergencyStop()),
     st.builds(M.Hello, uv, u8, u8),
     st.builds(M.SetPosition, sv4),
     st.builds(M.Enable, u8),
-    st.integers(0, 7).flatmap(lambda mask: st.builds(
-        M.Home, st.just(mask), st.tuples(*[sv if mask >> k & 1 else st.just(0) for k in range(3)]))),
-    st.builds(M.Dwell, uv), st.builds(M.SetHeater, u8, uv), st.builds(M.SetFan, u8, u8), st.builds(M.WaitHeater, u8, uv),
+    st.integers(0, 7).flatmap(
+        lambda mask: st.builds(
+            M.Home,
+            st.just(mask),
+            st.tuples(*[sv if mask >> k & 1 else st.just(0) for k in range(3)]),
+        )
+    ),
+    st.builds(M.Dwell, uv),
+    st.builds(M.SetHeater, u8, uv),
+    st.builds(M.SetFan, u8, u8),
+    st.builds(M.WaitHeater, u8, uv),
     st.builds(M.Ident, uv, u8, u8, uv, text, text, u8, uv, uv, uv, u8, u8, u8, uv, uv, uv, uv),
     st.builds(M.Status, u8, uv, uv, uv, uv, sv4, sv, uv, sv, uv, u8, u8, u8, u8, uv, uv, uv, uv),
     st.builds(M.Event, u8, uv, st.lists(sv, max_size=5).map(tuple)),
@@ -74,7 +89,7 @@ def protocol_examples():
         lines = [ln.strip() for ln in block.strip().splitlines()]
         name = lines[0].lstrip("# ")
         head = dict(kv.split("=") for kv in lines[1].split())
-        messages = [ln[len("message: "):] for ln in lines if ln.startswith("message: ")]
+        messages = [ln[len("message: ") :] for ln in lines if ln.startswith("message: ")]
         hexline = lines[-1]
         out.append(pytest.param(head, messages, bytes.fromhex(hexline), id=name))
     return out
@@ -96,6 +111,10 @@ def test_protocol_md_example(head, messages, raw):
     decoded = decode_messages(f.payload, SegmentContext())
     assert [repr(m) for m in decoded] == messages
     # and the other way round: the listed messages encode to exactly these bytes
-    rebuilt = encode_frame(Kind[head["kind"]], int(head["seq"]), int(head["ack"]),
-                           encode_messages(decoded, SegmentContext()))
+    rebuilt = encode_frame(
+        Kind[head["kind"]],
+        int(head["seq"]),
+        int(head["ack"]),
+        encode_messages(decoded, SegmentContext()),
+    )
     assert rebuilt == raw

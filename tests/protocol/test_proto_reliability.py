@@ -31,8 +31,11 @@ def run_pair(payloads, spec: FaultSpec, window=8, horizon=600.0):
         a.feed(ba.receive(t), t)
         if len(got) == len(payloads) and a.sender.idle():
             break
-        times = [x for x in (ab.next_delivery(), ba.next_delivery(), a.next_deadline(), b.next_deadline())
-                 if x is not None]
+        times = [
+            x
+            for x in (ab.next_delivery(), ba.next_delivery(), a.next_deadline(), b.next_deadline())
+            if x is not None
+        ]
         t = max(t + 1e-6, min(times)) if times else t + 0.01
     return got, a, b
 

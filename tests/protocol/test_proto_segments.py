@@ -27,12 +27,14 @@ ramp_st = st.integers(-1, 255)
 
 
 def batches(max_n=40, max_delta=2**31 - 1):
-    return st.integers(1, max_n).flatmap(lambda n: st.builds(
-        SegmentBatch,
-        hnp.arrays(np.int64, n, elements=st.integers(1, 2**32 - 1)),
-        hnp.arrays(np.int64, (n, 4), elements=st.integers(-max_delta, max_delta)),
-        hnp.arrays(np.int16, n, elements=ramp_st),
-    ))
+    return st.integers(1, max_n).flatmap(
+        lambda n: st.builds(
+            SegmentBatch,
+            hnp.arrays(np.int64, n, elements=st.integers(1, 2**32 - 1)),
+            hnp.arrays(np.int64, (n, 4), elements=st.integers(-max_delta, max_delta)),
+            hnp.arrays(np.int16, n, elements=ramp_st),
+        )
+    )
 
 
 def decode_all(data: bytes, n: int, ctx: SegmentContext):
@@ -70,7 +72,9 @@ def test_split_encoding_equals_whole(batch, cut):
 def test_smooth_motion_is_compact():
     n = 200
     t = np.arange(n + 1) * 0.02
-    pos = np.rint(np.stack([4000 * np.sin(t), 3000 * np.cos(t), -2000 * np.sin(0.5 * t), 30 * t], axis=1))
+    pos = np.rint(
+        np.stack([4000 * np.sin(t), 3000 * np.cos(t), -2000 * np.sin(0.5 * t), 30 * t], axis=1)
+    )
     batch = SegmentBatch(np.full(n, 2000), np.diff(pos, axis=0))
     data, offsets = encode_segments(batch, SegmentContext())
     assert len(data) / n <= 5.0  # opcode + ~1 byte per slider; duration and extruder mostly omitted
@@ -111,7 +115,11 @@ def test_profile_speeds_follow_the_ramp(code):
 def test_ramp_codes_and_rest():
     codes = ramp_codes_from_speeds([0.0, 10.0, 10.0, 5.0, 0.0], [10.0, 0.0, 10.0, 15.0, 0.0])
     assert codes.tolist() == [0, 255, RAMP_CONSTANT, 64, RAMP_CONSTANT]
-    assert ends_at_rest([[1, 0, 0, 0], [0, 0, 0, 0], [5, 5, 5, 5]], [255, -1, -1]).tolist() == [True, True, False]
+    assert ends_at_rest([[1, 0, 0, 0], [0, 0, 0, 0], [5, 5, 5, 5]], [255, -1, -1]).tolist() == [
+        True,
+        True,
+        False,
+    ]
 
 
 def test_continuous_speed_across_segments():
@@ -119,8 +127,11 @@ def test_continuous_speed_across_segments():
     v = np.array([0.0, 100.0, 200.0, 300.0])  # steps/s at the boundaries, 0.1 s segments
     codes = ramp_codes_from_speeds(v[:-1], v[1:])
     deltas = (v[:-1] + v[1:]) / 2 * 0.1
-    batch = SegmentBatch(np.full(3, 10_000), np.stack([deltas, 0 * deltas, 0 * deltas, 0 * deltas], axis=1).round(),
-                         codes)
+    batch = SegmentBatch(
+        np.full(3, 10_000),
+        np.stack([deltas, 0 * deltas, 0 * deltas, 0 * deltas], axis=1).round(),
+        codes,
+    )
     r = ramp_share(batch.ramps)
     start = 2 * r * batch.deltas[:, 0] / 0.1
     end = (2 - 2 * r) * batch.deltas[:, 0] / 0.1

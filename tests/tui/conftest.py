@@ -24,15 +24,19 @@ def pytest_pyfunc_call(pyfuncitem):
     return None
 
 
-async def wait_for(pilot, predicate: Callable[[UiState], bool], timeout: float = 10.0, what: str = "") -> UiState:
+async def wait_for(
+    pilot, predicate: Callable[[UiState], bool], timeout: float = 10.0, what: str = ""
+) -> UiState:
     """Let the app run until ``predicate(app.state)`` holds (fails the test after ``timeout`` s)."""
     app = pilot.app
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout
     while not predicate(app.state):
         if loop.time() > deadline:
-            raise AssertionError(f"timed out waiting for {what or predicate}: state is {app.state.job.state}, "
-                                 f"connection {app.state.connection.status}")
+            raise AssertionError(
+                f"timed out waiting for {what or predicate}: state is {app.state.job.state}, "
+                f"connection {app.state.connection.status}"
+            )
         await pilot.pause(0.01)
     return app.state
 
@@ -51,7 +55,9 @@ def make_app(backend, **kw) -> CdprApp:
 @pytest.fixture
 def gcode_file(tmp_path):
     path = tmp_path / "part.gcode"
-    path.write_text("".join(f"G1 X{i} Y{i} E{0.1 * i:.2f} ; move {i}\n" for i in range(1, 60)), encoding="utf-8")
+    path.write_text(
+        "".join(f"G1 X{i} Y{i} E{0.1 * i:.2f} ; move {i}\n" for i in range(1, 60)), encoding="utf-8"
+    )
     return path
 
 

@@ -7,7 +7,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from cdprhost.job.state import Failure, JobState, LinkHealth, Planned, Progress, StateChanged, Temperatures
+from cdprhost.job.state import (
+    Failure,
+    JobState,
+    LinkHealth,
+    Planned,
+    Progress,
+    StateChanged,
+    Temperatures,
+)
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import load_profile
 from cdprhost.tui.control.backend import EMBEDDED
@@ -35,7 +43,11 @@ class FakeJob:
     def __init__(self, on_event, *, segments=30, layers=3, gate=None, fail_at=None, start_line=10):
         self.on_event, self.segments, self.layers = on_event, segments, layers
         self.gate, self.fail_at, self.start_line = gate, fail_at, start_line
-        self._pause, self._resume, self._cancel = threading.Event(), threading.Event(), threading.Event()
+        self._pause, self._resume, self._cancel = (
+            threading.Event(),
+            threading.Event(),
+            threading.Event(),
+        )
         self.result = None
 
     def request_pause(self):
@@ -54,7 +66,15 @@ class FakeJob:
     def run(self):
         emit = self.on_event
         self._state(JobState.PREFLIGHT)
-        emit(Planned(layers=self.layers, moves=self.segments, estimated_time_s=60.0, filament_mm=12.5, segments=self.segments))
+        emit(
+            Planned(
+                layers=self.layers,
+                moves=self.segments,
+                estimated_time_s=60.0,
+                filament_mm=12.5,
+                segments=self.segments,
+            )
+        )
         self._state(JobState.HEATING)
         emit(Temperatures(200.0, 60.0, 200.0, 60.0))
         self._state(JobState.PRINTING)
@@ -80,15 +100,30 @@ class FakeJob:
                 return "cancelled"
             if self.fail_at is not None and i > self.fail_at:
                 layer = (i - 2) // per_layer
-                emit(Failure("device reset (boot id changed)", self.start_line + i - 1, layer, (1.0, 2.0, 120.0),
-                             "/tmp/resume.json"))
+                emit(
+                    Failure(
+                        "device reset (boot id changed)",
+                        self.start_line + i - 1,
+                        layer,
+                        (1.0, 2.0, 120.0),
+                        "/tmp/resume.json",
+                    )
+                )
                 self._state(JobState.FAILED, "device reset")
                 return "failed"
             t = i * 2.0
-            emit(Progress(i, self.start_line + i, min((i - 1) // per_layer, self.layers - 1), t,
-                          position=(float(i), 0.5 * i, 110.0 + 0.2 * ((i - 1) // per_layer)),
-                          sliders=(-0.1 * i, 0.05 * i, 0.02 * i), tensions=(40.0 + i, 45.0, 50.0),
-                          steps=(-40 * i, 20 * i, 8 * i, 95 * i)))
+            emit(
+                Progress(
+                    i,
+                    self.start_line + i,
+                    min((i - 1) // per_layer, self.layers - 1),
+                    t,
+                    position=(float(i), 0.5 * i, 110.0 + 0.2 * ((i - 1) // per_layer)),
+                    sliders=(-0.1 * i, 0.05 * i, 0.02 * i),
+                    tensions=(40.0 + i, 45.0, 50.0),
+                    steps=(-40 * i, 20 * i, 8 * i, 95 * i),
+                )
+            )
             emit(Temperatures(200.0 + (i % 3) * 0.5, 60.0, 200.0, 60.0))
             emit(LinkHealth(retransmits=i // 10, bad_frames=i // 15))
         self._state(JobState.DONE)
@@ -102,9 +137,18 @@ class FakeCalibration:
 
     def plan(self, n_fit, n_check, session_dir):
         pts = [(-20.0 + 10 * i, 5.0 * i, 150.0 + 20 * i) for i in range(n_fit + n_check)]
-        poses = tuple(PoseView(i + 1, p, "fit" if i < n_fit else "check") for i, p in enumerate(pts))
-        return CalibrationView("planned", poses, None, session_dir or "/tmp/session",
-                               (("O1", 0.41), ("O2", 0.052), ("O3", 0.021)), None, "")
+        poses = tuple(
+            PoseView(i + 1, p, "fit" if i < n_fit else "check") for i, p in enumerate(pts)
+        )
+        return CalibrationView(
+            "planned",
+            poses,
+            None,
+            session_dir or "/tmp/session",
+            (("O1", 0.41), ("O2", 0.052), ("O3", 0.021)),
+            None,
+            "",
+        )
 
     def move_to(self, pose):
         self.moved.append(pose.index)
@@ -112,13 +156,21 @@ class FakeCalibration:
 
     def ingest(self, pose, take_path):
         if "bad" in take_path:
-            return replace(pose, status="rejected", detail=f"{take_path}: effector not static (spread 0.9 mm)")
+            return replace(
+                pose, status="rejected", detail=f"{take_path}: effector not static (spread 0.9 mm)"
+            )
         return replace(pose, status="take ok", detail="base fit 0.02 mm", measured=pose.point)
 
     def identify(self):
-        rows = tuple(ParameterRow(f"A{k // 3 + 1}.{'xyz'[k % 3]}", 100.0 + k, 100.5 + k, 0.01, 100.48 + k, 100.52 + k)
-                     for k in range(9))
-        rows += tuple(ParameterRow(f"L{k + 1}0", 390.0, 391.2, 0.02, 391.16, 391.24) for k in range(3))
+        rows = tuple(
+            ParameterRow(
+                f"A{k // 3 + 1}.{'xyz'[k % 3]}", 100.0 + k, 100.5 + k, 0.01, 100.48 + k, 100.52 + k
+            )
+            for k in range(9)
+        )
+        rows += tuple(
+            ParameterRow(f"L{k + 1}0", 390.0, 391.2, 0.02, 391.16, 391.24) for k in range(3)
+        )
         return IdentificationView(rows, 14.2, 0.051, 5, 4, 12.0, 0.07, (), "/tmp/calibrated.toml")
 
 
@@ -141,18 +193,36 @@ class FakeBackend:
         p = np.asarray(point, dtype=float)[None, :]
         s = self.model.ik(p)[0]
         steps = tuple(int(v) for v in self.model.steps(s[None, :])[0]) + (0,)
-        return DeviceStatus(steps, tuple(float(v) for v in s), tuple(float(v) for v in p[0]),
-                            25.0, 25.0, 0.0, 0.0, True, True, 64)
+        return DeviceStatus(
+            steps,
+            tuple(float(v) for v in s),
+            tuple(float(v) for v in p[0]),
+            25.0,
+            25.0,
+            0.0,
+            0.0,
+            True,
+            True,
+            64,
+        )
 
     def ports(self):
-        return [PortChoice(EMBEDDED, "embedded simulated device", "accelerated"),
-                PortChoice("/dev/ttyFAKE0", "/dev/ttyFAKE0", "USB serial")]
+        return [
+            PortChoice(EMBEDDED, "embedded simulated device", "accelerated"),
+            PortChoice("/dev/ttyFAKE0", "/dev/ttyFAKE0", "USB serial"),
+        ]
 
     def connect(self, port, baud):
         if port != EMBEDDED:
             raise OSError(f"{port}: no such device")
         self._connected = True
-        return (("firmware", "cdpr-sim 0.1"), ("protocol", "1"), ("queue", "64 segments"), ("port", port), ("baud", str(baud)))
+        return (
+            ("firmware", "cdpr-sim 0.1"),
+            ("protocol", "1"),
+            ("queue", "64 segments"),
+            ("port", port),
+            ("baud", str(baud)),
+        )
 
     def disconnect(self):
         self._connected = False
@@ -170,8 +240,18 @@ class FakeBackend:
         if path in self.preflight_views:
             return self.preflight_views[path]
         if "bad" in path:
-            return PreflightView(path, False, (Violation(12, "build_volume", "outside the build volume by 30 mm", (0, 0, 400)),
-                                               Violation(15, "unknown_command", "M999 is not understood")), 20, 2, 30.0, 3.0)
+            return PreflightView(
+                path,
+                False,
+                (
+                    Violation(12, "build_volume", "outside the build volume by 30 mm", (0, 0, 400)),
+                    Violation(15, "unknown_command", "M999 is not understood"),
+                ),
+                20,
+                2,
+                30.0,
+                3.0,
+            )
         with open(path, encoding="utf-8"):
             pass
         return PreflightView(path, True, (), 30, 3, 60.0, 12.5)
@@ -203,10 +283,23 @@ class FakeBackend:
             raise FileNotFoundError(f"{session_dir}/session.toml: no such file")
         before = tuple(0.1 + 0.02 * (k % 7) for k in range(40))
         after = tuple(0.06 + 0.005 * (k % 5) for k in range(40))
-        return DiagnosisView("named", "cable_elasticity", "cable residuals grow with tension (r = 0.91)",
-                             (CandidateRow("cable_elasticity", 1e-9, -42.0, 0.071), CandidateRow("drive_scale", 0.2, -1.0, 0.14),
-                              CandidateRow("backlash", 0.6, 3.0, 0.15), CandidateRow("drift", 0.8, 3.5, 0.15)),
-                             0.152, 0.071, 0.066, before, after, (("EA", "18500 ± 900 N"),))
+        return DiagnosisView(
+            "named",
+            "cable_elasticity",
+            "cable residuals grow with tension (r = 0.91)",
+            (
+                CandidateRow("cable_elasticity", 1e-9, -42.0, 0.071),
+                CandidateRow("drive_scale", 0.2, -1.0, 0.14),
+                CandidateRow("backlash", 0.6, 3.0, 0.15),
+                CandidateRow("drift", 0.8, 3.5, 0.15),
+            ),
+            0.152,
+            0.071,
+            0.066,
+            before,
+            after,
+            (("EA", "18500 ± 900 N"),),
+        )
 
     def close(self):
         self._connected = False

@@ -30,18 +30,33 @@ def test_defaults_open_the_embedded_device_with_paper_prototype(captured):
 
 
 def test_port_profile_and_virtual_mocap_options(captured, tmp_path):
-    assert main(["tui", "--profile", "paper-simulation", "--port", "loop://", "--baud", "115200"]) == 0
+    assert (
+        main(["tui", "--profile", "paper-simulation", "--port", "loop://", "--baud", "115200"]) == 0
+    )
     app = captured[-1]
-    assert app.backend.profile_name == "paper-simulation" and app._port == "loop://" and app._baud == 115200
-    assert main(["tui", "--sim-truth", "paper-simulation", "--sim-mocap-dir", str(tmp_path / "mocap")]) == 0
+    assert (
+        app.backend.profile_name == "paper-simulation"
+        and app._port == "loop://"
+        and app._baud == 115200
+    )
+    assert (
+        main(["tui", "--sim-truth", "paper-simulation", "--sim-mocap-dir", str(tmp_path / "mocap")])
+        == 0
+    )
     assert captured[-1].backend.sim_options["observer"] is not None
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["tui", "--profile", "no-such-profile"], "no-such-profile"),
-    (["tui", "--sim-truth", "paper-simulation"], "--sim-truth and --sim-mocap-dir go together"),
-    (["tui", "--port", "loop://", "--sim-truth", "paper-simulation", "--sim-mocap-dir", "x"], "embedded"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["tui", "--profile", "no-such-profile"], "no-such-profile"),
+        (["tui", "--sim-truth", "paper-simulation"], "--sim-truth and --sim-mocap-dir go together"),
+        (
+            ["tui", "--port", "loop://", "--sim-truth", "paper-simulation", "--sim-mocap-dir", "x"],
+            "embedded",
+        ),
+    ],
+)
 def test_bad_input_exits_2_with_a_message(captured, capsys, argv, message):
     assert main(argv) == 2
     assert message in capsys.readouterr().err

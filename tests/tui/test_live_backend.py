@@ -63,19 +63,34 @@ def test_preflight_view_on_real_preflight(live, tmp_path):
 
 
 def test_diagnosis_view_from_report():
-    report = {"verdict": "named", "effect": "drift", "effects": ["drift"], "where": "cable 2 grows with time",
-              "candidates": [{"name": "drift", "p_value": 1e-12, "delta_bic": -80.0, "heldout_rms_mm": 0.09},
-                             {"name": "backlash", "p_value": float("nan"), "delta_bic": None, "heldout_rms_mm": 0.2}],
-              "heldout_rms_before_mm": 0.3, "heldout_rms_after_mm": 0.09, "noise_floor_mm": 0.088,
-              "poses": {"heldout_before_mm": [0.2, 0.4], "heldout_after_mm": [0.08, 0.1]},
-              "parameters": {"drift": {"table": {"rho": [1e-4, -2e-4, 3e-4], "rho_stderr": [1e-5] * 3},
-                                       "ci95": {"rho": [[0.8e-4, 1.2e-4], [-2.2e-4, -1.8e-4], [2.8e-4, 3.2e-4]]}}}}
+    report = {
+        "verdict": "named",
+        "effect": "drift",
+        "effects": ["drift"],
+        "where": "cable 2 grows with time",
+        "candidates": [
+            {"name": "drift", "p_value": 1e-12, "delta_bic": -80.0, "heldout_rms_mm": 0.09},
+            {"name": "backlash", "p_value": float("nan"), "delta_bic": None, "heldout_rms_mm": 0.2},
+        ],
+        "heldout_rms_before_mm": 0.3,
+        "heldout_rms_after_mm": 0.09,
+        "noise_floor_mm": 0.088,
+        "poses": {"heldout_before_mm": [0.2, 0.4], "heldout_after_mm": [0.08, 0.1]},
+        "parameters": {
+            "drift": {
+                "table": {"rho": [1e-4, -2e-4, 3e-4], "rho_stderr": [1e-5] * 3},
+                "ci95": {"rho": [[0.8e-4, 1.2e-4], [-2.2e-4, -1.8e-4], [2.8e-4, 3.2e-4]]},
+            }
+        },
+    }
     view = diagnosis_view(report)
     assert view.verdict == "named" and view.effect == "drift"
     assert view.candidates[1].p_value is None and view.candidates[1].delta_bic is None
     assert view.per_pose_before_mm == (0.2, 0.4)
     rows = dict(parameter_rows(report))
-    assert list(rows) == ["drift.rho"] and rows["drift.rho"].startswith("[0.0001, -0.0002, 0.0003] (95% [8e-05")
+    assert list(rows) == ["drift.rho"] and rows["drift.rho"].startswith(
+        "[0.0001, -0.0002, 0.0003] (95% [8e-05"
+    )
 
 
 def write_hidden_session(directory, model, effect, seed):
@@ -85,8 +100,17 @@ def write_hidden_session(directory, model, effect, seed):
     t_s = session_times(40, rng)
     s_cmd, dirs = commanded_path(model, poses)
     actual = truth.fk(s_cmd, MotionContext(t_s=t_s, directions=dirs))
-    write_synthetic_session(directory, actual, poses, s_cmd, t_s, dirs.astype(int), "paper-simulation",
-                            noise_mm=0.05, seed=seed + 1)
+    write_synthetic_session(
+        directory,
+        actual,
+        poses,
+        s_cmd,
+        t_s,
+        dirs.astype(int),
+        "paper-simulation",
+        noise_mm=0.05,
+        seed=seed + 1,
+    )
 
 
 async def test_diagnose_screen_on_a_session_with_a_hidden_effect(tmp_path):
@@ -97,7 +121,9 @@ async def test_diagnose_screen_on_a_session_with_a_hidden_effect(tmp_path):
         await pilot.press("f5", "e")
         app.screen.query_one("#diag-session", Input).value = str(tmp_path / "session")
         await pilot.press("enter")
-        state = await wait_for(pilot, lambda s: s.diagnose.result is not None or s.diagnose.error, timeout=60)
+        state = await wait_for(
+            pilot, lambda s: s.diagnose.result is not None or s.diagnose.error, timeout=60
+        )
         assert state.diagnose.error == ""
         d = state.diagnose.result
         assert d.verdict == "named" and d.effect == "drive_scale"
@@ -121,23 +147,39 @@ async def test_calibration_wizard_screen_with_virtual_mocap(sim_profile, tmp_pat
         screen.query_one("#check-poses", Input).value = "2"
         screen.query_one("#session-dir", Input).value = str(tmp_path / "session")
         await pilot.press("n")
-        state = await wait_for(pilot, lambda s: s.calibration.stage in ("planned", "error"), timeout=60)
+        state = await wait_for(
+            pilot, lambda s: s.calibration.stage in ("planned", "error"), timeout=60
+        )
         assert state.calibration.stage == "planned", state.calibration.message
         n = len(state.calibration.poses)
         assert n == 6 and sum(p.role == "check" for p in state.calibration.poses) == 2
         for k in range(1, n + 1):
             await pilot.press("m")
-            await wait_for(pilot, lambda s, k=k: s.calibration.poses[k - 1].status in ("settled", "error")
-                           or s.calibration.stage == "error", timeout=60, what=f"pose {k} settled")
+            await wait_for(
+                pilot,
+                lambda s, k=k: (
+                    s.calibration.poses[k - 1].status in ("settled", "error")
+                    or s.calibration.stage == "error"
+                ),
+                timeout=60,
+                what=f"pose {k} settled",
+            )
             await pilot.pause()
             take = screen.query_one("#take-input", Input)
             assert take.value.endswith(f"take-{k:04d}.csv")  # offered by the virtual motion capture
             await pilot.press("k", "enter")
-            state = await wait_for(pilot, lambda s, k=k: s.calibration.poses[k - 1].status != "settled"
-                                   and not s.busy, timeout=30)
-            assert state.calibration.poses[k - 1].status == "take ok", state.calibration.poses[k - 1].detail
+            state = await wait_for(
+                pilot,
+                lambda s, k=k: s.calibration.poses[k - 1].status != "settled" and not s.busy,
+                timeout=30,
+            )
+            assert state.calibration.poses[k - 1].status == "take ok", state.calibration.poses[
+                k - 1
+            ].detail
         await pilot.press("i")
-        state = await wait_for(pilot, lambda s: s.calibration.stage in ("done", "error"), timeout=60)
+        state = await wait_for(
+            pilot, lambda s: s.calibration.stage in ("done", "error"), timeout=60
+        )
         result = state.calibration.result
         assert result is not None, state.calibration.message
         assert result.rms_before_mm > 1.0 and result.rms_after_mm < 0.1

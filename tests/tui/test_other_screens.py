@@ -63,12 +63,16 @@ async def test_jog_shows_feasibility_before_moving(fake_backend):
         await pilot.press("h")
         assert isinstance(app.screen, ConfirmScreen)
         await pilot.press("y")
-        await wait_for(pilot, lambda s: not s.busy and s.device.position != pytest.approx(jog.target))
+        await wait_for(
+            pilot, lambda s: not s.busy and s.device.position != pytest.approx(jog.target)
+        )
         hotend = app.screen.query_one("#hotend-input", Input)
         hotend.value = "215"
         app.screen.query_one("#bed-input", Input).value = "60"
         await pilot.press("t")
-        await wait_for(pilot, lambda s: s.device.hotend_target == 215.0 and not s.busy, what="heaters")
+        await wait_for(
+            pilot, lambda s: s.device.hotend_target == 215.0 and not s.busy, what="heaters"
+        )
         assert app.state.device.bed_target == 60.0
         hotend.value = "999"
         await pilot.press("t")  # above the profile's hotend maximum: refused
@@ -83,17 +87,29 @@ async def test_calibration_wizard_screen(fake_backend):
         await pilot.press("f4")
         await pilot.press("n")
         state = await wait_for(pilot, lambda s: s.calibration.stage == "planned", what="planned")
-        assert len(state.calibration.poses) == 7 and [p.role for p in state.calibration.poses].count("check") == 3
+        assert (
+            len(state.calibration.poses) == 7
+            and [p.role for p in state.calibration.poses].count("check") == 3
+        )
         assert app.screen.query_one("#poses", DataTable).row_count == 7
         take_input = app.screen.query_one("#take-input", Input)
         for k in range(1, 5):
             await pilot.press("m")
-            await wait_for(pilot, lambda s, k=k: s.calibration.current == k and
-                           s.calibration.poses[k - 1].status == "settled", what=f"pose {k} settled")
+            await wait_for(
+                pilot,
+                lambda s, k=k: (
+                    s.calibration.current == k and s.calibration.poses[k - 1].status == "settled"
+                ),
+                what=f"pose {k} settled",
+            )
             await pilot.press("k")
-            take_input.value = "takes/bad.csv" if k == 2 else f"takes/{k}.csv"  # pose 2: first take rejected
+            take_input.value = (
+                "takes/bad.csv" if k == 2 else f"takes/{k}.csv"
+            )  # pose 2: first take rejected
             await pilot.press("enter")
-            await wait_for(pilot, lambda s, k=k: s.calibration.poses[k - 1].status in ("take ok", "rejected"))
+            await wait_for(
+                pilot, lambda s, k=k: s.calibration.poses[k - 1].status in ("take ok", "rejected")
+            )
             if app.state.calibration.poses[k - 1].status == "rejected":
                 assert "not static" in await shown(pilot)
                 await pilot.press("k")  # the same pose again, with a good take
@@ -153,8 +169,13 @@ async def test_screens_render_at_80x24_with_key_bindings(fake_backend, mode):
         assert len(lines) == 24
         assert "F2 Print" in lines[0]  # the tab bar
         assert "^q Quit" in lines[-1] and "^p palette" in lines[-1]
-        expected = {"connection": "c Connect", "print": "o Open", "jog": "h Home", "calibrate": "n Plan poses",
-                    "diagnose": "e Session"}[mode]
+        expected = {
+            "connection": "c Connect",
+            "print": "o Open",
+            "jog": "h Home",
+            "calibrate": "n Plan poses",
+            "diagnose": "e Session",
+        }[mode]
         assert expected in lines[-1]
 
 

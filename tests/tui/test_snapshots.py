@@ -21,7 +21,9 @@ BIG, SMALL = (100, 32), (80, 24)
 def workdir(tmp_path, monkeypatch):
     """Run in a temporary folder so file paths on screen are the same every time."""
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "part.gcode").write_text("".join(f"G1 X{i} Y{i} E{0.1 * i:.2f} ; move {i}\n" for i in range(1, 60)))
+    (tmp_path / "part.gcode").write_text(
+        "".join(f"G1 X{i} Y{i} E{0.1 * i:.2f} ; move {i}\n" for i in range(1, 60))
+    )
     (tmp_path / "bad.gcode").write_text("".join(f"G1 X{i} ; line {i + 1}\n" for i in range(30)))
     return tmp_path
 
@@ -34,13 +36,16 @@ def open_and_wait(name):
         await pilot.press("enter")
         await wait_for(pilot, lambda s: s.file.preflight is not None)
         await wait_for(pilot, lambda s: pilot.app.screen.source is not None)
+
     return run_before
 
 
 @pytest.mark.parametrize("size", [BIG, SMALL], ids=["100x32", "80x24"])
 def test_print_screen_preflight_violations(snap_compare, workdir, size):
     app = make_app(FakeBackend())
-    assert snap_compare(app, terminal_size=size, run_before=open_and_wait("bad.gcode"), press=["down", "enter"])
+    assert snap_compare(
+        app, terminal_size=size, run_before=open_and_wait("bad.gcode"), press=["down", "enter"]
+    )
 
 
 @pytest.mark.parametrize("size", [BIG, SMALL], ids=["100x32", "80x24"])

@@ -42,7 +42,7 @@ def test_block_chart_shape_and_monotone(values, width, height):
     rows = block_chart(values, width, height, 0.0, 300.0)
     assert len(rows) == height and all(len(r) == width for r in rows)
     shown = values[-width:]
-    fill = filled_eighths(rows)[width - len(shown):]
+    fill = filled_eighths(rows)[width - len(shown) :]
     order = np.argsort(shown, kind="stable")
     assert np.all(np.diff(fill[order]) >= 0)  # a larger value never draws a shorter column
     assert np.all(np.abs(fill - np.asarray(shown) / 300.0 * height * 8) <= 0.5 + 1e-9)
@@ -50,7 +50,9 @@ def test_block_chart_shape_and_monotone(values, width, height):
 
 def test_block_chart_marker_and_right_alignment():
     rows = block_chart([150.0, 150.0], 6, 2, 0.0, 200.0, marker=150.0)
-    assert rows[0] == "┈┈┈┈▄▄"  # target line in the empty cells of the top row, newest values on the right
+    assert (
+        rows[0] == "┈┈┈┈▄▄"
+    )  # target line in the empty cells of the top row, newest values on the right
     assert rows[1] == "    ██"
 
 
@@ -82,7 +84,10 @@ def test_gap_cells_after_below_before_and_floor_line():
     assert floor_at == 1 and rows[1][1] == ("┈", FLOOR)  # above the short bar the floor line shows
 
 
-@given(st.lists(st.text(alphabet="G1XYZ0123456789 .;-é", max_size=12), min_size=1, max_size=40), st.booleans())
+@given(
+    st.lists(st.text(alphabet="G1XYZ0123456789 .;-é", max_size=12), min_size=1, max_size=40),
+    st.booleans(),
+)
 def test_source_lines_match_splitlines(tmp_path_factory, lines, trailing_newline):
     path = tmp_path_factory.mktemp("src") / "f.gcode"
     text = "\n".join(lines) + ("\n" if trailing_newline else "")
@@ -111,9 +116,14 @@ def test_jog_feasibility(sim_model):
 
 def test_fold_ignores_other_jobs_and_reports_illegal_transitions():
     state = UiState(job_id=2)
-    items = [(1, StateChanged(JobState.PREFLIGHT)), (2, StateChanged(JobState.PREFLIGHT)),
-             (2, Planned(3, 10, 5.0, 1.0, 10)), (2, StateChanged(JobState.DONE)),  # illegal from preflight
-             (2, StateChanged(JobState.PRINTING)), (2, Progress(4, 20, 1, 2.0))]
+    items = [
+        (1, StateChanged(JobState.PREFLIGHT)),
+        (2, StateChanged(JobState.PREFLIGHT)),
+        (2, Planned(3, 10, 5.0, 1.0, 10)),
+        (2, StateChanged(JobState.DONE)),  # illegal from preflight
+        (2, StateChanged(JobState.PRINTING)),
+        (2, Progress(4, 20, 1, 2.0)),
+    ]
     new, problems = fold_job_events(state, items)
     assert new.job.state is JobState.PRINTING and new.job.segments_done == 4 and new.job.layers == 3
     assert problems == ["preflight -> done is not allowed"]
@@ -145,8 +155,16 @@ def test_event_pump_wakes_once_per_burst_and_keeps_order():
 
 
 def test_progress_lines_layers_eta_and_line():
-    snap = JobSnapshot(state=JobState.PRINTING, layers=12, layer=4, segments_total=100, segments_done=25,
-                       estimated_time_s=400.0, device_time_s=100.0, line=42)
+    snap = JobSnapshot(
+        state=JobState.PRINTING,
+        layers=12,
+        layer=4,
+        segments_total=100,
+        segments_done=25,
+        estimated_time_s=400.0,
+        device_time_s=100.0,
+        line=42,
+    )
     head, stats, line = progress_lines(snap, "G1 X1 Y2")
     assert "PRINTING" in head.plain
     assert stats.plain == "layer 5/12  elapsed 0:01:40  ETA 0:05:00"
@@ -163,7 +181,15 @@ def test_failure_text_names_stop_and_resume_point():
 
 
 def test_preflight_summary_names_first_violation():
-    view = PreflightView("a.gcode", False, (Violation(40, "tension", "x"), Violation(12, "build_volume", "y")), 5, 1, 65.0, 2.0)
+    view = PreflightView(
+        "a.gcode",
+        False,
+        (Violation(40, "tension", "x"), Violation(12, "build_volume", "y")),
+        5,
+        1,
+        65.0,
+        2.0,
+    )
     text = preflight_summary(UiState(file=FileView(path="a.gcode", preflight=view))).plain
     assert text.startswith("2 violations (first at line 12)") and "est 0:01:05" in text
     assert "press o" in preflight_summary(UiState()).plain

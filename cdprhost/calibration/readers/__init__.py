@@ -18,9 +18,14 @@ from cdprhost.calibration.readers.vicon import looks_like_vicon, read_vicon
 from cdprhost.calibration.readers.writers import EXTENSIONS, write_take
 from cdprhost.errors import InputError
 
-__all__ = ["FORMATS", "EXTENSIONS", "Take", "detect_format", "read_take", "write_take"]
+__all__ = ["EXTENSIONS", "FORMATS", "Take", "detect_format", "read_take", "write_take"]
 
-_READERS = {"motive-csv": read_motive, "vicon-csv": read_vicon, "qualisys-tsv": read_qualisys, "c3d": read_c3d}
+_READERS = {
+    "motive-csv": read_motive,
+    "vicon-csv": read_vicon,
+    "qualisys-tsv": read_qualisys,
+    "c3d": read_c3d,
+}
 
 
 def detect_format(path: str | os.PathLike[str]) -> str | None:
@@ -47,7 +52,10 @@ def read_take(path: str | os.PathLike[str], format: str | None = None) -> Take:
     """Read one take. ``format`` None: detect it. A given format that the content
     contradicts is overridden by the detected one (recorded in ``Take.notes``)."""
     if format is not None and format not in FORMATS:
-        raise InputError(f"unknown take format {format!r} (expected one of {', '.join(FORMATS)})", source=str(path))
+        raise InputError(
+            f"unknown take format {format!r} (expected one of {', '.join(FORMATS)})",
+            source=str(path),
+        )
     detected = detect_format(path)
     if detected is None and format is None:
         raise InputError(
@@ -59,5 +67,12 @@ def read_take(path: str | os.PathLike[str], format: str | None = None) -> Take:
     take = _READERS[chosen](path)
     if format is not None and detected is not None and detected != format:
         note = f"session says {format} but the file is {detected}; read as {detected}"
-        take = Take(take.marker_names, take.positions, take.times_s, take.source, take.format, take.notes + (note,))
+        take = Take(
+            take.marker_names,
+            take.positions,
+            take.times_s,
+            take.source,
+            take.format,
+            take.notes + (note,),
+        )
     return take

@@ -51,11 +51,13 @@ def read_c3d(path: str | os.PathLike[str]) -> Take:
         raise InputError(f"cannot read: {exc.strerror}", source=src) from None
     except InputError:
         raise
-    except Exception as exc:  # the library raises assorted errors on corrupt files
+    except Exception as exc:  # noqa: BLE001 - the library raises assorted errors on corrupt files
         raise InputError(f"not a readable C3D file: {exc}", source=src) from None
     notes: list[str] = []
     if len(labels) < n_points:
-        notes.append(f"POINT:LABELS names {len(labels)} of {n_points} points; the rest are called P<n>")
+        notes.append(
+            f"POINT:LABELS names {len(labels)} of {n_points} points; the rest are called P<n>"
+        )
         labels += [f"P{i + 1}" for i in range(len(labels), n_points)]
     labels = labels[:n_points]
     names, keep = _unique(labels, notes)
@@ -83,7 +85,9 @@ def _unique(labels: list[str], notes: list[str]) -> tuple[list[str], list[int]]:
     return names, keep
 
 
-def write_c3d(path: str | os.PathLike[str], take: Take, *, units: str = "mm", rate_hz: float | None = None) -> None:
+def write_c3d(
+    path: str | os.PathLike[str], take: Take, *, units: str = "mm", rate_hz: float | None = None
+) -> None:
     """Write ``take`` as a float C3D file (gaps get residual -1), atomically."""
     import c3d
 

@@ -31,7 +31,11 @@ def looks_like_motive(first_line: str) -> bool:
 
 def parse_metadata(cells: list[str]) -> dict[str, str]:
     """The first line's key,value pairs."""
-    return {cells[i].strip(): cells[i + 1].strip() for i in range(0, len(cells) - 1, 2) if cells[i].strip()}
+    return {
+        cells[i].strip(): cells[i + 1].strip()
+        for i in range(0, len(cells) - 1, 2)
+        if cells[i].strip()
+    }
 
 
 def read_motive(path: str | os.PathLike[str]) -> Take:
@@ -41,7 +45,9 @@ def read_motive(path: str | os.PathLike[str]) -> Take:
 def parse_motive(text: str, source: str) -> Take:
     rows = list(csv.reader(io.StringIO(text)))
     if not rows or not rows[0] or rows[0][0].strip() != "Format Version":
-        raise InputError("line 1: not a Motive CSV export (expected 'Format Version,...')", source=source)
+        raise InputError(
+            "line 1: not a Motive CSV export (expected 'Format Version,...')", source=source
+        )
     meta = parse_metadata(rows[0])
     notes: list[str] = []
     version = meta.get("Format Version", "")
@@ -53,7 +59,9 @@ def parse_motive(text: str, source: str) -> Take:
         scale = 1000.0
         notes.append("no 'Length Units' on line 1; assumed Meters (Motive's default)")
 
-    axis_row = next((i for i, r in enumerate(rows) if i > 0 and r and r[0].strip() == "Frame"), None)
+    axis_row = next(
+        (i for i, r in enumerate(rows) if i > 0 and r and r[0].strip() == "Frame"), None
+    )
     if axis_row is None:
         raise InputError("no 'Frame,Time (Seconds),X,Y,Z,...' header row found", source=source)
     header: dict[str, list[str]] = {}
@@ -65,10 +73,15 @@ def parse_motive(text: str, source: str) -> Take:
             header_line[r[1].strip()] = i + 1
     for key in ("Type", "Name"):
         if key not in header:
-            raise InputError(f"header lacks the ',{key},...' row (lines 2-{axis_row})", source=source)
+            raise InputError(
+                f"header lacks the ',{key},...' row (lines 2-{axis_row})", source=source
+            )
     labels = rows[axis_row - 1] if axis_row >= 2 else []
     if not labels or labels[0].strip() or "Position" not in [c.strip() for c in labels]:
-        raise InputError(f"line {axis_row}: expected the row of Rotation/Position labels above line {axis_row + 1}", source=source)
+        raise InputError(
+            f"line {axis_row}: expected the row of Rotation/Position labels above line {axis_row + 1}",
+            source=source,
+        )
     axes = rows[axis_row]
 
     def cell(row: list[str], j: int) -> str:
@@ -83,7 +96,10 @@ def parse_motive(text: str, source: str) -> Take:
             continue
         name = cell(header["Name"], j)
         if not name:
-            raise InputError(f"line {header_line['Name']}, column {j + 1}: Marker column without a name", source=source)
+            raise InputError(
+                f"line {header_line['Name']}, column {j + 1}: Marker column without a name",
+                source=source,
+            )
         slot = columns.setdefault(name, {})
         if axis in slot:
             if f"duplicate marker {name}" not in notes:
@@ -93,18 +109,33 @@ def parse_motive(text: str, source: str) -> Take:
     for name, slot in columns.items():
         missing = [a for a in "XYZ" if a not in slot]
         if missing:
-            raise InputError(f"marker '{name}' lacks its Position {'/'.join(missing)} column(s)", source=source)
+            raise InputError(
+                f"marker '{name}' lacks its Position {'/'.join(missing)} column(s)", source=source
+            )
     if not columns:
-        raise InputError("no Marker position columns (export with Markers enabled, not only Rigid Bodies)", source=source)
+        raise InputError(
+            "no Marker position columns (export with Markers enabled, not only Rigid Bodies)",
+            source=source,
+        )
 
     names = tuple(columns)
     col_idx = [columns[n][a] for n in names for a in "XYZ"]
-    data = [(i + 1, r) for i, r in enumerate(rows[axis_row + 1:], start=axis_row + 1) if r and any(c.strip() for c in r)]
+    data = [
+        (i + 1, r)
+        for i, r in enumerate(rows[axis_row + 1 :], start=axis_row + 1)
+        if r and any(c.strip() for c in r)
+    ]
     line_numbers = [n for n, _ in data]
     body = [r for _, r in data]
     labels_of = [f"{n} {a}" for n in names for a in "XYZ"]
-    values = numeric_block(body, [0, 1, *col_idx], first_line=axis_row + 2, source=source,
-                           line_numbers=line_numbers, column_label=lambda j: (["Frame", "Time"] + labels_of)[j])
+    values = numeric_block(
+        body,
+        [0, 1, *col_idx],
+        first_line=axis_row + 2,
+        source=source,
+        line_numbers=line_numbers,
+        column_label=lambda j: (["Frame", "Time"] + labels_of)[j],
+    )
     frames, times = values[:, 0], values[:, 1]
     if np.isnan(frames).any():
         bad = line_numbers[int(np.flatnonzero(np.isnan(frames))[0])]
@@ -113,7 +144,9 @@ def parse_motive(text: str, source: str) -> Take:
         rate = _frame_rate(meta)
         if rate is None:
             bad = line_numbers[int(np.flatnonzero(np.isnan(times))[0])]
-            raise InputError(f"line {bad}, column 2 (Time): empty and no frame rate on line 1", source=source)
+            raise InputError(
+                f"line {bad}, column 2 (Time): empty and no frame rate on line 1", source=source
+            )
         times = (frames - frames[0]) / rate
     positions = values[:, 2:].reshape(len(body), len(names), 3) * scale
     return Take(names, positions, times, source, FORMAT, tuple(notes))

@@ -41,13 +41,19 @@ def parse_qualisys(text: str, source: str) -> Take:
         meta_line[rows[i][0].strip()] = i + 1
         i += 1
     if "MARKER_NAMES" not in meta:
-        raise InputError("no MARKER_NAMES header line (export 3D data as TSV from QTM)", source=source)
+        raise InputError(
+            "no MARKER_NAMES header line (export 3D data as TSV from QTM)", source=source
+        )
     names = [n for n in meta["MARKER_NAMES"] if n]
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
-        raise InputError(f"line {meta_line['MARKER_NAMES']}: marker '{dup}' named twice", source=source)
+        raise InputError(
+            f"line {meta_line['MARKER_NAMES']}: marker '{dup}' named twice", source=source
+        )
     if not names:
-        raise InputError(f"line {meta_line['MARKER_NAMES']}: MARKER_NAMES lists no markers", source=source)
+        raise InputError(
+            f"line {meta_line['MARKER_NAMES']}: MARKER_NAMES lists no markers", source=source
+        )
     rate = _float_meta(meta, "FREQUENCY")
     notes: list[str] = []
     while i < len(rows) and not any(c.strip() for c in rows[i]):
@@ -59,7 +65,9 @@ def parse_qualisys(text: str, source: str) -> Take:
             for a in "XYZ":
                 key = f"{n} {a}"
                 if key not in header:
-                    raise InputError(f"line {i + 1}: no column '{key}' for marker '{n}'", source=source)
+                    raise InputError(
+                        f"line {i + 1}: no column '{key}' for marker '{n}'", source=source
+                    )
                 col_idx.append(header.index(key))
         frame_col = 0
         time_col = header.index("Time") if "Time" in header else None
@@ -80,8 +88,14 @@ def parse_qualisys(text: str, source: str) -> Take:
     lines_of = [n for n, _ in data]
     extra = [c for c in (frame_col, time_col) if c is not None]
     labels = [f"{n} {a}" for n in names for a in "XYZ"] + ["Frame", "Time"][: len(extra)]
-    values = numeric_block(body, [*col_idx, *extra], first_line=i + 1, line_numbers=lines_of,
-                           source=source, column_label=lambda j: labels[j])
+    values = numeric_block(
+        body,
+        [*col_idx, *extra],
+        first_line=i + 1,
+        line_numbers=lines_of,
+        source=source,
+        column_label=lambda j: labels[j],
+    )
     positions = values[:, : 3 * len(names)].reshape(len(body), len(names), 3)
     positions[np.all(positions == 0.0, axis=2)] = np.nan
     if time_col is not None and not np.isnan(values[:, -1]).any():
@@ -89,7 +103,9 @@ def parse_qualisys(text: str, source: str) -> Take:
     elif rate is not None:
         times = np.arange(len(body)) / rate
     else:
-        raise InputError("no Time column and no FREQUENCY header line: cannot time the frames", source=source)
+        raise InputError(
+            "no Time column and no FREQUENCY header line: cannot time the frames", source=source
+        )
     declared = _float_meta(meta, "NO_OF_FRAMES")
     if declared is not None and int(declared) != len(body):
         notes.append(f"NO_OF_FRAMES says {int(declared)}, file has {len(body)} data rows")

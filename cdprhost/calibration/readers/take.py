@@ -14,9 +14,18 @@ FORMATS = ("motive-csv", "vicon-csv", "qualisys-tsv", "c3d")
 
 # Length unit names as the exporters spell them -> millimetres per unit.
 UNIT_TO_MM = {
-    "millimeters": 1.0, "millimetres": 1.0, "millimeter": 1.0, "mm": 1.0,
-    "centimeters": 10.0, "centimetres": 10.0, "centimeter": 10.0, "cm": 10.0,
-    "meters": 1000.0, "metres": 1000.0, "meter": 1000.0, "m": 1000.0,
+    "millimeters": 1.0,
+    "millimetres": 1.0,
+    "millimeter": 1.0,
+    "mm": 1.0,
+    "centimeters": 10.0,
+    "centimetres": 10.0,
+    "centimeter": 10.0,
+    "cm": 10.0,
+    "meters": 1000.0,
+    "metres": 1000.0,
+    "meter": 1000.0,
+    "m": 1000.0,
 }
 
 
@@ -34,7 +43,9 @@ class Take:
     def __post_init__(self) -> None:
         pos = np.asarray(self.positions, dtype=float)
         if pos.ndim != 3 or pos.shape[2] != 3 or pos.shape[1] != len(self.marker_names):
-            raise ValueError(f"positions must be (frames, {len(self.marker_names)}, 3), got {pos.shape}")
+            raise ValueError(
+                f"positions must be (frames, {len(self.marker_names)}, 3), got {pos.shape}"
+            )
         times = np.asarray(self.times_s, dtype=float).reshape(-1)
         if times.shape[0] != pos.shape[0]:
             raise ValueError(f"times_s has {times.shape[0]} entries for {pos.shape[0]} frames")
@@ -53,8 +64,12 @@ class Take:
         try:
             return self.marker_names.index(name)
         except ValueError:
-            shown = ", ".join(self.marker_names[:20]) + (" ..." if len(self.marker_names) > 20 else "")
-            raise InputError(f"marker '{name}' not in take (markers: {shown or 'none'})", source=self.source) from None
+            shown = ", ".join(self.marker_names[:20]) + (
+                " ..." if len(self.marker_names) > 20 else ""
+            )
+            raise InputError(
+                f"marker '{name}' not in take (markers: {shown or 'none'})", source=self.source
+            ) from None
 
     def marker(self, name: str) -> np.ndarray:
         """Trajectory of one marker, (frames, 3)."""
@@ -71,14 +86,17 @@ def unit_scale(name: str, source: str, where: str) -> float:
         return UNIT_TO_MM[name.strip().lower()]
     except KeyError:
         known = "Meters, Centimeters, Millimeters (or m, cm, mm)"
-        raise InputError(f"{where}: unknown length unit {name!r} (expected {known})", source=source) from None
+        raise InputError(
+            f"{where}: unknown length unit {name!r} (expected {known})", source=source
+        ) from None
 
 
 def read_text(path: str | os.PathLike[str]) -> str:
     """Whole file as text (UTF-8, BOM tolerated; Latin-1 fallback for old exports)."""
     src = str(path)
     try:
-        raw = open(path, "rb").read()
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", source=src) from None
     try:
@@ -127,6 +145,7 @@ def numeric_block(
             if not ok:
                 line = line_numbers[i] if line_numbers is not None else first_line + i
                 raise InputError(
-                    f"line {line}, column {cols[j] + 1} ({column_label(j)}): not a finite number: {cell!r}", source=source
+                    f"line {line}, column {cols[j] + 1} ({column_label(j)}): not a finite number: {cell!r}",
+                    source=source,
                 )
     raise AssertionError("unreachable")

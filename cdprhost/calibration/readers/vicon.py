@@ -39,7 +39,9 @@ def parse_vicon(text: str, source: str) -> Take:
     rows = list(csv.reader(io.StringIO(text)))
     start = next((i for i, r in enumerate(rows) if _first(r) == SECTION), None)
     if start is None:
-        raise InputError("no 'Trajectories' section (export trajectories from Nexus)", source=source)
+        raise InputError(
+            "no 'Trajectories' section (export trajectories from Nexus)", source=source
+        )
     if len(rows) < start + 5:
         raise InputError(f"line {start + 1}: 'Trajectories' section is truncated", source=source)
     try:
@@ -47,7 +49,9 @@ def parse_vicon(text: str, source: str) -> Take:
         if not rate > 0:
             raise ValueError
     except (ValueError, IndexError):
-        raise InputError(f"line {start + 2}: expected the frame rate (Hz) after 'Trajectories'", source=source) from None
+        raise InputError(
+            f"line {start + 2}: expected the frame rate (Hz) after 'Trajectories'", source=source
+        ) from None
     names_row, axes_row = rows[start + 2], rows[start + 3]
     if _first(axes_row) != "frame":
         raise InputError(f"line {start + 4}: expected 'Frame,Sub Frame,X,Y,Z,...'", source=source)
@@ -73,7 +77,9 @@ def parse_vicon(text: str, source: str) -> Take:
             notes.append(f"duplicate marker {name}; kept the first")
             continue
         unit = cell(units_row, j) if has_units else "mm"
-        scales.append(unit_scale(unit or "mm", source, f"line {start + 5}, column {j + 1} ({name})"))
+        scales.append(
+            unit_scale(unit or "mm", source, f"line {start + 5}, column {j + 1} ({name})")
+        )
         names.append(name)
         col_idx.extend([j, j + 1, j + 2])
     if not names:
@@ -86,7 +92,9 @@ def parse_vicon(text: str, source: str) -> Take:
             break
         body.append(r)
     labels = ["Frame"] + [f"{n} {a}" for n in names for a in "XYZ"]
-    values = numeric_block(body, [0, *col_idx], first_line=first + 1, source=source, column_label=lambda j: labels[j])
+    values = numeric_block(
+        body, [0, *col_idx], first_line=first + 1, source=source, column_label=lambda j: labels[j]
+    )
     frames = values[:, 0]
     if np.isnan(frames).any():
         bad = first + 1 + int(np.flatnonzero(np.isnan(frames))[0])

@@ -68,20 +68,47 @@ def write_motive(
     meta = ["Format Version", version, "Take Name", take_name]
     if version >= "1.23":
         meta += ["Take Notes", ""]
-    meta += ["Capture Frame Rate", f"{rate:.6f}", "Export Frame Rate", f"{rate:.6f}",
-             "Capture Start Time", "2024-01-01 12.00.00.000 PM"]
+    meta += [
+        "Capture Frame Rate",
+        f"{rate:.6f}",
+        "Export Frame Rate",
+        f"{rate:.6f}",
+        "Capture Start Time",
+        "2024-01-01 12.00.00.000 PM",
+    ]
     if version >= "1.23":
         meta += ["Capture Start Frame", "0"]
-    meta += ["Total Frames in Take", str(n), "Total Exported Frames", str(n), "Rotation Type", "Quaternion",
-             "Length Units", units, "Coordinate Space", "Global"]
+    meta += [
+        "Total Frames in Take",
+        str(n),
+        "Total Exported Frames",
+        str(n),
+        "Rotation Type",
+        "Quaternion",
+        "Length Units",
+        units,
+        "Coordinate Space",
+        "Global",
+    ]
 
     types, names, ids, parents, labels, axes = [], [], [], [], [], []
     blocks: list[np.ndarray] = []  # (n, width) string blocks in column order
 
-    def add(kind: str, name: str, ident: str, parent: str, cols: Sequence[tuple[str, str]], block: np.ndarray) -> None:
+    def add(
+        kind: str,
+        name: str,
+        ident: str,
+        parent: str,
+        cols: Sequence[tuple[str, str]],
+        block: np.ndarray,
+    ) -> None:
         for label, axis in cols:
-            types.append(kind); names.append(name); ids.append(ident); parents.append(parent)
-            labels.append(label); axes.append(axis)
+            types.append(kind)
+            names.append(name)
+            ids.append(ident)
+            parents.append(parent)
+            labels.append(label)
+            axes.append(axis)
         blocks.append(block)
 
     for k, (rb, members) in enumerate((rigid_bodies or {}).items(), start=1):
@@ -92,15 +119,38 @@ def write_motive(
             solved = np.nanmean(pts, axis=0) / scale
         rot = np.tile(["0.000000", "0.000000", "0.000000", "1.000000"], (n, 1))
         err = np.where(np.isnan(centre[:, :1]), "", f"{0.00012 * 1000.0 / scale:.6f}")
-        add("Rigid Body", rb, str(k), "",
-            [("Rotation", a) for a in "XYZW"] + [("Position", a) for a in "XYZ"] + [("Mean Marker Error", "")],
-            np.hstack([rot, _fmt(centre, "%.6f"), err]))
+        add(
+            "Rigid Body",
+            rb,
+            str(k),
+            "",
+            [("Rotation", a) for a in "XYZW"]
+            + [("Position", a) for a in "XYZ"]
+            + [("Mean Marker Error", "")],
+            np.hstack([rot, _fmt(centre, "%.6f"), err]),
+        )
         for i, m in enumerate(members):
-            block = np.hstack([np.tile(_fmt(solved[i], "%.6f"), (n, 1)), np.full((n, 1), "1.000000")])
-            add("Rigid Body Marker", m, f"{k}:{i + 1}", rb, [("Position", a) for a in "XYZ"] + [("Marker Quality", "")], block)
+            block = np.hstack(
+                [np.tile(_fmt(solved[i], "%.6f"), (n, 1)), np.full((n, 1), "1.000000")]
+            )
+            add(
+                "Rigid Body Marker",
+                m,
+                f"{k}:{i + 1}",
+                rb,
+                [("Position", a) for a in "XYZ"] + [("Marker Quality", "")],
+                block,
+            )
     for i, m in enumerate(take.marker_names):
         parent = m.split(":")[0] if ":" in m else ""
-        add("Marker", m, f"{1000 + i}", parent, [("Position", a) for a in "XYZ"], _fmt(take.positions[:, i] / scale, "%.6f"))
+        add(
+            "Marker",
+            m,
+            f"{1000 + i}",
+            parent,
+            [("Position", a) for a in "XYZ"],
+            _fmt(take.positions[:, i] / scale, "%.6f"),
+        )
 
     head = [",".join(meta)]
     if version != "1.21":
@@ -128,8 +178,13 @@ def write_vicon(
     m = len(take.marker_names)
     lines: list[str] = []
     if devices_section:  # one idle force-plate channel at twice the frame rate
-        lines += ["Devices", f"{2 * rate:g}", ",,Imported Force Plate #1 - Force,,",
-                  "Frame,Sub Frame,Fx,Fy,Fz", ",,N,N,N"]
+        lines += [
+            "Devices",
+            f"{2 * rate:g}",
+            ",,Imported Force Plate #1 - Force,,",
+            "Frame,Sub Frame,Fx,Fy,Fz",
+            ",,N,N,N",
+        ]
         lines += [f"{f + 1},{s},0,0,0" for f in range(take.n_frames) for s in range(2)]
         lines.append("")
     lines += ["Trajectories", f"{rate:g}"]
@@ -156,16 +211,24 @@ def write_qualisys(
     rate = _rate_of(take, rate_hz)
     n, m = take.n_frames, len(take.marker_names)
     lines = [
-        f"NO_OF_FRAMES\t{n}", "NO_OF_CAMERAS\t8", f"NO_OF_MARKERS\t{m}", f"FREQUENCY\t{rate:g}",
-        "NO_OF_ANALOG\t0", "ANALOG_FREQUENCY\t0", "DESCRIPTION\t--",
-        "TIME_STAMP\t2024-01-01, 12:00:00.000\t1000.000", "DATA_INCLUDED\t3D",
+        f"NO_OF_FRAMES\t{n}",
+        "NO_OF_CAMERAS\t8",
+        f"NO_OF_MARKERS\t{m}",
+        f"FREQUENCY\t{rate:g}",
+        "NO_OF_ANALOG\t0",
+        "ANALOG_FREQUENCY\t0",
+        "DESCRIPTION\t--",
+        "TIME_STAMP\t2024-01-01, 12:00:00.000\t1000.000",
+        "DATA_INCLUDED\t3D",
         "MARKER_NAMES\t" + "\t".join(take.marker_names),
         "TRAJECTORY_TYPES\t" + "\t".join(["Measured"] * m),
     ]
     gap = "0.000" if zero_gaps else ""
     values = _fmt(take.positions.reshape(n, 3 * m), "%.3f", gap)
     if column_header:
-        lines.append("Frame\tTime\t" + "\t".join(f"{name} {a}" for name in take.marker_names for a in "XYZ"))
+        lines.append(
+            "Frame\tTime\t" + "\t".join(f"{name} {a}" for name in take.marker_names for a in "XYZ")
+        )
         lead = np.column_stack([(np.arange(n) + 1).astype(str), _fmt(take.times_s, "%.5f")])
         values = np.hstack([lead, values])
     lines += _join(values, "\t")
@@ -174,7 +237,12 @@ def write_qualisys(
 
 def write_take(path: str | os.PathLike[str], take: Take, format: str, **options) -> None:
     """Write ``take`` as ``format`` (one of FORMATS) with that writer's ``options``."""
-    writers = {"motive-csv": write_motive, "vicon-csv": write_vicon, "qualisys-tsv": write_qualisys, "c3d": write_c3d}
+    writers = {
+        "motive-csv": write_motive,
+        "vicon-csv": write_vicon,
+        "qualisys-tsv": write_qualisys,
+        "c3d": write_c3d,
+    }
     if format not in writers:
         raise ValueError(f"unknown take format {format!r} (expected one of {', '.join(FORMATS)})")
     writers[format](path, take, **options)

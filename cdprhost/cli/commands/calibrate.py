@@ -17,52 +17,128 @@ from cdprhost.profile import save_profile
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    cal = sub.add_parser("calibrate", help="kinematic calibration: plan poses, identify parameters, guided wizard")
+    cal = sub.add_parser(
+        "calibrate", help="kinematic calibration: plan poses, identify parameters, guided wizard"
+    )
     cal_sub = cal.add_subparsers(dest="calibrate_command", metavar="STEP", required=True)
 
     plan = cal_sub.add_parser("plan", help="plan measurement poses over the whole workspace")
     add_profile_argument(plan)
-    plan.add_argument("--poses", type=_at_least_4, default=4, metavar="N", help="fit poses (>= 4; default 4)")
-    plan.add_argument("--check-poses", type=_non_negative, default=0, metavar="M", help="extra check poses (default 0)")
-    plan.add_argument("--criterion", choices=planning.CRITERIA, default="D",
-                      help="D-optimal (default), I (mean prediction variance) or an observability index O1-O5")
-    plan.add_argument("--restarts", type=_non_negative, default=8, help="random restarts of the exchange (default 8)")
+    plan.add_argument(
+        "--poses", type=_at_least_4, default=4, metavar="N", help="fit poses (>= 4; default 4)"
+    )
+    plan.add_argument(
+        "--check-poses",
+        type=_non_negative,
+        default=0,
+        metavar="M",
+        help="extra check poses (default 0)",
+    )
+    plan.add_argument(
+        "--criterion",
+        choices=planning.CRITERIA,
+        default="D",
+        help="D-optimal (default), I (mean prediction variance) or an observability index O1-O5",
+    )
+    plan.add_argument(
+        "--restarts",
+        type=_non_negative,
+        default=8,
+        help="random restarts of the exchange (default 8)",
+    )
     plan.add_argument("--seed", type=int, default=0)
-    plan.add_argument("--out", required=True, metavar="poses.csv", help="poses in visiting order with role and approach")
+    plan.add_argument(
+        "--out",
+        required=True,
+        metavar="poses.csv",
+        help="poses in visiting order with role and approach",
+    )
     plan.add_argument("--json", metavar="R", help="machine-readable report")
     plan.set_defaults(func=run_plan)
 
     ident = cal_sub.add_parser("identify", help="identify the 12 parameters from a session folder")
-    ident.add_argument("session", metavar="SESSION", help="session folder (session.toml, poses.csv, takes/)")
+    ident.add_argument(
+        "session", metavar="SESSION", help="session folder (session.toml, poses.csv, takes/)"
+    )
     add_profile_argument(ident)
     ident.add_argument("--out", required=True, metavar="calibrated.toml", help="calibrated profile")
     ident.add_argument("--json", metavar="R", help="machine-readable report")
-    ident.add_argument("--noise-floor", type=float, default=0.05, metavar="MM",
-                       help="mocap noise per coordinate that averaging cannot remove (default 0.05 mm)")
+    ident.add_argument(
+        "--noise-floor",
+        type=float,
+        default=0.05,
+        metavar="MM",
+        help="mocap noise per coordinate that averaging cannot remove (default 0.05 mm)",
+    )
     ident.set_defaults(func=run_identify)
 
-    wiz = cal_sub.add_parser("wizard", help="guided calibration: move to planned poses, record takes, identify")
+    wiz = cal_sub.add_parser(
+        "wizard", help="guided calibration: move to planned poses, record takes, identify"
+    )
     add_profile_argument(wiz)
-    wiz.add_argument("--port", metavar="DEV", help="device path or pyserial URL (default: the embedded simulated device)")
+    wiz.add_argument(
+        "--port",
+        metavar="DEV",
+        help="device path or pyserial URL (default: the embedded simulated device)",
+    )
     wiz.add_argument("--baud", type=int, default=250000)
-    wiz.add_argument("--session", metavar="DIR", help="session folder; an existing one is resumed "
-                     "(default: ./calibration-<date>)")
-    wiz.add_argument("--poses", type=_at_least_4, default=4, metavar="N", help="fit poses (default 4)")
-    wiz.add_argument("--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)")
+    wiz.add_argument(
+        "--session",
+        metavar="DIR",
+        help="session folder; an existing one is resumed (default: ./calibration-<date>)",
+    )
+    wiz.add_argument(
+        "--poses", type=_at_least_4, default=4, metavar="N", help="fit poses (default 4)"
+    )
+    wiz.add_argument(
+        "--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)"
+    )
     wiz.add_argument("--criterion", choices=planning.CRITERIA, default="D")
     src = wiz.add_mutually_exclusive_group()
     src.add_argument("--watch", metavar="DIR", help="wait for each new take file to appear in DIR")
-    src.add_argument("--takes-from", metavar="DIR", help="takes recorded beforehand: the file ending in the pose number")
-    wiz.add_argument("--mocap-config", metavar="TOML", help="a session.toml-like file whose [mocap] table names the "
-                     "markers (needed for a new session with real motion capture)")
-    wiz.add_argument("--sim-truth", metavar="PROFILE", help="embedded device: the hidden true machine")
-    wiz.add_argument("--sim-mocap-dir", metavar="DIR", help="embedded device: folder of its virtual motion capture")
-    wiz.add_argument("--speedup", type=float, help="embedded device: pace virtual time at X times real time")
-    wiz.add_argument("--feed", type=float, default=40.0, metavar="MM_S", help="travel speed between poses (default 40)")
-    wiz.add_argument("--settle", type=float, default=0.5, metavar="S", help="rest before a take (default 0.5 s)")
-    wiz.add_argument("--take-timeout", type=float, default=600.0, metavar="S", help="wait for a take at most S seconds")
+    src.add_argument(
+        "--takes-from",
+        metavar="DIR",
+        help="takes recorded beforehand: the file ending in the pose number",
+    )
+    wiz.add_argument(
+        "--mocap-config",
+        metavar="TOML",
+        help="a session.toml-like file whose [mocap] table names the "
+        "markers (needed for a new session with real motion capture)",
+    )
+    wiz.add_argument(
+        "--sim-truth", metavar="PROFILE", help="embedded device: the hidden true machine"
+    )
+    wiz.add_argument(
+        "--sim-mocap-dir",
+        metavar="DIR",
+        help="embedded device: folder of its virtual motion capture",
+    )
+    wiz.add_argument(
+        "--speedup", type=float, help="embedded device: pace virtual time at X times real time"
+    )
+    wiz.add_argument(
+        "--feed",
+        type=float,
+        default=40.0,
+        metavar="MM_S",
+        help="travel speed between poses (default 40)",
+    )
+    wiz.add_argument(
+        "--settle", type=float, default=0.5, metavar="S", help="rest before a take (default 0.5 s)"
+    )
+    wiz.add_argument(
+        "--take-timeout",
+        type=float,
+        default=600.0,
+        metavar="S",
+        help="wait for a take at most S seconds",
+    )
     wiz.add_argument("--noise-floor", type=float, default=0.05, metavar="MM")
-    wiz.add_argument("--out", metavar="calibrated.toml", help="also write the calibrated profile here")
+    wiz.add_argument(
+        "--out", metavar="calibrated.toml", help="also write the calibrated profile here"
+    )
     wiz.add_argument("--json", metavar="R", help="machine-readable report")
     wiz.set_defaults(func=run_wizard)
 
@@ -100,8 +176,14 @@ def write_json(path: str | None, data: dict) -> None:
 def run_plan(args: argparse.Namespace) -> int:
     _, model = load_model(args.profile)
     try:
-        plan = planning.plan_poses(model, args.poses, n_check=args.check_poses, criterion=args.criterion,
-                                   restarts=args.restarts, seed=args.seed)
+        plan = planning.plan_poses(
+            model,
+            args.poses,
+            n_check=args.check_poses,
+            criterion=args.criterion,
+            restarts=args.restarts,
+            seed=args.seed,
+        )
     except ValueError as exc:
         raise InputError(str(exc)) from None
     write_text_atomic(args.out, planning.plan_csv(plan))
@@ -130,8 +212,13 @@ def run_identify(args: argparse.Namespace) -> int:
     write_json(args.json, result.to_json())
     print(report.identification_text(result))
     if not result.ok:
-        raise JobFailed("calibration failed; no profile written:\n" + "\n".join(f"  - {p}" for p in result.problems()))
-    save_profile(calibrated_profile(profile, result, session=str(Path(args.session).resolve())), args.out)
+        raise JobFailed(
+            "calibration failed; no profile written:\n"
+            + "\n".join(f"  - {p}" for p in result.problems())
+        )
+    save_profile(
+        calibrated_profile(profile, result, session=str(Path(args.session).resolve())), args.out
+    )
     print(f"\ncalibrated profile written to {args.out}", file=sys.stderr)
     return 0
 
@@ -143,7 +230,9 @@ class PromptTakes:
         where = ", ".join(f"{v:.1f}" for v in pose)
         while True:
             try:
-                text = input(f"pose {index + 1} at ({where}) has settled: record a take, then enter its file path: ")
+                text = input(
+                    f"pose {index + 1} at ({where}) has settled: record a take, then enter its file path: "
+                )
             except EOFError:
                 raise InputError("no take given (end of input)") from None
             path = Path(text.strip().strip('"').strip("'")).expanduser()
@@ -162,8 +251,10 @@ def _mocap_for(args: argparse.Namespace, session: Path):
         return load_session_config(args.mocap_config).mocap
     if args.sim_mocap_dir and not args.port:
         return mocap_config().mocap
-    raise InputError("a new session needs --mocap-config (a TOML file with the [mocap] table of session.toml: "
-                     "base markers, effector markers and offset)")
+    raise InputError(
+        "a new session needs --mocap-config (a TOML file with the [mocap] table of session.toml: "
+        "base markers, effector markers and offset)"
+    )
 
 
 def run_wizard(args: argparse.Namespace) -> int:
@@ -175,7 +266,9 @@ def run_wizard(args: argparse.Namespace) -> int:
 
     profile, model = load_model(args.profile)
     if args.port and (args.sim_truth or args.sim_mocap_dir):
-        raise InputError("--sim-truth/--sim-mocap-dir drive the embedded simulated device; drop them with --port")
+        raise InputError(
+            "--sim-truth/--sim-mocap-dir drive the embedded simulated device; drop them with --port"
+        )
     session = Path(args.session or f"calibration-{dt.datetime.now():%Y%m%d-%H%M%S}")
     mocap = _mocap_for(args, session)
     watch = args.watch or (args.sim_mocap_dir if not args.takes_from else None)
@@ -186,7 +279,9 @@ def run_wizard(args: argparse.Namespace) -> int:
     elif sys.stdin.isatty():
         takes = PromptTakes()
     else:
-        raise InputError("no way to get takes: give --watch DIR or --takes-from DIR (or run on a terminal)")
+        raise InputError(
+            "no way to get takes: give --watch DIR or --takes-from DIR (or run on a terminal)"
+        )
     if args.port:
         link = open_link(args.port, args.baud)
     else:
@@ -196,26 +291,54 @@ def run_wizard(args: argparse.Namespace) -> int:
             observer.attach_record(link.device.record)
     try:
         device = wizard.LinkDevice(link, profile, model, feed_mm_s=args.feed, settle_s=args.settle)
-        options = wizard.WizardOptions(n_poses=args.poses, n_check=args.check_poses, criterion=args.criterion,
-                                       noise_floor_mm=args.noise_floor)
-        wiz = wizard.CalibrationWizard(session, profile, device, takes, mocap=mocap, options=options,
-                                       profile_ref=args.profile, log=lambda m: print(m, flush=True))
+        options = wizard.WizardOptions(
+            n_poses=args.poses,
+            n_check=args.check_poses,
+            criterion=args.criterion,
+            noise_floor_mm=args.noise_floor,
+        )
+        wiz = wizard.CalibrationWizard(
+            session,
+            profile,
+            device,
+            takes,
+            mocap=mocap,
+            options=options,
+            profile_ref=args.profile,
+            log=lambda m: print(m, flush=True),
+        )
         outcome = wiz.run()
     except KeyboardInterrupt:
-        print(f"\ninterrupted: everything recorded is in {session}; resume with --session {session}", file=sys.stderr)
+        print(
+            f"\ninterrupted: everything recorded is in {session}; resume with --session {session}",
+            file=sys.stderr,
+        )
         raise
     finally:
         link.close()
     result = outcome.identification
     finished = outcome.state.next_action()
     if result is None:
-        raise JobFailed(f"calibration incomplete: {getattr(finished, 'reason', '')}; session kept in {session}")
-    write_json(args.json, {**result.to_json(), "session": str(session), "profile_path":
-                           str(outcome.profile_path) if outcome.profile_path else None})
+        raise JobFailed(
+            f"calibration incomplete: {getattr(finished, 'reason', '')}; session kept in {session}"
+        )
+    write_json(
+        args.json,
+        {
+            **result.to_json(),
+            "session": str(session),
+            "profile_path": str(outcome.profile_path) if outcome.profile_path else None,
+        },
+    )
     print(report.identification_text(result))
     if not result.ok:
-        raise JobFailed("calibration failed; no profile written:\n" + "\n".join(f"  - {p}" for p in result.problems()))
+        raise JobFailed(
+            "calibration failed; no profile written:\n"
+            + "\n".join(f"  - {p}" for p in result.problems())
+        )
     if args.out:
         save_profile(outcome.profile, args.out)
-    print(f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or outcome.profile_path}")
+    print(
+        f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or outcome.profile_path}"
+    )
     return 0

@@ -10,11 +10,18 @@ from cdprhost.fileio.atomic import write_text_atomic
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("check", help="preflight a G-code file: workspace along every move, extrusion, commands")
+    p = sub.add_parser(
+        "check", help="preflight a G-code file: workspace along every move, extrusion, commands"
+    )
     p.add_argument("gcode", metavar="FILE.gcode", help="sliced G-code file")
     add_profile_argument(p)
     p.add_argument("--json", metavar="R", help="write the report as JSON to R")
-    p.add_argument("--max-rows", type=int, default=20, help="violations printed (default 20; all are in the JSON)")
+    p.add_argument(
+        "--max-rows",
+        type=int,
+        default=20,
+        help="violations printed (default 20; all are in the JSON)",
+    )
     p.set_defaults(func=run)
 
 

@@ -20,21 +20,45 @@ from cdprhost.profile import save_profile
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "diagnose", help="find, name and add the physics the calibrated model lacks (model discrepancy workflow)",
+        "diagnose",
+        help="find, name and add the physics the calibrated model lacks (model discrepancy workflow)",
         description="Fit the base model to a calibration session, test the misfit against the noise floor, "
-                    "name the catalogue effect that explains it (or say none / ambiguous / unexplained), and "
-                    "write the augmented profile. Exit 0 whatever the verdict; 2 on bad input.",
+        "name the catalogue effect that explains it (or say none / ambiguous / unexplained), and "
+        "write the augmented profile. Exit 0 whatever the verdict; 2 on bad input.",
     )
-    p.add_argument("session", metavar="SESSION", help="calibration session folder (session.toml, poses.csv, takes/)")
+    p.add_argument(
+        "session",
+        metavar="SESSION",
+        help="calibration session folder (session.toml, poses.csv, takes/)",
+    )
     add_profile_argument(p)
     p.add_argument("--json", metavar="R", help="write the machine-readable report here")
-    p.add_argument("--out", metavar="augmented.toml", help="write the profile with the final model (geometry + effects)")
-    p.add_argument("--plot", metavar="gap.png", help="write the per-pose held-out error figure (PNG)")
-    p.add_argument("--folds", type=int, default=DiagnosisSettings.folds, metavar="K",
-                   help="grouped K-fold by pose for held-out errors (default %(default)s)")
-    p.add_argument("--alpha", type=float, default=DiagnosisSettings.alpha,
-                   help="family-wise level of the nested tests (Holm; default %(default)s)")
-    p.add_argument("--effects", metavar="NAMES", help=f"comma-separated candidates (default: all of {', '.join(CATALOGUE)})")
+    p.add_argument(
+        "--out",
+        metavar="augmented.toml",
+        help="write the profile with the final model (geometry + effects)",
+    )
+    p.add_argument(
+        "--plot", metavar="gap.png", help="write the per-pose held-out error figure (PNG)"
+    )
+    p.add_argument(
+        "--folds",
+        type=int,
+        default=DiagnosisSettings.folds,
+        metavar="K",
+        help="grouped K-fold by pose for held-out errors (default %(default)s)",
+    )
+    p.add_argument(
+        "--alpha",
+        type=float,
+        default=DiagnosisSettings.alpha,
+        help="family-wise level of the nested tests (Holm; default %(default)s)",
+    )
+    p.add_argument(
+        "--effects",
+        metavar="NAMES",
+        help=f"comma-separated candidates (default: all of {', '.join(CATALOGUE)})",
+    )
     p.add_argument("--quiet", "-q", action="store_true", help="no terminal report")
     p.set_defaults(func=run)
 
@@ -50,7 +74,9 @@ def _settings(args: argparse.Namespace) -> DiagnosisSettings:
         candidates = tuple(n.strip() for n in args.effects.split(",") if n.strip())
         unknown = [n for n in candidates if n not in CATALOGUE]
         if unknown:
-            raise InputError(f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(CATALOGUE)})")
+            raise InputError(
+                f"--effects: unknown effect(s) {', '.join(unknown)} (known: {', '.join(CATALOGUE)})"
+            )
     return replace(settings, folds=args.folds, alpha=args.alpha, candidates=candidates)
 
 
@@ -64,7 +90,11 @@ def run(args: argparse.Namespace) -> int:
         for r in data.rejected:
             print(f"rejected take: pose {r.pose} ({r.take}): {r.reason}", file=sys.stderr)
     if args.json:
-        write_text_atomic(args.json, json.dumps(to_json(result, session=str(args.session), rejected=rejected), indent=2) + "\n")
+        write_text_atomic(
+            args.json,
+            json.dumps(to_json(result, session=str(args.session), rejected=rejected), indent=2)
+            + "\n",
+        )
     if args.out:
         save_profile(augmented_profile(profile, result, session=str(args.session)), args.out)
     if args.plot:

@@ -12,14 +12,28 @@ from cdprhost.fileio.csv_arrays import data_row_numbers, read_columns, write_col
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    ik = sub.add_parser("ik", help="points (x,y,z) -> slider displacements and steps, effects compensated")
+    ik = sub.add_parser(
+        "ik", help="points (x,y,z) -> slider displacements and steps, effects compensated"
+    )
     add_profile_argument(ik)
-    ik.add_argument("--in", dest="inp", required=True, metavar="points.csv", help="header x,y,z (base frame, mm), a path in order")
-    ik.add_argument("--out", required=True, metavar="targets.csv", help="header x,y,z,s1,s2,s3,n1,n2,n3")
+    ik.add_argument(
+        "--in",
+        dest="inp",
+        required=True,
+        metavar="points.csv",
+        help="header x,y,z (base frame, mm), a path in order",
+    )
+    ik.add_argument(
+        "--out", required=True, metavar="targets.csv", help="header x,y,z,s1,s2,s3,n1,n2,n3"
+    )
     ik.set_defaults(func=run_ik)
-    fk = sub.add_parser("fk", help="slider displacements (s1,s2,s3) -> effector points, effects predicted")
+    fk = sub.add_parser(
+        "fk", help="slider displacements (s1,s2,s3) -> effector points, effects predicted"
+    )
     add_profile_argument(fk)
-    fk.add_argument("--in", dest="inp", required=True, metavar="targets.csv", help="header s1,s2,s3 (mm)")
+    fk.add_argument(
+        "--in", dest="inp", required=True, metavar="targets.csv", help="header s1,s2,s3 (mm)"
+    )
     fk.add_argument("--out", required=True, metavar="points.csv", help="header s1,s2,s3,x,y,z")
     fk.set_defaults(func=run_fk)
 
@@ -39,11 +53,17 @@ def run_ik(args: argparse.Namespace) -> int:
         ]
         if bad.size > 20:
             lines.append(f"... and {bad.size - 20} more")
-        raise InputError(f"{bad.size} point(s) outside the workspace; nothing written", source=args.inp, problems=lines)
+        raise InputError(
+            f"{bad.size} point(s) outside the workspace; nothing written",
+            source=args.inp,
+            problems=lines,
+        )
     steps = model.steps(sliders)
     write_columns(
-        args.out, ("x", "y", "z", "s1", "s2", "s3", "n1", "n2", "n3"),
-        [*points.T, *sliders.T, *steps.T], ["%.10f"] * 6 + ["%d"] * 3,
+        args.out,
+        ("x", "y", "z", "s1", "s2", "s3", "n1", "n2", "n3"),
+        [*points.T, *sliders.T, *steps.T],
+        ["%.10f"] * 6 + ["%d"] * 3,
     )
     return 0
 
@@ -55,7 +75,16 @@ def run_fk(args: argparse.Namespace) -> int:
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if bad.size:
         rows = data_row_numbers(args.inp)
-        lines = [f"row {rows[i]}: the three cable lengths do not meet (no effector position)" for i in bad[:20]]
-        raise InputError(f"{bad.size} row(s) have no forward solution; nothing written", source=args.inp, problems=lines)
-    write_columns(args.out, ("s1", "s2", "s3", "x", "y", "z"), [*sliders.T, *points.T], ["%.10f"] * 6)
+        lines = [
+            f"row {rows[i]}: the three cable lengths do not meet (no effector position)"
+            for i in bad[:20]
+        ]
+        raise InputError(
+            f"{bad.size} row(s) have no forward solution; nothing written",
+            source=args.inp,
+            problems=lines,
+        )
+    write_columns(
+        args.out, ("s1", "s2", "s3", "x", "y", "z"), [*sliders.T, *points.T], ["%.10f"] * 6
+    )
     return 0

@@ -22,18 +22,41 @@ from cdprhost.job.state import JobState
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("print", help="print a G-code file (embedded simulated device unless --port is given)")
+    p = sub.add_parser(
+        "print", help="print a G-code file (embedded simulated device unless --port is given)"
+    )
     p.add_argument("gcode", metavar="FILE.gcode")
     add_profile_argument(p)
-    p.add_argument("--port", metavar="DEV", help="serial device path or pyserial URL (default: embedded simulated device)")
+    p.add_argument(
+        "--port",
+        metavar="DEV",
+        help="serial device path or pyserial URL (default: embedded simulated device)",
+    )
     p.add_argument("--baud", type=int, default=None, help="baud rate (default: the profile's)")
-    p.add_argument("--speedup", type=float, default=None,
-                   help="embedded device: run at most X times real time (default: as fast as the host can)")
+    p.add_argument(
+        "--speedup",
+        type=float,
+        default=None,
+        help="embedded device: run at most X times real time (default: as fast as the host can)",
+    )
     p.add_argument("--json", metavar="R", help="write the job summary as JSON to R")
-    p.add_argument("--resume-from-layer", type=int, metavar="N", help="restart the print at layer N (1-based, as shown)")
+    p.add_argument(
+        "--resume-from-layer",
+        type=int,
+        metavar="N",
+        help="restart the print at layer N (1-based, as shown)",
+    )
     p.add_argument("--yes", "-y", action="store_true", help="do not ask for confirmation (resume)")
-    p.add_argument("--log", metavar="FILE", help="job log, JSON lines (default: ~/.local/state/cdprhost/jobs/<name>-<time>.jsonl)")
-    p.add_argument("--sim-faults", metavar="SPEC", help="embedded device: inject faults (same SPEC as sim-device --faults)")
+    p.add_argument(
+        "--log",
+        metavar="FILE",
+        help="job log, JSON lines (default: ~/.local/state/cdprhost/jobs/<name>-<time>.jsonl)",
+    )
+    p.add_argument(
+        "--sim-faults",
+        metavar="SPEC",
+        help="embedded device: inject faults (same SPEC as sim-device --faults)",
+    )
     p.set_defaults(func=run)
 
 
@@ -65,8 +88,10 @@ def run(args: argparse.Namespace) -> int:
         if args.resume_from_layer < 1:
             raise InputError(f"--resume-from-layer must be 1 or more, got {args.resume_from_layer}")
         layer = args.resume_from_layer - 1
-        if not args.yes and not _confirm(f"Resume {gcode.name} from layer {args.resume_from_layer}: the machine homes, "
-                                         "heats, and lowers onto the part. Is the part still on the bed and clear?"):
+        if not args.yes and not _confirm(
+            f"Resume {gcode.name} from layer {args.resume_from_layer}: the machine homes, "
+            "heats, and lowers onto the part. Is the part still on the bed and clear?"
+        ):
             print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
             return 1
     options = PrintOptions(resume_from_layer=layer, log_path=args.log or log_path_for(gcode))
@@ -77,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     def work() -> None:
         try:
             outcome["result"] = job.run()
-        except BaseException as exc:  # re-raised in the main thread
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the main thread
             outcome["error"] = exc
         finally:
             events.put(None)
@@ -91,7 +116,11 @@ def run(args: argparse.Namespace) -> int:
                 if event is None:
                     break
                 view.update(event)
-                if event.__class__.__name__ == "StateChanged" and event.state is JobState.PAUSED and "asked" not in outcome:
+                if (
+                    event.__class__.__name__ == "StateChanged"
+                    and event.state is JobState.PAUSED
+                    and "asked" not in outcome
+                ):
                     outcome["asked"] = True
                     _ask_after_pause(job)
                     outcome.pop("asked")
@@ -135,12 +164,18 @@ def _report(result, args: argparse.Namespace) -> None:
         if len(result.violations) > 10:
             print(f"  ... {len(result.violations) - 10} more (see --json)")
     else:
-        print(f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
-              f"(estimated {result.estimated_time_s:.1f} s)")
-        print(f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}")
+        print(
+            f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
+            f"(estimated {result.estimated_time_s:.1f} s)"
+        )
+        print(
+            f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}"
+        )
     if result.reason and result.status != "completed":
         print(f"reason: {result.reason}")
     if result.resume_file:
-        print(f"resume point saved: {result.resume_file} (restart with --resume-from-layer {max(result.last_layer or 1, 1)})")
+        print(
+            f"resume point saved: {result.resume_file} (restart with --resume-from-layer {max(result.last_layer or 1, 1)})"
+        )
     if args.json:
         write_text_atomic(args.json, json.dumps(result.to_json(), indent=1) + "\n")

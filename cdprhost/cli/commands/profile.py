@@ -14,7 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     show = psub.add_parser("show", help="print a profile (validated) as TOML")
     show.add_argument("profile", metavar="P")
     show.set_defaults(func=run_show)
-    check = psub.add_parser("check", help="validate a profile file; exit 2 with one line per problem")
+    check = psub.add_parser(
+        "check", help="validate a profile file; exit 2 with one line per problem"
+    )
     check.add_argument("path", metavar="PATH")
     check.set_defaults(func=run_check)
 

@@ -16,12 +16,22 @@ from firmware_protocol.device.virtual_mocap import make_observer
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("sim-device", help="run the simulated device on a pseudo-terminal (prints its path)")
-    p.add_argument("--speedup", type=float, default=1.0, metavar="X", help="device time runs X times real time")
-    p.add_argument("--faults", metavar="SPEC", default=None,
-                   help="corrupt=P,drop=P,dup=P,latency_ms=MS,jitter_ms=MS,reset_after=N,stall_after=N,"
-                        "heater_fail_after=S,seed=N")
-    p.add_argument("--record", metavar="FILE", help="JSON lines, one per executed segment, written on exit")
+    p = sub.add_parser(
+        "sim-device", help="run the simulated device on a pseudo-terminal (prints its path)"
+    )
+    p.add_argument(
+        "--speedup", type=float, default=1.0, metavar="X", help="device time runs X times real time"
+    )
+    p.add_argument(
+        "--faults",
+        metavar="SPEC",
+        default=None,
+        help="corrupt=P,drop=P,dup=P,latency_ms=MS,jitter_ms=MS,reset_after=N,stall_after=N,"
+        "heater_fail_after=S,seed=N",
+    )
+    p.add_argument(
+        "--record", metavar="FILE", help="JSON lines, one per executed segment, written on exit"
+    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -36,7 +46,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"must be positive, got {args.speedup:g}", source="--speedup")
     if (args.truth is None) != (args.mocap_dir is None):
         given, missing = ("--truth", "--mocap-dir") if args.truth else ("--mocap-dir", "--truth")
-        raise InputError(f"{given} needs {missing} as well (the virtual mocap needs both)", source=given)
+        raise InputError(
+            f"{given} needs {missing} as well (the virtual mocap needs both)", source=given
+        )
     observer = make_observer(args.truth, args.mocap_dir) if args.truth else None
     device = SimDevice(SimConfig(speedup=args.speedup), faults, observer)
     server = PtyServer(device, faults)
@@ -47,8 +59,12 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     print(server.path, flush=True)
-    print(f"cdprhost sim-device: {device.config.firmware_name} {device.config.firmware_version} on {server.path} "
-          f"(speedup {args.speedup:g}, faults: {args.faults or 'none'})", file=sys.stderr, flush=True)
+    print(
+        f"cdprhost sim-device: {device.config.firmware_name} {device.config.firmware_version} on {server.path} "
+        f"(speedup {args.speedup:g}, faults: {args.faults or 'none'})",
+        file=sys.stderr,
+        flush=True,
+    )
     try:
         server.serve_forever()
     finally:

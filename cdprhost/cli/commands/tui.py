@@ -11,15 +11,32 @@ from cdprhost.errors import InputError
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("tui", help="terminal UI: connect, print, jog, calibrate, diagnose")
     add_profile_argument(parser, default="paper-prototype")
-    parser.add_argument("--port", metavar="DEV", default=None,
-                        help="device path or pyserial URL (default: the embedded simulated device)")
-    parser.add_argument("--baud", type=int, default=None, metavar="N", help="baud rate (default: the profile's)")
-    parser.add_argument("--speedup", type=float, default=10.0, metavar="X",
-                        help="clock speed-up of the embedded simulated device (default 10)")
-    parser.add_argument("--sim-truth", metavar="PROFILE",
-                        help="embedded device only: the hidden true machine seen by the virtual motion capture")
-    parser.add_argument("--sim-mocap-dir", metavar="DIR",
-                        help="embedded device only: folder where the virtual motion capture writes its takes")
+    parser.add_argument(
+        "--port",
+        metavar="DEV",
+        default=None,
+        help="device path or pyserial URL (default: the embedded simulated device)",
+    )
+    parser.add_argument(
+        "--baud", type=int, default=None, metavar="N", help="baud rate (default: the profile's)"
+    )
+    parser.add_argument(
+        "--speedup",
+        type=float,
+        default=10.0,
+        metavar="X",
+        help="clock speed-up of the embedded simulated device (default 10)",
+    )
+    parser.add_argument(
+        "--sim-truth",
+        metavar="PROFILE",
+        help="embedded device only: the hidden true machine seen by the virtual motion capture",
+    )
+    parser.add_argument(
+        "--sim-mocap-dir",
+        metavar="DIR",
+        help="embedded device only: folder where the virtual motion capture writes its takes",
+    )
     parser.set_defaults(func=run)
 
 
@@ -30,12 +47,22 @@ def run(args: argparse.Namespace) -> int:
     from firmware_protocol.device.virtual_mocap import make_observer
 
     if (args.sim_truth is None) != (args.sim_mocap_dir is None):
-        raise InputError("--sim-truth and --sim-mocap-dir go together (virtual motion capture needs both)")
+        raise InputError(
+            "--sim-truth and --sim-mocap-dir go together (virtual motion capture needs both)"
+        )
     if args.port and args.sim_truth:
-        raise InputError("--sim-truth/--sim-mocap-dir apply to the embedded simulated device, not to --port")
+        raise InputError(
+            "--sim-truth/--sim-mocap-dir apply to the embedded simulated device, not to --port"
+        )
     observer = make_observer(args.sim_truth, args.sim_mocap_dir)
     status_interval_s = 1.0
-    backend = LiveBackend(args.profile, speedup=args.speedup, sim_options={"observer": observer} if observer else None,
-                          idle_pump_s=0.8 * status_interval_s)
-    app = CdprApp(backend, port=args.port or EMBEDDED, baud=args.baud, status_interval_s=status_interval_s)
+    backend = LiveBackend(
+        args.profile,
+        speedup=args.speedup,
+        sim_options={"observer": observer} if observer else None,
+        idle_pump_s=0.8 * status_interval_s,
+    )
+    app = CdprApp(
+        backend, port=args.port or EMBEDDED, baud=args.baud, status_interval_s=status_interval_s
+    )
     return int(app.run() or 0)

@@ -41,8 +41,15 @@ class Controller:
         """Replace fields of the UI state (UI thread only)."""
         self.app.state = replace(self.app.state, **changes)
 
-    def background(self, name: str, work: Callable[[], Any], done: Callable[[Any], None],
-                   fail: Callable[[BaseException], None] | None = None, *, exclusive: bool = False) -> None:
+    def background(
+        self,
+        name: str,
+        work: Callable[[], Any],
+        done: Callable[[Any], None],
+        fail: Callable[[BaseException], None] | None = None,
+        *,
+        exclusive: bool = False,
+    ) -> None:
         """Run ``work`` in a thread worker; ``done``/``fail`` then run in the UI thread."""
         app = self.app
 
@@ -54,7 +61,9 @@ class Controller:
                 return
             app.call_later_safe(done, result)
 
-        app.run_worker(body, name=name, group=name, thread=True, exclusive=exclusive, exit_on_error=False)
+        app.run_worker(
+            body, name=name, group=name, thread=True, exclusive=exclusive, exit_on_error=False
+        )
 
     def _report(self, exc: BaseException) -> None:
         self.app.notify(str(exc) or type(exc).__name__, title="error", severity="error", timeout=8)
@@ -64,20 +73,32 @@ class Controller:
         self.update(connection=ConnectionView(status="connecting", port=port, baud=baud))
 
         def done(identity: tuple[tuple[str, str], ...]) -> None:
-            self.update(connection=ConnectionView("connected", port, baud, tuple(identity), "", self.backend.link_health()))
+            self.update(
+                connection=ConnectionView(
+                    "connected", port, baud, tuple(identity), "", self.backend.link_health()
+                )
+            )
             self.refresh_device()
 
         def fail(exc: BaseException) -> None:
-            self.update(connection=ConnectionView("error", port, baud, (), str(exc) or type(exc).__name__))
+            self.update(
+                connection=ConnectionView("error", port, baud, (), str(exc) or type(exc).__name__)
+            )
             self._report(exc)
 
-        self.background("connect", lambda: self.backend.connect(port, baud), done, fail, exclusive=True)
+        self.background(
+            "connect", lambda: self.backend.connect(port, baud), done, fail, exclusive=True
+        )
 
     def disconnect(self) -> None:
         conn = self.state.connection
 
         def done(_: Any) -> None:
-            self.update(connection=ConnectionView("disconnected", conn.port, conn.baud), device=None, jog=None)
+            self.update(
+                connection=ConnectionView("disconnected", conn.port, conn.baud),
+                device=None,
+                jog=None,
+            )
 
         self.background("connect", self.backend.disconnect, done, exclusive=True)
 
@@ -101,14 +122,16 @@ class Controller:
         def fail(exc: BaseException) -> None:  # the link died (device reset, port gone): say so
             conn = self.state.connection
             if conn.status == "connected" and not self.state.job_active:
-                self.update(connection=replace(conn, status="error", error=str(exc) or type(exc).__name__))
+                self.update(
+                    connection=replace(conn, status="error", error=str(exc) or type(exc).__name__)
+                )
 
         self.background("status", self.backend.device_status, done, fail, exclusive=True)
 
     def _device(self, status: Any) -> None:
         hist = self.state.device_temps
         if status.hotend is not None and status.bed is not None:
-            hist = (*hist[-(TEMPERATURE_HISTORY - 1):], (status.hotend, status.bed))
+            hist = (*hist[-(TEMPERATURE_HISTORY - 1) :], (status.hotend, status.bed))
         self.update(device=status, device_temps=hist)
 
     # ----------------------------------------------------------------- print
@@ -123,7 +146,9 @@ class Controller:
             if self.state.file.path == path:
                 self.update(file=FileView(path=path, error=str(exc) or type(exc).__name__))
 
-        self.background("preflight", lambda: self.backend.preflight(path), done, fail, exclusive=True)
+        self.background(
+            "preflight", lambda: self.backend.preflight(path), done, fail, exclusive=True
+        )
 
     def start(self, resume_from_layer: int | None = None) -> None:
         path = self.state.file.path
@@ -167,7 +192,11 @@ class Controller:
                 self._device(status)
 
         def fail(exc: BaseException) -> None:
-            self.update(connection=replace(self.state.connection, status="error", error=str(exc) or type(exc).__name__))
+            self.update(
+                connection=replace(
+                    self.state.connection, status="error", error=str(exc) or type(exc).__name__
+                )
+            )
 
         self.background("status", self.backend.device_status, done, fail, exclusive=True)
 
@@ -223,8 +252,10 @@ class Controller:
         check = self.state.jog
         if check is None or not check.ok:
             return
-        self._device_op(f"moving to ({check.target[0]:.1f}, {check.target[1]:.1f}, {check.target[2]:.1f})",
-                        lambda: self.backend.jog_to(check.target))
+        self._device_op(
+            f"moving to ({check.target[0]:.1f}, {check.target[1]:.1f}, {check.target[2]:.1f})",
+            lambda: self.backend.jog_to(check.target),
+        )
 
     def home(self) -> None:
         self._device_op("homing", self.backend.home)
@@ -236,10 +267,17 @@ class Controller:
         self._device_op("heaters", lambda: self.backend.set_heaters(hotend_c, bed_c))
 
     # ------------------------------------------------------------ calibrate
-    def _calibration(self, work: Callable[[], Any], done: Callable[[Any], None], stage: str, busy: str = "") -> None:
+    def _calibration(
+        self, work: Callable[[], Any], done: Callable[[Any], None], stage: str, busy: str = ""
+    ) -> None:
         if self.backend.calibration is None:
-            self.update(calibration=replace(self.state.calibration, stage="error",
-                                            message="calibration wizard not available"))
+            self.update(
+                calibration=replace(
+                    self.state.calibration,
+                    stage="error",
+                    message="calibration wizard not available",
+                )
+            )
             return
         self.update(calibration=replace(self.state.calibration, stage=stage, message=""), busy=busy)
 
@@ -248,26 +286,43 @@ class Controller:
             done(result)
 
         def fail(exc: BaseException) -> None:
-            poses = tuple(replace(p, status="planned") if p.status == "moving" else p
-                          for p in self.state.calibration.poses)
-            self.update(busy="", calibration=replace(self.state.calibration, poses=poses, stage="error",
-                                                     message=str(exc) or type(exc).__name__))
+            poses = tuple(
+                replace(p, status="planned") if p.status == "moving" else p
+                for p in self.state.calibration.poses
+            )
+            self.update(
+                busy="",
+                calibration=replace(
+                    self.state.calibration,
+                    poses=poses,
+                    stage="error",
+                    message=str(exc) or type(exc).__name__,
+                ),
+            )
 
         self.background("calibration", work, finished, fail, exclusive=True)
 
     def plan_calibration(self, n_fit: int, n_check: int, session_dir: str | None) -> None:
         calib = self.backend.calibration
-        self._calibration(lambda: calib.plan(n_fit, n_check, session_dir),
-                          lambda view: self.update(calibration=view), "planning", "planning poses")
+        self._calibration(
+            lambda: calib.plan(n_fit, n_check, session_dir),
+            lambda view: self.update(calibration=view),
+            "planning",
+            "planning poses",
+        )
 
     def _put_pose(self, pose: PoseView, stage: str, message: str = "") -> None:
         cal = self.state.calibration
         poses = tuple(pose if p.index == pose.index else p for p in cal.poses)
-        self.update(calibration=replace(cal, poses=poses, current=pose.index, stage=stage, message=message))
+        self.update(
+            calibration=replace(cal, poses=poses, current=pose.index, stage=stage, message=message)
+        )
 
     def awaiting_take(self) -> PoseView | None:
         """The settled pose that needs a (new) take, if any."""
-        return next((p for p in self.state.calibration.poses if p.status in ("settled", "rejected")), None)
+        return next(
+            (p for p in self.state.calibration.poses if p.status in ("settled", "rejected")), None
+        )
 
     def next_pose(self) -> PoseView | None:
         """The next pose to move to (none while a pose awaits its take)."""
@@ -281,25 +336,36 @@ class Controller:
             return
         calib = self.backend.calibration
         self._put_pose(replace(pose, status="moving"), "measuring")
-        self._calibration(lambda: calib.move_to(pose),
-                          lambda p: self._put_pose(p, "measuring", f"pose {p.index} settled: record a take"),
-                          "measuring", f"moving to pose {pose.index}")
+        self._calibration(
+            lambda: calib.move_to(pose),
+            lambda p: self._put_pose(p, "measuring", f"pose {p.index} settled: record a take"),
+            "measuring",
+            f"moving to pose {pose.index}",
+        )
 
     def ingest_take(self, take_path: str) -> None:
         pose = self.awaiting_take()
         if pose is None:
             return
         calib = self.backend.calibration
-        self._calibration(lambda: calib.ingest(pose, take_path), lambda p: self._put_pose(p, "measuring", p.detail),
-                          "measuring", "checking the take")
+        self._calibration(
+            lambda: calib.ingest(pose, take_path),
+            lambda p: self._put_pose(p, "measuring", p.detail),
+            "measuring",
+            "checking the take",
+        )
 
     def identify(self) -> None:
         calib = self.backend.calibration
 
         def done(result: Any) -> None:
-            self.update(calibration=replace(self.state.calibration, stage="done", result=result, message=""))
+            self.update(
+                calibration=replace(self.state.calibration, stage="done", result=result, message="")
+            )
 
-        self._calibration(calib.identify if calib else (lambda: None), done, "identifying", "identifying")
+        self._calibration(
+            calib.identify if calib else (lambda: None), done, "identifying", "identifying"
+        )
 
     # -------------------------------------------------------------- diagnose
     def diagnose(self, session_dir: str) -> None:
@@ -309,6 +375,10 @@ class Controller:
             self.update(diagnose=DiagnoseView(session_dir, False, view))
 
         def fail(exc: BaseException) -> None:
-            self.update(diagnose=DiagnoseView(session_dir, False, None, str(exc) or type(exc).__name__))
+            self.update(
+                diagnose=DiagnoseView(session_dir, False, None, str(exc) or type(exc).__name__)
+            )
 
-        self.background("diagnose", lambda: self.backend.diagnose(session_dir), done, fail, exclusive=True)
+        self.background(
+            "diagnose", lambda: self.backend.diagnose(session_dir), done, fail, exclusive=True
+        )

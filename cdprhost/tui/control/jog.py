@@ -18,7 +18,9 @@ def jog_target(current: Vec3, axis: str, step_mm: float) -> Vec3:
     return (p[0], p[1], p[2])
 
 
-def check_jog(model: MachineModel, start: Vec3 | None, target: Vec3, spacing_mm: float = 1.0) -> JogCheck:
+def check_jog(
+    model: MachineModel, start: Vec3 | None, target: Vec3, spacing_mm: float = 1.0
+) -> JogCheck:
     """Whether the straight move ``start`` -> ``target`` stays in the workspace.
 
     The path is sampled every ``spacing_mm`` (and at both ends); the first

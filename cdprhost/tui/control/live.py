@@ -17,7 +17,13 @@ from cdprhost.job.state import LinkHealth
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, EventSink, JobHandle
-from cdprhost.tui.control.views import DeviceStatus, DiagnosisView, PortChoice, PreflightView, Violation
+from cdprhost.tui.control.views import (
+    DeviceStatus,
+    DiagnosisView,
+    PortChoice,
+    PreflightView,
+    Violation,
+)
 
 HOTEND, BED = 0, 1
 ALL_MODULES = 0b111
@@ -45,18 +51,35 @@ def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str],
 
 def preflight_view(report: Any, path: str) -> PreflightView:
     """A :class:`cdprhost.preflight.PreflightReport` as the print screen shows it."""
-    violations = tuple(Violation(v.line, v.rule, v.detail, tuple(v.point)) for v in report.violations)
+    violations = tuple(
+        Violation(v.line, v.rule, v.detail, tuple(v.point)) for v in report.violations
+    )
     notes = tuple(f"line {n.line}: {n.text}" for n in report.notes)
-    return PreflightView(path, bool(report.ok), violations, int(report.moves), int(report.layers),
-                         float(report.estimated_time_s), float(report.filament_mm), notes)
+    return PreflightView(
+        path,
+        bool(report.ok),
+        violations,
+        int(report.moves),
+        int(report.layers),
+        float(report.estimated_time_s),
+        float(report.filament_mm),
+        notes,
+    )
 
 
 class LiveBackend:
     """``sim_options`` go to :func:`cdprhost.link.open_embedded` (faults, observer, config)."""
 
-    def __init__(self, profile: str | MachineProfile, *, speedup: float | None = 10.0,
-                 sim_options: dict[str, Any] | None = None, diagnosis_settings: Any = None,
-                 job_options: dict[str, Any] | None = None, idle_pump_s: float = 0.0):
+    def __init__(
+        self,
+        profile: str | MachineProfile,
+        *,
+        speedup: float | None = 10.0,
+        sim_options: dict[str, Any] | None = None,
+        diagnosis_settings: Any = None,
+        job_options: dict[str, Any] | None = None,
+        idle_pump_s: float = 0.0,
+    ):
         self.profile = load_profile(profile) if isinstance(profile, str) else profile
         self.profile_name = self.profile.name
         self.model = MachineModel.from_profile(self.profile)
@@ -87,8 +110,10 @@ class LiveBackend:
             from serial.tools import list_ports
 
             for p in sorted(list_ports.comports(), key=lambda p: p.device):
-                choices.append(PortChoice(p.device, p.device, p.description if p.description != "n/a" else ""))
-        except Exception:  # noqa: BLE001 - a broken port enumeration must not hide the simulator
+                choices.append(
+                    PortChoice(p.device, p.device, p.description if p.description != "n/a" else "")
+                )
+        except Exception:  # noqa: BLE001, S110 - a broken port enumeration must not hide the simulator
             pass
         return choices
 
@@ -97,10 +122,14 @@ class LiveBackend:
 
         self.disconnect()
         if port == EMBEDDED:
-            link = open_embedded(speedup=self.speedup, timeout_s=self.profile.serial.timeout_s, **self.sim_options)
+            link = open_embedded(
+                speedup=self.speedup, timeout_s=self.profile.serial.timeout_s, **self.sim_options
+            )
             observer = self.sim_options.get("observer")
             if observer is not None and hasattr(observer, "attach_record"):
-                observer.attach_record(link.device.record)  # directions of motion for the truth's backlash
+                observer.attach_record(
+                    link.device.record
+                )  # directions of motion for the truth's backlash
         else:
             link = open_link(port, baud, self.profile.serial.timeout_s)
         with self._lock:
@@ -141,8 +170,18 @@ class LiveBackend:
         if homed:
             p = self.model.fk(sliders[None, :])[0]
             position = tuple(float(v) for v in p) if np.all(np.isfinite(p)) else None
-        return DeviceStatus(steps, tuple(float(v) for v in sliders), position, st.hotend_c, st.bed_c,
-                            st.hotend_target_c, st.bed_target_c, bool(st.enabled_mask), homed, st.queue_free)
+        return DeviceStatus(
+            steps,
+            tuple(float(v) for v in sliders),
+            position,
+            st.hotend_c,
+            st.bed_c,
+            st.hotend_target_c,
+            st.bed_target_c,
+            bool(st.enabled_mask),
+            homed,
+            st.queue_free,
+        )
 
     # --------------------------------------------------------------- print
     def preflight(self, path: str) -> PreflightView:
@@ -150,7 +189,9 @@ class LiveBackend:
 
         return preflight_view(preflight(path, self.profile, self.model), path)
 
-    def make_job(self, path: str, on_event: EventSink, resume_from_layer: int | None = None) -> JobHandle:
+    def make_job(
+        self, path: str, on_event: EventSink, resume_from_layer: int | None = None
+    ) -> JobHandle:
         try:
             from cdprhost.job.runner import PrintJob, PrintOptions
         except ImportError as exc:  # the runner is a separate piece of work
@@ -178,7 +219,9 @@ class LiveBackend:
     def _wait(self, seconds: float) -> None:
         self.link.wait_idle(timeout=seconds)
 
-    def move_to(self, target: tuple[float, float, float], speed_mm_s: float = JOG_SPEED_MM_S) -> DeviceStatus:
+    def move_to(
+        self, target: tuple[float, float, float], speed_mm_s: float = JOG_SPEED_MM_S
+    ) -> DeviceStatus:
         """Plan and execute a straight move to ``target`` (machine frame); requires homing."""
         from cdprhost.tui.control.moves import straight_move
         from firmware_protocol.messages import Enable
@@ -187,8 +230,14 @@ class LiveBackend:
         status = self._status_view(link.request_status())
         if not status.homed:
             raise CdprError("the modules are not homed: home first (h)")
-        batch, duration = straight_move(self.profile, self.model, status.steps, target,
-                                        feedrate_mm_s=speed_mm_s, clock_hz=link.identity.clock_hz)
+        batch, duration = straight_move(
+            self.profile,
+            self.model,
+            status.steps,
+            target,
+            feedrate_mm_s=speed_mm_s,
+            clock_hz=link.identity.clock_hz,
+        )
         link.send(Enable(ALL_AXES))
         link.queue_segments(batch, timeout=duration + 10.0)
         self._wait(duration + 10.0)
@@ -201,7 +250,9 @@ class LiveBackend:
         from firmware_protocol.messages import Home
 
         link = self.link
-        home_steps = self.model.steps(np.asarray(self.profile.drive.home_mm, dtype=float)[None, :])[0]
+        home_steps = self.model.steps(np.asarray(self.profile.drive.home_mm, dtype=float)[None, :])[
+            0
+        ]
         link.send(Home(ALL_MODULES, tuple(int(v) for v in home_steps)))
         self._wait(180.0)
         return self._status_view(link.request_status())
@@ -218,7 +269,9 @@ class LiveBackend:
         from firmware_protocol.messages import SetHeater
 
         link = self.link
-        link.send(SetHeater(HOTEND, int(round(hotend_c * 10))), SetHeater(BED, int(round(bed_c * 10))))
+        link.send(
+            SetHeater(HOTEND, int(round(hotend_c * 10))), SetHeater(BED, int(round(bed_c * 10)))
+        )
         self._wait(10.0)
         return self._status_view(link.request_status())
 

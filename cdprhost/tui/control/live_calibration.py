@@ -44,20 +44,37 @@ def identification_view(result: Any, profile_path: str = "") -> IdentificationVi
     before = np.concatenate([result.nominal.outlets.ravel(), result.nominal.initial_lengths])
     after = np.concatenate([result.geometry.outlets.ravel(), result.geometry.initial_lengths])
     rows = tuple(
-        ParameterRow(name, float(before[i]), float(after[i]),
-                     float(result.stderr[i]) if np.isfinite(result.stderr[i]) else None,
-                     float(result.ci95[i][0]) if np.isfinite(result.ci95[i][0]) else None,
-                     float(result.ci95[i][1]) if np.isfinite(result.ci95[i][1]) else None)
+        ParameterRow(
+            name,
+            float(before[i]),
+            float(after[i]),
+            float(result.stderr[i]) if np.isfinite(result.stderr[i]) else None,
+            float(result.ci95[i][0]) if np.isfinite(result.ci95[i][0]) else None,
+            float(result.ci95[i][1]) if np.isfinite(result.ci95[i][1]) else None,
+        )
         for i, name in enumerate(result.names)
     )
     warnings = tuple(result.problems())
     if result.correlations:
         worst = max(result.correlations, key=lambda c: abs(c[2]))
-        warnings += (f"{len(result.correlations)} parameter pair(s) correlate above 0.95 "
-                     f"(strongest {worst[0]} / {worst[1]}: {worst[2]:.3f}); check poses tell how well it predicts",)
-    return IdentificationView(rows, float(result.rms_before_mm), float(result.rms_after_mm), int(result.iterations),
-                              int(result.poses_used), result.check_rms_before_mm, result.check_rms_after_mm,
-                              warnings, profile_path)
+        warnings += (
+            (
+                f"{len(result.correlations)} parameter pair(s) correlate above 0.95 "
+                f"(strongest {worst[0]} / {worst[1]}: {worst[2]:.3f}); "
+                "check poses tell how well it predicts"
+            ),
+        )
+    return IdentificationView(
+        rows,
+        float(result.rms_before_mm),
+        float(result.rms_after_mm),
+        int(result.iterations),
+        int(result.poses_used),
+        result.check_rms_before_mm,
+        result.check_rms_after_mm,
+        warnings,
+        profile_path,
+    )
 
 
 class LiveCalibration:
@@ -75,14 +92,23 @@ class LiveCalibration:
         state, plan = w.state, w.plan
         poses = []
         for i, p in enumerate(plan.poses):
-            status = "take ok" if i in state.recorded else "skipped" if i in state.skipped else "planned"
+            status = (
+                "take ok" if i in state.recorded else "skipped" if i in state.skipped else "planned"
+            )
             detail = ""
             if i == state.at and status == "planned":
                 status = "settled"
                 detail = state.last_problem or ""
             poses.append(PoseView(i + 1, _point(p), str(plan.roles[i]), status, detail))
-        return CalibrationView(stage, tuple(poses), current, str(w.dir), tuple(sorted(plan.indices.items())),
-                               None, message)
+        return CalibrationView(
+            stage,
+            tuple(poses),
+            current,
+            str(w.dir),
+            tuple(sorted(plan.indices.items())),
+            None,
+            message,
+        )
 
     def _pose(self, index: int) -> PoseView:
         return self._view("measuring").poses[index - 1]
@@ -101,9 +127,16 @@ class LiveCalibration:
 
             mocap = mocap_config(b.profile_name).mocap
         device = LinkDevice(b.link, b.profile, b.model)
-        self.wizard = CalibrationWizard(session_dir or DEFAULT_SESSION, b.profile, device, self.source, mocap=mocap,
-                                        options=WizardOptions(n_poses=n_fit, n_check=n_check), log=self._log,
-                                        profile_ref=b.profile_name)
+        self.wizard = CalibrationWizard(
+            session_dir or DEFAULT_SESSION,
+            b.profile,
+            device,
+            self.source,
+            mocap=mocap,
+            options=WizardOptions(n_poses=n_fit, n_check=n_check),
+            log=self._log,
+            profile_ref=b.profile_name,
+        )
         return self._view("planned", self.messages[-1] if self.messages else "")
 
     def _require(self, kind: type, index: int | None = None) -> Any:
@@ -123,8 +156,14 @@ class LiveCalibration:
         self.wizard.step()
         new = sorted(set(self._takes()) - set(seen), key=lambda p: p.stat().st_mtime)
         view = self._pose(pose.index)
-        return PoseView(view.index, view.point, view.role, "settled", "settled: record a take",
-                        take=str(new[-1]) if new else "")
+        return PoseView(
+            view.index,
+            view.point,
+            view.role,
+            "settled",
+            "settled: record a take",
+            take=str(new[-1]) if new else "",
+        )
 
     def _sync_device(self) -> None:
         """Start the wizard's planner from where the device really is (the user may have jogged)."""
@@ -134,8 +173,11 @@ class LiveCalibration:
         status = b.device_status()
         if status is None or not status.homed or status.position is None:
             return
-        device.state = SegmentState(np.asarray(status.steps, dtype=np.int64),
-                                    np.asarray(status.position, dtype=float), np.ones(3))
+        device.state = SegmentState(
+            np.asarray(status.steps, dtype=np.int64),
+            np.asarray(status.position, dtype=float),
+            np.ones(3),
+        )
         device.homed = True
 
     def _takes(self) -> list[Path]:
@@ -152,7 +194,9 @@ class LiveCalibration:
         self.wizard.step()
         view = self._pose(pose.index)
         if view.status == "take ok":
-            detail = self.messages[-1].split(": ", 1)[-1] if len(self.messages) > before else "recorded"
+            detail = (
+                self.messages[-1].split(": ", 1)[-1] if len(self.messages) > before else "recorded"
+            )
             return PoseView(view.index, view.point, view.role, "take ok", detail)
         problem = self.wizard.state.last_problem or "rejected"
         status = "skipped" if view.status == "skipped" else "rejected"

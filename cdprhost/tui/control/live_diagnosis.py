@@ -26,7 +26,7 @@ def _fmt(value: Any) -> str:
 
 
 def parameter_rows(report: dict[str, Any]) -> tuple[tuple[str, str], ...]:
-    """"effect.key" -> "value [95 % interval]" for every effect in the final model."""
+    """ "effect.key" -> "value [95 % interval]" for every effect in the final model."""
     rows = []
     params = report.get("parameters") or {}
     for name in report.get("effects") or ():
@@ -35,7 +35,11 @@ def parameter_rows(report: dict[str, Any]) -> tuple[tuple[str, str], ...]:
         for key, value in (entry.get("table") or {}).items():
             if key.endswith("stderr") or not isinstance(value, (int, float, list, tuple)):
                 continue
-            interval = f" (95% {_fmt(np.asarray(ci[key])[..., 0])}..{_fmt(np.asarray(ci[key])[..., 1])})" if key in ci else ""
+            interval = (
+                f" (95% {_fmt(np.asarray(ci[key])[..., 0])}..{_fmt(np.asarray(ci[key])[..., 1])})"
+                if key in ci
+                else ""
+            )
             rows.append((f"{name}.{key}", _fmt(value) + interval))
     return tuple(rows)
 
@@ -43,15 +47,28 @@ def parameter_rows(report: dict[str, Any]) -> tuple[tuple[str, str], ...]:
 def diagnosis_view(report: dict[str, Any]) -> DiagnosisView:
     """The JSON report of :func:`cdprhost.diagnosis.report.to_json` as the screen shows it."""
     poses = report.get("poses") or {}
-    candidates = tuple(CandidateRow(c["name"], _num(c.get("p_value")), _num(c.get("delta_bic")),
-                                    _num(c.get("heldout_rms_mm"))) for c in report.get("candidates") or ())
+    candidates = tuple(
+        CandidateRow(
+            c["name"],
+            _num(c.get("p_value")),
+            _num(c.get("delta_bic")),
+            _num(c.get("heldout_rms_mm")),
+        )
+        for c in report.get("candidates") or ()
+    )
     before = tuple(float(v) for v in (poses.get("heldout_before_mm") or ()) if v is not None)
     after = tuple(float(v) for v in (poses.get("heldout_after_mm") or ()) if v is not None)
     return DiagnosisView(
-        verdict=str(report["verdict"]), effect=report.get("effect"), where=str(report.get("where") or ""),
-        candidates=candidates, heldout_rms_before_mm=float(report["heldout_rms_before_mm"]),
-        heldout_rms_after_mm=float(report["heldout_rms_after_mm"]), noise_floor_mm=float(report["noise_floor_mm"]),
-        per_pose_before_mm=before, per_pose_after_mm=after, parameters=parameter_rows(report),
+        verdict=str(report["verdict"]),
+        effect=report.get("effect"),
+        where=str(report.get("where") or ""),
+        candidates=candidates,
+        heldout_rms_before_mm=float(report["heldout_rms_before_mm"]),
+        heldout_rms_after_mm=float(report["heldout_rms_after_mm"]),
+        noise_floor_mm=float(report["noise_floor_mm"]),
+        per_pose_before_mm=before,
+        per_pose_after_mm=after,
+        parameters=parameter_rows(report),
     )
 
 

@@ -31,7 +31,7 @@ class SourceLines:
         if not 0 <= i < len(self):
             return ""
         end = int(self._starts[i + 1]) if i + 1 < len(self) else len(self._data)
-        return self._data[int(self._starts[i]):end].decode("utf-8", "replace").rstrip("\r\n")
+        return self._data[int(self._starts[i]) : end].decode("utf-8", "replace").rstrip("\r\n")
 
     def around(self, number: int, before: int = 3, after: int = 3) -> list[tuple[int, str]]:
         """(line number, text) for the lines around ``number`` that exist."""

@@ -79,7 +79,9 @@ class PoseView:
     status: str = "planned"  # planned | moving | settled | take ok | rejected | done
     detail: str = ""
     measured: Vec3 | None = None
-    take: str = ""  # a take file waiting for this pose (virtual motion capture), offered to the user
+    take: str = (
+        ""  # a take file waiting for this pose (virtual motion capture), offered to the user
+    )
 
 
 @dataclass(frozen=True)

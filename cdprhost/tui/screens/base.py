@@ -11,8 +11,11 @@ from cdprhost.tui.state import UiState
 from cdprhost.tui.widgets.nav_bar import NavBar
 
 TABS = (
-    ("connection", "f1", "Link"), ("print", "f2", "Print"), ("jog", "f3", "Jog"),
-    ("calibrate", "f4", "Calibrate"), ("diagnose", "f5", "Diagnose"),
+    ("connection", "f1", "Link"),
+    ("print", "f2", "Print"),
+    ("jog", "f3", "Jog"),
+    ("calibrate", "f4", "Calibrate"),
+    ("diagnose", "f5", "Diagnose"),
 )
 
 
@@ -45,7 +48,9 @@ class AppScreen(Screen):
 
     def _bindings_signature(self) -> tuple[bool | None, ...]:
         """Which of this screen's actions are enabled, greyed or hidden now."""
-        names = dict.fromkeys(b.action.split("(", 1)[0] for b in self.BINDINGS if isinstance(b, Binding))
+        names = dict.fromkeys(
+            b.action.split("(", 1)[0] for b in self.BINDINGS if isinstance(b, Binding)
+        )
         return tuple(self.check_action(name, ()) for name in names)
 
     def render_state(self, state: UiState) -> None:

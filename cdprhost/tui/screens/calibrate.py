@@ -12,8 +12,15 @@ from cdprhost.tui.control.views import CalibrationView, IdentificationView
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState
 
-STATUS_STYLE = {"planned": "dim", "moving": "cyan", "settled": "yellow", "take ok": "green",
-                "rejected": "bold red", "skipped": "red", "done": "green"}
+STATUS_STYLE = {
+    "planned": "dim",
+    "moving": "cyan",
+    "settled": "yellow",
+    "take ok": "green",
+    "rejected": "bold red",
+    "skipped": "red",
+    "done": "green",
+}
 
 
 def _num(v: float | None, fmt: str = ".4f") -> str:
@@ -21,7 +28,9 @@ def _num(v: float | None, fmt: str = ".4f") -> str:
 
 
 def stage_text(cal: CalibrationView) -> Text:
-    out = Text.assemble(("wizard  ", "bold"), (cal.stage, "bold red" if cal.stage == "error" else "cyan"))
+    out = Text.assemble(
+        ("wizard  ", "bold"), (cal.stage, "bold red" if cal.stage == "error" else "cyan")
+    )
     done = sum(p.status in ("take ok", "done") for p in cal.poses)
     if cal.poses:
         out.append(f"  {done}/{len(cal.poses)} poses measured", style="dim")
@@ -34,9 +43,15 @@ def stage_text(cal: CalibrationView) -> Text:
 
 def result_text(result: IdentificationView | None) -> Text:
     if result is None:
-        return Text("identification: not run yet (i identifies once the fit poses are measured)", style="dim")
-    out = Text.assemble(("RMS at fit poses ", "bold"), f"{result.rms_before_mm:.3f} → ",
-                        (f"{result.rms_after_mm:.4f} mm", "bold green"))
+        return Text(
+            "identification: not run yet (i identifies once the fit poses are measured)",
+            style="dim",
+        )
+    out = Text.assemble(
+        ("RMS at fit poses ", "bold"),
+        f"{result.rms_before_mm:.3f} → ",
+        (f"{result.rms_after_mm:.4f} mm", "bold green"),
+    )
     if result.check_before_mm is not None and result.check_after_mm is not None:
         out.append(f"   check poses {result.check_before_mm:.3f} → {result.check_after_mm:.4f} mm")
     out.append(f"   {result.iterations} iterations, {result.poses_used} poses", style="dim")
@@ -69,22 +84,41 @@ class CalibrateScreen(AppScreen):
             yield Label(" check ")
             yield Input("3", type="integer", compact=True, id="check-poses")
             yield Label(" session ")
-            yield Input(placeholder="session folder (new or to resume)", compact=True, id="session-dir")
+            yield Input(
+                placeholder="session folder (new or to resume)", compact=True, id="session-dir"
+            )
         yield Label(id="calib-stage")
         yield DataTable(id="poses", cursor_type="row", zebra_stripes=True)
         with Horizontal(id="take-row"):
             yield Label("take file ")
-            yield Input(placeholder="motion-capture take of the settled pose, Enter to ingest", compact=True,
-                        id="take-input")
+            yield Input(
+                placeholder="motion-capture take of the settled pose, Enter to ingest",
+                compact=True,
+                id="take-input",
+            )
         yield Label(id="calib-result")
         yield DataTable(id="parameters", cursor_type="row", zebra_stripes=True)
 
     def on_mount(self) -> None:
         poses = self.query_one("#poses", DataTable)
-        for name, width in (("#", 3), ("role", 5), ("x", 8), ("y", 8), ("z", 8), ("status", 9), ("detail", 60)):
+        for name, width in (
+            ("#", 3),
+            ("role", 5),
+            ("x", 8),
+            ("y", 8),
+            ("z", 8),
+            ("status", 9),
+            ("detail", 60),
+        ):
             poses.add_column(name, width=width)
         params = self.query_one("#parameters", DataTable)
-        for name, width in (("parameter", 10), ("before", 10), ("after", 10), ("± stderr", 9), ("95% interval", 22)):
+        for name, width in (
+            ("parameter", 10),
+            ("before", 10),
+            ("after", 10),
+            ("± stderr", 9),
+            ("95% interval", 22),
+        ):
             params.add_column(name, width=width)
         super().on_mount()
 
@@ -97,7 +131,13 @@ class CalibrateScreen(AppScreen):
             poses.clear()
             for p in cal.poses:
                 style = STATUS_STYLE.get(p.status, "")
-                poses.add_row(str(p.index), p.role, *(f"{v:.2f}" for v in p.point), Text(p.status, style=style), p.detail)
+                poses.add_row(
+                    str(p.index),
+                    p.role,
+                    *(f"{v:.2f}" for v in p.point),
+                    Text(p.status, style=style),
+                    p.detail,
+                )
             poses._shown = cal.poses
             if cal.poses:
                 poses.move_cursor(row=min(cursor, len(cal.poses) - 1))
@@ -110,7 +150,7 @@ class CalibrateScreen(AppScreen):
         params = self.query_one("#parameters", DataTable)
         if getattr(params, "_shown", None) is not cal.result:
             params.clear()
-            for r in (cal.result.rows if cal.result else ()):
+            for r in cal.result.rows if cal.result else ():
                 ci = "" if r.ci_low is None else f"[{r.ci_low:.4f}, {r.ci_high:.4f}]"
                 params.add_row(r.name, _num(r.before, ".3f"), _num(r.after), _num(r.stderr), ci)
             params._shown = cal.result
@@ -123,7 +163,12 @@ class CalibrateScreen(AppScreen):
         if action == "plan":
             return None if busy or state.job_active else True
         if action == "move":
-            ok = state.connected and not state.job_active and not busy and self.app.controller.next_pose() is not None
+            ok = (
+                state.connected
+                and not state.job_active
+                and not busy
+                and self.app.controller.next_pose() is not None
+            )
             return True if ok else None
         if action == "take":
             return True if self.app.controller.awaiting_take() is not None and not busy else None
@@ -152,7 +197,9 @@ class CalibrateScreen(AppScreen):
             self.app.notify("pose counts must be integers", severity="error")
             return
         if n_fit < 4 or n_check < 0:
-            self.app.notify("at least 4 fit poses (12 parameters, 3 cables per pose)", severity="error")
+            self.app.notify(
+                "at least 4 fit poses (12 parameters, 3 cables per pose)", severity="error"
+            )
             return
         session = self.query_one("#session-dir", Input).value.strip() or None
         self.app.controller.plan_calibration(n_fit, n_check, session)

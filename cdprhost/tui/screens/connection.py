@@ -21,8 +21,10 @@ def health_text(state: UiState) -> Text:
     if h is None:
         return out.append("--", style="dim")
     bad = h.bad_frames or h.retransmits
-    out.append(f"retx {h.retransmits}  bad frames {h.bad_frames}  naks {h.naks}",
-               style="yellow" if bad else "green")
+    out.append(
+        f"retx {h.retransmits}  bad frames {h.bad_frames}  naks {h.naks}",
+        style="yellow" if bad else "green",
+    )
     return out
 
 
@@ -60,7 +62,9 @@ class ConnectionScreen(AppScreen):
 
     def render_state(self, state: UiState) -> None:
         c = state.connection
-        style = {"connected": "bold green", "connecting": "cyan", "error": "bold red"}.get(c.status, "dim")
+        style = {"connected": "bold green", "connecting": "cyan", "error": "bold red"}.get(
+            c.status, "dim"
+        )
         status = Text.assemble(("status  ", "bold"), (c.status, style))
         if c.port:
             status.append(f"  {c.port} @ {c.baud}")
@@ -84,7 +88,9 @@ class ConnectionScreen(AppScreen):
         self.choices = list(choices)
         options = self.query_one("#port-list", OptionList)
         options.clear_options()
-        options.add_options([Option(f"{p.label}  {p.detail}".rstrip(), id=p.port) for p in self.choices])
+        options.add_options(
+            [Option(f"{p.label}  {p.detail}".rstrip(), id=p.port) for p in self.choices]
+        )
         current = self.app.state.connection.port or self.app._port
         index = next((i for i, p in enumerate(self.choices) if p.port == current), 0)
         if self.choices:

@@ -12,7 +12,12 @@ from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import DiagnoseView, UiState
 from cdprhost.tui.widgets.gap_plot import GapPlot
 
-VERDICT_STYLE = {"named": "bold green", "none": "bold cyan", "ambiguous": "bold yellow", "unexplained": "bold red"}
+VERDICT_STYLE = {
+    "named": "bold green",
+    "none": "bold cyan",
+    "ambiguous": "bold yellow",
+    "unexplained": "bold red",
+}
 
 
 def _opt(v: float | None, fmt: str) -> str:
@@ -56,14 +61,23 @@ class DiagnoseScreen(AppScreen):
     def compose_body(self) -> ComposeResult:
         with Horizontal(id="diag-row"):
             yield Label("session ")
-            yield Input(placeholder="calibration session folder, Enter to diagnose", compact=True, id="diag-session")
+            yield Input(
+                placeholder="calibration session folder, Enter to diagnose",
+                compact=True,
+                id="diag-session",
+            )
         yield Label(id="diag-verdict")
         yield DataTable(id="candidates", cursor_type="row", zebra_stripes=True)
         yield GapPlot(id="gap")
 
     def on_mount(self) -> None:
         table = self.query_one("#candidates", DataTable)
-        for name, width in (("candidate", 18), ("p value", 10), ("ΔBIC", 10), ("held-out RMS mm", 16)):
+        for name, width in (
+            ("candidate", 18),
+            ("p value", 10),
+            ("ΔBIC", 10),
+            ("held-out RMS mm", 16),
+        ):
             table.add_column(name, width=width)
         super().on_mount()
 
@@ -74,8 +88,13 @@ class DiagnoseScreen(AppScreen):
         result = view.result
         if getattr(table, "_shown", None) is not result:
             table.clear()
-            for c in (result.candidates if result else ()):
-                table.add_row(c.name, _opt(c.p_value, ".3g"), _opt(c.delta_bic, ".1f"), _opt(c.heldout_rms_mm, ".4f"))
+            for c in result.candidates if result else ():
+                table.add_row(
+                    c.name,
+                    _opt(c.p_value, ".3g"),
+                    _opt(c.delta_bic, ".1f"),
+                    _opt(c.heldout_rms_mm, ".4f"),
+                )
             table._shown = result
         gap = self.query_one(GapPlot)
         if result is None:

@@ -54,14 +54,20 @@ def failure_text(failure: Failure | None, reason: str, line_text: str, path: str
     if failure.resume_file:
         out.append(f"resume point saved: {failure.resume_file}\n")
     if failure.last_layer is not None:
-        out.append(f"resume: cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}", style="italic")
+        out.append(
+            f"resume: cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}",
+            style="italic",
+        )
     return out
 
 
 class FailureScreen(ModalScreen[str]):
     """Shows the stop and the resume point; dismisses with "resume" or "close"."""
 
-    BINDINGS = [Binding("r", "choose('resume')", "Resume from layer"), Binding("escape,enter", "choose('close')", "Close")]
+    BINDINGS = [
+        Binding("r", "choose('resume')", "Resume from layer"),
+        Binding("escape,enter", "choose('close')", "Close"),
+    ]
 
     def __init__(self, text: Text, can_resume: bool):
         super().__init__(classes="dialog-screen")
@@ -72,7 +78,9 @@ class FailureScreen(ModalScreen[str]):
             yield Static(self.text, id="failure-text")
             with Horizontal(classes="dialog-buttons"):
                 if self.can_resume:
-                    yield Button("Resume from layer (r)", variant="warning", id="resume", compact=True)
+                    yield Button(
+                        "Resume from layer (r)", variant="warning", id="resume", compact=True
+                    )
                 yield Button("Close (esc)", id="close", compact=True)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:

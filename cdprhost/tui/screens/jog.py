@@ -39,7 +39,10 @@ class JogScreen(AppScreen):
         Binding("up", "jog('y', 1)", "y+", show=False),
         Binding("pagedown", "jog('z', -1)", "z-", show=False),
         Binding("pageup", "jog('z', 1)", "z+", show=False),
-        *(Binding(str(i + 1), f"step({i})", f"{s:g} mm", show=False) for i, s in enumerate(STEPS_MM)),
+        *(
+            Binding(str(i + 1), f"step({i})", f"{s:g} mm", show=False)
+            for i, s in enumerate(STEPS_MM)
+        ),
         Binding("enter", "go", "Move"),
         Binding("escape", "clear", "Clear", show=False),
         Binding("h", "home", "Home"),
@@ -76,8 +79,15 @@ class JogScreen(AppScreen):
         steps = state.device.steps if state.device else None
         self.query_one(PositionPanel).show(position, sliders, steps)
         self.query_one("#jog-step", Label).update(
-            Text.assemble(("step  ", "bold"), *((f" {s:g} ", "reverse" if i == self.step_index else "dim")
-                                                 for i, s in enumerate(STEPS_MM)), ("  mm", "dim")))
+            Text.assemble(
+                ("step  ", "bold"),
+                *(
+                    (f" {s:g} ", "reverse" if i == self.step_index else "dim")
+                    for i, s in enumerate(STEPS_MM)
+                ),
+                ("  mm", "dim"),
+            )
+        )
         self.query_one("#jog-target", Label).update(target_text(state))
         busy = state.busy or ("print running: jog disabled" if state.job_active else "")
         if not state.connected:
@@ -90,7 +100,9 @@ class JogScreen(AppScreen):
         if dev is None:
             graph.show((None, None), (0.0, 0.0), ())
         else:
-            graph.show((dev.hotend, dev.bed), (dev.hotend_target, dev.bed_target), state.device_temps)
+            graph.show(
+                (dev.hotend, dev.bed), (dev.hotend_target, dev.bed_target), state.device_temps
+            )
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.action_heaters()
@@ -126,7 +138,9 @@ class JogScreen(AppScreen):
 
     def action_home(self) -> None:
         if self._can_move():
-            self.app.confirm("Home: drive the three modules to their endstops?", self.app.controller.home)
+            self.app.confirm(
+                "Home: drive the three modules to their endstops?", self.app.controller.home
+            )
 
     def action_motors_off(self) -> None:
         if self._can_move():
@@ -143,8 +157,10 @@ class JogScreen(AppScreen):
             return
         heaters = self.app.backend.profile.heaters
         if not (0 <= hotend <= heaters.hotend_max_c and 0 <= bed <= heaters.bed_max_c):
-            self.app.notify(f"targets must be within 0-{heaters.hotend_max_c:g} / 0-{heaters.bed_max_c:g} °C",
-                            severity="error")
+            self.app.notify(
+                f"targets must be within 0-{heaters.hotend_max_c:g} / 0-{heaters.bed_max_c:g} °C",
+                severity="error",
+            )
             return
         self.set_focus(None)
         self.app.controller.set_heaters(hotend, bed)

@@ -14,8 +14,8 @@ from textual.widgets import Input, Label
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.jog import static_tensions
 from cdprhost.tui.control.source import SourceLines
-from cdprhost.tui.screens.dialogs import FailureScreen, failure_text
 from cdprhost.tui.screens.base import AppScreen
+from cdprhost.tui.screens.dialogs import FailureScreen, failure_text
 from cdprhost.tui.state import UiState, hms, live_position
 from cdprhost.tui.widgets.position_panel import PositionPanel
 from cdprhost.tui.widgets.progress_panel import ProgressPanel
@@ -42,12 +42,19 @@ def preflight_summary(state: UiState) -> Text:
         out.append("preflight ok", style="bold green")
     else:
         first = min(v.line for v in p.violations) if p.violations else 0
-        out.append(f"{len(p.violations)} violation{'s' * (len(p.violations) != 1)} (first at line {first})",
-                   style="bold red")
-    out.append(f" · {p.moves} moves · {p.layers} layers · est {hms(p.estimated_time_s)} · {p.filament_mm:.0f} mm filament",
-               style="dim")
+        out.append(
+            f"{len(p.violations)} violation{'s' * (len(p.violations) != 1)} (first at line {first})",
+            style="bold red",
+        )
+    out.append(
+        f" · {p.moves} moves · {p.layers} layers · est {hms(p.estimated_time_s)} · {p.filament_mm:.0f} mm filament",
+        style="dim",
+    )
     if p.notes:
-        out.append(f" · {len(p.notes)} note{'s' * (len(p.notes) != 1)} (harmless commands skipped)", style="dim")
+        out.append(
+            f" · {len(p.notes)} note{'s' * (len(p.notes) != 1)} (harmless commands skipped)",
+            style="dim",
+        )
     return out
 
 
@@ -86,7 +93,11 @@ class PrintScreen(AppScreen):
         statics = self.app.backend.model.statics
         with Horizontal(id="file-row"):
             yield Label("G-code ", id="file-label")
-            yield Input(placeholder="path to a .gcode file, Enter to check it", compact=True, id="file-input")
+            yield Input(
+                placeholder="path to a .gcode file, Enter to check it",
+                compact=True,
+                id="file-input",
+            )
         yield Label(id="preflight-summary")
         with Horizontal(id="panels"):
             with Vertical(id="left-panels"):
@@ -129,7 +140,11 @@ class PrintScreen(AppScreen):
         graph = self.query_one(TemperatureGraph)
         if job.state is not JobState.IDLE and job.temperatures is not None:
             t = job.temperatures
-            graph.show((t.hotend, t.bed), (t.hotend_target, t.bed_target), [(h, b) for _, h, b in job.temperature_history])
+            graph.show(
+                (t.hotend, t.bed),
+                (t.hotend_target, t.bed_target),
+                [(h, b) for _, h, b in job.temperature_history],
+            )
         elif state.device is not None:
             d = state.device
             graph.show((d.hotend, d.bed), (d.hotend_target, d.bed_target), state.device_temps)
@@ -145,7 +160,14 @@ class PrintScreen(AppScreen):
             view.show(self.source.around(state.job.line, 1, 4), state.job.line, "printing")
         elif self._jump is not None:
             pre = state.file.preflight
-            why = next((f": {v.rule}: {v.detail}" for v in (pre.violations if pre else ()) if v.line == self._jump), "")
+            why = next(
+                (
+                    f": {v.rule}: {v.detail}"
+                    for v in (pre.violations if pre else ())
+                    if v.line == self._jump
+                ),
+                "",
+            )
             view.show(self.source.around(self._jump), self._jump, f"line {self._jump}{why}")
         else:
             view.show(self.source.around(1, 0, 6), None, Path(self.source.path).name)
@@ -183,7 +205,12 @@ class PrintScreen(AppScreen):
         job = state.job
         failure = job.failure
         line = failure.last_line if failure and failure.last_line else job.line
-        text = failure_text(failure, job.reason, self.source.line(line) if self.source and line else "", state.job_path)
+        text = failure_text(
+            failure,
+            job.reason,
+            self.source.line(line) if self.source and line else "",
+            state.job_path,
+        )
         can_resume = failure is not None and failure.last_layer is not None
 
         def chosen(choice: str | None) -> None:
@@ -194,7 +221,12 @@ class PrintScreen(AppScreen):
 
     # ------------------------------------------------------------ actions
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        mapping = {"start": "start_print", "pause": "pause_print", "resume": "resume_print", "cancel": "cancel_print"}
+        mapping = {
+            "start": "start_print",
+            "pause": "pause_print",
+            "resume": "resume_print",
+            "cancel": "cancel_print",
+        }
         if action in mapping:
             return self.app.check_print_action(mapping[action])
         return True

@@ -16,8 +16,14 @@ def latest(values: Sequence[float], width: int) -> np.ndarray:
     return v[-width:] if width > 0 else v[:0]
 
 
-def block_chart(values: Sequence[float], width: int, height: int, lo: float, hi: float,
-                marker: float | None = None) -> list[str]:
+def block_chart(
+    values: Sequence[float],
+    width: int,
+    height: int,
+    lo: float,
+    hi: float,
+    marker: float | None = None,
+) -> list[str]:
     """Rows (top first) of a column chart of the last ``width`` values scaled to
     [lo, hi], right-aligned (the newest value in the last column).
 
@@ -53,7 +59,7 @@ def hbar(value: float, hi: float, width: int) -> str:
 
 
 def tension_level(value: float, t_min: float, t_max: float) -> str:
-    """"bad" outside [t_min, t_max]; "near" within 2 % of the span above t_min
+    """ "bad" outside [t_min, t_max]; "near" within 2 % of the span above t_min
     (close to slack) or 10 % below t_max; else "ok"."""
     if not np.isfinite(value) or value < t_min or value > t_max:
         return "bad"

@@ -13,8 +13,9 @@ from cdprhost.tui.widgets.charts import BLOCKS
 BEFORE, AFTER, FLOOR = "red", "green", "bold cyan"
 
 
-def gap_cells(before: Sequence[float], after: Sequence[float], floor: float, width: int, height: int
-              ) -> tuple[list[list[tuple[str, str]]], float, int | None]:
+def gap_cells(
+    before: Sequence[float], after: Sequence[float], floor: float, width: int, height: int
+) -> tuple[list[list[tuple[str, str]]], float, int | None]:
     """Rows (top first) of (char, style) cells, one column per pose; the top of the
     scale (mm); the index (top first) of the row holding the noise floor.
 
@@ -63,7 +64,9 @@ class GapPlot(Widget):
         out = Text(no_wrap=True, overflow="crop")
         if not before:
             return out.append("held-out error per pose: run a diagnosis", style="dim")
-        rows, top, floor_at = gap_cells(before, after, floor, max(self.size.width - 8, 4), max(self.size.height - 1, 1))
+        rows, top, floor_at = gap_cells(
+            before, after, floor, max(self.size.width - 8, 4), max(self.size.height - 1, 1)
+        )
         for i, cells in enumerate(rows):
             if i == floor_at:
                 out.append(f"{floor:6.3f}┈", style=FLOOR)

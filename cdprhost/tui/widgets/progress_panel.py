@@ -11,10 +11,17 @@ from cdprhost.job.state import JobSnapshot, JobState
 from cdprhost.tui.state import hms
 
 STATE_STYLE = {
-    JobState.IDLE: "dim", JobState.PREFLIGHT: "cyan", JobState.REFUSED: "bold red",
-    JobState.HEATING: "bold dark_orange", JobState.PRINTING: "bold green", JobState.PAUSING: "yellow",
-    JobState.PAUSED: "bold yellow", JobState.CANCELLING: "yellow", JobState.CANCELLED: "bold yellow",
-    JobState.FAILED: "bold red", JobState.DONE: "bold green",
+    JobState.IDLE: "dim",
+    JobState.PREFLIGHT: "cyan",
+    JobState.REFUSED: "bold red",
+    JobState.HEATING: "bold dark_orange",
+    JobState.PRINTING: "bold green",
+    JobState.PAUSING: "yellow",
+    JobState.PAUSED: "bold yellow",
+    JobState.CANCELLING: "yellow",
+    JobState.CANCELLED: "bold yellow",
+    JobState.FAILED: "bold red",
+    JobState.DONE: "bold green",
 }
 
 
@@ -37,9 +44,12 @@ def progress_lines(snap: JobSnapshot, line_text: str) -> tuple[Text, Text, Text]
         head.append(f" {snap.notices[-1]}", style="dim italic")
     layers = f"{min(snap.layer + 1, snap.layers)}/{snap.layers}" if snap.layers else "-/-"
     stats = Text.assemble(
-        ("layer ", "dim"), layers,
-        ("  elapsed ", "dim"), hms(snap.device_time_s if snap.state is not JobState.IDLE else None),
-        ("  ETA ", "dim"), hms(snap.eta_s if snap.state.active else (0.0 if snap.state is JobState.DONE else None)),
+        ("layer ", "dim"),
+        layers,
+        ("  elapsed ", "dim"),
+        hms(snap.device_time_s if snap.state is not JobState.IDLE else None),
+        ("  ETA ", "dim"),
+        hms(snap.eta_s if snap.state.active else (0.0 if snap.state is JobState.DONE else None)),
     )
     cur = Text()
     if snap.line:
@@ -60,4 +70,6 @@ class ProgressPanel(Vertical):
         self.query_one("#job-state", Label).update(head)
         self.query_one("#job-stats", Label).update(stats)
         self.query_one("#job-line", Label).update(cur)
-        self.query_one("#job-bar", ProgressBar).update(progress=round(1000 * progress_fraction(snap)))
+        self.query_one("#job-bar", ProgressBar).update(
+            progress=round(1000 * progress_fraction(snap))
+        )

@@ -15,7 +15,9 @@ class SourceView(Static):
             body.append("(no G-code line)", style="dim")
         for i, (number, text) in enumerate(lines):
             mark = number == focus
-            body.append(f"{'>' if mark else ' '}{number:>7} ", style="bold yellow" if mark else "dim")
+            body.append(
+                f"{'>' if mark else ' '}{number:>7} ", style="bold yellow" if mark else "dim"
+            )
             body.append(text, style="reverse" if mark else "")
             if i < len(lines) - 1:
                 body.append("\n")

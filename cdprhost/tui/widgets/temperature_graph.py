@@ -22,8 +22,12 @@ class TemperatureGraph(Widget):
         self._targets: tuple[float, float] = (0.0, 0.0)
         self._history: Sequence[tuple[float, float]] = ()
 
-    def show(self, current: tuple[float | None, float | None], targets: tuple[float, float],
-             history: Sequence[tuple[float, float]]) -> None:
+    def show(
+        self,
+        current: tuple[float | None, float | None],
+        targets: tuple[float, float],
+        history: Sequence[tuple[float, float]],
+    ) -> None:
         """``history`` holds (hotend, bed) samples, oldest first."""
         self._current, self._targets, self._history = current, targets, tuple(history)
         self.refresh()
@@ -39,7 +43,9 @@ class TemperatureGraph(Widget):
             out.append("\n")
             series = [h[k] for h in self._history]
             hi = max([target * 1.1, 60.0, *series]) if series else max(target * 1.1, 60.0)
-            rows = block_chart(series, width, per_heater, AMBIENT_C, hi, marker=target if target > 0 else None)
+            rows = block_chart(
+                series, width, per_heater, AMBIENT_C, hi, marker=target if target > 0 else None
+            )
             for r, row in enumerate(rows):
                 out.append(row, style=colour)
                 if k < len(HEATERS) - 1 or r < len(rows) - 1:

@@ -11,7 +11,9 @@ LEVEL_STYLE = {"ok": "green", "near": "yellow", "bad": "bold red"}
 
 
 class TensionBars(Widget):
-    def __init__(self, t_min: float, t_max: float, *, id: str | None = None, classes: str | None = None):
+    def __init__(
+        self, t_min: float, t_max: float, *, id: str | None = None, classes: str | None = None
+    ):
         super().__init__(id=id, classes=classes)
         self.t_min, self.t_max = t_min, t_max
         self._tensions: tuple[float, float, float] | None = None
