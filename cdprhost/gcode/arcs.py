@@ -13,6 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 
 FULL_CIRCLE_MM = 1e-6  # start and end closer than this (XY): full circle with I/J
+#: chords of all arcs resolved at once (one run of a block): bounds memory whatever the
+#: radii; real files stay far below (a Benchy's 3,772 arcs make about 30,000 chords)
+CHORD_BUDGET = 1 << 20
+#: chords of one arc at most (a full circle of radius 130 mm within 0.01 mm needs 255)
+MAX_CHORDS_PER_ARC = 4096
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +94,26 @@ def segment_counts(geo: ArcGeometry, tolerance: float) -> np.ndarray:
         step = np.minimum(2.0 * np.arccos(cos_half), np.pi / 2)
         n = np.ceil(np.abs(geo.sweep) / step)
     return np.maximum(np.nan_to_num(n, nan=1.0), 1).astype(np.int64)
+
+
+def within_budget(counts: np.ndarray, budget: int = CHORD_BUDGET) -> np.ndarray:
+    """``counts`` capped so that no arc has more than ``MAX_CHORDS_PER_ARC`` chords and all
+    together no more than ``budget``: the largest counts are lowered to a common cap.
+
+    Only absurd arcs (radii of metres, or a run of thousands of large circles) are
+    affected; their chords then deviate more than the tolerance, and preflight
+    refuses them anyway for leaving the build volume.
+    """
+    counts = np.minimum(counts, MAX_CHORDS_PER_ARC)
+    if int(counts.sum()) <= budget:
+        return counts
+    ordered = np.sort(counts)
+    n = ordered.size
+    prefix = np.concatenate([[0], np.cumsum(ordered)[:-1]])  # sum of the k smallest
+    cap = (budget - prefix) // (n - np.arange(n))  # the rest capped: largest cap that fits
+    fits = np.concatenate([[True], ordered[:-1] <= cap[1:]])
+    k = int(np.flatnonzero(fits & (cap >= 0))[-1]) if (fits & (cap >= 0)).any() else 0
+    return np.maximum(np.minimum(counts, max(int(cap[k]), 1)), 1)
 
 
 def chord_ends(

@@ -14,12 +14,19 @@ from dataclasses import replace
 
 import numpy as np
 
-from cdprhost.gcode import annotations, commands, segment
+from cdprhost.gcode import annotations, commands, extended, segment
 from cdprhost.gcode.annotations import Annotation, LayerStyle
 from cdprhost.gcode.classify import Classified, Other, Problem, classify
 from cdprhost.gcode.errors import GcodeError
-from cdprhost.gcode.items import LayerChange, MoveChunk, ProgramItem
+from cdprhost.gcode.items import (
+    CHUNK_FIELDS,
+    IgnoredParameters,
+    LayerChange,
+    MoveChunk,
+    ProgramItem,
+)
 from cdprhost.gcode.line_parser import TEXT_COMMANDS, ParsedLine, find_column, parse_line
+from cdprhost.gcode.settings import FirmwareRetraction, Park
 from cdprhost.gcode.source import BLOCK_BYTES, BLOCK_LINES, Block, iter_blocks, source_name
 from cdprhost.gcode.state import ModalState
 from cdprhost.gcode.tokenize import Tokens, tokenize
@@ -33,6 +40,9 @@ def read_program(
     arc_tolerance_mm: float = 0.01,
     chunk_moves: int = 65536,
     home_position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    placement: tuple[float, float] = (0.0, 0.0),
+    retraction: FirmwareRetraction | None = None,
+    park: Park | None = None,
     name: str | None = None,
     block_bytes: int = BLOCK_BYTES,
     block_lines: int = BLOCK_LINES,
@@ -40,6 +50,8 @@ def read_program(
     """Yield `MoveChunk` and command records of ``source`` (a path, or an iterable of lines).
 
     ``home_position``: where G28 (and the start) puts the effector, in the G-code frame.
+    ``placement``: X/Y shift of the whole program (``--center``, ``--offset``).
+    ``retraction``: what G10/G11 do; ``park``: where M600 parks (None: it only waits).
     Chunks end at every command record, after ``chunk_moves`` moves and at block ends.
     """
     if not (arc_tolerance_mm > 0 and math.isfinite(arc_tolerance_mm)):
@@ -48,13 +60,13 @@ def read_program(
         raise ValueError(f"chunk_moves must be at least 1, got {chunk_moves!r}")
     path = source_name(source, name)
     blocks = iter_blocks(source, path, block_bytes=block_bytes, block_lines=block_lines)
-    return _read(
-        blocks,
-        path,
-        ModalState(home=np.asarray(home_position, dtype=float)),
-        arc_tolerance_mm,
-        chunk_moves,
+    state = ModalState(
+        home=np.asarray(home_position, dtype=float),
+        placement=np.asarray(placement, dtype=float),
+        retraction=retraction or FirmwareRetraction(),
+        park=park,
     )
+    return _read(blocks, path, state, arc_tolerance_mm, chunk_moves)
 
 
 def _read(
@@ -97,17 +109,22 @@ class _BlockReader:
         anns = annotations.scan(self.data)
         if st.layer_style is None and anns:  # undecided until annotations or an extruding move
             st.layer_style = annotations.choose_style(anns)
-        tok = tokenize(annotations.strip_comments(self.data))
+        ext, code = extended.extract(annotations.strip_comments(self.data))
+        tok = tokenize(code)
         texts: dict[int, str] = {}
         slow_error: GcodeError | None = None
         if tok.slow.size:
             tok, texts, slow_error = self._slow_lines(tok)
-        cls = classify(tok, self.first, texts)
+        cls = classify(tok, self.first, texts, st.motion_mode)
         stop, error = self._first_error(cls, slow_error)
+        if error is None:
+            st.motion_mode = cls.motion_mode
         events: list[tuple[int, int, object]] = [
             (o.index, 1, o) for o in cls.others if o.index < stop
         ]
+        events += [(o.index, 1, o) for o in ext if o.index < stop]
         events += [(a.index, 0, a) for a in anns if a.index < stop and self._counts(a)]
+        events += [(i, 2, rec) for i, rec in cls.ignored if i < stop]
         events.sort(key=lambda e: (e[0], e[1]))
         rows = cls.rows
         if stop < tok.n_lines:
@@ -248,24 +265,29 @@ class _BlockReader:
             return
         for s in range(a, b, self.chunk_moves):
             e = min(s + self.chunk_moves, b)
-            yield MoveChunk(*(getattr(moves, f)[s:e] for f in segment._FIELDS))
+            yield MoveChunk(*(getattr(moves, f)[s:e] for f in CHUNK_FIELDS))
 
-    def _event(self, index: int, payload) -> Iterator[ProgramItem]:
+    def _event(
+        self, index: int, payload: Other | LayerChange | Annotation | IgnoredParameters
+    ) -> Iterator[ProgramItem]:
         st = self.st
-        if isinstance(payload, Other):
-            yield from self._command(payload)
-        elif isinstance(payload, LayerChange):  # detected from heights
-            st.layer = payload.index
-            yield from self._flush_layer()
-            yield payload
-        elif payload.tag == "Z:":
-            if st.pending_layer is not None:
-                yield replace(st.pending_layer, z=payload.value)
-                st.pending_layer = None
-        else:
-            yield from self._flush_layer()
-            st.layer += 1
-            st.pending_layer = LayerChange(self.first + index, st.layer, None)
+        match payload:
+            case Other():
+                yield from self._command(payload)
+            case LayerChange():  # detected from heights
+                st.layer = payload.index
+                yield from self._flush_layer()
+                yield payload
+            case IgnoredParameters():
+                yield replace(payload, line=self.first + index)
+            case Annotation(tag="Z:", value=value):
+                if st.pending_layer is not None:
+                    yield replace(st.pending_layer, z=value)
+                    st.pending_layer = None
+            case Annotation():
+                yield from self._flush_layer()
+                st.layer += 1
+                st.pending_layer = LayerChange(self.first + index, st.layer, None)
 
     def _command(self, other: Other) -> Iterator[ProgramItem]:
         line = self.first + other.index
@@ -278,10 +300,10 @@ class _BlockReader:
         if other.word in TEXT_COMMANDS and other.text is None:  # e.g. "M117 X5" took the fast path
             text = parse_line(self.text(other.index), line, self.path).text
             other = replace(other, text=text)
-        item = commands.apply(other, line, self.st, fail)
-        if item is not None:
+        produced = commands.apply(other, line, self.st, fail)
+        if produced:
             yield from self._flush_layer()
-            yield item
+            yield from produced
 
     def _flush_layer(self) -> Iterator[ProgramItem]:
         if self.st.pending_layer is not None:

@@ -8,7 +8,7 @@ import numpy as np
 
 from cdprhost.gcode import arcs
 from cdprhost.gcode.annotations import LayerStyle
-from cdprhost.gcode.items import LayerChange, MoveChunk, MoveKind
+from cdprhost.gcode.items import CHUNK_FIELDS, LayerChange, MoveChunk, MoveKind
 from cdprhost.gcode.positions import forward_fill, resolve_axis
 from cdprhost.gcode.state import ModalState
 
@@ -65,6 +65,11 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
     st.pos = track[-1].copy()
     st.off = off
     st.feed = float(feed[-1])
+    if st.speed_factor != 1.0:
+        feed = feed * st.speed_factor
+    if st.flow_factor != 1.0 or st.e_machine != track[0, 3]:
+        track[:, 3] = st.e_machine + (track[:, 3] - track[0, 3]) * st.flow_factor
+    st.e_machine = float(track[-1, 3])
 
     # G92 rows stay in: they do not move, so they are dropped with the other non-moves.
     before, after = track[:-1], track[1:]
@@ -98,12 +103,9 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
         kind=kind[keep],
         rapid=cmd[keep] == 0,
     )
-    for name in _FIELDS:
+    for name in CHUNK_FIELDS:
         getattr(moves, name).flags.writeable = False
     return SegmentResult(moves, layer_starts, error)
-
-
-_FIELDS = ("start", "end", "e_start", "e_end", "feedrate", "line", "layer", "kind", "rapid")
 
 
 def _kind_table() -> np.ndarray:
@@ -171,7 +173,7 @@ def _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance):
     if geo.bad:
         k, reason = geo.bad[0]
         error = (int(line[idx[k]]), reason)
-    n_seg = arcs.segment_counts(geo, tolerance)
+    n_seg = arcs.within_budget(arcs.segment_counts(geo, tolerance))
     counts = np.ones(cmd.size, dtype=np.int64)
     counts[idx] = n_seg
     ends = np.repeat(after, counts, axis=0)

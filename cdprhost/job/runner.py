@@ -267,23 +267,32 @@ class PrintJob:
             if stopping and self._at_rest:
                 self._hold_at_rest()
 
-    def _send_command(self, item: Any) -> None:
+    def _send_command(self, item: g.Command) -> None:
+        match item:
+            case g.FilamentChange():
+                self._filament_change(item)
+                return
+            case g.DisplayMessage(line=line, text=text):
+                self._emit(Notice(f"line {line}: {text}"))
+            case _:
+                pass
         msgs = device_messages(
             item,
             model=self.model,
             home_mm=self.profile.drive.home_mm,
             clock_hz=self.link.identity.clock_hz,
         )
-        if isinstance(item, g.Message):
-            self._emit(Notice(f"line {item.line}: {item.text}"))
         if not msgs:
             return
         numbers = self.link.send(*msgs)
-        if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
-            self._waiting_heat_item = max(numbers)
-            self._set(
-                JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
-            )
+        match item:
+            case g.SetTemperature(wait=True, target_c=target) if target > 0:
+                self._waiting_heat_item = max(numbers)
+                self._set(
+                    JobState.HEATING, f"line {item.line}: waiting for {item.heater} {target:g} C"
+                )
+            case _:
+                pass
         if (
             self._stop_wanted() and self._at_rest
         ):  # mid-motion commands wait for the next rest point
@@ -304,6 +313,18 @@ class PrintJob:
             raise _Stop
         self._take("pause")
         self._set(JobState.PAUSED, "at rest; heaters kept")
+        self._wait_for_resume()
+
+    def _filament_change(self, item: g.FilamentChange) -> None:
+        """M600: the reader's park moves brought the machine to the park point; wait there
+        (paused, heaters kept) until the operator resumes or cancels."""
+        self._set(JobState.PAUSING, f"line {item.line}: M600 filament change")
+        self._drain()
+        self._emit(Notice(f"line {item.line}: M600: change the filament, then resume"))
+        self._set(JobState.PAUSED, f"line {item.line}: M600: change the filament, then resume")
+        self._wait_for_resume()
+
+    def _wait_for_resume(self) -> None:
         while True:
             self._service(force_status=False)
             if self._take("cancel"):

@@ -188,6 +188,8 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
         e_a = np.where(ratio > 0, caps.e_accel / ratio, np.inf)
     v_cart = np.minimum(feed, np.where(kin, np.minimum(caps.max_velocity, e_v), caps.e_velocity))
     accel = np.where(kin, np.minimum(caps.max_accel, e_a), caps.e_accel)
+    if block.accel_limit is not None:
+        accel = np.minimum(accel, block.accel_limit)
     v2_cart = v_cart * v_cart
     v2_cap = v2_cart.copy()
     chord_step = np.full(n, np.inf)

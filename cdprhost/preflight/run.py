@@ -11,11 +11,24 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from cdprhost.gcode.items import LayerChange, MoveChunk, SetTemperature, Unknown
+from cdprhost.gcode.errors import GcodeError
+from cdprhost.gcode.items import (
+    ColdExtrusion,
+    IgnoredParameters,
+    LayerChange,
+    MoveChunk,
+    ObjectDefine,
+    ObjectStart,
+    ProgramItem,
+    SetTemperature,
+    UnknownCommand,
+)
+from cdprhost.gcode.summary import ProgramSummary
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.program import MarkedMoves, ProgramPlanner, read_items
@@ -26,7 +39,13 @@ from cdprhost.preflight.extrusion import (
     temperature_problem,
     volumetric_flow,
 )
-from cdprhost.preflight.report import BoxAccumulator, NoteLog, PreflightReport, ViolationLog
+from cdprhost.preflight.report import (
+    BoxAccumulator,
+    NoteLog,
+    PreflightReport,
+    ViolationLog,
+    WarningLog,
+)
 from cdprhost.preflight.workspace import PathChecker
 from cdprhost.profile.models import MachineProfile
 
@@ -41,9 +60,11 @@ class Preflight:
         *,
         source: str = "<program>",
         limits: ExtrusionLimits | None = None,
+        strict: bool = False,
         **planner_options: Any,
     ):
         self.profile = profile
+        self.strict = strict
         self.model = model or MachineModel.from_profile(profile)
         self.source = source
         self.limits = limits or ExtrusionLimits.from_profile(profile)
@@ -53,48 +74,72 @@ class Preflight:
         self.checker = PathChecker(self.model)
         self.violations = ViolationLog()
         self.notes = NoteLog()
+        self.warnings = WarningLog()
+        self.summary = ProgramSummary()
+        self.objects: dict[str, None] = {}
+        self.cold_allowed = False
         self.motion_box = BoxAccumulator()
         self.print_box = BoxAccumulator()
         self.motion_box.add(self.planner.home[None, :])
         self.hotend_c: float | None = None
-        self.moves = 0
         self.layers = 0
-        self.filament_mm = 0.0
         self.slowed = 0
         self.max_flow = 0.0
 
-    def add(self, item: Any) -> None:
-        if isinstance(item, MoveChunk):
-            self._chunk(item)
-            return
-        if isinstance(item, SetTemperature):
-            problem = temperature_problem(item, self.limits)
-            if problem:
-                self.violations.add(item.line, "temperature", self.planner.position, problem)
-            if item.heater == "hotend":
-                self.hotend_c = item.target_c
-        elif isinstance(item, Unknown):
-            if item.harmless:
-                self.notes.add(item.line, item.word, getattr(item, "text", ""))
-            else:
-                text = f" ({item.text})" if getattr(item, "text", "") else ""
-                self.violations.add(
+    def add(self, item: ProgramItem) -> None:
+        self.summary.add(item)
+        match item:
+            case MoveChunk():
+                self._chunk(item)
+                return
+            case SetTemperature():
+                problem = temperature_problem(item, self.limits)
+                if problem:
+                    self.violations.add(item.line, "temperature", self.planner.position, problem)
+                if item.heater == "hotend":
+                    self.hotend_c = item.target_c
+            case UnknownCommand(harmless=True):
+                self.notes.add(item.line, item.word, item.text)
+            case UnknownCommand():
+                self._unexpected(
                     item.line,
+                    item.word,
                     "unknown_command",
-                    self.planner.position,
-                    f"{item.word} is not supported and may change what is printed{text}",
+                    item.text,
+                    f"{item.word} is not a command this machine knows; "
+                    + ("refused (--strict)" if self.strict else "skipped when printing"),
                 )
-        elif isinstance(item, LayerChange):
-            self.layers = max(self.layers, item.index + 1)
+            case IgnoredParameters():
+                self._unexpected(
+                    item.line,
+                    item.word,
+                    "ignored_parameters",
+                    item.letters,
+                    f"{item.letters} on {item.word} means nothing to this machine: ignored",
+                )
+            case ColdExtrusion(allow=allow, min_temp_c=min_temp):
+                if allow is not None:
+                    self.cold_allowed = allow
+                if min_temp is not None:
+                    self.limits = replace(self.limits, min_extrude_temp_c=min_temp)
+            case ObjectDefine(name=name) | ObjectStart(name=name):
+                self.objects.setdefault(name, None)
+            case LayerChange(index=index):
+                self.layers = max(self.layers, index + 1)
+            case _:
+                pass
         self._planned(self.planner.command(item))
 
+    def _unexpected(self, line: int, word: str, kind: str, text: str, detail: str) -> None:
+        """Unknown commands and ignored parameters: warnings, or errors with ``strict``."""
+        if self.strict:
+            self.violations.add(line, kind, self.planner.position, detail)
+        else:
+            self.warnings.add(line, word, kind, text)
+
     def _chunk(self, chunk: MoveChunk) -> None:
-        n = len(chunk)
-        if not n:
+        if not len(chunk):
             return
-        self.moves += n
-        de = np.asarray(chunk.e_end) - np.asarray(chunk.e_start)
-        self.filament_mm += float(de[de > 0].sum())
         self.layers = max(self.layers, int(np.max(chunk.layer)) + 1)
         block, outputs = self.planner.moves(chunk)
         if len(block):
@@ -104,7 +149,7 @@ class Preflight:
     def _check_block(self, block: MoveBlock) -> None:
         for f in self.checker.check(block):
             self.violations.add(int(block.line[f.move]), f.rule, f.point, f.detail)
-        cold = cold_extrusion(block, self.hotend_c, self.limits)
+        cold = None if self.cold_allowed else cold_extrusion(block, self.hotend_c, self.limits)
         if cold is not None:
             first, count = cold
             self.violations.add(
@@ -121,7 +166,7 @@ class Preflight:
 
     def _planned(self, outputs: list[Any]) -> None:
         for marked in outputs:
-            if not isinstance(marked, MarkedMoves):
+            if not isinstance(marked, MarkedMoves):  # a command: checked when it was added
                 continue
             out = marked.planned
             self.slowed += int(np.count_nonzero(out.module_limited))
@@ -138,6 +183,14 @@ class Preflight:
                 )
 
     def report(self) -> PreflightReport:
+        """The report; raises `GcodeError` (bad input) for a program without moves."""
+        if self.summary.moves == 0:
+            what = (
+                "the file is empty (or only comments)"
+                if self.summary.last_line == 0
+                else f"only commands up to line {self.summary.last_line}"
+            )
+            raise GcodeError(self.source, 0, 0, f"no moves, nothing to print: {what}")
         self._planned(self.planner.finish())
         origin = self.planner.origin
         return PreflightReport(
@@ -148,9 +201,14 @@ class Preflight:
             violations_total=self.violations.total,
             violations_by_rule=dict(self.violations.counts),
             notes=self.notes.ordered(),
-            moves=self.moves,
+            warnings=self.warnings.ordered(),
+            warnings_total=self.warnings.total,
+            strict=self.strict,
+            objects=list(self.objects),
+            moves=self.summary.moves,
             layers=self.layers,
-            filament_mm=round(self.filament_mm, 4),
+            filament_mm=round(self.summary.filament_mm, 4),
+            filament_fed_mm=round(self.summary.filament_fed_mm, 4),
             estimated_time_s=round(self.planner.time, 3),
             moves_slowed_by_modules=self.slowed,
             moves_sampled_densely=self.checker.sampled_moves,
@@ -163,7 +221,7 @@ class Preflight:
 
 
 def preflight_items(
-    items: Iterable[Any],
+    items: Iterable[ProgramItem],
     profile: MachineProfile,
     model: MachineModel | None = None,
     *,
