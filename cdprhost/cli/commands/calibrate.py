@@ -243,7 +243,7 @@ class PromptTakes:
 
 def _mocap_for(args: argparse.Namespace, session: Path):
     from cdprhost.calibration.session import load_session_config
-    from firmware_protocol.device.virtual_mocap import mocap_config
+    from cdprhost.sim.virtual_mocap import mocap_config
 
     if (session / "session.toml").is_file():
         return None  # resuming: the folder's own configuration
@@ -261,8 +261,10 @@ def run_wizard(args: argparse.Namespace) -> int:
     import datetime as dt
 
     from cdprhost.calibration import wizard
-    from cdprhost.link import open_embedded, open_link
-    from firmware_protocol.device.virtual_mocap import make_observer
+    from cdprhost.link import open_link
+    from cdprhost.machine import Machine
+    from cdprhost.sim.embedded import open_embedded
+    from cdprhost.sim.virtual_mocap import make_observer
 
     profile, model = load_model(args.profile)
     if args.port and (args.sim_truth or args.sim_mocap_dir):
@@ -290,7 +292,7 @@ def run_wizard(args: argparse.Namespace) -> int:
         if observer is not None:
             observer.attach_record(link.device.record)
     try:
-        device = wizard.LinkDevice(link, profile, model, feed_mm_s=args.feed, settle_s=args.settle)
+        device = Machine(link, profile, model, feed_mm_s=args.feed, settle_s=args.settle)
         options = wizard.WizardOptions(
             n_poses=args.poses,
             n_check=args.check_poses,
