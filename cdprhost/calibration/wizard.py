@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,6 +30,7 @@ from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SessionConfig
 from cdprhost.calibration.takes import MocapConfig, TakeMeasurement, TakeRejected, measure_effector
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import atomic_open, write_text_atomic
+from cdprhost.jsonsafe import dumps
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import MachineProfile, save_profile
 
@@ -330,9 +330,7 @@ class CalibrationWizard:
     def _identify(self) -> None:
         self.log("identifying the 12 parameters")
         result = identify_session(self.dir, self.model, noise_floor_mm=self.options.noise_floor_mm)
-        write_text_atomic(
-            self.dir / REPORT_FILE, json.dumps(_json_safe(result.to_json()), indent=2) + "\n"
-        )
+        write_text_atomic(self.dir / REPORT_FILE, dumps(result.to_json(), indent=2) + "\n")
         self.identification = result
         if result.ok:
             self.calibrated = calibrated_profile(
@@ -351,16 +349,6 @@ class CalibrationWizard:
             self.dir / PROFILE_FILE if prof else None,
             self.dir,
         )
-
-
-def _json_safe(obj):
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
 
 
 # ------------------------------------------------------------------ take sources

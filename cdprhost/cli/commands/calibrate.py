@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -13,6 +11,7 @@ from cdprhost.calibration.identification import calibrated_profile, identify_ses
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
+from cdprhost.jsonsafe import dumps
 from cdprhost.profile import save_profile
 
 
@@ -157,20 +156,9 @@ def _non_negative(text: str) -> int:
     return n
 
 
-def _finite(obj):
-    """JSON has no NaN/inf: write null instead."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def write_json(path: str | None, data: dict) -> None:
     if path:
-        write_text_atomic(path, json.dumps(_finite(data), indent=2, allow_nan=False) + "\n")
+        write_text_atomic(path, dumps(data, indent=2) + "\n")
 
 
 def run_plan(args: argparse.Namespace) -> int:
