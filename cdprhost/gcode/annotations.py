@@ -14,6 +14,7 @@ import numpy as np
 
 _ANNOTATION = re.compile(rb";[ \t]*(LAYER_CHANGE|LAYER:|Z:)([^\n]*)")
 _COMMENT = re.compile(rb";[^\n]*")
+_HASH_LINE = re.compile(rb"(?m)^[ \t]*#[^\n]*")  # Klipper test files and configs
 
 
 class LayerStyle(Enum):
@@ -35,7 +36,10 @@ class Annotation:
 
 
 def strip_comments(block: bytes) -> bytes:
-    """Remove ``;`` comments (newlines stay, so line numbers do not move)."""
+    """Remove ``;`` comments and lines starting with ``#`` (newlines stay, so line
+    numbers do not move)."""
+    if b"#" in block:
+        block = _HASH_LINE.sub(b"", block)
     return _COMMENT.sub(b"", block) if b";" in block else block
 
 

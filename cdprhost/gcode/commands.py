@@ -54,6 +54,7 @@ MODAL = frozenset(
         "G10",
         "G11",
         "M600",
+        "M200",
     }
 )
 
@@ -169,6 +170,12 @@ HARMLESS_EXTENDED = frozenset(
     }
 )
 
+# Machine-specific settings: ignored inside the blocks --retarget replaces (``mute``).
+MUTABLE = frozenset(
+    {"M220", "M221", "G10", "G11", "M600", "M207", "M208", "SET_RETRACTION", "M201", "M203"}
+    | {"M204", "M205", "SET_VELOCITY_LIMIT", "M302"}
+)
+
 Fail = Callable[..., NoReturn]
 
 
@@ -179,11 +186,7 @@ def is_modal(other: Other) -> bool:
 
 def harmless(word: str, params: dict[str, float]) -> bool:
     """Whether an unknown command can be skipped without changing the print."""
-    if word in HARMLESS or word.startswith(_HARMLESS_PREFIX):
-        return True
-    if word == "M200":  # volumetric extrusion: harmless only when switched off
-        return params.get("D", math.nan) == 0.0
-    return False
+    return word in HARMLESS or word.startswith(_HARMLESS_PREFIX)
 
 
 def apply(other: Other, line: int, st: ModalState, fail: Fail) -> list[ProgramItem]:
@@ -406,6 +409,19 @@ def _filament_change(line, p, st, fail, other):  # M600 [X Y] [Z lift] [E retrac
     )
 
 
+def _volumetric(line, p, st, fail, other):
+    """M200 D<filament diameter>: E in mm^3 from here on (D0 or S0: off); T0 only."""
+    _check_tool(p, fail)
+    d = _number(p, "D", fail)
+    s = _number(p, "S", fail)
+    if s == 0 or d == 0:
+        st.volumetric_scale = 1.0
+    elif d is not None:
+        st.volumetric_scale = 1.0 / (math.pi * (d * st.scale) ** 2 / 4.0)
+    elif s is not None:  # S1: on with the diameter given before (the machine's filament)
+        st.volumetric_scale = 1.0 / (math.pi * st.filament_diameter_mm**2 / 4.0)
+
+
 def _m486(line, p, st, fail, other):
     return objects.m486(other.text or "", line, st, fail)
 
@@ -458,6 +474,7 @@ _HANDLERS: dict[str, Callable] = {
     "M302": _cold_extrusion,
     "M600": _filament_change,
     "M486": _m486,
+    "M200": _volumetric,
 }
 
 

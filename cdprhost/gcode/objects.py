@@ -12,6 +12,8 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Iterator
 
+import numpy as np
+
 from cdprhost.gcode.items import (
     CancelObject,
     HomeCommand,
@@ -113,18 +115,21 @@ def _center(text: str | None, st: ModalState) -> tuple[float, float] | None:
 
 
 def exclude_objects(
-    items: Iterable[ProgramItem], cancelled: Iterable[str] = ()
+    items: Iterable[ProgramItem],
+    cancelled: Iterable[str] = (),
+    home: tuple[float, float, float] | None = None,
 ) -> Iterator[ProgramItem]:
     """``items`` without the moves of cancelled objects.
 
     ``cancelled``: object names or labels (case-insensitive); the file's own
     `CancelObject` records add to them. Moves outside every object are kept.
+    ``home``: where the program starts and G28 goes (G-code frame), if known.
     """
     wanted = {c.upper() for c in cancelled}
     labels: dict[str, str] = {}
     current: str | None = None
     skipping = False
-    gap = Gap()
+    gap = Gap(position=None if home is None else np.asarray(home, dtype=float))
 
     def is_cancelled(name: str) -> bool:
         return name.upper() in wanted or labels.get(name, "").upper() in wanted
@@ -151,7 +156,7 @@ def exclude_objects(
                     wanted.add(name.upper())
                     skipping = skipping or name == current
             case HomeCommand():
-                gap.moved_to(None)
+                gap.moved_to(None if home is None else np.asarray(home, dtype=float))
         yield item
 
 

@@ -43,6 +43,9 @@ def read_program(
     placement: tuple[float, float] = (0.0, 0.0),
     retraction: FirmwareRetraction | None = None,
     park: Park | None = None,
+    filament_diameter_mm: float = 1.75,
+    mute: tuple[tuple[int, int], ...] = (),
+    start_position: tuple[float, float, float] | None = None,
     name: str | None = None,
     block_bytes: int = BLOCK_BYTES,
     block_lines: int = BLOCK_LINES,
@@ -52,6 +55,11 @@ def read_program(
     ``home_position``: where G28 (and the start) puts the effector, in the G-code frame.
     ``placement``: X/Y shift of the whole program (``--center``, ``--offset``).
     ``retraction``: what G10/G11 do; ``park``: where M600 parks (None: it only waits).
+    ``filament_diameter_mm``: converts volumetric E (mm^3: UltiGCode files, ``M200 S1``).
+    ``mute``: line ranges (first, last) whose machine-specific commands (factors, limits,
+    firmware retraction, filament change) must not change the state: the blocks
+    ``--retarget`` replaces (modes, offsets and positions still count).
+    ``start_position``: where the effector is when the program starts (default: home).
     Chunks end at every command record, after ``chunk_moves`` moves and at block ends.
     """
     if not (arc_tolerance_mm > 0 and math.isfinite(arc_tolerance_mm)):
@@ -65,7 +73,11 @@ def read_program(
         placement=np.asarray(placement, dtype=float),
         retraction=retraction or FirmwareRetraction(),
         park=park,
+        filament_diameter_mm=filament_diameter_mm,
+        mute=tuple(mute),
     )
+    if start_position is not None:
+        state.pos[:3] = start_position
     return _read(blocks, path, state, arc_tolerance_mm, chunk_moves)
 
 
@@ -73,6 +85,8 @@ def _read(
     blocks: Iterator[Block], path: str, st: ModalState, tol: float, chunk_moves: int
 ) -> Iterator[ProgramItem]:
     for block in blocks:
+        if block.first_line == 1 and _ULTIGCODE in block.data[:4096]:  # E in mm^3
+            st.volumetric_scale = 1.0 / (np.pi * st.filament_diameter_mm**2 / 4.0)
         yield from _BlockReader(block, path, st, tol, chunk_moves).run()
     if st.pending_layer is not None:
         yield st.pending_layer
@@ -300,6 +314,8 @@ class _BlockReader:
         if other.word in TEXT_COMMANDS and other.text is None:  # e.g. "M117 X5" took the fast path
             text = parse_line(self.text(other.index), line, self.path).text
             other = replace(other, text=text)
+        if self.st.mute and other.word in commands.MUTABLE and self.st.muted(line):
+            return
         produced = commands.apply(other, line, self.st, fail)
         if produced:
             yield from self._flush_layer()
@@ -312,3 +328,4 @@ class _BlockReader:
 
 
 _LAYER_TAGS = ("LAYER_CHANGE", "LAYER:")
+_ULTIGCODE = b";FLAVOR:UltiGCode"

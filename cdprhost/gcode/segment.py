@@ -67,8 +67,9 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
     st.feed = float(feed[-1])
     if st.speed_factor != 1.0:
         feed = feed * st.speed_factor
-    if st.flow_factor != 1.0 or st.e_machine != track[0, 3]:
-        track[:, 3] = st.e_machine + (track[:, 3] - track[0, 3]) * st.flow_factor
+    factor = st.e_factor
+    if factor != 1.0 or st.e_machine != track[0, 3]:
+        track[:, 3] = st.e_machine + (track[:, 3] - track[0, 3]) * factor
     st.e_machine = float(track[-1, 3])
 
     # G92 rows stay in: they do not move, so they are dropped with the other non-moves.

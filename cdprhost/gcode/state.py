@@ -39,6 +39,8 @@ class ModalState:
     speed_factor: float = 1.0  # M220
     speed_factor_saved: float = 1.0  # M220 B / R
     flow_factor: float = 1.0  # M221
+    filament_diameter_mm: float = 1.75
+    volumetric_scale: float = 1.0  # E in mm^3 (M200 D, UltiGCode): 1 / filament area
     retracted: bool = False  # after G10, until G11
     motion_mode: int | None = None  # last G0-G3, for lines that continue it
     plane: int = 17
@@ -47,6 +49,7 @@ class ModalState:
     z_top: float = -np.inf  # highest extruding Z so far (height-detected layers)
     next_n: int | None = None
     pending_layer: LayerChange | None = None
+    mute: tuple[tuple[int, int], ...] = ()  # line ranges whose machine settings do not count
     objects: dict[int, str] = field(default_factory=dict)  # M486 id -> name
     object_id: int | None = None  # M486 S: the object being printed
 
@@ -59,6 +62,14 @@ class ModalState:
     def home_offsets(self) -> np.ndarray:
         """X, Y, Z, E offsets at the start and after G28: the placement shift."""
         return np.array([self.placement[0], self.placement[1], 0.0, 0.0])
+
+    def muted(self, line: int) -> bool:
+        return any(a <= line <= b for a, b in self.mute)
+
+    @property
+    def e_factor(self) -> float:
+        """Machine E per programmed E: the flow factor, and the volumetric conversion."""
+        return self.flow_factor * self.volumetric_scale
 
     @property
     def abs_xyz(self) -> bool:

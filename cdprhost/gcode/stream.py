@@ -72,6 +72,7 @@ class Gap:
     position: np.ndarray | None = None  # where the kept moves have left the machine
     pending: bool = False  # moves were dropped since the last kept one
     travel_feedrate: float = TRAVEL_FEEDRATE_MM_S
+    last_e: float = 0.0  # machine E after the last kept move
 
     def drop(self, rows: MoveChunk) -> None:
         if len(rows):
@@ -104,6 +105,7 @@ class Gap:
         if travels.any():
             self.travel_feedrate = float(rows.feedrate[travels].max())
         self.position = rows.end[-1].copy()
+        self.last_e = float(rows.e_end[-1])
         out.append(rows)
         return out
 

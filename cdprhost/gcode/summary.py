@@ -22,10 +22,11 @@ from cdprhost.gcode.items import (
 class ProgramSummary:
     """Accumulates over items (``add`` or the pass-through ``observe``).
 
-    ``filament_mm``: filament of the extruding moves as the file programs it (what
-    slicers report as "filament used"); ``filament_fed_mm``: the same after the flow
-    factor (M221), what the extruder really feeds; ``retracted_mm``: total pulled
-    back by retractions and wipes. ``layer_start_lines[i]`` is the line where layer
+    ``filament_mm``: filament of the extruding moves from the first layer on, as the
+    file programs it (before M221's flow factor): the figure slicers report as
+    "filament used" (their start-up purge lines are not counted); ``filament_fed_mm``:
+    what the extruder really feeds in extruding moves, purge lines included, after the
+    flow factor; ``retracted_mm``: total pulled back by retractions and wipes. ``layer_start_lines[i]`` is the line where layer
     ``i`` starts.
     """
 
@@ -83,10 +84,10 @@ class ProgramSummary:
         self.last_line = max(self.last_line, int(c.line[-1]))
         de = c.de
         extruding = c.kind == MoveKind.EXTRUDE
-        fed = float(de[extruding].sum())
-        self.filament_fed_mm += fed
+        self.filament_fed_mm += float(de[extruding].sum())
         if self.flow_factor > 0:
-            self.filament_mm += fed / self.flow_factor
+            printed = extruding & (c.layer >= 0)
+            self.filament_mm += float(de[printed].sum()) / self.flow_factor
         self.retracted_mm -= float(de[de < 0].sum())
         length = c.length
         self.extrude_path_mm += float(length[extruding].sum())

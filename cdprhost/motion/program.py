@@ -194,6 +194,7 @@ def reader_settings(profile: MachineProfile, model: MachineModel) -> dict[str, A
     ex, gc = profile.extruder, profile.gcode
     return {
         "home_position": (float(home[0]), float(home[1]), float(home[2])),
+        "filament_diameter_mm": ex.filament_diameter_mm,
         "retraction": FirmwareRetraction(
             ex.retract_mm, ex.retract_speed_mm_s, ex.unretract_extra_mm, ex.unretract_speed_mm_s
         ),

@@ -80,8 +80,8 @@ class RetargetReport(BaseModel):
     end_lines: tuple[int, int] | None = Field(description="replaced end block (first, last)")
     found_by: str = Field(description="slicer markers or first/last extruding move")
     replaced: list[str] = Field(description="commands of the replaced blocks, counted")
-    hotend_c: float | None
-    bed_c: float | None
+    hotend_c: float = Field(description="{hotend_c} of the profile's start G-code")
+    bed_c: float = Field(description="{bed_c} of the profile's start G-code")
 
 
 class Box(BaseModel):

@@ -9,6 +9,7 @@ propagate unchanged.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable
 from dataclasses import replace
@@ -28,10 +29,13 @@ from cdprhost.gcode.items import (
     SetTemperature,
     UnknownCommand,
 )
+from cdprhost.gcode.placement import PartExtent
+from cdprhost.gcode.slicer_header import read_slicer_figures
 from cdprhost.gcode.summary import ProgramSummary
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.moves import MoveBlock
-from cdprhost.motion.program import MarkedMoves, ProgramPlanner, read_items
+from cdprhost.motion.prepared import Prepared, Setup, prepare
+from cdprhost.motion.program import MarkedMoves, ProgramPlanner
 from cdprhost.preflight.extrusion import (
     ExtrusionLimits,
     cold_detail,
@@ -39,10 +43,13 @@ from cdprhost.preflight.extrusion import (
     temperature_problem,
     volumetric_flow,
 )
+from cdprhost.preflight.placement import placement_report
 from cdprhost.preflight.report import (
     BoxAccumulator,
     NoteLog,
     PreflightReport,
+    RetargetReport,
+    SlicerFigures,
     ViolationLog,
     WarningLog,
 )
@@ -77,6 +84,7 @@ class Preflight:
         self.warnings = WarningLog()
         self.summary = ProgramSummary()
         self.objects: dict[str, None] = {}
+        self.extent = PartExtent()
         self.cold_allowed = False
         self.motion_box = BoxAccumulator()
         self.print_box = BoxAccumulator()
@@ -141,6 +149,7 @@ class Preflight:
         if not len(chunk):
             return
         self.layers = max(self.layers, int(np.max(chunk.layer)) + 1)
+        self.extent.add(chunk)
         block, outputs = self.planner.moves(chunk)
         if len(block):
             self._check_block(block)
@@ -234,14 +243,65 @@ def preflight_items(
     return pf.report()
 
 
+WORKSPACE_RULES = ("build_volume", "tension", "slider_travel")
+
+
 def preflight(
     path: str | os.PathLike[str],
     profile: MachineProfile,
     model: MachineModel | None = None,
+    *,
+    setup: Setup | None = None,
     **options: Any,
 ) -> PreflightReport:
-    """Read and check a G-code file; raises `GcodeError` (exit 2) on malformed input."""
-    model = model or MachineModel.from_profile(profile)
-    return preflight_items(
-        read_items(path, profile, model), profile, model, source=os.fspath(path), **options
+    """Read and check a G-code file (placed, retargeted, objects cancelled as ``setup``
+    says); raises `GcodeError` (exit 2) on malformed input."""
+    return preflight_prepared(prepare(path, profile, model, setup), **options)
+
+
+def preflight_prepared(
+    prepared: Prepared, items: Iterable[ProgramItem] | None = None, **options: Any
+) -> PreflightReport:
+    """Check ``prepared`` (``items``: instead of ``prepared.items()``, e.g. resumed from a
+    layer); the report adds the placement, what --retarget replaced and the slicer's figures."""
+    pf = Preflight(prepared.profile, prepared.model, source=prepared.path, **options)
+    for item in prepared.items() if items is None else items:
+        pf.add(item)
+    report = pf.report()
+    advise = any(report.violations_by_rule.get(rule) for rule in WORKSPACE_RULES)
+    report.placement = placement_report(
+        prepared.model, pf.extent, pf.planner.origin, prepared.placement, advise=advise
+    )
+    if prepared.plan is not None:
+        plan = prepared.plan
+        report.retarget = RetargetReport(
+            start_lines=plan.start,
+            end_lines=None
+            if plan.end is None
+            else (plan.end[0], max(plan.end[0], plan.file_lines)),
+            found_by=plan.found_by,
+            replaced=list(plan.replaced),
+            hotend_c=plan.hotend_c
+            if plan.hotend_c is not None
+            else prepared.profile.gcode.hotend_c,
+            bed_c=plan.bed_c if plan.bed_c is not None else prepared.profile.gcode.bed_c,
+        )
+    report.cancelled_objects = list(prepared.setup.cancel_objects)
+    report.slicer = slicer_figures(prepared.path, prepared.profile)
+    return report
+
+
+def slicer_figures(path: str, profile: MachineProfile) -> SlicerFigures | None:
+    """The slicer's own figures from the file's comments; a volume (UltiGCode) in mm of
+    this machine's filament."""
+    fig = read_slicer_figures(path)
+    if fig is None:
+        return None
+    filament = fig.filament_mm
+    if filament is None and fig.filament_mm3 is not None:
+        filament = fig.filament_mm3 / (math.pi * profile.extruder.filament_diameter_mm**2 / 4.0)
+    return SlicerFigures(
+        slicer=fig.slicer,
+        filament_mm=None if filament is None else round(filament, 3),
+        time_s=fig.time_s,
     )

@@ -13,6 +13,13 @@ import sys
 import threading
 from pathlib import Path
 
+from cdprhost.cli.options import (
+    add_placement_arguments,
+    finite_positive,
+    non_empty,
+    positive_int,
+    setup_from_args,
+)
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
@@ -29,20 +36,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_profile_argument(p)
     p.add_argument(
         "--port",
+        type=non_empty,
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
-    p.add_argument("--baud", type=int, default=None, help="baud rate (default: the profile's)")
+    p.add_argument(
+        "--baud", type=positive_int, default=None, help="baud rate (default: the profile's)"
+    )
     p.add_argument(
         "--speedup",
-        type=float,
+        type=finite_positive,
         default=None,
         help="embedded device: run at most X times real time (default: as fast as the host can)",
     )
     p.add_argument("--json", metavar="R", help="write the job summary as JSON to R")
     p.add_argument(
         "--resume-from-layer",
-        type=int,
+        type=positive_int,
         metavar="N",
         help="restart the print at layer N (1-based, as shown)",
     )
@@ -57,6 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="embedded device: inject faults (same SPEC as sim-device --faults)",
     )
+    add_placement_arguments(p, strict=False)
     p.set_defaults(func=run)
 
 
@@ -95,7 +106,15 @@ def run(args: argparse.Namespace) -> int:
         ):
             print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
             return 1
-    options = PrintOptions(resume_from_layer=layer, log_path=args.log or log_path_for(gcode))
+    if args.sim_faults is not None:
+        if args.port:
+            raise InputError("--sim-faults: only for the embedded device (without --port)")
+        _check_faults(args.sim_faults)
+    options = PrintOptions(
+        setup=setup_from_args(args),
+        resume_from_layer=layer,
+        log_path=args.log or log_path_for(gcode),
+    )
     events: queue.Queue = queue.Queue()
     job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
     outcome: dict = {}
@@ -137,6 +156,23 @@ def run(args: argparse.Namespace) -> int:
     if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
         return 2
     return result.exit_code
+
+
+def _check_faults(spec: str) -> None:
+    """A bad ``--sim-faults`` SPEC is bad input (exit 2), named, before anything starts."""
+    import dataclasses
+    import math
+
+    from firmware_protocol.device.faults import FaultSpec, FaultSpecError
+
+    try:
+        parsed = FaultSpec.parse(spec)
+    except FaultSpecError as exc:
+        raise InputError(f"--sim-faults {spec!r}: {exc}") from None
+    for f in dataclasses.fields(parsed):
+        value = getattr(parsed, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InputError(f"--sim-faults {spec!r}: {f.name} must be a finite number")
 
 
 def _ask_after_pause(job) -> None:
