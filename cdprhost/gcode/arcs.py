@@ -14,10 +14,13 @@ import numpy as np
 
 FULL_CIRCLE_MM = 1e-6  # start and end closer than this (XY): full circle with I/J
 #: chords of all arcs resolved at once (one run of a block): bounds memory whatever the
-#: radii; real files stay far below (a Benchy's 3,772 arcs make about 30,000 chords)
-CHORD_BUDGET = 1 << 20
-#: chords of one arc at most (a full circle of radius 130 mm within 0.01 mm needs 255)
-MAX_CHORDS_PER_ARC = 4096
+#: radii; real files stay far below (a boat's 3,837 arcs make about 26,000 chords)
+CHORD_BUDGET = 1 << 18
+#: chords of one arc at most (a full circle of radius 530 mm within 0.01 mm needs 497)
+MAX_CHORDS_PER_ARC = 512
+#: arcs longer than this (mm) fit no printer: at most ``LONG_ARC_CHORDS`` chords
+LONG_ARC_MM = 2000.0
+LONG_ARC_CHORDS = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,7 +99,14 @@ def segment_counts(geo: ArcGeometry, tolerance: float) -> np.ndarray:
     return np.maximum(np.nan_to_num(n, nan=1.0), 1).astype(np.int64)
 
 
-def within_budget(counts: np.ndarray, budget: int = CHORD_BUDGET) -> np.ndarray:
+def arc_lengths(geo: ArcGeometry) -> np.ndarray:
+    """Length of each arc in the XY plane (mm)."""
+    return np.abs(geo.sweep) * np.maximum(geo.r0, geo.r1)
+
+
+def within_budget(
+    counts: np.ndarray, budget: int = CHORD_BUDGET, lengths: np.ndarray | None = None
+) -> np.ndarray:
     """``counts`` capped so that no arc has more than ``MAX_CHORDS_PER_ARC`` chords and all
     together no more than ``budget``: the largest counts are lowered to a common cap.
 
@@ -105,6 +115,8 @@ def within_budget(counts: np.ndarray, budget: int = CHORD_BUDGET) -> np.ndarray:
     refuses them anyway for leaving the build volume.
     """
     counts = np.minimum(counts, MAX_CHORDS_PER_ARC)
+    if lengths is not None:
+        counts = np.where(lengths > LONG_ARC_MM, np.minimum(counts, LONG_ARC_CHORDS), counts)
     if int(counts.sum()) <= budget:
         return counts
     ordered = np.sort(counts)

@@ -65,8 +65,9 @@ class PartExtent:
     def centre_xy(self) -> tuple[float, float]:
         return (float(self.lo[0] + self.hi[0]) / 2, float(self.lo[1] + self.hi[1]) / 2)
 
-    def outline(self, spacing_mm: float = 1.0) -> np.ndarray:
-        """Points (m, 2) along the outline polygon, at most ``spacing_mm`` apart."""
+    def outline(self, spacing_mm: float = 1.0, max_points: int = 4096) -> np.ndarray:
+        """Points (m, 2) along the outline polygon, at most ``spacing_mm`` apart (or
+        ``max_points`` in all, for a part too large for any machine)."""
         if self.empty:
             return np.zeros((0, 2))
         # vertices: intersections of consecutive support lines u_k . p = h_k
@@ -78,6 +79,7 @@ class PartExtent:
         verts = np.column_stack([vx, vy])
         nxt = np.roll(verts, -1, axis=0)
         lengths = np.linalg.norm(nxt - verts, axis=1)
+        spacing_mm = max(spacing_mm, float(lengths.sum()) / max_points)
         counts = np.maximum(np.ceil(lengths / spacing_mm).astype(int), 1)
         owner = np.repeat(np.arange(len(verts)), counts)
         t = (np.arange(owner.size) - np.repeat(np.cumsum(counts) - counts, counts)) / counts[owner]

@@ -174,7 +174,7 @@ def _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance):
     if geo.bad:
         k, reason = geo.bad[0]
         error = (int(line[idx[k]]), reason)
-    n_seg = arcs.within_budget(arcs.segment_counts(geo, tolerance))
+    n_seg = arcs.within_budget(arcs.segment_counts(geo, tolerance), lengths=arcs.arc_lengths(geo))
     counts = np.ones(cmd.size, dtype=np.int64)
     counts[idx] = n_seg
     ends = np.repeat(after, counts, axis=0)

@@ -79,6 +79,9 @@ def fit_offset(
     the one bringing the outline's centre nearest to ``target``; None if none fits."""
     if not region.mask.any() or not len(outline_machine):
         return None
+    span = outline_machine.max(axis=0) - outline_machine.min(axis=0)
+    if not np.isfinite(span).all() or span[0] > np.ptp(region.xs) or span[1] > np.ptp(region.ys):
+        return None  # larger than the build volume: nothing to shift
     x0, y0 = region.xs[0], region.ys[0]
     nx, ny = region.mask.shape
     ix = np.rint((outline_machine[:, 0] - x0) / GRID_MM).astype(np.int64)

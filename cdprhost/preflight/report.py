@@ -146,6 +146,10 @@ class ViolationLog:
                 Violation(line=int(line), rule=rule, point=point3(point), detail=detail)
             )
 
+    def count(self, rule: str, n: int) -> None:
+        """``n`` more violations of ``rule`` beyond the stored ones (counted only)."""
+        self.counts[rule] += n
+
     @property
     def total(self) -> int:
         return sum(self.counts.values())

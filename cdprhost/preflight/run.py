@@ -158,6 +158,9 @@ class Preflight:
     def _check_block(self, block: MoveBlock) -> None:
         for f in self.checker.check(block):
             self.violations.add(int(block.line[f.move]), f.rule, f.point, f.detail)
+        for rule, n in self.checker.counted.items():
+            self.violations.count(rule, n)
+        self.checker.counted.clear()
         cold = None if self.cold_allowed else cold_extrusion(block, self.hotend_c, self.limits)
         if cold is not None:
             first, count = cold
