@@ -224,10 +224,14 @@ class PrintJob:
 
     @staticmethod
     def _state_reason(report) -> str:
+        from cdprhost.preflight.render import advice
+
         v = report.violations[0]
-        return (
-            f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}"
-        )
+        lines = [
+            f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
+            *(line.strip() for line in advice(report)),
+        ]
+        return "\n".join(lines)
 
     # ---------------------------------------------------------- streaming
     def _stream(self, result: PrintResult) -> None:
@@ -455,7 +459,7 @@ class PrintJob:
             info.steps if info else None,
             st.hotend_target_c if st else 0.0,
             st.bed_target_c if st else 0.0,
-            max(result.last_layer or 1, 1),
+            max(result.last_layer or 1, (self.options.resume_from_layer or 0) + 1),
         )
         try:
             result.resume_file = str(

@@ -89,6 +89,11 @@ def render_text(report: PreflightReport, *, max_rows: int = 20) -> str:
     return "\n".join(lines)
 
 
+def advice(report: PreflightReport) -> list[str]:
+    """Where the part is and how to move it (placement lines of the text report)."""
+    return _placement(report)
+
+
 def _placement(report: PreflightReport) -> list[str]:
     p = report.placement
     if p is None:

@@ -198,7 +198,7 @@ class Preflight:
         """The report; raises `GcodeError` (bad input) for a program without moves."""
         if self.summary.moves == 0:
             what = (
-                "the file is empty (or only comments)"
+                "the file has no commands (it is empty, or only comments and settings)"
                 if self.summary.last_line == 0
                 else f"only commands up to line {self.summary.last_line}"
             )

@@ -200,7 +200,7 @@ def _report(result, args: argparse.Namespace) -> None:
             print(f"  line {v['line']}: {v['rule']}: {v['detail']}")
         if len(result.violations) > 10:
             print(f"  ... {len(result.violations) - 10} more (see --json)")
-    else:
+    elif result.segments or result.status != "failed":
         print(
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
             f"(estimated {result.estimated_time_s:.1f} s)"
@@ -212,7 +212,8 @@ def _report(result, args: argparse.Namespace) -> None:
         print(f"reason: {result.reason}")
     if result.resume_file:
         print(
-            f"resume point saved: {result.resume_file} (restart with --resume-from-layer {max(result.last_layer or 1, 1)})"
+            f"resume point saved: {result.resume_file} (restart with --resume-from-layer "
+            f"{max(result.last_layer or 1, args.resume_from_layer or 1)})"
         )
     if args.json:
         write_text_atomic(args.json, json.dumps(result.to_json(), indent=1) + "\n")
