@@ -68,6 +68,8 @@ def read_slicer_figures(path: str | os.PathLike[str]) -> SlicerFigures | None:
         filament = cura_m * 1000.0
     volume = _first(text, _ULTI_MATERIAL)
     time_s = _time(text)
+    filament = filament or None  # "0m": a header the slicer's front end never filled in
+    volume = volume or None
     if filament is None and volume is None and time_s is None:
         return None
     return SlicerFigures(slicer or "unknown", filament, volume, time_s)

@@ -140,3 +140,46 @@ def placement_report(
     if shift is not None:
         report.fit_offset = (round(offset[0] + shift[0], 3), round(offset[1] + shift[1], 3))
     return report
+
+
+@dataclass(frozen=True)
+class PrintableBed:
+    """What a slicer may use: a polygon (G-code frame, counter-clockwise) that is allowed
+    at every height from the bed up to ``height_mm`` (G-code frame)."""
+
+    polygon: tuple[tuple[float, float], ...]
+    height_mm: float
+
+
+def printable_bed(model: MachineModel, origin: np.ndarray, margin_mm: float = 1.0) -> PrintableBed:
+    """The build triangle (shrunk about its centre if the bed itself needs it, and by
+    ``margin_mm``) and the height up to which all of it passes every workspace rule."""
+    lim = model.limits
+    inradius = lim.build_side / (2.0 * np.sqrt(3.0)) - margin_mm
+    angles = np.deg2rad([90.0, 210.0, 330.0])  # vertex on +y, counter-clockwise
+    unit = np.column_stack([np.cos(angles), np.sin(angles)]) * 2.0  # circumradius = 2 r
+
+    def samples(scale: float) -> np.ndarray:
+        verts = unit * inradius * scale
+        w = np.linspace(0.0, 1.0, 41)
+        a, b = np.meshgrid(w, w, indexing="ij")
+        keep = a + b <= 1.0
+        a, b = a[keep], b[keep]
+        return verts[0] + a[:, None] * (verts[1] - verts[0]) + b[:, None] * (verts[2] - verts[0])
+
+    def ok_at(xy: np.ndarray, z: float) -> bool:
+        pts = np.column_stack([xy, np.full(len(xy), z)])
+        return bool(model.check(pts).ok.all())
+
+    scale = 1.0
+    while scale > 0.1 and not ok_at(samples(scale), lim.z_min + 0.2):
+        scale -= 0.02
+    xy = samples(scale)
+    heights = np.arange(lim.z_min, lim.z_max + 1e-9, 1.0)
+    pts = np.column_stack([np.tile(xy, (len(heights), 1)), np.repeat(heights, len(xy))])
+    good = model.check(pts).ok.reshape(len(heights), len(xy)).all(axis=1)
+    bad = np.flatnonzero(~good)
+    top = heights[bad[0] - 1] if bad.size else heights[-1]
+    verts = unit * inradius * scale - origin[:2]
+    polygon = tuple((round(float(x), 3), round(float(y), 3)) for x, y in verts)
+    return PrintableBed(polygon, round(float(top - origin[2]), 3))
