@@ -216,7 +216,9 @@ def _resolve_continuations(
     return out, mode_after, (int(orphan[0]) if orphan.size else None)
 
 
-def _ignored(tok: Tokens, tokens: np.ndarray, head, group) -> list[tuple[int, IgnoredParameters]]:
+def _ignored(
+    tok: Tokens, tokens: np.ndarray, head: np.ndarray, group: np.ndarray
+) -> list[tuple[int, IgnoredParameters]]:
     """One record per line with ignored parameters: (block line index, record with line 0)."""
     out: list[tuple[int, IgnoredParameters]] = []
     lines = tok.line[tokens]
@@ -236,7 +238,14 @@ def _params(let: np.ndarray, val: np.ndarray, h: int, c: int) -> dict[str, float
     return {chr(a): b for a, b in zip(let[h + 1 : h + c].tolist(), val[h + 1 : h + c].tolist())}
 
 
-def _problem(tok: Tokens, tokens, head, group, template: str, second: bool = False) -> Problem:
+def _problem(
+    tok: Tokens,
+    tokens: np.ndarray,
+    head: np.ndarray,
+    group: np.ndarray,
+    template: str,
+    second: bool = False,
+) -> Problem:
     """The earliest of the flagged tokens as a `Problem` (``second``: its repeat on that line)."""
     t = int(tokens[0])
     if second:

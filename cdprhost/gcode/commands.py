@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import replace
-from typing import NoReturn
+from typing import Literal, NoReturn
 
 from cdprhost.gcode import firmware_moves, objects
 from cdprhost.gcode.classify import Other
@@ -177,6 +177,9 @@ MUTABLE = frozenset(
 )
 
 Fail = Callable[..., NoReturn]
+Params = dict[str, float]
+Produced = ProgramItem | list[ProgramItem] | None
+Handler = Callable[[int, Params, ModalState, Fail, Other], Produced]
 
 
 def is_modal(other: Other) -> bool:
@@ -236,8 +239,8 @@ def _check_tool(p: dict[str, float], fail: Fail) -> None:
         fail(f"T{t:g}: this machine has a single extruder (only T0)", "T")
 
 
-def _temperature(heater: str, wait: bool):
-    def handle(line, p, st, fail, other):
+def _temperature(heater: Literal["hotend", "bed"], wait: bool) -> Handler:
+    def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
         _check_tool(p, fail)
         r = _number(p, "R", fail)
         s = _number(p, "S", fail)
@@ -250,35 +253,36 @@ def _temperature(heater: str, wait: bool):
     return handle
 
 
-def _fan_on(line, p, st, fail, other):
+def _fan_on(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     s = _number(p, "S", fail)
     index = _number(p, "P", fail)
     speed = 1.0 if s is None else min(s / 255.0, 1.0)
     return Fan(line, speed, int(index or 0))
 
 
-def _fan_off(line, p, st, fail, other):
+def _fan_off(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     index = _number(p, "P", fail)
     return Fan(line, 0.0, int(index or 0))
 
 
-def _dwell(line, p, st, fail, other):
+def _dwell(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     s = _number(p, "S", fail)
     ms = _number(p, "P", fail)
     return DwellCommand(line, s if s is not None else (ms or 0.0) / 1000.0)
 
 
-def _home(line, p, st, fail, other):
+def _home(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     st.pos[:3] = st.home
     st.off[:3] = st.home_offsets()[:3]
     return HomeCommand(line, tuple(a for a in "XYZ" if a in p))
 
 
-def _set_all_zero(line, p, st, fail, other):
+def _set_all_zero(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     st.off = st.pos.copy()
+    return None
 
 
-def _motors_off(line, p, st, fail, other):
+def _motors_off(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     if "S" in p:  # M84 S<seconds>: idle timeout, does not release now
         return UnknownCommand(line, other.word, True)
     if p and not any(a in p for a in "XYZ"):  # M84 E: the extruder motor only
@@ -291,14 +295,15 @@ def _printable(text: str) -> str:
     return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
 
 
-def _setter(attr: str, value):
-    def handle(line, p, st, fail, other):
+def _setter(attr: str, value: object) -> Handler:
+    def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
         setattr(st, attr, value)
+        return None
 
     return handle
 
 
-def _speed_factor(line, p, st, fail, other):
+def _speed_factor(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     """M220 S<percent>; B saves the factor, R restores it (Marlin)."""
     if "B" in p:
         st.speed_factor_saved = st.speed_factor
@@ -312,7 +317,7 @@ def _speed_factor(line, p, st, fail, other):
     return SpeedFactor(line, st.speed_factor) if ("S" in p or "R" in p) else None
 
 
-def _flow_factor(line, p, st, fail, other):
+def _flow_factor(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     """M221 S<percent> [T0]."""
     _check_tool(p, fail)
     s = _number(p, "S", fail)
@@ -325,22 +330,30 @@ def _flow_factor(line, p, st, fail, other):
 _AXES = "XYZE"
 
 
-def _axes(p, fail, scale: float) -> tuple[float | None, float | None, float | None, float | None]:
+def _axes(
+    p: Params, fail: Fail, scale: float
+) -> tuple[float | None, float | None, float | None, float | None]:
     vals = [_positive(p, a, fail, scale) for a in _AXES]
     return (vals[0], vals[1], vals[2], vals[3])
 
 
-def _max_accel(line, p, st, fail, other):  # M201, mm/s^2 (inches under G20)
+def _max_accel(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M201, mm/s^2 (inches under G20)
     _check_tool(p, fail)
     return SetMotionLimits(line, "M201", axis_accel=_axes(p, fail, st.scale))
 
 
-def _max_feedrate(line, p, st, fail, other):  # M203, mm/s
+def _max_feedrate(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M203, mm/s
     _check_tool(p, fail)
     return SetMotionLimits(line, "M203", axis_velocity=_axes(p, fail, st.scale))
 
 
-def _accel(line, p, st, fail, other):  # M204 S (both) | P (print) | T (travel) | R (retract)
+def _accel(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M204 S (both) | P (print) | T (travel) | R (retract)
     s = _positive(p, "S", fail, st.scale)
     pr = _positive(p, "P", fail, st.scale)
     tr = _positive(p, "T", fail, st.scale)
@@ -353,7 +366,9 @@ def _accel(line, p, st, fail, other):  # M204 S (both) | P (print) | T (travel) 
     )
 
 
-def _jerk(line, p, st, fail, other):  # M205 X/Y (classic jerk), J (junction deviation)
+def _jerk(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M205 X/Y (classic jerk), J (junction deviation)
     xy = [v for v in (_positive(p, "X", fail, st.scale), _positive(p, "Y", fail, st.scale)) if v]
     return SetMotionLimits(
         line,
@@ -363,7 +378,9 @@ def _jerk(line, p, st, fail, other):  # M205 X/Y (classic jerk), J (junction dev
     )
 
 
-def _retract_settings(line, p, st, fail, other):  # M207 S<mm> F<mm/min> [Z hop: not done]
+def _retract_settings(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M207 S<mm> F<mm/min> [Z hop: not done]
     length, feed = _number(p, "S", fail), _positive(p, "F", fail, 1 / 60.0)
     r = st.retraction
     st.retraction = replace(
@@ -371,9 +388,12 @@ def _retract_settings(line, p, st, fail, other):  # M207 S<mm> F<mm/min> [Z hop:
         length_mm=r.length_mm if length is None else length * st.scale,
         speed_mm_s=r.speed_mm_s if feed is None else feed * st.scale,
     )
+    return None
 
 
-def _unretract_settings(line, p, st, fail, other):  # M208 S<extra mm> F<mm/min>
+def _unretract_settings(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M208 S<extra mm> F<mm/min>
     extra, feed = _number(p, "S", fail), _positive(p, "F", fail, 1 / 60.0)
     r = st.retraction
     st.retraction = replace(
@@ -381,9 +401,12 @@ def _unretract_settings(line, p, st, fail, other):  # M208 S<extra mm> F<mm/min>
         extra_mm=r.extra_mm if extra is None else extra * st.scale,
         unretract_speed_mm_s=r.unretract_speed_mm_s if feed is None else feed * st.scale,
     )
+    return None
 
 
-def _cold_extrusion(line, p, st, fail, other):  # M302 [P0|P1] [S<min temp>]
+def _cold_extrusion(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M302 [P0|P1] [S<min temp>]
     pv = _number(p, "P", fail)
     s = _number(p, "S", fail)
     if pv is None and s is None:
@@ -394,7 +417,9 @@ def _cold_extrusion(line, p, st, fail, other):  # M302 [P0|P1] [S<min temp>]
     return ColdExtrusion(line, allow, s)
 
 
-def _filament_change(line, p, st, fail, other):  # M600 [X Y] [Z lift] [E retract]
+def _filament_change(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M600 [X Y] [Z lift] [E retract]
     def value(letter: str) -> float | None:
         v = p.get(letter)
         return None if v is None or math.isnan(v) else v
@@ -409,7 +434,7 @@ def _filament_change(line, p, st, fail, other):  # M600 [X Y] [Z lift] [E retrac
     )
 
 
-def _volumetric(line, p, st, fail, other):
+def _volumetric(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     """M200 D<filament diameter>: E in mm^3 from here on (D0 or S0: off); T0 only."""
     _check_tool(p, fail)
     d = _number(p, "D", fail)
@@ -420,13 +445,14 @@ def _volumetric(line, p, st, fail, other):
         st.volumetric_scale = 1.0 / (math.pi * (d * st.scale) ** 2 / 4.0)
     elif s is not None:  # S1: on with the diameter given before (the machine's filament)
         st.volumetric_scale = 1.0 / (math.pi * st.filament_diameter_mm**2 / 4.0)
+    return None
 
 
-def _m486(line, p, st, fail, other):
+def _m486(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     return objects.m486(other.text or "", line, st, fail)
 
 
-def _g10(line, p, st, fail, other):
+def _g10(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     """G10 alone is firmware retraction; with L or P it sets CNC work offsets (not done)."""
     if set(p) - {"S"}:
         return UnknownCommand(line, "G10", False, _param_text("G10", p))
@@ -437,7 +463,7 @@ def _param_text(word: str, p: dict[str, float]) -> str:
     return " ".join([word, *(k if math.isnan(v) else f"{k}{v:g}" for k, v in p.items())])
 
 
-_HANDLERS: dict[str, Callable] = {
+_HANDLERS: dict[str, Handler] = {
     "M104": _temperature("hotend", False),
     "M109": _temperature("hotend", True),
     "M140": _temperature("bed", False),
@@ -497,23 +523,26 @@ def _extended(other: Other, line: int, st: ModalState, fail: Fail) -> list[Progr
         ]
     if word == "SET_RETRACTION":
         r = st.retraction
+
+        def given(key: str, old: float) -> float:
+            v = _ext_number(params, key, fail)
+            return old if v is None else v
+
         st.retraction = replace(
             r,
-            length_mm=_ext_number(params, "RETRACT_LENGTH", fail, r.length_mm),
-            speed_mm_s=_ext_number(params, "RETRACT_SPEED", fail, r.speed_mm_s),
-            extra_mm=_ext_number(params, "UNRETRACT_EXTRA_LENGTH", fail, r.extra_mm),
-            unretract_speed_mm_s=_ext_number(
-                params, "UNRETRACT_SPEED", fail, r.unretract_speed_mm_s
-            ),
+            length_mm=given("RETRACT_LENGTH", r.length_mm),
+            speed_mm_s=given("RETRACT_SPEED", r.speed_mm_s),
+            extra_mm=given("UNRETRACT_EXTRA_LENGTH", r.extra_mm),
+            unretract_speed_mm_s=given("UNRETRACT_SPEED", r.unretract_speed_mm_s),
         )
         return []
     return [UnknownCommand(line, word, word in HARMLESS_EXTENDED, text)]
 
 
-def _ext_number(params: dict[str, str], key: str, fail: Fail, default=None):
+def _ext_number(params: dict[str, str], key: str, fail: Fail) -> float | None:
     raw = params.get(key)
     if raw is None or raw == "":
-        return default
+        return None
     try:
         v = float(raw)
     except ValueError:

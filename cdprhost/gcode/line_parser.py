@@ -89,17 +89,17 @@ def parse_line(
             i += 1
             continue
         m = _RUN.match(code, i + 1)
-        run = m.group(1)
-        end = m.end() if run else i + 1
+        run = m.group(1) if m else ""
+        end = m.end() if (m and run) else i + 1
         raw = code[i:end]
         letter = ch.upper()
         if letter == "E" and i > 0 and code[i - 1] in "0123456789." and run and not compact:
-            word = _word_text(code, _number_start(code, i))
+            glued = _word_text(code, _number_start(code, i))
             raise GcodeError(
                 path,
                 line,
                 _number_start(code, i) + 1,
-                f"number with an exponent {quoted(word)}: write plain decimals "
+                f"number with an exponent {quoted(glued)}: write plain decimals "
                 "(or a space before E, the extruder)",
             )
         value: float | None = None

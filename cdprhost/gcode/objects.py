@@ -10,7 +10,8 @@ them and the filament they would have used stays on the spool.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from typing import NoReturn
 
 import numpy as np
 
@@ -27,11 +28,12 @@ from cdprhost.gcode.items import (
 from cdprhost.gcode.state import ModalState
 from cdprhost.gcode.stream import Gap
 
+Fail = Callable[..., NoReturn]
 _M486_WORD = re.compile(r'([A-Za-z])[ \t]*("[^"]*"?|[^ \t"]*)')
 MAX_OBJECTS = 10000
 
 
-def m486(text: str, line: int, st: ModalState, fail) -> list[ProgramItem]:
+def m486(text: str, line: int, st: ModalState, fail: Fail) -> list[ProgramItem]:
     """``M486 T<count> | S<id> [A<label>] | S-1 | A<label> | P<id> | U<id> | C``."""
     words: dict[str, str] = {}
     for m in _M486_WORD.finditer(text):
@@ -82,7 +84,7 @@ def m486(text: str, line: int, st: ModalState, fail) -> list[ProgramItem]:
 
 
 def exclude_object_command(
-    word: str, params: dict[str, str], line: int, st: ModalState, fail
+    word: str, params: dict[str, str], line: int, st: ModalState, fail: Fail
 ) -> list[ProgramItem]:
     """Klipper's EXCLUDE_OBJECT_DEFINE / _START / _END and EXCLUDE_OBJECT."""
     name = params.get("NAME", "").upper()

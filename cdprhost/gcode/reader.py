@@ -11,11 +11,18 @@ import math
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import replace
+from typing import NoReturn
 
 import numpy as np
 
-from cdprhost.gcode import annotations, commands, extended, segment
-from cdprhost.gcode.annotations import Annotation, LayerStyle
+from cdprhost.gcode import commands, extended, segment
+from cdprhost.gcode.annotations import (
+    Annotation,
+    LayerStyle,
+    choose_style,
+    scan,
+    strip_comments,
+)
 from cdprhost.gcode.classify import Classified, Other, Problem, classify
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.gcode.items import (
@@ -120,10 +127,10 @@ class _BlockReader:
     # -- the block -----------------------------------------------------------
     def run(self) -> Iterator[ProgramItem]:
         st = self.st
-        anns = annotations.scan(self.data)
+        anns = scan(self.data)
         if st.layer_style is None and anns:  # undecided until annotations or an extruding move
-            st.layer_style = annotations.choose_style(anns)
-        ext, code = extended.extract(annotations.strip_comments(self.data))
+            st.layer_style = choose_style(anns)
+        ext, code = extended.extract(strip_comments(self.data))
         tok = tokenize(code)
         texts: dict[int, str] = {}
         slow_error: GcodeError | None = None
@@ -133,9 +140,7 @@ class _BlockReader:
         stop, error = self._first_error(cls, slow_error)
         if error is None:
             st.motion_mode = cls.motion_mode
-        events: list[tuple[int, int, object]] = [
-            (o.index, 1, o) for o in cls.others if o.index < stop
-        ]
+        events: list[Event] = [(o.index, 1, o) for o in cls.others if o.index < stop]
         events += [(o.index, 1, o) for o in ext if o.index < stop]
         events += [(a.index, 0, a) for a in anns if a.index < stop and self._counts(a)]
         events += [(i, 2, rec) for i, rec in cls.ignored if i < stop]
@@ -216,32 +221,33 @@ class _BlockReader:
                 st.next_n = int(reset) + 1
 
     # -- in-order walk ---------------------------------------------------------
-    def _walk(
-        self, rows: segment.Rows, events: list[tuple[int, int, object]]
-    ) -> Iterator[ProgramItem]:
+    def _walk(self, rows: segment.Rows, events: list[Event]) -> Iterator[ProgramItem]:
         """Runs of rows between modal commands are resolved at once; events are cut in."""
         row_index = rows.line - self.first
         r0 = 0
-        passive: list[tuple[int, int, object]] = []
+        passive: list[Event] = []
         for ev in events:
-            if ev[1] == 1 and commands.is_modal(ev[2]):
-                r1 = int(np.searchsorted(row_index, ev[0]))
-                yield from self._run(rows.part(r0, r1), passive)
-                passive, r0 = [], r1
-                yield from self._command(ev[2])
-            else:
-                passive.append(ev)
+            match ev:
+                case (index, _, Other() as other) if commands.is_modal(other):
+                    r1 = int(np.searchsorted(row_index, index))
+                    yield from self._run(rows.part(r0, r1), passive)
+                    passive, r0 = [], r1
+                    yield from self._command(other)
+                case _:
+                    passive.append(ev)
         yield from self._run(rows.part(r0, len(rows)), passive)
 
-    def _run(
-        self, rows: segment.Rows, events: list[tuple[int, int, object]]
-    ) -> Iterator[ProgramItem]:
+    def _run(self, rows: segment.Rows, events: list[Event]) -> Iterator[ProgramItem]:
         st = self.st
-        moves = None
+        moves: MoveChunk | None = None
         error = None
         if len(rows):
             layer_lines = np.asarray(
-                [self.first + i for i, kind, a in events if kind == 0 and a.tag in _LAYER_TAGS],
+                [
+                    self.first + i
+                    for i, _, a in events
+                    if isinstance(a, Annotation) and a.tag in _LAYER_TAGS
+                ],
                 dtype=np.int64,
             )
             res = segment.compute(rows, st, self.tol, layer_lines)
@@ -262,8 +268,9 @@ class _BlockReader:
                 done = cut
             yield from self._event(index, payload)
         if error is not None:
-            cut = int(np.searchsorted(moves.line, error[0]))
-            yield from self._chunks(moves, done, cut)
+            if moves is not None:
+                cut = int(np.searchsorted(moves.line, error[0]))
+                yield from self._chunks(moves, done, cut)
             raise self.error(error[0] - self.first, error[1], "G")
         if moves is not None:
             yield from self._chunks(moves, done, len(moves))
@@ -306,7 +313,7 @@ class _BlockReader:
     def _command(self, other: Other) -> Iterator[ProgramItem]:
         line = self.first + other.index
 
-        def fail(reason: str, letter: str | None = None):
+        def fail(reason: str, letter: str | None = None) -> NoReturn:
             if other.word not in reason:
                 reason = f"{reason} in {other.word}"
             raise self.error(other.index, reason, letter)
@@ -328,4 +335,6 @@ class _BlockReader:
 
 
 _LAYER_TAGS = ("LAYER_CHANGE", "LAYER:")
+# (block line index, order on the line, what): commands, layer marks, ignored parameters
+Event = tuple[int, int, "Other | Annotation | LayerChange | IgnoredParameters"]
 _ULTIGCODE = b";FLAVOR:UltiGCode"

@@ -139,7 +139,14 @@ def classify(start: np.ndarray, end: np.ndarray) -> np.ndarray:
     return _KIND[code]
 
 
-def _row_layers(before, after, is_arc, line, st: ModalState, layer_lines):
+def _row_layers(
+    before: np.ndarray,
+    after: np.ndarray,
+    is_arc: np.ndarray,
+    line: np.ndarray,
+    st: ModalState,
+    layer_lines: np.ndarray,
+) -> tuple[np.ndarray, list[LayerChange]]:
     """Layer per moving row; for height-detected layers also the new-layer records."""
     if st.layer_style not in (None, LayerStyle.HEIGHT):
         if layer_lines.size == 0:
@@ -163,7 +170,15 @@ def _row_layers(before, after, is_arc, line, st: ModalState, layer_lines):
     return layer, starts
 
 
-def _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance):
+def _expand_arcs(
+    before: np.ndarray,
+    after: np.ndarray,
+    vals: np.ndarray,
+    cmd: np.ndarray,
+    line: np.ndarray,
+    is_arc: np.ndarray,
+    tolerance: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, str] | None]:
     """Replace each arc row by its chords; (counts per row, before, after, first error)."""
     idx = np.flatnonzero(is_arc)
     start, end = before[idx], after[idx]

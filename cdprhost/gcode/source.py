@@ -11,6 +11,7 @@ import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from itertools import islice
+from typing import AnyStr
 
 from cdprhost.errors import InputError
 from cdprhost.gcode.errors import GcodeError
@@ -117,17 +118,14 @@ def _line_blocks(lines: Iterable[str | bytes], block_lines: int) -> Iterator[Blo
 def _join(batch: list[str | bytes]) -> bytes:
     """The lines as one newline-terminated block (one encode for the common cases)."""
     kinds = {type(x) for x in batch}
-    if len(kinds) == 1 and not any(("\r" if str in kinds else b"\r") in x for x in batch):
-        nl = "\n" if str in kinds else b"\n"
-        empty = nl[:0]
-        joined = nl.join(batch)
-        if joined.count(nl) == len(batch) - 1:  # no line carries a newline
-            return _encode(joined + nl)
-        joined = empty.join(batch)
-        if joined.count(nl) == len(batch) and all(
-            x.endswith(nl) for x in batch
-        ):  # every line ends with one
-            return _encode(joined)
+    if kinds == {str}:
+        fast = _join_same([x for x in batch if isinstance(x, str)], "\n", "\r")
+        if fast is not None:
+            return _encode(fast)
+    elif kinds == {bytes}:
+        fast_b = _join_same([x for x in batch if isinstance(x, bytes)], b"\n", b"\r")
+        if fast_b is not None:
+            return fast_b
     out = []
     for raw in batch:
         raw = _encode(raw).removesuffix(b"\n").removesuffix(b"\r")
@@ -139,6 +137,19 @@ def _join(batch: list[str | bytes]) -> bytes:
             )
         out.append(raw)
     return b"\n".join(out) + b"\n"
+
+
+def _join_same(batch: list[AnyStr], nl: AnyStr, cr: AnyStr) -> AnyStr | None:
+    """Lines of one type joined when none has a CR inside (None: take the careful path)."""
+    joined = nl.join(batch)
+    if cr in joined:
+        return None
+    if joined.count(nl) == len(batch) - 1:  # no line carries a newline
+        return joined + nl
+    joined = nl[:0].join(batch)
+    if joined.count(nl) == len(batch) and all(x.endswith(nl) for x in batch):
+        return joined  # every line ends with one
+    return None
 
 
 def _encode(text: str | bytes) -> bytes:

@@ -103,7 +103,14 @@ def _keep(lines: np.ndarray, slow: np.ndarray) -> np.ndarray:
     return slow[np.minimum(idx, slow.size - 1)] != lines
 
 
-def _anomalies(arr, cls, letters, run_start, run_end, n_dots) -> np.ndarray:
+def _anomalies(
+    arr: np.ndarray,
+    cls: np.ndarray,
+    letters: np.ndarray,
+    run_start: np.ndarray,
+    run_end: np.ndarray,
+    n_dots: np.ndarray,
+) -> np.ndarray:
     """Byte positions that make their line unsuitable for the fast path."""
     parts = [np.flatnonzero(cls == JUNK) if cls.max(initial=0) == JUNK else _EMPTY_I]
     after = cls[letters + 1]

@@ -45,7 +45,9 @@ class FileLimits:
         def pick(new: float | None, old: float) -> float:
             return old if new is None else float(new)
 
-        def axes(new, old) -> tuple[float, float, float, float]:
+        def axes(
+            new: tuple[float | None, ...], old: tuple[float, ...]
+        ) -> tuple[float, float, float, float]:
             a, b, c, d = (pick(n, o) for n, o in zip(new, old))
             return (a, b, c, d)
 

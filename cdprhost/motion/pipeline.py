@@ -75,8 +75,11 @@ def segment_blocks(
                 )
                 yield SegmentBlock(batch, marks, None if encode is None else encode(batch))
             else:
-                if isinstance(out, HomeCommand):
-                    seg.home()
+                match out:
+                    case HomeCommand():
+                        seg.home()
+                    case _:
+                        pass
                 yield out
         totals.planned_time_s = pp.time
 

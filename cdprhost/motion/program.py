@@ -146,8 +146,11 @@ class ProgramPlanner:
         return block, self._emit(self.planner.push(block))
 
     def command(self, item: Any) -> list[PlannedMoves | Any]:
-        if isinstance(item, SetMotionLimits):
-            self.file_limits = self.file_limits.updated(item, self.profile_accel)
+        match item:
+            case SetMotionLimits():
+                self.file_limits = self.file_limits.updated(item, self.profile_accel)
+            case _:
+                pass
         if not flushes_motion(item):
             if self._emitted == self._pushed:
                 return [item]

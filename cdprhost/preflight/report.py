@@ -6,6 +6,7 @@ Pydantic models, because the report leaves the program as JSON (``check --json``
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -159,21 +160,30 @@ class ViolationLog:
         return sorted(self._kept, key=lambda v: v.line)
 
 
+@dataclass
+class _NoteEntry:
+    line: int
+    count: int
+    text: str
+
+
 class NoteLog:
     """Harmless unknown commands, one entry per command word."""
 
     def __init__(self) -> None:
-        self._notes: dict[str, list] = {}  # word -> [first line, count, text]
+        self._notes: dict[str, _NoteEntry] = {}
 
     def add(self, line: int, word: str, text: str) -> None:
         entry = self._notes.get(word)
         if entry is None:
-            self._notes[word] = [line, 1, text]
+            self._notes[word] = _NoteEntry(line, 1, text)
         else:
-            entry[1] += 1
+            entry.count += 1
 
     def ordered(self) -> list[Note]:
-        notes = [Note(line=v[0], word=w, count=v[1], text=v[2]) for w, v in self._notes.items()]
+        notes = [
+            Note(line=e.line, word=w, count=e.count, text=e.text) for w, e in self._notes.items()
+        ]
         return sorted(notes, key=lambda n: n.line)
 
 

@@ -68,7 +68,7 @@ def _certify_grid(model: MachineModel, h: float) -> tuple[bool | None, float]:
     margin = np.where(np.isfinite(margin), margin, -np.inf)
     grad = np.where(np.isfinite(grad), grad, np.inf)
 
-    def corners(a: np.ndarray, op) -> np.ndarray:
+    def corners(a: np.ndarray, op: np.ufunc) -> np.ndarray:
         sx, sy, sz = (n - 1 for n in a.shape)
         return op.reduce(
             [a[i : sx + i, j : sy + j, k : sz + k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]

@@ -249,9 +249,11 @@ class MachineProfile(_Strict):
 
     def with_geometry(self, outlets: Any, initial_lengths: Any, **updates: Any) -> MachineProfile:
         """A copy with new kinematic parameters (used by calibration)."""
-        geometry = Geometry(
-            outlets=tuple(tuple(float(v) for v in row) for row in np.asarray(outlets)),
-            initial_lengths=tuple(float(v) for v in np.asarray(initial_lengths)),
+        geometry = Geometry.model_validate(
+            {
+                "outlets": np.asarray(outlets, dtype=float).tolist(),
+                "initial_lengths": np.asarray(initial_lengths, dtype=float).tolist(),
+            }
         )
         data = self.model_dump()
         data["geometry"] = geometry.model_dump()

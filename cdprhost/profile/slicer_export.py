@@ -25,6 +25,7 @@ from typing import Literal
 from cdprhost.profile.models import MachineProfile
 
 Slicer = Literal["prusaslicer", "cura", "orca"]
+Polygon = Sequence[tuple[float, float]]
 SLICERS: tuple[Slicer, ...] = ("prusaslicer", "cura", "orca")
 NOZZLE_MM = 0.4
 
@@ -51,7 +52,7 @@ def slicer_gcode(profile: MachineProfile, which: Literal["start", "end"], slicer
 def export(
     profile: MachineProfile,
     slicer: Slicer,
-    polygon: Sequence[tuple[float, float]],
+    polygon: Polygon,
     height_mm: float,
 ) -> str:
     """The definition text for ``slicer``; ``polygon``: the printable bed, G-code frame."""
@@ -82,7 +83,7 @@ def _header(profile: MachineProfile, comment: str) -> str:
     )
 
 
-def _prusaslicer(profile: MachineProfile, polygon, height: float) -> str:
+def _prusaslicer(profile: MachineProfile, polygon: Polygon, height: float) -> str:
     lim = _limits(profile)
     ex = profile.extruder
     firmware = ex.retract_mm > 0
@@ -133,7 +134,7 @@ def _escaped(text: str) -> str:
     return text.rstrip("\n").replace("\\", "\\\\").replace("\n", "\\n")
 
 
-def _cura(profile: MachineProfile, polygon, height: float) -> str:
+def _cura(profile: MachineProfile, polygon: Polygon, height: float) -> str:
     lim = _limits(profile)
     ex = profile.extruder
     xs, ys = [p[0] for p in polygon], [p[1] for p in polygon]
@@ -145,7 +146,7 @@ def _cura(profile: MachineProfile, polygon, height: float) -> str:
         [[round(x, 3), round(-y, 3)] for x, y in area] for area in _outside(polygon, half_w, half_d)
     ]
 
-    def value(v):
+    def value(v: object) -> dict[str, object]:
         return {"default_value": v}
 
     overrides = {
@@ -194,7 +195,7 @@ def _cura(profile: MachineProfile, polygon, height: float) -> str:
     return json.dumps(definition, indent=2) + "\n"
 
 
-def _outside(polygon, half_w: float, half_d: float) -> list[list[tuple[float, float]]]:
+def _outside(polygon: Polygon, half_w: float, half_d: float) -> list[list[tuple[float, float]]]:
     """Convex pieces of the rectangle [-w, w] x [-d, d] outside the convex ``polygon``:
     for each edge, the part of the rectangle beyond it (a quadrilateral or triangle)."""
     corners = [(-half_w, -half_d), (half_w, -half_d), (half_w, half_d), (-half_w, half_d)]
@@ -215,7 +216,7 @@ def _hull(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
     if len(pts) < 3:
         return pts
 
-    def cross(o, a, b):
+    def cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
         return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
     lower: list[tuple[float, float]] = []
@@ -231,7 +232,7 @@ def _hull(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
     return lower[:-1] + upper[:-1]
 
 
-def _orca(profile: MachineProfile, polygon, height: float) -> str:
+def _orca(profile: MachineProfile, polygon: Polygon, height: float) -> str:
     lim = _limits(profile)
     ex = profile.extruder
 

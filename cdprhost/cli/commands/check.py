@@ -11,7 +11,7 @@ from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.fileio.atomic import write_text_atomic
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "check", help="preflight a G-code file: workspace along every move, extrusion, commands"
     )

@@ -12,6 +12,7 @@ import queue
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 from cdprhost.cli.options import (
     add_placement_arguments,
@@ -28,7 +29,7 @@ from cdprhost.job.resume import log_path_for
 from cdprhost.job.state import JobState
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "print", help="print a G-code file (embedded simulated device unless --port is given)"
     )
@@ -142,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                     and "asked" not in outcome
                 ):
                     outcome["asked"] = True
-                    _ask_after_pause(job)
+                    _ask_after_pause(job, event.reason)
                     outcome.pop("asked")
             except KeyboardInterrupt:
                 view._say("Ctrl-C: pausing at the next rest point...")
@@ -175,14 +176,15 @@ def _check_faults(spec: str) -> None:
             raise InputError(f"--sim-faults {spec!r}: {f.name} must be a finite number")
 
 
-def _ask_after_pause(job) -> None:
+def _ask_after_pause(job: Any, reason: str) -> None:
     if not sys.stdin.isatty():
-        print("paused without a terminal to ask: cancelling", file=sys.stderr)
+        print(f"paused ({reason}) without a terminal to ask: cancelling", file=sys.stderr)
         job.request_cancel()
         return
     while True:
         try:
-            answer = input("Paused (heaters kept). [r]esume or [c]ancel? ").strip().lower()
+            answer = input(f"Paused ({reason}; heaters kept). [r]esume or [c]ancel? ")
+            answer = answer.strip().lower()
         except (EOFError, KeyboardInterrupt):
             answer = "c"
         if answer in ("r", "resume"):
