@@ -16,8 +16,8 @@ FULL_CIRCLE_MM = 1e-6  # start and end closer than this (XY): full circle with I
 #: chords of all arcs resolved at once (one run of a block): bounds memory whatever the
 #: radii; real files stay far below (a boat's 3,837 arcs make about 26,000 chords)
 CHORD_BUDGET = 1 << 18
-#: chords of one arc at most (a full circle of radius 530 mm within 0.01 mm needs 497)
-MAX_CHORDS_PER_ARC = 512
+#: chords of one arc at most (arcs up to 2 m long keep 0.001 mm with fewer)
+MAX_CHORDS_PER_ARC = 4096
 #: arcs longer than this (mm) fit no printer: at most ``LONG_ARC_CHORDS`` chords
 LONG_ARC_MM = 2000.0
 LONG_ARC_CHORDS = 16

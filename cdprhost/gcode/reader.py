@@ -130,12 +130,12 @@ class _BlockReader:
         anns = scan(self.data)
         if st.layer_style is None and anns:  # undecided until annotations or an extruding move
             st.layer_style = choose_style(anns)
-        ext, code = extended.extract(strip_comments(self.data))
-        tok = tokenize(code)
+        tok = tokenize(strip_comments(self.data))
         texts: dict[int, str] = {}
+        ext: list[Other] = []
         slow_error: GcodeError | None = None
         if tok.slow.size:
-            tok, texts, slow_error = self._slow_lines(tok)
+            tok, texts, ext, slow_error = self._slow_lines(tok)
         cls = classify(tok, self.first, texts, st.motion_mode)
         stop, error = self._first_error(cls, slow_error)
         if error is None:
@@ -171,14 +171,22 @@ class _BlockReader:
             return 1 << 62, None
         return error.line - self.first, error
 
-    def _slow_lines(self, tok: Tokens) -> tuple[Tokens, dict[int, str], GcodeError | None]:
-        """Parse the slow lines exactly; check N numbers; merge their words into ``tok``."""
+    def _slow_lines(
+        self, tok: Tokens
+    ) -> tuple[Tokens, dict[int, str], list[Other], GcodeError | None]:
+        """Parse the slow lines exactly; check N numbers; merge their words into ``tok``;
+        extended (Klipper) commands are returned apart."""
         lines, letters, values = [], [], []
         texts: dict[int, str] = {}
+        ext: list[Other] = []
         error = None
         for index in tok.slow.tolist():
             number = self.first + index
             text = self.text(index)
+            found = extended.parse(text, index)
+            if found is not None:
+                ext.append(found)
+                continue
             try:
                 parsed = parse_line(
                     text,
@@ -203,7 +211,7 @@ class _BlockReader:
             letter = np.concatenate([tok.letter, np.asarray(letters, dtype=np.uint8)])[order]
             value = np.concatenate([tok.value, np.asarray(values, dtype=np.float64)])[order]
             tok = Tokens(line[order], letter, value, tok.n_lines, tok.slow)
-        return tok, texts, error
+        return tok, texts, ext, error
 
     def _line_number(self, parsed: ParsedLine, text: str, number: int) -> None:
         """N words go up by one; ``M110 N<n>`` (or the N of its line) restarts the count."""
