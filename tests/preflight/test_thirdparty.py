@@ -18,7 +18,7 @@ WHOLE = [f for f in FILES if "cropped" not in f.name]  # the slicer's figures ar
 def test_the_corpus_is_there():
     names = {f.name for f in FILES}
     assert len(names) >= 8
-    for slicer in ("prusaslicer25", "slic3r13", "cura413"):
+    for slicer in ("prusaslicer25", "slic3r13", "cura413", "simplify3d"):
         assert any(n.startswith(slicer) for n in names)
 
 
