@@ -213,3 +213,59 @@ def test_bad_bytes_are_shown_as_escapes_not_surrogates():
     with pytest.raises(GcodeError) as exc:
         list(read_program([b"G1 X1 F600", b"G1 Y\xc2\xff"]))
     assert "\\udc" not in str(exc.value) and "\\xc2" in str(exc.value)
+
+
+def test_item_names_do_not_clash_with_the_wire_protocol():
+    import cdprhost.gcode.items as items
+    import firmware_protocol.messages as messages
+
+    def own(module):
+        return {
+            n for n, v in vars(module).items() if getattr(v, "__module__", "") == module.__name__
+        }
+
+    gcode_names, wire_names = own(items), own(messages)
+    assert gcode_names & wire_names == set()
+    assert {"HomeCommand", "DwellCommand", "DisplayMessage", "UnknownCommand"} <= gcode_names
+
+
+KLIPPER_TEST_STYLE = """\
+DICTIONARY atmega2560.dict
+CONFIG example.cfg
+
+# Start by homing the printer.
+G28
+G90
+G1 F6000
+GET_POSITION
+SET_GCODE_OFFSET Z=.1
+M206 Z-.2
+SET_VELOCITY_LIMIT ACCEL=100 VELOCITY=20 SQUARE_CORNER_VELOCITY=1 ACCEL_TO_DECEL=200
+SET_PRESSURE_ADVANCE EXTRUDER=extruder ADVANCE=.001
+M486 T3
+M486 S0
+  G0 X10
+M486 S-1
+M486 S1
+  G1 X11 E0.5
+M486 C
+M486 U1
+EXCLUDE_OBJECT
+G1 X0 Y0 E.01
+"""
+
+
+def test_klipper_test_files_read_with_warnings_not_errors():
+    items = read(KLIPPER_TEST_STYLE)
+    unknown = [(c.word, c.harmless) for c in commands(items) if isinstance(c, UnknownCommand)]
+    assert unknown == [
+        ("DICTIONARY", False),
+        ("CONFIG", False),
+        ("GET_POSITION", True),
+        ("SET_GCODE_OFFSET", False),
+        ("M206", False),
+        ("SET_PRESSURE_ADVANCE", True),
+        ("M486 U", False),
+    ]
+    assert moves(items)["line"].tolist() == [15, 18, 22]
+    assert CancelObject(19, "1") in commands(items)
