@@ -378,30 +378,20 @@ def _jerk(
     )
 
 
-def _retract_settings(
-    line: int, p: Params, st: ModalState, fail: Fail, other: Other
-) -> Produced:  # M207 S<mm> F<mm/min> [Z hop: not done]
-    length, feed = _number(p, "S", fail), _positive(p, "F", fail, 1 / 60.0)
-    r = st.retraction
-    st.retraction = replace(
-        r,
-        length_mm=r.length_mm if length is None else length * st.scale,
-        speed_mm_s=r.speed_mm_s if feed is None else feed * st.scale,
-    )
-    return None
+def _retraction_settings(length_field: str, speed_field: str) -> Handler:
+    """M207 S<length> F<mm/min> (retract; Z hop is not done) and M208 S<extra> F<mm/min>."""
 
+    def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+        length, feed = _number(p, "S", fail), _positive(p, "F", fail, 1 / 60.0)
+        changes: dict[str, float] = {}
+        if length is not None:
+            changes[length_field] = length * st.scale
+        if feed is not None:
+            changes[speed_field] = feed * st.scale
+        st.retraction = replace(st.retraction, **changes)
+        return None
 
-def _unretract_settings(
-    line: int, p: Params, st: ModalState, fail: Fail, other: Other
-) -> Produced:  # M208 S<extra mm> F<mm/min>
-    extra, feed = _number(p, "S", fail), _positive(p, "F", fail, 1 / 60.0)
-    r = st.retraction
-    st.retraction = replace(
-        r,
-        extra_mm=r.extra_mm if extra is None else extra * st.scale,
-        unretract_speed_mm_s=r.unretract_speed_mm_s if feed is None else feed * st.scale,
-    )
-    return None
+    return handle
 
 
 def _cold_extrusion(
@@ -493,8 +483,8 @@ _HANDLERS: dict[str, Handler] = {
     "M203": _max_feedrate,
     "M204": _accel,
     "M205": _jerk,
-    "M207": _retract_settings,
-    "M208": _unretract_settings,
+    "M207": _retraction_settings("length_mm", "speed_mm_s"),
+    "M208": _retraction_settings("extra_mm", "unretract_speed_mm_s"),
     "G10": _g10,
     "G11": lambda line, p, st, fail, other: firmware_moves.unretract(st, line),
     "M302": _cold_extrusion,
