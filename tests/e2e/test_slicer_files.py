@@ -142,3 +142,23 @@ def test_check_cli_places_and_retargets(tmp_path):
     assert ok.returncode == 0, ok.stdout
     assert "retargeted: replaced start lines 1-" in ok.stdout
     assert "the slicer (Cura) says: filament 321.4 mm" in ok.stdout
+
+
+def test_resume_hint_names_the_requested_layer_when_nothing_printed(tmp_path):
+    """Regression: a resumed job that failed at once offered to restart at layer 1."""
+    r = _cli(
+        "print",
+        str(DATA / "prusaslicer25_mk3s_cube.gcode"),
+        "-p",
+        "paper-prototype",
+        "--retarget",
+        "--resume-from-layer",
+        "20",
+        "--yes",
+        "--sim-faults",
+        "stall_after=1",
+        "--log",
+        str(tmp_path / "job.log"),
+    )
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "(restart with --resume-from-layer 20)" in r.stdout
