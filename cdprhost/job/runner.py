@@ -42,9 +42,9 @@ from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
 from cdprhost.machine.commands import device_messages, heaters_off
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.pipeline import segment_program
-from cdprhost.motion.program import read_items
+from cdprhost.motion.prepared import Prepared, Setup, prepare
 from cdprhost.motion.segments import SegmentBatch
-from cdprhost.preflight.run import preflight, preflight_items
+from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
 
 POLL_S = 0.05
@@ -54,6 +54,7 @@ STATUS_EVERY_S = 0.5
 
 @dataclass
 class PrintOptions:
+    setup: Setup = field(default_factory=Setup)  # placement, --retarget, cancelled objects
     resume_from_layer: int | None = None
     log_path: str | Path | None = None
     resume_dir: str | Path | None = None
@@ -115,6 +116,7 @@ class PrintJob:
         self._t0_device = 0.0
         self._waiting_heat_item = 0
         self._status: DeviceStatus | None = None
+        self._prepared: Prepared | None = None
         self._at_rest = True  # does the queued motion end at rest?
 
     # ------------------------------------------------------------ requests
@@ -155,8 +157,10 @@ class PrintJob:
             self._emit(StateChanged(state, reason))
 
     # ------------------------------------------------------------ the job
-    def _items(self):
-        items = read_items(self.gcode, self.profile, self.model)
+    def _items(self) -> Any:
+        if self._prepared is None:
+            self._prepared = prepare(self.gcode, self.profile, self.model, self.options.setup)
+        items: Any = self._prepared.items()
         if self.options.resume_from_layer is not None:
             z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
             items = from_layer(items, self.options.resume_from_layer, z_max=z_max)
@@ -171,12 +175,9 @@ class PrintJob:
     def _run(self) -> PrintResult:
         self._set(JobState.PREFLIGHT, str(self.gcode))
         try:
-            if self.options.resume_from_layer is None:
-                report = preflight(self.gcode, self.profile, self.model)
-            else:
-                report = preflight_items(
-                    self._items(), self.profile, self.model, source=str(self.gcode)
-                )
+            self._prepared = prepare(self.gcode, self.profile, self.model, self.options.setup)
+            resumed = self.options.resume_from_layer is not None
+            report = preflight_prepared(self._prepared, self._items() if resumed else None)
         except GcodeError as exc:
             self._set(JobState.REFUSED, str(exc))
             return PrintResult(
@@ -204,6 +205,12 @@ class PrintJob:
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
         try:
             self.link = self.link_factory()
+        except (LinkError, OSError) as exc:  # nothing started: no resume point to offer
+            result.reason = f"cannot open the device: {exc}"
+            self._emit(Failure(result.reason, None, None))
+            self._set(JobState.FAILED, result.reason)
+            return result
+        try:
             self._t0_device = self._device_time()
             self._stream(result)
             self._finish(JobState.DONE, "completed", result)
@@ -217,10 +224,14 @@ class PrintJob:
 
     @staticmethod
     def _state_reason(report) -> str:
+        from cdprhost.preflight.render import advice
+
         v = report.violations[0]
-        return (
-            f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}"
-        )
+        lines = [
+            f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
+            *(line.strip() for line in advice(report)),
+        ]
+        return "\n".join(lines)
 
     # ---------------------------------------------------------- streaming
     def _stream(self, result: PrintResult) -> None:
@@ -267,23 +278,32 @@ class PrintJob:
             if stopping and self._at_rest:
                 self._hold_at_rest()
 
-    def _send_command(self, item: Any) -> None:
+    def _send_command(self, item: g.Command) -> None:
+        match item:
+            case g.FilamentChange():
+                self._filament_change(item)
+                return
+            case g.DisplayMessage(line=line, text=text):
+                self._emit(Notice(f"line {line}: {text}"))
+            case _:
+                pass
         msgs = device_messages(
             item,
             model=self.model,
             home_mm=self.profile.drive.home_mm,
             clock_hz=self.link.identity.clock_hz,
         )
-        if isinstance(item, g.Message):
-            self._emit(Notice(f"line {item.line}: {item.text}"))
         if not msgs:
             return
         numbers = self.link.send(*msgs)
-        if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
-            self._waiting_heat_item = max(numbers)
-            self._set(
-                JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
-            )
+        match item:
+            case g.SetTemperature(wait=True, target_c=target) if target > 0:
+                self._waiting_heat_item = max(numbers)
+                self._set(
+                    JobState.HEATING, f"line {item.line}: waiting for {item.heater} {target:g} C"
+                )
+            case _:
+                pass
         if (
             self._stop_wanted() and self._at_rest
         ):  # mid-motion commands wait for the next rest point
@@ -304,6 +324,18 @@ class PrintJob:
             raise _Stop
         self._take("pause")
         self._set(JobState.PAUSED, "at rest; heaters kept")
+        self._wait_for_resume()
+
+    def _filament_change(self, item: g.FilamentChange) -> None:
+        """M600: the reader's park moves brought the machine to the park point; wait there
+        (paused, heaters kept) until the operator resumes or cancels."""
+        self._set(JobState.PAUSING, f"line {item.line}: M600 filament change")
+        self._drain()
+        self._emit(Notice(f"line {item.line}: M600: change the filament, then resume"))
+        self._set(JobState.PAUSED, f"line {item.line}: M600: change the filament, then resume")
+        self._wait_for_resume()
+
+    def _wait_for_resume(self) -> None:
         while True:
             self._service(force_status=False)
             if self._take("cancel"):
@@ -427,7 +459,7 @@ class PrintJob:
             info.steps if info else None,
             st.hotend_target_c if st else 0.0,
             st.bed_target_c if st else 0.0,
-            max(result.last_layer or 1, 1),
+            max(result.last_layer or 1, (self.options.resume_from_layer or 0) + 1),
         )
         try:
             result.resume_file = str(

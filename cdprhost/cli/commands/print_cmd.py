@@ -12,7 +12,15 @@ import queue
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
+from cdprhost.cli.options import (
+    add_placement_arguments,
+    finite_positive,
+    non_empty,
+    positive_int,
+    setup_from_args,
+)
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
@@ -21,7 +29,7 @@ from cdprhost.job.resume import log_path_for
 from cdprhost.job.state import JobState
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "print", help="print a G-code file (embedded simulated device unless --port is given)"
     )
@@ -29,20 +37,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_profile_argument(p)
     p.add_argument(
         "--port",
+        type=non_empty,
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
-    p.add_argument("--baud", type=int, default=None, help="baud rate (default: the profile's)")
+    p.add_argument(
+        "--baud", type=positive_int, default=None, help="baud rate (default: the profile's)"
+    )
     p.add_argument(
         "--speedup",
-        type=float,
+        type=finite_positive,
         default=None,
         help="embedded device: run at most X times real time (default: as fast as the host can)",
     )
     p.add_argument("--json", metavar="R", help="write the job summary as JSON to R")
     p.add_argument(
         "--resume-from-layer",
-        type=int,
+        type=positive_int,
         metavar="N",
         help="restart the print at layer N (1-based, as shown)",
     )
@@ -57,6 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="embedded device: inject faults (same SPEC as sim-device --faults)",
     )
+    add_placement_arguments(p, strict=False)
     p.set_defaults(func=run)
 
 
@@ -95,7 +107,15 @@ def run(args: argparse.Namespace) -> int:
         ):
             print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
             return 1
-    options = PrintOptions(resume_from_layer=layer, log_path=args.log or log_path_for(gcode))
+    if args.sim_faults is not None:
+        if args.port:
+            raise InputError("--sim-faults: only for the embedded device (without --port)")
+        _check_faults(args.sim_faults)
+    options = PrintOptions(
+        setup=setup_from_args(args),
+        resume_from_layer=layer,
+        log_path=args.log or log_path_for(gcode),
+    )
     events: queue.Queue = queue.Queue()
     job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
     outcome: dict = {}
@@ -123,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
                     and "asked" not in outcome
                 ):
                     outcome["asked"] = True
-                    _ask_after_pause(job)
+                    _ask_after_pause(job, event.reason)
                     outcome.pop("asked")
             except KeyboardInterrupt:
                 view._say("Ctrl-C: pausing at the next rest point...")
@@ -139,14 +159,32 @@ def run(args: argparse.Namespace) -> int:
     return result.exit_code
 
 
-def _ask_after_pause(job) -> None:
+def _check_faults(spec: str) -> None:
+    """A bad ``--sim-faults`` SPEC is bad input (exit 2), named, before anything starts."""
+    import dataclasses
+    import math
+
+    from firmware_protocol.device.faults import FaultSpec, FaultSpecError
+
+    try:
+        parsed = FaultSpec.parse(spec)
+    except FaultSpecError as exc:
+        raise InputError(f"--sim-faults {spec!r}: {exc}") from None
+    for f in dataclasses.fields(parsed):
+        value = getattr(parsed, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InputError(f"--sim-faults {spec!r}: {f.name} must be a finite number")
+
+
+def _ask_after_pause(job: Any, reason: str) -> None:
     if not sys.stdin.isatty():
-        print("paused without a terminal to ask: cancelling", file=sys.stderr)
+        print(f"paused ({reason}) without a terminal to ask: cancelling", file=sys.stderr)
         job.request_cancel()
         return
     while True:
         try:
-            answer = input("Paused (heaters kept). [r]esume or [c]ancel? ").strip().lower()
+            answer = input(f"Paused ({reason}; heaters kept). [r]esume or [c]ancel? ")
+            answer = answer.strip().lower()
         except (EOFError, KeyboardInterrupt):
             answer = "c"
         if answer in ("r", "resume"):
@@ -164,7 +202,7 @@ def _report(result, args: argparse.Namespace) -> None:
             print(f"  line {v['line']}: {v['rule']}: {v['detail']}")
         if len(result.violations) > 10:
             print(f"  ... {len(result.violations) - 10} more (see --json)")
-    else:
+    elif result.segments or result.status != "failed":
         print(
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
             f"(estimated {result.estimated_time_s:.1f} s)"
@@ -176,7 +214,8 @@ def _report(result, args: argparse.Namespace) -> None:
         print(f"reason: {result.reason}")
     if result.resume_file:
         print(
-            f"resume point saved: {result.resume_file} (restart with --resume-from-layer {max(result.last_layer or 1, 1)})"
+            f"resume point saved: {result.resume_file} (restart with --resume-from-layer "
+            f"{max(result.last_layer or 1, args.resume_from_layer or 1)})"
         )
     if args.json:
         write_text_atomic(args.json, json.dumps(result.to_json(), indent=1) + "\n")
