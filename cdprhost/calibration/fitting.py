@@ -100,7 +100,8 @@ class CableModelFit:
     Fitted attributes (after ``fit``): ``model_``, ``names_``, ``x_``, ``stderr_``,
     ``covariance_``, ``correlation_``, ``chi2_``, ``dof_``, ``iterations_`` (accepted
     parameter updates), ``iterates_`` (x0 then each accepted iterate), ``nfev_``,
-    ``converged_``, ``residuals_`` (whitened, (K, 3)), ``singular_values_`` (of the
+    ``converged_``, ``residuals_`` (whitened, (K, 3)), ``information_`` (J^T J of
+    the whitened residuals), ``singular_values_`` (of the
     column-scaled Jacobian), ``null_space_`` (right singular vectors of the
     unidentifiable directions).
     """
@@ -204,6 +205,7 @@ class CableModelFit:
         return jac
 
     def _covariance(self, jac: np.ndarray) -> None:
+        self.information_ = jac.T @ jac
         norms = np.linalg.norm(jac, axis=0)
         norms[norms == 0] = 1.0
         scaled = jac / norms

@@ -19,15 +19,11 @@ random starts and from the greedy design.
 
 from __future__ import annotations
 
-import csv
-import io
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cdprhost.calibration.commanding import commanded_path
-from cdprhost.errors import InputError
 from cdprhost.kinematics.jacobian import identification_jacobian
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tension_bounds
@@ -374,6 +370,10 @@ class PosePlan:
     value: float
     n_candidates: int
     travel_mm: float
+    rounds: tuple[int, ...] = ()  # per pose: 0 planned, n added by the n-th augmentation
+
+    def round_of(self, i: int) -> int:
+        return self.rounds[i] if i < len(self.rounds) else 0
 
     @property
     def fit_poses(self) -> np.ndarray:
@@ -434,90 +434,4 @@ def plan_poses(
         value=design.value,
         n_candidates=cand.shape[0],
         travel_mm=tour_length(waypoints, home),
-    )
-
-
-# ------------------------------------------------------------------ plan files
-PLAN_COLUMNS = (
-    "pose",
-    "role",
-    "x",
-    "y",
-    "z",
-    "approach_x",
-    "approach_y",
-    "approach_z",
-    "dir1",
-    "dir2",
-    "dir3",
-)
-
-
-def plan_csv(plan: PosePlan) -> str:
-    """The plan as CSV text (``calibrate plan --out`` and a wizard session's plan.csv)."""
-    lines = [",".join(PLAN_COLUMNS)]
-    for i, (p, role, a, d) in enumerate(
-        zip(plan.poses, plan.roles, plan.approach, plan.directions)
-    ):
-        lines.append(
-            ",".join([str(i + 1), role, *(f"{v:.6f}" for v in (*p, *a)), *(str(int(v)) for v in d)])
-        )
-    return "\n".join(lines) + "\n"
-
-
-def read_plan_csv(path: str | os.PathLike[str], model: MachineModel | None = None) -> PosePlan:
-    """A plan file back as a :class:`PosePlan` (indices recomputed when ``model`` is given)."""
-    src = str(path)
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(io.StringIO(fh.read())))
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", source=src) from None
-    header = [h.strip() for h in rows[0]] if rows else []
-    missing = [c for c in PLAN_COLUMNS if c not in header]
-    if missing:
-        raise InputError(f"line 1: header lacks column(s) {', '.join(missing)}", source=src)
-    col = {c: header.index(c) for c in PLAN_COLUMNS}
-    roles, values = [], []
-    for n, row in enumerate(rows[1:], start=2):
-        if not any(c.strip() for c in row):
-            continue
-        role = row[col["role"]].strip()
-        if role not in ("fit", "check"):
-            raise InputError(
-                f"line {n}, column 'role': must be fit or check, got {role!r}", source=src
-            )
-        try:
-            values.append([float(row[col[c]]) for c in PLAN_COLUMNS[2:]])
-        except (ValueError, IndexError):
-            raise InputError(
-                f"line {n}: expected numbers in columns {', '.join(PLAN_COLUMNS[2:])}", source=src
-            ) from None
-        roles.append(role)
-    v = np.asarray(values, dtype=float).reshape(-1, 9)
-    if not np.isfinite(v).all():
-        raise InputError("non-finite number in a pose row", source=src)
-    fit = v[np.array(roles) == "fit", :3] if roles else np.zeros((0, 3))
-    indices = (
-        observability_indices(pose_blocks(model, fit))
-        if model is not None and len(fit) >= 4
-        else {}
-    )
-    table1 = observability_indices(pose_blocks(model, TABLE1_POSES)) if model is not None else {}
-    start = (
-        model.home_point(np.zeros(3)) if model is not None else v[0, 3:6] if len(v) else np.zeros(3)
-    )
-    way = np.empty((2 * len(v), 3))
-    way[0::2], way[1::2] = v[:, 3:6], v[:, :3]
-    return PosePlan(
-        v[:, :3],
-        tuple(roles),
-        v[:, 3:6],
-        v[:, 6:9],
-        "file",
-        indices,
-        table1,
-        float("nan"),
-        0,
-        tour_length(way, start),
     )

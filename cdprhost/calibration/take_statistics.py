@@ -47,6 +47,8 @@ MAD_TO_SIGMA = 1.4826
 MAX_LAG = 64
 #: Blocks of the settling scan: about one per 8 frames, 4 to 20 of them.
 MIN_BLOCKS, MAX_BLOCKS, FRAMES_PER_BLOCK = 4, 20, 8
+#: Shorter takes are not scanned for settling (too few frames to tell it from noise).
+MIN_SETTLING_FRAMES = 40
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,7 +165,9 @@ def ar_variance_inflation(corr: np.ndarray, n: np.ndarray, max_order: np.ndarray
 def max_ar_order(n: np.ndarray) -> np.ndarray:
     """Largest autoregression order tried: 10 log10(n), at most n / 4 and MAX_LAG."""
     nn = np.maximum(np.asarray(n, dtype=float), 2.0)
-    return np.asarray(np.clip(np.minimum(np.floor(10.0 * np.log10(nn)), nn // 4), 1, MAX_LAG)).astype(int)
+    return np.asarray(
+        np.clip(np.minimum(np.floor(10.0 * np.log10(nn)), nn // 4), 1, MAX_LAG)
+    ).astype(int)
 
 
 def variance_inflation(
@@ -220,7 +224,7 @@ def settling_start(
     block = np.searchsorted(edges, np.arange(n), side="right") - 1
     jmax = int(np.floor(nb * max_fraction))
     start = np.zeros(n_takes, dtype=int)
-    if jmax < 1 or n < 2 * MIN_BLOCKS:
+    if jmax < 1 or n < MIN_SETTLING_FRAMES:
         return start
     if vif is None:
         ref0 = w * (block >= jmax)[None, :]
@@ -341,7 +345,9 @@ def take_statistics(
     dof = np.clip(np.min(n_eff, axis=1) - 2.0, 1.0, np.maximum(n_used - 2.0, 1.0))
     ridge = 1e-12 * np.einsum("bii->b", v_slope)[:, None, None] * np.eye(3)
     with np.errstate(invalid="ignore", divide="ignore"):
-        wald = np.einsum("bi,bi->b", slope, np.linalg.solve(v_slope + ridge, slope[..., None])[..., 0])
+        wald = np.einsum(
+            "bi,bi->b", slope, np.linalg.solve(v_slope + ridge, slope[..., None])[..., 0]
+        )
     wald = np.where(np.isfinite(wald) & (n_used >= 4), wald, 0.0)
     p = stats.f.sf(wald / 3.0, 3, dof)
     tu = np.where(inl, times, np.nan)

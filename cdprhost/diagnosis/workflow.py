@@ -19,14 +19,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
 
 from cdprhost.calibration.fitting import CableModelFit, Observations
+from cdprhost.calibration.pose_noise import PoseNoise
 from cdprhost.diagnosis import crossval, signatures
 from cdprhost.diagnosis.localise import Finding, describe, localise
-from cdprhost.diagnosis.noise import NoiseEstimate
 from cdprhost.diagnosis.stat_tests import bic, goodness_of_fit_p, holm, nested_f_test
 from cdprhost.effects.registry import CATALOGUE
 from cdprhost.errors import InputError
@@ -52,6 +53,7 @@ class DiagnosisSettings:
     heldout_for_all: bool = True  # False: cross-validate only candidates that pass the F test
 
 
+DEFAULT_SETTINGS = DiagnosisSettings()
 #: Settings for many repeated diagnoses (tests, benchmarks): fewer folds, same decisions.
 FAST = DiagnosisSettings(folds=4, heldout_for_all=False)
 
@@ -111,6 +113,35 @@ class Candidate:
         return float("nan") if self.result is None else self.result.heldout_rms_mm
 
 
+@dataclass(frozen=True)
+class Step:
+    """The model after one step of the forward selection (the base model first) and the gap
+    it leaves: held-out error against the noise floor a correct model would reach."""
+
+    effects: tuple[str, ...]
+    heldout_rms_mm: float
+    noise_floor_mm: float
+    chi2: float
+    dof: int
+    gof_p: float
+    p_value: float = float("nan")  # F test of the effect added, against the previous step
+    delta_bic: float = float("nan")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "effects": list(self.effects),
+            "added": self.effects[-1] if self.effects else None,
+            "heldout_rms_mm": self.heldout_rms_mm,
+            "noise_floor_mm": self.noise_floor_mm,
+            "gap_mm": self.heldout_rms_mm - self.noise_floor_mm,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "p_value_fit": self.gof_p,
+            "p_value_added": self.p_value,
+            "delta_bic": self.delta_bic,
+        }
+
+
 @dataclass
 class Diagnosis:
     verdict: str  # named | none | ambiguous | unexplained
@@ -119,7 +150,7 @@ class Diagnosis:
     rounds: list[list[Candidate]]
     base: ModelResult
     final: ModelResult
-    noise: NoiseEstimate
+    noise: PoseNoise
     noise_floor_mm: float
     noise_floor_base_mm: float
     expected_heldout_mm: np.ndarray  # per pose, for a correct final model
@@ -130,6 +161,7 @@ class Diagnosis:
     confusable: list[tuple[str, str, float]]
     n_poses: int
     settings: DiagnosisSettings = field(default_factory=DiagnosisSettings)
+    steps: list[Step] = field(default_factory=list)
 
     @property
     def effect(self) -> str | None:
@@ -292,13 +324,15 @@ def observations_check(obs: Observations) -> None:
 def diagnose(
     obs: Observations,
     base_model: MachineModel,
-    noise: NoiseEstimate | None = None,
-    settings: DiagnosisSettings = DiagnosisSettings(),
+    noise: PoseNoise | None = None,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
 ) -> Diagnosis:
     """Run the whole workflow on measured poses; ``base_model`` gives the starting geometry
     and any effects already in the profile (refitted, not tested)."""
     observations_check(obs)
-    noise = noise or NoiseEstimate(float(np.mean(obs.sigma_mm)), "given")
+    if noise is None:
+        sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),)).copy()
+        noise = PoseNoise(sig, sig, 0.0, "given", "noise given with the observations")
     folds = crossval.pose_folds(len(obs), settings.folds)
     base = fit_model(obs, base_model, base_model.effects.names, folds)
 
@@ -314,6 +348,7 @@ def diagnose(
     unabsorbed = {n: r.unabsorbed_min for n, r in reports.items()}
 
     current, named, ambiguous, rounds = base, [], (), []
+    added: list[Candidate] = []
     for index in range(settings.max_rounds):
         if not remaining:
             break
@@ -339,6 +374,7 @@ def diagnose(
             break
         best.status = "named"
         named.append(best.name)
+        added.append(best)
         current = best.result
         remaining.remove(best.name)
 
@@ -374,6 +410,15 @@ def diagnose(
     jac_final = signatures.fit_jacobian(current.fit, obs)
     expected = crossval.expected_heldout_sq(jac_final, sigma, folds)
     floor_base = crossval.noise_floor_mm(signatures.fit_jacobian(base.fit, obs), sigma, folds)
+    floors = [floor_base] + [
+        crossval.noise_floor_mm(signatures.fit_jacobian(c.result.fit, obs), sigma, folds)
+        for c in added[:-1]
+        if c.result is not None
+    ]
+    floors.append(float(np.sqrt(np.mean(expected))))
+    steps = [_step(base, floors[0])] + [
+        _step(c.result, f, c) for c, f in zip(added, floors[1:]) if c.result is not None
+    ]
     params = {"geometry": geometry_parameters(current.fit)}
     params.update({n: effect_parameters(current.fit, n) for n in current.effects})
     return Diagnosis(
@@ -394,4 +439,18 @@ def diagnose(
         confusable=confusable,
         n_poses=len(obs),
         settings=settings,
+        steps=steps,
+    )
+
+
+def _step(result: ModelResult, floor: float, added: Candidate | None = None) -> Step:
+    return Step(
+        result.effects,
+        result.heldout_rms_mm,
+        floor,
+        result.chi2,
+        result.dof,
+        result.gof_p,
+        added.p_value if added else float("nan"),
+        added.delta_bic if added else float("nan"),
     )

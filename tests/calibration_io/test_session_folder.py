@@ -10,12 +10,11 @@ import pytest
 from cdprhost.calibration.readers import FORMATS
 from cdprhost.calibration.session import (
     POSE_COLUMNS,
-    SessionWriter,
     load_session,
     load_session_config,
     read_poses,
-    session_toml,
 )
+from cdprhost.calibration.session_writer import SessionWriter, session_toml
 from cdprhost.errors import InputError
 from cdprhost.sim.synthetic_session import (
     synthesize_take,
@@ -65,9 +64,10 @@ def test_synthetic_session_roundtrip(tmp_path, fmt):
     np.testing.assert_allclose(m.s_cmd, s_cmd, atol=1e-6)
     np.testing.assert_allclose(m.t_s, t_s, atol=1e-6)
     np.testing.assert_array_equal(m.dirs, dirs)
-    assert m.std.shape == (6, 3) and (m.base_fit_rms_mm < 0.1).all()
-    obs = m.observations(sigma_mm=0.05)
-    assert len(obs) == 6 and obs.sigma_mm == 0.05
+    assert m.se.shape == (6, 3) and (m.base_fit_rms_mm < 0.1).all()
+    obs = m.observations()
+    np.testing.assert_allclose(obs.sigma_mm, np.sqrt(np.mean(m.se**2, axis=1)))
+    assert len(obs) == 6 and (obs.sigma_mm > 0).all() and (obs.sigma_mm < 0.02).all()
 
 
 def test_spec_example_folder_assembled_by_hand(tmp_path):

@@ -101,7 +101,7 @@ def test_clean_session_says_none_and_exits_zero(tmp_path, sim_model):
     result = json.loads(report.read_text())
     assert result["verdict"] == "none" and result["effect"] is None
     assert result["where"].startswith("no disagreement beyond the noise floor")
-    assert result["noise"]["source"] == "default"
+    assert result["noise"]["source"] == "takes"
 
 
 def test_declared_noise_is_read_from_session_toml(tmp_path, sim_model):
@@ -110,8 +110,9 @@ def test_declared_noise_is_read_from_session_toml(tmp_path, sim_model):
     toml = session / "session.toml"
     toml.write_text(toml.read_text().replace("[session]\n", "[session]\nnoise_mm = 0.06\n", 1))
     data = load_session_data(session)
-    assert data.noise.source == "declared" and data.noise.sigma_mm == 0.06
-    assert data.observations.sigma_mm == 0.06 and len(data.observations) == 12
+    assert data.noise.source == "takes + declared" and data.noise.extra_mm == 0.06
+    np.testing.assert_allclose(data.observations.sigma_mm, np.hypot(data.noise.take_mm, 0.06))
+    assert len(data.observations) == 12
     toml.write_text(toml.read_text().replace("noise_mm = 0.06", "noise_mm = -1"))
     assert main(["diagnose", str(session), "-p", "paper-simulation", "-q"]) == 2
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cdprhost.calibration import planning, report
+from cdprhost.calibration import plan_files, planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
@@ -64,10 +64,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     ident.add_argument("--json", metavar="R", help="machine-readable report")
     ident.add_argument(
         "--noise-floor",
-        type=float,
-        default=0.05,
+        type=_positive_mm,
+        default=None,
         metavar="MM",
-        help="mocap noise per coordinate that averaging cannot remove (default 0.05 mm)",
+        help="mocap noise per coordinate that averaging cannot remove, added to each take's "
+        "standard error (default: noise_mm of session.toml, else none)",
+    )
+    ident.add_argument(
+        "--max-workspace-error",
+        type=_positive_mm,
+        default=1.0,
+        metavar="MM",
+        help="refuse when the predicted workspace error exceeds this (default 1 mm)",
+    )
+    ident.add_argument(
+        "--force",
+        action="store_true",
+        help="write the profile even when the trust gate refuses it (the report still says ok: false)",
     )
     ident.set_defaults(func=run_identify)
 
@@ -134,7 +147,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="wait for a take at most S seconds",
     )
-    wiz.add_argument("--noise-floor", type=float, default=0.05, metavar="MM")
+    wiz.add_argument(
+        "--noise-floor",
+        type=_positive_mm,
+        default=None,
+        metavar="MM",
+        help="mocap noise per coordinate that averaging cannot remove (default: none)",
+    )
     wiz.add_argument(
         "--out", metavar="calibrated.toml", help="also write the calibrated profile here"
     )
@@ -147,6 +166,16 @@ def _at_least_4(text: str) -> int:
     if n < 4:
         raise argparse.ArgumentTypeError("at least 4 poses are needed to identify 12 parameters")
     return n
+
+
+def _positive_mm(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v > 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError("must be a positive number of millimetres")
+    return v
 
 
 def _non_negative(text: str) -> int:
@@ -174,7 +203,7 @@ def run_plan(args: argparse.Namespace) -> int:
         )
     except ValueError as exc:
         raise InputError(str(exc)) from None
-    write_text_atomic(args.out, planning.plan_csv(plan))
+    write_text_atomic(args.out, plan_files.plan_csv(plan))
     write_json(args.json, planning_json(plan))
     print(report.plan_text(plan))
     return 0
@@ -195,18 +224,28 @@ def planning_json(plan: planning.PosePlan) -> dict:
 
 
 def run_identify(args: argparse.Namespace) -> int:
+    from cdprhost.calibration.trust import TrustLimits
+
     profile, model = load_model(args.profile)
-    result = identify_session(args.session, model, noise_floor_mm=args.noise_floor)
-    write_json(args.json, result.to_json())
+    limits = TrustLimits(max_workspace_mm=args.max_workspace_error)
+    result = identify_session(args.session, model, noise_floor_mm=args.noise_floor, limits=limits)
+    forced = bool(args.force) and result.solved and not result.ok
+    write_json(args.json, {**result.to_json(), "forced": forced})
     print(report.identification_text(result))
-    if not result.ok:
+    if not result.ok and not forced:
         raise JobFailed(
-            "calibration failed; no profile written:\n"
+            "calibration refused; no profile written"
+            + (" (--force writes it anyway)" if result.solved else "")
+            + ":\n"
             + "\n".join(f"  - {p}" for p in result.problems())
         )
-    save_profile(
-        calibrated_profile(profile, result, session=str(Path(args.session).resolve())), args.out
-    )
+    calibrated = calibrated_profile(profile, result, session=str(Path(args.session).resolve()))
+    save_profile(calibrated, args.out)
+    if forced:
+        print(
+            "\nWARNING: the trust gate refused this result; written because of --force",
+            file=sys.stderr,
+        )
     print(f"\ncalibrated profile written to {args.out}", file=sys.stderr)
     return 0
 
