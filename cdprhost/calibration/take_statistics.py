@@ -215,41 +215,60 @@ def settling_start(
     max_fraction: float = 0.5,
     alpha: float = 0.01,
     vif: np.ndarray | None = None,
+    passes: int = 4,
 ) -> np.ndarray:
     """Index of the first frame after the settling transient, per take (B,) (see module doc).
-    ``vif`` (B, 3): the noise's variance inflation when known (else estimated per take)."""
+    ``vif`` (B, 3): the noise's variance inflation when known (else estimated per take).
+
+    Each pass fits a line to the second half of what is kept and flags every earlier block
+    whose mean squared deviation from that line (extrapolated) exceeds what noise and the
+    line's own uncertainty allow; the kept part then starts after the last flagged block.
+    Passes repeat on the part kept (a slow sag needs more than one), never trimming more than
+    ``max_fraction`` of the take."""
     n_takes, n = w.shape
     nb = int(np.clip(n // FRAMES_PER_BLOCK, MIN_BLOCKS, MAX_BLOCKS))
     edges = (np.arange(nb + 1) * n) // nb
     block = np.searchsorted(edges, np.arange(n), side="right") - 1
     jmax = int(np.floor(nb * max_fraction))
-    start = np.zeros(n_takes, dtype=int)
+    first = np.zeros(n_takes, dtype=int)  # first block kept
     if jmax < 1 or n < MIN_SETTLING_FRAMES:
-        return start
+        return first
     if vif is None:
-        ref0 = w * (block >= jmax)[None, :]
+        ref0 = w * (block >= nb // 2)[None, :]
         vif = variance_inflation(*autocorrelations(_residuals(x, t, ref0), ref0))
-    vif = np.max(np.broadcast_to(vif, (n_takes, 3)), axis=1)  # (B,)
+    v = np.max(np.broadcast_to(vif, (n_takes, 3)), axis=1)[:, None]  # (B, 1)
     q = 1.0 - alpha / jmax
-    stopped = np.zeros(n_takes, dtype=bool)
-    for j in range(jmax - 1, -1, -1):  # one pass per block (a handful), vectorised over takes
-        ref = w * (block > j)[None, :]
+    counts = np.add.reduceat(w, edges[:-1], axis=1)  # (B, nb) frames per block
+    t_block = np.add.reduceat(w * t, edges[:-1], axis=1) / np.maximum(counts, 1.0)
+    for _ in range(passes):
+        ref_first = (first + nb) // 2  # the second half of the blocks kept
+        ref = w * (block[None, :] >= ref_first[:, None])
         level, slope, tbar = _line(x, t, ref)
         r = x - level[:, None, :] - slope[:, None, :] * (t - tbar[:, None])[..., None]
-        r = np.where(np.isfinite(r), r, 0.0)
+        r = np.where(np.isfinite(r) & (w[..., None] > 0), r, 0.0)
         n_ref = np.maximum(_sum(ref), 1.0)
         s2 = np.maximum(_sum(r * r * ref[..., None]) / n_ref[:, None], 1e-300)
-        inblock = w * (block == j)[None, :]
-        m = _sum(inblock)
-        ms = _sum(_sum(r * r / s2[:, None, :], axis=2) * inblock) / np.maximum(3.0 * m, 1.0)
-        nu = np.maximum(3.0 * m / vif, 1.0)
-        nu_ref = np.maximum(3.0 * n_ref / vif, 1.0)
-        n_eff_ref = np.maximum(n_ref / vif, 1.0)
-        limit = stats.f.ppf(q, nu, nu_ref) + 4.0 / n_eff_ref * stats.chi2.ppf(q, 3) / 3.0
-        flag = (m > 0) & (ms > limit) & ~stopped
-        start = np.where(flag, edges[j + 1], start)
-        stopped |= flag
-    return start
+        z2 = _sum(r * r / s2[:, None, :], axis=2)  # (B, n)
+        ms = np.add.reduceat(z2, edges[:-1], axis=1) / np.maximum(3.0 * counts, 1.0)
+        stt = np.maximum(_sum(ref * (t - tbar[:, None]) ** 2), 1e-300)
+        # the extrapolated line's own variance at each block, relative to the frame noise
+        lever = (
+            v
+            / n_ref[:, None]
+            * (1.0 + n_ref[:, None] * (t_block - tbar[:, None]) ** 2 / stt[:, None])
+        )
+        limit = stats.f.ppf(
+            q, np.maximum(3.0 * counts / v, 1.0), np.maximum(3.0 * n_ref[:, None] / v, 1.0)
+        )
+        limit = limit + lever  # its expected share (a shift of the whole block)
+        candidate = (np.arange(nb)[None, :] >= first[:, None]) & (np.arange(nb)[None, :] < jmax)
+        flagged = candidate & (counts > 0) & (ms > limit)
+        last = np.max(np.where(flagged, np.arange(nb)[None, :], -1), axis=1)
+        moved = last + 1 > first
+        if not moved.any():
+            break
+        first = np.where(moved, last + 1, first)
+    return np.asarray(edges[first])
 
 
 # ------------------------------------------------------------------ outliers
@@ -257,6 +276,20 @@ def _masked_median(a: np.ndarray, w: np.ndarray) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-gap takes: judged elsewhere
         return np.asarray(np.nanmedian(np.where(w > 0, a, np.nan), axis=1))
+
+
+def spike_mask(
+    x: np.ndarray, t: np.ndarray, w: np.ndarray, n_mads: float, min_scale: float, window: int = 5
+) -> np.ndarray:
+    """Isolated outlier frames (B, n): beyond ``n_mads`` robust sigmas of a robust line while
+    most of their ``window`` neighbours are not (a swing or sag is beyond in runs, a marker
+    swap or reflection in one or two frames). Removed before the settling scan."""
+    beyond = w.astype(bool) & ~outlier_mask(x, t, w, n_mads, min_scale)
+    half = window // 2
+    padded = np.pad(beyond.astype(float), ((0, 0), (half + 1, half)))
+    csum = np.cumsum(padded, axis=1)
+    runs = csum[:, window:] - csum[:, :-window]  # beyond-count in each centred window
+    return np.asarray(beyond & (runs <= half))
 
 
 def outlier_mask(
@@ -316,8 +349,14 @@ def take_statistics(
     times = np.where(np.isfinite(times), times, 0.0)
     w = ok.astype(float)
     given = None if noise_inflation is None else np.broadcast_to(noise_inflation, (n_takes, 3))
+    spikes = spike_mask(pts, times, w, outlier_mads, min_scale_mm)
     start = settling_start(
-        pts, times, w, max_fraction=max_settling_fraction, alpha=settle_alpha, vif=given
+        pts,
+        times,
+        w * ~spikes,
+        max_fraction=max_settling_fraction,
+        alpha=settle_alpha,
+        vif=given,
     )
     kept = ok & (np.arange(n)[None, :] >= start[:, None])
     inl = outlier_mask(pts, times, kept.astype(float), outlier_mads, min_scale_mm)

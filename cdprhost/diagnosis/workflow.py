@@ -310,6 +310,31 @@ class _Round:
         return not (p_over_best < self.settings.alpha and p_over_rival < self.settings.alpha)
 
 
+TAKES_ONLY = "takes"
+
+
+def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> PoseNoise:
+    """``noise`` plus the common part s that makes the fitted model's chi-square equal its
+    degrees of freedom (sum r_i^2 / (sigma_i^2 + s^2) = dof, solved for s)."""
+    sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
+    r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)  # position misfit^2 per pose, mm^2
+    dof = max(fit.dof_, 1)
+    lo, hi = 0.0, float(np.sqrt(np.max(r2))) + 1e-9
+    for _ in range(60):  # bisection: the chi-square falls monotonically as s grows
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.sum(r2 / (sig**2 + mid**2)) > dof else (lo, mid)
+    extra = 0.5 * (lo + hi)
+    return PoseNoise(
+        np.sqrt(sig**2 + extra**2),
+        noise.take_mm,
+        extra,
+        "takes + unstructured excess",
+        f"the residuals exceed the takes' noise with no pattern (time, direction, tension, height, "
+        f"slider position): {extra:.3g} mm per coordinate added to every pose as noise no take "
+        "shows; declare noise_mm in session.toml, or repeat poses, to measure it",
+    )
+
+
 def observations_check(obs: Observations) -> None:
     if len(obs) < MIN_POSES:
         raise InputError(f"a diagnosis needs at least {MIN_POSES} measured poses, got {len(obs)}")
@@ -389,6 +414,18 @@ def diagnose(
         verdict = "ambiguous"
     elif current.gof_p < settings.gof_alpha:
         verdict = "unexplained"
+        if noise.source == TAKES_ONLY and not localise(
+            current.fit.model_, obs, settings.localise_alpha
+        ):
+            # The takes cannot see an error that stays fixed during a take (repeatability,
+            # calibration of the mocap): an excess with no pattern is that, not physics.
+            wider = unseen_noise(current.fit, obs, noise)
+            return diagnose(
+                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider.sigma_mm),
+                base_model,
+                wider,
+                settings,
+            )
     else:
         verdict = "named" if named else "none"
 

@@ -16,6 +16,7 @@ Everything is vectorised over frames and markers; the caller owns the random gen
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -161,3 +162,48 @@ def vary(
         settle_hz=noise.settle_hz * float(rng.uniform(0.7, 1.3)),
         creep_mm=creep,
     )
+
+
+def effector_series(
+    rng: np.random.Generator,
+    n_takes: int,
+    n_frames: int,
+    rate_hz: float,
+    noise: MocapNoise,
+    *,
+    n_markers: int = 3,
+    creep_mm: np.ndarray | float = 0.0,
+) -> np.ndarray:
+    """Per-frame effector points (n_takes, n_frames, 3) of many takes of a static effector at
+    the origin, as the take test sees them (the centroid of ``n_markers`` effector markers,
+    registration aside): marker jitter, settling swing, hum, gaps and a creep of ``creep_mm``
+    (per take) in a random direction. Vectorised over takes (for Monte Carlo)."""
+    t = np.arange(n_frames) / rate_hz
+    level = noise.jitter_mm * np.exp(noise.marker_variation * rng.normal(size=(n_takes, n_markers)))
+    rho = float(np.exp(-1.0 / (rate_hz * noise.correlation_s))) if noise.correlation_s > 0 else 0.0
+    jitter = ar1_noise(rng, (n_frames, n_takes, n_markers, 3), rho, level[None, :, :, None])
+    lost = gap_mask(rng, n_frames, n_takes * n_markers, noise.gap_fraction, noise.gap_run_frames)
+    jitter[lost.reshape(n_frames, n_takes, n_markers)] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames with every marker lost
+        x = np.moveaxis(np.nanmean(jitter, axis=2), 0, 1)  # (takes, frames, 3)
+
+    def directions() -> np.ndarray:
+        d = rng.normal(size=(n_takes, 3))
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    if noise.settle_mm > 0:
+        amp = noise.settle_mm * rng.uniform(0.5, 1.5, n_takes)
+        hz = noise.settle_hz * rng.uniform(0.7, 1.3, n_takes)
+        phase = rng.uniform(0, 2 * np.pi, n_takes)
+        swing = np.exp(-t[None] / noise.settle_decay_s) * np.cos(
+            2 * np.pi * hz[:, None] * t[None] + phase[:, None]
+        )
+        x += (amp[:, None] * swing)[..., None] * directions()[:, None, :]
+    creep = np.broadcast_to(np.asarray(creep_mm, dtype=float), (n_takes,))
+    if np.any(creep > 0) and n_frames > 1:
+        x += (creep[:, None] * t[None] / t[-1])[..., None] * directions()[:, None, :]
+    if noise.hum_mm > 0:
+        hum = band_limited(rng, n_frames, rate_hz, noise.hum_band_hz, noise.hum_mm, 3 * n_takes)
+        x += np.moveaxis(hum.reshape(n_frames, n_takes, 3), 0, 1)
+    return x

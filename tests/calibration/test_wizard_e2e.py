@@ -219,7 +219,7 @@ def test_wrong_take_is_rejected_at_once_and_asked_again(
         out = wiz.run()
     finally:
         link.close()
-    assert any("take rejected" in m and "from the commanded pose" in m for m in logs)
+    assert any("take refused (wrong-pose" in m and "from the commanded pose" in m for m in logs)
     rows = list(csv.DictReader(open(tmp_path / "s" / "poses.csv")))
     assert len(rows) == 5 and out.identification.ok
 

@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take, numeric_block, read_text
+from cdprhost.calibration.readers.take import Take, numeric_block, read_text, to_float
 from cdprhost.errors import InputError
 
 FORMAT = "qualisys-tsv"
@@ -114,7 +114,7 @@ def parse_qualisys(text: str, source: str) -> Take:
 
 def _float_meta(meta: dict[str, list[str]], key: str) -> float | None:
     try:
-        value = float(meta[key][0])
+        value = to_float(meta[key][0])
     except (KeyError, IndexError, ValueError):
         return None
     return value if value > 0 else None
