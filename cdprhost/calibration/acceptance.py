@@ -41,6 +41,13 @@ class AcceptanceLimits(BaseModel):
 
     drift_alpha: float = Field(0.001, gt=0, lt=1, description="significance of the drift test")
     max_drift_mm: float = Field(0.05, ge=0, description="smallest drift over a take that matters")
+    motion_alpha: float = Field(
+        0.05,
+        gt=0,
+        lt=1,
+        description="a kept take whose drift is significant at this level carries its motion "
+        "(RMS of the ramp, drift / sqrt(12)) in its standard error",
+    )
     max_spread_mm: float = Field(
         1.0, gt=0, description="cap on the RMS distance of frames from the centre"
     )

@@ -63,12 +63,15 @@ def augment_design(info: np.ndarray, base: np.ndarray, k: int, max_iter: int = 5
 
 
 def predicted_workspace(
-    model: MachineModel, fit_poses: np.ndarray, sigma_mm: float, grid: np.ndarray
+    model: MachineModel, fit_poses: np.ndarray, sigma_mm: float | np.ndarray, grid: np.ndarray
 ) -> tuple[float, float]:
     """(RMS, max) predicted workspace error of identifying from ``fit_poses`` with noise
-    ``sigma_mm`` per coordinate (inf when the poses cannot determine the 12 parameters)."""
-    j0 = identification_jacobian(np.asarray(fit_poses, float), model.geometry).reshape(-1, 12)
-    m = j0.T @ j0 / sigma_mm**2
+    ``sigma_mm`` per coordinate (one, or one per pose): the noise limit of a pose set (inf
+    when the poses cannot determine the 12 parameters)."""
+    pts = np.asarray(fit_poses, float).reshape(-1, 3)
+    j0 = identification_jacobian(pts, model.geometry).reshape(-1, 3, 12)
+    sig = np.broadcast_to(np.asarray(sigma_mm, dtype=float), (len(pts),))
+    m = np.einsum("nip,niq,n->pq", j0, j0, 1.0 / sig**2)
     if np.linalg.matrix_rank(m, tol=1e-10 * np.trace(m)) < 12:
         return float("inf"), float("inf")
     sigma = workspace_sigma(model.geometry, np.linalg.inv(m), grid)

@@ -119,7 +119,9 @@ class TakeMeasurement:
     """The effector point of a sound take (base frame, mm) and how well it is known.
 
     ``se`` (3,): standard error per coordinate, the frames' (``se_frames``, from the
-    long-run variance of the autocorrelated noise) and the registration's combined;
+    long-run variance of the autocorrelated noise), the registration's and, for a take whose
+    drift is significant at ``motion_alpha`` but too small to refuse, the motion's
+    (drift / sqrt(12) per coordinate) combined;
     ``sigma_mm`` their RMS over coordinates, the pose noise of identification and diagnosis.
     """
 
@@ -284,8 +286,16 @@ def judge_series(
     verdict = judge(s, limits)
     if verdict.reason is not None:
         raise TakeRejected(verdict.message, source=series.source, reason=verdict.reason)
-    se = np.sqrt(s.se**2 + series.registration_se**2)
+    # an effector that probably moved during the take was at its centre only on average
+    moved = float(s.drift_p) < limits.motion_alpha
+    se_motion = np.abs(np.asarray(s.drift_mm)) / np.sqrt(12.0) if moved else np.zeros(3)
+    se = np.sqrt(s.se**2 + series.registration_se**2 + se_motion**2)
     notes = list(series.notes)
+    if moved:
+        notes.append(
+            f"moved {float(s.drift_total_mm):.3f} mm during the take (p = {float(s.drift_p):.2g}): "
+            "counted in its standard error"
+        )
     total = int(s.n_frames)
     if int(s.n_valid) < total:
         notes.append(f"{total - int(s.n_valid)} of {total} frames without the effector (gaps)")

@@ -104,11 +104,16 @@ def weak_combinations(
 ) -> tuple[WeakCombination, ...]:
     """Parameter combinations whose uncertainty alone gives more than ``threshold_mm`` RMS
     workspace error (largest first, at most ``top``)."""
+    if not (np.all(np.isfinite(information)) and np.all(np.isfinite(metric))):
+        return ()
     scale = np.sqrt(np.maximum(np.diag(metric), 1e-300))
-    w = metric / np.outer(scale, scale)
+    w = metric / np.outer(scale, scale) + 1e-12 * np.eye(metric.shape[0])
     info = information / np.outer(scale, scale)
     ridge = 1e-12 * max(float(np.trace(info)) / info.shape[0], 1e-300)
-    mu, vec = linalg.eigh(info + ridge * np.eye(info.shape[0]), w)  # info v = mu W v
+    try:
+        mu, vec = linalg.eigh(info + ridge * np.eye(info.shape[0]), w)  # info v = mu W v
+    except linalg.LinAlgError:
+        return ()
     contribution = np.where(mu > ridge * 10, 1.0 / np.maximum(mu, 1e-300), np.inf)
     out = []
     for k in np.argsort(-contribution)[:top]:

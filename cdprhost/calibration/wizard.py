@@ -97,7 +97,7 @@ class TakeSource(Protocol):
 
 @dataclass(frozen=True)
 class WizardOptions:
-    n_poses: int = 4
+    n_poses: int = 6
     n_check: int = 3
     criterion: str = "D"
     seed: int = 0

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -193,6 +194,14 @@ def write_synthetic_session(
     return Path(directory)
 
 
+@dataclass(frozen=True, eq=False)
+class MeasuredSession:
+    directory: Path
+    actual: np.ndarray  # (K, 3) where the true effector was at each pose (base frame, mm)
+    s_cmd: np.ndarray  # (K, 3) commanded sliders
+    crept: np.ndarray  # (K,) bool: the take crept
+
+
 def write_measured_session(
     directory: str | os.PathLike[str],
     truth: MachineModel,
@@ -209,11 +218,11 @@ def write_measured_session(
     roles: Sequence[str] | None = None,
     seed: int = 0,
     writer_options: Mapping[str, object] | None = None,
-) -> list[bool]:
+) -> MeasuredSession:
     """A session folder of ``poses`` commanded through ``nominal`` (visiting order) on the
     ``truth`` machine and recorded by a realistic motion capture: every take its own draw of
     settling and, with ``creep_probability``, a creep (:func:`~.mocap_noise.vary`).
-    Returns, per pose, whether its take crept."""
+    Returns where the effector really was and which takes crept."""
     rng = np.random.default_rng(seed)
     pts = np.asarray(poses, dtype=float).reshape(-1, 3)
     times = np.asarray(t_s, dtype=float).reshape(-1)
@@ -237,4 +246,6 @@ def write_measured_session(
         writer_options=writer_options,
         roles=roles,
     )
-    return [n.creep_mm > 0 for n in noises]
+    return MeasuredSession(
+        Path(directory), actual, s_cmd, np.array([n.creep_mm > 0 for n in noises])
+    )

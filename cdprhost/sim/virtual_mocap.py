@@ -9,7 +9,8 @@ motion, drift the time) and writes a motion-capture take of that point into the
 mocap folder, an OptiTrack Motive CSV (in metres) by default, with the noise of a
 real system (:data:`REALISTIC`: autocorrelated jitter of 0.1 mm per marker at 120 fps,
 a settling swing after each move, runs of gaps; ``creep_probability`` of a slow creep).
-``crept`` records, per take written, whether it crept. Takes use the synthetic session layout's markers
+``creep_takes`` (take numbers, from 1) creep by ``creep_mm`` for sure. ``crept`` records,
+per take written, whether it crept. Takes use the synthetic session layout's markers
 (:mod:`cdprhost.sim.synthetic_session`); :func:`mocap_config` is the matching
 ``[mocap]`` configuration. ``make_observer(None, None)`` is None (no observer).
 """
@@ -18,6 +19,8 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Collection
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +69,8 @@ class VirtualMocap:
         rate_hz: float = 120.0,
         duration_s: float = 2.0,
         creep_probability: float = 0.0,
+        creep_takes: Collection[int] = (),
+        creep_mm: float = 0.3,
         noise_mm: float = 0.0,
         seed: int | None = 0,
         format: str = "motive-csv",
@@ -78,6 +83,8 @@ class VirtualMocap:
         self.rate_hz = float(rate_hz)
         self.n_frames = max(int(round(duration_s * rate_hz)), 2)
         self.creep_probability = float(creep_probability)
+        self.creep_takes = frozenset(int(n) for n in creep_takes)
+        self.creep_mm = float(creep_mm)
         self.noise_mm = float(noise_mm)
         self.crept: list[bool] = []
         self.format = format
@@ -131,6 +138,8 @@ class VirtualMocap:
             self.count += 1
             path = self.directory / f"take-{self.count:04d}{EXTENSIONS[self.format]}"
             noise = vary(self.realism, self._rng, creep_probability=self.creep_probability)
+            if self.count in self.creep_takes:
+                noise = replace(noise, creep_mm=self.creep_mm)
             self.crept.append(noise.creep_mm > 0)
             synthesize_take(
                 point,

@@ -100,7 +100,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="session folder; an existing one is resumed (default: ./calibration-<date>)",
     )
     wiz.add_argument(
-        "--poses", type=_at_least_4, default=4, metavar="N", help="fit poses (default 4)"
+        "--poses",
+        type=_at_least_4,
+        default=6,
+        metavar="N",
+        help="fit poses (default 6: the workspace error then lands near its noise limit; "
+        "4 is the minimum)",
     )
     wiz.add_argument(
         "--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)"
