@@ -159,3 +159,30 @@ def test_out_of_catalogue_effect_is_unexplained_end_to_end(tmp_path, sim_model):
     assert "repeat with slider position" in result["where"]
     assert result["chi2_after"]["p_value"] < 1e-3
     assert load_profile(out).calibration["diagnosis"]["verdict"] == "unexplained"
+
+
+@pytest.mark.parametrize(
+    ("pair", "fmt", "seed"),
+    [
+        (("drive_scale", "backlash"), "qualisys-tsv", 301),
+        (("cable_elasticity", "drift"), "c3d", 302),
+    ],
+)
+def test_two_effects_at_once_are_both_named(tmp_path, sim_model, pair, fmt, seed, capsys):
+    session = tmp_path / "two"
+    write_hidden_session(
+        session, sim_model, list(pair), seed, format=fmt, rate_hz=240.0, duration_s=3.0
+    )
+    report = tmp_path / "r.json"
+    assert main(["diagnose", str(session), "-p", "paper-simulation", "--json", str(report)]) == 0
+    data = json.loads(report.read_text())
+    assert data["verdict"] == "named" and set(data["effects"]) == set(pair)
+    assert data["effect"] == data["effects"][0]
+    steps = data["steps"]
+    assert [s["added"] for s in steps] == [None, *data["effects"]]
+    held = [s["heldout_rms_mm"] for s in steps]
+    assert held[0] > held[1] > held[2]  # each step closes part of the gap...
+    assert held[2] <= 1.3 * steps[2]["noise_floor_mm"]  # ...and the last closes it
+    out = capsys.readouterr().out
+    assert "forward selection: the gap after each step" in out
+    assert f"geometry + {data['effects'][0]} + {data['effects'][1]}" in out
