@@ -39,27 +39,35 @@ class AcceptanceLimits(BaseModel):
 
     model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False)
 
-    drift_alpha: float = Field(0.001, gt=0, lt=1, description="significance of the drift test")
-    max_drift_mm: float = Field(0.05, ge=0, description="smallest drift over a take that matters")
+    drift_alpha: float = Field(
+        default=0.001, gt=0, lt=1, description="significance of the drift test"
+    )
+    max_drift_mm: float = Field(
+        default=0.05, ge=0, description="smallest drift over a take that matters"
+    )
     motion_alpha: float = Field(
-        0.05,
+        default=0.05,
         gt=0,
         lt=1,
         description="a kept take whose drift is significant at this level carries its motion "
         "(RMS of the ramp, drift / sqrt(12)) in its standard error",
     )
     max_spread_mm: float = Field(
-        1.0, gt=0, description="cap on the RMS distance of frames from the centre"
+        default=1.0, gt=0, description="cap on the RMS distance of frames from the centre"
     )
-    min_valid_fraction: float = Field(0.5, gt=0, le=1, description="frames with the effector seen")
-    min_frames: int = Field(10, ge=3)
-    outlier_mads: float = Field(5.0, gt=0)
-    max_outlier_fraction: float = Field(0.25, ge=0, lt=1)
-    max_settling_fraction: float = Field(0.5, ge=0, lt=1)
-    settle_alpha: float = Field(0.01, gt=0, lt=1)
-    max_base_rms_mm: float = Field(0.5, gt=0, description="base markers' misfit to session.toml")
+    min_valid_fraction: float = Field(
+        default=0.5, gt=0, le=1, description="frames with the effector seen"
+    )
+    min_frames: int = Field(default=10, ge=3)
+    outlier_mads: float = Field(default=5.0, gt=0)
+    max_outlier_fraction: float = Field(default=0.25, ge=0, lt=1)
+    max_settling_fraction: float = Field(default=0.5, ge=0, lt=1)
+    settle_alpha: float = Field(default=0.01, gt=0, lt=1)
+    max_base_rms_mm: float = Field(
+        default=0.5, gt=0, description="base markers' misfit to session.toml"
+    )
     min_scale_mm: float = Field(
-        0.005, gt=0, description="floor of the noise scale (quantised exports)"
+        default=0.005, gt=0, description="floor of the noise scale (quantised exports)"
     )
 
     @property

@@ -74,7 +74,7 @@ class Identification:
 
     @property
     def fit_mask(self) -> np.ndarray:
-        return np.array(self.roles) == "fit"
+        return np.asarray(np.array(self.roles) == "fit")
 
     @property
     def poses_used(self) -> int:

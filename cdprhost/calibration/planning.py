@@ -76,7 +76,7 @@ def candidate_poses(
     xy = xy[triangle_excess(xy, side) <= -edge_margin_mm]
     pts = np.column_stack([np.tile(xy, (heights.size, 1)), np.repeat(heights, xy.shape[0])])
     ok = feasible_with_margin(model, pts, tension_margin_n, tension_max_fraction, approach_mm)
-    return pts[ok & robust_to_prior(model, pts, prior_mm, clearance_mm)]
+    return np.asarray(pts[ok & robust_to_prior(model, pts, prior_mm, clearance_mm)])
 
 
 def robust_to_prior(
@@ -92,7 +92,7 @@ def robust_to_prior(
     pts = np.asarray(points, dtype=float)
     j0 = identification_jacobian(pts, model.geometry).reshape(-1, 3, 12)
     dz3 = 3.0 * prior_mm / np.sqrt(3.0) * np.linalg.norm(j0[:, 2, :], axis=1)
-    return pts[:, 2] - dz3 - model.geometry.outlets[:, 2].max() >= clearance_mm
+    return np.asarray(pts[:, 2] - dz3 - model.geometry.outlets[:, 2].max() >= clearance_mm)
 
 
 def feasible_with_margin(
@@ -111,7 +111,7 @@ def feasible_with_margin(
     ok &= (lo.min(axis=1) >= st.t_min + tension_margin_n) & (
         hi.max(axis=1) <= tension_max_fraction * st.t_max
     )
-    return ok
+    return np.asarray(ok)
 
 
 # ------------------------------------------------------------------ information
@@ -122,17 +122,17 @@ def pose_blocks(
     j0 = identification_jacobian(np.asarray(points, float), model.geometry).reshape(-1, 3, 12)
     if scale is None:
         scale = column_scale(j0)
-    return j0 / scale
+    return np.asarray(j0 / scale)
 
 
 def column_scale(blocks: np.ndarray) -> np.ndarray:
     """Per-pose RMS norm of each of the 12 columns, (12,)."""
-    return np.sqrt(np.einsum("nij,nij->j", blocks, blocks) / blocks.shape[0])
+    return np.asarray(np.sqrt(np.einsum("nij,nij->j", blocks, blocks) / blocks.shape[0]))
 
 
 def information(blocks: np.ndarray) -> np.ndarray:
     """Per-pose information matrices J_i^T J_i, (N, 12, 12)."""
-    return np.einsum("nij,nik->njk", blocks, blocks)
+    return np.asarray(np.einsum("nij,nik->njk", blocks, blocks))
 
 
 def observability_indices(blocks: np.ndarray) -> dict[str, float]:
@@ -158,15 +158,17 @@ def criterion_values(
     if criterion in ("D", "O1"):
         with np.errstate(divide="ignore"):
             logdet = np.sum(np.log(lam), axis=-1)
-        return logdet if criterion == "D" else np.exp(logdet / (2 * lam.shape[-1])) / np.sqrt(m)
+        return np.asarray(
+            logdet if criterion == "D" else np.exp(logdet / (2 * lam.shape[-1])) / np.sqrt(m)
+        )
     sv = np.sqrt(lam)
     smin, smax = sv[..., 0], sv[..., -1]
     if criterion == "O2":
-        return smin / smax
+        return np.asarray(smin / smax)
     if criterion == "O3":
-        return smin
+        return np.asarray(smin)
     if criterion == "O4":
-        return smin * smin / smax
+        return np.asarray(smin * smin / smax)
     if criterion == "O5":
         with np.errstate(divide="ignore"):
             return np.where(smin > 0, 1.0 / np.sum(1.0 / np.where(sv > 0, sv, 1.0), axis=-1), 0.0)
@@ -245,6 +247,7 @@ def fedorov_exchange(
         for lo in range(0, info.shape[0], chunk):
             cand = info[lo : lo + chunk]
             if fast:
+                assert blocks is not None and minv is not None
                 vals = value + _swap_logdet_gain(blocks[design], blocks[lo : lo + chunk], minv)
             else:
                 trial = total[None, None] - info[design][:, None] + cand[None, :]  # (k, c, 12, 12)
@@ -255,9 +258,9 @@ def fedorov_exchange(
                 best = (float(vals[i, j]), int(i), int(lo + j))
         if best[1] < 0 or best[0] - value <= rel_tol * max(abs(value), 1e-300):
             break
-        value, i, j = best
-        total = total - info[design[i]] + info[j]
-        design[i] = j
+        value, bi, bj = best
+        total = total - info[design[bi]] + info[bj]
+        design[bi] = bj
     return design, value
 
 
@@ -377,7 +380,7 @@ class PosePlan:
 
     @property
     def fit_poses(self) -> np.ndarray:
-        return self.poses[np.array(self.roles) == "fit"]
+        return np.asarray(self.poses[np.array(self.roles) == "fit"])
 
 
 def plan_poses(

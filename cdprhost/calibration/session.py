@@ -69,7 +69,10 @@ class SessionInfo(BaseModel):
     model_config = ConfigDict(extra="allow", frozen=True)
     profile: str = Field(min_length=1)
     noise_mm: float | None = Field(
-        None, gt=0, allow_inf_nan=False, description="declared mocap noise (mm per coordinate)"
+        default=None,
+        gt=0,
+        allow_inf_nan=False,
+        description="declared mocap noise (mm per coordinate)",
     )
 
 
@@ -329,7 +332,7 @@ class Session:
     @property
     def check_poses(self) -> np.ndarray:
         """Pose numbers marked ``check``."""
-        return self.poses.pose[np.array(self.poses.roles) == "check"]
+        return np.asarray(self.poses.pose[np.array(self.poses.roles) == "check"])
 
     def take_path(self, i: int) -> Path:
         """Path of the i-th row's take (0-based row index), inside the session folder."""

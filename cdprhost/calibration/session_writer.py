@@ -9,8 +9,10 @@ import json
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
 from cdprhost.calibration.readers import EXTENSIONS, Take, write_take
@@ -27,7 +29,7 @@ from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
 
 
-def _toml_value(v) -> str:
+def _toml_value(v: Any) -> str:
     if isinstance(v, str):
         return json.dumps(v, ensure_ascii=False)  # a JSON string is a valid TOML basic string
     if isinstance(v, bool):
@@ -128,9 +130,9 @@ class SessionWriter:
         *,
         take: str,
         t_s: float,
-        commanded,
-        s_cmd,
-        dirs,
+        commanded: ArrayLike,
+        s_cmd: ArrayLike,
+        dirs: ArrayLike,
         pose: int | None = None,
         extra: dict[str, str] | None = None,
     ) -> int:
@@ -179,12 +181,12 @@ class SessionWriter:
         take: Take,
         *,
         t_s: float,
-        commanded,
-        s_cmd,
-        dirs,
+        commanded: ArrayLike,
+        s_cmd: ArrayLike,
+        dirs: ArrayLike,
         format: str | None = None,
         extra: dict[str, str] | None = None,
-        **writer_options,
+        **writer_options: Any,
     ) -> int:
         """Write ``take`` under takes/ (atomically) and append its row (with ``extra`` columns,
         which a new folder's header gains); returns the pose number."""

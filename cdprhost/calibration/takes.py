@@ -62,7 +62,7 @@ class MocapConfig(_Strict):
     effector: EffectorConfig
     acceptance: AcceptanceLimits = AcceptanceLimits()
     noise_mm: float | None = Field(
-        None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)"
+        default=None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)"
     )
 
     @field_validator("base_markers")

@@ -48,7 +48,7 @@ def advice(d: Diagnosis) -> list[str]:
 
 
 def to_json(
-    d: Diagnosis, *, session: str = "", rejected: list[dict] | None = None
+    d: Diagnosis, *, session: str = "", rejected: list[dict[str, Any]] | None = None
 ) -> dict[str, Any]:
     """Every field of spec/cli-contract.md's ``diagnose`` entry, plus details."""
     out = {
@@ -97,7 +97,7 @@ def to_json(
         "session": session,
         "rejected_takes": rejected or [],
     }
-    return json_safe(out)
+    return dict(json_safe(out))
 
 
 def table(headers: list[str], rows: list[list[str]]) -> str:

@@ -76,7 +76,7 @@ class ModelResult:
 
     @property
     def dof(self) -> int:
-        return self.fit.dof_
+        return int(self.fit.dof_)
 
     @property
     def bic(self) -> float:
@@ -154,7 +154,7 @@ class Diagnosis:
     noise_floor_mm: float
     noise_floor_base_mm: float
     expected_heldout_mm: np.ndarray  # per pose, for a correct final model
-    parameters: dict
+    parameters: dict[str, Any]
     where: str
     findings: list[Finding]
     signatures: dict[str, signatures.SignatureReport]
@@ -188,7 +188,7 @@ def fit_model(
     return ModelResult(tuple(effects), fit, errors)
 
 
-def effect_parameters(fit: CableModelFit, name: str) -> dict:
+def effect_parameters(fit: CableModelFit, name: str) -> dict[str, Any]:
     """Fitted vector, standard errors, 95% intervals, and the profile table of one effect."""
     effect = CATALOGUE[name]
     vec, sd = fit.effect_vector(name)
@@ -209,10 +209,10 @@ def effect_parameters(fit: CableModelFit, name: str) -> dict:
     }
 
 
-def _interval(lo: np.ndarray, hi: np.ndarray) -> list:
+def _interval(lo: np.ndarray, hi: np.ndarray) -> list[Any]:
     """[lo, hi] (or a list of them); an unbounded end is None."""
     if lo.ndim == 0:
-        return [finite_or_none(lo), finite_or_none(hi)]
+        return [finite_or_none(float(lo)), finite_or_none(float(hi))]
     return [[finite_or_none(a), finite_or_none(b)] for a, b in zip(lo, hi)]
 
 
@@ -226,7 +226,7 @@ def admissible(fit: CableModelFit, name: str) -> bool:
     return True
 
 
-def geometry_parameters(fit: CableModelFit) -> dict:
+def geometry_parameters(fit: CableModelFit) -> dict[str, Any]:
     q, sd = fit.x_[:12], fit.stderr_[:12]
     return {
         "outlets": q[:9].reshape(3, 3).tolist(),
@@ -298,6 +298,8 @@ class _Round:
     def same_disagreement(self, best: Candidate, rival: Candidate) -> bool:
         """True when best and rival explain the same thing: their joint fit is not
         significantly better than both of them alone."""
+        if best.result is None or rival.result is None:
+            return False
         joint = CableModelFit(effects=best.result.effects + (rival.name,)).fit(
             self.obs, best.result.fit.model_
         )
@@ -372,7 +374,10 @@ def diagnose(
     remaining = [n for n in names if not reports[n].absorbed]
     unabsorbed = {n: r.unabsorbed_min for n, r in reports.items()}
 
-    current, named, ambiguous, rounds = base, [], (), []
+    current: ModelResult = base
+    named: list[str] = []
+    ambiguous: tuple[str, ...] = ()
+    rounds: list[list[Candidate]] = []
     added: list[Candidate] = []
     for index in range(settings.max_rounds):
         if not remaining:
@@ -400,6 +405,8 @@ def diagnose(
         best.status = "named"
         named.append(best.name)
         added.append(best)
+        if best.result is None:  # eligible candidates always carry their fit
+            break
         current = best.result
         remaining.remove(best.name)
 

@@ -186,11 +186,11 @@ def effector_series(
     jitter[lost.reshape(n_frames, n_takes, n_markers)] = np.nan
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # frames with every marker lost
-        x = np.moveaxis(np.nanmean(jitter, axis=2), 0, 1)  # (takes, frames, 3)
+        x: np.ndarray = np.moveaxis(np.nanmean(jitter, axis=2), 0, 1)  # (takes, frames, 3)
 
     def directions() -> np.ndarray:
         d = rng.normal(size=(n_takes, 3))
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        return np.asarray(d / np.linalg.norm(d, axis=1, keepdims=True))
 
     if noise.settle_mm > 0:
         amp = noise.settle_mm * rng.uniform(0.5, 1.5, n_takes)

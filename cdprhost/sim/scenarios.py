@@ -35,7 +35,7 @@ def random_effect_vector(name: str, rng: np.random.Generator) -> np.ndarray:
     mag = rng.uniform(lo, hi, 3)
     if name == "backlash":
         return mag
-    return mag * rng.choice([-1.0, 1.0], 3)
+    return np.asarray(mag * rng.choice([-1.0, 1.0], 3))
 
 
 def measurement_tour(
@@ -85,10 +85,14 @@ def hidden_truth(
     geometry = perturbed_geometry(nominal.geometry, rng, geometry_mm)
     if effect is None:
         return nominal.with_geometry(geometry, EffectChain())
+    effects: list[str | Effect] = [effect] if isinstance(effect, (str, Effect)) else list(effect)
     several = not isinstance(effect, (str, Effect))
-    effects = list(effect) if several else [effect]  # type: ignore[arg-type]
-    vectors = list(vector) if several and vector is not None else [vector] * len(effects)  # type: ignore[arg-type]
-    objs = [CATALOGUE[e] if isinstance(e, str) else e for e in effects]
+    vectors: list[np.ndarray | None] = (
+        [None if v is None else np.asarray(v, float) for v in vector]
+        if several and vector is not None
+        else [None if vector is None else np.asarray(vector, float)] * len(effects)
+    )
+    objs: list[Effect] = [CATALOGUE[e] if isinstance(e, str) else e for e in effects]
     vecs = [
         random_effect_vector(o.name, rng) if v is None else np.asarray(v, float)
         for o, v in zip(objs, vectors)

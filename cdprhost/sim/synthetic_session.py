@@ -17,8 +17,10 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.calibration.commanding import commanded_path
 from cdprhost.calibration.readers import Take, write_take
@@ -53,14 +55,12 @@ def motive_world_pose(
 
 def effector_offset(effector_markers: Mapping[str, Sequence[float]]) -> tuple[float, float, float]:
     """The session's ``offset``: B minus the centroid of markers given relative to B."""
-    return tuple(
-        float(v) + 0.0
-        for v in -np.mean(np.asarray(list(effector_markers.values()), dtype=float), axis=0)
-    )
+    c = -np.mean(np.asarray(list(effector_markers.values()), dtype=float), axis=0)
+    return (float(c[0]) + 0.0, float(c[1]) + 0.0, float(c[2]) + 0.0)
 
 
 def synthesize_take(
-    effector_point_base: Sequence[float],
+    effector_point_base: ArrayLike,
     *,
     base_markers: Mapping[str, Sequence[float]] = DEFAULT_BASE_MARKERS,
     effector_markers: Mapping[str, Sequence[float]] = DEFAULT_EFFECTOR_MARKERS,
@@ -75,7 +75,7 @@ def synthesize_take(
     rng: np.random.Generator | None = None,
     path: str | os.PathLike[str] | None = None,
     format: str = "motive-csv",
-    **writer_options: object,
+    **writer_options: Any,
 ) -> Take:
     """Marker trajectories (mocap world, mm) of an effector at rest at ``effector_point_base``.
 
@@ -117,14 +117,16 @@ def synthetic_config(
     base_markers: Mapping[str, Sequence[float]] = DEFAULT_BASE_MARKERS,
     effector_markers: Mapping[str, Sequence[float]] = DEFAULT_EFFECTOR_MARKERS,
 ) -> SessionConfig:
-    mocap = MocapConfig(
-        format=format,
-        base_markers={k: tuple(v) for k, v in base_markers.items()},
-        effector=EffectorConfig(
-            markers=tuple(effector_markers), offset=effector_offset(effector_markers)
-        ),
+    mocap = MocapConfig.model_validate(
+        {
+            "format": format,
+            "base_markers": {k: tuple(v) for k, v in base_markers.items()},
+            "effector": EffectorConfig(
+                markers=tuple(effector_markers), offset=effector_offset(effector_markers)
+            ),
+        }
     )
-    return SessionConfig(session={"profile": profile_name}, mocap=mocap)
+    return SessionConfig.model_validate({"session": {"profile": profile_name}, "mocap": mocap})
 
 
 def write_synthetic_session(

@@ -22,10 +22,13 @@ import threading
 from collections.abc import Collection
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.calibration.readers import EXTENSIONS
+from cdprhost.calibration.session import SessionConfig
 from cdprhost.effects.base import MotionContext
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
@@ -74,7 +77,7 @@ class VirtualMocap:
         noise_mm: float = 0.0,
         seed: int | None = 0,
         format: str = "motive-csv",
-        writer_options: dict[str, object] | None = None,
+        writer_options: dict[str, Any] | None = None,
     ):
         self.truth = truth
         self.directory = Path(directory)
@@ -96,9 +99,9 @@ class VirtualMocap:
         self._dirs = np.ones(3)
         self.count = sum(1 for p in self.directory.glob("take-*") if not p.name.startswith("."))
         self.written: list[Path] = []
-        self._record: list[dict] | None = None
+        self._record: list[dict[str, Any]] | None = None
 
-    def attach_record(self, record: list[dict]) -> None:
+    def attach_record(self, record: list[dict[str, Any]]) -> None:
         """Read last-motion directions from the device's (growing) record of executed segments."""
         self._record = record
 
@@ -114,14 +117,18 @@ class VirtualMocap:
                 dirs[k] = np.sign(moves[nz[-1], k])
         return dirs
 
-    def effector_point(self, steps, device_time_s: float, directions=None) -> np.ndarray:
+    def effector_point(
+        self, steps: ArrayLike, device_time_s: float, directions: ArrayLike | None = None
+    ) -> np.ndarray:
         """Where the true effector is for absolute module steps (the first three of ``steps``)."""
         n = np.asarray(steps, dtype=float)[:3]
         dirs = self._dirs if directions is None else np.asarray(directions, dtype=float)[:3]
         ctx = MotionContext(t_s=np.array([float(device_time_s)]), directions=dirs[None, :])
-        return self.truth.fk(self.truth.sliders_from_steps(n)[None, :], ctx)[0]
+        return np.asarray(self.truth.fk(self.truth.sliders_from_steps(n)[None, :], ctx)[0])
 
-    def on_settled(self, steps, device_time_s: float, directions=None) -> Path | None:
+    def on_settled(
+        self, steps: ArrayLike, device_time_s: float, directions: ArrayLike | None = None
+    ) -> Path | None:
         """Write a take of the settled effector; returns its path (None if the cables cannot meet)."""
         with self._lock:
             n = np.asarray(steps, dtype=np.int64)[:3]
@@ -156,12 +163,16 @@ class VirtualMocap:
             return path
 
 
-def mocap_config(profile_name: str = "truth", format: str = "motive-csv"):
+def mocap_config(profile_name: str = "truth", format: str = "motive-csv") -> SessionConfig:
     """The session configuration that reads this observer's takes."""
     return synthetic_config(profile_name, format, DEFAULT_BASE_MARKERS, DEFAULT_EFFECTOR_MARKERS)
 
 
-def make_observer(truth_profile_path, mocap_dir, **options) -> VirtualMocap | None:
+def make_observer(
+    truth_profile_path: str | os.PathLike[str] | None,
+    mocap_dir: str | os.PathLike[str] | None,
+    **options: Any,
+) -> VirtualMocap | None:
     """The device's observer factory: both arguments, or neither (None)."""
     if truth_profile_path is None and mocap_dir is None:
         return None

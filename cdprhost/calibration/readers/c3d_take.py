@@ -28,7 +28,7 @@ def looks_like_c3d(head: bytes) -> bool:
     return len(head) >= 2 and head[1] == 0x50 and head[0] >= 1
 
 
-def _labels(reader) -> list[str]:
+def _labels(reader: Any) -> list[str]:
     labels: list[str] = []
     for key in ["LABELS"] + [f"LABELS{i}" for i in range(2, 10)]:
         param = reader.get(f"POINT:{key}")

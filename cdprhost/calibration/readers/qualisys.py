@@ -81,7 +81,7 @@ def parse_qualisys(text: str, source: str) -> Take:
                 source=source,
             )
         col_idx = [lead + k for k in range(3 * len(names))]
-        frame_col, time_col = (0, 1) if lead == 2 else (None, None)
+        frame_col, time_col = (0, 1) if lead == 2 else (None, None)  # type: ignore[assignment]
 
     data = [(n + 1, r) for n, r in enumerate(rows[i:], start=i) if any(c.strip() for c in r)]
     body = [r for _, r in data]

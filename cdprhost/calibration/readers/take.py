@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -129,7 +129,7 @@ def numeric_block(
     columns: Sequence[int],
     *,
     first_line: int,
-    column_label,
+    column_label: Callable[[int], str],
     source: str,
     line_numbers: Sequence[int] | None = None,
 ) -> np.ndarray:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -265,9 +266,9 @@ def write_qualisys(
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def write_take(path: str | os.PathLike[str], take: Take, format: str, **options) -> None:
+def write_take(path: str | os.PathLike[str], take: Take, format: str, **options: Any) -> None:
     """Write ``take`` as ``format`` (one of FORMATS) with that writer's ``options``."""
-    writers = {
+    writers: dict[str, Callable[..., None]] = {
         "motive-csv": write_motive,
         "vicon-csv": write_vicon,
         "qualisys-tsv": write_qualisys,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from cdprhost.calibration import plan_files, planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
@@ -14,8 +15,13 @@ from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.jsonsafe import dumps
 from cdprhost.profile import save_profile
 
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
 
-def register(sub: argparse._SubParsersAction) -> None:
+    from cdprhost.calibration.takes import MocapConfig
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     cal = sub.add_parser(
         "calibrate", help="kinematic calibration: plan poses, identify parameters, guided wizard"
     )
@@ -190,7 +196,7 @@ def _non_negative(text: str) -> int:
     return n
 
 
-def write_json(path: str | None, data: dict) -> None:
+def write_json(path: str | None, data: dict[str, Any]) -> None:
     if path:
         write_text_atomic(path, dumps(data, indent=2) + "\n")
 
@@ -214,7 +220,7 @@ def run_plan(args: argparse.Namespace) -> int:
     return 0
 
 
-def planning_json(plan: planning.PosePlan) -> dict:
+def planning_json(plan: planning.PosePlan) -> dict[str, Any]:
     return {
         "poses": plan.poses.tolist(),
         "roles": list(plan.roles),
@@ -258,7 +264,7 @@ def run_identify(args: argparse.Namespace) -> int:
 class PromptTakes:
     """Asks the user, on the terminal, for the take file of each pose."""
 
-    def take_for(self, index: int, pose, attempt: int) -> Path:
+    def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
         where = ", ".join(f"{v:.1f}" for v in pose)
         while True:
             try:
@@ -273,7 +279,7 @@ class PromptTakes:
             print(f"  not a file: {path}", file=sys.stderr)
 
 
-def _mocap_for(args: argparse.Namespace, session: Path):
+def _mocap_for(args: argparse.Namespace, session: Path) -> MocapConfig | None:
     from cdprhost.calibration.session import load_session_config
     from cdprhost.sim.virtual_mocap import mocap_config
 
@@ -306,6 +312,7 @@ def run_wizard(args: argparse.Namespace) -> int:
     session = Path(args.session or f"calibration-{dt.datetime.now():%Y%m%d-%H%M%S}")
     mocap = _mocap_for(args, session)
     watch = args.watch or (args.sim_mocap_dir if not args.takes_from else None)
+    takes: wizard.TakeSource
     if watch:
         takes = wizard.FolderWatcher(Path(watch), timeout_s=args.take_timeout)
     elif args.takes_from:
@@ -370,7 +377,7 @@ def run_wizard(args: argparse.Namespace) -> int:
             "calibration failed; no profile written:\n"
             + "\n".join(f"  - {p}" for p in result.problems())
         )
-    if args.out:
+    if args.out and outcome.profile is not None:
         save_profile(outcome.profile, args.out)
     print(
         f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or outcome.profile_path}"

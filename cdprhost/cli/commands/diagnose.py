@@ -18,7 +18,7 @@ from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.profile import save_profile
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "diagnose",
         help="find, name and add the physics the calibrated model lacks (model discrepancy workflow)",
