@@ -51,6 +51,26 @@ class Run:
     limit_mm: float
 
 
+def drive(profile, model, tmp_path, observer, options, fmt="motive-csv"):
+    """The wizard on the embedded device with ``observer`` as its motion capture."""
+    link = open_embedded(observer=observer)
+    observer.attach_record(link.device.record)
+    logs: list[str] = []
+    try:
+        wiz = CalibrationWizard(
+            tmp_path / "session",
+            profile,
+            Machine(link, profile, model, settle_s=0.5),
+            FolderWatcher(tmp_path / "mocap", timeout_s=10, poll_s=0.01),
+            mocap=mocap_config(format=fmt).mocap,
+            options=options,
+            log=logs.append,
+        )
+        return wiz.run(), logs
+    finally:
+        link.close()
+
+
 def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
     truth = model.with_geometry(
         perturbed_geometry(model.geometry, np.random.default_rng(seed), 2.0)
@@ -66,22 +86,7 @@ def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
         seed=seed,
         format=fmt,
     )
-    link = open_embedded(observer=observer)
-    observer.attach_record(link.device.record)
-    logs: list[str] = []
-    try:
-        wiz = CalibrationWizard(
-            tmp_path / "session",
-            profile,
-            Machine(link, profile, model, settle_s=0.5),
-            FolderWatcher(tmp_path / "mocap", timeout_s=10, poll_s=0.01),
-            mocap=mocap_config(format=fmt).mocap,
-            options=WizardOptions(),
-            log=logs.append,
-        )
-        out = wiz.run()
-    finally:
-        link.close()
+    out, logs = drive(profile, model, tmp_path, observer, WizardOptions(), fmt)
     r = out.identification
     assert r is not None and r.ok and out.profile_path is not None, logs
     session = load_session(tmp_path / "session")
@@ -150,22 +155,9 @@ def test_refused_identification_plans_more_poses_and_asks_for_them(
         perturbed_geometry(sim_model.geometry, np.random.default_rng(23), 2.0)
     )
     observer = VirtualMocap(truth, tmp_path / "mocap", realism=REALISM, rate_hz=240.0, seed=23)
-    link = open_embedded(observer=observer)
-    observer.attach_record(link.device.record)
-    logs: list[str] = []
-    try:
-        wiz = CalibrationWizard(
-            tmp_path / "session",
-            sim_profile,
-            Machine(link, sim_profile, sim_model, settle_s=0.5),
-            FolderWatcher(tmp_path / "mocap", timeout_s=10, poll_s=0.01),
-            mocap=mocap_config().mocap,
-            options=WizardOptions(n_poses=4, n_check=0),
-            log=logs.append,
-        )
-        out = wiz.run()
-    finally:
-        link.close()
+    out, logs = drive(
+        sim_profile, sim_model, tmp_path, observer, WizardOptions(n_poses=4, n_check=0)
+    )
     assert any("the trust gate refused: the noise cannot be estimated" in m for m in logs)
     planned = [m for m in logs if m.startswith("planned ")]
     assert len(planned) == 1 and "(round 1;" in planned[0]
