@@ -166,8 +166,9 @@ def trust_report(
     refusals, warnings = [], []
     if noise_dof <= 0:
         refusals.append(
-            "the noise cannot be estimated: no residual degrees of freedom (more fit poses than 4) "
-            "and no check poses to test the prediction against"
+            "the noise cannot be estimated: no residual degrees of freedom (4 fit poses "
+            "determine the 12 parameters exactly; each further pose adds 3) and no check poses "
+            "to test the prediction against"
         )
     if not worst <= limits.max_workspace_mm:
         shown = "unbounded" if not np.isfinite(worst) else f"{worst:.3g} mm"
