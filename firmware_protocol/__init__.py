@@ -1,6 +1,6 @@
 """Wire protocol shared by the host and the (simulated) firmware; see PROTOCOL.md.
 
-- ``crc``, ``varint``: checksums (CRC-16/CCITT-FALSE, CRC-8/SMBUS) and compact integers.
+- ``crc``, ``varint``: checksums (CRC-32/ISO-HDLC, CRC-8/SMBUS) and compact integers.
 - ``framing``: frame layout, ``encode_frame`` and the resynchronising ``Deframer``.
 - ``segments``: move-segment semantics (shared ramp profile, step timing) and the
   vectorised segment coder; ``messages``: the whole message set and its codec.
