@@ -43,7 +43,7 @@ from cdprhost.machine.commands import device_messages, heaters_off
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.program import read_items
-from cdprhost.motion.segments import SegmentBatch
+from cdprhost.motion.segments import PlannedSegments
 from cdprhost.preflight.run import preflight, preflight_items
 from cdprhost.profile.models import MachineProfile
 
@@ -238,13 +238,13 @@ class PrintJob:
         ahead = Prefetch(planned)
         ahead.wait_filled(4)
         for out in ahead:
-            if isinstance(out, SegmentBatch):
+            if isinstance(out, PlannedSegments):
                 self._send_segments(out)
             else:
                 self._send_command(out)
         self._drain()
 
-    def _send_segments(self, batch: SegmentBatch) -> None:
+    def _send_segments(self, batch: PlannedSegments) -> None:
         link = self.link
         i, n = 0, len(batch)
         while i < n:
@@ -448,5 +448,5 @@ class PrintJob:
         self._set(JobState.FAILED, reason)
 
 
-def _slice(batch: SegmentBatch, i: int, j: int) -> SegmentBatch:
-    return SegmentBatch(*(getattr(batch, f)[i:j] for f in batch.__dataclass_fields__))
+def _slice(batch: PlannedSegments, i: int, j: int) -> PlannedSegments:
+    return PlannedSegments(*(getattr(batch, f)[i:j] for f in batch.__dataclass_fields__))

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdprhost.motion.segments import SegmentBatch
+from cdprhost.motion.segments import PlannedSegments
 
 
 @dataclass(frozen=True)
@@ -27,10 +27,10 @@ class SegmentInfo:
 
 class SegmentMap:
     def __init__(self) -> None:
-        self._batches: deque[tuple[int, SegmentBatch]] = deque()
+        self._batches: deque[tuple[int, PlannedSegments]] = deque()
         self._last: SegmentInfo | None = None
 
-    def add(self, first_number: int, batch: SegmentBatch) -> None:
+    def add(self, first_number: int, batch: PlannedSegments) -> None:
         if len(batch):
             self._batches.append((first_number, batch))
 
@@ -47,7 +47,7 @@ class SegmentMap:
         return self._info(first, batch, number - first)
 
     @staticmethod
-    def _info(first: int, batch: SegmentBatch, i: int) -> SegmentInfo:
+    def _info(first: int, batch: PlannedSegments, i: int) -> SegmentInfo:
         return SegmentInfo(
             first + i,
             int(batch.line[i]),
@@ -58,7 +58,7 @@ class SegmentMap:
         )
 
 
-def first_rest_index(batch: SegmentBatch, start: int = 0) -> int | None:
+def first_rest_index(batch: PlannedSegments, start: int = 0) -> int | None:
     """Index of the first segment at or after ``start`` that ends with the machine at rest."""
     rest = np.flatnonzero(batch.v_end[start:] <= 1e-9)
     return None if rest.size == 0 else start + int(rest[0])

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import select
 import time
 
 import serial
@@ -39,6 +40,11 @@ class SerialTransport:
     def __init__(self, ser: serial.SerialBase, name: str):
         self._ser = ser
         self.name = name
+        fileno = getattr(ser, "fileno", None)
+        try:
+            self._fd: int | None = fileno() if fileno is not None else None
+        except (OSError, ValueError, AttributeError, serial.SerialException):
+            self._fd = None
 
     def now(self) -> float:
         return time.monotonic()
@@ -56,9 +62,12 @@ class SerialTransport:
             ) from None
 
     def read(self, timeout: float) -> bytes:
-        """Bytes available now, or the first ones to arrive within ``timeout`` seconds."""
+        """Bytes available now, or the first ones to arrive within ``timeout`` seconds
+        (a real port waits in ``select``: it wakes when bytes arrive, not on a timer)."""
         deadline = time.monotonic() + max(0.0, timeout)
         try:
+            if self._fd is not None:
+                return self._read_select(timeout)
             while True:
                 waiting = self._ser.in_waiting
                 if waiting:
@@ -73,6 +82,17 @@ class SerialTransport:
             raise PortVanished(
                 f"{self.name}: port failed on read ({exc}); was it unplugged?"
             ) from None
+
+    def _read_select(self, timeout: float) -> bytes:
+        waiting = self._ser.in_waiting
+        if not waiting and timeout > 0:
+            ready, _, _ = select.select([self._fd], [], [], timeout)
+            if not ready:
+                return b""
+            waiting = self._ser.in_waiting
+            if not waiting:  # readable but empty: pyserial raises if the port hung up
+                return self._ser.read(1)
+        return self._ser.read(waiting) if waiting else b""
 
     def close(self) -> None:
         with contextlib.suppress(serial.SerialException, OSError):
