@@ -23,15 +23,20 @@ class SegmentInfo:
     point: tuple[float, float, float]
     steps: tuple[int, int, int, int]
     t_end_s: float
+    e_mm: float = 0.0  # filament position at the end, in the job's program
 
 
 class SegmentMap:
-    def __init__(self) -> None:
+    def __init__(self, clock_hz: int = 100_000) -> None:
+        self.clock_hz = clock_hz
         self._batches: deque[tuple[int, PlannedSegments]] = deque()
         self._last: SegmentInfo | None = None
+        self.start_s: float | None = None  # program time when the first segment began
 
     def add(self, first_number: int, batch: PlannedSegments) -> None:
         if len(batch):
+            if self.start_s is None:
+                self.start_s = float(batch.t_end[0]) - float(batch.ticks[0]) / self.clock_hz
             self._batches.append((first_number, batch))
 
     def lookup(self, number: int) -> SegmentInfo | None:
@@ -48,13 +53,15 @@ class SegmentMap:
 
     @staticmethod
     def _info(first: int, batch: PlannedSegments, i: int) -> SegmentInfo:
+        p, s = batch.point[i], batch.steps_abs[i]
         return SegmentInfo(
             first + i,
             int(batch.line[i]),
             int(batch.layer[i]),
-            tuple(float(v) for v in batch.point[i]),
-            tuple(int(v) for v in batch.steps_abs[i]),
+            (float(p[0]), float(p[1]), float(p[2])),
+            (int(s[0]), int(s[1]), int(s[2]), int(s[3])),
             float(batch.t_end[i]),
+            float(batch.e[i]),
         )
 
 

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 from firmware_protocol.messages import Flag
 
+START_SHARE = 0.8  # start threshold / high watermark
+
 
 @dataclass(frozen=True)
 class Watermarks:
@@ -52,10 +54,22 @@ class TimeFlow:
             held -= rate * max(0.0, now - report.t)
         return max(0.0, held) + ticks_in_flight
 
-    def room_ticks(self, ahead: float, rate: float) -> float:
-        """Ticks that may be sent now (0 while above the low watermark after a refill)."""
+    def start_ticks(self, rate: float) -> int:
+        """The device's start threshold: most of the high watermark, so that a host whose
+        rate estimate moves a little still sends enough to start the device."""
+        return round(START_SHARE * self.marks.high_s * rate)
+
+    def room_ticks(
+        self, ahead: float, rate: float, moving: bool = True, start_ticks: int = 0
+    ) -> float:
+        """Ticks that may be sent now (0 while above the low watermark after a refill).
+
+        A device at rest starts only once it holds its start threshold, so while it is
+        not moving the host fills at least that far, whatever the hysteresis says."""
         low, high = self.marks.low_s * rate, self.marks.high_s * rate
-        if ahead <= low:
+        if not moving:
+            high = max(high, 1.05 * start_ticks)
+        if ahead <= low or not moving:
             self.filling = True
         if ahead >= high:
             self.filling = False

@@ -134,6 +134,7 @@ class HostLink:
         self._garbage_since_valid = 0
         self._last_retx = 0
         self._configured_rate = 0.0
+        self._start_ticks = 0
         self._ka_stop: threading.Event | None = None
         self._ka_thread: threading.Thread | None = None
 
@@ -289,14 +290,15 @@ class HostLink:
                 self.poll(CLOCK_SYNC_S / 3)
 
     def configure(self) -> None:
-        """Send the watchdog, the start threshold (the high watermark) and the flow interval
-        (a quarter of the watermarks' gap), in device ticks at the measured clock rate."""
+        """Send the watchdog, the start threshold (most of the high watermark) and the flow
+        interval (half the watermarks' gap), in device ticks at the measured clock rate."""
         rate = self.clock_rate
         marks = self.watermarks
         cap = 0xFFFF_FFFF
-        start = min(cap, round(marks.high_s * rate))
-        flow = min(cap, max(1, round((marks.high_s - marks.low_s) * rate / 4)))
+        start = min(cap, self._flow.start_ticks(rate))
+        flow = min(cap, max(1, round((marks.high_s - marks.low_s) * rate / 2)))
         self._configured_rate = rate
+        self._start_ticks = start
         self.send(Configure(self.watchdog_ms, start, flow))
         log.debug("%s: configured start %d ticks, flow %d ticks", self._t.name, start, flow)
 
@@ -464,9 +466,10 @@ class HostLink:
         if slots <= 0:
             return 0
         rate = self.clock_rate
-        if abs(rate - self._configured_rate) > 0.25 * self._configured_rate:
+        if abs(rate - self._configured_rate) > 0.1 * self._configured_rate:
             self.configure()
-        room = self._flow.room_ticks(self.ahead_ticks(), rate)
+        moving = bool(self._dev.flow.flags & Flag.MOVING)
+        room = self._flow.room_ticks(self.ahead_ticks(), rate, moving, self._start_ticks)
         if room <= 0:
             return 0
         window = self._window_room()
@@ -508,14 +511,16 @@ class HostLink:
                 f"limit {identity.max_step_rate}/s"
             )
 
-    def feed(self, batch: SegmentBatch, start: int = 0, max_wait: float = 0.0) -> int:
-        """Send segments of ``batch`` from index ``start`` as far as slots, the time watermarks
-        and the window allow, waiting for room at most ``max_wait`` s (waking on reports);
+    def feed(
+        self, batch: SegmentBatch, start: int = 0, max_wait: float = 0.0, end: int | None = None
+    ) -> int:
+        """Send segments ``start..end`` of ``batch`` as far as slots, the time watermarks and
+        the window allow, waiting for room at most ``max_wait`` s (waking on reports);
         returns the index after the last segment sent. Their segment numbers continue from
         :attr:`segments_sent`."""
-        n = len(batch)
+        n = len(batch) if end is None else min(end, len(batch))
         if start >= n:
-            return n
+            return start
         if start == 0:
             self.check_step_rates(batch)
         end = self._t.now() + max_wait
@@ -525,7 +530,7 @@ class HostLink:
             with self._locked():
                 if self._dev.failure is not None:
                     raise self._dev.failure
-                k = self._sendable(batch.ticks[i:])
+                k = self._sendable(batch.ticks[i:n])
                 if k > 0:
                     self._send_segments(batch, i, i + k)
                     i += k

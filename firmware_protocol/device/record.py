@@ -152,23 +152,6 @@ class SegmentRecord(Sequence[dict[str, Any]]):
         return f"SegmentRecord({len(self)} segments{', ' + self.path if self.path else ''})"
 
 
-def write_record(path: str | os.PathLike[str], entries: Sequence[dict[str, Any]]) -> None:
-    """Write entries as JSON lines, atomically (a temporary file renamed over ``path``)."""
-    target = os.fspath(path)
-    tmp = f"{target}.{os.getpid()}.tmp"
-    try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            for e in entries:
-                fh.write(_line(e))
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def read_record(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
     with open(path, encoding="utf-8") as fh:
         return [json.loads(line) for line in fh if line.strip()]
