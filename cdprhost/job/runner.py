@@ -24,6 +24,7 @@ from typing import Any
 
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
@@ -37,7 +38,7 @@ from cdprhost.job.resume_items import PlanSpec, Restart
 from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
 from cdprhost.job.streamer import Requests, Stop, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
-from cdprhost.link import DeviceReset, HostLink, LinkError
+from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import heaters_off
 from cdprhost.motion.pipeline import segment_program
@@ -73,13 +74,16 @@ class PrintResult:
     reason: str = ""
     resume_file: str | None = None
     notices: list[str] = field(default_factory=list)
+    bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
 
     @property
     def exit_code(self) -> int:
-        return 0 if self.status == "completed" else 1
+        if self.status == "completed":
+            return 0
+        return 2 if self.bad_input else 1
 
     def to_json(self) -> dict[str, Any]:
-        return dict(self.__dict__)
+        return {k: v for k, v in self.__dict__.items() if k != "bad_input"}
 
 
 class PrintJob:
@@ -217,6 +221,7 @@ class PrintJob:
         try:
             link = self.link_factory()
         except LinkError as exc:  # a failed connect never touches the resume point
+            result.bad_input = exc.exit_code == 2
             self._fail_early(result, f"{type(exc).__name__}: {exc}")
             return result
         self.link = link
@@ -236,6 +241,7 @@ class PrintJob:
             for text in check.notices:
                 self._emit(Notice(text))
                 result.notices.append(text)
+            self._refine_resume(link, check.found, result)
             self._t0 = link.request_status().motion_time_s
             writer = ResumeWriter(
                 resume_path_for(self.gcode, self.options.resume_dir, self._sha256)
@@ -269,6 +275,31 @@ class PrintJob:
             self._give_up(
                 link, streamer, result, f"internal error: {type(exc).__name__}: {exc}", exc
             )
+
+    def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
+        """``--resume`` after a killed host: the device's own last segment, when it knows it."""
+        point = self.options.resume
+        if point is None or link.identity is None:
+            return
+        exact = refine_point(
+            point,
+            found,
+            link.identity.boot_id,
+            self._items,
+            self.profile,
+            self.model,
+            clock_hz=link.identity.clock_hz,
+            batch_moves=self.options.batch_moves,
+        )
+        if exact is None:
+            return
+        text = (
+            f"the device executed {exact.device_segment - point.device_segment} segments after "
+            f"the resume point was saved: resuming at line {exact.last_line} instead"
+        )
+        self._emit(Notice(text))
+        result.notices.append(text)
+        self.plan = PlanSpec("point", line=exact.last_line, point=exact.point, e_mm=exact.e_mm)
 
     def _context(self) -> StreamContext:
         return StreamContext(
