@@ -57,6 +57,8 @@ class PrintOptions:
     log_path: str | Path | None = None
     resume_dir: str | Path | None = None
     idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
+    resume_every_s: float = 3.0  # the resume point is saved this often (wall clock) ...
+    resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
     batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
 
 
@@ -244,7 +246,9 @@ class PrintJob:
             self._refine_resume(link, check.found, result)
             self._t0 = link.request_status().motion_time_s
             writer = ResumeWriter(
-                resume_path_for(self.gcode, self.options.resume_dir, self._sha256)
+                resume_path_for(self.gcode, self.options.resume_dir, self._sha256),
+                self.options.resume_every_s,
+                self.options.resume_layer_s,
             )
             streamer = Streamer(link, self._context(), writer)
             self._set(JobState.PRINTING)

@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import queue
 import sys
 import threading
 from pathlib import Path
 from typing import Any
 
+from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
@@ -39,10 +39,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
-    p.add_argument("--baud", type=int, default=None, help="baud rate (default: the profile's)")
+    p.add_argument(
+        "--baud",
+        type=bounded_int(*BAUD_RANGE),
+        default=None,
+        help="baud rate (default: the profile's)",
+    )
     p.add_argument(
         "--speedup",
-        type=float,
+        type=bounded_float(0.0, MAX_SPEEDUP),
         default=None,
         help="embedded device: run at most X times real time (default: as fast as the host can)",
     )
@@ -54,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--resume-from-layer",
-        type=int,
+        type=bounded_int(1, 1_000_000),
         metavar="N",
         help="restart the print at layer N (1-based, as shown)",
     )
@@ -73,22 +78,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def _check_options(args: argparse.Namespace) -> None:
-    if args.baud is not None and not BAUD_RANGE[0] <= args.baud <= BAUD_RANGE[1]:
-        raise InputError(
-            f"must be {BAUD_RANGE[0]}..{BAUD_RANGE[1]}, got {args.baud}", source="--baud"
-        )
-    if args.speedup is not None and not (
-        math.isfinite(args.speedup) and 0 < args.speedup <= MAX_SPEEDUP
-    ):
-        raise InputError(
-            f"must be a number in (0, {MAX_SPEEDUP:g}], got {args.speedup:g}", source="--speedup"
-        )
     if args.resume and args.resume_from_layer is not None:
         raise InputError("give --resume or --resume-from-layer, not both", source="--resume")
-    if args.resume_from_layer is not None and args.resume_from_layer < 1:
-        raise InputError(
-            f"must be 1 or more, got {args.resume_from_layer}", source="--resume-from-layer"
-        )
     if args.sim_faults:
         from firmware_protocol.device.faults import FaultSpec, FaultSpecError
 

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 
+from cdprhost.cli.numbers import bounded_float
 from cdprhost.errors import InputError
 from cdprhost.sim.virtual_mocap import make_observer
 from firmware_protocol.device.config import MAX_SPEEDUP, SimConfig
@@ -20,7 +20,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "sim-device", help="run the simulated device on a pseudo-terminal (prints its path)"
     )
     p.add_argument(
-        "--speedup", type=float, default=1.0, metavar="X", help="device time runs X times real time"
+        "--speedup",
+        type=bounded_float(0.0, MAX_SPEEDUP),
+        default=1.0,
+        metavar="X",
+        help="device time runs X times real time",
     )
     p.add_argument(
         "--faults",
@@ -44,10 +48,6 @@ def run(args: argparse.Namespace) -> int:
         faults = FaultSpec.parse(args.faults)
     except FaultSpecError as exc:
         raise InputError(str(exc), source="--faults") from None
-    if not (math.isfinite(args.speedup) and 0 < args.speedup <= MAX_SPEEDUP):
-        raise InputError(
-            f"must be a number in (0, {MAX_SPEEDUP:g}], got {args.speedup:g}", source="--speedup"
-        )
     if (args.truth is None) != (args.mocap_dir is None):
         given, missing = ("--truth", "--mocap-dir") if args.truth else ("--mocap-dir", "--truth")
         raise InputError(
