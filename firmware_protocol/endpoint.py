@@ -55,7 +55,7 @@ class Endpoint:
         rto_initial: float = 0.25,
         rto_floor: float = 0.02,
         rto_ceiling: float = 1.0,
-        nak_holdoff: float = 0.03,
+        nak_holdoff: float = 0.01,
         accept: Callable[[bytes], bool] | None = None,
         flow: Callable[[], bytes] | None = None,
         byte_time: float = 0.0,

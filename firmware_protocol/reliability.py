@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 SEQ_MOD = 256
 MAX_WINDOW = 127
+MAX_BACKOFF = 4
 
 
 class RtoEstimator:
@@ -45,7 +46,9 @@ class RtoEstimator:
         self._backoff = 1
 
     def back_off(self) -> None:
-        self._backoff = min(self._backoff * 2, 64)
+        """Double the timeout after a timeout, at most 4x: a serial line loses frames to
+        noise, not congestion, so waiting longer only slows the retry."""
+        self._backoff = min(self._backoff * 2, MAX_BACKOFF)
 
     def reset_backoff(self) -> None:
         self._backoff = 1
@@ -91,6 +94,7 @@ class Sender:
         self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
         self.retransmits = 0
         self.timeouts = 0
+        self.acked_clean = 0  # frames acknowledged that had been sent once
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
 
@@ -134,9 +138,12 @@ class Sender:
         if n == 0 or n > len(self.outstanding):
             return 0
         last = None
+        clean = 0
         for _ in range(n):
             last = self.outstanding.popleft()
             self._bytes_out -= len(last.payload)
+            clean += not last.retransmitted
+        self.acked_clean += clean
         if last is not None and not last.retransmitted:
             self.rto.sample(now - last.sent_at)
         else:

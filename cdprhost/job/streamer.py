@@ -121,6 +121,7 @@ class Streamer:
         self._at_rest = True
         self._last_progress = -1e9
         self._last_status = -1e9
+        self._status_seen = 0
         self._origin = np.asarray(ctx.profile.build_volume.bed_origin, dtype=float)
 
     # ------------------------------------------------------------------ the stream
@@ -238,9 +239,16 @@ class Streamer:
             if isinstance(ev, DeviceErrorEvent):
                 raise LinkError(f"device error {ev.text}")
         now = time.monotonic()
-        if force_status or now - self._last_status > STATUS_EVERY_S:
-            self._last_status = now
+        if force_status:
             self._on_status(link.request_status())
+        elif link.status_count > self._status_seen:  # a reply to an earlier request
+            self._status_seen = link.status_count
+            st = link.status()
+            if st is not None:
+                self._on_status(st)
+        if not force_status and now - self._last_status > STATUS_EVERY_S:
+            self._last_status = now
+            self._status_seen = link.ask_status()  # answered while streaming goes on
         if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self._heat_item:
             self._set(JobState.PRINTING)
         info = self.map.lookup(link.progress.segments_done)

@@ -70,9 +70,12 @@ log = logging.getLogger(__name__)
 
 SLICE_S = 0.02
 MIN_PAYLOAD = 24
+START_PAYLOAD = 64  # frames start small and grow while the line is clean
 MAX_WINDOW = 127
 START_WINDOW = 8
+MIN_WINDOW = 8
 CLOCK_SYNC_S = 0.06  # clock samples this far apart before streaming
+STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a lossy line
 
 
 class Transport(Protocol):
@@ -116,7 +119,7 @@ class HostLink:
             window=min(START_WINDOW, self._max_window),
             rto_initial=min(0.05, self.timeout_s / 4),
             rto_floor=0.01,
-            rto_ceiling=min(1.0, self.timeout_s / 2),
+            rto_ceiling=min(0.25, self.timeout_s / 4),
             byte_time=10.0 / baud if baud else 0.0,
         )
         self._ctx = SegmentContext()
@@ -133,6 +136,7 @@ class HostLink:
         self._waiting_since: float | None = None
         self._garbage_since_valid = 0
         self._last_retx = 0
+        self._acked_clean = 0
         self._configured_rate = 0.0
         self._start_ticks = 0
         self._ka_stop: threading.Event | None = None
@@ -217,6 +221,7 @@ class HostLink:
             nonce = int.from_bytes(os.urandom(2), "little") or 1
             self._ep.reset_session()
             self._ep.sender.window = min(START_WINDOW, self._max_window)
+            self._last_retx = self._acked_clean = 0
             self._ctx = SegmentContext()
             start = self._t.now()
             resend_at = start
@@ -269,7 +274,8 @@ class HostLink:
     def _accept_ident(self, msg: Ident) -> None:
         if msg.major != PROTOCOL_MAJOR:
             self._mismatch(msg.major, msg.minor)
-        self._max_payload = self._payload_limit = min(self._max_payload, msg.max_payload)
+        self._max_payload = min(self._max_payload, msg.max_payload)
+        self._payload_limit = min(self._max_payload, START_PAYLOAD)
         self._ep.sender.window_bytes = msg.rx_window
         now = self._t.now()
         self._dev.accept_ident(msg, now)
@@ -283,9 +289,12 @@ class HostLink:
         while not self._dev.clock.known:
             if self._t.now() - start > self.timeout_s:
                 raise self._silent_error(0, "while reading the device clock")
-            count = self._dev.status_count
-            self.send(GetStatus())
-            self._wait(lambda: self._dev.status_count > count, self.timeout_s, "a status report")
+            count = self.ask_status()
+            self._wait(
+                lambda c=count: self._dev.status_count > c,  # type: ignore[misc]
+                STATUS_TIMEOUTS * self.timeout_s,
+                "a status report",
+            )
             if not self._dev.clock.known:
                 self.poll(CLOCK_SYNC_S / 3)
 
@@ -378,13 +387,17 @@ class HostLink:
             raise self._dev.failure
 
     def _adapt(self) -> None:
-        """On a retransmission: shorter frames, half the window; on clean exchanges grow back."""
+        """On a retransmission: shorter frames, half the window; every frame acknowledged
+        without one grows them back (2 bytes, 1 frame): a noisy line settles on short frames
+        that get through, a clean one on full ones. A frame once sent keeps its size (its
+        retransmissions are byte-identical), so frames start small and grow."""
         ep = self._ep
         retx = ep.retransmits
         sender = ep.sender
+        clean, self._acked_clean = sender.acked_clean - self._acked_clean, sender.acked_clean
         if retx > self._last_retx:
             self._payload_limit = max(MIN_PAYLOAD, int(self._payload_limit * 0.7))
-            sender.window = max(2, sender.window // 2)
+            sender.window = max(MIN_WINDOW, sender.window // 2)
             log.debug(
                 "%s: %d retransmissions; payload %d, window %d",
                 self._t.name,
@@ -392,11 +405,9 @@ class HostLink:
                 self._payload_limit,
                 sender.window,
             )
-        else:
-            if self._payload_limit < self._max_payload:
-                self._payload_limit = min(self._max_payload, self._payload_limit + 2)
-            if sender.window < self._max_window:
-                sender.window += 1
+        elif clean:
+            self._payload_limit = min(self._max_payload, self._payload_limit + 2 * clean)
+            sender.window = min(self._max_window, sender.window + clean)
         self._last_retx = retx
 
     def _wait(self, done: Callable[[], bool], timeout: float | None, what: str) -> None:
@@ -628,12 +639,23 @@ class HostLink:
             with self._locked():
                 self._pump(min(left, 0.25))
 
-    def request_status(self, timeout: float | None = None) -> DeviceStatus:
+    def ask_status(self) -> int:
+        """Ask for a status report without waiting for it; returns the count of reports so
+        far (:meth:`status` is newer once :attr:`status_count` exceeds it)."""
         count = self._dev.status_count
         self.send(GetStatus())
-        self._wait(
-            lambda: self._dev.status_count > count, timeout or self.timeout_s, "a status report"
-        )
+        return count
+
+    @property
+    def status_count(self) -> int:
+        return self._dev.status_count
+
+    def request_status(self, timeout: float | None = None) -> DeviceStatus:
+        """Ask for a status report and wait for it (default: a few link timeouts, since on
+        a lossy line a reply may need several retransmissions)."""
+        count = self.ask_status()
+        limit = timeout if timeout is not None else STATUS_TIMEOUTS * self.timeout_s
+        self._wait(lambda: self._dev.status_count > count, limit, "a status report")
         st = self._dev.status
         assert st is not None
         return st

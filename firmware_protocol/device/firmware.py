@@ -118,7 +118,7 @@ class SimDevice:
             flow=self._flow_payload,
             rto_initial=0.05,
             rto_floor=0.02,
-            rto_ceiling=1.0,
+            rto_ceiling=0.25,
         )
         self.synced = False
         self.nonce: int | None = None

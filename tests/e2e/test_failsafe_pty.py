@@ -152,3 +152,34 @@ def test_a_log_on_dev_full_stops_before_anything_moves(tmp_path):
         st = link.request_status()
         link.close()
         assert st.hotend_target_c == 0 and st.segments_done == 0
+
+
+def test_fuzzed_frames_over_the_pty_then_a_clean_handshake(tmp_path):
+    from firmware_protocol.framing import Kind, encode_frame
+    from tests.protocol.test_proto_fuzz import fuzz_frames
+
+    with SimDeviceProcess(tmp_path, "--speedup", SPEEDUP) as dev:
+        with serial.Serial(dev.path, 250000, timeout=0, exclusive=True) as port:
+            seq = 0
+            chunk = bytearray()
+            for frame in fuzz_frames(20_000, seed=31):
+                if isinstance(frame, tuple):
+                    what, payload = frame
+                    if what == "data":
+                        frame = encode_frame(Kind.DATA, seq, 0, payload)
+                        seq = (seq + 1) % 256
+                    else:
+                        frame = encode_frame(Kind.URGENT, 0, 0, payload)
+                chunk += frame
+                if len(chunk) > 2048:
+                    port.write(chunk)
+                    port.reset_input_buffer()  # nobody reads the answers
+                    chunk.clear()
+            port.write(chunk)
+        assert dev.proc.poll() is None  # still running
+        link = open_link(dev.path)
+        if link.request_status().faulted:  # the fuzz left a fault (a BAD_COMMAND, an e-stop)
+            link.clear_fault()
+        st = link.request_status()
+        link.close()
+        assert st.flags & Flag.SYNCED and not st.faulted
