@@ -1,9 +1,10 @@
 """The device's clock rate, measured against the host's (PROTOCOL.md section 3.2).
 
-Every FLOW, STATUS and IDENT carries the device's free-running clock (u32 ticks of
-``clock_hz``, wrapping). The host unwraps it and estimates how many device ticks pass
-per host second from the oldest and newest samples of a sliding window, as Klipper's
-clock synchronisation does. A crystal gives ``clock_hz`` to within 100 ppm; a simulated
+FLOW and IDENT carry the device's free-running clock (u32 ticks of ``clock_hz``,
+wrapping) as of when they were sent; both are never retransmitted, so the clock is
+fresh (a STATUS may be a retransmission carrying an old clock: not used). The host
+unwraps it and estimates how many device ticks pass per host second from the oldest
+and newest samples of a sliding window, as Klipper's clock synchronisation does. A crystal gives ``clock_hz`` to within 100 ppm; a simulated
 device running X times faster is measured as ``X * clock_hz``.
 """
 

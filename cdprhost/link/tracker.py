@@ -123,9 +123,9 @@ class DeviceTracker:
                 self.clock.add(now, msg.clock)
                 self.set_progress(msg.items_done, msg.segments_done, msg.queue_free, msg.flags)
             elif isinstance(msg, Status):
+                # no clock sample: a status may be a retransmission (an old clock, late)
                 self.status = DeviceStatus.from_message(msg, self.identity, now)
                 self.status_count += 1
-                self.clock.add(now, msg.clock)
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:

@@ -272,7 +272,7 @@ class SimDevice:
         T = self.device_time(now)
         cur = mc.current
         if cur is not None:
-            if cur[m.KIND] == m.WAIT:
+            if cur.kind == m.WAIT:
                 cands.append(now + 0.2 / sp)
             elif not mc.queue:
                 cands.append(mc.cur_end / sp)
@@ -315,7 +315,7 @@ class SimDevice:
         mc = self.machine
         cur = mc.current
         extra = 0
-        if cur is not None and cur[m.KIND] in m.TIMED and mc.cur_end > mc.cur_start:
+        if cur is not None and cur.kind in m.TIMED and mc.cur_end > mc.cur_start:
             extra = int((min(T, mc.cur_end) - mc.cur_start) * mc.clock_hz)
         return mc.motion_ticks + max(0, extra)
 
@@ -349,7 +349,7 @@ class SimDevice:
         if (mc.items_done, mc.flags()) != self._flow_sent:
             due = self._flow_time + self.config.flow_interval_s
         cur = mc.current
-        if self.flow_ticks > 0 and cur is not None and cur[m.KIND] in m.TIMED:
+        if self.flow_ticks > 0 and cur is not None and cur.kind in m.TIMED:
             # when the executed motion reaches the threshold if it runs on without a gap
             # (an absolute time: the machine may not have been advanced to ``now`` yet)
             need = self._flow_motion_sent + self.flow_ticks - mc.motion_ticks + 1

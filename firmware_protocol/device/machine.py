@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.heaters import Heater
@@ -38,10 +38,24 @@ from firmware_protocol.segments import MAX_DELTA, RAMP_TO_REST, ramp_share, step
 
 SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT = range(8)
 TIMED = (SEG, DWELL, HOME)
-# an item is a tuple: (kind, item number, segment number, ticks, deltas, ramp, arg, arrival)
-KIND, ITEM, SEGNO, TICKS, DELTAS, RAMP, ARG, ARRIVAL = range(8)
-Item = tuple[int, int, int, int, tuple[int, int, int, int], int, tuple[Any, ...], float]
 U32 = 0xFFFF_FFFF
+
+
+class Item(NamedTuple):
+    """One queue slot (a tuple: cheap to make, nothing for the garbage collector to follow).
+
+    ``arg``: SETPOS the four positions; ENABLE (mask,); HOME (mask, positions);
+    HEATER/FAN/WAIT (index, value)."""
+
+    kind: int
+    item: int  # queue item number
+    seg: int  # segment number (segments only)
+    ticks: int
+    deltas: tuple[int, int, int, int]
+    ramp: int
+    arg: tuple[Any, ...]
+    arrival: float  # device time it was queued
+
 
 _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
     int(Flag.MOVING),
@@ -69,12 +83,12 @@ def make_item(
     ramp: int = -1,
     arg: tuple[Any, ...] = (),
 ) -> Item:
-    return (kind, number, seg, ticks, deltas, ramp, arg, arrival)
+    return Item(kind, number, seg, ticks, deltas, ramp, arg, arrival)
 
 
 def _ends_block(item: Item) -> bool:
     """A segment that ends at rest, or any item that is not a segment."""
-    return item[KIND] != SEG or item[RAMP] == RAMP_TO_REST or not any(item[DELTAS])
+    return item.kind != SEG or item.ramp == RAMP_TO_REST or not any(item.deltas)
 
 
 class Machine:
@@ -133,7 +147,7 @@ class Machine:
     def flags(self) -> int:
         f = 0
         cur = self.current
-        if (cur is not None and cur[KIND] in TIMED) or not self.at_rest:
+        if (cur is not None and cur.kind in TIMED) or not self.at_rest:
             f |= _MOVING
         if self.fault:
             f |= _FAULT
@@ -145,7 +159,7 @@ class Machine:
             f |= _ENABLED
         if self.heaters[0].target > 0 or self.heaters[1].target > 0:
             f |= _HEATING
-        if cur is not None and cur[KIND] == WAIT:
+        if cur is not None and cur.kind == WAIT:
             f |= _WAITING
         return f
 
@@ -162,7 +176,7 @@ class Machine:
         """Queued motion not yet executed: the rest of the current timed item and the queue."""
         rest = 0
         cur = self.current
-        if cur is not None and cur[KIND] in TIMED and self.cur_end > T:
+        if cur is not None and cur.kind in TIMED and self.cur_end > T:
             rest = math.ceil((self.cur_end - T) * self.clock_hz)
         return min(U32, self.queued_ticks + rest)
 
@@ -171,10 +185,10 @@ class Machine:
 
     def steps_now(self, T: float) -> list[int]:
         cur = self.current
-        if cur is None or cur[KIND] != SEG or self.cur_end <= self.cur_start:
+        if cur is None or cur.kind != SEG or self.cur_end <= self.cur_start:
             return list(self.pos)
-        tau = (T - self.cur_start) / (cur[TICKS] / self.clock_hz)
-        done = steps_done(cur[DELTAS], cur[RAMP], tau)
+        tau = (T - self.cur_start) / (cur.ticks / self.clock_hz)
+        done = steps_done(cur.deltas, cur.ramp, tau)
         return [p + int(d) for p, d in zip(self.pos, done)]
 
     # ------------------------------------------------------------------ input
@@ -182,39 +196,37 @@ class Machine:
     def enqueue(self, item: Item, T: float) -> list[Message]:
         """Add one queued item (numbers already assigned). Returns reports."""
         if self.fault:
-            self.items_done = item[ITEM]  # discarded while faulted
+            self.items_done = item.item  # discarded while faulted
             return []
-        kind = item[KIND]
+        kind = item.kind
         if kind == SEG:
-            ticks, deltas = item[TICKS], item[DELTAS]
-            r = float(ramp_share(item[RAMP]))
+            ticks, deltas = item.ticks, item.deltas
+            r = float(ramp_share(item.ramp))
             factor = max(2 * r, 2 - 2 * r) * self.clock_hz / ticks
             for axis, d in enumerate(deltas):
                 rate = abs(d) * factor
                 if rate > self.cfg.max_step_rate * (1 + 1e-9):
-                    return [
-                        self.fail(ErrorCode.STEP_RATE, item[ITEM], item[SEGNO], T, axis, int(rate))
-                    ]
+                    return [self.fail(ErrorCode.STEP_RATE, item.item, item.seg, T, axis, int(rate))]
             tail = [p + d for p, d in zip(self.tail_pos, deltas)]
             if any(abs(p) > MAX_DELTA for p in tail):
                 worst = max(range(4), key=lambda k: abs(tail[k]))
                 value = max(-MAX_DELTA, min(MAX_DELTA, tail[worst]))
-                return [self.fail(ErrorCode.BAD_VALUE, item[ITEM], item[SEGNO], T, 0x80, value)]
+                return [self.fail(ErrorCode.BAD_VALUE, item.item, item.seg, T, 0x80, value)]
             self.tail_pos = tail
             self.queued_ticks += ticks
         elif kind == DWELL:
-            self.queued_ticks += item[TICKS]
+            self.queued_ticks += item.ticks
         elif kind == SETPOS:
-            self.tail_pos = list(item[ARG])
+            self.tail_pos = list(item.arg)
         elif kind == HOME:
-            mask, targets = item[ARG]
+            mask, targets = item.arg
             for k in range(3):
                 if mask >> k & 1:
                     self.tail_pos[k] = targets[k]
         elif kind == HEATER:
-            hid, target = item[ARG]
+            hid, target = item.arg
             if target > self.max_dc[hid]:
-                return [self.fail(ErrorCode.HEATER_RANGE, item[ITEM], 0, T, hid, target)]
+                return [self.fail(ErrorCode.HEATER_RANGE, item.item, 0, T, hid, target)]
         if _ends_block(item):
             self.block_ends += 1
         self.queue.append(item)
@@ -239,9 +251,9 @@ class Machine:
     ) -> Error:
         """Enter the fault state: stop now, flush the queue; heaters off for thermal faults,
         the watchdog and an e-stop (unless ``heaters_off`` says otherwise)."""
-        if self.current is not None and self.current[KIND] == SEG and self.cur_end > T:
+        if self.current is not None and self.current.kind == SEG and self.cur_end > T:
             cur = self.current
-            tau = (T - self.cur_start) / (cur[TICKS] / self.clock_hz)
+            tau = (T - self.cur_start) / (cur.ticks / self.clock_hz)
             self._apply_partial(cur, tau, ErrorCode(code).name.lower())
         self.fault = int(code)
         self.last_error = int(code)
@@ -275,7 +287,7 @@ class Machine:
             self.block_ends > 0
             or self.queued_ticks >= self.start_ticks
             or self.free_slots() <= 0
-            or self.queue[0][ITEM] <= self.flush_item
+            or self.queue[0].item <= self.flush_item
         )
 
     def next_start(self) -> float | None:
@@ -284,9 +296,9 @@ class Machine:
         if self.current is not None or not self.queue or self.fault or self.halted:
             return None
         head = self.queue[0]
-        if head[KIND] == SEG and self.at_rest:
+        if head.kind == SEG and self.at_rest:
             return max(self.t_free, self.last_arrival) if self._may_start() else None
-        return max(self.t_free, head[ARRIVAL])
+        return max(self.t_free, head.arrival)
 
     def advance(self, T: float) -> list[Message]:
         reports: list[Message] = []
@@ -296,10 +308,10 @@ class Machine:
         while not self.halted and not self.fault:
             cur = self.current
             if cur is not None:
-                if cur[KIND] == WAIT:
+                if cur.kind == WAIT:
                     reports += self._heaters_to(T)
-                    h = self.heaters[cur[ARG][0]]
-                    if self.fault or (h.target > 0 and abs(h.temp - h.target) > cur[ARG][1] / 10.0):
+                    h = self.heaters[cur.arg[0]]
+                    if self.fault or (h.target > 0 and abs(h.temp - h.target) > cur.arg[1] / 10.0):
                         break
                     self.cur_end = T
                 if self.cur_end > T:
@@ -309,17 +321,17 @@ class Machine:
             if not queue:
                 break
             head = queue[0]
-            if head[KIND] == SEG and self.at_rest:
+            if head.kind == SEG and self.at_rest:
                 if not self._may_start():
                     break
                 start = max(self.t_free, self.last_arrival)
             else:
-                start = max(self.t_free, head[ARRIVAL])
+                start = max(self.t_free, head.arrival)
             if start > T:
                 break
             queue.popleft()
-            if head[KIND] in (SEG, DWELL):
-                self.queued_ticks -= head[TICKS]
+            if head.kind in (SEG, DWELL):
+                self.queued_ticks -= head.ticks
             if _ends_block(head):
                 self.block_ends -= 1
             reports += self._start(head, start)
@@ -357,35 +369,35 @@ class Machine:
     def _start(self, it: Item, t: float) -> list[Message]:
         self.settled = False
         clock = self.clock_hz
-        kind = it[KIND]
+        kind = it.kind
         if kind == SEG:
             self._abort = self._endstop_crossing(it)
-            deltas = it[DELTAS]
+            deltas = it.deltas
             if deltas[0] or deltas[1] or deltas[2] or deltas[3]:
                 self.enabled_mask |= sum(1 << k for k, d in enumerate(deltas) if d)
             self.current, self.cur_start = it, t
             tau = self._abort[0] if self._abort else 1.0
-            self.cur_end = t + tau * it[TICKS] / clock
+            self.cur_end = t + tau * it.ticks / clock
             return []
         if kind in (DWELL, HOME, WAIT):
             self.at_rest = True
-            ticks = it[TICKS]
+            ticks = it.ticks
             if kind == HOME:
-                mask = it[ARG][0]
+                mask = it.arg[0]
                 dist = max(
                     (abs(self.pos[k] + self.offset[k]) for k in range(3) if mask >> k & 1),
                     default=0,
                 )
                 if dist > self.cfg.homing_max_steps:
-                    return [self.fail(ErrorCode.HOMING_FAILED, it[ITEM], 0, t, 0xFF, dist)]
+                    return [self.fail(ErrorCode.HOMING_FAILED, it.item, 0, t, 0xFF, dist)]
                 ticks = math.ceil(dist / self.cfg.homing_rate * clock)
-                it = (*it[:TICKS], ticks, *it[TICKS + 1 :])  # type: ignore[assignment]
+                it = it._replace(ticks=ticks)
                 self.enabled_mask |= mask
             self.current, self.cur_start = it, t
             self.cur_end = t + ticks / clock if kind != WAIT else math.inf
             return []
         reports: list[Message] = []
-        arg = it[ARG]
+        arg = it.arg
         if kind == SETPOS:
             for k in range(4):
                 if k < 3:
@@ -400,39 +412,39 @@ class Machine:
         elif kind == FAN:
             if arg[0] == 0:
                 self.fan = arg[1]
-        self.items_done = it[ITEM]
+        self.items_done = it.item
         self.t_free = max(self.t_free, t)
         if not self.at_rest and not self.queue and self.current is None:
-            reports.append(self.fail(ErrorCode.UNDERRUN, it[ITEM], self.segments_done, t))
+            reports.append(self.fail(ErrorCode.UNDERRUN, it.item, self.segments_done, t))
         return reports
 
     def _endstop_crossing(self, it: Item) -> tuple[float, int, int] | None:
         limit = self.cfg.overtravel_steps
         best = None
-        deltas = it[DELTAS]
+        deltas = it.deltas
         for k in range(3):
             d = deltas[k]
             start = self.pos[k] + self.offset[k]
             if d > 0 and start <= limit < start + d:
                 x = (limit + 1 - start - 0.5) / d  # normalised position of the offending step
-                r = float(ramp_share(it[RAMP]))
+                r = float(ramp_share(it.ramp))
                 tau = x / (r + math.sqrt(r * r + (1 - 2 * r) * x))
                 if best is None or tau < best[0]:
                     best = (tau, k, limit + 1)
         return best
 
     def _apply_partial(self, it: Item, tau: float, error: str) -> None:
-        done = steps_done(it[DELTAS], it[RAMP], tau)
+        done = steps_done(it.deltas, it.ramp, tau)
         self.pos = [p + int(d) for p, d in zip(self.pos, done)]
-        self.motion_ticks += round(tau * it[TICKS])
-        self.record.append(it[SEGNO], self.pos, self.motion_ticks, self.boot, error)
+        self.motion_ticks += round(tau * it.ticks)
+        self.record.append(it.seg, self.pos, self.motion_ticks, self.boot, error)
 
     def _complete(self, t: float) -> list[Message]:
         it = self.current
         assert it is not None
         self.current = None
         self.t_free = t
-        kind = it[KIND]
+        kind = it.kind
         if kind == SEG:
             if self._abort is not None:
                 tau, axis, phys = self._abort
@@ -442,40 +454,40 @@ class Machine:
                 return [
                     self.fail(
                         ErrorCode.ENDSTOP_HIT,
-                        it[ITEM],
-                        it[SEGNO],
-                        self.cur_start + tau * it[TICKS] / self.clock_hz,
+                        it.item,
+                        it.seg,
+                        self.cur_start + tau * it.ticks / self.clock_hz,
                         axis,
                         phys,
                     )
                 ]
-            d = it[DELTAS]
+            d = it.deltas
             p = self.pos
             pos = [p[0] + d[0], p[1] + d[1], p[2] + d[2], p[3] + d[3]]
             self.pos = pos
-            self.motion_ticks += it[TICKS]
-            self.segments_done = it[SEGNO]
-            self.items_done = it[ITEM]
-            self.record.append(it[SEGNO], pos, self.motion_ticks, self.boot)
-            self.at_rest = it[RAMP] == RAMP_TO_REST or not (d[0] or d[1] or d[2] or d[3])
+            self.motion_ticks += it.ticks
+            self.segments_done = it.seg
+            self.items_done = it.item
+            self.record.append(it.seg, pos, self.motion_ticks, self.boot)
+            self.at_rest = it.ramp == RAMP_TO_REST or not (d[0] or d[1] or d[2] or d[3])
             if self.halt_at is not None and self.segments_done >= self.halt_at:
                 self.halted = True
                 return []
             if not self.at_rest and not self.queue:
-                return [self.fail(ErrorCode.UNDERRUN, it[ITEM], it[SEGNO], t)]
+                return [self.fail(ErrorCode.UNDERRUN, it.item, it.seg, t)]
             return []
-        self.items_done = it[ITEM]
+        self.items_done = it.item
         if kind == DWELL:
-            self.motion_ticks += it[TICKS]
+            self.motion_ticks += it.ticks
         elif kind == HOME:
-            self.motion_ticks += it[TICKS]
-            mask, targets = it[ARG]
+            self.motion_ticks += it.ticks
+            mask, targets = it.arg
             for k in range(3):
                 if mask >> k & 1:
                     self.pos[k] = targets[k]
                     self.offset[k] = -targets[k]  # the switch is physical 0
             self.homed_mask |= mask
-            return [Event(EventCode.HOMED, it[ITEM], tuple(self.pos[:3]))]
+            return [Event(EventCode.HOMED, it.item, tuple(self.pos[:3]))]
         return []
 
     def stop(
