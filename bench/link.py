@@ -250,7 +250,7 @@ def wire_bytes(gcode: Path) -> dict[str, float]:
         if not isinstance(out, PlannedSegments):
             continue
         wire = to_wire(out)
-        data, offsets = encode_segments(wire, ctx)
+        data, _offsets = encode_segments(wire, ctx)
         n += len(wire)
         payload += len(data)
         frames += int(np.ceil(len(data) / 248)) * OVERHEAD

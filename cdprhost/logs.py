@@ -31,7 +31,7 @@ class _QuietFileHandler(logging.FileHandler):
     """A log file that goes quiet, rather than printing tracebacks, once it cannot be
     written (disk full): the job's own log reports that failure."""
 
-    def handleError(self, record: logging.LogRecord) -> None:  # noqa: N802 - logging's name
+    def handleError(self, record: logging.LogRecord) -> None:
         logging.getLogger("cdprhost").removeHandler(self)
         with contextlib.suppress(OSError):
             self.close()

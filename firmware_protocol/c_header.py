@@ -41,7 +41,7 @@ def message_max_bytes(cls: type[Message]) -> int:
 
 
 def _enum(prefix: str, enum: type[IntEnum] | type[IntFlag]) -> list[str]:
-    return [f"#define CDPR_{prefix}_{m.name} 0x{int(m.value):02X}" for m in enum]  # type: ignore[union-attr]
+    return [f"#define CDPR_{prefix}_{m.name} 0x{int(m.value):02X}" for m in enum]
 
 
 def _literal(v: int, signed: bool) -> str:
@@ -135,7 +135,8 @@ def header() -> str:
         "",
         "/* opcodes and largest encoded size of each message (opcode included) */",
     ]
-    for cls in (messages.Segment, *MESSAGES):
+    every: tuple[type[Message], ...] = (messages.Segment, *MESSAGES)
+    for cls in every:
         tag = snake(cls.__name__)
         if cls is not messages.Segment:
             out.append(f"#define CDPR_OP_{tag} 0x{cls.OPCODE:02X}")

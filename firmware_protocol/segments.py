@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from firmware_protocol.varint import (
     VarintError,
@@ -47,16 +48,15 @@ class SegmentBatch:
 
     ticks: np.ndarray
     deltas: np.ndarray
-    ramps: np.ndarray = field(default=None)  # type: ignore[assignment]
+    ramps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int16))
 
     def __post_init__(self) -> None:
         ticks = np.ascontiguousarray(self.ticks, dtype=np.int64).reshape(-1)
         deltas = np.ascontiguousarray(self.deltas, dtype=np.int64).reshape(-1, AXES)
-        ramps = (
-            np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16)
-            if self.ramps is None
-            else np.ascontiguousarray(self.ramps, dtype=np.int16).reshape(-1)
-        )
+        given = [] if self.ramps is None else self.ramps
+        ramps = np.ascontiguousarray(given, dtype=np.int16).reshape(-1)
+        if len(ramps) == 0 and len(ticks):  # none given: constant speed
+            ramps = np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16)
         if not (len(ticks) == len(deltas) == len(ramps)):
             raise ValueError(
                 f"segment arrays differ in length: {len(ticks)}, {len(deltas)}, {len(ramps)}"
@@ -91,6 +91,8 @@ def segments_from_positions(
 ) -> SegmentBatch:
     """Segments between consecutive absolute step positions ``positions`` (N+1, 4)."""
     pos = np.asarray(positions, dtype=np.int64)
+    if ramps is None:
+        return SegmentBatch(ticks, np.diff(pos, axis=0))
     return SegmentBatch(ticks, np.diff(pos, axis=0), ramps)
 
 
@@ -114,7 +116,7 @@ def ramp_codes_from_speeds(v_start: np.ndarray, v_end: np.ndarray, tol: float = 
     return np.where(constant, RAMP_CONSTANT, code).astype(np.int16)
 
 
-def profile(tau: np.ndarray, codes: np.ndarray | int) -> np.ndarray:
+def profile(tau: np.ndarray | float, codes: np.ndarray | int) -> np.ndarray:
     """Normalised position ``p(tau)`` in [0, 1]."""
     r = ramp_share(codes)
     t = np.asarray(tau, dtype=np.float64)
@@ -149,7 +151,7 @@ def step_times(steps: int, ticks: int, code: int) -> np.ndarray:
     return tau * ticks
 
 
-def steps_done(deltas: np.ndarray, code: int, tau: float) -> np.ndarray:
+def steps_done(deltas: ArrayLike, code: int, tau: float) -> np.ndarray:
     """Signed steps already issued at normalised time ``tau`` (consistent with step_times)."""
     d = np.asarray(deltas, dtype=np.int64)
     p = float(profile(min(max(tau, 0.0), 1.0), code))
@@ -198,9 +200,9 @@ def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np
     )
     z = np.where(use_pred[:, None], z_pred, z_plain)
     has_dur = batch.ticks != prev_t
-    has_sl = z[:, :3].any(axis=1)
-    has_e = z[:, 3] != 0
-    has_r = batch.ramps != RAMP_CONSTANT
+    has_sl = np.asarray(z[:, :3].any(axis=1))
+    has_e = np.asarray(z[:, 3] != 0)
+    has_r = np.asarray(batch.ramps != RAMP_CONSTANT)
     lens = uvarint_lengths(z)
     len_dur = np.where(has_dur, uvarint_lengths(batch.ticks.astype(np.uint64)), 0)
     len_sl = np.where(has_sl[:, None], lens[:, :3], 0)

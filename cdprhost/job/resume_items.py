@@ -182,10 +182,10 @@ class Restart:
                 homed = True
                 yield item
         if not started:
-            where = (
+            target = (
                 f"layer {self.layer}" if self.layer is not None else f"line {self.line} or later"
             )
-            raise InputError(f"resume: the program has no moves in {where}")
+            raise InputError(f"resume: the program has no moves in {target}")
 
 
 def from_layer(

@@ -255,9 +255,14 @@ class Streamer:
         if force_status or now - self._last_progress > PROGRESS_EVERY_S:
             self._last_progress = now
             self._progress(info)
-        if self.resume is not None and info is not None and info.line != INSERTED_LINE:
-            if self.resume.due(info.layer, info.number, now):
-                self.resume.save(self.point("printing", info), now, info.layer)
+        writer = self.resume
+        if (
+            writer is not None
+            and info is not None
+            and info.line != INSERTED_LINE
+            and writer.due(info.layer, info.number, now)
+        ):
+            writer.save(self.point("printing", info), now, info.layer)
         problem = self.ctx.log_problem()
         if problem:
             self.ctx.requests.stop_safely(problem)

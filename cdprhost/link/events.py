@@ -183,7 +183,7 @@ def error_text(m: Error) -> str:
         if m.axis == 0xFF or m.code in (ErrorCode.BAD_VALUE, ErrorCode.BAD_COMMAND)
         else f", axis {m.axis}"
     )
-    detail = {
+    details: dict[int, str] = {
         ErrorCode.UNDERRUN: "the move queue ran empty while moving",
         ErrorCode.THERMAL_RUNAWAY: f"heater temperature {m.value / 10:g} C not following its target",
         ErrorCode.ENDSTOP_HIT: f"endstop hit during motion at physical step {m.value}",
@@ -194,7 +194,8 @@ def error_text(m: Error) -> str:
         ErrorCode.WATCHDOG: f"no word from the host for {m.value} ms: motion stopped, heaters off",
         ErrorCode.BAD_VALUE: f"value {m.value} out of range in command 0x{m.axis:02X}",
         ErrorCode.BAD_COMMAND: f"malformed command 0x{m.axis:02X} at byte {m.value}",
-    }.get(m.code, "")
+    }
+    detail = details.get(m.code, "")
     return f"{name} at item {m.item}, segment {m.segment}{axis}" + (f": {detail}" if detail else "")
 
 

@@ -534,7 +534,7 @@ class HostLink:
             return start
         if start == 0:
             self.check_step_rates(batch)
-        end = self._t.now() + max_wait
+        until = self._t.now() + max_wait
         i = start
         while i < n:
             self._let_others_in()
@@ -547,13 +547,13 @@ class HostLink:
                     i += k
                     continue
                 now = self._t.now()
-                if now >= end:
+                if now >= until:
                     break
                 wake = self._flow.wake_in(
                     self.ahead_ticks(), self.clock_rate, bool(self._dev.flow.flags & Flag.MOVING)
                 )
                 # below the low watermark already: only a report can give room
-                wait = end - now if not wake else min(end - now, wake)
+                wait = until - now if not wake else min(until - now, wake)
                 self._pump(min(wait, 0.25))
         return i
 

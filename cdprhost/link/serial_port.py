@@ -67,32 +67,32 @@ class SerialTransport:
         deadline = time.monotonic() + max(0.0, timeout)
         try:
             if self._fd is not None:
-                return self._read_select(timeout)
+                return self._read_select(self._fd, timeout)
             while True:
                 waiting = self._ser.in_waiting
                 if waiting:
-                    return self._ser.read(waiting)
+                    return bytes(self._ser.read(waiting))
                 if time.monotonic() >= deadline:
                     return b""
-                data = self._ser.read(1)  # blocks at most READ_SLICE_S
+                data = bytes(self._ser.read(1))  # blocks at most READ_SLICE_S
                 if data:
                     more = self._ser.in_waiting
-                    return data + (self._ser.read(more) if more else b"")
+                    return data + (bytes(self._ser.read(more)) if more else b"")
         except (serial.SerialException, OSError) as exc:
             raise PortVanished(
                 f"{self.name}: port failed on read ({exc}); was it unplugged?"
             ) from None
 
-    def _read_select(self, timeout: float) -> bytes:
+    def _read_select(self, fd: int, timeout: float) -> bytes:
         waiting = self._ser.in_waiting
         if not waiting and timeout > 0:
-            ready, _, _ = select.select([self._fd], [], [], timeout)
+            ready, _, _ = select.select([fd], [], [], timeout)
             if not ready:
                 return b""
             waiting = self._ser.in_waiting
             if not waiting:  # readable but empty: pyserial raises if the port hung up
-                return self._ser.read(1)
-        return self._ser.read(waiting) if waiting else b""
+                return bytes(self._ser.read(1))
+        return bytes(self._ser.read(waiting)) if waiting else b""
 
     def close(self) -> None:
         with contextlib.suppress(serial.SerialException, OSError):

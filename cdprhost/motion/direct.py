@@ -9,6 +9,7 @@ segment batch; the print job, the jog screen and the calibration wizard all use 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.limits import Caps
@@ -26,7 +27,7 @@ def to_wire(batch: PlannedSegments) -> SegmentBatch:
     )
 
 
-def state_at_steps(model: MachineModel, steps) -> SegmentState:
+def state_at_steps(model: MachineModel, steps: ArrayLike) -> SegmentState:
     """Machine state from the device's absolute steps (position by forward kinematics)."""
     arr = np.asarray(steps, dtype=np.int64).reshape(4)
     point = model.fk(model.sliders_from_steps(arr[:3])[None, :])[0]
@@ -37,7 +38,7 @@ def direct_path(
     profile: MachineProfile,
     model: MachineModel,
     state: SegmentState,
-    points,
+    points: ArrayLike,
     *,
     feedrate_mm_s: float,
     clock_hz: int,

@@ -450,7 +450,7 @@ class SimDevice:
         for x in msgs:
             if x.QUEUED:
                 queued += 1
-            elif x.CLASS == "U" or x.CLASS == "D":  # URGENT-only or device messages in DATA
+            elif x.CLASS in {"U", "D"}:  # URGENT-only or device messages in DATA
                 self._report([mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, 0, T, x.OPCODE, 0)])
                 return True
         if queued > mc.free_slots() and not mc.fault:

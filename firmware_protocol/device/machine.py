@@ -69,7 +69,9 @@ _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
 
 
 class Observer(Protocol):
-    def on_settled(self, steps: tuple[int, ...], t: float) -> None: ...
+    """Told when motion has come to rest and settled (the virtual mocap takes a picture)."""
+
+    def on_settled(self, steps: tuple[int, ...], t: float, /) -> object: ...
 
 
 def make_item(
@@ -409,9 +411,8 @@ class Machine:
             hid, target = arg
             reports += self._heaters_to(t)
             self.heaters[hid].set_target(target / 10.0, t)
-        elif kind == FAN:
-            if arg[0] == 0:
-                self.fan = arg[1]
+        elif kind == FAN and arg[0] == 0:
+            self.fan = arg[1]
         self.items_done = it.item
         self.t_free = max(self.t_free, t)
         if not self.at_rest and not self.queue and self.current is None:

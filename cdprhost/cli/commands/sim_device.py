@@ -15,7 +15,7 @@ from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.pty_server import PtyServer
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "sim-device", help="run the simulated device on a pseudo-terminal (prints its path)"
     )
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"cannot write: {exc.strerror or exc}", source=args.record) from None
     server = PtyServer(device, faults)
 
-    def stop(signum, frame):
+    def stop(signum: int, frame: object) -> None:
         server.stop()
 
     signal.signal(signal.SIGTERM, stop)
