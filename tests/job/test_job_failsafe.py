@@ -190,3 +190,20 @@ def test_a_reset_then_resume_continues_exactly_at_the_last_executed_segment(part
     # the approach lowers onto the end of segment 400, then the print goes on from there
     assert any(r["steps"][:3] == at_stop["steps"][:3] for r in link2.device.record)
     assert resumed.final_steps[:3] == clean.final_steps[:3]
+
+
+def test_a_killed_atomic_write_leaves_no_temporary_behind_for_long(tmp_path):
+    import os
+    import time
+
+    from cdprhost.fileio.atomic import write_text_atomic
+
+    target = tmp_path / "x.resume.json"
+    stale = tmp_path / ".x.resume.json.abc123.tmp"  # what a killed writer leaves
+    fresh = tmp_path / ".x.resume.json.def456.tmp"  # a writer at work right now
+    stale.write_text("half")
+    fresh.write_text("half")
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    write_text_atomic(target, "{}\n")
+    assert target.read_text() == "{}\n" and not stale.exists() and fresh.exists()
