@@ -354,18 +354,7 @@ class PrintJob:
         if reason:
             self._fill(streamer, result)
             result.status, result.reason = "failed", reason
-            result.print_time_s = self._print_time(streamer)
-            info = streamer.executed()
-            self._emit(
-                Failure(
-                    reason,
-                    result.last_line,
-                    info.layer if info else None,
-                    info.point if info else None,
-                    result.resume_file,
-                )
-            )
-            self._set(JobState.FAILED, reason)
+            self._failed(streamer, result, reason)
             return
         self._finish(streamer, result, JobState.CANCELLED, "cancelled")
 
@@ -393,8 +382,14 @@ class PrintJob:
             return
         last = exc.last_segment if isinstance(exc, DeviceReset) else None
         self._fill(streamer, result, last)
-        result.print_time_s = self._print_time(streamer, last)
         self._save_point(streamer, result, reason, last)
+        self._failed(streamer, result, reason, last)
+
+    def _failed(
+        self, streamer: Streamer, result: PrintResult, reason: str, last: int | None = None
+    ) -> None:
+        """The machine time printed, the Failure event and the final state."""
+        result.print_time_s = self._print_time(streamer, last)
         info = streamer.executed(last)
         # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
         self._emit(

@@ -41,6 +41,7 @@ from cdprhost.machine.commands import device_messages
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.segments import PlannedSegments
 from cdprhost.profile.models import MachineProfile
+from firmware_protocol.messages import BED, HOTEND, SetHeater
 
 log = logging.getLogger(__name__)
 
@@ -166,6 +167,7 @@ class Streamer:
             self.ctx.emit(Notice(f"line {item.line}: {item.text}"))
         if not msgs:
             return
+        self._check_heater_limits(msgs)
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self._heat_item = max(numbers)
@@ -174,6 +176,19 @@ class Streamer:
             )
         if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
             self._hold_at_rest()
+
+    def _check_heater_limits(self, msgs: list[Any]) -> None:
+        """The device's announced maxima bound heater targets (it would refuse them)."""
+        identity = self.link.identity
+        if identity is None:
+            return
+        limits = {HOTEND: identity.hotend_max_c, BED: identity.bed_max_c}
+        for m in msgs:
+            if isinstance(m, SetHeater) and m.target_dc / 10 > limits.get(m.heater, 0.0):
+                raise LinkError(
+                    f"heater {m.heater} target {m.target_dc / 10:g} C is over the device's "
+                    f"maximum {limits.get(m.heater, 0.0):g} C"
+                )
 
     def _set(self, state: JobState, reason: str = "") -> None:
         if state is not self.ctx.state():
