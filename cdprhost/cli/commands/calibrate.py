@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from cdprhost.calibration import plan_files, planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
+from cdprhost.cli.numbers import bounded_float
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
@@ -70,7 +71,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     ident.add_argument("--json", metavar="R", help="machine-readable report")
     ident.add_argument(
         "--noise-floor",
-        type=_positive_mm,
+        type=bounded_float(0.0, 10.0),
         default=None,
         metavar="MM",
         help="mocap noise per coordinate that averaging cannot remove, added to each take's "
@@ -160,7 +161,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     wiz.add_argument(
         "--noise-floor",
-        type=_positive_mm,
+        type=bounded_float(0.0, 10.0),
         default=None,
         metavar="MM",
         help="mocap noise per coordinate that averaging cannot remove (default: none)",
