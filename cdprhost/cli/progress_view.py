@@ -7,7 +7,14 @@ import time
 from typing import TextIO
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    Progress,
+    TaskID,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+)
 
 from cdprhost.job.state import Event, Failure, JobSnapshot, JobState, Notice, StateChanged, reduce
 
@@ -28,7 +35,7 @@ class ProgressView:
         self.snapshot = JobSnapshot()
         self.live = self.console.is_terminal
         self._bar: Progress | None = None
-        self._task = None
+        self._task: TaskID | None = None
         self._last_plain = -1.0
         self._t0 = time.monotonic()
 
@@ -51,7 +58,7 @@ class ProgressView:
             )
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         if self._bar:
             self._render()
             self._bar.stop()
@@ -98,7 +105,7 @@ class ProgressView:
         s = self.snapshot
         shown = str(s.layer + 1) if s.layer >= 0 and s.line else "-"
         layer = f"{shown}/{s.layers}" if s.layers > 0 else shown
-        if self._bar:
+        if self._bar and self._task is not None:
             self._bar.update(
                 self._task,
                 completed=s.fraction,

@@ -75,12 +75,13 @@ class MoveBlock:
         if len(blocks) == 1:
             return blocks[0]
         fields = [np.concatenate([getattr(b, f) for b in blocks]) for f in _FIELDS]
-        for f in _LIMIT_FIELDS:
-            if any(getattr(b, f) is not None for b in blocks):
-                fields.append(np.concatenate([_limit(b, f) for b in blocks]))
-            else:
-                fields.append(None)
-        return cls(*fields)
+        limits = [
+            np.concatenate([_limit(b, f) for b in blocks])
+            if any(getattr(b, f) is not None for b in blocks)
+            else None
+            for f in _LIMIT_FIELDS
+        ]
+        return cls(*fields, *limits)
 
     @classmethod
     def from_arrays(
