@@ -11,6 +11,7 @@ their values while the geometry is fitted.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import os
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ from cdprhost.calibration.trust import (
     trust_report,
     variance_factor,
 )
+from cdprhost.calibration.verification import DEFAULT_ALPHA, Verification, verify_checks
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.jsonsafe import json_safe
 from cdprhost.kinematics.geometry import CableGeometry
@@ -69,6 +71,7 @@ class Identification:
     pose_numbers: np.ndarray | None = None  # (K,) poses.csv numbers
     noise: PoseNoise | None = None
     notes: tuple[str, ...] = ()
+    verification: Verification | None = None
 
     names = GEOMETRY_NAMES
 
@@ -111,7 +114,11 @@ class Identification:
     @property
     def ok(self) -> bool:
         """Solved and trusted by the gate."""
-        return self.solved and (self.trust is None or self.trust.trusted)
+        return (
+            self.solved
+            and (self.trust is None or self.trust.trusted)
+            and (self.verification is None or self.verification.problem() is None)
+        )
 
     @property
     def predicted_workspace_rms_mm(self) -> float:
@@ -133,6 +140,9 @@ class Identification:
             out.append("unidentifiable parameter combination(s): " + "; ".join(self.unidentifiable))
         if self.trust is not None:
             out += list(self.trust.refusals)
+        problem = self.verification.problem() if self.verification else None
+        if problem:
+            out.append(problem)
         return out
 
     def warnings(self) -> list[str]:
@@ -173,6 +183,7 @@ class Identification:
             "predicted_workspace_rms_mm": self.predicted_workspace_rms_mm,
             "predicted_workspace_max_mm": self.predicted_workspace_max_mm,
             "trust": self.trust.to_json() if self.trust else None,
+            "verification": self.verification.to_json() if self.verification else None,
             "noise": self.noise.as_dict() if self.noise else None,
             "iterations": self.iterations,
             "converged": self.converged,
@@ -208,9 +219,12 @@ def identify(
     noise: PoseNoise | None = None,
     pose_numbers: np.ndarray | None = None,
     notes: tuple[str, ...] = (),
+    alpha: float = DEFAULT_ALPHA,
 ) -> Identification:
     """Fit the geometry on the ``fit`` poses of ``obs``; predict every pose before/after;
-    judge the result with the trust gate over ``grid`` (default: the build volume)."""
+    test the ``check`` poses against that prediction (:mod:`.verification`, false-alarm
+    rate ``alpha``); judge the result with the trust gate over ``grid`` (default: the
+    build volume)."""
     k = len(obs)
     roles = tuple(roles) if roles is not None else ("fit",) * k
     if len(roles) != k:
@@ -270,6 +284,16 @@ def identify(
         noise_dof,
         limits,
     )
+    numbers = np.arange(1, k + 1) if pose_numbers is None else np.asarray(pose_numbers)
+    verification = (
+        dataclasses.replace(
+            verify_checks(residuals[check], sigma[check], j0, cov, numbers[check], alpha),
+            fit_only_rms_mm=trust.predicted_rms_mm,
+            fit_only_max_mm=trust.predicted_max_mm,
+        )
+        if check.size
+        else None
+    )
     inflate = max(factor, 1.0) if np.isfinite(factor) else 1.0
     cov = cov * inflate
     stderr = np.array(est.stderr_[:12]) * np.sqrt(inflate)
@@ -295,7 +319,36 @@ def identify(
         model=model,
         trust=trust,
         covariance=cov,
+        verification=verification,
         **common,  # type: ignore[arg-type]
+    )
+
+
+def identify_verified(
+    obs: Observations,
+    base: MachineModel,
+    roles: tuple[str, ...] | list[str] | None = None,
+    *,
+    refine: bool = True,
+    **options: Any,
+) -> Identification:
+    """Verify, then refine: identify on the ``fit`` poses and test the ``check`` poses
+    against that prediction; when they agree (and ``refine``), identify again on every
+    pose, keeping the verification (with both predicted workspace errors) in the result.
+    Options as for :func:`identify`."""
+    first = identify(obs, base, roles, **options)
+    v = first.verification
+    if not refine or v is None or not v.consistent or not first.solved:
+        return first
+    second = identify(obs, base, ("fit",) * len(obs), **options)
+    return dataclasses.replace(
+        second,
+        verification=dataclasses.replace(
+            v,
+            refined=True,
+            refined_rms_mm=second.predicted_workspace_rms_mm,
+            refined_max_mm=second.predicted_workspace_max_mm,
+        ),
     )
 
 
@@ -363,8 +416,11 @@ def identify_session(
     *,
     noise_floor_mm: float | None = None,
     limits: TrustLimits = DEFAULT_TRUST,
+    refine: bool = True,
+    alpha: float = DEFAULT_ALPHA,
 ) -> Identification:
-    """Measure every take of a session folder and identify (refused takes are listed, not used).
+    """Measure every take of a session folder and identify (refused takes are listed, not
+    used): verify on the check poses, then refine on all poses (:func:`identify_verified`).
 
     Each pose's noise is its take's standard error (:mod:`.pose_noise`); ``noise_floor_mm``
     adds a part no take shows (default: ``noise_mm`` of session.toml, if declared)."""
@@ -378,10 +434,12 @@ def identify_session(
         )
     noise = meas.noise(base.steps_per_mm, floor_mm=noise_floor_mm)
     notes = tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ())
-    return identify(
+    return identify_verified(
         meas.observations(noise),
         base,
         meas.roles,
+        refine=refine,
+        alpha=alpha,
         rejected=tuple(str(r) for r in meas.rejected),
         limits=limits,
         noise=noise,

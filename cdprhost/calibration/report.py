@@ -136,6 +136,8 @@ def identification_text(r: Identification) -> str:
         )
     if r.unidentifiable:
         parts.append("UNIDENTIFIABLE combinations: " + "; ".join(r.unidentifiable))
+    if r.verification is not None:
+        parts.append(r.verification.text())
     parts.append(trust_text(r))
     if r.rejected:
         parts.append("rejected takes:\n" + "\n".join(f"  {t}" for t in r.rejected))
