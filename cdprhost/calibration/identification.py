@@ -95,12 +95,33 @@ class Identification:
         return self._rms(self.errors_after, self.fit_mask)
 
     @property
+    def _refined(self) -> bool:
+        return self.verification is not None and self.verification.refined
+
+    @property
+    def check_rows(self) -> np.ndarray:
+        """Rows of the check poses (after a refinement: those the fit-only geometry predicted)."""
+        if self.verification is not None and self.verification.refined:
+            return np.asarray(self.verification.rows, dtype=int)
+        return np.flatnonzero(~self.fit_mask)
+
+    @property
+    def check_errors_after(self) -> np.ndarray:
+        """Check poses' errors as predicted, not fitted (after a refinement: by the fit-only
+        geometry, the verification's residuals)."""
+        if self.verification is not None and self.verification.refined:
+            return self.verification.errors_mm
+        return np.asarray(self.errors_after[~self.fit_mask])
+
+    @property
     def check_rms_before_mm(self) -> float | None:
-        return self._rms(self.errors_before, ~self.fit_mask)
+        e = self.errors_before[self.check_rows]
+        return float(np.sqrt(np.mean(e**2))) if e.size else None
 
     @property
     def check_rms_after_mm(self) -> float | None:
-        return self._rms(self.errors_after, ~self.fit_mask)
+        e = self.check_errors_after
+        return float(np.sqrt(np.mean(e**2))) if e.size else None
 
     @property
     def identifiable(self) -> bool:
@@ -290,6 +311,7 @@ def identify(
             verify_checks(residuals[check], sigma[check], j0, cov, numbers[check], alpha),
             fit_only_rms_mm=trust.predicted_rms_mm,
             fit_only_max_mm=trust.predicted_max_mm,
+            rows=tuple(int(i) for i in check),
         )
         if check.size
         else None
@@ -387,7 +409,7 @@ def calibrated_profile(
     if not result.ok:
         provenance["forced"] = True
     if result.check_rms_after_mm is not None:
-        provenance["check_poses"] = int((~result.fit_mask).sum())
+        provenance["check_poses"] = int(result.check_rows.size)
         provenance["check_rms_before_mm"] = result.check_rms_before_mm
         provenance["check_rms_after_mm"] = result.check_rms_after_mm
     name = profile.name if profile.name.endswith("-calibrated") else f"{profile.name}-calibrated"

@@ -54,7 +54,7 @@ def plan_text(plan: PosePlan) -> str:
 
 def summary_text(r: Identification) -> str:
     """The before/after table."""
-    fit, chk = r.fit_mask, ~r.fit_mask
+    fit, chk = r.fit_mask, r.check_rows
     rows = [
         ["fit poses RMS", _mm(r.rms_before_mm), _mm(r.rms_after_mm)],
         [
@@ -63,10 +63,15 @@ def summary_text(r: Identification) -> str:
             _mm(r.errors_after[fit].max() if fit.any() else None),
         ],
     ]
-    if chk.any():
+    if chk.size:
+        note = " (predicted by the fit poses)" if r.verification and r.verification.refined else ""
         rows += [
-            ["check poses RMS", _mm(r.check_rms_before_mm), _mm(r.check_rms_after_mm)],
-            ["check poses max", _mm(r.errors_before[chk].max()), _mm(r.errors_after[chk].max())],
+            ["check poses RMS" + note, _mm(r.check_rms_before_mm), _mm(r.check_rms_after_mm)],
+            [
+                "check poses max" + note,
+                _mm(r.errors_before[chk].max()),
+                _mm(r.check_errors_after.max()),
+            ],
         ]
     return _table(["position error (mm)", "before", "after"], rows)
 

@@ -75,6 +75,12 @@ class Verification:
     refined: bool = False  # the geometry was refitted on fit + check poses
     refined_rms_mm: float = float("nan")
     refined_max_mm: float = float("nan")
+    rows: tuple[int, ...] = ()  # the check poses' rows in the observations
+
+    @property
+    def errors_mm(self) -> np.ndarray:
+        """Each check pose's prediction error by the fit-only geometry, (M,) mm."""
+        return np.array([c.residual_mm for c in self.checks])
 
     @property
     def consistent(self) -> bool:
@@ -100,7 +106,8 @@ class Verification:
             "else an effect the model lacks (run `cdprhost diagnose` on the session)"
             if len(alone) == 1
             else "likely an effect the model lacks (cable stretch, drive scale, backlash, drift: "
-            "run `cdprhost diagnose` on the session), else bad takes"
+            "run `cdprhost diagnose` on the session), else bad takes, or pose noise the takes "
+            "cannot show (a static positioning error: declare it with --noise-floor)"
         )
         return (
             f"the check poses disagree with the fit poses' prediction (chi2 {self.chi2:.1f} on "
