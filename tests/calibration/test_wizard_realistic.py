@@ -127,14 +127,24 @@ def test_the_creep_is_caught_and_recaptured_and_no_sound_take_refused(runs):
         refused = [m for m in run.logs if m.startswith("take refused")]
         assert sum(run.crept) == 1 and run.crept[2], seed
         assert len(refused) == 1 and refused[0].startswith("take refused (drift:"), (seed, refused)
-        assert len(run.session.poses) == 9 and not run.session.measure().rejected  # 6 fit + 3 check
+        assert len(run.session.poses) == 7 and not run.session.measure().rejected  # 4 fit + 3 check
+
+
+def test_the_defaults_verify_four_fit_poses_on_three_check_poses_then_refine(runs):
+    for seed, run in runs.items():
+        r = run.identification
+        assert list(run.session.poses.roles).count("check") == 3, seed
+        v = r.verification
+        assert v is not None and v.consistent and v.refined and len(v.checks) == 3, seed
+        assert r.poses_used == 7 and v.refined_rms_mm < v.fit_only_rms_mm, seed
+        assert any(m.startswith("verification of the fit poses on 3 check pose(s)") for m in run.logs)
 
 
 def test_the_calibrated_machine_reaches_the_noise_limit_of_its_poses(runs):
     """Within 1.3x of the noise limit (the bench's 'limit': the workspace RMS predicted from
-    the takes' noise for this pose set). One session is one draw of a quadratic form in the
-    12 parameter errors (the bench puts ~85-90 % of sessions of 6+ poses within 1.3x), so
-    the median over the sessions must be within 1.3x, and every session within 2x."""
+    the takes' noise for this pose set, the default 4 fit + 3 check poses refined on all 7).
+    One session is one draw of a quadratic form in the 12 parameter errors, so the median
+    over the sessions must be within 1.3x, and every session within 2x."""
     ratios = [run.ratio for run in runs.values()]
     assert all(run.before_mm > 2.0 for run in runs.values())
     assert np.median(ratios) <= 1.3 and max(ratios) <= 2.0, ratios
