@@ -9,12 +9,14 @@ has covariance C = diag(sigma_i^2 I3) + J0 Sigma J0^T (the parameter part correl
 poses), so for a sound session and a complete model r^T C^-1 r follows chi-square with 3M
 degrees of freedom.
 
-The session is called inconsistent when that joint test has p < alpha/2, or when one pose's
-own test (its 3x3 block, 3 dof) has p < alpha/(2M) (Bonferroni): the false-alarm rate of a
-sound session is at most alpha (default 1 %). The single-pose test names the culprit (a bad
-take, a bump, a wrong marker) with more power than the joint test; the joint test catches an
-effect the model lacks, which spreads over every check pose. When consistent, the check
-poses carry information like any other pose and the geometry is refitted on all of them.
+The session is called inconsistent when that joint test has p < alpha (default 1 %: the
+false-alarm rate of a sound session). Each pose's own statistic (its 3x3 block, 3 dof) then
+names the culprit(s): the poses whose own p is below alpha/M (Bonferroni), else the largest.
+One pose carrying most of the chi-square points to a bad take (a bump, a wrong marker); a
+disagreement spread over the check poses to an effect the model lacks. (A per-pose test in
+the verdict would add power against one bad take, but it rides on the tails of each take's
+standard error, which real takes fatten; the joint test averages them.) When consistent,
+the check poses carry information like any other pose and the geometry is refitted on all.
 """
 
 from __future__ import annotations
@@ -96,15 +98,11 @@ class Verification:
             for c in self.checks
             if c.pose in self.suspects
         )
-        alone = [
-            c
-            for c in self.checks
-            if c.pose in self.suspects and c.p_value < self.alpha / (2 * len(self.checks))
-        ]
+        one = len(self.suspects) == 1 and max(c.chi2 for c in self.checks) > 0.6 * self.chi2
         cause = (
             "likely a bad take of that pose (bumped, moved, a wrong marker: record it again), "
             "else an effect the model lacks (run `cdprhost diagnose` on the session)"
-            if len(alone) == 1
+            if one
             else "likely an effect the model lacks (cable stretch, drive scale, backlash, drift: "
             "run `cdprhost diagnose` on the session), else bad takes, or pose noise the takes "
             "cannot show (a static positioning error: declare it with --noise-floor)"
@@ -198,12 +196,12 @@ def verify_checks(
         )
         for i in range(m)
     )
-    single = p_i < alpha / (2 * m)
-    bad = bool(p < alpha / 2 or single.any())
-    if single.any():
-        suspects = tuple(numbers[i] for i in np.flatnonzero(single))
-    elif bad:
-        suspects = (numbers[int(np.argmax(chi2_i))],)
+    bad = bool(p < alpha)
+    single = np.flatnonzero(p_i < alpha / m)
+    if not bad:
+        suspects: tuple[int, ...] = ()
+    elif single.size:
+        suspects = tuple(numbers[i] for i in single)
     else:
-        suspects = ()
+        suspects = (numbers[int(np.argmax(chi2_i))],)
     return Verification(checks, chi2, dof, p, alpha, INCONSISTENT if bad else CONSISTENT, suspects)
