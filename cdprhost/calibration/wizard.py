@@ -317,7 +317,9 @@ class CalibrationWizard:
                 f"max {result.predicted_workspace_max_mm:.3f} mm"
             )
         else:
-            self.log("the trust gate refused: " + "; ".join(result.problems()))
+            gate = result.trust is not None and bool(result.trust.refusals)
+            who = "the trust gate" if gate or result.verification is None else "the verification"
+            self.log(f"{who} refused: " + "; ".join(result.problems()))
         self.state = self.state.identified_as(result.ok, "; ".join(result.problems()))
 
     def _plan_more(self, action: PlanMore) -> None:

@@ -12,6 +12,7 @@ import pytest
 
 from cdprhost.calibration.augmentation import predicted_workspace
 from cdprhost.calibration.identification import Identification
+from cdprhost.calibration.planning import plan_poses
 from cdprhost.calibration.session import Session, load_session
 from cdprhost.calibration.wizard import CalibrationWizard, FolderWatcher, WizardOptions
 from cdprhost.kinematics import MachineModel
@@ -137,7 +138,9 @@ def test_the_defaults_verify_four_fit_poses_on_three_check_poses_then_refine(run
         v = r.verification
         assert v is not None and v.consistent and v.refined and len(v.checks) == 3, seed
         assert r.poses_used == 7 and v.refined_rms_mm < v.fit_only_rms_mm, seed
-        assert any(m.startswith("verification of the fit poses on 3 check pose(s)") for m in run.logs)
+        assert any(
+            m.startswith("verification of the fit poses on 3 check pose(s)") for m in run.logs
+        )
 
 
 def test_the_calibrated_machine_reaches_the_noise_limit_of_its_poses(runs):
@@ -176,3 +179,36 @@ def test_refused_identification_plans_more_poses_and_asks_for_them(
     assert out.state.rounds == 1 and len(out.state.plan.poses) == r.poses_used
     # the plan file says which poses were added, so a resumed session knows
     assert "round" in (tmp_path / "session" / "plan.csv").read_text().splitlines()[0]
+
+
+def test_a_bumped_check_take_fails_verification_and_no_profile_is_written(
+    sim_profile, sim_model, tmp_path
+):
+    """The effector of one check pose's take is 0.5 mm off (bumped): the check poses disagree
+    with the four fit poses, the wizard names that pose and writes no profile."""
+    truth = sim_model.with_geometry(
+        perturbed_geometry(sim_model.geometry, np.random.default_rng(26), 2.0)
+    )
+    defaults = WizardOptions()
+    plan = plan_poses(sim_model, defaults.n_poses, n_check=defaults.n_check, seed=defaults.seed)
+    bumped = plan.roles.index("check") + 1  # its take number: one take per pose, in order
+    observer = VirtualMocap(
+        truth,
+        tmp_path / "mocap",
+        realism=REALISM,
+        rate_hz=240.0,
+        duration_s=3.0,
+        offset_takes={bumped: (0.0, 0.5, 0.0)},
+        seed=26,
+    )
+    out, logs = drive(
+        sim_profile, sim_model, tmp_path, observer, WizardOptions(max_augment_rounds=0)
+    )
+    r = out.identification
+    assert r is not None and not r.ok and out.profile_path is None
+    assert not (tmp_path / "session" / "calibrated.toml").exists()
+    v = r.verification
+    assert v is not None and v.verdict == "inconsistent" and v.suspects == (bumped,)
+    assert not v.refined and r.poses_used == 4
+    refusal = next(m for m in logs if m.startswith("the verification refused"))
+    assert f"pose {bumped} off by" in refusal and "bad take" in refusal
