@@ -95,10 +95,14 @@ def parameters_text(r: Identification) -> str:
 
 
 def poses_text(r: Identification) -> str:
+    roles = list(r.roles)
+    if r.verification is not None and r.verification.refined:
+        for i in r.check_rows:
+            roles[i] = "check+fit"  # verified as a check pose, then used in the refit
     rows = [
         [str(i + 1), role, _mm(b), _mm(a), *(_mm(v, 4) for v in res), _mm(s)]
         for i, (role, b, a, res, s) in enumerate(
-            zip(r.roles, r.errors_before, r.errors_after, r.residuals_after, r.sigma_mm)
+            zip(roles, r.errors_before, r.errors_after, r.residuals_after, r.sigma_mm)
         )
     ]
     return _table(["pose", "role", "before", "after", "dx", "dy", "dz", "sigma"], rows)

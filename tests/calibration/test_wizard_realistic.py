@@ -72,7 +72,8 @@ def drive(profile, model, tmp_path, observer, options, fmt="motive-csv"):
         link.close()
 
 
-def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
+def realistic_mocap(model, tmp_path, seed: int, **options) -> tuple[MachineModel, VirtualMocap]:
+    """A true machine off ``model`` and its virtual motion capture (0.2 mm, 240 fps, 3 s)."""
     truth = model.with_geometry(
         perturbed_geometry(model.geometry, np.random.default_rng(seed), 2.0)
     )
@@ -82,9 +83,19 @@ def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
         realism=REALISM,
         rate_hz=240.0,
         duration_s=3.0,
+        seed=seed,
+        **options,
+    )
+    return truth, observer
+
+
+def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
+    truth, observer = realistic_mocap(
+        model,
+        tmp_path,
+        seed,
         creep_takes={3},
         creep_mm=0.4,  # above the bench's 90 % detection limit for 0.2 mm jitter, 240 fps, 3 s
-        seed=seed,
         format=fmt,
     )
     out, logs = drive(profile, model, tmp_path, observer, WizardOptions(), fmt)
@@ -186,21 +197,10 @@ def test_a_bumped_check_take_fails_verification_and_no_profile_is_written(
 ):
     """The effector of one check pose's take is 0.5 mm off (bumped): the check poses disagree
     with the four fit poses, the wizard names that pose and writes no profile."""
-    truth = sim_model.with_geometry(
-        perturbed_geometry(sim_model.geometry, np.random.default_rng(26), 2.0)
-    )
     defaults = WizardOptions()
     plan = plan_poses(sim_model, defaults.n_poses, n_check=defaults.n_check, seed=defaults.seed)
     bumped = plan.roles.index("check") + 1  # its take number: one take per pose, in order
-    observer = VirtualMocap(
-        truth,
-        tmp_path / "mocap",
-        realism=REALISM,
-        rate_hz=240.0,
-        duration_s=3.0,
-        offset_takes={bumped: (0.0, 0.5, 0.0)},
-        seed=26,
-    )
+    _, observer = realistic_mocap(sim_model, tmp_path, 26, offset_takes={bumped: (0, 0.5, 0)})
     out, logs = drive(
         sim_profile, sim_model, tmp_path, observer, WizardOptions(max_augment_rounds=0)
     )
