@@ -1,0 +1,22 @@
+/* What the simulation harness may read from RAM (its address is left in
+ * GPIOR1:GPIOR2 at boot). The record itself is built from pin edges; the
+ * mailbox only names segments (their protocol numbers), the positions a
+ * SET_POSITION or HOME set, and figures for the benchmark. */
+#ifndef MAILBOX_H
+#define MAILBOX_H
+#include <stdint.h>
+
+struct sim_mailbox {
+    uint8_t magic[4]; /* "CDPR" */
+    uint32_t seq;     /* segment number of the marker edge in progress */
+    int32_t pos[4];   /* positions after the last SET_POSITION / HOME */
+    uint8_t last_error;
+    uint8_t version;
+    uint16_t isr_max_cycles;
+    uint16_t lost_steps;
+    uint16_t main_loop_max_us;
+    uint32_t segments_parsed;
+};
+extern volatile struct sim_mailbox sim_mailbox;
+
+#endif

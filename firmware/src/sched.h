@@ -1,0 +1,20 @@
+/* The tick clock (TICK_HZ), kept by the step timer's interrupt. */
+#ifndef SCHED_H
+#define SCHED_H
+#include <stdint.h>
+#include <avr/interrupt.h>
+#include "config.h"
+
+extern volatile uint32_t sched_tick_count;
+
+static inline uint32_t sched_ticks(void)
+{
+    uint8_t s = SREG;
+    cli();
+    uint32_t t = sched_tick_count;
+    SREG = s;
+    return t;
+}
+
+#define MS_TO_TICKS(ms) ((uint32_t)(ms) * (TICK_HZ / 1000UL))
+#endif
