@@ -32,6 +32,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--record", metavar="FILE", help="JSON lines, one per executed segment, written on exit"
     )
+    p.add_argument(
+        "--firmware",
+        choices=("python", "avr"),
+        default="python",
+        help="python: the device model; avr: the C firmware's ELF in simavr",
+    )
+    p.add_argument(
+        "--like-avr",
+        action="store_true",
+        help="the Python model announces the AVR firmware's clock, step rate and queue size",
+    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -49,8 +60,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{given} needs {missing} as well (the virtual mocap needs both)", source=given
         )
+    if args.firmware == "avr":
+        from cdprhost.sim.avr_device import run as run_avr
+
+        return run_avr(args, faults)
     observer = make_observer(args.truth, args.mocap_dir) if args.truth else None
-    device = SimDevice(SimConfig(speedup=args.speedup), faults, observer)
+    like = {}
+    if args.like_avr:
+        from cdprhost.sim.avr_device import AVR_IDENTITY as like
+    device = SimDevice(SimConfig(speedup=args.speedup, **like), faults, observer)
     server = PtyServer(device, faults)
 
     def stop(signum, frame):

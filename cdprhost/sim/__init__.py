@@ -1,0 +1,1 @@
+"""Simulated devices other than the Python model: the AVR firmware in simavr."""
