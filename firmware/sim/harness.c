@@ -362,8 +362,12 @@ static avr_cycle_count_t poll_timer(struct avr_t *a, avr_cycle_count_t when, voi
     (void)a; (void)param;
     if (!mailbox_addr) {
         uint32_t addr = avr->data[0x4A] | (uint32_t)avr->data[0x4B] << 8; /* GPIOR1, GPIOR2 */
-        if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R')
+        if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R') {
             mailbox_addr = addr;
+            unsigned s16 = (unsigned)(speedup * 16.0 + 0.5);
+            avr->data[addr + 36] = (uint8_t)s16;
+            avr->data[addr + 37] = (uint8_t)(s16 >> 8);
+        }
     }
     poll_pty();
     check_lost_interrupts();

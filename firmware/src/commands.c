@@ -133,7 +133,7 @@ static void push_item(void)
     cli();
     queue_head++;
     sei();
-    mc.last_enqueue_at = sched_ticks();
+    mc.last_enqueue_at = link_now;
 }
 
 /* a queue item has been numbered; discard it while faulted */

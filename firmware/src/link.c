@@ -57,7 +57,7 @@ void link_reset_session(void)
     srtt = rttvar = 0;
     rto_base = RTO_INITIAL;
     backoff = 1;
-    went_back_at = sched_ticks() - T_MS(10000);
+    went_back_at = link_now - T_MS(10000);
     last_nak_at = went_back_at;
 }
 
@@ -149,12 +149,12 @@ static void want_nak(uint32_t now)
 void frame_rejected(uint8_t kind, uint8_t seq)
 {
     if (kind == KIND_DATA && seq == expected)
-        want_nak(sched_ticks());
+        want_nak(link_now);
 }
 
 void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
 {
-    uint32_t now = sched_ticks();
+    uint32_t now = link_now;
     proto_frame_seen();
     if (kind == KIND_URGENT) {
         proto_urgent(payload, len);

@@ -16,6 +16,7 @@ struct sim_mailbox {
     uint16_t lost_steps;
     uint16_t main_loop_max_us;
     uint32_t segments_parsed;
+    uint16_t speedup_x16; /* written by the harness: device time / link time x 16 */
 };
 extern volatile struct sim_mailbox sim_mailbox;
 

@@ -22,6 +22,14 @@
 struct item queue[QUEUE_SIZE];
 volatile uint8_t queue_head, queue_tail;
 volatile struct sim_mailbox sim_mailbox;
+uint32_t link_now;
+
+void sched_update_link_time(void)
+{
+    uint32_t t = sched_ticks();
+    uint16_t s = sim_mailbox.speedup_x16;
+    link_now = s > 16 ? (uint32_t)(((uint64_t)t * 16u) / s) : t;
+}
 
 static void take_interrupt_reports(uint32_t now)
 {
@@ -91,6 +99,7 @@ int main(void)
     for (;;) {
         watchdog_kick();
         uint32_t now = sched_ticks();
+        sched_update_link_time();
         uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / TICK_HZ));
         if (loop_us > sim_mailbox.main_loop_max_us)
             sim_mailbox.main_loop_max_us = loop_us;
@@ -108,9 +117,9 @@ int main(void)
             deframer_run();
         take_interrupt_reports(now);
         heater_poll(now);
-        stepper_start_ok = session_may_start(now);
-        session_poll(now);
-        link_poll(now);
+        stepper_start_ok = session_may_start(link_now);
+        session_poll(link_now);
+        link_poll(link_now);
         watchdog_save(st.items_done, st.segments_done);
         sim_mailbox.isr_max_cycles = stepper_isr_max_cycles;
         sim_mailbox.lost_steps = stepper_lost_steps;

@@ -16,5 +16,11 @@ static inline uint32_t sched_ticks(void)
     return t;
 }
 
+/* Link time: the tick clock divided by the simulation's speed-up (1 on a board),
+ * for everything the host's timers meet: retransmission, announcements, the
+ * start delay, the host watchdog. Updated once per main loop turn. */
+extern uint32_t link_now;
+void sched_update_link_time(void);
+
 #define MS_TO_TICKS(ms) ((uint32_t)(ms) * (TICK_HZ / 1000UL))
 #endif

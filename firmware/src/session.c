@@ -10,6 +10,7 @@
 #include "sched.h"
 #include "session.h"
 #include "stepper.h"
+#include "mailbox.h"
 
 static uint32_t boot_sent_at;
 static uint8_t boot_sent_once;
@@ -32,7 +33,7 @@ static void announce_boot(uint32_t now)
 
 void session_boot_on_data(void)
 {
-    uint32_t now = sched_ticks();
+    uint32_t now = link_now;
     if (!boot_sent_once || now - boot_sent_at >= MS_TO_TICKS(50))
         announce_boot(now);
 }
@@ -44,14 +45,14 @@ uint8_t proto_flow(uint8_t *out)
     sei();
     flow_flags = machine_flags();
     flow_free = machine_free();
-    flow_at = sched_ticks();
+    flow_at = link_now;
     flow_valid = 1;
     return report_flow(out);
 }
 
 void proto_frame_seen(void)
 {
-    mc.last_frame_at = sched_ticks();
+    mc.last_frame_at = link_now;
 }
 
 /* PROTOCOL 5.1 "start from rest" (protocol 1): the queued segments up to the
@@ -60,7 +61,11 @@ void proto_frame_seen(void)
  * DEV_START_DELAY_MS. */
 uint8_t session_may_start(uint32_t now)
 {
+    /* 0.25 s of real time worth of motion: device ticks scaled by the speed-up */
+    uint16_t s = sim_mailbox.speedup_x16;
     uint32_t need = MS_TO_TICKS(DEV_START_BUFFER_MS), total = 0;
+    if (s > 16)
+        need = need * s / 16;
     uint8_t tail = queue_tail, head = queue_head;
     for (uint8_t i = tail; i != head; i++) {
         struct item *it = queue_slot(i);
