@@ -38,8 +38,8 @@
 #include "thermal.h"
 
 #define F_CPU 16000000ULL
-#define TICK_CYCLES 800ULL
-#define CLOCK_HZ 20000.0
+#define TICK_CYCLES 1600ULL
+#define CLOCK_HZ 10000.0
 #define POLL_US 500
 
 static avr_t *avr;
@@ -81,6 +81,8 @@ static uint64_t steps_total;
 static unsigned repairs, unrepaired;
 static int suspect[2];
 
+static uint32_t pc_hist[65536];
+static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count;
 static struct thermal thermal[2];
 static int heater_level[2];
 static double heater_fail_after = -1.0;
@@ -206,7 +208,11 @@ static const char *error_name(int code)
 
 static void seg_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    (void)irq; (void)value; (void)param;
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
     if (!record)
         return;
     uint64_t ticks = (motion_now() + TICK_CYCLES / 2) / TICK_CYCLES;
@@ -224,13 +230,21 @@ static void seg_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 
 static void abort_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    (void)irq; (void)value; (void)param;
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
     abort_next = 1;
 }
 
 static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    (void)irq; (void)value; (void)param;
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
     if (!mailbox_addr)
         return;
     for (int k = 0; k < 4; k++)
@@ -266,7 +280,7 @@ static avr_int_vector_t *vector_no(int n)
 /* Timer1 compare A (vector 17) and B (18): flag, enable and I set, not queued. */
 static void check_lost_interrupts(void)
 {
-    static const struct { int vec; uint8_t bit; } t1[2] = {{17, 1}, {18, 2}};
+    static const struct { int vec; uint8_t bit; } t1[2] = {{17, 0x02}, {18, 0x04}};
     uint8_t tifr = avr->data[0x36], timsk = avr->data[0x6F];
     for (int i = 0; i < 2; i++) {
         avr_int_vector_t *v = vector_no(t1[i].vec);
@@ -296,8 +310,10 @@ static void pace(void)
     }
 }
 
+static unsigned long polls;
 static void poll_pty(void)
 {
+    polls++;
     if (in_len < sizeof in_buf) {
         ssize_t n = read(master, in_buf + in_len, sizeof in_buf - in_len);
         if (n > 0) {
@@ -319,6 +335,10 @@ static void poll_pty(void)
             out_len -= (size_t)n;
         } else if (n < 0 && errno == EIO) {
             out_len = 0; /* nobody listens: a UART drops it too */
+        } else if (n < 0 && getenv("CDPR_SIM_DEBUG")) {
+            static int shown;
+            if (shown++ < 3)
+                fprintf(stderr, "cdpr-sim: write: %s (%zu pending)\n", strerror(errno), out_len);
         }
     }
 }
@@ -357,9 +377,9 @@ static void update_thermal(void)
     }
 }
 
-static avr_cycle_count_t poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
+static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
-    (void)a; (void)param;
+    (void)a; (void)param; (void)when;
     if (!mailbox_addr) {
         uint32_t addr = avr->data[0x4A] | (uint32_t)avr->data[0x4B] << 8; /* GPIOR1, GPIOR2 */
         if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R') {
@@ -375,7 +395,6 @@ static avr_cycle_count_t poll_timer(struct avr_t *a, avr_cycle_count_t when, voi
     pace();
     if (time_limit > 0 && sim_seconds() >= time_limit)
         stop_flag = 1;
-    return when + (avr_cycle_count_t)(F_CPU * POLL_US / 1000000ULL);
 }
 
 static void write_stats(void)
@@ -396,13 +415,13 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"hotend_c\":%.3f,\"bed_c\":%.3f}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost,
-            loop_us, mailbox_addr ? mailbox_u32(32) : 0, thermal[0].temp, thermal[1].temp);
+            loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp);
     fclose(f);
 }
 
@@ -451,7 +470,7 @@ int main(int argc, char **argv)
     avr_load_firmware(avr, &fw);
     avr->frequency = F_CPU;
     avr->vcc = avr->avcc = avr->aref = 5000;
-    avr->log = LOG_ERROR;
+    avr->log = getenv("CDPR_SIM_DEBUG") ? LOG_TRACE : LOG_ERROR;
     fflush(stdout);
     dup2(saved_stdout, 1);
     close(saved_stdout);
@@ -508,15 +527,58 @@ int main(int argc, char **argv)
     signal(SIGPIPE, SIG_IGN);
 
     clock_gettime(CLOCK_MONOTONIC, &wall0);
-    avr_cycle_timer_register_usec(avr, POLL_US, poll_timer, NULL);
+    /* The poll runs from the run loop at a cycle deadline rather than from a
+     * simavr cycle timer: under UART traffic simavr 1.6 was seen to drop cycle
+     * timers for good, which would stop the bridge. */
+    const avr_cycle_count_t poll_cycles = F_CPU * POLL_US / 1000000ULL;
+    avr_cycle_count_t next_poll = poll_cycles;
     int state = cpu_Running;
-    while (!stop_flag && state != cpu_Done && state != cpu_Crashed)
+    int debug = getenv("CDPR_SIM_DEBUG") != NULL;
+    int profile_isr = getenv("CDPR_SIM_PROFILE_ISR") != NULL;
+    avr_flashaddr_t prev_pc = 0;
+    while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
         state = avr_run(avr);
+        if (debug) {
+            if (avr->pc == 0 && prev_pc != 0)
+                fprintf(stderr, "cdpr-sim: reset at %.6f s, from pc 0x%x, sp 0x%x\n", sim_seconds(),
+                        prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
+            prev_pc = avr->pc;
+        }
+        if (profile_isr) {
+            /* cycles from the step timer's vector to its RETI (nested interrupts are not used) */
+            if (isr_entry && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
+                pc_hist[avr->pc]++;
+            if (avr->pc == 0x44 && !isr_entry)
+                isr_entry = avr->cycle;
+            else if (isr_entry && avr->flash[avr->pc] == 0x18 && avr->flash[avr->pc + 1] == 0x95) {
+                uint64_t c = avr->cycle - isr_entry + 4;
+                if (c > isr_cycles_max)
+                    isr_cycles_max = c;
+                isr_cycles_sum += c;
+                isr_count++;
+                isr_entry = 0;
+            }
+        }
+        if (avr->cycle >= next_poll) {
+            poll_timer(avr, avr->cycle, NULL);
+            next_poll += poll_cycles;
+        }
+    }
     if (record) {
         fclose(record);
         rename(record_tmp, record_path);
     }
     write_stats();
+    if (getenv("CDPR_SIM_PROFILE_ISR")) {
+        FILE *f = fopen("/tmp/cdpr-pc-hist.txt", "w");
+        for (unsigned i = 0; f && i < 65536; i++)
+            if (pc_hist[i])
+                fprintf(f, "%x %u\n", i, pc_hist[i]);
+        if (f)
+            fclose(f);
+    }
+    if (getenv("CDPR_SIM_DEBUG"))
+        fprintf(stderr, "cdpr-sim: pc 0x%x I=%d TIMSK1=%02x TIFR1=%02x UCSR0B=%02x out_len=%zu in_len=%zu xon=%d polls=%lu\n", avr->pc, avr->sreg[S_I], avr->data[0x6F], avr->data[0x36], avr->data[0xC1], out_len, in_len - in_pos, xon, polls);
     fprintf(stderr, "cdpr-sim: %.3f s simulated, %u lost interrupts repaired, %u unrepaired%s\n",
             sim_seconds(), repairs, unrepaired, state == cpu_Crashed ? ", CPU CRASHED" : "");
     return state == cpu_Crashed ? 3 : 0;

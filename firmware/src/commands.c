@@ -130,6 +130,7 @@ static struct item *new_item(uint8_t kind)
 
 static void push_item(void)
 {
+    stepper_start_ok = 0; /* the start rule is evaluated again with this item */
     cli();
     queue_head++;
     sei();

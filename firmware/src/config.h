@@ -10,10 +10,10 @@
 #define BAUD 250000UL
 
 /* The step timer: one tick = one unit of segment and dwell durations (clock_hz). */
-#define TICK_HZ 20000UL
-#define TIMER_CYCLES_PER_TICK (F_CPU / TICK_HZ) /* 800 */
-/* Up to this many step pulses per axis per tick (at 0, 1/3 and 2/3 of the tick). */
-#define MAX_STEPS_PER_TICK 3
+#define TICK_HZ 10000UL
+#define TIMER_CYCLES_PER_TICK (F_CPU / TICK_HZ) /* 1600 */
+/* Up to this many step pulses per axis per tick, at k/6 of the tick. */
+#define MAX_STEPS_PER_TICK 6
 #define MAX_STEP_RATE (TICK_HZ * MAX_STEPS_PER_TICK) /* 60000 steps/s, any one axis */
 
 /* Move queue slots (power of two); see queue.h for the RAM per slot. */
@@ -23,8 +23,6 @@
 #define REPORT_SLOTS 8
 #define REPORT_MAX 96
 
-/* Homing: ticks between homing steps (TICK_HZ / DEV_HOMING_RATE). */
-#define HOMING_TICKS_PER_STEP (TICK_HZ / DEV_HOMING_RATE)
 
 /* Host watchdog: no valid frame for this long while a session is open and the
  * machine is busy (moving, heating) stops motion and switches the heaters off. */

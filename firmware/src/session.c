@@ -67,6 +67,8 @@ uint8_t session_may_start(uint32_t now)
     if (s > 16)
         need = need * s / 16;
     uint8_t tail = queue_tail, head = queue_head;
+    if (tail == head)
+        return 0;
     for (uint8_t i = tail; i != head; i++) {
         struct item *it = queue_slot(i);
         if (it->kind != IT_SEG)

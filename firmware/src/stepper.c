@@ -2,7 +2,7 @@
  * the interrupt first finishes what the previous tick's pulses mean for the
  * markers, then emits the step pulses computed during the previous interrupt
  * (direction first, then the first pulse of each axis; the second and third at
- * 1/3 and 2/3 of the tick from compare B), then computes the next tick. Pulses
+ * k/6 of the tick from compare B), then computes the next tick. Pulses
  * are high for at least 2 us and direction changes lead them by at least 1 us
  * (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208: 0.1 us / 20 ns). */
 #include <avr/interrupt.h>
@@ -32,29 +32,51 @@ volatile uint16_t stepper_lost_steps;
 #define OUT_DIR 0x10
 
 struct out {
-    uint8_t pf[3], pl[3], pa[3];
+    uint8_t m[MAX_STEPS_PER_TICK]; /* axes stepping in phase k of the tick */
     uint8_t flags;
     uint8_t dir; /* axis bit set: negative */
     uint32_t seq;
 };
-static struct out next, emit;
+static struct out outs[2];
+static uint8_t which;  /* outs[which] is being emitted, the other one computed */
+#define emit (outs[which])
+#define next (outs[which ^ 1])
 static uint8_t phase;
 static uint8_t cur_dir = 0xFF;
 
-/* executing item */
-static int32_t dda_v[4], dda_a[4];
-static uint32_t dda_acc[4], dda_rem[4];
+/* executing item: one DDA per axis */
+struct axis {
+    int32_t v, a;
+    uint32_t acc, rem;
+};
+static struct axis ax[4];
 static uint32_t t_left;
 static uint8_t hold;          /* ticks to wait after positions were set */
 static uint8_t abort_pending; /* a segment was abandoned: mark it */
 static uint32_t abort_seq;
-static uint8_t home_mask, home_phase, home_backoff;
+static uint8_t home_mask, home_backoff;
+static uint16_t home_acc;
 static uint32_t home_steps;
 static uint8_t pwm;
 
-static const uint8_t step_pf[4] = {_BV(X_STEP_BIT), _BV(Y_STEP_BIT), 0, 0};
-static const uint8_t step_pl[4] = {0, 0, _BV(Z_STEP_BIT), 0};
-static const uint8_t step_pa[4] = {0, 0, 0, _BV(E_STEP_BIT)};
+/* step pins of an axis mask on the X/Y port (the Z and E pins have ports of their own) */
+static const uint8_t xy_bits[4] = {0, _BV(X_STEP_BIT), _BV(Y_STEP_BIT), _BV(X_STEP_BIT) | _BV(Y_STEP_BIT)};
+
+static inline void pulse_on(uint8_t m)
+{
+    X_STEP_PORT |= xy_bits[m & 3];
+    if (m & 4)
+        Z_STEP_PORT |= _BV(Z_STEP_BIT);
+    if (m & 8)
+        E_STEP_PORT |= _BV(E_STEP_BIT);
+}
+
+static inline void pulse_off(void)
+{
+    X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
+    Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
+    E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+}
 
 static void apply_enables(uint8_t mask)
 {
@@ -187,7 +209,7 @@ static void start_homing(struct item *it)
     for (uint8_t k = 0; k < 3; k++)
         if ((home_mask >> k & 1) && endstop(k))
             home_backoff |= (uint8_t)(1 << k);
-    home_phase = 0;
+    home_acc = TICK_HZ - DEV_HOMING_RATE; /* the first step on the first tick */
     home_steps = 0;
     st.enabled_mask |= home_mask;
     apply_enables(st.enabled_mask);
@@ -196,11 +218,11 @@ static void start_homing(struct item *it)
 /* one homing tick; returns 1 when done */
 static uint8_t home_tick(struct item *it)
 {
-    if (home_phase) {
-        if (++home_phase >= HOMING_TICKS_PER_STEP)
-            home_phase = 0;
+    /* DEV_HOMING_RATE steps/s: step k on tick ceil(k TICK_HZ / rate) */
+    home_acc += DEV_HOMING_RATE;
+    if (home_acc < TICK_HZ)
         return 0;
-    }
+    home_acc -= TICK_HZ;
     uint8_t stepping = 0, neg = 0;
     for (uint8_t k = 0; k < 3; k++) {
         uint8_t bit = (uint8_t)(1 << k);
@@ -229,13 +251,10 @@ static uint8_t home_tick(struct item *it)
         return 0;
     }
     next.dir = (uint8_t)((cur_dir & 0x8) | neg);
+    next.m[0] = stepping;
     for (uint8_t k = 0; k < 3; k++)
-        if (stepping >> k & 1) {
-            next.pf[0] |= step_pf[k];
-            next.pl[0] |= step_pl[k];
+        if (stepping >> k & 1)
             st.pos[k] += (neg >> k & 1) ? -1 : 1;
-        }
-    home_phase = 1;
     (void)it;
     return 0;
 }
@@ -250,11 +269,11 @@ static void dispatch(void)
             if (st.at_rest && !stepper_start_ok)
                 return;
             for (uint8_t k = 0; k < 4; k++) {
-                dda_v[k] = it->u.seg.v0[k];
-                dda_a[k] = it->u.seg.a[k];
-                dda_acc[k] = 1UL << 23;
-                dda_rem[k] = it->u.seg.n[k];
-                if (dda_rem[k])
+                ax[k].v = it->u.seg.v0[k];
+                ax[k].a = it->u.seg.a[k];
+                ax[k].acc = 1UL << 23;
+                ax[k].rem = it->u.seg.n[k];
+                if (ax[k].rem)
                     st.enabled_mask |= (uint8_t)(1 << k);
             }
             apply_enables(st.enabled_mask);
@@ -306,60 +325,75 @@ static void dispatch(void)
     }
 }
 
-static void seg_tick(struct item *it)
+/* steps of one axis in this tick (at most MAX_STEPS_PER_TICK) */
+static inline uint8_t axis_tick(struct axis *x, uint8_t last)
 {
-    uint8_t last = --t_left == 0;
-    next.flags |= OUT_MOTION;
-    next.dir = it->flags >> 4;
-    for (uint8_t k = 0; k < 4; k++) {
-        uint32_t rem = dda_rem[k];
-        if (!rem)
-            continue;
-        int32_t v = dda_v[k] + dda_a[k];
+    uint32_t rem = x->rem;
+    if (!rem)
+        return 0;
+    int32_t v = x->v;
+    if (x->a) {
+        v += x->a;
         if (v < 0)
             v = 0;
-        dda_v[k] = v;
-        uint32_t acc = dda_acc[k] + (uint32_t)v;
-        uint8_t n = (uint8_t)(acc >> 24);
-        if (last)
-            n = rem > 255 ? 255 : (uint8_t)rem;
-        if (n > rem)
-            n = (uint8_t)rem;
-        if (n > MAX_STEPS_PER_TICK) {
-            if (last)
-                stepper_lost_steps += n - MAX_STEPS_PER_TICK;
-            n = MAX_STEPS_PER_TICK;
-        }
-        acc -= (uint32_t)n << 24;
-        dda_acc[k] = acc;
-        dda_rem[k] = rem - n;
-        if (n) {
-            uint8_t pf = step_pf[k], pl = step_pl[k], pa = step_pa[k];
-            next.pf[0] |= pf; next.pl[0] |= pl; next.pa[0] |= pa;
-            if (n > 1) { next.pf[1] |= pf; next.pl[1] |= pl; next.pa[1] |= pa; }
-            if (n > 2) { next.pf[2] |= pf; next.pl[2] |= pl; next.pa[2] |= pa; }
-            if (it->flags & (0x10 << k))
-                st.pos[k] -= n;
-            else
-                st.pos[k] += n;
-        }
+        x->v = v;
     }
+    uint32_t acc = x->acc + (uint32_t)v;
+    uint8_t n = (uint8_t)(acc >> 24);
+    if (last)
+        n = rem > 255 ? 255 : (uint8_t)rem;
+    if (n > rem)
+        n = (uint8_t)rem;
+    if (n > MAX_STEPS_PER_TICK) {
+        if (last)
+            stepper_lost_steps += (uint8_t)(n - MAX_STEPS_PER_TICK);
+        n = MAX_STEPS_PER_TICK;
+    }
+    x->acc = acc - ((uint32_t)n << 24);
+    x->rem = rem - n;
+    return n;
+}
+
+static void seg_tick(struct item *it)
+{
+    struct stepper_state *s = (struct stepper_state *)&st; /* private to this interrupt here */
+    uint8_t last = --t_left == 0;
+    uint8_t neg = it->flags >> 4;
+    uint8_t m[MAX_STEPS_PER_TICK] = {0};
+    next.flags |= OUT_MOTION;
+    next.dir = neg;
+    for (uint8_t k = 0, bit = 1; k < 4; k++, bit <<= 1) {
+        uint8_t n = axis_tick(&ax[k], last);
+        if (!n)
+            continue;
+        for (uint8_t i = 0; i < n; i++)
+            m[i] |= bit;
+        if (neg & bit)
+            s->pos[k] -= n;
+        else
+            s->pos[k] += n;
+    }
+    for (uint8_t i = 0; i < MAX_STEPS_PER_TICK; i++)
+        next.m[i] = m[i];
     if (last) {
-        st.current = 0xFF;
-        st.segments_done++;
+        s->current = 0xFF;
+        s->segments_done++;
         next.flags |= OUT_SEG_END;
-        next.seq = st.segments_done;
-        st.at_rest = it->flags & SEGF_AT_REST;
+        next.seq = s->segments_done;
+        s->at_rest = it->flags & SEGF_AT_REST;
         complete_item();
-        if (!st.at_rest && queue_head == queue_tail)
-            raise_error(ERR_UNDERRUN, st.items_done, st.segments_done, 0xFF, 0);
+        if (!s->at_rest && queue_head == queue_tail)
+            raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
     }
 }
 
 static void compute(void)
 {
-    memset(&next, 0, sizeof next);
-    next.dir = cur_dir;
+    struct out *o = &next;
+    for (uint8_t i = 0; i < MAX_STEPS_PER_TICK; i++)
+        o->m[i] = 0;
+    o->flags = 0;
+    o->dir = cur_dir;
     if (abort_pending) {
         abort_pending = 0;
         next.flags = OUT_SEG_END | OUT_ABORT;
@@ -417,24 +451,23 @@ static void compute(void)
 ISR(TIMER1_COMPB_vect)
 {
     uint8_t k = ++phase;
+    if (k >= MAX_STEPS_PER_TICK) {
+        TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+        return;
+    }
     uint8_t t0 = TCNT1L;
-    X_STEP_PORT |= emit.pf[k];
-    Z_STEP_PORT |= emit.pl[k];
-    E_STEP_PORT |= emit.pa[k];
-    if (k == 1 && (emit.pf[2] | emit.pl[2] | emit.pa[2]))
-        OCR1B = 2 * TIMER_CYCLES_PER_TICK / 3;
+    pulse_on(emit.m[k]);
+    if (k + 1 < MAX_STEPS_PER_TICK && emit.m[k + 1])
+        OCR1B = (uint16_t)((k + 1) * (TIMER_CYCLES_PER_TICK / MAX_STEPS_PER_TICK));
     else
         TIMSK1 &= (uint8_t)~_BV(OCIE1B);
     while ((uint8_t)(TCNT1L - t0) < 34)
         ;
-    X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
-    Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
-    E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+    pulse_off();
 }
 
 ISR(TIMER1_COMPA_vect)
 {
-    uint16_t t0 = TCNT1;
     /* markers for the pulses emitted during the tick that just ended */
     if (emit.flags & (OUT_SEG_END | OUT_POS | OUT_ABORT)) {
         sim_mailbox.seq = emit.seq;
@@ -445,46 +478,47 @@ ISR(TIMER1_COMPA_vect)
         if (emit.flags & OUT_POS)
             MARK3_PIN = _BV(MARK_POS_BIT);
     }
-    emit = next;
+    which ^= 1;
     if (emit.flags & OUT_MOTION)
         MARK2_PORT |= _BV(MARK_MOTION_BIT);
     else
         MARK2_PORT &= (uint8_t)~_BV(MARK_MOTION_BIT);
-    uint8_t pulses = emit.pf[0] | emit.pl[0] | emit.pa[0];
-    if (pulses && emit.dir != cur_dir) {
-        apply_dirs(emit.dir);
-        cur_dir = emit.dir;
-        __builtin_avr_delay_cycles(16);
-    }
-    X_STEP_PORT |= emit.pf[0];
-    Z_STEP_PORT |= emit.pl[0];
-    E_STEP_PORT |= emit.pa[0];
-    if (emit.pf[1] | emit.pl[1] | emit.pa[1]) {
-        phase = 0;
-        OCR1B = TIMER_CYCLES_PER_TICK / 3;
-        TIFR1 = _BV(OCF1B);
-        TIMSK1 |= _BV(OCIE1B);
+    uint8_t pulses = emit.m[0];
+    uint16_t t0 = TCNT1;
+    if (pulses) {
+        if (emit.dir != cur_dir) {
+            apply_dirs(emit.dir);
+            cur_dir = emit.dir;
+            __builtin_avr_delay_cycles(16);
+        }
+        t0 = TCNT1;
+        pulse_on(pulses);
+        if (emit.m[1]) {
+            phase = 0;
+            OCR1B = TIMER_CYCLES_PER_TICK / MAX_STEPS_PER_TICK;
+            TIFR1 = _BV(OCF1B);
+            TIMSK1 |= _BV(OCIE1B);
+        }
     }
     sched_tick_count++;
 
     compute();
 
     /* slow software PWM for the heaters and the fan (78 Hz) */
-    pwm++;
-    if (pwm < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
-    if (pwm < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
-    if (pwm < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
+    uint8_t p = ++pwm;
+    if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
+    if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
+    if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
 
     if (pulses) {
         while ((uint16_t)(TCNT1 - t0) < 34)
             ;
-        X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
-        Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
-        E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+        pulse_off();
     }
-    uint16_t used = (uint16_t)(TCNT1 - t0);
+    /* cycles since the compare match (TCNT1 restarted from 0 there) */
+    uint16_t used = TCNT1;
     if (TIFR1 & _BV(OCF1A))
-        used += TIMER_CYCLES_PER_TICK; /* overran into the next tick */
+        used += TIMER_CYCLES_PER_TICK; /* ran into the next tick */
     if (used > stepper_isr_max_cycles)
         stepper_isr_max_cycles = used;
 }

@@ -71,7 +71,7 @@ void watchdog_start(void)
     saved.magic = SAVED_MAGIC;
     saved.soft_boots = soft;
     watchdog_save(0, 0);
-    wdt_enable(WDTO_250MS);
+    wdt_enable(WDTO_2S);
 }
 
 void watchdog_kick(void)
