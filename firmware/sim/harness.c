@@ -390,6 +390,11 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         }
     }
     poll_pty();
+    /* drive the switches again: enabling the pull-ups makes simavr read them high */
+    for (int k = 0; k < 3; k++) {
+        endstop_level[k] = -1;
+        set_endstop(k);
+    }
     check_lost_interrupts();
     update_thermal();
     pace();
