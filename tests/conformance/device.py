@@ -44,7 +44,9 @@ def start(kind: str, tmp: Path, *args: str) -> Device:
     record = tmp / f"{kind}-record.jsonl"
     cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--record", str(record)]
     cmd += ["--firmware", "avr"] if kind == "avr" else ["--like-avr"]
-    proc = subprocess.Popen([*cmd, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [*cmd, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     path = proc.stdout.readline().strip()
     if not path.startswith("/dev/"):
         proc.wait(10)
