@@ -22,9 +22,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cdprhost.link import open_link  # noqa: E402
-from cdprhost.sim import avr_device  # noqa: E402
-from firmware_protocol.streams import demo_stream  # noqa: E402
+from cdprhost.link import open_link
+from cdprhost.sim import avr_device
+from firmware_protocol.streams import demo_stream
 
 
 def main() -> int:
