@@ -6,6 +6,7 @@
 #include "queue.h"
 #include "reports.h"
 #include "stepper.h"
+#include "mailbox.h"
 
 struct machine mc;
 
@@ -36,6 +37,7 @@ uint8_t machine_flags(void)
 
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
 {
+    sim_mailbox.last_error = code; /* before the abort marker names it */
     stepper_halt();
     mc.fault = code;
     mc.last_error = code;
