@@ -21,14 +21,10 @@ import numpy as np
 
 from cdprhost.calibration.identification import identify
 from cdprhost.calibration.planning import TABLE1_POSES, plan_poses
-from cdprhost.calibration.simulate import (
-    achieved_points,
-    perturbed_geometry,
-    simulate_observations,
-    validation_grid,
-)
 from cdprhost.kinematics import MachineModel
+from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.profile import load_profile
+from cdprhost.sim.measurement import achieved_points, perturbed_geometry, simulate_observations
 
 TARGETS_MM = {"planned 4": 0.3, "planned 12": 0.12}
 
@@ -47,7 +43,7 @@ def session_scores(
     amplitude_mm: float = 3.0,
 ) -> dict[str, np.ndarray]:
     """Validation RMS after calibration, per pose set and seed; key ``before`` = nominal."""
-    grid = validation_grid(nominal)
+    grid = workspace_grid(nominal)
     scores: dict[str, list[float]] = {"before": [], **{k: [] for k in pose_sets}}
     for seed in seeds:
         rng = np.random.default_rng(seed)
@@ -95,7 +91,7 @@ def main() -> int:
     )
     print(
         "validation RMS (mm) over",
-        len(validation_grid(nominal)),
+        len(workspace_grid(nominal)),
         "grid points; 'failed' = a pose the true machine cannot reach or no convergence",
     )
     print(

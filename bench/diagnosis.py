@@ -18,20 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
+from cdprhost.calibration.commanding import commanded_path
 from cdprhost.calibration.fitting import CableModelFit
-from cdprhost.calibration.simulate import commanded_path
-from cdprhost.calibration.synthetic import write_synthetic_session
-from cdprhost.diagnosis.scenarios import (
-    hidden_truth,
-    measurement_tour,
-    session_times,
-    simulate_session,
-)
 from cdprhost.diagnosis.session_input import load_session_data
 from cdprhost.diagnosis.workflow import FAST, DiagnosisSettings, diagnose
 from cdprhost.effects.base import MotionContext
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import load_profile
+from cdprhost.sim.scenarios import hidden_truth, measurement_tour, session_times, simulate_session
+from cdprhost.sim.synthetic_session import write_synthetic_session
 
 
 def median_time(fn, runs: int) -> float:

@@ -27,8 +27,8 @@ import math
 import numpy as np
 
 from cdprhost.kinematics import MachineModel
-from cdprhost.link import open_embedded
 from cdprhost.profile import load_profile
+from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.messages import HOTEND, WaitHeater
 from firmware_protocol.segments import (

@@ -25,6 +25,13 @@ PAPER_TRUTH_OUTLETS = np.array(
 )
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _isolated_state(tmp_path_factory):
+    """Job logs and resume points of every test (and the CLIs they start) go to a temporary
+    folder, never to the user's ~/.local/state."""
+    os.environ["CDPRHOST_STATE"] = str(tmp_path_factory.mktemp("state"))
+
+
 @pytest.fixture(scope="session")
 def sim_profile():
     return load_profile("paper-simulation")

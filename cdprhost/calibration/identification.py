@@ -23,6 +23,7 @@ from scipy import stats
 from cdprhost.calibration.fitting import GEOMETRY_NAMES, CableModelFit, Observations
 from cdprhost.calibration.session import POSES_FILE, load_session
 from cdprhost.errors import InputError
+from cdprhost.jsonsafe import json_safe
 from cdprhost.kinematics.geometry import CableGeometry
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.profile.models import MachineProfile
@@ -108,9 +109,6 @@ class Identification:
         """The machine-readable report (field names are part of the CLI contract)."""
         g, se = self.geometry, self.stderr
 
-        def finite(v: np.ndarray) -> list:
-            return [float(x) if np.isfinite(x) else None for x in np.ravel(v)]
-
         return {
             "ok": self.ok,
             "problems": self.problems(),
@@ -123,10 +121,10 @@ class Identification:
                 "initial_lengths": self.nominal.initial_lengths.tolist(),
             },
             "stderr": {
-                "outlets": np.reshape(finite(se[:9]), (3, 3)).tolist(),
-                "initial_lengths": finite(se[9:]),
+                "outlets": np.reshape(json_safe(np.ravel(se[:9])), (3, 3)).tolist(),
+                "initial_lengths": json_safe(np.ravel(se[9:])),
             },
-            "ci95": {n: finite(self.ci95[i]) for i, n in enumerate(self.names)},
+            "ci95": {n: json_safe(np.ravel(self.ci95[i])) for i, n in enumerate(self.names)},
             "correlations": [{"a": a, "b": b, "r": r} for a, b, r in self.correlations],
             "singular_values": self.singular_values.tolist(),
             "unidentifiable": list(self.unidentifiable),

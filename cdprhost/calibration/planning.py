@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cdprhost.calibration.simulate import commanded_path
+from cdprhost.calibration.commanding import commanded_path
 from cdprhost.errors import InputError
 from cdprhost.kinematics.jacobian import identification_jacobian
 from cdprhost.kinematics.machine import MachineModel

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,6 +30,7 @@ from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SessionConfig
 from cdprhost.calibration.takes import MocapConfig, TakeMeasurement, TakeRejected, measure_effector
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import atomic_open, write_text_atomic
+from cdprhost.jsonsafe import dumps
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import MachineProfile, save_profile
 
@@ -134,7 +134,9 @@ class WizardState:
 
 # ------------------------------------------------------------------ interfaces
 class WizardDevice(Protocol):
-    def move_through(self, points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Implemented by :class:`cdprhost.machine.Machine`."""
+
+    def visit(self, points: np.ndarray) -> tuple[np.ndarray, float]:
         """Move the effector through ``points`` (machine frame, in order), stop at the last,
         wait until it has settled; return the absolute module steps (3,) and device time (s)."""
 
@@ -280,7 +282,7 @@ class CalibrationWizard:
 
     def _move(self, action: MoveTo) -> None:
         self.log(f"moving to {self._label(action.index)}")
-        steps, t = self.device.move_through(action.waypoints)
+        steps, t = self.device.visit(action.waypoints)
         self._steps = np.asarray(steps, dtype=np.int64)[:3]
         if self._t0 is None:
             self._t0 = float(t)
@@ -328,9 +330,7 @@ class CalibrationWizard:
     def _identify(self) -> None:
         self.log("identifying the 12 parameters")
         result = identify_session(self.dir, self.model, noise_floor_mm=self.options.noise_floor_mm)
-        write_text_atomic(
-            self.dir / REPORT_FILE, json.dumps(_json_safe(result.to_json()), indent=2) + "\n"
-        )
+        write_text_atomic(self.dir / REPORT_FILE, dumps(result.to_json(), indent=2) + "\n")
         self.identification = result
         if result.ok:
             self.calibrated = calibrated_profile(
@@ -349,16 +349,6 @@ class CalibrationWizard:
             self.dir / PROFILE_FILE if prof else None,
             self.dir,
         )
-
-
-def _json_safe(obj):
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, float) and not np.isfinite(obj):
-        return None
-    return obj
 
 
 # ------------------------------------------------------------------ take sources
@@ -432,58 +422,3 @@ class NumberedTakes:
 
 
 # ------------------------------------------------------------------ the machine over the link
-class LinkDevice:
-    """:class:`WizardDevice` over a :class:`~cdprhost.link.HostLink`: homes once, then moves
-    through waypoints with the print pipeline's planner and segmenter and waits ``settle_s``."""
-
-    def __init__(
-        self,
-        link,
-        profile: MachineProfile,
-        model: MachineModel,
-        *,
-        feed_mm_s: float = 40.0,
-        settle_s: float = 0.5,
-        timeout_s: float = 300.0,
-    ):
-        from cdprhost.motion.segments import SegmentState
-
-        self.link, self.profile, self.model = link, profile, model
-        self.feed, self.settle_s, self.timeout_s = (
-            float(feed_mm_s),
-            float(settle_s),
-            float(timeout_s),
-        )
-        self.state = SegmentState.at_home(model, profile.drive.home_mm)
-        self.homed = False
-
-    def home(self) -> None:
-        from cdprhost.job.device_commands import home_message
-        from cdprhost.motion.segments import SegmentState
-        from firmware_protocol.messages import Enable
-
-        self.link.send(Enable(0b1111), home_message(self.model, self.profile.drive.home_mm))
-        self.link.wait_idle(self.timeout_s)
-        self.state = SegmentState.at_home(
-            self.model, self.profile.drive.home_mm, int(self.state.steps[3])
-        )
-        self.homed = True
-
-    def move_through(self, points: np.ndarray) -> tuple[np.ndarray, float]:
-        from cdprhost.motion.direct import direct_path
-
-        if not self.homed:
-            self.home()
-        wire, _, self.state = direct_path(
-            self.profile,
-            self.model,
-            self.state,
-            points,
-            feedrate_mm_s=self.feed,
-            clock_hz=self.link.identity.clock_hz,
-        )
-        if len(wire):
-            self.link.queue_segments(wire, timeout=self.timeout_s)
-        self.link.wait_idle(self.timeout_s)
-        self.link.poll(self.settle_s)  # let it come to rest (the device's settle time)
-        return self.state.steps[:3].copy(), float(self.link.now())

@@ -1,36 +1,83 @@
-"""Entry point of the ``cdprhost`` console script."""
+"""Entry point of the ``cdprhost`` console script.
+
+Start-up imports only what the command asked for: the table below names each command's
+module and one-line help, so ``--version``, ``--help`` and the parser of one command never
+import the others (``check`` and ``print`` never load calibration, diagnosis, plotting or
+the TUI). ``tests/cli/test_startup.py`` keeps the table and the modules in step.
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import pkgutil
 import sys
+from types import ModuleType
 
 from cdprhost import __version__
-from cdprhost.cli import commands as commands_pkg
-from cdprhost.errors import CdprError
+
+# command -> (module in cdprhost.cli.commands, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "calibrate": (
+        "calibrate",
+        "kinematic calibration: plan poses, identify parameters, guided wizard",
+    ),
+    "check": ("check", "preflight a G-code file: workspace along every move, extrusion, commands"),
+    "diagnose": (
+        "diagnose",
+        "find, name and add the physics the calibrated model lacks (model discrepancy workflow)",
+    ),
+    "ik": ("kinematics", "points (x,y,z) -> slider displacements and steps, effects compensated"),
+    "fk": ("kinematics", "slider displacements (s1,s2,s3) -> effector points, effects predicted"),
+    "print": (
+        "print_cmd",
+        "print a G-code file (embedded simulated device unless --port is given)",
+    ),
+    "profile": ("profile", "show, validate or export machine profiles"),
+    "sim-device": ("sim_device", "run the simulated device on a pseudo-terminal (prints its path)"),
+    "tui": ("tui", "terminal UI: connect, print, jog, calibrate, diagnose"),
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def command_word(argv: list[str]) -> str | None:
+    """The command in ``argv`` (top-level options are all flags, so it is the first word)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser; only ``command``'s module is imported (None: none, all commands listed)."""
     parser = argparse.ArgumentParser(
         prog="cdprhost",
         description="Host software for a cable-driven parallel robot 3D printer.",
     )
     parser.add_argument("--version", action="version", version=f"cdprhost {__version__}")
+    parser.add_argument(
+        "--verbose", "-v", action="count", default=0, help="log more (-v info, -vv debug) to stderr"
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for info in sorted(pkgutil.iter_modules(commands_pkg.__path__), key=lambda m: m.name):
-        module = importlib.import_module(f"{commands_pkg.__name__}.{info.name}")
-        module.register(sub)
+    if command in COMMANDS:
+        load_command(COMMANDS[command][0]).register(sub)
+    for name, (_, one_line) in COMMANDS.items():
+        if name not in sub.choices:
+            sub.add_parser(name, help=one_line)
     return parser
 
 
+def load_command(module: str) -> ModuleType:
+    """A command module (``register(subparsers)``, and the ``run`` functions it sets)."""
+    return importlib.import_module(f"cdprhost.cli.commands.{module}")
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(command_word(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    from cdprhost.errors import CdprError
+    from cdprhost.logs import configure_logging
+
+    configure_logging(args.verbose)
     try:
         return int(args.func(args) or 0)
     except CdprError as exc:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
-from cdprhost.kinematics import MachineModel
-from cdprhost.profile import MachineProfile, load_profile
+if TYPE_CHECKING:
+    from cdprhost.kinematics import MachineModel
+    from cdprhost.profile import MachineProfile
 
 
 def add_profile_argument(
@@ -22,5 +24,8 @@ def add_profile_argument(
 
 
 def load_model(ref: str) -> tuple[MachineProfile, MachineModel]:
+    from cdprhost.kinematics import MachineModel
+    from cdprhost.profile import load_profile
+
     profile = load_profile(ref)
     return profile, MachineModel.from_profile(profile)

@@ -11,28 +11,11 @@ the record says so.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-import numpy as np
-
 from cdprhost.diagnosis.workflow import Diagnosis, admissible
+from cdprhost.jsonsafe import json_safe
 from cdprhost.profile.models import MachineProfile
-
-
-def _clean(obj: Any) -> Any:
-    """JSON/TOML-safe: numpy -> Python, non-finite floats dropped (None)."""
-    if isinstance(obj, dict):
-        return {str(k): v for k, v in ((k, _clean(v)) for k, v in obj.items()) if v is not None}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _clean(obj.tolist())
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if math.isfinite(float(obj)) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
 
 
 def _toml_intervals(ci: dict[str, Any]) -> dict[str, Any]:
@@ -55,7 +38,7 @@ def augmented_profile(
     effects, dropped = {}, []
     for name in diagnosis.final.effects:
         if admissible(fit, name):
-            effects[name] = _clean(diagnosis.parameters[name]["table"])
+            effects[name] = json_safe(diagnosis.parameters[name]["table"], drop_none=True)
         else:
             dropped.append(name)
     record = {
@@ -70,7 +53,7 @@ def augmented_profile(
         "noise_source": diagnosis.noise.source,
         "poses": diagnosis.n_poses,
         "ci95": {
-            n: _toml_intervals(_clean(diagnosis.parameters[n]["ci95"]))
+            n: _toml_intervals(json_safe(diagnosis.parameters[n]["ci95"], drop_none=True))
             for n in diagnosis.final.effects
         },
     }
@@ -79,7 +62,7 @@ def augmented_profile(
     if diagnosis.verdict != "named" and diagnosis.effects:
         record["note"] = f"verdict {diagnosis.verdict}: effects added are tentative"
     calibration = dict(profile.calibration)
-    calibration["diagnosis"] = _clean(record)
+    calibration["diagnosis"] = json_safe(record, drop_none=True)
     return profile.with_geometry(
         q[:9].reshape(3, 3), q[9:12], effects=effects, calibration=calibration
     )

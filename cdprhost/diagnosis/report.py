@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from cdprhost.diagnosis.augment import _clean
 from cdprhost.diagnosis.workflow import Candidate, Diagnosis
+from cdprhost.jsonsafe import json_safe
 
 ADVICE = {
     "drift": "drift is not compensated while printing (time is unknown there): re-home the modules before each print",
@@ -100,18 +100,7 @@ def to_json(
         "session": session,
         "rejected_takes": rejected or [],
     }
-    return _json_safe(out)
-
-
-def _json_safe(obj: Any) -> Any:
-    """Like augment._clean but keeps keys whose value is None (null in JSON)."""
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [_json_safe(v) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
-    if obj is None or isinstance(obj, (str, bool)):
-        return obj
-    return _clean(obj)
+    return json_safe(out)
 
 
 def table(headers: list[str], rows: list[list[str]]) -> str:

@@ -30,6 +30,7 @@ from cdprhost.diagnosis.noise import NoiseEstimate
 from cdprhost.diagnosis.stat_tests import bic, goodness_of_fit_p, holm, nested_f_test
 from cdprhost.effects.registry import CATALOGUE
 from cdprhost.errors import InputError
+from cdprhost.jsonsafe import finite_or_none
 from cdprhost.kinematics.machine import MachineModel
 
 MIN_POSES = 8
@@ -176,16 +177,11 @@ def effect_parameters(fit: CableModelFit, name: str) -> dict:
     }
 
 
-def _finite_or_none(x: float) -> float | None:
-    x = float(x)
-    return x if np.isfinite(x) else None
-
-
 def _interval(lo: np.ndarray, hi: np.ndarray) -> list:
     """[lo, hi] (or a list of them); an unbounded end is None."""
     if lo.ndim == 0:
-        return [_finite_or_none(lo), _finite_or_none(hi)]
-    return [[_finite_or_none(a), _finite_or_none(b)] for a, b in zip(lo, hi)]
+        return [finite_or_none(lo), finite_or_none(hi)]
+    return [[finite_or_none(a), finite_or_none(b)] for a, b in zip(lo, hi)]
 
 
 def admissible(fit: CableModelFit, name: str) -> bool:

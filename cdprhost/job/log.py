@@ -2,24 +2,12 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
-from enum import Enum
 from pathlib import Path
 from typing import Any, TextIO
 
-
-def _plain(obj: Any) -> Any:
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {k: _plain(v) for k, v in dataclasses.asdict(obj).items()}
-    if isinstance(obj, Enum):
-        return obj.value
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, dict):
-        return {k: _plain(v) for k, v in obj.items()}
-    return obj
+from cdprhost.jsonsafe import json_safe
 
 
 class JobLog:
@@ -38,13 +26,13 @@ class JobLog:
         record = {
             "t": round(time.time(), 3),
             "event": kind,
-            **{k: _plain(v) for k, v in fields.items()},
+            **{k: json_safe(v) for k, v in fields.items()},
         }
         self._fh.write(json.dumps(record) + "\n")
         self._fh.flush()
 
     def event(self, event: Any) -> None:
-        self.write(type(event).__name__, **_plain(event))
+        self.write(type(event).__name__, **json_safe(event))
 
     def close(self) -> None:
         if self._fh:

@@ -20,7 +20,6 @@ import numpy as np
 
 from cdprhost.gcode import items as g
 from cdprhost.gcode.errors import GcodeError
-from cdprhost.job.device_commands import device_messages, heaters_off
 from cdprhost.job.log import JobLog
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import ResumePoint, resume_path_for
@@ -40,6 +39,7 @@ from cdprhost.job.state import (
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tensions
 from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
+from cdprhost.machine.commands import device_messages, heaters_off
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.program import read_items

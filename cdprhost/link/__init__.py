@@ -1,16 +1,11 @@
 """The serial link to the printer's firmware (protocol: firmware_protocol/PROTOCOL.md).
 
-Getting a link (both return a handshaken :class:`HostLink`)::
+Getting a link (a handshaken :class:`HostLink`; the embedded simulated device is
+:func:`cdprhost.sim.embedded.open_embedded`, with the same interface)::
 
     open_link(port, baud=250000, timeout_s=2.0) -> HostLink
         port: a device path or any pyserial URL (loop://, socket://host:port, ...);
         opened exclusively.
-    open_embedded(config=None, faults=None, speedup=None, observer=None, baud=250000,
-                  timeout_s=2.0) -> HostLink
-        the simulated device in process, on a virtual clock (as fast as the CPU
-        allows, or paced to ``speedup`` x real time); ``faults`` a --faults spec;
-        ``link.device`` is the SimDevice, ``link.device.record`` its record of
-        executed segments ({"seq", "steps", "t"}, see firmware_protocol/device/record.py).
 
 HostLink (thread-safe; every call pumps the link; nothing runs in the background)::
 
@@ -48,7 +43,7 @@ PortBusy, PortVanished, DeviceSilent, ProtocolMismatch, DeviceReset(last_segment
 last_item, exact), DeviceFault(code, item, segment, axis, value), LinkTimeout.
 """
 
-from cdprhost.link.connect import open_embedded, open_link
+from cdprhost.link.connect import open_link
 from cdprhost.link.errors import (
     DeviceFault,
     DeviceReset,
@@ -87,6 +82,5 @@ __all__ = [
     "PortVanished",
     "Progress",
     "ProtocolMismatch",
-    "open_embedded",
     "open_link",
 ]

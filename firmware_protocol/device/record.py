@@ -10,10 +10,10 @@ carry ``"boot": k`` (k >= 1); an aborted segment carries ``"error"``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-
-from cdprhost.fileio.atomic import atomic_open
+import tempfile
 
 
 def record_entry(
@@ -33,10 +33,22 @@ def record_entry(
 
 
 def write_record(path: str | os.PathLike[str], entries: list[dict]) -> None:
-    """Write entries as JSON lines, atomically."""
-    with atomic_open(path, "w") as fh:
-        for e in entries:
-            fh.write(json.dumps(e, separators=(",", ":")) + "\n")
+    """Write entries as JSON lines, atomically: the file is complete or absent, never half
+    written (a temporary file beside it, renamed over it only on success)."""
+    target = os.fspath(path)
+    folder = os.path.dirname(target) or "."
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(target)}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            for e in entries:
+                fh.write(json.dumps(e, separators=(",", ":")) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
 
 
 def read_record(path: str | os.PathLike[str]) -> list[dict]:

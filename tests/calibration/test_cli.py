@@ -10,16 +10,12 @@ import numpy as np
 import pytest
 
 from cdprhost.calibration.planning import read_plan_csv
-from cdprhost.calibration.simulate import (
-    achieved_points,
-    perturbed_geometry,
-    simulate_observations,
-    validation_grid,
-)
-from cdprhost.calibration.synthetic import write_synthetic_session
 from cdprhost.cli.main import main
 from cdprhost.kinematics import MachineModel
+from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.profile import load_profile
+from cdprhost.sim.measurement import achieved_points, perturbed_geometry, simulate_observations
+from cdprhost.sim.synthetic_session import write_synthetic_session
 
 
 def test_plan_writes_poses_and_indices(tmp_path, sim_model, capsys):
@@ -138,7 +134,7 @@ def test_identify_recovers_a_machine_at_the_noise_floor(
     assert data["poses_used"] == 12 and data["rms_before_mm"] > 1.0 and data["rms_after_mm"] < 0.12
     assert np.array(data["stderr"]["outlets"]).shape == (3, 3) and data["iterations"] >= 1
     cal = MachineModel.from_profile(load_profile(out))
-    grid = validation_grid(sim_model)
+    grid = workspace_grid(sim_model)
     err = np.linalg.norm(
         achieved_points(truth.with_geometry(truth.geometry), cal, grid) - grid, axis=1
     )

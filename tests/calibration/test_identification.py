@@ -8,8 +8,8 @@ import pytest
 from cdprhost.calibration.fitting import CableModelFit, Observations
 from cdprhost.calibration.identification import calibrated_profile, identify
 from cdprhost.calibration.planning import TABLE1_POSES
-from cdprhost.calibration.simulate import perturbed_geometry, simulate_observations
 from cdprhost.profile import load_profile, save_profile
+from cdprhost.sim.measurement import perturbed_geometry, simulate_observations
 
 
 def test_paper_section_5_2_converges_to_truth(sim_model, paper_truth):

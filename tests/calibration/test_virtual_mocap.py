@@ -10,7 +10,7 @@ from cdprhost.calibration.takes import measure_effector
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import save_profile
-from firmware_protocol.device.virtual_mocap import VirtualMocap, make_observer, mocap_config
+from cdprhost.sim.virtual_mocap import VirtualMocap, make_observer, mocap_config
 
 from .conftest import paper_truth_geometry
 

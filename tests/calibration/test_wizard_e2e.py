@@ -9,17 +9,19 @@ import json
 import numpy as np
 import pytest
 
-from cdprhost.calibration.simulate import achieved_points, validation_grid
-from cdprhost.calibration.wizard import CalibrationWizard, FolderWatcher, LinkDevice, WizardOptions
+from cdprhost.calibration.wizard import CalibrationWizard, FolderWatcher, WizardOptions
 from cdprhost.cli.main import main
 from cdprhost.kinematics import MachineModel
-from cdprhost.link import open_embedded
+from cdprhost.kinematics.grid import workspace_grid
+from cdprhost.machine import Machine
 from cdprhost.motion.limits import Caps
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.planner import Planner
 from cdprhost.motion.segments import Segmenter
 from cdprhost.profile import load_profile, save_profile
-from firmware_protocol.device.virtual_mocap import make_observer, mocap_config
+from cdprhost.sim.embedded import open_embedded
+from cdprhost.sim.measurement import achieved_points
+from cdprhost.sim.virtual_mocap import make_observer, mocap_config
 from firmware_protocol.segments import SegmentBatch, ramp_codes_from_speeds
 
 from .conftest import paper_truth_geometry
@@ -46,7 +48,7 @@ def print_path_errors(profile, truth: MachineModel, path: np.ndarray) -> np.ndar
     model = MachineModel.from_profile(profile)
     link = open_embedded()
     try:
-        dev = LinkDevice(link, profile, model)
+        dev = Machine(link, profile, model, settle_s=0.5)
         dev.home()
         planner = Planner(
             Caps.from_profile(profile.motion, profile.extruder, profile.statics.a_max_mm_s2),
@@ -88,7 +90,7 @@ def test_wizard_calibrates_then_printing_gets_accurate(
         wiz = CalibrationWizard(
             tmp_path / "session",
             sim_profile,
-            LinkDevice(link, sim_profile, sim_model),
+            Machine(link, sim_profile, sim_model, settle_s=0.5),
             FolderWatcher(tmp_path / "mocap", timeout_s=5, poll_s=0.01),
             mocap=mocap_config().mocap,
             options=WizardOptions(),
@@ -107,7 +109,7 @@ def test_wizard_calibrates_then_printing_gets_accurate(
     cal = load_profile(out.profile_path)
     cal_model = MachineModel.from_profile(cal)
 
-    grid = validation_grid(sim_model)
+    grid = workspace_grid(sim_model)
     before = np.linalg.norm(achieved_points(truth, sim_model, grid) - grid, axis=1)
     after = np.linalg.norm(achieved_points(truth, cal_model, grid) - grid, axis=1)
     assert np.sqrt(np.mean(before**2)) > 5.0 and np.sqrt(np.mean(after**2)) < 0.3
@@ -149,7 +151,7 @@ def test_interrupted_session_resumes_without_losing_takes(
         wiz = CalibrationWizard(
             session,
             sim_profile,
-            LinkDevice(link, sim_profile, sim_model),
+            Machine(link, sim_profile, sim_model, settle_s=0.5),
             takes,
             mocap=mocap_config().mocap,
             log=lambda m: None,
@@ -167,7 +169,7 @@ def test_interrupted_session_resumes_without_losing_takes(
         wiz = CalibrationWizard(
             session,
             sim_profile,
-            LinkDevice(link, sim_profile, sim_model),
+            Machine(link, sim_profile, sim_model, settle_s=0.5),
             FolderWatcher(mocap, timeout_s=5, poll_s=0.01),
             mocap=None,
             log=lambda m: None,
@@ -208,7 +210,7 @@ def test_wrong_take_is_rejected_at_once_and_asked_again(
         wiz = CalibrationWizard(
             tmp_path / "s",
             sim_profile,
-            LinkDevice(link, sim_profile, sim_model),
+            Machine(link, sim_profile, sim_model, settle_s=0.5),
             source,
             mocap=mocap_config().mocap,
             options=WizardOptions(n_check=1),

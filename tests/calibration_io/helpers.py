@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.readers import Take
-from cdprhost.calibration.synthetic import (
+from cdprhost.calibration.takes import EffectorConfig, MocapConfig
+from cdprhost.sim.synthetic_session import (
     DEFAULT_BASE_MARKERS,
     DEFAULT_EFFECTOR_MARKERS,
     effector_offset,
 )
-from cdprhost.calibration.takes import EffectorConfig, MocapConfig
 
 DATA = Path(__file__).resolve().parent / "data"
 # The point the hand-written sample takes were made from (base frame, mm).

@@ -16,12 +16,12 @@ from cdprhost.calibration.session import (
     read_poses,
     session_toml,
 )
-from cdprhost.calibration.synthetic import (
+from cdprhost.errors import InputError
+from cdprhost.sim.synthetic_session import (
     synthesize_take,
     synthetic_config,
     write_synthetic_session,
 )
-from cdprhost.errors import InputError
 from tests.calibration_io.helpers import DATA, SAMPLE_POINT, SPEC_SESSION_TOML
 
 

@@ -7,13 +7,13 @@ import pytest
 
 from cdprhost.calibration.readers import Take, read_take
 from cdprhost.calibration.registration import rotation_about_z
-from cdprhost.calibration.synthetic import motive_world_pose, synthesize_take
 from cdprhost.calibration.takes import (
     AcceptanceLimits,
     TakeRejected,
     measure_effector,
     robust_inliers,
 )
+from cdprhost.sim.synthetic_session import motive_world_pose, synthesize_take
 from tests.calibration_io.helpers import mocap_config
 
 POINT = np.array([-35.0, 60.0, 210.0])

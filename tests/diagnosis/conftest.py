@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.diagnosis.scenarios import hidden_truth, simulate_session
+from cdprhost.sim.scenarios import hidden_truth, simulate_session
 
 
 def hidden_session(model, effect, seed, vector=None, n_poses=40, noise_mm=0.05):

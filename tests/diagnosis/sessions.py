@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cdprhost.calibration.simulate import commanded_path
-from cdprhost.calibration.synthetic import write_synthetic_session
-from cdprhost.diagnosis.scenarios import hidden_truth, measurement_tour, session_times
+from cdprhost.calibration.commanding import commanded_path
 from cdprhost.effects.base import Effect, MotionContext
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.sim.scenarios import hidden_truth, measurement_tour, session_times
+from cdprhost.sim.synthetic_session import write_synthetic_session
 
 
 def write_hidden_session(

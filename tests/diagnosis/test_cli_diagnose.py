@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from cdprhost.calibration.fitting import CableModelFit
-from cdprhost.calibration.simulate import achieved_points, validation_grid
 from cdprhost.cli.main import main
 from cdprhost.diagnosis.session_input import load_session_data
 from cdprhost.kinematics import MachineModel
+from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.profile import load_profile
+from cdprhost.sim.measurement import achieved_points
 from tests.diagnosis.sessions import write_hidden_session
 
 CONTRACT_FIELDS = {
@@ -82,7 +83,7 @@ def test_diagnose_names_the_effect_and_the_profile_prints_better(
     # printing side: the same session calibrated without the effect is the baseline
     data = load_session_data(session)
     base = CableModelFit().fit(data.observations, sim_model).model_
-    grid = validation_grid(sim_model, spacing_mm=30.0)
+    grid = workspace_grid(sim_model, spacing_mm=30.0)
     err_base = rms_3d(achieved_points(truth, base, grid), grid)
     err_aug = rms_3d(achieved_points(truth, commanding, grid), grid)
     assert err_aug < 0.5 * err_base

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.calibration.simulate import validation_grid
 from cdprhost.diagnosis.workflow import FAST, diagnose
 from cdprhost.effects.backlash import path_directions
 from cdprhost.effects.base import MotionContext
+from cdprhost.kinematics.grid import workspace_grid
 
 
 def printed_points(truth, commanding, targets):
@@ -27,7 +27,7 @@ def test_augmented_model_compensates_while_printing(make_session, sim_model, eff
     truth, _, obs = make_session(effect, 41)
     d = diagnose(obs, sim_model, settings=FAST)
     assert d.effects == (effect,)
-    grid = validation_grid(sim_model, spacing_mm=25.0)
+    grid = workspace_grid(sim_model, spacing_mm=25.0)
     path = np.concatenate([grid, grid[::-1]])  # both directions of travel
     err = {
         name: np.linalg.norm(printed_points(truth, m, path) - path[1:], axis=1)
@@ -42,7 +42,7 @@ def test_drift_is_reported_not_compensated(make_session, sim_model):
     _, _, obs = make_session("drift", 42)
     d = diagnose(obs, sim_model, settings=FAST)
     assert d.effects == ("drift",)
-    grid = validation_grid(sim_model, spacing_mm=40.0)
+    grid = workspace_grid(sim_model, spacing_mm=40.0)
     no_drift = d.final_model.with_geometry(d.final_model.geometry, d.base.fit.model_.effects)
     np.testing.assert_allclose(
         d.final_model.ik(grid), no_drift.ik(grid)

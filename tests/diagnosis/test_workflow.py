@@ -4,15 +4,15 @@ import tomllib
 import numpy as np
 import pytest
 
-from cdprhost.calibration.simulate import simulate_observations
 from cdprhost.diagnosis.augment import augmented_profile
 from cdprhost.diagnosis.report import to_json, to_text
-from cdprhost.diagnosis.scenarios import hidden_truth, measurement_tour
 from cdprhost.diagnosis.workflow import FAST, diagnose
 from cdprhost.effects.registry import EffectChain
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import profile_from_dict, profile_to_toml
+from cdprhost.sim.measurement import simulate_observations
+from cdprhost.sim.scenarios import hidden_truth, measurement_tour
 
 CONTRACT_FIELDS = {
     "verdict",

@@ -11,11 +11,11 @@ import pytest
 from cdprhost.gcode.items import MoveChunk
 from cdprhost.job.runner import PrintJob, PrintResult
 from cdprhost.kinematics import MachineModel
-from cdprhost.link import open_embedded
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.program import read_items
 from cdprhost.motion.segments import SegmentBatch
 from cdprhost.profile import load_profile
+from cdprhost.sim.embedded import open_embedded
 
 
 @dataclass

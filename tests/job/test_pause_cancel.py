@@ -6,8 +6,8 @@ import threading
 
 from cdprhost.job.runner import PrintJob
 from cdprhost.job.state import JobState, StateChanged
-from cdprhost.link import open_embedded
 from cdprhost.profile import load_profile
+from cdprhost.sim.embedded import open_embedded
 
 
 def _part(tmp_path, layers=6):

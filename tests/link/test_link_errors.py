@@ -17,9 +17,9 @@ from cdprhost.link import (
     PortNotFound,
     PortVanished,
     ProtocolMismatch,
-    open_embedded,
     open_link,
 )
+from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.pty_server import PtyServer
 from firmware_protocol.streams import demo_stream

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from cdprhost.link import DeviceReset, DeviceSilent, open_embedded
+from cdprhost.link import DeviceReset, DeviceSilent
+from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.streams import demo_stream
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cdprhost.link import open_embedded
+from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.streams import demo_stream, expected_record
 
 

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import firmware_protocol.messages as M
-from cdprhost.link import DeviceFault, DeviceStatus, open_embedded
+from cdprhost.link import DeviceFault, DeviceStatus
 from cdprhost.link.events import DeviceEvent
+from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.messages import ErrorCode
 from firmware_protocol.segments import RAMP_TO_REST, SegmentBatch

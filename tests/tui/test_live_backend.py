@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 from textual.widgets import DataTable, Input
 
-from cdprhost.calibration.simulate import commanded_path
-from cdprhost.calibration.synthetic import write_synthetic_session
-from cdprhost.diagnosis.scenarios import hidden_truth, measurement_tour, session_times
+from cdprhost.calibration.commanding import commanded_path
 from cdprhost.diagnosis.workflow import FAST
 from cdprhost.effects.base import MotionContext
 from cdprhost.profile import save_profile
+from cdprhost.sim.scenarios import hidden_truth, measurement_tour, session_times
+from cdprhost.sim.synthetic_session import write_synthetic_session
+from cdprhost.sim.virtual_mocap import make_observer
 from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.control.live_diagnosis import diagnosis_view, parameter_rows
-from firmware_protocol.device.virtual_mocap import make_observer
 
 from .conftest import make_app, shown, wait_for
 

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -13,6 +11,7 @@ from cdprhost.calibration.identification import calibrated_profile, identify_ses
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
+from cdprhost.jsonsafe import dumps
 from cdprhost.profile import save_profile
 
 
@@ -157,20 +156,9 @@ def _non_negative(text: str) -> int:
     return n
 
 
-def _finite(obj):
-    """JSON has no NaN/inf: write null instead."""
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def write_json(path: str | None, data: dict) -> None:
     if path:
-        write_text_atomic(path, json.dumps(_finite(data), indent=2, allow_nan=False) + "\n")
+        write_text_atomic(path, dumps(data, indent=2) + "\n")
 
 
 def run_plan(args: argparse.Namespace) -> int:
@@ -243,7 +231,7 @@ class PromptTakes:
 
 def _mocap_for(args: argparse.Namespace, session: Path):
     from cdprhost.calibration.session import load_session_config
-    from firmware_protocol.device.virtual_mocap import mocap_config
+    from cdprhost.sim.virtual_mocap import mocap_config
 
     if (session / "session.toml").is_file():
         return None  # resuming: the folder's own configuration
@@ -261,8 +249,10 @@ def run_wizard(args: argparse.Namespace) -> int:
     import datetime as dt
 
     from cdprhost.calibration import wizard
-    from cdprhost.link import open_embedded, open_link
-    from firmware_protocol.device.virtual_mocap import make_observer
+    from cdprhost.link import open_link
+    from cdprhost.machine import Machine
+    from cdprhost.sim.embedded import open_embedded
+    from cdprhost.sim.virtual_mocap import make_observer
 
     profile, model = load_model(args.profile)
     if args.port and (args.sim_truth or args.sim_mocap_dir):
@@ -290,7 +280,7 @@ def run_wizard(args: argparse.Namespace) -> int:
         if observer is not None:
             observer.attach_record(link.device.record)
     try:
-        device = wizard.LinkDevice(link, profile, model, feed_mm_s=args.feed, settle_s=args.settle)
+        device = Machine(link, profile, model, feed_mm_s=args.feed, settle_s=args.settle)
         options = wizard.WizardOptions(
             n_poses=args.poses,
             n_check=args.check_poses,

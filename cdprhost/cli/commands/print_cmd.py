@@ -61,7 +61,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _link_factory(args: argparse.Namespace, profile):
-    from cdprhost.link import open_embedded, open_link
+    from cdprhost.link import open_link
+    from cdprhost.sim.embedded import open_embedded
 
     baud = args.baud or profile.serial.baud
     if args.port:

@@ -7,12 +7,12 @@ import signal
 import sys
 
 from cdprhost.errors import InputError
+from cdprhost.sim.virtual_mocap import make_observer
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec, FaultSpecError
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.pty_server import PtyServer
 from firmware_protocol.device.record import write_record
-from firmware_protocol.device.virtual_mocap import make_observer
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -41,10 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from cdprhost.sim.virtual_mocap import make_observer
     from cdprhost.tui.app import CdprApp
     from cdprhost.tui.control.backend import EMBEDDED
     from cdprhost.tui.control.live import LiveBackend
-    from firmware_protocol.device.virtual_mocap import make_observer
 
     if (args.sim_truth is None) != (args.sim_mocap_dir is None):
         raise InputError(

@@ -15,6 +15,7 @@ import numpy as np
 from cdprhost.errors import CdprError
 from cdprhost.job.state import LinkHealth
 from cdprhost.kinematics import MachineModel
+from cdprhost.machine import Machine, NotHomed
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, EventSink, JobHandle
 from cdprhost.tui.control.views import (
@@ -25,9 +26,7 @@ from cdprhost.tui.control.views import (
     Violation,
 )
 
-HOTEND, BED = 0, 1
 ALL_MODULES = 0b111
-ALL_AXES = 0b1111
 JOG_SPEED_MM_S = 40.0
 
 
@@ -68,7 +67,7 @@ def preflight_view(report: Any, path: str) -> PreflightView:
 
 
 class LiveBackend:
-    """``sim_options`` go to :func:`cdprhost.link.open_embedded` (faults, observer, config)."""
+    """``sim_options`` go to :func:`cdprhost.sim.embedded.open_embedded` (faults, observer, config)."""
 
     def __init__(
         self,
@@ -118,7 +117,8 @@ class LiveBackend:
         return choices
 
     def connect(self, port: str, baud: int) -> tuple[tuple[str, str], ...]:
-        from cdprhost.link import open_embedded, open_link
+        from cdprhost.link import open_link
+        from cdprhost.sim.embedded import open_embedded
 
         self.disconnect()
         if port == EMBEDDED:
@@ -216,64 +216,30 @@ class LiveBackend:
         return link
 
     # ----------------------------------------------------------------- jog
-    def _wait(self, seconds: float) -> None:
-        self.link.wait_idle(timeout=seconds)
+    @property
+    def machine(self) -> Machine:
+        return Machine(self.link, self.profile, self.model, feed_mm_s=JOG_SPEED_MM_S)
 
     def move_to(
         self, target: tuple[float, float, float], speed_mm_s: float = JOG_SPEED_MM_S
     ) -> DeviceStatus:
         """Plan and execute a straight move to ``target`` (machine frame); requires homing."""
-        from cdprhost.tui.control.moves import straight_move
-        from firmware_protocol.messages import Enable
-
-        link = self.link
-        status = self._status_view(link.request_status())
-        if not status.homed:
-            raise CdprError("the modules are not homed: home first (h)")
-        batch, duration = straight_move(
-            self.profile,
-            self.model,
-            status.steps,
-            target,
-            feedrate_mm_s=speed_mm_s,
-            clock_hz=link.identity.clock_hz,
-        )
-        link.send(Enable(ALL_AXES))
-        link.queue_segments(batch, timeout=duration + 10.0)
-        self._wait(duration + 10.0)
-        return self._status_view(link.request_status())
+        try:
+            return self._status_view(self.machine.move_to(target, feed_mm_s=speed_mm_s))
+        except NotHomed:
+            raise CdprError("the modules are not homed: home first (h)") from None
 
     def jog_to(self, target: tuple[float, float, float]) -> DeviceStatus:
         return self.move_to(target)
 
     def home(self) -> DeviceStatus:
-        from firmware_protocol.messages import Home
-
-        link = self.link
-        home_steps = self.model.steps(np.asarray(self.profile.drive.home_mm, dtype=float)[None, :])[
-            0
-        ]
-        link.send(Home(ALL_MODULES, tuple(int(v) for v in home_steps)))
-        self._wait(180.0)
-        return self._status_view(link.request_status())
+        return self._status_view(self.machine.home())
 
     def motors_off(self) -> DeviceStatus:
-        from firmware_protocol.messages import Enable
-
-        link = self.link
-        link.send(Enable(0))
-        self._wait(10.0)
-        return self._status_view(link.request_status())
+        return self._status_view(self.machine.motors_off())
 
     def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatus:
-        from firmware_protocol.messages import SetHeater
-
-        link = self.link
-        link.send(
-            SetHeater(HOTEND, int(round(hotend_c * 10))), SetHeater(BED, int(round(bed_c * 10)))
-        )
-        self._wait(10.0)
-        return self._status_view(link.request_status())
+        return self._status_view(self.machine.set_heaters(hotend_c, bed_c))
 
     # ------------------------------------------------------------ diagnose
     def diagnose(self, session_dir: str) -> DiagnosisView:

@@ -118,15 +118,16 @@ class LiveCalibration:
 
     # ---------------------------------------------------------------- steps
     def plan(self, n_fit: int, n_check: int, session_dir: str | None) -> CalibrationView:
-        from cdprhost.calibration.wizard import CalibrationWizard, LinkDevice, WizardOptions
+        from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
+        from cdprhost.machine import Machine
 
         b = self.backend
         mocap = None
         if b.sim_options.get("observer") is not None:
-            from firmware_protocol.device.virtual_mocap import mocap_config
+            from cdprhost.sim.virtual_mocap import mocap_config
 
             mocap = mocap_config(b.profile_name).mocap
-        device = LinkDevice(b.link, b.profile, b.model)
+        device = Machine(b.link, b.profile, b.model, settle_s=0.5)
         self.wizard = CalibrationWizard(
             session_dir or DEFAULT_SESSION,
             b.profile,

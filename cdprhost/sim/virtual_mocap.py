@@ -1,4 +1,4 @@
-"""Virtual motion capture for the simulated device (``--truth PROFILE --mocap-dir DIR``).
+"""Virtual motion capture beside the simulated device (``--truth PROFILE --mocap-dir DIR``).
 
 The simulated device calls ``on_settled(steps, device_time_s)`` whenever motion
 has stopped and the queue has stayed empty for its settle time
@@ -8,7 +8,7 @@ kinematics with its effects: backlash needs each module's last direction of
 motion, drift the time) and writes a motion-capture take of that point into the
 mocap folder, an OptiTrack Motive CSV (in metres) by default, with the noise of a
 real system. Takes use the synthetic session layout's markers
-(:mod:`cdprhost.calibration.synthetic`); :func:`mocap_config` is the matching
+(:mod:`cdprhost.sim.synthetic_session`); :func:`mocap_config` is the matching
 ``[mocap]`` configuration. ``make_observer(None, None)`` is None (no observer).
 """
 
@@ -21,16 +21,16 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.readers import EXTENSIONS
-from cdprhost.calibration.synthetic import (
+from cdprhost.effects.base import MotionContext
+from cdprhost.errors import InputError
+from cdprhost.kinematics import MachineModel
+from cdprhost.profile import load_profile
+from cdprhost.sim.synthetic_session import (
     DEFAULT_BASE_MARKERS,
     DEFAULT_EFFECTOR_MARKERS,
     synthesize_take,
     synthetic_config,
 )
-from cdprhost.effects.base import MotionContext
-from cdprhost.errors import InputError
-from cdprhost.kinematics import MachineModel
-from cdprhost.profile import load_profile
 
 
 class VirtualMocap:

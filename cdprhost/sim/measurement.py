@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from cdprhost.calibration.commanding import commanded_path
 from cdprhost.calibration.fitting import Observations
-from cdprhost.effects.backlash import path_directions
 from cdprhost.effects.base import MotionContext
 from cdprhost.kinematics.geometry import CableGeometry
 from cdprhost.kinematics.machine import MachineModel
@@ -23,20 +23,6 @@ def perturbed_geometry(
 ) -> CableGeometry:
     """A true geometry within +-amplitude of the nominal one in each of the 12 parameters."""
     return CableGeometry.from_q(nominal.q + rng.uniform(-amplitude_mm, amplitude_mm, 12))
-
-
-def commanded_path(
-    nominal: MachineModel, poses: np.ndarray, start_sliders: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Slider targets for poses visited in order, and each module's approach direction."""
-    s_cmd = nominal.ik(poses)
-    start = (
-        np.zeros((1, 3))
-        if start_sliders is None
-        else np.asarray(start_sliders, float).reshape(1, 3)
-    )
-    dirs = path_directions(np.vstack([start, s_cmd]))[1:]
-    return s_cmd, dirs
 
 
 def simulate_observations(
@@ -68,17 +54,3 @@ def achieved_points(
     (through integer steps, as on the real machine)."""
     steps = commanding.steps(commanding.ik(targets, path=True))
     return truth.fk(commanding.sliders_from_steps(steps))
-
-
-def validation_grid(
-    model: MachineModel,
-    heights: tuple[float, ...] = (120.0, 170.0, 220.0, 270.0, 320.0),
-    spacing_mm: float = 15.0,
-) -> np.ndarray:
-    """Points of the build volume (inside every workspace rule) on a grid at several heights."""
-    side = model.limits.build_side
-    xs = np.arange(-side / 2, side / 2 + 1e-9, spacing_mm)
-    ys = np.arange(-side / np.sqrt(3) / 2, side / np.sqrt(3) + 1e-9, spacing_mm)
-    gx, gy, gz = np.meshgrid(xs, ys, np.asarray(heights, float), indexing="ij")
-    pts = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
-    return pts[model.check(pts).ok]

@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 from cdprhost.calibration.fitting import Observations
-from cdprhost.calibration.simulate import perturbed_geometry, simulate_observations
 from cdprhost.effects.base import Effect
 from cdprhost.effects.registry import CATALOGUE, EffectChain
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.sim.measurement import perturbed_geometry, simulate_observations
 
 MAGNITUDES: dict[str, tuple[float, float]] = {
     "cable_elasticity": (15000.0, 25000.0),  # EA, N

@@ -1,0 +1,50 @@
+"""Logging set-up for the shells: stderr at the chosen verbosity, and a log file beside a
+job's JSON-lines log. Library modules only ever call ``logging.getLogger(__name__)``."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import sys
+
+FORMAT = "%(asctime)s %(levelname)s %(name)s: %(message)s"
+LEVELS = (logging.WARNING, logging.INFO, logging.DEBUG)
+
+
+def configure_logging(verbosity: int = 0) -> None:
+    """Warnings and errors on stderr; ``-v`` adds info, ``-vv`` debug."""
+    root = logging.getLogger("cdprhost")
+    level = LEVELS[max(0, min(verbosity, len(LEVELS) - 1))]
+    root.setLevel(min(level, logging.INFO))  # the job's log file always gets info
+    if not any(getattr(h, "_cdprhost_stderr", False) for h in root.handlers):
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("cdprhost: %(levelname)s %(name)s: %(message)s"))
+        handler._cdprhost_stderr = True  # type: ignore[attr-defined]
+        root.addHandler(handler)
+    for h in root.handlers:
+        if getattr(h, "_cdprhost_stderr", False):
+            h.setLevel(level)
+
+
+def attach_log_file(path: str | os.PathLike[str]) -> logging.Handler | None:
+    """Also log (info and up) to ``path``; None, with a warning, when it cannot be opened.
+
+    A log file is a convenience: failing to open one never stops a command."""
+    try:
+        handler = logging.FileHandler(path, encoding="utf-8", delay=False)
+    except OSError as exc:
+        logging.getLogger(__name__).warning("no log file %s: %s", path, exc.strerror or exc)
+        return None
+    handler.setLevel(logging.INFO)
+    handler.setFormatter(logging.Formatter(FORMAT))
+    logging.getLogger("cdprhost").addHandler(handler)
+    return handler
+
+
+def detach_log_file(handler: logging.Handler | None) -> None:
+    if handler is None:
+        return
+    logging.getLogger("cdprhost").removeHandler(handler)
+    with contextlib.suppress(OSError):  # a full disk on the last flush: the job log reports it
+        handler.close()

@@ -1,0 +1,6 @@
+"""Operations on a connected machine, used by the print job, the calibration wizard, the CLI
+and the TUI alike (one way to do each): :class:`Machine` over a handshaken link."""
+
+from cdprhost.machine.operations import Machine, MoveResult, NotHomed
+
+__all__ = ["Machine", "MoveResult", "NotHomed"]

@@ -1,0 +1,76 @@
+"""Firmware messages for machine commands (firmware_protocol/PROTOCOL.md): the one place
+that knows how homing, enabling and heater control are spelled on the wire."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from cdprhost.gcode import items as g
+from cdprhost.kinematics.machine import MachineModel
+from firmware_protocol import messages as m
+
+HEATER_IDS = {"hotend": m.HOTEND, "bed": m.BED}
+ALL_AXES = 0b1111
+ALL_MODULES = 0b111
+
+
+def enable_all() -> m.Enable:
+    return m.Enable(ALL_AXES)
+
+
+def motors_off() -> m.Enable:
+    return m.Enable(0)
+
+
+def home_message(model: MachineModel, home_mm: Sequence[float]) -> m.Home:
+    n1, n2, n3 = (int(v) for v in model.steps(np.asarray(home_mm, dtype=float).reshape(1, 3))[0])
+    return m.Home(mask=ALL_MODULES, positions=(n1, n2, n3))
+
+
+def home_commands(model: MachineModel, home_mm: Sequence[float]) -> list[m.Message]:
+    """Homing needs the drivers on: enable every axis, then home the three modules."""
+    return [enable_all(), home_message(model, home_mm)]
+
+
+def heater_messages(
+    hotend_c: float | None, bed_c: float | None, *, wait: bool = False
+) -> list[m.Message]:
+    """Targets in degrees C (None: leave that heater alone); ``wait`` adds a queue hold for
+    each heater set above 0."""
+    out: list[m.Message] = []
+    for heater, target in ((m.HOTEND, hotend_c), (m.BED, bed_c)):
+        if target is None:
+            continue
+        out.append(m.SetHeater(heater, int(round(target * 10))))
+        if wait and target > 0:
+            out.append(m.WaitHeater(heater))
+    return out
+
+
+def heaters_off() -> list[m.Message]:
+    return heater_messages(0.0, 0.0)
+
+
+def device_messages(
+    item: Any, *, model: MachineModel, home_mm: Any, clock_hz: int
+) -> list[m.Message]:
+    """The queued messages that carry out one program command (may be none)."""
+    if isinstance(item, g.SetTemperature):
+        heater = HEATER_IDS[item.heater]
+        out: list[m.Message] = [m.SetHeater(heater, int(round(item.target_c * 10)))]
+        if item.wait and item.target_c > 0:
+            out.append(m.WaitHeater(heater))
+        return out
+    if isinstance(item, g.Fan):
+        return [m.SetFan(item.index, int(round(max(0.0, min(1.0, item.speed)) * 255)))]
+    if isinstance(item, g.Dwell):
+        ticks = int(round(item.seconds * clock_hz))
+        return [m.Dwell(ticks)] if ticks > 0 else []
+    if isinstance(item, g.Home):
+        return home_commands(model, home_mm)
+    if isinstance(item, g.MotorsOff):
+        return [motors_off()]
+    return []

@@ -1,0 +1,168 @@
+"""Operations on a connected machine: the one way to home, enable, heat, move, park and stop.
+
+The print job, the calibration wizard, the CLI and the TUI all drive the device through a
+:class:`Machine`. Every move starts from the device's own absolute step counters (read
+back first), never from a position the host assumes, and keeps the extruder where it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdprhost.errors import CdprError
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.link.events import DeviceStatus
+from cdprhost.link.host_link import HostLink
+from cdprhost.machine.commands import enable_all, heater_messages, home_commands, motors_off
+from cdprhost.motion.direct import direct_path, state_at_steps
+from cdprhost.profile.models import MachineProfile
+
+ALL_MODULES = 0b111
+HOMING_TIMEOUT_S = 180.0
+COMMAND_TIMEOUT_S = 10.0
+
+
+class NotHomed(CdprError):
+    """A move was asked of modules whose position is unknown."""
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """Where a move left the modules (absolute steps) and the device clock when it settled."""
+
+    steps: np.ndarray
+    device_time_s: float
+
+
+class Machine:
+    """A handshaken link plus the machine it drives (profile and kinematic model)."""
+
+    def __init__(
+        self,
+        link: HostLink,
+        profile: MachineProfile,
+        model: MachineModel | None = None,
+        *,
+        feed_mm_s: float = 40.0,
+        settle_s: float = 0.0,
+    ):
+        self.link = link
+        self.profile = profile
+        self.model = model or MachineModel.from_profile(profile)
+        self.feed_mm_s = float(feed_mm_s)
+        self.settle_s = float(settle_s)
+
+    # ------------------------------------------------------------------ state
+    @property
+    def clock_hz(self) -> int:
+        identity = self.link.identity
+        if identity is None:
+            raise CdprError("not connected: the link has no session")
+        return int(identity.clock_hz)
+
+    def status(self, timeout_s: float | None = None) -> DeviceStatus:
+        """The device's status, asked for now."""
+        return self.link.request_status(timeout=timeout_s)
+
+    def homed(self) -> bool:
+        return self.status().homed_mask & ALL_MODULES == ALL_MODULES
+
+    # ---------------------------------------------------------------- drivers
+    def enable(self) -> DeviceStatus:
+        self.link.send(enable_all())
+        self.link.wait_idle(COMMAND_TIMEOUT_S)
+        return self.status()
+
+    def motors_off(self) -> DeviceStatus:
+        self.link.send(motors_off())
+        self.link.wait_idle(COMMAND_TIMEOUT_S)
+        return self.status()
+
+    def home(self, timeout_s: float = HOMING_TIMEOUT_S) -> DeviceStatus:
+        """Enable every driver and drive the three modules to their endstops (docs/homing.md)."""
+        self.link.send(*home_commands(self.model, self.profile.drive.home_mm))
+        self.link.wait_idle(timeout_s)
+        return self.status()
+
+    # ---------------------------------------------------------------- heaters
+    def set_heaters(
+        self, hotend_c: float | None = None, bed_c: float | None = None, *, wait: bool = False
+    ) -> DeviceStatus:
+        """Set heater targets (None leaves a heater as it is; 0 switches it off); ``wait``
+        holds the device's queue until each target set above 0 is reached."""
+        self.link.send(*heater_messages(hotend_c, bed_c, wait=wait))
+        if not wait:
+            self.link.wait_idle(COMMAND_TIMEOUT_S)
+        return self.status()
+
+    def heaters_off(self, timeout_s: float | None = None) -> None:
+        self.link.send(*heater_messages(0.0, 0.0), timeout=timeout_s)
+
+    # ----------------------------------------------------------------- motion
+    def move_through(
+        self,
+        points: np.ndarray,
+        *,
+        feed_mm_s: float | None = None,
+        home_if_needed: bool = False,
+        timeout_s: float | None = None,
+    ) -> MoveResult:
+        """Straight moves through ``points`` (machine frame, in order), planned like a print
+        (limits, ramps, ends at rest); returns when the device has executed them and waited
+        ``settle_s``."""
+        st = self.status()
+        if st.homed_mask & ALL_MODULES != ALL_MODULES:
+            if not home_if_needed:
+                raise NotHomed("the modules are not homed: home first")
+            st = self.home()
+        wire, seconds, _ = direct_path(
+            self.profile,
+            self.model,
+            state_at_steps(self.model, st.steps),
+            points,
+            feedrate_mm_s=self.feed_mm_s if feed_mm_s is None else float(feed_mm_s),
+            clock_hz=self.clock_hz,
+        )
+        limit = timeout_s if timeout_s is not None else seconds + 60.0
+        if len(wire):
+            self.link.send(enable_all())
+            self.link.queue_segments(wire, timeout=limit)
+        self.link.wait_idle(limit)
+        if self.settle_s > 0:
+            self.link.poll(self.settle_s)  # let it come to rest
+        after = self.status()
+        return MoveResult(np.asarray(after.steps[:3], dtype=np.int64), float(self.link.now()))
+
+    def move_to(
+        self, target: tuple[float, float, float], *, feed_mm_s: float | None = None
+    ) -> DeviceStatus:
+        """One straight move to ``target`` (machine frame); the modules must be homed."""
+        self.move_through(np.asarray(target, dtype=float).reshape(1, 3), feed_mm_s=feed_mm_s)
+        return self.status()
+
+    def park(self, *, lift_mm: float = 10.0) -> DeviceStatus:
+        """Lift the effector straight up by ``lift_mm`` (capped at the build volume's top)."""
+        st = self.status()
+        if st.homed_mask & ALL_MODULES != ALL_MODULES:
+            return st
+        here = self.model.fk(self.model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+        if not np.all(np.isfinite(here)):
+            return st
+        top = self.profile.build_volume.z_max_mm
+        target = (float(here[0]), float(here[1]), float(min(here[2] + lift_mm, top)))
+        if target[2] <= here[2]:
+            return st
+        return self.move_to(target)
+
+    def emergency_stop(self, timeout_s: float = 1.0) -> bool:
+        """Stop now, bypassing the queue: motion, heaters and motors off on the device."""
+        return self.link.emergency_stop(timeout=timeout_s)
+
+    # ------------------------------------------- the wizard's device interface
+    def visit(self, points: np.ndarray) -> tuple[np.ndarray, float]:
+        """:class:`cdprhost.calibration.wizard.WizardDevice`: move through ``points``, homing
+        first when needed; the settled module steps and the device time."""
+        moved = self.move_through(points, home_if_needed=True)
+        return moved.steps, moved.device_time_s

@@ -1,0 +1,134 @@
+"""The layer contract: every import points down (docs/architecture.md).
+
+Read from the source (every ``import``, including those inside functions), so a lazy
+import cannot hide an upward arrow. A package may import its own modules and anything in
+a lower layer; packages in the same layer may not import each other.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# Lowest first. One tuple per layer; packages within a layer are independent.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("firmware_protocol",),
+    ("firmware_protocol.device",),
+    ("cdprhost",),  # the package itself: its version, nothing else
+    ("cdprhost.errors", "cdprhost.jsonsafe"),
+    ("cdprhost.fileio", "cdprhost.logs"),
+    ("cdprhost.effects",),
+    ("cdprhost.profile",),
+    ("cdprhost.kinematics", "cdprhost.gcode"),
+    ("cdprhost.motion",),
+    ("cdprhost.preflight", "cdprhost.calibration"),
+    ("cdprhost.diagnosis",),
+    ("cdprhost.link",),
+    ("cdprhost.machine", "cdprhost.sim"),
+    ("cdprhost.job",),
+    ("cdprhost.tui",),
+    ("cdprhost.cli",),  # `cdprhost tui` starts the terminal UI
+    ("cdprhost.__main__",),
+)
+RANK = {name: rank for rank, layer in enumerate(LAYERS) for name in layer}
+CORE = {
+    "cdprhost.effects",
+    "cdprhost.profile",
+    "cdprhost.kinematics",
+    "cdprhost.gcode",
+    "cdprhost.motion",
+    "cdprhost.preflight",
+    "cdprhost.calibration",
+    "cdprhost.diagnosis",
+}
+
+
+def unit(module: str) -> str | None:
+    """The contract unit a dotted module belongs to (the longest listed prefix)."""
+    parts = module.split(".")
+    for n in range(len(parts), 0, -1):
+        name = ".".join(parts[:n])
+        if name in RANK:
+            return name
+    return None
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imports_of(path: Path) -> list[tuple[int, str]]:
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.lineno, node.module))
+        elif isinstance(node, ast.Import):
+            out.extend((node.lineno, a.name) for a in node.names)
+    return out
+
+
+def source_files() -> list[Path]:
+    files = [
+        *ROOT.joinpath("cdprhost").rglob("*.py"),
+        *ROOT.joinpath("firmware_protocol").rglob("*.py"),
+    ]
+    return sorted(files)
+
+
+def arrows() -> list[tuple[str, str, str]]:
+    """(file:line, from unit, to unit) for every import between two contract units."""
+    out = []
+    for path in source_files():
+        src = unit(module_name(path))
+        assert src is not None, f"{path} belongs to no layer: add its package to LAYERS"
+        for line, target in imports_of(path):
+            dst = unit(target)
+            if dst is not None and dst != src:
+                out.append((f"{path.relative_to(ROOT)}:{line}", src, dst))
+    return out
+
+
+def test_every_package_has_a_layer():
+    for path in source_files():
+        assert unit(module_name(path)) is not None, path
+
+
+def test_imports_point_down():
+    upward = [
+        f"{where}: {src} imports {dst}" for where, src, dst in arrows() if RANK[dst] >= RANK[src]
+    ]
+    assert not upward, "imports that do not point down:\n" + "\n".join(upward)
+
+
+def test_firmware_protocol_stands_alone():
+    bad = [
+        f"{where}: {src} imports {dst}"
+        for where, src, dst in arrows()
+        if src.startswith("firmware_protocol") and not dst.startswith("firmware_protocol")
+    ]
+    assert not bad, "\n".join(bad)
+
+
+def test_core_reaches_no_device_model():
+    """The pure core never touches the simulated device (it is part of the simulated world)."""
+    bad = [
+        f"{where}: {src} imports {dst}"
+        for where, src, dst in arrows()
+        if src in CORE and dst == "firmware_protocol.device"
+    ]
+    assert not bad, "\n".join(bad)
+
+
+def test_contract_catches_an_upward_import(tmp_path):
+    """The checker itself: a lazy upward import inside a function is seen."""
+    probe = tmp_path / "probe.py"
+    probe.write_text("def f():\n    from cdprhost.job.runner import PrintJob\n")
+    ((line, target),) = imports_of(probe)
+    assert line == 2
+    assert RANK[unit(target)] > RANK["cdprhost.kinematics"]
