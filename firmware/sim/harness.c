@@ -31,6 +31,7 @@
 #include <sim_irq.h>
 #include <sim_cycle_timers.h>
 #include <avr_adc.h>
+#include <avr_extint.h>
 #include <avr_ioport.h>
 #include <avr_uart.h>
 
@@ -38,8 +39,8 @@
 #include "thermal.h"
 
 #define F_CPU 16000000ULL
-#define TICK_CYCLES 1600ULL
-#define CLOCK_HZ 10000.0
+#define CLOCK_HZ 100000ULL /* the protocol clock: record times are in its units */
+#define UNIT_CYCLES (F_CPU / CLOCK_HZ)
 #define POLL_US 500
 
 static avr_t *avr;
@@ -64,7 +65,7 @@ static int64_t offset[4];      /* logical = phys + offset */
 static int64_t boot_physical = -8000;
 static int endstop_level[3] = {-1, -1, -1};
 static avr_irq_t *endstop_irq[3];
-static uint64_t motion_cycles, motion_since;
+static uint64_t motion_units, motion_since; /* whole motion periods, in clock units */
 static int motion_level;
 static int abort_next;
 static FILE *record;
@@ -82,7 +83,8 @@ static unsigned repairs, unrepaired;
 static int suspect[2];
 
 static uint32_t pc_hist[65536];
-static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count;
+static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count, isr_hist[64];
+static uint16_t isr_sp;
 static struct thermal thermal[2];
 static int heater_level[2];
 static double heater_fail_after = -1.0;
@@ -138,13 +140,23 @@ static void xoff_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     xon = 0;
 }
 
+/* The switch sits at physical 0 and reads high (pressed) from there on. It is
+ * an external driver of the pin: simavr's "external pull" for that bit, so
+ * that the firmware's pull-up and every later write to the same PORT register
+ * do not override it (simavr re-asserts a pulled-up input high on each write). */
 static void set_endstop(int k)
 {
-    int level = (phys[k] + boot_physical) >= 0; /* the switch sits at physical 0 */
-    if (level != endstop_level[k]) {
-        endstop_level[k] = level;
-        avr_raise_irq(endstop_irq[k], level);
-    }
+    int level = (phys[k] + boot_physical) >= 0;
+    if (level == endstop_level[k])
+        return;
+    endstop_level[k] = level;
+    static uint8_t mask[256], value[256];
+    uint8_t port = (uint8_t)ENDSTOP_PINS[k].port, bit = (uint8_t)(1u << ENDSTOP_PINS[k].bit);
+    mask[port] |= bit;
+    value[port] = (uint8_t)(level ? value[port] | bit : value[port] & ~bit);
+    avr_ioport_external_t ext = {.name = (char)port, .mask = mask[port], .value = value[port]};
+    avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(port), &ext);
+    avr_raise_irq(endstop_irq[k], (uint32_t)level);
 }
 
 static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -181,9 +193,17 @@ static void dir_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     }
 }
 
+/* The motion clock: the time MARK_MOTION was high, in clock units. Each high
+ * period is rounded to whole units on its own (its two edges leave the
+ * interrupt with about the same latency), so latency never accumulates. */
+static uint64_t units_since(uint64_t since)
+{
+    return (avr->cycle - since + UNIT_CYCLES / 2) / UNIT_CYCLES;
+}
+
 static uint64_t motion_now(void)
 {
-    return motion_cycles + (motion_level ? avr->cycle - motion_since : 0);
+    return motion_units + (motion_level ? units_since(motion_since) : 0);
 }
 
 static void motion_cb(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -192,7 +212,7 @@ static void motion_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     if ((int)value == motion_level)
         return;
     if (motion_level)
-        motion_cycles += avr->cycle - motion_since;
+        motion_units += units_since(motion_since);
     else
         motion_since = avr->cycle;
     motion_level = (int)value;
@@ -215,12 +235,12 @@ static void seg_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     level = value;
     if (!record)
         return;
-    uint64_t ticks = (motion_now() + TICK_CYCLES / 2) / TICK_CYCLES;
+    uint64_t ticks = motion_now();
     uint32_t seq = mailbox_addr ? mailbox_u32(4) : (uint32_t)segments_recorded + 1;
     fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
             (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
             (long long)(phys[2] + offset[2]), (long long)(phys[3] + offset[3]),
-            (double)ticks / CLOCK_HZ);
+            (double)ticks / (double)CLOCK_HZ);
     if (abort_next)
         fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + 24]));
     fputs("}\n", record);
@@ -390,11 +410,6 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         }
     }
     poll_pty();
-    /* drive the switches again: enabling the pull-ups makes simavr read them high */
-    for (int k = 0; k < 3; k++) {
-        endstop_level[k] = -1;
-        set_endstop(k);
-    }
     check_lost_interrupts();
     update_thermal();
     pace();
@@ -415,17 +430,19 @@ static void write_stats(void)
     unsigned isr_max = mailbox_addr ? (avr->data[mailbox_addr + 26] | avr->data[mailbox_addr + 27] << 8) : 0;
     unsigned lost = mailbox_addr ? (avr->data[mailbox_addr + 28] | avr->data[mailbox_addr + 29] << 8) : 0;
     unsigned loop_us = mailbox_addr ? (avr->data[mailbox_addr + 30] | avr->data[mailbox_addr + 31] << 8) : 0;
+    unsigned stalls = mailbox_addr ? (avr->data[mailbox_addr + 38] | avr->data[mailbox_addr + 39] << 8) : 0;
+    unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
     fprintf(f,
             "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
-            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"main_loop_max_us\":%u,"
+            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"main_loop_max_us\":%u,"
             "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
-            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost,
+            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns,
             loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp);
     fclose(f);
 }
@@ -501,6 +518,12 @@ int main(int argc, char **argv)
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
     watch(HEATER_PINS[0].port, HEATER_PINS[0].bit, heater_cb, 0);
     watch(HEATER_PINS[1].port, HEATER_PINS[1].bit, heater_cb, 1);
+    /* The endstop pins are also INT3/INT5 inputs. simavr polls a low level on
+     * an INT pin every cycle (level-triggered mode, the reset default) even
+     * with the interrupt disabled, and starts another poller on every low
+     * write: that alone made the simulation run at a third of real time. */
+    for (uint8_t i = 0; i < 8; i++)
+        avr_extint_set_strict_lvl_trig(avr, i, 0);
     map_adc_channels();
     thermal_init(&thermal[0], 30.0, 300.0);
     thermal_init(&thermal[1], 90.0, 100.0);
@@ -550,17 +573,22 @@ int main(int argc, char **argv)
             prev_pc = avr->pc;
         }
         if (profile_isr) {
-            /* cycles from the step timer's vector to its RETI (nested interrupts are not used) */
+            /* cycles from the step timer's vector to its own RETI (the one executed
+             * with the stack pointer it entered with; nested interrupts included) */
+            uint16_t sp = (uint16_t)(avr->data[0x5D] | avr->data[0x5E] << 8);
             if (isr_entry && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
                 pc_hist[avr->pc]++;
-            if (avr->pc == 0x44 && !isr_entry)
+            if (avr->pc == 0x44 && !isr_entry) {
                 isr_entry = avr->cycle;
-            else if (isr_entry && avr->flash[avr->pc] == 0x18 && avr->flash[avr->pc + 1] == 0x95) {
+                isr_sp = sp;
+            } else if (isr_entry && sp == isr_sp && avr->flash[avr->pc] == 0x18 &&
+                       avr->flash[avr->pc + 1] == 0x95) {
                 uint64_t c = avr->cycle - isr_entry + 4;
                 if (c > isr_cycles_max)
                     isr_cycles_max = c;
                 isr_cycles_sum += c;
                 isr_count++;
+                isr_hist[c / 100 < 63 ? c / 100 : 63]++;
                 isr_entry = 0;
             }
         }
@@ -581,6 +609,10 @@ int main(int argc, char **argv)
                 fprintf(f, "%x %u\n", i, pc_hist[i]);
         if (f)
             fclose(f);
+        for (int i = 0; i < 64; i++)
+            if (isr_hist[i])
+                fprintf(stderr, "isr %4d-%4d cycles: %llu\n", i * 100, i * 100 + 99,
+                        (unsigned long long)isr_hist[i]);
     }
     if (getenv("CDPR_SIM_DEBUG"))
         fprintf(stderr, "cdpr-sim: pc 0x%x I=%d TIMSK1=%02x TIFR1=%02x UCSR0B=%02x out_len=%zu in_len=%zu xon=%d polls=%lu\n", avr->pc, avr->sreg[S_I], avr->data[0x6F], avr->data[0x36], avr->data[0xC1], out_len, in_len - in_pos, xon, polls);

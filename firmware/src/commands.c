@@ -162,7 +162,7 @@ static void enqueue_segment(const struct segment *s)
                      (int32_t)rate);
         return;
     }
-    motion_prepare(new_item(IT_SEG), s);
+    motion_store(new_item(IT_SEG), s);
     push_item();
 }
 
@@ -244,6 +244,7 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         if (op >= SEG_BASE) {
             segment_decode(&r, &ctx, &s);
             enqueue_segment(&s);
+            motion_prepare_ahead(); /* keep the interrupt's plans coming during long frames */
             continue;
         }
         r.pos++;

@@ -9,15 +9,28 @@
 
 #define BAUD 250000UL
 
-/* The step timer: one tick = one unit of segment and dwell durations (clock_hz). */
-#define TICK_HZ 10000UL
-#define TIMER_CYCLES_PER_TICK (F_CPU / TICK_HZ) /* 1600 */
-/* Up to this many step pulses per axis per tick, at k/6 of the tick. */
-#define MAX_STEPS_PER_TICK 6
-#define MAX_STEP_RATE (TICK_HZ * MAX_STEPS_PER_TICK) /* 60000 steps/s, any one axis */
+/* Time. Segment and dwell durations, the device clock and every timer are in
+ * units of the protocol clock: CLOCK_HZ (10 us), as in the Python device model,
+ * so the host plans the same segments for both. The step interrupt runs on its
+ * own grid of TICK_UNITS units (100 us, 10 kHz) and makes the last tick of each
+ * timed item as long as it needs to be, so
+ * every segment and dwell lasts exactly its duration. Homing ticks are
+ * HOME_TICK_UNITS long (a homing step every 25 units, 4000 steps/s). */
+#define CLOCK_HZ 100000UL
+#define UNIT_CYCLES (F_CPU / CLOCK_HZ)                  /* 160 */
+#define TICK_UNITS 10
+#define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 1600 */
+#define HOME_TICK_UNITS 5
+/* Step pulses within a tick at k * PHASE_CYCLES (12.5 us apart): a 100 us tick
+ * holds 8 of them per axis, so 80000 steps/s could be issued; the firmware
+ * advertises 60000, which leaves the rounding of the DDA room. */
+#define PHASE_CYCLES 200
+#define MAX_STEP_RATE 60000UL /* steps/s, any one axis */
 
-/* Move queue slots (power of two); see queue.h for the RAM per slot. */
-#define QUEUE_SIZE 64
+/* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */
+#define QUEUE_SIZE 128
+/* Segments prepared ahead of the step interrupt (DDA constants, 72 bytes each). */
+#define PLAN_SLOTS 8
 
 /* Device-to-host report slots (window + backlog), bytes per report. */
 #define REPORT_SLOTS 8

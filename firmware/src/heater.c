@@ -22,7 +22,7 @@ static uint16_t adc_n[2];
 static uint32_t next_control;
 
 static const uint8_t channel[2] = {HOTEND_ADC_CHANNEL, BED_ADC_CHANNEL};
-static const uint32_t watch_ticks[2] = {MS_TO_TICKS(HOTEND_WATCH_MS), MS_TO_TICKS(BED_WATCH_MS)};
+static const uint32_t watch_ticks[2] = {MS_TO_CLOCK(HOTEND_WATCH_MS), MS_TO_CLOCK(BED_WATCH_MS)};
 static const int16_t hysteresis[2] = {HOTEND_HYSTERESIS_DC, BED_HYSTERESIS_DC};
 static const int16_t cutoff[2] = {HOTEND_CUTOFF_DC, BED_CUTOFF_DC};
 /* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS */
@@ -141,7 +141,7 @@ void heater_poll(uint32_t now)
     adc_busy = 1;
     if ((int32_t)(now - next_control) < 0)
         return;
-    next_control = now + MS_TO_TICKS(HEATER_PERIOD_MS);
+    next_control = now + MS_TO_CLOCK(HEATER_PERIOD_MS);
     for (uint8_t i = 0; i < 2; i++) {
         struct heater *h = &heaters[i];
         if (adc_n[i]) {

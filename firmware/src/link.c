@@ -5,7 +5,7 @@
 #include "sched.h"
 #include "uart.h"
 
-#define T_MS(ms) ((uint32_t)(ms) * (TICK_HZ / 1000))
+#define T_MS(ms) ((uint32_t)(ms) * (CLOCK_HZ / 1000))
 #define RTO_INITIAL T_MS(250)
 #define RTO_FLOOR T_MS(20)
 #define RTO_CEILING T_MS(1000)

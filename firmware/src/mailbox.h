@@ -17,6 +17,8 @@ struct sim_mailbox {
     uint16_t main_loop_max_us;
     uint32_t segments_parsed;
     uint16_t speedup_x16; /* written by the harness: device time / link time x 16 */
+    uint16_t plan_stalls;
+    uint16_t overruns;
 };
 extern volatile struct sim_mailbox sim_mailbox;
 

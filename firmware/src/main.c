@@ -10,6 +10,7 @@
 #include "link.h"
 #include "machine.h"
 #include "mailbox.h"
+#include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
 #include "reports.h"
@@ -26,7 +27,7 @@ uint32_t link_now;
 
 void sched_update_link_time(void)
 {
-    uint32_t t = sched_ticks();
+    uint32_t t = sched_clock();
     uint16_t s = sim_mailbox.speedup_x16;
     link_now = s > 16 ? (uint32_t)(((uint64_t)t * 16u) / s) : t;
 }
@@ -45,11 +46,8 @@ static void take_interrupt_reports(uint32_t now)
         if (changed >> i & 1)
             heater_set_target(i, targets[i], now);
     if (r.homed) {
-        int32_t pos[3];
-        cli();
-        for (uint8_t k = 0; k < 3; k++)
-            pos[k] = st.pos[k];
-        sei();
+        int32_t pos[4];
+        stepper_positions(pos);
         report_event(EVT_HOMED, r.homed_item, 3, pos);
     }
     if (r.error && !mc.fault)
@@ -95,12 +93,12 @@ int main(void)
     watchdog_start();
     link_reset_session();
     sei();
-    uint32_t last = sched_ticks();
+    uint32_t last = sched_clock();
     for (;;) {
         watchdog_kick();
-        uint32_t now = sched_ticks();
+        uint32_t now = sched_clock();
         sched_update_link_time();
-        uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / TICK_HZ));
+        uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / CLOCK_HZ));
         if (loop_us > sim_mailbox.main_loop_max_us)
             sim_mailbox.main_loop_max_us = loop_us;
         last = now;
@@ -115,6 +113,7 @@ int main(void)
         }
         if (got)
             deframer_run();
+        motion_prepare_ahead();
         take_interrupt_reports(now);
         heater_poll(now);
         stepper_start_ok = session_may_start(link_now);
@@ -123,6 +122,8 @@ int main(void)
         watchdog_save(st.items_done, st.segments_done);
         sim_mailbox.isr_max_cycles = stepper_isr_max_cycles;
         sim_mailbox.lost_steps = stepper_lost_steps;
+        sim_mailbox.plan_stalls = stepper_plan_stalls;
+        sim_mailbox.overruns = stepper_overruns;
         sim_mailbox.last_error = mc.last_error;
     }
 }

@@ -1,6 +1,14 @@
-/* The move queue: items executed strictly in order by the step interrupt.
- * The main loop appends at head; the interrupt completes at tail. An item keeps
- * its slot while it executes (the protocol counts it as not free). */
+/* The move queue and the plans prepared ahead of the step interrupt.
+ *
+ * Queue: items executed strictly in order by the step interrupt. The main loop
+ * appends at head; the interrupt completes at tail. An item keeps its slot while
+ * it executes (the protocol counts it as not free). Segments are stored as
+ * decoded (duration, step counts, directions, ramp): small, so the queue holds
+ * many of them.
+ *
+ * Plans: the DDA constants of the next few segments, computed by the main loop
+ * (motion_prepare_ahead) from the queued segments in order, taken by the
+ * interrupt when it starts each segment. */
 #ifndef QUEUE_H
 #define QUEUE_H
 #include <stdint.h>
@@ -9,17 +17,15 @@
 enum { IT_SEG, IT_DWELL, IT_HOME, IT_SETPOS, IT_ENABLE, IT_HEATER, IT_FAN, IT_WAIT };
 
 #define SEGF_AT_REST 0x01 /* ends at rest (ramp 255 or no deltas) */
+#define SEGF_RAMP 0x02    /* ramp holds a code; else constant speed */
 
 struct item {
     uint8_t kind;
-    uint8_t flags; /* SEG: SEGF_*, dir bits in the high nibble (1 = negative) */
-    uint32_t ticks;
+    uint8_t flags; /* SEG: SEGF_*, dir bits in the high nibble (1 = negative); HOME: mask */
+    uint8_t ramp;
+    uint32_t ticks; /* SEG, DWELL: duration in clock units */
     union {
-        struct {
-            int32_t v0[4]; /* Q8.24 steps per tick before the first tick's acceleration */
-            int32_t a[4];  /* Q8.24 steps per tick per tick */
-            uint32_t n[4]; /* |delta| */
-        } seg;
+        uint32_t n[4];  /* SEG: |delta| per axis */
         int32_t pos[4]; /* SETPOS positions, HOME targets */
         struct {
             uint8_t id, mask;
@@ -43,5 +49,33 @@ static inline struct item *queue_slot(uint8_t index)
 {
     return &queue[index & (QUEUE_SIZE - 1)];
 }
+
+/* One axis of a prepared segment: the steps due by the end of tick i are
+ * floor(N p(i / Dt) + 1/2), kept by second-order forward differences:
+ * v += a; acc += v; steps = acc >> 24. v and a are 48-bit fixed point with 40
+ * fraction bits (lo: the low 16 fraction bits, hi: Q7.24); acc is Q8.24 and
+ * starts at 1/2; rem counts the steps not issued yet. The layout is fixed: the
+ * interrupt's assembly (stepper.c) addresses the fields by offset. */
+struct axis_plan {
+    uint16_t v_lo; /* 0 */
+    int32_t v_hi;  /* 2 */
+    uint16_t a_lo; /* 6 */
+    int32_t a_hi;  /* 8 */
+    uint32_t acc;  /* 12 */
+    uint32_t rem;  /* 16 */
+};
+
+struct plan {
+    uint8_t index;      /* the queue position this plan is for */
+    uint8_t dir;        /* axis bit set: negative */
+    uint8_t moving;     /* axis bit set: steps to make */
+    uint8_t accel;      /* some a != 0 */
+    uint8_t last_units; /* length of the last tick in clock units */
+    uint32_t ticks;     /* interrupt ticks (the last one last_units long) */
+    struct axis_plan ax[4];
+};
+
+extern struct plan plans[PLAN_SLOTS];
+extern volatile uint8_t plan_head, plan_tail; /* main loop fills at head, interrupt takes at tail */
 
 #endif

@@ -53,9 +53,8 @@ void report_status(void)
     int32_t pos[4];
     uint32_t items, segs, ticks;
     uint8_t fan, en, homed;
+    stepper_positions(pos);
     cli();
-    for (uint8_t k = 0; k < 4; k++)
-        pos[k] = st.pos[k];
     items = st.items_done;
     segs = st.segments_done;
     ticks = st.motion_ticks;
@@ -102,7 +101,7 @@ void report_ident(uint32_t nonce, uint8_t urgent)
     wr_text(&w, FIRMWARE_VERSION);
     wr_u8(&w, AXES);
     wr_uv(&w, QUEUE_SIZE);
-    wr_uv(&w, TICK_HZ);
+    wr_uv(&w, CLOCK_HZ);
     wr_uv(&w, MAX_STEP_RATE);
     wr_u8(&w, FRAME_MAX_PAYLOAD);
     wr_u8(&w, 2);

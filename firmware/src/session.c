@@ -34,7 +34,7 @@ static void announce_boot(uint32_t now)
 void session_boot_on_data(void)
 {
     uint32_t now = link_now;
-    if (!boot_sent_once || now - boot_sent_at >= MS_TO_TICKS(50))
+    if (!boot_sent_once || now - boot_sent_at >= MS_TO_CLOCK(50))
         announce_boot(now);
 }
 
@@ -63,7 +63,7 @@ uint8_t session_may_start(uint32_t now)
 {
     /* 0.25 s of real time worth of motion: device ticks scaled by the speed-up */
     uint16_t s = sim_mailbox.speedup_x16;
-    uint32_t need = MS_TO_TICKS(DEV_START_BUFFER_MS), total = 0;
+    uint32_t need = MS_TO_CLOCK(DEV_START_BUFFER_MS), total = 0;
     if (s > 16)
         need = need * s / 16;
     uint8_t tail = queue_tail, head = queue_head;
@@ -79,13 +79,13 @@ uint8_t session_may_start(uint32_t now)
     }
     if (queue_free() == 0)
         return 1;
-    return now - mc.last_enqueue_at >= MS_TO_TICKS(DEV_START_DELAY_MS);
+    return now - mc.last_enqueue_at >= MS_TO_CLOCK(DEV_START_DELAY_MS);
 }
 
 void session_poll(uint32_t now)
 {
     if (!mc.synced) {
-        if (!boot_sent_once || now - boot_sent_at >= MS_TO_TICKS(DEV_BOOT_ANNOUNCE_MS))
+        if (!boot_sent_once || now - boot_sent_at >= MS_TO_CLOCK(DEV_BOOT_ANNOUNCE_MS))
             announce_boot(now);
         return;
     }
@@ -95,14 +95,14 @@ void session_poll(uint32_t now)
     uint8_t flags = machine_flags();
     if (!flow_valid || items != flow_items || flags != flow_flags) {
         if (!flow_valid || machine_free() >= flow_free + QUEUE_SIZE / 8 ||
-            now - flow_at >= MS_TO_TICKS(DEV_FLOW_INTERVAL_MS))
+            now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS))
             link_request_ack();
     }
     /* host watchdog: a silent host while the machine is busy */
     uint8_t busy = stepper_moving() || queue_used() || heaters[0].target_dc || heaters[1].target_dc;
-    if (busy && !mc.fault && now - mc.last_frame_at >= MS_TO_TICKS(HOST_WATCHDOG_MS)) {
+    if (busy && !mc.fault && now - mc.last_frame_at >= MS_TO_CLOCK(HOST_WATCHDOG_MS)) {
         machine_fail(ERR_ESTOP, st.items_done, st.segments_done, 0xFE,
-                     (int32_t)((now - mc.last_frame_at) / (TICK_HZ / 1000)));
+                     (int32_t)((now - mc.last_frame_at) / (CLOCK_HZ / 1000)));
         heater_all_off();
         stepper_disable_all();
     }

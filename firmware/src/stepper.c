@@ -1,68 +1,85 @@
-/* Timer1 in CTC mode interrupts every tick. Work is pipelined one tick deep:
- * the interrupt first finishes what the previous tick's pulses mean for the
- * markers, then emits the step pulses computed during the previous interrupt
- * (direction first, then the first pulse of each axis; the second and third at
- * k/6 of the tick from compare B), then computes the next tick. Pulses
- * are high for at least 2 us and direction changes lead them by at least 1 us
- * (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208: 0.1 us / 20 ns). */
+/* The step interrupt: Timer1 in CTC mode, one compare match per tick.
+ *
+ * Ticks are TICK_UNITS clock units long, except the last tick of a segment or
+ * dwell, which is as long as the item needs (OCR1A is rewritten at the start of
+ * the tick whose length differs), so items start and end on exact clock units.
+ * Work is pipelined one tick deep: at a tick's start the interrupt first marks
+ * what the tick that just ended completed (segment end, positions set, abort),
+ * then sets this tick's directions and its first pulses, all computed during
+ * the previous interrupt; further pulses of the tick follow at k * PHASE_CYCLES
+ * from compare B. Then, with its own interrupt masked and the others allowed
+ * (so compare B keeps its time), it computes the next tick.
+ *
+ * Pulses are high for at least 2 us and a direction change leads the next pulse
+ * by at least 1 us (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208:
+ * 0.1 us / 20 ns); pulses of one axis are at least PHASE_CYCLES apart. */
 #include <avr/interrupt.h>
 #include <avr/io.h>
-#include <string.h>
 
 #include "board_ramps14.h"
 #include "config.h"
 #include "mailbox.h"
+#include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
 #include "sched.h"
 #include "stepper.h"
 
-volatile uint32_t sched_tick_count;
+volatile uint32_t sched_clock_count;
 volatile struct stepper_state st;
 volatile struct stepper_report stepper_report;
 volatile uint8_t stepper_start_ok, stepper_wait_ok;
 volatile uint8_t heater_duty[2], fan_duty;
 volatile uint16_t stepper_isr_max_cycles;
-volatile uint16_t stepper_lost_steps;
+volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns;
 
 #define OUT_MOTION 0x01
 #define OUT_SEG_END 0x02
 #define OUT_POS 0x04
 #define OUT_ABORT 0x08
-#define OUT_DIR 0x10
+
+#define PULSE_CYCLES 34 /* >= 2 us high */
+#define HOME_TICKS (CLOCK_HZ / ((uint32_t)DEV_HOMING_RATE * HOME_TICK_UNITS))
+_Static_assert(HOME_TICKS * DEV_HOMING_RATE * HOME_TICK_UNITS == CLOCK_HZ,
+               "a homing step must take a whole number of homing ticks");
 
 struct out {
-    uint8_t m[MAX_STEPS_PER_TICK]; /* axes stepping in phase k of the tick */
+    uint8_t n[4];   /* pulses per axis: axis k steps in phases 0..n[k]-1 */
+    uint8_t phases; /* the largest n */
+    uint8_t dir;    /* axis bit set: negative */
     uint8_t flags;
-    uint8_t dir; /* axis bit set: negative */
+    uint8_t units; /* length of the tick */
     uint32_t seq;
 };
 static struct out outs[2];
-static uint8_t which;  /* outs[which] is being emitted, the other one computed */
-#define emit (outs[which])
-#define next (outs[which ^ 1])
-static uint8_t phase;
-static uint8_t cur_dir = 0xFF;
+static struct out *emit = &outs[0]; /* the tick being emitted */
+static struct out *nx = &outs[1];   /* the tick being computed */
+static volatile uint8_t phase;
+static uint8_t cur_dir = 0xFF, ocr_units = TICK_UNITS;
 
-/* executing item: one DDA per axis */
-struct axis {
-    int32_t v, a;
-    uint32_t acc, rem;
-};
-static struct axis ax[4];
-static uint32_t t_left;
+/* pulses that fit a tick of u units (index u): the last one starts at least
+ * PHASE_CYCLES before the next tick */
+#define CAP(u) ((u) * UNIT_CYCLES < 2 * PHASE_CYCLES ? 1 : (u) * UNIT_CYCLES / PHASE_CYCLES)
+static const uint8_t phase_cap[2 * TICK_UNITS] = {
+    CAP(0), CAP(1), CAP(2), CAP(3), CAP(4), CAP(5), CAP(6), CAP(7), CAP(8), CAP(9),
+    CAP(10), CAP(11), CAP(12), CAP(13), CAP(14), CAP(15), CAP(16), CAP(17), CAP(18), CAP(19)};
+_Static_assert(2 * TICK_UNITS == 20, "phase_cap lists 20 lengths");
+
+/* the executing item */
+static struct plan *run;    /* SEG */
+static uint32_t t_left;     /* SEG, DWELL: ticks left */
+static uint8_t last_units;  /* DWELL: length of the last tick */
 static uint8_t hold;          /* ticks to wait after positions were set */
 static uint8_t abort_pending; /* a segment was abandoned: mark it */
 static uint32_t abort_seq;
-static uint8_t home_mask, home_backoff;
-static uint16_t home_acc;
+static uint8_t home_mask, home_backoff, home_div;
 static uint32_t home_steps;
 static uint8_t pwm;
 
 /* step pins of an axis mask on the X/Y port (the Z and E pins have ports of their own) */
 static const uint8_t xy_bits[4] = {0, _BV(X_STEP_BIT), _BV(Y_STEP_BIT), _BV(X_STEP_BIT) | _BV(Y_STEP_BIT)};
 
-static inline void pulse_on(uint8_t m)
+static inline __attribute__((always_inline)) void pulse_on(uint8_t m)
 {
     X_STEP_PORT |= xy_bits[m & 3];
     if (m & 4)
@@ -71,7 +88,7 @@ static inline void pulse_on(uint8_t m)
         E_STEP_PORT |= _BV(E_STEP_BIT);
 }
 
-static inline void pulse_off(void)
+static inline __attribute__((always_inline)) void pulse_off(void)
 {
     X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
     Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
@@ -125,10 +142,11 @@ void stepper_init(void)
     st.current = 0xFF;
     st.at_rest = 1;
     st.running = 1;
+    outs[0].units = outs[1].units = TICK_UNITS;
     /* Timer1: CTC on OCR1A, no prescaler */
     TCCR1A = 0;
     TCCR1B = _BV(WGM12) | _BV(CS10);
-    OCR1A = TIMER_CYCLES_PER_TICK - 1;
+    OCR1A = TICK_CYCLES - 1;
     TIMSK1 = _BV(OCIE1A);
 }
 
@@ -149,12 +167,38 @@ static void raise_error(uint8_t code, uint32_t item, uint32_t seg, uint8_t axis,
     st.running = 0;
 }
 
-/* with interrupts off */
+/* Positions while a segment runs: the start plus the steps issued so far. */
+static void seg_positions(int32_t *out)
+{
+    const struct item *it = queue_slot(queue_tail);
+    for (uint8_t k = 0; k < 4; k++) {
+        int32_t done = (int32_t)(it->u.n[k] - run->ax[k].rem);
+        out[k] = st.pos[k] + ((run->dir >> k & 1) ? -done : done);
+    }
+}
+
+void stepper_positions(int32_t *out)
+{
+    uint8_t s = SREG;
+    cli();
+    if (st.current == IT_SEG) {
+        seg_positions(out);
+    } else {
+        for (uint8_t k = 0; k < 4; k++)
+            out[k] = st.pos[k];
+    }
+    SREG = s;
+}
+
 void stepper_halt(void)
 {
     uint8_t s = SREG;
     cli();
     if (st.current == IT_SEG) {
+        int32_t pos[4];
+        seg_positions(pos);
+        for (uint8_t k = 0; k < 4; k++)
+            st.pos[k] = pos[k];
         abort_pending = 1;
         abort_seq = st.segments_done + 1;
     }
@@ -175,6 +219,7 @@ void stepper_flush(uint32_t items_received)
     cli();
     queue_tail = queue_head;
     st.items_done = items_received;
+    motion_plans_reset();
     SREG = s;
 }
 
@@ -188,41 +233,46 @@ void stepper_disable_all(void)
     SREG = s;
 }
 
+/* ---------------------------------------------------------------- the next tick */
+
 static void complete_item(void)
 {
     st.items_done++;
     queue_tail++;
 }
 
-static void set_pos_marker(void)
+static void __attribute__((noinline)) set_pos_marker(void)
 {
     for (uint8_t k = 0; k < 4; k++)
         sim_mailbox.pos[k] = st.pos[k];
-    next.flags |= OUT_POS;
+    nx->flags |= OUT_POS;
     hold = 2;
 }
 
-static void start_homing(struct item *it)
+static void start_homing(const struct item *it)
 {
     home_mask = it->flags & 7;
     home_backoff = 0;
     for (uint8_t k = 0; k < 3; k++)
         if ((home_mask >> k & 1) && endstop(k))
             home_backoff |= (uint8_t)(1 << k);
-    home_acc = TICK_HZ - DEV_HOMING_RATE; /* the first step on the first tick */
+    home_div = 0;
     home_steps = 0;
     st.enabled_mask |= home_mask;
     apply_enables(st.enabled_mask);
 }
 
-/* one homing tick; returns 1 when done */
-static uint8_t home_tick(struct item *it)
+/* One homing tick: every HOME_TICKS ticks each module still homing checks its
+ * switch and steps (away from a pressed switch until it releases, then toward
+ * it until it closes). Returns 1 when all switches closed, so homing from d
+ * steps takes d / DEV_HOMING_RATE seconds exactly, as in the Python model. */
+static uint8_t __attribute__((noinline)) home_tick(void)
 {
-    /* DEV_HOMING_RATE steps/s: step k on tick ceil(k TICK_HZ / rate) */
-    home_acc += DEV_HOMING_RATE;
-    if (home_acc < TICK_HZ)
+    if (home_div) {
+        home_div--;
         return 0;
-    home_acc -= TICK_HZ;
+    }
+    home_div = HOME_TICKS - 1;
     uint8_t stepping = 0, neg = 0;
     for (uint8_t k = 0; k < 3; k++) {
         uint8_t bit = (uint8_t)(1 << k);
@@ -230,13 +280,12 @@ static uint8_t home_tick(struct item *it)
             continue;
         uint8_t hit = endstop(k);
         if (home_backoff & bit) {
-            if (!hit)
-                home_backoff &= (uint8_t)~bit; /* released: approach again */
-            else {
+            if (hit) {
                 stepping |= bit;
                 neg |= bit;
                 continue;
             }
+            home_backoff &= (uint8_t)~bit; /* released: approach again */
         }
         if (hit)
             home_mask &= (uint8_t)~bit;
@@ -250,43 +299,46 @@ static uint8_t home_tick(struct item *it)
         st.current = 0xFF;
         return 0;
     }
-    next.dir = (uint8_t)((cur_dir & 0x8) | neg);
-    next.m[0] = stepping;
-    for (uint8_t k = 0; k < 3; k++)
-        if (stepping >> k & 1)
+    nx->dir = (uint8_t)((cur_dir & 0x8) | neg);
+    for (uint8_t k = 0; k < 3; k++) {
+        if (stepping >> k & 1) {
+            nx->n[k] = 1;
             st.pos[k] += (neg >> k & 1) ? -1 : 1;
-    (void)it;
+        }
+    }
+    nx->phases = stepping ? 1 : 0;
     return 0;
 }
 
-/* Start queue items until a timed one runs (or nothing may start). */
-static void dispatch(void)
+/* Start queue items until a timed one runs (or nothing may start); at most a
+ * few instantaneous items per tick, so a queue of them cannot stretch a tick. */
+static void __attribute__((noinline)) dispatch(void)
 {
-    while (queue_head != queue_tail && st.current == 0xFF && !hold && st.running) {
+    uint8_t budget = 4;
+    while (queue_head != queue_tail && st.current == 0xFF && !hold && st.running && budget--) {
         struct item *it = queue_slot(queue_tail);
         switch (it->kind) {
-        case IT_SEG:
+        case IT_SEG: {
             if (st.at_rest && !stepper_start_ok)
                 return;
-            for (uint8_t k = 0; k < 4; k++) {
-                ax[k].v = it->u.seg.v0[k];
-                ax[k].a = it->u.seg.a[k];
-                ax[k].acc = 1UL << 23;
-                ax[k].rem = it->u.seg.n[k];
-                if (ax[k].rem)
-                    st.enabled_mask |= (uint8_t)(1 << k);
+            struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
+            if (plan_tail == plan_head || p->index != queue_tail) {
+                if (!st.at_rest)
+                    stepper_plan_stalls++; /* the main loop fell behind */
+                return;
             }
-            apply_enables(st.enabled_mask);
-            t_left = it->ticks;
+            run = p;
+            if ((st.enabled_mask | p->moving) != st.enabled_mask) {
+                st.enabled_mask |= p->moving;
+                apply_enables(st.enabled_mask);
+            }
+            t_left = p->ticks;
             st.current = IT_SEG;
             return;
+        }
         case IT_DWELL:
             st.at_rest = 1;
-            if (!it->ticks) {
-                complete_item();
-                continue;
-            }
-            t_left = it->ticks;
+            t_left = motion_ticks_of(it->ticks, &last_units);
             st.current = IT_DWELL;
             return;
         case IT_HOME:
@@ -325,200 +377,339 @@ static void dispatch(void)
     }
 }
 
-/* steps of one axis in this tick (at most MAX_STEPS_PER_TICK) */
-static inline uint8_t axis_tick(struct axis *x, uint8_t last)
+/* Steps one axis issues in a tick that is not the segment's last: (v += a),
+ * acc += v, n = min(acc >> 24, cap, rem); acc -= n << 24, rem -= n. What does
+ * not fit the tick's phases stays in acc for the next tick. 63 cycles, 99 with
+ * the acceleration (hand-written: the compiler's version took twice that). */
+static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *x, uint8_t cap, uint8_t accel)
 {
-    uint32_t rem = x->rem;
-    if (!rem)
-        return 0;
-    int32_t v = x->v;
-    if (x->a) {
-        v += x->a;
-        if (v < 0)
-            v = 0;
-        x->v = v;
-    }
-    uint32_t acc = x->acc + (uint32_t)v;
-    uint8_t n = (uint8_t)(acc >> 24);
-    if (last)
-        n = rem > 255 ? 255 : (uint8_t)rem;
-    if (n > rem)
-        n = (uint8_t)rem;
-    if (n > MAX_STEPS_PER_TICK) {
-        if (last)
-            stepper_lost_steps += (uint8_t)(n - MAX_STEPS_PER_TICK);
-        n = MAX_STEPS_PER_TICK;
-    }
-    x->acc = acc - ((uint32_t)n << 24);
-    x->rem = rem - n;
+    uint8_t n;
+    __asm__ volatile(
+        "ldd r20, Z+2\n\t"
+        "ldd r21, Z+3\n\t"
+        "ldd r22, Z+4\n\t"
+        "ldd r23, Z+5\n\t"
+        "tst %[accel]\n\t"
+        "breq 2f\n\t"
+        "ldd r18, Z+0\n\t"
+        "ldd r19, Z+1\n\t"
+        "ldd __tmp_reg__, Z+6\n\t"
+        "add r18, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+7\n\t"
+        "adc r19, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+8\n\t"
+        "adc r20, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+9\n\t"
+        "adc r21, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+10\n\t"
+        "adc r22, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+11\n\t"
+        "adc r23, __tmp_reg__\n\t"
+        "brpl 1f\n\t" /* v < 0 only by rounding at the end of a stop: 0 */
+        "clr r18\n\t"
+        "clr r19\n\t"
+        "clr r20\n\t"
+        "clr r21\n\t"
+        "clr r22\n\t"
+        "clr r23\n"
+        "1:\n\t"
+        "std Z+0, r18\n\t"
+        "std Z+1, r19\n\t"
+        "std Z+2, r20\n\t"
+        "std Z+3, r21\n\t"
+        "std Z+4, r22\n\t"
+        "std Z+5, r23\n"
+        "2:\n\t"
+        "ldd r18, Z+12\n\t"
+        "ldd r19, Z+13\n\t"
+        "ldd r24, Z+14\n\t"
+        "ldd r25, Z+15\n\t"
+        "add r18, r20\n\t"
+        "adc r19, r21\n\t"
+        "adc r24, r22\n\t"
+        "adc r25, r23\n\t"
+        "mov %[n], r25\n\t"
+        "cp %[cap], %[n]\n\t"
+        "brsh 3f\n\t"
+        "mov %[n], %[cap]\n"
+        "3:\n\t"
+        "ldd r20, Z+16\n\t"
+        "ldd r21, Z+17\n\t"
+        "ldd r22, Z+18\n\t"
+        "ldd r23, Z+19\n\t"
+        "mov __tmp_reg__, r21\n\t"
+        "or __tmp_reg__, r22\n\t"
+        "or __tmp_reg__, r23\n\t"
+        "brne 4f\n\t"
+        "cp r20, %[n]\n\t"
+        "brsh 4f\n\t"
+        "mov %[n], r20\n"
+        "4:\n\t"
+        "sub r25, %[n]\n\t"
+        "std Z+12, r18\n\t"
+        "std Z+13, r19\n\t"
+        "std Z+14, r24\n\t"
+        "std Z+15, r25\n\t"
+        "sub r20, %[n]\n\t"
+        "sbc r21, __zero_reg__\n\t"
+        "sbc r22, __zero_reg__\n\t"
+        "sbc r23, __zero_reg__\n\t"
+        "std Z+16, r20\n\t"
+        "std Z+17, r21\n\t"
+        "std Z+18, r22\n\t"
+        "std Z+19, r23\n\t"
+        : [n] "=&r"(n)
+        : "z"(x), [cap] "r"(cap), [accel] "r"(accel)
+        : "r18", "r19", "r20", "r21", "r22", "r23", "r24", "r25", "memory");
     return n;
 }
 
-static void seg_tick(struct item *it)
+/* The segment's last tick: each axis issues what is left (the exact total). */
+static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
 {
-    struct stepper_state *s = (struct stepper_state *)&st; /* private to this interrupt here */
-    uint8_t last = --t_left == 0;
-    uint8_t neg = it->flags >> 4;
-    uint8_t m[MAX_STEPS_PER_TICK] = {0};
-    next.flags |= OUT_MOTION;
-    next.dir = neg;
-    for (uint8_t k = 0, bit = 1; k < 4; k++, bit <<= 1) {
-        uint8_t n = axis_tick(&ax[k], last);
-        if (!n)
-            continue;
-        for (uint8_t i = 0; i < n; i++)
-            m[i] |= bit;
-        if (neg & bit)
-            s->pos[k] -= n;
-        else
-            s->pos[k] += n;
+    uint8_t maxn = 0;
+    for (uint8_t k = 0; k < 4; k++) {
+        uint32_t rem = p->ax[k].rem;
+        uint8_t n = rem > cap ? cap : (uint8_t)rem;
+        if (rem > cap)
+            stepper_lost_steps += (uint16_t)(rem - cap); /* never at the advertised rate */
+        nx->n[k] = n;
+        if (n > maxn)
+            maxn = n;
     }
-    for (uint8_t i = 0; i < MAX_STEPS_PER_TICK; i++)
-        next.m[i] = m[i];
-    if (last) {
-        s->current = 0xFF;
-        s->segments_done++;
-        next.flags |= OUT_SEG_END;
-        next.seq = s->segments_done;
-        s->at_rest = it->flags & SEGF_AT_REST;
-        complete_item();
-        if (!s->at_rest && queue_head == queue_tail)
-            raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
+    nx->phases = maxn;
+    const struct item *it = queue_slot(queue_tail);
+    for (uint8_t k = 0; k < 4; k++)
+        st.pos[k] += (p->dir >> k & 1) ? -(int32_t)it->u.n[k] : (int32_t)it->u.n[k];
+    st.current = 0xFF;
+    st.segments_done++;
+    nx->flags |= OUT_SEG_END;
+    nx->seq = st.segments_done;
+    st.at_rest = it->flags & SEGF_AT_REST;
+    plan_tail++;
+    complete_item();
+    if (!st.at_rest && queue_head == queue_tail)
+        raise_error(ERR_UNDERRUN, st.items_done, st.segments_done, 0xFF, 0);
+}
+
+static void __attribute__((noinline)) seg_tick(void)
+{
+    struct plan *p = run;
+    struct out *o = nx;
+    o->flags |= OUT_MOTION;
+    o->dir = p->dir;
+    if (--t_left == 0) {
+        o->units = p->last_units;
+        seg_last_tick(p, phase_cap[p->last_units]);
+        return;
+    }
+    uint8_t moving = p->moving, accel = p->accel, maxn = 0, n;
+    const uint8_t cap = phase_cap[TICK_UNITS];
+    if (moving & 1) {
+        n = o->n[0] = dda_tick(&p->ax[0], cap, accel);
+        maxn = n;
+    }
+    if (moving & 2) {
+        n = o->n[1] = dda_tick(&p->ax[1], cap, accel);
+        if (n > maxn)
+            maxn = n;
+    }
+    if (moving & 4) {
+        n = o->n[2] = dda_tick(&p->ax[2], cap, accel);
+        if (n > maxn)
+            maxn = n;
+    }
+    if (moving & 8) {
+        n = o->n[3] = dda_tick(&p->ax[3], cap, accel);
+        if (n > maxn)
+            maxn = n;
+    }
+    o->phases = maxn;
+}
+
+/* Everything but a segment's tick. */
+static void __attribute__((noinline)) compute_other(void)
+{
+    struct out *o = nx;
+    {
+        if (abort_pending) {
+            abort_pending = 0;
+            o->flags = OUT_SEG_END | OUT_ABORT;
+            o->seq = abort_seq;
+            return;
+        }
+        if (hold) {
+            hold--;
+            return;
+        }
+        if (st.current == 0xFF)
+            dispatch();
+        if (st.current == 0xFF || !st.running)
+            return;
+        switch (st.current) {
+        case IT_SEG:
+            seg_tick();
+            break;
+        case IT_DWELL:
+            o->flags |= OUT_MOTION;
+            if (--t_left == 0) {
+                o->units = last_units;
+                st.current = 0xFF;
+                complete_item();
+            }
+            break;
+        case IT_HOME:
+            if (home_tick()) {
+                const struct item *it = queue_slot(queue_tail);
+                uint8_t mask = it->flags & 7;
+                for (uint8_t k = 0; k < 3; k++)
+                    if (mask >> k & 1)
+                        st.pos[k] = it->u.pos[k];
+                st.homed_mask |= mask;
+                stepper_report.homed_item = st.items_done + 1;
+                stepper_report.homed = 1;
+                st.current = 0xFF;
+                complete_item();
+                set_pos_marker();
+            } else if (st.current == IT_HOME) {
+                o->flags |= OUT_MOTION;
+            }
+            break;
+        case IT_WAIT:
+            if (stepper_wait_ok) {
+                st.current = 0xFF;
+                complete_item();
+            }
+            break;
+        }
     }
 }
 
-static void compute(void)
+static void __attribute__((noinline)) compute(void)
 {
-    struct out *o = &next;
-    for (uint8_t i = 0; i < MAX_STEPS_PER_TICK; i++)
-        o->m[i] = 0;
+    struct out *o = nx;
+    o->n[0] = o->n[1] = o->n[2] = o->n[3] = 0;
+    o->phases = 0;
     o->flags = 0;
     o->dir = cur_dir;
-    if (abort_pending) {
-        abort_pending = 0;
-        next.flags = OUT_SEG_END | OUT_ABORT;
-        next.seq = abort_seq;
-        return;
-    }
-    if (hold) {
-        hold--;
-        return;
-    }
-    if (st.current == 0xFF)
-        dispatch();
-    if (st.current == 0xFF || !st.running)
-        return;
-    struct item *it = queue_slot(queue_tail);
-    switch (st.current) {
-    case IT_SEG:
-        st.motion_ticks++;
-        seg_tick(it);
-        break;
-    case IT_DWELL:
-        st.motion_ticks++;
-        next.flags |= OUT_MOTION;
-        if (--t_left == 0) {
-            st.current = 0xFF;
-            complete_item();
-        }
-        break;
-    case IT_HOME:
-        if (home_tick(it)) {
-            uint8_t mask = it->flags & 7;
-            for (uint8_t k = 0; k < 3; k++)
-                if (mask >> k & 1)
-                    st.pos[k] = it->u.pos[k];
-            st.homed_mask |= mask;
-            stepper_report.homed_item = st.items_done + 1;
-            stepper_report.homed = 1;
-            st.current = 0xFF;
-            complete_item();
-            set_pos_marker();
-        } else if (st.current == IT_HOME) {
-            st.motion_ticks++;
-            next.flags |= OUT_MOTION;
-        }
-        break;
-    case IT_WAIT:
-        if (stepper_wait_ok) {
-            st.current = 0xFF;
-            complete_item();
-        }
-        break;
-    }
+    o->units = TICK_UNITS;
+    if (st.current == IT_SEG && st.running)
+        seg_tick(); /* the common case first */
+    else if (st.current != 0xFF || queue_head != queue_tail || abort_pending || hold)
+        compute_other(); /* else idle */
+    if (o->flags & OUT_MOTION)
+        st.motion_ticks += o->units;
+}
+
+/* ---------------------------------------------------------------- interrupts */
+
+static inline uint8_t phase_mask(const struct out *e, uint8_t k)
+{
+    return (uint8_t)((e->n[0] > k) | (e->n[1] > k) << 1 | (e->n[2] > k) << 2 | (e->n[3] > k) << 3);
 }
 
 ISR(TIMER1_COMPB_vect)
 {
+    const struct out *e = emit;
     uint8_t k = ++phase;
-    if (k >= MAX_STEPS_PER_TICK) {
-        TIMSK1 &= (uint8_t)~_BV(OCIE1B);
-        return;
-    }
+    pulse_on(phase_mask(e, k));
     uint8_t t0 = TCNT1L;
-    pulse_on(emit.m[k]);
-    if (k + 1 < MAX_STEPS_PER_TICK && emit.m[k + 1])
-        OCR1B = (uint16_t)((k + 1) * (TIMER_CYCLES_PER_TICK / MAX_STEPS_PER_TICK));
+    if (k + 1 < e->phases)
+        OCR1B = (uint16_t)((k + 1) * PHASE_CYCLES);
     else
         TIMSK1 &= (uint8_t)~_BV(OCIE1B);
-    while ((uint8_t)(TCNT1L - t0) < 34)
+    while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
         ;
     pulse_off();
 }
 
-ISR(TIMER1_COMPA_vect)
+/* The start of a tick: markers, this tick's length, directions, first pulses. */
+static void __attribute__((noinline)) tick_start(void)
 {
-    /* markers for the pulses emitted during the tick that just ended */
-    if (emit.flags & (OUT_SEG_END | OUT_POS | OUT_ABORT)) {
-        sim_mailbox.seq = emit.seq;
-        if (emit.flags & OUT_ABORT)
+    struct out *e = emit;
+    /* markers for what the tick that just ended completed */
+    uint8_t f = e->flags;
+    if (f & (OUT_SEG_END | OUT_POS | OUT_ABORT)) {
+        sim_mailbox.seq = e->seq;
+        if (f & OUT_ABORT)
             MARK4_PIN = _BV(MARK_ABORT_BIT);
-        if (emit.flags & OUT_SEG_END)
+        if (f & OUT_SEG_END)
             MARK_PIN = _BV(MARK_SEG_BIT);
-        if (emit.flags & OUT_POS)
+        if (f & OUT_POS)
             MARK3_PIN = _BV(MARK_POS_BIT);
     }
-    which ^= 1;
-    if (emit.flags & OUT_MOTION)
+    e = nx;
+    nx = emit;
+    emit = e;
+    uint8_t units = e->units;
+    if (units != ocr_units) {
+        ocr_units = units;
+        OCR1A = (uint16_t)(units * UNIT_CYCLES - 1);
+    }
+    if (e->flags & OUT_MOTION)
         MARK2_PORT |= _BV(MARK_MOTION_BIT);
     else
         MARK2_PORT &= (uint8_t)~_BV(MARK_MOTION_BIT);
-    uint8_t pulses = emit.m[0];
-    uint16_t t0 = TCNT1;
+    uint8_t t0 = 0, pulses = e->phases ? phase_mask(e, 0) : 0;
     if (pulses) {
-        if (emit.dir != cur_dir) {
-            apply_dirs(emit.dir);
-            cur_dir = emit.dir;
+        if (e->dir != cur_dir) {
+            apply_dirs(e->dir);
+            cur_dir = e->dir;
             __builtin_avr_delay_cycles(16);
         }
-        t0 = TCNT1;
         pulse_on(pulses);
-        if (emit.m[1]) {
+        t0 = TCNT1L;
+        if (e->phases > 1) {
             phase = 0;
-            OCR1B = TIMER_CYCLES_PER_TICK / MAX_STEPS_PER_TICK;
+            OCR1B = PHASE_CYCLES;
             TIFR1 = _BV(OCF1B);
             TIMSK1 |= _BV(OCIE1B);
         }
     }
-    sched_tick_count++;
-
-    compute();
-
-    /* slow software PWM for the heaters and the fan (78 Hz) */
+    /* useful work while the pulses are high */
+    sched_clock_count += units;
     uint8_t p = ++pwm;
     if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
     if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
     if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
-
     if (pulses) {
-        while ((uint16_t)(TCNT1 - t0) < 34)
+        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
             ;
         pulse_off();
     }
-    /* cycles since the compare match (TCNT1 restarted from 0 there) */
-    uint16_t used = TCNT1;
-    if (TIFR1 & _BV(OCF1A))
-        used += TIMER_CYCLES_PER_TICK; /* ran into the next tick */
+}
+
+/* After a tick's computation: the interrupt's length so far, and whether the
+ * next tick has already begun (returns 1: start it now). Its compare match came
+ * while this interrupt was masked: silicon would re-enter at once, simavr 1.6
+ * never queues an interrupt enabled after its flag rose, so handle it here. */
+static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
+
+static uint8_t __attribute__((noinline)) tick_end(void)
+{
+    uint16_t used = TCNT1 + late;
     if (used > stepper_isr_max_cycles)
         stepper_isr_max_cycles = used;
+    if (!(TIFR1 & _BV(OCF1A))) {
+        late = 0;
+        return 0;
+    }
+    TIFR1 = _BV(OCF1A);
+    stepper_overruns++;
+    late += (uint16_t)(ocr_units * UNIT_CYCLES);
+    return 1;
+}
+
+/* Nothing lives across the calls, so the entry saves only what a call clobbers. */
+ISR(TIMER1_COMPA_vect)
+{
+    do {
+        tick_start();
+        /* the next tick, interruptible by everything but this interrupt */
+        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+        sei();
+        compute();
+        cli();
+        TIMSK1 |= _BV(OCIE1A);
+    } while (tick_end());
 }

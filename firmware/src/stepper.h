@@ -6,7 +6,7 @@
 struct stepper_state {
     int32_t pos[4];            /* logical step positions */
     uint32_t items_done, segments_done;
-    uint32_t motion_ticks;
+    uint32_t motion_ticks;     /* executed durations, clock units */
     uint8_t enabled_mask, homed_mask;
     uint8_t at_rest;           /* the last executed motion ended at rest */
     uint8_t running;           /* 0: fault / estop: execute nothing */
@@ -44,6 +44,10 @@ uint8_t stepper_moving(void);
 
 /* figures for the harness and the benchmark */
 extern volatile uint16_t stepper_isr_max_cycles;
-extern volatile uint16_t stepper_lost_steps;
+extern volatile uint16_t stepper_lost_steps;  /* pulses a tick had no room for */
+extern volatile uint16_t stepper_plan_stalls; /* ticks motion waited for a plan */
+extern volatile uint16_t stepper_overruns;    /* ticks computed after their start */
+/* Step positions now (mid-segment: the steps issued so far). */
+void stepper_positions(int32_t *out);
 
 #endif
