@@ -29,8 +29,6 @@ INSTALL_HINT = (
     "the AVR toolchain or simavr is missing: install it with "
     "`apt-get install -y gcc-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config`"
 )
-# what the AVR firmware announces (firmware/src/config.h), for a Python model run alike
-AVR_IDENTITY = {"clock_hz": 10_000, "max_step_rate": 60_000, "queue_capacity": 64}
 
 
 def toolchain_missing() -> str | None:

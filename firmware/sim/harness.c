@@ -11,7 +11,8 @@
  * and watches for timer compare interrupts that simavr lost (flag, enable and
  * I set, vector not queued): it queues them again and counts every repair.
  * The executed-segment record is built from pin edges: step/dir give the
- * physical steps, MARK_MOTION the motion clock, MARK_SEG the segment ends. */
+ * physical steps, MARK_EDGE (a timer compare output) the segment ends and the
+ * starts and stops of motion, hence the motion clock. */
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
@@ -36,6 +37,9 @@
 #include <avr_uart.h>
 
 #include "pins.h"
+#define EDGE_SEG_END 0x01 /* as firmware/src/mailbox.h */
+#define EDGE_MOTION_START 0x02
+#define EDGE_MOTION_STOP 0x04
 #include "thermal.h"
 
 #define F_CPU 16000000ULL
@@ -85,6 +89,9 @@ static int suspect[2];
 static uint32_t pc_hist[65536];
 static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count, isr_hist[64];
 static uint16_t isr_sp;
+static uint32_t trace_pc[8192];
+static size_t trace_len;
+
 static struct thermal thermal[2];
 static int heater_level[2];
 static double heater_fail_after = -1.0;
@@ -161,6 +168,7 @@ static void set_endstop(int k)
 
 static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
     (void)irq;
     int k = (int)(intptr_t)param;
     uint64_t now = avr->cycle;
@@ -185,6 +193,7 @@ static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 
 static void dir_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
     (void)irq;
     int k = (int)(intptr_t)param;
     if ((int)value != dir_level[k]) {
@@ -193,9 +202,9 @@ static void dir_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     }
 }
 
-/* The motion clock: the time MARK_MOTION was high, in clock units. Each high
- * period is rounded to whole units on its own (its two edges leave the
- * interrupt with about the same latency), so latency never accumulates. */
+/* The motion clock, in clock units: the time between the MARK_EDGE toggles
+ * that start and stop motion. The timer toggles MARK_EDGE exactly at tick
+ * boundaries (one cycle in), so every period is a whole number of units. */
 static uint64_t units_since(uint64_t since)
 {
     return (avr->cycle - since + UNIT_CYCLES / 2) / UNIT_CYCLES;
@@ -206,18 +215,6 @@ static uint64_t motion_now(void)
     return motion_units + (motion_level ? units_since(motion_since) : 0);
 }
 
-static void motion_cb(struct avr_irq_t *irq, uint32_t value, void *param)
-{
-    (void)irq; (void)param;
-    if ((int)value == motion_level)
-        return;
-    if (motion_level)
-        motion_units += units_since(motion_since);
-    else
-        motion_since = avr->cycle;
-    motion_level = (int)value;
-}
-
 static const char *error_name(int code)
 {
     static const char *names[] = {"error", "underrun", "thermal_runaway", "endstop_hit",
@@ -226,17 +223,12 @@ static const char *error_name(int code)
     return code > 0 && code <= 10 ? names[code] : "error";
 }
 
-static void seg_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+static void record_segment(void)
 {
-    (void)irq; (void)param;
-    static uint32_t level;
-    if (value == level || !mailbox_addr)
-        return; /* only toggles of a running firmware */
-    level = value;
     if (!record)
         return;
     uint64_t ticks = motion_now();
-    uint32_t seq = mailbox_addr ? mailbox_u32(4) : (uint32_t)segments_recorded + 1;
+    uint32_t seq = mailbox_u32(4);
     fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
             (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
             (long long)(phys[2] + offset[2]), (long long)(phys[3] + offset[3]),
@@ -248,8 +240,33 @@ static void seg_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     segments_recorded++;
 }
 
+/* MARK_EDGE toggled: the firmware left what it means in the mailbox. */
+static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
+    uint8_t edge = avr->data[mailbox_addr + 48];
+    if (getenv("CDPR_SIM_TRACE_MOTION"))
+        fprintf(stderr, "edge %x at %llu\n", edge, (unsigned long long)avr->cycle);
+    if ((edge & EDGE_MOTION_START) && !motion_level) {
+        motion_since = avr->cycle;
+        motion_level = 1;
+    }
+    if (edge & EDGE_SEG_END)
+        record_segment();
+    if ((edge & EDGE_MOTION_STOP) && motion_level) {
+        motion_units += units_since(motion_since);
+        motion_level = 0;
+    }
+}
+
 static void abort_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
     (void)irq; (void)param;
     static uint32_t level;
     if (value == level || !mailbox_addr)
@@ -260,6 +277,7 @@ static void abort_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 
 static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
     (void)irq; (void)param;
     static uint32_t level;
     if (value == level || !mailbox_addr)
@@ -273,6 +291,7 @@ static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 
 static void heater_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
     (void)irq;
     int h = (int)(intptr_t)param;
     thermal_switch(&thermal[h], sim_seconds(), (int)value);
@@ -318,12 +337,16 @@ static void check_lost_interrupts(void)
     }
 }
 
-static void pace(void)
+static double wall_seconds(void)
 {
     struct timespec now;
     clock_gettime(CLOCK_MONOTONIC, &now);
-    double wall = (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
-    double ahead = sim_seconds() / speedup - wall;
+    return (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
+}
+
+static void pace(void)
+{
+    double ahead = sim_seconds() / speedup - wall_seconds();
     if (ahead > 0.0005) {
         struct timespec d = {(time_t)ahead, (long)((ahead - floor(ahead)) * 1e9)};
         nanosleep(&d, NULL);
@@ -410,6 +433,13 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         }
     }
     poll_pty();
+    if (mailbox_addr) {
+        /* the link's clock for the firmware: wall time in clock units */
+        uint64_t u = (uint64_t)(wall_seconds() * (double)CLOCK_HZ);
+        for (int i = 0; i < 4; i++)
+            avr->data[mailbox_addr + 42 + i] = (uint8_t)(u >> (8 * i));
+        avr->data[mailbox_addr + 46] = 1;
+    }
     check_lost_interrupts();
     update_thermal();
     pace();
@@ -432,17 +462,18 @@ static void write_stats(void)
     unsigned loop_us = mailbox_addr ? (avr->data[mailbox_addr + 30] | avr->data[mailbox_addr + 31] << 8) : 0;
     unsigned stalls = mailbox_addr ? (avr->data[mailbox_addr + 38] | avr->data[mailbox_addr + 39] << 8) : 0;
     unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
+    unsigned latency = mailbox_addr ? avr->data[mailbox_addr + 47] : 0;
     fprintf(f,
             "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
-            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"main_loop_max_us\":%u,"
+            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
             "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
-            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns,
+            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, latency,
             loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp);
     fclose(f);
 }
@@ -512,8 +543,7 @@ int main(int argc, char **argv)
     }
     for (int k = 0; k < 3; k++)
         endstop_irq[k] = pin_irq(ENDSTOP_PINS[k].port, ENDSTOP_PINS[k].bit);
-    watch(MARK_SEG.port, MARK_SEG.bit, seg_cb, 0);
-    watch(MARK_MOTION.port, MARK_MOTION.bit, motion_cb, 0);
+    watch(MARK_EDGE.port, MARK_EDGE.bit, edge_cb, 0);
     watch(MARK_POS.port, MARK_POS.bit, pos_cb, 0);
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
     watch(HEATER_PINS[0].port, HEATER_PINS[0].bit, heater_cb, 0);
@@ -578,6 +608,8 @@ int main(int argc, char **argv)
             uint16_t sp = (uint16_t)(avr->data[0x5D] | avr->data[0x5E] << 8);
             if (isr_entry && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
                 pc_hist[avr->pc]++;
+            if (isr_entry && trace_len < sizeof trace_pc / sizeof trace_pc[0])
+                trace_pc[trace_len++] = avr->pc | (uint32_t)(avr->data[0x84] | avr->data[0x85] << 8) << 16 ;
             if (avr->pc == 0x44 && !isr_entry) {
                 isr_entry = avr->cycle;
                 isr_sp = sp;
@@ -590,6 +622,16 @@ int main(int argc, char **argv)
                 isr_count++;
                 isr_hist[c / 100 < 63 ? c / 100 : 63]++;
                 isr_entry = 0;
+                if (c > 1600 && c >= isr_cycles_max) {
+                    /* the first over-long tick: its instruction trace, for the profile */
+                    FILE *f = fopen("/tmp/cdpr-long-isr.txt", "w");
+                    for (size_t i = 0; f && i < trace_len; i++)
+                        fprintf(f, "%x %u\n", trace_pc[i] & 0xFFFF, trace_pc[i] >> 16);
+                    if (f)
+                        fclose(f);
+
+                }
+                trace_len = 0;
             }
         }
         if (avr->cycle >= next_poll) {

@@ -88,28 +88,23 @@
 #define BED_ADC_CHANNEL 14
 #define THERMISTOR_PULLUP_OHMS 4700
 
-/* Marker outputs on the servo header (leave unconnected on a real board): the
- * simulation harness builds its executed-segment record from them and from the
- * step/dir pins. MARK_SEG toggles after the last pulse of each executed segment,
- * MARK_MOTION is high while a timed item (segment, dwell, homing) runs,
- * MARK_POS toggles when positions were set (SET_POSITION, HOME). */
-#define MARK_PORT PORTG /* D4 */
-#define MARK_DDR DDRG
-#define MARK_SEG_BIT 5
-#define MARK2_PORT PORTE /* D5, D2 is not used */
-#define MARK2_DDR DDRE
-#define MARK_MOTION_BIT 3
-#define MARK3_PORT PORTH /* D6 */
-#define MARK3_DDR DDRH
+/* Marker outputs (the simulation harness builds its executed-segment record
+ * from them and from the step/dir pins; on a board they only blink the LED).
+ * MARK_EDGE is Timer1's compare C output (OC1C, D13, the board's LED): the
+ * timer itself toggles it exactly at a tick boundary, whatever the interrupt's
+ * latency, when a segment ends or motion (the ticks of segments, dwells,
+ * homing) starts or stops there; the firmware leaves which of these it was in
+ * RAM for the harness. Toggled by software at rest, on the servo header:
+ * MARK_POS (D6) when positions were set (SET_POSITION, HOME), MARK_ABORT (D4)
+ * just before the edge that ends an abandoned segment. */
+#define MARK_EDGE_DDR DDRB /* D13, OC1C */
+#define MARK_EDGE_BIT 7
+#define MARK_POS_PIN PINH /* D6 */
+#define MARK_POS_DDR DDRH
 #define MARK_POS_BIT 3
-
-#define MARK4_PORT PORTB /* D11: toggles before MARK_SEG when a segment was abandoned */
-#define MARK4_DDR DDRB
+#define MARK_ABORT_PIN PING /* D4 */
+#define MARK_ABORT_DDR DDRG
 #define MARK_ABORT_BIT 5
-#define MARK_PIN PING
-#define MARK2_PIN PINE
-#define MARK3_PIN PINH
-#define MARK4_PIN PINB
 
 /* status LED (D13) */
 #define LED_PORT PORTB

@@ -19,7 +19,15 @@ struct sim_mailbox {
     uint16_t speedup_x16; /* written by the harness: device time / link time x 16 */
     uint16_t plan_stalls;
     uint16_t overruns;
+    uint32_t link_clock; /* written by the harness: wall time in clock units (link_valid set) */
+    uint8_t link_valid;
+    uint8_t latency_max;
+    uint8_t edge; /* what the next MARK_EDGE toggle means: EDGE_* */
 };
 extern volatile struct sim_mailbox sim_mailbox;
+
+#define EDGE_SEG_END 0x01      /* a segment's last tick ended: seq names it */
+#define EDGE_MOTION_START 0x02 /* the first tick of motion begins */
+#define EDGE_MOTION_STOP 0x04  /* the last tick of motion ended */
 
 #endif

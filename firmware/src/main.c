@@ -28,8 +28,15 @@ uint32_t link_now;
 void sched_update_link_time(void)
 {
     uint32_t t = sched_clock();
-    uint16_t s = sim_mailbox.speedup_x16;
-    link_now = s > 16 ? (uint32_t)(((uint64_t)t * 16u) / s) : t;
+    /* In the simulator the harness keeps the wall clock here: the link's timers
+     * (retransmission, announcements, host watchdog) then run in real time
+     * whatever the simulation's speed, as the Python model's do. */
+    if (sim_mailbox.link_valid) {
+        cli();
+        t = sim_mailbox.link_clock;
+        sei();
+    }
+    link_now = t;
 }
 
 static void take_interrupt_reports(uint32_t now)
@@ -124,6 +131,7 @@ int main(void)
         sim_mailbox.lost_steps = stepper_lost_steps;
         sim_mailbox.plan_stalls = stepper_plan_stalls;
         sim_mailbox.overruns = stepper_overruns;
+        sim_mailbox.latency_max = stepper_latency_max;
         sim_mailbox.last_error = mc.last_error;
     }
 }

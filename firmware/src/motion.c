@@ -102,11 +102,13 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
     p->dir = it->flags >> 4;
     p->moving = 0;
     p->accel = kb != 0.0f;
+    p->at_rest = it->flags & SEGF_AT_REST;
     p->ticks = motion_ticks_of(it->ticks, &p->last_units);
     for (uint8_t k = 0; k < 4; k++) {
         struct axis_plan *x = &p->ax[k];
         uint32_t n = it->u.n[k];
         float nf = (float)n;
+        p->delta[k] = (p->dir >> k & 1) ? -(int32_t)n : (int32_t)n;
         x->rem = n;
         x->acc = 1UL << 23;
         if (n)

@@ -71,7 +71,9 @@ struct plan {
     uint8_t moving;     /* axis bit set: steps to make */
     uint8_t accel;      /* some a != 0 */
     uint8_t last_units; /* length of the last tick in clock units */
+    uint8_t at_rest;    /* SEGF_AT_REST of the item */
     uint32_t ticks;     /* interrupt ticks (the last one last_units long) */
+    int32_t delta[4];   /* signed steps */
     struct axis_plan ax[4];
 };
 

@@ -32,6 +32,7 @@ volatile uint8_t stepper_start_ok, stepper_wait_ok;
 volatile uint8_t heater_duty[2], fan_duty;
 volatile uint16_t stepper_isr_max_cycles;
 volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns;
+volatile uint8_t stepper_latency_max;
 
 #define OUT_MOTION 0x01
 #define OUT_SEG_END 0x02
@@ -39,31 +40,51 @@ volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns;
 #define OUT_ABORT 0x08
 
 #define PULSE_CYCLES 34 /* >= 2 us high */
+/* OCR1C: 0 toggles MARK_EDGE (OC1C) one cycle into the next tick; above TOP never */
+#define EDGE_AT_NEXT_TICK 0
+#define EDGE_NEVER 0xFFFF
 #define HOME_TICKS (CLOCK_HZ / ((uint32_t)DEV_HOMING_RATE * HOME_TICK_UNITS))
 _Static_assert(HOME_TICKS * DEV_HOMING_RATE * HOME_TICK_UNITS == CLOCK_HZ,
                "a homing step must take a whole number of homing ticks");
 
 struct out {
-    uint8_t n[4];   /* pulses per axis: axis k steps in phases 0..n[k]-1 */
-    uint8_t phases; /* the largest n */
+    uint8_t m[16];  /* axes stepping in phase k of the tick (offset 0) */
+    uint8_t phases; /* phases with pulses (offset 16) */
     uint8_t dir;    /* axis bit set: negative */
     uint8_t flags;
     uint8_t units; /* length of the tick */
     uint32_t seq;
 };
 static struct out outs[2];
-static struct out *emit = &outs[0]; /* the tick being emitted */
+struct out *stepper_emit = &outs[0]; /* the tick being emitted (global: compare B's assembly) */
+#define emit stepper_emit
 static struct out *nx = &outs[1];   /* the tick being computed */
-static volatile uint8_t phase;
+volatile uint8_t stepper_phase; /* the phase last emitted (global: compare B's assembly) */
+#define phase stepper_phase
 static uint8_t cur_dir = 0xFF, ocr_units = TICK_UNITS;
 
-/* pulses that fit a tick of u units (index u): the last one starts at least
- * PHASE_CYCLES before the next tick */
-#define CAP(u) ((u) * UNIT_CYCLES < 2 * PHASE_CYCLES ? 1 : (u) * UNIT_CYCLES / PHASE_CYCLES)
+/* Phase k of a tick starts PHASE_BASE + k * PHASE_CYCLES cycles after its
+ * compare match (phase 0 leaves the interrupt's entry at about PHASE_BASE).
+ * Pulses that fit a tick of u units (index u): the last one ends (and has its
+ * low time) before the next tick's first. */
+#define PHASE_BASE 100
+#define CAP(u) ((u) * UNIT_CYCLES < PHASE_BASE + 64 + PHASE_CYCLES ? 1 \
+                : ((u) * UNIT_CYCLES - PHASE_BASE - 64) / PHASE_CYCLES + 1)
 static const uint8_t phase_cap[2 * TICK_UNITS] = {
     CAP(0), CAP(1), CAP(2), CAP(3), CAP(4), CAP(5), CAP(6), CAP(7), CAP(8), CAP(9),
     CAP(10), CAP(11), CAP(12), CAP(13), CAP(14), CAP(15), CAP(16), CAP(17), CAP(18), CAP(19)};
 _Static_assert(2 * TICK_UNITS == 20, "phase_cap lists 20 lengths");
+_Static_assert(CAP(19) <= 16, "phase masks per tick");
+
+/* axis `bit` steps in phases 0..n-1 of the tick */
+static inline __attribute__((always_inline)) void add_pulses(struct out *o, uint8_t bit, uint8_t n)
+{
+    uint8_t *m = o->m;
+    if (n > o->phases)
+        o->phases = n;
+    while (n--)
+        *m++ |= bit;
+}
 
 /* the executing item */
 static struct plan *run;    /* SEG */
@@ -134,19 +155,20 @@ void stepper_init(void)
     X_MIN_DDR &= (uint8_t)~_BV(X_MIN_BIT); X_MIN_PORT |= _BV(X_MIN_BIT);
     Y_MIN_DDR &= (uint8_t)~_BV(Y_MIN_BIT); Y_MIN_PORT |= _BV(Y_MIN_BIT);
     Z_MIN_DDR &= (uint8_t)~_BV(Z_MIN_BIT); Z_MIN_PORT |= _BV(Z_MIN_BIT);
-    MARK_DDR |= _BV(MARK_SEG_BIT);
-    MARK2_DDR |= _BV(MARK_MOTION_BIT);
-    MARK3_DDR |= _BV(MARK_POS_BIT);
-    MARK4_DDR |= _BV(MARK_ABORT_BIT);
+    MARK_EDGE_DDR |= _BV(MARK_EDGE_BIT);
+    MARK_POS_DDR |= _BV(MARK_POS_BIT);
+    MARK_ABORT_DDR |= _BV(MARK_ABORT_BIT);
     FAN_DDR |= _BV(FAN_BIT);
     st.current = 0xFF;
     st.at_rest = 1;
     st.running = 1;
     outs[0].units = outs[1].units = TICK_UNITS;
-    /* Timer1: CTC on OCR1A, no prescaler */
-    TCCR1A = 0;
+    /* Timer1: CTC on OCR1A, no prescaler; compare C toggles OC1C (MARK_EDGE)
+     * when OCR1C is set to match one cycle into the next tick */
+    TCCR1A = _BV(COM1C0);
     TCCR1B = _BV(WGM12) | _BV(CS10);
     OCR1A = TICK_CYCLES - 1;
+    OCR1C = EDGE_NEVER;
     TIMSK1 = _BV(OCIE1A);
 }
 
@@ -300,12 +322,10 @@ static uint8_t __attribute__((noinline)) home_tick(void)
         return 0;
     }
     nx->dir = (uint8_t)((cur_dir & 0x8) | neg);
-    for (uint8_t k = 0; k < 3; k++) {
-        if (stepping >> k & 1) {
-            nx->n[k] = 1;
+    for (uint8_t k = 0; k < 3; k++)
+        if (stepping >> k & 1)
             st.pos[k] += (neg >> k & 1) ? -1 : 1;
-        }
-    }
+    nx->m[0] = stepping;
     nx->phases = stepping ? 1 : 0;
     return 0;
 }
@@ -467,29 +487,29 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
 /* The segment's last tick: each axis issues what is left (the exact total). */
 static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
 {
-    uint8_t maxn = 0;
-    for (uint8_t k = 0; k < 4; k++) {
-        uint32_t rem = p->ax[k].rem;
-        uint8_t n = rem > cap ? cap : (uint8_t)rem;
-        if (rem > cap)
+    struct stepper_state *s = (struct stepper_state *)&st; /* private to this interrupt here */
+    struct out *o = nx;
+    struct axis_plan *x = p->ax;
+    for (uint8_t bit = 1; bit < 16; bit <<= 1, x++) {
+        uint32_t rem = x->rem;
+        uint8_t n = (uint8_t)rem;
+        if (rem > cap) {
             stepper_lost_steps += (uint16_t)(rem - cap); /* never at the advertised rate */
-        nx->n[k] = n;
-        if (n > maxn)
-            maxn = n;
+            n = cap;
+        }
+        add_pulses(o, bit, n);
     }
-    nx->phases = maxn;
-    const struct item *it = queue_slot(queue_tail);
     for (uint8_t k = 0; k < 4; k++)
-        st.pos[k] += (p->dir >> k & 1) ? -(int32_t)it->u.n[k] : (int32_t)it->u.n[k];
-    st.current = 0xFF;
-    st.segments_done++;
-    nx->flags |= OUT_SEG_END;
-    nx->seq = st.segments_done;
-    st.at_rest = it->flags & SEGF_AT_REST;
+        s->pos[k] += p->delta[k];
+    s->current = 0xFF;
+    o->flags |= OUT_SEG_END;
+    o->seq = ++s->segments_done;
+    s->at_rest = p->at_rest;
     plan_tail++;
-    complete_item();
-    if (!st.at_rest && queue_head == queue_tail)
-        raise_error(ERR_UNDERRUN, st.items_done, st.segments_done, 0xFF, 0);
+    s->items_done++;
+    uint8_t tail = ++queue_tail;
+    if (!p->at_rest && queue_head == tail)
+        raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
 }
 
 static void __attribute__((noinline)) seg_tick(void)
@@ -503,28 +523,16 @@ static void __attribute__((noinline)) seg_tick(void)
         seg_last_tick(p, phase_cap[p->last_units]);
         return;
     }
-    uint8_t moving = p->moving, accel = p->accel, maxn = 0, n;
+    uint8_t moving = p->moving, accel = p->accel;
     const uint8_t cap = phase_cap[TICK_UNITS];
-    if (moving & 1) {
-        n = o->n[0] = dda_tick(&p->ax[0], cap, accel);
-        maxn = n;
-    }
-    if (moving & 2) {
-        n = o->n[1] = dda_tick(&p->ax[1], cap, accel);
-        if (n > maxn)
-            maxn = n;
-    }
-    if (moving & 4) {
-        n = o->n[2] = dda_tick(&p->ax[2], cap, accel);
-        if (n > maxn)
-            maxn = n;
-    }
-    if (moving & 8) {
-        n = o->n[3] = dda_tick(&p->ax[3], cap, accel);
-        if (n > maxn)
-            maxn = n;
-    }
-    o->phases = maxn;
+    if (moving & 1)
+        add_pulses(o, 1, dda_tick(&p->ax[0], cap, accel));
+    if (moving & 2)
+        add_pulses(o, 2, dda_tick(&p->ax[1], cap, accel));
+    if (moving & 4)
+        add_pulses(o, 4, dda_tick(&p->ax[2], cap, accel));
+    if (moving & 8)
+        add_pulses(o, 8, dda_tick(&p->ax[3], cap, accel));
 }
 
 /* Everything but a segment's tick. */
@@ -588,7 +596,8 @@ static void __attribute__((noinline)) compute_other(void)
 static void __attribute__((noinline)) compute(void)
 {
     struct out *o = nx;
-    o->n[0] = o->n[1] = o->n[2] = o->n[3] = 0;
+    for (uint8_t i = 0; i < o->phases; i++)
+        o->m[i] = 0;
     o->phases = 0;
     o->flags = 0;
     o->dir = cur_dir;
@@ -603,40 +612,147 @@ static void __attribute__((noinline)) compute(void)
 
 /* ---------------------------------------------------------------- interrupts */
 
-static inline uint8_t phase_mask(const struct out *e, uint8_t k)
-{
-    return (uint8_t)((e->n[0] > k) | (e->n[1] > k) << 1 | (e->n[2] > k) << 2 | (e->n[3] > k) << 3);
-}
 
-ISR(TIMER1_COMPB_vect)
+/* At a tick's start, after phase 0: emit the phases that are due, then arm
+ * compare B for the next one. A phase that is due now, or already late (the
+ * tick's interrupt started late), goes out at once, after the previous pulse
+ * had its low time. With interrupts off. */
+#define PHASE_SLACK 48 /* cycles: a phase this close is waited for, not interrupted for */
+static inline __attribute__((always_inline)) void phases_due(uint8_t t_off)
 {
     const struct out *e = emit;
-    uint8_t k = ++phase;
-    pulse_on(phase_mask(e, k));
-    uint8_t t0 = TCNT1L;
-    if (k + 1 < e->phases)
-        OCR1B = (uint16_t)((k + 1) * PHASE_CYCLES);
-    else
-        TIMSK1 &= (uint8_t)~_BV(OCIE1B);
-    while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
-        ;
-    pulse_off();
+    for (;;) {
+        uint8_t k = phase + 1;
+        if (k >= e->phases) {
+            TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+            return;
+        }
+        uint16_t at = (uint16_t)(PHASE_BASE + k * PHASE_CYCLES);
+        if ((int16_t)(at - TCNT1) > PHASE_SLACK) {
+            OCR1B = at;
+            TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
+            TIMSK1 |= _BV(OCIE1B);
+            return;
+        }
+        while ((int16_t)(TCNT1 - at) < 0)
+            ;
+        while ((uint8_t)(TCNT1L - t_off) < PULSE_CYCLES)
+            ; /* low time */
+        phase = k;
+        pulse_on(e->m[k]);
+        uint8_t t0 = TCNT1L;
+        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
+            ;
+        pulse_off();
+        t_off = TCNT1L;
+    }
 }
+
+/* Compare B: the tick's further phases, one per interrupt, 60-odd cycles
+ * (hand-written: the compiler's version took twice that, and at 60000 steps/s
+ * on three axes a tick has up to seven of them). Sets phase k's pulses, moves
+ * OCR1B on by PHASE_CYCLES (or to just ahead of now, if that is already past)
+ * or disables itself after the last phase, then ends the pulses >= 2 us later. */
+ISR(TIMER1_COMPB_vect, ISR_NAKED)
+{
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r25\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r30, stepper_emit\n\t"
+        "lds r31, stepper_emit+1\n\t"
+        "ldd r25, Z+16\n\t" /* phases */
+        "lds r24, stepper_phase\n\t"
+        "inc r24\n\t"
+        "sts stepper_phase, r24\n\t"
+        "add r30, r24\n\t"
+        "brcc 1f\n\t"
+        "inc r31\n"
+        "1:\n\t"
+        "ld r30, Z\n\t" /* this phase's axes */
+        "sbrc r30, 0\n\t"
+        "sbi %[pf], %[xb]\n\t"
+        "sbrc r30, 1\n\t"
+        "sbi %[pf], %[yb]\n\t"
+        "sbrc r30, 3\n\t"
+        "sbi %[pa], %[eb]\n\t"
+        "sbrs r30, 2\n\t"
+        "rjmp 2f\n\t"
+        "lds r31, %[pl]\n\t"
+        "ori r31, %[zm]\n\t"
+        "sts %[pl], r31\n"
+        "2:\n\t"
+        "inc r24\n\t"
+        "cp r24, r25\n\t"
+        "brlo 3f\n\t"
+        "lds r24, %[timsk]\n\t" /* that was the last phase */
+        "andi r24, %[nocieb]\n\t"
+        "sts %[timsk], r24\n\t"
+        "rjmp 4f\n"
+        "3:\n\t"
+        "lds r24, %[ocrl]\n\t"
+        "lds r25, %[ocrl]+1\n\t"
+        "subi r24, lo8(-(%[step]))\n\t"
+        "sbci r25, hi8(-(%[step]))\n\t"
+        "lds r30, %[tcntl]\n\t"
+        "lds r31, %[tcntl]+1\n\t"
+        "adiw r30, 24\n\t"
+        "cp r30, r24\n\t"
+        "cpc r31, r25\n\t"
+        "brlo 5f\n\t"
+        "movw r24, r30\n\t" /* already past: just ahead of now */
+        "adiw r24, 16\n"
+        "5:\n\t"
+        "sts %[ocrl]+1, r25\n\t"
+        "sts %[ocrl], r24\n"
+        "4:\n\t"
+        "ldi r24, 5\n" /* the rest of the pulse's 2 us */
+        "6:\n\t"
+        "dec r24\n\t"
+        "brne 6b\n\t"
+        "cbi %[pf], %[xb]\n\t"
+        "cbi %[pf], %[yb]\n\t"
+        "cbi %[pa], %[eb]\n\t"
+        "lds r31, %[pl]\n\t"
+        "andi r31, %[nzm]\n\t"
+        "sts %[pl], r31\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r25\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t"
+        :
+        : [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),
+          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
+          [nzm] "n"(0xFF & ~_BV(Z_STEP_BIT)), [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)),
+          [nocieb] "n"(0xFF & ~_BV(OCIE1B)), [ocrl] "n"(_SFR_MEM_ADDR(OCR1BL)),
+          [tcntl] "n"(_SFR_MEM_ADDR(TCNT1L)), [step] "n"(PHASE_CYCLES));
+}
+/* compare B's assembly assumes the RAMPS step ports: X and Y on PORTF, Z on PORTL, E on PORTA */
+
+static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
+static uint8_t edge_armed; /* OCR1C set to toggle MARK_EDGE at the next boundary */
 
 /* The start of a tick: markers, this tick's length, directions, first pulses. */
 static void __attribute__((noinline)) tick_start(void)
 {
+    uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
+    if (entry > stepper_latency_max && !late)
+        stepper_latency_max = entry;
     struct out *e = emit;
-    /* markers for what the tick that just ended completed */
+    /* markers at rest (positions set, an abandoned segment) for what the tick
+     * that just ended completed */
     uint8_t f = e->flags;
-    if (f & (OUT_SEG_END | OUT_POS | OUT_ABORT)) {
-        sim_mailbox.seq = e->seq;
+    if (f & (OUT_POS | OUT_ABORT)) {
         if (f & OUT_ABORT)
-            MARK4_PIN = _BV(MARK_ABORT_BIT);
-        if (f & OUT_SEG_END)
-            MARK_PIN = _BV(MARK_SEG_BIT);
+            MARK_ABORT_PIN = _BV(MARK_ABORT_BIT);
         if (f & OUT_POS)
-            MARK3_PIN = _BV(MARK_POS_BIT);
+            MARK_POS_PIN = _BV(MARK_POS_BIT);
     }
     e = nx;
     nx = emit;
@@ -646,11 +762,19 @@ static void __attribute__((noinline)) tick_start(void)
         ocr_units = units;
         OCR1A = (uint16_t)(units * UNIT_CYCLES - 1);
     }
-    if (e->flags & OUT_MOTION)
-        MARK2_PORT |= _BV(MARK_MOTION_BIT);
-    else
-        MARK2_PORT &= (uint8_t)~_BV(MARK_MOTION_BIT);
-    uint8_t t0 = 0, pulses = e->phases ? phase_mask(e, 0) : 0;
+    /* MARK_EDGE toggles when this tick ends if it ends a segment (the harness
+     * reads the segment's number at that edge); motion_marker may add a start
+     * or stop of motion to that boundary */
+    if (e->flags & OUT_SEG_END) {
+        sim_mailbox.seq = e->seq;
+        sim_mailbox.edge = EDGE_SEG_END;
+        edge_armed = 1;
+        OCR1C = EDGE_AT_NEXT_TICK;
+    } else if (edge_armed) {
+        edge_armed = 0;
+        OCR1C = EDGE_NEVER;
+    }
+    uint8_t pulses = e->m[0];
     if (pulses) {
         if (e->dir != cur_dir) {
             apply_dirs(e->dir);
@@ -658,58 +782,75 @@ static void __attribute__((noinline)) tick_start(void)
             __builtin_avr_delay_cycles(16);
         }
         pulse_on(pulses);
-        t0 = TCNT1L;
-        if (e->phases > 1) {
-            phase = 0;
-            OCR1B = PHASE_CYCLES;
-            TIFR1 = _BV(OCF1B);
-            TIMSK1 |= _BV(OCIE1B);
-        }
+        uint8_t t0 = TCNT1L;
+        sched_clock_count += units; /* useful work while the pulses are high */
+        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
+            ;
+        pulse_off();
+        phase = 0;
+        phases_due(TCNT1L);
+    } else {
+        sched_clock_count += units;
     }
-    /* useful work while the pulses are high */
-    sched_clock_count += units;
     uint8_t p = ++pwm;
     if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
     if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
     if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
-    if (pulses) {
-        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
-            ;
-        pulse_off();
-    }
+}
+
+/* Motion starts or stops at the next tick boundary: MARK_EDGE toggles there
+ * (armed just after the next tick's computation, before that boundary). */
+static void __attribute__((noinline)) motion_marker(void)
+{
+    uint8_t next = nx->flags & OUT_MOTION;
+    if (next == (emit->flags & OUT_MOTION))
+        return;
+    if (!edge_armed)
+        sim_mailbox.edge = 0;
+    sim_mailbox.edge |= next ? EDGE_MOTION_START : EDGE_MOTION_STOP;
+    edge_armed = 1;
+    OCR1C = EDGE_AT_NEXT_TICK;
 }
 
 /* After a tick's computation: the interrupt's length so far, and whether the
- * next tick has already begun (returns 1: start it now). Its compare match came
- * while this interrupt was masked: silicon would re-enter at once, simavr 1.6
- * never queues an interrupt enabled after its flag rose, so handle it here. */
-static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
+ * next tick has already begun (returns 1: start it now). */
+static volatile uint8_t computing, tick_missed;
 
 static uint8_t __attribute__((noinline)) tick_end(void)
 {
     uint16_t used = TCNT1 + late;
+    if (tick_missed) {
+        tick_missed = 0;
+        stepper_overruns++;
+        used += (uint16_t)(ocr_units * UNIT_CYCLES);
+        late += (uint16_t)(ocr_units * UNIT_CYCLES);
+    } else {
+        late = 0;
+    }
     if (used > stepper_isr_max_cycles)
         stepper_isr_max_cycles = used;
-    if (!(TIFR1 & _BV(OCF1A))) {
-        late = 0;
-        return 0;
-    }
-    TIFR1 = _BV(OCF1A);
-    stepper_overruns++;
-    late += (uint16_t)(ocr_units * UNIT_CYCLES);
-    return 1;
+    return late != 0;
 }
 
-/* Nothing lives across the calls, so the entry saves only what a call clobbers. */
+/* The computation runs with interrupts on, so compare B keeps its phases'
+ * time. Should it overrun into the next tick, that tick's interrupt only
+ * notes it and this one starts the tick at once (late), as silicon would
+ * (without masking compare A: simavr 1.6 never queues an interrupt that was
+ * enabled after its flag rose). Nothing lives across the calls, so the entry
+ * saves only what a call clobbers. */
 ISR(TIMER1_COMPA_vect)
 {
+    if (computing) {
+        tick_missed = 1;
+        return;
+    }
     do {
         tick_start();
-        /* the next tick, interruptible by everything but this interrupt */
-        TIMSK1 &= (uint8_t)~_BV(OCIE1A);
+        computing = 1;
         sei();
         compute();
         cli();
-        TIMSK1 |= _BV(OCIE1A);
+        computing = 0;
+        motion_marker();
     } while (tick_end());
 }

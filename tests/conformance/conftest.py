@@ -2,8 +2,8 @@
 
 The AVR half needs the toolchain (`apt-get install -y gcc-avr avr-libc simavr
 libsimavr-dev libelf-dev pkg-config`); without it those tests are skipped with
-that message. The Python model runs with the AVR's announced clock, step rate
-and queue size (`--like-avr`) so the two answer the same host alike.
+that message. Both devices announce the same clock (100 kHz) and queue size, so
+one host plans the same segments for both.
 """
 
 from __future__ import annotations

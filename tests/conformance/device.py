@@ -14,9 +14,11 @@ import serial
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.framing import Kind, encode_frame
 from firmware_protocol.messages import (
+    GetStatus,
     Hello,
     Ident,
     Message,
+    Status,
     decode_messages,
     encode_message,
     encode_messages,
@@ -43,7 +45,7 @@ class Device:
 def start(kind: str, tmp: Path, *args: str) -> Device:
     record = tmp / f"{kind}-record.jsonl"
     cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--record", str(record)]
-    cmd += ["--firmware", "avr"] if kind == "avr" else ["--like-avr"]
+    cmd += ["--firmware", kind]
     proc = subprocess.Popen(
         [*cmd, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
@@ -65,6 +67,9 @@ class RawHost:
     reports: list = field(default_factory=list)
     urgent: list = field(default_factory=list)
     flows: list = field(default_factory=list)
+    keepalive: float = 0.5  # GET_STATUS when nothing was sent for this long (0: never)
+    _sent_at: float = 0.0
+    _open: bool = False
 
     def __post_init__(self):
         self.port = serial.Serial(self.path, 250000, timeout=0)
@@ -90,6 +95,9 @@ class RawHost:
                 {"data": self.reports, "urgent": self.urgent, "flow": self.flows}[inc.kind].extend(
                     msgs
                 )
+            if self.keepalive and self._open and now - self._sent_at > self.keepalive:
+                self.ep.send(encode_messages([GetStatus()], self.ctx))
+                self._sent_at = now
             for frame in self.ep.flush(now):
                 self.port.write(frame)
             if time.monotonic() >= end:
@@ -117,13 +125,21 @@ class RawHost:
                 self.pump(0.02)
                 for m in self.urgent:
                     if isinstance(m, Ident) and m.nonce == nonce:
+                        self._open = True
                         return m
         raise AssertionError("no IDENT")
 
     def send(self, *msgs: Message) -> None:
+        self._sent_at = self.now()
         payload = encode_messages(list(msgs), self.ctx)
         self.ep.send(payload, items=sum(1 for m in msgs if m.QUEUED))
         self.pump(0.01)
+
+    def status(self) -> Status:
+        """A STATUS answered after everything received so far (keep-alive replies dropped)."""
+        self.reports[:] = [m for m in self.reports if not isinstance(m, Status)]
+        self.send(GetStatus())
+        return self.wait_for(lambda: self.of(Status), what="STATUS")
 
     def of(self, cls, **fields):
         for m in self.reports:

@@ -38,11 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="python",
         help="python: the device model; avr: the C firmware's ELF in simavr",
     )
-    p.add_argument(
-        "--like-avr",
-        action="store_true",
-        help="the Python model announces the AVR firmware's clock, step rate and queue size",
-    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -65,10 +60,7 @@ def run(args: argparse.Namespace) -> int:
 
         return run_avr(args, faults)
     observer = make_observer(args.truth, args.mocap_dir) if args.truth else None
-    like = {}
-    if args.like_avr:
-        from cdprhost.sim.avr_device import AVR_IDENTITY as like
-    device = SimDevice(SimConfig(speedup=args.speedup, **like), faults, observer)
+    device = SimDevice(SimConfig(speedup=args.speedup), faults, observer)
     server = PtyServer(device, faults)
 
     def stop(signum, frame):
