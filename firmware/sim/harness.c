@@ -622,7 +622,14 @@ int main(int argc, char **argv)
                 isr_count++;
                 isr_hist[c / 100 < 63 ? c / 100 : 63]++;
                 isr_entry = 0;
-                if (c > 1600 && c >= isr_cycles_max) {
+                static long trace_lo = -1;
+                if (trace_lo < 0)
+                    trace_lo = getenv("CDPR_SIM_TRACE_AT") ? atol(getenv("CDPR_SIM_TRACE_AT")) : 0;
+                int take = trace_lo ? (c >= (uint64_t)trace_lo && c < (uint64_t)trace_lo + 100)
+                                    : (c > 1600 && c >= isr_cycles_max);
+                if (take) {
+                    if (trace_lo)
+                        trace_lo = 1; /* the first one only */
                     /* the first over-long tick: its instruction trace, for the profile */
                     FILE *f = fopen("/tmp/cdpr-long-isr.txt", "w");
                     for (size_t i = 0; f && i < trace_len; i++)

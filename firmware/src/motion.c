@@ -93,6 +93,14 @@ static void fixed48(float x, int32_t *hi, uint16_t *lo)
     *lo = (uint16_t)((s - f) * 65536.0f);
 }
 
+/* floor(n (ka i + kb i^2) + 1/2): the steps due by the end of tick i */
+uint32_t motion_steps_due(float n, float ka, float kb, uint32_t i)
+{
+    float t = (float)i;
+    float q = n * (ka * t + kb * t * t) + 0.5f;
+    return q <= 0.0f ? 0 : (uint32_t)q;
+}
+
 static void prepare(struct plan *p, const struct item *it, uint8_t index)
 {
     float r = (it->flags & SEGF_RAMP) ? (float)it->ramp / 255.0f : 0.5f;
@@ -104,12 +112,18 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
     p->accel = kb != 0.0f;
     p->at_rest = it->flags & SEGF_AT_REST;
     p->ticks = motion_ticks_of(it->ticks, &p->last_units);
+    p->ka = ka;
+    p->kb = kb;
     for (uint8_t k = 0; k < 4; k++) {
         struct axis_plan *x = &p->ax[k];
         uint32_t n = it->u.n[k];
         float nf = (float)n;
         p->delta[k] = (p->dir >> k & 1) ? -(int32_t)n : (int32_t)n;
-        x->rem = n;
+        uint32_t before = motion_steps_due(nf, ka, kb, p->ticks - 1);
+        if (before > n)
+            before = n;
+        x->last_n = n - before;
+        x->est_low = (uint8_t)before;
         x->acc = 1UL << 23;
         if (n)
             p->moving |= (uint8_t)(1 << k);

@@ -15,6 +15,8 @@ void motion_store(struct item *it, const struct segment *s);
 void motion_prepare_ahead(void);
 /* Forget all plans (the queue was flushed; interrupts off or the ISR idle). */
 void motion_plans_reset(void);
+/* Steps due by the end of tick i of an axis of n steps (float estimate). */
+uint32_t motion_steps_due(float n, float ka, float kb, uint32_t i);
 /* Ticks of a timed item of `units` clock units, and the length of its last tick. */
 uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units);
 

@@ -52,17 +52,22 @@ static inline struct item *queue_slot(uint8_t index)
 
 /* One axis of a prepared segment: the steps due by the end of tick i are
  * floor(N p(i / Dt) + 1/2), kept by second-order forward differences:
- * v += a; acc += v; steps = acc >> 24. v and a are 48-bit fixed point with 40
- * fraction bits (lo: the low 16 fraction bits, hi: Q7.24); acc is Q8.24 and
- * starts at 1/2; rem counts the steps not issued yet. The layout is fixed: the
+ * v += a; acc += v; the steps of the tick are the change of acc's top byte.
+ * v and a are 48-bit fixed point with 40 fraction bits (lo: the low 16
+ * fraction bits, hi: Q7.24); acc is Q8.24 modulo 256 steps and starts at 1/2.
+ * The interrupt keeps no count: the last tick issues last_n corrected by the
+ * difference between acc's top byte and est_low, the low byte of the count
+ * the main loop estimated for the end of the tick before (the estimate and
+ * the DDA differ by a step or two at most). The layout is fixed: the
  * interrupt's assembly (stepper.c) addresses the fields by offset. */
 struct axis_plan {
-    uint16_t v_lo; /* 0 */
-    int32_t v_hi;  /* 2 */
-    uint16_t a_lo; /* 6 */
-    int32_t a_hi;  /* 8 */
-    uint32_t acc;  /* 12 */
-    uint32_t rem;  /* 16 */
+    uint16_t v_lo;   /* 0 */
+    int32_t v_hi;    /* 2 */
+    uint16_t a_lo;   /* 6 */
+    int32_t a_hi;    /* 8 */
+    uint32_t acc;    /* 12 */
+    uint32_t last_n; /* N minus the estimated count before the last tick */
+    uint8_t est_low;
 };
 
 struct plan {
@@ -73,6 +78,7 @@ struct plan {
     uint8_t last_units; /* length of the last tick in clock units */
     uint8_t at_rest;    /* SEGF_AT_REST of the item */
     uint32_t ticks;     /* interrupt ticks (the last one last_units long) */
+    float ka, kb;       /* N p(i / Dt) = N (ka i + kb i^2): positions mid-segment */
     int32_t delta[4];   /* signed steps */
     struct axis_plan ax[4];
 };

@@ -67,7 +67,7 @@ static uint8_t cur_dir = 0xFF, ocr_units = TICK_UNITS;
  * compare match (phase 0 leaves the interrupt's entry at about PHASE_BASE).
  * Pulses that fit a tick of u units (index u): the last one ends (and has its
  * low time) before the next tick's first. */
-#define PHASE_BASE 100
+#define PHASE_BASE 80
 #define CAP(u) ((u) * UNIT_CYCLES < PHASE_BASE + 64 + PHASE_CYCLES ? 1 \
                 : ((u) * UNIT_CYCLES - PHASE_BASE - 64) / PHASE_CYCLES + 1)
 static const uint8_t phase_cap[2 * TICK_UNITS] = {
@@ -189,38 +189,65 @@ static void raise_error(uint8_t code, uint32_t item, uint32_t seg, uint8_t axis,
     st.running = 0;
 }
 
-/* Positions while a segment runs: the start plus the steps issued so far. */
-static void seg_positions(int32_t *out)
+/* What the positions mid-segment are made of, taken with interrupts off. */
+struct seg_snapshot {
+    int32_t pos[4];
+    uint8_t running; /* a segment is executing */
+    uint8_t acc_int[4];
+    uint32_t done_ticks;
+    float ka, kb;
+    int32_t delta[4];
+};
+
+static void seg_snapshot(struct seg_snapshot *sn)
 {
-    const struct item *it = queue_slot(queue_tail);
+    for (uint8_t k = 0; k < 4; k++)
+        sn->pos[k] = st.pos[k];
+    sn->running = st.current == IT_SEG;
+    if (!sn->running)
+        return;
+    sn->done_ticks = run->ticks - t_left;
+    sn->ka = run->ka;
+    sn->kb = run->kb;
     for (uint8_t k = 0; k < 4; k++) {
-        int32_t done = (int32_t)(it->u.n[k] - run->ax[k].rem);
-        out[k] = st.pos[k] + ((run->dir >> k & 1) ? -done : done);
+        sn->acc_int[k] = (uint8_t)(run->ax[k].acc >> 24);
+        sn->delta[k] = run->delta[k];
+    }
+}
+
+/* The start plus the steps issued so far (the estimate corrected by the low
+ * byte the interrupt's accumulator keeps); floating point, interrupts on. */
+static void seg_positions(const struct seg_snapshot *sn, int32_t *out)
+{
+    for (uint8_t k = 0; k < 4; k++) {
+        out[k] = sn->pos[k];
+        if (!sn->running || !sn->delta[k])
+            continue;
+        int32_t d = sn->delta[k];
+        uint32_t n = (uint32_t)(d < 0 ? -d : d);
+        uint32_t est = motion_steps_due((float)n, sn->ka, sn->kb, sn->done_ticks);
+        int32_t issued = (int32_t)est + (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
+        out[k] += d < 0 ? -issued : issued;
     }
 }
 
 void stepper_positions(int32_t *out)
 {
+    struct seg_snapshot sn;
     uint8_t s = SREG;
     cli();
-    if (st.current == IT_SEG) {
-        seg_positions(out);
-    } else {
-        for (uint8_t k = 0; k < 4; k++)
-            out[k] = st.pos[k];
-    }
+    seg_snapshot(&sn);
     SREG = s;
+    seg_positions(&sn, out);
 }
 
 void stepper_halt(void)
 {
+    struct seg_snapshot sn;
     uint8_t s = SREG;
     cli();
+    seg_snapshot(&sn);
     if (st.current == IT_SEG) {
-        int32_t pos[4];
-        seg_positions(pos);
-        for (uint8_t k = 0; k < 4; k++)
-            st.pos[k] = pos[k];
         abort_pending = 1;
         abort_seq = st.segments_done + 1;
     }
@@ -228,6 +255,14 @@ void stepper_halt(void)
     st.at_rest = 1;
     st.running = 0;
     SREG = s;
+    if (sn.running) {
+        int32_t pos[4];
+        seg_positions(&sn, pos);
+        cli();
+        for (uint8_t k = 0; k < 4; k++)
+            st.pos[k] = pos[k];
+        SREG = s;
+    }
 }
 
 void stepper_resume(void)
@@ -398,10 +433,9 @@ static void __attribute__((noinline)) dispatch(void)
 }
 
 /* Steps one axis issues in a tick that is not the segment's last: (v += a),
- * acc += v, n = min(acc >> 24, cap, rem); acc -= n << 24, rem -= n. What does
- * not fit the tick's phases stays in acc for the next tick. 63 cycles, 99 with
+ * acc += v; the steps are the change of acc's top byte. 36 cycles, 72 with
  * the acceleration (hand-written: the compiler's version took twice that). */
-static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *x, uint8_t cap, uint8_t accel)
+static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *x, uint8_t accel)
 {
     uint8_t n;
     __asm__ volatile(
@@ -444,44 +478,34 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
         "ldd r19, Z+13\n\t"
         "ldd r24, Z+14\n\t"
         "ldd r25, Z+15\n\t"
+        "mov %[n], r25\n\t"
         "add r18, r20\n\t"
         "adc r19, r21\n\t"
         "adc r24, r22\n\t"
         "adc r25, r23\n\t"
-        "mov %[n], r25\n\t"
-        "cp %[cap], %[n]\n\t"
-        "brsh 3f\n\t"
-        "mov %[n], %[cap]\n"
-        "3:\n\t"
-        "ldd r20, Z+16\n\t"
-        "ldd r21, Z+17\n\t"
-        "ldd r22, Z+18\n\t"
-        "ldd r23, Z+19\n\t"
-        "mov __tmp_reg__, r21\n\t"
-        "or __tmp_reg__, r22\n\t"
-        "or __tmp_reg__, r23\n\t"
-        "brne 4f\n\t"
-        "cp r20, %[n]\n\t"
-        "brsh 4f\n\t"
-        "mov %[n], r20\n"
-        "4:\n\t"
-        "sub r25, %[n]\n\t"
         "std Z+12, r18\n\t"
         "std Z+13, r19\n\t"
         "std Z+14, r24\n\t"
         "std Z+15, r25\n\t"
-        "sub r20, %[n]\n\t"
-        "sbc r21, __zero_reg__\n\t"
-        "sbc r22, __zero_reg__\n\t"
-        "sbc r23, __zero_reg__\n\t"
-        "std Z+16, r20\n\t"
-        "std Z+17, r21\n\t"
-        "std Z+18, r22\n\t"
-        "std Z+19, r23\n\t"
+        "sub r25, %[n]\n\t"
+        "mov %[n], r25\n\t"
         : [n] "=&r"(n)
-        : "z"(x), [cap] "r"(cap), [accel] "r"(accel)
+        : "z"(x), [accel] "r"(accel)
         : "r18", "r19", "r20", "r21", "r22", "r23", "r24", "r25", "memory");
     return n;
+}
+
+/* More pulses than a tick holds (a rate over the advertised one): count the
+ * excess as lost. */
+static void __attribute__((noinline)) too_many(struct out *o)
+{
+    uint8_t cap = phase_cap[TICK_UNITS];
+    for (uint8_t i = cap; i < o->phases; i++) {
+        for (uint8_t m = o->m[i]; m; m &= (uint8_t)(m - 1))
+            stepper_lost_steps++;
+        o->m[i] = 0;
+    }
+    o->phases = cap;
 }
 
 /* The segment's last tick: each axis issues what is left (the exact total). */
@@ -490,17 +514,22 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
     struct stepper_state *s = (struct stepper_state *)&st; /* private to this interrupt here */
     struct out *o = nx;
     struct axis_plan *x = p->ax;
-    for (uint8_t bit = 1; bit < 16; bit <<= 1, x++) {
-        uint32_t rem = x->rem;
+    int32_t *pos = s->pos;
+    const int32_t *d = p->delta;
+    for (uint8_t bit = 1; bit < 16; bit <<= 1, x++, pos++, d++) {
+        if (!(p->moving & bit))
+            continue;
+        /* N minus what was issued: the estimate's difference to the DDA */
+        int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
+        uint32_t rem = x->last_n - (int32_t)off;
         uint8_t n = (uint8_t)rem;
-        if (rem > cap) {
+        if ((rem >> 8) || n > cap) {
             stepper_lost_steps += (uint16_t)(rem - cap); /* never at the advertised rate */
             n = cap;
         }
         add_pulses(o, bit, n);
+        *pos += *d;
     }
-    for (uint8_t k = 0; k < 4; k++)
-        s->pos[k] += p->delta[k];
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
     o->seq = ++s->segments_done;
@@ -524,15 +553,16 @@ static void __attribute__((noinline)) seg_tick(void)
         return;
     }
     uint8_t moving = p->moving, accel = p->accel;
-    const uint8_t cap = phase_cap[TICK_UNITS];
     if (moving & 1)
-        add_pulses(o, 1, dda_tick(&p->ax[0], cap, accel));
+        add_pulses(o, 1, dda_tick(&p->ax[0], accel));
     if (moving & 2)
-        add_pulses(o, 2, dda_tick(&p->ax[1], cap, accel));
+        add_pulses(o, 2, dda_tick(&p->ax[1], accel));
     if (moving & 4)
-        add_pulses(o, 4, dda_tick(&p->ax[2], cap, accel));
+        add_pulses(o, 4, dda_tick(&p->ax[2], accel));
     if (moving & 8)
-        add_pulses(o, 8, dda_tick(&p->ax[3], cap, accel));
+        add_pulses(o, 8, dda_tick(&p->ax[3], accel));
+    if (o->phases > phase_cap[TICK_UNITS])
+        too_many(o); /* never at the advertised rate */
 }
 
 /* Everything but a segment's tick. */
@@ -617,7 +647,7 @@ static void __attribute__((noinline)) compute(void)
  * compare B for the next one. A phase that is due now, or already late (the
  * tick's interrupt started late), goes out at once, after the previous pulse
  * had its low time. With interrupts off. */
-#define PHASE_SLACK 48 /* cycles: a phase this close is waited for, not interrupted for */
+#define PHASE_SLACK 24 /* cycles: a phase this close is waited for, not interrupted for */
 static inline __attribute__((always_inline)) void phases_due(uint8_t t_off)
 {
     const struct out *e = emit;
@@ -742,19 +772,7 @@ static uint8_t edge_armed; /* OCR1C set to toggle MARK_EDGE at the next boundary
 static void __attribute__((noinline)) tick_start(void)
 {
     uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
-    if (entry > stepper_latency_max && !late)
-        stepper_latency_max = entry;
-    struct out *e = emit;
-    /* markers at rest (positions set, an abandoned segment) for what the tick
-     * that just ended completed */
-    uint8_t f = e->flags;
-    if (f & (OUT_POS | OUT_ABORT)) {
-        if (f & OUT_ABORT)
-            MARK_ABORT_PIN = _BV(MARK_ABORT_BIT);
-        if (f & OUT_POS)
-            MARK_POS_PIN = _BV(MARK_POS_BIT);
-    }
-    e = nx;
+    struct out *e = nx;
     nx = emit;
     emit = e;
     uint8_t units = e->units;
@@ -762,10 +780,32 @@ static void __attribute__((noinline)) tick_start(void)
         ocr_units = units;
         OCR1A = (uint16_t)(units * UNIT_CYCLES - 1);
     }
+    uint8_t pulses = e->m[0], t0 = 0;
+    if (pulses) {
+        if (e->dir != cur_dir) {
+            apply_dirs(e->dir);
+            cur_dir = e->dir;
+            __builtin_avr_delay_cycles(16);
+        }
+        pulse_on(pulses);
+        t0 = TCNT1L;
+    }
+    /* useful work while the pulses are high */
+    if (entry > stepper_latency_max && !late)
+        stepper_latency_max = entry;
+    uint8_t f = e->flags;
+    if (f & (OUT_POS | OUT_ABORT)) {
+        /* positions were set (at rest); a segment was abandoned (before the
+         * edge that ends it) */
+        if (f & OUT_ABORT)
+            MARK_ABORT_PIN = _BV(MARK_ABORT_BIT);
+        if (f & OUT_POS)
+            MARK_POS_PIN = _BV(MARK_POS_BIT);
+    }
     /* MARK_EDGE toggles when this tick ends if it ends a segment (the harness
      * reads the segment's number at that edge); motion_marker may add a start
      * or stop of motion to that boundary */
-    if (e->flags & OUT_SEG_END) {
+    if (f & OUT_SEG_END) {
         sim_mailbox.seq = e->seq;
         sim_mailbox.edge = EDGE_SEG_END;
         edge_armed = 1;
@@ -774,28 +814,18 @@ static void __attribute__((noinline)) tick_start(void)
         edge_armed = 0;
         OCR1C = EDGE_NEVER;
     }
-    uint8_t pulses = e->m[0];
+    sched_clock_count += units;
+    uint8_t p = ++pwm;
+    if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
+    if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
+    if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
     if (pulses) {
-        if (e->dir != cur_dir) {
-            apply_dirs(e->dir);
-            cur_dir = e->dir;
-            __builtin_avr_delay_cycles(16);
-        }
-        pulse_on(pulses);
-        uint8_t t0 = TCNT1L;
-        sched_clock_count += units; /* useful work while the pulses are high */
         while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
             ;
         pulse_off();
         phase = 0;
         phases_due(TCNT1L);
-    } else {
-        sched_clock_count += units;
     }
-    uint8_t p = ++pwm;
-    if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
-    if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
-    if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
 }
 
 /* Motion starts or stops at the next tick boundary: MARK_EDGE toggles there
