@@ -31,6 +31,10 @@ INSTALL_HINT = (
 )
 
 
+# the harness's figures (lost interrupts, ISR cycles, step timing) go to this file on exit
+STATS_ENV = "CDPR_SIM_STATS"
+
+
 def toolchain_missing() -> str | None:
     """None when the firmware and its harness can be built here, else how to fix it."""
     if shutil.which("avr-gcc") is None or shutil.which("make") is None:
@@ -125,7 +129,10 @@ def run(args, faults: FaultSpec) -> int:
     build()
     proc = subprocess.Popen(
         harness_command(
-            speedup=args.speedup, record=args.record, heater_fail_after=faults.heater_fail_after
+            speedup=args.speedup,
+            record=args.record,
+            heater_fail_after=faults.heater_fail_after,
+            stats=os.environ.get(STATS_ENV),
         ),
         stdout=subprocess.PIPE,
         text=True,

@@ -15,12 +15,12 @@
  * own grid of TICK_UNITS units (100 us, 10 kHz) and makes the last tick of each
  * timed item as long as it needs to be, so
  * every segment and dwell lasts exactly its duration. Homing ticks are
- * HOME_TICK_UNITS long (a homing step every 25 units, 4000 steps/s). */
+ * HOME_TICK_UNITS long: one homing step each, 4000 steps/s. */
 #define CLOCK_HZ 100000UL
 #define UNIT_CYCLES (F_CPU / CLOCK_HZ)                  /* 160 */
 #define TICK_UNITS 10
 #define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 1600 */
-#define HOME_TICK_UNITS 5
+#define HOME_TICK_UNITS 25
 /* Step pulses within a tick at k * PHASE_CYCLES (12.5 us apart): a 100 us tick
  * holds 8 of them per axis, so 80000 steps/s could be issued; the firmware
  * advertises 60000, which leaves the rounding of the DDA room. */

@@ -40,8 +40,10 @@ volatile uint8_t stepper_latency_max;
 #define OUT_ABORT 0x08
 
 #define PULSE_CYCLES 34 /* >= 2 us high */
-/* OCR1C: 0 toggles MARK_EDGE (OC1C) one cycle into the next tick; above TOP never */
-#define EDGE_AT_NEXT_TICK 0
+/* OCR1C: toggle MARK_EDGE (OC1C) a few cycles into the next tick (simavr only
+ * arms a compare whose time has not passed when its timer period starts, and
+ * that start may be seen a few cycles late); above TOP: never */
+#define EDGE_AT_NEXT_TICK 8
 #define EDGE_NEVER 0xFFFF
 #define HOME_TICKS (CLOCK_HZ / ((uint32_t)DEV_HOMING_RATE * HOME_TICK_UNITS))
 _Static_assert(HOME_TICKS * DEV_HOMING_RATE * HOME_TICK_UNITS == CLOCK_HZ,
@@ -357,9 +359,10 @@ static uint8_t __attribute__((noinline)) home_tick(void)
         return 0;
     }
     nx->dir = (uint8_t)((cur_dir & 0x8) | neg);
+    int32_t *pos = ((struct stepper_state *)&st)->pos; /* private to this interrupt here */
     for (uint8_t k = 0; k < 3; k++)
         if (stepping >> k & 1)
-            st.pos[k] += (neg >> k & 1) ? -1 : 1;
+            pos[k] += (neg >> k & 1) ? -1 : 1;
     nx->m[0] = stepping;
     nx->phases = stepping ? 1 : 0;
     return 0;
@@ -611,6 +614,7 @@ static void __attribute__((noinline)) compute_other(void)
                 set_pos_marker();
             } else if (st.current == IT_HOME) {
                 o->flags |= OUT_MOTION;
+                o->units = HOME_TICK_UNITS;
             }
             break;
         case IT_WAIT:
