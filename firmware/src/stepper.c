@@ -647,39 +647,22 @@ static void __attribute__((noinline)) compute(void)
 /* ---------------------------------------------------------------- interrupts */
 
 
-/* At a tick's start, after phase 0: emit the phases that are due, then arm
- * compare B for the next one. A phase that is due now, or already late (the
- * tick's interrupt started late), goes out at once, after the previous pulse
- * had its low time. With interrupts off. */
-#define PHASE_SLACK 24 /* cycles: a phase this close is waited for, not interrupted for */
-static inline __attribute__((always_inline)) void phases_due(uint8_t t_off)
+/* At a tick's start, after phase 0: arm compare B for phase 1, at its time or,
+ * when the tick started late, just ahead of now (the later phases then follow
+ * at their spacing: compare B's interrupt does the same for each). The tick's
+ * computation runs with interrupts on, so compare B keeps its time meanwhile.
+ * With interrupts off. */
+#define PHASE_SLACK 40 /* cycles: the earliest compare B can be armed for */
+static inline __attribute__((always_inline)) void phases_arm(void)
 {
-    const struct out *e = emit;
-    for (;;) {
-        uint8_t k = phase + 1;
-        if (k >= e->phases) {
-            TIMSK1 &= (uint8_t)~_BV(OCIE1B);
-            return;
-        }
-        uint16_t at = (uint16_t)(PHASE_BASE + k * PHASE_CYCLES);
-        if ((int16_t)(at - TCNT1) > PHASE_SLACK) {
-            OCR1B = at;
-            TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
-            TIMSK1 |= _BV(OCIE1B);
-            return;
-        }
-        while ((int16_t)(TCNT1 - at) < 0)
-            ;
-        while ((uint8_t)(TCNT1L - t_off) < PULSE_CYCLES)
-            ; /* low time */
-        phase = k;
-        pulse_on(e->m[k]);
-        uint8_t t0 = TCNT1L;
-        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
-            ;
-        pulse_off();
-        t_off = TCNT1L;
+    if (emit->phases < 2) {
+        TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+        return;
     }
+    uint16_t at = PHASE_BASE + PHASE_CYCLES, soon = TCNT1 + PHASE_SLACK;
+    OCR1B = (int16_t)(at - soon) > 0 ? at : soon;
+    TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
+    TIMSK1 |= _BV(OCIE1B);
 }
 
 /* Compare B: the tick's further phases, one per interrupt, 60-odd cycles
@@ -828,7 +811,7 @@ static void __attribute__((noinline)) tick_start(void)
             ;
         pulse_off();
         phase = 0;
-        phases_due(TCNT1L);
+        phases_arm();
     }
 }
 
