@@ -63,6 +63,48 @@ def decode_svarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, 
     return unzigzag(value), pos
 
 
+# ------------------------------------------------------------------ bounded (the wire's field types)
+
+#: bits of each unsigned field type; a varint of ``b`` bits takes at most ceil(b / 7) bytes
+UNSIGNED_BITS = {"u16": 16, "u32": 32}
+SIGNED_BITS = {"i16": 16, "i32": 32}
+
+
+def max_bytes(bits: int) -> int:
+    return (bits + 6) // 7
+
+
+def decode_ubounded(buf: bytes | bytearray | memoryview, pos: int, bits: int) -> tuple[int, int]:
+    """An unsigned varint that must fit ``bits`` bits in at most ``ceil(bits / 7)`` bytes.
+
+    This is what a microcontroller's fixed-width parser accepts: a longer encoding or a
+    value over the width raises :class:`VarintError` (never an unbounded integer)."""
+    value = 0
+    shift = 0
+    end = len(buf)
+    limit = 7 * max_bytes(bits)
+    while True:
+        if pos >= end:
+            raise VarintError("truncated varint")
+        byte = buf[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            break
+        if shift >= limit:
+            raise VarintError(f"varint longer than {max_bytes(bits)} bytes for a {bits}-bit field")
+    if value >> bits:
+        raise VarintError(f"value {value} does not fit a {bits}-bit field")
+    return value, pos
+
+
+def decode_sbounded(buf: bytes | bytearray | memoryview, pos: int, bits: int) -> tuple[int, int]:
+    """A zigzag varint of a signed ``bits``-bit field (two's complement range)."""
+    value, pos = decode_ubounded(buf, pos, bits)
+    return (value >> 1) ^ -(value & 1), pos
+
+
 # ------------------------------------------------------------------ vectorised
 
 

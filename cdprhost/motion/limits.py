@@ -24,6 +24,8 @@ import numpy as np
 from cdprhost.motion.moves import MIN_MOVE_MM, MoveBlock
 from cdprhost.profile.models import Extruder, MotionLimits
 
+Vec3 = tuple[np.ndarray, np.ndarray, np.ndarray]  # one array per coordinate
+
 #: spacing of the Jacobian samples along a move (mm)
 SAMPLE_SPACING_MM = 10.0
 #: fraction of the chord tolerance the segment length aims for (rest: higher order terms)
@@ -98,9 +100,9 @@ def _max3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 class _PointTerms:
     """Direction-independent cable terms at points (structure of arrays, cable k in [k])."""
 
-    e: tuple  # e[k] = (ex, ey, ez) unit vector from outlet k
-    inv_length: tuple  # 1 / L_k
-    cof: tuple | None  # columns of adj(J) (e2 x e3, e3 x e1, e1 x e2) divided by det J
+    e: tuple[Vec3, ...]  # e[k] = (ex, ey, ez) unit vector from outlet k
+    inv_length: tuple[np.ndarray, ...]  # 1 / L_k
+    cof: tuple[Vec3, ...] | None  # columns of adj(J) (e2 x e3, e3 x e1, e1 x e2) / det J
 
     @classmethod
     def at(
@@ -115,7 +117,7 @@ class _PointTerms:
         cof = None
         if chord:
 
-            def cross(a, b):
+            def cross(a: Vec3, b: Vec3) -> Vec3:
                 return (
                     a[1] * b[2] - a[2] * b[1],
                     a[2] * b[0] - a[0] * b[2],
@@ -124,15 +126,19 @@ class _PointTerms:
 
             c23, c31, c12 = cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])
             inv_det = 1.0 / (e[0][0] * c23[0] + e[0][1] * c23[1] + e[0][2] * c23[2])
-            cof = tuple(tuple(c * inv_det for c in col) for col in (c23, c31, c12))
+            cof = tuple(
+                (col[0] * inv_det, col[1] * inv_det, col[2] * inv_det) for col in (c23, c31, c12)
+            )
         return cls(tuple(e), tuple(inv), cof)
 
     def take(self, idx: slice | np.ndarray) -> _PointTerms:
-        pick = lambda t: tuple(a[idx] for a in t)  # noqa: E731
+        def pick3(t: Vec3) -> Vec3:
+            return (t[0][idx], t[1][idx], t[2][idx])
+
         return _PointTerms(
-            tuple(pick(v) for v in self.e),
-            pick(self.inv_length),
-            None if self.cof is None else tuple(pick(c) for c in self.cof),
+            tuple(pick3(v) for v in self.e),
+            tuple(a[idx] for a in self.inv_length),
+            None if self.cof is None else tuple(pick3(c) for c in self.cof),
         )
 
     def along(
@@ -207,7 +213,7 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     c0, k0, w0 = terms.take(i0).along(ux, uy, uz)
     c1, k1, w1 = terms.take(i1).along(ux, uy, uz)
     c_max, k_max = np.maximum(c0, c1), np.maximum(k0, k1)
-    w_max = np.maximum(w0, w1) if chord else None
+    w_max = np.maximum(w0, w1) if w0 is not None and w1 is not None else None
     owner, frac = _interior_samples(np.where(kin, dist, 0.0), SAMPLE_SPACING_MM)
     if owner.size:
         p = block.start[owner] + frac[:, None] * delta[owner]
@@ -216,7 +222,7 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
         )
         np.maximum.at(c_max, owner, ci)
         np.maximum.at(k_max, owner, ki)
-        if chord:
+        if w_max is not None and wi is not None:
             np.maximum.at(w_max, owner, wi)
     spacing = dist / (np.floor(dist / SAMPLE_SPACING_MM) + 1.0)
     c_bound = np.clip(c_max + 0.5 * k_max * spacing, 1e-9, 1.0)  # >0: three cables span space
@@ -226,7 +232,7 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     v2_cap = np.where(kin, np.minimum(v2_cap, v2_mod), v2_cap)
     a_mod = (caps.module_accel - v2_cap * k_bound) / c_bound
     accel = np.where(kin, np.minimum(accel, a_mod), accel)
-    if chord:
+    if w_max is not None:
         step = np.sqrt(8.0 * caps.chord_tolerance * CHORD_SAFETY / np.maximum(w_max * 1.05, 1e-12))
         chord_step = np.where(kin, step, np.inf)
     return MoveCaps(length, kin, unit, accel, v2_cap, v2_cart, chord_step)

@@ -11,6 +11,7 @@ plans everything to a stop (end of program, dwell, waits, homing).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +32,7 @@ class PlannerStats:
     replans: int = 0
     start_speed_drops: int = 0  # committed speed the next plan could not keep (should stay 0)
     flushes: int = 0
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
 
 class Planner:

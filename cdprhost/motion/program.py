@@ -167,7 +167,9 @@ def read_items(
     from cdprhost.gcode import read_program
 
     home = home_position(profile, model) - np.asarray(profile.build_volume.bed_origin, dtype=float)
-    return read_program(source, home_position=tuple(float(v) for v in home), **reader_options)
+    return read_program(
+        source, home_position=(float(home[0]), float(home[1]), float(home[2])), **reader_options
+    )
 
 
 def plan_program(

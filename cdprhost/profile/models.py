@@ -129,9 +129,11 @@ class Heaters(_Strict):
 
 
 class Serial(_Strict):
-    baud: Annotated[int, Field(gt=0)] = 250000
+    baud: Annotated[int, Field(ge=50, le=10_000_000)] = 250000
     port: str | None = None
-    timeout_s: Positive = 2.0
+    timeout_s: Annotated[float, Field(ge=0.1, le=600, allow_inf_nan=False)] = Field(
+        default=2.0, description="seconds without a word from the device before giving up"
+    )
 
 
 class EffectEntry(BaseModel):

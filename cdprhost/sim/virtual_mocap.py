@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,16 +70,20 @@ class VirtualMocap:
         self._dirs = np.ones(3)
         self.count = sum(1 for p in self.directory.glob("take-*") if not p.name.startswith("."))
         self.written: list[Path] = []
-        self._record: list[dict] | None = None
+        self._record: Any = None
 
-    def attach_record(self, record: list[dict]) -> None:
-        """Read last-motion directions from the device's (growing) record of executed segments."""
+    def attach_record(self, record: Any) -> None:
+        """Read last-motion directions from the device's (growing) record of executed segments
+        (a ``SegmentRecord``: its ``steps(last=n)`` array, or a list of entries)."""
         self._record = record
 
     def _record_directions(self, window: int = 4096) -> np.ndarray | None:
         if not self._record:
             return None
-        steps = np.array([e["steps"][:3] for e in self._record[-window:]], dtype=np.int64)
+        if hasattr(self._record, "steps"):
+            steps = self._record.steps(last=window)[:, :3]
+        else:
+            steps = np.array([e["steps"][:3] for e in self._record[-window:]], dtype=np.int64)
         moves = np.diff(steps, axis=0)
         dirs = self._dirs.copy()
         for k in range(3):  # three columns; the record window is vectorised

@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("cdprhost.job.runner", reason="the print runner has not landed yet")
 
 
+from cdprhost.job.resume import resume_path_for
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
@@ -127,7 +128,8 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         text = await shown(pilot)
         assert f"last executed line: {failure.last_line}" in text
         assert f"--resume-from-layer {max(failure.last_layer + 1, 1)}" in text
-        assert failure.resume_file == str(tmp_path / "resume" / "tube.resume.json")
+        # keyed by the file's content hash and path
+        assert failure.resume_file == str(resume_path_for(part, tmp_path / "resume"))
         await pilot.press(
             "r"
         )  # resume from that layer: the link is re-opened, a new job starts there

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from cdprhost.calibration import planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
+from cdprhost.cli.numbers import bounded_float
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
@@ -64,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     ident.add_argument("--json", metavar="R", help="machine-readable report")
     ident.add_argument(
         "--noise-floor",
-        type=float,
+        type=bounded_float(0.0, 10.0),
         default=0.05,
         metavar="MM",
         help="mocap noise per coordinate that averaging cannot remove (default 0.05 mm)",
@@ -134,7 +135,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="wait for a take at most S seconds",
     )
-    wiz.add_argument("--noise-floor", type=float, default=0.05, metavar="MM")
+    wiz.add_argument("--noise-floor", type=bounded_float(0.0, 10.0), default=0.05, metavar="MM")
     wiz.add_argument(
         "--out", metavar="calibrated.toml", help="also write the calibrated profile here"
     )
