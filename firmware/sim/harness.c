@@ -73,7 +73,7 @@ static uint64_t motion_units, motion_since; /* whole motion periods, in clock un
 static int motion_level;
 static int abort_next;
 static FILE *record;
-static char *record_path, *record_tmp, *stats_path;
+static char *record_path, *stats_path;
 static uint32_t mailbox_addr;
 static uint64_t segments_recorded;
 
@@ -236,6 +236,7 @@ static void record_segment(void)
     if (abort_next)
         fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + 24]));
     fputs("}\n", record);
+    fflush(record); /* streamed: a killed simulator leaves every line written so far */
     abort_next = 0;
     segments_recorded++;
 }
@@ -561,11 +562,8 @@ int main(int argc, char **argv)
         set_endstop(k);
 
     if (record_path) {
-        size_t n = strlen(record_path) + 8;
-        record_tmp = malloc(n);
-        snprintf(record_tmp, n, "%s.part", record_path);
-        record = fopen(record_tmp, "w");
-        if (!record) { perror(record_tmp); return 2; }
+        record = fopen(record_path, "w");
+        if (!record) { perror(record_path); return 2; }
     }
     char name[256];
     if (openpty(&master, &slave, name, NULL, NULL) < 0) { perror("openpty"); return 2; }
@@ -646,10 +644,8 @@ int main(int argc, char **argv)
             next_poll += poll_cycles;
         }
     }
-    if (record) {
+    if (record)
         fclose(record);
-        rename(record_tmp, record_path);
-    }
     write_stats();
     if (getenv("CDPR_SIM_PROFILE_ISR")) {
         FILE *f = fopen("/tmp/cdpr-pc-hist.txt", "w");

@@ -1,9 +1,11 @@
-/* Protocol 1 command table: decode a host DATA payload and act on it, exactly
- * as firmware_protocol/device/firmware.py does. The payload is parsed twice:
- * first to check every field and count queue items (a payload that does not
- * parse is one BAD_COMMAND and nothing of it runs; one with more queue items
- * than free slots is left unacknowledged), then to execute. */
+/* Host commands (PROTOCOL.md sections 4 and 8): decode a DATA or URGENT payload
+ * with the field descriptors generated from the Python message table, check
+ * every value, act. A DATA payload is parsed twice: first to check every field
+ * and count queue items (a payload that does not decode is one BAD_COMMAND and
+ * nothing of it runs; one with more queue items than free slots is left
+ * unacknowledged), then to execute. */
 #include <avr/interrupt.h>
+#include <avr/pgmspace.h>
 #include <string.h>
 
 #include "heater.h"
@@ -19,6 +21,33 @@
 #include "session.h"
 #include "stepper.h"
 
+struct field_desc {
+    uint8_t type, count;
+    int8_t mask;
+    int32_t lo;
+    uint32_t hi;
+};
+
+struct message_desc {
+    uint8_t op, queued, urgent, nfields;
+    const struct field_desc *fields;
+};
+
+#define MAX_VALUES 4
+#define X(name)                                                                              \
+    static const struct field_desc fields_##name[NFIELDS_##name ? NFIELDS_##name : 1] PROGMEM = \
+        {FIELDS_##name};                                                                      \
+    _Static_assert(NVALUES_##name <= MAX_VALUES, "values of " #name);
+PROTO_HOST_MESSAGES(X)
+#undef X
+
+static const struct message_desc messages[] PROGMEM = {
+#define X(name) {OP_##name, QUEUED_##name, URGENT_##name, NFIELDS_##name, fields_##name},
+    PROTO_HOST_MESSAGES(X)
+#undef X
+};
+#define N_MESSAGES (sizeof messages / sizeof messages[0])
+
 static struct seg_ctx ctx;
 
 void commands_reset_session(void)
@@ -26,97 +55,78 @@ void commands_reset_session(void)
     memset(&ctx, 0, sizeof ctx);
 }
 
-static const char *layout_of(uint8_t op)
+static uint8_t find(uint8_t op, struct message_desc *out)
 {
-    switch (op) {
-#define X(code, name) \
-    case code:        \
-        return LAYOUT_##name;
-        PROTO_OPCODE_TABLE(X)
-#undef X
+    for (uint8_t i = 0; i < N_MESSAGES; i++) {
+        memcpy_P(out, &messages[i], sizeof *out);
+        if (out->op == op)
+            return 1;
     }
     return 0;
 }
 
-static uint8_t queued_op(uint8_t op)
+/* The fields of one message into v[] (signed fields as int32 bits); every value
+ * checked against its type and fixed range. */
+static void parse_fields(struct reader *r, const struct message_desc *m, uint32_t *v)
 {
-    switch (op) {
-#define X(code, name) \
-    case code:        \
-        return QUEUED_##name;
-        PROTO_OPCODE_TABLE(X)
-#undef X
-    }
-    return 0;
-}
-
-/* Parse one non-segment message's fields into v[] (at most 8 numbers kept). */
-static void parse_fields(struct reader *r, const char *layout, int32_t *v)
-{
-    uint8_t n = 0, mask = 0;
-    for (const char *p = layout; *p && !r->err; p++) {
-        switch (*p) {
-        case 'b':
-            mask = rd_u8(r);
-            if (n < 8) v[n++] = mask;
-            break;
-        case 'u': {
-            uint32_t u = rd_uv(r);
-            if (n < 8) v[n++] = (int32_t)u; /* callers range-check as unsigned */
-            break;
-        }
-        case 's':
-            if (n < 8) v[n++] = rd_sv(r); else rd_sv(r);
-            break;
-        case 't':
-            rd_text(r);
-            break;
-        case '4':
-            for (uint8_t k = 0; k < 4; k++) {
-                int32_t x = rd_sv(r);
-                if (n < 8) v[n++] = x;
+    uint8_t n = 0;
+    for (uint8_t i = 0; i < m->nfields && !r->err; i++) {
+        struct field_desc f;
+        memcpy_P(&f, &m->fields[i], sizeof f);
+        uint8_t mask = f.mask >= 0 ? (uint8_t)v[f.mask] : 0xFF;
+        for (uint8_t k = 0; k < f.count && n < MAX_VALUES; k++, n++) {
+            v[n] = 0;
+            if (!(mask >> k & 1))
+                continue;
+            uint32_t raw = rd_field(r, f.type);
+            if (f.type == FT_I16 || f.type == FT_I32) {
+                int32_t x = unzigzag(raw);
+                if (f.type == FT_I16 && (x < -32768L || x > 32767L))
+                    r->err = 1;
+                if (x < f.lo || x > (int32_t)f.hi)
+                    r->err = 1;
+                v[n] = (uint32_t)x;
+            } else {
+                if (raw < (uint32_t)f.lo || raw > f.hi) /* lo >= 0 for unsigned fields */
+                    r->err = 1;
+                v[n] = raw;
             }
-            break;
-        case 'm':
-            for (uint8_t k = 0; k < 3; k++) {
-                int32_t x = (mask >> k & 1) ? rd_sv(r) : 0;
-                if (n < 8) v[n++] = x;
-            }
-            break;
-        case 'E': {
-            rd_u8(r);
-            rd_uv(r);
-            uint8_t cnt = rd_u8(r);
-            for (uint8_t i = 0; i < cnt && !r->err; i++)
-                rd_sv(r);
-            break;
-        }
         }
     }
 }
 
+/* Check a whole DATA payload; counts its queue items. Returns 0 with the
+ * offending opcode and offset when it does not decode. */
 static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx *work,
-                             uint8_t *queued)
+                             uint8_t *queued, uint8_t *bad_op, uint8_t *bad_at, uint8_t *wrong)
 {
     struct reader r = {payload, 0, len, 0};
     struct segment s;
-    int32_t v[8];
+    struct message_desc m;
+    uint32_t v[MAX_VALUES];
     *queued = 0;
-    while (r.pos < len && !r.err) {
-        uint8_t op = payload[r.pos];
+    *wrong = 0;
+    while (r.pos < len) {
+        uint8_t at = r.pos, op = payload[at];
         if (op >= SEG_BASE) {
             segment_decode(&r, work, &s);
             (*queued)++;
-            continue;
+        } else if (find(op, &m)) {
+            r.pos++;
+            parse_fields(&r, &m, v);
+            *queued += m.queued;
+            if (m.urgent)
+                *wrong = op; /* an URGENT-only message in a DATA frame */
+        } else {
+            r.err = 1;
         }
-        const char *layout = layout_of(op);
-        if (!layout)
+        if (r.err) {
+            *bad_op = op;
+            *bad_at = at;
             return 0;
-        r.pos++;
-        parse_fields(&r, layout, v);
-        *queued += queued_op(op);
+        }
     }
-    return !r.err;
+    return 1;
 }
 
 static struct item *new_item(uint8_t kind)
@@ -130,11 +140,10 @@ static struct item *new_item(uint8_t kind)
 
 static void push_item(void)
 {
-    stepper_start_ok = 0; /* the start rule is evaluated again with this item */
+    machine_queued(queue_slot(queue_head));
     cli();
     queue_head++;
     sei();
-    mc.last_enqueue_at = link_now;
 }
 
 /* a queue item has been numbered; discard it while faulted */
@@ -146,6 +155,11 @@ static uint8_t discard_if_fault(void)
     st.items_done = mc.items_received;
     sei();
     return 1;
+}
+
+static void bad_value(uint8_t op, int32_t value, uint32_t segment)
+{
+    machine_fail(ERR_BAD_VALUE, mc.items_received, segment, op, value);
 }
 
 static void enqueue_segment(const struct segment *s)
@@ -162,26 +176,53 @@ static void enqueue_segment(const struct segment *s)
                      (int32_t)rate);
         return;
     }
+    int32_t tail[4];
+    for (uint8_t k = 0; k < 4; k++) {
+        int64_t p = (int64_t)mc.tail_pos[k] + s->deltas[k];
+        if (p > SEG_MAX_DELTA || p < -SEG_MAX_DELTA) {
+            bad_value(SEG_BASE, p > 0 ? SEG_MAX_DELTA : -SEG_MAX_DELTA, mc.segments_received);
+            return;
+        }
+        tail[k] = (int32_t)p;
+    }
+    memcpy(mc.tail_pos, tail, sizeof tail);
     motion_store(new_item(IT_SEG), s);
     push_item();
 }
 
-static void enqueue_command(uint8_t op, const int32_t *v)
+static void enqueue_command(uint8_t op, const uint32_t *v)
 {
     mc.items_received++;
-    uint32_t n = mc.items_received;
-    if ((op == OP_SET_HEATER || op == OP_WAIT_HEATER) && v[0] > 1) {
-        machine_fail(ERR_BAD_COMMAND, n, 0, (uint8_t)v[0], 0);
-        return;
+    struct item *it;
+    /* ranges that depend on this device (PROTOCOL.md section 8) */
+    switch (op) {
+    case OP_DWELL:
+        if (v[0] > (uint32_t)DWELL_MAX_S * CLOCK_HZ) {
+            bad_value(op, v[0] > 0x7FFFFFFFUL ? 0x7FFFFFFFL : (int32_t)v[0], 0);
+            return;
+        }
+        break;
+    case OP_SET_HEATER:
+    case OP_WAIT_HEATER:
+        if (v[0] > 1) {
+            bad_value(op, (int32_t)v[0], 0);
+            return;
+        }
+        break;
+    case OP_SET_FAN:
+        if (v[0] >= FAN_COUNT) {
+            bad_value(op, (int32_t)v[0], 0);
+            return;
+        }
+        break;
     }
     if (discard_if_fault())
         return;
-    struct item *it;
     switch (op) {
     case OP_SET_POSITION:
         it = new_item(IT_SETPOS);
         for (uint8_t k = 0; k < 4; k++)
-            it->u.pos[k] = v[k];
+            mc.tail_pos[k] = it->u.pos[k] = (int32_t)v[k];
         break;
     case OP_ENABLE:
         it = new_item(IT_ENABLE);
@@ -190,16 +231,19 @@ static void enqueue_command(uint8_t op, const int32_t *v)
     case OP_HOME:
         it = new_item(IT_HOME);
         it->flags = (uint8_t)(v[0] & 7);
-        for (uint8_t k = 0; k < 3; k++)
-            it->u.pos[k] = v[1 + k];
+        for (uint8_t k = 0; k < 3; k++) {
+            it->u.pos[k] = (int32_t)v[1 + k];
+            if (v[0] >> k & 1)
+                mc.tail_pos[k] = (int32_t)v[1 + k];
+        }
         break;
     case OP_DWELL:
         it = new_item(IT_DWELL);
-        it->ticks = (uint32_t)v[0];
+        it->ticks = v[0];
         break;
     case OP_SET_HEATER:
-        if ((uint32_t)v[1] > heater_max_dc((uint8_t)v[0])) {
-            machine_fail(ERR_HEATER_RANGE, n, 0, (uint8_t)v[0], v[1]);
+        if (v[1] > heater_max_dc((uint8_t)v[0])) {
+            machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
             return;
         }
         it = new_item(IT_HEATER);
@@ -214,10 +258,35 @@ static void enqueue_command(uint8_t op, const int32_t *v)
     default: /* OP_WAIT_HEATER */
         it = new_item(IT_WAIT);
         it->u.cmd.id = (uint8_t)v[0];
-        it->u.cmd.value = (uint32_t)v[1] > 0xFFFF ? 0xFFFF : (uint16_t)v[1];
+        it->u.cmd.value = (uint16_t)v[1];
         break;
     }
+    (void)it;
     push_item();
+}
+
+static void immediate(uint8_t op, const uint32_t *v)
+{
+    switch (op) {
+    case OP_GET_STATUS:
+        report_status();
+        break;
+    case OP_IDENTIFY:
+        report_ident(0, 0);
+        break;
+    case OP_CLEAR_FAULT:
+        if (machine_clear_fault())
+            report_event(EVT_FAULT_CLEARED, st.items_done, 0, 0);
+        break;
+    case OP_FLUSH:
+        mc.flush_item = mc.items_received;
+        break;
+    case OP_CONFIGURE:
+        mc.watchdog_ms = (uint16_t)v[0];
+        mc.start_ticks = v[1];
+        mc.flow_ticks = v[2];
+        break;
+    }
 }
 
 uint8_t proto_accept(const uint8_t *payload, uint8_t len)
@@ -227,9 +296,13 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         return 0;
     }
     struct seg_ctx work = ctx;
-    uint8_t queued;
-    if (!check_payload(payload, len, &work, &queued)) {
-        machine_fail(ERR_BAD_COMMAND, mc.items_received, mc.segments_received, 0xFF, 0);
+    uint8_t queued, bad_op = 0, bad_at = 0, wrong;
+    if (!check_payload(payload, len, &work, &queued, &bad_op, &bad_at, &wrong)) {
+        machine_fail(ERR_BAD_COMMAND, mc.items_received, mc.segments_received, bad_op, bad_at);
+        return 1;
+    }
+    if (wrong) {
+        machine_fail(ERR_BAD_COMMAND, mc.items_received, 0, wrong, 0);
         return 1;
     }
     if (queued > machine_free() && !mc.fault) {
@@ -238,7 +311,8 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
     }
     struct reader r = {payload, 0, len, 0};
     struct segment s;
-    int32_t v[8];
+    struct message_desc m;
+    uint32_t v[MAX_VALUES];
     while (r.pos < len) {
         uint8_t op = payload[r.pos];
         if (op >= SEG_BASE) {
@@ -247,20 +321,13 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
             motion_prepare_ahead(); /* keep the interrupt's plans coming during long frames */
             continue;
         }
+        find(op, &m);
         r.pos++;
-        parse_fields(&r, layout_of(op), v);
-        if (queued_op(op)) {
+        parse_fields(&r, &m, v);
+        if (m.queued)
             enqueue_command(op, v);
-        } else if (op == OP_GET_STATUS) {
-            report_status();
-        } else if (op == OP_IDENTIFY) {
-            report_ident(mc.nonce, 0);
-        } else if (op == OP_CLEAR_FAULT) {
-            if (machine_clear_fault())
-                report_event(EVT_FAULT_CLEARED, st.items_done, 0, 0);
-        } else {
-            machine_fail(ERR_BAD_COMMAND, mc.items_received, mc.segments_received, 0xFF, 0);
-        }
+        else
+            immediate(op, v);
     }
     ctx = work;
     return 1;
@@ -268,35 +335,30 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
 
 void proto_urgent(const uint8_t *payload, uint8_t len)
 {
-    struct seg_ctx scratch = {0, {0, 0, 0, 0}};
-    uint8_t queued;
-    if (!check_payload(payload, len, &scratch, &queued))
-        return;
     struct reader r = {payload, 0, len, 0};
-    struct segment s;
-    int32_t v[8];
-    while (r.pos < len) {
-        uint8_t op = payload[r.pos];
-        if (op >= SEG_BASE) {
-            segment_decode(&r, &scratch, &s);
-            continue;
+    struct message_desc m;
+    uint32_t v[MAX_VALUES];
+    uint8_t op = rd_u8(&r);
+    if (r.err || !find(op, &m) || !m.urgent)
+        return;
+    parse_fields(&r, &m, v);
+    if (r.err || r.pos != len)
+        return; /* exactly one well-formed message */
+    if (op == OP_HELLO) {
+        uint16_t nonce = (uint16_t)v[0];
+        if (v[1] == PROTO_MAJOR && (!mc.synced || nonce != mc.nonce)) {
+            link_reset_session();
+            commands_reset_session();
+            session_opened();
+            mc.synced = 1;
+            mc.nonce = nonce;
         }
-        r.pos++;
-        parse_fields(&r, layout_of(op), v);
-        if (op == OP_HELLO) {
-            uint32_t nonce = (uint32_t)v[0];
-            if (v[1] == PROTO_MAJOR && (!mc.synced || nonce != mc.nonce)) {
-                link_reset_session();
-                commands_reset_session();
-                session_opened();
-                mc.synced = 1;
-                mc.nonce = nonce;
-            }
-            report_ident(nonce, 1);
-        } else if (op == OP_EMERGENCY_STOP) {
-            if (!mc.estopped)
-                machine_estop();
-            report_estop_ack();
+        report_ident(nonce, 1);
+    } else { /* OP_EMERGENCY_STOP */
+        if (!mc.estopped) {
+            machine_stop(ERR_ESTOP, v[0] & ESTOP_KEEP_HEATERS, v[0] & ESTOP_KEEP_MOTORS, 0);
+            mc.estopped = 1;
         }
+        report_estop_ack();
     }
 }

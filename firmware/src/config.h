@@ -32,6 +32,14 @@
 /* Segments prepared ahead of the step interrupt (DDA constants, 72 bytes each). */
 #define PLAN_SLOTS 8
 
+/* Unacknowledged host payload bytes the device can hold (IDENT rx_window): the
+ * host never has more in flight, so the UART's receive ring (uart.h) holds them
+ * all even while the main loop is busy with a long frame. */
+#define RX_WINDOW 192
+
+/* Fans: the part-cooling fan on D9. */
+#define FAN_COUNT 1
+
 /* Device-to-host report slots (window + backlog), bytes per report. */
 #define REPORT_SLOTS 8
 #define REPORT_MAX 96

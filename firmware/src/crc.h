@@ -1,10 +1,11 @@
-/* CRC-16/CCITT-FALSE (frames) and CRC-8/SMBUS (frame headers). */
+/* CRC-32/ISO-HDLC (frames) and CRC-8/SMBUS (frame headers). */
 #ifndef CRC_H
 #define CRC_H
 #include <stdint.h>
 
-uint16_t crc16_update(uint16_t crc, uint8_t byte);
-uint16_t crc16(const uint8_t *data, uint16_t len);
+#define CRC32_INIT 0xFFFFFFFFUL
+uint32_t crc32_update(uint32_t crc, uint8_t byte); /* running value, no final XOR */
+uint32_t crc32(const uint8_t *data, uint16_t len);  /* final value (XOR applied) */
 uint8_t crc8(const uint8_t *data, uint8_t len);
 
 #endif

@@ -35,10 +35,12 @@ static uint8_t header_ok(const uint8_t *p)
 static uint8_t body_ok(const uint8_t *p)
 {
     uint8_t len = p[1];
-    uint16_t end = 6 + (uint16_t)len;
-    uint16_t crc = crc16(p + 1, end - 1);
-    return p[end + 2] == FRAME_END && p[end] == (uint8_t)(crc >> 8) &&
-           p[end + 1] == (uint8_t)crc;
+    uint16_t end = FRAME_HEADER_LEN + (uint16_t)len;
+    if (p[end + FRAME_CRC_LEN] != FRAME_END)
+        return 0; /* cheaper than the CRC: a shortened frame fails here */
+    uint32_t crc = crc32(p + 1, end - 1);
+    return p[end] == (uint8_t)(crc >> 24) && p[end + 1] == (uint8_t)(crc >> 16) &&
+           p[end + 2] == (uint8_t)(crc >> 8) && p[end + 3] == (uint8_t)crc;
 }
 
 /* First complete valid frame at or after start, or -1. */
@@ -97,15 +99,17 @@ void deframer_run(void)
 
 void frame_send(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
 {
-    uint8_t head[6] = {FRAME_SYNC, len, kind, seq, ack, 0};
+    uint8_t head[FRAME_HEADER_LEN] = {FRAME_SYNC, len, kind, seq, ack, 0};
     head[5] = crc8(head + 1, 4);
-    uint16_t crc = 0xFFFF;
-    for (uint8_t i = 1; i < 6; i++)
-        crc = crc16_update(crc, head[i]);
+    uint32_t crc = CRC32_INIT;
+    for (uint8_t i = 1; i < FRAME_HEADER_LEN; i++)
+        crc = crc32_update(crc, head[i]);
     for (uint8_t i = 0; i < len; i++)
-        crc = crc16_update(crc, payload[i]);
-    uint8_t tail[3] = {(uint8_t)(crc >> 8), (uint8_t)crc, FRAME_END};
-    uart_write(head, 6);
+        crc = crc32_update(crc, payload[i]);
+    crc ^= 0xFFFFFFFFUL;
+    uint8_t tail[FRAME_CRC_LEN + 1] = {(uint8_t)(crc >> 24), (uint8_t)(crc >> 16),
+                                       (uint8_t)(crc >> 8), (uint8_t)crc, FRAME_END};
+    uart_write(head, FRAME_HEADER_LEN);
     uart_write(payload, len);
-    uart_write(tail, 3);
+    uart_write(tail, sizeof tail);
 }

@@ -2,13 +2,14 @@
 
 #include "frame.h"
 #include "link.h"
+#include "reports.h"
 #include "sched.h"
 #include "uart.h"
 
 #define T_MS(ms) ((uint32_t)(ms) * (CLOCK_HZ / 1000))
-#define RTO_INITIAL T_MS(250)
+#define RTO_INITIAL T_MS(50)
 #define RTO_FLOOR T_MS(20)
-#define RTO_CEILING T_MS(1000)
+#define RTO_CEILING T_MS(250)
 #define NAK_HOLDOFF T_MS(30)
 
 struct link_counters link_counters;
@@ -188,7 +189,7 @@ void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *paylo
 
 void link_poll(uint32_t now)
 {
-    uint8_t flow[24];
+    uint8_t flow[FLOW_MAX];
     if (urgent_len) {
         if (uart_tx_free() < FRAME_SIZE(urgent_len))
             return;

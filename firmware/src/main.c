@@ -76,11 +76,12 @@ static void take_interrupt_reports(uint32_t now)
         }
     }
     if (st.current == IT_WAIT) {
+        /* done at once when the target is 0, else within the tolerance */
         struct heater *h = &heaters[st.wait_heater & 1];
         int16_t diff = (int16_t)(h->temp_dc - (int16_t)h->target_dc);
         if (diff < 0)
             diff = (int16_t)-diff;
-        stepper_wait_ok = (uint16_t)diff <= st.wait_tolerance;
+        stepper_wait_ok = !h->target_dc || (uint16_t)diff <= st.wait_tolerance;
     }
 }
 
@@ -123,7 +124,7 @@ int main(void)
         motion_prepare_ahead();
         take_interrupt_reports(now);
         heater_poll(now);
-        stepper_start_ok = session_may_start(link_now);
+        stepper_start_ok = session_may_start();
         session_poll(link_now);
         link_poll(link_now);
         watchdog_save(st.items_done, st.segments_done);

@@ -2,153 +2,217 @@
 /* Do not edit: run `python firmware/tools/gen_protocol_header.py`. */
 #ifndef PROTOCOL_GEN_H
 #define PROTOCOL_GEN_H
+#include <stdint.h>
+#include "cdpr_protocol.h"
 
-#define PROTO_MAJOR 1
-#define PROTO_MINOR 0
-
-/* framing */
-#define FRAME_SYNC 0xA5
-#define FRAME_END 0x5A
-#define FRAME_HEADER_LEN 6
-#define FRAME_OVERHEAD 9
-#define FRAME_MAX_PAYLOAD 248
-#define KIND_DATA 1
-#define KIND_ACK 2
-#define KIND_NAK 3
-#define KIND_URGENT 4
-
-/* reliability */
-#define SEQ_MOD 256
+#define PROTO_MAJOR CDPR_PROTOCOL_MAJOR
+#define PROTO_MINOR CDPR_PROTOCOL_MINOR
+#define FRAME_SYNC CDPR_SYNC
+#define FRAME_END CDPR_END
+#define FRAME_HEADER_LEN CDPR_HEADER_LEN
+#define FRAME_CRC_LEN CDPR_CRC_LEN
+#define FRAME_OVERHEAD CDPR_OVERHEAD
+#define FRAME_MAX_PAYLOAD CDPR_MAX_PAYLOAD
 #define MAX_WINDOW 127
-#define MAX_VARINT_BYTES 10
-
-/* segments */
-#define SEG_BASE 0x80
-#define SEG_F_RAMP 0x01
-#define SEG_F_DURATION 0x02
-#define SEG_F_PREDICTED 0x04
-#define SEG_F_SLIDERS 0x08
-#define SEG_F_EXTRUDER 0x10
-#define SEG_F_RESERVED 0x60
-#define SEG_RAMP_CONSTANT (-1)
-#define SEG_RAMP_TO_REST 255
-#define SEG_MAX_TICKS 4294967295UL
-#define SEG_MAX_DELTA 2147483647L
 #define AXES 4
+#define SEG_BASE CDPR_SEG_BASE
+#define SEG_MAX_DELTA CDPR_SEG_MAX_DELTA
+#define SEG_RAMP_TO_REST CDPR_RAMP_TO_REST
+#define SEG_RAMP_CONSTANT (-1)
+#define SEG_F_RAMP CDPR_SEG_F_RAMP
+#define SEG_F_DURATION CDPR_SEG_F_DURATION
+#define SEG_F_PREDICTED CDPR_SEG_F_PREDICTED
+#define SEG_F_SLIDERS CDPR_SEG_F_SLIDERS
+#define SEG_F_EXTRUDER CDPR_SEG_F_EXTRUDER
+#define SEG_F_RESERVED CDPR_SEG_F_RESERVED
 
-/* opcodes and field layouts */
-#define OP_IDENTIFY 0x01
-#define LAYOUT_IDENTIFY ""
+/* frame kinds, status flags, codes */
+#define KIND_DATA CDPR_KIND_DATA
+#define KIND_ACK CDPR_KIND_ACK
+#define KIND_NAK CDPR_KIND_NAK
+#define KIND_URGENT CDPR_KIND_URGENT
+#define FLAG_MOVING CDPR_FLAG_MOVING
+#define FLAG_FAULT CDPR_FLAG_FAULT
+#define FLAG_ESTOP CDPR_FLAG_ESTOP
+#define FLAG_HOMED CDPR_FLAG_HOMED
+#define FLAG_ENABLED CDPR_FLAG_ENABLED
+#define FLAG_HEATING CDPR_FLAG_HEATING
+#define FLAG_SYNCED CDPR_FLAG_SYNCED
+#define FLAG_WAITING CDPR_FLAG_WAITING
+#define ERR_UNDERRUN CDPR_ERR_UNDERRUN
+#define ERR_THERMAL_RUNAWAY CDPR_ERR_THERMAL_RUNAWAY
+#define ERR_ENDSTOP_HIT CDPR_ERR_ENDSTOP_HIT
+#define ERR_STEP_RATE CDPR_ERR_STEP_RATE
+#define ERR_QUEUE_OVERFLOW CDPR_ERR_QUEUE_OVERFLOW
+#define ERR_BAD_COMMAND CDPR_ERR_BAD_COMMAND
+#define ERR_ESTOP CDPR_ERR_ESTOP
+#define ERR_HEATER_RANGE CDPR_ERR_HEATER_RANGE
+#define ERR_HOMING_FAILED CDPR_ERR_HOMING_FAILED
+#define ERR_OVERTEMP CDPR_ERR_OVERTEMP
+#define ERR_WATCHDOG CDPR_ERR_WATCHDOG
+#define ERR_BAD_VALUE CDPR_ERR_BAD_VALUE
+#define EVT_HOMED CDPR_EVT_HOMED
+#define EVT_HEATER_REACHED CDPR_EVT_HEATER_REACHED
+#define EVT_FAULT_CLEARED CDPR_EVT_FAULT_CLEARED
+#define BOOT_POWER_ON CDPR_BOOT_POWER_ON
+#define BOOT_WATCHDOG CDPR_BOOT_WATCHDOG
+#define BOOT_SOFT_RESET CDPR_BOOT_SOFT_RESET
+#define ESTOP_KEEP_HEATERS CDPR_ESTOP_KEEP_HEATERS
+#define ESTOP_KEEP_MOTORS CDPR_ESTOP_KEEP_MOTORS
+
+/* Host-to-device messages: opcode, queue slot, field descriptors. A descriptor
+ * is {type (0 u8, 1 u16, 2 u32, 3 i16, 4 i32), count, mask, lo, hi}: the
+ * decoder reads `count` values (or those whose bit is set in value[mask])
+ * into a flat array, each within lo..hi (hi as the field's unsigned bits). */
+#define OP_IDENTIFY CDPR_OP_IDENTIFY
 #define QUEUED_IDENTIFY 0
-#define OP_GET_STATUS 0x02
-#define LAYOUT_GET_STATUS ""
-#define QUEUED_GET_STATUS 0
-#define OP_CLEAR_FAULT 0x03
-#define LAYOUT_CLEAR_FAULT ""
-#define QUEUED_CLEAR_FAULT 0
-#define OP_HELLO 0x05
-#define LAYOUT_HELLO "ubb"
-#define QUEUED_HELLO 0
-#define OP_EMERGENCY_STOP 0x06
-#define LAYOUT_EMERGENCY_STOP ""
-#define QUEUED_EMERGENCY_STOP 0
-#define OP_SET_POSITION 0x10
-#define LAYOUT_SET_POSITION "4"
-#define QUEUED_SET_POSITION 1
-#define OP_ENABLE 0x11
-#define LAYOUT_ENABLE "b"
-#define QUEUED_ENABLE 1
-#define OP_HOME 0x12
-#define LAYOUT_HOME "bm"
-#define QUEUED_HOME 1
-#define OP_DWELL 0x13
-#define LAYOUT_DWELL "u"
-#define QUEUED_DWELL 1
-#define OP_SET_HEATER 0x14
-#define LAYOUT_SET_HEATER "bu"
-#define QUEUED_SET_HEATER 1
-#define OP_SET_FAN 0x15
-#define LAYOUT_SET_FAN "bb"
-#define QUEUED_SET_FAN 1
-#define OP_WAIT_HEATER 0x16
-#define LAYOUT_WAIT_HEATER "bu"
-#define QUEUED_WAIT_HEATER 1
-#define OP_IDENT 0x41
-#define LAYOUT_IDENT "ubbuttbuuubbbuuuu"
-#define QUEUED_IDENT 0
-#define OP_STATUS 0x42
-#define LAYOUT_STATUS "buuuu4susubbbbuuuu"
-#define QUEUED_STATUS 0
-#define OP_EVENT 0x43
-#define LAYOUT_EVENT "E"
-#define QUEUED_EVENT 0
-#define OP_ERROR 0x44
-#define LAYOUT_ERROR "buubs"
-#define QUEUED_ERROR 0
-#define OP_BOOT 0x45
-#define LAYOUT_BOOT "ubbbbuu"
-#define QUEUED_BOOT 0
-#define OP_ESTOP_ACK 0x46
-#define LAYOUT_ESTOP_ACK "uu"
-#define QUEUED_ESTOP_ACK 0
-#define OP_FLOW 0x47
-#define LAYOUT_FLOW "buuu"
-#define QUEUED_FLOW 0
-#define PROTO_OPCODE_TABLE(X) \
-    X(0x01, IDENTIFY) \
-    X(0x02, GET_STATUS) \
-    X(0x03, CLEAR_FAULT) \
-    X(0x05, HELLO) \
-    X(0x06, EMERGENCY_STOP) \
-    X(0x10, SET_POSITION) \
-    X(0x11, ENABLE) \
-    X(0x12, HOME) \
-    X(0x13, DWELL) \
-    X(0x14, SET_HEATER) \
-    X(0x15, SET_FAN) \
-    X(0x16, WAIT_HEATER) \
-    X(0x41, IDENT) \
-    X(0x42, STATUS) \
-    X(0x43, EVENT) \
-    X(0x44, ERROR) \
-    X(0x45, BOOT) \
-    X(0x46, ESTOP_ACK) \
-    X(0x47, FLOW) \
+#define URGENT_IDENTIFY 0
+#define NFIELDS_IDENTIFY 0
+#define NVALUES_IDENTIFY 0
+#define FIELDS_IDENTIFY \
+    {0, 0, -1, 0L, 0UL} /* none */, \
 
-/* status flags, error, event and boot codes */
-#define FLAG_MOVING 0x01
-#define FLAG_FAULT 0x02
-#define FLAG_ESTOP 0x04
-#define FLAG_HOMED 0x08
-#define FLAG_ENABLED 0x10
-#define FLAG_HEATING 0x20
-#define FLAG_SYNCED 0x40
-#define FLAG_WAITING 0x80
-#define ERR_UNDERRUN 1
-#define ERR_THERMAL_RUNAWAY 2
-#define ERR_ENDSTOP_HIT 3
-#define ERR_STEP_RATE 4
-#define ERR_QUEUE_OVERFLOW 5
-#define ERR_BAD_COMMAND 6
-#define ERR_ESTOP 7
-#define ERR_HEATER_RANGE 8
-#define ERR_HOMING_FAILED 9
-#define ERR_OVERTEMP 10
-#define EVT_HOMED 1
-#define EVT_HEATER_REACHED 2
-#define EVT_FAULT_CLEARED 3
-#define BOOT_POWER_ON 0
-#define BOOT_WATCHDOG 1
-#define BOOT_SOFT_RESET 2
+#define OP_GET_STATUS CDPR_OP_GET_STATUS
+#define QUEUED_GET_STATUS 0
+#define URGENT_GET_STATUS 0
+#define NFIELDS_GET_STATUS 0
+#define NVALUES_GET_STATUS 0
+#define FIELDS_GET_STATUS \
+    {0, 0, -1, 0L, 0UL} /* none */, \
+
+#define OP_CLEAR_FAULT CDPR_OP_CLEAR_FAULT
+#define QUEUED_CLEAR_FAULT 0
+#define URGENT_CLEAR_FAULT 0
+#define NFIELDS_CLEAR_FAULT 0
+#define NVALUES_CLEAR_FAULT 0
+#define FIELDS_CLEAR_FAULT \
+    {0, 0, -1, 0L, 0UL} /* none */, \
+
+#define OP_FLUSH CDPR_OP_FLUSH
+#define QUEUED_FLUSH 0
+#define URGENT_FLUSH 0
+#define NFIELDS_FLUSH 0
+#define NVALUES_FLUSH 0
+#define FIELDS_FLUSH \
+    {0, 0, -1, 0L, 0UL} /* none */, \
+
+#define OP_HELLO CDPR_OP_HELLO
+#define QUEUED_HELLO 0
+#define URGENT_HELLO 1
+#define NFIELDS_HELLO 3
+#define NVALUES_HELLO 3
+#define FIELDS_HELLO \
+    {1, 1, -1, 1L, 65535UL} /* nonce */, \
+    {0, 1, -1, 0L, 255UL} /* major */, \
+    {0, 1, -1, 0L, 255UL} /* minor */, \
+
+#define OP_EMERGENCY_STOP CDPR_OP_EMERGENCY_STOP
+#define QUEUED_EMERGENCY_STOP 0
+#define URGENT_EMERGENCY_STOP 1
+#define NFIELDS_EMERGENCY_STOP 1
+#define NVALUES_EMERGENCY_STOP 1
+#define FIELDS_EMERGENCY_STOP \
+    {0, 1, -1, 0L, 3UL} /* flags */, \
+
+#define OP_CONFIGURE CDPR_OP_CONFIGURE
+#define QUEUED_CONFIGURE 0
+#define URGENT_CONFIGURE 0
+#define NFIELDS_CONFIGURE 3
+#define NVALUES_CONFIGURE 3
+#define FIELDS_CONFIGURE \
+    {1, 1, -1, 100L, 60000UL} /* watchdog_ms */, \
+    {2, 1, -1, 0L, 4294967295UL} /* start_ticks */, \
+    {2, 1, -1, 0L, 4294967295UL} /* flow_ticks */, \
+
+#define OP_SET_POSITION CDPR_OP_SET_POSITION
+#define QUEUED_SET_POSITION 1
+#define URGENT_SET_POSITION 0
+#define NFIELDS_SET_POSITION 1
+#define NVALUES_SET_POSITION 4
+#define FIELDS_SET_POSITION \
+    {4, 4, -1, (-2147483647L - 1), 2147483647UL} /* steps */, \
+
+#define OP_ENABLE CDPR_OP_ENABLE
+#define QUEUED_ENABLE 1
+#define URGENT_ENABLE 0
+#define NFIELDS_ENABLE 1
+#define NVALUES_ENABLE 1
+#define FIELDS_ENABLE \
+    {0, 1, -1, 0L, 15UL} /* mask */, \
+
+#define OP_HOME CDPR_OP_HOME
+#define QUEUED_HOME 1
+#define URGENT_HOME 0
+#define NFIELDS_HOME 2
+#define NVALUES_HOME 4
+#define FIELDS_HOME \
+    {0, 1, -1, 1L, 7UL} /* mask */, \
+    {4, 3, 0, (-2147483647L - 1), 2147483647UL} /* positions */, \
+
+#define OP_DWELL CDPR_OP_DWELL
+#define QUEUED_DWELL 1
+#define URGENT_DWELL 0
+#define NFIELDS_DWELL 1
+#define NVALUES_DWELL 1
+#define FIELDS_DWELL \
+    {2, 1, -1, 1L, 4294967295UL} /* ticks */, \
+
+#define OP_SET_HEATER CDPR_OP_SET_HEATER
+#define QUEUED_SET_HEATER 1
+#define URGENT_SET_HEATER 0
+#define NFIELDS_SET_HEATER 2
+#define NVALUES_SET_HEATER 2
+#define FIELDS_SET_HEATER \
+    {0, 1, -1, 0L, 1UL} /* heater */, \
+    {1, 1, -1, 0L, 65535UL} /* target_dc */, \
+
+#define OP_SET_FAN CDPR_OP_SET_FAN
+#define QUEUED_SET_FAN 1
+#define URGENT_SET_FAN 0
+#define NFIELDS_SET_FAN 2
+#define NVALUES_SET_FAN 2
+#define FIELDS_SET_FAN \
+    {0, 1, -1, 0L, 7UL} /* fan */, \
+    {0, 1, -1, 0L, 255UL} /* value */, \
+
+#define OP_WAIT_HEATER CDPR_OP_WAIT_HEATER
+#define QUEUED_WAIT_HEATER 1
+#define URGENT_WAIT_HEATER 0
+#define NFIELDS_WAIT_HEATER 2
+#define NVALUES_WAIT_HEATER 2
+#define FIELDS_WAIT_HEATER \
+    {0, 1, -1, 0L, 1UL} /* heater */, \
+    {1, 1, -1, 1L, 1000UL} /* tolerance_dc */, \
+
+#define PROTO_HOST_MESSAGES(X) \
+    X(IDENTIFY) \
+    X(GET_STATUS) \
+    X(CLEAR_FAULT) \
+    X(FLUSH) \
+    X(HELLO) \
+    X(EMERGENCY_STOP) \
+    X(CONFIGURE) \
+    X(SET_POSITION) \
+    X(ENABLE) \
+    X(HOME) \
+    X(DWELL) \
+    X(SET_HEATER) \
+    X(SET_FAN) \
+    X(WAIT_HEATER) \
+
+#define DWELL_MAX_S CDPR_DWELL_MAX_S
+#define WATCHDOG_MS_DEFAULT CDPR_WATCHDOG_MS_DEFAULT
 
 /* device behaviour the model defines (SimConfig defaults) */
 #define DEV_WINDOW 4
 #define DEV_BOOT_ANNOUNCE_MS 250
 #define DEV_FLOW_INTERVAL_MS 100
-#define DEV_START_BUFFER_MS 250
-#define DEV_START_DELAY_MS 100
+#define DEV_START_MS 250
+#define DEV_FLOW_MS 100
 #define DEV_HOMING_RATE 4000
 #define DEV_HOMING_MAX_STEPS 160000L
 #define DEV_OVERTRAVEL_STEPS 16400L
+#define DEV_HOTEND_MAX_DC 2850
+#define DEV_BED_MAX_DC 1200
 
 #endif

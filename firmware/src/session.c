@@ -1,3 +1,5 @@
+/* Session behaviour around the link (PROTOCOL.md 3, 5.4, 6): BOOT announcements,
+ * unsolicited FLOW reports, the start rule and the host watchdog. */
 #include <avr/interrupt.h>
 
 #include "config.h"
@@ -10,18 +12,19 @@
 #include "sched.h"
 #include "session.h"
 #include "stepper.h"
-#include "mailbox.h"
 
 static uint32_t boot_sent_at;
 static uint8_t boot_sent_once;
+/* what the last FLOW said, and when */
 static uint8_t flow_valid;
-static uint32_t flow_items;
+static uint32_t flow_items, flow_motion, flow_at;
 static uint8_t flow_flags, flow_free;
-static uint32_t flow_at;
 
 void session_opened(void)
 {
     flow_valid = 0;
+    machine_session_defaults();
+    mc.last_frame_at = link_now;
 }
 
 static void announce_boot(uint32_t now)
@@ -38,6 +41,14 @@ void session_boot_on_data(void)
         announce_boot(now);
 }
 
+static uint32_t motion_executed(void)
+{
+    cli();
+    uint32_t t = st.motion_ticks;
+    sei();
+    return t;
+}
+
 uint8_t proto_flow(uint8_t *out)
 {
     cli();
@@ -45,6 +56,7 @@ uint8_t proto_flow(uint8_t *out)
     sei();
     flow_flags = machine_flags();
     flow_free = machine_free();
+    flow_motion = motion_executed();
     flow_at = link_now;
     flow_valid = 1;
     return report_flow(out);
@@ -55,31 +67,25 @@ void proto_frame_seen(void)
     mc.last_frame_at = link_now;
 }
 
-/* PROTOCOL 5.1 "start from rest" (protocol 1): the queued segments up to the
- * first that ends at rest (or up to another item) are all there, or they add up
- * to DEV_START_BUFFER_MS, or the queue is full, or nothing arrived for
- * DEV_START_DELAY_MS. */
-uint8_t session_may_start(uint32_t now)
+/* PROTOCOL 5.4: at rest with a segment at the head of the queue, start when the
+ * queue holds a whole block (an item that ends one), start_ticks of motion, a
+ * full queue, or after FLUSH. O(1): the counts are kept as items come and go. */
+uint8_t session_may_start(void)
 {
-    /* 0.25 s of real time worth of motion: device ticks scaled by the speed-up */
-    uint16_t s = sim_mailbox.speedup_x16;
-    uint32_t need = MS_TO_CLOCK(DEV_START_BUFFER_MS), total = 0;
-    if (s > 16)
-        need = need * s / 16;
-    uint8_t tail = queue_tail, head = queue_head;
-    if (tail == head)
+    machine_account();
+    if (queue_head == queue_tail)
         return 0;
-    for (uint8_t i = tail; i != head; i++) {
-        struct item *it = queue_slot(i);
-        if (it->kind != IT_SEG)
-            return 1;
-        total += it->ticks;
-        if ((it->flags & SEGF_AT_REST) || total >= need)
-            return 1;
-    }
-    if (queue_free() == 0)
-        return 1;
-    return now - mc.last_enqueue_at >= MS_TO_CLOCK(DEV_START_DELAY_MS);
+    cli();
+    uint32_t head_item = st.items_done + 1;
+    sei();
+    return mc.block_ends > 0 || mc.queued_units >= mc.start_ticks || queue_free() == 0 ||
+           head_item <= mc.flush_item;
+}
+
+/* Anything to do: motion executing or queued, a heater on (the watchdog guards it). */
+static uint8_t active(void)
+{
+    return stepper_moving() || queue_used() || heaters[0].target_dc || heaters[1].target_dc;
 }
 
 void session_poll(uint32_t now)
@@ -89,21 +95,27 @@ void session_poll(uint32_t now)
             announce_boot(now);
         return;
     }
-    cli();
-    uint32_t items = st.items_done;
-    sei();
-    uint8_t flags = machine_flags();
-    if (!flow_valid || items != flow_items || flags != flow_flags) {
-        if (!flow_valid || machine_free() >= flow_free + QUEUE_SIZE / 8 ||
-            now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS))
-            link_request_ack();
+    /* host watchdog: no valid frame for watchdog_ms while there is something to do:
+     * stop, heaters off, motors held (a cable robot would drop its effector) */
+    if (active() && !mc.fault &&
+        now - mc.last_frame_at >= (uint32_t)mc.watchdog_ms * (CLOCK_HZ / 1000)) {
+        machine_stop(ERR_WATCHDOG, 0, 1, mc.watchdog_ms);
+        return;
     }
-    /* host watchdog: a silent host while the machine is busy */
-    uint8_t busy = stepper_moving() || queue_used() || heaters[0].target_dc || heaters[1].target_dc;
-    if (busy && !mc.fault && now - mc.last_frame_at >= MS_TO_CLOCK(HOST_WATCHDOG_MS)) {
-        machine_fail(ERR_ESTOP, st.items_done, st.segments_done, 0xFE,
-                     (int32_t)((now - mc.last_frame_at) / (CLOCK_HZ / 1000)));
-        heater_all_off();
-        stepper_disable_all();
+    /* unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of
+     * the queue freed, or any other change after DEV_FLOW_INTERVAL_MS */
+    uint8_t want = !flow_valid;
+    if (!want && mc.flow_ticks && motion_executed() - flow_motion >= mc.flow_ticks)
+        want = 1;
+    if (!want) {
+        cli();
+        uint32_t items = st.items_done;
+        sei();
+        uint8_t flags = machine_flags();
+        if (items != flow_items || flags != flow_flags)
+            want = flags != flow_flags || machine_free() >= flow_free + QUEUE_SIZE / 8 ||
+                   now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS);
     }
+    if (want)
+        link_request_ack();
 }

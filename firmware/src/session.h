@@ -1,4 +1,4 @@
-/* Protocol 1 session behaviour around the link: BOOT announcements, unsolicited
+/* Session behaviour around the link: BOOT announcements, unsolicited
  * FLOW reports, the motion start rule and the host watchdog. */
 #ifndef SESSION_H
 #define SESSION_H
@@ -7,7 +7,7 @@
 void session_opened(void);
 void session_boot_on_data(void);
 void session_poll(uint32_t now);
-uint8_t session_may_start(uint32_t now);
+uint8_t session_may_start(void);
 void commands_reset_session(void);
 
 #endif

@@ -174,6 +174,11 @@ void stepper_init(void)
     TIMSK1 = _BV(OCIE1A);
 }
 
+uint32_t stepper_ticks_left(void)
+{
+    return (st.current == IT_SEG || st.current == IT_DWELL) ? t_left : 0;
+}
+
 uint8_t stepper_moving(void)
 {
     return st.current != 0xFF || !st.at_rest;

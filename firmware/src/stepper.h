@@ -41,6 +41,8 @@ void stepper_resume(void);
 void stepper_flush(uint32_t items_received);
 void stepper_disable_all(void);
 uint8_t stepper_moving(void);
+/* Ticks the executing segment or dwell has left (interrupts off). */
+uint32_t stepper_ticks_left(void);
 
 /* figures for the harness and the benchmark */
 extern volatile uint16_t stepper_isr_max_cycles;

@@ -4,7 +4,7 @@
 #include <stdint.h>
 
 #define UART_RX_SIZE 256 /* power of two */
-#define UART_TX_SIZE 512 /* power of two */
+#define UART_TX_SIZE 256 /* power of two */
 
 void uart_init(void);
 int16_t uart_getc(void);              /* -1 when empty */

@@ -1,4 +1,3 @@
-#include "protocol_gen.h"
 #include "wire.h"
 
 uint8_t rd_u8(struct reader *r)
@@ -10,44 +9,40 @@ uint8_t rd_u8(struct reader *r)
     return r->buf[r->pos++];
 }
 
-uint32_t rd_uv(struct reader *r)
+uint32_t rd_bounded(struct reader *r, uint8_t bits)
 {
+    uint8_t max_bytes = (uint8_t)((bits + 6) / 7);
     uint32_t value = 0;
-    for (uint8_t i = 0; i < MAX_VARINT_BYTES; i++) {
+    for (uint8_t i = 0; i < max_bytes; i++) {
         if (r->pos >= r->len) {
             r->err = 1;
             return 0;
         }
         uint8_t b = r->buf[r->pos++];
-        uint8_t bits = b & 0x7F;
-        if (i < 4)
-            value |= (uint32_t)bits << (7 * i);
-        else if (i == 4) {
-            if (bits > 0x0F)
-                r->err = 1; /* beyond 32 bits */
-            value |= (uint32_t)bits << 28;
-        } else if (bits)
+        uint8_t shift = (uint8_t)(7 * i);
+        uint32_t part = (uint32_t)(b & 0x7F);
+        /* the bits that would fall beyond the field's width */
+        if (shift + 7 > bits && (part >> (bits - shift)))
             r->err = 1;
+        value |= part << shift;
         if (!(b & 0x80))
             return r->err ? 0 : value;
     }
-    r->err = 1; /* longer than 10 bytes */
+    r->err = 1; /* longer than the field allows */
     return 0;
 }
 
-int32_t rd_sv(struct reader *r)
+uint32_t rd_field(struct reader *r, uint8_t type)
 {
-    uint32_t u = rd_uv(r);
-    return (int32_t)((u >> 1) ^ (uint32_t)-(int32_t)(u & 1));
-}
-
-void rd_text(struct reader *r)
-{
-    uint8_t n = rd_u8(r);
-    if ((uint16_t)r->pos + n > r->len)
-        r->err = 1;
-    else
-        r->pos += n;
+    switch (type) {
+    case FT_U8:
+        return rd_u8(r);
+    case FT_U16:
+    case FT_I16:
+        return rd_bounded(r, 16);
+    default:
+        return rd_bounded(r, 32);
+    }
 }
 
 void wr_u8(struct writer *w, uint8_t v)

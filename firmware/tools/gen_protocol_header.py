@@ -1,13 +1,14 @@
-"""Write firmware/src/protocol_gen.h from the Python protocol definition.
+"""Write the firmware's protocol headers from the Python protocol definition.
 
-The C firmware takes every message id, field layout and limit from here, so
-``firmware_protocol`` stays the single source of truth. Usage::
+``firmware_protocol`` stays the single source of truth: ``src/cdpr_protocol.h`` is
+exactly what ``python -m firmware_protocol.c_header`` emits from the message table
+(opcodes, codes, limits, field ranges), and ``src/protocol_gen.h`` adds what this
+firmware's table-driven decoder and its behaviour take from the same definitions:
+one field descriptor per field of every host-to-device message, and the device
+behaviour the Python model defines (SimConfig defaults). Usage::
 
-    python firmware/tools/gen_protocol_header.py            # rewrite the header
-    python firmware/tools/gen_protocol_header.py --check    # exit 1 when stale
-
-Layout letters: ``b`` u8, ``u`` uv, ``s`` sv, ``t`` text, ``4`` sv x4,
-``m`` sv for each bit of the preceding mask byte (3 bits), ``E`` the EVENT body.
+    python firmware/tools/gen_protocol_header.py            # rewrite both headers
+    python firmware/tools/gen_protocol_header.py --check    # exit 1 when either is stale
 """
 
 from __future__ import annotations
@@ -17,22 +18,44 @@ import re
 import sys
 from pathlib import Path
 
-from firmware_protocol import framing, reliability, segments, varint
+from firmware_protocol import c_header, framing, reliability, segments
 from firmware_protocol import messages as m
 from firmware_protocol.device.config import SimConfig
 
-HEADER = Path(__file__).resolve().parents[1] / "src" / "protocol_gen.h"
-_KIND_LETTER = {"u8": "b", "uv": "u", "sv": "s", "text": "t", "sv4": "4", "sv3m": "m"}
+SRC = Path(__file__).resolve().parents[1] / "src"
+HEADER = SRC / "protocol_gen.h"
+CDPR_HEADER = SRC / "cdpr_protocol.h"
+# field types of the descriptors (wire.h reads them)
+TYPE_CODE = {"u8": 0, "u16": 1, "u32": 2, "i16": 3, "i32": 4}
 
 
 def _name(cls: type) -> str:
     return re.sub(r"(?<!^)(?=[A-Z])", "_", cls.__name__).upper()
 
 
-def _layout(cls: type[m.Message]) -> str:
-    if cls is m.Event:
-        return "E"
-    return "".join(_KIND_LETTER[k] for k in cls.LAYOUT)
+def _host_messages() -> list[type[m.Message]]:
+    """The messages a device decodes: host commands (immediate, queued, urgent)."""
+    return [cls for cls in m.MESSAGES if cls.CLASS in ("I", "Q", "U")]
+
+
+def _descriptors(cls: type[m.Message]) -> list[str]:
+    """One {type, count, mask, lo, hi} per field; values land in a flat array in order,
+    ``mask`` being the index of the value whose bits select an array's entries (-1: all)."""
+    rows, index = [], {}
+    at = 0
+    for f in cls.FIELDS:
+        if f.type not in TYPE_CODE or f.counted:
+            raise SystemExit(f"{cls.__name__}.{f.name}: the device decoder takes no {f.type} here")
+        mask = index[f.mask] if f.mask else -1
+        lo, hi = f.range
+        low = "(-2147483647L - 1)" if lo == -(2**31) else f"{lo}L"
+        rows.append(
+            f"{{{TYPE_CODE[f.type]}, {f.count}, {mask}, {low}, {hi & 0xFFFFFFFF}UL}}"
+            f" /* {f.name} */"
+        )
+        index[f.name] = at
+        at += f.count
+    return rows
 
 
 def render() -> str:
@@ -42,66 +65,71 @@ def render() -> str:
         "/* Do not edit: run `python firmware/tools/gen_protocol_header.py`. */",
         "#ifndef PROTOCOL_GEN_H",
         "#define PROTOCOL_GEN_H",
+        "#include <stdint.h>",
+        '#include "cdpr_protocol.h"',
         "",
-        f"#define PROTO_MAJOR {m.PROTOCOL_MAJOR}",
-        f"#define PROTO_MINOR {m.PROTOCOL_MINOR}",
-        "",
-        "/* framing */",
-        f"#define FRAME_SYNC 0x{framing.SYNC:02X}",
-        f"#define FRAME_END 0x{framing.END:02X}",
-        f"#define FRAME_HEADER_LEN {framing.HEADER_LEN}",
-        f"#define FRAME_OVERHEAD {framing.OVERHEAD}",
-        f"#define FRAME_MAX_PAYLOAD {framing.MAX_PAYLOAD}",
-    ]
-    for kind in framing.Kind:
-        out.append(f"#define KIND_{kind.name} {int(kind)}")
-    out += [
-        "",
-        "/* reliability */",
-        f"#define SEQ_MOD {reliability.SEQ_MOD}",
+        "#define PROTO_MAJOR CDPR_PROTOCOL_MAJOR",
+        "#define PROTO_MINOR CDPR_PROTOCOL_MINOR",
+        "#define FRAME_SYNC CDPR_SYNC",
+        "#define FRAME_END CDPR_END",
+        "#define FRAME_HEADER_LEN CDPR_HEADER_LEN",
+        "#define FRAME_CRC_LEN CDPR_CRC_LEN",
+        "#define FRAME_OVERHEAD CDPR_OVERHEAD",
+        "#define FRAME_MAX_PAYLOAD CDPR_MAX_PAYLOAD",
         f"#define MAX_WINDOW {reliability.MAX_WINDOW}",
-        f"#define MAX_VARINT_BYTES {varint.MAX_VARINT_BYTES}",
-        "",
-        "/* segments */",
-        f"#define SEG_BASE 0x{segments.SEG_BASE:02X}",
+        f"#define AXES {segments.AXES}",
+        "#define SEG_BASE CDPR_SEG_BASE",
+        "#define SEG_MAX_DELTA CDPR_SEG_MAX_DELTA",
+        "#define SEG_RAMP_TO_REST CDPR_RAMP_TO_REST",
+        f"#define SEG_RAMP_CONSTANT ({segments.RAMP_CONSTANT})",
     ]
     for flag in ("F_RAMP", "F_DURATION", "F_PREDICTED", "F_SLIDERS", "F_EXTRUDER", "F_RESERVED"):
-        out.append(f"#define SEG_{flag} 0x{getattr(segments, flag):02X}")
+        out.append(f"#define SEG_{flag} CDPR_SEG_{flag}")
+    out += ["", "/* frame kinds, status flags, codes */"]
+    out += [f"#define KIND_{k.name} CDPR_KIND_{k.name}" for k in framing.Kind]
+    out += [f"#define FLAG_{f.name} CDPR_FLAG_{f.name}" for f in m.Flag]
+    out += [f"#define ERR_{e.name} CDPR_ERR_{e.name}" for e in m.ErrorCode]
+    out += [f"#define EVT_{e.name} CDPR_EVT_{e.name}" for e in m.EventCode]
+    out += [f"#define BOOT_{e.name} CDPR_BOOT_{e.name}" for e in m.BootCause]
+    out += [f"#define ESTOP_{e.name} CDPR_ESTOP_{e.name}" for e in m.EstopFlag]
     out += [
-        f"#define SEG_RAMP_CONSTANT ({segments.RAMP_CONSTANT})",
-        f"#define SEG_RAMP_TO_REST {segments.RAMP_TO_REST}",
-        f"#define SEG_MAX_TICKS {segments.MAX_TICKS}UL",
-        f"#define SEG_MAX_DELTA {segments.MAX_DELTA}L",
-        f"#define AXES {segments.AXES}",
         "",
-        "/* opcodes and field layouts */",
+        "/* Host-to-device messages: opcode, queue slot, field descriptors. A descriptor",
+        " * is {type (0 u8, 1 u16, 2 u32, 3 i16, 4 i32), count, mask, lo, hi}: the",
+        " * decoder reads `count` values (or those whose bit is set in value[mask])",
+        " * into a flat array, each within lo..hi (hi as the field's unsigned bits). */",
     ]
     table = []
-    for op, cls in sorted(m._BY_OPCODE.items()):
+    for cls in _host_messages():
         name = _name(cls)
-        out.append(f"#define OP_{name} 0x{op:02X}")
-        out.append(f'#define LAYOUT_{name} "{_layout(cls)}"')
+        out.append(f"#define OP_{name} CDPR_OP_{name}")
         out.append(f"#define QUEUED_{name} {int(cls.QUEUED)}")
-        table.append((op, name))
-    out.append("#define PROTO_OPCODE_TABLE(X) \\")
-    out += [f"    X(0x{op:02X}, {name}) \\" for op, name in table]
-    out.append("")
-    out.append("/* status flags, error, event and boot codes */")
-    out += [f"#define FLAG_{f.name} 0x{int(f):02X}" for f in m.Flag]
-    out += [f"#define ERR_{e.name} {int(e)}" for e in m.ErrorCode]
-    out += [f"#define EVT_{e.name} {int(e)}" for e in m.EventCode]
-    out += [f"#define BOOT_{e.name} {int(e)}" for e in m.BootCause]
+        out.append(f"#define URGENT_{name} {int(cls.CLASS == 'U')}")
+        rows = _descriptors(cls)
+        out.append(f"#define NFIELDS_{name} {len(rows)}")
+        out.append(f"#define NVALUES_{name} {sum(f.count for f in cls.FIELDS)}")
+        out.append(f"#define FIELDS_{name} \\")
+        out += [f"    {r}, \\" for r in rows or ["{0, 0, -1, 0L, 0UL} /* none */"]]
+        out.append("")
+        table.append(name)
+    out.append("#define PROTO_HOST_MESSAGES(X) \\")
+    out += [f"    X({name}) \\" for name in table]
     out += [
+        "",
+        f"#define DWELL_MAX_S CDPR_DWELL_MAX_S",
+        f"#define WATCHDOG_MS_DEFAULT CDPR_WATCHDOG_MS_DEFAULT",
         "",
         "/* device behaviour the model defines (SimConfig defaults) */",
         f"#define DEV_WINDOW {cfg.window}",
         f"#define DEV_BOOT_ANNOUNCE_MS {round(cfg.boot_announce_s * 1000)}",
         f"#define DEV_FLOW_INTERVAL_MS {round(cfg.flow_interval_s * 1000)}",
-        f"#define DEV_START_BUFFER_MS {round(cfg.start_buffer_s * 1000)}",
-        f"#define DEV_START_DELAY_MS {round(cfg.start_delay_s * 1000)}",
+        f"#define DEV_START_MS {round(cfg.start_s * 1000)}",
+        f"#define DEV_FLOW_MS {round(cfg.flow_s * 1000)}",
         f"#define DEV_HOMING_RATE {round(cfg.homing_rate)}",
         f"#define DEV_HOMING_MAX_STEPS {cfg.homing_max_steps}L",
         f"#define DEV_OVERTRAVEL_STEPS {cfg.overtravel_steps}L",
+        f"#define DEV_HOTEND_MAX_DC {round(cfg.hotend.max_c * 10)}",
+        f"#define DEV_BED_MAX_DC {round(cfg.bed.max_c * 10)}",
         "",
         "#endif",
         "",
@@ -109,18 +137,23 @@ def render() -> str:
     return "\n".join(out)
 
 
+def outputs() -> dict[Path, str]:
+    return {CDPR_HEADER: c_header.header(), HEADER: render()}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if the header is stale")
+    ap.add_argument("--check", action="store_true", help="exit 1 if a header is stale")
     args = ap.parse_args(argv)
-    text = render()
-    if args.check:
-        if not HEADER.exists() or HEADER.read_text() != text:
-            print(f"{HEADER} is stale: run python firmware/tools/gen_protocol_header.py")
-            return 1
-        return 0
-    HEADER.write_text(text)
-    return 0
+    stale = 0
+    for path, text in outputs().items():
+        if args.check:
+            if not path.exists() or path.read_text() != text:
+                print(f"{path} is stale: run python firmware/tools/gen_protocol_header.py")
+                stale = 1
+        else:
+            path.write_text(text)
+    return stale
 
 
 if __name__ == "__main__":
