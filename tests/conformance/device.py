@@ -126,8 +126,12 @@ class RawHost:
                 for m in self.urgent:
                     if isinstance(m, Ident) and m.nonce == nonce:
                         self._open = True
+                        self.ep.window_bytes = m.rx_window  # what the device can buffer
                         return m
         raise AssertionError("no IDENT")
+
+    def urgent_send(self, msg: Message) -> None:
+        self.write_raw(encode_frame(Kind.URGENT, 0, 0, encode_message(msg)))
 
     def send(self, *msgs: Message) -> None:
         self._sent_at = self.now()
