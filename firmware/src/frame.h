@@ -9,7 +9,7 @@
 #define DEFRAME_BUF (2 * FRAME_MAX + 6)
 
 struct deframer_stats {
-    uint16_t frames, bad_headers, bad_frames;
+    uint32_t frames, bad_headers, bad_frames;
 };
 extern struct deframer_stats deframer_stats;
 

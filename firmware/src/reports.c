@@ -86,7 +86,7 @@ void report_status(void)
     wr_u8(&w, en);
     wr_u8(&w, homed);
     wr_u8(&w, mc.last_error);
-    wr_uv(&w, (uint32_t)deframer_stats.bad_frames + deframer_stats.bad_headers);
+    wr_uv(&w, deframer_stats.bad_frames + deframer_stats.bad_headers);
     wr_uv(&w, link_counters.retransmits);
     wr_uv(&w, link_counters.naks_sent);
     wr_uv(&w, link_counters.duplicates);

@@ -45,6 +45,11 @@ def device_factory(kind, tmp_path):
     yield make
     for dev in started:
         dev.stop()
+        # the harness repairs timer interrupts simavr loses; one it could not repair, or a
+        # pulse the firmware had no room for, fails the test
+        stats = dev.stats()
+        assert stats.get("unrepaired", 0) == 0, stats
+        assert stats.get("lost_steps", 0) == 0, stats
 
 
 @pytest.fixture

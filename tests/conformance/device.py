@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import os
 import signal
 import subprocess
 import sys
@@ -11,6 +13,7 @@ from pathlib import Path
 
 import serial
 
+from cdprhost.sim import avr_device
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.framing import Kind, encode_frame
 from firmware_protocol.messages import (
@@ -32,28 +35,36 @@ class Device:
     proc: subprocess.Popen
     path: str
     record: Path
+    stats_path: Path  # the AVR harness's figures, written when it exits
 
     def stop(self) -> int:
-        self.proc.send_signal(signal.SIGTERM)
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
         try:
             return self.proc.wait(30)
         finally:
             if self.proc.poll() is None:
                 self.proc.kill()
 
+    def stats(self) -> dict:
+        """The harness's figures (AVR only; after stop)."""
+        return json.loads(self.stats_path.read_text()) if self.stats_path.exists() else {}
+
 
 def start(kind: str, tmp: Path, *args: str) -> Device:
     record = tmp / f"{kind}-record.jsonl"
+    stats = tmp / f"{kind}-{time.monotonic_ns()}-stats.json"
     cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--record", str(record)]
     cmd += ["--firmware", kind]
+    env = dict(os.environ, **{avr_device.STATS_ENV: str(stats)})
     proc = subprocess.Popen(
-        [*cmd, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [*cmd, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
     )
     path = proc.stdout.readline().strip()
     if not path.startswith("/dev/"):
         proc.wait(10)
         raise RuntimeError(f"sim-device did not start: {proc.stderr.read()}")
-    return Device(kind, proc, path, record)
+    return Device(kind, proc, path, record, stats)
 
 
 @dataclass
