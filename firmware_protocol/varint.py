@@ -40,37 +40,11 @@ def encode_svarint(value: int) -> bytes:
     return encode_uvarint(zigzag(value))
 
 
-def decode_uvarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
-    """Return ``(value, next_pos)``; raises :class:`VarintError` when truncated or overlong."""
-    value = 0
-    shift = 0
-    end = len(buf)
-    while True:
-        if pos >= end:
-            raise VarintError("truncated varint")
-        byte = buf[pos]
-        pos += 1
-        value |= (byte & 0x7F) << shift
-        if byte < 0x80:
-            return value, pos
-        shift += 7
-        if shift >= 7 * MAX_VARINT_BYTES:
-            raise VarintError("varint longer than 10 bytes")
-
-
-def decode_svarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
-    value, pos = decode_uvarint(buf, pos)
-    return unzigzag(value), pos
-
-
 # ------------------------------------------------------------------ bounded (the wire's field types)
-
-#: bits of each unsigned field type; a varint of ``b`` bits takes at most ceil(b / 7) bytes
-UNSIGNED_BITS = {"u16": 16, "u32": 32}
-SIGNED_BITS = {"i16": 16, "i32": 32}
 
 
 def max_bytes(bits: int) -> int:
+    """A varint of ``bits`` bits takes at most ceil(bits / 7) bytes."""
     return (bits + 6) // 7
 
 
@@ -103,6 +77,15 @@ def decode_sbounded(buf: bytes | bytearray | memoryview, pos: int, bits: int) ->
     """A zigzag varint of a signed ``bits``-bit field (two's complement range)."""
     value, pos = decode_ubounded(buf, pos, bits)
     return (value >> 1) ^ -(value & 1), pos
+
+
+def decode_uvarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
+    """Any varint below 2**64 (10 bytes at most); ``(value, next_pos)``."""
+    return decode_ubounded(buf, pos, 64)
+
+
+def decode_svarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
+    return decode_sbounded(buf, pos, 64)
 
 
 # ------------------------------------------------------------------ vectorised

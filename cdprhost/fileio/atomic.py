@@ -10,7 +10,6 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-
 STALE_S = 600.0  # a temporary file this old was left by a writer that was killed
 
 

@@ -22,47 +22,32 @@ import numpy as np
 
 from cdprhost.errors import InputError
 from cdprhost.gcode import items as g
+from cdprhost.gcode.stream import shift_e, travel
 
 CLEARANCE_MM = 5.0
 INSERTED_LINE = 0  # the line of moves the host inserts (not in the file)
-
-
-def _travel_chunk(points: list[np.ndarray], layer: int, feedrate: float) -> g.MoveChunk:
-    pts = np.asarray(points, dtype=float)
-    n = len(pts) - 1
-    return g.MoveChunk(
-        start=pts[:-1].copy(),
-        end=pts[1:].copy(),
-        e_start=np.zeros(n),
-        e_end=np.zeros(n),
-        feedrate=np.full(n, feedrate),
-        line=np.full(n, INSERTED_LINE, dtype=np.int64),
-        layer=np.full(n, layer, dtype=np.int32),
-        kind=np.full(n, int(g.MoveKind.TRAVEL), dtype=np.uint8),
-        rapid=np.ones(n, dtype=bool),
-    )
+#: items before the restart that still hold after it (temperatures, fans, limits, factors...)
+_KEPT_SETTINGS = (
+    g.SetTemperature,
+    g.Fan,
+    g.ToolSelect,
+    g.FlowFactor,
+    g.SpeedFactor,
+    g.SetMotionLimits,
+    g.ColdExtrusion,
+    g.ObjectDefine,
+)
 
 
 def _cut(chunk: g.MoveChunk, i: int, point: np.ndarray | None, e_offset: float) -> g.MoveChunk:
     """Moves ``i..`` of ``chunk``, the first starting at ``point`` (if given), E re-zeroed."""
-    rest = np.arange(i, len(chunk))
-    start = chunk.start[rest].copy()
-    e_start = chunk.e_start[rest] - e_offset
+    rest = chunk.take(slice(i, None))
+    start = rest.start.copy()
+    e_start = rest.e_start - e_offset
     if point is not None:
         start[0] = point
         e_start[0] = 0.0
-    return replace(
-        chunk,
-        start=start,
-        end=chunk.end[rest],
-        e_start=e_start,
-        e_end=chunk.e_end[rest] - e_offset,
-        feedrate=chunk.feedrate[rest],
-        line=chunk.line[rest],
-        layer=chunk.layer[rest],
-        kind=chunk.kind[rest],
-        rapid=chunk.rapid[rest],
-    )
+    return replace(rest, start=start, e_start=e_start, e_end=rest.e_end - e_offset)
 
 
 def _nearest_move(chunk: g.MoveChunk, line: int, point: np.ndarray) -> tuple[int, float] | None:
@@ -141,11 +126,7 @@ class Restart:
         for item in self._items:
             if started:
                 if isinstance(item, g.MoveChunk):
-                    yield replace(
-                        item,
-                        e_start=item.e_start - self.e_offset,
-                        e_end=item.e_end - self.e_offset,
-                    )
+                    yield shift_e(item, self.e_offset)
                 else:
                     yield item
                 continue
@@ -173,12 +154,12 @@ class Restart:
                         np.array([first[0], first[1], safe_z]),
                         first,
                     ]
-                    yield _travel_chunk(route, layer, self.travel_feedrate)
+                    yield travel(np.asarray(route), 0.0, INSERTED_LINE, layer, self.travel_feedrate)
                 yield _cut(item, i, cut, self.e_offset)
                 started = True
-            elif isinstance(item, (g.SetTemperature, g.Fan, g.ToolSelect)):
+            elif isinstance(item, _KEPT_SETTINGS):
                 yield item
-            elif isinstance(item, g.Home) and not homed:
+            elif isinstance(item, g.HomeCommand) and not homed:
                 homed = True
                 yield item
         if not started:

@@ -42,8 +42,8 @@ from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import heaters_off
 from cdprhost.motion.pipeline import segment_program
-from cdprhost.motion.program import read_items
-from cdprhost.preflight.run import preflight, preflight_items
+from cdprhost.motion.prepared import Prepared, Setup, prepare
+from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.messages import EstopFlag
 
@@ -52,6 +52,7 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class PrintOptions:
+    setup: Setup = field(default_factory=Setup)  # placement, --retarget, cancelled objects
     resume_from_layer: int | None = None  # 0-based
     resume: ResumePoint | None = None  # continue exactly at this point (``--resume``)
     log_path: str | Path | None = None
@@ -109,6 +110,7 @@ class PrintJob:
         self.link: HostLink | None = None  # set once connected (the streamer holds it)
         self._sha256 = ""
         self._restart: Restart | None = None
+        self._prepared: Prepared | None = None
         self._t0 = 0.0  # the device's motion clock when streaming began
         self.plan = self._plan_spec()
 
@@ -158,8 +160,13 @@ class PrintJob:
             return PlanSpec("layer", layer=self.options.resume_from_layer)
         return PlanSpec()
 
+    def _prepare(self) -> Prepared:
+        if self._prepared is None:
+            self._prepared = prepare(self.gcode, self.profile, self.model, self.options.setup)
+        return self._prepared
+
     def _items(self, plan: PlanSpec | None = None) -> Iterable[Any]:
-        items = read_items(self.gcode, self.profile, self.model)
+        items = self._prepare().items()
         z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
         out = (plan or self.plan).apply(items, z_max=z_max)
         if plan is None and isinstance(out, Restart):
@@ -180,12 +187,9 @@ class PrintJob:
         self._set(JobState.PREFLIGHT, str(self.gcode))
         try:
             self._sha256 = file_sha256(self.gcode)
-            if self.plan.start == "file":
-                report = preflight(self.gcode, self.profile, self.model)
-            else:
-                report = preflight_items(
-                    self._items(), self.profile, self.model, source=str(self.gcode)
-                )
+            prepared = self._prepare()
+            resumed = self.plan.start != "file"
+            report = preflight_prepared(prepared, self._items() if resumed else None)
         except GcodeError as exc:
             self._set(JobState.REFUSED, str(exc))
             return PrintResult(
@@ -225,6 +229,9 @@ class PrintJob:
         except LinkError as exc:  # a failed connect never touches the resume point
             result.bad_input = exc.exit_code == 2
             self._fail_early(result, f"{type(exc).__name__}: {exc}")
+            return result
+        except OSError as exc:
+            self._fail_early(result, f"cannot open the device: {exc.strerror or exc}")
             return result
         self.link = link
         self._print(link, result)
@@ -354,18 +361,7 @@ class PrintJob:
         if reason:
             self._fill(streamer, result)
             result.status, result.reason = "failed", reason
-            result.print_time_s = self._print_time(streamer)
-            info = streamer.executed()
-            self._emit(
-                Failure(
-                    reason,
-                    result.last_line,
-                    info.layer if info else None,
-                    info.point if info else None,
-                    result.resume_file,
-                )
-            )
-            self._set(JobState.FAILED, reason)
+            self._failed(streamer, result, reason)
             return
         self._finish(streamer, result, JobState.CANCELLED, "cancelled")
 
@@ -393,8 +389,14 @@ class PrintJob:
             return
         last = exc.last_segment if isinstance(exc, DeviceReset) else None
         self._fill(streamer, result, last)
-        result.print_time_s = self._print_time(streamer, last)
         self._save_point(streamer, result, reason, last)
+        self._failed(streamer, result, reason, last)
+
+    def _failed(
+        self, streamer: Streamer, result: PrintResult, reason: str, last: int | None = None
+    ) -> None:
+        """The machine time printed, the Failure event and the final state."""
+        result.print_time_s = self._print_time(streamer, last)
         info = streamer.executed(last)
         # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
         self._emit(
@@ -435,5 +437,11 @@ class PrintJob:
 
 
 def _violations_reason(report: Any) -> str:
+    from cdprhost.preflight.render import advice
+
     v = report.violations[0]
-    return f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}"
+    lines = [
+        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
+        *(line.strip() for line in advice(report)),
+    ]
+    return "\n".join(lines)

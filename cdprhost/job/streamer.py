@@ -41,6 +41,7 @@ from cdprhost.machine.commands import device_messages
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.segments import PlannedSegments
 from cdprhost.profile.models import MachineProfile
+from firmware_protocol.messages import BED, HOTEND, SetHeater
 
 log = logging.getLogger(__name__)
 
@@ -156,16 +157,20 @@ class Streamer:
                 self._hold_at_rest()
 
     def _command(self, item: Any) -> None:
+        if isinstance(item, g.FilamentChange):
+            self._filament_change(item)
+            return
         msgs = device_messages(
             item,
             model=self.ctx.model,
             home_mm=self.ctx.profile.drive.home_mm,
             clock_hz=self.clock_hz,
         )
-        if isinstance(item, g.Message):
+        if isinstance(item, g.DisplayMessage):
             self.ctx.emit(Notice(f"line {item.line}: {item.text}"))
         if not msgs:
             return
+        self._check_heater_limits(msgs)
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self._heat_item = max(numbers)
@@ -174,6 +179,19 @@ class Streamer:
             )
         if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
             self._hold_at_rest()
+
+    def _check_heater_limits(self, msgs: list[Any]) -> None:
+        """The device's announced maxima bound heater targets (it would refuse them)."""
+        identity = self.link.identity
+        if identity is None:
+            return
+        limits = {HOTEND: identity.hotend_max_c, BED: identity.bed_max_c}
+        for m in msgs:
+            if isinstance(m, SetHeater) and m.target_dc / 10 > limits.get(m.heater, 0.0):
+                raise LinkError(
+                    f"heater {m.heater} target {m.target_dc / 10:g} C is over the device's "
+                    f"maximum {limits.get(m.heater, 0.0):g} C"
+                )
 
     def _set(self, state: JobState, reason: str = "") -> None:
         if state is not self.ctx.state():
@@ -193,6 +211,20 @@ class Streamer:
             raise Stop()
         req.take("pause")
         self._set(JobState.PAUSED, "at rest; heaters kept")
+        self._wait_for_resume()
+
+    def _filament_change(self, item: g.FilamentChange) -> None:
+        """M600: the reader's park moves brought the machine to the park point; wait there
+        (paused, heaters kept) until the operator resumes or cancels."""
+        self._set(JobState.PAUSING, f"line {item.line}: M600 filament change")
+        self.link.flush()
+        self.drain(final=False)
+        self.ctx.emit(Notice(f"line {item.line}: M600: change the filament, then resume"))
+        self._set(JobState.PAUSED, f"line {item.line}: M600: change the filament, then resume")
+        self._wait_for_resume()
+
+    def _wait_for_resume(self) -> None:
+        req = self.ctx.requests
         while True:
             self.service(force_status=False)
             if req.has("stop"):

@@ -87,7 +87,7 @@ class Transport(Protocol):
     def close(self) -> None: ...
 
 
-class StepRateError(ValueError):
+class StepRateError(LinkError, ValueError):
     """A segment over the device's announced step rate (the host checks before sending)."""
 
 

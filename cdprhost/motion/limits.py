@@ -28,6 +28,11 @@ Vec3 = tuple[np.ndarray, np.ndarray, np.ndarray]  # one array per coordinate
 
 #: spacing of the Jacobian samples along a move (mm)
 SAMPLE_SPACING_MM = 10.0
+#: at most this many samples inside one move (moves longer than 40 cm, more than this
+#: kind of machine can make, are sampled more sparsely: their bound is looser, never
+#: wrong); moves longer than ``ABSURD_MOVE_MM`` (a typo: preflight refuses them) get 4
+MAX_SAMPLES_PER_MOVE = 40
+ABSURD_MOVE_MM = 2000.0
 #: fraction of the chord tolerance the segment length aims for (rest: higher order terms)
 CHORD_SAFETY = 0.7
 
@@ -161,7 +166,9 @@ class _PointTerms:
         return _max3(*c), _max3(*kap), w
 
 
-def _interior_samples(dist: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+def _interior_samples(
+    dist: np.ndarray, spacing: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Interior sample points of moves longer than ``spacing``: (move index, fraction)."""
     inner = np.floor(dist / spacing).astype(np.int64)  # samples strictly inside each move
     owner = np.repeat(np.arange(dist.shape[0]), inner)
@@ -194,6 +201,8 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
         e_a = np.where(ratio > 0, caps.e_accel / ratio, np.inf)
     v_cart = np.minimum(feed, np.where(kin, np.minimum(caps.max_velocity, e_v), caps.e_velocity))
     accel = np.where(kin, np.minimum(caps.max_accel, e_a), caps.e_accel)
+    if block.accel_limit is not None:
+        accel = np.minimum(accel, block.accel_limit)
     v2_cart = v_cart * v_cart
     v2_cap = v2_cart.copy()
     chord_step = np.full(n, np.inf)
@@ -214,7 +223,9 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     c1, k1, w1 = terms.take(i1).along(ux, uy, uz)
     c_max, k_max = np.maximum(c0, c1), np.maximum(k0, k1)
     w_max = np.maximum(w0, w1) if w0 is not None and w1 is not None else None
-    owner, frac = _interior_samples(np.where(kin, dist, 0.0), SAMPLE_SPACING_MM)
+    spacing_req = np.maximum(SAMPLE_SPACING_MM, dist / MAX_SAMPLES_PER_MOVE)
+    spacing_req = np.where(dist > ABSURD_MOVE_MM, dist / 4.0, spacing_req)
+    owner, frac = _interior_samples(np.where(kin, dist, 0.0), spacing_req)
     if owner.size:
         p = block.start[owner] + frac[:, None] * delta[owner]
         ci, ki, wi = _PointTerms.at(p[:, 0], p[:, 1], p[:, 2], outlets, chord).along(
@@ -224,7 +235,7 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
         np.maximum.at(k_max, owner, ki)
         if w_max is not None and wi is not None:
             np.maximum.at(w_max, owner, wi)
-    spacing = dist / (np.floor(dist / SAMPLE_SPACING_MM) + 1.0)
+    spacing = dist / (np.floor(dist / spacing_req) + 1.0)
     c_bound = np.clip(c_max + 0.5 * k_max * spacing, 1e-9, 1.0)  # >0: three cables span space
     k_bound = k_max * 1.05 + 1e-12
     # module speed, then keep the J-dot term within 3/4 of the module acceleration

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from cdprhost.gcode.items import Home, MoveChunk
+from cdprhost.gcode.items import HomeCommand, MoveChunk
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.program import MarkedMoves, ProgramPlanner, split_at_marks
 from cdprhost.motion.segments import DEFAULT_CLOCK_HZ, PlannedSegments, Segmenter
@@ -75,13 +75,20 @@ def segment_blocks(
                 )
                 yield SegmentBlock(batch, marks, None if encode is None else encode(batch))
             else:
-                if isinstance(out, Home):
-                    seg.home()
+                match out:
+                    case HomeCommand():
+                        seg.home()
+                    case _:
+                        pass
                 yield out
         totals.planned_time_s = pp.time
 
     for item in items:
-        yield from convert(pp.moves(item)[1] if isinstance(item, MoveChunk) else pp.command(item))
+        match item:
+            case MoveChunk():
+                yield from convert(pp.moves(item)[1])
+            case _:
+                yield from convert(pp.command(item))
     yield from convert(pp.finish())
 
 

@@ -90,7 +90,10 @@ class Planner:
         self.stats.replans += 1
         mc = move_caps(block, self.outlets, self.caps, chord=self.chord)
         delta = 2.0 * mc.accel * mc.length
-        jv2 = junction_v2(mc.unit, mc.kinematic, mc.accel, mc.length, self.caps.junction_deviation)
+        jd: float | np.ndarray = self.caps.junction_deviation
+        if block.junction_limit is not None:
+            jd = np.minimum(jd, np.minimum(block.junction_limit[:-1], block.junction_limit[1:]))
+        jv2 = junction_v2(mc.unit, mc.kinematic, mc.accel, mc.length, jd)
         v2_start = min(self._v0**2, float(mc.v2_cap[0]))
         v2, cruise, smooth, hump_start = plan_profile(
             jv2,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.gcode import Dwell, Fan, Home, LayerChange, SetTemperature
+from cdprhost.gcode import DwellCommand, Fan, HomeCommand, LayerChange, SetTemperature
 from cdprhost.motion.pipeline import PipelineTotals, segment_program
 from cdprhost.motion.program import (
     ProgramPlanner,
@@ -49,7 +49,7 @@ def test_commands_keep_their_place_between_moves(sim_profile, sim_model):
             order.append((type(item).__name__, item.line))
     lines = [ln for _, ln in order]
     assert lines == sorted(lines)
-    assert ("Fan", 4) in order and ("Dwell", 6) in order and ("Home", 13) in order
+    assert ("Fan", 4) in order and ("DwellCommand", 6) in order and ("HomeCommand", 13) in order
 
 
 def test_flushing_commands_stop_the_machine_and_others_do_not(sim_profile, sim_model):
@@ -65,8 +65,8 @@ def test_flushing_commands_stop_the_machine_and_others_do_not(sim_profile, sim_m
         elif isinstance(item, Fan):
             assert before.v_end[-1] > 0.0  # the corner at line 5 is taken at speed, not stopped
     assert (
-        flushes_motion(Dwell(1, 0.5))
-        and flushes_motion(Home(1))
+        flushes_motion(DwellCommand(1, 0.5))
+        and flushes_motion(HomeCommand(1))
         and flushes_motion(SetTemperature(1, "hotend", 200, True))
     )
     assert not flushes_motion(SetTemperature(1, "hotend", 200, False)) and not flushes_motion(

@@ -225,7 +225,7 @@ def test_fixture_pipeline_is_consistent(fixture_gcode, sim_profile, sim_model):
                 steps, out.steps_abs[-1]
             )  # no homing inside the print body
             last = out
-        elif type(out).__name__ == "Home":
+        elif type(out).__name__ == "HomeCommand":
             steps[:3] = 0
     assert totals.moves == 122769
     assert abs(ticks / DEFAULT_CLOCK_HZ - totals.planned_time_s) < 1e-3

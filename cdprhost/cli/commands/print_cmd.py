@@ -17,6 +17,11 @@ from pathlib import Path
 from typing import Any
 
 from cdprhost.cli.numbers import bounded_float, bounded_int
+from cdprhost.cli.options import (
+    add_placement_arguments,
+    non_empty,
+    setup_from_args,
+)
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
@@ -28,7 +33,7 @@ BAUD_RANGE = (50, 10_000_000)
 MAX_SPEEDUP = 100_000.0
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "print", help="print a G-code file (embedded simulated device unless --port is given)"
     )
@@ -36,6 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_profile_argument(p)
     p.add_argument(
         "--port",
+        type=non_empty,
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
@@ -74,6 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="SPEC",
         help="embedded device: inject faults (same SPEC as sim-device --faults)",
     )
+    add_placement_arguments(p, strict=False)
     p.set_defaults(func=run)
 
 
@@ -148,7 +155,13 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     log_path = Path(args.log) if args.log else log_path_for(gcode)
-    options = PrintOptions(resume_from_layer=layer, resume=point, log_path=log_path)
+    if args.sim_faults is not None:
+        if args.port:
+            raise InputError("--sim-faults: only for the embedded device (without --port)")
+        _check_faults(args.sim_faults)
+    options = PrintOptions(
+        setup=setup_from_args(args), resume_from_layer=layer, resume=point, log_path=log_path
+    )
     handler = attach_log_file(log_path.with_suffix(".log"), quiet=True) if not args.log else None
     events: queue.Queue[Any] = queue.Queue()
     job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
@@ -178,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
                         and "asked" not in outcome
                     ):
                         outcome["asked"] = True
-                        _ask_after_pause(job)
+                        _ask_after_pause(job, event.reason)
                         outcome.pop("asked")
                 except KeyboardInterrupt:
                     view.say("Ctrl-C: pausing at the next rest point...")
@@ -196,14 +209,32 @@ def run(args: argparse.Namespace) -> int:
     return int(result.exit_code)
 
 
-def _ask_after_pause(job: Any) -> None:
+def _check_faults(spec: str) -> None:
+    """A bad ``--sim-faults`` SPEC is bad input (exit 2), named, before anything starts."""
+    import dataclasses
+    import math
+
+    from firmware_protocol.device.faults import FaultSpec, FaultSpecError
+
+    try:
+        parsed = FaultSpec.parse(spec)
+    except FaultSpecError as exc:
+        raise InputError(f"--sim-faults {spec!r}: {exc}") from None
+    for f in dataclasses.fields(parsed):
+        value = getattr(parsed, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InputError(f"--sim-faults {spec!r}: {f.name} must be a finite number")
+
+
+def _ask_after_pause(job: Any, reason: str) -> None:
     if not sys.stdin.isatty():
-        print("paused without a terminal to ask: cancelling", file=sys.stderr)
+        print(f"paused ({reason}) without a terminal to ask: cancelling", file=sys.stderr)
         job.request_cancel()
         return
     while True:
         try:
-            answer = input("Paused (heaters kept). [r]esume or [c]ancel? ").strip().lower()
+            answer = input(f"Paused ({reason}; heaters kept). [r]esume or [c]ancel? ")
+            answer = answer.strip().lower()
         except (EOFError, KeyboardInterrupt):
             answer = "c"
         if answer in ("r", "resume"):
@@ -221,7 +252,7 @@ def _report(result: Any, args: argparse.Namespace) -> None:
             print(f"  line {v['line']}: {v['rule']}: {v['detail']}")
         if len(result.violations) > 10:
             print(f"  ... {len(result.violations) - 10} more (see --json)")
-    else:
+    elif result.segments or result.status != "failed":
         print(
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
             f"(estimated {result.estimated_time_s:.1f} s)"
@@ -234,7 +265,7 @@ def _report(result: Any, args: argparse.Namespace) -> None:
     if result.resume_file:
         print(
             f"resume point saved: {result.resume_file} (continue with --resume, or restart with "
-            f"--resume-from-layer {max(result.last_layer or 1, 1)})"
+            f"--resume-from-layer {max(result.last_layer or 1, args.resume_from_layer or 1)})"
         )
     if args.json:
         try:
