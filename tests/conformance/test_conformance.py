@@ -223,10 +223,11 @@ def test_silent_host_turns_heaters_off_within_the_watchdog(device_factory, host_
 
 def test_fuzzed_frames_then_a_clean_session(device_factory, host_factory, kind):
     """The model's own fuzz (random fields after real opcodes, mutated frames, garbage),
-    100,000 frames on both (CDPR_FUZZ_FRAMES sets another count); then a clean session."""
+    20,000 frames on both (CDPR_FUZZ_FRAMES sets another count; the model alone takes
+    100,000 in tests/protocol, in-process); then a clean session."""
     import os
 
-    count = int(os.environ.get("CDPR_FUZZ_FRAMES", 100_000))
+    count = int(os.environ.get("CDPR_FUZZ_FRAMES", 20_000))
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello(4242)
@@ -244,6 +245,11 @@ def test_fuzzed_frames_then_a_clean_session(device_factory, host_factory, kind):
         sent += 1
         if k % 20 == 0:
             h.pump(0.001)
+            # the host's own backlog drains before more is queued: the Python model reads
+            # without limit, the AVR at 250000 baud (a real line applies back-pressure), and
+            # the data frames must reach the message checks on both
+            if len(h.ep.sender.backlog) > 16:
+                h.wait_for(lambda: len(h.ep.sender.backlog) <= 4, timeout=30, what="drained")
             h.reports.clear()
             h.flows.clear()
     h.urgent_send(EmergencyStop())

@@ -26,14 +26,21 @@ def test_checked_in_header_is_current(name):
 
 
 def test_protocol_header_names_every_opcode_and_layout():
+    """Every opcode is in cdpr_protocol.h; every host message has its descriptors."""
     from firmware_protocol import messages as m
 
-    text = _tool("gen_protocol_header").render()
+    tool = _tool("gen_protocol_header")
+    text, cdpr = tool.render(), tool.outputs()[tool.CDPR_HEADER]
     for op, cls in m._BY_OPCODE.items():
-        assert re.search(rf"#define OP_\w+ 0x{op:02X}\n", text), cls.__name__
-    assert '#define LAYOUT_HELLO "ubb"' in text
-    assert '#define LAYOUT_STATUS "buuuu4susubbbbuuuu"' in text
-    assert f"#define PROTO_MAJOR {m.PROTOCOL_MAJOR}" in text
+        assert re.search(rf"#define CDPR_OP_\w+ 0x{op:02X}\n", cdpr), cls.__name__
+    for cls in tool._host_messages():
+        name = tool._name(cls)
+        assert f"#define OP_{name} CDPR_OP_{name}\n" in text
+        assert f"#define NFIELDS_{name} {len(cls.FIELDS)}\n" in text
+    # HELLO: nonce u16 (1..65535) then major u8 (type codes 1 and 0), one value each
+    assert re.search(r"FIELDS_HELLO \\\n    \{1, 1, -1, 1L, 65535UL\} /\* nonce \*/", text)
+    assert "#define PROTO_MAJOR CDPR_PROTOCOL_MAJOR" in text
+    assert f"#define CDPR_PROTOCOL_MAJOR {m.PROTOCOL_MAJOR}" in cdpr
 
 
 def test_a_changed_table_makes_the_check_fail(monkeypatch):
