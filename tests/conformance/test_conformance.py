@@ -227,7 +227,7 @@ def test_fuzzed_frames_then_a_clean_session(device_factory, host_factory, kind):
     100,000 in tests/protocol, in-process); then a clean session."""
     import os
 
-    count = int(os.environ.get("CDPR_FUZZ_FRAMES", 20_000))
+    count = int(os.environ.get("CDPR_FUZZ_FRAMES", "20000"))
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello(4242)
