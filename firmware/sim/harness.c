@@ -290,11 +290,27 @@ static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         offset[k] = (int64_t)(int32_t)mailbox_u32(8 + 4 * k) - phys[k];
 }
 
+/* The host watchdog seen from outside: the longest time a heater pin was high after the
+ * host's last byte (wall time, the clock of the firmware's link timers). */
+static double last_host_byte_wall = -1.0, heater_on_silence_max;
+static double wall_seconds(void);
+
+static void note_heater_silence(void)
+{
+    if (last_host_byte_wall < 0)
+        return;
+    double gap = wall_seconds() - last_host_byte_wall;
+    if (gap > heater_on_silence_max)
+        heater_on_silence_max = gap;
+}
+
 static void heater_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
     (void)irq;
     int h = (int)(intptr_t)param;
+    if (heater_level[h] && !value)
+        note_heater_silence(); /* it was on until now */
     thermal_switch(&thermal[h], sim_seconds(), (int)value);
     heater_level[h] = (int)value;
 }
@@ -367,6 +383,7 @@ static void poll_pty(void)
                 slave = -1;
             }
             host_seen = 1;
+            last_host_byte_wall = wall_seconds();
         } else if (n < 0 && errno == EIO && exit_on_hangup && host_seen) {
             stop_flag = 1;
         }
@@ -442,6 +459,8 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         avr->data[mailbox_addr + 46] = 1;
     }
     check_lost_interrupts();
+    if (heater_level[0] || heater_level[1])
+        note_heater_silence();
     update_thermal();
     pace();
     if (time_limit > 0 && sim_seconds() >= time_limit)
@@ -469,13 +488,13 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, latency,
-            loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp);
+            loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max);
     fclose(f);
 }
 

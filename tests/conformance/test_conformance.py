@@ -203,8 +203,13 @@ def test_heater_failure_is_a_thermal_runaway(device_factory, host_factory):
     assert st.hotend_target_dc == 0
 
 
-def test_silent_host_turns_heaters_off_within_the_watchdog(device_factory, host_factory):
-    """No frame for the watchdog time: heaters off, motors held, ERROR WATCHDOG."""
+def test_silent_host_turns_heaters_off_within_the_watchdog(device_factory, host_factory, kind):
+    """No frame for the watchdog time: heaters off, motors held, ERROR WATCHDOG.
+
+    On the AVR the harness also watches the heater pins: no heater pin is high later than
+    the watchdog time after the host's last byte (plus 0.1 s for the harness's 1 ms polls
+    and the scheduling of a loaded machine). The Python model has no pins to watch; both
+    must answer with ERROR WATCHDOG and a zero heater target after the same silence."""
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello()
@@ -219,6 +224,10 @@ def test_silent_host_turns_heaters_off_within_the_watchdog(device_factory, host_
     st = h.status()
     assert st.hotend_target_dc == 0 and st.flags & Flag.FAULT
     assert st.enabled_mask == 0b111  # a cable robot must not drop its effector
+    if kind == "avr":
+        dev.stop()
+        on_after_silence = dev.stats()["heater_on_silence_max_s"]
+        assert 0.4 < on_after_silence <= 0.5 + 0.1, on_after_silence
 
 
 def test_fuzzed_frames_then_a_clean_session(device_factory, host_factory, kind):
