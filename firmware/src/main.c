@@ -41,14 +41,21 @@ void sched_update_link_time(void)
 
 static void take_interrupt_reports(uint32_t now)
 {
-    struct stepper_report r;
-    cli();
-    r = *(struct stepper_report *)&stepper_report;
-    stepper_report.homed = 0;
-    uint8_t changed = st.heater_target_changed;
-    uint16_t targets[2] = {st.heater_target[0], st.heater_target[1]};
-    st.heater_target_changed = 0;
-    sei();
+    struct stepper_report r = {0};
+    uint8_t changed = 0;
+    uint16_t targets[2] = {0, 0};
+    /* The one-byte flags are read with interrupts on: the copy with them masked (long
+     * enough to delay a step tick by several us) only when there is something to take. */
+    if (stepper_report.homed || stepper_report.error || st.heater_target_changed) {
+        cli();
+        r = *(struct stepper_report *)&stepper_report;
+        stepper_report.homed = 0;
+        changed = st.heater_target_changed;
+        targets[0] = st.heater_target[0];
+        targets[1] = st.heater_target[1];
+        st.heater_target_changed = 0;
+        sei();
+    }
     for (uint8_t i = 0; i < 2; i++)
         if (changed >> i & 1)
             heater_set_target(i, targets[i], now);
