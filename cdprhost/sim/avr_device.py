@@ -39,7 +39,8 @@ def toolchain_missing() -> str | None:
     """None when the firmware and its harness can be built here, else how to fix it."""
     if shutil.which("avr-gcc") is None or shutil.which("make") is None:
         return INSTALL_HINT
-    if not Path("/usr/include/simavr/sim_avr.h").exists():
+    headers = ("/usr/include/simavr/sim_avr.h", "/usr/include/libelf.h")
+    if not all(Path(h).exists() for h in headers):
         return INSTALL_HINT
     return None
 
