@@ -50,8 +50,7 @@ def _descriptors(cls: type[m.Message]) -> list[str]:
         lo, hi = f.range
         low = "(-2147483647L - 1)" if lo == -(2**31) else f"{lo}L"
         rows.append(
-            f"{{{TYPE_CODE[f.type]}, {f.count}, {mask}, {low}, {hi & 0xFFFFFFFF}UL}}"
-            f" /* {f.name} */"
+            f"{{{TYPE_CODE[f.type]}, {f.count}, {mask}, {low}, {hi & 0xFFFFFFFF}UL}} /* {f.name} */"
         )
         index[f.name] = at
         at += f.count
@@ -116,8 +115,8 @@ def render() -> str:
     out += [f"    X({name}) \\" for name in table]
     out += [
         "",
-        f"#define DWELL_MAX_S CDPR_DWELL_MAX_S",
-        f"#define WATCHDOG_MS_DEFAULT CDPR_WATCHDOG_MS_DEFAULT",
+        "#define DWELL_MAX_S CDPR_DWELL_MAX_S",
+        "#define WATCHDOG_MS_DEFAULT CDPR_WATCHDOG_MS_DEFAULT",
         "",
         "/* device behaviour the model defines (SimConfig defaults) */",
         f"#define DEV_WINDOW {cfg.window}",
