@@ -386,8 +386,13 @@ static void __attribute__((noinline)) dispatch(void)
                 return;
             struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
             if (plan_tail == plan_head || p->index != queue_tail) {
-                if (!st.at_rest)
-                    stepper_plan_stalls++; /* the main loop fell behind */
+                if (!st.at_rest) {
+                    /* the main loop fell behind while moving: the motion would stretch
+                     * and lose steps (all axes near the top rate at once), so say so */
+                    stepper_plan_stalls++;
+                    raise_error(ERR_STEP_RATE, st.items_done, st.segments_done, 0xFF,
+                                (int32_t)MAX_STEP_RATE);
+                }
                 return;
             }
             run = p;
