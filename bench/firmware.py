@@ -38,6 +38,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -59,7 +60,9 @@ CLOCK_HZ = 100_000
 BAUD = 250_000
 
 
-def _stream(kind: str, batch: SegmentBatch, *, speedup: float = 1.0, profile: bool = False):
+def _stream(
+    kind: str, batch: SegmentBatch, *, speedup: float = 1.0, profile: bool = False
+) -> tuple[dict[str, Any], list[dict[str, Any]], bool, float]:
     """Stream ``batch`` to a ``sim-device --firmware kind``: (harness stats, record, ok, wall)."""
     tmp = Path(tempfile.mkdtemp())
     stats, record = tmp / "stats.json", tmp / "record.jsonl"
@@ -116,7 +119,7 @@ def _short_batch(ticks: int, n: int) -> SegmentBatch:
     return SegmentBatch(np.full(n, ticks), deltas, ramps)
 
 
-def _size() -> dict:
+def _size() -> dict[str, Any]:
     out = subprocess.run(
         ["avr-size", str(avr_device.ELF)], capture_output=True, text=True, check=True
     ).stdout
@@ -134,7 +137,9 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="fewer rates and shorter streams")
     args = ap.parse_args()
     avr_device.build()
-    fig: dict = {"command": "python bench/firmware.py" + (" --quick" if args.quick else "")}
+    fig: dict[str, Any] = {
+        "command": "python bench/firmware.py" + (" --quick" if args.quick else "")
+    }
     fig.update(_size())
 
     demo = demo_stream(60 if args.quick else 200, seed=3)

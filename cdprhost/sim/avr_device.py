@@ -8,6 +8,7 @@ relay sits between the host's pty and the harness's, applying the same
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import select
@@ -18,6 +19,7 @@ import sys
 import time
 import tty
 from pathlib import Path
+from types import FrameType
 
 from cdprhost.errors import InputError
 from firmware_protocol.device.faults import FaultSpec, FaultyChannel
@@ -119,7 +121,7 @@ class Relay:
                 os.close(fd)
 
 
-def run(args, faults: FaultSpec) -> int:
+def run(args: argparse.Namespace, faults: FaultSpec) -> int:
     """The CLI entry: build if needed, start the harness, print the pty, serve until SIGTERM."""
     if faults.reset_after or faults.stall_after:
         raise InputError(
@@ -144,7 +146,7 @@ def run(args, faults: FaultSpec) -> int:
         raise InputError("the simavr harness did not start", source="--firmware avr")
     stopping = False
 
-    def stop(signum, frame):
+    def stop(signum: int, frame: FrameType | None) -> None:
         nonlocal stopping
         stopping = True
 
