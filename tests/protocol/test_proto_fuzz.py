@@ -50,21 +50,22 @@ class Session:
 
 
 # the four frames that crashed 1.0's device model, a dwell that blocked its queue, fan 200
-@pytest.mark.parametrize(
-    "payload, code",
-    [
-        (b"\x14\x00" + b"\xff" * 9 + b"\x01", ErrorCode.BAD_COMMAND),  # SET_HEATER target 2**64
-        (b"\x10" + b"\xff" * 9 + b"\x02" + b"\x00" * 3, ErrorCode.BAD_COMMAND),  # SET_POSITION
-        (b"\x9a" + b"\xff" * 10 + b"\x01\x00\x00\x00", ErrorCode.BAD_COMMAND),  # segment delta
-        (b"\x13" + b"\xff" * 9 + b"\x01", ErrorCode.BAD_COMMAND),  # DWELL 2**64 - 1
-        (encode_message(M.Dwell(4_000_000_000)), ErrorCode.BAD_VALUE),  # over 3600 s
-        (b"\x15\x07\x10", ErrorCode.BAD_VALUE),  # fan 7: the device has one fan
-        (b"\x15\xc8\x10", ErrorCode.BAD_COMMAND),  # fan 200: outside the table's 0..7
-        (encode_message(M.SetHeater(1, 1300)), ErrorCode.HEATER_RANGE),  # bed 130 C over 120
-        (encode_message(M.Hello(7)), ErrorCode.BAD_COMMAND),  # URGENT-only message in DATA
-        (encode_message(M.Flow(0, 0, 0, 0)), ErrorCode.BAD_COMMAND),  # a device report
-    ],
-)
+# (also sent to the AVR firmware by tests/conformance)
+BAD_PAYLOADS = [
+    (b"\x14\x00" + b"\xff" * 9 + b"\x01", ErrorCode.BAD_COMMAND),  # SET_HEATER target 2**64
+    (b"\x10" + b"\xff" * 9 + b"\x02" + b"\x00" * 3, ErrorCode.BAD_COMMAND),  # SET_POSITION
+    (b"\x9a" + b"\xff" * 10 + b"\x01\x00\x00\x00", ErrorCode.BAD_COMMAND),  # segment delta
+    (b"\x13" + b"\xff" * 9 + b"\x01", ErrorCode.BAD_COMMAND),  # DWELL 2**64 - 1
+    (encode_message(M.Dwell(4_000_000_000)), ErrorCode.BAD_VALUE),  # over 3600 s
+    (b"\x15\x07\x10", ErrorCode.BAD_VALUE),  # fan 7: the device has one fan
+    (b"\x15\xc8\x10", ErrorCode.BAD_COMMAND),  # fan 200: outside the table's 0..7
+    (encode_message(M.SetHeater(1, 1300)), ErrorCode.HEATER_RANGE),  # bed 130 C over 120
+    (encode_message(M.Hello(7)), ErrorCode.BAD_COMMAND),  # URGENT-only message in DATA
+    (encode_message(M.Flow(0, 0, 0, 0)), ErrorCode.BAD_COMMAND),  # a device report
+]
+
+
+@pytest.mark.parametrize("payload, code", BAD_PAYLOADS)
 def test_bad_fields_are_answered_with_an_error(payload, code):
     s = Session()
     s.send(payload)

@@ -38,6 +38,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="FILE",
         help="JSON lines, one per executed segment, streamed as they execute (flushed on exit)",
     )
+    p.add_argument(
+        "--firmware",
+        choices=("python", "avr"),
+        default="python",
+        help="python: the device model; avr: the C firmware's ELF in simavr",
+    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -53,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             f"{given} needs {missing} as well (the virtual mocap needs both)", source=given
         )
+    if args.firmware == "avr":
+        from cdprhost.sim.avr_device import run as run_avr
+
+        return run_avr(args, faults)
     observer = make_observer(args.truth, args.mocap_dir) if args.truth else None
 
     def notice(text: str) -> None:

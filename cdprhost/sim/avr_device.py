@@ -1,0 +1,176 @@
+"""`cdprhost sim-device --firmware avr`: the C firmware's ELF in simavr on a pty.
+
+The harness (``firmware/build/cdpr-sim``) prints its pty path first, like the
+Python device. With byte or frame faults (``--faults corrupt=..,drop=..``) a
+relay sits between the host's pty and the harness's, applying the same
+:class:`FaultyChannel` as the Python device's server.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import tty
+from pathlib import Path
+from types import FrameType
+
+from cdprhost.errors import InputError
+from firmware_protocol.device.faults import FaultSpec, FaultyChannel
+
+FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
+ELF = FIRMWARE_DIR / "build" / "cdpr.elf"
+HARNESS = FIRMWARE_DIR / "build" / "cdpr-sim"
+INSTALL_HINT = (
+    "the AVR toolchain or simavr is missing: install it with "
+    "`apt-get install -y gcc-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config`"
+)
+
+
+# the harness's figures (lost interrupts, ISR cycles, step timing) go to this file on exit
+STATS_ENV = "CDPR_SIM_STATS"
+
+
+def toolchain_missing() -> str | None:
+    """None when the firmware and its harness can be built here, else how to fix it."""
+    if shutil.which("avr-gcc") is None or shutil.which("make") is None:
+        return INSTALL_HINT
+    headers = ("/usr/include/simavr/sim_avr.h", "/usr/include/libelf.h")
+    if not all(Path(h).exists() for h in headers):
+        return INSTALL_HINT
+    return None
+
+
+def build() -> None:
+    """Build the ELF and the harness (make decides what is stale)."""
+    missing = toolchain_missing()
+    if missing:
+        raise InputError(missing, source="--firmware avr")
+    proc = subprocess.run(
+        ["make", "-s", "-C", str(FIRMWARE_DIR), "all", "sim"],
+        check=False,
+        capture_output=True,
+        text=True,
+    )
+    if proc.returncode != 0:
+        raise InputError(
+            f"building the firmware failed (make -C {FIRMWARE_DIR} all sim):\n{proc.stderr[-2000:]}",
+            source="--firmware avr",
+        )
+
+
+def harness_command(
+    *,
+    speedup: float = 1.0,
+    record: str | None = None,
+    stats: str | None = None,
+    time_limit: float | None = None,
+    heater_fail_after: float | None = None,
+    exit_on_hangup: bool = False,
+) -> list[str]:
+    cmd = [str(HARNESS), str(ELF), "--speedup", f"{speedup:g}"]
+    if record:
+        cmd += ["--record", str(record)]
+    if stats:
+        cmd += ["--stats", str(stats)]
+    if time_limit:
+        cmd += ["--time-limit", f"{time_limit:g}"]
+    if heater_fail_after is not None:
+        cmd += ["--heater-fail-after", f"{heater_fail_after:g}"]
+    if exit_on_hangup:
+        cmd.append("--exit-on-hangup")
+    return cmd
+
+
+class Relay:
+    """Our own pty <-> the harness's pty, through a FaultyChannel each way."""
+
+    def __init__(self, harness_pty: str, faults: FaultSpec):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(self.slave)
+        self.dev = os.open(harness_pty, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        tty.setraw(self.dev)
+        self.to_dev = FaultyChannel(faults, seed_offset=1)
+        self.to_host = FaultyChannel(faults, seed_offset=2)
+        self.t0 = time.monotonic()
+
+    def step(self, wait: float = 0.005) -> None:
+        ready, _, _ = select.select([self.master, self.dev], [], [], wait)
+        now = time.monotonic() - self.t0
+        for fd, chan in ((self.master, self.to_dev), (self.dev, self.to_host)):
+            if fd in ready:
+                with contextlib.suppress(BlockingIOError, OSError):
+                    chan.send(os.read(fd, 65536), now)
+        for fd, chan in ((self.dev, self.to_dev), (self.master, self.to_host)):
+            data = chan.receive(now)
+            if data:
+                with contextlib.suppress(BlockingIOError, OSError):
+                    os.write(fd, data)
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave, self.dev):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+def run(args: argparse.Namespace, faults: FaultSpec) -> int:
+    """The CLI entry: build if needed, start the harness, print the pty, serve until SIGTERM."""
+    if faults.reset_after or faults.stall_after:
+        raise InputError(
+            "reset_after and stall_after are not supported with --firmware avr", source="--faults"
+        )
+    if getattr(args, "truth", None):
+        raise InputError("the virtual mocap needs --firmware python", source="--truth")
+    build()
+    proc = subprocess.Popen(
+        harness_command(
+            speedup=args.speedup,
+            record=args.record,
+            heater_fail_after=faults.heater_fail_after,
+            stats=os.environ.get(STATS_ENV),
+        ),
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    path = proc.stdout.readline().strip() if proc.stdout else ""
+    if not path.startswith("/dev/"):
+        proc.wait()
+        raise InputError("the simavr harness did not start", source="--firmware avr")
+    stopping = False
+
+    def stop(signum: int, frame: FrameType | None) -> None:
+        nonlocal stopping
+        stopping = True
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    lossy = faults.lossy or faults.latency_ms or faults.jitter_ms
+    relay = Relay(path, faults) if lossy else None
+    print(relay.path if relay else path, flush=True)
+    print(
+        f"cdprhost sim-device: AVR firmware {ELF.name} in simavr on {relay.path if relay else path} "
+        f"(speedup {args.speedup:g}, faults: {args.faults or 'none'})",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        while not stopping and proc.poll() is None:
+            if relay:
+                relay.step()
+            else:
+                time.sleep(0.05)
+    finally:
+        if relay:
+            relay.close()
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+        code = proc.wait()
+    return 0 if code == 0 else 1

@@ -1,0 +1,722 @@
+/* cdpr-sim: the firmware ELF in simavr behind a pseudo-terminal.
+ *
+ *   cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE]
+ *            [--time-limit SIM_SECONDS] [--exit-on-hangup]
+ *            [--heater-fail-after SIM_SECONDS] [--boot-physical STEPS]
+ *
+ * The first line on stdout is the pty path. Single-threaded: a cycle timer polls
+ * the pty every POLL_US of simulated time, feeds received bytes to UART0 only
+ * while the UART signals XON, buffers the UART's output without limit, paces
+ * simulated time to wall time (times the speed-up), updates the thermal model
+ * and watches for timer compare interrupts that simavr lost (flag, enable and
+ * I set, vector not queued): it queues them again and counts every repair.
+ * The executed-segment record is built from pin edges: step/dir give the
+ * physical steps, MARK_EDGE (a timer compare output) the segment ends and the
+ * starts and stops of motion, hence the motion clock. */
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <pty.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <sim_avr.h>
+#include <sim_elf.h>
+#include <sim_interrupts.h>
+#include <sim_io.h>
+#include <sim_irq.h>
+#include <sim_cycle_timers.h>
+#include <avr_adc.h>
+#include <avr_extint.h>
+#include <avr_ioport.h>
+#include <avr_uart.h>
+
+#include "pins.h"
+#define EDGE_SEG_END 0x01 /* as firmware/src/mailbox.h */
+#define EDGE_MOTION_START 0x02
+#define EDGE_MOTION_STOP 0x04
+#include "thermal.h"
+
+#define F_CPU 16000000ULL
+#define CLOCK_HZ 100000ULL /* the protocol clock: record times are in its units */
+#define UNIT_CYCLES (F_CPU / CLOCK_HZ)
+#define POLL_US 500
+
+static avr_t *avr;
+static volatile sig_atomic_t stop_flag;
+static int master = -1, slave = -1;
+static int exit_on_hangup, host_seen;
+static double speedup = 1.0, time_limit = 0.0;
+static struct timespec wall0;
+
+/* bytes host -> AVR and AVR -> host */
+static uint8_t in_buf[65536];
+static size_t in_len, in_pos;
+static uint8_t *out_buf;
+static size_t out_len, out_cap;
+static int xon = 1;
+static avr_irq_t *uart_in;
+
+/* motion record from pins */
+static int dir_level[4];
+static int64_t phys[4];        /* steps counted from the pins since boot */
+static int64_t offset[4];      /* logical = phys + offset */
+static int64_t boot_physical = -8000;
+static int endstop_level[3] = {-1, -1, -1};
+static avr_irq_t *endstop_irq[3];
+static uint64_t motion_units, motion_since; /* whole motion periods, in clock units */
+static int motion_level;
+static int abort_next;
+static FILE *record;
+static char *record_path, *stats_path;
+static uint32_t mailbox_addr;
+static uint64_t segments_recorded;
+
+/* step timing figures */
+static uint64_t last_rise[4], last_dir_change[4], rise_at[4];
+static uint64_t min_high = UINT64_MAX, min_low_gap = UINT64_MAX, min_dir_setup = UINT64_MAX;
+static uint64_t steps_total;
+
+/* lost interrupt repair */
+static unsigned repairs, unrepaired;
+static int suspect[2];
+
+static uint32_t pc_hist[65536];
+static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count, isr_hist[64];
+static uint16_t isr_sp;
+static uint32_t trace_pc[8192];
+static size_t trace_len;
+
+static struct thermal thermal[2];
+static int heater_level[2];
+static double heater_fail_after = -1.0;
+
+static double sim_seconds(void) { return (double)avr->cycle / (double)F_CPU; }
+
+static void on_signal(int sig) { (void)sig; stop_flag = 1; }
+
+static uint32_t mailbox_u32(unsigned off)
+{
+    uint32_t v = 0;
+    for (int i = 3; i >= 0; i--)
+        v = (v << 8) | avr->data[mailbox_addr + off + i];
+    return v;
+}
+
+static void out_push(uint8_t b)
+{
+    if (out_len == out_cap) {
+        out_cap = out_cap ? 2 * out_cap : 4096;
+        out_buf = realloc(out_buf, out_cap);
+        if (!out_buf) { perror("realloc"); exit(2); }
+    }
+    out_buf[out_len++] = b;
+}
+
+static void uart_out_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    out_push((uint8_t)value);
+}
+
+static void feed_uart(void)
+{
+    while (xon && in_pos < in_len) {
+        uint8_t b = in_buf[in_pos++];
+        avr_raise_irq(uart_in, b);
+    }
+    if (in_pos == in_len)
+        in_pos = in_len = 0;
+}
+
+static void xon_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)value; (void)param;
+    xon = 1;
+    feed_uart();
+}
+
+static void xoff_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)value; (void)param;
+    xon = 0;
+}
+
+/* The switch sits at physical 0 and reads high (pressed) from there on. It is
+ * an external driver of the pin: simavr's "external pull" for that bit, so
+ * that the firmware's pull-up and every later write to the same PORT register
+ * do not override it (simavr re-asserts a pulled-up input high on each write). */
+static void set_endstop(int k)
+{
+    int level = (phys[k] + boot_physical) >= 0;
+    if (level == endstop_level[k])
+        return;
+    endstop_level[k] = level;
+    static uint8_t mask[256], value[256];
+    uint8_t port = (uint8_t)ENDSTOP_PINS[k].port, bit = (uint8_t)(1u << ENDSTOP_PINS[k].bit);
+    mask[port] |= bit;
+    value[port] = (uint8_t)(level ? value[port] | bit : value[port] & ~bit);
+    avr_ioport_external_t ext = {.name = (char)port, .mask = mask[port], .value = value[port]};
+    avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(port), &ext);
+    avr_raise_irq(endstop_irq[k], (uint32_t)level);
+}
+
+/* Step timing against the firmware's schedule: phase k of a tick is due PHASE_BASE +
+ * k * PHASE_CYCLES cycles after the tick's compare match (stepper.c). The error of each
+ * rising edge against the latest due time before it, in cycles (a pulse later than a
+ * whole phase would count against the next phase); its spread is the timing figure. */
+#define TIMER1_COMPA_VECTOR 17
+#define PHASE_BASE 80
+#define PHASE_CYCLES 200
+static uint64_t tick_match_cycle;
+static int64_t step_err_min = INT64_MAX, step_err_max = INT64_MIN;
+
+static void compa_pending_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    if (value)
+        tick_match_cycle = avr->cycle;
+}
+
+static void note_step_timing(uint64_t now)
+{
+    if (!tick_match_cycle)
+        return;
+    int64_t off = (int64_t)(now - tick_match_cycle) - PHASE_BASE;
+    int64_t k = off <= 0 ? 0 : off / PHASE_CYCLES; /* pulses are late, never early */
+    int64_t err = off - k * PHASE_CYCLES;
+    if (err < step_err_min)
+        step_err_min = err;
+    if (err > step_err_max)
+        step_err_max = err;
+}
+
+static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq;
+    int k = (int)(intptr_t)param;
+    uint64_t now = avr->cycle;
+    if (value) {
+        if (last_rise[k] && now - last_rise[k] < min_low_gap)
+            min_low_gap = now - last_rise[k];
+        if (last_dir_change[k] && now - last_dir_change[k] < min_dir_setup)
+            min_dir_setup = now - last_dir_change[k];
+        last_dir_change[k] = 0;
+        last_rise[k] = now;
+        rise_at[k] = now;
+        note_step_timing(now);
+        phys[k] += dir_level[k] ? 1 : -1;
+        steps_total++;
+        if (k < 3)
+            set_endstop(k);
+    } else if (rise_at[k]) {
+        if (now - rise_at[k] < min_high)
+            min_high = now - rise_at[k];
+        rise_at[k] = 0;
+    }
+}
+
+static void dir_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq;
+    int k = (int)(intptr_t)param;
+    if ((int)value != dir_level[k]) {
+        dir_level[k] = (int)value;
+        last_dir_change[k] = avr->cycle;
+    }
+}
+
+/* The motion clock, in clock units: the time between the MARK_EDGE toggles
+ * that start and stop motion. The timer toggles MARK_EDGE exactly at tick
+ * boundaries (one cycle in), so every period is a whole number of units. */
+static uint64_t units_since(uint64_t since)
+{
+    return (avr->cycle - since + UNIT_CYCLES / 2) / UNIT_CYCLES;
+}
+
+static uint64_t motion_now(void)
+{
+    return motion_units + (motion_level ? units_since(motion_since) : 0);
+}
+
+static const char *error_name(int code)
+{
+    static const char *names[] = {"error", "underrun", "thermal_runaway", "endstop_hit",
+        "step_rate", "queue_overflow", "bad_command", "estop", "heater_range",
+        "homing_failed", "overtemp"};
+    return code > 0 && code <= 10 ? names[code] : "error";
+}
+
+static void record_segment(void)
+{
+    if (!record)
+        return;
+    uint64_t ticks = motion_now();
+    uint32_t seq = mailbox_u32(4);
+    fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
+            (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
+            (long long)(phys[2] + offset[2]), (long long)(phys[3] + offset[3]),
+            (double)ticks / (double)CLOCK_HZ);
+    if (abort_next)
+        fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + 24]));
+    fputs("}\n", record);
+    fflush(record); /* streamed: a killed simulator leaves every line written so far */
+    abort_next = 0;
+    segments_recorded++;
+}
+
+/* MARK_EDGE toggled: the firmware left what it means in the mailbox. */
+static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
+    uint8_t edge = avr->data[mailbox_addr + 48];
+    if (getenv("CDPR_SIM_TRACE_MOTION"))
+        fprintf(stderr, "edge %x at %llu\n", edge, (unsigned long long)avr->cycle);
+    if ((edge & EDGE_MOTION_START) && !motion_level) {
+        motion_since = avr->cycle;
+        motion_level = 1;
+    }
+    if (edge & EDGE_SEG_END)
+        record_segment();
+    if ((edge & EDGE_MOTION_STOP) && motion_level) {
+        motion_units += units_since(motion_since);
+        motion_level = 0;
+    }
+}
+
+static void abort_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
+    abort_next = 1;
+}
+
+static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq; (void)param;
+    static uint32_t level;
+    if (value == level || !mailbox_addr)
+        return; /* only toggles of a running firmware */
+    level = value;
+    if (!mailbox_addr)
+        return;
+    for (int k = 0; k < 4; k++)
+        offset[k] = (int64_t)(int32_t)mailbox_u32(8 + 4 * k) - phys[k];
+}
+
+/* The host watchdog seen from outside: the longest time a heater pin was high after the
+ * host's last byte (wall time, the clock of the firmware's link timers). */
+static double last_host_byte_wall = -1.0, heater_on_silence_max;
+static double wall_seconds(void);
+
+static void note_heater_silence(void)
+{
+    if (last_host_byte_wall < 0)
+        return;
+    double gap = wall_seconds() - last_host_byte_wall;
+    if (gap > heater_on_silence_max)
+        heater_on_silence_max = gap;
+}
+
+static void heater_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
+    (void)irq;
+    int h = (int)(intptr_t)param;
+    if (heater_level[h] && !value)
+        note_heater_silence(); /* it was on until now */
+    thermal_switch(&thermal[h], sim_seconds(), (int)value);
+    heater_level[h] = (int)value;
+}
+
+static avr_irq_t *pin_irq(char port, int bit)
+{
+    return avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port), bit);
+}
+
+static void watch(char port, int bit, avr_irq_notify_t cb, intptr_t param)
+{
+    avr_irq_register_notify(pin_irq(port, bit), cb, (void *)param);
+}
+
+static avr_int_vector_t *vector_no(int n)
+{
+    for (int i = 0; i < avr->interrupts.vector_count; i++)
+        if (avr->interrupts.vector[i] && avr->interrupts.vector[i]->vector == n)
+            return avr->interrupts.vector[i];
+    return NULL;
+}
+
+/* Timer1 compare A (vector 17) and B (18): flag, enable and I set, not queued. */
+static void check_lost_interrupts(void)
+{
+    static const struct { int vec; uint8_t bit; } t1[2] = {{17, 0x02}, {18, 0x04}};
+    uint8_t tifr = avr->data[0x36], timsk = avr->data[0x6F];
+    for (int i = 0; i < 2; i++) {
+        avr_int_vector_t *v = vector_no(t1[i].vec);
+        int lost = v && (tifr & t1[i].bit) && (timsk & t1[i].bit) && avr->sreg[S_I] &&
+                   !avr_is_interrupt_pending(avr, v);
+        if (!lost) {
+            suspect[i] = 0;
+            continue;
+        }
+        if (suspect[i])
+            unrepaired++; /* still lost one poll after a repair */
+        avr_raise_interrupt(avr, v);
+        repairs++;
+        suspect[i] = 1;
+    }
+}
+
+static double wall_seconds(void)
+{
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    return (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
+}
+
+static void pace(void)
+{
+    double ahead = sim_seconds() / speedup - wall_seconds();
+    if (ahead > 0.0005) {
+        struct timespec d = {(time_t)ahead, (long)((ahead - floor(ahead)) * 1e9)};
+        nanosleep(&d, NULL);
+    }
+}
+
+static unsigned long polls;
+static void poll_pty(void)
+{
+    polls++;
+    if (in_len < sizeof in_buf) {
+        ssize_t n = read(master, in_buf + in_len, sizeof in_buf - in_len);
+        if (n > 0) {
+            in_len += (size_t)n;
+            if (!host_seen && exit_on_hangup && slave >= 0) {
+                close(slave); /* from now on EIO means the host hung up */
+                slave = -1;
+            }
+            host_seen = 1;
+            last_host_byte_wall = wall_seconds();
+        } else if (n < 0 && errno == EIO && exit_on_hangup && host_seen) {
+            stop_flag = 1;
+        }
+    }
+    feed_uart();
+    if (out_len) {
+        ssize_t n = write(master, out_buf, out_len);
+        if (n > 0) {
+            memmove(out_buf, out_buf + n, out_len - (size_t)n);
+            out_len -= (size_t)n;
+        } else if (n < 0 && errno == EIO) {
+            out_len = 0; /* nobody listens: a UART drops it too */
+        } else if (n < 0 && getenv("CDPR_SIM_DEBUG")) {
+            static int shown;
+            if (shown++ < 3)
+                fprintf(stderr, "cdpr-sim: write: %s (%zu pending)\n", strerror(errno), out_len);
+        }
+    }
+}
+
+/* simavr 1.6 keeps input voltages for ADC0..7 only (adc_values[8]): map the
+ * thermistor channels ADC13 and ADC14 onto the slots of ADC5 and ADC6, whose
+ * pins the RAMPS does not use as analog inputs. Newer simavr stores all 16. */
+static int adc_slot[2] = {13, 14};
+
+static void map_adc_channels(void)
+{
+    for (avr_io_t *io = avr->io_port; io; io = io->next) {
+        if (!io->kind || strcmp(io->kind, "adc"))
+            continue;
+        avr_adc_t *adc = (avr_adc_t *)io;
+        if (sizeof adc->adc_values / sizeof adc->adc_values[0] >= 16)
+            return;
+        avr_adc_mux_t m5 = AVR_ADC_SINGLE(5), m6 = AVR_ADC_SINGLE(6);
+        adc->muxmode[32 + 13 - 8] = m5; /* MUX5:0 = 0b100101: ADC13 */
+        adc->muxmode[32 + 14 - 8] = m6;
+        adc_slot[0] = 5;
+        adc_slot[1] = 6;
+        return;
+    }
+}
+
+static void update_thermal(void)
+{
+    double t = sim_seconds();
+    if (heater_fail_after >= 0 && t >= heater_fail_after)
+        thermal[0].element_ok = 0;
+    for (int h = 0; h < 2; h++) {
+        thermal_advance(&thermal[h], t);
+        avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + adc_slot[h]),
+                      thermal_millivolts(&thermal[h]));
+    }
+}
+
+static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a; (void)param; (void)when;
+    if (!mailbox_addr) {
+        uint32_t addr = avr->data[0x4A] | (uint32_t)avr->data[0x4B] << 8; /* GPIOR1, GPIOR2 */
+        if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R') {
+            mailbox_addr = addr;
+            unsigned s16 = (unsigned)(speedup * 16.0 + 0.5);
+            avr->data[addr + 36] = (uint8_t)s16;
+            avr->data[addr + 37] = (uint8_t)(s16 >> 8);
+        }
+    }
+    poll_pty();
+    if (mailbox_addr) {
+        /* the link's clock for the firmware: wall time in clock units */
+        uint64_t u = (uint64_t)(wall_seconds() * (double)CLOCK_HZ);
+        for (int i = 0; i < 4; i++)
+            avr->data[mailbox_addr + 42 + i] = (uint8_t)(u >> (8 * i));
+        avr->data[mailbox_addr + 46] = 1;
+    }
+    check_lost_interrupts();
+    if (heater_level[0] || heater_level[1])
+        note_heater_silence();
+    update_thermal();
+    pace();
+    if (time_limit > 0 && sim_seconds() >= time_limit)
+        stop_flag = 1;
+}
+
+static void write_stats(void)
+{
+    if (!stats_path)
+        return;
+    FILE *f = fopen(stats_path, "w");
+    if (!f)
+        return;
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    double wall = (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
+    unsigned isr_max = mailbox_addr ? (avr->data[mailbox_addr + 26] | avr->data[mailbox_addr + 27] << 8) : 0;
+    unsigned lost = mailbox_addr ? (avr->data[mailbox_addr + 28] | avr->data[mailbox_addr + 29] << 8) : 0;
+    unsigned loop_us = mailbox_addr ? (avr->data[mailbox_addr + 30] | avr->data[mailbox_addr + 31] << 8) : 0;
+    unsigned stalls = mailbox_addr ? (avr->data[mailbox_addr + 38] | avr->data[mailbox_addr + 39] << 8) : 0;
+    unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
+    unsigned latency = mailbox_addr ? avr->data[mailbox_addr + 47] : 0;
+    fprintf(f,
+            "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
+            "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
+            "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
+            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f}\n",
+            sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
+            (unsigned long long)segments_recorded, (unsigned long long)steps_total,
+            min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
+            min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
+            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, latency,
+            loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
+            step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
+            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0);
+    fclose(f);
+}
+
+static void usage(void)
+{
+    fprintf(stderr, "usage: cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE] "
+                    "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
+                    "[--boot-physical STEPS]\n");
+    exit(2);
+}
+
+int main(int argc, char **argv)
+{
+    const char *elf = NULL;
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i];
+        if (!strcmp(a, "--speedup") && i + 1 < argc) speedup = atof(argv[++i]);
+        else if (!strcmp(a, "--record") && i + 1 < argc) record_path = argv[++i];
+        else if (!strcmp(a, "--stats") && i + 1 < argc) stats_path = argv[++i];
+        else if (!strcmp(a, "--time-limit") && i + 1 < argc) time_limit = atof(argv[++i]);
+        else if (!strcmp(a, "--heater-fail-after") && i + 1 < argc) heater_fail_after = atof(argv[++i]);
+        else if (!strcmp(a, "--boot-physical") && i + 1 < argc) boot_physical = atoll(argv[++i]);
+        else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
+        else if (a[0] == '-') usage();
+        else elf = a;
+    }
+    if (!elf || speedup <= 0)
+        usage();
+
+    elf_firmware_t fw;
+    memset(&fw, 0, sizeof fw);
+    int saved_stdout = dup(1); /* simavr's loader talks on stdout: the pty path must come first */
+    dup2(2, 1);
+    int bad = elf_read_firmware(elf, &fw);
+    fflush(stdout);
+    if (bad) {
+        fprintf(stderr, "cdpr-sim: cannot read %s\n", elf);
+        return 2;
+    }
+    avr = avr_make_mcu_by_name("atmega2560");
+    if (!avr) {
+        fprintf(stderr, "cdpr-sim: simavr has no atmega2560\n");
+        return 2;
+    }
+    avr_init(avr);
+    avr_load_firmware(avr, &fw);
+    avr->frequency = F_CPU;
+    avr->vcc = avr->avcc = avr->aref = 5000;
+    avr->log = getenv("CDPR_SIM_DEBUG") ? LOG_TRACE : LOG_ERROR;
+    fflush(stdout);
+    dup2(saved_stdout, 1);
+    close(saved_stdout);
+
+    uint32_t flags = 0;
+    avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~AVR_UART_FLAG_STDIO;
+    avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_out_cb, NULL);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), xon_cb, NULL);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), xoff_cb, NULL);
+
+    for (int k = 0; k < 4; k++) {
+        watch(STEP_PINS[k].port, STEP_PINS[k].bit, step_cb, k);
+        watch(DIR_PINS[k].port, DIR_PINS[k].bit, dir_cb, k);
+    }
+    avr_irq_t *compa = avr_get_interrupt_irq(avr, TIMER1_COMPA_VECTOR);
+    if (compa)
+        avr_irq_register_notify(compa + AVR_INT_IRQ_PENDING, compa_pending_cb, NULL);
+    for (int k = 0; k < 3; k++)
+        endstop_irq[k] = pin_irq(ENDSTOP_PINS[k].port, ENDSTOP_PINS[k].bit);
+    watch(MARK_EDGE.port, MARK_EDGE.bit, edge_cb, 0);
+    watch(MARK_POS.port, MARK_POS.bit, pos_cb, 0);
+    watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
+    watch(HEATER_PINS[0].port, HEATER_PINS[0].bit, heater_cb, 0);
+    watch(HEATER_PINS[1].port, HEATER_PINS[1].bit, heater_cb, 1);
+    /* The endstop pins are also INT3/INT5 inputs. simavr polls a low level on
+     * an INT pin every cycle (level-triggered mode, the reset default) even
+     * with the interrupt disabled, and starts another poller on every low
+     * write: that alone made the simulation run at a third of real time. */
+    for (uint8_t i = 0; i < 8; i++)
+        avr_extint_set_strict_lvl_trig(avr, i, 0);
+    map_adc_channels();
+    thermal_init(&thermal[0], 30.0, 300.0);
+    thermal_init(&thermal[1], 90.0, 100.0);
+    for (int k = 0; k < 3; k++)
+        set_endstop(k);
+
+    if (record_path) {
+        record = fopen(record_path, "w");
+        if (!record) { perror(record_path); return 2; }
+    }
+    char name[256];
+    if (openpty(&master, &slave, name, NULL, NULL) < 0) { perror("openpty"); return 2; }
+    struct termios tio;
+    tcgetattr(slave, &tio);
+    cfmakeraw(&tio);
+    tcsetattr(slave, TCSANOW, &tio);
+    fcntl(master, F_SETFL, fcntl(master, F_GETFL) | O_NONBLOCK);
+    printf("%s\n", name);
+    fflush(stdout);
+
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigaction(SIGTERM, &sa, NULL);
+    sigaction(SIGINT, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN);
+
+    clock_gettime(CLOCK_MONOTONIC, &wall0);
+    /* The poll runs from the run loop at a cycle deadline rather than from a
+     * simavr cycle timer: under UART traffic simavr 1.6 was seen to drop cycle
+     * timers for good, which would stop the bridge. */
+    const avr_cycle_count_t poll_cycles = F_CPU * POLL_US / 1000000ULL;
+    avr_cycle_count_t next_poll = poll_cycles;
+    int state = cpu_Running;
+    int debug = getenv("CDPR_SIM_DEBUG") != NULL;
+    int profile_isr = getenv("CDPR_SIM_PROFILE_ISR") != NULL;
+    avr_flashaddr_t prev_pc = 0;
+    while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
+        state = avr_run(avr);
+        if (debug) {
+            if (avr->pc == 0 && prev_pc != 0)
+                fprintf(stderr, "cdpr-sim: reset at %.6f s, from pc 0x%x, sp 0x%x\n", sim_seconds(),
+                        prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
+            prev_pc = avr->pc;
+        }
+        if (profile_isr) {
+            /* cycles from the step timer's vector to its own RETI (the one executed
+             * with the stack pointer it entered with; nested interrupts included) */
+            uint16_t sp = (uint16_t)(avr->data[0x5D] | avr->data[0x5E] << 8);
+            if (isr_entry && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
+                pc_hist[avr->pc]++;
+            if (isr_entry && trace_len < sizeof trace_pc / sizeof trace_pc[0])
+                trace_pc[trace_len++] = avr->pc | (uint32_t)(avr->data[0x84] | avr->data[0x85] << 8) << 16 ;
+            if (avr->pc == 0x44 && !isr_entry) {
+                isr_entry = avr->cycle;
+                isr_sp = sp;
+            } else if (isr_entry && sp == isr_sp && avr->flash[avr->pc] == 0x18 &&
+                       avr->flash[avr->pc + 1] == 0x95) {
+                uint64_t c = avr->cycle - isr_entry + 4;
+                if (c > isr_cycles_max)
+                    isr_cycles_max = c;
+                isr_cycles_sum += c;
+                isr_count++;
+                isr_hist[c / 100 < 63 ? c / 100 : 63]++;
+                isr_entry = 0;
+                static long trace_lo = -1;
+                if (trace_lo < 0)
+                    trace_lo = getenv("CDPR_SIM_TRACE_AT") ? atol(getenv("CDPR_SIM_TRACE_AT")) : 0;
+                int take = trace_lo ? (c >= (uint64_t)trace_lo && c < (uint64_t)trace_lo + 100)
+                                    : (c > 1600 && c >= isr_cycles_max);
+                if (take) {
+                    if (trace_lo)
+                        trace_lo = 1; /* the first one only */
+                    /* the first over-long tick: its instruction trace, for the profile */
+                    FILE *f = fopen("/tmp/cdpr-long-isr.txt", "w");
+                    for (size_t i = 0; f && i < trace_len; i++)
+                        fprintf(f, "%x %u\n", trace_pc[i] & 0xFFFF, trace_pc[i] >> 16);
+                    if (f)
+                        fclose(f);
+
+                }
+                trace_len = 0;
+            }
+        }
+        if (avr->cycle >= next_poll) {
+            poll_timer(avr, avr->cycle, NULL);
+            next_poll += poll_cycles;
+        }
+    }
+    if (record)
+        fclose(record);
+    write_stats();
+    if (getenv("CDPR_SIM_PROFILE_ISR")) {
+        FILE *f = fopen("/tmp/cdpr-pc-hist.txt", "w");
+        for (unsigned i = 0; f && i < 65536; i++)
+            if (pc_hist[i])
+                fprintf(f, "%x %u\n", i, pc_hist[i]);
+        if (f)
+            fclose(f);
+        for (int i = 0; i < 64; i++)
+            if (isr_hist[i])
+                fprintf(stderr, "isr %4d-%4d cycles: %llu\n", i * 100, i * 100 + 99,
+                        (unsigned long long)isr_hist[i]);
+    }
+    if (getenv("CDPR_SIM_DEBUG"))
+        fprintf(stderr, "cdpr-sim: pc 0x%x I=%d TIMSK1=%02x TIFR1=%02x UCSR0B=%02x out_len=%zu in_len=%zu xon=%d polls=%lu\n", avr->pc, avr->sreg[S_I], avr->data[0x6F], avr->data[0x36], avr->data[0xC1], out_len, in_len - in_pos, xon, polls);
+    fprintf(stderr, "cdpr-sim: %.3f s simulated, %u lost interrupts repaired, %u unrepaired%s\n",
+            sim_seconds(), repairs, unrepaired, state == cpu_Crashed ? ", CPU CRASHED" : "");
+    return state == cpu_Crashed ? 3 : 0;
+}

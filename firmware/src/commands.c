@@ -1,0 +1,364 @@
+/* Host commands (PROTOCOL.md sections 4 and 8): decode a DATA or URGENT payload
+ * with the field descriptors generated from the Python message table, check
+ * every value, act. A DATA payload is parsed twice: first to check every field
+ * and count queue items (a payload that does not decode is one BAD_COMMAND and
+ * nothing of it runs; one with more queue items than free slots is left
+ * unacknowledged), then to execute. */
+#include <avr/interrupt.h>
+#include <avr/pgmspace.h>
+#include <string.h>
+
+#include "heater.h"
+#include "link.h"
+#include "machine.h"
+#include "mailbox.h"
+#include "motion.h"
+#include "protocol_gen.h"
+#include "queue.h"
+#include "reports.h"
+#include "sched.h"
+#include "segment.h"
+#include "session.h"
+#include "stepper.h"
+
+struct field_desc {
+    uint8_t type, count;
+    int8_t mask;
+    int32_t lo;
+    uint32_t hi;
+};
+
+struct message_desc {
+    uint8_t op, queued, urgent, nfields;
+    const struct field_desc *fields;
+};
+
+#define MAX_VALUES 4
+#define X(name)                                                                              \
+    static const struct field_desc fields_##name[NFIELDS_##name ? NFIELDS_##name : 1] PROGMEM = \
+        {FIELDS_##name};                                                                      \
+    _Static_assert(NVALUES_##name <= MAX_VALUES, "values of " #name);
+PROTO_HOST_MESSAGES(X)
+#undef X
+
+static const struct message_desc messages[] PROGMEM = {
+#define X(name) {OP_##name, QUEUED_##name, URGENT_##name, NFIELDS_##name, fields_##name},
+    PROTO_HOST_MESSAGES(X)
+#undef X
+};
+#define N_MESSAGES (sizeof messages / sizeof messages[0])
+
+static struct seg_ctx ctx;
+
+void commands_reset_session(void)
+{
+    memset(&ctx, 0, sizeof ctx);
+}
+
+static uint8_t find(uint8_t op, struct message_desc *out)
+{
+    for (uint8_t i = 0; i < N_MESSAGES; i++) {
+        memcpy_P(out, &messages[i], sizeof *out);
+        if (out->op == op)
+            return 1;
+    }
+    return 0;
+}
+
+/* The fields of one message into v[] (signed fields as int32 bits); every value
+ * checked against its type and fixed range. */
+static void parse_fields(struct reader *r, const struct message_desc *m, uint32_t *v)
+{
+    uint8_t n = 0;
+    for (uint8_t i = 0; i < m->nfields && !r->err; i++) {
+        struct field_desc f;
+        memcpy_P(&f, &m->fields[i], sizeof f);
+        uint8_t mask = f.mask >= 0 ? (uint8_t)v[f.mask] : 0xFF;
+        for (uint8_t k = 0; k < f.count && n < MAX_VALUES; k++, n++) {
+            v[n] = 0;
+            if (!(mask >> k & 1))
+                continue;
+            uint32_t raw = rd_field(r, f.type);
+            if (f.type == FT_I16 || f.type == FT_I32) {
+                int32_t x = unzigzag(raw);
+                if (f.type == FT_I16 && (x < -32768L || x > 32767L))
+                    r->err = 1;
+                if (x < f.lo || x > (int32_t)f.hi)
+                    r->err = 1;
+                v[n] = (uint32_t)x;
+            } else {
+                if (raw < (uint32_t)f.lo || raw > f.hi) /* lo >= 0 for unsigned fields */
+                    r->err = 1;
+                v[n] = raw;
+            }
+        }
+    }
+}
+
+/* Check a whole DATA payload; counts its queue items. Returns 0 with the
+ * offending opcode and offset when it does not decode. */
+static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx *work,
+                             uint8_t *queued, uint8_t *bad_op, uint8_t *bad_at, uint8_t *wrong)
+{
+    struct reader r = {payload, 0, len, 0};
+    struct segment s;
+    struct message_desc m;
+    uint32_t v[MAX_VALUES];
+    *queued = 0;
+    *wrong = 0;
+    while (r.pos < len) {
+        uint8_t at = r.pos, op = payload[at];
+        if (op >= SEG_BASE) {
+            segment_decode(&r, work, &s);
+            (*queued)++;
+        } else if (find(op, &m)) {
+            r.pos++;
+            parse_fields(&r, &m, v);
+            *queued += m.queued;
+            if (m.urgent)
+                *wrong = op; /* an URGENT-only message in a DATA frame */
+        } else {
+            r.err = 1;
+        }
+        if (r.err) {
+            *bad_op = op;
+            *bad_at = at;
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static struct item *new_item(uint8_t kind)
+{
+    struct item *it = queue_slot(queue_head);
+    it->kind = kind;
+    it->flags = 0;
+    it->ticks = 0;
+    return it;
+}
+
+static void push_item(void)
+{
+    machine_queued(queue_slot(queue_head));
+    cli();
+    queue_head++;
+    sei();
+}
+
+/* a queue item has been numbered; discard it while faulted */
+static uint8_t discard_if_fault(void)
+{
+    if (!mc.fault)
+        return 0;
+    cli();
+    st.items_done = mc.items_received;
+    sei();
+    return 1;
+}
+
+static void bad_value(uint8_t op, int32_t value, uint32_t segment)
+{
+    machine_fail(ERR_BAD_VALUE, mc.items_received, segment, op, value);
+}
+
+static void enqueue_segment(const struct segment *s)
+{
+    mc.items_received++;
+    mc.segments_received++;
+    sim_mailbox.segments_parsed++;
+    if (discard_if_fault())
+        return;
+    uint32_t rate;
+    int8_t axis = motion_rate_check(s, &rate);
+    if (axis >= 0) {
+        machine_fail(ERR_STEP_RATE, mc.items_received, mc.segments_received, (uint8_t)axis,
+                     (int32_t)rate);
+        return;
+    }
+    int32_t tail[4];
+    for (uint8_t k = 0; k < 4; k++) {
+        int64_t p = (int64_t)mc.tail_pos[k] + s->deltas[k];
+        if (p > SEG_MAX_DELTA || p < -SEG_MAX_DELTA) {
+            bad_value(SEG_BASE, p > 0 ? SEG_MAX_DELTA : -SEG_MAX_DELTA, mc.segments_received);
+            return;
+        }
+        tail[k] = (int32_t)p;
+    }
+    memcpy(mc.tail_pos, tail, sizeof tail);
+    motion_store(new_item(IT_SEG), s);
+    push_item();
+}
+
+static void enqueue_command(uint8_t op, const uint32_t *v)
+{
+    mc.items_received++;
+    struct item *it;
+    /* ranges that depend on this device (PROTOCOL.md section 8) */
+    switch (op) {
+    case OP_DWELL:
+        if (v[0] > (uint32_t)DWELL_MAX_S * CLOCK_HZ) {
+            bad_value(op, v[0] > 0x7FFFFFFFUL ? 0x7FFFFFFFL : (int32_t)v[0], 0);
+            return;
+        }
+        break;
+    case OP_SET_HEATER:
+    case OP_WAIT_HEATER:
+        if (v[0] > 1) {
+            bad_value(op, (int32_t)v[0], 0);
+            return;
+        }
+        break;
+    case OP_SET_FAN:
+        if (v[0] >= FAN_COUNT) {
+            bad_value(op, (int32_t)v[0], 0);
+            return;
+        }
+        break;
+    }
+    if (discard_if_fault())
+        return;
+    switch (op) {
+    case OP_SET_POSITION:
+        it = new_item(IT_SETPOS);
+        for (uint8_t k = 0; k < 4; k++)
+            mc.tail_pos[k] = it->u.pos[k] = (int32_t)v[k];
+        break;
+    case OP_ENABLE:
+        it = new_item(IT_ENABLE);
+        it->u.cmd.mask = (uint8_t)v[0];
+        break;
+    case OP_HOME:
+        it = new_item(IT_HOME);
+        it->flags = (uint8_t)(v[0] & 7);
+        for (uint8_t k = 0; k < 3; k++) {
+            it->u.pos[k] = (int32_t)v[1 + k];
+            if (v[0] >> k & 1)
+                mc.tail_pos[k] = (int32_t)v[1 + k];
+        }
+        break;
+    case OP_DWELL:
+        it = new_item(IT_DWELL);
+        it->ticks = v[0];
+        break;
+    case OP_SET_HEATER:
+        if (v[1] > heater_max_dc((uint8_t)v[0])) {
+            machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
+            return;
+        }
+        it = new_item(IT_HEATER);
+        it->u.cmd.id = (uint8_t)v[0];
+        it->u.cmd.value = (uint16_t)v[1];
+        break;
+    case OP_SET_FAN:
+        it = new_item(IT_FAN);
+        it->u.cmd.id = (uint8_t)v[0];
+        it->u.cmd.value = (uint16_t)v[1];
+        break;
+    default: /* OP_WAIT_HEATER */
+        it = new_item(IT_WAIT);
+        it->u.cmd.id = (uint8_t)v[0];
+        it->u.cmd.value = (uint16_t)v[1];
+        break;
+    }
+    (void)it;
+    push_item();
+}
+
+static void immediate(uint8_t op, const uint32_t *v)
+{
+    switch (op) {
+    case OP_GET_STATUS:
+        report_status();
+        break;
+    case OP_IDENTIFY:
+        report_ident(0, 0);
+        break;
+    case OP_CLEAR_FAULT:
+        if (machine_clear_fault())
+            report_event(EVT_FAULT_CLEARED, st.items_done, 0, 0);
+        break;
+    case OP_FLUSH:
+        mc.flush_item = mc.items_received;
+        break;
+    case OP_CONFIGURE:
+        mc.watchdog_ms = (uint16_t)v[0];
+        mc.start_ticks = v[1];
+        mc.flow_ticks = v[2];
+        break;
+    }
+}
+
+uint8_t proto_accept(const uint8_t *payload, uint8_t len)
+{
+    if (!mc.synced) {
+        session_boot_on_data();
+        return 0;
+    }
+    struct seg_ctx work = ctx;
+    uint8_t queued, bad_op = 0, bad_at = 0, wrong;
+    if (!check_payload(payload, len, &work, &queued, &bad_op, &bad_at, &wrong)) {
+        machine_fail(ERR_BAD_COMMAND, mc.items_received, mc.segments_received, bad_op, bad_at);
+        return 1;
+    }
+    if (wrong) {
+        machine_fail(ERR_BAD_COMMAND, mc.items_received, 0, wrong, 0);
+        return 1;
+    }
+    if (queued > machine_free() && !mc.fault) {
+        mc.overflow_rejects++;
+        return 0;
+    }
+    struct reader r = {payload, 0, len, 0};
+    struct segment s;
+    struct message_desc m;
+    uint32_t v[MAX_VALUES];
+    while (r.pos < len) {
+        uint8_t op = payload[r.pos];
+        if (op >= SEG_BASE) {
+            segment_decode(&r, &ctx, &s);
+            enqueue_segment(&s);
+            motion_prepare_ahead(); /* keep the interrupt's plans coming during long frames */
+            continue;
+        }
+        find(op, &m);
+        r.pos++;
+        parse_fields(&r, &m, v);
+        if (m.queued)
+            enqueue_command(op, v);
+        else
+            immediate(op, v);
+    }
+    ctx = work;
+    return 1;
+}
+
+void proto_urgent(const uint8_t *payload, uint8_t len)
+{
+    struct reader r = {payload, 0, len, 0};
+    struct message_desc m;
+    uint32_t v[MAX_VALUES];
+    uint8_t op = rd_u8(&r);
+    if (r.err || !find(op, &m) || !m.urgent)
+        return;
+    parse_fields(&r, &m, v);
+    if (r.err || r.pos != len)
+        return; /* exactly one well-formed message */
+    if (op == OP_HELLO) {
+        uint16_t nonce = (uint16_t)v[0];
+        if (v[1] == PROTO_MAJOR && (!mc.synced || nonce != mc.nonce)) {
+            link_reset_session();
+            commands_reset_session();
+            session_opened();
+            mc.synced = 1;
+            mc.nonce = nonce;
+        }
+        report_ident(nonce, 1);
+    } else { /* OP_EMERGENCY_STOP */
+        if (!mc.estopped) {
+            machine_stop(ERR_ESTOP, v[0] & ESTOP_KEEP_HEATERS, v[0] & ESTOP_KEEP_MOTORS, 0);
+            mc.estopped = 1;
+        }
+        report_estop_ack();
+    }
+}

@@ -1,0 +1,66 @@
+/* Firmware parameters: what the device announces and how it behaves. */
+#ifndef CONFIG_H
+#define CONFIG_H
+
+#include <stdint.h>
+
+#define FIRMWARE_NAME "cdpr-avr"
+#define FIRMWARE_VERSION "0.1.0"
+
+#define BAUD 250000UL
+
+/* Time. Segment and dwell durations, the device clock and every timer are in
+ * units of the protocol clock: CLOCK_HZ (10 us), as in the Python device model,
+ * so the host plans the same segments for both. The step interrupt runs on its
+ * own grid of TICK_UNITS units (100 us, 10 kHz) and makes the last tick of each
+ * timed item as long as it needs to be, so
+ * every segment and dwell lasts exactly its duration. Homing ticks are
+ * HOME_TICK_UNITS long: one homing step each, 4000 steps/s. */
+#define CLOCK_HZ 100000UL
+#define UNIT_CYCLES (F_CPU / CLOCK_HZ)                  /* 160 */
+#define TICK_UNITS 10
+#define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 1600 */
+#define HOME_TICK_UNITS 25
+/* Step pulses within a tick at k * PHASE_CYCLES (12.5 us apart): a 100 us tick
+ * holds 8 of them per axis, so 80000 steps/s could be issued; the firmware
+ * advertises 60000, which leaves the rounding of the DDA room. */
+#define PHASE_CYCLES 200
+#define MAX_STEP_RATE 60000UL /* steps/s, any one axis */
+
+/* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */
+#define QUEUE_SIZE 128
+/* Segments prepared ahead of the step interrupt (DDA constants, 72 bytes each). */
+#define PLAN_SLOTS 8
+
+/* Unacknowledged host payload bytes the device can hold (IDENT rx_window): the
+ * host never has more in flight, so the UART's receive ring (uart.h) holds them
+ * all even while the main loop is busy with a long frame. */
+#define RX_WINDOW 192
+
+/* Fans: the part-cooling fan on D9. */
+#define FAN_COUNT 1
+
+/* Device-to-host report slots (window + backlog), bytes per report. */
+#define REPORT_SLOTS 8
+#define REPORT_MAX 96
+
+
+/* Host watchdog: no valid frame for this long while a session is open and the
+ * machine is busy (moving, heating) stops motion and switches the heaters off. */
+#define HOST_WATCHDOG_MS 2000
+
+/* Heaters */
+#define HEATER_PERIOD_MS 100
+#define HOTEND_MAX_DC 2850  /* 285.0 C: targets above 10x this are HEATER_RANGE */
+#define BED_MAX_DC 1200
+#define HOTEND_CUTOFF_DC 3000 /* OVERTEMP above this, whatever the target */
+#define BED_CUTOFF_DC 1300
+#define MINTEMP_DC 50         /* below 5.0 C with a target: sensor open */
+#define HOTEND_WATCH_MS 20000UL
+#define BED_WATCH_MS 60000UL
+#define HOTEND_HYSTERESIS_DC 150
+#define BED_HYSTERESIS_DC 100
+#define WATCH_MIN_RISE_DC 20
+#define REACHED_BAND_DC 10
+
+#endif

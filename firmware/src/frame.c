@@ -1,0 +1,115 @@
+/* Deframer: the same rules as firmware_protocol/framing.py. A candidate starts
+ * at each SYNC; a bad header, an oversize LEN, an unknown KIND, a bad CRC or a
+ * missing END drops only that SYNC byte and the scan resumes at the next byte.
+ * A candidate still waiting for bytes is abandoned as soon as a complete valid
+ * frame sits behind it. */
+#include <string.h>
+
+#include "crc.h"
+#include "frame.h"
+#include "uart.h"
+
+struct deframer_stats deframer_stats;
+static uint8_t buf[DEFRAME_BUF];
+static uint16_t fill;
+
+void deframer_reset(void)
+{
+    fill = 0;
+}
+
+uint8_t deframer_push(uint8_t byte)
+{
+    if (fill >= DEFRAME_BUF)
+        return 0;
+    buf[fill++] = byte;
+    return 1;
+}
+
+static uint8_t header_ok(const uint8_t *p)
+{
+    return crc8(p + 1, 4) == p[5] && p[1] <= FRAME_MAX_PAYLOAD && p[2] >= KIND_DATA &&
+           p[2] <= KIND_URGENT;
+}
+
+static uint8_t body_ok(const uint8_t *p)
+{
+    uint8_t len = p[1];
+    uint16_t end = FRAME_HEADER_LEN + (uint16_t)len;
+    if (p[end + FRAME_CRC_LEN] != FRAME_END)
+        return 0; /* cheaper than the CRC: a shortened frame fails here */
+    uint32_t crc = crc32(p + 1, end - 1);
+    return p[end] == (uint8_t)(crc >> 24) && p[end + 1] == (uint8_t)(crc >> 16) &&
+           p[end + 2] == (uint8_t)(crc >> 8) && p[end + 3] == (uint8_t)crc;
+}
+
+/* First complete valid frame at or after start, or -1. */
+static int16_t complete_frame_after(uint16_t start)
+{
+    for (uint16_t i = start; i + FRAME_OVERHEAD <= fill; i++) {
+        if (buf[i] != FRAME_SYNC)
+            continue;
+        uint8_t len = buf[i + 1];
+        if (len > FRAME_MAX_PAYLOAD || i + FRAME_OVERHEAD + len > fill)
+            continue;
+        if (crc8(buf + i + 1, 4) == buf[i + 5] && body_ok(buf + i))
+            return (int16_t)i;
+    }
+    return -1;
+}
+
+void deframer_run(void)
+{
+    uint16_t pos = 0;
+    for (;;) {
+        while (pos < fill && buf[pos] != FRAME_SYNC)
+            pos++;
+        if (fill - pos < FRAME_HEADER_LEN)
+            break;
+        uint8_t *p = buf + pos;
+        if (!header_ok(p)) {
+            deframer_stats.bad_headers++;
+            pos++;
+            continue;
+        }
+        uint16_t total = FRAME_OVERHEAD + p[1];
+        if (fill - pos < total) {
+            int16_t later = complete_frame_after(pos + 1);
+            if (later < 0)
+                break;
+            deframer_stats.bad_headers++;
+            pos = (uint16_t)later;
+            continue;
+        }
+        if (!body_ok(p)) {
+            deframer_stats.bad_frames++;
+            frame_rejected(p[2], p[3]);
+            pos++;
+            continue;
+        }
+        deframer_stats.frames++;
+        frame_received(p[2], p[3], p[4], p + 6, p[1]);
+        pos += total;
+    }
+    if (pos) {
+        memmove(buf, buf + pos, fill - pos);
+        fill -= pos;
+    }
+}
+
+void frame_send(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
+{
+    uint8_t head[FRAME_HEADER_LEN] = {FRAME_SYNC, len, kind, seq, ack, 0};
+    head[5] = crc8(head + 1, 4);
+    uint32_t crc = CRC32_INIT;
+    for (uint8_t i = 1; i < FRAME_HEADER_LEN; i++)
+        crc = crc32_update(crc, head[i]);
+    for (uint8_t i = 0; i < len; i++)
+        crc = crc32_update(crc, payload[i]);
+    crc ^= 0xFFFFFFFFUL;
+    uint8_t tail[FRAME_CRC_LEN + 1] = {(uint8_t)(crc >> 24), (uint8_t)(crc >> 16),
+                                       (uint8_t)(crc >> 8), (uint8_t)crc, FRAME_END};
+    uart_write(head, FRAME_HEADER_LEN);
+    uart_write(payload, len);
+    uart_write(tail, sizeof tail);
+}

@@ -1,0 +1,30 @@
+/* Frames on the wire: a resynchronising deframer and the frame writer. */
+#ifndef FRAME_H
+#define FRAME_H
+#include <stdint.h>
+
+#include "protocol_gen.h"
+
+#define FRAME_MAX (FRAME_OVERHEAD + FRAME_MAX_PAYLOAD)
+#define DEFRAME_BUF (2 * FRAME_MAX + 6)
+
+struct deframer_stats {
+    uint32_t frames, bad_headers, bad_frames;
+};
+extern struct deframer_stats deframer_stats;
+
+/* Called for each valid frame, and for each frame with a good header and a bad body. */
+void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len);
+void frame_rejected(uint8_t kind, uint8_t seq);
+
+void deframer_reset(void);
+/* Append a received byte; returns 0 when the buffer is full (call deframer_run first). */
+uint8_t deframer_push(uint8_t byte);
+void deframer_run(void);
+
+/* Bytes a frame of this payload takes on the wire. */
+#define FRAME_SIZE(len) ((uint16_t)(len) + FRAME_OVERHEAD)
+/* Write one frame to the UART (caller checked uart_tx_free() >= FRAME_SIZE(len)). */
+void frame_send(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len);
+
+#endif

@@ -1,0 +1,242 @@
+#include <string.h>
+
+#include "frame.h"
+#include "link.h"
+#include "reports.h"
+#include "sched.h"
+#include "uart.h"
+
+#define T_MS(ms) ((uint32_t)(ms) * (CLOCK_HZ / 1000))
+#define RTO_INITIAL T_MS(50)
+#define RTO_FLOOR T_MS(20)
+#define RTO_CEILING T_MS(250)
+#define NAK_HOLDOFF T_MS(30)
+
+struct link_counters link_counters;
+
+struct slot {
+    uint8_t len;
+    uint8_t retransmitted;
+    uint32_t sent_at;
+    uint8_t data[REPORT_MAX];
+};
+static struct slot slots[REPORT_SLOTS];
+static uint8_t first;       /* index of the oldest slot (outstanding first, then backlog) */
+static uint8_t n_out, n_back;
+static uint8_t base_seq, next_seq;
+static uint8_t expected;
+static uint8_t ack_due, nak_due, resend;
+static uint8_t last_nak_expected;
+static uint32_t last_nak_at;
+static uint8_t went_back_seq;
+static uint32_t went_back_at;
+static uint8_t have_srtt;
+static uint32_t srtt, rttvar, rto_base;
+static uint8_t backoff;
+
+static uint8_t urgent_len;
+static uint8_t urgent_buf[REPORT_MAX];
+
+static uint32_t rto(void)
+{
+    uint32_t b = rto_base < RTO_FLOOR ? RTO_FLOOR : rto_base;
+    b *= backoff;
+    return b > RTO_CEILING ? RTO_CEILING : b;
+}
+
+void link_reset_session(void)
+{
+    first = n_out = n_back = 0;
+    base_seq = next_seq = 0;
+    expected = 0;
+    ack_due = nak_due = resend = 0;
+    last_nak_expected = 0xFF;
+    last_nak_at = 0;
+    went_back_seq = 0;
+    went_back_at = 0;
+    have_srtt = 0;
+    srtt = rttvar = 0;
+    rto_base = RTO_INITIAL;
+    backoff = 1;
+    went_back_at = link_now - T_MS(10000);
+    last_nak_at = went_back_at;
+}
+
+uint8_t link_expected(void)
+{
+    return expected;
+}
+
+uint8_t link_backlog(void)
+{
+    return n_out + n_back;
+}
+
+uint8_t link_report_room(void)
+{
+    return (uint8_t)(REPORT_SLOTS - n_out - n_back);
+}
+
+uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important)
+{
+    if (len > REPORT_MAX)
+        return 0;
+    if (n_out + n_back >= REPORT_SLOTS) {
+        if (!important)
+            return 0;
+        /* an error report replaces the newest unsent report */
+        if (!n_back)
+            return 0;
+        n_back--;
+    }
+    struct slot *s = &slots[(first + n_out + n_back) % REPORT_SLOTS];
+    memcpy(s->data, payload, len);
+    s->len = len;
+    s->retransmitted = 0;
+    n_back++;
+    return 1;
+}
+
+void link_send_urgent(const uint8_t *payload, uint8_t len)
+{
+    if (len <= sizeof urgent_buf) {
+        memcpy(urgent_buf, payload, len);
+        urgent_len = len;
+    }
+}
+
+void link_request_ack(void)
+{
+    ack_due = 1;
+}
+
+static void rto_sample(uint32_t rtt)
+{
+    if (!have_srtt) {
+        srtt = rtt;
+        rttvar = rtt / 2;
+        have_srtt = 1;
+    } else {
+        uint32_t diff = srtt > rtt ? srtt - rtt : rtt - srtt;
+        rttvar = (3 * rttvar + diff) / 4;
+        srtt = (7 * srtt + rtt) / 8;
+    }
+    uint32_t v4 = 4 * rttvar;
+    rto_base = srtt + (v4 > T_MS(2) ? v4 : T_MS(2));
+    backoff = 1;
+}
+
+static void on_ack(uint8_t ack, uint32_t now)
+{
+    uint8_t n = (uint8_t)(ack - base_seq);
+    if (n == 0 || n > n_out)
+        return;
+    struct slot *last = &slots[(first + n - 1) % REPORT_SLOTS];
+    if (!last->retransmitted)
+        rto_sample(now - last->sent_at);
+    else
+        backoff = 1;
+    first = (uint8_t)((first + n) % REPORT_SLOTS);
+    n_out -= n;
+    base_seq += n;
+}
+
+static void want_nak(uint32_t now)
+{
+    if (last_nak_expected != expected || now - last_nak_at >= NAK_HOLDOFF)
+        nak_due = 1;
+}
+
+void frame_rejected(uint8_t kind, uint8_t seq)
+{
+    if (kind == KIND_DATA && seq == expected)
+        want_nak(link_now);
+}
+
+void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
+{
+    uint32_t now = link_now;
+    proto_frame_seen();
+    if (kind == KIND_URGENT) {
+        proto_urgent(payload, len);
+        return;
+    }
+    on_ack(ack, now);
+    if (kind == KIND_NAK && n_out && base_seq == ack) {
+        uint32_t holdoff = (have_srtt ? srtt : rto()) / 2;
+        if (!(went_back_seq == ack && now - went_back_at < holdoff)) {
+            resend = 1;
+            went_back_seq = base_seq;
+            went_back_at = now;
+        }
+    }
+    if (kind != KIND_DATA)
+        return;
+    uint8_t d = (uint8_t)(seq - expected);
+    if (d == 0) {
+        if (proto_accept(payload, len))
+            expected++;
+        else
+            link_counters.rejected++;
+        ack_due = 1;
+    } else if (d > MAX_WINDOW) {
+        link_counters.duplicates++;
+        ack_due = 1;
+    } else {
+        want_nak(now);
+    }
+}
+
+void link_poll(uint32_t now)
+{
+    uint8_t flow[FLOW_MAX];
+    if (urgent_len) {
+        if (uart_tx_free() < FRAME_SIZE(urgent_len))
+            return;
+        frame_send(KIND_URGENT, 0, expected, urgent_buf, urgent_len);
+        urgent_len = 0;
+    }
+    if (n_out && !resend && now - slots[first].sent_at >= rto()) {
+        if (backoff < 64)
+            backoff *= 2;
+        resend = 1;
+        went_back_seq = base_seq;
+        went_back_at = now;
+    }
+    if (resend) {
+        for (uint8_t i = 0; i < n_out; i++) {
+            struct slot *s = &slots[(first + i) % REPORT_SLOTS];
+            if (uart_tx_free() < FRAME_SIZE(s->len))
+                return; /* the rest goes next time round */
+            frame_send(KIND_DATA, (uint8_t)(base_seq + i), expected, s->data, s->len);
+            s->sent_at = now;
+            s->retransmitted = 1;
+            link_counters.retransmits++;
+        }
+        resend = 0;
+    }
+    while (n_back && n_out < DEV_WINDOW) {
+        struct slot *s = &slots[(first + n_out) % REPORT_SLOTS];
+        if (uart_tx_free() < FRAME_SIZE(s->len))
+            return;
+        frame_send(KIND_DATA, next_seq, expected, s->data, s->len);
+        s->sent_at = now;
+        next_seq++;
+        n_out++;
+        n_back--;
+    }
+    if (nak_due || ack_due) {
+        if (uart_tx_free() < FRAME_SIZE(sizeof flow))
+            return;
+        uint8_t n = proto_flow(flow);
+        if (nak_due) {
+            frame_send(KIND_NAK, 0, expected, flow, n);
+            link_counters.naks_sent++;
+            last_nak_expected = expected;
+            last_nak_at = now;
+        } else {
+            frame_send(KIND_ACK, 0, expected, flow, n);
+        }
+        nak_due = ack_due = 0;
+    }
+}

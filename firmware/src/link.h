@@ -1,0 +1,30 @@
+/* Reliable ordered delivery, device side: in-order receiver with NAKs, a
+ * go-back-N sender for the device's reports with an RFC 6298 timeout. The same
+ * rules as firmware_protocol/reliability.py and endpoint.py. Times are ticks. */
+#ifndef LINK_H
+#define LINK_H
+#include <stdint.h>
+
+#include "config.h"
+
+struct link_counters {
+    uint16_t retransmits, naks_sent, duplicates, rejected;
+};
+extern struct link_counters link_counters;
+
+void link_reset_session(void);
+void link_poll(uint32_t now);                 /* send what is due */
+uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important); /* 0: dropped */
+uint8_t link_report_room(void);               /* free report slots */
+void link_send_urgent(const uint8_t *payload, uint8_t len);
+void link_request_ack(void);
+uint8_t link_expected(void);
+uint8_t link_backlog(void);
+
+/* provided by the protocol layer */
+uint8_t proto_accept(const uint8_t *payload, uint8_t len); /* 0: leave unacknowledged */
+void proto_urgent(const uint8_t *payload, uint8_t len);
+uint8_t proto_flow(uint8_t *out); /* FLOW payload for ACK/NAK frames, returns length */
+void proto_frame_seen(void);      /* any valid frame: feeds the host watchdog */
+
+#endif

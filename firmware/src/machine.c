@@ -1,0 +1,136 @@
+#include <avr/interrupt.h>
+
+#include "heater.h"
+#include "machine.h"
+#include "mailbox.h"
+#include "protocol_gen.h"
+#include "queue.h"
+#include "reports.h"
+#include "sched.h"
+#include "stepper.h"
+
+struct machine mc;
+
+uint8_t machine_free(void)
+{
+    return queue_free();
+}
+
+uint8_t machine_flags(void)
+{
+    uint8_t f = 0;
+    if (stepper_moving())
+        f |= FLAG_MOVING;
+    if (mc.fault)
+        f |= FLAG_FAULT;
+    if (mc.estopped)
+        f |= FLAG_ESTOP;
+    if ((st.homed_mask & 7) == 7)
+        f |= FLAG_HOMED;
+    if (st.enabled_mask)
+        f |= FLAG_ENABLED;
+    if (heaters[0].target_dc || heaters[1].target_dc)
+        f |= FLAG_HEATING;
+    if (st.current == IT_WAIT)
+        f |= FLAG_WAITING;
+    return f;
+}
+
+static uint8_t ends_block(const struct item *it)
+{
+    return it->kind != IT_SEG || (it->flags & SEGF_AT_REST);
+}
+
+static uint32_t duration(const struct item *it)
+{
+    return (it->kind == IT_SEG || it->kind == IT_DWELL) ? it->ticks : 0;
+}
+
+void machine_account(void)
+{
+    uint8_t tail = queue_tail;
+    while (mc.accounted != tail) {
+        const struct item *it = queue_slot(mc.accounted);
+        mc.queued_units -= duration(it);
+        mc.block_ends -= ends_block(it);
+        mc.accounted++;
+    }
+}
+
+void machine_queued(const struct item *it)
+{
+    machine_account(); /* before the slot can have been reused */
+    mc.queued_units += duration(it);
+    mc.block_ends += ends_block(it);
+}
+
+uint32_t machine_buffered_ticks(void)
+{
+    machine_account();
+    uint32_t executed = 0;
+    cli();
+    uint8_t timed = st.current == IT_SEG || st.current == IT_DWELL;
+    uint32_t left = stepper_ticks_left();
+    sei();
+    if (timed) {
+        /* the executing item (at tail) is still counted whole */
+        uint32_t d = duration(queue_slot(queue_tail));
+        uint32_t rest = left * TICK_UNITS;
+        executed = rest < d ? d - rest : 0;
+    }
+    return mc.queued_units - executed;
+}
+
+static void fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value,
+                 uint8_t heaters_off)
+{
+    sim_mailbox.last_error = code; /* before the abort marker names it */
+    stepper_halt();
+    mc.fault = code;
+    mc.last_error = code;
+    stepper_flush(mc.items_received);
+    machine_account();
+    stepper_positions(mc.tail_pos);
+    if (heaters_off) {
+        heater_all_off();
+        cli();
+        st.heater_target[0] = st.heater_target[1] = 0;
+        st.heater_target_changed = 0;
+        sei();
+    }
+    report_error(code, item, segment, axis, value);
+}
+
+void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
+{
+    fail(code, item, segment, axis, value,
+         code == ERR_THERMAL_RUNAWAY || code == ERR_OVERTEMP || code == ERR_ESTOP ||
+             code == ERR_WATCHDOG);
+}
+
+void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32_t value)
+{
+    fail(code, st.items_done, st.segments_done, 0xFF, value, !keep_heaters);
+    if (!keep_motors)
+        stepper_disable_all(); /* positions are no longer trustworthy */
+}
+
+uint8_t machine_clear_fault(void)
+{
+    if (!mc.fault)
+        return 0;
+    mc.fault = 0;
+    mc.estopped = 0;
+    cli();
+    stepper_report.error = 0;
+    sei();
+    stepper_resume();
+    return 1;
+}
+
+void machine_session_defaults(void)
+{
+    mc.watchdog_ms = WATCHDOG_MS_DEFAULT;
+    mc.start_ticks = MS_TO_CLOCK(DEV_START_MS);
+    mc.flow_ticks = MS_TO_CLOCK(DEV_FLOW_MS);
+}

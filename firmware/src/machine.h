@@ -1,0 +1,45 @@
+/* Device state the protocol reports on, the session's settings, the fault state. */
+#ifndef MACHINE_H
+#define MACHINE_H
+#include <stdint.h>
+#include "queue.h"
+
+struct machine {
+    uint32_t items_received, segments_received;
+    uint8_t fault, last_error, estopped;
+    uint8_t synced;
+    uint16_t nonce;
+    uint16_t overflow_rejects;
+    /* session settings (CONFIGURE; defaults at every new session) */
+    uint16_t watchdog_ms;
+    uint32_t start_ticks, flow_ticks;
+    uint32_t last_frame_at; /* link time of the last valid frame (host watchdog) */
+    uint32_t flush_item;    /* FLUSH: items up to this number may start at once */
+    int32_t tail_pos[4];    /* where everything queued will have left the axes */
+    /* the queue's contents for the start rule and buffered_ticks, kept by the
+     * main loop: additions when it queues, departures when it sees them */
+    uint32_t queued_units; /* durations of the segments and dwells in the queue */
+    uint8_t block_ends;    /* queued items that end a block */
+    uint8_t accounted;     /* queue position up to which departures are counted */
+};
+extern struct machine mc;
+
+uint8_t machine_flags(void);
+uint8_t machine_free(void);
+/* Account for the items the interrupt completed (main loop). */
+void machine_account(void);
+/* An item was queued at head (before queue_head moves on). */
+void machine_queued(const struct item *it);
+/* Motion not yet executed: the rest of the executing item and the queue (saturates). */
+uint32_t machine_buffered_ticks(void);
+/* Enter the fault state: stop where it is, flush the queue (flushed items count
+ * as done); heaters off for thermal faults, the watchdog and e-stop (unless kept);
+ * report the error. */
+void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
+/* E-stop or host watchdog: stop now, fail with `code`, keep what the flags say. */
+void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32_t value);
+uint8_t machine_clear_fault(void);
+/* A new session: the settings go back to their defaults. */
+void machine_session_defaults(void);
+
+#endif

@@ -1,0 +1,145 @@
+/* cdpr firmware for an ATmega2560 on a RAMPS 1.4: the main loop.
+ * The host decides, the MCU obeys: the interrupt executes the move queue, this
+ * loop moves bytes, decodes commands, controls the heaters and reports. */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+
+#include "board_ramps14.h"
+#include "frame.h"
+#include "heater.h"
+#include "link.h"
+#include "machine.h"
+#include "mailbox.h"
+#include "motion.h"
+#include "protocol_gen.h"
+#include "queue.h"
+#include "reports.h"
+#include "sched.h"
+#include "session.h"
+#include "stepper.h"
+#include "uart.h"
+#include "watchdog.h"
+
+struct item queue[QUEUE_SIZE];
+volatile uint8_t queue_head, queue_tail;
+volatile struct sim_mailbox sim_mailbox;
+uint32_t link_now;
+
+void sched_update_link_time(void)
+{
+    uint32_t t = sched_clock();
+    /* In the simulator the harness keeps the wall clock here: the link's timers
+     * (retransmission, announcements, host watchdog) then run in real time
+     * whatever the simulation's speed, as the Python model's do. */
+    if (sim_mailbox.link_valid) {
+        cli();
+        t = sim_mailbox.link_clock;
+        sei();
+    }
+    link_now = t;
+}
+
+static void take_interrupt_reports(uint32_t now)
+{
+    struct stepper_report r = {0};
+    uint8_t changed = 0;
+    uint16_t targets[2] = {0, 0};
+    /* The one-byte flags are read with interrupts on: the copy with them masked (long
+     * enough to delay a step tick by several us) only when there is something to take. */
+    if (stepper_report.homed || stepper_report.error || st.heater_target_changed) {
+        cli();
+        r = *(struct stepper_report *)&stepper_report;
+        stepper_report.homed = 0;
+        changed = st.heater_target_changed;
+        targets[0] = st.heater_target[0];
+        targets[1] = st.heater_target[1];
+        st.heater_target_changed = 0;
+        sei();
+    }
+    for (uint8_t i = 0; i < 2; i++)
+        if (changed >> i & 1)
+            heater_set_target(i, targets[i], now);
+    if (r.homed) {
+        int32_t pos[4];
+        stepper_positions(pos);
+        report_event(EVT_HOMED, r.homed_item, 3, pos);
+    }
+    if (r.error && !mc.fault)
+        machine_fail(r.error, r.item, r.segment, r.axis, r.value);
+    for (uint8_t i = 0; i < 2; i++) {
+        struct heater *h = &heaters[i];
+        if (h->reached_event) {
+            h->reached_event = 0;
+            int32_t v[2] = {i, h->temp_dc};
+            report_event(EVT_HEATER_REACHED, st.items_done, 2, v);
+        }
+        if (h->fault) {
+            uint8_t code = h->fault;
+            h->fault = 0;
+            if (!mc.fault)
+                machine_fail(code, st.items_done, st.segments_done, i, h->temp_dc);
+            else
+                heater_all_off();
+        }
+    }
+    if (st.current == IT_WAIT) {
+        /* done at once when the target is 0, else within the tolerance */
+        struct heater *h = &heaters[st.wait_heater & 1];
+        int16_t diff = (int16_t)(h->temp_dc - (int16_t)h->target_dc);
+        if (diff < 0)
+            diff = (int16_t)-diff;
+        stepper_wait_ok = !h->target_dc || (uint16_t)diff <= st.wait_tolerance;
+    }
+}
+
+int main(void)
+{
+    GPIOR1 = (uint8_t)((uint16_t)&sim_mailbox);
+    GPIOR2 = (uint8_t)((uint16_t)&sim_mailbox >> 8);
+    sim_mailbox.magic[0] = 'C';
+    sim_mailbox.magic[1] = 'D';
+    sim_mailbox.magic[2] = 'P';
+    sim_mailbox.magic[3] = 'R';
+    sim_mailbox.version = 1;
+    LED_DDR |= _BV(LED_BIT);
+    heater_init();
+    stepper_init();
+    uart_init();
+    watchdog_start();
+    link_reset_session();
+    sei();
+    uint32_t last = sched_clock();
+    for (;;) {
+        watchdog_kick();
+        uint32_t now = sched_clock();
+        sched_update_link_time();
+        uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / CLOCK_HZ));
+        if (loop_us > sim_mailbox.main_loop_max_us)
+            sim_mailbox.main_loop_max_us = loop_us;
+        last = now;
+        int16_t c;
+        uint8_t got = 0;
+        while ((c = uart_getc()) >= 0) {
+            got = 1;
+            if (!deframer_push((uint8_t)c)) {
+                deframer_run();
+                deframer_push((uint8_t)c);
+            }
+        }
+        if (got)
+            deframer_run();
+        motion_prepare_ahead();
+        take_interrupt_reports(now);
+        heater_poll(now);
+        stepper_start_ok = session_may_start();
+        session_poll(link_now);
+        link_poll(link_now);
+        watchdog_save(st.items_done, st.segments_done);
+        sim_mailbox.isr_max_cycles = stepper_isr_max_cycles;
+        sim_mailbox.lost_steps = stepper_lost_steps;
+        sim_mailbox.plan_stalls = stepper_plan_stalls;
+        sim_mailbox.overruns = stepper_overruns;
+        sim_mailbox.latency_max = stepper_latency_max;
+        sim_mailbox.last_error = mc.last_error;
+    }
+}

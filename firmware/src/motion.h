@@ -1,0 +1,23 @@
+/* Segments into queue items, and queue items into the step interrupt's plans. */
+#ifndef MOTION_H
+#define MOTION_H
+#include <stdint.h>
+#include "queue.h"
+#include "segment.h"
+
+/* Peak step rate check (PROTOCOL 5.1): returns the first axis over MAX_STEP_RATE
+ * and its rate through *rate, or -1. */
+int8_t motion_rate_check(const struct segment *s, uint32_t *rate);
+/* Store a decoded segment in a queue item (no arithmetic beyond signs). */
+void motion_store(struct item *it, const struct segment *s);
+/* Prepare the DDA constants of queued segments ahead of the interrupt (main loop;
+ * cheap when nothing is to do). */
+void motion_prepare_ahead(void);
+/* Forget all plans (the queue was flushed; interrupts off or the ISR idle). */
+void motion_plans_reset(void);
+/* Steps due by the end of tick i of an axis of n steps (float estimate). */
+uint32_t motion_steps_due(float n, float ka, float kb, uint32_t i);
+/* Ticks of a timed item of `units` clock units, and the length of its last tick. */
+uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units);
+
+#endif

@@ -1,0 +1,174 @@
+#include "config.h"
+#include "frame.h"
+#include "heater.h"
+#include "link.h"
+#include "machine.h"
+#include "protocol_gen.h"
+#include "queue.h"
+#include "reports.h"
+#include "stepper.h"
+#include "watchdog.h"
+#include "wire.h"
+#include <avr/interrupt.h>
+
+#include "sched.h"
+
+static uint8_t buf[REPORT_MAX];
+
+static struct writer start(uint8_t op)
+{
+    struct writer w = {buf, 0, sizeof buf, 0};
+    wr_u8(&w, op);
+    return w;
+}
+
+static void send(struct writer *w, uint8_t important)
+{
+    if (!w->err && mc.synced)
+        link_send(buf, w->pos, important);
+}
+
+void report_error(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
+{
+    if (value < -SEG_MAX_DELTA)
+        value = -SEG_MAX_DELTA; /* the range the Python model reports */
+    struct writer w = start(CDPR_OP_ERROR);
+    wr_u8(&w, code);
+    wr_uv(&w, item);
+    wr_uv(&w, segment);
+    wr_u8(&w, axis);
+    wr_sv(&w, value);
+    send(&w, 1);
+}
+
+void report_event(uint8_t code, uint32_t item, uint8_t n, const int32_t *values)
+{
+    struct writer w = start(CDPR_OP_EVENT);
+    wr_u8(&w, code);
+    wr_uv(&w, item);
+    wr_u8(&w, n); /* count, then the values */
+    for (uint8_t i = 0; i < n; i++)
+        wr_sv(&w, values[i]);
+    send(&w, 0);
+}
+
+void report_status(void)
+{
+    int32_t pos[4];
+    uint32_t items, segs, ticks;
+    uint8_t fan, en, homed;
+    stepper_positions(pos);
+    uint32_t buffered = machine_buffered_ticks();
+    cli();
+    items = st.items_done;
+    segs = st.segments_done;
+    ticks = st.motion_ticks;
+    fan = st.fan;
+    en = st.enabled_mask;
+    homed = st.homed_mask;
+    sei();
+    struct writer w = start(CDPR_OP_STATUS);
+    wr_u8(&w, (uint8_t)(machine_flags() | (mc.synced ? FLAG_SYNCED : 0)));
+    wr_uv(&w, machine_free());
+    wr_uv(&w, mc.items_received);
+    wr_uv(&w, items);
+    wr_uv(&w, segs);
+    wr_uv(&w, buffered);
+    wr_uv(&w, ticks);
+    wr_uv(&w, sched_clock());
+    for (uint8_t k = 0; k < 4; k++)
+        wr_sv(&w, pos[k]);
+    wr_sv(&w, heaters[0].temp_dc);
+    wr_uv(&w, heaters[0].target_dc);
+    wr_sv(&w, heaters[1].temp_dc);
+    wr_uv(&w, heaters[1].target_dc);
+    wr_u8(&w, fan);
+    wr_u8(&w, en);
+    wr_u8(&w, homed);
+    wr_u8(&w, mc.last_error);
+    wr_uv(&w, deframer_stats.bad_frames + deframer_stats.bad_headers);
+    wr_uv(&w, link_counters.retransmits);
+    wr_uv(&w, link_counters.naks_sent);
+    wr_uv(&w, link_counters.duplicates);
+    send(&w, 0);
+}
+
+void report_ident(uint16_t nonce, uint8_t urgent)
+{
+    uint32_t items, segs;
+    cli();
+    items = st.items_done;
+    segs = st.segments_done;
+    sei();
+    struct writer w = start(CDPR_OP_IDENT);
+    wr_uv(&w, nonce);
+    wr_u8(&w, PROTO_MAJOR);
+    wr_u8(&w, PROTO_MINOR);
+    wr_uv(&w, watchdog_boot_id());
+    wr_text(&w, FIRMWARE_NAME);
+    wr_text(&w, FIRMWARE_VERSION);
+    wr_u8(&w, AXES);
+    wr_uv(&w, QUEUE_SIZE);
+    wr_uv(&w, CLOCK_HZ);
+    wr_uv(&w, MAX_STEP_RATE);
+    wr_u8(&w, FRAME_MAX_PAYLOAD);
+    wr_uv(&w, RX_WINDOW);
+    wr_u8(&w, 2);         /* heaters */
+    wr_u8(&w, FAN_COUNT); /* fans */
+    wr_uv(&w, heater_max_dc(0));
+    wr_uv(&w, heater_max_dc(1));
+    wr_uv(&w, mc.watchdog_ms);
+    wr_uv(&w, mc.start_ticks);
+    wr_uv(&w, mc.items_received);
+    wr_uv(&w, items);
+    wr_uv(&w, mc.segments_received);
+    wr_uv(&w, segs);
+    wr_uv(&w, sched_clock());
+    if (w.err)
+        return;
+    if (urgent)
+        link_send_urgent(buf, w.pos);
+    else
+        send(&w, 0);
+}
+
+void report_boot(void)
+{
+    struct writer w = start(CDPR_OP_BOOT);
+    wr_uv(&w, watchdog_boot_id());
+    wr_u8(&w, watchdog_boot_cause());
+    wr_u8(&w, PROTO_MAJOR);
+    wr_u8(&w, PROTO_MINOR);
+    wr_u8(&w, watchdog_prev_valid());
+    wr_uv(&w, watchdog_prev_items());
+    wr_uv(&w, watchdog_prev_segments());
+    link_send_urgent(buf, w.pos);
+}
+
+void report_estop_ack(void)
+{
+    struct writer w = start(CDPR_OP_ESTOP_ACK);
+    cli();
+    uint32_t items = st.items_done, segs = st.segments_done;
+    sei();
+    wr_uv(&w, items);
+    wr_uv(&w, segs);
+    link_send_urgent(buf, w.pos);
+}
+
+uint8_t report_flow(uint8_t *out)
+{
+    struct writer w = {out, 0, FLOW_MAX, 0};
+    uint32_t buffered = machine_buffered_ticks();
+    cli();
+    uint32_t items = st.items_done, segs = st.segments_done;
+    sei();
+    wr_u8(&w, CDPR_OP_FLOW);
+    wr_u8(&w, machine_flags());
+    wr_uv(&w, machine_free());
+    wr_uv(&w, items);
+    wr_uv(&w, segs);
+    wr_uv(&w, buffered);
+    wr_uv(&w, sched_clock());
+    return w.pos;
+}

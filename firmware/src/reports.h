@@ -1,0 +1,16 @@
+/* Device reports: encoders and where they go (link or URGENT). */
+#ifndef REPORTS_H
+#define REPORTS_H
+#include <stdint.h>
+#include "protocol_gen.h"
+
+void report_error(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
+void report_event(uint8_t code, uint32_t item, uint8_t n, const int32_t *values);
+void report_status(void);
+void report_ident(uint16_t nonce, uint8_t urgent);
+void report_boot(void);
+void report_estop_ack(void);
+#define FLOW_MAX CDPR_FLOW_MAX_LEN
+uint8_t report_flow(uint8_t *out); /* FLOW payload into out[FLOW_MAX] */
+
+#endif

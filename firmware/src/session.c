@@ -1,0 +1,121 @@
+/* Session behaviour around the link (PROTOCOL.md 3, 5.4, 6): BOOT announcements,
+ * unsolicited FLOW reports, the start rule and the host watchdog. */
+#include <avr/interrupt.h>
+
+#include "config.h"
+#include "heater.h"
+#include "link.h"
+#include "machine.h"
+#include "protocol_gen.h"
+#include "queue.h"
+#include "reports.h"
+#include "sched.h"
+#include "session.h"
+#include "stepper.h"
+
+static uint32_t boot_sent_at;
+static uint8_t boot_sent_once;
+/* what the last FLOW said, and when */
+static uint8_t flow_valid;
+static uint32_t flow_items, flow_motion, flow_at;
+static uint8_t flow_flags, flow_free;
+
+void session_opened(void)
+{
+    flow_valid = 0;
+    machine_session_defaults();
+    mc.last_frame_at = link_now;
+}
+
+static void announce_boot(uint32_t now)
+{
+    boot_sent_at = now;
+    boot_sent_once = 1;
+    report_boot();
+}
+
+void session_boot_on_data(void)
+{
+    uint32_t now = link_now;
+    if (!boot_sent_once || now - boot_sent_at >= MS_TO_CLOCK(50))
+        announce_boot(now);
+}
+
+static uint32_t motion_executed(void)
+{
+    cli();
+    uint32_t t = st.motion_ticks;
+    sei();
+    return t;
+}
+
+uint8_t proto_flow(uint8_t *out)
+{
+    cli();
+    flow_items = st.items_done;
+    sei();
+    flow_flags = machine_flags();
+    flow_free = machine_free();
+    flow_motion = motion_executed();
+    flow_at = link_now;
+    flow_valid = 1;
+    return report_flow(out);
+}
+
+void proto_frame_seen(void)
+{
+    mc.last_frame_at = link_now;
+}
+
+/* PROTOCOL 5.4: at rest with a segment at the head of the queue, start when the
+ * queue holds a whole block (an item that ends one), start_ticks of motion, a
+ * full queue, or after FLUSH. O(1): the counts are kept as items come and go. */
+uint8_t session_may_start(void)
+{
+    machine_account();
+    if (queue_head == queue_tail)
+        return 0;
+    cli();
+    uint32_t head_item = st.items_done + 1;
+    sei();
+    return mc.block_ends > 0 || mc.queued_units >= mc.start_ticks || queue_free() == 0 ||
+           head_item <= mc.flush_item;
+}
+
+/* Anything to do: motion executing or queued, a heater on (the watchdog guards it). */
+static uint8_t active(void)
+{
+    return stepper_moving() || queue_used() || heaters[0].target_dc || heaters[1].target_dc;
+}
+
+void session_poll(uint32_t now)
+{
+    if (!mc.synced) {
+        if (!boot_sent_once || now - boot_sent_at >= MS_TO_CLOCK(DEV_BOOT_ANNOUNCE_MS))
+            announce_boot(now);
+        return;
+    }
+    /* host watchdog: no valid frame for watchdog_ms while there is something to do:
+     * stop, heaters off, motors held (a cable robot would drop its effector) */
+    if (active() && !mc.fault &&
+        now - mc.last_frame_at >= (uint32_t)mc.watchdog_ms * (CLOCK_HZ / 1000)) {
+        machine_stop(ERR_WATCHDOG, 0, 1, mc.watchdog_ms);
+        return;
+    }
+    /* unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of
+     * the queue freed, or any other change after DEV_FLOW_INTERVAL_MS */
+    uint8_t want = !flow_valid;
+    if (!want && mc.flow_ticks && motion_executed() - flow_motion >= mc.flow_ticks)
+        want = 1;
+    if (!want) {
+        cli();
+        uint32_t items = st.items_done;
+        sei();
+        uint8_t flags = machine_flags();
+        if (items != flow_items || flags != flow_flags)
+            want = flags != flow_flags || machine_free() >= flow_free + QUEUE_SIZE / 8 ||
+                   now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS);
+    }
+    if (want)
+        link_request_ack();
+}

@@ -1,0 +1,13 @@
+/* Session behaviour around the link: BOOT announcements, unsolicited
+ * FLOW reports, the motion start rule and the host watchdog. */
+#ifndef SESSION_H
+#define SESSION_H
+#include <stdint.h>
+
+void session_opened(void);
+void session_boot_on_data(void);
+void session_poll(uint32_t now);
+uint8_t session_may_start(void);
+void commands_reset_session(void);
+
+#endif

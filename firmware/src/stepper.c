@@ -1,0 +1,883 @@
+/* The step interrupt: Timer1 in CTC mode, one compare match per tick.
+ *
+ * Ticks are TICK_UNITS clock units long, except the last tick of a segment or
+ * dwell, which is as long as the item needs (OCR1A is rewritten at the start of
+ * the tick whose length differs), so items start and end on exact clock units.
+ * Work is pipelined one tick deep: at a tick's start the interrupt first marks
+ * what the tick that just ended completed (segment end, positions set, abort),
+ * then sets this tick's directions and its first pulses, all computed during
+ * the previous interrupt; further pulses of the tick follow at k * PHASE_CYCLES
+ * from compare B. Then, with its own interrupt masked and the others allowed
+ * (so compare B keeps its time), it computes the next tick.
+ *
+ * Pulses are high for at least 2 us and a direction change leads the next pulse
+ * by at least 1 us (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208:
+ * 0.1 us / 20 ns); pulses of one axis are at least PHASE_CYCLES apart. */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+
+#include "board_ramps14.h"
+#include "config.h"
+#include "mailbox.h"
+#include "motion.h"
+#include "protocol_gen.h"
+#include "queue.h"
+#include "sched.h"
+#include "stepper.h"
+
+volatile uint32_t sched_clock_count;
+volatile struct stepper_state st;
+volatile struct stepper_report stepper_report;
+volatile uint8_t stepper_start_ok, stepper_wait_ok;
+volatile uint8_t heater_duty[2], fan_duty;
+volatile uint16_t stepper_isr_max_cycles;
+volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns;
+volatile uint8_t stepper_latency_max;
+
+#define OUT_MOTION 0x01
+#define OUT_SEG_END 0x02
+#define OUT_POS 0x04
+#define OUT_ABORT 0x08
+
+#define PULSE_CYCLES 34 /* >= 2 us high */
+/* OCR1C: toggle MARK_EDGE (OC1C) a few cycles into the next tick (simavr only
+ * arms a compare whose time has not passed when its timer period starts, and
+ * that start may be seen a few cycles late); above TOP: never */
+#define EDGE_AT_NEXT_TICK 8
+#define EDGE_NEVER 0xFFFF
+#define HOME_TICKS (CLOCK_HZ / ((uint32_t)DEV_HOMING_RATE * HOME_TICK_UNITS))
+_Static_assert(HOME_TICKS * DEV_HOMING_RATE * HOME_TICK_UNITS == CLOCK_HZ,
+               "a homing step must take a whole number of homing ticks");
+
+struct out {
+    uint8_t m[16];  /* axes stepping in phase k of the tick (offset 0) */
+    uint8_t phases; /* phases with pulses (offset 16) */
+    uint8_t dir;    /* axis bit set: negative */
+    uint8_t flags;
+    uint8_t units; /* length of the tick */
+    uint32_t seq;
+};
+static struct out outs[2];
+struct out *stepper_emit = &outs[0]; /* the tick being emitted (global: compare B's assembly) */
+#define emit stepper_emit
+static struct out *nx = &outs[1];   /* the tick being computed */
+volatile uint8_t stepper_phase; /* the phase last emitted (global: compare B's assembly) */
+#define phase stepper_phase
+static uint8_t cur_dir = 0xFF, ocr_units = TICK_UNITS;
+
+/* Phase k of a tick starts PHASE_BASE + k * PHASE_CYCLES cycles after its
+ * compare match (phase 0 leaves the interrupt's entry at about PHASE_BASE).
+ * Pulses that fit a tick of u units (index u): the last one ends (and has its
+ * low time) before the next tick's first. */
+#define PHASE_BASE 80
+#define CAP(u) ((u) * UNIT_CYCLES < PHASE_BASE + 64 + PHASE_CYCLES ? 1 \
+                : ((u) * UNIT_CYCLES - PHASE_BASE - 64) / PHASE_CYCLES + 1)
+static const uint8_t phase_cap[2 * TICK_UNITS] = {
+    CAP(0), CAP(1), CAP(2), CAP(3), CAP(4), CAP(5), CAP(6), CAP(7), CAP(8), CAP(9),
+    CAP(10), CAP(11), CAP(12), CAP(13), CAP(14), CAP(15), CAP(16), CAP(17), CAP(18), CAP(19)};
+_Static_assert(2 * TICK_UNITS == 20, "phase_cap lists 20 lengths");
+_Static_assert(CAP(19) <= 16, "phase masks per tick");
+
+/* axis `bit` steps in phases 0..n-1 of the tick */
+static inline __attribute__((always_inline)) void add_pulses(struct out *o, uint8_t bit, uint8_t n)
+{
+    uint8_t *m = o->m;
+    if (n > o->phases)
+        o->phases = n;
+    while (n--)
+        *m++ |= bit;
+}
+
+/* the executing item */
+static struct plan *run;    /* SEG */
+static uint32_t t_left;     /* SEG, DWELL: ticks left */
+static uint8_t last_units;  /* DWELL: length of the last tick */
+static uint8_t hold;          /* ticks to wait after positions were set */
+static uint8_t abort_pending; /* a segment was abandoned: mark it */
+static uint32_t abort_seq;
+static uint8_t home_mask, home_backoff, home_div;
+static uint32_t home_steps;
+static uint8_t pwm;
+
+/* step pins of an axis mask on the X/Y port (the Z and E pins have ports of their own) */
+static const uint8_t xy_bits[4] = {0, _BV(X_STEP_BIT), _BV(Y_STEP_BIT), _BV(X_STEP_BIT) | _BV(Y_STEP_BIT)};
+
+static inline __attribute__((always_inline)) void pulse_on(uint8_t m)
+{
+    X_STEP_PORT |= xy_bits[m & 3];
+    if (m & 4)
+        Z_STEP_PORT |= _BV(Z_STEP_BIT);
+    if (m & 8)
+        E_STEP_PORT |= _BV(E_STEP_BIT);
+}
+
+static inline __attribute__((always_inline)) void pulse_off(void)
+{
+    X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
+    Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
+    E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+}
+
+static void apply_enables(uint8_t mask)
+{
+    /* active low */
+    if (mask & 1) X_EN_PORT &= (uint8_t)~_BV(X_EN_BIT); else X_EN_PORT |= _BV(X_EN_BIT);
+    if (mask & 2) Y_EN_PORT &= (uint8_t)~_BV(Y_EN_BIT); else Y_EN_PORT |= _BV(Y_EN_BIT);
+    if (mask & 4) Z_EN_PORT &= (uint8_t)~_BV(Z_EN_BIT); else Z_EN_PORT |= _BV(Z_EN_BIT);
+    if (mask & 8) E_EN_PORT &= (uint8_t)~_BV(E_EN_BIT); else E_EN_PORT |= _BV(E_EN_BIT);
+}
+
+static void apply_dirs(uint8_t neg)
+{
+    if (((neg >> 0) & 1) ^ X_DIR_INVERT) X_DIR_PORT &= (uint8_t)~_BV(X_DIR_BIT); else X_DIR_PORT |= _BV(X_DIR_BIT);
+    if (((neg >> 1) & 1) ^ Y_DIR_INVERT) Y_DIR_PORT &= (uint8_t)~_BV(Y_DIR_BIT); else Y_DIR_PORT |= _BV(Y_DIR_BIT);
+    if (((neg >> 2) & 1) ^ Z_DIR_INVERT) Z_DIR_PORT &= (uint8_t)~_BV(Z_DIR_BIT); else Z_DIR_PORT |= _BV(Z_DIR_BIT);
+    if (((neg >> 3) & 1) ^ E_DIR_INVERT) E_DIR_PORT &= (uint8_t)~_BV(E_DIR_BIT); else E_DIR_PORT |= _BV(E_DIR_BIT);
+}
+
+static uint8_t endstop(uint8_t axis)
+{
+    uint8_t v;
+    if (axis == 0)
+        v = (X_MIN_PIN >> X_MIN_BIT) & 1;
+    else if (axis == 1)
+        v = (Y_MIN_PIN >> Y_MIN_BIT) & 1;
+    else
+        v = (Z_MIN_PIN >> Z_MIN_BIT) & 1;
+    return v == ENDSTOP_TRIGGERED_LEVEL;
+}
+
+void stepper_init(void)
+{
+    X_STEP_DDR |= _BV(X_STEP_BIT); X_DIR_DDR |= _BV(X_DIR_BIT); X_EN_DDR |= _BV(X_EN_BIT);
+    Y_STEP_DDR |= _BV(Y_STEP_BIT); Y_DIR_DDR |= _BV(Y_DIR_BIT); Y_EN_DDR |= _BV(Y_EN_BIT);
+    Z_STEP_DDR |= _BV(Z_STEP_BIT); Z_DIR_DDR |= _BV(Z_DIR_BIT); Z_EN_DDR |= _BV(Z_EN_BIT);
+    E_STEP_DDR |= _BV(E_STEP_BIT); E_DIR_DDR |= _BV(E_DIR_BIT); E_EN_DDR |= _BV(E_EN_BIT);
+    apply_enables(0);
+    X_MIN_DDR &= (uint8_t)~_BV(X_MIN_BIT); X_MIN_PORT |= _BV(X_MIN_BIT);
+    Y_MIN_DDR &= (uint8_t)~_BV(Y_MIN_BIT); Y_MIN_PORT |= _BV(Y_MIN_BIT);
+    Z_MIN_DDR &= (uint8_t)~_BV(Z_MIN_BIT); Z_MIN_PORT |= _BV(Z_MIN_BIT);
+    MARK_EDGE_DDR |= _BV(MARK_EDGE_BIT);
+    MARK_POS_DDR |= _BV(MARK_POS_BIT);
+    MARK_ABORT_DDR |= _BV(MARK_ABORT_BIT);
+    FAN_DDR |= _BV(FAN_BIT);
+    st.current = 0xFF;
+    st.at_rest = 1;
+    st.running = 1;
+    outs[0].units = outs[1].units = TICK_UNITS;
+    /* Timer1: CTC on OCR1A, no prescaler; compare C toggles OC1C (MARK_EDGE)
+     * when OCR1C is set to match one cycle into the next tick */
+    TCCR1A = _BV(COM1C0);
+    TCCR1B = _BV(WGM12) | _BV(CS10);
+    OCR1A = TICK_CYCLES - 1;
+    OCR1C = EDGE_NEVER;
+    TIMSK1 = _BV(OCIE1A);
+}
+
+uint32_t stepper_ticks_left(void)
+{
+    return (st.current == IT_SEG || st.current == IT_DWELL) ? t_left : 0;
+}
+
+uint8_t stepper_moving(void)
+{
+    return st.current != 0xFF || !st.at_rest;
+}
+
+static void raise_error(uint8_t code, uint32_t item, uint32_t seg, uint8_t axis, int32_t value)
+{
+    if (stepper_report.error)
+        return;
+    stepper_report.item = item;
+    stepper_report.segment = seg;
+    stepper_report.axis = axis;
+    stepper_report.value = value;
+    stepper_report.error = code;
+    st.running = 0;
+}
+
+/* What the positions mid-segment are made of, taken with interrupts off. */
+struct seg_snapshot {
+    int32_t pos[4];
+    uint8_t running; /* a segment is executing */
+    uint8_t acc_int[4];
+    uint32_t done_ticks;
+    float ka, kb;
+    int32_t delta[4];
+};
+
+static void seg_snapshot(struct seg_snapshot *sn)
+{
+    for (uint8_t k = 0; k < 4; k++)
+        sn->pos[k] = st.pos[k];
+    sn->running = st.current == IT_SEG;
+    if (!sn->running)
+        return;
+    sn->done_ticks = run->ticks - t_left;
+    sn->ka = run->ka;
+    sn->kb = run->kb;
+    for (uint8_t k = 0; k < 4; k++) {
+        sn->acc_int[k] = (uint8_t)(run->ax[k].acc >> 24);
+        sn->delta[k] = run->delta[k];
+    }
+}
+
+/* The start plus the steps issued so far (the estimate corrected by the low
+ * byte the interrupt's accumulator keeps); floating point, interrupts on. */
+static void seg_positions(const struct seg_snapshot *sn, int32_t *out)
+{
+    for (uint8_t k = 0; k < 4; k++) {
+        out[k] = sn->pos[k];
+        if (!sn->running || !sn->delta[k])
+            continue;
+        int32_t d = sn->delta[k];
+        uint32_t n = (uint32_t)(d < 0 ? -d : d);
+        uint32_t est = motion_steps_due((float)n, sn->ka, sn->kb, sn->done_ticks);
+        int32_t issued = (int32_t)est + (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
+        out[k] += d < 0 ? -issued : issued;
+    }
+}
+
+void stepper_positions(int32_t *out)
+{
+    struct seg_snapshot sn;
+    uint8_t s = SREG;
+    cli();
+    seg_snapshot(&sn);
+    SREG = s;
+    seg_positions(&sn, out);
+}
+
+void stepper_halt(void)
+{
+    struct seg_snapshot sn;
+    uint8_t s = SREG;
+    cli();
+    seg_snapshot(&sn);
+    if (st.current == IT_SEG) {
+        abort_pending = 1;
+        abort_seq = st.segments_done + 1;
+    }
+    st.current = 0xFF;
+    st.at_rest = 1;
+    st.running = 0;
+    SREG = s;
+    if (sn.running) {
+        int32_t pos[4];
+        seg_positions(&sn, pos);
+        cli();
+        for (uint8_t k = 0; k < 4; k++)
+            st.pos[k] = pos[k];
+        SREG = s;
+    }
+}
+
+void stepper_resume(void)
+{
+    st.running = 1;
+}
+
+void stepper_flush(uint32_t items_received)
+{
+    uint8_t s = SREG;
+    cli();
+    queue_tail = queue_head;
+    st.items_done = items_received;
+    motion_plans_reset();
+    SREG = s;
+}
+
+void stepper_disable_all(void)
+{
+    uint8_t s = SREG;
+    cli();
+    st.enabled_mask = 0;
+    st.homed_mask = 0;
+    apply_enables(0);
+    SREG = s;
+}
+
+/* ---------------------------------------------------------------- the next tick */
+
+static void complete_item(void)
+{
+    st.items_done++;
+    queue_tail++;
+}
+
+static void __attribute__((noinline)) set_pos_marker(void)
+{
+    for (uint8_t k = 0; k < 4; k++)
+        sim_mailbox.pos[k] = st.pos[k];
+    nx->flags |= OUT_POS;
+    hold = 2;
+}
+
+static void start_homing(const struct item *it)
+{
+    home_mask = it->flags & 7;
+    home_backoff = 0;
+    for (uint8_t k = 0; k < 3; k++)
+        if ((home_mask >> k & 1) && endstop(k))
+            home_backoff |= (uint8_t)(1 << k);
+    home_div = 0;
+    home_steps = 0;
+    st.enabled_mask |= home_mask;
+    apply_enables(st.enabled_mask);
+}
+
+/* One homing tick: every HOME_TICKS ticks each module still homing checks its
+ * switch and steps (away from a pressed switch until it releases, then toward
+ * it until it closes). Returns 1 when all switches closed, so homing from d
+ * steps takes d / DEV_HOMING_RATE seconds exactly, as in the Python model. */
+static uint8_t __attribute__((noinline)) home_tick(void)
+{
+    if (home_div) {
+        home_div--;
+        return 0;
+    }
+    home_div = HOME_TICKS - 1;
+    uint8_t stepping = 0, neg = 0;
+    for (uint8_t k = 0; k < 3; k++) {
+        uint8_t bit = (uint8_t)(1 << k);
+        if (!(home_mask & bit))
+            continue;
+        uint8_t hit = endstop(k);
+        if (home_backoff & bit) {
+            if (hit) {
+                stepping |= bit;
+                neg |= bit;
+                continue;
+            }
+            home_backoff &= (uint8_t)~bit; /* released: approach again */
+        }
+        if (hit)
+            home_mask &= (uint8_t)~bit;
+        else
+            stepping |= bit;
+    }
+    if (!home_mask)
+        return 1;
+    if (++home_steps > (uint32_t)DEV_HOMING_MAX_STEPS) {
+        raise_error(ERR_HOMING_FAILED, st.items_done + 1, 0, 0xFF, (int32_t)home_steps);
+        st.current = 0xFF;
+        return 0;
+    }
+    nx->dir = (uint8_t)((cur_dir & 0x8) | neg);
+    int32_t *pos = ((struct stepper_state *)&st)->pos; /* private to this interrupt here */
+    for (uint8_t k = 0; k < 3; k++)
+        if (stepping >> k & 1)
+            pos[k] += (neg >> k & 1) ? -1 : 1;
+    nx->m[0] = stepping;
+    nx->phases = stepping ? 1 : 0;
+    return 0;
+}
+
+/* Start queue items until a timed one runs (or nothing may start); at most a
+ * few instantaneous items per tick, so a queue of them cannot stretch a tick. */
+static void __attribute__((noinline)) dispatch(void)
+{
+    uint8_t budget = 4;
+    while (queue_head != queue_tail && st.current == 0xFF && !hold && st.running && budget--) {
+        struct item *it = queue_slot(queue_tail);
+        switch (it->kind) {
+        case IT_SEG: {
+            if (st.at_rest && !stepper_start_ok)
+                return;
+            struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
+            if (plan_tail == plan_head || p->index != queue_tail) {
+                if (!st.at_rest) {
+                    /* the main loop fell behind while moving: the motion would stretch
+                     * and lose steps (all axes near the top rate at once), so say so */
+                    stepper_plan_stalls++;
+                    raise_error(ERR_STEP_RATE, st.items_done, st.segments_done, 0xFF,
+                                (int32_t)MAX_STEP_RATE);
+                }
+                return;
+            }
+            run = p;
+            if ((st.enabled_mask | p->moving) != st.enabled_mask) {
+                st.enabled_mask |= p->moving;
+                apply_enables(st.enabled_mask);
+            }
+            t_left = p->ticks;
+            st.current = IT_SEG;
+            return;
+        }
+        case IT_DWELL:
+            st.at_rest = 1;
+            t_left = motion_ticks_of(it->ticks, &last_units);
+            st.current = IT_DWELL;
+            return;
+        case IT_HOME:
+            st.at_rest = 1;
+            start_homing(it);
+            st.current = IT_HOME;
+            return;
+        case IT_WAIT:
+            st.at_rest = 1;
+            stepper_wait_ok = 0;
+            st.wait_heater = it->u.cmd.id;
+            st.wait_tolerance = it->u.cmd.value;
+            st.current = IT_WAIT;
+            return;
+        case IT_SETPOS:
+            for (uint8_t k = 0; k < 4; k++)
+                st.pos[k] = it->u.pos[k];
+            set_pos_marker();
+            break;
+        case IT_ENABLE:
+            st.enabled_mask = it->u.cmd.mask & 0x0F;
+            apply_enables(st.enabled_mask);
+            break;
+        case IT_HEATER:
+            st.heater_target[it->u.cmd.id] = it->u.cmd.value;
+            st.heater_target_changed |= (uint8_t)(1 << it->u.cmd.id);
+            break;
+        case IT_FAN:
+            st.fan = (uint8_t)it->u.cmd.value;
+            fan_duty = st.fan;
+            break;
+        }
+        complete_item();
+        if (!st.at_rest && queue_head == queue_tail)
+            raise_error(ERR_UNDERRUN, st.items_done, st.segments_done, 0xFF, 0);
+    }
+}
+
+/* Steps one axis issues in a tick that is not the segment's last: (v += a),
+ * acc += v; the steps are the change of acc's top byte. 36 cycles, 72 with
+ * the acceleration (hand-written: the compiler's version took twice that). */
+static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *x, uint8_t accel)
+{
+    uint8_t n;
+    __asm__ volatile(
+        "ldd r20, Z+2\n\t"
+        "ldd r21, Z+3\n\t"
+        "ldd r22, Z+4\n\t"
+        "ldd r23, Z+5\n\t"
+        "tst %[accel]\n\t"
+        "breq 2f\n\t"
+        "ldd r18, Z+0\n\t"
+        "ldd r19, Z+1\n\t"
+        "ldd __tmp_reg__, Z+6\n\t"
+        "add r18, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+7\n\t"
+        "adc r19, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+8\n\t"
+        "adc r20, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+9\n\t"
+        "adc r21, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+10\n\t"
+        "adc r22, __tmp_reg__\n\t"
+        "ldd __tmp_reg__, Z+11\n\t"
+        "adc r23, __tmp_reg__\n\t"
+        "brpl 1f\n\t" /* v < 0 only by rounding at the end of a stop: 0 */
+        "clr r18\n\t"
+        "clr r19\n\t"
+        "clr r20\n\t"
+        "clr r21\n\t"
+        "clr r22\n\t"
+        "clr r23\n"
+        "1:\n\t"
+        "std Z+0, r18\n\t"
+        "std Z+1, r19\n\t"
+        "std Z+2, r20\n\t"
+        "std Z+3, r21\n\t"
+        "std Z+4, r22\n\t"
+        "std Z+5, r23\n"
+        "2:\n\t"
+        "ldd r18, Z+12\n\t"
+        "ldd r19, Z+13\n\t"
+        "ldd r24, Z+14\n\t"
+        "ldd r25, Z+15\n\t"
+        "mov %[n], r25\n\t"
+        "add r18, r20\n\t"
+        "adc r19, r21\n\t"
+        "adc r24, r22\n\t"
+        "adc r25, r23\n\t"
+        "std Z+12, r18\n\t"
+        "std Z+13, r19\n\t"
+        "std Z+14, r24\n\t"
+        "std Z+15, r25\n\t"
+        "sub r25, %[n]\n\t"
+        "mov %[n], r25\n\t"
+        : [n] "=&r"(n)
+        : "z"(x), [accel] "r"(accel)
+        : "r18", "r19", "r20", "r21", "r22", "r23", "r24", "r25", "memory");
+    return n;
+}
+
+/* More pulses than a tick holds (a rate over the advertised one): count the
+ * excess as lost. */
+static void __attribute__((noinline)) too_many(struct out *o)
+{
+    uint8_t cap = phase_cap[TICK_UNITS];
+    for (uint8_t i = cap; i < o->phases; i++) {
+        for (uint8_t m = o->m[i]; m; m &= (uint8_t)(m - 1))
+            stepper_lost_steps++;
+        o->m[i] = 0;
+    }
+    o->phases = cap;
+}
+
+/* The segment's last tick: each axis issues what is left (the exact total). */
+static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
+{
+    struct stepper_state *s = (struct stepper_state *)&st; /* private to this interrupt here */
+    struct out *o = nx;
+    struct axis_plan *x = p->ax;
+    int32_t *pos = s->pos;
+    const int32_t *d = p->delta;
+    for (uint8_t bit = 1; bit < 16; bit <<= 1, x++, pos++, d++) {
+        if (!(p->moving & bit))
+            continue;
+        /* N minus what was issued: the estimate's difference to the DDA */
+        int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
+        uint32_t rem = x->last_n - (int32_t)off;
+        uint8_t n = (uint8_t)rem;
+        if ((rem >> 8) || n > cap) {
+            stepper_lost_steps += (uint16_t)(rem - cap); /* never at the advertised rate */
+            n = cap;
+        }
+        add_pulses(o, bit, n);
+        *pos += *d;
+    }
+    s->current = 0xFF;
+    o->flags |= OUT_SEG_END;
+    o->seq = ++s->segments_done;
+    s->at_rest = p->at_rest;
+    plan_tail++;
+    s->items_done++;
+    uint8_t tail = ++queue_tail;
+    if (!p->at_rest && queue_head == tail)
+        raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
+}
+
+static void __attribute__((noinline)) seg_tick(void)
+{
+    struct plan *p = run;
+    struct out *o = nx;
+    o->flags |= OUT_MOTION;
+    o->dir = p->dir;
+    if (--t_left == 0) {
+        o->units = p->last_units;
+        seg_last_tick(p, phase_cap[p->last_units]);
+        return;
+    }
+    uint8_t moving = p->moving, accel = p->accel;
+    if (moving & 1)
+        add_pulses(o, 1, dda_tick(&p->ax[0], accel));
+    if (moving & 2)
+        add_pulses(o, 2, dda_tick(&p->ax[1], accel));
+    if (moving & 4)
+        add_pulses(o, 4, dda_tick(&p->ax[2], accel));
+    if (moving & 8)
+        add_pulses(o, 8, dda_tick(&p->ax[3], accel));
+    if (o->phases > phase_cap[TICK_UNITS])
+        too_many(o); /* never at the advertised rate */
+}
+
+/* Everything but a segment's tick. */
+static void __attribute__((noinline)) compute_other(void)
+{
+    struct out *o = nx;
+    {
+        if (abort_pending) {
+            abort_pending = 0;
+            o->flags = OUT_SEG_END | OUT_ABORT;
+            o->seq = abort_seq;
+            return;
+        }
+        if (hold) {
+            hold--;
+            return;
+        }
+        if (st.current == 0xFF)
+            dispatch();
+        if (st.current == 0xFF || !st.running)
+            return;
+        switch (st.current) {
+        case IT_SEG:
+            seg_tick();
+            break;
+        case IT_DWELL:
+            o->flags |= OUT_MOTION;
+            if (--t_left == 0) {
+                o->units = last_units;
+                st.current = 0xFF;
+                complete_item();
+            }
+            break;
+        case IT_HOME:
+            if (home_tick()) {
+                const struct item *it = queue_slot(queue_tail);
+                uint8_t mask = it->flags & 7;
+                for (uint8_t k = 0; k < 3; k++)
+                    if (mask >> k & 1)
+                        st.pos[k] = it->u.pos[k];
+                st.homed_mask |= mask;
+                stepper_report.homed_item = st.items_done + 1;
+                stepper_report.homed = 1;
+                st.current = 0xFF;
+                complete_item();
+                set_pos_marker();
+            } else if (st.current == IT_HOME) {
+                o->flags |= OUT_MOTION;
+                o->units = HOME_TICK_UNITS;
+            }
+            break;
+        case IT_WAIT:
+            if (stepper_wait_ok) {
+                st.current = 0xFF;
+                complete_item();
+            }
+            break;
+        }
+    }
+}
+
+static void __attribute__((noinline)) compute(void)
+{
+    struct out *o = nx;
+    for (uint8_t i = 0; i < o->phases; i++)
+        o->m[i] = 0;
+    o->phases = 0;
+    o->flags = 0;
+    o->dir = cur_dir;
+    o->units = TICK_UNITS;
+    if (st.current == IT_SEG && st.running)
+        seg_tick(); /* the common case first */
+    else if (st.current != 0xFF || queue_head != queue_tail || abort_pending || hold)
+        compute_other(); /* else idle */
+    if (o->flags & OUT_MOTION)
+        st.motion_ticks += o->units;
+}
+
+/* ---------------------------------------------------------------- interrupts */
+
+
+/* At a tick's start, after phase 0: arm compare B for phase 1, at its time or,
+ * when the tick started late, just ahead of now (the later phases then follow
+ * at their spacing: compare B's interrupt does the same for each). The tick's
+ * computation runs with interrupts on, so compare B keeps its time meanwhile.
+ * With interrupts off. */
+#define PHASE_SLACK 40 /* cycles: the earliest compare B can be armed for */
+static inline __attribute__((always_inline)) void phases_arm(void)
+{
+    if (emit->phases < 2) {
+        TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+        return;
+    }
+    uint16_t at = PHASE_BASE + PHASE_CYCLES, soon = TCNT1 + PHASE_SLACK;
+    OCR1B = (int16_t)(at - soon) > 0 ? at : soon;
+    TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
+    TIMSK1 |= _BV(OCIE1B);
+}
+
+/* Compare B: the tick's further phases, one per interrupt, 60-odd cycles
+ * (hand-written: the compiler's version took twice that, and at 60000 steps/s
+ * on three axes a tick has up to seven of them). Sets phase k's pulses, moves
+ * OCR1B on by PHASE_CYCLES (or to just ahead of now, if that is already past)
+ * or disables itself after the last phase, then ends the pulses >= 2 us later. */
+ISR(TIMER1_COMPB_vect, ISR_NAKED)
+{
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r25\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r30, stepper_emit\n\t"
+        "lds r31, stepper_emit+1\n\t"
+        "ldd r25, Z+16\n\t" /* phases */
+        "lds r24, stepper_phase\n\t"
+        "inc r24\n\t"
+        "sts stepper_phase, r24\n\t"
+        "add r30, r24\n\t"
+        "brcc 1f\n\t"
+        "inc r31\n"
+        "1:\n\t"
+        "ld r30, Z\n\t" /* this phase's axes */
+        "sbrc r30, 0\n\t"
+        "sbi %[pf], %[xb]\n\t"
+        "sbrc r30, 1\n\t"
+        "sbi %[pf], %[yb]\n\t"
+        "sbrc r30, 3\n\t"
+        "sbi %[pa], %[eb]\n\t"
+        "sbrs r30, 2\n\t"
+        "rjmp 2f\n\t"
+        "lds r31, %[pl]\n\t"
+        "ori r31, %[zm]\n\t"
+        "sts %[pl], r31\n"
+        "2:\n\t"
+        "inc r24\n\t"
+        "cp r24, r25\n\t"
+        "brlo 3f\n\t"
+        "lds r24, %[timsk]\n\t" /* that was the last phase */
+        "andi r24, %[nocieb]\n\t"
+        "sts %[timsk], r24\n\t"
+        "rjmp 4f\n"
+        "3:\n\t"
+        "lds r24, %[ocrl]\n\t"
+        "lds r25, %[ocrl]+1\n\t"
+        "subi r24, lo8(-(%[step]))\n\t"
+        "sbci r25, hi8(-(%[step]))\n\t"
+        "lds r30, %[tcntl]\n\t"
+        "lds r31, %[tcntl]+1\n\t"
+        "adiw r30, 24\n\t"
+        "cp r30, r24\n\t"
+        "cpc r31, r25\n\t"
+        "brlo 5f\n\t"
+        "movw r24, r30\n\t" /* already past: just ahead of now */
+        "adiw r24, 16\n"
+        "5:\n\t"
+        "sts %[ocrl]+1, r25\n\t"
+        "sts %[ocrl], r24\n"
+        "4:\n\t"
+        "ldi r24, 5\n" /* the rest of the pulse's 2 us */
+        "6:\n\t"
+        "dec r24\n\t"
+        "brne 6b\n\t"
+        "cbi %[pf], %[xb]\n\t"
+        "cbi %[pf], %[yb]\n\t"
+        "cbi %[pa], %[eb]\n\t"
+        "lds r31, %[pl]\n\t"
+        "andi r31, %[nzm]\n\t"
+        "sts %[pl], r31\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r25\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t"
+        :
+        : [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),
+          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
+          [nzm] "n"(0xFF & ~_BV(Z_STEP_BIT)), [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)),
+          [nocieb] "n"(0xFF & ~_BV(OCIE1B)), [ocrl] "n"(_SFR_MEM_ADDR(OCR1BL)),
+          [tcntl] "n"(_SFR_MEM_ADDR(TCNT1L)), [step] "n"(PHASE_CYCLES));
+}
+/* compare B's assembly assumes the RAMPS step ports: X and Y on PORTF, Z on PORTL, E on PORTA */
+
+static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
+static uint8_t edge_armed; /* OCR1C set to toggle MARK_EDGE at the next boundary */
+
+/* The start of a tick: markers, this tick's length, directions, first pulses. */
+static void __attribute__((noinline)) tick_start(void)
+{
+    uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
+    struct out *e = nx;
+    nx = emit;
+    emit = e;
+    uint8_t units = e->units;
+    if (units != ocr_units) {
+        ocr_units = units;
+        OCR1A = (uint16_t)(units * UNIT_CYCLES - 1);
+    }
+    uint8_t pulses = e->m[0], t0 = 0;
+    if (pulses) {
+        if (e->dir != cur_dir) {
+            apply_dirs(e->dir);
+            cur_dir = e->dir;
+            __builtin_avr_delay_cycles(16);
+        }
+        pulse_on(pulses);
+        t0 = TCNT1L;
+    }
+    /* useful work while the pulses are high */
+    if (entry > stepper_latency_max && !late)
+        stepper_latency_max = entry;
+    uint8_t f = e->flags;
+    if (f & (OUT_POS | OUT_ABORT)) {
+        /* positions were set (at rest); a segment was abandoned (before the
+         * edge that ends it) */
+        if (f & OUT_ABORT)
+            MARK_ABORT_PIN = _BV(MARK_ABORT_BIT);
+        if (f & OUT_POS)
+            MARK_POS_PIN = _BV(MARK_POS_BIT);
+    }
+    /* MARK_EDGE toggles when this tick ends if it ends a segment (the harness
+     * reads the segment's number at that edge); motion_marker may add a start
+     * or stop of motion to that boundary */
+    if (f & OUT_SEG_END) {
+        sim_mailbox.seq = e->seq;
+        sim_mailbox.edge = EDGE_SEG_END;
+        edge_armed = 1;
+        OCR1C = EDGE_AT_NEXT_TICK;
+    } else if (edge_armed) {
+        edge_armed = 0;
+        OCR1C = EDGE_NEVER;
+    }
+    sched_clock_count += units;
+    uint8_t p = ++pwm;
+    if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
+    if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
+    if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
+    if (pulses) {
+        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
+            ;
+        pulse_off();
+        phase = 0;
+        phases_arm();
+    }
+}
+
+/* Motion starts or stops at the next tick boundary: MARK_EDGE toggles there
+ * (armed just after the next tick's computation, before that boundary). */
+static void __attribute__((noinline)) motion_marker(void)
+{
+    uint8_t next = nx->flags & OUT_MOTION;
+    if (next == (emit->flags & OUT_MOTION))
+        return;
+    if (!edge_armed)
+        sim_mailbox.edge = 0;
+    sim_mailbox.edge |= next ? EDGE_MOTION_START : EDGE_MOTION_STOP;
+    edge_armed = 1;
+    OCR1C = EDGE_AT_NEXT_TICK;
+}
+
+/* After a tick's computation: the interrupt's length so far, and whether the
+ * next tick has already begun (returns 1: start it now). */
+static volatile uint8_t computing, tick_missed;
+
+static uint8_t __attribute__((noinline)) tick_end(void)
+{
+    uint16_t used = TCNT1 + late;
+    if (tick_missed) {
+        tick_missed = 0;
+        stepper_overruns++;
+        used += (uint16_t)(ocr_units * UNIT_CYCLES);
+        late += (uint16_t)(ocr_units * UNIT_CYCLES);
+    } else {
+        late = 0;
+    }
+    if (used > stepper_isr_max_cycles)
+        stepper_isr_max_cycles = used;
+    return late != 0;
+}
+
+/* The computation runs with interrupts on, so compare B keeps its phases'
+ * time. Should it overrun into the next tick, that tick's interrupt only
+ * notes it and this one starts the tick at once (late), as silicon would
+ * (without masking compare A: simavr 1.6 never queues an interrupt that was
+ * enabled after its flag rose). Nothing lives across the calls, so the entry
+ * saves only what a call clobbers. */
+ISR(TIMER1_COMPA_vect)
+{
+    if (computing) {
+        tick_missed = 1;
+        return;
+    }
+    do {
+        tick_start();
+        computing = 1;
+        sei();
+        compute();
+        cli();
+        computing = 0;
+        motion_marker();
+    } while (tick_end());
+}

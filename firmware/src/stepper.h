@@ -1,0 +1,56 @@
+/* The step timer interrupt: executes the move queue, one tick at a time. */
+#ifndef STEPPER_H
+#define STEPPER_H
+#include <stdint.h>
+
+struct stepper_state {
+    int32_t pos[4];            /* logical step positions */
+    uint32_t items_done, segments_done;
+    uint32_t motion_ticks;     /* executed durations, clock units */
+    uint8_t enabled_mask, homed_mask;
+    uint8_t at_rest;           /* the last executed motion ended at rest */
+    uint8_t running;           /* 0: fault / estop: execute nothing */
+    uint8_t current;           /* kind of the executing timed item, or 0xFF */
+    uint8_t fan;
+    uint16_t heater_target[2]; /* set by queued SET_HEATER items (0.1 C) */
+    uint8_t heater_target_changed;
+    uint8_t wait_heater;       /* WAIT item executing: heater id */
+    uint16_t wait_tolerance;
+};
+extern volatile struct stepper_state st;
+
+/* set by the main loop */
+extern volatile uint8_t stepper_start_ok; /* the start rule allows leaving rest */
+extern volatile uint8_t stepper_wait_ok;  /* the waited-for heater is within tolerance */
+extern volatile uint8_t heater_duty[2], fan_duty;
+
+/* raised by the interrupt, taken by the main loop */
+struct stepper_report {
+    uint8_t error, axis;       /* ERR_* or 0 */
+    uint32_t item, segment;
+    int32_t value;
+    uint8_t homed;             /* a HOME item completed */
+    uint32_t homed_item;
+};
+extern volatile struct stepper_report stepper_report;
+
+void stepper_init(void);
+/* Stop now (fault, estop): the executing item is abandoned, nothing more runs. */
+void stepper_halt(void);
+void stepper_resume(void);
+void stepper_flush(uint32_t items_received);
+void stepper_disable_all(void);
+uint8_t stepper_moving(void);
+/* Ticks the executing segment or dwell has left (interrupts off). */
+uint32_t stepper_ticks_left(void);
+
+/* figures for the harness and the benchmark */
+extern volatile uint16_t stepper_isr_max_cycles;
+extern volatile uint16_t stepper_lost_steps;  /* pulses a tick had no room for */
+extern volatile uint16_t stepper_plan_stalls; /* ticks motion waited for a plan */
+extern volatile uint16_t stepper_overruns;    /* ticks computed after their start */
+extern volatile uint8_t stepper_latency_max;  /* cycles from a tick's compare match to its first work */
+/* Step positions now (mid-segment: the steps issued so far). */
+void stepper_positions(int32_t *out);
+
+#endif

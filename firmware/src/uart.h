@@ -1,0 +1,15 @@
+/* USART0 at BAUD, 8N1, interrupt driven ring buffers both ways. */
+#ifndef UART_H
+#define UART_H
+#include <stdint.h>
+
+#define UART_RX_SIZE 256 /* power of two */
+#define UART_TX_SIZE 256 /* power of two */
+
+void uart_init(void);
+int16_t uart_getc(void);              /* -1 when empty */
+uint16_t uart_tx_free(void);
+void uart_write(const uint8_t *data, uint16_t len); /* caller checks uart_tx_free() */
+uint8_t uart_rx_overruns(void);
+
+#endif

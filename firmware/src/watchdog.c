@@ -1,0 +1,92 @@
+/* The very first code after reset (.init3, before the C runtime clears RAM)
+ * drives the heater MOSFET gates low, takes MCUSR and stops the watchdog: after
+ * a watchdog reset the AVR keeps it running at its shortest period. */
+#include <avr/eeprom.h>
+#include <avr/io.h>
+#include <avr/wdt.h>
+
+#include "board_ramps14.h"
+#include "protocol_gen.h"
+#include "watchdog.h"
+
+#define SAVED_MAGIC 0xC0DEu
+
+struct saved {
+    uint16_t magic;
+    uint32_t items_done, segments_done;
+    uint16_t soft_boots;
+    uint16_t check;
+};
+
+static uint8_t mcusr_at_boot __attribute__((section(".noinit")));
+static struct saved saved __attribute__((section(".noinit")));
+static uint8_t prev_valid;
+static uint32_t prev_items, prev_segments, boot_id;
+static uint16_t EEMEM ee_boots;
+
+void early_init(void) __attribute__((naked, used, section(".init3")));
+void early_init(void)
+{
+    HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
+    BED_PORT &= (uint8_t)~_BV(BED_BIT);
+    HOTEND_DDR |= _BV(HOTEND_BIT);
+    BED_DDR |= _BV(BED_BIT);
+    mcusr_at_boot = MCUSR;
+    MCUSR = 0;
+    wdt_disable();
+}
+
+static uint16_t check_of(const struct saved *s)
+{
+    return (uint16_t)(s->magic ^ (uint16_t)s->items_done ^ (uint16_t)(s->items_done >> 16) ^
+                      (uint16_t)s->segments_done ^ (uint16_t)(s->segments_done >> 16) ^
+                      s->soft_boots ^ 0x5A5A);
+}
+
+uint8_t watchdog_boot_cause(void)
+{
+    if (mcusr_at_boot & _BV(WDRF))
+        return BOOT_WATCHDOG;
+    if (mcusr_at_boot & (_BV(PORF) | _BV(BORF)))
+        return BOOT_POWER_ON;
+    return mcusr_at_boot & _BV(EXTRF) ? BOOT_SOFT_RESET : BOOT_POWER_ON;
+}
+
+void watchdog_start(void)
+{
+    uint8_t cause = watchdog_boot_cause();
+    uint8_t valid = saved.magic == SAVED_MAGIC && saved.check == check_of(&saved);
+    prev_valid = valid && cause != BOOT_POWER_ON;
+    if (prev_valid) {
+        prev_items = saved.items_done;
+        prev_segments = saved.segments_done;
+    }
+    uint16_t soft = valid ? (uint16_t)(saved.soft_boots + 1) : 0;
+    uint16_t boots = eeprom_read_word(&ee_boots);
+    if (!prev_valid) {
+        boots++;
+        eeprom_update_word(&ee_boots, boots);
+    }
+    boot_id = ((uint32_t)boots * 2654435761UL) ^ ((uint32_t)soft * 40503UL) ^ 0x5EEDUL;
+    saved.magic = SAVED_MAGIC;
+    saved.soft_boots = soft;
+    watchdog_save(0, 0);
+    wdt_enable(WDTO_2S);
+}
+
+void watchdog_kick(void)
+{
+    wdt_reset();
+}
+
+void watchdog_save(uint32_t items_done, uint32_t segments_done)
+{
+    saved.items_done = items_done;
+    saved.segments_done = segments_done;
+    saved.check = check_of(&saved);
+}
+
+uint8_t watchdog_prev_valid(void) { return prev_valid; }
+uint32_t watchdog_prev_items(void) { return prev_items; }
+uint32_t watchdog_prev_segments(void) { return prev_segments; }
+uint32_t watchdog_boot_id(void) { return boot_id; }

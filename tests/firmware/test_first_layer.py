@@ -1,0 +1,71 @@
+"""Acceptance: the fixture's first layer, printed by `cdprhost print` over a pty against
+`cdprhost sim-device --firmware avr`, completes and executes exactly what the Python
+device executes for the same file: the same segments, step totals and device-clock times.
+
+The whole layer is printed (start G-code with homing and heating included: 4027 segments,
+142 s of device time); the AVR runs at up to 4x real time (simavr manages about 3x here),
+the Python model at 25x, so the test takes about a minute.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cdprhost.cli.main import main
+from cdprhost.sim import avr_device
+from tests.conftest import FIXTURE_GCODE
+from tests.e2e.conftest import first_layers
+
+pytestmark = [
+    pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminals as on Linux"),
+    pytest.mark.timeout(900),
+]
+
+SPEEDUP = {"python": "25", "avr": "4"}
+
+
+def _print_on(kind: str, gcode: Path, tmp: Path) -> tuple[dict, list[dict], dict]:
+    """Print ``gcode`` on a ``sim-device --firmware kind``: job summary, record, harness stats."""
+    record, stats = tmp / f"{kind}.jsonl", tmp / f"{kind}-stats.json"
+    cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--firmware", kind]
+    cmd += ["--speedup", SPEEDUP[kind], "--record", str(record)]
+    env = {**os.environ, avr_device.STATS_ENV: str(stats)}
+    dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        pty = dev.stdout.readline().strip() if dev.stdout else ""
+        assert pty.startswith("/dev/"), f"sim-device printed {pty!r}"
+        report = tmp / f"{kind}.json"
+        args = ["print", str(gcode), "--profile", "paper-prototype", "--port", pty]
+        assert main([*args, "--json", str(report)]) == 0
+    finally:
+        dev.send_signal(signal.SIGTERM)
+        assert dev.wait(timeout=60) == 0
+    rows = [json.loads(line) for line in record.read_text().splitlines() if line.strip()]
+    harness = json.loads(stats.read_text()) if stats.exists() else {}
+    return json.loads(report.read_text()), rows, harness
+
+
+def test_first_layer_on_the_avr_equals_the_python_device(tmp_path, monkeypatch):
+    if not FIXTURE_GCODE.exists():
+        pytest.skip(f"the fixture {FIXTURE_GCODE} is absent (../shared beside the repository)")
+    missing = avr_device.toolchain_missing()
+    if missing:
+        pytest.skip(missing)
+    avr_device.build()
+    monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
+    gcode = first_layers(FIXTURE_GCODE, tmp_path, 1)
+    py_job, py_rows, _ = _print_on("python", gcode, tmp_path)
+    avr_job, avr_rows, harness = _print_on("avr", gcode, tmp_path)
+    assert py_job["status"] == avr_job["status"] == "completed"
+    assert len(py_rows) > 4000  # the whole first layer, not a prefix
+    assert avr_rows == py_rows  # seq, step totals and device-clock time of every segment
+    # no timer interrupt lost for good, no pulse dropped
+    assert harness, "the harness wrote no figures"
+    assert harness.get("unrepaired", 0) == 0 and harness.get("lost_steps", 0) == 0, harness
