@@ -8,7 +8,7 @@ device reports. Temperatures are integers in tenths of a degree Celsius.
 Every field has a wire type with a fixed width (``u8``; ``u16``/``u32`` unsigned
 varints of at most 3/5 bytes; ``i16``/``i32`` zigzag varints; ``text`` a length byte
 and ASCII) and, where the protocol fixes one, a value range. The table
-(``Message.FIELDS``) is the single source for the codec, the device's checks and the
+(``Message.FIELDS``) is the single source for the codec (:mod:`firmware_protocol.message_codec`), the device's checks and the
 C header (:mod:`firmware_protocol.c_header`); PROTOCOL.md section 4 is its prose.
 Ranges that depend on the device (heater count, maximum temperatures, clock) are
 named by the ``Ident`` field that announces them and checked by the device.
@@ -17,141 +17,35 @@ named by the ``Ident`` field that announces them and checked by the device.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import IntEnum, IntFlag
-from typing import Any, ClassVar
+from typing import ClassVar
 
-from firmware_protocol.segments import (
-    SEG_BASE,
-    SegmentContext,
-    decode_segment,
-    encode_one_segment,
+# the codes and field types are part of the message table's vocabulary: re-exported here
+from firmware_protocol.codes import (  # noqa: F401
+    THERMAL_ERRORS,
+    BootCause,
+    ErrorCode,
+    EstopFlag,
+    EventCode,
+    Flag,
 )
-from firmware_protocol.varint import (
-    VarintError,
-    decode_sbounded,
-    decode_ubounded,
-    encode_svarint,
-    encode_uvarint,
+from firmware_protocol.fields import (  # noqa: F401
+    MAX_TEXT,
+    TYPE_RANGE,
+    F,
+    Field,
+    MessageError,
 )
+from firmware_protocol.segments import SEG_BASE
 
 PROTOCOL_MAJOR = 2
 PROTOCOL_MINOR = 0
 
 HOTEND, BED = 0, 1
-MAX_TEXT = 32  # bytes of a text field
 MAX_EVENT_VALUES = 4
 DWELL_MAX_S = 3600  # longest DWELL, in seconds of the device clock
 WATCHDOG_MS_RANGE = (100, 60_000)
 WATCHDOG_MS_DEFAULT = 2000
 TOLERANCE_DC_RANGE = (1, 1000)
-
-# value ranges of each wire type
-TYPE_RANGE: dict[str, tuple[int, int]] = {
-    "u8": (0, 0xFF),
-    "u16": (0, 0xFFFF),
-    "u32": (0, 0xFFFF_FFFF),
-    "i16": (-0x8000, 0x7FFF),
-    "i32": (-0x8000_0000, 0x7FFF_FFFF),
-}
-_BITS = {"u16": 16, "u32": 32, "i16": 16, "i32": 32}
-
-
-class MessageError(ValueError):
-    """A payload that does not parse (unknown opcode, truncated or out-of-range field).
-
-    ``offset`` is the payload byte where the offending message starts; ``opcode`` its opcode."""
-
-    def __init__(self, text: str, *, offset: int = 0, opcode: int = 0):
-        super().__init__(text)
-        self.offset = offset
-        self.opcode = opcode
-
-
-class Flag(IntFlag):
-    MOVING = 0x01
-    FAULT = 0x02
-    ESTOP = 0x04
-    HOMED = 0x08
-    ENABLED = 0x10
-    HEATING = 0x20
-    SYNCED = 0x40
-    WAITING = 0x80
-
-
-class ErrorCode(IntEnum):
-    UNDERRUN = 1
-    THERMAL_RUNAWAY = 2
-    ENDSTOP_HIT = 3
-    STEP_RATE = 4
-    QUEUE_OVERFLOW = 5
-    BAD_COMMAND = 6
-    ESTOP = 7
-    HEATER_RANGE = 8
-    HOMING_FAILED = 9
-    OVERTEMP = 10
-    WATCHDOG = 11
-    BAD_VALUE = 12
-
-
-#: faults a host must not clear on its own (the heater or its sensor needs a look first)
-THERMAL_ERRORS = frozenset({ErrorCode.THERMAL_RUNAWAY, ErrorCode.OVERTEMP})
-
-
-class EventCode(IntEnum):
-    HOMED = 1
-    HEATER_REACHED = 2
-    FAULT_CLEARED = 3
-
-
-class BootCause(IntEnum):
-    POWER_ON = 0
-    WATCHDOG = 1
-    SOFT_RESET = 2
-
-
-class EstopFlag(IntFlag):
-    """``EmergencyStop.flags``: what the stop leaves on (0: everything off)."""
-
-    KEEP_HEATERS = 0x01
-    KEEP_MOTORS = 0x02
-
-
-@dataclass(frozen=True)
-class Field:
-    """One field of the table.
-
-    ``type``: u8, u16, u32, i16, i32 or text. ``count`` > 1: a fixed array; with ``mask``
-    only the entries whose bit is set in the named earlier field are on the wire; with
-    ``counted`` a u8 count (0..count) precedes the entries. ``lo``/``hi``: the value
-    range the protocol fixes (within the type's own range), checked by every decoder;
-    ``limit``: a further bound that depends on the device (named by the ``Ident`` field
-    that announces it), checked by the device when it executes the command.
-    """
-
-    name: str
-    type: str
-    count: int = 1
-    mask: str | None = None
-    counted: bool = False
-    lo: int | None = None
-    hi: int | None = None
-    limit: str = ""
-    doc: str = ""
-
-    @property
-    def range(self) -> tuple[int, int]:
-        """The statically known range (type range narrowed by lo/hi when numeric)."""
-        lo, hi = TYPE_RANGE.get(self.type, (0, MAX_TEXT))
-        if self.lo is not None:
-            lo = max(lo, self.lo)
-        if self.hi is not None:
-            hi = min(hi, self.hi)
-        return lo, hi
-
-
-def F(name: str, type_: str, doc: str = "", **kw: Any) -> Field:
-    return Field(name, type_, doc=doc, **kw)
-
 
 # ------------------------------------------------------------------ messages
 
@@ -552,147 +446,3 @@ MESSAGES: tuple[type[Message], ...] = (
     Flow,
 )
 _BY_OPCODE: dict[int, type[Message]] = {cls.OPCODE: cls for cls in MESSAGES}
-
-
-# ------------------------------------------------------------------ codec
-
-
-def _check(msg: Message, f: Field, value: int) -> None:
-    lo, hi = f.range
-    if not (isinstance(value, int) and lo <= value <= hi):
-        raise MessageError(
-            f"{type(msg).__name__}.{f.name}: {value!r} outside {lo}..{hi}", opcode=msg.OPCODE
-        )
-
-
-def _put(out: bytearray, msg: Message, f: Field, value: int) -> None:
-    _check(msg, f, value)
-    if f.type == "u8":
-        out.append(value)
-    elif f.type[0] == "u":
-        out += encode_uvarint(value)
-    else:
-        out += encode_svarint(value)
-
-
-def _encode_fields(msg: Message) -> bytes:
-    out = bytearray((msg.OPCODE,))
-    for f in msg.FIELDS:
-        value = getattr(msg, f.name)
-        if f.type == "text":
-            raw = str(value).encode("ascii", "replace")[:MAX_TEXT]
-            out.append(len(raw))
-            out += raw
-        elif f.count == 1:
-            _put(out, msg, f, value)
-        elif f.counted:
-            if len(value) > f.count:
-                raise MessageError(f"{type(msg).__name__}.{f.name}: more than {f.count} values")
-            out.append(len(value))
-            for v in value:
-                _put(out, msg, f, v)
-        else:
-            if len(value) != f.count:
-                raise MessageError(f"{type(msg).__name__}.{f.name}: needs {f.count} values")
-            mask = getattr(msg, f.mask) if f.mask else (1 << f.count) - 1
-            for k, v in enumerate(value):
-                if mask >> k & 1:
-                    _put(out, msg, f, v)
-    return bytes(out)
-
-
-class _Reader:
-    __slots__ = ("buf", "pos")
-
-    def __init__(self, buf: bytes, pos: int):
-        self.buf = buf
-        self.pos = pos
-
-    def value(self, f: Field) -> int:
-        if f.type == "u8":
-            if self.pos >= len(self.buf):
-                raise MessageError(f"{f.name}: truncated byte field")
-            v = self.buf[self.pos]
-            self.pos += 1
-        elif f.type[0] == "u":
-            v, self.pos = decode_ubounded(self.buf, self.pos, _BITS[f.type])
-        else:
-            v, self.pos = decode_sbounded(self.buf, self.pos, _BITS[f.type])
-        lo, hi = f.range
-        if not lo <= v <= hi:
-            raise MessageError(f"{f.name}: {v} outside {lo}..{hi}")
-        return v
-
-    def text(self, f: Field) -> str:
-        n = self.value(_TEXT_LEN)
-        if self.pos + n > len(self.buf):
-            raise MessageError(f"{f.name}: truncated text")
-        self.pos += n
-        return self.buf[self.pos - n : self.pos].decode("ascii", "replace")
-
-
-_TEXT_LEN = Field("length", "u8", hi=MAX_TEXT)
-
-
-def _decode_fields(cls: type[Message], r: _Reader) -> Message:
-    values: dict[str, Any] = {}
-    for f in cls.FIELDS:
-        if f.type == "text":
-            values[f.name] = r.text(f)
-        elif f.count == 1:
-            values[f.name] = r.value(f)
-        elif f.counted:
-            n = r.value(Field(f.name, "u8", hi=f.count))
-            values[f.name] = tuple(r.value(f) for _ in range(n))
-        else:
-            mask = values[f.mask] if f.mask else (1 << f.count) - 1
-            values[f.name] = tuple(r.value(f) if mask >> k & 1 else 0 for k in range(f.count))
-    return cls(**values)
-
-
-def encode_messages(messages: list[Message] | tuple[Message, ...], ctx: SegmentContext) -> bytes:
-    """Encode messages into one payload, advancing the segment context."""
-    out = bytearray()
-    for msg in messages:
-        if isinstance(msg, Segment):
-            out += encode_one_segment(msg.ticks, msg.deltas, msg.ramp, ctx)
-        else:
-            out += _encode_fields(msg)
-    return bytes(out)
-
-
-def encode_message(msg: Message) -> bytes:
-    """A single non-segment message."""
-    return _encode_fields(msg)
-
-
-def decode_messages(payload: bytes, ctx: SegmentContext) -> list[Message]:
-    """Decode a whole payload; the context advances only if the payload parses.
-
-    Raises :class:`MessageError` (with the offset and opcode of the bad message) for an
-    unknown opcode, a truncated field, a varint longer than its field allows, or a value
-    outside its field's fixed range."""
-    work = ctx.copy()
-    out: list[Message] = []
-    pos = 0
-    op = 0
-    try:
-        while pos < len(payload):
-            op = payload[pos]
-            if op >= SEG_BASE:
-                ticks, deltas, ramp, nxt = decode_segment(payload, pos, work)
-                out.append(Segment(ticks, deltas, ramp))
-                pos = nxt
-                continue
-            cls = _BY_OPCODE.get(op)
-            if cls is None:
-                raise MessageError(f"unknown opcode 0x{op:02X}")
-            r = _Reader(payload, pos + 1)
-            out.append(_decode_fields(cls, r))
-            pos = r.pos
-    except (VarintError, MessageError, ValueError) as exc:
-        raise MessageError(
-            f"bad message 0x{op:02X} at payload byte {pos}: {exc}", offset=pos, opcode=op
-        ) from None
-    ctx.prev_ticks, ctx.prev_deltas = work.prev_ticks, work.prev_deltas
-    return out

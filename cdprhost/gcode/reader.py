@@ -15,7 +15,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from cdprhost.gcode import commands, extended, segment
+from cdprhost.gcode import commands, extended, segment, vocabulary
 from cdprhost.gcode.annotations import (
     Annotation,
     LayerStyle,
@@ -192,8 +192,8 @@ class _BlockReader:
                     text,
                     number,
                     self.path,
-                    strict_params=commands.KNOWN,
-                    flag_commands=commands.FLAG_COMMANDS,
+                    strict_params=vocabulary.KNOWN,
+                    flag_commands=vocabulary.FLAG_COMMANDS,
                 )
                 self._line_number(parsed, text, number)
             except GcodeError as exc:
@@ -236,7 +236,7 @@ class _BlockReader:
         passive: list[Event] = []
         for ev in events:
             match ev:
-                case (index, _, Other() as other) if commands.is_modal(other):
+                case (index, _, Other() as other) if vocabulary.is_modal(other):
                     r1 = int(np.searchsorted(row_index, index))
                     yield from self._run(rows.part(r0, r1), passive)
                     passive, r0 = [], r1
@@ -329,7 +329,7 @@ class _BlockReader:
         if other.word in TEXT_COMMANDS and other.text is None:  # e.g. "M117 X5" took the fast path
             text = parse_line(self.text(other.index), line, self.path).text
             other = replace(other, text=text)
-        if self.st.mute and other.word in commands.MUTABLE and self.st.muted(line):
+        if self.st.mute and other.word in vocabulary.MUTABLE and self.st.muted(line):
             return
         produced = commands.apply(other, line, self.st, fail)
         if produced:

@@ -39,6 +39,7 @@ from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker, decode_one
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.framing import MAX_PAYLOAD, Kind, encode_frame
+from firmware_protocol.message_codec import encode_message, encode_messages
 from firmware_protocol.messages import (
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
@@ -56,8 +57,6 @@ from firmware_protocol.messages import (
     Ident,
     Message,
     Segment,
-    encode_message,
-    encode_messages,
 )
 from firmware_protocol.segments import (
     SegmentBatch,

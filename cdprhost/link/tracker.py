@@ -22,6 +22,7 @@ from cdprhost.link.events import (
 )
 from cdprhost.link.flow import FlowReport
 from firmware_protocol.endpoint import Incoming
+from firmware_protocol.message_codec import decode_messages
 from firmware_protocol.messages import (
     Boot,
     EstopAck,
@@ -33,7 +34,6 @@ from firmware_protocol.messages import (
     Message,
     MessageError,
     Status,
-    decode_messages,
 )
 from firmware_protocol.messages import Error as ErrorReport
 from firmware_protocol.segments import SegmentContext

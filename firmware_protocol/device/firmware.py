@@ -13,16 +13,16 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable
-from typing import Any
 
-from firmware_protocol.device import machine as m
+from firmware_protocol.device import queue_items as m
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
-from firmware_protocol.device.machine import Machine, Observer, make_item
+from firmware_protocol.device.machine import Machine, Observer
+from firmware_protocol.device.queue_items import BadValue, item_of
 from firmware_protocol.device.record import SegmentRecord
 from firmware_protocol.endpoint import Endpoint
+from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
-    DWELL_MAX_S,
     MAX_EVENT_VALUES,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
@@ -30,9 +30,7 @@ from firmware_protocol.messages import (
     BootCause,
     ClearFault,
     Configure,
-    Dwell,
     EmergencyStop,
-    Enable,
     ErrorCode,
     EstopAck,
     EstopFlag,
@@ -43,19 +41,12 @@ from firmware_protocol.messages import (
     Flush,
     GetStatus,
     Hello,
-    Home,
     Ident,
     Identify,
     Message,
     MessageError,
     Segment,
-    SetFan,
-    SetHeater,
-    SetPosition,
     Status,
-    WaitHeater,
-    decode_messages,
-    encode_message,
 )
 from firmware_protocol.messages import Error as ErrorReport
 from firmware_protocol.segments import SegmentContext
@@ -485,42 +476,11 @@ class SimDevice:
         mc = self.machine
         mc.items_received += 1
         n = mc.items_received
-        item: Any
-        if isinstance(msg, Segment):
-            mc.segments_received += 1
-            item = make_item(
-                m.SEG,
-                n,
-                T,
-                seg=mc.segments_received,
-                ticks=msg.ticks,
-                deltas=msg.deltas,
-                ramp=msg.ramp,
-            )
-        elif isinstance(msg, Dwell):
-            if msg.ticks > DWELL_MAX_S * self.config.clock_hz:
-                return self._bad_value(n, msg.OPCODE, msg.ticks, T)
-            item = make_item(m.DWELL, n, T, ticks=msg.ticks)
-        elif isinstance(msg, Home):
-            item = make_item(m.HOME, n, T, arg=(msg.mask, msg.positions))
-        elif isinstance(msg, SetPosition):
-            item = make_item(m.SETPOS, n, T, arg=msg.steps)
-        elif isinstance(msg, Enable):
-            item = make_item(m.ENABLE, n, T, arg=(msg.mask,))
-        elif isinstance(msg, SetHeater):
-            if msg.heater >= HEATERS:
-                return self._bad_value(n, msg.OPCODE, msg.heater, T)
-            item = make_item(m.HEATER, n, T, arg=(msg.heater, msg.target_dc))
-        elif isinstance(msg, SetFan):
-            if msg.fan >= self.config.fans:
-                return self._bad_value(n, msg.OPCODE, msg.fan, T)
-            item = make_item(m.FAN, n, T, arg=(msg.fan, msg.value))
-        elif isinstance(msg, WaitHeater):
-            if msg.heater >= HEATERS:
-                return self._bad_value(n, msg.OPCODE, msg.heater, T)
-            item = make_item(m.WAIT, n, T, arg=(msg.heater, msg.tolerance_dc))
-        else:  # pragma: no cover - every QUEUED message is handled above
-            return self._bad_value(n, msg.OPCODE, 0, T)
+        seg = mc.segments_received + 1 if isinstance(msg, Segment) else 0
+        item = item_of(msg, n, T, seg, self.config.clock_hz, HEATERS, self.config.fans)
+        if isinstance(item, BadValue):
+            return self._bad_value(n, msg.OPCODE, item.value, T)
+        mc.segments_received += seg > 0
         return mc.enqueue(item, T)
 
     def close(self) -> None:

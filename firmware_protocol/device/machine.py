@@ -18,13 +18,26 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, NamedTuple, Protocol
+from typing import Protocol
 
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.heaters import Heater
+from firmware_protocol.device.queue_items import (
+    DWELL,
+    ENABLE,
+    FAN,
+    HEATER,
+    HOME,
+    SEG,
+    SETPOS,
+    TIMED,
+    U32,
+    WAIT,
+    Item,
+    _ends_block,
+)
 from firmware_protocol.device.record import SegmentRecord
 from firmware_protocol.messages import (
-    BED,
     HOTEND,
     THERMAL_ERRORS,
     Error,
@@ -35,27 +48,6 @@ from firmware_protocol.messages import (
     Message,
 )
 from firmware_protocol.segments import MAX_DELTA, RAMP_TO_REST, ramp_share, steps_done
-
-SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT = range(8)
-TIMED = (SEG, DWELL, HOME)
-U32 = 0xFFFF_FFFF
-
-
-class Item(NamedTuple):
-    """One queue slot (a tuple: cheap to make, nothing for the garbage collector to follow).
-
-    ``arg``: SETPOS the four positions; ENABLE (mask,); HOME (mask, positions);
-    HEATER/FAN/WAIT (index, value)."""
-
-    kind: int
-    item: int  # queue item number
-    seg: int  # segment number (segments only)
-    ticks: int
-    deltas: tuple[int, int, int, int]
-    ramp: int
-    arg: tuple[Any, ...]
-    arrival: float  # device time it was queued
-
 
 _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
     int(Flag.MOVING),
@@ -72,25 +64,6 @@ class Observer(Protocol):
     """Told when motion has come to rest and settled (the virtual mocap takes a picture)."""
 
     def on_settled(self, steps: tuple[int, ...], t: float, /) -> object: ...
-
-
-def make_item(
-    kind: int,
-    number: int,
-    arrival: float,
-    *,
-    seg: int = 0,
-    ticks: int = 0,
-    deltas: tuple[int, int, int, int] = (0, 0, 0, 0),
-    ramp: int = -1,
-    arg: tuple[Any, ...] = (),
-) -> Item:
-    return Item(kind, number, seg, ticks, deltas, ramp, arg, arrival)
-
-
-def _ends_block(item: Item) -> bool:
-    """A segment that ends at rest, or any item that is not a segment."""
-    return item.kind != SEG or item.ramp == RAMP_TO_REST or not any(item.deltas)
 
 
 class Machine:
@@ -516,20 +489,3 @@ class Machine:
             self.enabled_mask = 0
             self.homed_mask = 0  # motors released: positions are no longer trustworthy
         return reports
-
-
-__all__ = [
-    "BED",
-    "DWELL",
-    "ENABLE",
-    "FAN",
-    "HEATER",
-    "HOME",
-    "HOTEND",
-    "SEG",
-    "SETPOS",
-    "WAIT",
-    "Item",
-    "Machine",
-    "make_item",
-]

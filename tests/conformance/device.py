@@ -16,15 +16,13 @@ import serial
 from cdprhost.sim import avr_device
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.framing import Kind, encode_frame
+from firmware_protocol.message_codec import decode_messages, encode_message, encode_messages
 from firmware_protocol.messages import (
     GetStatus,
     Hello,
     Ident,
     Message,
     Status,
-    decode_messages,
-    encode_message,
-    encode_messages,
 )
 from firmware_protocol.segments import SegmentContext
 

@@ -8,7 +8,7 @@ import numpy as np
 import firmware_protocol.messages as M
 from cdprhost.link.host_link import HostLink
 from firmware_protocol.framing import Deframer, Kind, encode_frame
-from firmware_protocol.messages import decode_messages, encode_message
+from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.segments import SegmentBatch, SegmentContext
 
 

@@ -14,7 +14,11 @@ import serial
 
 from cdprhost.link import DeviceReset, open_link
 from firmware_protocol.framing import Deframer, Kind, encode_frame
-from firmware_protocol.messages import Hello, Ident, decode_messages, encode_message
+from firmware_protocol.message_codec import decode_messages, encode_message
+from firmware_protocol.messages import (
+    Hello,
+    Ident,
+)
 from firmware_protocol.segments import SegmentContext
 from firmware_protocol.streams import demo_stream, expected_record
 

@@ -11,7 +11,10 @@ import pytest
 import firmware_protocol.messages as M
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.framing import Deframer, Kind, encode_frame
-from firmware_protocol.messages import ErrorCode, decode_messages, encode_message
+from firmware_protocol.message_codec import decode_messages, encode_message, encode_messages
+from firmware_protocol.messages import (
+    ErrorCode,
+)
 from firmware_protocol.segments import SegmentContext
 
 
@@ -88,7 +91,7 @@ def test_the_handshake_reports_the_hello_nonce_in_the_ident():
 def test_a_position_past_the_32_bit_range_is_refused():
     s = Session()
     s.send(encode_message(M.SetPosition((2**31 - 10, 0, 0, 0))))
-    s.send(M.encode_messages([M.Segment(100_000, (20, 0, 0, 0), 255)], SegmentContext()))
+    s.send(encode_messages([M.Segment(100_000, (20, 0, 0, 0), 255)], SegmentContext()))
     s.step(dt=0.05)
     assert [e.code for e in s.errors()] == [ErrorCode.BAD_VALUE]
 

@@ -12,7 +12,10 @@ from hypothesis import strategies as st
 
 import firmware_protocol.messages as M
 from firmware_protocol.framing import Deframer, Kind, encode_frame
-from firmware_protocol.messages import MessageError, decode_messages, encode_messages
+from firmware_protocol.message_codec import decode_messages, encode_message, encode_messages
+from firmware_protocol.messages import (
+    MessageError,
+)
 from firmware_protocol.segments import SegmentContext
 
 PROTOCOL_MD = Path(M.__file__).with_name("PROTOCOL.md")
@@ -114,7 +117,7 @@ def test_encoding_refuses_values_outside_the_table(cls):
                 good[g.name] = () if g.counted else (0,) * g.count
         for bad in (lo - 1, hi + 1):
             with pytest.raises(MessageError):
-                M.encode_message(cls(**{**good, f.name: bad}))
+                encode_message(cls(**{**good, f.name: bad}))
 
 
 def test_the_c_header_compiles_for_the_host_and_the_avr(tmp_path):

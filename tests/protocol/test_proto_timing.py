@@ -12,7 +12,8 @@ from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.harness import VirtualBench
-from firmware_protocol.device.machine import SEG, Machine, make_item
+from firmware_protocol.device.machine import Machine
+from firmware_protocol.device.queue_items import SEG, make_item
 from firmware_protocol.device.record import SegmentRecord, read_record
 from firmware_protocol.messages import ErrorCode, Flag, SetHeater
 from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch

@@ -1,0 +1,54 @@
+"""Numeric codes of the protocol: status flags, errors, events, boot causes, e-stop flags."""
+
+from __future__ import annotations
+
+from enum import IntEnum, IntFlag
+
+
+class Flag(IntFlag):
+    MOVING = 0x01
+    FAULT = 0x02
+    ESTOP = 0x04
+    HOMED = 0x08
+    ENABLED = 0x10
+    HEATING = 0x20
+    SYNCED = 0x40
+    WAITING = 0x80
+
+
+class ErrorCode(IntEnum):
+    UNDERRUN = 1
+    THERMAL_RUNAWAY = 2
+    ENDSTOP_HIT = 3
+    STEP_RATE = 4
+    QUEUE_OVERFLOW = 5
+    BAD_COMMAND = 6
+    ESTOP = 7
+    HEATER_RANGE = 8
+    HOMING_FAILED = 9
+    OVERTEMP = 10
+    WATCHDOG = 11
+    BAD_VALUE = 12
+
+
+#: faults a host must not clear on its own (the heater or its sensor needs a look first)
+THERMAL_ERRORS = frozenset({ErrorCode.THERMAL_RUNAWAY, ErrorCode.OVERTEMP})
+
+
+class EventCode(IntEnum):
+    HOMED = 1
+    HEATER_REACHED = 2
+    FAULT_CLEARED = 3
+
+
+class BootCause(IntEnum):
+    POWER_ON = 0
+    WATCHDOG = 1
+    SOFT_RESET = 2
+
+
+class EstopFlag(IntFlag):
+    """``EmergencyStop.flags``: what the stop leaves on (0: everything off)."""
+
+    KEEP_HEATERS = 0x01
+    KEEP_MOTORS = 0x02
