@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 # the codes and field types are part of the message table's vocabulary: re-exported here
-from firmware_protocol.codes import (  # noqa: F401
+from firmware_protocol.codes import (
     THERMAL_ERRORS,
     BootCause,
     ErrorCode,
@@ -28,7 +28,7 @@ from firmware_protocol.codes import (  # noqa: F401
     EventCode,
     Flag,
 )
-from firmware_protocol.fields import (  # noqa: F401
+from firmware_protocol.fields import (
     MAX_TEXT,
     TYPE_RANGE,
     F,
@@ -446,3 +446,50 @@ MESSAGES: tuple[type[Message], ...] = (
     Flow,
 )
 _BY_OPCODE: dict[int, type[Message]] = {cls.OPCODE: cls for cls in MESSAGES}
+
+__all__ = [
+    "BED",
+    "DWELL_MAX_S",
+    "HOTEND",
+    "MAX_EVENT_VALUES",
+    "MAX_TEXT",
+    "MESSAGES",
+    "PROTOCOL_MAJOR",
+    "PROTOCOL_MINOR",
+    "THERMAL_ERRORS",
+    "TOLERANCE_DC_RANGE",
+    "TYPE_RANGE",
+    "WATCHDOG_MS_DEFAULT",
+    "WATCHDOG_MS_RANGE",
+    "Boot",
+    "BootCause",
+    "ClearFault",
+    "Configure",
+    "Dwell",
+    "EmergencyStop",
+    "Enable",
+    "Error",
+    "ErrorCode",
+    "EstopAck",
+    "EstopFlag",
+    "Event",
+    "EventCode",
+    "F",
+    "Field",
+    "Flag",
+    "Flow",
+    "Flush",
+    "GetStatus",
+    "Hello",
+    "Home",
+    "Ident",
+    "Identify",
+    "Message",
+    "MessageError",
+    "Segment",
+    "SetFan",
+    "SetHeater",
+    "SetPosition",
+    "Status",
+    "WaitHeater",
+]
