@@ -41,6 +41,7 @@ from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import heaters_off
+from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, Setup, prepare
 from cdprhost.preflight.run import preflight_prepared
@@ -100,6 +101,7 @@ class PrintJob:
     ):
         self.gcode = Path(gcode)
         self.profile = profile
+        self._plan_profile = profile  # capped to the device's step rate once connected
         self.model = MachineModel.from_profile(profile)
         self.link_factory = link_factory
         self.options = options or PrintOptions()
@@ -247,7 +249,10 @@ class PrintJob:
         streamer: Streamer | None = None
         try:
             check = prepare_device(machine)
-            for text in check.notices:
+            rate = link.identity.max_step_rate if link.identity else None
+            caps = caps_for_device(self.profile, rate)
+            self._plan_profile = caps.profile
+            for text in [*check.notices, *([caps.notice] if caps.notice else [])]:
                 self._emit(Notice(text))
                 result.notices.append(text)
             self._refine_resume(link, check.found, result)
@@ -261,7 +266,7 @@ class PrintJob:
             self._set(JobState.PRINTING)
             planned = segment_program(
                 self._items(),
-                self.profile,
+                self._plan_profile,
                 self.model,
                 clock_hz=streamer.clock_hz,
                 batch_moves=self.options.batch_moves,
@@ -297,7 +302,7 @@ class PrintJob:
             found,
             link.identity.boot_id,
             self._items,
-            self.profile,
+            self._plan_profile,
             self.model,
             clock_hz=link.identity.clock_hz,
             batch_moves=self.options.batch_moves,

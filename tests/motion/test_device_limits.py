@@ -1,0 +1,50 @@
+"""The host slows a print to the device's announced step rate, and says so."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.device_limits import STEP_RATE_MARGIN, caps_for_device
+from cdprhost.motion.direct import to_wire
+from cdprhost.motion.pipeline import segment_program
+from cdprhost.profile import load_profile
+from firmware_protocol.segments import peak_step_rates
+from tests.e2e.processes import square_part
+
+
+def test_a_profile_that_fits_is_unchanged():
+    profile = load_profile("paper-prototype")
+    caps = caps_for_device(profile, 10_000_000)
+    assert caps.profile is profile and caps.notice is None
+    assert caps_for_device(profile, None).profile is profile
+
+
+def test_a_slow_device_caps_module_and_filament_speed_and_says_so():
+    profile = load_profile("paper-prototype")
+    rate = 0.5 * profile.motion.module_max_velocity_mm_s * max(profile.drive.steps_per_mm)
+    caps = caps_for_device(profile, rate)
+    assert caps.notice and "planned with" in caps.notice and "module speed" in caps.notice
+    v = caps.profile.motion.module_max_velocity_mm_s
+    assert v * max(profile.drive.steps_per_mm) <= STEP_RATE_MARGIN * rate + 1e-9
+    assert profile.motion.module_max_velocity_mm_s > v  # the original is not touched
+
+
+def test_planned_segments_stay_under_the_announced_rate(tmp_path):
+    profile = load_profile("paper-prototype")
+    model = MachineModel.from_profile(profile)
+    path = square_part(tmp_path / "part.gcode", layers=2)
+    from cdprhost.motion.program import read_items
+
+    def peak(p):
+        out = [
+            peak_step_rates(to_wire(b), 100_000).max()
+            for b in segment_program(read_items(path, p, model), p, model, clock_hz=100_000)
+            if hasattr(b, "v_end")
+        ]
+        return float(np.max(out))
+
+    free = peak(profile)
+    rate = 0.6 * free  # a device slower than this file needs
+    capped = caps_for_device(profile, rate).profile
+    assert peak(capped) <= rate
