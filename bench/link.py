@@ -305,9 +305,16 @@ SECTIONS = ("clean", "light", "lossy", "cpu", "wire")
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="the first 6 layers instead of the whole fixture")
+    ap.add_argument(
+        "--quick", action="store_true", help="the first 6 layers instead of the whole fixture"
+    )
     ap.add_argument("--cpu-seconds", type=float, default=60.0)
     ap.add_argument("--skip-lossy-whole", action="store_true")
+    ap.add_argument(
+        "--lossy-speedup",
+        type=float,
+        help="section 3: skip the first-layer ladder, print the whole run at this speed-up",
+    )
     ap.add_argument(
         "--only",
         action="append",
@@ -351,10 +358,15 @@ def main() -> None:
             )
         if "lossy" in run:
             print(f"\n3. {LOSSY}: highest speed-up on the first layer, then the {what} there")
-            lossy_best, _ = ladder(one, LOSSY_LADDER, LOSSY, ref(one))
-            text = f"{lossy_best.speedup:g}x on the first layer" if lossy_best else "none"
-            if lossy_best and not args.skip_lossy_whole:
-                lossy_whole = trial(whole, lossy_best.speedup, LOSSY, ref(whole))
+            if args.lossy_speedup:
+                speed: float | None = args.lossy_speedup
+                text = "first-layer ladder skipped"
+            else:
+                lossy_best, _ = ladder(one, LOSSY_LADDER, LOSSY, ref(one))
+                speed = lossy_best.speedup if lossy_best else None
+                text = f"{speed:g}x on the first layer" if speed else "none"
+            if speed and not args.skip_lossy_whole:
+                lossy_whole = trial(whole, speed, LOSSY, ref(whole))
                 report(lossy_whole)
                 text += f"; {what} at {lossy_whole.speedup:g}x: " + (
                     "completed, record identical"

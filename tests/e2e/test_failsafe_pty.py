@@ -41,11 +41,13 @@ def _printing_point(gcode, state) -> ResumePoint:
 
 
 def _kill_mid_print(tmp_path, dev, gcode, state, *extra):
+    """Kill the host once it is printing; the resume point it left (read after the kill:
+    the host may have saved a newer one between the poll and the kill)."""
     host = start_print(gcode, dev.path, state, *extra)
-    point = _printing_point(gcode, state)
+    _printing_point(gcode, state)
     host.kill()
     host.wait(20)
-    return point
+    return ResumePoint.load(resume_path_for(gcode, state / "jobs"))
 
 
 def _status_after_watchdog(dev):
