@@ -14,8 +14,10 @@ Reported (with the machine's load average, since 2 cores are shared):
 4. host CPU per second of printing at 1x (the print process, over --cpu-seconds);
 5. wire bytes per segment on the fixture and the same motion as Marlin ASCII.
 
-Run: python bench/link.py [--quick] [--cpu-seconds 60] [--skip-lossy-whole]
-``--quick``: the clean ladder on the first 6 layers and no whole-fixture lossy run.
+   Baseline: the same link connected to a 1x device and idle, over as long, same run.
+Run: python bench/link.py [--quick] [--cpu-seconds 60] [--skip-lossy-whole] [--only SECTION]
+``--quick``: the first 6 layers instead of the whole fixture (ladder and lossy run);
+``--only clean|light|lossy|cpu|wire`` (repeatable) runs those sections only.
 Figures of the latest run are in the closing note of issue 12 (and docs in PROTOCOL.md).
 """
 
@@ -45,7 +47,7 @@ FIXTURE = (
 )
 PROFILE = "paper-prototype"
 CLEAN_LADDER = (100, 200, 350, 500, 700, 1000, 1400, 2000)
-LOSSY_LADDER = (1, 2, 3, 5, 8, 12, 20)
+LOSSY_LADDER = (5, 20, 50, 100, 200, 350, 500)
 LOSSY = "corrupt=0.01,drop=0.01"
 LIGHT = "corrupt=0.001,drop=0.001"
 
@@ -128,14 +130,18 @@ def trial(gcode: Path, speedup: float, faults: str, reference: list[dict]) -> Tr
                 str(tmp_path / "job.jsonl"),
             ],
             stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+            stderr=(tmp_path / "host.err").open("w"),
             env=env,
         )
         _, _, usage = os.wait4(host.pid, 0)
         wall = time.monotonic() - t0
         dev.send_signal(signal.SIGTERM)
         dev.wait(60)
-        result = json.loads(report.read_text()) if report.exists() else {"status": "crashed"}
+        if report.exists():
+            result = json.loads(report.read_text())
+        else:  # no summary: the host died; its last words say why
+            err = (tmp_path / "host.err").read_text(errors="replace").strip().splitlines()
+            result = {"status": "crashed", "reason": err[-1] if err else f"exit {host.returncode}"}
         rows = [json.loads(x) for x in record.read_text().splitlines()] if record.exists() else []
     return Trial(
         speedup,
@@ -175,9 +181,33 @@ def report(t: Trial) -> None:
         f"  {t.speedup:>6g}x {t.faults or 'clean':<26} {t.status:<9} "
         f"record {'identical' if t.record_equal else 'DIFFERS'}  segments {t.segments}  "
         f"retransmits {t.retransmits}  wall {t.wall_s:.1f} s  host cpu {t.host_cpu_s:.1f} s"
-        + (f"  ({t.reason[:90]})" if t.status != "completed" else ""),
+        + (f"  ({t.reason[:160]})" if t.status != "completed" else ""),
         flush=True,
     )
+
+
+def idle_link_cpu(seconds: float) -> float:
+    """The baseline of (4): host CPU per second of a link connected to a 1x device and
+    left idle (its keep-alive thread only), over ``seconds`` in this process."""
+    from cdprhost.link import open_link
+
+    dev = subprocess.Popen(
+        [sys.executable, "-m", "cdprhost", "sim-device", "--speedup", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    assert dev.stdout is not None
+    link = open_link(dev.stdout.readline().strip())
+    try:
+        c0, w0 = time.process_time(), time.monotonic()
+        time.sleep(seconds)
+        c1, w1 = time.process_time(), time.monotonic()
+    finally:
+        link.close()
+        dev.send_signal(signal.SIGTERM)
+        dev.wait(30)
+    return (c1 - c0) / (w1 - w0)
 
 
 def host_cpu_at_1x(gcode: Path, seconds: float) -> tuple[float, float]:
@@ -270,67 +300,102 @@ def wire_bytes(gcode: Path) -> dict[str, float]:
     }
 
 
+SECTIONS = ("clean", "light", "lossy", "cpu", "wire")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="first 6 layers only; no lossy whole run")
+    ap.add_argument(
+        "--quick", action="store_true", help="the first 6 layers instead of the whole fixture"
+    )
     ap.add_argument("--cpu-seconds", type=float, default=60.0)
     ap.add_argument("--skip-lossy-whole", action="store_true")
+    ap.add_argument(
+        "--lossy-speedup",
+        type=float,
+        help="section 3: skip the first-layer ladder, print the whole run at this speed-up",
+    )
+    ap.add_argument(
+        "--only",
+        action="append",
+        choices=SECTIONS,
+        help="run only these sections (repeatable; to repeat a noisy figure)",
+    )
     args = ap.parse_args()
+    run = set(args.only or SECTIONS)
     load = os.getloadavg()
     print(
-        f"cdprhost link benchmark; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} on {os.cpu_count()} cores"
+        f"cdprhost link benchmark; load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f} "
+        f"on {os.cpu_count()} cores"
     )
+    summary: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         six = first_layers(FIXTURE, Path(tmp), 6)
         one = first_layers(FIXTURE, Path(tmp), 1)
         whole = six if args.quick else FIXTURE
+        what = "first 6 layers" if args.quick else "whole fixture"
+        refs: dict[Path, list[dict]] = {}
 
-        print(
-            f"\n1. clean link, {'first 6 layers' if args.quick else 'whole fixture'}: highest speed-up with zero underruns"
-        )
-        ref_whole = reference_record(whole)
-        best, _ = ladder(whole, CLEAN_LADDER, "", ref_whole)
-        clean_best = best.speedup if best else 0
+        def ref(path: Path) -> list[dict]:
+            if path not in refs:
+                refs[path] = reference_record(path)
+            return refs[path]
 
-        print(f"\n2. first 6 layers at 1000x with {LIGHT}")
-        ref_six = ref_whole if whole is six else reference_record(six)
-        light = trial(six, 1000, LIGHT, ref_six)
-        report(light)
-
-        print(f"\n3. {LOSSY}: highest speed-up on the first layer, then the whole fixture there")
-        ref_one = reference_record(one)
-        lossy_best, _ = ladder(one, LOSSY_LADDER, LOSSY, ref_one)
-        lossy_whole = None
-        if lossy_best and not (args.quick or args.skip_lossy_whole):
-            lossy_whole = trial(FIXTURE, lossy_best.speedup, LOSSY, ref_whole)
-            report(lossy_whole)
-
-        print(f"\n4. host CPU at 1x over {args.cpu_seconds:g} s of printing")
-        cpu, wall = host_cpu_at_1x(one, args.cpu_seconds)
-        print(f"  {100 * cpu:.2f} % of a core ({cpu * wall:.2f} s over {wall:.0f} s)")
-
-        print("\n5. wire bytes per segment (fixture)")
-        wb = wire_bytes(whole)
-        print(
-            f"  {wb['segments']} segments, {wb['motion_s']:.0f} s of motion; payload "
-            f"{wb['payload_per_segment']:.2f} B, frames {wb['wire_per_segment']:.2f} B "
-            f"(target <= 12); ASCII {wb['ascii_per_segment']:.1f} B "
-            f"({wb['ascii_per_segment'] / wb['wire_per_segment']:.1f}x)"
-        )
+        if "clean" in run:
+            print(f"\n1. clean link, {what}: highest speed-up with zero underruns")
+            best, _ = ladder(whole, CLEAN_LADDER, "", ref(whole))
+            summary.append(
+                f"clean, {what}: {best.speedup if best else 0:g}x with zero underruns "
+                "(target >= 500x)"
+            )
+        if "light" in run:
+            print(f"\n2. first 6 layers at 1000x with {LIGHT}")
+            light = trial(six, 1000, LIGHT, ref(six))
+            report(light)
+            summary.append(
+                f"6 layers, 1000x, {LIGHT}: "
+                + ("completed, record identical" if light.ok else "FAILED: " + light.status)
+            )
+        if "lossy" in run:
+            print(f"\n3. {LOSSY}: highest speed-up on the first layer, then the {what} there")
+            if args.lossy_speedup:
+                speed: float | None = args.lossy_speedup
+                text = "first-layer ladder skipped"
+            else:
+                lossy_best, _ = ladder(one, LOSSY_LADDER, LOSSY, ref(one))
+                speed = lossy_best.speedup if lossy_best else None
+                text = f"{speed:g}x on the first layer" if speed else "none"
+            if speed and not args.skip_lossy_whole:
+                lossy_whole = trial(whole, speed, LOSSY, ref(whole))
+                report(lossy_whole)
+                text += f"; {what} at {lossy_whole.speedup:g}x: " + (
+                    "completed, record identical"
+                    if lossy_whole.ok
+                    else f"FAILED: {lossy_whole.status}"
+                )
+            summary.append(f"{LOSSY}: {text}")
+        if "cpu" in run:
+            print(f"\n4. host CPU at 1x over {args.cpu_seconds:g} s of printing")
+            cpu, wall = host_cpu_at_1x(one, args.cpu_seconds)
+            print(f"  printing: {100 * cpu:.2f} % of a core ({cpu * wall:.2f} s over {wall:.0f} s)")
+            idle = idle_link_cpu(args.cpu_seconds)
+            print(f"  baseline, the same link connected and idle: {100 * idle:.2f} % of a core")
+            summary.append(
+                f"host CPU at 1x: {100 * cpu:.2f} % of a core (target <= 2 %); idle connected "
+                f"link {100 * idle:.2f} %: printing costs {100 * (cpu - idle):.2f} % more"
+            )
+        if "wire" in run:
+            print(f"\n5. wire bytes per segment ({what})")
+            wb = wire_bytes(whole)
+            print(
+                f"  {wb['segments']} segments, {wb['motion_s']:.0f} s of motion; payload "
+                f"{wb['payload_per_segment']:.2f} B, frames {wb['wire_per_segment']:.2f} B "
+                f"(target <= 12); ASCII {wb['ascii_per_segment']:.1f} B "
+                f"({wb['ascii_per_segment'] / wb['wire_per_segment']:.1f}x)"
+            )
     print("\nsummary")
-    print(
-        f"  clean, {'6 layers' if args.quick else 'whole fixture'}: {clean_best:g}x with zero underruns (target >= 500x)"
-    )
-    print(
-        f"  6 layers, 1000x, {LIGHT}: {'completed, record identical' if light.ok else 'FAILED: ' + light.status}"
-    )
-    lossy_text = f"{lossy_best.speedup:g}x on the first layer" if lossy_best else "none"
-    if lossy_whole is not None:
-        lossy_text += f"; whole fixture at {lossy_whole.speedup:g}x: " + (
-            "completed, record identical" if lossy_whole.ok else f"FAILED: {lossy_whole.status}"
-        )
-    print(f"  {LOSSY}: {lossy_text}")
-    print(f"  host CPU at 1x: {100 * cpu:.2f} % of a core (target <= 2 %)")
+    for line in summary:
+        print(f"  {line}")
     load = os.getloadavg()
     print(f"  load average at the end {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}")
 

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from firmware_protocol.framing import MAX_PAYLOAD, Deframer, Frame, Kind, encode_frame
-from firmware_protocol.reliability import Receiver, RtoEstimator, Sender
+from firmware_protocol.reliability import MAX_BACKOFF, Receiver, RtoEstimator, Sender
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,7 @@ class Endpoint:
         rto_initial: float = 0.25,
         rto_floor: float = 0.02,
         rto_ceiling: float = 1.0,
+        rto_max_backoff: int = MAX_BACKOFF,
         nak_holdoff: float = 0.01,
         accept: Callable[[bytes], bool] | None = None,
         flow: Callable[[], bytes] | None = None,
@@ -63,7 +64,7 @@ class Endpoint:
     ):
         self._window = window
         self.window_bytes = window_bytes
-        self._rto_args = (rto_initial, rto_floor, rto_ceiling)
+        self._rto_args = (rto_initial, rto_floor, rto_ceiling, rto_max_backoff)
         self.nak_holdoff = nak_holdoff
         self.accept = accept
         self.flow = flow

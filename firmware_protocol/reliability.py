@@ -23,9 +23,16 @@ MAX_BACKOFF = 4
 class RtoEstimator:
     """Adaptive retransmission timeout (RFC 6298) with floor/ceiling and backoff."""
 
-    def __init__(self, initial: float = 0.25, floor: float = 0.02, ceiling: float = 1.0):
+    def __init__(
+        self,
+        initial: float = 0.25,
+        floor: float = 0.02,
+        ceiling: float = 1.0,
+        max_backoff: int = MAX_BACKOFF,
+    ):
         self.floor = floor
         self.ceiling = ceiling
+        self.max_backoff = max(1, max_backoff)
         self.srtt: float | None = None
         self.rttvar = 0.0
         self._base = initial
@@ -46,9 +53,10 @@ class RtoEstimator:
         self._backoff = 1
 
     def back_off(self) -> None:
-        """Double the timeout after a timeout, at most 4x: a serial line loses frames to
-        noise, not congestion, so waiting longer only slows the retry."""
-        self._backoff = min(self._backoff * 2, MAX_BACKOFF)
+        """Double the timeout after a timeout, at most ``max_backoff`` times (4x by default;
+        1: never): a serial line loses frames to noise, not congestion, so waiting longer
+        only slows the retry."""
+        self._backoff = min(self._backoff * 2, self.max_backoff)
 
     def reset_backoff(self) -> None:
         self._backoff = 1

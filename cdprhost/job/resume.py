@@ -28,6 +28,7 @@ from typing import Any
 
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
+from cdprhost.motion.prepared import Setup
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +53,8 @@ class ResumePoint:
     boot_id: int = 0  # of the device that executed it
     first_segment: int = 0  # device number of the job's first planned segment
     plan: dict[str, Any] = field(default_factory=dict)  # how the job built its program
+    setup: dict[str, Any] = field(default_factory=dict)  # placement options (`Setup.to_json`)
+    placement: tuple[float, float] | None = None  # the X/Y shift they gave (mm)
     saved_at: str = ""
     version: int = VERSION
 
@@ -69,14 +72,34 @@ class ResumePoint:
             if not isinstance(data, dict):
                 raise ValueError("not a JSON object")
             known = {f for f in cls.__dataclass_fields__}
-            return cls(**{k: v for k, v in data.items() if k in known})
+            point = cls(**{k: v for k, v in data.items() if k in known})
+            point.job_setup()  # validated here: a malformed setup is not a resume point
+            return point
         except (OSError, ValueError, TypeError) as exc:
             raise InputError(f"not a resume point: {exc}", source=str(path)) from None
+
+    def job_setup(self) -> Setup:
+        """The placement options the job that saved this point ran with."""
+        return Setup.from_json(self.setup) if self.setup else Setup()
 
     @property
     def exact(self) -> bool:
         """Does it name a point on a move (``--resume``), not just a layer?"""
         return self.point is not None and self.last_line is not None and self.last_line > 0
+
+
+def resume_setup(point: ResumePoint, requested: Setup) -> Setup:
+    """The setup a ``--resume`` of ``point`` runs with: the saved job's own, so the same
+    program is rebuilt. Options given again must be the same; others are refused."""
+    saved = point.job_setup()
+    if requested.default or requested == saved:
+        return saved
+    raise InputError(
+        f"the resume point was saved by a print with placement options {saved.options()!r}; "
+        f"--resume continues that program, so give the same options or none "
+        f"(given: {requested.options()!r})",
+        source="--resume",
+    )
 
 
 def state_dir() -> Path:

@@ -33,6 +33,7 @@ from cdprhost.job.resume import (
     file_sha256,
     remove_resume_point,
     resume_path_for,
+    resume_setup,
 )
 from cdprhost.job.resume_items import PlanSpec, Restart
 from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
@@ -115,6 +116,11 @@ class PrintJob:
         self._prepared: Prepared | None = None
         self._t0 = 0.0  # the device's motion clock when streaming began
         self.plan = self._plan_spec()
+        point = self.options.resume
+        # --resume rebuilds the saved job's program: its placement options, not new ones
+        self.setup = (
+            self.options.setup if point is None else resume_setup(point, self.options.setup)
+        )
 
     # ------------------------------------------------------------ requests
     def request_pause(self) -> None:
@@ -164,7 +170,19 @@ class PrintJob:
 
     def _prepare(self) -> Prepared:
         if self._prepared is None:
-            self._prepared = prepare(self.gcode, self.profile, self.model, self.options.setup)
+            prepared = prepare(self.gcode, self.profile, self.model, self.setup)
+            point = self.options.resume
+            if point is not None and point.placement is not None:
+                saved = (float(point.placement[0]), float(point.placement[1]))
+                if max(abs(a - b) for a, b in zip(saved, prepared.placement)) > 1e-6:
+                    raise CdprError(
+                        f"{self.gcode}: --resume: the placement options "
+                        f"{self.setup.options()!r} now shift the part by "
+                        f"{prepared.placement[0]:.3f},{prepared.placement[1]:.3f} mm, the "
+                        f"interrupted print by {saved[0]:.3f},{saved[1]:.3f} mm (another "
+                        "profile?); resume from a layer instead"
+                    )
+            self._prepared = prepared
         return self._prepared
 
     def _items(self, plan: PlanSpec | None = None) -> Iterable[Any]:
@@ -330,6 +348,8 @@ class PrintJob:
             log_problem=lambda: self.log.problem,
             idle_timeout_s=self.options.idle_timeout_s,
             e_offset=self._e_offset,
+            setup=self.setup,
+            placement=self._prepare().placement,
         )
 
     # ------------------------------------------------------------- endings

@@ -39,6 +39,7 @@ from cdprhost.kinematics.statics import tensions
 from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
 from cdprhost.machine.commands import device_messages
 from cdprhost.motion.direct import to_wire
+from cdprhost.motion.prepared import Setup
 from cdprhost.motion.segments import PlannedSegments
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.messages import BED, HOTEND, SetHeater
@@ -104,6 +105,8 @@ class StreamContext:
     log_problem: Callable[[], str | None]
     idle_timeout_s: float = 30.0
     e_offset: Callable[[], float] = lambda: 0.0
+    setup: Setup = field(default_factory=Setup)  # placement options the program was built with
+    placement: tuple[float, float] = (0.0, 0.0)  # the X/Y shift they gave (mm)
 
 
 class Streamer:
@@ -362,4 +365,6 @@ class Streamer:
             boot_id=self.boot_id,
             first_segment=self.first_segment,
             plan=self.ctx.plan.to_json(),
+            setup=self.ctx.setup.to_json(),
+            placement=self.ctx.placement,
         )

@@ -75,6 +75,19 @@ START_WINDOW = 8
 MIN_WINDOW = 8
 CLOCK_SYNC_S = 0.06  # clock samples this far apart before streaming
 STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a lossy line
+# The retransmission timeout never goes below this. The estimator (SRTT + 4 RTTVAR, wire
+# time included) sets it above the measured round trip; the floor only matters on a fast
+# line (a pty, USB) where the round trip is ~1 ms: there, on a noisy line, most timeouts
+# are lost ACKs and each one stalls the stream for the whole timeout. At 1 % corrupt +
+# 1 % drop a 10 ms floor spent most of the time waiting (the first layer underran at 20x,
+# 0 of 6 trials); 3 ms printed it (3 of 4). A spurious timeout costs one window resent.
+RTO_FLOOR_S = 0.003
+# No exponential backoff on the host: a timeout is a lost frame or ACK (noise), and a
+# longer wait only stretches the stall; a slow device still raises the RTO through the
+# estimator (each ACK of a frame sent once is a sample). With 4x backoff the first layer
+# at 1 %+1 % and 10x underran 3 of 3 times (strings of lost ACKs: each try fails ~80 %
+# at 2 % per byte); without, it printed 3 of 3.
+RTO_MAX_BACKOFF = 1
 
 
 class Transport(Protocol):
@@ -117,7 +130,8 @@ class HostLink:
         self._ep = Endpoint(
             window=min(START_WINDOW, self._max_window),
             rto_initial=min(0.05, self.timeout_s / 4),
-            rto_floor=0.01,
+            rto_floor=RTO_FLOOR_S,
+            rto_max_backoff=RTO_MAX_BACKOFF,
             rto_ceiling=min(0.25, self.timeout_s / 4),
             byte_time=10.0 / baud if baud else 0.0,
         )

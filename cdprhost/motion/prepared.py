@@ -41,6 +41,47 @@ class Setup:
     retarget: bool = False
     cancel_objects: tuple[str, ...] = ()
 
+    @property
+    def default(self) -> bool:
+        """Nothing asked: the file as it is."""
+        return self == Setup()
+
+    def options(self) -> str:
+        """The command-line options that ask for this setup (``"none"`` for the default)."""
+        parts = ["--center"] if self.center else []
+        if self.offset != (0.0, 0.0):
+            parts.append(f"--offset {self.offset[0]:g},{self.offset[1]:g}")
+        parts += ["--retarget"] if self.retarget else []
+        parts += [f"--cancel-object {name}" for name in self.cancel_objects]
+        return " ".join(parts) or "none"
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "center": self.center,
+            "offset": [self.offset[0], self.offset[1]],
+            "retarget": self.retarget,
+            "cancel_objects": list(self.cancel_objects),
+        }
+
+    @classmethod
+    def from_json(cls, data: object) -> Setup:
+        """The setup saved by :meth:`to_json`; ValueError naming the field when malformed."""
+        if not isinstance(data, dict):
+            raise ValueError("setup: not a JSON object")
+        center, retarget = data.get("center", False), data.get("retarget", False)
+        offset, cancel = data.get("offset", [0.0, 0.0]), data.get("cancel_objects", [])
+        if not isinstance(center, bool) or not isinstance(retarget, bool):
+            raise ValueError("setup: center and retarget must be true or false")
+        if (
+            not isinstance(offset, list)
+            or len(offset) != 2
+            or not all(isinstance(v, (int, float)) and np.isfinite(v) for v in offset)
+        ):
+            raise ValueError("setup: offset must be two finite numbers")
+        if not isinstance(cancel, list) or not all(isinstance(n, str) for n in cancel):
+            raise ValueError("setup: cancel_objects must be a list of names")
+        return cls(center, (float(offset[0]), float(offset[1])), retarget, tuple(cancel))
+
 
 def build_volume_centre(profile: MachineProfile) -> tuple[float, float]:
     """The build triangle's centre (machine X/Y = 0) in the G-code frame."""

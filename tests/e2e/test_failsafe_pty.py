@@ -40,12 +40,14 @@ def _printing_point(gcode, state) -> ResumePoint:
     return wait_until(ready, 120, "a resume point written while printing")  # type: ignore[return-value]
 
 
-def _kill_mid_print(tmp_path, dev, gcode, state):
-    host = start_print(gcode, dev.path, state)
-    point = _printing_point(gcode, state)
+def _kill_mid_print(tmp_path, dev, gcode, state, *extra):
+    """Kill the host once it is printing; the resume point it left (read after the kill:
+    the host may have saved a newer one between the poll and the kill)."""
+    host = start_print(gcode, dev.path, state, *extra)
+    _printing_point(gcode, state)
     host.kill()
     host.wait(20)
-    return point
+    return ResumePoint.load(resume_path_for(gcode, state / "jobs"))
 
 
 def _status_after_watchdog(dev):
@@ -77,11 +79,15 @@ def test_killed_host_trips_the_watchdog_then_a_new_print_completes(tmp_path):
         assert "Traceback" not in err
 
 
-def test_killed_host_then_resume_continues_exactly_where_the_device_stopped(tmp_path):
+@pytest.mark.parametrize("placement", [(), ("--center",)], ids=["as-sliced", "centred"])
+def test_killed_host_then_resume_continues_exactly_where_the_device_stopped(tmp_path, placement):
+    """The resumed job rebuilds the dead job's program (its placement too: ``--resume``
+    alone continues a ``--center`` print at the same physical point)."""
     state = tmp_path / "state"
     gcode = square_part(tmp_path / "part.gcode")
     with SimDeviceProcess(tmp_path, "--speedup", SPEEDUP) as dev:
-        point = _kill_mid_print(tmp_path, dev, gcode, state)
+        point = _kill_mid_print(tmp_path, dev, gcode, state, *placement)
+        assert point.job_setup().center is bool(placement)
         identity, st = _status_after_watchdog(dev)
         stopped_at = st.segments_done  # the device's own last executed segment
         assert stopped_at >= point.device_segment

@@ -26,7 +26,7 @@ from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
-from cdprhost.job.resume import find_resume_point, log_path_for
+from cdprhost.job.resume import find_resume_point, log_path_for, resume_setup
 from cdprhost.job.state import JobState, StateChanged
 
 BAUD_RANGE = (50, 10_000_000)
@@ -133,8 +133,10 @@ def run(args: argparse.Namespace) -> int:
                 source=str(gcode),
             )
         point = saved
+        setup = resume_setup(saved, setup_from_args(args))  # refuses conflicting options
+        placed = "" if setup.default else f", placement {setup.options()}"
         question = (
-            f"Resume {gcode.name} at line {saved.last_line} (layer {saved.last_layer}, "
+            f"Resume {gcode.name} at line {saved.last_line} (layer {saved.last_layer}{placed}, "
             f"stopped: {saved.reason}): the machine homes, heats, and lowers onto the part. "
             "Is the part still on the bed and clear?"
         )
