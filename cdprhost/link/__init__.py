@@ -64,6 +64,7 @@ from cdprhost.link.errors import (
     PortNotFound,
     PortVanished,
     ProtocolMismatch,
+    StepRateError,
 )
 from cdprhost.link.events import (
     DeviceErrorEvent,
@@ -74,7 +75,7 @@ from cdprhost.link.events import (
     LinkCounters,
 )
 from cdprhost.link.flow import Watermarks
-from cdprhost.link.host_link import HostLink, StepRateError
+from cdprhost.link.host_link import HostLink
 
 __all__ = [
     "DeviceErrorEvent",

@@ -67,3 +67,7 @@ class DeviceFault(LinkError):
 
 class LinkTimeout(LinkError):
     """The device is alive but a requested condition did not happen in time."""
+
+
+class StepRateError(LinkError, ValueError):
+    """A segment over the device's announced step rate (the host checks before sending)."""

@@ -17,14 +17,11 @@ for room at most ``max_wait`` seconds.
 from __future__ import annotations
 
 import logging
-import os
 import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any, Protocol
-
-import numpy as np
 
 from cdprhost.link.errors import (
     DeviceFault,
@@ -32,62 +29,41 @@ from cdprhost.link.errors import (
     DeviceSilent,
     LinkError,
     LinkTimeout,
-    ProtocolMismatch,
 )
 from cdprhost.link.events import DeviceProgress, DeviceStatus, Identity, LinkCounters, LinkEvent
 from cdprhost.link.flow import TimeFlow, Watermarks
-from cdprhost.link.tracker import DeviceTracker, decode_one
+from cdprhost.link.segment_feed import SegmentFeed
+from cdprhost.link.session_setup import SessionSetup
+from cdprhost.link.tracker import DeviceTracker
+from cdprhost.link.tuning import (
+    MAX_WINDOW,
+    MIN_PAYLOAD,
+    MIN_WINDOW,
+    RTO_FLOOR_S,
+    RTO_MAX_BACKOFF,
+    SLICE_S,
+    START_WINDOW,
+    STATUS_TIMEOUTS,
+)
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.framing import MAX_PAYLOAD, Kind, encode_frame
 from firmware_protocol.message_codec import encode_message, encode_messages
 from firmware_protocol.messages import (
-    PROTOCOL_MAJOR,
-    PROTOCOL_MINOR,
     WATCHDOG_MS_DEFAULT,
     WATCHDOG_MS_RANGE,
-    Boot,
     ClearFault,
-    Configure,
     EmergencyStop,
     ErrorCode,
     Flag,
-    Flush,
     GetStatus,
-    Hello,
-    Ident,
     Message,
     Segment,
 )
 from firmware_protocol.segments import (
-    SegmentBatch,
     SegmentContext,
-    encode_segments,
-    peak_step_rates,
 )
 
 log = logging.getLogger(__name__)
-
-SLICE_S = 0.02
-MIN_PAYLOAD = 24
-START_PAYLOAD = 64  # frames start small and grow while the line is clean
-MAX_WINDOW = 127
-START_WINDOW = 8
-MIN_WINDOW = 8
-CLOCK_SYNC_S = 0.06  # clock samples this far apart before streaming
-STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a lossy line
-# The retransmission timeout never goes below this. The estimator (SRTT + 4 RTTVAR, wire
-# time included) sets it above the measured round trip; the floor only matters on a fast
-# line (a pty, USB) where the round trip is ~1 ms: there, on a noisy line, most timeouts
-# are lost ACKs and each one stalls the stream for the whole timeout. At 1 % corrupt +
-# 1 % drop a 10 ms floor spent most of the time waiting (the first layer underran at 20x,
-# 0 of 6 trials); 3 ms printed it (3 of 4). A spurious timeout costs one window resent.
-RTO_FLOOR_S = 0.003
-# No exponential backoff on the host: a timeout is a lost frame or ACK (noise), and a
-# longer wait only stretches the stall; a slow device still raises the RTO through the
-# estimator (each ACK of a frame sent once is a sample). With 4x backoff the first layer
-# at 1 %+1 % and 10x underran 3 of 3 times (strings of lost ACKs: each try fails ~80 %
-# at 2 % per byte); without, it printed 3 of 3.
-RTO_MAX_BACKOFF = 1
 
 
 class Transport(Protocol):
@@ -99,11 +75,7 @@ class Transport(Protocol):
     def close(self) -> None: ...
 
 
-class StepRateError(LinkError, ValueError):
-    """A segment over the device's announced step rate (the host checks before sending)."""
-
-
-class HostLink:
+class HostLink(SessionSetup, SegmentFeed):
     """See the package docstring (:mod:`cdprhost.link`) for the API summary."""
 
     def __init__(
@@ -136,10 +108,10 @@ class HostLink:
             byte_time=10.0 / baud if baud else 0.0,
         )
         self._ctx = SegmentContext()
-        self._max_payload = max_payload
+        self._max_payload: int = max_payload
         self._payload_limit = max_payload
-        self._dev = DeviceTracker(getattr(transport, "name", "port"))
-        self._flow = TimeFlow(self.watermarks)
+        self._dev: DeviceTracker = DeviceTracker(getattr(transport, "name", "port"))
+        self._flow: TimeFlow = TimeFlow(self.watermarks)
         self._items_sent = 0
         self._segments_sent = 0
         now = transport.now()
@@ -224,123 +196,6 @@ class HostLink:
 
     def now(self) -> float:
         return self._t.now()
-
-    # ------------------------------------------------------------------ handshake
-
-    def handshake(self) -> Identity:
-        """HELLO with a fresh nonce until the device answers IDENT; check the protocol version;
-        measure the device clock; configure the watchdog, start threshold and flow reports."""
-        with self._locked():
-            nonce = int.from_bytes(os.urandom(2), "little") or 1
-            self._ep.reset_session()
-            self._ep.sender.window = min(START_WINDOW, self._max_window)
-            self._last_retx = self._acked_clean = 0
-            self._ctx = SegmentContext()
-            start = self._t.now()
-            resend_at = start
-            rx_bytes = 0
-            identity = None
-            while identity is None:
-                now = self._t.now()
-                if now - start > self.timeout_s:
-                    raise self._silent_error(rx_bytes, "during the handshake")
-                if now >= resend_at:
-                    self._write([self._urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))])
-                    resend_at = now + max(0.05, self.timeout_s / 8)
-                data = self._read(min(SLICE_S * 5, max(0.0, resend_at - now)))
-                rx_bytes += len(data)
-                frames = self._ep.deframer.feed(data)
-                for k, fr in enumerate(frames):
-                    if fr.kind != Kind.URGENT:
-                        continue
-                    msg = decode_one(fr.payload)
-                    if isinstance(msg, Ident) and msg.nonce == nonce:
-                        self._accept_ident(msg)
-                        now = self._t.now()
-                        for inc in self._ep.process(frames[k + 1 :], now):
-                            self._dev.handle(inc, now)
-                        identity = self._identity()
-                        break
-                    if isinstance(msg, Boot) and msg.major != PROTOCOL_MAJOR:
-                        self._mismatch(msg.major, msg.minor)
-        log.info(
-            "%s: session with %s %s (protocol %d.%d, queue %d, clock %d Hz)",
-            self._t.name,
-            identity.firmware_name,
-            identity.firmware_version,
-            *identity.protocol,
-            identity.queue_capacity,
-            identity.clock_hz,
-        )
-        self._sync_clock()
-        self.configure()
-        return identity
-
-    def _mismatch(self, major: int, minor: int) -> None:
-        raise ProtocolMismatch(
-            f"{self._t.name}: device speaks protocol {major}.{minor}, host speaks {PROTOCOL_MAJOR}.{PROTOCOL_MINOR}; "
-            "update the firmware or the host so the major versions match",
-            device_version=(major, minor),
-            host_version=(PROTOCOL_MAJOR, PROTOCOL_MINOR),
-        )
-
-    def _accept_ident(self, msg: Ident) -> None:
-        if msg.major != PROTOCOL_MAJOR:
-            self._mismatch(msg.major, msg.minor)
-        self._max_payload = min(self._max_payload, msg.max_payload)
-        self._payload_limit = min(self._max_payload, START_PAYLOAD)
-        self._ep.sender.window_bytes = msg.rx_window
-        now = self._t.now()
-        self._dev.accept_ident(msg, now)
-        self._items_sent = msg.items_received
-        self._segments_sent = msg.segments_received
-        self._last_rx = now
-
-    def _sync_clock(self) -> None:
-        """Status requests until the device clock's rate is measured (a few tens of ms)."""
-        start = self._t.now()
-        while not self._dev.clock.known:
-            if self._t.now() - start > self.timeout_s:
-                raise self._silent_error(0, "while reading the device clock")
-            count = self.ask_status()
-            self._wait(
-                lambda c=count: self._dev.status_count > c,  # type: ignore[misc]
-                STATUS_TIMEOUTS * self.timeout_s,
-                "a status report",
-            )
-            if not self._dev.clock.known:
-                self.poll(CLOCK_SYNC_S / 3)
-
-    def configure(self) -> None:
-        """Send the watchdog, the start threshold (most of the high watermark) and the flow
-        interval (half the watermarks' gap), in device ticks at the measured clock rate."""
-        rate = self.clock_rate
-        marks = self.watermarks
-        cap = 0xFFFF_FFFF
-        start = min(cap, self._flow.start_ticks(rate))
-        flow = min(cap, max(1, round((marks.high_s - marks.low_s) * rate / 2)))
-        self._configured_rate = rate
-        self._start_ticks = start
-        self.send(Configure(self.watchdog_ms, start, flow))
-        log.debug("%s: configured start %d ticks, flow %d ticks", self._t.name, start, flow)
-
-    def _silent_error(self, rx_bytes: int, when: str) -> DeviceSilent:
-        name = self._t.name
-        p = self._dev.progress
-        when = f" {when}" if when else ""
-        if rx_bytes and self._ep.deframer.frames == 0:
-            text = (
-                f"{name}: {rx_bytes} bytes but no valid frame{when} within {self.timeout_s:g} s; "
-                "wrong baud rate, or not a cdpr device (or one speaking protocol 1)?"
-            )
-        else:
-            text = (
-                f"{name}: no answer from the device{when} within {self.timeout_s:g} s "
-                f"(last reported executed segment {p.segments_done}); is it powered and connected?"
-            )
-        return DeviceSilent(text, last_segment=p.segments_done, last_item=p.items_done)
-
-    # ------------------------------------------------------------------ pumping
 
     def _urgent_frame(self, msg: Message) -> bytes:
         return encode_frame(Kind.URGENT, 0, self._ep.receiver.expected, encode_message(msg))
@@ -461,133 +316,6 @@ class HostLink:
                     self._pump(0.0)
             except (LinkError, OSError):
                 continue
-
-    # ------------------------------------------------------------------ sending
-
-    def _credit(self) -> int:
-        flow = self._dev.flow
-        return flow.free - self._ep.sender.items_after(flow.ack)
-
-    def ahead_ticks(self) -> float:
-        """Device ticks of motion held ahead of the device's now (estimated; see flow.py)."""
-        flow = self._dev.flow
-        return self._flow.ahead_ticks(
-            flow, self._t.now(), self.clock_rate, self._ep.sender.ticks_after(flow.ack)
-        )
-
-    def _window_room(self) -> int:
-        """Payload bytes the window can still take (sent or queued frames count)."""
-        s = self._ep.sender
-        if s.window_free <= 0:
-            return 0
-        cap = s.window_bytes or 1 << 20
-        queued = sum(len(o.payload) for o in s.outstanding) + sum(len(b.payload) for b in s.backlog)
-        return max(0, cap - queued)
-
-    def _sendable(self, ticks: np.ndarray) -> int:
-        """How many of the segments with durations ``ticks`` may go now."""
-        slots = self._credit()
-        if slots <= 0:
-            return 0
-        rate = self.clock_rate
-        if abs(rate - self._configured_rate) > 0.1 * self._configured_rate:
-            self.configure()
-        moving = bool(self._dev.flow.flags & Flag.MOVING)
-        room = self._flow.room_ticks(self.ahead_ticks(), rate, moving, self._start_ticks)
-        if room <= 0:
-            return 0
-        window = self._window_room()
-        if window <= 0:
-            return 0
-        limit = min(len(ticks), slots, max(8, window // 2))
-        cum = np.cumsum(ticks[:limit])
-        return min(limit, int(np.searchsorted(cum, room, side="right")) + 1)
-
-    def _send_segments(self, batch: SegmentBatch, i: int, j: int) -> None:
-        sub = batch[i:j]
-        data, offsets = encode_segments(sub, self._ctx)
-        n = j - i
-        pos = 0
-        limit = self._payload_limit
-        ticks = sub.ticks
-        while pos < n:
-            end = int(np.searchsorted(offsets, offsets[pos] + limit, side="right")) - 1
-            end = max(pos + 1, min(end, n))
-            self._ep.send(
-                data[offsets[pos] : offsets[end]],
-                items=end - pos,
-                ticks=int(ticks[pos:end].sum()),
-            )
-            pos = end
-        self._items_sent += n
-        self._segments_sent += n
-        self._write(self._ep.flush(self._t.now()))
-
-    def check_step_rates(self, batch: SegmentBatch) -> None:
-        """Raise :class:`StepRateError` for a segment over the device's max step rate."""
-        identity = self._identity()
-        rates = peak_step_rates(batch, identity.clock_hz)
-        over = np.flatnonzero((rates > identity.max_step_rate).any(axis=1))
-        if over.size:
-            k = int(over[0])
-            raise StepRateError(
-                f"segment {k} of the batch: peak step rate {rates[k].max():.0f}/s exceeds the device "
-                f"limit {identity.max_step_rate}/s"
-            )
-
-    def feed(
-        self, batch: SegmentBatch, start: int = 0, max_wait: float = 0.0, end: int | None = None
-    ) -> int:
-        """Send segments ``start..end`` of ``batch`` as far as slots, the time watermarks and
-        the window allow, waiting for room at most ``max_wait`` s (waking on reports);
-        returns the index after the last segment sent. Their segment numbers continue from
-        :attr:`segments_sent`."""
-        n = len(batch) if end is None else min(end, len(batch))
-        if start >= n:
-            return start
-        if start == 0:
-            self.check_step_rates(batch)
-        until = self._t.now() + max_wait
-        i = start
-        while i < n:
-            self._let_others_in()
-            with self._locked():
-                if self._dev.failure is not None:
-                    raise self._dev.failure
-                k = self._sendable(batch.ticks[i:n])
-                if k > 0:
-                    self._send_segments(batch, i, i + k)
-                    i += k
-                    continue
-                now = self._t.now()
-                if now >= until:
-                    break
-                wake = self._flow.wake_in(
-                    self.ahead_ticks(), self.clock_rate, bool(self._dev.flow.flags & Flag.MOVING)
-                )
-                # below the low watermark already: only a report can give room
-                wait = until - now if not wake else min(until - now, wake)
-                self._pump(min(wait, 0.25))
-        return i
-
-    def queue_segments(self, batch: SegmentBatch, timeout: float | None = None) -> range:
-        """Stream move segments (blocking until all are sent); returns their segment numbers
-        (as in the device record). Raises :class:`StepRateError` for a segment over the
-        device's step-rate limit."""
-        first = self._segments_sent + 1
-        n = len(batch)
-        start = self._t.now()
-        i = 0
-        while i < n:
-            left = None if timeout is None else timeout - (self._t.now() - start)
-            if left is not None and left <= 0:
-                raise LinkTimeout(f"{self._t.name}: could not queue segments within {timeout:g} s")
-            i = self.feed(batch, i, max_wait=0.25 if left is None else min(0.25, left))
-        return range(first, first + n)
-
-    def flush(self) -> None:
-        """FLUSH: the motion sent so far may start now (end of a stream, a pause)."""
-        self.send(Flush())
 
     def send(self, *commands: Message, timeout: float | None = None) -> list[int]:
         """Send commands in order; returns the item number of each queued one (0 for immediate ones)."""
