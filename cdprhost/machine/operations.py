@@ -117,10 +117,14 @@ class Machine:
             if not home_if_needed:
                 raise NotHomed("the modules are not homed: home first")
             st = self.home()
+        # The wire carries step deltas: plan from the device's module steps with the extruder
+        # counter at zero, so a move never tries to undo the filament a print pushed (a print
+        # or a cancelled print leaves that counter far from zero).
+        modules_only = (*st.steps[:3], 0)
         wire, seconds, _ = direct_path(
             self.profile,
             self.model,
-            state_at_steps(self.model, st.steps),
+            state_at_steps(self.model, modules_only),
             points,
             feedrate_mm_s=self.feed_mm_s if feed_mm_s is None else float(feed_mm_s),
             clock_hz=self.clock_hz,

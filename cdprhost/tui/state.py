@@ -14,7 +14,7 @@ from typing import Any
 from cdprhost.job.state import IllegalTransition, JobSnapshot, JobState, LinkHealth, reduce
 from cdprhost.tui.control.views import (
     CalibrationView,
-    DeviceStatus,
+    DeviceStatusView,
     DiagnosisView,
     JogCheck,
     PreflightView,
@@ -55,7 +55,7 @@ class UiState:
     job_path: str = ""
     connection: ConnectionView = field(default_factory=ConnectionView)
     file: FileView = field(default_factory=FileView)
-    device: DeviceStatus | None = None
+    device: DeviceStatusView | None = None
     device_temps: tuple[tuple[float, float], ...] = ()  # (hotend, bed) polled while no job runs
     jog: JogCheck | None = None
     busy: str = ""  # a device operation in flight (jog, home, heaters...)

@@ -22,14 +22,14 @@ from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.views import (
     CalibrationView,
     CandidateRow,
-    DeviceStatus,
+    DeviceStatusView,
     DiagnosisView,
     IdentificationView,
     ParameterRow,
     PortChoice,
     PoseView,
     PreflightView,
-    Violation,
+    ViolationRow,
 )
 
 
@@ -193,7 +193,7 @@ class FakeBackend:
         p = np.asarray(point, dtype=float)[None, :]
         s = self.model.ik(p)[0]
         steps = tuple(int(v) for v in self.model.steps(s[None, :])[0]) + (0,)
-        return DeviceStatus(
+        return DeviceStatusView(
             steps,
             tuple(float(v) for v in s),
             tuple(float(v) for v in p[0]),
@@ -244,8 +244,10 @@ class FakeBackend:
                 path,
                 False,
                 (
-                    Violation(12, "build_volume", "outside the build volume by 30 mm", (0, 0, 400)),
-                    Violation(15, "unknown_command", "M999 is not understood"),
+                    ViolationRow(
+                        12, "build_volume", "outside the build volume by 30 mm", (0, 0, 400)
+                    ),
+                    ViolationRow(15, "unknown_command", "M999 is not understood"),
                 ),
                 20,
                 2,

@@ -16,38 +16,7 @@ from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
 
 from .conftest import make_app, shown, wait_for
-
-
-def small_part(layers: int = 10, side: float = 30.0) -> str:
-    """A square tube of 0.2 mm layers with slicer layer annotations; each layer ends with a
-    retraction, so the motion comes to rest there (where a pause takes effect)."""
-    out = [
-        "; generated for the UI tests",
-        "G21",
-        "G90",
-        "M82",
-        "M140 S60",
-        "M104 S200",
-        "G28",
-        "G92 E0",
-    ]
-    e, h = 0.0, side / 2
-    corners = [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)]
-    for k in range(layers):
-        z = 0.3 + 0.2 * k
-        out += [
-            ";LAYER_CHANGE",
-            f";Z:{z:.1f}",
-            f"G1 Z{z:.2f} F600",
-            f"G1 X{-h:.2f} Y{-h:.2f} F6000",
-            f"G1 E{e:.4f} F2400",
-        ]
-        for x, y in corners[1:]:
-            e += side * 0.033
-            out.append(f"G1 X{x:.2f} Y{y:.2f} E{e:.4f} F1800")
-        out.append(f"G1 E{e - 0.8:.4f} F2400")
-    out += ["M104 S0", "M140 S0", "G1 Z20 F600"]
-    return "\n".join(out) + "\n"
+from .parts import small_part
 
 
 @pytest.fixture
@@ -139,3 +108,35 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         assert (
             second.last_line >= failure.last_line
         )  # the stopped layer is printed again from its start
+
+
+async def test_jog_after_a_cancelled_print_moves(tmp_path):
+    """A cancelled print leaves the extruder's step counter where the print left it; the next
+    jog must keep the extruder still, not try to undo the whole print's filament in one move."""
+    part = tmp_path / "tall.gcode"
+    part.write_text(small_part(layers=80), encoding="utf-8")
+    backend = LiveBackend(
+        "paper-prototype",
+        speedup=20.0,
+        job_options={"resume_dir": tmp_path / "resume", "log_path": tmp_path / "job.jsonl"},
+    )
+    app = make_app(backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected, timeout=20)
+        await open_file(pilot, part)
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.segments_done > 200 or s.job.state.finished, 60)
+        await pilot.press("x", "y")
+        state = await wait_for(pilot, lambda s: s.job.state.finished, timeout=60)
+        assert state.job.state is JobState.CANCELLED, state.job.reason
+        assert state.job.steps is not None and state.job.steps[3] > 100  # filament was pushed
+        app.controller.refresh_device()
+        await wait_for(pilot, lambda s: s.device is not None and not s.busy, timeout=30)
+        await pilot.press("f3", "3", "right")
+        target = app.state.jog.target
+        assert app.state.jog.ok, app.state.jog.reason
+        await pilot.press("enter")
+        state = await wait_for(pilot, lambda s: not s.busy, timeout=60)
+        assert not app._notifications, [n.message for n in app._notifications]
+        assert state.device.position == pytest.approx(target, abs=0.01)
+        assert state.device.steps[3] == app.state.job.steps[3]  # the extruder did not move

@@ -19,7 +19,7 @@ from cdprhost.job.state import (
 from cdprhost.tui.control.jog import check_jog, jog_target
 from cdprhost.tui.control.pump import EventPump
 from cdprhost.tui.control.source import SourceLines
-from cdprhost.tui.control.views import PreflightView, Violation
+from cdprhost.tui.control.views import PreflightView, ViolationRow
 from cdprhost.tui.screens.dialogs import failure_text
 from cdprhost.tui.screens.print_screen import preflight_summary
 from cdprhost.tui.state import FileView, UiState, fold_job_events, hms
@@ -184,7 +184,7 @@ def test_preflight_summary_names_first_violation():
     view = PreflightView(
         "a.gcode",
         False,
-        (Violation(40, "tension", "x"), Violation(12, "build_volume", "y")),
+        (ViolationRow(40, "tension", "x"), ViolationRow(12, "build_volume", "y")),
         5,
         1,
         65.0,

@@ -19,11 +19,11 @@ from cdprhost.machine import Machine, NotHomed
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, EventSink, JobHandle
 from cdprhost.tui.control.views import (
-    DeviceStatus,
+    DeviceStatusView,
     DiagnosisView,
     PortChoice,
     PreflightView,
-    Violation,
+    ViolationRow,
 )
 
 ALL_MODULES = 0b111
@@ -51,7 +51,7 @@ def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str],
 def preflight_view(report: Any, path: str) -> PreflightView:
     """A :class:`cdprhost.preflight.PreflightReport` as the print screen shows it."""
     violations = tuple(
-        Violation(v.line, v.rule, v.detail, tuple(v.point)) for v in report.violations
+        ViolationRow(v.line, v.rule, v.detail, tuple(v.point)) for v in report.violations
     )
     notes = tuple(f"line {n.line}: {n.text}" for n in report.notes)
     return PreflightView(
@@ -152,7 +152,7 @@ class LiveBackend:
         c = link.counters
         return LinkHealth(retransmits=c.retransmits, bad_frames=c.bad_frames, naks=c.naks_received)
 
-    def device_status(self) -> DeviceStatus | None:
+    def device_status(self) -> DeviceStatusView | None:
         link = self._link
         if link is None:
             return None
@@ -162,7 +162,7 @@ class LiveBackend:
         link.poll(pump)
         return self._status_view(link.request_status())
 
-    def _status_view(self, st: Any) -> DeviceStatus:
+    def _status_view(self, st: Any) -> DeviceStatusView:
         steps = tuple(int(v) for v in st.steps)
         sliders = self.model.sliders_from_steps(np.asarray(steps[:3]))
         homed = st.homed_mask & ALL_MODULES == ALL_MODULES
@@ -170,7 +170,7 @@ class LiveBackend:
         if homed:
             p = self.model.fk(sliders[None, :])[0]
             position = tuple(float(v) for v in p) if np.all(np.isfinite(p)) else None
-        return DeviceStatus(
+        return DeviceStatusView(
             steps,
             tuple(float(v) for v in sliders),
             position,
@@ -222,23 +222,23 @@ class LiveBackend:
 
     def move_to(
         self, target: tuple[float, float, float], speed_mm_s: float = JOG_SPEED_MM_S
-    ) -> DeviceStatus:
+    ) -> DeviceStatusView:
         """Plan and execute a straight move to ``target`` (machine frame); requires homing."""
         try:
             return self._status_view(self.machine.move_to(target, feed_mm_s=speed_mm_s))
         except NotHomed:
             raise CdprError("the modules are not homed: home first (h)") from None
 
-    def jog_to(self, target: tuple[float, float, float]) -> DeviceStatus:
+    def jog_to(self, target: tuple[float, float, float]) -> DeviceStatusView:
         return self.move_to(target)
 
-    def home(self) -> DeviceStatus:
+    def home(self) -> DeviceStatusView:
         return self._status_view(self.machine.home())
 
-    def motors_off(self) -> DeviceStatus:
+    def motors_off(self) -> DeviceStatusView:
         return self._status_view(self.machine.motors_off())
 
-    def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatus:
+    def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatusView:
         return self._status_view(self.machine.set_heaters(hotend_c, bed_c))
 
     # ------------------------------------------------------------ diagnose

@@ -21,7 +21,7 @@ class PortChoice:
 
 
 @dataclass(frozen=True)
-class Violation:
+class ViolationRow:
     line: int
     rule: str
     detail: str
@@ -34,7 +34,7 @@ class PreflightView:
 
     path: str
     ok: bool
-    violations: tuple[Violation, ...] = ()
+    violations: tuple[ViolationRow, ...] = ()
     moves: int = 0
     layers: int = 0
     estimated_time_s: float = 0.0
@@ -43,7 +43,7 @@ class PreflightView:
 
 
 @dataclass(frozen=True)
-class DeviceStatus:
+class DeviceStatusView:
     """What the device reports while no job runs (jog screen, idle panels)."""
 
     steps: tuple[int, int, int, int] | None = None

@@ -5,7 +5,7 @@ from __future__ import annotations
 from textual.message import Message
 from textual.widgets import DataTable
 
-from cdprhost.tui.control.views import Violation
+from cdprhost.tui.control.views import ViolationRow
 
 
 class ViolationList(DataTable):
@@ -25,7 +25,7 @@ class ViolationList(DataTable):
         self.add_column("rule", key="rule", width=15)
         self.add_column("detail", key="detail", width=90)
 
-    def show(self, violations: tuple[Violation, ...]) -> None:
+    def show(self, violations: tuple[ViolationRow, ...]) -> None:
         self.clear()
         self._lines = [v.line for v in violations]
         for i, v in enumerate(violations):
