@@ -396,7 +396,8 @@ class PrintJob:
         self._set(state, status)
 
     def _cancel_tail(self, result: PrintResult) -> None:
-        self.link.send(*heaters_off())
+        if self.profile.heaters.on_cancel == "off":
+            self.link.send(*heaters_off())
         self._drain()
         self._finish(JobState.CANCELLED, "cancelled", result)
 

@@ -158,6 +158,16 @@ class Machine:
             return st
         return self.move_to(target)
 
+    def after_cancel(self) -> DeviceStatus:
+        """What the profile asks once a print is cancelled: park (lift clear of the part)
+        when ``park.on_cancel``, heaters off when ``heaters.on_cancel`` is "off"."""
+        st = self.status()
+        if self.profile.park.on_cancel and self.profile.park.lift_mm > 0:
+            st = self.park(lift_mm=self.profile.park.lift_mm)
+        if self.profile.heaters.on_cancel == "off":
+            st = self.set_heaters(0.0, 0.0)
+        return st
+
     def emergency_stop(self, timeout_s: float = 1.0) -> bool:
         """Stop now, bypassing the queue: motion, heaters and motors off on the device."""
         return self.link.emergency_stop(timeout=timeout_s)

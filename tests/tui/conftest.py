@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import asyncio
 import inspect
+import tempfile
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -47,9 +49,21 @@ def fake_backend() -> FakeBackend:
 
 
 def make_app(backend, **kw) -> CdprApp:
+    """The app on ``backend``, without timers, keeping its recent files and history in a
+    folder of its own."""
     kw.setdefault("status_interval_s", 0)
     kw.setdefault("health_interval_s", 0)
+    kw.setdefault("state_folder", Path(tempfile.mkdtemp(prefix="cdpr-tui-")))
     return CdprApp(backend, **kw)
+
+
+async def pick_file(pilot, path) -> None:
+    """o, then the picker's path field (its own key), type the path, Enter."""
+    await pilot.press("o")
+    await wait_for(pilot, lambda s: pilot.app.screen.query("#file-input"), what="the picker")
+    await pilot.press("ctrl+o")
+    pilot.app.screen.query_one("#file-input").value = str(path)
+    await pilot.press("enter")
 
 
 @pytest.fixture

@@ -15,7 +15,7 @@ from cdprhost.job.state import JobState
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
 
-from .conftest import make_app, shown, wait_for
+from .conftest import make_app, pick_file, shown, wait_for
 from .parts import small_part
 
 
@@ -27,9 +27,7 @@ def part(tmp_path):
 
 
 async def open_file(pilot, path):
-    await pilot.press("o")
-    pilot.app.screen.query_one("#file-input").value = str(path)
-    await pilot.press("enter")
+    await pick_file(pilot, path)
     state = await wait_for(
         pilot, lambda s: s.file.preflight is not None or s.file.error, timeout=30
     )
@@ -97,17 +95,28 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         assert f"last executed line: {failure.last_line}" in text
         assert f"--resume-from-layer {max(failure.last_layer + 1, 1)}" in text
         assert failure.resume_file == str(tmp_path / "resume" / "tube.resume.json")
-        await pilot.press(
-            "r"
-        )  # resume from that layer: the link is re-opened, a new job starts there
+        await pilot.press("r")  # resume asked for: the link is checked first, and it is down
+        await wait_for(pilot, lambda s: s.connection.status == "error", timeout=30)
+        await pilot.pause(0.2)
+        assert app.state.job_id == 1  # nothing started
+        saved = (tmp_path / "resume" / "tube.resume.json").read_text()
+        await pilot.press("f1", "c")  # reconnect: the embedded device again
+        await wait_for(pilot, lambda s: s.connected, timeout=30)
+        await pilot.press("f2")
+        state = await wait_for(pilot, lambda s: s.file.resume is not None, timeout=30)
+        assert state.file.resume.layer == failure.last_layer + 1 and not state.file.resume.problem
+        assert "resume point layer" in await shown(pilot)
+        await pilot.press("l")
+        await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
+        assert "Is the part still on the bed and clear?" in await shown(pilot)
+        assert (tmp_path / "resume" / "tube.resume.json").read_text() == saved
+        await pilot.press("y")  # a new job starts at that layer
         state = await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, timeout=120)
-        assert state.connection.status in ("connected", "error")
+        assert state.job_resumed_from == failure.last_layer + 1
         second = state.job.failure  # the simulated device resets again after 150 segments
         assert second is not None, (state.job.state, state.job.reason, state.job.segments_done)
-        assert second is not None and second.last_layer >= failure.last_layer
-        assert (
-            second.last_line >= failure.last_line
-        )  # the stopped layer is printed again from its start
+        assert second.last_layer >= failure.last_layer
+        assert second.last_line >= failure.last_line  # the stopped layer is printed again
 
 
 async def test_jog_after_a_cancelled_print_moves(tmp_path):

@@ -9,9 +9,8 @@ from __future__ import annotations
 import threading
 
 import pytest
-from textual.widgets import Input
 
-from .conftest import make_app, wait_for
+from .conftest import make_app, pick_file, wait_for
 from .fakes import FakeBackend
 
 BIG, SMALL = (100, 32), (80, 24)
@@ -31,9 +30,7 @@ def workdir(tmp_path, monkeypatch):
 def open_and_wait(name):
     async def run_before(pilot):
         await wait_for(pilot, lambda s: s.connected)
-        await pilot.press("o")
-        pilot.app.screen.query_one("#file-input", Input).value = name
-        await pilot.press("enter")
+        await pick_file(pilot, name)
         await wait_for(pilot, lambda s: s.file.preflight is not None)
         await wait_for(pilot, lambda s: pilot.app.screen.source is not None)
 

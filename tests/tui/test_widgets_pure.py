@@ -165,11 +165,13 @@ def test_progress_lines_layers_eta_and_line():
         device_time_s=100.0,
         line=42,
     )
-    head, stats, line = progress_lines(snap, "G1 X1 Y2")
+    head, stats, line = progress_lines(snap, "G1 X1 Y2", elapsed_s=130.0)
     assert "PRINTING" in head.plain
-    assert stats.plain == "layer 5/12  elapsed 0:01:40  ETA 0:05:00"
+    assert stats.plain == "layer 5/12  elapsed 0:02:10  machine 0:01:40"  # wall vs machine time
     assert line.plain == "line 42: G1 X1 Y2"
     assert hms(3725) == "1:02:05" and hms(None) == "--:--:--"
+    head, _, _ = progress_lines(snap, "", shown=JobState.PAUSING)
+    assert "PAUSING" in head.plain and "comes to rest" in head.plain
 
 
 def test_failure_text_names_stop_and_resume_point():
@@ -191,5 +193,5 @@ def test_preflight_summary_names_first_violation():
         2.0,
     )
     text = preflight_summary(UiState(file=FileView(path="a.gcode", preflight=view))).plain
-    assert text.startswith("2 violations (first at line 12)") and "est 0:01:05" in text
-    assert "press o" in preflight_summary(UiState()).plain
+    assert text.startswith("2 violations (first at line 12)") and "machine time 0:01:05" in text
+    assert "o Open picks one" in preflight_summary(UiState(), "o Open").plain

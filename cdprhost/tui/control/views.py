@@ -8,16 +8,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
 class PortChoice:
-    """A port the user can pick: ``port`` is what ``connect`` receives."""
+    """A port the user can pick: ``port`` is what ``connect`` receives; ``simulated`` marks a
+    simulated device (embedded, or a ``cdprhost sim-device`` on a pseudo-terminal)."""
 
     port: str
     label: str
     detail: str = ""
+    simulated: bool = False
 
 
 @dataclass(frozen=True)
@@ -26,6 +30,35 @@ class ViolationRow:
     rule: str
     detail: str
     point: Vec3 | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Toolpath:
+    """The moves of a G-code file in the G-code frame (machine frame minus ``bed_origin``),
+    program order, for the layer preview; ``heat_waits`` are (line, heater, target °C) of the
+    program's waits for temperature, for the time estimate."""
+
+    xy0: np.ndarray  # (n, 2) float32, move starts
+    xy1: np.ndarray  # (n, 2) float32, move ends
+    line: np.ndarray  # (n,) int64
+    layer: np.ndarray  # (n,) int32
+    extrude: np.ndarray  # (n,) bool
+    layer_z: tuple[float, ...] = ()  # height of each layer (its first extrusion), mm
+    heat_waits: tuple[tuple[int, str, float], ...] = ()
+    bed_origin: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def layers(self) -> int:
+        return len(self.layer_z)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(x min, y min, x max, y max) of the extrusions (of every move when none extrudes)."""
+        sel = self.extrude if self.extrude.any() else np.ones(len(self.line), dtype=bool)
+        if not sel.any():
+            return (-1.0, -1.0, 1.0, 1.0)
+        pts = np.concatenate([self.xy0[sel], self.xy1[sel]])
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
 
 @dataclass(frozen=True)
@@ -40,6 +73,47 @@ class PreflightView:
     estimated_time_s: float = 0.0
     filament_mm: float = 0.0
     notes: tuple[str, ...] = ()
+    toolpath: Toolpath | None = None
+
+
+@dataclass(frozen=True)
+class ResumeView:
+    """A saved resume point that belongs to the open file."""
+
+    path: str  # the resume point's file
+    gcode: str
+    reason: str
+    layer: int  # 1-based layer to restart at, as the CLI takes it
+    last_line: int | None = None
+    saved_at: float | None = None  # epoch seconds
+    problem: str = ""  # why it cannot be used (file changed since, ...), "" when usable
+
+
+@dataclass(frozen=True)
+class ConsoleLine:
+    """One line of the console: what was sent, the reply, or something the device said."""
+
+    kind: str  # sent | reply | error | device | notice
+    text: str
+    at: float = 0.0  # epoch seconds
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    """One finished print, for the job history."""
+
+    file: str
+    status: str  # done | cancelled | failed | refused
+    started: float  # epoch seconds
+    ended: float
+    layers_done: int = 0
+    layers: int = 0
+    reason: str = ""
+    resumed_from_layer: int | None = None  # 1-based
+
+    @property
+    def duration_s(self) -> float:
+        return max(self.ended - self.started, 0.0)
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ class ViolationList(DataTable):
     def __init__(self, *, id: str | None = None, classes: str | None = None):
         super().__init__(id=id, classes=classes, cursor_type="row", zebra_stripes=True)
         self._lines: list[int] = []
+        self.shown: tuple[ViolationRow, ...] | None = None
 
     def on_mount(self) -> None:
         self.add_column("line", key="line", width=7)
@@ -26,6 +27,7 @@ class ViolationList(DataTable):
         self.add_column("detail", key="detail", width=90)
 
     def show(self, violations: tuple[ViolationRow, ...]) -> None:
+        self.shown = violations
         self.clear()
         self._lines = [v.line for v in violations]
         for i, v in enumerate(violations):
