@@ -28,7 +28,6 @@ from cdprhost.tui.control.controller import Controller
 from cdprhost.tui.control.pump import EventPump
 from cdprhost.tui.control.store import JobHistory, RecentFiles, screenshot_dir, tui_dir
 from cdprhost.tui.control.views import ConsoleLine
-from cdprhost.tui.screens.base import TAB_OF, TABS
 from cdprhost.tui.screens.calibrate import CalibrateScreen
 from cdprhost.tui.screens.connection import ConnectionScreen
 from cdprhost.tui.screens.console import ConsoleScreen
@@ -39,6 +38,7 @@ from cdprhost.tui.screens.history import HistoryScreen
 from cdprhost.tui.screens.jog import JogScreen
 from cdprhost.tui.screens.print_screen import PrintScreen
 from cdprhost.tui.state import CONSOLE_LINES, UiState, fold_job_events, shown_job_state
+from cdprhost.tui.tabs import TAB_OF, TABS
 
 
 class EventsReady(Message):

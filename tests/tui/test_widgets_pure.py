@@ -167,7 +167,7 @@ def test_progress_lines_layers_eta_and_line():
     )
     head, stats, line = progress_lines(snap, "G1 X1 Y2", elapsed_s=130.0)
     assert "PRINTING" in head.plain
-    assert stats.plain == "layer 5/12  elapsed 0:02:10  machine 0:01:40"  # wall vs machine time
+    assert stats.plain == "layer 5/12 · elapsed 0:02:10 · machine 0:01:40"  # wall vs machine
     assert line.plain == "line 42: G1 X1 Y2"
     assert hms(3725) == "1:02:05" and hms(None) == "--:--:--"
     head, _, _ = progress_lines(snap, "", shown=JobState.PAUSING)

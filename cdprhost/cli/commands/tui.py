@@ -8,7 +8,7 @@ from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser("tui", help="terminal UI: connect, print, jog, calibrate, diagnose")
     add_profile_argument(parser, default="paper-prototype")
     parser.add_argument(

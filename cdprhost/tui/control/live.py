@@ -21,7 +21,7 @@ from cdprhost.job.state import LinkHealth
 from cdprhost.kinematics import MachineModel
 from cdprhost.machine import Machine, NotHomed
 from cdprhost.profile import MachineProfile, load_profile
-from cdprhost.tui.control.backend import EMBEDDED, EventSink, JobHandle
+from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
 from cdprhost.tui.control.views import (
     ConsoleLine,
     DeviceStatusView,
@@ -104,13 +104,13 @@ class LiveBackend:
         self._log: deque[ConsoleLine] = deque(maxlen=DEVICE_LOG)
         from cdprhost.tui.control.live_calibration import LiveCalibration
 
-        self.calibration = LiveCalibration(self)
+        self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ---------------------------------------------------------------- link
     @property
     def link(self) -> Any:
         if self._link is None:
-            raise CdprError("not connected: pick a port on the link screen (F1)")
+            raise CdprError("not connected: pick a port on the link screen")
         return self._link
 
     def ports(self) -> list[PortChoice]:

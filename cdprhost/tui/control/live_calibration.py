@@ -142,9 +142,11 @@ class LiveCalibration:
 
     def _require(self, kind: type, index: int | None = None) -> Any:
         if self.wizard is None:
-            raise CdprError("plan the poses first (n)")
+            raise CdprError("plan the poses first")
         action = self.wizard.state.next_action()
-        if not isinstance(action, kind) or (index is not None and action.index != index - 1):
+        if not isinstance(action, kind) or (
+            index is not None and getattr(action, "index", None) != index - 1
+        ):
             raise CdprError(f"the wizard expects {type(action).__name__} next, not {kind.__name__}")
         return action
 

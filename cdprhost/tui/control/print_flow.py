@@ -11,6 +11,7 @@ from cdprhost.job.state import JobSnapshot, JobState, StateChanged
 from cdprhost.tui.control.link_flow import ControllerBase
 from cdprhost.tui.control.views import ConsoleLine, JobRecord, ResumeView
 from cdprhost.tui.state import FileView
+from cdprhost.tui.tabs import screen_key
 
 
 def resume_question(name: str, layer: int) -> str:
@@ -193,7 +194,7 @@ class PrintFlow(ControllerBase):
             return
         if not self.state.connected:
             self.app.notify(
-                "not connected: reconnect on the link screen (F1) first; nothing started",
+                f"not connected: reconnect on {screen_key('connection')} first; nothing started",
                 severity="warning",
             )
             return
@@ -221,7 +222,7 @@ class PrintFlow(ControllerBase):
             conn = self.state.connection
             self.update(connection=replace(conn, status="error", error=text))
             self.app.notify(
-                f"the link does not answer ({text}): reconnect on the link screen (F1); "
+                f"the link does not answer ({text}): reconnect on {screen_key('connection')}; "
                 "nothing started, the resume point is kept",
                 severity="error",
                 timeout=10,

@@ -1,9 +1,8 @@
-"""What every screen shares: the tab table, the tab bar on top, the key bar below, state
-watching, and a once-a-second tick for what ages (temperatures, clocks)."""
+"""What every screen shares: the tab bar on top, the key bar below, state watching, and a
+once-a-second tick for what ages (temperatures, clocks)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from textual.app import ComposeResult
@@ -12,33 +11,11 @@ from textual.screen import Screen
 from textual.widgets import Footer
 
 from cdprhost.tui.state import UiState, shown_job_state
+from cdprhost.tui.tabs import TABS
 from cdprhost.tui.widgets.nav_bar import NavBar
 
 if TYPE_CHECKING:  # pragma: no cover
     from cdprhost.tui.app import CdprApp
-
-
-@dataclass(frozen=True)
-class Tab:
-    mode: str
-    key: str
-    label: str
-    short: str  # label on a narrow terminal
-    help: str
-
-
-TABS = (
-    Tab(
-        "connection", "f1", "Link", "Link", "Link: port (listed or typed), connect, device, health"
-    ),
-    Tab("print", "f2", "Print", "Print", "Print: pick a file, preflight, preview, run a print"),
-    Tab("jog", "f3", "Jog", "Jog", "Jog: move with feasibility first, home, motors, heaters"),
-    Tab("calibrate", "f4", "Calibrate", "Cal", "Calibrate: poses, takes, identification"),
-    Tab("diagnose", "f5", "Diagnose", "Diag", "Diagnose: verdict, where, held-out gap"),
-    Tab("console", "f6", "Console", "Cons", "Console: send a command, replies, device errors"),
-    Tab("history", "f7", "History", "Hist", "History: past prints; reopen a file"),
-)
-TAB_OF = {t.mode: t for t in TABS}
 
 
 class AppScreen(Screen[None]):
@@ -49,9 +26,7 @@ class AppScreen(Screen[None]):
     TICK_S = 1.0
 
     if TYPE_CHECKING:  # pragma: no cover - the app these screens run in
-
-        @property
-        def app(self) -> CdprApp: ...
+        app: CdprApp
 
     def compose(self) -> ComposeResult:
         yield NavBar(id="nav")

@@ -9,6 +9,7 @@ from textual.containers import Horizontal
 from textual.widgets import DataTable, Input, Label
 
 from cdprhost.tui.control.views import CalibrationView, IdentificationView
+from cdprhost.tui.keys import hint
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState
 
@@ -41,10 +42,10 @@ def stage_text(cal: CalibrationView) -> Text:
     return out
 
 
-def result_text(result: IdentificationView | None) -> Text:
+def result_text(result: IdentificationView | None, identify_key: str = "i Identify") -> Text:
     if result is None:
         return Text(
-            "identification: not run yet (i identifies once the fit poses are measured)",
+            f"identification: not run yet ({identify_key}, once the fit poses are measured)",
             style="dim",
         )
     out = Text.assemble(
@@ -138,7 +139,7 @@ class CalibrateScreen(AppScreen):
                     Text(p.status, style=style),
                     p.detail,
                 )
-            poses._shown = cal.poses
+            poses._shown = cal.poses  # type: ignore[attr-defined]
             if cal.poses:
                 poses.move_cursor(row=min(cursor, len(cal.poses) - 1))
         waiting = self.app.controller.awaiting_take()
@@ -146,14 +147,16 @@ class CalibrateScreen(AppScreen):
         if waiting is not None and waiting.take and self._offered != (waiting.index, waiting.take):
             take_input.value = waiting.take  # offered by the virtual motion capture, once per pose
             self._offered = (waiting.index, waiting.take)
-        self.query_one("#calib-result", Label).update(result_text(cal.result))
+        self.query_one("#calib-result", Label).update(
+            result_text(cal.result, hint(self.app, self, "identify"))
+        )
         params = self.query_one("#parameters", DataTable)
         if getattr(params, "_shown", None) is not cal.result:
             params.clear()
             for r in cal.result.rows if cal.result else ():
                 ci = "" if r.ci_low is None else f"[{r.ci_low:.4f}, {r.ci_high:.4f}]"
                 params.add_row(r.name, _num(r.before, ".3f"), _num(r.after), _num(r.stderr), ci)
-            params._shown = cal.result
+            params._shown = cal.result  # type: ignore[attr-defined]
 
     # ------------------------------------------------------------ actions
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:

@@ -22,12 +22,12 @@ SIMULATOR = "embedded simulated device (no hardware)"
 
 def health_text(state: UiState) -> Text:
     h = state.job.link if state.job_active else state.connection.health
-    out = Text("link health  ", style="bold")
+    out = Text("health  ", style="bold")
     if h is None:
         return out.append("--", style="dim")
     bad = h.bad_frames or h.retransmits
     out.append(
-        f"retx {h.retransmits}  bad frames {h.bad_frames}  naks {h.naks}",
+        f"retx {h.retransmits} · bad {h.bad_frames} · naks {h.naks}",
         style="yellow" if bad else "green",
     )
     return out
@@ -44,9 +44,9 @@ def status_text(state: UiState) -> Text:
     )
     out = Text.assemble(("status  ", "bold"), (c.status, style))
     if c.port:
-        out.append(f"  {port_name(c.port)}")
+        out.append(f"\n{port_name(c.port)}")
         if not c.simulated:
-            out.append(f" @ {c.baud}")
+            out.append(f" @ {c.baud} baud")
     if c.simulated and c.status in ("connected", "connecting"):
         out.append("\nSIMULATOR: no machine moves", style="bold reverse yellow")
     if c.error:

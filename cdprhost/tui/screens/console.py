@@ -63,8 +63,8 @@ class ConsoleScreen(AppScreen):
         app = self.app
         leave = hint(app, self, "leave_input").split(" ", 1)[0]
         self.query_one("#console-hint", Label).update(
-            f"Enter sends · ↑↓ recall · {leave} leaves the field, then "
-            f"{hint(app, self, 'command')} types again · {hint(app, self, 'clear')}"
+            f"⏎ sends · ↑↓ recall · {leave} leaves the field, "
+            f"{hint(app, self, 'command')} comes back · help lists commands"
         )
         super().on_mount()
 

@@ -95,7 +95,7 @@ class DiagnoseScreen(AppScreen):
                     _opt(c.delta_bic, ".1f"),
                     _opt(c.heldout_rms_mm, ".4f"),
                 )
-            table._shown = result
+            table._shown = result  # type: ignore[attr-defined]
         gap = self.query_one(GapPlot)
         if result is None:
             gap.show((), (), 0.0)

@@ -80,7 +80,7 @@ class FilePickerScreen(ModalScreen[str | None]):
         keys = "  ".join(
             hint(app, self, a) for a in ("focus_recent", "focus_tree", "focus_path", "close")
         )
-        self.query_one("#picker-hint", Label).update(f"{keys}  (Tab moves between them)")
+        self.query_one("#picker-hint", Label).update(keys)
         if self.recent:
             self.query_one("#recent-list", OptionList).highlighted = 0
             self.query_one("#recent-list").focus()

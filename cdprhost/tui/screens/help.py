@@ -14,11 +14,7 @@ from textual.widgets import Label, Static
 
 from cdprhost.tui.keys import KeyRow, key_rows
 
-MOVING_FOCUS = (
-    KeyRow("tab/shift+tab", "Move the focus between lists, tables and text fields", "", True),
-    KeyRow("enter", "Act on the focused item (connect, open, jump to a line, send)", "", True),
-    KeyRow("esc", "Leave a text field (one-letter keys work again)", "", True),
-)
+ENTER = KeyRow("⏎", "Act on the focused item (connect, open, jump to a line, send)", "", True)
 
 
 def keys_table(title: str, rows: list[KeyRow] | tuple[KeyRow, ...]) -> Table:
@@ -49,10 +45,18 @@ class HelpScreen(ModalScreen[None]):
                 f"Keys: {self.screen_title} (esc closes; same labels as the key bar)",
                 classes="section-title",
             )
+            palette = Binding(app.COMMAND_PALETTE_BINDING, "command_palette", "Command palette")
+            everywhere = [
+                *key_rows(app, app),
+                KeyRow(
+                    app.get_key_display(palette), "Command palette", "search every command", True
+                ),
+            ]
+            moving = [*key_rows(app, self.screen_node, ours=False), ENTER]
             with VerticalScroll(id="help-body"):
                 yield Static(keys_table("This screen", key_rows(app, self.screen_node)))
-                yield Static(keys_table("Everywhere", key_rows(app, app)))
-                yield Static(keys_table("Moving around", MOVING_FOCUS))
+                yield Static(keys_table("Everywhere", everywhere))
+                yield Static(keys_table("Moving around", moving))
 
     def action_close(self) -> None:
         self.dismiss(None)

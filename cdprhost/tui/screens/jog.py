@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from rich.text import Text
 from textual.app import App, ComposeResult
 from textual.binding import Binding
@@ -18,7 +20,7 @@ from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
 from cdprhost.tui.widgets.tension_bars import TensionBars
 
 
-def keys_help(app: App[object], screen: DOMNode) -> str:
+def keys_help(app: App[Any], screen: DOMNode) -> str:
     """The jog keys as the help screen names them (taken from the bindings)."""
 
     def pair(axis: str) -> str:

@@ -27,6 +27,7 @@ from cdprhost.tui.state import (
     shown_job_state,
     temperature_age,
 )
+from cdprhost.tui.tabs import screen_key
 from cdprhost.tui.widgets.layer_preview import LayerPreview, PreviewInput
 from cdprhost.tui.widgets.position_panel import PositionPanel
 from cdprhost.tui.widgets.progress_panel import ProgressPanel
@@ -83,7 +84,7 @@ def resume_line(state: UiState, resume_key: str) -> Text:
     if r.problem:
         return out.append(f" · cannot resume: {r.problem}", style="red")
     if not state.connected:
-        return out.append(" · connect (F1) to resume", style="yellow")
+        return out.append(f" · connect on {screen_key('connection')} to resume", style="yellow")
     return out.append(f" · {resume_key}", style="bold")
 
 
@@ -110,7 +111,13 @@ class PrintScreen(AppScreen):
         Binding("p", "pause", "Pause", tooltip="At the next point where the motion rests"),
         Binding("r", "resume", "Resume"),
         Binding("x", "cancel", "Cancel", tooltip="Stops at rest, then parks as configured"),
-        Binding("l", "resume_failed", "Resume at layer", tooltip="A failed print, checked first"),
+        Binding(
+            "l",
+            "resume_failed",
+            "Resume at layer",
+            show=False,  # offered on the resume line when the open file has a resume point
+            tooltip="A failed print, from its saved layer; the link is checked first",
+        ),
         Binding("v", "toggle_view", "Preview/violations", show=False),
         Binding("left_square_bracket", "layer(-1)", "Layer down", show=False),
         Binding("right_square_bracket", "layer(1)", "Layer up", show=False),
@@ -133,18 +140,23 @@ class PrintScreen(AppScreen):
             yield Label(id="file-name")
         yield Label(id="preflight-summary")
         yield Label(id="resume-line")
-        with Horizontal(id="panels"):
-            with Vertical(id="left-panels"):
-                yield ProgressPanel(id="progress")
-                yield PositionPanel((float(bed[0]), float(bed[1]), float(bed[2])), id="position")
-                yield Label(id="link-line")
-            with Vertical(id="right-panels"):
-                yield TemperatureGraph(id="temperatures")
-                yield TensionBars(statics.t_min, statics.t_max, id="tensions")
-        with Horizontal(id="bottom"):
-            yield LayerPreview(id="preview")
-            yield ViolationList(id="violations")
-            yield SourceView(id="source")
+        with Horizontal(id="main"):
+            with Vertical(id="dash"):
+                with Horizontal(id="panels"):
+                    with Vertical(id="left-panels"):
+                        yield ProgressPanel(id="progress")
+                        yield PositionPanel(
+                            (float(bed[0]), float(bed[1]), float(bed[2])), id="position"
+                        )
+                        yield Label(id="link-line")
+                    with Vertical(id="right-panels"):
+                        yield TemperatureGraph(id="temperatures")
+                        yield TensionBars(statics.t_min, statics.t_max, id="tensions")
+                with Horizontal(id="bottom"):
+                    yield LayerPreview(id="preview", classes="preview")
+                    yield ViolationList(id="violations")
+                    yield SourceView(id="source")
+            yield LayerPreview(id="side-preview", classes="preview")  # wide terminals
 
     # ------------------------------------------------------------- render
     def render_state(self, state: UiState) -> None:
@@ -190,7 +202,9 @@ class PrintScreen(AppScreen):
         now = app.clock()
         self._render_temperatures(state, temperature_age(state, now))
         eta = job_eta(state, app.backend.machine_rate())
-        self.query_one(ProgressPanel).show_eta(eta, app.wall_clock(), state.job.state)
+        wall = app.wall_clock()
+        elapsed = wall - state.job_started if state.job_started else None
+        self.query_one(ProgressPanel).show_times(state.job, elapsed, eta, wall)
         self._render_preview(state)
 
     def _render_temperatures(self, state: UiState, age: float | None) -> None:
@@ -225,9 +239,9 @@ class PrintScreen(AppScreen):
             o = toolpath.bed_origin
             nozzle = (job.position[0] - o[0], job.position[1] - o[1])
         title = "browsing ([ ] layers, f follows)" if self._layer is not None else ""
-        self.query_one(LayerPreview).show(
-            PreviewInput(toolpath, layer, job.line if follow else 0, nozzle, title)
-        )
+        data = PreviewInput(toolpath, layer, job.line if follow else 0, nozzle, title)
+        for preview in self.query(LayerPreview):
+            preview.show(data)
 
     def _render_source(self, state: UiState) -> None:
         view = self.query_one(SourceView)
@@ -324,7 +338,7 @@ class PrintScreen(AppScreen):
         pre = self.app.state.file.preflight
         if pre is None or pre.toolpath is None or pre.toolpath.layers == 0:
             return
-        current = self.query_one(LayerPreview).shown.layer
+        current = self.query_one("#preview", LayerPreview).shown.layer
         self._layer = min(max(current + step, 0), pre.toolpath.layers - 1)
         self._render_preview(self.app.state)
 

@@ -90,7 +90,8 @@ def cell_bits(grid: np.ndarray) -> np.ndarray:
     """(rows, cols) braille bit masks of a (rows*4, cols*2) dot grid."""
     h, w = grid.shape
     cells = grid.reshape(h // 4, 4, w // 2, 2)
-    return np.einsum("rics,is->rc", cells.astype(np.uint16), DOT_BITS).astype(np.uint16)
+    bits: np.ndarray = np.einsum("rics,is->rc", cells.astype(np.uint16), DOT_BITS)
+    return bits.astype(np.uint16)
 
 
 def braille_char(bits: int) -> str:

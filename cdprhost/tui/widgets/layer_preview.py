@@ -43,17 +43,16 @@ def preview_text(data: PreviewInput, cols: int, rows: int) -> Text:
     out = Text(no_wrap=True, overflow="crop")
     tp = data.toolpath
     if tp is None or tp.layers == 0:
-        return out.append("layer preview: open a G-code file (o)", style="dim")
+        return out.append("layer preview: open a G-code file", style="dim")
     layer = min(max(data.layer, 0), tp.layers - 1)
     out.append(f"layer {layer + 1}/{tp.layers}", style="bold")
-    out.append(f" z {tp.layer_z[layer]:.2f} mm", style="dim")
-    out.append("  ")
-    out.append("⣿", style=PLANNED)
-    out.append(" planned ", style="dim")
-    out.append("⣿", style=PRINTED)
-    out.append(" printed ", style="dim")
-    out.append(NOZZLE_MARK, style=NOZZLE)
-    out.append(" nozzle", style="dim")
+    out.append(f" z {tp.layer_z[layer]:.2f}", style="dim")
+    wide = cols >= 60
+    for mark, style, word in ((" ⣿", PLANNED, "planned"), (" ⣿", PRINTED, "printed")):
+        out.append(mark, style=style)
+        out.append(f" {word}" if wide else word[:4], style="dim")
+    out.append(f" {NOZZLE_MARK}", style=NOZZLE)
+    out.append(" nozzle" if wide else "nozl", style="dim")
     if data.title:
         out.append(f"  {data.title}", style="italic")
     body_rows = rows - 1
@@ -61,23 +60,24 @@ def preview_text(data: PreviewInput, cols: int, rows: int) -> Text:
         return out
     frame = fit(tp.bounds(), cols, body_rows)
     bits, printed = layer_cells(tp, layer, data.done_line, frame)
-    style = np.where(bits > 0, np.where(printed, 2, 1), 0)
+    kinds = np.where(bits > 0, np.where(printed, 2, 1), 0)
     nozzle = frame.to_cell(*data.nozzle) if data.nozzle is not None else None
     for r in range(body_rows):
         out.append("\n")
-        row_bits, row_style = bits[r], style[r]
-        cuts = np.flatnonzero(np.diff(row_style)) + 1
+        row_bits, row_kind = bits[r], kinds[r]
+        cuts = np.flatnonzero(np.diff(row_kind)) + 1
         starts = np.concatenate(([0], cuts))
-        ends = np.concatenate((cuts, [len(row_style)]))
-        for a, b in zip(starts, ends):
+        ends = np.concatenate((cuts, [len(row_kind)]))
+        for a, b in zip(starts.tolist(), ends.tolist()):
             chars = "".join(braille_char(v) for v in row_bits[a:b])
+            style = _STYLE[int(row_kind[a])]
             if nozzle is not None and nozzle[1] == r and a <= nozzle[0] < b:
                 k = nozzle[0] - a
-                out.append(chars[:k], style=_STYLE[row_style[a]])
+                out.append(chars[:k], style=style)
                 out.append(NOZZLE_MARK, style=NOZZLE)
-                out.append(chars[k + 1 :], style=_STYLE[row_style[a]])
+                out.append(chars[k + 1 :], style=style)
             else:
-                out.append(chars, style=_STYLE[row_style[a]])
+                out.append(chars, style=style)
     return out
 
 

@@ -4,25 +4,18 @@ when the device is simulated."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
 
 from textual import events
 from textual.content import Content
 from textual.widgets import Static
 
 from cdprhost.job.state import JobState
-
-
-class TabLike(Protocol):
-    mode: str
-    key: str
-    label: str
-    short: str
+from cdprhost.tui.tabs import Tab
 
 
 def nav_markup(
     title: str,
-    tabs: Sequence[TabLike],
+    tabs: Sequence[Tab],
     current: str,
     state: JobState,
     badge: str = "",
@@ -44,10 +37,10 @@ def nav_markup(
 class NavBar(Static):
     def __init__(self, *, id: str | None = None):
         super().__init__(id=id)
-        self._args: tuple[str, Sequence[TabLike], str, JobState, str] | None = None
+        self._args: tuple[str, Sequence[Tab], str, JobState, str] | None = None
 
     def show(
-        self, title: str, tabs: Sequence[TabLike], current: str, state: JobState, badge: str = ""
+        self, title: str, tabs: Sequence[Tab], current: str, state: JobState, badge: str = ""
     ) -> None:
         args = (title, tabs, current, state, badge)
         if args == self._args:
@@ -60,8 +53,14 @@ class NavBar(Static):
             return
         title, tabs, current, state, badge = self._args
         width = self.size.width
-        for t, short in ((title, False), ("", False), ("", True)):
-            content = Content.from_markup(nav_markup(t, tabs, current, state, badge, short))
+        small_badge = badge[:3] if badge else ""
+        for t, short, b in (
+            (title, False, badge),
+            ("", False, badge),
+            ("", True, badge),
+            ("", True, small_badge),
+        ):
+            content = Content.from_markup(nav_markup(t, tabs, current, state, b, short))
             if not width or content.cell_length <= width:
                 break
         self.update(content)

@@ -26,14 +26,14 @@ def position_rows(
     steps: Sequence[int] | None,
     bed_origin: Vec3 = (0.0, 0.0, 0.0),
 ) -> Text:
-    """Four aligned rows: effector in the machine frame and in the G-code (bed) frame,
+    """Four aligned rows: effector x y z in the machine frame and in the G-code (bed) frame,
     sliders s1 s2 s3, steps n1 n2 n3 (and e)."""
     gcode = None
     if position is not None:
         gcode = tuple(p - o for p, o in zip(position, bed_origin))
     rows = [
-        _row("machine", position, "8.2f", " mm xyz"),
-        _row("G-code", gcode, "8.2f", " mm xyz"),
+        _row("machine", position, "8.2f", " mm"),
+        _row("G-code", gcode, "8.2f", " mm"),
         _row("sliders", sliders, "8.3f", " mm"),
         _row("steps", None if steps is None else steps[:3], "8d", ""),
     ]

@@ -47,7 +47,8 @@ def clock_time(epoch: float) -> str:
 
 
 def eta_text(eta: Eta | None, now_wall: float, state: JobState) -> Text:
-    """ "left 0:12:34 wall-clock, done ≈ 14:05 (heating 0:00:40; machine time 0:11:54)"."""
+    """ "left 0:12:34 wall-clock · done ≈ 14:05 · heating 0:00:40 · machine time left 0:11:54"
+    (the most useful first: a narrow panel cuts the end)."""
     out = Text()
     if state is JobState.DONE:
         return out.append("finished", style="green")
@@ -56,11 +57,10 @@ def eta_text(eta: Eta | None, now_wall: float, state: JobState) -> Text:
     out.append("left ", style="dim")
     out.append(hms(eta.wall_s), style="bold")
     out.append(" wall-clock", style="dim")
-    out.append(f", done ≈ {clock_time(now_wall + eta.wall_s)}")
-    extra = f"machine time {hms(eta.motion_left_s)}"
+    out.append(f" · done ≈ {clock_time(now_wall + eta.wall_s)}")
     if eta.heating_left_s >= 1:
-        extra = f"heating {hms(eta.heating_left_s)}; " + extra
-    out.append(f" ({extra})", style="dim")
+        out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
+    out.append(f" · machine time left {hms(eta.motion_left_s)}", style="dim")
     return out
 
 
@@ -86,9 +86,9 @@ def progress_lines(
     stats = Text.assemble(
         ("layer ", "dim"),
         layers,
-        ("  elapsed ", "dim"),
+        (" · elapsed ", "dim"),
         hms(elapsed_s if snap.state is not JobState.IDLE else None),
-        ("  machine ", "dim"),
+        (" · machine ", "dim"),
         hms(snap.device_time_s if snap.state is not JobState.IDLE else None),
     )
     cur = Text()
@@ -121,5 +121,15 @@ class ProgressPanel(Vertical):
             progress=round(1000 * progress_fraction(snap))
         )
 
-    def show_eta(self, eta: Eta | None, now_wall: float, state: JobState) -> None:
-        self.query_one("#job-eta", Label).update(eta_text(eta, now_wall, state))
+    def show_times(
+        self,
+        snap: JobSnapshot,
+        elapsed_s: float | None,
+        eta: Eta | None,
+        now_wall: float,
+        shown: JobState | None = None,
+    ) -> None:
+        """What changes with the clock alone: elapsed and time left."""
+        _, stats, _ = progress_lines(snap, "", shown, elapsed_s)
+        self.query_one("#job-stats", Label).update(stats)
+        self.query_one("#job-eta", Label).update(eta_text(eta, now_wall, snap.state))

@@ -49,10 +49,10 @@ class TemperatureGraph(Widget):
         out = Text(no_wrap=True, overflow="crop")
         for k, (name, colour) in enumerate(HEATERS):
             now, target = self._current[k], self._targets[k]
-            now_text = "  --.-" if now is None else f"{now:6.1f}"
+            now_text = " --.-" if now is None else f"{now:5.1f}"
             stale = self._stale_s is not None and now is not None
             out.append(
-                f"{name:<6} {now_text} / {target:5.1f} °C",
+                f"{name:<6} {now_text}/{target:<3.0f} °C",
                 style="dim" if stale else f"bold {colour}",
             )
             if stale:

@@ -19,7 +19,11 @@ class TensionBars(Widget):
         self._tensions: tuple[float, float, float] | None = None
 
     def show(self, tensions: tuple[float, float, float] | None) -> None:
-        self._tensions = None if tensions is None else tuple(float(t) for t in tensions)
+        self._tensions = (
+            None
+            if tensions is None
+            else (float(tensions[0]), float(tensions[1]), float(tensions[2]))
+        )
         self.refresh()
 
     def levels(self) -> tuple[str, ...]:

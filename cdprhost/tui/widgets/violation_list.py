@@ -8,7 +8,7 @@ from textual.widgets import DataTable
 from cdprhost.tui.control.views import ViolationRow
 
 
-class ViolationList(DataTable):
+class ViolationList(DataTable[str]):
     class Jump(Message):
         """The user wants to see G-code line ``line``."""
 
@@ -28,6 +28,7 @@ class ViolationList(DataTable):
 
     def show(self, violations: tuple[ViolationRow, ...]) -> None:
         self.shown = violations
+        self.set_class(not violations, "-empty")
         self.clear()
         self._lines = [v.line for v in violations]
         for i, v in enumerate(violations):
