@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import inspect
+import signal
+import subprocess
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -85,3 +89,24 @@ async def shown(pilot) -> str:
     """Screen text after the pending repaint."""
     await pilot.pause()
     return screen_text(pilot.app)
+
+
+@contextlib.contextmanager
+def sim_device(*options: str):
+    """``cdprhost sim-device`` in its own process; yields (pty path, process)."""
+    cmd = [sys.executable, "-m", "cdprhost", "sim-device", *options]
+    dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = dev.stdout.readline().strip()
+        if not path.startswith("/dev/"):
+            err = dev.stderr.read() if dev.poll() is not None else ""
+            raise AssertionError(f"sim-device printed {path!r}: {err}")
+        yield path, dev
+    finally:
+        if dev.poll() is None:
+            dev.send_signal(signal.SIGTERM)
+            try:
+                dev.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                dev.kill()
+                dev.wait()

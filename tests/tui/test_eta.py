@@ -90,4 +90,6 @@ def test_job_eta_before_and_during_a_print():
     assert eta.motion_left_s == 500.0 and eta.rate == pytest.approx(10.0)
     assert eta.heating_left_s == 0.0 and eta.wall_s == pytest.approx(50.0)
     text = eta_text(eta, 0.0, JobState.PRINTING).plain
-    assert text.startswith("left 0:00:50 wall-clock · done ≈") and "machine time left 0:08:20" in text
+    assert (
+        text.startswith("left 0:00:50 wall-clock · done ≈") and "machine time left 0:08:20" in text
+    )

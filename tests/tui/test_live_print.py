@@ -139,8 +139,15 @@ async def test_jog_after_a_cancelled_print_moves(tmp_path):
         state = await wait_for(pilot, lambda s: s.job.state.finished, timeout=60)
         assert state.job.state is JobState.CANCELLED, state.job.reason
         assert state.job.steps is not None and state.job.steps[3] > 100  # filament was pushed
-        app.controller.refresh_device()
-        await wait_for(pilot, lambda s: s.device is not None and not s.busy, timeout=30)
+        stopped_z = state.job.position[2]
+        # then it parks (lifted by the profile's park.lift_mm) and turns the heaters off
+        state = await wait_for(
+            pilot, lambda s: s.device is not None and not s.busy and s.history, timeout=60
+        )
+        lift = backend.profile.park.lift_mm
+        assert state.device.position[2] == pytest.approx(stopped_z + lift, abs=0.05)
+        assert state.device.hotend_target == 0 and state.device.bed_target == 0
+        assert state.history[0].status == "cancelled"
         await pilot.press("f3", "3", "right")
         target = app.state.jog.target
         assert app.state.jog.ok, app.state.jog.reason

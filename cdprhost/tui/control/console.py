@@ -23,13 +23,14 @@ HELP = (
     ("M115", "device identity"),
     ("M17 / M18 / M84", "drivers on / off"),
     ("M112", "emergency stop: motion, heaters and drivers off at once"),
+    ("M999", "clear the stop (after M112 or a device fault)"),
     ("help", "this list"),
 )
 
 
 @dataclass(frozen=True)
 class ConsoleCommand:
-    op: str  # home | move | heaters | temps | position | identity | enable | motors_off | estop | help
+    op: str  # home move heaters temps position identity enable motors_off estop clear help
     text: str
     values: dict[str, float] = field(default_factory=dict)
     wait: bool = False
@@ -80,6 +81,7 @@ def parse_command(text: str) -> ConsoleCommand:
         "M18": "motors_off",
         "M84": "motors_off",
         "M112": "estop",
+        "M999": "clear",
     }
     if name in simple:
         return ConsoleCommand(simple[name], raw)

@@ -159,6 +159,33 @@ class ControllerBase:
 
         self.background("status", self.backend.device_status, done, fail, exclusive=True)
 
+    def recheck_link(self, then: Callable[[], None] | None = None) -> None:
+        """Ask the device for its status: the link is "connected" again when it answers (after
+        a job, an emergency stop, a cleared fault), "error" when it does not; ``then`` runs
+        either way."""
+        conn = self.state.connection
+        if conn.status not in ("connected", "error") or not self.backend.connected():
+            if then is not None:
+                then()
+            return
+
+        def done(status: Any) -> None:
+            self.update(connection=replace(self.state.connection, status="connected", error=""))
+            if status is not None:
+                self.device_seen(status)
+            if then is not None:
+                then()
+
+        def fail(exc: BaseException) -> None:
+            text = str(exc) or type(exc).__name__
+            if self.state.connection.status == "connected":
+                self.say(ConsoleLine("error", f"link lost: {text}", self.app.wall_clock()))
+            self.update(connection=replace(self.state.connection, status="error", error=text))
+            if then is not None:
+                then()
+
+        self.background("status", self.backend.device_status, done, fail, exclusive=True)
+
     def device_seen(self, status: DeviceStatusView) -> None:
         hist = self.state.device_temps
         if status.hotend is not None and status.bed is not None:
@@ -232,7 +259,7 @@ class ControllerBase:
         if self.state.job_active:
             self.say(ConsoleLine("sent", text.strip(), now), *self._answer_while_printing(text))
             return
-        if not self.state.connected:
+        if self.state.connection.status not in ("connected", "error"):
             self.say(
                 ConsoleLine("sent", text.strip(), now),
                 ConsoleLine("error", "not connected: connect on the link screen first", now),
@@ -249,7 +276,7 @@ class ControllerBase:
         def done(lines: list[ConsoleLine]) -> None:
             self.update(busy="")
             self.say(*lines)
-            self.refresh_device()
+            self.recheck_link()
 
         def fail(exc: BaseException) -> None:
             self.update(busy="")

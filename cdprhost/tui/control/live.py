@@ -314,8 +314,13 @@ class LiveBackend:
             machine = self.machine
         except CdprError as exc:
             return [ConsoleLine("sent", line, time.time()), ConsoleLine("error", str(exc))]
+        from cdprhost.link import LinkError
+
         out = run_console(line, machine, self._status_view, self._identity, JOG_SPEED_MM_S)
-        self._note_events(machine.link.poll(0.0))
+        try:
+            self._note_events(machine.link.poll(0.0))
+        except (LinkError, OSError) as exc:  # stopped (M112) or lost: said, not raised
+            out.append(ConsoleLine("device", f"{type(exc).__name__}: {exc}", time.time()))
         return out + self.device_log()
 
     # ------------------------------------------------------------ diagnose

@@ -27,8 +27,8 @@ def status_lines(view: DeviceStatusView, bed_origin: Any) -> list[str]:
     if view.position is not None:
         g = np.asarray(view.position) - np.asarray(bed_origin, dtype=float)
         out.append(
-            "position X{:.3f} Y{:.3f} Z{:.3f} (G-code frame); machine frame ({:.3f}, {:.3f}, "
-            "{:.3f}) mm".format(*g, *view.position)
+            "position X{:.2f} Y{:.2f} Z{:.2f} (G-code frame); machine frame ({:.2f}, {:.2f}, "
+            "{:.2f}) mm".format(*g, *view.position)
         )
     else:
         out.append("position unknown: not homed (G28 homes)")
@@ -92,11 +92,11 @@ def _execute(
             return ["ok drivers off"]
         case "estop":
             answered = m.emergency_stop()
-            return [
-                "ok emergency stop: motion, heaters and drivers off"
-                if answered
-                else "emergency stop sent; the device did not confirm"
-            ]
+            said = "ok emergency stop" if answered else "emergency stop sent (not confirmed)"
+            return [f"{said}: motion, heaters and drivers off; M999 clears the stop"]
+        case "clear":
+            m.link.clear_fault()
+            return ["ok cleared: home (G28) before moving"]
         case "temps":
             return [temperature_line(status_view(m.status()))]
         case "position":

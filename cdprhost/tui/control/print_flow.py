@@ -143,26 +143,13 @@ class PrintFlow(ControllerBase):
     def probe_connection(self, after_cancel: bool = False) -> None:
         """After a job: is the link alive? (A job may have re-opened it, or lost it.) After a
         cancel, do what the profile asks (park, heaters off)."""
-        conn = self.state.connection
-        if conn.status not in ("connected", "error") or not self.backend.connected():
-            self.lookup_resume()
-            return
 
-        def done(status: Any) -> None:
-            self.update(connection=replace(self.state.connection, status="connected", error=""))
-            if status is not None:
-                self.device_seen(status)
+        def then() -> None:
             self.lookup_resume()
-            if after_cancel:
+            if after_cancel and self.state.connected:
                 self.device_op("parking", self.backend.after_cancel)
 
-        def fail(exc: BaseException) -> None:
-            text = str(exc) or type(exc).__name__
-            self.update(connection=replace(self.state.connection, status="error", error=text))
-            self.say(ConsoleLine("error", f"link lost: {text}", self.app.wall_clock()))
-            self.lookup_resume()
-
-        self.background("status", self.backend.device_status, done, fail, exclusive=True)
+        self.recheck_link(then)
 
     def _request(self, what: str) -> bool:
         with self._job_lock:

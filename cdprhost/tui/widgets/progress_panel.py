@@ -52,6 +52,13 @@ def eta_text(eta: Eta | None, now_wall: float, state: JobState) -> Text:
     out = Text()
     if state is JobState.DONE:
         return out.append("finished", style="green")
+    if eta is not None and not (state.active or state is JobState.PREFLIGHT):
+        out.append("takes ≈ ", style="dim")  # the open file, before it starts
+        out.append(hms(eta.wall_s), style="bold")
+        out.append(" wall-clock", style="dim")
+        if eta.heating_left_s >= 1:
+            out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
+        return out
     if eta is None or not (state.active or state is JobState.PREFLIGHT):
         return out.append("left --:--:--", style="dim")
     out.append("left ", style="dim")
