@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from types import ModuleType
 
 from cdprhost import __version__
 
@@ -61,7 +62,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def load_command(module: str):
+def load_command(module: str) -> ModuleType:
+    """A command module (``register(subparsers)``, and the ``run`` functions it sets)."""
     return importlib.import_module(f"cdprhost.cli.commands.{module}")
 
 

@@ -31,7 +31,8 @@ class Backlash(Effect):
         "each module lags its commanded position by beta_k against its direction of travel"
     )
 
-    def to_vector(self, params: BacklashParams) -> np.ndarray:
+    def to_vector(self, params: BaseModel) -> np.ndarray:
+        assert isinstance(params, BacklashParams)
         return vector3(params.beta)
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:

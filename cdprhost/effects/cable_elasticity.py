@@ -27,7 +27,8 @@ class CableElasticity(Effect):
     vector_names = ("compliance_per_N",)
     description = "cables stretch in proportion to their tension (shared EA)"
 
-    def to_vector(self, params: CableElasticityParams) -> np.ndarray:
+    def to_vector(self, params: BaseModel) -> np.ndarray:
+        assert isinstance(params, CableElasticityParams)
         return np.array([1.0 / params.EA])
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:

@@ -29,7 +29,8 @@ class Drift(Effect):
     vector_names = ("rho_1", "rho_2", "rho_3")
     description = "each module creeps at rho_k mm/s over a session"
 
-    def to_vector(self, params: DriftParams) -> np.ndarray:
+    def to_vector(self, params: BaseModel) -> np.ndarray:
+        assert isinstance(params, DriftParams)
         return vector3(params.rho)
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:

@@ -25,7 +25,8 @@ class DriveScale(Effect):
     vector_names = ("eps_1", "eps_2", "eps_3")
     description = "each module moves (1 + eps_k) times the commanded distance"
 
-    def to_vector(self, params: DriveScaleParams) -> np.ndarray:
+    def to_vector(self, params: BaseModel) -> np.ndarray:
+        assert isinstance(params, DriveScaleParams)
         return vector3(params.eps)
 
     def to_params(self, vector: np.ndarray, stderr: np.ndarray | None = None) -> dict[str, Any]:

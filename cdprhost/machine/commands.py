@@ -26,8 +26,8 @@ def motors_off() -> m.Enable:
 
 
 def home_message(model: MachineModel, home_mm: Sequence[float]) -> m.Home:
-    steps = model.steps(np.asarray(home_mm, dtype=float).reshape(1, 3))[0]
-    return m.Home(mask=ALL_MODULES, positions=tuple(int(v) for v in steps))
+    n1, n2, n3 = (int(v) for v in model.steps(np.asarray(home_mm, dtype=float).reshape(1, 3))[0])
+    return m.Home(mask=ALL_MODULES, positions=(n1, n2, n3))
 
 
 def home_commands(model: MachineModel, home_mm: Sequence[float]) -> list[m.Message]:

@@ -139,9 +139,11 @@ class Machine:
         after = self.status()
         return MoveResult(np.asarray(after.steps[:3], dtype=np.int64), float(self.link.now()))
 
-    def move_to(self, target: tuple[float, float, float], **options: float) -> DeviceStatus:
+    def move_to(
+        self, target: tuple[float, float, float], *, feed_mm_s: float | None = None
+    ) -> DeviceStatus:
         """One straight move to ``target`` (machine frame); the modules must be homed."""
-        self.move_through(np.asarray(target, dtype=float).reshape(1, 3), **options)
+        self.move_through(np.asarray(target, dtype=float).reshape(1, 3), feed_mm_s=feed_mm_s)
         return self.status()
 
     def park(self, *, lift_mm: float = 10.0) -> DeviceStatus:

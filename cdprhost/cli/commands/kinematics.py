@@ -11,7 +11,7 @@ from cdprhost.errors import InputError
 from cdprhost.fileio.csv_arrays import data_row_numbers, read_columns, write_columns
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     ik = sub.add_parser(
         "ik", help="points (x,y,z) -> slider displacements and steps, effects compensated"
     )

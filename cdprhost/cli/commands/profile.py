@@ -8,7 +8,7 @@ from cdprhost.profile import load_profile, profile_to_toml
 from cdprhost.profile.loader import resolve_profile_path
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser("profile", help="show or validate machine profiles")
     psub = parser.add_subparsers(dest="profile_command", metavar="ACTION", required=True)
     show = psub.add_parser("show", help="print a profile (validated) as TOML")
