@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -211,6 +210,7 @@ class FakeBackend:
         self.sent: list[str] = []
         self.cancels_handled = 0
         self.rate = 1.0
+        self.now = 1_750_000_000.0  # the wall clock of the console's replies
 
     def _status_at(self, point):
         p = np.asarray(point, dtype=float)[None, :]
@@ -282,7 +282,7 @@ class FakeBackend:
 
     def console(self, line):
         self.sent.append(line)
-        now = time.time()
+        now = self.now
         if line.strip().upper() == "M105":
             return [
                 ConsoleLine("sent", line, now),

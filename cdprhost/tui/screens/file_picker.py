@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -15,6 +16,18 @@ from textual.widgets.option_list import Option
 from cdprhost.tui.keys import hint
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".gc", ".nc")
+
+
+def shown_path(path: Path) -> str:
+    """A folder as the operator reads it: relative to the working folder when inside it,
+    else with the home folder as ~."""
+    p = path.resolve()
+    with contextlib.suppress(ValueError):
+        rel = p.relative_to(Path.cwd().resolve())
+        return "." if str(rel) == "." else f"./{rel}"
+    with contextlib.suppress(ValueError, RuntimeError):
+        return f"~/{p.relative_to(Path.home().resolve())}"
+    return str(p)
 
 
 class GcodeTree(DirectoryTree):
@@ -66,14 +79,14 @@ class FilePickerScreen(ModalScreen[str | None]):
                         compact=True,
                     )
                 with Vertical(id="picker-tree"):
-                    yield Label(str(self.start), id="tree-root", classes="section-title")
+                    yield Label(shown_path(self.start), id="tree-root", classes="section-title")
                     yield GcodeTree(self.start, id="file-tree")
             yield Label(id="picker-hint", classes="hint")
 
     @staticmethod
     def _recent_label(path: str) -> str:
         p = Path(path)
-        return f"{p.name}  {p.parent}"
+        return f"{p.name}  {shown_path(p.parent)}"
 
     def on_mount(self) -> None:
         app = self.app
@@ -119,4 +132,4 @@ class FilePickerScreen(ModalScreen[str | None]):
         tree = self.query_one(GcodeTree)
         parent = Path(tree.path).resolve().parent
         tree.path = parent
-        self.query_one("#tree-root", Label).update(str(parent))
+        self.query_one("#tree-root", Label).update(shown_path(parent))
