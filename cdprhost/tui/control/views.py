@@ -52,13 +52,20 @@ class Toolpath:
         return len(self.layer_z)
 
     def bounds(self) -> tuple[float, float, float, float]:
-        """(x min, y min, x max, y max) of the extrusions (of every move when none extrudes)."""
+        """(x min, y min, x max, y max) of the extrusions (of every move when none extrudes);
+        computed once."""
+        cached: tuple[float, float, float, float] | None = self.__dict__.get("_bounds")
+        if cached is not None:
+            return cached
         sel = self.extrude if self.extrude.any() else np.ones(len(self.line), dtype=bool)
         if not sel.any():
-            return (-1.0, -1.0, 1.0, 1.0)
-        pts = np.concatenate([self.xy0[sel], self.xy1[sel]])
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+            box = (-1.0, -1.0, 1.0, 1.0)
+        else:
+            lo = np.minimum(self.xy0[sel].min(axis=0), self.xy1[sel].min(axis=0))
+            hi = np.maximum(self.xy0[sel].max(axis=0), self.xy1[sel].max(axis=0))
+            box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+        object.__setattr__(self, "_bounds", box)
+        return box
 
 
 @dataclass(frozen=True)

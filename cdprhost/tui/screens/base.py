@@ -45,8 +45,10 @@ class AppScreen(Screen[None]):
         self._state_changed(self.app.state)
 
     def _tick(self) -> None:
-        if self.is_current:
-            self.render_tick(self.app.state)
+        app = self.app
+        if not self.is_current or app.clock() - app.last_fold < self.TICK_S:
+            return  # events were folded (and drawn) within the last second
+        self.render_tick(app.state)
 
     def _state_changed(self, state: UiState) -> None:
         if not self.is_current:

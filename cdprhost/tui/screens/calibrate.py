@@ -12,6 +12,7 @@ from cdprhost.tui.control.views import CalibrationView, IdentificationView
 from cdprhost.tui.keys import hint
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState
+from cdprhost.tui.widgets.show import show_text
 
 STATUS_STYLE = {
     "planned": "dim",
@@ -125,7 +126,7 @@ class CalibrateScreen(AppScreen):
 
     def render_state(self, state: UiState) -> None:
         cal = state.calibration
-        self.query_one("#calib-stage", Label).update(stage_text(cal))
+        show_text(self.query_one("#calib-stage", Label), stage_text(cal), layout=True)
         poses = self.query_one("#poses", DataTable)
         if getattr(poses, "_shown", None) != cal.poses:
             cursor = poses.cursor_row
@@ -147,8 +148,10 @@ class CalibrateScreen(AppScreen):
         if waiting is not None and waiting.take and self._offered != (waiting.index, waiting.take):
             take_input.value = waiting.take  # offered by the virtual motion capture, once per pose
             self._offered = (waiting.index, waiting.take)
-        self.query_one("#calib-result", Label).update(
-            result_text(cal.result, hint(self.app, self, "identify"))
+        show_text(
+            self.query_one("#calib-result", Label),
+            result_text(cal.result, hint(self.app, self, "identify")),
+            layout=True,
         )
         params = self.query_one("#parameters", DataTable)
         if getattr(params, "_shown", None) is not cal.result:

@@ -16,6 +16,7 @@ from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.views import PortChoice
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState
+from cdprhost.tui.widgets.show import show_text
 
 SIMULATOR = "embedded simulated device (no hardware)"
 
@@ -105,8 +106,8 @@ class ConnectionScreen(AppScreen):
 
     def render_state(self, state: UiState) -> None:
         c = state.connection
-        self.query_one("#conn-status", Label).update(status_text(state))
-        self.query_one("#conn-health", Label).update(health_text(state))
+        show_text(self.query_one("#conn-status", Label), status_text(state), layout=True)
+        show_text(self.query_one("#conn-health", Label), health_text(state), layout=True)
         table = self.query_one("#identity", DataTable)
         if getattr(table, "_shown", None) != c.identity:
             table.clear()

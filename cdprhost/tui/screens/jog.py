@@ -16,6 +16,7 @@ from cdprhost.tui.keys import key_for
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState, live_position
 from cdprhost.tui.widgets.position_panel import PositionPanel
+from cdprhost.tui.widgets.show import show_text
 from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
 from cdprhost.tui.widgets.tension_bars import TensionBars
 
@@ -107,7 +108,8 @@ class JogScreen(AppScreen):
         position, sliders, _ = live_position(state)
         steps = state.device.steps if state.device else None
         self.query_one(PositionPanel).show(position, sliders, steps)
-        self.query_one("#jog-step", Label).update(
+        show_text(
+            self.query_one("#jog-step", Label),
             Text.assemble(
                 ("step  ", "bold"),
                 *(
@@ -115,13 +117,13 @@ class JogScreen(AppScreen):
                     for i, s in enumerate(STEPS_MM)
                 ),
                 ("  mm", "dim"),
-            )
+            ),
         )
-        self.query_one("#jog-target", Label).update(target_text(state))
+        show_text(self.query_one("#jog-target", Label), target_text(state), layout=True)
         busy = state.busy or ("print running: jog disabled" if state.job_active else "")
         if not state.connected:
             busy = "not connected"
-        self.query_one("#jog-busy", Label).update(Text(busy, style="yellow"))
+        show_text(self.query_one("#jog-busy", Label), Text(busy, style="yellow"), layout=True)
         target = state.jog.target if state.jog is not None else position
         self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target))
         dev = state.device

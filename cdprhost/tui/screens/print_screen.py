@@ -31,6 +31,7 @@ from cdprhost.tui.tabs import screen_key
 from cdprhost.tui.widgets.layer_preview import LayerPreview, PreviewInput
 from cdprhost.tui.widgets.position_panel import PositionPanel
 from cdprhost.tui.widgets.progress_panel import ProgressPanel
+from cdprhost.tui.widgets.show import show_text
 from cdprhost.tui.widgets.source_view import SourceView
 from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
 from cdprhost.tui.widgets.tension_bars import TensionBars
@@ -176,17 +177,19 @@ class PrintScreen(AppScreen):
         steps = job.steps if state.job_active or state.device is None else state.device.steps
         self.query_one(PositionPanel).show(position, sliders, steps)
         self.query_one(TensionBars).show(tensions)
-        self.query_one("#link-line", Label).update(link_line(state))
+        show_text(self.query_one("#link-line", Label), link_line(state))
         name = Text(state.file.path or "none", style="bold" if state.file.path else "dim")
         name.append(f"   {hint(app, self, 'open')}", style="dim")
-        self.query_one("#file-name", Label).update(name)
-        self.query_one("#preflight-summary", Label).update(
-            preflight_summary(state, hint(app, self, "open"))
+        show_text(self.query_one("#file-name", Label), name)
+        show_text(
+            self.query_one("#preflight-summary", Label),
+            preflight_summary(state, hint(app, self, "open")),
         )
         resume = resume_line(state, hint(app, self, "resume_failed"))
         line = self.query_one("#resume-line", Label)
-        line.update(resume)
-        line.display = bool(resume.plain)
+        show_text(line, resume)
+        if line.display != bool(resume.plain):
+            line.display = bool(resume.plain)
         pre = state.file.preflight
         violations = pre.violations if pre else ()
         table = self.query_one(ViolationList)
@@ -194,18 +197,21 @@ class PrintScreen(AppScreen):
             table.show(violations)
             self.set_class(bool(violations), "-violations")
         self._render_source(state)
-        self.render_tick(state)
+        self._render_times(state)
+        self._render_preview(state)
 
     def render_tick(self, state: UiState) -> None:
         """What ages: temperatures (stale marking), elapsed and time left, the preview."""
+        self._render_times(state)
+        self._render_preview(state)
+
+    def _render_times(self, state: UiState) -> None:
         app = self.app
-        now = app.clock()
-        self._render_temperatures(state, temperature_age(state, now))
+        self._render_temperatures(state, temperature_age(state, app.clock()))
         eta = job_eta(state, app.backend.machine_rate())
         wall = app.wall_clock()
         elapsed = wall - state.job_started if state.job_started else None
         self.query_one(ProgressPanel).show_times(state.job, elapsed, eta, wall)
-        self._render_preview(state)
 
     def _render_temperatures(self, state: UiState, age: float | None) -> None:
         job = state.job

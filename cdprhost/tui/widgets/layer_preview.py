@@ -3,14 +3,16 @@ the nozzle, drawn in braille dots (no graphics protocol needed)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from rich.text import Text
+from textual.geometry import Region
+from textual.strip import Strip
 from textual.widget import Widget
 
 from cdprhost.tui.control.views import Toolpath
-from cdprhost.tui.widgets.braille import DotFrame, braille_char, cell_bits, draw_segments, fit
+from cdprhost.tui.widgets.braille import BRAILLE_BLANK, DotFrame, cell_bits, draw_segments, fit
 
 PLANNED, PRINTED, NOZZLE = "grey50", "bold green", "bold red"
 NOZZLE_MARK = "◆"
@@ -26,20 +28,49 @@ class PreviewInput:
     title: str = ""
 
 
+@dataclass
+class LayerDots:
+    """One layer's dots kept between drawings: planned, and printed up to ``done_line`` (while
+    a print advances, only the moves printed since the last drawing are added)."""
+
+    key: tuple[object, ...] = ()
+    planned: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    printed: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    done_line: int = -1
+
+
 def layer_cells(
-    toolpath: Toolpath, layer: int, done_line: int, frame: DotFrame
+    toolpath: Toolpath,
+    layer: int,
+    done_line: int,
+    frame: DotFrame,
+    dots: LayerDots | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(bits, printed) per cell: the braille bits of the layer's extrusions, and whether any
-    printed extrusion crosses the cell."""
+    printed extrusion crosses the cell; ``dots`` carries the work over between calls."""
+    dots = LayerDots() if dots is None else dots
+    key = (id(toolpath), layer, frame)
     sel = (toolpath.layer == layer) & toolpath.extrude
-    planned = draw_segments(frame, toolpath.xy0[sel], toolpath.xy1[sel])
-    done = sel & (toolpath.line <= done_line)
-    printed = draw_segments(frame, toolpath.xy0[done], toolpath.xy1[done])
-    return cell_bits(planned | printed), cell_bits(printed) > 0
+    if dots.key != key or done_line < dots.done_line:  # another layer, or a new job
+        if dots.key != key:
+            dots.planned = draw_segments(frame, toolpath.xy0[sel], toolpath.xy1[sel])
+        dots.key, dots.done_line = key, -1
+        dots.printed = np.zeros_like(dots.planned)
+    new = sel & (toolpath.line <= done_line) & (toolpath.line > dots.done_line)
+    if new.any():
+        dots.printed = dots.printed | draw_segments(frame, toolpath.xy0[new], toolpath.xy1[new])
+    dots.done_line = done_line
+    return cell_bits(dots.planned | dots.printed), cell_bits(dots.printed) > 0
 
 
-def preview_text(data: PreviewInput, cols: int, rows: int) -> Text:
-    """The drawing as styled text: a title row, then ``rows - 1`` rows of ``cols`` cells."""
+def row_chars(bits: np.ndarray) -> str:
+    """One row of braille bit masks as text (vectorised)."""
+    return (BRAILLE_BLANK + bits.astype(np.uint32)).astype("<u4").tobytes().decode("utf-32-le")
+
+
+def preview_text(data: PreviewInput, cols: int, rows: int, dots: LayerDots | None = None) -> Text:
+    """The drawing as styled text: a title row, then ``rows - 1`` rows of ``cols`` cells.
+    ``dots``: see :func:`layer_cells`."""
     out = Text(no_wrap=True, overflow="crop")
     tp = data.toolpath
     if tp is None or tp.layers == 0:
@@ -59,17 +90,17 @@ def preview_text(data: PreviewInput, cols: int, rows: int) -> Text:
     if body_rows < 1 or cols < 2:
         return out
     frame = fit(tp.bounds(), cols, body_rows)
-    bits, printed = layer_cells(tp, layer, data.done_line, frame)
+    bits, printed = layer_cells(tp, layer, data.done_line, frame, dots)
     kinds = np.where(bits > 0, np.where(printed, 2, 1), 0)
     nozzle = frame.to_cell(*data.nozzle) if data.nozzle is not None else None
     for r in range(body_rows):
         out.append("\n")
-        row_bits, row_kind = bits[r], kinds[r]
+        text, row_kind = row_chars(bits[r]), kinds[r]
         cuts = np.flatnonzero(np.diff(row_kind)) + 1
         starts = np.concatenate(([0], cuts))
         ends = np.concatenate((cuts, [len(row_kind)]))
         for a, b in zip(starts.tolist(), ends.tolist()):
-            chars = "".join(braille_char(v) for v in row_bits[a:b])
+            chars = text[a:b]
             style = _STYLE[int(row_kind[a])]
             if nozzle is not None and nozzle[1] == r and a <= nozzle[0] < b:
                 k = nozzle[0] - a
@@ -82,12 +113,16 @@ def preview_text(data: PreviewInput, cols: int, rows: int) -> Text:
 
 
 class LayerPreview(Widget):
-    """Shows :func:`preview_text` for the last :meth:`show` input; redraws only on change."""
+    """Shows :func:`preview_text` for the last :meth:`show` input, line by line: only the
+    rows that changed are drawn again (the nozzle moving redraws a row or two)."""
 
     def __init__(self, *, id: str | None = None, classes: str | None = None):
         super().__init__(id=id, classes=classes)
         self._input = PreviewInput(None, 0, 0, None)
-        self._cache: tuple[tuple[object, ...], Text] | None = None
+        self._dots = LayerDots()
+        self._lines: list[Strip] = []
+        self._texts: list[Text] = []
+        self._drawn_for: tuple[int, int] = (0, 0)
 
     @property
     def shown(self) -> PreviewInput:
@@ -96,11 +131,40 @@ class LayerPreview(Widget):
     def show(self, data: PreviewInput) -> None:
         if data != self._input:
             self._input = data
-            self.refresh()
+            self._redraw()
 
-    def render(self) -> Text:
-        d, (w, h) = self._input, self.size
-        key = (id(d.toolpath), d.layer, d.done_line, d.nozzle, d.title, w, h)
-        if self._cache is None or self._cache[0] != key:
-            self._cache = (key, preview_text(d, w, h))
-        return self._cache[1]
+    def on_resize(self) -> None:
+        self._redraw(full=True)
+
+    def on_show(self) -> None:
+        self._redraw(full=True)
+
+    def _redraw(self, full: bool = False) -> None:
+        w, h = self.content_size
+        if w <= 0 or h <= 0 or not self.display:
+            self._drawn_for = (0, 0)  # drawn in full when it shows again
+            return
+        texts = preview_text(self._input, w, h, self._dots).split("\n")
+        old = self._texts
+        full = full or self._drawn_for != (w, h) or len(old) != len(texts)
+        console = self.app.console
+        changed = []
+        lines = []
+        for y, text in enumerate(texts):
+            if not full and y < len(old) and old[y] == text:
+                lines.append(self._lines[y])
+                continue
+            text.no_wrap, text.overflow = True, "crop"
+            lines.append(Strip(list(text.render(console)), text.cell_len).crop_extend(0, w, None))
+            changed.append(y)
+        self._texts, self._lines, self._drawn_for = texts, lines, (w, h)
+        if full:
+            self.refresh()
+        elif changed:
+            top, left = self.gutter.top, self.gutter.left
+            self.refresh(*(Region(left, top + y, w, 1) for y in changed))
+
+    def render_line(self, y: int) -> Strip:
+        if 0 <= y < len(self._lines):
+            return self._lines[y]
+        return Strip.blank(self.content_size.width)

@@ -7,6 +7,8 @@ from collections.abc import Sequence
 from rich.text import Text
 from textual.widgets import Static
 
+from cdprhost.tui.widgets.show import show_text
+
 Vec3 = tuple[float, float, float]
 
 
@@ -56,4 +58,4 @@ class PositionPanel(Static):
     def show(
         self, position: Vec3 | None, sliders: Vec3 | None, steps: Sequence[int] | None = None
     ) -> None:
-        self.update(position_rows(position, sliders, steps, self.bed_origin))
+        show_text(self, position_rows(position, sliders, steps, self.bed_origin))

@@ -8,11 +8,13 @@ import time
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Vertical
-from textual.widgets import Label, ProgressBar
+from textual.widgets import Label
 
 from cdprhost.job.state import JobSnapshot, JobState
 from cdprhost.tui.control.eta import Eta
 from cdprhost.tui.state import hms
+from cdprhost.tui.widgets.charts import hbar
+from cdprhost.tui.widgets.show import show_text
 
 STATE_STYLE = {
     JobState.IDLE: "dim",
@@ -40,6 +42,16 @@ def progress_fraction(snap: JobSnapshot) -> float:
     if snap.estimated_time_s > 0:
         return min(max(snap.device_time_s / snap.estimated_time_s, 0.0), 1.0)
     return 0.0
+
+
+def bar_text(fraction: float, width: int, state: JobState) -> Text:
+    """The progress bar: blocks to eighths of a cell, then the percentage."""
+    style = "green" if state is JobState.DONE else STATE_STYLE[state].replace("bold ", "")
+    cells = max(width - 6, 4)
+    done = hbar(fraction, 1.0, cells).rstrip()
+    out = Text(done, style=style)
+    out.append("─" * (cells - len(done)), style="dim")
+    return out.append(f" {100 * fraction:3.0f}%", style="bold")
 
 
 def clock_time(epoch: float) -> str:
@@ -108,7 +120,7 @@ def progress_lines(
 class ProgressPanel(Vertical):
     def compose(self) -> ComposeResult:
         yield Label(id="job-state")
-        yield ProgressBar(total=1000, show_eta=False, id="job-bar")
+        yield Label(id="job-bar")
         yield Label(id="job-stats")
         yield Label(id="job-eta")
         yield Label(id="job-line")
@@ -121,12 +133,11 @@ class ProgressPanel(Vertical):
         elapsed_s: float | None = None,
     ) -> None:
         head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s)
-        self.query_one("#job-state", Label).update(head)
-        self.query_one("#job-stats", Label).update(stats)
-        self.query_one("#job-line", Label).update(cur)
-        self.query_one("#job-bar", ProgressBar).update(
-            progress=round(1000 * progress_fraction(snap))
-        )
+        show_text(self.query_one("#job-state", Label), head)
+        show_text(self.query_one("#job-stats", Label), stats)
+        show_text(self.query_one("#job-line", Label), cur)
+        bar = self.query_one("#job-bar", Label)
+        show_text(bar, bar_text(progress_fraction(snap), bar.size.width or 40, snap.state))
 
     def show_times(
         self,
@@ -138,5 +149,5 @@ class ProgressPanel(Vertical):
     ) -> None:
         """What changes with the clock alone: elapsed and time left."""
         _, stats, _ = progress_lines(snap, "", shown, elapsed_s)
-        self.query_one("#job-stats", Label).update(stats)
-        self.query_one("#job-eta", Label).update(eta_text(eta, now_wall, snap.state))
+        show_text(self.query_one("#job-stats", Label), stats)
+        show_text(self.query_one("#job-eta", Label), eta_text(eta, now_wall, snap.state))
