@@ -84,8 +84,8 @@ def run_preflight(path: Path, profile, model):
 def encoder():
     """The wire-encode hook: the protocol's vectorised segment encoder, when present."""
     try:
-        from firmware_protocol.segments import SegmentBatch as WireBatch
         from firmware_protocol.segments import (
+            SegmentBatch,
             SegmentContext,
             encode_segments,
             ramp_codes_from_speeds,
@@ -95,7 +95,7 @@ def encoder():
     ctx = SegmentContext()
 
     def encode(batch):
-        wire = WireBatch(
+        wire = SegmentBatch(
             batch.ticks, batch.delta, ramp_codes_from_speeds(batch.v_start, batch.v_end)
         )
         return encode_segments(wire, ctx)[0]

@@ -27,14 +27,26 @@ def configure_logging(verbosity: int = 0) -> None:
             h.setLevel(level)
 
 
-def attach_log_file(path: str | os.PathLike[str]) -> logging.Handler | None:
-    """Also log (info and up) to ``path``; None, with a warning, when it cannot be opened.
+class _QuietFileHandler(logging.FileHandler):
+    """A log file that goes quiet, rather than printing tracebacks, once it cannot be
+    written (disk full): the job's own log reports that failure."""
 
-    A log file is a convenience: failing to open one never stops a command."""
+    def handleError(self, record: logging.LogRecord) -> None:
+        logging.getLogger("cdprhost").removeHandler(self)
+        with contextlib.suppress(OSError):
+            self.close()
+
+
+def attach_log_file(path: str | os.PathLike[str], *, quiet: bool = False) -> logging.Handler | None:
+    """Also log (info and up) to ``path``; None, with a warning (unless ``quiet``), when it
+    cannot be opened.
+
+    A log file is a convenience: failing to open or write one never stops a command."""
     try:
-        handler = logging.FileHandler(path, encoding="utf-8", delay=False)
+        handler = _QuietFileHandler(path, encoding="utf-8", delay=False)
     except OSError as exc:
-        logging.getLogger(__name__).warning("no log file %s: %s", path, exc.strerror or exc)
+        if not quiet:
+            logging.getLogger(__name__).warning("no log file %s: %s", path, exc.strerror or exc)
         return None
     handler.setLevel(logging.INFO)
     handler.setFormatter(logging.Formatter(FORMAT))

@@ -1,16 +1,17 @@
 """The two checksums of the wire format.
 
-- CRC-16/CCITT-FALSE (a.k.a. CRC-16/IBM-3740): poly 0x1021, init 0xFFFF, not
-  reflected, xorout 0; check value for b"123456789" is 0x29B1. Protects a frame.
+- CRC-32 (CRC-32/ISO-HDLC, the one of zlib, Ethernet and PNG): reflected polynomial
+  0xEDB88320, initial value 0xFFFFFFFF, final XOR 0xFFFFFFFF; check value for
+  b"123456789" is 0xCBF43926. Protects a whole frame.
 - CRC-8/SMBUS: poly 0x07, init 0x00, not reflected, xorout 0; check value 0xF4.
   Protects the frame header (length, kind, seq, ack) on its own.
 """
 
 from __future__ import annotations
 
-import binascii
+import zlib
 
-CRC16_CHECK = 0x29B1
+CRC32_CHECK = 0xCBF43926
 CRC8_CHECK = 0xF4
 
 
@@ -27,19 +28,20 @@ def _crc8_table() -> tuple[int, ...]:
 _CRC8 = _crc8_table()
 
 
-def crc16(data: bytes | bytearray | memoryview, init: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE of ``data`` (binascii.crc_hqx is exactly this polynomial)."""
-    return binascii.crc_hqx(data, init)
+def crc32(data: bytes | bytearray | memoryview) -> int:
+    """CRC-32/ISO-HDLC of ``data`` (zlib's)."""
+    return zlib.crc32(data) & 0xFFFFFFFF
 
 
-def crc16_reference(data: bytes) -> int:
-    """Bit-by-bit CRC-16/CCITT-FALSE, the definition the fast version is tested against."""
-    crc = 0xFFFF
+def crc32_reference(data: bytes) -> int:
+    """Bit-by-bit CRC-32/ISO-HDLC, the definition the fast version is tested against (and
+    what a firmware without a table computes)."""
+    crc = 0xFFFFFFFF
     for byte in data:
-        crc ^= byte << 8
+        crc ^= byte
         for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+            crc = (crc >> 1) ^ 0xEDB88320 if crc & 1 else crc >> 1
+    return crc ^ 0xFFFFFFFF
 
 
 def crc8(data: bytes | bytearray | memoryview) -> int:

@@ -25,7 +25,7 @@ class Incoming:
 
 
 @dataclass
-class LinkCounters:
+class EndpointCounters:
     frames_sent: int = 0
     frames_received: int = 0
     bytes_sent: int = 0
@@ -55,12 +55,14 @@ class Endpoint:
         rto_initial: float = 0.25,
         rto_floor: float = 0.02,
         rto_ceiling: float = 1.0,
-        nak_holdoff: float = 0.03,
+        nak_holdoff: float = 0.01,
         accept: Callable[[bytes], bool] | None = None,
         flow: Callable[[], bytes] | None = None,
         byte_time: float = 0.0,
+        window_bytes: int | None = None,
     ):
         self._window = window
+        self.window_bytes = window_bytes
         self._rto_args = (rto_initial, rto_floor, rto_ceiling)
         self.nak_holdoff = nak_holdoff
         self.accept = accept
@@ -70,13 +72,13 @@ class Endpoint:
         )
         self._wire_free = 0.0
         self.deframer = Deframer()
-        self.counters = LinkCounters()
+        self.counters = EndpointCounters()
         self._urgent: list[bytes] = []
         self.reset_session()
 
     def reset_session(self) -> None:
         """Start sequence numbers from 0 on both directions (after HELLO)."""
-        self.sender = Sender(self._window, RtoEstimator(*self._rto_args))
+        self.sender = Sender(self._window, RtoEstimator(*self._rto_args), self.window_bytes)
         self.receiver = Receiver()
         self._ack_due = False
         self._nak_due = False
@@ -150,11 +152,12 @@ class Endpoint:
 
     # ------------------------------------------------------------------ send
 
-    def send(self, payload: bytes, items: int = 0) -> None:
-        """Queue a reliable DATA payload; ``items`` is its move-queue slot count."""
+    def send(self, payload: bytes, items: int = 0, ticks: int = 0) -> None:
+        """Queue a reliable DATA payload; ``items`` is its move-queue slot count, ``ticks``
+        the device time of motion it carries."""
         if len(payload) > MAX_PAYLOAD:
             raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
-        self.sender.queue(payload, items)
+        self.sender.queue(payload, items, ticks)
 
     def send_urgent(self, payload: bytes) -> None:
         self._urgent.append(payload)

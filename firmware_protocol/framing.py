@@ -9,11 +9,11 @@ Layout (all multi-byte fields big-endian; see PROTOCOL.md section 2)::
     4      ACK   next DATA sequence number the sender expects from its peer
     5      HCRC  CRC-8/SMBUS over bytes 1..4
     6..    PAYLOAD (LEN bytes)
-    6+LEN  CRC   CRC-16/CCITT-FALSE over bytes 1..5+LEN (2 bytes)
-    8+LEN  END   0x5A
+    6+LEN  CRC   CRC-32/ISO-HDLC over bytes 1..5+LEN (4 bytes, big-endian)
+    10+LEN END   0x5A
 
 No byte stuffing: the header check rejects false SYNC bytes inside payloads, the
-CRC-16 the rest, and END turns a dropped byte into a certain rejection because
+CRC-32 the rest, and END turns a dropped byte into a certain rejection because
 the byte that slides into END's place is the next frame's SYNC.
 """
 
@@ -22,12 +22,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
-from firmware_protocol.crc import crc8, crc16
+from firmware_protocol.crc import crc8, crc32
 
 SYNC = 0xA5
 END = 0x5A
 HEADER_LEN = 6
-OVERHEAD = 9
+CRC_LEN = 4
+OVERHEAD = HEADER_LEN + CRC_LEN + 1
 MAX_PAYLOAD = 248
 
 
@@ -52,8 +53,7 @@ def encode_frame(kind: int, seq: int, ack: int, payload: bytes = b"") -> bytes:
         raise ValueError(f"payload of {len(payload)} bytes exceeds {MAX_PAYLOAD}")
     head = bytes((len(payload), int(kind), seq & 0xFF, ack & 0xFF))
     body = head + bytes((crc8(head),)) + payload
-    crc = crc16(body)
-    return bytes((SYNC,)) + body + bytes((crc >> 8, crc & 0xFF, END))
+    return bytes((SYNC,)) + body + crc32(body).to_bytes(4, "big") + bytes((END,))
 
 
 def decode_frame(data: bytes) -> Frame:
@@ -69,7 +69,7 @@ class Deframer:
 
     A candidate starts at each SYNC. It is rejected (and the scan resumes one byte
     after that SYNC, so a real frame hidden behind garbage is still found) when
-    the header check fails, LEN is too large, the kind is unknown, the CRC-16
+    the header check fails, LEN is too large, the kind is unknown, the CRC-32
     differs, or END is missing. An incomplete candidate waits for more bytes unless
     a complete valid frame already follows it.
     """
@@ -78,7 +78,7 @@ class Deframer:
         self._buf = bytearray()
         self.frames = 0
         self.bad_headers = 0
-        self.bad_frames = 0  # header fine, CRC-16 or END wrong
+        self.bad_frames = 0  # header fine, CRC-32 or END wrong
         self.garbage_bytes = 0
         self.rejected: list[
             tuple[int, int]
@@ -129,9 +129,10 @@ class Deframer:
                 self.garbage_bytes += later - pos
                 pos = later
                 continue
-            end = pos + 6 + length
-            crc = (buf[end] << 8) | buf[end + 1]
-            if buf[end + 2] != END or crc16(buf[pos + 1 : end]) != crc:
+            end = pos + HEADER_LEN + length
+            if buf[end + CRC_LEN] != END or crc32(buf[pos + 1 : end]) != int.from_bytes(
+                buf[end : end + CRC_LEN], "big"
+            ):
                 self.bad_frames += 1
                 self.garbage_bytes += 1
                 self.rejected.append((kind, buf[pos + 3]))
@@ -149,13 +150,13 @@ class Deframer:
         i = buf.find(SYNC, start)
         while 0 <= i <= n - OVERHEAD:
             length = buf[i + 1]
-            end = i + 6 + length
+            end = i + HEADER_LEN + length
             if (
                 length <= MAX_PAYLOAD
-                and end + 3 <= n
+                and end + CRC_LEN + 1 <= n
                 and crc8(buf[i + 1 : i + 5]) == buf[i + 5]
-                and buf[end + 2] == END
-                and crc16(buf[i + 1 : end]) == (buf[end] << 8) | buf[end + 1]
+                and buf[end + CRC_LEN] == END
+                and crc32(buf[i + 1 : end]) == int.from_bytes(buf[end : end + CRC_LEN], "big")
             ):
                 return i
             i = buf.find(SYNC, i + 1)

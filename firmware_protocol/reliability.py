@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 SEQ_MOD = 256
 MAX_WINDOW = 127
+MAX_BACKOFF = 4
 
 
 class RtoEstimator:
@@ -45,7 +46,9 @@ class RtoEstimator:
         self._backoff = 1
 
     def back_off(self) -> None:
-        self._backoff = min(self._backoff * 2, 64)
+        """Double the timeout after a timeout, at most 4x: a serial line loses frames to
+        noise, not congestion, so waiting longer only slows the retry."""
+        self._backoff = min(self._backoff * 2, MAX_BACKOFF)
 
     def reset_backoff(self) -> None:
         self._backoff = 1
@@ -60,21 +63,38 @@ class _Outstanding:
     retransmitted: bool = False
 
 
-class Sender:
-    """Go-back-N sender: a window of sent-but-unacknowledged frames plus a backlog."""
+@dataclass
+class _Queued:
+    payload: bytes
+    items: int
+    cum_items: int  # queue items in every frame queued so far, this one included
+    cum_ticks: int  # device ticks of motion likewise
 
-    def __init__(self, window: int = 8, rto: RtoEstimator | None = None):
+
+class Sender:
+    """Go-back-N sender: a window of sent-but-unacknowledged frames plus a backlog.
+
+    The window is bounded in frames (``window``, at most 127) and, when ``window_bytes``
+    is given, in payload bytes (what the receiver can buffer)."""
+
+    def __init__(
+        self, window: int = 8, rto: RtoEstimator | None = None, window_bytes: int | None = None
+    ):
         if not 1 <= window <= MAX_WINDOW:
             raise ValueError(f"window must be 1..{MAX_WINDOW}")
         self.window = window
+        self.window_bytes = window_bytes
         self.rto = rto or RtoEstimator()
         self.next_seq = 0
         self.outstanding: deque[_Outstanding] = deque()
-        self.backlog: deque[tuple[bytes, int, int]] = deque()  # payload, items, cumulative items
+        self.backlog: deque[_Queued] = deque()
         self.items_queued = 0
-        self._cum_items: dict[int, int] = {}  # seq -> cumulative items through that frame
+        self.ticks_queued = 0
+        self._bytes_out = 0
+        self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
         self.retransmits = 0
         self.timeouts = 0
+        self.acked_clean = 0  # frames acknowledged that had been sent once
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
 
@@ -91,15 +111,26 @@ class Sender:
 
     def unacked_items(self) -> int:
         """Queue items in frames the peer has not acknowledged yet (sent or not)."""
-        return sum(o.items for o in self.outstanding) + sum(b[1] for b in self.backlog)
+        return sum(o.items for o in self.outstanding) + sum(b.items for b in self.backlog)
+
+    def _through(self, ack: int) -> tuple[int, int]:
+        """Cumulative (items, ticks) of every frame before sequence number ``ack``."""
+        if ack == self.next_seq and not self.backlog:
+            return self.items_queued, self.ticks_queued
+        return self._cum.get((ack - 1) % SEQ_MOD, (0, 0))
 
     def items_after(self, ack: int) -> int:
         """Queue items in every frame from sequence number ``ack`` on (sent or not)."""
-        return self.items_queued - self._cum_items.get((ack - 1) % SEQ_MOD, 0)
+        return self.items_queued - self._through(ack)[0]
 
-    def queue(self, payload: bytes, items: int = 0) -> None:
+    def ticks_after(self, ack: int) -> int:
+        """Device ticks of motion in every frame from sequence number ``ack`` on (sent or not)."""
+        return self.ticks_queued - self._through(ack)[1]
+
+    def queue(self, payload: bytes, items: int = 0, ticks: int = 0) -> None:
         self.items_queued += items
-        self.backlog.append((payload, items, self.items_queued))
+        self.ticks_queued += ticks
+        self.backlog.append(_Queued(payload, items, self.items_queued, self.ticks_queued))
 
     def on_ack(self, ack: int, now: float) -> int:
         """Release frames before ``ack``; returns how many were released."""
@@ -107,8 +138,12 @@ class Sender:
         if n == 0 or n > len(self.outstanding):
             return 0
         last = None
+        clean = 0
         for _ in range(n):
             last = self.outstanding.popleft()
+            self._bytes_out -= len(last.payload)
+            clean += not last.retransmitted
+        self.acked_clean += clean
         if last is not None and not last.retransmitted:
             self.rto.sample(now - last.sent_at)
         else:
@@ -138,7 +173,7 @@ class Sender:
                 return
 
     def next_deadline(self) -> float | None:
-        if self._resend or (self.backlog and len(self.outstanding) < self.window):
+        if self._resend or (self.backlog and self._room_for(len(self.backlog[0].payload))):
             return -1.0
         if not self.outstanding:
             return None
@@ -162,14 +197,21 @@ class Sender:
                 o.retransmitted = True
                 self.retransmits += 1
                 out.append((o.seq, o.payload))
-        while self.backlog and len(self.outstanding) < self.window:
-            payload, items, cum = self.backlog.popleft()
-            self._cum_items[self.next_seq] = cum
-            o = _Outstanding(self.next_seq, payload, items, now)
+        while self.backlog and self._room_for(len(self.backlog[0].payload)):
+            q = self.backlog.popleft()
+            self._cum[self.next_seq] = (q.cum_items, q.cum_ticks)
+            o = _Outstanding(self.next_seq, q.payload, q.items, now)
             self.next_seq = (self.next_seq + 1) % SEQ_MOD
             self.outstanding.append(o)
+            self._bytes_out += len(q.payload)
             out.append((o.seq, o.payload))
         return out
+
+    def _room_for(self, size: int) -> bool:
+        if len(self.outstanding) >= self.window:
+            return False
+        cap = self.window_bytes
+        return cap is None or not self.outstanding or self._bytes_out + size <= cap
 
 
 class Receiver:

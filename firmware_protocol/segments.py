@@ -15,12 +15,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from firmware_protocol.varint import (
-    decode_svarint,
-    decode_uvarint,
+    VarintError,
+    encode_uvarint,
     scatter_uvarints,
     uvarint_lengths,
+    zigzag,
     zigzag_array,
 )
 
@@ -28,8 +30,8 @@ AXES = 4
 RAMP_CONSTANT = -1
 RAMP_FROM_REST = 0
 RAMP_TO_REST = 255
-MAX_TICKS = (1 << 32) - 1
-MAX_DELTA = (1 << 31) - 1
+MAX_TICKS = (1 << 32) - 1  # durations are u32
+MAX_DELTA = (1 << 31) - 1  # deltas (and positions) are i32
 
 SEG_BASE = 0x80
 F_RAMP = 0x01  # a ramp byte follows the deltas
@@ -46,16 +48,15 @@ class SegmentBatch:
 
     ticks: np.ndarray
     deltas: np.ndarray
-    ramps: np.ndarray = field(default=None)  # type: ignore[assignment]
+    ramps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int16))
 
     def __post_init__(self) -> None:
         ticks = np.ascontiguousarray(self.ticks, dtype=np.int64).reshape(-1)
         deltas = np.ascontiguousarray(self.deltas, dtype=np.int64).reshape(-1, AXES)
-        ramps = (
-            np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16)
-            if self.ramps is None
-            else np.ascontiguousarray(self.ramps, dtype=np.int16).reshape(-1)
-        )
+        given = [] if self.ramps is None else self.ramps
+        ramps = np.ascontiguousarray(given, dtype=np.int16).reshape(-1)
+        if len(ramps) == 0 and len(ticks):  # none given: constant speed
+            ramps = np.full(ticks.shape, RAMP_CONSTANT, dtype=np.int16)
         if not (len(ticks) == len(deltas) == len(ramps)):
             raise ValueError(
                 f"segment arrays differ in length: {len(ticks)}, {len(deltas)}, {len(ramps)}"
@@ -90,6 +91,8 @@ def segments_from_positions(
 ) -> SegmentBatch:
     """Segments between consecutive absolute step positions ``positions`` (N+1, 4)."""
     pos = np.asarray(positions, dtype=np.int64)
+    if ramps is None:
+        return SegmentBatch(ticks, np.diff(pos, axis=0))
     return SegmentBatch(ticks, np.diff(pos, axis=0), ramps)
 
 
@@ -113,7 +116,7 @@ def ramp_codes_from_speeds(v_start: np.ndarray, v_end: np.ndarray, tol: float = 
     return np.where(constant, RAMP_CONSTANT, code).astype(np.int16)
 
 
-def profile(tau: np.ndarray, codes: np.ndarray | int) -> np.ndarray:
+def profile(tau: np.ndarray | float, codes: np.ndarray | int) -> np.ndarray:
     """Normalised position ``p(tau)`` in [0, 1]."""
     r = ramp_share(codes)
     t = np.asarray(tau, dtype=np.float64)
@@ -148,7 +151,7 @@ def step_times(steps: int, ticks: int, code: int) -> np.ndarray:
     return tau * ticks
 
 
-def steps_done(deltas: np.ndarray, code: int, tau: float) -> np.ndarray:
+def steps_done(deltas: ArrayLike, code: int, tau: float) -> np.ndarray:
     """Signed steps already issued at normalised time ``tau`` (consistent with step_times)."""
     d = np.asarray(deltas, dtype=np.int64)
     p = float(profile(min(max(tau, 0.0), 1.0), code))
@@ -189,13 +192,17 @@ def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np
     prev_d = np.vstack([np.asarray(ctx.prev_deltas, dtype=np.int64)[None, :], d[:-1]])
     prev_t = np.concatenate([[ctx.prev_ticks], batch.ticks[:-1]])
     z_plain = zigzag_array(d)
-    z_pred = zigzag_array(d - prev_d)
-    use_pred = _coded_cost(z_pred) < _coded_cost(z_plain)
+    diff = d - prev_d
+    z_pred = zigzag_array(diff)
+    # a predicted value must itself fit the i32 field
+    use_pred = (_coded_cost(z_pred) < _coded_cost(z_plain)) & (
+        np.abs(diff).max(axis=1) <= MAX_DELTA
+    )
     z = np.where(use_pred[:, None], z_pred, z_plain)
     has_dur = batch.ticks != prev_t
-    has_sl = z[:, :3].any(axis=1)
-    has_e = z[:, 3] != 0
-    has_r = batch.ramps != RAMP_CONSTANT
+    has_sl = np.asarray(z[:, :3].any(axis=1))
+    has_e = np.asarray(z[:, 3] != 0)
+    has_r = np.asarray(batch.ramps != RAMP_CONSTANT)
     lens = uvarint_lengths(z)
     len_dur = np.where(has_dur, uvarint_lengths(batch.ticks.astype(np.uint64)), 0)
     len_sl = np.where(has_sl[:, None], lens[:, :3], 0)
@@ -227,32 +234,103 @@ def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np
     return out.tobytes(), offsets
 
 
+def encode_one_segment(
+    ticks: int, deltas: tuple[int, int, int, int], ramp: int, ctx: SegmentContext
+) -> bytes:
+    """One segment, scalar (the vectorised :func:`encode_segments` makes the same bytes)."""
+    if not 1 <= ticks <= MAX_TICKS or any(abs(d) > MAX_DELTA for d in deltas):
+        raise ValueError(f"segment out of range: {ticks} ticks, deltas {deltas}")
+    if not RAMP_CONSTANT <= ramp <= RAMP_TO_REST:
+        raise ValueError(f"ramp code {ramp} outside -1..255")
+    plain = [zigzag(d) for d in deltas]
+    pred = [zigzag(d - p) for d, p in zip(deltas, ctx.prev_deltas)]
+
+    def cost(z: list[int]) -> int:
+        sl = sum(len(encode_uvarint(v)) for v in z[:3]) if any(z[:3]) else 0
+        return sl + (len(encode_uvarint(z[3])) if z[3] else 0)
+
+    fits = all(abs(d - p) <= MAX_DELTA for d, p in zip(deltas, ctx.prev_deltas))
+    use_pred = fits and cost(pred) < cost(plain)
+    z = pred if use_pred else plain
+    op = SEG_BASE | (F_PREDICTED if use_pred else 0)
+    out = bytearray()
+    if ticks != ctx.prev_ticks:
+        op |= F_DURATION
+        out += encode_uvarint(ticks)
+    if any(z[:3]):
+        op |= F_SLIDERS
+        for v in z[:3]:
+            out += encode_uvarint(v)
+    if z[3]:
+        op |= F_EXTRUDER
+        out += encode_uvarint(z[3])
+    if ramp != RAMP_CONSTANT:
+        op |= F_RAMP
+        out.append(ramp)
+    ctx.prev_ticks = ticks
+    ctx.prev_deltas = (deltas[0], deltas[1], deltas[2], deltas[3])
+    return bytes((op,)) + bytes(out)
+
+
 class SegmentDecodeError(ValueError):
     pass
+
+
+def _u32(buf: bytes, pos: int) -> tuple[int, int]:
+    """A u32 varint: at most 5 bytes, value below 2**32 (what a firmware's parser accepts)."""
+    value = 0
+    shift = 0
+    while True:
+        if pos >= len(buf):
+            raise VarintError("truncated varint")
+        byte = buf[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            if value > 0xFFFF_FFFF:
+                raise VarintError(f"value {value} does not fit 32 bits")
+            return value, pos
+        shift += 7
+        if shift >= 35:
+            raise VarintError("varint longer than 5 bytes for a 32-bit field")
 
 
 def decode_segment(
     buf: bytes, pos: int, ctx: SegmentContext
 ) -> tuple[int, tuple[int, int, int, int], int, int]:
-    """Decode the segment whose opcode is at ``buf[pos]``; returns ``(ticks, deltas, ramp, next_pos)``."""
+    """Decode the segment whose opcode is at ``buf[pos]``; returns ``(ticks, deltas, ramp, next_pos)``.
+
+    Every field is bounded as on the wire: the duration is a u32 of 1 or more, each coded
+    delta an i32, and a predicted delta (coded + previous) must stay within i32."""
     op = buf[pos]
     pos += 1
     if op & F_RESERVED:
         raise SegmentDecodeError(f"segment opcode 0x{op:02X} has reserved flag bits set")
     if op & F_DURATION:
-        ticks, pos = decode_uvarint(buf, pos)
+        ticks, pos = _u32(buf, pos)
     else:
         ticks = ctx.prev_ticks
-    if not 1 <= ticks <= MAX_TICKS:
+    if ticks < 1:
         raise SegmentDecodeError(f"segment duration {ticks} ticks out of range")
-    coded = [0, 0, 0, 0]
+    c0 = c1 = c2 = c3 = 0
     if op & F_SLIDERS:
-        for k in range(3):
-            coded[k], pos = decode_svarint(buf, pos)
+        c0, pos = _u32(buf, pos)
+        c1, pos = _u32(buf, pos)
+        c2, pos = _u32(buf, pos)
+        c0 = (c0 >> 1) ^ -(c0 & 1)
+        c1 = (c1 >> 1) ^ -(c1 & 1)
+        c2 = (c2 >> 1) ^ -(c2 & 1)
     if op & F_EXTRUDER:
-        coded[3], pos = decode_svarint(buf, pos)
+        c3, pos = _u32(buf, pos)
+        c3 = (c3 >> 1) ^ -(c3 & 1)
     if op & F_PREDICTED:
-        coded = [c + p for c, p in zip(coded, ctx.prev_deltas)]
+        p = ctx.prev_deltas
+        c0 += p[0]
+        c1 += p[1]
+        c2 += p[2]
+        c3 += p[3]
+    if max(abs(c0), abs(c1), abs(c2), abs(c3)) > MAX_DELTA:
+        raise SegmentDecodeError("step delta outside -(2**31 - 1)..2**31 - 1")
     if op & F_RAMP:
         if pos >= len(buf):
             raise SegmentDecodeError("truncated ramp byte")
@@ -260,7 +338,7 @@ def decode_segment(
         pos += 1
     else:
         ramp = RAMP_CONSTANT
-    deltas = (coded[0], coded[1], coded[2], coded[3])
+    deltas = (c0, c1, c2, c3)
     ctx.prev_ticks = ticks
     ctx.prev_deltas = deltas
     return ticks, deltas, ramp, pos

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
@@ -30,10 +32,10 @@ def expected_record(
     batch: SegmentBatch,
     *,
     clock_hz: int = 100_000,
-    start=(0, 0, 0, 0),
+    start: tuple[int, int, int, int] = (0, 0, 0, 0),
     first_seq: int = 1,
     start_ticks: int = 0,
-) -> list[dict]:
+) -> list[dict[str, Any]]:
     """The record a device must produce executing ``batch`` from ``start`` (see device/record.py)."""
     steps = np.asarray(start, dtype=np.int64) + np.cumsum(batch.deltas, axis=0)
     ticks = start_ticks + np.cumsum(batch.ticks)

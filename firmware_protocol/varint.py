@@ -40,27 +40,52 @@ def encode_svarint(value: int) -> bytes:
     return encode_uvarint(zigzag(value))
 
 
-def decode_uvarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
-    """Return ``(value, next_pos)``; raises :class:`VarintError` when truncated or overlong."""
+# ------------------------------------------------------------------ bounded (the wire's field types)
+
+
+def max_bytes(bits: int) -> int:
+    """A varint of ``bits`` bits takes at most ceil(bits / 7) bytes."""
+    return (bits + 6) // 7
+
+
+def decode_ubounded(buf: bytes | bytearray | memoryview, pos: int, bits: int) -> tuple[int, int]:
+    """An unsigned varint that must fit ``bits`` bits in at most ``ceil(bits / 7)`` bytes.
+
+    This is what a microcontroller's fixed-width parser accepts: a longer encoding or a
+    value over the width raises :class:`VarintError` (never an unbounded integer)."""
     value = 0
     shift = 0
     end = len(buf)
+    limit = 7 * max_bytes(bits)
     while True:
         if pos >= end:
             raise VarintError("truncated varint")
         byte = buf[pos]
         pos += 1
         value |= (byte & 0x7F) << shift
-        if byte < 0x80:
-            return value, pos
         shift += 7
-        if shift >= 7 * MAX_VARINT_BYTES:
-            raise VarintError("varint longer than 10 bytes")
+        if byte < 0x80:
+            break
+        if shift >= limit:
+            raise VarintError(f"varint longer than {max_bytes(bits)} bytes for a {bits}-bit field")
+    if value >> bits:
+        raise VarintError(f"value {value} does not fit a {bits}-bit field")
+    return value, pos
+
+
+def decode_sbounded(buf: bytes | bytearray | memoryview, pos: int, bits: int) -> tuple[int, int]:
+    """A zigzag varint of a signed ``bits``-bit field (two's complement range)."""
+    value, pos = decode_ubounded(buf, pos, bits)
+    return (value >> 1) ^ -(value & 1), pos
+
+
+def decode_uvarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
+    """Any varint below 2**64 (10 bytes at most); ``(value, next_pos)``."""
+    return decode_ubounded(buf, pos, 64)
 
 
 def decode_svarint(buf: bytes | bytearray | memoryview, pos: int) -> tuple[int, int]:
-    value, pos = decode_uvarint(buf, pos)
-    return unzigzag(value), pos
+    return decode_sbounded(buf, pos, 64)
 
 
 # ------------------------------------------------------------------ vectorised

@@ -17,7 +17,7 @@ Follows scikit-learn's shape: configure a :class:`CableModelFit`, ``fit`` it on
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -82,13 +82,13 @@ def position_misfit(model: MachineModel, obs: Observations) -> np.ndarray:
 
 def whitened_residuals(model: MachineModel, obs: Observations) -> np.ndarray:
     sig = np.asarray(obs.sigma_mm, dtype=float)
-    return position_misfit(model, obs) / (sig if sig.ndim == 0 else sig[:, None])
+    return np.asarray(position_misfit(model, obs) / (sig if sig.ndim == 0 else sig[:, None]))
 
 
 def prediction_errors(model: MachineModel, obs: Observations) -> np.ndarray:
     """3D distance between measured points and where ``model`` says the effector went (K,)."""
     predicted = model.fk(obs.sliders, obs.context)
-    return np.linalg.norm(predicted - obs.measured, axis=1)
+    return np.asarray(np.linalg.norm(predicted - obs.measured, axis=1))
 
 
 @dataclass
@@ -100,7 +100,8 @@ class CableModelFit:
     Fitted attributes (after ``fit``): ``model_``, ``names_``, ``x_``, ``stderr_``,
     ``covariance_``, ``correlation_``, ``chi2_``, ``dof_``, ``iterations_`` (accepted
     parameter updates), ``iterates_`` (x0 then each accepted iterate), ``nfev_``,
-    ``converged_``, ``residuals_`` (whitened, (K, 3)), ``singular_values_`` (of the
+    ``converged_``, ``residuals_`` (whitened, (K, 3)), ``information_`` (J^T J of
+    the whitened residuals), ``singular_values_`` (of the
     column-scaled Jacobian), ``null_space_`` (right singular vectors of the
     unidentifiable directions).
     """
@@ -186,7 +187,9 @@ class CableModelFit:
         self._covariance(self._jacobian(base, result.x, fun))
         return self
 
-    def _jacobian(self, base: MachineModel, x: np.ndarray, fun) -> np.ndarray:
+    def _jacobian(
+        self, base: MachineModel, x: np.ndarray, fun: Callable[[np.ndarray], np.ndarray]
+    ) -> np.ndarray:
         """Central-difference Jacobian at the solution (more accurate than the solver's)."""
         f0 = fun(x)
         jac = np.empty((f0.size, x.size))
@@ -204,6 +207,7 @@ class CableModelFit:
         return jac
 
     def _covariance(self, jac: np.ndarray) -> None:
+        self.information_ = jac.T @ jac
         norms = np.linalg.norm(jac, axis=0)
         norms[norms == 0] = 1.0
         scaled = jac / norms

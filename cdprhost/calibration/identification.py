@@ -1,35 +1,44 @@
-"""Identification of the 12 geometric parameters from measured poses.
+"""Identification of the 12 geometric parameters from measured poses, and whether to trust it.
 
 A thin layer over :class:`~cdprhost.calibration.fitting.CableModelFit` (the one
-estimator): it fits the poses marked ``fit``, predicts the ``check`` poses, and
-gathers what a user needs to trust the result: standard errors and 95 %
-intervals, high correlations, scaled singular values with the unidentifiable
-combinations named, per-pose errors, RMS before and after. The profile's own
-effects are held at their values while the geometry is fitted.
+estimator): it fits the poses marked ``fit``, predicts the ``check`` poses, and gathers
+what a user needs to trust the result: standard errors and 95 % intervals, high
+correlations, scaled singular values with the unidentifiable combinations named,
+per-pose errors, RMS before and after, and the trust gate of :mod:`.trust` (the
+parameter covariance carried to the build volume). The profile's own effects are held at
+their values while the geometry is fitted.
 """
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 from scipy import stats
 
 from cdprhost.calibration.fitting import GEOMETRY_NAMES, CableModelFit, Observations
-from cdprhost.calibration.session import POSES_FILE, load_session
-from cdprhost.errors import InputError
+from cdprhost.calibration.pose_noise import PoseNoise
+from cdprhost.calibration.session import Session, load_session
+from cdprhost.calibration.trust import (
+    DEFAULT_TRUST,
+    TrustLimits,
+    TrustReport,
+    trust_report,
+    variance_factor,
+)
+from cdprhost.errors import InputError, JobFailed
 from cdprhost.jsonsafe import json_safe
 from cdprhost.kinematics.geometry import CableGeometry
+from cdprhost.kinematics.grid import workspace_grid
+from cdprhost.kinematics.jacobian import identification_jacobian
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.profile.models import MachineProfile
 
 MIN_POSES = 4
-ROLES = ("fit", "check")
 
 
 @dataclass(frozen=True)
@@ -55,12 +64,17 @@ class Identification:
     sigma_mm: np.ndarray  # (K,)
     model: MachineModel = field(repr=False)
     rejected: tuple[str, ...] = ()
+    trust: TrustReport | None = None
+    covariance: np.ndarray | None = field(default=None, repr=False)  # (12, 12), scaled
+    pose_numbers: np.ndarray | None = None  # (K,) poses.csv numbers
+    noise: PoseNoise | None = None
+    notes: tuple[str, ...] = ()
 
     names = GEOMETRY_NAMES
 
     @property
     def fit_mask(self) -> np.ndarray:
-        return np.array(self.roles) == "fit"
+        return np.asarray(np.array(self.roles) == "fit")
 
     @property
     def poses_used(self) -> int:
@@ -70,11 +84,11 @@ class Identification:
         return float(np.sqrt(np.mean(errors[mask] ** 2))) if mask.any() else None
 
     @property
-    def rms_before_mm(self) -> float:
+    def rms_before_mm(self) -> float | None:
         return self._rms(self.errors_before, self.fit_mask)
 
     @property
-    def rms_after_mm(self) -> float:
+    def rms_after_mm(self) -> float | None:
         return self._rms(self.errors_after, self.fit_mask)
 
     @property
@@ -90,8 +104,22 @@ class Identification:
         return not self.unidentifiable and bool(np.all(np.isfinite(self.stderr)))
 
     @property
-    def ok(self) -> bool:
+    def solved(self) -> bool:
+        """Converged on enough poses with every parameter determined (trusted or not)."""
         return self.converged and self.identifiable and self.poses_used >= MIN_POSES
+
+    @property
+    def ok(self) -> bool:
+        """Solved and trusted by the gate."""
+        return self.solved and (self.trust is None or self.trust.trusted)
+
+    @property
+    def predicted_workspace_rms_mm(self) -> float:
+        return self.trust.predicted_rms_mm if self.trust else float("nan")
+
+    @property
+    def predicted_workspace_max_mm(self) -> float:
+        return self.trust.predicted_max_mm if self.trust else float("nan")
 
     def problems(self) -> list[str]:
         out = []
@@ -99,19 +127,29 @@ class Identification:
             out.append(
                 f"only {self.poses_used} usable fit pose(s); at least {MIN_POSES} are needed for 12 parameters"
             )
-        if not self.converged:
+        if not self.converged and self.poses_used >= MIN_POSES:
             out.append("the least-squares fit did not converge")
         if self.unidentifiable:
             out.append("unidentifiable parameter combination(s): " + "; ".join(self.unidentifiable))
+        if self.trust is not None:
+            out += list(self.trust.refusals)
         return out
+
+    def warnings(self) -> list[str]:
+        return list(self.notes) + (list(self.trust.warnings) if self.trust else [])
 
     def to_json(self) -> dict[str, Any]:
         """The machine-readable report (field names are part of the CLI contract)."""
         g, se = self.geometry, self.stderr
-
-        return {
+        numbers = (
+            self.pose_numbers
+            if self.pose_numbers is not None
+            else np.arange(1, len(self.roles) + 1)
+        )
+        out = {
             "ok": self.ok,
             "problems": self.problems(),
+            "warnings": self.warnings(),
             "parameters": {
                 "outlets": g.outlets.tolist(),
                 "initial_lengths": g.initial_lengths.tolist(),
@@ -132,6 +170,10 @@ class Identification:
             "rms_after_mm": self.rms_after_mm,
             "check_rms_before_mm": self.check_rms_before_mm,
             "check_rms_after_mm": self.check_rms_after_mm,
+            "predicted_workspace_rms_mm": self.predicted_workspace_rms_mm,
+            "predicted_workspace_max_mm": self.predicted_workspace_max_mm,
+            "trust": self.trust.to_json() if self.trust else None,
+            "noise": self.noise.as_dict() if self.noise else None,
             "iterations": self.iterations,
             "converged": self.converged,
             "chi2": self.chi2,
@@ -139,7 +181,7 @@ class Identification:
             "poses_used": self.poses_used,
             "poses": [
                 {
-                    "pose": i + 1,
+                    "pose": int(numbers[i]),
                     "role": r,
                     "error_before_mm": float(b),
                     "error_after_mm": float(a),
@@ -152,6 +194,7 @@ class Identification:
             ],
             "rejected": list(self.rejected),
         }
+        return dict(json_safe(out))
 
 
 def identify(
@@ -160,8 +203,14 @@ def identify(
     roles: tuple[str, ...] | list[str] | None = None,
     *,
     rejected: tuple[str, ...] = (),
+    limits: TrustLimits = DEFAULT_TRUST,
+    grid: np.ndarray | None = None,
+    noise: PoseNoise | None = None,
+    pose_numbers: np.ndarray | None = None,
+    notes: tuple[str, ...] = (),
 ) -> Identification:
-    """Fit the geometry on the ``fit`` poses of ``obs``; predict every pose before/after."""
+    """Fit the geometry on the ``fit`` poses of ``obs``; predict every pose before/after;
+    judge the result with the trust gate over ``grid`` (default: the build volume)."""
     k = len(obs)
     roles = tuple(roles) if roles is not None else ("fit",) * k
     if len(roles) != k:
@@ -171,13 +220,19 @@ def identify(
     sigma = np.maximum(np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (k,)), 1e-6)
     obs = Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, sigma)
     before = _errors(base, obs)
+    common = {
+        "rejected": rejected,
+        "pose_numbers": pose_numbers,
+        "noise": noise,
+        "notes": notes,
+    }
     if fit_idx.size < MIN_POSES:
-        nan = np.full(12, np.inf)
+        inf = np.full(12, np.inf)
         return Identification(
             base.geometry,
             base.geometry,
-            nan,
-            np.column_stack([-nan, nan]),
+            inf,
+            np.column_stack([-inf, inf]),
             [],
             np.zeros(0),
             [],
@@ -191,15 +246,35 @@ def identify(
             0,
             sigma,
             base,
-            rejected,
+            **common,  # type: ignore[arg-type]
         )
     est = CableModelFit(scale_covariance=False).fit(obs.subset(fit_idx), base)
-    # Known-noise covariance, inflated (never shrunk) when the misfit exceeds the noise.
-    inflate = max(1.0, est.chi2_ / est.dof_) if est.dof_ > 0 else 1.0
-    stderr = est.stderr_[:12] * np.sqrt(inflate)
-    q = stats.t.ppf(0.975, est.dof_) if est.dof_ > 0 and inflate > 1.0 else stats.norm.ppf(0.975)
-    x = est.x_[:12]
     model = est.model_
+    cov = np.array(est.covariance_[:12, :12])
+    if est.null_space_.size:
+        cov[:] = np.inf
+    residuals = _residuals(model, obs)
+    check = np.flatnonzero(np.array(roles) == "check")
+    j0 = identification_jacobian(obs.measured[check], model.geometry).reshape(-1, 3, 12)
+    with np.errstate(invalid="ignore"):
+        pred_cov = sigma[check, None, None] ** 2 * np.eye(3) + np.einsum(
+            "nip,pq,njq->nij", j0, np.where(np.isfinite(cov), cov, 0.0), j0
+        )
+    factor, noise_dof = variance_factor(est.chi2_, est.dof_, residuals[check], pred_cov)
+    trust = trust_report(
+        model.geometry,
+        cov,
+        est.information_[:12, :12],
+        workspace_grid(base) if grid is None else grid,
+        factor,
+        noise_dof,
+        limits,
+    )
+    inflate = max(factor, 1.0) if np.isfinite(factor) else 1.0
+    cov = cov * inflate
+    stderr = np.array(est.stderr_[:12]) * np.sqrt(inflate)
+    q = stats.t.ppf(0.975, noise_dof) if noise_dof > 0 and inflate > 1.0 else stats.norm.ppf(0.975)
+    x = est.x_[:12]
     return Identification(
         nominal=base.geometry,
         geometry=model.geometry,
@@ -211,19 +286,21 @@ def identify(
         roles=roles,
         errors_before=before,
         errors_after=_errors(model, obs),
-        residuals_after=_residuals(model, obs),
+        residuals_after=residuals,
         iterations=est.iterations_,
         converged=est.converged_,
         chi2=est.chi2_,
         dof=est.dof_,
         sigma_mm=sigma,
         model=model,
-        rejected=rejected,
+        trust=trust,
+        covariance=cov,
+        **common,  # type: ignore[arg-type]
     )
 
 
 def _errors(model: MachineModel, obs: Observations) -> np.ndarray:
-    return np.linalg.norm(_residuals(model, obs), axis=1)
+    return np.asarray(np.linalg.norm(_residuals(model, obs), axis=1))
 
 
 def _residuals(model: MachineModel, obs: Observations) -> np.ndarray:
@@ -234,7 +311,10 @@ def _residuals(model: MachineModel, obs: Observations) -> np.ndarray:
 def calibrated_profile(
     profile: MachineProfile, result: Identification, *, session: str = "", date: str | None = None
 ) -> MachineProfile:
-    """``profile`` with the identified geometry and a ``calibration`` provenance table."""
+    """``profile`` with the identified geometry and a ``calibration`` provenance table.
+
+    A geometry the profile model refuses (outlets collinear, above the build volume...)
+    raises :class:`~cdprhost.errors.JobFailed` naming each problem."""
     g = result.geometry
     provenance: dict[str, Any] = {
         "method": "cable-length residual least squares (12 geometric parameters)",
@@ -248,56 +328,63 @@ def calibrated_profile(
         "stderr_outlets_mm": np.nan_to_num(result.stderr[:9], posinf=-1.0).reshape(3, 3).tolist(),
         "stderr_initial_lengths_mm": np.nan_to_num(result.stderr[9:], posinf=-1.0).tolist(),
     }
+    if result.trust is not None and np.isfinite(result.trust.predicted_max_mm):
+        provenance["predicted_workspace_rms_mm"] = result.trust.predicted_rms_mm
+        provenance["predicted_workspace_max_mm"] = result.trust.predicted_max_mm
+    if not result.ok:
+        provenance["forced"] = True
     if result.check_rms_after_mm is not None:
         provenance["check_poses"] = int((~result.fit_mask).sum())
         provenance["check_rms_before_mm"] = result.check_rms_before_mm
         provenance["check_rms_after_mm"] = result.check_rms_after_mm
     name = profile.name if profile.name.endswith("-calibrated") else f"{profile.name}-calibrated"
-    return profile.with_geometry(g.outlets, g.initial_lengths, name=name, calibration=provenance)
-
-
-def pose_roles(poses_csv: str | os.PathLike[str]) -> dict[int, str]:
-    """The optional ``role`` column of poses.csv (``fit`` | ``check``), by pose number; absent = fit."""
-    with open(poses_csv, encoding="utf-8-sig", newline="") as fh:
-        rows = list(csv.reader(fh))
-    header = [h.strip() for h in rows[0]] if rows else []
-    if "role" not in header:
-        return {}
-    ip, ir = header.index("pose"), header.index("role")
-    roles: dict[int, str] = {}
-    for n, row in enumerate(rows[1:], start=2):
-        if not any(c.strip() for c in row):
-            continue
-        role = (row[ir].strip().lower() if ir < len(row) else "") or "fit"
-        if role not in ROLES:
-            raise InputError(
-                f"line {n}, column 'role' (column {ir + 1}): must be fit or check, got {role!r}",
-                source=str(poses_csv),
-            )
-        roles[int(row[ip])] = role
-    return roles
+    try:
+        return profile.with_geometry(
+            g.outlets,
+            g.initial_lengths,
+            name=name,
+            calibration=json_safe(provenance, drop_none=True),
+        )
+    except (ValidationError, ValueError) as exc:
+        problems = (
+            [f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in exc.errors()]
+            if isinstance(exc, ValidationError)
+            else [str(exc)]
+        )
+        raise JobFailed(
+            "the identified geometry is not a valid profile; no profile written:\n"
+            + "\n".join(f"  - {p}" for p in problems)
+        ) from None
 
 
 def identify_session(
-    directory: str | os.PathLike[str], base: MachineModel, *, noise_floor_mm: float = 0.05
+    directory: str | os.PathLike[str] | Session,
+    base: MachineModel,
+    *,
+    noise_floor_mm: float | None = None,
+    limits: TrustLimits = DEFAULT_TRUST,
 ) -> Identification:
-    """Measure every take of a session folder and identify (rejected takes are listed, not used).
+    """Measure every take of a session folder and identify (refused takes are listed, not used).
 
-    Each pose's sigma combines the take's frame noise (standard error of its mean)
-    with the mocap noise floor, which averaging over frames cannot remove.
-    """
-    session = load_session(directory)
+    Each pose's noise is its take's standard error (:mod:`.pose_noise`); ``noise_floor_mm``
+    adds a part no take shows (default: ``noise_mm`` of session.toml, if declared)."""
+    session = directory if isinstance(directory, Session) else load_session(directory)
     meas = session.measure()
     if len(meas) == 0:
         raise InputError(
             "no usable take in the session",
-            source=str(directory),
-            problems=[f"pose {r.pose} ({r.take}): {r.message}" for r in meas.rejected],
+            source=str(session.directory),
+            problems=[str(r) for r in meas.rejected],
         )
-    roles_by_pose = pose_roles(Path(directory) / POSES_FILE)
-    roles = tuple(roles_by_pose.get(int(p), "fit") for p in meas.pose)
-    sem = np.array([t.sem for t in meas.takes]).reshape(-1, 3)
-    sigma = np.sqrt(noise_floor_mm**2 + np.mean(sem**2, axis=1))
-    obs = Observations(meas.measured, meas.s_cmd, meas.t_s, meas.dirs.astype(float), sigma)
-    rejected = tuple(f"pose {r.pose} ({r.take}): {r.reason}: {r.message}" for r in meas.rejected)
-    return identify(obs, base, roles, rejected=rejected)
+    noise = meas.noise(base.steps_per_mm, floor_mm=noise_floor_mm)
+    notes = tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ())
+    return identify(
+        meas.observations(noise),
+        base,
+        meas.roles,
+        rejected=tuple(str(r) for r in meas.rejected),
+        limits=limits,
+        noise=noise,
+        pose_numbers=meas.pose,
+        notes=notes,
+    )

@@ -19,15 +19,11 @@ random starts and from the greedy design.
 
 from __future__ import annotations
 
-import csv
-import io
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from cdprhost.calibration.commanding import commanded_path
-from cdprhost.errors import InputError
 from cdprhost.kinematics.jacobian import identification_jacobian
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tension_bounds
@@ -80,7 +76,7 @@ def candidate_poses(
     xy = xy[triangle_excess(xy, side) <= -edge_margin_mm]
     pts = np.column_stack([np.tile(xy, (heights.size, 1)), np.repeat(heights, xy.shape[0])])
     ok = feasible_with_margin(model, pts, tension_margin_n, tension_max_fraction, approach_mm)
-    return pts[ok & robust_to_prior(model, pts, prior_mm, clearance_mm)]
+    return np.asarray(pts[ok & robust_to_prior(model, pts, prior_mm, clearance_mm)])
 
 
 def robust_to_prior(
@@ -96,7 +92,7 @@ def robust_to_prior(
     pts = np.asarray(points, dtype=float)
     j0 = identification_jacobian(pts, model.geometry).reshape(-1, 3, 12)
     dz3 = 3.0 * prior_mm / np.sqrt(3.0) * np.linalg.norm(j0[:, 2, :], axis=1)
-    return pts[:, 2] - dz3 - model.geometry.outlets[:, 2].max() >= clearance_mm
+    return np.asarray(pts[:, 2] - dz3 - model.geometry.outlets[:, 2].max() >= clearance_mm)
 
 
 def feasible_with_margin(
@@ -115,7 +111,7 @@ def feasible_with_margin(
     ok &= (lo.min(axis=1) >= st.t_min + tension_margin_n) & (
         hi.max(axis=1) <= tension_max_fraction * st.t_max
     )
-    return ok
+    return np.asarray(ok)
 
 
 # ------------------------------------------------------------------ information
@@ -126,17 +122,17 @@ def pose_blocks(
     j0 = identification_jacobian(np.asarray(points, float), model.geometry).reshape(-1, 3, 12)
     if scale is None:
         scale = column_scale(j0)
-    return j0 / scale
+    return np.asarray(j0 / scale)
 
 
 def column_scale(blocks: np.ndarray) -> np.ndarray:
     """Per-pose RMS norm of each of the 12 columns, (12,)."""
-    return np.sqrt(np.einsum("nij,nij->j", blocks, blocks) / blocks.shape[0])
+    return np.asarray(np.sqrt(np.einsum("nij,nij->j", blocks, blocks) / blocks.shape[0]))
 
 
 def information(blocks: np.ndarray) -> np.ndarray:
     """Per-pose information matrices J_i^T J_i, (N, 12, 12)."""
-    return np.einsum("nij,nik->njk", blocks, blocks)
+    return np.asarray(np.einsum("nij,nik->njk", blocks, blocks))
 
 
 def observability_indices(blocks: np.ndarray) -> dict[str, float]:
@@ -162,15 +158,17 @@ def criterion_values(
     if criterion in ("D", "O1"):
         with np.errstate(divide="ignore"):
             logdet = np.sum(np.log(lam), axis=-1)
-        return logdet if criterion == "D" else np.exp(logdet / (2 * lam.shape[-1])) / np.sqrt(m)
+        return np.asarray(
+            logdet if criterion == "D" else np.exp(logdet / (2 * lam.shape[-1])) / np.sqrt(m)
+        )
     sv = np.sqrt(lam)
     smin, smax = sv[..., 0], sv[..., -1]
     if criterion == "O2":
-        return smin / smax
+        return np.asarray(smin / smax)
     if criterion == "O3":
-        return smin
+        return np.asarray(smin)
     if criterion == "O4":
-        return smin * smin / smax
+        return np.asarray(smin * smin / smax)
     if criterion == "O5":
         with np.errstate(divide="ignore"):
             return np.where(smin > 0, 1.0 / np.sum(1.0 / np.where(sv > 0, sv, 1.0), axis=-1), 0.0)
@@ -249,6 +247,7 @@ def fedorov_exchange(
         for lo in range(0, info.shape[0], chunk):
             cand = info[lo : lo + chunk]
             if fast:
+                assert blocks is not None and minv is not None
                 vals = value + _swap_logdet_gain(blocks[design], blocks[lo : lo + chunk], minv)
             else:
                 trial = total[None, None] - info[design][:, None] + cand[None, :]  # (k, c, 12, 12)
@@ -259,9 +258,9 @@ def fedorov_exchange(
                 best = (float(vals[i, j]), int(i), int(lo + j))
         if best[1] < 0 or best[0] - value <= rel_tol * max(abs(value), 1e-300):
             break
-        value, i, j = best
-        total = total - info[design[i]] + info[j]
-        design[i] = j
+        value, bi, bj = best
+        total = total - info[design[bi]] + info[bj]
+        design[bi] = bj
     return design, value
 
 
@@ -374,10 +373,14 @@ class PosePlan:
     value: float
     n_candidates: int
     travel_mm: float
+    rounds: tuple[int, ...] = ()  # per pose: 0 planned, n added by the n-th augmentation
+
+    def round_of(self, i: int) -> int:
+        return self.rounds[i] if i < len(self.rounds) else 0
 
     @property
     def fit_poses(self) -> np.ndarray:
-        return self.poses[np.array(self.roles) == "fit"]
+        return np.asarray(self.poses[np.array(self.roles) == "fit"])
 
 
 def plan_poses(
@@ -434,90 +437,4 @@ def plan_poses(
         value=design.value,
         n_candidates=cand.shape[0],
         travel_mm=tour_length(waypoints, home),
-    )
-
-
-# ------------------------------------------------------------------ plan files
-PLAN_COLUMNS = (
-    "pose",
-    "role",
-    "x",
-    "y",
-    "z",
-    "approach_x",
-    "approach_y",
-    "approach_z",
-    "dir1",
-    "dir2",
-    "dir3",
-)
-
-
-def plan_csv(plan: PosePlan) -> str:
-    """The plan as CSV text (``calibrate plan --out`` and a wizard session's plan.csv)."""
-    lines = [",".join(PLAN_COLUMNS)]
-    for i, (p, role, a, d) in enumerate(
-        zip(plan.poses, plan.roles, plan.approach, plan.directions)
-    ):
-        lines.append(
-            ",".join([str(i + 1), role, *(f"{v:.6f}" for v in (*p, *a)), *(str(int(v)) for v in d)])
-        )
-    return "\n".join(lines) + "\n"
-
-
-def read_plan_csv(path: str | os.PathLike[str], model: MachineModel | None = None) -> PosePlan:
-    """A plan file back as a :class:`PosePlan` (indices recomputed when ``model`` is given)."""
-    src = str(path)
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(io.StringIO(fh.read())))
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", source=src) from None
-    header = [h.strip() for h in rows[0]] if rows else []
-    missing = [c for c in PLAN_COLUMNS if c not in header]
-    if missing:
-        raise InputError(f"line 1: header lacks column(s) {', '.join(missing)}", source=src)
-    col = {c: header.index(c) for c in PLAN_COLUMNS}
-    roles, values = [], []
-    for n, row in enumerate(rows[1:], start=2):
-        if not any(c.strip() for c in row):
-            continue
-        role = row[col["role"]].strip()
-        if role not in ("fit", "check"):
-            raise InputError(
-                f"line {n}, column 'role': must be fit or check, got {role!r}", source=src
-            )
-        try:
-            values.append([float(row[col[c]]) for c in PLAN_COLUMNS[2:]])
-        except (ValueError, IndexError):
-            raise InputError(
-                f"line {n}: expected numbers in columns {', '.join(PLAN_COLUMNS[2:])}", source=src
-            ) from None
-        roles.append(role)
-    v = np.asarray(values, dtype=float).reshape(-1, 9)
-    if not np.isfinite(v).all():
-        raise InputError("non-finite number in a pose row", source=src)
-    fit = v[np.array(roles) == "fit", :3] if roles else np.zeros((0, 3))
-    indices = (
-        observability_indices(pose_blocks(model, fit))
-        if model is not None and len(fit) >= 4
-        else {}
-    )
-    table1 = observability_indices(pose_blocks(model, TABLE1_POSES)) if model is not None else {}
-    start = (
-        model.home_point(np.zeros(3)) if model is not None else v[0, 3:6] if len(v) else np.zeros(3)
-    )
-    way = np.empty((2 * len(v), 3))
-    way[0::2], way[1::2] = v[:, 3:6], v[:, :3]
-    return PosePlan(
-        v[:, :3],
-        tuple(roles),
-        v[:, 3:6],
-        v[:, 6:9],
-        "file",
-        indices,
-        table1,
-        float("nan"),
-        0,
-        tour_length(way, start),
     )

@@ -35,12 +35,12 @@ class RigidTransform:
 
     @property
     def valid(self) -> np.ndarray:
-        return np.isfinite(self.rms_residual)
+        return np.asarray(np.isfinite(self.rms_residual))
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """Transform points (..., m, 3); the batch dims broadcast against the transform's."""
         p = np.asarray(points, dtype=float)
-        return np.einsum("...ij,...mj->...mi", self.R, p) + self.t[..., None, :]
+        return np.asarray(np.einsum("...ij,...mj->...mi", self.R, p) + self.t[..., None, :])
 
     def inverse(self) -> RigidTransform:
         rt = np.swapaxes(self.R, -1, -2)

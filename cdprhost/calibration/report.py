@@ -12,7 +12,10 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
     widths = [
         max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)
     ]
-    line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(c.rjust(w) for c, w in zip(cells, widths))
+
     return "\n".join([line(header), line(["-" * w for w in widths]), *(line(r) for r in rows)])
 
 
@@ -96,6 +99,24 @@ def poses_text(r: Identification) -> str:
     return _table(["pose", "role", "before", "after", "dx", "dy", "dz", "sigma"], rows)
 
 
+def trust_text(r: Identification) -> str:
+    """The trust gate's verdict: predicted workspace error, refusals, warnings."""
+    lines = [
+        (
+            "predicted workspace error (from the parameter uncertainty): "
+            f"RMS {_mm(r.predicted_workspace_rms_mm, 3)} mm, max {_mm(r.predicted_workspace_max_mm, 3)} mm"
+        )
+    ]
+    if r.noise is not None:
+        lines.append(
+            f"pose noise: {r.noise.typical_mm:.3g} mm RMS per coordinate ({r.noise.source})"
+        )
+    lines.append("TRUSTED" if r.ok else "NOT TRUSTED")
+    lines += [f"  refused: {p}" for p in r.problems()]
+    lines += [f"  warning: {w}" for w in r.warnings()]
+    return "\n".join(lines)
+
+
 def identification_text(r: Identification) -> str:
     parts = [
         (
@@ -115,6 +136,7 @@ def identification_text(r: Identification) -> str:
         )
     if r.unidentifiable:
         parts.append("UNIDENTIFIABLE combinations: " + "; ".join(r.unidentifiable))
+    parts.append(trust_text(r))
     if r.rejected:
         parts.append("rejected takes:\n" + "\n".join(f"  {t}" for t in r.rejected))
     return "\n\n".join(parts)

@@ -1,40 +1,46 @@
-"""The calibration session folder: ``session.toml``, ``poses.csv``, ``takes/``.
+"""The calibration session folder, read in one place: ``session.toml``, ``poses.csv``, ``takes/``.
 
-``load_session(dir)`` validates both files and returns a :class:`Session`, whose
-``measure()`` turns every take into a base-frame effector point (arrays ready for
-identification), listing rejected takes instead of using them.
-:class:`SessionWriter` creates a folder, or resumes one, one pose at a time.
+``load_session(dir)`` validates both files into one typed :class:`Session` (settings with
+the acceptance thresholds, poses with their roles, take paths resolved inside the folder),
+which planning, identification, diagnosis and the wizard all consume. ``measure()`` turns
+every take into a base-frame effector point with its standard error, listing refused takes
+instead of using them, and the resulting :class:`SessionMeasurements` builds the
+observations (with each pose's noise, :mod:`.pose_noise`) for identification and diagnosis.
+:mod:`.session_writer` writes folders.
 
-Beyond the spec, ``session.toml`` may hold ``[mocap.acceptance]`` (the take
-checks' limits, :class:`~cdprhost.calibration.takes.AcceptanceLimits`); other
-top-level tables and extra ``[session]`` keys are kept, and poses.csv may carry
-extra columns in any order.
+Beyond the spec, ``session.toml`` may hold ``[mocap.acceptance]`` (the take checks'
+thresholds, :class:`~cdprhost.calibration.acceptance.AcceptanceLimits`) and ``noise_mm``
+(under ``[mocap]`` or ``[session]``); other top-level tables and extra ``[session]`` keys
+are kept. poses.csv may carry extra columns in any order; ``role`` (``fit`` | ``check``,
+empty = fit) marks check poses, which identification predicts but does not fit.
 """
 
 from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import os
 import tomllib
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath, PureWindowsPath
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from cdprhost.calibration.readers import EXTENSIONS, Take, read_take, write_take
+from cdprhost.calibration.acceptance import AcceptanceLimits
+from cdprhost.calibration.fitting import Observations
+from cdprhost.calibration.pose_noise import PoseNoise, pose_noise
+from cdprhost.calibration.readers import read_take
 from cdprhost.calibration.takes import (
-    AcceptanceLimits,
     MocapConfig,
     TakeMeasurement,
     TakeRejected,
-    measure_effector,
+    TakeSeries,
+    judge_takes,
+    prepare_take,
 )
 from cdprhost.errors import InputError
-from cdprhost.fileio.atomic import write_text_atomic
 
 SESSION_FILE = "session.toml"
 POSES_FILE = "poses.csv"
@@ -53,6 +59,7 @@ POSE_COLUMNS = (
     "dir2",
     "dir3",
 )
+ROLES = ("fit", "check")
 _FLOAT_COLUMNS = ("t_s", "x_cmd", "y_cmd", "z_cmd", "s1_cmd", "s2_cmd", "s3_cmd")
 
 
@@ -61,6 +68,12 @@ class SessionInfo(BaseModel):
 
     model_config = ConfigDict(extra="allow", frozen=True)
     profile: str = Field(min_length=1)
+    noise_mm: float | None = Field(
+        default=None,
+        gt=0,
+        allow_inf_nan=False,
+        description="declared mocap noise (mm per coordinate)",
+    )
 
 
 class SessionConfig(BaseModel):
@@ -69,6 +82,15 @@ class SessionConfig(BaseModel):
     model_config = ConfigDict(extra="allow", frozen=True)
     session: SessionInfo
     mocap: MocapConfig
+
+    @property
+    def declared_noise_mm(self) -> float | None:
+        """``noise_mm`` of ``[mocap]``, else of ``[session]``."""
+        return self.mocap.noise_mm if self.mocap.noise_mm is not None else self.session.noise_mm
+
+    @property
+    def acceptance(self) -> AcceptanceLimits:
+        return self.mocap.acceptance
 
 
 def validation_problems(exc: ValidationError) -> list[str]:
@@ -101,7 +123,8 @@ def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
 
 @dataclass(frozen=True, eq=False)
 class PoseTable:
-    """poses.csv as arrays, one row per pose; ``lines`` are the rows' file line numbers."""
+    """poses.csv as arrays, one row per pose; ``lines`` are the rows' file line numbers;
+    ``extra`` holds every other column, by header name, as text."""
 
     pose: np.ndarray  # (K,) int
     take: tuple[str, ...]
@@ -110,9 +133,15 @@ class PoseTable:
     s_cmd: np.ndarray  # (K, 3)
     dirs: np.ndarray  # (K, 3) int in {-1, 0, 1}
     lines: np.ndarray  # (K,) int
+    roles: tuple[str, ...] = ()  # "fit" | "check" per row
+    extra: dict[str, tuple[str, ...]] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return len(self.take)
+
+
+def _row_error(source: str, line: int, name: str, column: int, why: str) -> InputError:
+    return InputError(f"line {line}, column '{name}' (column {column + 1}): {why}", source=source)
 
 
 def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
@@ -124,8 +153,15 @@ def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
     missing = [c for c in POSE_COLUMNS if c not in header]
     if missing:
         raise InputError(f"line 1: header lacks column(s) {', '.join(missing)}", source=source)
-    col = {c: header.index(c) for c in POSE_COLUMNS}
-    poses, takes, floats, dirs, lines = [], [], [], [], []
+    col = {c: header.index(c) for c in header}
+    others = [h for h in header if h and h not in POSE_COLUMNS and h != "role"]
+    poses: list[int] = []
+    takes: list[str] = []
+    floats: list[list[float]] = []
+    dirs: list[list[int]] = []
+    lines: list[int] = []
+    roles: list[str] = []
+    extra: dict[str, list[str]] = {h: [] for h in others}
     for n, row in enumerate(rows[1:], start=2):
         if not any(c.strip() for c in row):
             continue
@@ -134,9 +170,7 @@ def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
             return row[col[name]].strip() if col[name] < len(row) else ""
 
         def fail(name: str, why: str, n: int = n) -> InputError:
-            return InputError(
-                f"line {n}, column '{name}' (column {col[name] + 1}): {why}", source=source
-            )
+            return _row_error(source, n, name, col[name], why)
 
         try:
             pose = int(cell("pose"))
@@ -166,11 +200,17 @@ def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
             if v not in (-1.0, 0.0, 1.0):
                 raise fail(name, f"must be +1, -1 or 0, got {cell(name)!r}")
             d.append(int(v))
+        role = (cell("role").lower() if "role" in col else "") or "fit"
+        if role not in ROLES:
+            raise fail("role", f"must be fit or check, got {role!r}")
         poses.append(pose)
         takes.append(cell("take"))
         floats.append(vals)
         dirs.append(d)
         lines.append(n)
+        roles.append(role)
+        for h in others:
+            extra[h].append(cell(h))
     f = np.asarray(floats, dtype=float).reshape(-1, 7)
     table = PoseTable(
         np.asarray(poses, dtype=int),
@@ -180,6 +220,8 @@ def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
         f[:, 4:7],
         np.asarray(dirs, dtype=int).reshape(-1, 3),
         np.asarray(lines, dtype=int),
+        tuple(roles),
+        {h: tuple(v) for h, v in extra.items()},
     )
     return header, table
 
@@ -189,40 +231,84 @@ def read_poses(path: str | os.PathLike[str]) -> PoseTable:
         text = Path(path).read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", source=str(path)) from None
     return parse_poses(text, str(path))[1]
 
 
-@dataclass(frozen=True)
+def contained_path(root: Path, relative: str) -> Path | str:
+    """``relative`` resolved inside ``root``, or the reason it is refused: an absolute path
+    (POSIX or Windows), a ``..`` escape, or a link that leads outside. Backslashes (folders
+    assembled on Windows) count as separators."""
+    text = relative.replace("\\", "/")
+    if "\x00" in text:
+        return "contains a NUL character"
+    if PurePosixPath(text).is_absolute() or PureWindowsPath(relative).anchor:
+        return (
+            f"{relative!r} is an absolute path: take paths must be relative to the session folder"
+        )
+    if ".." in PurePosixPath(text).parts:
+        return f"{relative!r} leads outside the session folder ('..')"
+    base = root.resolve()
+    target = (base / text).resolve()
+    if not target.is_relative_to(base):
+        return f"{relative!r} resolves to {target}, outside the session folder"
+    return target
+
+
+@dataclass(frozen=True, eq=False)
 class RejectedTake:
     pose: int
     take: str
-    reason: str  # a TakeRejected reason, or "unreadable"
+    reason: str  # one of acceptance.REASONS
     message: str
+
+    def __str__(self) -> str:
+        return f"pose {self.pose} ({self.take}): {self.reason}: {self.message}"
 
 
 @dataclass(frozen=True, eq=False)
 class SessionMeasurements:
-    """Accepted poses only (K of them), in poses.csv order; rejected ones listed apart."""
+    """Accepted poses only (K of them), in poses.csv order; refused ones listed apart."""
 
     pose: np.ndarray  # (K,)
+    roles: tuple[str, ...]
     measured: np.ndarray  # (K, 3) base frame, mm
     commanded: np.ndarray  # (K, 3)
     s_cmd: np.ndarray  # (K, 3)
     t_s: np.ndarray  # (K,)
     dirs: np.ndarray  # (K, 3)
-    std: np.ndarray  # (K, 3) per-frame spread of each take
+    se: np.ndarray  # (K, 3) standard error of each take's centre
     base_fit_rms_mm: np.ndarray  # (K,)
     takes: tuple[TakeMeasurement, ...]
     rejected: tuple[RejectedTake, ...]
+    declared_noise_mm: float | None = None
 
     def __len__(self) -> int:
         return int(self.measured.shape[0])
 
-    def observations(self, sigma_mm: float = 0.05):
-        """As :class:`cdprhost.calibration.fitting.Observations` (for identification)."""
-        from cdprhost.calibration.fitting import Observations
+    @property
+    def take_sigma_mm(self) -> np.ndarray:
+        """Each pose's noise from its take alone, (K,) mm per coordinate."""
+        return np.sqrt(np.mean(self.se**2, axis=1)) if len(self) else np.zeros(0)
 
-        return Observations(self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), sigma_mm)
+    def noise(
+        self, steps_per_mm: np.ndarray | float = 400.0, *, floor_mm: float | None = None
+    ) -> PoseNoise:
+        """The one noise model (:func:`~.pose_noise.pose_noise`); ``floor_mm`` overrides the
+        declared noise."""
+        return pose_noise(
+            self.take_sigma_mm,
+            declared_mm=self.declared_noise_mm if floor_mm is None else floor_mm,
+            sliders=self.s_cmd,
+            measured=self.measured,
+            steps_per_mm=steps_per_mm,
+        )
+
+    def observations(self, noise: PoseNoise | None = None) -> Observations:
+        """The observations of identification and diagnosis (the one builder)."""
+        sigma = (noise or self.noise()).sigma_mm
+        return Observations(self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), sigma)
 
 
 @dataclass(frozen=True)
@@ -230,212 +316,107 @@ class Session:
     directory: Path
     config: SessionConfig
     poses: PoseTable
+    take_paths: tuple[Path, ...] = ()
+
+    @property
+    def warnings(self) -> list[str]:
+        unknown = self.config.acceptance.unknown_keys
+        return (
+            [
+                f"{SESSION_FILE}: [mocap.acceptance] key(s) not known here, ignored: {', '.join(unknown)}"
+            ]
+            if unknown
+            else []
+        )
+
+    @property
+    def check_poses(self) -> np.ndarray:
+        """Pose numbers marked ``check``."""
+        return np.asarray(self.poses.pose[np.array(self.poses.roles) == "check"])
 
     def take_path(self, i: int) -> Path:
-        """Path of the i-th row's take (0-based row index)."""
-        return self.directory / self.poses.take[i]
+        """Path of the i-th row's take (0-based row index), inside the session folder."""
+        return self.take_paths[i] if self.take_paths else self.directory / self.poses.take[i]
 
-    def measure_take(self, i: int, limits: AcceptanceLimits | None = None) -> TakeMeasurement:
+    def prepare(self, i: int, limits: AcceptanceLimits | None = None) -> TakeSeries:
         take = read_take(self.take_path(i), self.config.mocap.format)
-        return measure_effector(take, self.config.mocap, limits)
+        return prepare_take(take, self.config.mocap, limits)
 
     def measure(
         self, limits: AcceptanceLimits | None = None, *, strict: bool = False
     ) -> SessionMeasurements:
-        """Measure every take. ``strict``: raise on the first rejected or unreadable take."""
+        """Measure every take (their noise correlation pooled, :func:`~.takes.judge_takes`).
+        ``strict``: raise on the first refused or unreadable take."""
+        lim = limits or self.config.acceptance
+        p = self.poses
+        outcome: dict[int, TakeMeasurement | InputError] = {}
+        series: list[TakeSeries] = []
+        rows: list[int] = []
+        for i in range(len(p)):
+            try:
+                series.append(self.prepare(i, lim))
+                rows.append(i)
+            except InputError as exc:
+                outcome[i] = exc
+        outcome.update(zip(rows, judge_takes(series, lim)))
         keep: list[int] = []
         results: list[TakeMeasurement] = []
         rejected: list[RejectedTake] = []
-        p = self.poses
         for i in range(len(p)):
-            try:
-                results.append(self.measure_take(i, limits))
+            r = outcome[i]
+            if isinstance(r, TakeMeasurement):
                 keep.append(i)
-            except InputError as exc:
-                if strict:
-                    raise InputError(
-                        f"pose {p.pose[i]} (poses.csv line {p.lines[i]}): {exc}"
-                    ) from None
-                reason = exc.reason if isinstance(exc, TakeRejected) else "unreadable"
-                rejected.append(RejectedTake(int(p.pose[i]), p.take[i], reason, str(exc)))
+                results.append(r)
+                continue
+            if strict:
+                raise InputError(f"pose {p.pose[i]} (poses.csv line {p.lines[i]}): {r}") from None
+            reason = r.reason if isinstance(r, TakeRejected) else "unreadable"
+            rejected.append(RejectedTake(int(p.pose[i]), p.take[i], reason, str(r)))
         k = np.asarray(keep, dtype=int)
         return SessionMeasurements(
             p.pose[k],
+            tuple(p.roles[i] for i in keep) if p.roles else ("fit",) * len(keep),
             np.array([r.point for r in results]).reshape(-1, 3),
             p.commanded[k],
             p.s_cmd[k],
             p.t_s[k],
             p.dirs[k],
-            np.array([r.std for r in results]).reshape(-1, 3),
+            np.array([r.se for r in results]).reshape(-1, 3),
             np.array([r.base_fit_rms_mm for r in results]),
             tuple(results),
             tuple(rejected),
+            self.config.declared_noise_mm,
         )
 
 
 def load_session(directory: str | os.PathLike[str]) -> Session:
-    """Read and validate a session folder (takes are read later, by ``measure``)."""
+    """Read and validate a session folder (takes are read later, by ``measure``).
+
+    Every take path must stay inside the folder: an absolute path or a ``..`` escape is
+    refused, naming its poses.csv line."""
     root = Path(directory)
     if not root.is_dir():
         raise InputError("not a session folder (no such directory)", source=str(root))
     for name in (SESSION_FILE, POSES_FILE):
         if not (root / name).is_file():
             raise InputError(f"missing {name}", source=str(root))
-    return Session(root, load_session_config(root / SESSION_FILE), read_poses(root / POSES_FILE))
+    config = load_session_config(root / SESSION_FILE)
+    poses_path = root / POSES_FILE
+    text = _read_text(poses_path)
+    header, poses = parse_poses(text, str(poses_path))
+    paths: list[Path] = []
+    for take, line in zip(poses.take, poses.lines):
+        where = contained_path(root, take)
+        if isinstance(where, str):
+            raise _row_error(str(poses_path), int(line), "take", header.index("take"), where)
+        paths.append(where)
+    return Session(root, config, poses, tuple(paths))
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)  # a JSON string is a valid TOML basic string
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(float(v)) if isinstance(v, float) else str(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {type(v).__name__} to session.toml")
-
-
-def session_toml(config: SessionConfig) -> str:
-    """session.toml text for ``config`` (the layout of the spec; default limits omitted)."""
-    import tomli_w
-
-    mocap = config.mocap
-    out = ["[session]"] + [
-        f"{k} = {_toml_value(v)}" for k, v in config.session.model_dump().items()
-    ]
-    out += ["", "[mocap]"]
-    if mocap.format is not None:
-        out.append(f"format = {_toml_value(mocap.format)}")
-    if mocap.noise_mm is not None:
-        out.append(f"noise_mm = {_toml_value(mocap.noise_mm)}")
-    out += ["", "[mocap.base_markers]"]
-    out += [f"{_toml_value(k)} = {_toml_value(list(v))}" for k, v in mocap.base_markers.items()]
-    out += [
-        "",
-        "[mocap.effector]",
-        f"markers = {_toml_value(list(mocap.effector.markers))}",
-        f"offset = {_toml_value(list(mocap.effector.offset))}",
-    ]
-    if mocap.acceptance != AcceptanceLimits():
-        out += ["", "[mocap.acceptance]"] + [
-            f"{k} = {_toml_value(v)}" for k, v in mocap.acceptance.model_dump().items()
-        ]
-    text = "\n".join(out) + "\n"
-    extra = {k: v for k, v in config.model_dump().items() if k not in ("session", "mocap")}
-    return text + ("\n" + tomli_w.dumps(extra) if extra else "")
-
-
-def _fmt(v: float) -> str:
-    return f"{v:.6f}".rstrip("0").rstrip(".") if math.isfinite(v) else "nan"
-
-
-class SessionWriter:
-    """Create or resume a session folder, one pose at a time, crash-safely.
-
-    ``session.toml`` is written once; ``poses.csv`` is rewritten atomically with each
-    new row, after that row's take is on disk, so a crash leaves either the old or
-    the new file and never a row without its take. Resuming an existing folder
-    continues the pose numbering (``config`` must then match the folder's, or be None).
-    """
-
-    def __init__(self, directory: str | os.PathLike[str], config: SessionConfig | None = None):
-        self.directory = Path(directory)
-        toml_path = self.directory / SESSION_FILE
-        if toml_path.is_file():
-            existing = load_session_config(toml_path)
-            if config is not None and existing.model_dump() != config.model_dump():
-                raise InputError(
-                    "session.toml differs from the configuration given; resume with config=None "
-                    "or start a new folder",
-                    source=str(toml_path),
-                )
-            self.config = existing
-        elif config is None:
-            raise InputError(
-                "no session.toml: a new session needs its configuration", source=str(self.directory)
-            )
-        else:
-            self.config = config
-            (self.directory / TAKES_DIR).mkdir(parents=True, exist_ok=True)
-            write_text_atomic(toml_path, session_toml(config))
-        (self.directory / TAKES_DIR).mkdir(parents=True, exist_ok=True)
-        poses_path = self.directory / POSES_FILE
-        if poses_path.is_file():
-            self._text = poses_path.read_text(encoding="utf-8-sig")
-            self._header, table = parse_poses(self._text, str(poses_path))
-            self._last = int(table.pose.max()) if len(table) else 0
-        else:
-            self._header = list(POSE_COLUMNS)
-            self._text = ",".join(POSE_COLUMNS) + "\n"
-            self._last = 0
-            write_text_atomic(poses_path, self._text)
-
-    @property
-    def next_pose(self) -> int:
-        return self._last + 1
-
-    def take_relpath(self, pose: int | None = None, format: str | None = None) -> str:
-        """Suggested take path for ``pose`` (default the next), relative to the folder."""
-        fmt = format or self.config.mocap.format or "motive-csv"
-        return f"{TAKES_DIR}/pose_{pose or self.next_pose:04d}{EXTENSIONS[fmt]}"
-
-    def append(
-        self,
-        *,
-        take: str,
-        t_s: float,
-        commanded,
-        s_cmd,
-        dirs,
-        pose: int | None = None,
-        extra: dict[str, str] | None = None,
-    ) -> int:
-        """Add one row to poses.csv (the take file must exist already); returns its pose number."""
-        number = self.next_pose if pose is None else int(pose)
-        if number <= self._last:
-            raise ValueError(f"pose {number} is not after the last pose {self._last}")
-        if not (self.directory / take).is_file():
-            raise InputError(
-                f"take file {take!r} does not exist; write it before its row",
-                source=str(self.directory),
-            )
-        values = {"pose": str(number), "take": take, "t_s": _fmt(float(t_s))}
-        for names, vec in (
-            (("x_cmd", "y_cmd", "z_cmd"), commanded),
-            (("s1_cmd", "s2_cmd", "s3_cmd"), s_cmd),
-        ):
-            values.update(
-                {n: _fmt(float(v)) for n, v in zip(names, np.asarray(vec, dtype=float).reshape(3))}
-            )
-        values.update(
-            {f"dir{k + 1}": str(int(d)) for k, d in enumerate(np.asarray(dirs).reshape(3))}
-        )
-        values.update(extra or {})
-        buf = io.StringIO()
-        csv.writer(buf, lineterminator="\n").writerow([values.get(h, "") for h in self._header])
-        text = self._text if self._text.endswith("\n") or not self._text else self._text + "\n"
-        text += buf.getvalue()
-        parse_poses(
-            text, str(self.directory / POSES_FILE)
-        )  # never write a file we could not read back
-        write_text_atomic(self.directory / POSES_FILE, text)
-        self._text, self._last = text, number
-        return number
-
-    def add_take(
-        self,
-        take: Take,
-        *,
-        t_s: float,
-        commanded,
-        s_cmd,
-        dirs,
-        format: str | None = None,
-        **writer_options,
-    ) -> int:
-        """Write ``take`` under takes/ (atomically) and append its row; returns the pose number."""
-        fmt = format or self.config.mocap.format or "motive-csv"
-        rel = self.take_relpath(self.next_pose, fmt)
-        write_take(self.directory / rel, take, fmt, **writer_options)
-        return self.append(take=rel, t_s=t_s, commanded=commanded, s_cmd=s_cmd, dirs=dirs)
+def _read_text(path: Path) -> str:
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", source=str(path)) from None

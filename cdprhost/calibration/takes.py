@@ -1,27 +1,39 @@
-"""One take -> one measured effector point in the base frame, or a clear rejection.
+"""One take -> one measured effector point in the base frame with its standard error, or a
+clear rejection.
 
-Per frame: fit the base markers to their base-frame positions (Kabsch), carry the
-effector markers' centroid into the base frame, add the offset. Over frames:
-drop outliers (median/MAD), average the rest. A take is rejected (``TakeRejected``)
-when a marker is missing, the base fit is implausible, the effector moved, or too
-few frames remain; the numbers behind each verdict are in the message.
+The base and the cameras are at rest during a take, so the base frame is registered once:
+each base marker's trajectory is reduced to its centre (and standard error) and those
+centres are fitted to their base-frame positions (Kabsch). Averaging first removes the
+base markers' jitter, which a per-frame fit would carry to the effector through the
+lever arm of the base. The effector point of each frame is the centroid of the effector
+markers seen in that frame (a marker lost in a gap is stood in for by the others and its
+known offset from them), carried into the base frame, plus the configured offset. The
+series is then judged by :mod:`.take_statistics` and :mod:`.acceptance`.
+
+The point's standard error combines the series' own (autocorrelation-aware) standard
+error with the registration's: the base-marker centres' standard errors carried to the
+effector through the rigid fit (a numerical Jacobian of the Kabsch solution).
+A take is refused (:class:`TakeRejected`) with its reason and the numbers behind it.
 """
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from cdprhost.calibration.acceptance import AcceptanceLimits, judge
 from cdprhost.calibration.readers.take import FORMATS, Take
-from cdprhost.calibration.registration import is_degenerate, register_frames
+from cdprhost.calibration.registration import RigidTransform, is_degenerate, kabsch
+from cdprhost.calibration.take_statistics import TakeStatistics, take_statistics, variance_inflation
 from cdprhost.errors import InputError
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
-MAD_TO_SIGMA = 1.4826
 
 
 class _Strict(BaseModel):
@@ -42,19 +54,6 @@ class EffectorConfig(_Strict):
         return markers
 
 
-class AcceptanceLimits(_Strict):
-    """When a take is believed. Defaults suit a static effector and a surveyed base."""
-
-    max_base_rms_mm: float = Field(0.5, gt=0)
-    max_spread_mm: float = Field(0.5, gt=0)
-    min_frames: int = Field(10, ge=1)
-    outlier_mads: float = Field(5.0, gt=0)
-    max_outlier_fraction: float = Field(0.25, ge=0, lt=1)
-    min_scale_mm: float = Field(
-        0.005, gt=0, description="floor of the robust scale (quantised exports)"
-    )
-
-
 class MocapConfig(_Strict):
     """``[mocap]`` of session.toml."""
 
@@ -63,7 +62,7 @@ class MocapConfig(_Strict):
     effector: EffectorConfig
     acceptance: AcceptanceLimits = AcceptanceLimits()
     noise_mm: float | None = Field(
-        None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)"
+        default=None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)"
     )
 
     @field_validator("base_markers")
@@ -88,7 +87,7 @@ class MocapConfig(_Strict):
 
 
 class TakeRejected(InputError):
-    """A take that must not be used. ``reason``: missing-marker | base-fit | not-static | too-few-frames."""
+    """A take that must not be used; ``reason`` is one of :data:`~.acceptance.REASONS`."""
 
     def __init__(self, message: str, *, source: str, reason: str):
         super().__init__(message, source=source)
@@ -96,133 +95,273 @@ class TakeRejected(InputError):
 
 
 @dataclass(frozen=True, eq=False)
-class TakeMeasurement:
-    """The averaged effector point (base frame, mm) and how good it is.
+class TakeSeries:
+    """A take reduced to what its judgement needs: the effector point of every frame in the
+    base frame (NaN where no effector marker was seen) and the registration."""
 
-    ``std``: per-coordinate standard deviation over the frames used; ``sem`` =
-    std / sqrt(n) is the frame-noise part of the point's uncertainty.
-    ``spread_mm``: largest distance of a used frame from the point.
+    points: np.ndarray  # (frames, 3)
+    times_s: np.ndarray  # (frames,)
+    registration: RigidTransform  # mocap -> base, one for the whole take
+    registration_se: np.ndarray  # (3,) standard error the registration adds to the point
+    base_fit_rms_mm: float
+    notes: tuple[str, ...]
+    source: str
+
+    @property
+    def rate_hz(self) -> float:
+        dt = np.diff(self.times_s)
+        dt = dt[np.isfinite(dt) & (dt > 0)]
+        return float(1.0 / np.median(dt)) if dt.size else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class TakeMeasurement:
+    """The effector point of a sound take (base frame, mm) and how well it is known.
+
+    ``se`` (3,): standard error per coordinate, the frames' (``se_frames``, from the
+    long-run variance of the autocorrelated noise), the registration's and, for a take whose
+    drift is significant at ``motion_alpha`` but too small to refuse, the motion's
+    (drift / sqrt(12) per coordinate) combined;
+    ``sigma_mm`` their RMS over coordinates, the pose noise of identification and diagnosis.
     """
 
     point: np.ndarray
-    std: np.ndarray
-    n_frames_used: int
-    n_frames_total: int
+    se: np.ndarray
+    se_frames: np.ndarray
+    se_registration: np.ndarray
+    stats: TakeStatistics
     base_fit_rms_mm: float
-    spread_mm: float
+    n_frames_total: int
     warnings: tuple[str, ...]
     source: str
 
     @property
-    def sem(self) -> np.ndarray:
-        return self.std / np.sqrt(max(self.n_frames_used, 1))
+    def sigma_mm(self) -> float:
+        return float(np.sqrt(np.mean(self.se**2)))
+
+    @property
+    def n_frames_used(self) -> int:
+        return int(self.stats.n_used)
+
+    @property
+    def spread_mm(self) -> float:
+        return float(self.stats.spread_rms_mm)
+
+    @property
+    def drift_mm(self) -> float:
+        return float(self.stats.drift_total_mm)
 
 
-def robust_inliers(points: np.ndarray, n_mads: float, min_scale: float) -> np.ndarray:
-    """Mask of rows within ``n_mads`` robust sigmas (MAD * 1.4826) of the median in every coordinate."""
-    med = np.median(points, axis=0)
-    dev = np.abs(points - med)
-    scale = np.maximum(MAD_TO_SIGMA * np.median(dev, axis=0), min_scale)
-    return np.all(dev <= n_mads * scale, axis=1)
+# ------------------------------------------------------------------ preparation
+def _check_markers(take: Take, mocap: MocapConfig) -> None:
+    names = list(mocap.base_markers) + list(mocap.effector.markers)
+    missing = [n for n in names if n not in take.marker_names]
+    if missing:
+        shown = ", ".join(take.marker_names[:20]) + (" ..." if len(take.marker_names) > 20 else "")
+        raise TakeRejected(
+            f"marker(s) {', '.join(missing)} not in the take (it has: {shown})",
+            source=take.source,
+            reason="missing-marker",
+        )
+    seen = np.isfinite(take.select(names)).all(axis=2)
+    empty = [n for j, n in enumerate(names) if not seen[:, j].any()]
+    if empty:
+        raise TakeRejected(
+            f"marker(s) {', '.join(empty)} never seen (gap in every frame)",
+            source=take.source,
+            reason="missing-marker",
+        )
+
+
+def effector_centroid(eff: np.ndarray) -> tuple[np.ndarray, int]:
+    """Per-frame centroid of the effector markers (frames, m, 3), standing in for a marker lost
+    in a gap by its offset from the others (the effector translates only); frames without any
+    marker are NaN. Returns the centroids and how many frames were completed that way."""
+    seen = np.isfinite(eff).all(axis=2)
+    full = seen.all(axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        if full.sum() >= 10:
+            ref = eff[full]
+            offsets = np.mean(ref - ref.mean(axis=1, keepdims=True), axis=0)
+        else:
+            means = np.nanmean(eff, axis=0)
+            offsets = means - means.mean(axis=0)
+        centre = np.nanmean(np.where(seen[..., None], eff - offsets[None], np.nan), axis=1)
+    partial = int((seen.any(axis=1) & ~full).sum())
+    return centre, partial
+
+
+def registration_se(
+    centres: np.ndarray, se: np.ndarray, nominal: np.ndarray, point_mocap: np.ndarray
+) -> np.ndarray:
+    """Standard error (3,) at ``point_mocap`` of the base-frame point that the rigid fit of
+    base-marker ``centres`` (n, 3, mocap frame) with standard errors ``se`` (n, 3) gives."""
+    n = centres.shape[0]
+    h = 1e-3
+    steps = np.eye(3 * n).reshape(3 * n, n, 3) * h
+    batch = np.concatenate([centres[None] + steps, centres[None] - steps])
+    fits = kabsch(batch, nominal[None])
+    moved = fits.apply(np.broadcast_to(point_mocap, (2 * 3 * n, 1, 3)))[:, 0]
+    jac = (moved[: 3 * n] - moved[3 * n :]) / (2 * h)  # (3n, 3): d point / d centre coordinate
+    return np.asarray(np.sqrt(np.einsum("ki,k->i", jac**2, se.reshape(-1) ** 2)))
+
+
+def prepare_take(
+    take: Take, mocap: MocapConfig, limits: AcceptanceLimits | None = None
+) -> TakeSeries:
+    """Register a take into the base frame (see module doc); refuses structural problems:
+    missing markers, base markers that do not fit session.toml."""
+    lim = limits or mocap.acceptance
+    src = take.source
+    _check_markers(take, mocap)
+    names = list(mocap.base_markers)
+    nominal = np.asarray([mocap.base_markers[n] for n in names], dtype=float)
+    base = take.select(names)  # (frames, n, 3)
+    bstats = take_statistics(
+        np.moveaxis(base, 1, 0),
+        take.times_s,
+        groups=np.zeros(len(names), dtype=int),
+        outlier_mads=lim.outlier_mads,
+        min_scale_mm=lim.min_scale_mm,
+    )
+    fit = kabsch(bstats.centre, nominal)
+    if not bool(fit.valid):
+        raise TakeRejected(
+            "the base markers' centres are collinear in the take: cannot register",
+            source=src,
+            reason="base-fit",
+        )
+    misfit = np.linalg.norm(fit.apply(bstats.centre[None])[0] - nominal, axis=1)
+    rms = float(np.sqrt(np.mean(misfit**2)))
+    if rms > lim.max_base_rms_mm:
+        worst = int(np.argmax(misfit))
+        raise TakeRejected(
+            f"base-marker fit RMS {rms:.3f} mm exceeds {lim.max_base_rms_mm:g} mm (largest misfit: "
+            f"{names[worst]}, {misfit[worst]:.3f} mm): the base marker positions in session.toml do "
+            "not match the measured ones, or a base marker moved or is mislabelled",
+            source=src,
+            reason="base-fit",
+        )
+    centroid, partial = effector_centroid(take.select(list(mocap.effector.markers)))
+    offset = np.asarray(mocap.effector.offset, dtype=float)
+    points = fit.apply(centroid[None])[0] + offset
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mid = np.nanmean(centroid, axis=0)
+    reg_se = registration_se(bstats.centre, bstats.se, nominal, mid)
+    notes = list(take.notes)
+    if partial:
+        notes.append(f"{partial} frame(s) completed from the effector markers seen")
+    moved = [
+        n
+        for n, p, d in zip(names, bstats.drift_p, bstats.drift_total_mm)
+        if p < lim.drift_alpha and d > lim.max_drift_mm
+    ]
+    if moved:
+        notes.append(f"base marker(s) {', '.join(moved)} moved during the take")
+    return TakeSeries(points, take.times_s, fit, reg_se, rms, tuple(notes), src)
+
+
+# ------------------------------------------------------------------ judgement
+def _statistics(
+    series: TakeSeries, lim: AcceptanceLimits, noise_inflation: np.ndarray | None = None
+) -> TakeStatistics:
+    return take_statistics(
+        series.points,
+        series.times_s,
+        outlier_mads=lim.outlier_mads,
+        min_scale_mm=lim.min_scale_mm,
+        max_settling_fraction=lim.max_settling_fraction,
+        settle_alpha=lim.settle_alpha,
+        noise_inflation=None if noise_inflation is None else np.asarray(noise_inflation)[None],
+    )
+
+
+def judge_series(
+    series: TakeSeries, limits: AcceptanceLimits, stats: TakeStatistics | None = None
+) -> TakeMeasurement:
+    """The measurement of a registered take, or :class:`TakeRejected` with the reason."""
+    s = stats if stats is not None else _statistics(series, limits)
+    verdict = judge(s, limits)
+    if verdict.reason is not None:
+        raise TakeRejected(verdict.message, source=series.source, reason=verdict.reason)
+    # an effector that probably moved during the take was at its centre only on average
+    moved = float(s.drift_p) < limits.motion_alpha
+    se_motion = np.abs(np.asarray(s.drift_mm)) / np.sqrt(12.0) if moved else np.zeros(3)
+    se = np.sqrt(s.se**2 + series.registration_se**2 + se_motion**2)
+    notes = list(series.notes)
+    if moved:
+        notes.append(
+            f"moved {float(s.drift_total_mm):.3f} mm during the take (p = {float(s.drift_p):.2g}): "
+            "counted in its standard error"
+        )
+    total = int(s.n_frames)
+    if int(s.n_valid) < total:
+        notes.append(f"{total - int(s.n_valid)} of {total} frames without the effector (gaps)")
+    if int(s.n_trimmed):
+        notes.append(f"settling: the first {float(s.settled_at_s):.2f} s trimmed")
+    if int(s.n_outliers):
+        notes.append(f"{int(s.n_outliers)} outlier frame(s) dropped")
+    return TakeMeasurement(
+        point=np.asarray(s.centre),
+        se=se,
+        se_frames=np.asarray(s.se),
+        se_registration=series.registration_se,
+        stats=s,
+        base_fit_rms_mm=series.base_fit_rms_mm,
+        n_frames_total=total,
+        warnings=tuple(notes),
+        source=series.source,
+    )
+
+
+def judge_takes(
+    series: Sequence[TakeSeries], limits: AcceptanceLimits
+) -> list[TakeMeasurement | TakeRejected]:
+    """Judge the takes of one session together: the noise's correlation is a property of the
+    mocap system, so it is pooled over takes of the same frame rate
+    (:func:`~.take_statistics.variance_inflation`) before each take is judged."""
+    first = [_statistics(s, limits) for s in series]
+    if not first:
+        return []
+    rates = np.array([round(s.rate_hz, 1) for s in series])
+    vif = variance_inflation(
+        np.stack([f.autocorrelation for f in first]),
+        np.stack([f.pairs for f in first]),
+        rates,
+    )
+    out: list[TakeMeasurement | TakeRejected] = []
+    for s, v in zip(series, vif):
+        try:
+            out.append(judge_series(s, limits, _statistics(s, limits, v)))
+        except TakeRejected as exc:
+            out.append(exc)
+    return out
+
+
+def judge_in_session(
+    series: TakeSeries,
+    limits: AcceptanceLimits,
+    history: Sequence[tuple[float, TakeStatistics]] = (),
+) -> tuple[TakeMeasurement, TakeStatistics]:
+    """Judge one new take of a session at once, its noise correlation pooled with the
+    ``history`` of (frame rate, first-pass statistics) of the session's sound takes so far.
+    Returns the measurement and this take's first-pass statistics (for the history)."""
+    first = _statistics(series, limits)
+    rate = round(series.rate_hz, 1)
+    same = [s for r, s in history if round(r, 1) == rate] + [first]
+    vif = variance_inflation(
+        np.stack([s.autocorrelation for s in same]),
+        np.stack([s.pairs for s in same]),
+        np.zeros(len(same), dtype=int),
+    )[-1]
+    return judge_series(series, limits, _statistics(series, limits, vif)), first
 
 
 def measure_effector(
     take: Take, mocap: MocapConfig, limits: AcceptanceLimits | None = None
 ) -> TakeMeasurement:
-    """Average the effector point of a static take in the base frame (see module doc)."""
+    """Measure one take on its own (its noise correlation estimated from itself)."""
     lim = limits or mocap.acceptance
-    src = take.source
-    base = list(mocap.base_markers)
-    eff = list(mocap.effector.markers)
-    missing = [n for n in base + eff if n not in take.marker_names]
-    if missing:
-        shown = ", ".join(take.marker_names[:20]) + (" ..." if len(take.marker_names) > 20 else "")
-        raise TakeRejected(
-            f"marker(s) {', '.join(missing)} not in the take (it has: {shown})",
-            source=src,
-            reason="missing-marker",
-        )
-    seen = np.isfinite(take.positions).all(axis=2)  # (frames, markers)
-    empty = [n for n in base + eff if not seen[:, take.index(n)].any()]
-    if empty:
-        raise TakeRejected(
-            f"marker(s) {', '.join(empty)} never seen (gap in every frame)",
-            source=src,
-            reason="missing-marker",
-        )
-
-    reg = register_frames(take, mocap.base_markers)
-    eff_pos = take.select(eff)
-    eff_ok = np.isfinite(eff_pos).all(axis=(1, 2))
-    usable = reg.valid & eff_ok
-    n_usable = int(usable.sum())
-    if n_usable < lim.min_frames:
-        raise TakeRejected(
-            f"only {n_usable} of {take.n_frames} frames have every effector marker and 3 base markers "
-            f"(need {lim.min_frames})",
-            source=src,
-            reason="too-few-frames",
-        )
-    centroid = np.where(eff_ok[:, None, None], eff_pos, 0.0).mean(axis=1)
-    points = reg.apply(centroid[:, None, :])[:, 0] + np.asarray(mocap.effector.offset)
-    rms = reg.rms_residual
-    base_rms = float(np.median(rms[usable]))
-    if base_rms > lim.max_base_rms_mm:
-        worst, worst_mm = _worst_base_marker(take, mocap, reg, usable)
-        raise TakeRejected(
-            f"base-marker fit RMS {base_rms:.3f} mm exceeds {lim.max_base_rms_mm} mm (largest misfit: {worst}, "
-            f"{worst_mm:.3f} mm): the base marker positions in session.toml do not match the measured ones, "
-            "or a base marker moved or is mislabelled",
-            source=src,
-            reason="base-fit",
-        )
-
-    idx = np.flatnonzero(usable)
-    inl = robust_inliers(points[idx], lim.outlier_mads, lim.min_scale_mm)
-    inl &= rms[idx] <= lim.max_base_rms_mm
-    n_out = int((~inl).sum())
-    if n_out > lim.max_outlier_fraction * len(idx):
-        raise TakeRejected(
-            f"effector not static: {n_out} of {len(idx)} frames lie beyond {lim.outlier_mads} robust sigmas "
-            f"or have a base fit over {lim.max_base_rms_mm} mm (limit {lim.max_outlier_fraction:.0%} of frames)",
-            source=src,
-            reason="not-static",
-        )
-    used = points[idx[inl]]
-    if len(used) < lim.min_frames:
-        raise TakeRejected(
-            f"only {len(used)} frames left after outlier rejection (need {lim.min_frames})",
-            source=src,
-            reason="too-few-frames",
-        )
-    point = used.mean(axis=0)
-    spread = float(np.max(np.linalg.norm(used - point, axis=1)))
-    if spread > lim.max_spread_mm:
-        raise TakeRejected(
-            f"effector not static: frames spread {spread:.3f} mm from the average (limit {lim.max_spread_mm} mm)",
-            source=src,
-            reason="not-static",
-        )
-    std = used.std(axis=0, ddof=1) if len(used) > 1 else np.zeros(3)
-    warnings = list(take.notes)
-    if n_usable < take.n_frames:
-        warnings.append(f"{take.n_frames - n_usable} of {take.n_frames} frames skipped for gaps")
-    if n_out:
-        warnings.append(f"{n_out} outlier frame(s) dropped")
-    partial = int((usable & (reg.n_points < len(base))).sum())
-    if partial:
-        warnings.append(f"{partial} frame(s) registered without every base marker")
-    return TakeMeasurement(
-        point, std, len(used), take.n_frames, base_rms, spread, tuple(warnings), src
-    )
-
-
-def _worst_base_marker(
-    take: Take, mocap: MocapConfig, reg, usable: np.ndarray
-) -> tuple[str, float]:
-    names = list(mocap.base_markers)
-    nominal = np.asarray([mocap.base_markers[n] for n in names])
-    fitted = reg.apply(take.select(names))[usable]
-    err = np.nanmedian(np.linalg.norm(fitted - nominal, axis=2), axis=0)
-    k = int(np.nanargmax(err))
-    return names[k], float(err[k])
+    return judge_series(prepare_take(take, mocap, lim), lim)

@@ -1,19 +1,21 @@
-"""Guided calibration: a resumable state machine and the loop that drives it.
+"""Guided calibration: the loop that drives the wizard's state machine (:mod:`.wizard_state`).
 
-:class:`WizardState` is pure: it says what to do next (:class:`MoveTo` a pose,
-:class:`RecordTake` there, :class:`Identify`, :class:`Finished`) and returns a new
-state for each outcome. :class:`CalibrationWizard` runs it against two small
-interfaces, a :class:`WizardDevice` (moves and settles the machine) and a
-:class:`TakeSource` (produces a take file for a pose: the user, a watched folder,
-a folder of recorded takes), validating each take at once and appending it to the
-session folder before going on. Everything recorded is on disk as soon as it is
-accepted, so a crash or Ctrl-C loses nothing; running again on the same folder
-resumes from ``plan.csv`` and the rows already in ``poses.csv``.
+:class:`CalibrationWizard` runs the state against two small interfaces, a
+:class:`WizardDevice` (moves and settles the machine: :class:`cdprhost.machine.Machine`)
+and a :class:`TakeSource` (produces a take file for a pose: the user, a watched folder,
+takes recorded beforehand, :mod:`.take_sources`). Each take is judged at once (its noise
+pooled with the session's earlier takes); a refused take sends the machine to the pose
+again and a new take is asked for. Sound takes are appended to the session folder before
+going on, so a crash or Ctrl-C loses nothing; running again on the same folder resumes
+from ``plan.csv`` and the rows already in ``poses.csv``.
+
+When the trust gate refuses the identification, the wizard plans extra poses by D-optimal
+augmentation of the poses measured (:mod:`.augmentation`), appends them to the plan and
+asks for them, then identifies again (at most ``max_augment_rounds`` times).
 """
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import shutil
 from collections.abc import Callable
@@ -23,16 +25,54 @@ from typing import Protocol
 
 import numpy as np
 
+from cdprhost.calibration.augmentation import extend_plan, extra_poses
 from cdprhost.calibration.identification import Identification, calibrated_profile, identify_session
-from cdprhost.calibration.planning import PosePlan, plan_csv, plan_poses, read_plan_csv
+from cdprhost.calibration.plan_files import plan_csv, read_plan_csv
+from cdprhost.calibration.planning import plan_poses
 from cdprhost.calibration.readers import read_take
-from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SessionConfig, SessionWriter
-from cdprhost.calibration.takes import MocapConfig, TakeMeasurement, TakeRejected, measure_effector
-from cdprhost.errors import InputError
+from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SessionConfig, read_poses
+from cdprhost.calibration.session_writer import SessionWriter
+from cdprhost.calibration.take_sources import FolderWatcher, NumberedTakes
+from cdprhost.calibration.take_statistics import TakeStatistics
+from cdprhost.calibration.takes import (
+    MocapConfig,
+    TakeMeasurement,
+    TakeRejected,
+    judge_in_session,
+    prepare_take,
+)
+from cdprhost.calibration.trust import TrustLimits
+from cdprhost.calibration.wizard_state import (
+    Action,
+    Finished,
+    IdentifyStep,
+    MoveTo,
+    PlanMore,
+    RecordTake,
+    WizardState,
+    resume_state,
+)
+from cdprhost.errors import CdprError, InputError
 from cdprhost.fileio.atomic import atomic_open, write_text_atomic
 from cdprhost.jsonsafe import dumps
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import MachineProfile, save_profile
+
+__all__ = [
+    "CalibrationWizard",
+    "Finished",
+    "FolderWatcher",
+    "IdentifyStep",
+    "MoveTo",
+    "NumberedTakes",
+    "PlanMore",
+    "RecordTake",
+    "WizardOptions",
+    "WizardOutcome",
+    "WizardState",
+    "resume_state",
+    "validate_take",
+]
 
 PLAN_FILE = "plan.csv"
 REPORT_FILE = "identification.json"
@@ -40,123 +80,35 @@ PROFILE_FILE = "calibrated.toml"
 EXTRA_COLUMNS = ("role", "plan_pose", "mocap_file")
 
 
-# ------------------------------------------------------------------ actions
-@dataclass(frozen=True)
-class MoveTo:
-    index: int  # 0-based row of the plan
-    waypoints: np.ndarray  # (2, 3): the approach point, then the pose
-
-
-@dataclass(frozen=True)
-class RecordTake:
-    index: int
-    attempt: int  # 1-based
-    last_problem: str | None = None
-
-
-@dataclass(frozen=True)
-class Identify:
-    pass
-
-
-@dataclass(frozen=True)
-class Finished:
-    reason: str
-
-
-# ------------------------------------------------------------------ state
-@dataclass(frozen=True)
-class WizardState:
-    """Where a calibration session stands. Every transition returns a new state."""
-
-    plan: PosePlan
-    recorded: frozenset[int] = frozenset()
-    skipped: frozenset[int] = frozenset()
-    at: int | None = None  # plan row the machine is settled at
-    attempts: int = 0
-    last_problem: str | None = None
-    identified: bool = False
-    max_attempts: int = 3
-    min_fit_poses: int = 4
-
-    @property
-    def pending(self) -> list[int]:
-        return [
-            i
-            for i in range(len(self.plan.poses))
-            if i not in self.recorded and i not in self.skipped
-        ]
-
-    @property
-    def fit_recorded(self) -> int:
-        return sum(self.plan.roles[i] == "fit" for i in self.recorded)
-
-    def next_action(self) -> MoveTo | RecordTake | Identify | Finished:
-        pending = self.pending
-        if pending:
-            i = pending[0]
-            if self.at != i:
-                return MoveTo(i, np.vstack([self.plan.approach[i], self.plan.poses[i]]))
-            return RecordTake(i, self.attempts + 1, self.last_problem)
-        if self.identified:
-            return Finished("identified")
-        if self.fit_recorded < self.min_fit_poses:
-            return Finished(
-                f"only {self.fit_recorded} fit pose(s) recorded; {self.min_fit_poses} are needed"
-            )
-        return Identify()
-
-    def moved(self, index: int) -> WizardState:
-        return dataclasses.replace(self, at=index, attempts=0, last_problem=None)
-
-    def accepted(self, index: int) -> WizardState:
-        return dataclasses.replace(
-            self, recorded=self.recorded | {index}, attempts=0, last_problem=None
-        )
-
-    def rejected(self, index: int, problem: str) -> WizardState:
-        """Ask again at the same pose, until ``max_attempts``; then skip it."""
-        attempts = self.attempts + 1
-        if attempts >= self.max_attempts:
-            return dataclasses.replace(
-                self, skipped=self.skipped | {index}, attempts=0, last_problem=problem
-            )
-        return dataclasses.replace(self, attempts=attempts, last_problem=problem)
-
-    def skip(self, index: int) -> WizardState:
-        return dataclasses.replace(
-            self, skipped=self.skipped | {index}, attempts=0, last_problem=None
-        )
-
-    def done(self) -> WizardState:
-        return dataclasses.replace(self, identified=True)
-
-
-# ------------------------------------------------------------------ interfaces
 class WizardDevice(Protocol):
     """Implemented by :class:`cdprhost.machine.Machine`."""
 
     def visit(self, points: np.ndarray) -> tuple[np.ndarray, float]:
         """Move the effector through ``points`` (machine frame, in order), stop at the last,
         wait until it has settled; return the absolute module steps (3,) and device time (s)."""
+        ...
 
 
 class TakeSource(Protocol):
     def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
         """A take file recorded with the effector settled at ``pose`` (plan row ``index``)."""
+        ...
 
 
 @dataclass(frozen=True)
 class WizardOptions:
-    n_poses: int = 4
+    n_poses: int = 6
     n_check: int = 3
     criterion: str = "D"
     seed: int = 0
-    noise_floor_mm: float = 0.05
+    noise_floor_mm: float | None = None  # added to each take's standard error (None: session's)
     max_offset_mm: float = (
         30.0  # a take further than this from the commanded pose is the wrong take
     )
     max_attempts: int = 3
+    max_augment_rounds: int = 2
+    max_extra_poses: int = 12
+    trust: TrustLimits = field(default_factory=TrustLimits)
 
 
 @dataclass(frozen=True)
@@ -168,29 +120,18 @@ class WizardOutcome:
     session: Path
 
 
-# ------------------------------------------------------------------ session folder
-def recorded_rows(directory: Path) -> list[dict[str, str]]:
-    path = directory / POSES_FILE
-    if not path.is_file():
-        return []
-    with open(path, encoding="utf-8-sig", newline="") as fh:
-        return [row for row in csv.DictReader(fh) if any((v or "").strip() for v in row.values())]
-
-
-def resume_state(plan: PosePlan, rows: list[dict[str, str]], max_attempts: int = 3) -> WizardState:
-    """The state after the rows already in poses.csv (matched to the plan by ``plan_pose``)."""
-    done = {int(r["plan_pose"]) - 1 for r in rows if (r.get("plan_pose") or "").strip()}
-    return WizardState(
-        plan, frozenset(i for i in done if 0 <= i < len(plan.poses)), max_attempts=max_attempts
-    )
-
-
 def validate_take(
-    path: Path, mocap: MocapConfig, pose: np.ndarray, max_offset_mm: float
+    path: Path,
+    mocap: MocapConfig,
+    pose: np.ndarray,
+    max_offset_mm: float,
+    history: list[tuple[float, TakeStatistics]] | None = None,
 ) -> TakeMeasurement:
-    """Read and measure a take now (markers, static effector, base fit), and check it was
-    taken at this pose; raises :class:`TakeRejected` naming the problem."""
-    measurement = measure_effector(read_take(path, mocap.format), mocap)
+    """Read and judge a take now (markers, base fit, gaps, spread, drift; its noise pooled
+    with ``history``, to which it is added when sound), and check it was taken at this pose;
+    raises :class:`TakeRejected` naming the problem."""
+    series = prepare_take(read_take(path, mocap.format), mocap)
+    measurement, first = judge_in_session(series, mocap.acceptance, history or ())
     offset = float(np.linalg.norm(measurement.point - pose))
     if offset > max_offset_mm:
         raise TakeRejected(
@@ -199,11 +140,13 @@ def validate_take(
             source=str(path),
             reason="wrong-pose",
         )
+    if history is not None:
+        history.append((series.rate_hz, first))
     return measurement
 
 
 class CalibrationWizard:
-    """Plan (or resume), visit every pose, record and validate takes, identify."""
+    """Plan (or resume), visit every pose, record and judge takes, identify, add poses if refused."""
 
     def __init__(
         self,
@@ -249,26 +192,37 @@ class CalibrationWizard:
                     "a new session needs the motion-capture configuration (markers)",
                     source=str(self.dir),
                 )
-            config = SessionConfig(session={"profile": profile_ref or profile.name}, mocap=mocap)
+            config = SessionConfig(session={"profile": profile_ref or profile.name}, mocap=mocap)  # type: ignore[arg-type]
         self.writer = SessionWriter(self.dir, config)
-        rows = recorded_rows(self.dir)
-        self.state = resume_state(self.plan, rows, options.max_attempts)
-        self._t_offset = max((float(r["t_s"]) for r in rows), default=0.0)
+        table = read_poses(self.dir / POSES_FILE)
+        rounds = max((self.plan.round_of(i) for i in range(len(self.plan.poses))), default=0)
+        self.state = dataclasses.replace(
+            resume_state(self.plan, table.extra.get("plan_pose", ()), options.max_attempts, rounds),
+            max_rounds=options.max_augment_rounds,
+        )
+        self._t_offset = float(np.max(table.t_s, initial=0.0))
         self._t0: float | None = None  # device time of the first settle of this run
+        self._t = self._t_offset
         self._steps: np.ndarray | None = None
+        self._history: list[tuple[float, TakeStatistics]] = []
         self.identification: Identification | None = None
         self.calibrated: MachineProfile | None = None
 
     # --------------------------------------------------------------- steps
-    def step(self) -> MoveTo | RecordTake | Identify | Finished:
+    def step(self) -> Action:
         """Carry out the next action; returns the action it carried out."""
         action = self.state.next_action()
-        if isinstance(action, MoveTo):
-            self._move(action)
-        elif isinstance(action, RecordTake):
-            self._record(action)
-        elif isinstance(action, Identify):
-            self._identify()
+        match action:
+            case MoveTo():
+                self._move(action)
+            case RecordTake():
+                self._record(action)
+            case IdentifyStep():
+                self._identify()
+            case PlanMore():
+                self._plan_more(action)
+            case Finished():
+                pass
         return action
 
     def run(self) -> WizardOutcome:
@@ -281,7 +235,8 @@ class CalibrationWizard:
         return f"pose {i + 1}/{len(self.plan.poses)} ({self.plan.roles[i]}) at ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f})"
 
     def _move(self, action: MoveTo) -> None:
-        self.log(f"moving to {self._label(action.index)}")
+        again = f" again (attempt {self.state.attempts + 1})" if self.state.attempts else ""
+        self.log(f"moving to {self._label(action.index)}{again}")
         steps, t = self.device.visit(action.waypoints)
         self._steps = np.asarray(steps, dtype=np.int64)[:3]
         if self._t0 is None:
@@ -291,24 +246,28 @@ class CalibrationWizard:
 
     def _record(self, action: RecordTake) -> None:
         i = action.index
-        if action.last_problem:
-            self.log(
-                f"take rejected: {action.last_problem}; attempt {action.attempt} of {self.options.max_attempts}"
-            )
-        else:
-            self.log(f"{self._label(i)} has settled: record a take")
+        self.log(f"{self._label(i)} has settled: record a take")
         path = Path(self.takes.take_for(i, self.plan.poses[i], action.attempt))
         try:
             m = validate_take(
-                path, self.writer.config.mocap, self.plan.poses[i], self.options.max_offset_mm
+                path,
+                self.writer.config.mocap,
+                self.plan.poses[i],
+                self.options.max_offset_mm,
+                self._history,
             )
         except InputError as exc:  # TakeRejected or an unreadable file
-            self.state = self.state.rejected(i, str(exc))
+            reason = exc.reason if isinstance(exc, TakeRejected) else "unreadable"
+            self.state = self.state.rejected(i, f"{reason}: {exc}")
             if i in self.state.skipped:
                 self.log(
-                    f"{self._label(i)} skipped after {self.options.max_attempts} rejected takes: {exc}"
+                    f"{self._label(i)} skipped after {self.options.max_attempts} refused takes: {exc}"
                 )
+            else:
+                self.log(f"take refused ({reason}: {exc}); moving to the pose again for a new take")
             return
+        if self._steps is None:
+            raise CdprError("internal: a take was recorded before any move")
         rel = f"takes/pose_{self.writer.next_pose:04d}{path.suffix}"  # the take exactly as recorded
         with atomic_open(self.dir / rel, "wb") as out, open(path, "rb") as src:
             shutil.copyfileobj(src, out)
@@ -322,14 +281,21 @@ class CalibrationWizard:
             extra={"role": self.plan.roles[i], "plan_pose": str(i + 1), "mocap_file": str(path)},
         )
         self.state = self.state.accepted(i)
+        s = m.stats
         self.log(
-            f"recorded {self._label(i)}: base fit {m.base_fit_rms_mm:.3f} mm, spread {m.spread_mm:.3f} mm, "
-            f"{m.n_frames_used} frames"
+            f"recorded {self._label(i)}: sigma {m.sigma_mm:.4f} mm, drift {s.drift_total_mm:.3f} mm, "
+            f"spread {m.spread_mm:.3f} mm, {m.n_frames_used} frames"
+            + (f" ({'; '.join(m.warnings)})" if m.warnings else "")
         )
 
     def _identify(self) -> None:
         self.log("identifying the 12 parameters")
-        result = identify_session(self.dir, self.model, noise_floor_mm=self.options.noise_floor_mm)
+        result = identify_session(
+            self.dir,
+            self.model,
+            noise_floor_mm=self.options.noise_floor_mm,
+            limits=self.options.trust,
+        )
         write_text_atomic(self.dir / REPORT_FILE, dumps(result.to_json(), indent=2) + "\n")
         self.identification = result
         if result.ok:
@@ -337,7 +303,41 @@ class CalibrationWizard:
                 self.profile, result, session=str(self.dir.resolve())
             )
             save_profile(self.calibrated, self.dir / PROFILE_FILE)
-        self.state = self.state.done()
+            self.log(
+                f"trusted: predicted workspace error RMS {result.predicted_workspace_rms_mm:.3f} mm, "
+                f"max {result.predicted_workspace_max_mm:.3f} mm"
+            )
+        else:
+            self.log("the trust gate refused: " + "; ".join(result.problems()))
+        self.state = self.state.identified_as(result.ok, "; ".join(result.problems()))
+
+    def _plan_more(self, action: PlanMore) -> None:
+        result = self.identification
+        recorded = sorted(self.state.recorded)
+        fit_rows = [i for i in recorded if self.plan.roles[i] == "fit"]
+        sigma = 0.05
+        if result is not None and result.noise is not None:
+            factor = result.trust.variance_factor if result.trust else 1.0
+            sigma = result.noise.typical_mm * float(
+                np.sqrt(max(factor, 1.0) if np.isfinite(factor) else 1.0)
+            )
+        extra = extra_poses(
+            self.model,
+            self.plan.poses[fit_rows],
+            sigma,
+            limits=self.options.trust,
+            has_check_poses=any(self.plan.roles[i] == "check" for i in recorded),
+            max_extra=self.options.max_extra_poses,
+        )
+        plan = extend_plan(self.plan, self.model, extra.poses) if len(extra.poses) else self.plan
+        if len(extra.poses):
+            write_text_atomic(self.dir / PLAN_FILE, plan_csv(plan))
+            self.log(
+                f"planned {len(extra.poses)} more pose(s) (round {action.round}; predicted workspace "
+                f"error with them: RMS {extra.predicted_rms_mm:.3f} mm, max {extra.predicted_max_mm:.3f} mm)"
+            )
+        self.plan = plan
+        self.state = self.state.augmented(plan)
 
     @property
     def outcome(self) -> WizardOutcome:
@@ -349,76 +349,3 @@ class CalibrationWizard:
             self.dir / PROFILE_FILE if prof else None,
             self.dir,
         )
-
-
-# ------------------------------------------------------------------ take sources
-@dataclass
-class FolderWatcher:
-    """Waits for a new take file in ``folder`` (one not seen before), complete and stable."""
-
-    folder: Path
-    timeout_s: float = 600.0
-    poll_s: float = 0.2
-    clock: Callable[[], float] = field(default=None)  # type: ignore[assignment]
-    sleep: Callable[[float], None] = field(default=None)  # type: ignore[assignment]
-
-    def __post_init__(self) -> None:
-        import time
-
-        self.folder = Path(self.folder)
-        self.clock = self.clock or time.monotonic
-        self.sleep = self.sleep or time.sleep
-        self.seen = set(self._files())
-
-    def _files(self) -> dict[Path, int]:
-        if not self.folder.is_dir():
-            return {}
-        return {
-            p: p.stat().st_size
-            for p in self.folder.iterdir()
-            if p.is_file() and not p.name.startswith(".") and not p.name.endswith(".tmp")
-        }
-
-    def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
-        deadline = self.clock() + self.timeout_s
-        sizes: dict[Path, int] = {}
-        while True:
-            files = self._files()
-            new = {p: s for p, s in files.items() if p not in self.seen}
-            stable = sorted(
-                (p for p, s in new.items() if sizes.get(p) == s and s > 0),
-                key=lambda p: p.stat().st_mtime,
-            )
-            if stable:
-                self.seen.update(new)
-                return stable[-1]
-            sizes = new
-            if self.clock() > deadline:
-                raise InputError(
-                    f"no new take file appeared within {self.timeout_s:g} s",
-                    source=str(self.folder),
-                )
-            self.sleep(self.poll_s)
-
-
-@dataclass
-class NumberedTakes:
-    """Takes recorded beforehand: the file whose name ends in the plan pose number (``pose_3.csv``)."""
-
-    folder: Path
-
-    def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
-        import re
-
-        folder = Path(self.folder)
-        for p in sorted(folder.iterdir()) if folder.is_dir() else []:
-            numbers = re.findall(r"\d+", p.stem)
-            if p.is_file() and numbers and int(numbers[-1]) == index + 1:
-                return p
-        raise InputError(
-            f"no take for plan pose {index + 1} (expected a file name ending in {index + 1})",
-            source=str(folder),
-        )
-
-
-# ------------------------------------------------------------------ the machine over the link

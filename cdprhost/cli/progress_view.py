@@ -4,9 +4,17 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import TextIO
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    Progress,
+    TaskID,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+)
 
 from cdprhost.job.state import Event, Failure, JobSnapshot, JobState, Notice, StateChanged, reduce
 
@@ -21,13 +29,13 @@ def _fmt_s(seconds: float | None) -> str:
 class ProgressView:
     """Folds events into a snapshot and shows it. Call ``update`` from one thread only."""
 
-    def __init__(self, stream=None):
+    def __init__(self, stream: TextIO | None = None) -> None:
         self.stream = stream or sys.stderr
         self.console = Console(file=self.stream, highlight=False)
         self.snapshot = JobSnapshot()
         self.live = self.console.is_terminal
         self._bar: Progress | None = None
-        self._task = None
+        self._task: TaskID | None = None
         self._last_plain = -1.0
         self._t0 = time.monotonic()
 
@@ -50,7 +58,7 @@ class ProgressView:
             )
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         if self._bar:
             self._render()
             self._bar.stop()
@@ -67,15 +75,25 @@ class ProgressView:
         elif isinstance(event, Notice):
             self._say(event.text)
         elif isinstance(event, Failure):
-            where = (
-                f"line {event.last_line}, layer {event.last_layer}"
-                if event.last_line
-                else "before any motion"
+            # the event's layer is the 0-based index (as in Progress); people count from 1
+            layer = (
+                f", layer {event.last_layer + 1}"
+                if event.last_layer is not None and event.last_layer >= 0
+                else ""
             )
-            self._say(
-                f"stopped at {where}; position {event.position}; resume point: {event.resume_file}"
+            where = f"line {event.last_line}{layer}" if event.last_line else "before any motion"
+            pos = (
+                ""
+                if event.position is None
+                else "; position (" + ", ".join(f"{v:.2f}" for v in event.position) + ")"
             )
+            saved = f"; resume point: {event.resume_file}" if event.resume_file else ""
+            self._say(f"stopped at {where}{pos}{saved}")
         self._render()
+
+    def say(self, text: str) -> None:
+        """A line above the progress display."""
+        self._say(text)
 
     def _say(self, text: str) -> None:
         if self._bar:
@@ -85,8 +103,9 @@ class ProgressView:
 
     def _render(self) -> None:
         s = self.snapshot
-        layer = f"{s.layer + 1}/{s.layers}" if s.layers else "-"
-        if self._bar:
+        shown = str(s.layer + 1) if s.layer >= 0 and s.line else "-"
+        layer = f"{shown}/{s.layers}" if s.layers > 0 else shown
+        if self._bar and self._task is not None:
             self._bar.update(
                 self._task,
                 completed=s.fraction,

@@ -49,7 +49,7 @@ def augmented_profile(
         "heldout_rms_before_mm": diagnosis.base.heldout_rms_mm,
         "heldout_rms_after_mm": diagnosis.final.heldout_rms_mm,
         "noise_floor_mm": diagnosis.noise_floor_mm,
-        "noise_mm": diagnosis.noise.sigma_mm,
+        "noise_mm": diagnosis.noise.typical_mm,
         "noise_source": diagnosis.noise.source,
         "poses": diagnosis.n_poses,
         "ci95": {

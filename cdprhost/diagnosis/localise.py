@@ -11,6 +11,7 @@ reported.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy import stats
@@ -31,7 +32,7 @@ class Finding:
     p_value: float  # Bonferroni-adjusted
     text: str
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {
             "kind": self.kind,
             "cable": self.cable,
@@ -141,7 +142,7 @@ def _sides(points: np.ndarray, outlets: np.ndarray) -> np.ndarray:
     a = outlets[:, :2] - centre
     p = points[:, :2] - centre
     cos = (p @ a.T) / (np.linalg.norm(p, axis=1, keepdims=True) * np.linalg.norm(a, axis=1) + 1e-12)
-    return np.argmax(cos, axis=1)
+    return np.asarray(np.argmax(cos, axis=1))
 
 
 def region_finding(

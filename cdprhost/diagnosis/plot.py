@@ -14,12 +14,13 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 from cdprhost.diagnosis.workflow import Diagnosis
 from cdprhost.fileio.atomic import atomic_open
 
 
-def gap_figure(d: Diagnosis) -> plt.Figure:
+def gap_figure(d: Diagnosis) -> Figure:
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 7), gridspec_kw={"height_ratios": [2, 1]})
     n = d.n_poses
     x = np.arange(1, n + 1)

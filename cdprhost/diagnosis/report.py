@@ -44,15 +44,11 @@ def advice(d: Diagnosis) -> list[str]:
             f"{' and '.join(d.ambiguous_between)} explain the same disagreement on these poses: "
             "measure more poses that separate them (other heights, visiting orders and directions)"
         )
-    if d.noise.source == "default":
-        out.append(
-            "declare the motion-capture noise in session.toml ([session] noise_mm = 0.05) for calibrated tests"
-        )
     return out
 
 
 def to_json(
-    d: Diagnosis, *, session: str = "", rejected: list[dict] | None = None
+    d: Diagnosis, *, session: str = "", rejected: list[dict[str, Any]] | None = None
 ) -> dict[str, Any]:
     """Every field of spec/cli-contract.md's ``diagnose`` entry, plus details."""
     out = {
@@ -62,6 +58,7 @@ def to_json(
         "ambiguous_between": list(d.ambiguous_between),
         "candidates": [candidate_dict(c) for c in d.candidates],
         "rounds": [[candidate_dict(c) for c in r] for r in d.rounds],
+        "steps": [s.as_dict() for s in d.steps],
         "heldout_rms_before_mm": d.base.heldout_rms_mm,
         "heldout_rms_after_mm": d.final.heldout_rms_mm,
         "noise_floor_mm": d.noise_floor_mm,
@@ -100,7 +97,7 @@ def to_json(
         "session": session,
         "rejected_takes": rejected or [],
     }
-    return json_safe(out)
+    return dict(json_safe(out))
 
 
 def table(headers: list[str], rows: list[list[str]]) -> str:
@@ -136,6 +133,24 @@ def candidate_rows(candidates: list[Candidate]) -> list[list[str]]:
     ]
 
 
+STEP_HEADERS = ["model", "held-out mm", "noise floor mm", "gap mm", "chi2/dof", "p (added)", "dBIC"]
+
+
+def step_rows(d: Diagnosis) -> list[list[str]]:
+    return [
+        [
+            " + ".join(("geometry", *s.effects)),
+            _num(s.heldout_rms_mm, ".3f"),
+            _num(s.noise_floor_mm, ".3f"),
+            _num(s.heldout_rms_mm - s.noise_floor_mm, "+.3f"),
+            f"{s.chi2:.1f}/{s.dof}",
+            _num(s.p_value, ".2g"),
+            _num(s.delta_bic, ".1f"),
+        ]
+        for s in d.steps
+    ]
+
+
 CANDIDATE_HEADERS = ["effect", "p (F)", "p (Holm)", "dBIC", "held-out mm", "unabsorbed", "status"]
 
 
@@ -157,7 +172,7 @@ def summary_lines(d: Diagnosis) -> list[str]:
             f"chi2: before {d.base.chi2:.1f} / {d.base.dof} dof (p = {d.base.gof_p:.2g}), "
             f"after {d.final.chi2:.1f} / {d.final.dof} dof (p = {d.final.gof_p:.2g})"
         ),
-        f"noise: sigma = {d.noise.sigma_mm:.3g} mm per coordinate ({d.noise.source}{'; ' + d.noise.note if d.noise.note else ''})",
+        f"noise: sigma = {d.noise.typical_mm:.3g} mm RMS per coordinate ({d.noise.source}{'; ' + d.noise.note if d.noise.note else ''})",
     ]
 
 
@@ -194,6 +209,12 @@ def to_text(d: Diagnosis, *, session: str = "") -> str:
         "",
     ]
     parts += summary_lines(d)
+    if d.steps:
+        parts += [
+            "",
+            "forward selection: the gap after each step",
+            table(STEP_HEADERS, step_rows(d)),
+        ]
     for i, rnd in enumerate(d.rounds, start=1):
         parts += [
             "",

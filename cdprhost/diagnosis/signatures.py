@@ -88,7 +88,7 @@ def orthonormal_span(mat: np.ndarray, rtol: float = 1e-10) -> np.ndarray:
 
 
 def project_out(basis: np.ndarray, mat: np.ndarray) -> np.ndarray:
-    return mat - basis @ (basis.T @ mat)
+    return np.asarray(mat - basis @ (basis.T @ mat))
 
 
 @dataclass(frozen=True)

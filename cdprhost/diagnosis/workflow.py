@@ -19,14 +19,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
 
 from cdprhost.calibration.fitting import CableModelFit, Observations
+from cdprhost.calibration.pose_noise import PoseNoise
 from cdprhost.diagnosis import crossval, signatures
 from cdprhost.diagnosis.localise import Finding, describe, localise
-from cdprhost.diagnosis.noise import NoiseEstimate
 from cdprhost.diagnosis.stat_tests import bic, goodness_of_fit_p, holm, nested_f_test
 from cdprhost.effects.registry import CATALOGUE
 from cdprhost.errors import InputError
@@ -52,6 +53,7 @@ class DiagnosisSettings:
     heldout_for_all: bool = True  # False: cross-validate only candidates that pass the F test
 
 
+DEFAULT_SETTINGS = DiagnosisSettings()
 #: Settings for many repeated diagnoses (tests, benchmarks): fewer folds, same decisions.
 FAST = DiagnosisSettings(folds=4, heldout_for_all=False)
 
@@ -74,7 +76,7 @@ class ModelResult:
 
     @property
     def dof(self) -> int:
-        return self.fit.dof_
+        return int(self.fit.dof_)
 
     @property
     def bic(self) -> float:
@@ -111,6 +113,35 @@ class Candidate:
         return float("nan") if self.result is None else self.result.heldout_rms_mm
 
 
+@dataclass(frozen=True)
+class Step:
+    """The model after one step of the forward selection (the base model first) and the gap
+    it leaves: held-out error against the noise floor a correct model would reach."""
+
+    effects: tuple[str, ...]
+    heldout_rms_mm: float
+    noise_floor_mm: float
+    chi2: float
+    dof: int
+    gof_p: float
+    p_value: float = float("nan")  # F test of the effect added, against the previous step
+    delta_bic: float = float("nan")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "effects": list(self.effects),
+            "added": self.effects[-1] if self.effects else None,
+            "heldout_rms_mm": self.heldout_rms_mm,
+            "noise_floor_mm": self.noise_floor_mm,
+            "gap_mm": self.heldout_rms_mm - self.noise_floor_mm,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "p_value_fit": self.gof_p,
+            "p_value_added": self.p_value,
+            "delta_bic": self.delta_bic,
+        }
+
+
 @dataclass
 class Diagnosis:
     verdict: str  # named | none | ambiguous | unexplained
@@ -119,17 +150,18 @@ class Diagnosis:
     rounds: list[list[Candidate]]
     base: ModelResult
     final: ModelResult
-    noise: NoiseEstimate
+    noise: PoseNoise
     noise_floor_mm: float
     noise_floor_base_mm: float
     expected_heldout_mm: np.ndarray  # per pose, for a correct final model
-    parameters: dict
+    parameters: dict[str, Any]
     where: str
     findings: list[Finding]
     signatures: dict[str, signatures.SignatureReport]
     confusable: list[tuple[str, str, float]]
     n_poses: int
     settings: DiagnosisSettings = field(default_factory=DiagnosisSettings)
+    steps: list[Step] = field(default_factory=list)
 
     @property
     def effect(self) -> str | None:
@@ -156,7 +188,7 @@ def fit_model(
     return ModelResult(tuple(effects), fit, errors)
 
 
-def effect_parameters(fit: CableModelFit, name: str) -> dict:
+def effect_parameters(fit: CableModelFit, name: str) -> dict[str, Any]:
     """Fitted vector, standard errors, 95% intervals, and the profile table of one effect."""
     effect = CATALOGUE[name]
     vec, sd = fit.effect_vector(name)
@@ -177,10 +209,10 @@ def effect_parameters(fit: CableModelFit, name: str) -> dict:
     }
 
 
-def _interval(lo: np.ndarray, hi: np.ndarray) -> list:
+def _interval(lo: np.ndarray, hi: np.ndarray) -> list[Any]:
     """[lo, hi] (or a list of them); an unbounded end is None."""
     if lo.ndim == 0:
-        return [finite_or_none(lo), finite_or_none(hi)]
+        return [finite_or_none(float(lo)), finite_or_none(float(hi))]
     return [[finite_or_none(a), finite_or_none(b)] for a, b in zip(lo, hi)]
 
 
@@ -194,7 +226,7 @@ def admissible(fit: CableModelFit, name: str) -> bool:
     return True
 
 
-def geometry_parameters(fit: CableModelFit) -> dict:
+def geometry_parameters(fit: CableModelFit) -> dict[str, Any]:
     q, sd = fit.x_[:12], fit.stderr_[:12]
     return {
         "outlets": q[:9].reshape(3, 3).tolist(),
@@ -266,6 +298,8 @@ class _Round:
     def same_disagreement(self, best: Candidate, rival: Candidate) -> bool:
         """True when best and rival explain the same thing: their joint fit is not
         significantly better than both of them alone."""
+        if best.result is None or rival.result is None:
+            return False
         joint = CableModelFit(effects=best.result.effects + (rival.name,)).fit(
             self.obs, best.result.fit.model_
         )
@@ -276,6 +310,31 @@ class _Round:
             rival.result.chi2, joint.chi2_, len(joint.x_) - rival.result.n_params, joint.dof_
         )
         return not (p_over_best < self.settings.alpha and p_over_rival < self.settings.alpha)
+
+
+TAKES_ONLY = "takes"
+
+
+def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> PoseNoise:
+    """``noise`` plus the common part s that makes the fitted model's chi-square equal its
+    degrees of freedom (sum r_i^2 / (sigma_i^2 + s^2) = dof, solved for s)."""
+    sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
+    r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)  # position misfit^2 per pose, mm^2
+    dof = max(fit.dof_, 1)
+    lo, hi = 0.0, float(np.sqrt(np.max(r2))) + 1e-9
+    for _ in range(60):  # bisection: the chi-square falls monotonically as s grows
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.sum(r2 / (sig**2 + mid**2)) > dof else (lo, mid)
+    extra = 0.5 * (lo + hi)
+    return PoseNoise(
+        np.sqrt(sig**2 + extra**2),
+        noise.take_mm,
+        extra,
+        "takes + unstructured excess",
+        f"the residuals exceed the takes' noise with no pattern (time, direction, tension, height, "
+        f"slider position): {extra:.3g} mm per coordinate added to every pose as noise no take "
+        "shows; declare noise_mm in session.toml, or repeat poses, to measure it",
+    )
 
 
 def observations_check(obs: Observations) -> None:
@@ -292,13 +351,15 @@ def observations_check(obs: Observations) -> None:
 def diagnose(
     obs: Observations,
     base_model: MachineModel,
-    noise: NoiseEstimate | None = None,
-    settings: DiagnosisSettings = DiagnosisSettings(),
+    noise: PoseNoise | None = None,
+    settings: DiagnosisSettings = DEFAULT_SETTINGS,
 ) -> Diagnosis:
     """Run the whole workflow on measured poses; ``base_model`` gives the starting geometry
     and any effects already in the profile (refitted, not tested)."""
     observations_check(obs)
-    noise = noise or NoiseEstimate(float(np.mean(obs.sigma_mm)), "given")
+    if noise is None:
+        sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),)).copy()
+        noise = PoseNoise(sig, sig, 0.0, "given", "noise given with the observations")
     folds = crossval.pose_folds(len(obs), settings.folds)
     base = fit_model(obs, base_model, base_model.effects.names, folds)
 
@@ -313,7 +374,11 @@ def diagnose(
     remaining = [n for n in names if not reports[n].absorbed]
     unabsorbed = {n: r.unabsorbed_min for n, r in reports.items()}
 
-    current, named, ambiguous, rounds = base, [], (), []
+    current: ModelResult = base
+    named: list[str] = []
+    ambiguous: tuple[str, ...] = ()
+    rounds: list[list[Candidate]] = []
+    added: list[Candidate] = []
     for index in range(settings.max_rounds):
         if not remaining:
             break
@@ -339,6 +404,9 @@ def diagnose(
             break
         best.status = "named"
         named.append(best.name)
+        added.append(best)
+        if best.result is None:  # eligible candidates always carry their fit
+            break
         current = best.result
         remaining.remove(best.name)
 
@@ -353,6 +421,18 @@ def diagnose(
         verdict = "ambiguous"
     elif current.gof_p < settings.gof_alpha:
         verdict = "unexplained"
+        if noise.source == TAKES_ONLY and not localise(
+            current.fit.model_, obs, settings.localise_alpha
+        ):
+            # The takes cannot see an error that stays fixed during a take (repeatability,
+            # calibration of the mocap): an excess with no pattern is that, not physics.
+            wider = unseen_noise(current.fit, obs, noise)
+            return diagnose(
+                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider.sigma_mm),
+                base_model,
+                wider,
+                settings,
+            )
     else:
         verdict = "named" if named else "none"
 
@@ -374,6 +454,15 @@ def diagnose(
     jac_final = signatures.fit_jacobian(current.fit, obs)
     expected = crossval.expected_heldout_sq(jac_final, sigma, folds)
     floor_base = crossval.noise_floor_mm(signatures.fit_jacobian(base.fit, obs), sigma, folds)
+    floors = [floor_base] + [
+        crossval.noise_floor_mm(signatures.fit_jacobian(c.result.fit, obs), sigma, folds)
+        for c in added[:-1]
+        if c.result is not None
+    ]
+    floors.append(float(np.sqrt(np.mean(expected))))
+    steps = [_step(base, floors[0])] + [
+        _step(c.result, f, c) for c, f in zip(added, floors[1:]) if c.result is not None
+    ]
     params = {"geometry": geometry_parameters(current.fit)}
     params.update({n: effect_parameters(current.fit, n) for n in current.effects})
     return Diagnosis(
@@ -394,4 +483,18 @@ def diagnose(
         confusable=confusable,
         n_poses=len(obs),
         settings=settings,
+        steps=steps,
+    )
+
+
+def _step(result: ModelResult, floor: float, added: Candidate | None = None) -> Step:
+    return Step(
+        result.effects,
+        result.heldout_rms_mm,
+        floor,
+        result.chi2,
+        result.dof,
+        result.gof_p,
+        added.p_value if added else float("nan"),
+        added.delta_bic if added else float("nan"),
     )

@@ -1,7 +1,7 @@
 """Slicer comments that matter: layer changes and layer heights.
 
 PrusaSlicer/Slic3r write ``;LAYER_CHANGE`` then ``;Z:<height>``; Cura writes
-``;LAYER:<n>``. Comments are otherwise ignored (``;TYPE:``, ``;WIDTH:`` ...).
+``;LAYER:<n>``; Simplify3D ``; layer <n>, Z = <height>`` (counted like Cura's). Comments are otherwise ignored (``;TYPE:``, ``;WIDTH:`` ...).
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from enum import Enum
 
 import numpy as np
 
-_ANNOTATION = re.compile(rb";[ \t]*(LAYER_CHANGE|LAYER:|Z:)([^\n]*)")
+_ANNOTATION = re.compile(rb";[ \t]*(LAYER_CHANGE|LAYER:|Z:|layer \d+, Z = )([^\n]*)")
 _COMMENT = re.compile(rb";[^\n]*")
+_HASH_LINE = re.compile(rb"(?m)^[ \t]*#[^\n]*")  # Klipper test files and configs
 
 
 class LayerStyle(Enum):
@@ -35,7 +36,10 @@ class Annotation:
 
 
 def strip_comments(block: bytes) -> bytes:
-    """Remove ``;`` comments (newlines stay, so line numbers do not move)."""
+    """Remove ``;`` comments and lines starting with ``#`` (newlines stay, so line
+    numbers do not move)."""
+    if b"#" in block:
+        block = _HASH_LINE.sub(b"", block)
     return _COMMENT.sub(b"", block) if b";" in block else block
 
 
@@ -50,7 +54,10 @@ def scan(block: bytes) -> list[Annotation]:
             continue
         line += block.count(b"\n", pos, start)
         pos = start
-        out.append(Annotation(line, m.group(1).decode(), _number(m.group(2))))
+        tag = m.group(1).decode()
+        if tag.startswith("layer "):  # Simplify3D: "; layer 3, Z = 0.600", counted like Cura's
+            tag = "LAYER:"
+        out.append(Annotation(line, tag, _number(m.group(2))))
     return out
 
 

@@ -13,6 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 
 FULL_CIRCLE_MM = 1e-6  # start and end closer than this (XY): full circle with I/J
+#: chords of all arcs resolved at once (one run of a block): bounds memory whatever the
+#: radii; real files stay far below (a boat's 3,837 arcs make about 26,000 chords)
+CHORD_BUDGET = 1 << 18
+#: chords of one arc at most (arcs up to 2 m long keep 0.001 mm with fewer)
+MAX_CHORDS_PER_ARC = 4096
+#: arcs longer than this (mm) fit no printer: at most ``LONG_ARC_CHORDS`` chords
+LONG_ARC_MM = 2000.0
+LONG_ARC_CHORDS = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +97,35 @@ def segment_counts(geo: ArcGeometry, tolerance: float) -> np.ndarray:
         step = np.minimum(2.0 * np.arccos(cos_half), np.pi / 2)
         n = np.ceil(np.abs(geo.sweep) / step)
     return np.maximum(np.nan_to_num(n, nan=1.0), 1).astype(np.int64)
+
+
+def arc_lengths(geo: ArcGeometry) -> np.ndarray:
+    """Length of each arc in the XY plane (mm)."""
+    return np.abs(geo.sweep) * np.maximum(geo.r0, geo.r1)
+
+
+def within_budget(
+    counts: np.ndarray, budget: int = CHORD_BUDGET, lengths: np.ndarray | None = None
+) -> np.ndarray:
+    """``counts`` capped so that no arc has more than ``MAX_CHORDS_PER_ARC`` chords and all
+    together no more than ``budget``: the largest counts are lowered to a common cap.
+
+    Only absurd arcs (radii of metres, or a run of thousands of large circles) are
+    affected; their chords then deviate more than the tolerance, and preflight
+    refuses them anyway for leaving the build volume.
+    """
+    counts = np.minimum(counts, MAX_CHORDS_PER_ARC)
+    if lengths is not None:
+        counts = np.where(lengths > LONG_ARC_MM, np.minimum(counts, LONG_ARC_CHORDS), counts)
+    if int(counts.sum()) <= budget:
+        return counts
+    ordered = np.sort(counts)
+    n = ordered.size
+    prefix = np.concatenate([[0], np.cumsum(ordered)[:-1]])  # sum of the k smallest
+    cap = (budget - prefix) // (n - np.arange(n))  # the rest capped: largest cap that fits
+    fits = np.concatenate([[True], ordered[:-1] <= cap[1:]])
+    k = int(np.flatnonzero(fits & (cap >= 0))[-1]) if (fits & (cap >= 0)).any() else 0
+    return np.maximum(np.minimum(counts, max(int(cap[k]), 1)), 1)
 
 
 def chord_ends(

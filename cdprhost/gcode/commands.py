@@ -1,33 +1,62 @@
 """Non-motion commands: modal switches (applied to the state) and command records.
 
-``apply`` returns the record to yield (or None) and raises through ``fail`` for
-bad values. Unknown commands become `Unknown`, flagged harmless when skipping them
-changes nothing that is printed (see ``HARMLESS`` and the README).
+``apply`` returns the items to yield (maybe none) and raises through ``fail`` for
+bad values. A command the reader does not execute becomes `UnknownCommand`:
+``harmless`` when it is known to change nothing printed here (``HARMLESS``:
+reports, progress, bed levelling, driver settings...); any other is unknown, and
+the documented policy applies downstream (a warning when checking, skipped when
+printing, an error with ``--strict``).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import NoReturn
+from dataclasses import replace
+from typing import Literal, NoReturn
 
+from cdprhost.gcode import firmware_moves, objects
 from cdprhost.gcode.classify import Other
 from cdprhost.gcode.items import (
-    Command,
-    Dwell,
+    ColdExtrusion,
+    DisplayMessage,
+    DwellCommand,
     Fan,
-    Home,
-    Message,
+    FlowFactor,
+    HomeCommand,
     MotorsOff,
+    ProgramItem,
+    SetMotionLimits,
     SetTemperature,
+    SpeedFactor,
     ToolSelect,
-    Unknown,
+    UnknownCommand,
     WaitMoves,
 )
 from cdprhost.gcode.state import ModalState
 
-# Change how later coordinates are read: they end a vectorised run.
-MODAL = frozenset({"G17", "G18", "G19", "G20", "G21", "G28", "G90", "G91", "M82", "M83"})
+# Change how later coordinates are read, or move the machine themselves: they end a
+# vectorised run.
+MODAL = frozenset(
+    {
+        "G17",
+        "G18",
+        "G19",
+        "G20",
+        "G21",
+        "G28",
+        "G90",
+        "G91",
+        "M82",
+        "M83",
+        "M220",
+        "M221",
+        "G10",
+        "G11",
+        "M600",
+        "M200",
+    }
+)
 
 # Parameters are checked strictly (bad numbers are errors) for these commands.
 KNOWN = frozenset(
@@ -49,16 +78,23 @@ KNOWN = frozenset(
         "M400",
         "M117",
         "M110",
-        "G28",
+        "M201",
+        "M203",
+        "M204",
+        "M205",
+        "M207",
+        "M208",
+        "M302",
     }
     | MODAL
 )
 # Known commands whose parameters may be bare letters (G28 X Y).
-FLAG_COMMANDS = frozenset({"G28", "M84", "M18"})
+FLAG_COMMANDS = frozenset({"G28", "M84", "M18", "M600"})
 
-# Skipping these changes neither geometry nor extrusion. Limits, jerk and pressure
-# advance: the host plans with its own profile. Bed levelling: the calibrated
-# kinematics define the bed. Reports, progress, display, sounds, settings storage.
+# Skipping these changes neither geometry nor extrusion. Bed levelling: the
+# calibrated kinematics define the bed. Pressure advance, input shaping, driver
+# modes, currents: the firmware's business. Reports, progress, display, sounds,
+# settings storage, print timers, power.
 HARMLESS = frozenset(
     {
         "G29",
@@ -69,6 +105,9 @@ HARMLESS = frozenset(
         "M75",
         "M76",
         "M77",
+        "M78",
+        "M80",
+        "M81",
         "M105",
         "M114",
         "M115",
@@ -78,21 +117,15 @@ HARMLESS = frozenset(
         "M27",
         "M31",
         "M141",
+        "M142",
         "M191",
         "M150",
-        "M201",
         "M202",
-        "M203",
-        "M204",
-        "M205",
-        "M207",
-        "M208",
         "M209",
-        "M220",
         "M300",
         "M355",
         "M413",
-        "M486",
+        "M420",
         "M500",
         "M501",
         "M502",
@@ -100,47 +133,81 @@ HARMLESS = frozenset(
         "M530",
         "M531",
         "M532",
+        "M555",
         "M566",
+        "M569",
         "M572",
         "M593",
         "M710",
         "M900",
+        "M906",
         "M907",
+        "M911",
+        "M912",
+        "M913",
+        "M914",
         "M2",
     }
 )
-_HARMLESS_PREFIX = ("M862.",)  # Prusa printer/nozzle/firmware checks
+_HARMLESS_PREFIX = ("M862.", "G29.")  # Prusa printer/nozzle/firmware checks; levelling variants
+# Klipper extended commands known to change nothing printed here.
+HARMLESS_EXTENDED = frozenset(
+    {
+        "SET_PRESSURE_ADVANCE",
+        "GET_POSITION",
+        "SET_PRINT_STATS_INFO",
+        "TIMELAPSE_TAKE_FRAME",
+        "BED_MESH_CALIBRATE",
+        "BED_MESH_PROFILE",
+        "BED_MESH_CLEAR",
+        "SET_IDLE_TIMEOUT",
+        "RESPOND",
+        "SET_LED",
+        "SET_INPUT_SHAPER",
+        "UPDATE_DELAYED_GCODE",
+        "SET_DISPLAY_TEXT",
+        "M117",
+    }
+)
+
+# Machine-specific settings: ignored inside the blocks --retarget replaces (``mute``).
+MUTABLE = frozenset(
+    {"M220", "M221", "G10", "G11", "M600", "M207", "M208", "SET_RETRACTION", "M201", "M203"}
+    | {"M204", "M205", "SET_VELOCITY_LIMIT", "M302"}
+)
 
 Fail = Callable[..., NoReturn]
+Params = dict[str, float]
+Produced = ProgramItem | list[ProgramItem] | None
+Handler = Callable[[int, Params, ModalState, Fail, Other], Produced]
 
 
 def is_modal(other: Other) -> bool:
-    """True when ``other`` changes how the following coordinates are read."""
+    """True when ``other`` changes how the following coordinates are read (or moves)."""
     return other.word in MODAL or (other.word == "G92" and not other.params)
 
 
 def harmless(word: str, params: dict[str, float]) -> bool:
     """Whether an unknown command can be skipped without changing the print."""
-    if word in HARMLESS or word.startswith(_HARMLESS_PREFIX):
-        return True
-    if word == "M221":  # flow factor: harmless only when it restores 100 %
-        return params.get("S", 100.0) == 100.0
-    if word == "M200":  # volumetric extrusion: harmless only when switched off
-        return params.get("D", math.nan) == 0.0
-    return False
+    return word in HARMLESS or word.startswith(_HARMLESS_PREFIX)
 
 
-def apply(other: Other, line: int, st: ModalState, fail: Fail) -> Command | None:
-    """Execute ``other`` on ``st``; return its record, if any."""
+def apply(other: Other, line: int, st: ModalState, fail: Fail) -> list[ProgramItem]:
+    """Execute ``other`` on ``st``; return the items it yields."""
+    if other.extended is not None:
+        return _extended(other, line, st, fail)
     word, p = other.word, other.params
     handler = _HANDLERS.get(word)
     if handler is not None:
-        return handler(line, p, st, fail, other)
+        out = handler(line, p, st, fail, other)
+        if out is None:
+            return []
+        return out if isinstance(out, list) else [out]
     if word[0] == "T":
-        return _tool(word, line, fail)
+        return [_tool(word, line, fail)]
     if word[0] not in "GM":
-        fail(f"no command before {word!r} (a line must start with a G, M or T word)", word[0])
-    return Unknown(line, word, harmless(word, p))
+        fail(f"no command before '{word}' (a line must start with a G, M or T word)", word[0])
+    return [UnknownCommand(line, word, harmless(word, p))]
 
 
 def _number(p: dict[str, float], letter: str, fail: Fail, *, minimum: float = 0.0) -> float | None:
@@ -154,7 +221,13 @@ def _number(p: dict[str, float], letter: str, fail: Fail, *, minimum: float = 0.
     return v
 
 
-def _tool(word: str, line: int, fail: Fail) -> Command:
+def _positive(p: dict[str, float], letter: str, fail: Fail, scale: float = 1.0) -> float | None:
+    """A limit value: negative is an error, zero means "not given"."""
+    v = _number(p, letter, fail)
+    return None if v is None or v == 0 else v * scale
+
+
+def _tool(word: str, line: int, fail: Fail) -> ProgramItem:
     if word != "T0":
         fail(f"{word}: this machine has a single extruder (only T0)", "T")
     return ToolSelect(line, 0)
@@ -166,8 +239,8 @@ def _check_tool(p: dict[str, float], fail: Fail) -> None:
         fail(f"T{t:g}: this machine has a single extruder (only T0)", "T")
 
 
-def _temperature(heater: str, wait: bool):
-    def handle(line, p, st, fail, other):
+def _temperature(heater: Literal["hotend", "bed"], wait: bool) -> Handler:
+    def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
         _check_tool(p, fail)
         r = _number(p, "R", fail)
         s = _number(p, "S", fail)
@@ -180,37 +253,40 @@ def _temperature(heater: str, wait: bool):
     return handle
 
 
-def _fan_on(line, p, st, fail, other):
+def _fan_on(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     s = _number(p, "S", fail)
     index = _number(p, "P", fail)
     speed = 1.0 if s is None else min(s / 255.0, 1.0)
     return Fan(line, speed, int(index or 0))
 
 
-def _fan_off(line, p, st, fail, other):
+def _fan_off(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     index = _number(p, "P", fail)
     return Fan(line, 0.0, int(index or 0))
 
 
-def _dwell(line, p, st, fail, other):
+def _dwell(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     s = _number(p, "S", fail)
     ms = _number(p, "P", fail)
-    return Dwell(line, s if s is not None else (ms or 0.0) / 1000.0)
+    return DwellCommand(line, s if s is not None else (ms or 0.0) / 1000.0)
 
 
-def _home(line, p, st, fail, other):
+def _home(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     st.pos[:3] = st.home
-    st.off[:3] = 0.0
-    return Home(line, tuple(a for a in "XYZ" if a in p))
+    st.off[:3] = st.home_offsets()[:3]
+    return HomeCommand(line, tuple(a for a in "XYZ" if a in p))
 
 
-def _set_all_zero(line, p, st, fail, other):
+def _set_all_zero(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     st.off = st.pos.copy()
+    return None
 
 
-def _motors_off(line, p, st, fail, other):
+def _motors_off(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
     if "S" in p:  # M84 S<seconds>: idle timeout, does not release now
-        return Unknown(line, other.word, True)
+        return UnknownCommand(line, other.word, True)
+    if p and not any(a in p for a in "XYZ"):  # M84 E: the extruder motor only
+        return UnknownCommand(line, other.word, True)
     return MotorsOff(line)
 
 
@@ -219,14 +295,165 @@ def _printable(text: str) -> str:
     return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
 
 
-def _setter(attr: str, value):
-    def handle(line, p, st, fail, other):
+def _setter(attr: str, value: object) -> Handler:
+    def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
         setattr(st, attr, value)
+        return None
 
     return handle
 
 
-_HANDLERS: dict[str, Callable] = {
+def _speed_factor(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    """M220 S<percent>; B saves the factor, R restores it (Marlin)."""
+    if "B" in p:
+        st.speed_factor_saved = st.speed_factor
+    if "R" in p:
+        st.speed_factor = st.speed_factor_saved
+    s = _number(p, "S", fail)
+    if s is not None:
+        if s <= 0:
+            fail(f"speed factor S{s:g} must be above 0 %", "S")
+        st.speed_factor = s / 100.0
+    return SpeedFactor(line, st.speed_factor) if ("S" in p or "R" in p) else None
+
+
+def _flow_factor(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    """M221 S<percent> [T0]."""
+    _check_tool(p, fail)
+    s = _number(p, "S", fail)
+    if s is None:
+        return None
+    st.flow_factor = s / 100.0
+    return FlowFactor(line, st.flow_factor)
+
+
+_AXES = "XYZE"
+
+
+def _axes(
+    p: Params, fail: Fail, scale: float
+) -> tuple[float | None, float | None, float | None, float | None]:
+    vals = [_positive(p, a, fail, scale) for a in _AXES]
+    return (vals[0], vals[1], vals[2], vals[3])
+
+
+def _max_accel(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M201, mm/s^2 (inches under G20)
+    _check_tool(p, fail)
+    return SetMotionLimits(line, "M201", axis_accel=_axes(p, fail, st.scale))
+
+
+def _max_feedrate(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M203, mm/s
+    _check_tool(p, fail)
+    return SetMotionLimits(line, "M203", axis_velocity=_axes(p, fail, st.scale))
+
+
+def _accel(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M204 S (both) | P (print) | T (travel) | R (retract)
+    s = _positive(p, "S", fail, st.scale)
+    pr = _positive(p, "P", fail, st.scale)
+    tr = _positive(p, "T", fail, st.scale)
+    return SetMotionLimits(
+        line,
+        "M204",
+        print_accel=pr if pr is not None else s,
+        travel_accel=tr if tr is not None else s,
+        retract_accel=_positive(p, "R", fail, st.scale),
+    )
+
+
+def _jerk(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M205 X/Y (classic jerk), J (junction deviation)
+    xy = [v for v in (_positive(p, "X", fail, st.scale), _positive(p, "Y", fail, st.scale)) if v]
+    return SetMotionLimits(
+        line,
+        "M205",
+        corner_velocity=min(xy) if xy else None,
+        junction_deviation=_positive(p, "J", fail, st.scale),
+    )
+
+
+def _retraction_settings(length_field: str, speed_field: str) -> Handler:
+    """M207 S<length> F<mm/min> (retract; Z hop is not done) and M208 S<extra> F<mm/min>."""
+
+    def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+        length, feed = _number(p, "S", fail), _positive(p, "F", fail, 1 / 60.0)
+        changes: dict[str, float] = {}
+        if length is not None:
+            changes[length_field] = length * st.scale
+        if feed is not None:
+            changes[speed_field] = feed * st.scale
+        st.retraction = replace(st.retraction, **changes)
+        return None
+
+    return handle
+
+
+def _cold_extrusion(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M302 [P0|P1] [S<min temp>]
+    pv = _number(p, "P", fail)
+    s = _number(p, "S", fail)
+    if pv is None and s is None:
+        return UnknownCommand(line, "M302", True)  # bare M302 reports the setting
+    allow = None if pv is None else pv != 0
+    if s == 0:
+        allow = True
+    return ColdExtrusion(line, allow, s)
+
+
+def _filament_change(
+    line: int, p: Params, st: ModalState, fail: Fail, other: Other
+) -> Produced:  # M600 [X Y] [Z lift] [E retract]
+    def value(letter: str) -> float | None:
+        v = p.get(letter)
+        return None if v is None or math.isnan(v) else v
+
+    lift, retract = value("Z"), value("E")
+    return firmware_moves.filament_change(
+        st,
+        line,
+        xy=(value("X"), value("Y")),
+        lift_mm=None if lift is None else abs(lift) * st.scale,
+        retract_mm=None if retract is None else abs(retract) * st.scale,
+    )
+
+
+def _volumetric(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    """M200 D<filament diameter>: E in mm^3 from here on (D0 or S0: off); T0 only."""
+    _check_tool(p, fail)
+    d = _number(p, "D", fail)
+    s = _number(p, "S", fail)
+    if s == 0 or d == 0:
+        st.volumetric_scale = 1.0
+    elif d is not None:
+        st.volumetric_scale = 1.0 / (math.pi * (d * st.scale) ** 2 / 4.0)
+    elif s is not None:  # S1: on with the diameter given before (the machine's filament)
+        st.volumetric_scale = 1.0 / (math.pi * st.filament_diameter_mm**2 / 4.0)
+    return None
+
+
+def _m486(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    return objects.m486(other.text or "", line, st, fail)
+
+
+def _g10(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    """G10 alone is firmware retraction; with L or P it sets CNC work offsets (not done)."""
+    if set(p) - {"S"}:
+        return UnknownCommand(line, "G10", False, _param_text("G10", p))
+    return firmware_moves.retract(st, line)
+
+
+def _param_text(word: str, p: dict[str, float]) -> str:
+    return " ".join([word, *(k if math.isnan(v) else f"{k}{v:g}" for k, v in p.items())])
+
+
+_HANDLERS: dict[str, Handler] = {
     "M104": _temperature("hotend", False),
     "M109": _temperature("hotend", True),
     "M140": _temperature("bed", False),
@@ -239,7 +466,7 @@ _HANDLERS: dict[str, Callable] = {
     "M84": _motors_off,
     "M18": _motors_off,
     "M400": lambda line, p, st, fail, other: WaitMoves(line),
-    "M117": lambda line, p, st, fail, other: Message(line, _printable(other.text or "")),
+    "M117": lambda line, p, st, fail, other: DisplayMessage(line, _printable(other.text or "")),
     "M110": lambda line, p, st, fail, other: None,
     "G90": _setter("relative", False),
     "G91": _setter("relative", True),
@@ -250,4 +477,66 @@ _HANDLERS: dict[str, Callable] = {
     "G17": _setter("plane", 17),
     "G18": _setter("plane", 18),
     "G19": _setter("plane", 19),
+    "M220": _speed_factor,
+    "M221": _flow_factor,
+    "M201": _max_accel,
+    "M203": _max_feedrate,
+    "M204": _accel,
+    "M205": _jerk,
+    "M207": _retraction_settings("length_mm", "speed_mm_s"),
+    "M208": _retraction_settings("extra_mm", "unretract_speed_mm_s"),
+    "G10": _g10,
+    "G11": lambda line, p, st, fail, other: firmware_moves.unretract(st, line),
+    "M302": _cold_extrusion,
+    "M600": _filament_change,
+    "M486": _m486,
+    "M200": _volumetric,
 }
+
+
+# ------------------------------------------------------------------ extended
+def _extended(other: Other, line: int, st: ModalState, fail: Fail) -> list[ProgramItem]:
+    word, params = other.word, other.extended or {}
+    text = f"{word} {other.text or ''}".strip()
+    if word.startswith("EXCLUDE_OBJECT"):
+        return objects.exclude_object_command(word, params, line, st, fail)
+    if word == "SET_VELOCITY_LIMIT":
+        return [
+            SetMotionLimits(
+                line,
+                word,
+                velocity=_ext_number(params, "VELOCITY", fail),
+                print_accel=_ext_number(params, "ACCEL", fail),
+                travel_accel=_ext_number(params, "ACCEL", fail),
+                corner_velocity=_ext_number(params, "SQUARE_CORNER_VELOCITY", fail),
+            )
+        ]
+    if word == "SET_RETRACTION":
+        r = st.retraction
+
+        def given(key: str, old: float) -> float:
+            v = _ext_number(params, key, fail)
+            return old if v is None else v
+
+        st.retraction = replace(
+            r,
+            length_mm=given("RETRACT_LENGTH", r.length_mm),
+            speed_mm_s=given("RETRACT_SPEED", r.speed_mm_s),
+            extra_mm=given("UNRETRACT_EXTRA_LENGTH", r.extra_mm),
+            unretract_speed_mm_s=given("UNRETRACT_SPEED", r.unretract_speed_mm_s),
+        )
+        return []
+    return [UnknownCommand(line, word, word in HARMLESS_EXTENDED, text)]
+
+
+def _ext_number(params: dict[str, str], key: str, fail: Fail) -> float | None:
+    raw = params.get(key)
+    if raw is None or raw == "":
+        return None
+    try:
+        v = float(raw)
+    except ValueError:
+        fail(f"malformed number {key}={raw}")
+    if not math.isfinite(v) or v < 0:
+        fail(f"{key}={raw} must be a number >= 0")
+    return v

@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from cdprhost.gcode.errors import GcodeError
+from cdprhost.gcode.errors import GcodeError, quoted
 
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)\Z")
 _RUN = re.compile(r"[ \t]*([+\-0-9.]*)")
@@ -19,7 +19,9 @@ _SPACE = " \t\r\v\f"
 _INF = float("inf")
 
 # Commands whose argument is free text (the rest of the line).
-TEXT_COMMANDS = frozenset({"M117", "M118", "M23", "M28", "M30", "M32", "M33", "M928"})
+TEXT_COMMANDS = frozenset({"M117", "M118", "M23", "M28", "M30", "M32", "M33", "M928", "M486"})
+# A line starting with one of these letters continues the motion command (strict numbers).
+MOTION_LETTERS = frozenset("XYZEFIJR")
 
 
 @dataclass(slots=True)
@@ -62,6 +64,7 @@ def parse_line(
     ``flag_commands`` (``G28 XY``).
     """
     code = _verify_checksum(text, line, path)
+    compact = not any(c in " \t" for c in code.split(";", 1)[0].strip())
     out = ParsedLine()
     i, n = 0, len(code)
     strict = True
@@ -82,14 +85,23 @@ def parse_line(
             continue
         if not ch.isascii() or not ch.isalpha():
             if strict:
-                raise GcodeError(path, line, i + 1, f"unexpected character {ch!r}")
+                raise GcodeError(path, line, i + 1, f"unexpected character {quoted(ch)}")
             i += 1
             continue
         m = _RUN.match(code, i + 1)
-        run = m.group(1)
-        end = m.end() if run else i + 1
+        run = m.group(1) if m else ""
+        end = m.end() if (m and run) else i + 1
         raw = code[i:end]
         letter = ch.upper()
+        if letter == "E" and i > 0 and code[i - 1] in "0123456789." and run and not compact:
+            glued = _word_text(code, _number_start(code, i))
+            raise GcodeError(
+                path,
+                line,
+                _number_start(code, i) + 1,
+                f"number with an exponent {quoted(glued)}: write plain decimals "
+                "(or a space before E, the extruder)",
+            )
         value: float | None = None
         if run:
             if _NUMBER.match(run):
@@ -100,12 +112,15 @@ def parse_line(
                     value = None
             elif strict:
                 raise GcodeError(
-                    path, line, i + 1, f"malformed number {_word_text(code, i)!r}" + _in(command)
+                    path,
+                    line,
+                    i + 1,
+                    f"malformed number {quoted(_word_text(code, i))}" + _in(command),
                 )
         if command is None and letter == "N" and out.n is None and not out.words:
             if value is None or value != int(value) or value < 0:
                 raise GcodeError(
-                    path, line, i + 1, f"malformed line number {_word_text(code, i)!r}"
+                    path, line, i + 1, f"malformed line number {quoted(_word_text(code, i))}"
                 )
             out.n = int(value)
             i = end
@@ -113,11 +128,13 @@ def parse_line(
         word = Word(letter, value, i + 1, raw)
         if command is None:
             if value is None:
-                raise GcodeError(path, line, i + 1, f"malformed command {_word_text(code, i)!r}")
+                raise GcodeError(
+                    path, line, i + 1, f"malformed command {quoted(_word_text(code, i))}"
+                )
             command = letter + run.strip()
             word.raw = letter + run.strip()
             out.words.append(word)
-            strict = command in strict_params
+            strict = command in strict_params or letter in MOTION_LETTERS
             flags_ok = command in flag_commands
             if command in TEXT_COMMANDS:
                 out.text = code[end:].split(";", 1)[0].strip()
@@ -125,7 +142,10 @@ def parse_line(
         else:
             if strict and not flags_ok and value is None and end < n and code[end].isalpha():
                 raise GcodeError(
-                    path, line, i + 1, f"malformed number {_word_text(code, i)!r}" + _in(command)
+                    path,
+                    line,
+                    i + 1,
+                    f"malformed number {quoted(_word_text(code, i))}" + _in(command),
                 )
             out.words.append(word)
         i = end
@@ -156,6 +176,14 @@ def find_column(text: str, letter: str, occurrence: int = 0) -> int:
 def word_at(text: str, column: int) -> str:
     """The whitespace-delimited word starting at 1-based ``column``."""
     return _word_text(text, column - 1)
+
+
+def _number_start(code: str, i: int) -> int:
+    """Index of the letter whose number ends just before index ``i``."""
+    j = i
+    while j > 0 and code[j - 1] in "0123456789.+-":
+        j -= 1
+    return max(j - 1, 0)
 
 
 def _word_text(code: str, i: int) -> str:
@@ -205,7 +233,7 @@ def _verify_checksum(text: str, line: int, path: str) -> str:
             path,
             line,
             star + 1,
-            f"malformed checksum {text[star:].split(';', maxsplit=1)[0].strip()!r}",
+            f"malformed checksum {quoted(text[star:].split(';', maxsplit=1)[0].strip())}",
         )
     expected = int(m.group(1))
     actual = 0

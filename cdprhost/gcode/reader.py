@@ -11,15 +11,29 @@ import math
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import replace
+from typing import NoReturn
 
 import numpy as np
 
-from cdprhost.gcode import annotations, commands, segment
-from cdprhost.gcode.annotations import Annotation, LayerStyle
+from cdprhost.gcode import commands, extended, segment
+from cdprhost.gcode.annotations import (
+    Annotation,
+    LayerStyle,
+    choose_style,
+    scan,
+    strip_comments,
+)
 from cdprhost.gcode.classify import Classified, Other, Problem, classify
 from cdprhost.gcode.errors import GcodeError
-from cdprhost.gcode.items import LayerChange, MoveChunk, ProgramItem
+from cdprhost.gcode.items import (
+    CHUNK_FIELDS,
+    IgnoredParameters,
+    LayerChange,
+    MoveChunk,
+    ProgramItem,
+)
 from cdprhost.gcode.line_parser import TEXT_COMMANDS, ParsedLine, find_column, parse_line
+from cdprhost.gcode.settings import FirmwareRetraction, Park
 from cdprhost.gcode.source import BLOCK_BYTES, BLOCK_LINES, Block, iter_blocks, source_name
 from cdprhost.gcode.state import ModalState
 from cdprhost.gcode.tokenize import Tokens, tokenize
@@ -33,6 +47,12 @@ def read_program(
     arc_tolerance_mm: float = 0.01,
     chunk_moves: int = 65536,
     home_position: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    placement: tuple[float, float] = (0.0, 0.0),
+    retraction: FirmwareRetraction | None = None,
+    park: Park | None = None,
+    filament_diameter_mm: float = 1.75,
+    mute: tuple[tuple[int, int], ...] = (),
+    start_position: tuple[float, float, float] | None = None,
     name: str | None = None,
     block_bytes: int = BLOCK_BYTES,
     block_lines: int = BLOCK_LINES,
@@ -40,6 +60,13 @@ def read_program(
     """Yield `MoveChunk` and command records of ``source`` (a path, or an iterable of lines).
 
     ``home_position``: where G28 (and the start) puts the effector, in the G-code frame.
+    ``placement``: X/Y shift of the whole program (``--center``, ``--offset``).
+    ``retraction``: what G10/G11 do; ``park``: where M600 parks (None: it only waits).
+    ``filament_diameter_mm``: converts volumetric E (mm^3: UltiGCode files, ``M200 S1``).
+    ``mute``: line ranges (first, last) whose machine-specific commands (factors, limits,
+    firmware retraction, filament change) must not change the state: the blocks
+    ``--retarget`` replaces (modes, offsets and positions still count).
+    ``start_position``: where the effector is when the program starts (default: home).
     Chunks end at every command record, after ``chunk_moves`` moves and at block ends.
     """
     if not (arc_tolerance_mm > 0 and math.isfinite(arc_tolerance_mm)):
@@ -48,19 +75,25 @@ def read_program(
         raise ValueError(f"chunk_moves must be at least 1, got {chunk_moves!r}")
     path = source_name(source, name)
     blocks = iter_blocks(source, path, block_bytes=block_bytes, block_lines=block_lines)
-    return _read(
-        blocks,
-        path,
-        ModalState(home=np.asarray(home_position, dtype=float)),
-        arc_tolerance_mm,
-        chunk_moves,
+    state = ModalState(
+        home=np.asarray(home_position, dtype=float),
+        placement=np.asarray(placement, dtype=float),
+        retraction=retraction or FirmwareRetraction(),
+        park=park,
+        filament_diameter_mm=filament_diameter_mm,
+        mute=tuple(mute),
     )
+    if start_position is not None:
+        state.pos[:3] = start_position
+    return _read(blocks, path, state, arc_tolerance_mm, chunk_moves)
 
 
 def _read(
     blocks: Iterator[Block], path: str, st: ModalState, tol: float, chunk_moves: int
 ) -> Iterator[ProgramItem]:
     for block in blocks:
+        if block.first_line == 1 and _ULTIGCODE in block.data[:4096]:  # E in mm^3
+            st.volumetric_scale = 1.0 / (np.pi * st.filament_diameter_mm**2 / 4.0)
         yield from _BlockReader(block, path, st, tol, chunk_moves).run()
     if st.pending_layer is not None:
         yield st.pending_layer
@@ -94,20 +127,23 @@ class _BlockReader:
     # -- the block -----------------------------------------------------------
     def run(self) -> Iterator[ProgramItem]:
         st = self.st
-        anns = annotations.scan(self.data)
+        anns = scan(self.data)
         if st.layer_style is None and anns:  # undecided until annotations or an extruding move
-            st.layer_style = annotations.choose_style(anns)
-        tok = tokenize(annotations.strip_comments(self.data))
+            st.layer_style = choose_style(anns)
+        tok = tokenize(strip_comments(self.data))
         texts: dict[int, str] = {}
+        ext: list[Other] = []
         slow_error: GcodeError | None = None
         if tok.slow.size:
-            tok, texts, slow_error = self._slow_lines(tok)
-        cls = classify(tok, self.first, texts)
+            tok, texts, ext, slow_error = self._slow_lines(tok)
+        cls = classify(tok, self.first, texts, st.motion_mode)
         stop, error = self._first_error(cls, slow_error)
-        events: list[tuple[int, int, object]] = [
-            (o.index, 1, o) for o in cls.others if o.index < stop
-        ]
+        if error is None:
+            st.motion_mode = cls.motion_mode
+        events: list[Event] = [(o.index, 1, o) for o in cls.others if o.index < stop]
+        events += [(o.index, 1, o) for o in ext if o.index < stop]
         events += [(a.index, 0, a) for a in anns if a.index < stop and self._counts(a)]
+        events += [(i, 2, rec) for i, rec in cls.ignored if i < stop]
         events.sort(key=lambda e: (e[0], e[1]))
         rows = cls.rows
         if stop < tok.n_lines:
@@ -135,14 +171,22 @@ class _BlockReader:
             return 1 << 62, None
         return error.line - self.first, error
 
-    def _slow_lines(self, tok: Tokens) -> tuple[Tokens, dict[int, str], GcodeError | None]:
-        """Parse the slow lines exactly; check N numbers; merge their words into ``tok``."""
+    def _slow_lines(
+        self, tok: Tokens
+    ) -> tuple[Tokens, dict[int, str], list[Other], GcodeError | None]:
+        """Parse the slow lines exactly; check N numbers; merge their words into ``tok``;
+        extended (Klipper) commands are returned apart."""
         lines, letters, values = [], [], []
         texts: dict[int, str] = {}
+        ext: list[Other] = []
         error = None
         for index in tok.slow.tolist():
             number = self.first + index
             text = self.text(index)
+            found = extended.parse(text, index)
+            if found is not None:
+                ext.append(found)
+                continue
             try:
                 parsed = parse_line(
                     text,
@@ -167,7 +211,7 @@ class _BlockReader:
             letter = np.concatenate([tok.letter, np.asarray(letters, dtype=np.uint8)])[order]
             value = np.concatenate([tok.value, np.asarray(values, dtype=np.float64)])[order]
             tok = Tokens(line[order], letter, value, tok.n_lines, tok.slow)
-        return tok, texts, error
+        return tok, texts, ext, error
 
     def _line_number(self, parsed: ParsedLine, text: str, number: int) -> None:
         """N words go up by one; ``M110 N<n>`` (or the N of its line) restarts the count."""
@@ -185,32 +229,33 @@ class _BlockReader:
                 st.next_n = int(reset) + 1
 
     # -- in-order walk ---------------------------------------------------------
-    def _walk(
-        self, rows: segment.Rows, events: list[tuple[int, int, object]]
-    ) -> Iterator[ProgramItem]:
+    def _walk(self, rows: segment.Rows, events: list[Event]) -> Iterator[ProgramItem]:
         """Runs of rows between modal commands are resolved at once; events are cut in."""
         row_index = rows.line - self.first
         r0 = 0
-        passive: list[tuple[int, int, object]] = []
+        passive: list[Event] = []
         for ev in events:
-            if ev[1] == 1 and commands.is_modal(ev[2]):
-                r1 = int(np.searchsorted(row_index, ev[0]))
-                yield from self._run(rows.part(r0, r1), passive)
-                passive, r0 = [], r1
-                yield from self._command(ev[2])
-            else:
-                passive.append(ev)
+            match ev:
+                case (index, _, Other() as other) if commands.is_modal(other):
+                    r1 = int(np.searchsorted(row_index, index))
+                    yield from self._run(rows.part(r0, r1), passive)
+                    passive, r0 = [], r1
+                    yield from self._command(other)
+                case _:
+                    passive.append(ev)
         yield from self._run(rows.part(r0, len(rows)), passive)
 
-    def _run(
-        self, rows: segment.Rows, events: list[tuple[int, int, object]]
-    ) -> Iterator[ProgramItem]:
+    def _run(self, rows: segment.Rows, events: list[Event]) -> Iterator[ProgramItem]:
         st = self.st
-        moves = None
+        moves: MoveChunk | None = None
         error = None
         if len(rows):
             layer_lines = np.asarray(
-                [self.first + i for i, kind, a in events if kind == 0 and a.tag in _LAYER_TAGS],
+                [
+                    self.first + i
+                    for i, _, a in events
+                    if isinstance(a, Annotation) and a.tag in _LAYER_TAGS
+                ],
                 dtype=np.int64,
             )
             res = segment.compute(rows, st, self.tol, layer_lines)
@@ -231,8 +276,9 @@ class _BlockReader:
                 done = cut
             yield from self._event(index, payload)
         if error is not None:
-            cut = int(np.searchsorted(moves.line, error[0]))
-            yield from self._chunks(moves, done, cut)
+            if moves is not None:
+                cut = int(np.searchsorted(moves.line, error[0]))
+                yield from self._chunks(moves, done, cut)
             raise self.error(error[0] - self.first, error[1], "G")
         if moves is not None:
             yield from self._chunks(moves, done, len(moves))
@@ -248,29 +294,34 @@ class _BlockReader:
             return
         for s in range(a, b, self.chunk_moves):
             e = min(s + self.chunk_moves, b)
-            yield MoveChunk(*(getattr(moves, f)[s:e] for f in segment._FIELDS))
+            yield MoveChunk(*(getattr(moves, f)[s:e] for f in CHUNK_FIELDS))
 
-    def _event(self, index: int, payload) -> Iterator[ProgramItem]:
+    def _event(
+        self, index: int, payload: Other | LayerChange | Annotation | IgnoredParameters
+    ) -> Iterator[ProgramItem]:
         st = self.st
-        if isinstance(payload, Other):
-            yield from self._command(payload)
-        elif isinstance(payload, LayerChange):  # detected from heights
-            st.layer = payload.index
-            yield from self._flush_layer()
-            yield payload
-        elif payload.tag == "Z:":
-            if st.pending_layer is not None:
-                yield replace(st.pending_layer, z=payload.value)
-                st.pending_layer = None
-        else:
-            yield from self._flush_layer()
-            st.layer += 1
-            st.pending_layer = LayerChange(self.first + index, st.layer, None)
+        match payload:
+            case Other():
+                yield from self._command(payload)
+            case LayerChange():  # detected from heights
+                st.layer = payload.index
+                yield from self._flush_layer()
+                yield payload
+            case IgnoredParameters():
+                yield replace(payload, line=self.first + index)
+            case Annotation(tag="Z:", value=value):
+                if st.pending_layer is not None:
+                    yield replace(st.pending_layer, z=value)
+                    st.pending_layer = None
+            case Annotation():
+                yield from self._flush_layer()
+                st.layer += 1
+                st.pending_layer = LayerChange(self.first + index, st.layer, None)
 
     def _command(self, other: Other) -> Iterator[ProgramItem]:
         line = self.first + other.index
 
-        def fail(reason: str, letter: str | None = None):
+        def fail(reason: str, letter: str | None = None) -> NoReturn:
             if other.word not in reason:
                 reason = f"{reason} in {other.word}"
             raise self.error(other.index, reason, letter)
@@ -278,10 +329,12 @@ class _BlockReader:
         if other.word in TEXT_COMMANDS and other.text is None:  # e.g. "M117 X5" took the fast path
             text = parse_line(self.text(other.index), line, self.path).text
             other = replace(other, text=text)
-        item = commands.apply(other, line, self.st, fail)
-        if item is not None:
+        if self.st.mute and other.word in commands.MUTABLE and self.st.muted(line):
+            return
+        produced = commands.apply(other, line, self.st, fail)
+        if produced:
             yield from self._flush_layer()
-            yield item
+            yield from produced
 
     def _flush_layer(self) -> Iterator[ProgramItem]:
         if self.st.pending_layer is not None:
@@ -290,3 +343,6 @@ class _BlockReader:
 
 
 _LAYER_TAGS = ("LAYER_CHANGE", "LAYER:")
+# (block line index, order on the line, what): commands, layer marks, ignored parameters
+Event = tuple[int, int, "Other | Annotation | LayerChange | IgnoredParameters"]
+_ULTIGCODE = b";FLAVOR:UltiGCode"

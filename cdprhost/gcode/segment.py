@@ -8,7 +8,7 @@ import numpy as np
 
 from cdprhost.gcode import arcs
 from cdprhost.gcode.annotations import LayerStyle
-from cdprhost.gcode.items import LayerChange, MoveChunk, MoveKind
+from cdprhost.gcode.items import CHUNK_FIELDS, LayerChange, MoveChunk, MoveKind
 from cdprhost.gcode.positions import forward_fill, resolve_axis
 from cdprhost.gcode.state import ModalState
 
@@ -65,6 +65,12 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
     st.pos = track[-1].copy()
     st.off = off
     st.feed = float(feed[-1])
+    if st.speed_factor != 1.0:
+        feed = feed * st.speed_factor
+    factor = st.e_factor
+    if factor != 1.0 or st.e_machine != track[0, 3]:
+        track[:, 3] = st.e_machine + (track[:, 3] - track[0, 3]) * factor
+    st.e_machine = float(track[-1, 3])
 
     # G92 rows stay in: they do not move, so they are dropped with the other non-moves.
     before, after = track[:-1], track[1:]
@@ -98,12 +104,9 @@ def compute(rows: Rows, st: ModalState, tolerance: float, layer_lines: np.ndarra
         kind=kind[keep],
         rapid=cmd[keep] == 0,
     )
-    for name in _FIELDS:
+    for name in CHUNK_FIELDS:
         getattr(moves, name).flags.writeable = False
     return SegmentResult(moves, layer_starts, error)
-
-
-_FIELDS = ("start", "end", "e_start", "e_end", "feedrate", "line", "layer", "kind", "rapid")
 
 
 def _kind_table() -> np.ndarray:
@@ -136,7 +139,14 @@ def classify(start: np.ndarray, end: np.ndarray) -> np.ndarray:
     return _KIND[code]
 
 
-def _row_layers(before, after, is_arc, line, st: ModalState, layer_lines):
+def _row_layers(
+    before: np.ndarray,
+    after: np.ndarray,
+    is_arc: np.ndarray,
+    line: np.ndarray,
+    st: ModalState,
+    layer_lines: np.ndarray,
+) -> tuple[np.ndarray, list[LayerChange]]:
     """Layer per moving row; for height-detected layers also the new-layer records."""
     if st.layer_style not in (None, LayerStyle.HEIGHT):
         if layer_lines.size == 0:
@@ -160,7 +170,15 @@ def _row_layers(before, after, is_arc, line, st: ModalState, layer_lines):
     return layer, starts
 
 
-def _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance):
+def _expand_arcs(
+    before: np.ndarray,
+    after: np.ndarray,
+    vals: np.ndarray,
+    cmd: np.ndarray,
+    line: np.ndarray,
+    is_arc: np.ndarray,
+    tolerance: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, str] | None]:
     """Replace each arc row by its chords; (counts per row, before, after, first error)."""
     idx = np.flatnonzero(is_arc)
     start, end = before[idx], after[idx]
@@ -171,7 +189,7 @@ def _expand_arcs(before, after, vals, cmd, line, is_arc, tolerance):
     if geo.bad:
         k, reason = geo.bad[0]
         error = (int(line[idx[k]]), reason)
-    n_seg = arcs.segment_counts(geo, tolerance)
+    n_seg = arcs.within_budget(arcs.segment_counts(geo, tolerance), lengths=arcs.arc_lengths(geo))
     counts = np.ones(cmd.size, dtype=np.int64)
     counts[idx] = n_seg
     ends = np.repeat(after, counts, axis=0)

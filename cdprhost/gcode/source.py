@@ -1,7 +1,8 @@
 """Split a G-code source (file path or iterable of lines) into blocks of whole lines.
 
 A block is ``bytes`` ending in ``b"\\n"``; memory is bounded by the block size, never
-by the file size.
+by the file size. Line ends are universal: LF, CRLF and a lone CR (old Mac files)
+each end a line.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from itertools import islice
+from typing import AnyStr
 
 from cdprhost.errors import InputError
 from cdprhost.gcode.errors import GcodeError
@@ -69,6 +71,10 @@ def _file_blocks(path: str | os.PathLike[str], name: str, block_bytes: int) -> I
             if not data:
                 break
             data = tail + data if tail else data
+            if b"\r" in data:
+                data, held = _universal(data)
+            else:
+                held = b""
             cut = data.rfind(b"\n") + 1
             if cut == 0:
                 if len(data) > 4 * block_bytes:
@@ -78,14 +84,23 @@ def _file_blocks(path: str | os.PathLike[str], name: str, block_bytes: int) -> I
                         0,
                         f"line longer than {4 * block_bytes} bytes (no newline)",
                     )
-                tail = data
+                tail = data + held
                 continue
-            tail = data[cut:]
+            tail = data[cut:] + held
             block = data[:cut] if tail else data
             yield Block(block, first_line)
             first_line += block.count(b"\n")
         if tail:
-            yield Block(tail + b"\n", first_line)
+            tail = tail.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+            yield Block(tail if tail.endswith(b"\n") else tail + b"\n", first_line)
+
+
+def _universal(data: bytes) -> tuple[bytes, bytes]:
+    """``data`` with CRLF and lone CR as LF; a final CR is held back (its LF may follow)."""
+    held = b""
+    if data.endswith(b"\r"):
+        data, held = data[:-1], b"\r"
+    return data.replace(b"\r\n", b"\n").replace(b"\r", b"\n"), held
 
 
 def _line_blocks(lines: Iterable[str | bytes], block_lines: int) -> Iterator[Block]:
@@ -95,35 +110,46 @@ def _line_blocks(lines: Iterable[str | bytes], block_lines: int) -> Iterator[Blo
         batch = list(islice(it, block_lines))
         if not batch:
             return
-        yield Block(_join(batch), first_line)
-        first_line += len(batch)
+        data = _join(batch)
+        yield Block(data, first_line)
+        first_line += data.count(b"\n")
 
 
 def _join(batch: list[str | bytes]) -> bytes:
     """The lines as one newline-terminated block (one encode for the common cases)."""
     kinds = {type(x) for x in batch}
-    if len(kinds) == 1:
-        nl = "\n" if str in kinds else b"\n"
-        empty = nl[:0]
-        joined = nl.join(batch)
-        if joined.count(nl) == len(batch) - 1:  # no line carries a newline
-            return _encode(joined + nl)
-        joined = empty.join(batch)
-        if joined.count(nl) == len(batch) and all(
-            x.endswith(nl) for x in batch
-        ):  # every line ends with one
-            return _encode(joined)
+    if kinds == {str}:
+        fast = _join_same([x for x in batch if isinstance(x, str)], "\n", "\r")
+        if fast is not None:
+            return _encode(fast)
+    elif kinds == {bytes}:
+        fast_b = _join_same([x for x in batch if isinstance(x, bytes)], b"\n", b"\r")
+        if fast_b is not None:
+            return fast_b
     out = []
     for raw in batch:
-        raw = _encode(raw)
-        if raw.endswith(b"\n"):
-            raw = raw[:-1]
-        if b"\n" in raw:
+        raw = _encode(raw).removesuffix(b"\n").removesuffix(b"\r")
+        if b"\r" in raw:  # a lone CR ends a line too (a CR-only file read as one line)
+            raw = _universal(raw)[0]
+        elif b"\n" in raw:
             raise ValueError(
                 "a line passed to the G-code reader contains a newline; split the text into lines"
             )
         out.append(raw)
     return b"\n".join(out) + b"\n"
+
+
+def _join_same(batch: list[AnyStr], nl: AnyStr, cr: AnyStr) -> AnyStr | None:
+    """Lines of one type joined when none has a CR inside (None: take the careful path)."""
+    joined = nl.join(batch)
+    if cr in joined:
+        return None
+    if joined.count(nl) == len(batch) - 1:  # no line carries a newline
+        return joined + nl
+    joined = nl[:0].join(batch)
+    if joined.count(nl) == len(batch) and all(x.endswith(nl) for x in batch):
+        return joined  # every line ends with one
+    return None
 
 
 def _encode(text: str | bytes) -> bytes:

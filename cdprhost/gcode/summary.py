@@ -8,26 +8,38 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cdprhost.gcode.items import LayerChange, MoveChunk, MoveKind, ProgramItem, Unknown
+from cdprhost.gcode.items import (
+    FlowFactor,
+    LayerChange,
+    MoveChunk,
+    MoveKind,
+    ProgramItem,
+    UnknownCommand,
+)
 
 
 @dataclass
 class ProgramSummary:
     """Accumulates over items (``add`` or the pass-through ``observe``).
 
-    ``filament_mm``: filament fed during extruding moves (what slicers report as
-    "filament used"); ``retracted_mm``: total pulled back by retractions and wipes.
-    ``layer_start_lines[i]`` is the line where layer ``i`` starts.
+    ``filament_mm``: filament of the extruding moves from the first layer on, as the
+    file programs it (before M221's flow factor): the figure slicers report as
+    "filament used" (their start-up purge lines are not counted); ``filament_fed_mm``:
+    what the extruder really feeds in extruding moves, purge lines included, after the
+    flow factor; ``retracted_mm``: total pulled back by retractions and wipes. ``layer_start_lines[i]`` is the line where layer
+    ``i`` starts.
     """
 
     moves: int = 0
     filament_mm: float = 0.0
+    filament_fed_mm: float = 0.0
+    flow_factor: float = 1.0
     retracted_mm: float = 0.0
     travel_mm: float = 0.0
     extrude_path_mm: float = 0.0
     last_line: int = 0
     layer_start_lines: list[int] = field(default_factory=list)
-    unknown: list[Unknown] = field(default_factory=list)
+    unknown: list[UnknownCommand] = field(default_factory=list)
     extrude_min: np.ndarray | None = None  # (3,) bounds of extruding moves
     extrude_max: np.ndarray | None = None
 
@@ -50,14 +62,19 @@ class ProgramSummary:
             yield item
 
     def add(self, item: ProgramItem) -> None:
-        if isinstance(item, MoveChunk):
-            self._add_moves(item)
-        else:
-            self.last_line = max(self.last_line, item.line)
-            if isinstance(item, LayerChange):
+        match item:
+            case MoveChunk():
+                self._add_moves(item)
+                return
+            case LayerChange():
                 self.layer_start_lines.append(item.line)
-            elif isinstance(item, Unknown):
+            case UnknownCommand():
                 self.unknown.append(item)
+            case FlowFactor(factor=factor):
+                self.flow_factor = factor
+            case _:
+                pass
+        self.last_line = max(self.last_line, item.line)
 
     def _add_moves(self, c: MoveChunk) -> None:
         n = len(c)
@@ -67,7 +84,10 @@ class ProgramSummary:
         self.last_line = max(self.last_line, int(c.line[-1]))
         de = c.de
         extruding = c.kind == MoveKind.EXTRUDE
-        self.filament_mm += float(de[extruding].sum())
+        self.filament_fed_mm += float(de[extruding].sum())
+        if self.flow_factor > 0:
+            printed = extruding & (c.layer >= 0)
+            self.filament_mm += float(de[printed].sum()) / self.flow_factor
         self.retracted_mm -= float(de[de < 0].sum())
         length = c.length
         self.extrude_path_mm += float(length[extruding].sum())

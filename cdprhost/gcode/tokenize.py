@@ -4,8 +4,8 @@ Lines in the common form (every letter directly followed by its number) are
 tokenised with numpy. Numbers are read as integers with the dot removed
 (``np.fromstring``) and scaled by a power of ten: exact, and equal to ``float()``
 for up to 15 digits. Any line with something unusual (other characters, a letter
-without a number, a malformed or very long number, an N word) is returned as
-*slow*, for the exact per-line parser.
+without a number, a malformed or very long number, an N word, an E glued to the
+number before it) is returned as *slow*, for the exact per-line parser.
 """
 
 from __future__ import annotations
@@ -103,12 +103,23 @@ def _keep(lines: np.ndarray, slow: np.ndarray) -> np.ndarray:
     return slow[np.minimum(idx, slow.size - 1)] != lines
 
 
-def _anomalies(arr, cls, letters, run_start, run_end, n_dots) -> np.ndarray:
+def _anomalies(
+    arr: np.ndarray,
+    cls: np.ndarray,
+    letters: np.ndarray,
+    run_start: np.ndarray,
+    run_end: np.ndarray,
+    n_dots: np.ndarray,
+) -> np.ndarray:
     """Byte positions that make their line unsuitable for the fast path."""
     parts = [np.flatnonzero(cls == JUNK) if cls.max(initial=0) == JUNK else _EMPTY_I]
     after = cls[letters + 1]
     parts.append(letters[(after < DIGIT) | (after > SIGN)])  # letter without a number
-    parts.append(letters[(arr[letters] | np.uint8(0x20)) == ord("n")])  # N words: exact path
+    lower = arr[letters] | np.uint8(0x20)
+    parts.append(letters[lower == ord("n")])  # N words: exact path
+    glued_e = letters[(lower == ord("e")) & (letters > 0)]  # X1e5: an exponent, or a compact E
+    prev = cls[glued_e - 1]
+    parts.append(glued_e[(prev == DIGIT) | (prev == DOT)])
     if run_start.size:
         parts.append(run_start[cls[run_start - 1] != LETTER])  # number without a letter
         signs = np.flatnonzero(cls == SIGN)

@@ -19,7 +19,7 @@ _DONE = object()
 
 class Prefetch:
     def __init__(self, items: Iterable[Any], depth: int = 8):
-        self._q: queue.Queue = queue.Queue(maxsize=depth)
+        self._q: queue.Queue[Any] = queue.Queue(maxsize=depth)
         self._stop = threading.Event()
         self._thread = threading.Thread(
             target=self._produce, args=(iter(items),), name="plan-ahead", daemon=True

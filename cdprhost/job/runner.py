@@ -1,66 +1,66 @@
-"""The print job: preflight, then stream the planned program to the device.
+"""The print job: preflight, connect and check the device, stream, and end safely.
 
-Imperative shell around the pure pipeline (``cdprhost.motion.pipeline``) and the
-link (``cdprhost.link``). ``run()`` blocks; pause/resume/cancel requests come from
-other threads. Pause and cancel take effect at the next point where the planned
-motion comes to rest (every extrusion path ends at rest before a retraction, so
-this is at most a path away): the queue drains, nothing stops mid-segment.
+Imperative shell around the pure pipeline (``cdprhost.motion.pipeline``), the machine
+(``cdprhost.machine``) and the streamer (:mod:`cdprhost.job.streamer`, which holds the
+link once connected). ``run()`` blocks; pause/resume/cancel requests come from other
+threads. Every way a job ends is safe:
+
+- completed: only when the device reports the last segment executed; the resume point
+  is removed;
+- cancelled, or stopped because the job log cannot be written: the stream ends at the
+  next rest point, heaters off, a resume point saved;
+- any other failure (link lost, device fault, a bug): the host gives up with an
+  emergency stop first (motors kept, heaters off unless the profile keeps them), then
+  saves the resume point naming the exact last segment the device executed.
 """
 
 from __future__ import annotations
 
-import threading
-import time
-from collections.abc import Callable
+import logging
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from cdprhost.gcode import items as g
+from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
 from cdprhost.job.prefetch import Prefetch
-from cdprhost.job.resume import ResumePoint, resume_path_for
-from cdprhost.job.resume_items import from_layer
-from cdprhost.job.segment_map import SegmentMap, first_rest_index
-from cdprhost.job.state import (
-    Event,
-    Failure,
-    JobState,
-    LinkHealth,
-    Notice,
-    Planned,
-    Progress,
-    StateChanged,
-    Temperatures,
+from cdprhost.job.resume import (
+    ResumePoint,
+    ResumeWriter,
+    file_sha256,
+    remove_resume_point,
+    resume_path_for,
 )
+from cdprhost.job.resume_items import PlanSpec, Restart
+from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
+from cdprhost.job.streamer import Requests, Stop, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
-from cdprhost.kinematics.statics import tensions
-from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
-from cdprhost.machine.commands import device_messages, heaters_off
-from cdprhost.motion.direct import to_wire
+from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
+from cdprhost.machine import DeviceNotReady, Machine, prepare_device
+from cdprhost.machine.commands import heaters_off
 from cdprhost.motion.pipeline import segment_program
-from cdprhost.motion.program import read_items
-from cdprhost.motion.segments import SegmentBatch
-from cdprhost.preflight.run import preflight, preflight_items
+from cdprhost.motion.prepared import Prepared, Setup, prepare
+from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
+from firmware_protocol.messages import EstopFlag
 
-POLL_S = 0.05
-PROGRESS_EVERY_S = 0.1
-STATUS_EVERY_S = 0.5
+log = logging.getLogger(__name__)
 
 
 @dataclass
 class PrintOptions:
-    resume_from_layer: int | None = None
+    setup: Setup = field(default_factory=Setup)  # placement, --retarget, cancelled objects
+    resume_from_layer: int | None = None  # 0-based
+    resume: ResumePoint | None = None  # continue exactly at this point (``--resume``)
     log_path: str | Path | None = None
     resume_dir: str | Path | None = None
     idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
-    batch_moves: int = (
-        1024  # planner chunk: small enough to keep the device queue fed from the start
-    )
+    resume_every_s: float = 3.0  # the resume point is saved this often (wall clock) ...
+    resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
+    batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
 
 
 @dataclass
@@ -76,17 +76,17 @@ class PrintResult:
     violations: list[dict[str, Any]] = field(default_factory=list)
     reason: str = ""
     resume_file: str | None = None
+    notices: list[str] = field(default_factory=list)
+    bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
 
     @property
     def exit_code(self) -> int:
-        return 0 if self.status == "completed" else 1
+        if self.status == "completed":
+            return 0
+        return 2 if self.bad_input else 1
 
     def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items()}
-
-
-class _Stop(Exception):
-    """Internal: leave the streaming loop at a rest point (cancel)."""
+        return {k: v for k, v in self.__dict__.items() if k != "bad_input"}
 
 
 class PrintJob:
@@ -105,17 +105,14 @@ class PrintJob:
         self.options = options or PrintOptions()
         self.on_event = on_event or (lambda e: None)
         self.log = JobLog(self.options.log_path)
-        self._requests: set[str] = set()
-        self._lock = threading.Lock()
+        self.requests = Requests()
         self._state = JobState.IDLE
-        self.link: HostLink | None = None
-        self._map = SegmentMap()
-        self._last_progress = 0.0
-        self._last_status = 0.0
-        self._t0_device = 0.0
-        self._waiting_heat_item = 0
-        self._status: DeviceStatus | None = None
-        self._at_rest = True  # does the queued motion end at rest?
+        self.link: HostLink | None = None  # set once connected (the streamer holds it)
+        self._sha256 = ""
+        self._restart: Restart | None = None
+        self._prepared: Prepared | None = None
+        self._t0 = 0.0  # the device's motion clock when streaming began
+        self.plan = self._plan_spec()
 
     # ------------------------------------------------------------ requests
     def request_pause(self) -> None:
@@ -128,16 +125,8 @@ class PrintJob:
         self._request("cancel")
 
     def _request(self, what: str) -> None:
-        with self._lock:
-            self._requests.add(what)
+        self.requests.add(what)
         self.log.write("request", what=what)
-
-    def _take(self, what: str) -> bool:
-        with self._lock:
-            if what in self._requests:
-                self._requests.discard(what)
-                return True
-            return False
 
     @property
     def state(self) -> JobState:
@@ -147,6 +136,12 @@ class PrintJob:
     def _emit(self, event: Event) -> None:
         if isinstance(event, StateChanged):
             self._state = event.state
+            log.info(
+                "job %s: %s%s",
+                self.gcode.name,
+                event.state.value,
+                f" ({event.reason})" if event.reason else "",
+            )
         self.log.event(event)
         self.on_event(event)
 
@@ -154,14 +149,34 @@ class PrintJob:
         if state is not self._state:
             self._emit(StateChanged(state, reason))
 
-    # ------------------------------------------------------------ the job
-    def _items(self):
-        items = read_items(self.gcode, self.profile, self.model)
+    # ------------------------------------------------------------ the program
+    def _plan_spec(self) -> PlanSpec:
+        point = self.options.resume
+        if point is not None:
+            if not point.exact:
+                raise CdprError(f"{point.gcode}: the resume point names no position to resume at")
+            return PlanSpec("point", line=point.last_line, point=point.point, e_mm=point.e_mm)
         if self.options.resume_from_layer is not None:
-            z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
-            items = from_layer(items, self.options.resume_from_layer, z_max=z_max)
-        return items
+            return PlanSpec("layer", layer=self.options.resume_from_layer)
+        return PlanSpec()
 
+    def _prepare(self) -> Prepared:
+        if self._prepared is None:
+            self._prepared = prepare(self.gcode, self.profile, self.model, self.options.setup)
+        return self._prepared
+
+    def _items(self, plan: PlanSpec | None = None) -> Iterable[Any]:
+        items = self._prepare().items()
+        z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
+        out = (plan or self.plan).apply(items, z_max=z_max)
+        if plan is None and isinstance(out, Restart):
+            self._restart = out
+        return out
+
+    def _e_offset(self) -> float:
+        return self._restart.e_offset if self._restart is not None else 0.0
+
+    # ------------------------------------------------------------ the job
     def run(self) -> PrintResult:
         try:
             return self._run()
@@ -171,12 +186,10 @@ class PrintJob:
     def _run(self) -> PrintResult:
         self._set(JobState.PREFLIGHT, str(self.gcode))
         try:
-            if self.options.resume_from_layer is None:
-                report = preflight(self.gcode, self.profile, self.model)
-            else:
-                report = preflight_items(
-                    self._items(), self.profile, self.model, source=str(self.gcode)
-                )
+            self._sha256 = file_sha256(self.gcode)
+            prepared = self._prepare()
+            resumed = self.plan.start != "file"
+            report = preflight_prepared(prepared, self._items() if resumed else None)
         except GcodeError as exc:
             self._set(JobState.REFUSED, str(exc))
             return PrintResult(
@@ -187,6 +200,12 @@ class PrintJob:
                     {"line": exc.line, "rule": "syntax", "point": None, "detail": exc.reason}
                 ],
             )
+        except (CdprError, OSError) as exc:
+            reason = (
+                str(exc) if isinstance(exc, CdprError) else f"{self.gcode}: {exc.strerror or exc}"
+            )
+            self._set(JobState.REFUSED, reason)
+            return PrintResult("refused", reason=reason)
         self._emit(
             Planned(report.layers, report.moves, report.estimated_time_s, report.filament_mm)
         )
@@ -199,243 +218,188 @@ class PrintJob:
                 "refused",
                 violations=[v.model_dump() for v in report.violations],
                 estimated_time_s=report.estimated_time_s,
-                reason=self._state_reason(report),
+                reason=_violations_reason(report),
             )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
+        if self.log.problem:  # nothing has moved: say so and stop here
+            self._fail_early(result, f"{self.log.problem}; nothing moved")
+            return result
         try:
-            self.link = self.link_factory()
-            self._t0_device = self._device_time()
-            self._stream(result)
-            self._finish(JobState.DONE, "completed", result)
-        except _Stop:
-            self._cancel_tail(result)
-        except LinkError as exc:
-            self._fail(result, f"{type(exc).__name__}: {exc}", getattr(exc, "last_segment", None))
-        except GcodeError as exc:  # cannot happen after a clean preflight, but never lose it
-            self._fail(result, str(exc))
+            link = self.link_factory()
+        except LinkError as exc:  # a failed connect never touches the resume point
+            result.bad_input = exc.exit_code == 2
+            self._fail_early(result, f"{type(exc).__name__}: {exc}")
+            return result
+        except OSError as exc:
+            self._fail_early(result, f"cannot open the device: {exc.strerror or exc}")
+            return result
+        self.link = link
+        self._print(link, result)
         return result
 
-    @staticmethod
-    def _state_reason(report) -> str:
-        v = report.violations[0]
-        return (
-            f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}"
-        )
+    def _fail_early(self, result: PrintResult, reason: str) -> None:
+        result.status, result.reason = "failed", reason
+        self._emit(Failure(reason, None, None))
+        self._set(JobState.FAILED, reason)
 
-    # ---------------------------------------------------------- streaming
-    def _stream(self, result: PrintResult) -> None:
-        link = self.link
-        assert link is not None
-        clock = link.identity.clock_hz
-        self._set(JobState.PRINTING)
-        planned = segment_program(
-            self._items(),
+    def _print(self, link: HostLink, result: PrintResult) -> None:
+        machine = Machine(link, self.profile, self.model)
+        streamer: Streamer | None = None
+        try:
+            check = prepare_device(machine)
+            for text in check.notices:
+                self._emit(Notice(text))
+                result.notices.append(text)
+            self._refine_resume(link, check.found, result)
+            self._t0 = link.request_status().motion_time_s
+            writer = ResumeWriter(
+                resume_path_for(self.gcode, self.options.resume_dir, self._sha256),
+                self.options.resume_every_s,
+                self.options.resume_layer_s,
+            )
+            streamer = Streamer(link, self._context(), writer)
+            self._set(JobState.PRINTING)
+            planned = segment_program(
+                self._items(),
+                self.profile,
+                self.model,
+                clock_hz=streamer.clock_hz,
+                batch_moves=self.options.batch_moves,
+            )
+            ahead = Prefetch(planned)
+            ahead.wait_filled(4)
+            streamer.run(ahead)
+            self._finish(streamer, result, JobState.DONE, "completed")
+            remove_resume_point(self.gcode, self.options.resume_dir, self._sha256)
+        except DeviceNotReady as exc:
+            self._set(JobState.REFUSED, str(exc))
+            result.status, result.reason = "refused", str(exc)
+        except Stop as stop:
+            assert streamer is not None
+            self._stop_tail(streamer, result, stop.reason)
+        except LinkError as exc:
+            self._give_up(link, streamer, result, f"{type(exc).__name__}: {exc}", exc)
+        except (CdprError, GcodeError) as exc:
+            self._give_up(link, streamer, result, str(exc), exc)
+        except Exception as exc:  # a bug must still leave the machine safe
+            log.exception("print job failed unexpectedly")
+            self._give_up(
+                link, streamer, result, f"internal error: {type(exc).__name__}: {exc}", exc
+            )
+
+    def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
+        """``--resume`` after a killed host: the device's own last segment, when it knows it."""
+        point = self.options.resume
+        if point is None or link.identity is None:
+            return
+        exact = refine_point(
+            point,
+            found,
+            link.identity.boot_id,
+            self._items,
             self.profile,
             self.model,
-            clock_hz=clock,
+            clock_hz=link.identity.clock_hz,
             batch_moves=self.options.batch_moves,
         )
-        ahead = Prefetch(planned)
-        ahead.wait_filled(4)
-        for out in ahead:
-            if isinstance(out, SegmentBatch):
-                self._send_segments(out)
-            else:
-                self._send_command(out)
-        self._drain()
-
-    def _send_segments(self, batch: SegmentBatch) -> None:
-        link = self.link
-        i, n = 0, len(batch)
-        while i < n:
-            self._service()
-            stopping = self._stop_wanted()
-            free = link.progress.queue_free
-            if free <= 0:
-                link.poll(POLL_S)
-                continue
-            j = min(n, i + max(1, free))
-            if stopping:
-                rest = first_rest_index(batch, i)
-                if rest is not None and rest < j:
-                    j = rest + 1
-            sub = _slice(batch, i, j)
-            numbers = link.queue_segments(to_wire(sub))
-            self._map.add(numbers.start, sub)
-            i = j
-            self._at_rest = bool(sub.v_end[-1] <= 1e-9)
-            if stopping and self._at_rest:
-                self._hold_at_rest()
-
-    def _send_command(self, item: Any) -> None:
-        msgs = device_messages(
-            item,
-            model=self.model,
-            home_mm=self.profile.drive.home_mm,
-            clock_hz=self.link.identity.clock_hz,
+        if exact is None:
+            return
+        text = (
+            f"the device executed {exact.device_segment - point.device_segment} segments after "
+            f"the resume point was saved: resuming at line {exact.last_line} instead"
         )
-        if isinstance(item, g.Message):
-            self._emit(Notice(f"line {item.line}: {item.text}"))
-        if not msgs:
-            return
-        numbers = self.link.send(*msgs)
-        if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
-            self._waiting_heat_item = max(numbers)
-            self._set(
-                JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
-            )
-        if (
-            self._stop_wanted() and self._at_rest
-        ):  # mid-motion commands wait for the next rest point
-            self._hold_at_rest()
+        self._emit(Notice(text))
+        result.notices.append(text)
+        self.plan = PlanSpec("point", line=exact.last_line, point=exact.point, e_mm=exact.e_mm)
 
-    # ------------------------------------------------------- pause/cancel
-    def _stop_wanted(self) -> bool:
-        with self._lock:
-            return bool(self._requests & {"pause", "cancel"})
-
-    def _hold_at_rest(self) -> None:
-        """At a rest point: drain the queue, then pause (until resumed) or stop (cancel)."""
-        with self._lock:
-            cancel = "cancel" in self._requests
-        self._set(JobState.CANCELLING if cancel else JobState.PAUSING)
-        self._drain()
-        if cancel or self._take("cancel"):
-            raise _Stop
-        self._take("pause")
-        self._set(JobState.PAUSED, "at rest; heaters kept")
-        while True:
-            self._service(force_status=False)
-            if self._take("cancel"):
-                self._set(JobState.CANCELLING)
-                raise _Stop
-            if self._take("resume"):
-                self._set(JobState.PRINTING)
-                return
-            self.link.poll(POLL_S)
-
-    def _drain(self) -> None:
-        link = self.link
-        last, since = -1, time.monotonic()
-        while link.progress.items_done < link.items_sent or link.progress.moving:
-            link.poll(POLL_S)
-            self._service()
-            done = link.progress.items_done
-            if done != last:
-                last, since = done, time.monotonic()
-            elif (
-                time.monotonic() - since > self.options.idle_timeout_s
-                and self._state is not JobState.HEATING
-            ):
-                raise LinkError(
-                    f"the device made no progress for {self.options.idle_timeout_s:g} s"
-                )
-        self._service(force_status=True)
-
-    # -------------------------------------------------------- observation
-    def _device_time(self) -> float:
-        st = self.link.request_status()
-        return st.motion_time_s
-
-    def _service(self, force_status: bool = False) -> None:
-        link = self.link
-        for ev in link.poll(0.0):
-            if isinstance(ev, DeviceErrorEvent):
-                raise LinkError(f"device error {ev.name} (item {ev.item})")
-            if isinstance(ev, DeviceStatus):
-                self._on_status(ev)
-        now = time.monotonic()
-        if force_status or now - self._last_status > STATUS_EVERY_S:
-            self._last_status = now
-            self._on_status(link.request_status())
-        if self._state is JobState.HEATING and link.progress.items_done >= self._waiting_heat_item:
-            self._set(JobState.PRINTING)
-        if force_status or now - self._last_progress > PROGRESS_EVERY_S:
-            self._last_progress = now
-            self._progress()
-
-    def _on_status(self, st: DeviceStatus) -> None:
-        self._status = st
-        self._emit(Temperatures(st.hotend_c, st.bed_c, st.hotend_target_c, st.bed_target_c))
-        c = self.link.counters
-        self._emit(LinkHealth(c.retransmits, c.bad_frames + st.device_bad_frames, c.naks_received))
-
-    def _progress(self) -> None:
-        info = self._map.lookup(self.link.progress.segments_done)
-        if info is None:
-            return
-        p = np.asarray(info.point)[None, :]
-        t = tensions(p, self.model.geometry.outlets, self.model.statics)[0]
-        sliders = self.model.sliders_from_steps(np.asarray(info.steps[:3]))
-        self._emit(
-            Progress(
-                self.link.progress.segments_done,
-                info.line,
-                info.layer,
-                info.t_end_s,
-                info.point,
-                tuple(float(v) for v in sliders),
-                tuple(float(v) for v in t),
-                info.steps,
-            )
+    def _context(self) -> StreamContext:
+        return StreamContext(
+            gcode_path=str(self.gcode.resolve()),
+            sha256=self._sha256,
+            profile=self.profile,
+            model=self.model,
+            plan=self.plan,
+            emit=self._emit,
+            state=lambda: self._state,
+            requests=self.requests,
+            log_problem=lambda: self.log.problem,
+            idle_timeout_s=self.options.idle_timeout_s,
+            e_offset=self._e_offset,
         )
 
     # ------------------------------------------------------------- endings
-    def _finish(self, state: JobState, status: str, result: PrintResult) -> None:
-        link = self.link
-        st = link.request_status()
-        info = self._map.lookup(link.progress.segments_done)
-        result.status = status
-        result.segments = link.progress.segments_done
+    def _fill(self, streamer: Streamer, result: PrintResult, last: int | None = None) -> None:
+        link = streamer.link
+        info = streamer.executed(last)
+        result.segments = max(0, (last or link.progress.segments_done) - streamer.first_segment + 1)
         result.retransmits = link.counters.retransmits
-        result.final_steps = list(st.steps)
-        result.last_line = info.line if info else None
-        result.last_layer = info.layer + 1 if info else None
-        result.print_time_s = round(st.motion_time_s - self._t0_device, 6)
-        self._progress()
-        self._set(state, status)
-
-    def _cancel_tail(self, result: PrintResult) -> None:
-        if self.profile.heaters.on_cancel == "off":
-            self.link.send(*heaters_off())
-        self._drain()
-        self._finish(JobState.CANCELLED, "cancelled", result)
-
-    def _fail(self, result: PrintResult, reason: str, last_segment: int | None = None) -> None:
-        """``last_segment``: the last executed segment when the error knows it (a device reset)."""
-        link = self.link
-        done = link.progress.segments_done if link else 0
-        info = self._map.lookup(last_segment if last_segment else done)
-        result.status, result.reason = "failed", reason
-        result.segments = done
-        result.retransmits = link.counters.retransmits if link else 0
         result.last_line = info.line if info else None
         result.last_layer = info.layer + 1 if info else None
         result.final_steps = list(info.steps) if info else None
-        if link and self.profile.heaters.on_failure == "off":
-            try:
-                link.clear_fault(timeout=1.0)
-                link.send(*heaters_off(), timeout=1.0)
-            except (LinkError, OSError):
-                pass  # link lost: the firmware's own watchdog must turn heaters off
-        st = self._status
-        point = ResumePoint(
-            str(self.gcode),
-            reason,
-            result.last_line,
-            result.last_layer,
-            info.point if info else None,
-            info.steps if info else None,
-            st.hotend_target_c if st else 0.0,
-            st.bed_target_c if st else 0.0,
-            max(result.last_layer or 1, 1),
-        )
+
+    def _finish(
+        self, streamer: Streamer, result: PrintResult, state: JobState, status: str
+    ) -> None:
+        st = streamer.link.request_status()
+        self._fill(streamer, result)
+        result.status = status
+        result.final_steps = list(st.steps)
+        result.print_time_s = round(st.motion_time_s - self._t0, 6)
+        streamer.service(force_status=True)
+        self._set(state, status)
+
+    def _stop_tail(self, streamer: Streamer, result: PrintResult, reason: str) -> None:
+        """At a rest point after a cancel or a safe stop: heaters off (after a cancel, as the
+        profile's ``heaters.on_cancel`` says), resume point, end."""
+        link = streamer.link
         try:
-            result.resume_file = str(
-                point.save(resume_path_for(self.gcode, self.options.resume_dir))
-            )
-        except OSError:
-            result.resume_file = None
+            if reason or self.profile.heaters.on_cancel == "off":
+                link.send(*heaters_off())
+            streamer.drain(final=False)
+        except LinkError as exc:
+            self._give_up(link, streamer, result, f"{reason or 'cancelled'}; then {exc}", exc)
+            return
+        self._save_point(streamer, result, reason or "cancelled")
+        if reason:
+            self._fill(streamer, result)
+            result.status, result.reason = "failed", reason
+            self._failed(streamer, result, reason)
+            return
+        self._finish(streamer, result, JobState.CANCELLED, "cancelled")
+
+    def _give_up(
+        self,
+        link: HostLink,
+        streamer: Streamer | None,
+        result: PrintResult,
+        reason: str,
+        exc: BaseException,
+    ) -> None:
+        """Emergency stop first, then name the exact last executed segment and save it."""
+        keep = EstopFlag.KEEP_MOTORS
+        if self.profile.heaters.on_failure == "keep":
+            keep |= EstopFlag.KEEP_HEATERS
+        if not isinstance(exc, DeviceReset):
+            try:
+                link.emergency_stop(timeout=1.0, flags=keep)
+            except (LinkError, OSError) as stop_exc:  # the device's watchdog stops it
+                log.warning("emergency stop not acknowledged: %s", stop_exc)
+        result.status, result.reason = "failed", reason
+        if streamer is None:
+            self._emit(Failure(reason, None, None))
+            self._set(JobState.FAILED, reason)
+            return
+        last = exc.last_segment if isinstance(exc, DeviceReset) else None
+        self._fill(streamer, result, last)
+        self._save_point(streamer, result, reason, last)
+        self._failed(streamer, result, reason, last)
+
+    def _failed(
+        self, streamer: Streamer, result: PrintResult, reason: str, last: int | None = None
+    ) -> None:
+        """The machine time printed, the Failure event and the final state."""
+        result.print_time_s = self._print_time(streamer, last)
+        info = streamer.executed(last)
         # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
         self._emit(
             Failure(
@@ -448,6 +412,38 @@ class PrintJob:
         )
         self._set(JobState.FAILED, reason)
 
+    def _save_point(
+        self, streamer: Streamer, result: PrintResult, reason: str, last: int | None = None
+    ) -> None:
+        """The final point, when the job executed something (else the last one stays)."""
+        info = streamer.executed(last)
+        path = resume_path_for(self.gcode, self.options.resume_dir, self._sha256)
+        if info is None:
+            result.resume_file = str(path) if path.exists() else None
+            return
+        try:
+            result.resume_file = str(streamer.point(reason, info).save(path))
+        except OSError as exc:
+            log.warning("resume point %s not written: %s", path, exc.strerror or exc)
+            result.resume_file = str(path) if path.exists() else None
 
-def _slice(batch: SegmentBatch, i: int, j: int) -> SegmentBatch:
-    return SegmentBatch(*(getattr(batch, f)[i:j] for f in batch.__dataclass_fields__))
+    @staticmethod
+    def _print_time(streamer: Streamer, last: int | None = None) -> float:
+        """Machine time printed by this job up to its last executed segment (planned time:
+        the device may be unreachable now)."""
+        info = streamer.executed(last)
+        start = streamer.map.start_s
+        if info is None or start is None:
+            return 0.0
+        return round(max(0.0, info.t_end_s - start), 6)
+
+
+def _violations_reason(report: Any) -> str:
+    from cdprhost.preflight.render import advice
+
+    v = report.violations[0]
+    lines = [
+        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
+        *(line.strip() for line in advice(report)),
+    ]
+    return "\n".join(lines)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdprhost.motion.segments import SegmentBatch
+from cdprhost.motion.segments import PlannedSegments
 
 
 @dataclass(frozen=True)
@@ -23,15 +23,20 @@ class SegmentInfo:
     point: tuple[float, float, float]
     steps: tuple[int, int, int, int]
     t_end_s: float
+    e_mm: float = 0.0  # filament position at the end, in the job's program
 
 
 class SegmentMap:
-    def __init__(self) -> None:
-        self._batches: deque[tuple[int, SegmentBatch]] = deque()
+    def __init__(self, clock_hz: int = 100_000) -> None:
+        self.clock_hz = clock_hz
+        self._batches: deque[tuple[int, PlannedSegments]] = deque()
         self._last: SegmentInfo | None = None
+        self.start_s: float | None = None  # program time when the first segment began
 
-    def add(self, first_number: int, batch: SegmentBatch) -> None:
+    def add(self, first_number: int, batch: PlannedSegments) -> None:
         if len(batch):
+            if self.start_s is None:
+                self.start_s = float(batch.t_end[0]) - float(batch.ticks[0]) / self.clock_hz
             self._batches.append((first_number, batch))
 
     def lookup(self, number: int) -> SegmentInfo | None:
@@ -47,18 +52,20 @@ class SegmentMap:
         return self._info(first, batch, number - first)
 
     @staticmethod
-    def _info(first: int, batch: SegmentBatch, i: int) -> SegmentInfo:
+    def _info(first: int, batch: PlannedSegments, i: int) -> SegmentInfo:
+        p, s = batch.point[i], batch.steps_abs[i]
         return SegmentInfo(
             first + i,
             int(batch.line[i]),
             int(batch.layer[i]),
-            tuple(float(v) for v in batch.point[i]),
-            tuple(int(v) for v in batch.steps_abs[i]),
+            (float(p[0]), float(p[1]), float(p[2])),
+            (int(s[0]), int(s[1]), int(s[2]), int(s[3])),
             float(batch.t_end[i]),
+            float(batch.e[i]),
         )
 
 
-def first_rest_index(batch: SegmentBatch, start: int = 0) -> int | None:
+def first_rest_index(batch: PlannedSegments, start: int = 0) -> int | None:
     """Index of the first segment at or after ``start`` that ends with the machine at rest."""
     rest = np.flatnonzero(batch.v_end[start:] <= 1e-9)
     return None if rest.size == 0 else start + int(rest[0])

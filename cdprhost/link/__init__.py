@@ -7,27 +7,36 @@ Getting a link (a handshaken :class:`HostLink`; the embedded simulated device is
         port: a device path or any pyserial URL (loop://, socket://host:port, ...);
         opened exclusively.
 
-HostLink (thread-safe; every call pumps the link; nothing runs in the background)::
+HostLink (thread-safe; every call pumps the link; on a real port a keep-alive thread
+holds the session while nobody calls)::
 
     link.identity            Identity: protocol, firmware_name/version, axes, queue_capacity,
-                             clock_hz (unit of segment/dwell ticks), max_step_rate, boot_id, ...
-    link.queue_segments(SegmentBatch(ticks, deltas, ramps), timeout=None) -> range
-                             segment numbers as in the device record; blocks while the
-                             device queue or the window is full
+                             clock_hz (unit of segment/dwell ticks), max_step_rate, rx_window,
+                             heaters, fans, hotend_max_c, bed_max_c, watchdog_ms, boot_id, ...
+    link.feed(batch, start=0, max_wait=0.0) -> int
+                             stream segments of a SegmentBatch(ticks, deltas, ramps) from
+                             ``start`` as far as the device's slots and the time watermarks
+                             allow, waiting for room (woken by flow reports) at most max_wait s;
+                             returns the index after the last one sent
+    link.queue_segments(batch, timeout=None) -> range
+                             the same, blocking until all are sent; their segment numbers
+    link.flush()             FLUSH: what was sent may start now (end of a stream, a pause)
     link.send(*commands, timeout=None) -> list[int]
                              firmware_protocol.messages commands: SetHeater, WaitHeater, SetFan,
                              Dwell, Home, SetPosition, Enable (queued, returns their item numbers)
-                             and GetStatus, ClearFault (immediate, 0)
-    link.progress            Progress(items_done, segments_done, queue_free, flags) (no I/O)
+                             and GetStatus, ClearFault, Flush, Configure (immediate, 0)
+    link.progress            DeviceProgress(items_done, segments_done, queue_free, flags) (no I/O)
     link.status()            latest DeviceStatus (no I/O); link.request_status(timeout) asks
-    link.poll(timeout=0.0)   pump, then return events: Progress (latest, if changed),
-                             DeviceEvent, DeviceErrorEvent (call it every ~0.1 s when idle)
-    link.wait_idle(timeout)  all queued items executed and motion stopped
+    link.poll(timeout=0.0)   pump, then return events: DeviceProgress (latest, if changed),
+                             DeviceEvent, DeviceErrorEvent
+    link.wait_report(timeout)  pump until the next report (flow, status, error)
+    link.wait_idle(timeout)  FLUSH, then wait until all queued items executed and motion stopped
     link.wait_items(n, timeout)
-    link.emergency_stop(timeout=1.0) -> bool   bypasses the queue and the window
+    link.emergency_stop(timeout=1.0, flags=0) -> bool   bypasses the queue and the window
     link.clear_fault()       leave the device's fault state (after DeviceFault / e-stop)
     link.counters            LinkCounters(retransmits, timeouts, naks_received, naks_sent,
                              bad_frames, frames_sent, frames_received, bytes_sent, ...)
+    link.clock_rate          device ticks per host second (measured)
     link.handshake()         a new session (e.g. after DeviceReset); numbering continues
                              from the device's counters
     link.items_sent, link.segments_sent, link.now(), link.close()
@@ -36,7 +45,8 @@ Segments (firmware_protocol.segments): ``ticks`` durations in device ticks
 (``identity.clock_hz``), ``deltas`` (N, 4) signed steps for modules 1..3 and the
 extruder, ``ramps`` codes from ``ramp_codes_from_speeds(v_start, v_end)`` (-1 =
 constant speed; 255 = ends at rest, which the last segment of every motion block
-must do, or the device reports a queue underrun).
+must do, or the device reports a queue underrun). A segment over the device's step
+rate raises StepRateError (a ValueError) before anything is sent.
 
 Errors (all LinkError(CdprError), exit 1 unless noted): PortNotFound (exit 2),
 PortBusy, PortVanished, DeviceSilent, ProtocolMismatch, DeviceReset(last_segment,
@@ -58,17 +68,19 @@ from cdprhost.link.errors import (
 from cdprhost.link.events import (
     DeviceErrorEvent,
     DeviceEvent,
+    DeviceProgress,
     DeviceStatus,
     Identity,
     LinkCounters,
-    Progress,
 )
-from cdprhost.link.host_link import HostLink
+from cdprhost.link.flow import Watermarks
+from cdprhost.link.host_link import HostLink, StepRateError
 
 __all__ = [
     "DeviceErrorEvent",
     "DeviceEvent",
     "DeviceFault",
+    "DeviceProgress",
     "DeviceReset",
     "DeviceSilent",
     "DeviceStatus",
@@ -80,7 +92,8 @@ __all__ = [
     "PortBusy",
     "PortNotFound",
     "PortVanished",
-    "Progress",
     "ProtocolMismatch",
+    "StepRateError",
+    "Watermarks",
     "open_link",
 ]

@@ -10,6 +10,8 @@ from firmware_protocol.messages import Error, ErrorCode, Event, EventCode, Flag,
 
 @dataclass(frozen=True)
 class Identity:
+    """What the device announced at the handshake: its limits, which the host respects."""
+
     protocol: tuple[int, int]
     firmware_name: str
     firmware_version: str
@@ -21,6 +23,10 @@ class Identity:
     boot_id: int
     heaters: int
     fans: int
+    rx_window: int = 4096
+    hotend_max_c: float = 0.0
+    bed_max_c: float = 0.0
+    watchdog_ms: int = 2000
 
     @classmethod
     def from_message(cls, m: Ident) -> Identity:
@@ -36,12 +42,18 @@ class Identity:
             m.boot_id,
             m.heaters,
             m.fans,
+            m.rx_window,
+            m.hotend_max_dc / 10,
+            m.bed_max_dc / 10,
+            m.watchdog_ms,
         )
 
 
 @dataclass(frozen=True)
-class Progress:
-    """Executed so far (device counters since boot): queue items and move segments."""
+class DeviceProgress:
+    """Executed so far (device counters since boot): queue items and move segments.
+
+    ``segments_done`` is the last segment whose motion completed (never a discarded one)."""
 
     items_done: int
     segments_done: int
@@ -78,6 +90,19 @@ class DeviceStatus:
     device_naks_sent: int
     device_duplicates: int
     received_at: float  # host link time
+    items_received: int = 0
+    buffered_s: float = 0.0  # queued motion not yet executed, device seconds
+
+    @property
+    def faulted(self) -> bool:
+        return bool(self.flags & Flag.FAULT)
+
+    @property
+    def busy(self) -> bool:
+        """Motion executing or queued, or a heater wait holding the queue."""
+        return bool(self.flags & (Flag.MOVING | Flag.WAITING)) or (
+            self.items_received > self.items_done
+        )
 
     @classmethod
     def from_message(cls, m: Status, identity: Identity | None, now: float) -> DeviceStatus:
@@ -102,6 +127,8 @@ class DeviceStatus:
             m.naks_sent,
             m.duplicates,
             now,
+            m.items_received,
+            m.buffered_ticks / clock,
         )
 
 
@@ -139,10 +166,10 @@ class LinkCounters:
     duplicates: int
 
 
-LinkEvent = Union[Progress, DeviceEvent, DeviceErrorEvent]  # noqa: UP007
+LinkEvent = Union[DeviceProgress, DeviceEvent, DeviceErrorEvent]  # noqa: UP007
 
 
-def _name(enum, code: int) -> str:
+def _name(enum: type[ErrorCode] | type[EventCode], code: int) -> str:
     try:
         return enum(code).name.lower()
     except ValueError:
@@ -151,8 +178,12 @@ def _name(enum, code: int) -> str:
 
 def error_text(m: Error) -> str:
     name = _name(ErrorCode, m.code)
-    axis = "" if m.axis == 0xFF else f", axis {m.axis}"
-    detail = {
+    axis = (
+        ""
+        if m.axis == 0xFF or m.code in (ErrorCode.BAD_VALUE, ErrorCode.BAD_COMMAND)
+        else f", axis {m.axis}"
+    )
+    details: dict[int, str] = {
         ErrorCode.UNDERRUN: "the move queue ran empty while moving",
         ErrorCode.THERMAL_RUNAWAY: f"heater temperature {m.value / 10:g} C not following its target",
         ErrorCode.ENDSTOP_HIT: f"endstop hit during motion at physical step {m.value}",
@@ -160,7 +191,11 @@ def error_text(m: Error) -> str:
         ErrorCode.OVERTEMP: f"temperature {m.value / 10:g} C over the maximum",
         ErrorCode.HEATER_RANGE: f"target {m.value / 10:g} C over the maximum",
         ErrorCode.HOMING_FAILED: f"no endstop within travel ({m.value} steps)",
-    }.get(m.code, "")
+        ErrorCode.WATCHDOG: f"no word from the host for {m.value} ms: motion stopped, heaters off",
+        ErrorCode.BAD_VALUE: f"value {m.value} out of range in command 0x{m.axis:02X}",
+        ErrorCode.BAD_COMMAND: f"malformed command 0x{m.axis:02X} at byte {m.value}",
+    }
+    detail = details.get(m.code, "")
     return f"{name} at item {m.item}, segment {m.segment}{axis}" + (f": {detail}" if detail else "")
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import select
 import time
 
 import serial
@@ -39,6 +40,11 @@ class SerialTransport:
     def __init__(self, ser: serial.SerialBase, name: str):
         self._ser = ser
         self.name = name
+        fileno = getattr(ser, "fileno", None)
+        try:
+            self._fd: int | None = fileno() if fileno is not None else None
+        except (OSError, ValueError, AttributeError, serial.SerialException):
+            self._fd = None
 
     def now(self) -> float:
         return time.monotonic()
@@ -56,23 +62,37 @@ class SerialTransport:
             ) from None
 
     def read(self, timeout: float) -> bytes:
-        """Bytes available now, or the first ones to arrive within ``timeout`` seconds."""
+        """Bytes available now, or the first ones to arrive within ``timeout`` seconds
+        (a real port waits in ``select``: it wakes when bytes arrive, not on a timer)."""
         deadline = time.monotonic() + max(0.0, timeout)
         try:
+            if self._fd is not None:
+                return self._read_select(self._fd, timeout)
             while True:
                 waiting = self._ser.in_waiting
                 if waiting:
-                    return self._ser.read(waiting)
+                    return bytes(self._ser.read(waiting))
                 if time.monotonic() >= deadline:
                     return b""
-                data = self._ser.read(1)  # blocks at most READ_SLICE_S
+                data = bytes(self._ser.read(1))  # blocks at most READ_SLICE_S
                 if data:
                     more = self._ser.in_waiting
-                    return data + (self._ser.read(more) if more else b"")
+                    return data + (bytes(self._ser.read(more)) if more else b"")
         except (serial.SerialException, OSError) as exc:
             raise PortVanished(
                 f"{self.name}: port failed on read ({exc}); was it unplugged?"
             ) from None
+
+    def _read_select(self, fd: int, timeout: float) -> bytes:
+        waiting = self._ser.in_waiting
+        if not waiting and timeout > 0:
+            ready, _, _ = select.select([fd], [], [], timeout)
+            if not ready:
+                return b""
+            waiting = self._ser.in_waiting
+            if not waiting:  # readable but empty: pyserial raises if the port hung up
+                return bytes(self._ser.read(1))
+        return bytes(self._ser.read(waiting)) if waiting else b""
 
     def close(self) -> None:
         with contextlib.suppress(serial.SerialException, OSError):

@@ -1,4 +1,5 @@
-"""What the host knows about the device: identity, progress, status, events, failure.
+"""What the host knows about the device: identity, progress, flow, clock, status, events,
+failure.
 
 Fed with the endpoint's incoming items (device reports, flow, urgent frames); it
 never does I/O. HostLink owns one and raises ``tracker.failure`` when set.
@@ -6,17 +7,20 @@ never does I/O. HostLink owns one and raises ``tracker.failure`` when set.
 
 from __future__ import annotations
 
+import logging
 from collections import deque
 
+from cdprhost.link.clock_sync import ClockSync
 from cdprhost.link.errors import DeviceFault, DeviceReset, LinkError
 from cdprhost.link.events import (
+    DeviceProgress,
     DeviceStatus,
     Identity,
     LinkEvent,
-    Progress,
     device_event,
     error_text,
 )
+from cdprhost.link.flow import FlowReport
 from firmware_protocol.endpoint import Incoming
 from firmware_protocol.messages import (
     Boot,
@@ -34,6 +38,8 @@ from firmware_protocol.messages import (
 from firmware_protocol.messages import Error as ErrorReport
 from firmware_protocol.segments import SegmentContext
 
+log = logging.getLogger(__name__)
+
 
 def decode_one(payload: bytes) -> Message | None:
     """The single message of an URGENT payload (None if it does not parse)."""
@@ -48,9 +54,10 @@ class DeviceTracker:
     def __init__(self, name: str):
         self.name = name
         self.identity: Identity | None = None
-        self.progress = Progress(0, 0, 0, 0)
-        self.flow_free = 0
-        self.flow_ack = 0  # flow_free counts every frame before this sequence number
+        self.progress = DeviceProgress(0, 0, 0, 0)
+        self.flow = FlowReport()
+        self.clock = ClockSync(100_000)
+        self.flows = 0  # FLOW reports received (the streaming loop wakes on them)
         self.status: DeviceStatus | None = None
         self.status_count = 0
         self.events: deque[LinkEvent] = deque(maxlen=4096)
@@ -60,21 +67,25 @@ class DeviceTracker:
         self.cleared = False
         self.clearing = False  # errors reported before CLEAR_FAULT reached the device are stale
 
-    def accept_ident(self, msg: Ident, max_payload: int) -> None:
+    def accept_ident(self, msg: Ident, now: float) -> None:
         self.identity = Identity.from_message(msg)
-        self.flow_free = msg.queue_capacity - (msg.items_received - msg.items_done)
-        self.flow_ack = 0
-        self.progress = Progress(msg.items_done, msg.segments_done, self.flow_free, 0)
+        free = msg.queue_capacity - (msg.items_received - msg.items_done)
+        self.flow = FlowReport(free=free, ack=0, t=now)
+        self.progress = DeviceProgress(msg.items_done, msg.segments_done, free, 0)
+        self.clock = ClockSync(msg.clock_hz)
+        self.clock.add(now, msg.clock)
         self.failure = None
 
     def set_progress(self, items: int, segments: int, free: int, flags: int) -> None:
-        p = Progress(
+        p = DeviceProgress(
             max(items, self.progress.items_done),
             max(segments, self.progress.segments_done),
             free,
             flags,
         )
         if p != self.progress:
+            if (p.flags ^ self.progress.flags) & (Flag.FAULT | Flag.ESTOP | Flag.MOVING):
+                log.debug("%s: device flags %s", self.name, Flag(p.flags))
             self.progress = p
             self.progress_dirty = True
 
@@ -103,18 +114,22 @@ class DeviceTracker:
         try:
             msgs = decode_messages(inc.payload, SegmentContext())
         except MessageError:
+            log.warning("%s: a device report that does not parse was ignored", self.name)
             return
         for msg in msgs:
             if isinstance(msg, Flow):
-                self.flow_free = msg.queue_free
-                self.flow_ack = inc.ack
+                self.flow = FlowReport(msg.queue_free, inc.ack, msg.buffered_ticks, msg.flags, now)
+                self.flows += 1
+                self.clock.add(now, msg.clock)
                 self.set_progress(msg.items_done, msg.segments_done, msg.queue_free, msg.flags)
             elif isinstance(msg, Status):
+                # no clock sample: a status may be a retransmission (an old clock, late)
                 self.status = DeviceStatus.from_message(msg, self.identity, now)
                 self.status_count += 1
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:
+                    log.warning("%s: device error %s", self.name, error_text(msg))
                     self.failure = DeviceFault(
                         f"{self.name}: device error {error_text(msg)}",
                         code=msg.code,
@@ -126,6 +141,7 @@ class DeviceTracker:
             elif isinstance(msg, Event):
                 self.events.append(device_event(msg))
                 if msg.code == EventCode.FAULT_CLEARED:
+                    log.info("%s: device fault cleared", self.name)
                     self.cleared = True
                     self.clearing = False
             elif isinstance(msg, Ident):
@@ -138,6 +154,7 @@ class DeviceTracker:
         seg = msg.prev_segments_done if exact else self.progress.segments_done
         item = msg.prev_items_done if exact else self.progress.items_done
         self.set_progress(item, seg, 0, Flag.FAULT)
+        log.warning("%s: device reset (boot id %#010x)", self.name, msg.boot_id)
         self.failure = DeviceReset(
             f"{self.name}: the device reset (boot id {self.identity.boot_id:#010x} -> {msg.boot_id:#010x}); "
             f"last executed segment {seg}{'' if exact else ' (last reported; the device kept no record)'}",

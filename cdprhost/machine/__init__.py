@@ -2,5 +2,6 @@
 and the TUI alike (one way to do each): :class:`Machine` over a handshaken link."""
 
 from cdprhost.machine.operations import Machine, MoveResult, NotHomed
+from cdprhost.machine.prepare import DeviceCheck, DeviceNotReady, prepare_device
 
-__all__ = ["Machine", "MoveResult", "NotHomed"]
+__all__ = ["DeviceCheck", "DeviceNotReady", "Machine", "MoveResult", "NotHomed", "prepare_device"]

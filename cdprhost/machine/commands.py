@@ -55,22 +55,24 @@ def heaters_off() -> list[m.Message]:
 
 
 def device_messages(
-    item: Any, *, model: MachineModel, home_mm: Any, clock_hz: int
+    item: g.Command, *, model: MachineModel, home_mm: Any, clock_hz: int
 ) -> list[m.Message]:
     """The queued messages that carry out one program command (may be none)."""
-    if isinstance(item, g.SetTemperature):
-        heater = HEATER_IDS[item.heater]
-        out: list[m.Message] = [m.SetHeater(heater, int(round(item.target_c * 10)))]
-        if item.wait and item.target_c > 0:
-            out.append(m.WaitHeater(heater))
-        return out
-    if isinstance(item, g.Fan):
-        return [m.SetFan(item.index, int(round(max(0.0, min(1.0, item.speed)) * 255)))]
-    if isinstance(item, g.Dwell):
-        ticks = int(round(item.seconds * clock_hz))
-        return [m.Dwell(ticks)] if ticks > 0 else []
-    if isinstance(item, g.Home):
-        return home_commands(model, home_mm)
-    if isinstance(item, g.MotorsOff):
-        return [motors_off()]
-    return []
+    match item:
+        case g.SetTemperature(heater=heater_name, target_c=target, wait=wait):
+            heater = HEATER_IDS[heater_name]
+            out: list[m.Message] = [m.SetHeater(heater, int(round(target * 10)))]
+            if wait and target > 0:
+                out.append(m.WaitHeater(heater))
+            return out
+        case g.Fan(speed=speed, index=index):
+            return [m.SetFan(index, int(round(max(0.0, min(1.0, speed)) * 255)))]
+        case g.DwellCommand(seconds=seconds):
+            ticks = int(round(seconds * clock_hz))
+            return [m.Dwell(ticks)] if ticks > 0 else []
+        case g.HomeCommand():
+            return home_commands(model, home_mm)
+        case g.MotorsOff():
+            return [motors_off()]
+        case _:
+            return []

@@ -170,9 +170,10 @@ class Machine:
             st = self.set_heaters(0.0, 0.0)
         return st
 
-    def emergency_stop(self, timeout_s: float = 1.0) -> bool:
-        """Stop now, bypassing the queue: motion, heaters and motors off on the device."""
-        return self.link.emergency_stop(timeout=timeout_s)
+    def emergency_stop(self, timeout_s: float = 1.0, flags: int = 0) -> bool:
+        """Stop now, bypassing the queue: motion, heaters and motors off on the device
+        (``flags``, firmware_protocol.messages.EstopFlag, keep heaters or motors on)."""
+        return self.link.emergency_stop(timeout=timeout_s, flags=flags)
 
     # ------------------------------------------- the wizard's device interface
     def visit(self, points: np.ndarray) -> tuple[np.ndarray, float]:

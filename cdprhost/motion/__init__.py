@@ -7,7 +7,7 @@
 - :mod:`trapezoid`: planned moves and their timing;
 - :mod:`planner`: the streaming planner (bounded lookahead);
 - :mod:`program`: reader items -> planned moves and commands, homing;
-- :mod:`segments`: planned moves -> joint-space segments (``SegmentBatch``);
+- :mod:`segments`: planned moves -> joint-space segments (``PlannedSegments``);
 - :mod:`pipeline`: reader items -> segments (whole blocks with command marks, or a strictly ordered
   stream), with an encode hook.
 """
@@ -24,7 +24,7 @@ from cdprhost.motion.program import (
     plan_program,
     read_items,
 )
-from cdprhost.motion.segments import SegmentBatch, Segmenter, SegmentState, segment_moves
+from cdprhost.motion.segments import PlannedSegments, Segmenter, SegmentState, segment_moves
 from cdprhost.motion.trapezoid import PlannedMoves
 
 __all__ = [
@@ -34,9 +34,9 @@ __all__ = [
     "MoveCaps",
     "PipelineTotals",
     "PlannedMoves",
+    "PlannedSegments",
     "Planner",
     "ProgramPlanner",
-    "SegmentBatch",
     "SegmentBlock",
     "SegmentState",
     "Segmenter",

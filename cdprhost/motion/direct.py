@@ -9,23 +9,25 @@ segment batch; the print job, the jog screen and the calibration wizard all use 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.limits import Caps
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.planner import Planner
-from cdprhost.motion.segments import SegmentBatch, Segmenter, SegmentState
+from cdprhost.motion.segments import PlannedSegments, Segmenter, SegmentState
 from cdprhost.profile.models import MachineProfile
-from firmware_protocol.segments import SegmentBatch as WireBatch
-from firmware_protocol.segments import ramp_codes_from_speeds
+from firmware_protocol.segments import SegmentBatch, ramp_codes_from_speeds
 
 
-def to_wire(batch: SegmentBatch) -> WireBatch:
+def to_wire(batch: PlannedSegments) -> SegmentBatch:
     """Planned segments -> the protocol's batch (durations, step deltas, ramp codes)."""
-    return WireBatch(batch.ticks, batch.delta, ramp_codes_from_speeds(batch.v_start, batch.v_end))
+    return SegmentBatch(
+        batch.ticks, batch.delta, ramp_codes_from_speeds(batch.v_start, batch.v_end)
+    )
 
 
-def state_at_steps(model: MachineModel, steps) -> SegmentState:
+def state_at_steps(model: MachineModel, steps: ArrayLike) -> SegmentState:
     """Machine state from the device's absolute steps (position by forward kinematics)."""
     arr = np.asarray(steps, dtype=np.int64).reshape(4)
     point = model.fk(model.sliders_from_steps(arr[:3])[None, :])[0]
@@ -36,11 +38,11 @@ def direct_path(
     profile: MachineProfile,
     model: MachineModel,
     state: SegmentState,
-    points,
+    points: ArrayLike,
     *,
     feedrate_mm_s: float,
     clock_hz: int,
-) -> tuple[WireBatch, float, SegmentState]:
+) -> tuple[SegmentBatch, float, SegmentState]:
     """Segments through ``points`` (machine frame, in order) starting from ``state``.
 
     Returns the wire batch, its duration in seconds, and the state after it.
@@ -61,7 +63,7 @@ def direct_path(
     )
     batches = [b for b in (segmenter(p) for p in planned) if len(b)]
     if not batches:
-        return WireBatch(np.zeros(0, np.int64), np.zeros((0, 4), np.int64)), 0.0, state
+        return SegmentBatch(np.zeros(0, np.int64), np.zeros((0, 4), np.int64)), 0.0, state
     wires = [to_wire(b) for b in batches]
-    wire = WireBatch.concat(wires) if len(wires) > 1 else wires[0]
+    wire = SegmentBatch.concat(wires) if len(wires) > 1 else wires[0]
     return wire, float(wire.ticks.sum()) / clock_hz, segmenter.state

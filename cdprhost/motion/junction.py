@@ -22,9 +22,12 @@ def junction_v2(
     kinematic: np.ndarray,
     accel: np.ndarray,
     length: np.ndarray,
-    junction_deviation: float,
+    junction_deviation: float | np.ndarray,
 ) -> np.ndarray:
-    """Squared speed limit at the n-1 inner junctions of n consecutive moves."""
+    """Squared speed limit at the n-1 inner junctions of n consecutive moves.
+
+    ``junction_deviation``: one value, or one per junction (n-1,).
+    """
     if unit.shape[0] < 2:
         return np.zeros(0)
     u0, u1 = unit[:-1], unit[1:]
@@ -37,6 +40,8 @@ def junction_v2(
     r_jd = sin_half[corner] / one_minus[corner]
     a0, a1 = accel[:-1][corner], accel[1:][corner]
     quarter_tan = 0.25 * sin_half[corner] / cos_half[corner]
+    if np.ndim(junction_deviation):
+        junction_deviation = np.asarray(junction_deviation)[corner]
     d0, d1 = length[:-1][corner], length[1:][corner]
     v2[corner] = np.minimum.reduce(
         [

@@ -24,8 +24,15 @@ import numpy as np
 from cdprhost.motion.moves import MIN_MOVE_MM, MoveBlock
 from cdprhost.profile.models import Extruder, MotionLimits
 
+Vec3 = tuple[np.ndarray, np.ndarray, np.ndarray]  # one array per coordinate
+
 #: spacing of the Jacobian samples along a move (mm)
 SAMPLE_SPACING_MM = 10.0
+#: at most this many samples inside one move (moves longer than 40 cm, more than this
+#: kind of machine can make, are sampled more sparsely: their bound is looser, never
+#: wrong); moves longer than ``ABSURD_MOVE_MM`` (a typo: preflight refuses them) get 4
+MAX_SAMPLES_PER_MOVE = 40
+ABSURD_MOVE_MM = 2000.0
 #: fraction of the chord tolerance the segment length aims for (rest: higher order terms)
 CHORD_SAFETY = 0.7
 
@@ -98,9 +105,9 @@ def _max3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 class _PointTerms:
     """Direction-independent cable terms at points (structure of arrays, cable k in [k])."""
 
-    e: tuple  # e[k] = (ex, ey, ez) unit vector from outlet k
-    inv_length: tuple  # 1 / L_k
-    cof: tuple | None  # columns of adj(J) (e2 x e3, e3 x e1, e1 x e2) divided by det J
+    e: tuple[Vec3, ...]  # e[k] = (ex, ey, ez) unit vector from outlet k
+    inv_length: tuple[np.ndarray, ...]  # 1 / L_k
+    cof: tuple[Vec3, ...] | None  # columns of adj(J) (e2 x e3, e3 x e1, e1 x e2) / det J
 
     @classmethod
     def at(
@@ -115,7 +122,7 @@ class _PointTerms:
         cof = None
         if chord:
 
-            def cross(a, b):
+            def cross(a: Vec3, b: Vec3) -> Vec3:
                 return (
                     a[1] * b[2] - a[2] * b[1],
                     a[2] * b[0] - a[0] * b[2],
@@ -124,15 +131,19 @@ class _PointTerms:
 
             c23, c31, c12 = cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])
             inv_det = 1.0 / (e[0][0] * c23[0] + e[0][1] * c23[1] + e[0][2] * c23[2])
-            cof = tuple(tuple(c * inv_det for c in col) for col in (c23, c31, c12))
+            cof = tuple(
+                (col[0] * inv_det, col[1] * inv_det, col[2] * inv_det) for col in (c23, c31, c12)
+            )
         return cls(tuple(e), tuple(inv), cof)
 
     def take(self, idx: slice | np.ndarray) -> _PointTerms:
-        pick = lambda t: tuple(a[idx] for a in t)  # noqa: E731
+        def pick3(t: Vec3) -> Vec3:
+            return (t[0][idx], t[1][idx], t[2][idx])
+
         return _PointTerms(
-            tuple(pick(v) for v in self.e),
-            pick(self.inv_length),
-            None if self.cof is None else tuple(pick(c) for c in self.cof),
+            tuple(pick3(v) for v in self.e),
+            tuple(a[idx] for a in self.inv_length),
+            None if self.cof is None else tuple(pick3(c) for c in self.cof),
         )
 
     def along(
@@ -155,7 +166,9 @@ class _PointTerms:
         return _max3(*c), _max3(*kap), w
 
 
-def _interior_samples(dist: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+def _interior_samples(
+    dist: np.ndarray, spacing: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Interior sample points of moves longer than ``spacing``: (move index, fraction)."""
     inner = np.floor(dist / spacing).astype(np.int64)  # samples strictly inside each move
     owner = np.repeat(np.arange(dist.shape[0]), inner)
@@ -188,6 +201,8 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
         e_a = np.where(ratio > 0, caps.e_accel / ratio, np.inf)
     v_cart = np.minimum(feed, np.where(kin, np.minimum(caps.max_velocity, e_v), caps.e_velocity))
     accel = np.where(kin, np.minimum(caps.max_accel, e_a), caps.e_accel)
+    if block.accel_limit is not None:
+        accel = np.minimum(accel, block.accel_limit)
     v2_cart = v_cart * v_cart
     v2_cap = v2_cart.copy()
     chord_step = np.full(n, np.inf)
@@ -207,8 +222,10 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     c0, k0, w0 = terms.take(i0).along(ux, uy, uz)
     c1, k1, w1 = terms.take(i1).along(ux, uy, uz)
     c_max, k_max = np.maximum(c0, c1), np.maximum(k0, k1)
-    w_max = np.maximum(w0, w1) if chord else None
-    owner, frac = _interior_samples(np.where(kin, dist, 0.0), SAMPLE_SPACING_MM)
+    w_max = np.maximum(w0, w1) if w0 is not None and w1 is not None else None
+    spacing_req = np.maximum(SAMPLE_SPACING_MM, dist / MAX_SAMPLES_PER_MOVE)
+    spacing_req = np.where(dist > ABSURD_MOVE_MM, dist / 4.0, spacing_req)
+    owner, frac = _interior_samples(np.where(kin, dist, 0.0), spacing_req)
     if owner.size:
         p = block.start[owner] + frac[:, None] * delta[owner]
         ci, ki, wi = _PointTerms.at(p[:, 0], p[:, 1], p[:, 2], outlets, chord).along(
@@ -216,9 +233,9 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
         )
         np.maximum.at(c_max, owner, ci)
         np.maximum.at(k_max, owner, ki)
-        if chord:
+        if w_max is not None and wi is not None:
             np.maximum.at(w_max, owner, wi)
-    spacing = dist / (np.floor(dist / SAMPLE_SPACING_MM) + 1.0)
+    spacing = dist / (np.floor(dist / spacing_req) + 1.0)
     c_bound = np.clip(c_max + 0.5 * k_max * spacing, 1e-9, 1.0)  # >0: three cables span space
     k_bound = k_max * 1.05 + 1e-12
     # module speed, then keep the J-dot term within 3/4 of the module acceleration
@@ -226,7 +243,7 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     v2_cap = np.where(kin, np.minimum(v2_cap, v2_mod), v2_cap)
     a_mod = (caps.module_accel - v2_cap * k_bound) / c_bound
     accel = np.where(kin, np.minimum(accel, a_mod), accel)
-    if chord:
+    if w_max is not None:
         step = np.sqrt(8.0 * caps.chord_tolerance * CHORD_SAFETY / np.maximum(w_max * 1.05, 1e-12))
         chord_step = np.where(kin, step, np.inf)
     return MoveCaps(length, kin, unit, accel, v2_cap, v2_cart, chord_step)

@@ -27,6 +27,9 @@ class MoveBlock:
     feedrate: np.ndarray  # (n,) mm/s requested
     line: np.ndarray  # (n,) int64, 1-based source line
     layer: np.ndarray  # (n,) int32
+    # limits the program asks for (M201/M204/M205), below the profile's; None: none
+    accel_limit: np.ndarray | None = None  # (n,) mm/s^2
+    junction_limit: np.ndarray | None = None  # (n,) junction deviation, mm
 
     def __len__(self) -> int:
         return int(self.line.shape[0])
@@ -55,6 +58,8 @@ class MoveBlock:
             self.feedrate[index],
             self.line[index],
             self.layer[index],
+            None if self.accel_limit is None else self.accel_limit[index],
+            None if self.junction_limit is None else self.junction_limit[index],
         )
 
     @classmethod
@@ -69,7 +74,14 @@ class MoveBlock:
             return cls.empty()
         if len(blocks) == 1:
             return blocks[0]
-        return cls(*(np.concatenate([getattr(b, f) for b in blocks]) for f in _FIELDS))
+        fields = [np.concatenate([getattr(b, f) for b in blocks]) for f in _FIELDS]
+        limits = [
+            np.concatenate([_limit(b, f) for b in blocks])
+            if any(getattr(b, f) is not None for b in blocks)
+            else None
+            for f in _LIMIT_FIELDS
+        ]
+        return cls(*fields, *limits)
 
     @classmethod
     def from_arrays(
@@ -109,6 +121,12 @@ class MoveBlock:
 
 
 _FIELDS = ("start", "end", "e_start", "e_end", "feedrate", "line", "layer")
+_LIMIT_FIELDS = ("accel_limit", "junction_limit")
+
+
+def _limit(block: MoveBlock, name: str) -> np.ndarray:
+    v = getattr(block, name)
+    return np.full(len(block), np.inf) if v is None else v
 
 
 def block_from_chunk(chunk: Any, bed_origin: np.ndarray) -> MoveBlock:
@@ -137,7 +155,15 @@ def chain_from(block: MoveBlock, position: np.ndarray) -> MoveBlock:
     start[0] = position
     start[1:] = block.end[:-1]
     return MoveBlock(
-        start, block.end, block.e_start, block.e_end, block.feedrate, block.line, block.layer
+        start,
+        block.end,
+        block.e_start,
+        block.e_end,
+        block.feedrate,
+        block.line,
+        block.layer,
+        block.accel_limit,
+        block.junction_limit,
     )
 
 

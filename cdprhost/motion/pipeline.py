@@ -4,7 +4,7 @@ Two shapes of the same stream:
 - ``segment_blocks`` yields :class:`SegmentBlock` (a large batch of segments with
   the commands that fall inside it, ``marks``) and the commands that stop the
   motion. Fast: every planned block is segmented, and optionally encoded, at once.
-- ``segment_program`` yields :class:`SegmentBatch` and commands strictly in
+- ``segment_program`` yields :class:`PlannedSegments` and commands strictly in
   program order (blocks cut at their marks).
 An ``encode`` callable (the wire codec plugs in there) is applied to every batch.
 """
@@ -15,10 +15,10 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
-from cdprhost.gcode.items import Home, MoveChunk
+from cdprhost.gcode.items import HomeCommand, MoveChunk
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.program import MarkedMoves, ProgramPlanner, split_at_marks
-from cdprhost.motion.segments import DEFAULT_CLOCK_HZ, SegmentBatch, Segmenter
+from cdprhost.motion.segments import DEFAULT_CLOCK_HZ, PlannedSegments, Segmenter
 from cdprhost.profile.models import MachineProfile
 
 
@@ -35,7 +35,7 @@ class PipelineTotals:
 class SegmentBlock:
     """Segments of one planned block; ``marks``: (segments before it, command) for commands inside."""
 
-    batch: SegmentBatch
+    batch: PlannedSegments
     marks: tuple[tuple[int, Any], ...]
     encoded: Any = None  # ``encode(batch)`` when an encoder was given
 
@@ -50,7 +50,7 @@ def segment_blocks(
     model: MachineModel,
     *,
     clock_hz: float = DEFAULT_CLOCK_HZ,
-    encode: Callable[[SegmentBatch], Any] | None = None,
+    encode: Callable[[PlannedSegments], Any] | None = None,
     totals: PipelineTotals | None = None,
     **planner_options: Any,
 ) -> Iterator[Any]:
@@ -75,13 +75,20 @@ def segment_blocks(
                 )
                 yield SegmentBlock(batch, marks, None if encode is None else encode(batch))
             else:
-                if isinstance(out, Home):
-                    seg.home()
+                match out:
+                    case HomeCommand():
+                        seg.home()
+                    case _:
+                        pass
                 yield out
         totals.planned_time_s = pp.time
 
     for item in items:
-        yield from convert(pp.moves(item)[1] if isinstance(item, MoveChunk) else pp.command(item))
+        match item:
+            case MoveChunk():
+                yield from convert(pp.moves(item)[1])
+            case _:
+                yield from convert(pp.command(item))
     yield from convert(pp.finish())
 
 
@@ -90,7 +97,7 @@ def segment_program(
     profile: MachineProfile,
     model: MachineModel,
     *,
-    encode: Callable[[SegmentBatch], Any] | None = None,
+    encode: Callable[[PlannedSegments], Any] | None = None,
     **options: Any,
 ) -> Iterator[Any]:
     """Segment batches (or their encodings) and commands, strictly in program order."""
@@ -99,4 +106,6 @@ def segment_program(
             yield out
             continue
         for part in out.split():
-            yield encode(part) if (encode is not None and isinstance(part, SegmentBatch)) else part
+            yield (
+                encode(part) if (encode is not None and isinstance(part, PlannedSegments)) else part
+            )

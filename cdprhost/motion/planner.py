@@ -11,6 +11,7 @@ plans everything to a stop (end of program, dwell, waits, homing).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +32,7 @@ class PlannerStats:
     replans: int = 0
     start_speed_drops: int = 0  # committed speed the next plan could not keep (should stay 0)
     flushes: int = 0
-    extra: dict = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
 
 
 class Planner:
@@ -89,7 +90,10 @@ class Planner:
         self.stats.replans += 1
         mc = move_caps(block, self.outlets, self.caps, chord=self.chord)
         delta = 2.0 * mc.accel * mc.length
-        jv2 = junction_v2(mc.unit, mc.kinematic, mc.accel, mc.length, self.caps.junction_deviation)
+        jd: float | np.ndarray = self.caps.junction_deviation
+        if block.junction_limit is not None:
+            jd = np.minimum(jd, np.minimum(block.junction_limit[:-1], block.junction_limit[1:]))
+        jv2 = junction_v2(mc.unit, mc.kinematic, mc.accel, mc.length, jd)
         v2_start = min(self._v0**2, float(mc.v2_cap[0]))
         v2, cruise, smooth, hump_start = plan_profile(
             jv2,

@@ -6,9 +6,10 @@ effector at ``model.home_point(drive.home_mm)``; the program starts there too, s
 the first move (and the first move after any G28) starts at the home point.
 
 Commands that need the machine at rest flush the lookahead: dwell (G4), waits for
-temperature (M109/M190), M400, homing, motors off. Other commands (fan, heater
-targets without wait, layer changes, messages) keep their place between the moves
-without stopping the motion.
+temperature (M109/M190), M400, homing, motors off, the filament change (M600).
+Other commands (fan, heater targets without wait, layer changes, messages, the
+file's motion limits) keep their place between the moves without stopping the
+motion; the file's limits (M201-M205) apply to the moves after them.
 """
 
 from __future__ import annotations
@@ -20,8 +21,20 @@ from typing import Any
 
 import numpy as np
 
-from cdprhost.gcode.items import Dwell, Home, MotorsOff, MoveChunk, SetTemperature, WaitMoves
+from cdprhost.gcode.items import (
+    DwellCommand,
+    FilamentChange,
+    HomeCommand,
+    MotorsOff,
+    MoveChunk,
+    ProgramItem,
+    SetMotionLimits,
+    SetTemperature,
+    WaitMoves,
+)
+from cdprhost.gcode.settings import FirmwareRetraction, Park
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.file_limits import FileLimits, apply_file_limits
 from cdprhost.motion.limits import Caps
 from cdprhost.motion.moves import MoveBlock, block_from_chunk, chain_from, drop_noops
 from cdprhost.motion.planner import DEFAULT_MIN_CRUISE_RATIO, Planner
@@ -29,11 +42,15 @@ from cdprhost.motion.trapezoid import PlannedMoves
 from cdprhost.profile.models import MachineProfile
 
 
-def flushes_motion(item: Any) -> bool:
+def flushes_motion(item: ProgramItem) -> bool:
     """True for commands that must wait until the machine is at rest."""
-    if isinstance(item, (Dwell, Home, MotorsOff, WaitMoves)):
-        return True
-    return isinstance(item, SetTemperature) and item.wait
+    match item:
+        case DwellCommand() | HomeCommand() | MotorsOff() | WaitMoves() | FilamentChange():
+            return True
+        case SetTemperature(wait=wait):
+            return wait
+        case _:
+            return False
 
 
 def home_position(profile: MachineProfile, model: MachineModel) -> np.ndarray:
@@ -96,6 +113,8 @@ class ProgramPlanner:
             profile.statics.a_max_mm_s2,
             module_limits=module_limits,
         )
+        self.profile_accel = caps.max_accel
+        self.file_limits = FileLimits()
         self.planner = Planner(
             caps,
             model.geometry.outlets,
@@ -118,6 +137,8 @@ class ProgramPlanner:
         """Add a chunk; returns the machine-frame block (continuous from the current point) and outputs."""
         raw = chunk if isinstance(chunk, MoveBlock) else block_from_chunk(chunk, self.origin)
         block = drop_noops(chain_from(raw, self.position))
+        if self.file_limits.active:
+            block = apply_file_limits(block, self.file_limits)
         if not len(block):
             return block, []
         self.position = block.end[-1].copy()
@@ -125,6 +146,11 @@ class ProgramPlanner:
         return block, self._emit(self.planner.push(block))
 
     def command(self, item: Any) -> list[PlannedMoves | Any]:
+        match item:
+            case SetMotionLimits():
+                self.file_limits = self.file_limits.updated(item, self.profile_accel)
+            case _:
+                pass
         if not flushes_motion(item):
             if self._emitted == self._pushed:
                 return [item]
@@ -132,10 +158,13 @@ class ProgramPlanner:
             return []
         out = self._emit(self.planner.flush())
         out.append(item)
-        if isinstance(item, Dwell):
-            self.planner.add_time(item.seconds)
-        elif isinstance(item, Home):
-            self.position = self.home.copy()
+        match item:
+            case DwellCommand(seconds=seconds):
+                self.planner.add_time(seconds)
+            case HomeCommand():
+                self.position = self.home.copy()
+            case _:
+                pass
         return out
 
     def finish(self) -> list[PlannedMoves | Any]:
@@ -160,14 +189,39 @@ class ProgramPlanner:
         return out
 
 
+def reader_settings(profile: MachineProfile, model: MachineModel) -> dict[str, Any]:
+    """The reader's machine settings from a profile, in the G-code frame: the home
+    point (where G28 puts the effector), firmware retraction (G10/G11), the M600 park."""
+    origin = np.asarray(profile.build_volume.bed_origin, dtype=float)
+    home = home_position(profile, model) - origin
+    ex, gc = profile.extruder, profile.gcode
+    return {
+        "home_position": (float(home[0]), float(home[1]), float(home[2])),
+        "filament_diameter_mm": ex.filament_diameter_mm,
+        "retraction": FirmwareRetraction(
+            ex.retract_mm, ex.retract_speed_mm_s, ex.unretract_extra_mm, ex.unretract_speed_mm_s
+        ),
+        "park": Park(
+            xy=(gc.park_xy_mm[0] - float(origin[0]), gc.park_xy_mm[1] - float(origin[1])),
+            z_max=profile.build_volume.z_max_mm - float(origin[2]),
+            lift_mm=gc.park_lift_mm,
+            retract_mm=gc.park_retract_mm,
+            speed_mm_s=gc.travel_speed_mm_s,
+            retract_speed_mm_s=ex.retract_speed_mm_s,
+        ),
+    }
+
+
 def read_items(
     source: Any, profile: MachineProfile, model: MachineModel, **reader_options: Any
-) -> Iterator[Any]:
-    """``read_program`` with the reader's idea of "home" set to this machine's home point."""
+) -> Iterator[ProgramItem]:
+    """``read_program`` with this machine's settings (home point, retraction, park).
+
+    ``reader_options`` go to ``read_program`` (e.g. ``placement``).
+    """
     from cdprhost.gcode import read_program
 
-    home = home_position(profile, model) - np.asarray(profile.build_volume.bed_origin, dtype=float)
-    return read_program(source, home_position=tuple(float(v) for v in home), **reader_options)
+    return read_program(source, **{**reader_settings(profile, model), **reader_options})
 
 
 def plan_program(
@@ -176,8 +230,9 @@ def plan_program(
     """Planned moves (:class:`PlannedMoves`) and commands of a program, in order."""
     pp = ProgramPlanner(profile, model, **options)
     for item in items:
-        if isinstance(item, MoveChunk):
-            yield from pp.moves(item)[1]
-        else:
-            yield from pp.command(item)
+        match item:
+            case MoveChunk():
+                yield from pp.moves(item)[1]
+            case _:
+                yield from pp.command(item)
     yield from pp.finish()

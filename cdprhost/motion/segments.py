@@ -32,7 +32,7 @@ MIN_PHASE_MM = 1e-4
 
 
 @dataclass(frozen=True)
-class SegmentBatch:
+class PlannedSegments:
     """Consecutive segments as arrays; ``ramp`` is what firmware_protocol codes as code / 255."""
 
     steps_abs: np.ndarray  # (n, 4) int64: absolute steps after the segment (3 sliders, extruder)
@@ -50,9 +50,9 @@ class SegmentBatch:
     def __len__(self) -> int:
         return int(self.ticks.shape[0])
 
-    def take(self, index: slice) -> SegmentBatch:
+    def take(self, index: slice) -> PlannedSegments:
         """A contiguous run of segments (its ``delta`` stays valid: it is relative to the previous one)."""
-        return SegmentBatch(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
+        return PlannedSegments(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
 
 
 @dataclass(frozen=True)
@@ -176,7 +176,7 @@ def segment_moves(
     *,
     e_steps_per_mm: float,
     clock_hz: float = DEFAULT_CLOCK_HZ,
-) -> tuple[SegmentBatch, SegmentState]:
+) -> tuple[PlannedSegments, SegmentState]:
     """Cut planned moves into joint-space segments; returns the batch and the new state."""
     batch, state, _ = segment_moves_ends(
         planned, model, state, e_steps_per_mm=e_steps_per_mm, clock_hz=clock_hz
@@ -191,7 +191,7 @@ def segment_moves_ends(
     *,
     e_steps_per_mm: float,
     clock_hz: float = DEFAULT_CLOCK_HZ,
-) -> tuple[SegmentBatch, SegmentState, np.ndarray]:
+) -> tuple[PlannedSegments, SegmentState, np.ndarray]:
     """:func:`segment_moves`, plus per planned move the number of segments up to its end."""
     pc = piece_positions(planned)
     owner, ends = pc.owner, pc.ends
@@ -228,7 +228,7 @@ def segment_moves_ends(
     delta = np.diff(steps, axis=0, prepend=state.steps[None, :])
     with np.errstate(invalid="ignore", divide="ignore"):
         ramp = np.where(v_begin + v > 0, v_begin / (v_begin + v), 0.5)
-    batch = SegmentBatch(
+    batch = PlannedSegments(
         steps,
         delta,
         ticks,
@@ -255,8 +255,8 @@ def segment_moves_ends(
 
 
 def _absorb_empty(
-    batch: SegmentBatch, prev_steps: np.ndarray, ends: np.ndarray
-) -> tuple[SegmentBatch, np.ndarray]:
+    batch: PlannedSegments, prev_steps: np.ndarray, ends: np.ndarray
+) -> tuple[PlannedSegments, np.ndarray]:
     """Segments shorter than one tick merged into the next one (the device needs >= 1 tick).
 
     Rounded absolute times make such a segment's time part of the next one already;
@@ -269,7 +269,7 @@ def _absorb_empty(
     ticks[-1] = max(int(ticks[-1]), 1)
     steps = batch.steps_abs[keep]
     delta = np.diff(steps, axis=0, prepend=prev_steps[None, :])
-    kept = SegmentBatch(
+    kept = PlannedSegments(
         steps,
         delta,
         ticks,
@@ -303,10 +303,10 @@ class Segmenter:
         self.state = SegmentState.at_home(model, self.home_sliders)
         self.segments = 0
 
-    def __call__(self, planned: PlannedMoves) -> SegmentBatch:
+    def __call__(self, planned: PlannedMoves) -> PlannedSegments:
         return self.segment_block(planned)[0]
 
-    def segment_block(self, planned: PlannedMoves) -> tuple[SegmentBatch, np.ndarray]:
+    def segment_block(self, planned: PlannedMoves) -> tuple[PlannedSegments, np.ndarray]:
         """The batch and, per planned move, the number of segments up to its end."""
         batch, self.state, move_end = segment_moves_ends(
             planned,

@@ -14,6 +14,8 @@ import numpy as np
 
 from cdprhost.motion.moves import MoveBlock
 
+Arr = np.ndarray | float
+
 
 @dataclass(frozen=True)
 class PlannedMoves:
@@ -82,7 +84,7 @@ _ARRAYS = (
 )
 
 
-def move_durations(length, accel, v_start, v_cruise, v_end) -> np.ndarray:
+def move_durations(length: Arr, accel: Arr, v_start: Arr, v_cruise: Arr, v_end: Arr) -> np.ndarray:
     d_acc = np.clip((v_cruise**2 - v_start**2) / (2.0 * accel), 0.0, length)
     d_dec = np.clip((v_cruise**2 - v_end**2) / (2.0 * accel), 0.0, length - d_acc)
     cruise = np.maximum(length - d_acc - d_dec, 0.0)
@@ -93,7 +95,14 @@ def move_durations(length, accel, v_start, v_cruise, v_end) -> np.ndarray:
     )
 
 
-def time_at(x, length, accel, v_start, v_cruise, v_end) -> tuple[np.ndarray, np.ndarray]:
+def time_at(
+    x: Arr,
+    length: Arr,
+    accel: Arr,
+    v_start: Arr,
+    v_cruise: Arr,
+    v_end: Arr,
+) -> tuple[np.ndarray, np.ndarray]:
     """(t, v) at path position x (0 <= x <= length) of a trapezoid, vectorised."""
     d_acc = np.clip((v_cruise**2 - v_start**2) / (2.0 * accel), 0.0, length)
     d_dec = np.clip((v_cruise**2 - v_end**2) / (2.0 * accel), 0.0, length - d_acc)

@@ -9,16 +9,33 @@ propagate unchanged.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from cdprhost.gcode.items import LayerChange, MoveChunk, SetTemperature, Unknown
+from cdprhost.gcode.errors import GcodeError
+from cdprhost.gcode.items import (
+    ColdExtrusion,
+    IgnoredParameters,
+    LayerChange,
+    MoveChunk,
+    ObjectDefine,
+    ObjectStart,
+    ProgramItem,
+    SetTemperature,
+    UnknownCommand,
+)
+from cdprhost.gcode.placement import PartExtent
+from cdprhost.gcode.slicer_header import read_slicer_figures
+from cdprhost.gcode.summary import ProgramSummary
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.moves import MoveBlock
-from cdprhost.motion.program import MarkedMoves, ProgramPlanner, read_items
+from cdprhost.motion.prepared import Prepared, Setup, prepare
+from cdprhost.motion.program import MarkedMoves, ProgramPlanner
 from cdprhost.preflight.extrusion import (
     ExtrusionLimits,
     cold_detail,
@@ -26,7 +43,16 @@ from cdprhost.preflight.extrusion import (
     temperature_problem,
     volumetric_flow,
 )
-from cdprhost.preflight.report import BoxAccumulator, NoteLog, PreflightReport, ViolationLog
+from cdprhost.preflight.placement import placement_report
+from cdprhost.preflight.report import (
+    BoxAccumulator,
+    NoteLog,
+    PreflightReport,
+    RetargetReport,
+    SlicerFigures,
+    ViolationLog,
+    WarningLog,
+)
 from cdprhost.preflight.workspace import PathChecker
 from cdprhost.profile.models import MachineProfile
 
@@ -41,9 +67,11 @@ class Preflight:
         *,
         source: str = "<program>",
         limits: ExtrusionLimits | None = None,
+        strict: bool = False,
         **planner_options: Any,
     ):
         self.profile = profile
+        self.strict = strict
         self.model = model or MachineModel.from_profile(profile)
         self.source = source
         self.limits = limits or ExtrusionLimits.from_profile(profile)
@@ -53,49 +81,75 @@ class Preflight:
         self.checker = PathChecker(self.model)
         self.violations = ViolationLog()
         self.notes = NoteLog()
+        self.warnings = WarningLog()
+        self.summary = ProgramSummary()
+        self.objects: dict[str, None] = {}
+        self.extent = PartExtent()
+        self.cold_allowed = False
         self.motion_box = BoxAccumulator()
         self.print_box = BoxAccumulator()
         self.motion_box.add(self.planner.home[None, :])
         self.hotend_c: float | None = None
-        self.moves = 0
         self.layers = 0
-        self.filament_mm = 0.0
         self.slowed = 0
         self.max_flow = 0.0
 
-    def add(self, item: Any) -> None:
-        if isinstance(item, MoveChunk):
-            self._chunk(item)
-            return
-        if isinstance(item, SetTemperature):
-            problem = temperature_problem(item, self.limits)
-            if problem:
-                self.violations.add(item.line, "temperature", self.planner.position, problem)
-            if item.heater == "hotend":
-                self.hotend_c = item.target_c
-        elif isinstance(item, Unknown):
-            if item.harmless:
-                self.notes.add(item.line, item.word, getattr(item, "text", ""))
-            else:
-                text = f" ({item.text})" if getattr(item, "text", "") else ""
-                self.violations.add(
+    def add(self, item: ProgramItem) -> None:
+        self.summary.add(item)
+        match item:
+            case MoveChunk():
+                self._chunk(item)
+                return
+            case SetTemperature():
+                problem = temperature_problem(item, self.limits)
+                if problem:
+                    self.violations.add(item.line, "temperature", self.planner.position, problem)
+                if item.heater == "hotend":
+                    self.hotend_c = item.target_c
+            case UnknownCommand(harmless=True):
+                self.notes.add(item.line, item.word, item.text)
+            case UnknownCommand():
+                self._unexpected(
                     item.line,
+                    item.word,
                     "unknown_command",
-                    self.planner.position,
-                    f"{item.word} is not supported and may change what is printed{text}",
+                    item.text,
+                    f"{item.word} is not a command this machine knows; "
+                    + ("refused (--strict)" if self.strict else "skipped when printing"),
                 )
-        elif isinstance(item, LayerChange):
-            self.layers = max(self.layers, item.index + 1)
+            case IgnoredParameters():
+                self._unexpected(
+                    item.line,
+                    item.word,
+                    "ignored_parameters",
+                    item.letters,
+                    f"{item.letters} on {item.word} means nothing to this machine: ignored",
+                )
+            case ColdExtrusion(allow=allow, min_temp_c=min_temp):
+                if allow is not None:
+                    self.cold_allowed = allow
+                if min_temp is not None:
+                    self.limits = replace(self.limits, min_extrude_temp_c=min_temp)
+            case ObjectDefine(name=name) | ObjectStart(name=name):
+                self.objects.setdefault(name, None)
+            case LayerChange(index=index):
+                self.layers = max(self.layers, index + 1)
+            case _:
+                pass
         self._planned(self.planner.command(item))
 
+    def _unexpected(self, line: int, word: str, kind: str, text: str, detail: str) -> None:
+        """Unknown commands and ignored parameters: warnings, or errors with ``strict``."""
+        if self.strict:
+            self.violations.add(line, kind, self.planner.position, detail)
+        else:
+            self.warnings.add(line, word, kind, text)
+
     def _chunk(self, chunk: MoveChunk) -> None:
-        n = len(chunk)
-        if not n:
+        if not len(chunk):
             return
-        self.moves += n
-        de = np.asarray(chunk.e_end) - np.asarray(chunk.e_start)
-        self.filament_mm += float(de[de > 0].sum())
         self.layers = max(self.layers, int(np.max(chunk.layer)) + 1)
+        self.extent.add(chunk)
         block, outputs = self.planner.moves(chunk)
         if len(block):
             self._check_block(block)
@@ -104,7 +158,10 @@ class Preflight:
     def _check_block(self, block: MoveBlock) -> None:
         for f in self.checker.check(block):
             self.violations.add(int(block.line[f.move]), f.rule, f.point, f.detail)
-        cold = cold_extrusion(block, self.hotend_c, self.limits)
+        for rule, n in self.checker.counted.items():
+            self.violations.count(rule, n)
+        self.checker.counted.clear()
+        cold = None if self.cold_allowed else cold_extrusion(block, self.hotend_c, self.limits)
         if cold is not None:
             first, count = cold
             self.violations.add(
@@ -121,7 +178,7 @@ class Preflight:
 
     def _planned(self, outputs: list[Any]) -> None:
         for marked in outputs:
-            if not isinstance(marked, MarkedMoves):
+            if not isinstance(marked, MarkedMoves):  # a command: checked when it was added
                 continue
             out = marked.planned
             self.slowed += int(np.count_nonzero(out.module_limited))
@@ -138,6 +195,14 @@ class Preflight:
                 )
 
     def report(self) -> PreflightReport:
+        """The report; raises `GcodeError` (bad input) for a program without moves."""
+        if self.summary.moves == 0:
+            what = (
+                "the file has no commands (it is empty, or only comments and settings)"
+                if self.summary.last_line == 0
+                else f"only commands up to line {self.summary.last_line}"
+            )
+            raise GcodeError(self.source, 0, 0, f"no moves, nothing to print: {what}")
         self._planned(self.planner.finish())
         origin = self.planner.origin
         return PreflightReport(
@@ -148,9 +213,14 @@ class Preflight:
             violations_total=self.violations.total,
             violations_by_rule=dict(self.violations.counts),
             notes=self.notes.ordered(),
-            moves=self.moves,
+            warnings=self.warnings.ordered(),
+            warnings_total=self.warnings.total,
+            strict=self.strict,
+            objects=list(self.objects),
+            moves=self.summary.moves,
             layers=self.layers,
-            filament_mm=round(self.filament_mm, 4),
+            filament_mm=round(self.summary.filament_mm, 4),
+            filament_fed_mm=round(self.summary.filament_fed_mm, 4),
             estimated_time_s=round(self.planner.time, 3),
             moves_slowed_by_modules=self.slowed,
             moves_sampled_densely=self.checker.sampled_moves,
@@ -163,7 +233,7 @@ class Preflight:
 
 
 def preflight_items(
-    items: Iterable[Any],
+    items: Iterable[ProgramItem],
     profile: MachineProfile,
     model: MachineModel | None = None,
     *,
@@ -176,14 +246,65 @@ def preflight_items(
     return pf.report()
 
 
+WORKSPACE_RULES = ("build_volume", "tension", "slider_travel")
+
+
 def preflight(
     path: str | os.PathLike[str],
     profile: MachineProfile,
     model: MachineModel | None = None,
+    *,
+    setup: Setup | None = None,
     **options: Any,
 ) -> PreflightReport:
-    """Read and check a G-code file; raises `GcodeError` (exit 2) on malformed input."""
-    model = model or MachineModel.from_profile(profile)
-    return preflight_items(
-        read_items(path, profile, model), profile, model, source=os.fspath(path), **options
+    """Read and check a G-code file (placed, retargeted, objects cancelled as ``setup``
+    says); raises `GcodeError` (exit 2) on malformed input."""
+    return preflight_prepared(prepare(path, profile, model, setup), **options)
+
+
+def preflight_prepared(
+    prepared: Prepared, items: Iterable[ProgramItem] | None = None, **options: Any
+) -> PreflightReport:
+    """Check ``prepared`` (``items``: instead of ``prepared.items()``, e.g. resumed from a
+    layer); the report adds the placement, what --retarget replaced and the slicer's figures."""
+    pf = Preflight(prepared.profile, prepared.model, source=prepared.path, **options)
+    for item in prepared.items() if items is None else items:
+        pf.add(item)
+    report = pf.report()
+    advise = any(report.violations_by_rule.get(rule) for rule in WORKSPACE_RULES)
+    report.placement = placement_report(
+        prepared.model, pf.extent, pf.planner.origin, prepared.placement, advise=advise
+    )
+    if prepared.plan is not None:
+        plan = prepared.plan
+        report.retarget = RetargetReport(
+            start_lines=plan.start,
+            end_lines=None
+            if plan.end is None
+            else (plan.end[0], max(plan.end[0], plan.file_lines)),
+            found_by=plan.found_by,
+            replaced=list(plan.replaced),
+            hotend_c=plan.hotend_c
+            if plan.hotend_c is not None
+            else prepared.profile.gcode.hotend_c,
+            bed_c=plan.bed_c if plan.bed_c is not None else prepared.profile.gcode.bed_c,
+        )
+    report.cancelled_objects = list(prepared.setup.cancel_objects)
+    report.slicer = slicer_figures(prepared.path, prepared.profile)
+    return report
+
+
+def slicer_figures(path: str, profile: MachineProfile) -> SlicerFigures | None:
+    """The slicer's own figures from the file's comments; a volume (UltiGCode) in mm of
+    this machine's filament."""
+    fig = read_slicer_figures(path)
+    if fig is None:
+        return None
+    filament = fig.filament_mm
+    if filament is None and fig.filament_mm3 is not None:
+        filament = fig.filament_mm3 / (math.pi * profile.extruder.filament_diameter_mm**2 / 4.0)
+    return SlicerFigures(
+        slicer=fig.slicer,
+        filament_mm=None if filament is None else round(filament, 3),
+        time_s=fig.time_s,
     )

@@ -16,16 +16,21 @@ failing sample is reported. Points are in the machine frame.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tension_bounds
-from cdprhost.kinematics.workspace import build_volume_excess, triangle_excess
+from cdprhost.kinematics.workspace import RULES, build_volume_excess, triangle_excess
 from cdprhost.motion.moves import MoveBlock
 
 SAMPLE_MM = 1.0
+#: sample points checked at once (bounds memory)
+MAX_SAMPLES_PER_BATCH = 1 << 18
+#: failing moves per rule and batch described in full; the others are counted (`counted`)
+DETAILED_PER_RULE = 256
 #: sliders closer than this to a travel limit at a checked point send the move to dense sampling
 SLIDER_MARGIN_MM = 0.5
 
@@ -63,7 +68,7 @@ def _certify_grid(model: MachineModel, h: float) -> tuple[bool | None, float]:
     margin = np.where(np.isfinite(margin), margin, -np.inf)
     grad = np.where(np.isfinite(grad), grad, np.inf)
 
-    def corners(a: np.ndarray, op) -> np.ndarray:
+    def corners(a: np.ndarray, op: np.ufunc) -> np.ndarray:
         sx, sy, sz = (n - 1 for n in a.shape)
         return op.reduce(
             [a[i : sx + i, j : sy + j, k : sz + k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
@@ -112,6 +117,7 @@ class PathChecker:
             shortest if shortest > 0 else 0.0
         )  # 0: every move near s_min gets sampled
         self.sampled_moves = 0
+        self.counted: Counter[str] = Counter()  # failing moves beyond the detailed ones
 
     def _volume_excess(self, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
         """Build-volume excess (<= 0 inside), as ``build_volume_excess`` but column-wise."""
@@ -157,31 +163,97 @@ class PathChecker:
         idx = np.flatnonzero(suspect)
         return self._sample(block, idx) if idx.size else []
 
+    def _exit_fraction(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+        """Per move, the fraction of its length where it first leaves the build volume
+        (0: it starts outside; inf: it never leaves). The volume is an intersection of
+        half-spaces, so this is exact."""
+        lim = self.model.limits
+        inradius = lim.build_side / (2.0 * np.sqrt(3.0))
+        cx, sy = np.sqrt(3.0) / 2.0, 0.5
+        normals = np.array(
+            [[0.0, -1.0, 0.0], [cx, sy, 0.0], [-cx, sy, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]]
+        )
+        offsets = np.array([inradius, inradius, inradius, -lim.z_min, lim.z_max])
+        a = start @ normals.T - offsets  # <= 0 inside, per face
+        b = (end - start) @ normals.T
+        outside = (a > 0).any(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(b > 0, -a / np.where(b > 0, b, 1.0), np.inf)
+        return np.where(outside, 0.0, t.min(axis=1))
+
     def _sample(self, block: MoveBlock, idx: np.ndarray) -> list[PathFailure]:
-        """Dense check of the moves ``idx``: the first failing sample of each."""
+        """Dense check of the moves ``idx``: the first failing sample of each.
+
+        Samples stop one step past the point where a move leaves the build volume
+        (the first failure is there or before), so the cost is bounded by the
+        volume's size, whatever the coordinates; they are checked in batches.
+        """
         self.sampled_moves += int(idx.size)
         start, end = block.start[idx], block.end[idx]
-        count = np.maximum(np.ceil(block.distance[idx] / SAMPLE_MM).astype(np.int64), 1) + 1
-        owner = np.repeat(np.arange(idx.size), count)
-        first = np.cumsum(count) - count
-        frac = (np.arange(owner.size) - first[owner]) / (count - 1)[owner]
+        steps = np.maximum(np.ceil(block.distance[idx] / SAMPLE_MM), 1.0)
+        exit_step = np.floor(self._exit_fraction(start, end) * steps) + 1.0
+        count = (np.minimum(steps, exit_step) + 1).astype(np.int64)
+        failures: list[PathFailure] = []
+        lo = 0
+        while lo < idx.size:
+            total = np.cumsum(count[lo:])
+            hi = lo + max(int(np.searchsorted(total, MAX_SAMPLES_PER_BATCH, side="right")), 1)
+            failures += self._sample_batch(block, idx, lo, hi, steps, count)
+            lo = hi
+        return failures
+
+    def _sample_batch(
+        self,
+        block: MoveBlock,
+        idx: np.ndarray,
+        lo: int,
+        hi: int,
+        steps: np.ndarray,
+        count: np.ndarray,
+    ) -> list[PathFailure]:
+        start, end = block.start[idx[lo:hi]], block.end[idx[lo:hi]]
+        cnt = count[lo:hi]
+        owner = np.repeat(np.arange(hi - lo), cnt)
+        first = np.cumsum(cnt) - cnt
+        frac = (np.arange(owner.size) - first[owner]) / steps[lo:hi][owner]
         pts = start[owner] + frac[:, None] * (end - start)[owner]
         report = self.model.check(pts)
         bad = np.flatnonzero(~report.ok)
         if not bad.size:
             return []
+        # per failing move: its first failing sample, and the worst sample of that rule
         owners, first_bad = np.unique(owner[bad], return_index=True)
+        first = bad[first_bad]
+        rule = report.rule[first]
+        same = bad[report.rule[bad] == rule[np.searchsorted(owners, owner[bad])]]
+        key = np.lexsort((-report.excess[same], owner[same]))  # by owner, worst first
+        ordered = same[key]
+        starts = np.flatnonzero(np.r_[True, owner[ordered][1:] != owner[ordered][:-1]])
+        worst = ordered[starts]
+        # details for the first moves of each rule; the others are only counted
+        rank = np.zeros(rule.size, dtype=np.int64)
+        for r in np.unique(rule).tolist():
+            sel = rule == r
+            rank[sel] = np.arange(int(sel.sum()))
+        detailed = rank < DETAILED_PER_RULE
+        for r, n in zip(*np.unique(rule[~detailed], return_counts=True)):
+            self.counted[RULES[int(r)]] += int(n)
         failures = []
-        for o, f in zip(owners, first_bad):
-            i = int(bad[f])
-            same = bad[(owner[bad] == o) & (report.rule[bad] == report.rule[i])]
-            worst = int(same[np.argmax(report.excess[same])])
-            detail = report.describe(worst, self.model.limits)
-            if worst != i:
+        lim = self.model.limits
+        for k in np.flatnonzero(detailed).tolist():
+            o, i, w = int(owners[k]), int(first[k]), int(worst[k])
+            worst_point, detail = pts[w], report.describe(w, lim)
+            if report.rule_name(i) == "build_volume":  # convex: the worst is an end point
+                ends = np.vstack([start[o], end[o]])
+                excess = build_volume_excess(ends, lim.build_side, lim.z_min, lim.z_max)
+                if excess.max() > report.excess[w]:
+                    worst_point = ends[int(np.argmax(excess))]
+                    detail = f"outside the build volume by {excess.max():.3g} mm"
+            if not np.array_equal(worst_point, pts[i]):
                 detail += " at worst, at ({:.2f}, {:.2f}, {:.2f}); it first fails here".format(
-                    *pts[worst]
+                    *worst_point
                 )
             failures.append(
-                PathFailure(int(idx[o]), str(report.rule_name(i)), pts[i].copy(), detail)
+                PathFailure(int(idx[lo + o]), str(report.rule_name(i)), pts[i].copy(), detail)
             )
         return failures

@@ -118,6 +118,77 @@ class Extruder(_Strict):
     filament_diameter_mm: Positive = 1.75
     max_velocity_mm_s: Positive = 120.0
     max_accel_mm_s2: Positive = 5000.0
+    # firmware retraction (G10/G11; a file may change it with M207/M208 or SET_RETRACTION)
+    retract_mm: NonNegative = Field(default=1.0, description="G10 pulls this much back (mm)")
+    retract_speed_mm_s: Positive = 35.0
+    unretract_extra_mm: NonNegative = Field(
+        default=0.0, description="G11 pushes the retraction back plus this much (mm)"
+    )
+    unretract_speed_mm_s: Positive = 35.0
+
+
+DEFAULT_START_GCODE = """G28 ; home: the sliders to their endstops
+M140 S{bed_c} ; bed
+M104 S{hotend_c} ; hotend
+M190 S{bed_c}
+M109 S{hotend_c}
+G21
+G90
+M83
+G92 E0
+"""
+DEFAULT_END_GCODE = """M104 S0 ; hotend off
+M140 S0 ; bed off
+M107
+G91
+G1 Z10 F600 ; lift
+G90
+M84
+"""
+
+
+class PrintGcode(_Strict):
+    """What the machine does around a print, and where M600 parks.
+
+    ``start``/``end`` replace a file's own start and end blocks (``--retarget``) and
+    go into the slicer profiles (``profile export-slicer``). ``{hotend_c}`` and
+    ``{bed_c}`` are filled with the file's first temperatures (``--retarget``) or
+    the slicer's placeholders (export).
+    """
+
+    start: str = DEFAULT_START_GCODE
+    end: str = DEFAULT_END_GCODE
+    hotend_c: Annotated[float, Field(ge=0, le=400, allow_inf_nan=False)] = Field(
+        default=210.0, description="{hotend_c} when the file names no temperature"
+    )
+    bed_c: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] = Field(
+        default=60.0, description="{bed_c} when the file names no temperature"
+    )
+    park_xy_mm: tuple[Finite, Finite] = Field(
+        default=(0.0, -30.0), description="M600 park point, machine frame (mm)"
+    )
+    park_lift_mm: NonNegative = Field(default=10.0, description="M600 lifts this much first")
+    park_retract_mm: NonNegative = Field(default=2.0, description="M600 retracts this much")
+    travel_speed_mm_s: Positive = Field(default=50.0, description="park and placement travels")
+
+    @field_validator("start", "end")
+    @classmethod
+    def _placeholders(cls, text: str) -> str:
+        try:
+            text.format(hotend_c=0, bed_c=0)
+        except (KeyError, IndexError, ValueError) as exc:
+            raise ValueError(
+                f"bad placeholder ({exc}): only {{hotend_c}} and {{bed_c}} are filled in; "
+                "write {{ and }} for literal braces"
+            ) from None
+        return text
+
+    def filled(self, text: str, hotend_c: float | None, bed_c: float | None) -> str:
+        """``text`` (``start`` or ``end``) with the temperatures filled in."""
+        return text.format(
+            hotend_c=f"{self.hotend_c if hotend_c is None else hotend_c:g}",
+            bed_c=f"{self.bed_c if bed_c is None else bed_c:g}",
+        )
 
 
 class Heaters(_Strict):
@@ -141,9 +212,11 @@ class Park(_Strict):
 
 
 class Serial(_Strict):
-    baud: Annotated[int, Field(gt=0)] = 250000
+    baud: Annotated[int, Field(ge=50, le=10_000_000)] = 250000
     port: str | None = None
-    timeout_s: Positive = 2.0
+    timeout_s: Annotated[float, Field(ge=0.1, le=600, allow_inf_nan=False)] = Field(
+        default=2.0, description="seconds without a word from the device before giving up"
+    )
 
 
 class EffectEntry(BaseModel):
@@ -168,6 +241,7 @@ class MachineProfile(_Strict):
     heaters: Heaters = Heaters()
     park: Park = Park()
     serial: Serial = Serial()
+    gcode: PrintGcode = PrintGcode()
     effects: dict[str, dict[str, Any]] = Field(default_factory=dict)
     calibration: dict[str, Any] = Field(
         default_factory=dict, description="provenance of a calibrated profile"
@@ -190,9 +264,11 @@ class MachineProfile(_Strict):
 
     def with_geometry(self, outlets: Any, initial_lengths: Any, **updates: Any) -> MachineProfile:
         """A copy with new kinematic parameters (used by calibration)."""
-        geometry = Geometry(
-            outlets=tuple(tuple(float(v) for v in row) for row in np.asarray(outlets)),
-            initial_lengths=tuple(float(v) for v in np.asarray(initial_lengths)),
+        geometry = Geometry.model_validate(
+            {
+                "outlets": np.asarray(outlets, dtype=float).tolist(),
+                "initial_lengths": np.asarray(initial_lengths, dtype=float).tolist(),
+            }
         )
         data = self.model_dump()
         data["geometry"] = geometry.model_dump()

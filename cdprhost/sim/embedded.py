@@ -6,6 +6,8 @@ link is pumped (as fast as the CPU allows, or paced to ``speedup`` x real time).
 
 from __future__ import annotations
 
+from typing import Any
+
 from cdprhost.link.host_link import HostLink
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
@@ -18,10 +20,10 @@ def open_embedded(
     config: SimConfig | None = None,
     faults: FaultSpec | str | None = None,
     speedup: float | None = None,
-    observer=None,
+    observer: Any = None,
     baud: int | None = DEFAULT_BAUD,
     timeout_s: float = 2.0,
-    **kwargs,
+    **kwargs: Any,
 ) -> HostLink:
     """A HostLink to a simulated device in this process (no pty, no threads).
 

@@ -9,6 +9,8 @@ sign where the sign is not physical): EA 15-25 kN; |eps| 0.3-0.8 %; half-lash
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from cdprhost.calibration.fitting import Observations
@@ -33,7 +35,7 @@ def random_effect_vector(name: str, rng: np.random.Generator) -> np.ndarray:
     mag = rng.uniform(lo, hi, 3)
     if name == "backlash":
         return mag
-    return mag * rng.choice([-1.0, 1.0], 3)
+    return np.asarray(mag * rng.choice([-1.0, 1.0], 3))
 
 
 def measurement_tour(
@@ -72,18 +74,30 @@ def session_times(
 def hidden_truth(
     nominal: MachineModel,
     rng: np.random.Generator,
-    effect: str | Effect | None,
-    vector: np.ndarray | None = None,
+    effect: str | Effect | Sequence[str | Effect] | None,
+    vector: np.ndarray | Sequence[np.ndarray | None] | None = None,
     geometry_mm: float = 2.0,
 ) -> MachineModel:
     """The true machine: geometry off the nominal by up to ``geometry_mm`` per parameter,
-    plus one hidden effect (a catalogue name, or any Effect object outside the catalogue)."""
+    plus hidden effects: a catalogue name, any Effect object outside the catalogue, or a
+    sequence of them (several at once); ``vector`` gives their vectors (default: random,
+    realistic magnitudes)."""
     geometry = perturbed_geometry(nominal.geometry, rng, geometry_mm)
     if effect is None:
         return nominal.with_geometry(geometry, EffectChain())
-    obj = CATALOGUE[effect] if isinstance(effect, str) else effect
-    vec = random_effect_vector(obj.name, rng) if vector is None else np.asarray(vector, float)
-    return nominal.with_geometry(geometry, EffectChain((obj,), (vec,)))
+    effects: list[str | Effect] = [effect] if isinstance(effect, (str, Effect)) else list(effect)
+    several = not isinstance(effect, (str, Effect))
+    vectors: list[np.ndarray | None] = (
+        [None if v is None else np.asarray(v, float) for v in vector]
+        if several and vector is not None
+        else [None if vector is None else np.asarray(vector, float)] * len(effects)
+    )
+    objs: list[Effect] = [CATALOGUE[e] if isinstance(e, str) else e for e in effects]
+    vecs = [
+        random_effect_vector(o.name, rng) if v is None else np.asarray(v, float)
+        for o, v in zip(objs, vectors)
+    ]
+    return nominal.with_geometry(geometry, EffectChain(tuple(objs), tuple(vecs)))
 
 
 def simulate_session(

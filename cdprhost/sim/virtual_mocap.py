@@ -7,7 +7,10 @@ has stopped and the queue has stayed empty for its settle time
 kinematics with its effects: backlash needs each module's last direction of
 motion, drift the time) and writes a motion-capture take of that point into the
 mocap folder, an OptiTrack Motive CSV (in metres) by default, with the noise of a
-real system. Takes use the synthetic session layout's markers
+real system (:data:`REALISTIC`: autocorrelated jitter of 0.1 mm per marker at 120 fps,
+a settling swing after each move, runs of gaps; ``creep_probability`` of a slow creep).
+``creep_takes`` (take numbers, from 1) creep by ``creep_mm`` for sure. ``crept`` records,
+per take written, whether it crept. Takes use the synthetic session layout's markers
 (:mod:`cdprhost.sim.synthetic_session`); :func:`mocap_config` is the matching
 ``[mocap]`` configuration. ``make_observer(None, None)`` is None (no observer).
 """
@@ -16,20 +19,38 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Collection
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.calibration.readers import EXTENSIONS
+from cdprhost.calibration.session import SessionConfig
 from cdprhost.effects.base import MotionContext
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import load_profile
+from cdprhost.sim.mocap_noise import MocapNoise, vary
 from cdprhost.sim.synthetic_session import (
     DEFAULT_BASE_MARKERS,
     DEFAULT_EFFECTOR_MARKERS,
     synthesize_take,
     synthetic_config,
+)
+
+#: What the virtual motion capture adds by default: a good but not perfect system.
+REALISTIC = MocapNoise(
+    jitter_mm=0.1,
+    correlation_s=0.015,
+    marker_variation=0.3,
+    settle_mm=0.4,
+    settle_hz=3.0,
+    settle_decay_s=0.2,
+    gap_fraction=0.02,
+    gap_run_frames=12.0,
 )
 
 
@@ -47,19 +68,28 @@ class VirtualMocap:
         truth: MachineModel,
         directory: str | os.PathLike[str],
         *,
-        noise_mm: float = 0.05,
-        jitter_mm: float = 0.02,
-        n_frames: int = 60,
+        realism: MocapNoise | None = None,
+        rate_hz: float = 120.0,
+        duration_s: float = 2.0,
+        creep_probability: float = 0.0,
+        creep_takes: Collection[int] = (),
+        creep_mm: float = 0.3,
+        noise_mm: float = 0.0,
         seed: int | None = 0,
         format: str = "motive-csv",
-        writer_options: dict | None = None,
+        writer_options: dict[str, Any] | None = None,
     ):
         self.truth = truth
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
+        self.realism = REALISTIC if realism is None else realism
+        self.rate_hz = float(rate_hz)
+        self.n_frames = max(int(round(duration_s * rate_hz)), 2)
+        self.creep_probability = float(creep_probability)
+        self.creep_takes = frozenset(int(n) for n in creep_takes)
+        self.creep_mm = float(creep_mm)
         self.noise_mm = float(noise_mm)
-        self.jitter_mm = float(jitter_mm)
-        self.n_frames = int(n_frames)
+        self.crept: list[bool] = []
         self.format = format
         default_options = {"units": "Meters", "version": "1.23"} if format == "motive-csv" else {}
         self.writer_options = dict(default_options if writer_options is None else writer_options)
@@ -69,16 +99,20 @@ class VirtualMocap:
         self._dirs = np.ones(3)
         self.count = sum(1 for p in self.directory.glob("take-*") if not p.name.startswith("."))
         self.written: list[Path] = []
-        self._record: list[dict] | None = None
+        self._record: Any = None
 
-    def attach_record(self, record: list[dict]) -> None:
-        """Read last-motion directions from the device's (growing) record of executed segments."""
+    def attach_record(self, record: Any) -> None:
+        """Read last-motion directions from the device's (growing) record of executed segments
+        (a ``SegmentRecord``: its ``steps(last=n)`` array, or a list of entries)."""
         self._record = record
 
     def _record_directions(self, window: int = 4096) -> np.ndarray | None:
         if not self._record:
             return None
-        steps = np.array([e["steps"][:3] for e in self._record[-window:]], dtype=np.int64)
+        if hasattr(self._record, "steps"):
+            steps = self._record.steps(last=window)[:, :3]
+        else:
+            steps = np.array([e["steps"][:3] for e in self._record[-window:]], dtype=np.int64)
         moves = np.diff(steps, axis=0)
         dirs = self._dirs.copy()
         for k in range(3):  # three columns; the record window is vectorised
@@ -87,14 +121,18 @@ class VirtualMocap:
                 dirs[k] = np.sign(moves[nz[-1], k])
         return dirs
 
-    def effector_point(self, steps, device_time_s: float, directions=None) -> np.ndarray:
+    def effector_point(
+        self, steps: ArrayLike, device_time_s: float, directions: ArrayLike | None = None
+    ) -> np.ndarray:
         """Where the true effector is for absolute module steps (the first three of ``steps``)."""
         n = np.asarray(steps, dtype=float)[:3]
         dirs = self._dirs if directions is None else np.asarray(directions, dtype=float)[:3]
         ctx = MotionContext(t_s=np.array([float(device_time_s)]), directions=dirs[None, :])
-        return self.truth.fk(self.truth.sliders_from_steps(n)[None, :], ctx)[0]
+        return np.asarray(self.truth.fk(self.truth.sliders_from_steps(n)[None, :], ctx)[0])
 
-    def on_settled(self, steps, device_time_s: float, directions=None) -> Path | None:
+    def on_settled(
+        self, steps: ArrayLike, device_time_s: float, directions: ArrayLike | None = None
+    ) -> Path | None:
         """Write a take of the settled effector; returns its path (None if the cables cannot meet)."""
         with self._lock:
             n = np.asarray(steps, dtype=np.int64)[:3]
@@ -110,11 +148,16 @@ class VirtualMocap:
                 return None
             self.count += 1
             path = self.directory / f"take-{self.count:04d}{EXTENSIONS[self.format]}"
+            noise = vary(self.realism, self._rng, creep_probability=self.creep_probability)
+            if self.count in self.creep_takes:
+                noise = replace(noise, creep_mm=self.creep_mm)
+            self.crept.append(noise.creep_mm > 0)
             synthesize_take(
                 point,
                 noise_mm=self.noise_mm,
-                jitter_mm=self.jitter_mm,
+                realism=noise,
                 n_frames=self.n_frames,
+                rate_hz=self.rate_hz,
                 rng=self._rng,
                 path=path,
                 format=self.format,
@@ -124,12 +167,16 @@ class VirtualMocap:
             return path
 
 
-def mocap_config(profile_name: str = "truth", format: str = "motive-csv"):
+def mocap_config(profile_name: str = "truth", format: str = "motive-csv") -> SessionConfig:
     """The session configuration that reads this observer's takes."""
     return synthetic_config(profile_name, format, DEFAULT_BASE_MARKERS, DEFAULT_EFFECTOR_MARKERS)
 
 
-def make_observer(truth_profile_path, mocap_dir, **options) -> VirtualMocap | None:
+def make_observer(
+    truth_profile_path: str | os.PathLike[str] | None,
+    mocap_dir: str | os.PathLike[str] | None,
+    **options: Any,
+) -> VirtualMocap | None:
     """The device's observer factory: both arguments, or neither (None)."""
     if truth_profile_path is None and mocap_dir is None:
         return None

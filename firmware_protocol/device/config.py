@@ -2,30 +2,41 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from firmware_protocol.device.heaters import BED_MODEL, HOTEND_MODEL, HeaterModel
 from firmware_protocol.framing import MAX_PAYLOAD
+from firmware_protocol.messages import WATCHDOG_MS_DEFAULT
 
 FIRMWARE_NAME = "cdpr-sim"
-FIRMWARE_VERSION = "0.1.0"
+FIRMWARE_VERSION = "0.2.0"
+MAX_QUEUE = 0xFFFF  # queue_capacity is a u16
+MAX_SPEEDUP = 100_000.0
 
 
 @dataclass(frozen=True)
 class SimConfig:
+    """``speedup``: device time (motion, heaters, dwell, clock) runs this many times faster
+    than link time; the link's timers (retransmission, flow interval, watchdog) stay in
+    link time. The move queue is sized in time: ``queue_capacity`` slots at 1x, scaled by
+    the speed-up (at most 65535), so it holds as many seconds of wall-clock motion at any
+    speed-up (see ``slots``)."""
+
     firmware_name: str = FIRMWARE_NAME
     firmware_version: str = FIRMWARE_VERSION
-    queue_capacity: int = 128
+    queue_capacity: int = 128  # slots at 1x
+    scale_queue: bool = True  # scale the slots with the speed-up
     clock_hz: int = 100_000  # unit of segment and dwell durations
     max_step_rate: int = 100_000  # steps/s, any one axis
     max_payload: int = MAX_PAYLOAD
+    rx_window: int = 4096  # bytes of unacknowledged host frames it buffers (a pty holds 4 KB)
     window: int = 4  # device -> host DATA frames in flight
-    # motion start from rest: start when start_buffer_s of real time worth of motion
-    # is queued (link time: scaled by speedup), when a block that ends at rest is
-    # complete, when the queue is full, or after start_delay_s without new items
-    start_buffer_s: float = 0.25
-    start_delay_s: float = 0.1
-    flow_interval_s: float = 0.1  # link time between unsolicited flow updates
+    fans: int = 1
+    watchdog_ms: int = WATCHDOG_MS_DEFAULT
+    start_s: float = 0.25  # default start threshold (device seconds) until CONFIGURE
+    flow_s: float = 0.1  # default time-based flow interval (device seconds) until CONFIGURE
+    flow_interval_s: float = 0.1  # link time before other report changes are sent
     settle_s: float = 0.2  # rest time before the observer's on_settled
     boot_announce_s: float = 0.25  # BOOT repeat period while no session (link time)
     homing_rate: float = 4000.0  # steps/s toward the switch
@@ -36,3 +47,18 @@ class SimConfig:
     hotend: HeaterModel = field(default=HOTEND_MODEL)
     bed: HeaterModel = field(default=BED_MODEL)
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.speedup) and 0 < self.speedup <= MAX_SPEEDUP):
+            raise ValueError(
+                f"speedup must be a number in (0, {MAX_SPEEDUP:g}], got {self.speedup}"
+            )
+        if not 1 <= self.queue_capacity <= MAX_QUEUE:
+            raise ValueError(f"queue_capacity must be 1..{MAX_QUEUE}")
+
+    @property
+    def slots(self) -> int:
+        """The queue's capacity in slots, as announced."""
+        if not self.scale_queue:
+            return self.queue_capacity
+        return max(1, min(MAX_QUEUE, round(self.queue_capacity * max(1.0, self.speedup))))

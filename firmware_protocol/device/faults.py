@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -41,7 +42,7 @@ class FaultSpec:
         if not spec:
             return cls()
         known = {f.name: f for f in fields(cls)}
-        values: dict = {}
+        values: dict[str, Any] = {}
         for part in spec.split(","):
             part = part.strip()
             if not part:

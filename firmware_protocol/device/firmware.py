@@ -1,35 +1,46 @@
 """The simulated device: the firmware's protocol side around the machine model.
 
 ``SimDevice.step(now, data)`` is the whole main loop of the firmware: run the
-machine up to ``now``, take in received bytes, and return the frames to write.
-``next_deadline(now)`` says when ``step`` must run again if nothing arrives.
-``now`` is link time in seconds; device time is ``now * config.speedup``.
+machine up to ``now``, take in received bytes, check the host watchdog, and return
+the frames to write. ``next_deadline(now)`` says when ``step`` must run again if
+nothing arrives. ``now`` is link time in seconds; device time is
+``now * config.speedup``. Every field of every message is checked before it acts
+(PROTOCOL.md section 8): a bad frame gets a NAK or an ERROR, never an exception.
 """
 
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Callable
+from typing import Any
 
 from firmware_protocol.device import machine as m
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
-from firmware_protocol.device.machine import Item, Machine
+from firmware_protocol.device.machine import Machine, Observer, make_item
+from firmware_protocol.device.record import SegmentRecord
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.messages import (
+    DWELL_MAX_S,
+    MAX_EVENT_VALUES,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     Boot,
     BootCause,
     ClearFault,
+    Configure,
     Dwell,
     EmergencyStop,
     Enable,
     ErrorCode,
     EstopAck,
+    EstopFlag,
     Event,
     EventCode,
     Flag,
     Flow,
+    Flush,
     GetStatus,
     Hello,
     Home,
@@ -50,25 +61,37 @@ from firmware_protocol.messages import Error as ErrorReport
 from firmware_protocol.segments import SegmentContext
 
 MAX_REPORT_BACKLOG = 256
+HEATERS = 2
+U32 = 0xFFFF_FFFF
+
+assert MAX_EVENT_VALUES >= 3  # HOMED carries three positions
 
 
 class SimDevice:
-    """The simulated firmware. ``record`` lists every executed segment (see record.py)."""
+    """The simulated firmware. ``record`` lists every executed segment (see record.py);
+    with ``record_path`` it is also streamed to that file as segments execute."""
 
     def __init__(
-        self, config: SimConfig | None = None, faults: FaultSpec | None = None, observer=None
+        self,
+        config: SimConfig | None = None,
+        faults: FaultSpec | None = None,
+        observer: Observer | None = None,
+        *,
+        record_path: str | os.PathLike[str] | None = None,
+        on_notice: Callable[[str], None] | None = None,
     ):
         self.config = config or SimConfig()
         self.faults = faults or FaultSpec()
         self.observer = observer
-        self.record: list[dict] = []
-        if hasattr(
-            observer, "attach_record"
-        ):  # the observer may read motion directions from the record
-            observer.attach_record(self.record)
+        self.on_notice = on_notice
+        self.record = SegmentRecord(record_path, clock_hz=self.config.clock_hz)
+        attach = getattr(observer, "attach_record", None)
+        if attach is not None:  # the observer may read motion directions from the record
+            attach(self.record)
         self.boots = 0
         self.reset_times: list[float] = []  # link times of simulated resets
         self.stalled = False
+        self.reports_dropped = 0
         self._now = 0.0
         self._reset_done = False
         self._prev: tuple[int, int] | None = None
@@ -76,10 +99,10 @@ class SimDevice:
 
     # ------------------------------------------------------------------ boot / session
 
-    def _start_boot(self, cause: int, physical) -> None:
+    def _start_boot(self, cause: int, physical: list[int] | None) -> None:
         cfg = self.config
         self.cause = int(cause)
-        self.boot_id = (cfg.seed * 2654435761 + self.boots * 40503 + 0x5EED) & 0xFFFFFFFF
+        self.boot_id = (cfg.seed * 2654435761 + self.boots * 40503 + 0x5EED) & U32
         self.machine = Machine(
             cfg, self.record, boot=self.boots, physical=physical, observer=self.observer
         )
@@ -93,17 +116,26 @@ class SimDevice:
             window=cfg.window,
             accept=self._accept,
             flow=self._flow_payload,
-            rto_initial=0.25,
+            rto_initial=0.05,
             rto_floor=0.02,
-            rto_ceiling=1.0,
+            rto_ceiling=0.25,
         )
         self.synced = False
         self.nonce: int | None = None
         self.ctx = SegmentContext()
         self._boot_sent = -math.inf
-        self._flow_sent: tuple = ()
+        self._open_session_state(-math.inf)
+
+    def _open_session_state(self, now: float) -> None:
+        cfg = self.config
+        self.watchdog_ms = cfg.watchdog_ms
+        self.flow_ticks = round(cfg.flow_s * cfg.clock_hz)
+        self.machine.start_ticks = round(cfg.start_s * cfg.clock_hz)
+        self.last_rx = now
+        self._flow_sent: tuple[int, int] | None = None
         self._flow_free_sent = 0
-        self._flow_step = max(1, cfg.queue_capacity // 8)
+        self._flow_motion_sent = 0
+        self._flow_step = max(1, self.machine.capacity // 8)
         self._flow_time = -math.inf
 
     def reboot(self, now: float, cause: int = BootCause.WATCHDOG) -> None:
@@ -122,6 +154,10 @@ class SimDevice:
     def device_time(self, now: float) -> float:
         return now * self.config.speedup
 
+    def _notice(self, text: str) -> None:
+        if self.on_notice is not None:
+            self.on_notice(text)
+
     def _boot_message(self) -> Boot:
         prev = self._prev or (0, 0)
         return Boot(
@@ -136,23 +172,29 @@ class SimDevice:
     def ident(self, nonce: int) -> Ident:
         c, mc = self.config, self.machine
         return Ident(
-            nonce,
-            PROTOCOL_MAJOR,
-            PROTOCOL_MINOR,
-            self.boot_id,
-            c.firmware_name,
-            c.firmware_version,
-            4,
-            c.queue_capacity,
-            c.clock_hz,
-            c.max_step_rate,
-            c.max_payload,
-            2,
-            1,
-            mc.items_received,
-            mc.items_done,
-            mc.segments_received,
-            mc.segments_done,
+            nonce=nonce,
+            major=PROTOCOL_MAJOR,
+            minor=PROTOCOL_MINOR,
+            boot_id=self.boot_id,
+            firmware_name=c.firmware_name,
+            firmware_version=c.firmware_version,
+            axes=4,
+            queue_capacity=mc.capacity,
+            clock_hz=c.clock_hz,
+            max_step_rate=c.max_step_rate,
+            max_payload=c.max_payload,
+            rx_window=c.rx_window,
+            heaters=HEATERS,
+            fans=c.fans,
+            hotend_max_dc=mc.max_dc[0],
+            bed_max_dc=mc.max_dc[1],
+            watchdog_ms=self.watchdog_ms,
+            start_ticks=min(U32, mc.start_ticks),
+            items_received=mc.items_received,
+            items_done=mc.items_done,
+            segments_received=mc.segments_received,
+            segments_done=mc.segments_done,
+            clock=mc.clock(self.device_time(self._now)),
         )
 
     def status(self) -> Status:
@@ -160,25 +202,29 @@ class SimDevice:
         T = self.device_time(self._now)
         h, b = mc.heaters
         ep = self.endpoint
+        steps = mc.steps_now(T)
         return Status(
-            mc.flags() | (Flag.SYNCED if self.synced else 0),
-            max(0, mc.free_slots()),
-            mc.items_done,
-            mc.segments_done,
-            mc.motion_ticks,
-            tuple(mc.steps_now(T)),
-            round(h.temp * 10),
-            round(h.target * 10),
-            round(b.temp * 10),
-            round(b.target * 10),
-            mc.fan,
-            mc.enabled_mask,
-            mc.homed_mask,
-            mc.last_error,
-            ep.bad_frames,
-            ep.retransmits,
-            ep.counters.naks_sent,
-            ep.counters.duplicates,
+            flags=mc.flags() | (Flag.SYNCED if self.synced else 0),
+            queue_free=max(0, mc.free_slots()),
+            items_received=mc.items_received,
+            items_done=mc.items_done,
+            segments_done=mc.segments_done,
+            buffered_ticks=mc.buffered_ticks(T),
+            motion_ticks=mc.motion_ticks & U32,
+            clock=mc.clock(T),
+            steps=(steps[0], steps[1], steps[2], steps[3]),
+            hotend_dc=round(h.temp * 10),
+            hotend_target_dc=round(h.target * 10),
+            bed_dc=round(b.temp * 10),
+            bed_target_dc=round(b.target * 10),
+            fan=mc.fan,
+            enabled_mask=mc.enabled_mask,
+            homed_mask=mc.homed_mask,
+            last_error=mc.last_error,
+            bad_frames=ep.bad_frames & U32,
+            retransmits=ep.retransmits & U32,
+            naks_sent=ep.counters.naks_sent & U32,
+            duplicates=ep.counters.duplicates & U32,
         )
 
     # ------------------------------------------------------------------ main loop
@@ -187,21 +233,28 @@ class SimDevice:
         """Run to ``now``, take in ``data``, return the frames to write (one bytes object each)."""
         self._now = now
         T = self.device_time(now)
-        self._report(self.machine.advance(T, now))
-        if self.machine.halted:
+        mc = self.machine
+        self._report(mc.advance(T))
+        if mc.halted:
             if self.faults.reset_after and not self._reset_done:
                 self._reset_done = True
                 self.reboot(now)
+                mc = self.machine
             else:
                 self.stalled = True
         if self.stalled:
             return []
         if data:
-            for inc in self.endpoint.feed(data, now):
+            ep = self.endpoint
+            before = ep.deframer.frames
+            for inc in ep.feed(data, now):
                 if inc.kind == "urgent":
                     self._urgent(inc.payload, now)
-            self._report(self.machine.advance(T, now))
-        if self.synced and self._flow_wanted(now):
+            if ep.deframer.frames > before:
+                self.last_rx = now
+            self._report(self.machine.advance(T))
+        self._watchdog(now, T)
+        if self.synced and self._flow_wanted(now, T):
             self.endpoint.request_ack()
         if not self.synced and now >= self._boot_sent + self.config.boot_announce_s:
             self._announce_boot(now)
@@ -216,20 +269,22 @@ class SimDevice:
         if ep is not None:
             cands.append(max(ep, now))
         mc, sp, cfg = self.machine, self.config.speedup, self.config
+        T = self.device_time(now)
         cur = mc.current
-        flow_due = self._flow_time + cfg.flow_interval_s
         if cur is not None:
             if cur.kind == m.WAIT:
                 cands.append(now + 0.2 / sp)
             elif not mc.queue:
                 cands.append(mc.cur_end / sp)
-            else:  # when enough slots will have freed to be worth a FLOW report
-                k = self._flow_free_sent + self._flow_step - mc.free_slots()
-                cands.append(max(mc.cur_end / sp, min(flow_due, mc.completion_time(k) / sp)))
-        elif mc.queue and not mc.fault:
-            cands.append(mc.last_enqueue_link + cfg.start_delay_s)
-        if self.synced and (mc.items_done, mc.flags()) != self._flow_sent:
-            cands.append(flow_due)
+        start = mc.next_start()
+        if start is not None:
+            cands.append(start / sp)
+        if self.synced:
+            flow = self._flow_due(now, T)
+            if flow is not None:
+                cands.append(flow)
+            if mc.active():
+                cands.append(self.last_rx + self.watchdog_ms / 1000.0)
         if any(h.target > 0 for h in mc.heaters):
             cands.append(now + 0.5 / sp)
         if mc.heater_fail_at is not None and mc.heater_fail_at / sp > now:
@@ -240,57 +295,130 @@ class SimDevice:
             cands.append(self._boot_sent + cfg.boot_announce_s)
         return max(now, min(cands)) if cands else None
 
+    # ------------------------------------------------------------------ watchdog and flow
+
+    def _watchdog(self, now: float, T: float) -> None:
+        """No valid frame for watchdog_ms while there is something to do: stop, heaters off."""
+        mc = self.machine
+        if not self.synced or not mc.active():
+            return
+        if now - self.last_rx < self.watchdog_ms / 1000.0:
+            return
+        self._report(mc.stop(T, ErrorCode.WATCHDOG, keep_motors=True, value=self.watchdog_ms))
+        self._notice(
+            f"host watchdog: no valid frame for {self.watchdog_ms} ms; motion stopped after "
+            f"segment {mc.segments_done}, heaters off, motors held"
+        )
+
+    def _executed_ticks(self, T: float) -> int:
+        """Motion executed so far, the running segment's elapsed part included."""
+        mc = self.machine
+        cur = mc.current
+        extra = 0
+        if cur is not None and cur.kind in m.TIMED and mc.cur_end > mc.cur_start:
+            extra = int((min(T, mc.cur_end) - mc.cur_start) * mc.clock_hz)
+        return mc.motion_ticks + max(0, extra)
+
+    def _flow_wanted(self, now: float, T: float) -> bool:
+        """Unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of the
+        queue freed, or any other change after flow_interval_s."""
+        mc = self.machine
+        sent = self._flow_sent
+        if sent is None:
+            return True
+        if (
+            self.flow_ticks > 0
+            and self._executed_ticks(T) - self._flow_motion_sent >= self.flow_ticks
+        ):
+            return True
+        state = (mc.items_done, mc.flags())
+        if state == sent:
+            return False
+        return (
+            state[1] != sent[1]
+            or mc.free_slots() >= self._flow_free_sent + self._flow_step
+            or now >= self._flow_time + self.config.flow_interval_s
+        )
+
+    def _flow_due(self, now: float, T: float) -> float | None:
+        """When the next unsolicited FLOW falls due if nothing arrives (None: never)."""
+        mc = self.machine
+        if self._flow_sent is None:
+            return now
+        due = math.inf
+        if (mc.items_done, mc.flags()) != self._flow_sent:
+            due = self._flow_time + self.config.flow_interval_s
+        cur = mc.current
+        if self.flow_ticks > 0 and cur is not None and cur.kind in m.TIMED:
+            # when the executed motion reaches the threshold if it runs on without a gap
+            # (an absolute time: the machine may not have been advanced to ``now`` yet)
+            need = self._flow_motion_sent + self.flow_ticks - mc.motion_ticks + 1
+            due = min(due, (mc.cur_start + need / mc.clock_hz) / self.config.speedup)
+        return None if due == math.inf else max(now, due)
+
+    def _flow_payload(self) -> bytes:
+        mc = self.machine
+        T = self.device_time(self._now)
+        flags = mc.flags()
+        self._flow_sent = (mc.items_done, flags)
+        self._flow_free_sent = mc.free_slots()
+        self._flow_motion_sent = self._executed_ticks(T)
+        self._flow_time = self._now
+        return encode_message(
+            Flow(
+                flags,
+                max(0, mc.free_slots()),
+                mc.items_done,
+                mc.segments_done,
+                mc.buffered_ticks(T),
+                mc.clock(T),
+            )
+        )
+
     # ------------------------------------------------------------------ protocol handlers
 
     def _announce_boot(self, now: float) -> None:
         self._boot_sent = now
         self.endpoint.send_urgent(encode_message(self._boot_message()))
 
-    def _flow_wanted(self, now: float) -> bool:
-        """Unsolicited FLOW: an eighth of the queue freed, or any change after flow_interval_s."""
-        mc = self.machine
-        if (mc.items_done, mc.flags()) == self._flow_sent:
-            return False
-        return (
-            mc.free_slots() >= self._flow_free_sent + self._flow_step
-            or now >= self._flow_time + self.config.flow_interval_s
-        )
-
-    def _flow_payload(self) -> bytes:
-        mc = self.machine
-        self._flow_sent = (mc.items_done, mc.flags())
-        self._flow_free_sent = mc.free_slots()
-        self._flow_time = self._now
-        return encode_message(
-            Flow(mc.flags(), max(0, mc.free_slots()), mc.items_done, mc.segments_done)
-        )
-
     def _report(self, reports: list[Message]) -> None:
         if not self.synced:
             return
         for r in reports:
-            if len(self.endpoint.sender.backlog) < MAX_REPORT_BACKLOG or isinstance(r, ErrorReport):
+            if len(self.endpoint.sender.backlog) < MAX_REPORT_BACKLOG:
                 self.endpoint.send(encode_message(r))
+            else:
+                self.reports_dropped += 1
 
     def _urgent(self, payload: bytes, now: float) -> None:
         try:
             msgs = decode_messages(payload, SegmentContext())
         except MessageError:
             return
-        for msg in msgs:
-            if isinstance(msg, Hello):
-                if msg.major == PROTOCOL_MAJOR and (not self.synced or msg.nonce != self.nonce):
-                    self.endpoint.reset_session()
-                    self.ctx = SegmentContext()
-                    self.synced = True
-                    self.nonce = msg.nonce
-                    self._flow_sent = ()
-                self.endpoint.send_urgent(encode_message(self.ident(msg.nonce)))
-            elif isinstance(msg, EmergencyStop):
-                if not self.machine.estopped:
-                    self._report(self.machine.estop(self.device_time(now)))
-                mc = self.machine
-                self.endpoint.send_urgent(encode_message(EstopAck(mc.items_done, mc.segments_done)))
+        if len(msgs) != 1:
+            return
+        msg = msgs[0]
+        if isinstance(msg, Hello):
+            if msg.major == PROTOCOL_MAJOR and (not self.synced or msg.nonce != self.nonce):
+                self.endpoint.reset_session()
+                self.ctx = SegmentContext()
+                self.synced = True
+                self.nonce = msg.nonce
+                self._open_session_state(now)
+            self.endpoint.send_urgent(encode_message(self.ident(msg.nonce)))
+        elif isinstance(msg, EmergencyStop):
+            mc = self.machine
+            if not mc.estopped:
+                self._report(
+                    mc.stop(
+                        self.device_time(now),
+                        ErrorCode.ESTOP,
+                        keep_heaters=bool(msg.flags & EstopFlag.KEEP_HEATERS),
+                        keep_motors=bool(msg.flags & EstopFlag.KEEP_MOTORS),
+                    )
+                )
+                mc.estopped = True
+            self.endpoint.send_urgent(encode_message(EstopAck(mc.items_done, mc.segments_done)))
 
     def _accept(self, payload: bytes) -> bool:
         """Called by the endpoint for each in-order DATA payload; False leaves it unacknowledged."""
@@ -304,12 +432,27 @@ class SimDevice:
         T = self.device_time(now)
         try:
             msgs = decode_messages(payload, work)
-        except MessageError:
+        except MessageError as exc:
             self._report(
-                [mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, mc.segments_received, T)]
+                [
+                    mc.fail(
+                        ErrorCode.BAD_COMMAND,
+                        mc.items_received,
+                        mc.segments_received,
+                        T,
+                        exc.opcode,
+                        exc.offset,
+                    )
+                ]
             )
             return True
-        queued = sum(1 for x in msgs if x.QUEUED)
+        queued = 0
+        for x in msgs:
+            if x.QUEUED:
+                queued += 1
+            elif x.CLASS in {"U", "D"}:  # URGENT-only or device messages in DATA
+                self._report([mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, 0, T, x.OPCODE, 0)])
+                return True
         if queued > mc.free_slots() and not mc.fault:
             mc.overflow_rejects += 1
             return False
@@ -317,46 +460,72 @@ class SimDevice:
         reports: list[Message] = []
         for msg in msgs:
             if msg.QUEUED:
-                reports += self._enqueue(msg, T, now)
+                reports += self._enqueue(msg, T)
             elif isinstance(msg, GetStatus):
                 reports.append(self.status())
             elif isinstance(msg, Identify):
-                reports.append(self.ident(self.nonce or 0))
+                reports.append(self.ident(0))
             elif isinstance(msg, ClearFault):
                 if mc.clear_fault():
                     reports.append(Event(EventCode.FAULT_CLEARED, mc.items_done, ()))
-            else:
-                reports.append(
-                    mc.fail(ErrorCode.BAD_COMMAND, mc.items_received, mc.segments_received, T)
-                )
+            elif isinstance(msg, Flush):
+                mc.flush(T)
+            elif isinstance(msg, Configure):
+                self.watchdog_ms = msg.watchdog_ms
+                mc.start_ticks = msg.start_ticks
+                self.flow_ticks = msg.flow_ticks
         self._report(reports)
         return True
 
-    def _enqueue(self, msg: Message, T: float, now: float) -> list[Message]:
+    def _bad_value(self, n: int, opcode: int, value: int, T: float) -> list[Message]:
+        return [self.machine.fail(ErrorCode.BAD_VALUE, n, 0, T, opcode, value)]
+
+    def _enqueue(self, msg: Message, T: float) -> list[Message]:
+        """Number one queue item, check its device-dependent ranges, queue it."""
         mc = self.machine
         mc.items_received += 1
         n = mc.items_received
+        item: Any
         if isinstance(msg, Segment):
             mc.segments_received += 1
-            it = Item(m.SEG, n, T, mc.segments_received, msg.ticks, msg.deltas, msg.ramp)
+            item = make_item(
+                m.SEG,
+                n,
+                T,
+                seg=mc.segments_received,
+                ticks=msg.ticks,
+                deltas=msg.deltas,
+                ramp=msg.ramp,
+            )
         elif isinstance(msg, Dwell):
-            it = Item(m.DWELL, n, T, ticks=msg.ticks)
+            if msg.ticks > DWELL_MAX_S * self.config.clock_hz:
+                return self._bad_value(n, msg.OPCODE, msg.ticks, T)
+            item = make_item(m.DWELL, n, T, ticks=msg.ticks)
         elif isinstance(msg, Home):
-            it = Item(m.HOME, n, T, arg=(msg.mask & 0b111, msg.positions))
+            item = make_item(m.HOME, n, T, arg=(msg.mask, msg.positions))
         elif isinstance(msg, SetPosition):
-            it = Item(m.SETPOS, n, T, arg=msg.steps)
+            item = make_item(m.SETPOS, n, T, arg=msg.steps)
         elif isinstance(msg, Enable):
-            it = Item(m.ENABLE, n, T, arg=(msg.mask,))
+            item = make_item(m.ENABLE, n, T, arg=(msg.mask,))
         elif isinstance(msg, SetHeater):
-            if msg.heater > 1:
-                return [mc.fail(ErrorCode.BAD_COMMAND, n, 0, T, msg.heater)]
-            it = Item(m.HEATER, n, T, arg=(msg.heater, msg.target_dc))
+            if msg.heater >= HEATERS:
+                return self._bad_value(n, msg.OPCODE, msg.heater, T)
+            item = make_item(m.HEATER, n, T, arg=(msg.heater, msg.target_dc))
         elif isinstance(msg, SetFan):
-            it = Item(m.FAN, n, T, arg=(msg.fan, msg.value))
+            if msg.fan >= self.config.fans:
+                return self._bad_value(n, msg.OPCODE, msg.fan, T)
+            item = make_item(m.FAN, n, T, arg=(msg.fan, msg.value))
         elif isinstance(msg, WaitHeater):
-            if msg.heater > 1:
-                return [mc.fail(ErrorCode.BAD_COMMAND, n, 0, T, msg.heater)]
-            it = Item(m.WAIT, n, T, arg=(msg.heater, msg.tolerance_dc))
+            if msg.heater >= HEATERS:
+                return self._bad_value(n, msg.OPCODE, msg.heater, T)
+            item = make_item(m.WAIT, n, T, arg=(msg.heater, msg.tolerance_dc))
         else:  # pragma: no cover - every QUEUED message is handled above
-            return [mc.fail(ErrorCode.BAD_COMMAND, n, 0, T)]
-        return mc.enqueue(it, T, now)
+            return self._bad_value(n, msg.OPCODE, 0, T)
+        return mc.enqueue(item, T)
+
+    def close(self) -> None:
+        """Flush and close the streamed record."""
+        self.record.close()
+
+
+__all__ = ["ErrorReport", "SimDevice"]

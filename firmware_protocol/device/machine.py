@@ -1,27 +1,62 @@
-"""The firmware's machine model: move queue, step positions, timing, endstops, heaters.
+"""The firmware's machine model: move queue, start rule, step positions, timing, endstops,
+heaters.
 
 Driven by device time ``T`` (seconds). Items are executed strictly in order;
 segments, dwells and homing take time, the other items are instantaneous. The
 motion clock (``motion_ticks``) only advances with executed durations, so the
 record is the same whatever the link did. Reports (errors, events) are returned
 as protocol messages for the protocol layer to send.
+
+The queue is what a microcontroller keeps: a bounded FIFO of plain tuples, with
+two running sums that make the start rule O(1) (PROTOCOL.md section 5.4): the
+ticks of the queued segments and dwells, and the number of queued items that end
+a block. A start from rest is dated at the moment its condition became true (the
+arrival of the data, or the end of the previous item), never earlier.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
-from itertools import islice
+from typing import Any, NamedTuple, Protocol
 
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.heaters import Heater
-from firmware_protocol.device.record import record_entry
-from firmware_protocol.messages import BED, HOTEND, Error, ErrorCode, Event, EventCode, Flag
-from firmware_protocol.segments import RAMP_TO_REST, ramp_share, steps_done
+from firmware_protocol.device.record import SegmentRecord
+from firmware_protocol.messages import (
+    BED,
+    HOTEND,
+    THERMAL_ERRORS,
+    Error,
+    ErrorCode,
+    Event,
+    EventCode,
+    Flag,
+    Message,
+)
+from firmware_protocol.segments import MAX_DELTA, RAMP_TO_REST, ramp_share, steps_done
 
 SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT = range(8)
 TIMED = (SEG, DWELL, HOME)
+U32 = 0xFFFF_FFFF
+
+
+class Item(NamedTuple):
+    """One queue slot (a tuple: cheap to make, nothing for the garbage collector to follow).
+
+    ``arg``: SETPOS the four positions; ENABLE (mask,); HOME (mask, positions);
+    HEATER/FAN/WAIT (index, value)."""
+
+    kind: int
+    item: int  # queue item number
+    seg: int  # segment number (segments only)
+    ticks: int
+    deltas: tuple[int, int, int, int]
+    ramp: int
+    arg: tuple[Any, ...]
+    arrival: float  # device time it was queued
+
+
 _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
     int(Flag.MOVING),
     int(Flag.FAULT),
@@ -33,32 +68,59 @@ _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
 )
 
 
-@dataclass(slots=True)
-class Item:
-    kind: int
-    item: int
-    arrival: float  # device time
-    seg: int = 0
-    ticks: int = 0
-    deltas: tuple[int, int, int, int] = (0, 0, 0, 0)
-    ramp: int = -1
-    arg: tuple = ()
+class Observer(Protocol):
+    """Told when motion has come to rest and settled (the virtual mocap takes a picture)."""
+
+    def on_settled(self, steps: tuple[int, ...], t: float, /) -> object: ...
+
+
+def make_item(
+    kind: int,
+    number: int,
+    arrival: float,
+    *,
+    seg: int = 0,
+    ticks: int = 0,
+    deltas: tuple[int, int, int, int] = (0, 0, 0, 0),
+    ramp: int = -1,
+    arg: tuple[Any, ...] = (),
+) -> Item:
+    return Item(kind, number, seg, ticks, deltas, ramp, arg, arrival)
+
+
+def _ends_block(item: Item) -> bool:
+    """A segment that ends at rest, or any item that is not a segment."""
+    return item.kind != SEG or item.ramp == RAMP_TO_REST or not any(item.deltas)
 
 
 class Machine:
     def __init__(
-        self, cfg: SimConfig, record: list[dict], *, boot: int = 0, physical=None, observer=None
+        self,
+        cfg: SimConfig,
+        record: SegmentRecord,
+        *,
+        boot: int = 0,
+        physical: list[int] | None = None,
+        observer: Observer | None = None,
     ):
         self.cfg = cfg
+        self.clock_hz = cfg.clock_hz
+        self.capacity = cfg.slots
         self.record = record
         self.boot = boot
         self.observer = observer
         self.queue: deque[Item] = deque()
+        self.queued_ticks = 0  # segments and dwells in the queue
+        self.block_ends = 0  # queued items that end a block
+        self.flush_item = 0  # FLUSH: items up to this number may start at once
+        self.start_ticks = round(cfg.start_s * cfg.clock_hz)
+        self.last_arrival = -math.inf  # device time of the latest enqueue or FLUSH
         self.current: Item | None = None
         self.cur_end = 0.0
         self.cur_start = 0.0
         self._abort: tuple[float, int, int] | None = None  # (tau, axis, physical) of an endstop hit
         self.pos = [0, 0, 0, 0]
+        self.tail_pos = [0, 0, 0, 0]  # where everything queued will have left the axes
         phys = list(physical if physical is not None else cfg.boot_physical)
         self.offset = phys  # physical = pos + offset (modules only)
         self.items_received = self.items_done = 0
@@ -66,14 +128,13 @@ class Machine:
         self.motion_ticks = 0
         self.at_rest = True
         self.t_free = 0.0
-        self.last_enqueue_T = -math.inf
-        self.last_enqueue_link = -math.inf
         self.fault = 0
         self.last_error = 0
         self.estopped = False
         self.enabled_mask = self.homed_mask = 0
         self.fan = 0
         self.heaters = [Heater(cfg.hotend), Heater(cfg.bed)]
+        self.max_dc = [round(cfg.hotend.max_c * 10), round(cfg.bed.max_c * 10)]
         self.settled = True
         self.halt_at: int | None = None
         self.halted = False
@@ -83,7 +144,7 @@ class Machine:
     # ------------------------------------------------------------------ state
 
     def free_slots(self) -> int:
-        return self.cfg.queue_capacity - len(self.queue) - (self.current is not None)
+        return self.capacity - len(self.queue) - (self.current is not None)
 
     def flags(self) -> int:
         f = 0
@@ -104,66 +165,114 @@ class Machine:
             f |= _WAITING
         return f
 
-    def completion_time(self, k: int) -> float:
-        """Device time by which ``k`` (>= 1) more items will have completed if the queue runs on."""
-        if self.current is None:
-            return math.inf
-        t = self.cur_end
-        clock = self.cfg.clock_hz
-        for it in islice(self.queue, max(0, k - 1)):
-            if it.kind in (WAIT, HOME):
-                return math.inf
-            t += it.ticks / clock if it.kind in (SEG, DWELL) else 0.0
-        return t
+    def active(self) -> bool:
+        """Anything to do: motion executing or queued, a heater on (the watchdog guards it)."""
+        return (
+            self.current is not None
+            or bool(self.queue)
+            or self.heaters[0].target > 0
+            or self.heaters[1].target > 0
+        )
+
+    def buffered_ticks(self, T: float) -> int:
+        """Queued motion not yet executed: the rest of the current timed item and the queue."""
+        rest = 0
+        cur = self.current
+        if cur is not None and cur.kind in TIMED and self.cur_end > T:
+            rest = math.ceil((self.cur_end - T) * self.clock_hz)
+        return min(U32, self.queued_ticks + rest)
+
+    def clock(self, T: float) -> int:
+        return int(T * self.clock_hz) & U32
 
     def steps_now(self, T: float) -> list[int]:
         cur = self.current
         if cur is None or cur.kind != SEG or self.cur_end <= self.cur_start:
             return list(self.pos)
-        tau = (T - self.cur_start) / (cur.ticks / self.cfg.clock_hz)
+        tau = (T - self.cur_start) / (cur.ticks / self.clock_hz)
         done = steps_done(cur.deltas, cur.ramp, tau)
         return [p + int(d) for p, d in zip(self.pos, done)]
 
     # ------------------------------------------------------------------ input
 
-    def enqueue(self, item: Item, T: float, link_now: float) -> list:
+    def enqueue(self, item: Item, T: float) -> list[Message]:
         """Add one queued item (numbers already assigned). Returns reports."""
         if self.fault:
             self.items_done = item.item  # discarded while faulted
             return []
-        if item.kind == SEG:
-            r = 0.5 if item.ramp < 0 else item.ramp / 255.0
-            factor = max(2 * r, 2 - 2 * r) * self.cfg.clock_hz / item.ticks
-            for axis, d in enumerate(item.deltas):
+        kind = item.kind
+        if kind == SEG:
+            ticks, deltas = item.ticks, item.deltas
+            r = float(ramp_share(item.ramp))
+            factor = max(2 * r, 2 - 2 * r) * self.clock_hz / ticks
+            for axis, d in enumerate(deltas):
                 rate = abs(d) * factor
                 if rate > self.cfg.max_step_rate * (1 + 1e-9):
                     return [self.fail(ErrorCode.STEP_RATE, item.item, item.seg, T, axis, int(rate))]
-        if item.kind == HEATER and item.arg[1] > 10 * self.heaters[item.arg[0]].model.max_c:
-            return [self.fail(ErrorCode.HEATER_RANGE, item.item, 0, T, item.arg[0], item.arg[1])]
+            tail = [p + d for p, d in zip(self.tail_pos, deltas)]
+            if any(abs(p) > MAX_DELTA for p in tail):
+                worst = max(range(4), key=lambda k: abs(tail[k]))
+                value = max(-MAX_DELTA, min(MAX_DELTA, tail[worst]))
+                return [self.fail(ErrorCode.BAD_VALUE, item.item, item.seg, T, 0x80, value)]
+            self.tail_pos = tail
+            self.queued_ticks += ticks
+        elif kind == DWELL:
+            self.queued_ticks += item.ticks
+        elif kind == SETPOS:
+            self.tail_pos = list(item.arg)
+        elif kind == HOME:
+            mask, targets = item.arg
+            for k in range(3):
+                if mask >> k & 1:
+                    self.tail_pos[k] = targets[k]
+        elif kind == HEATER:
+            hid, target = item.arg
+            if target > self.max_dc[hid]:
+                return [self.fail(ErrorCode.HEATER_RANGE, item.item, 0, T, hid, target)]
+        if _ends_block(item):
+            self.block_ends += 1
         self.queue.append(item)
-        self.last_enqueue_T = T
-        self.last_enqueue_link = link_now
+        self.last_arrival = T
         return []
 
+    def flush(self, T: float) -> None:
+        """FLUSH: the motion queued so far may start now (later items follow the rule)."""
+        self.flush_item = self.items_received
+        self.last_arrival = T
+
     def fail(
-        self, code: int, item: int, segment: int, T: float, axis: int = 0xFF, value: int = 0
+        self,
+        code: int,
+        item: int,
+        segment: int,
+        T: float,
+        axis: int = 0xFF,
+        value: int = 0,
+        *,
+        heaters_off: bool | None = None,
     ) -> Error:
-        """Enter the fault state: stop, flush the queue; heaters off for thermal faults and e-stop."""
+        """Enter the fault state: stop now, flush the queue; heaters off for thermal faults,
+        the watchdog and an e-stop (unless ``heaters_off`` says otherwise)."""
         if self.current is not None and self.current.kind == SEG and self.cur_end > T:
             cur = self.current
-            tau = (T - self.cur_start) / (cur.ticks / self.cfg.clock_hz)
+            tau = (T - self.cur_start) / (cur.ticks / self.clock_hz)
             self._apply_partial(cur, tau, ErrorCode(code).name.lower())
         self.fault = int(code)
         self.last_error = int(code)
         self.queue.clear()
+        self.queued_ticks = 0
+        self.block_ends = 0
         self.current = None
         self.at_rest = True
         self.t_free = T
         self.items_done = self.items_received
-        if code in (ErrorCode.THERMAL_RUNAWAY, ErrorCode.OVERTEMP, ErrorCode.ESTOP):
+        self.tail_pos = list(self.pos)
+        if heaters_off is None:
+            heaters_off = code in THERMAL_ERRORS or code in (ErrorCode.ESTOP, ErrorCode.WATCHDOG)
+        if heaters_off:
             for h in self.heaters:
                 h.off(T)
-        return Error(int(code), item, segment, axis, value)
+        return Error(int(code), item, segment, axis, max(-MAX_DELTA, min(MAX_DELTA, value)))
 
     def clear_fault(self) -> bool:
         if not self.fault:
@@ -174,45 +283,59 @@ class Machine:
 
     # ------------------------------------------------------------------ execution
 
-    def _may_start(self, link_now: float) -> bool:
-        need = (
-            self.cfg.start_buffer_s * self.cfg.speedup * self.cfg.clock_hz
-        )  # real-time worth of motion
-        total = 0
-        for it in self.queue:
-            if it.kind != SEG:
-                return True
-            total += it.ticks
-            if it.ramp == RAMP_TO_REST or not any(it.deltas) or total >= need:
-                return True
-        if self.free_slots() <= 0:
-            return True
-        return link_now >= self.last_enqueue_link + self.cfg.start_delay_s
+    def _may_start(self) -> bool:
+        """The start rule from rest (PROTOCOL.md 5.4), O(1)."""
+        return (
+            self.block_ends > 0
+            or self.queued_ticks >= self.start_ticks
+            or self.free_slots() <= 0
+            or self.queue[0].item <= self.flush_item
+        )
 
-    def advance(self, T: float, link_now: float) -> list:
-        reports: list = []
+    def next_start(self) -> float | None:
+        """Device time at which the head of the queue will start if nothing arrives (None:
+        it waits for the host)."""
+        if self.current is not None or not self.queue or self.fault or self.halted:
+            return None
+        head = self.queue[0]
+        if head.kind == SEG and self.at_rest:
+            return max(self.t_free, self.last_arrival) if self._may_start() else None
+        return max(self.t_free, head.arrival)
+
+    def advance(self, T: float) -> list[Message]:
+        reports: list[Message] = []
         if self.heater_fail_at is not None and self.heater_fail_at <= T:
             self.heaters[HOTEND].element_ok = False
+        queue = self.queue
         while not self.halted and not self.fault:
             cur = self.current
             if cur is not None:
                 if cur.kind == WAIT:
                     reports += self._heaters_to(T)
                     h = self.heaters[cur.arg[0]]
-                    if self.fault or abs(h.temp - h.target) > cur.arg[1] / 10.0:
+                    if self.fault or (h.target > 0 and abs(h.temp - h.target) > cur.arg[1] / 10.0):
                         break
                     self.cur_end = T
                 if self.cur_end > T:
                     break
                 reports += self._complete(self.cur_end)
                 continue
-            if not self.queue:
+            if not queue:
                 break
-            head = self.queue[0]
-            start = self.t_free if self.t_free >= self.last_enqueue_T else T
-            if head.kind == SEG and self.at_rest and not self._may_start(link_now):
+            head = queue[0]
+            if head.kind == SEG and self.at_rest:
+                if not self._may_start():
+                    break
+                start = max(self.t_free, self.last_arrival)
+            else:
+                start = max(self.t_free, head.arrival)
+            if start > T:
                 break
-            self.queue.popleft()
+            queue.popleft()
+            if head.kind in (SEG, DWELL):
+                self.queued_ticks -= head.ticks
+            if _ends_block(head):
+                self.block_ends -= 1
             reports += self._start(head, start)
         if not self.fault:
             reports += self._heaters_to(T)
@@ -220,7 +343,7 @@ class Machine:
             self.observer is not None
             and not self.settled
             and self.current is None
-            and not self.queue
+            and not queue
             and self.at_rest
             and self.t_free + self.cfg.settle_s <= T
         ):
@@ -228,8 +351,8 @@ class Machine:
             self.observer.on_settled(tuple(self.pos), self.t_free + self.cfg.settle_s)
         return reports
 
-    def _heaters_to(self, T: float) -> list:
-        out: list = []
+    def _heaters_to(self, T: float) -> list[Message]:
+        out: list[Message] = []
         for hid, h in enumerate(self.heaters):
             for ev in h.advance(T):
                 if ev == "reached":
@@ -245,19 +368,23 @@ class Machine:
                     )
         return out
 
-    def _start(self, it: Item, t: float) -> list:
+    def _start(self, it: Item, t: float) -> list[Message]:
         self.settled = False
-        clock = self.cfg.clock_hz
-        if it.kind == SEG:
+        clock = self.clock_hz
+        kind = it.kind
+        if kind == SEG:
             self._abort = self._endstop_crossing(it)
-            self.enabled_mask |= sum(1 << k for k, d in enumerate(it.deltas) if d)
+            deltas = it.deltas
+            if deltas[0] or deltas[1] or deltas[2] or deltas[3]:
+                self.enabled_mask |= sum(1 << k for k, d in enumerate(deltas) if d)
             self.current, self.cur_start = it, t
             tau = self._abort[0] if self._abort else 1.0
             self.cur_end = t + tau * it.ticks / clock
             return []
-        if it.kind in (DWELL, HOME, WAIT):
+        if kind in (DWELL, HOME, WAIT):
             self.at_rest = True
-            if it.kind == HOME:
+            ticks = it.ticks
+            if kind == HOME:
                 mask = it.arg[0]
                 dist = max(
                     (abs(self.pos[k] + self.offset[k]) for k in range(3) if mask >> k & 1),
@@ -265,25 +392,27 @@ class Machine:
                 )
                 if dist > self.cfg.homing_max_steps:
                     return [self.fail(ErrorCode.HOMING_FAILED, it.item, 0, t, 0xFF, dist)]
-                it.ticks = math.ceil(dist / self.cfg.homing_rate * clock)
+                ticks = math.ceil(dist / self.cfg.homing_rate * clock)
+                it = it._replace(ticks=ticks)
                 self.enabled_mask |= mask
             self.current, self.cur_start = it, t
-            self.cur_end = t + it.ticks / clock if it.kind != WAIT else math.inf
+            self.cur_end = t + ticks / clock if kind != WAIT else math.inf
             return []
-        reports: list = []
-        if it.kind == SETPOS:
+        reports: list[Message] = []
+        arg = it.arg
+        if kind == SETPOS:
             for k in range(4):
                 if k < 3:
-                    self.offset[k] += self.pos[k] - it.arg[k]
-                self.pos[k] = it.arg[k]
-        elif it.kind == ENABLE:
-            self.enabled_mask = it.arg[0] & 0xF
-        elif it.kind == HEATER:
-            hid, target = it.arg
+                    self.offset[k] += self.pos[k] - arg[k]
+                self.pos[k] = arg[k]
+        elif kind == ENABLE:
+            self.enabled_mask = arg[0] & 0xF
+        elif kind == HEATER:
+            hid, target = arg
             reports += self._heaters_to(t)
             self.heaters[hid].set_target(target / 10.0, t)
-        elif it.kind == FAN:
-            self.fan = it.arg[1]
+        elif kind == FAN and arg[0] == 0:
+            self.fan = arg[1]
         self.items_done = it.item
         self.t_free = max(self.t_free, t)
         if not self.at_rest and not self.queue and self.current is None:
@@ -293,8 +422,9 @@ class Machine:
     def _endstop_crossing(self, it: Item) -> tuple[float, int, int] | None:
         limit = self.cfg.overtravel_steps
         best = None
+        deltas = it.deltas
         for k in range(3):
-            d = it.deltas[k]
+            d = deltas[k]
             start = self.pos[k] + self.offset[k]
             if d > 0 and start <= limit < start + d:
                 x = (limit + 1 - start - 0.5) / d  # normalised position of the offending step
@@ -307,20 +437,16 @@ class Machine:
     def _apply_partial(self, it: Item, tau: float, error: str) -> None:
         done = steps_done(it.deltas, it.ramp, tau)
         self.pos = [p + int(d) for p, d in zip(self.pos, done)]
-        part = round(tau * it.ticks)
-        self.motion_ticks += part
-        self.record.append(
-            record_entry(
-                it.seg, list(self.pos), self.motion_ticks, self.cfg.clock_hz, self.boot, error
-            )
-        )
+        self.motion_ticks += round(tau * it.ticks)
+        self.record.append(it.seg, self.pos, self.motion_ticks, self.boot, error)
 
-    def _complete(self, t: float) -> list:
+    def _complete(self, t: float) -> list[Message]:
         it = self.current
         assert it is not None
         self.current = None
         self.t_free = t
-        if it.kind == SEG:
+        kind = it.kind
+        if kind == SEG:
             if self._abort is not None:
                 tau, axis, phys = self._abort
                 self._abort = None
@@ -331,23 +457,20 @@ class Machine:
                         ErrorCode.ENDSTOP_HIT,
                         it.item,
                         it.seg,
-                        self.cur_start + tau * it.ticks / self.cfg.clock_hz,
+                        self.cur_start + tau * it.ticks / self.clock_hz,
                         axis,
                         phys,
                     )
                 ]
             d = it.deltas
             p = self.pos
-            self.pos = [p[0] + d[0], p[1] + d[1], p[2] + d[2], p[3] + d[3]]
+            pos = [p[0] + d[0], p[1] + d[1], p[2] + d[2], p[3] + d[3]]
+            self.pos = pos
             self.motion_ticks += it.ticks
             self.segments_done = it.seg
             self.items_done = it.item
-            self.record.append(
-                record_entry(
-                    it.seg, list(self.pos), self.motion_ticks, self.cfg.clock_hz, self.boot
-                )
-            )
-            self.at_rest = it.ramp == RAMP_TO_REST or not any(d)
+            self.record.append(it.seg, pos, self.motion_ticks, self.boot)
+            self.at_rest = it.ramp == RAMP_TO_REST or not (d[0] or d[1] or d[2] or d[3])
             if self.halt_at is not None and self.segments_done >= self.halt_at:
                 self.halted = True
                 return []
@@ -355,9 +478,9 @@ class Machine:
                 return [self.fail(ErrorCode.UNDERRUN, it.item, it.seg, t)]
             return []
         self.items_done = it.item
-        if it.kind == DWELL:
+        if kind == DWELL:
             self.motion_ticks += it.ticks
-        elif it.kind == HOME:
+        elif kind == HOME:
             self.motion_ticks += it.ticks
             mask, targets = it.arg
             for k in range(3):
@@ -368,13 +491,30 @@ class Machine:
             return [Event(EventCode.HOMED, it.item, tuple(self.pos[:3]))]
         return []
 
-    def estop(self, T: float) -> list:
-        """Stop now (mid-segment if need be), flush, heaters off; reports include the ESTOP error."""
-        reports = self.advance(T, -math.inf)
-        reports.append(self.fail(ErrorCode.ESTOP, self.items_done, self.segments_done, T))
-        self.estopped = True
-        self.enabled_mask = 0
-        self.homed_mask = 0  # motors released: positions are no longer trustworthy
+    def stop(
+        self,
+        T: float,
+        code: int,
+        *,
+        keep_heaters: bool = False,
+        keep_motors: bool = False,
+        value: int = 0,
+    ) -> list[Message]:
+        """Stop now (mid-segment if need be) and flush: an e-stop or the host watchdog."""
+        reports = self.advance(T)
+        reports.append(
+            self.fail(
+                code,
+                self.items_done,
+                self.segments_done,
+                T,
+                value=value,
+                heaters_off=not keep_heaters,
+            )
+        )
+        if not keep_motors:
+            self.enabled_mask = 0
+            self.homed_mask = 0  # motors released: positions are no longer trustworthy
         return reports
 
 
@@ -391,4 +531,5 @@ __all__ = [
     "WAIT",
     "Item",
     "Machine",
+    "make_item",
 ]

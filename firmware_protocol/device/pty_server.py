@@ -19,6 +19,7 @@ from firmware_protocol.device.faults import FaultSpec, FaultyChannel
 from firmware_protocol.device.firmware import SimDevice
 
 IDLE_WAIT_S = 0.05
+RECORD_FLUSH_S = 0.25  # the streamed record reaches its file at least this often
 
 
 class PtyServer:
@@ -33,6 +34,7 @@ class PtyServer:
         self.tx = FaultyChannel(spec, seed_offset=2)
         self._t0 = time.monotonic()
         self._stop = False
+        self._flushed = 0.0
         self.dropped_tx_bytes = 0
 
     def now(self) -> float:
@@ -85,6 +87,9 @@ class PtyServer:
         out = self.tx.receive(now)
         if out:
             self._write(out)
+        if now - self._flushed >= RECORD_FLUSH_S:
+            self._flushed = now
+            self.device.record.flush()
 
     def serve_forever(self) -> None:
         while not self._stop:

@@ -6,25 +6,38 @@ absolute step positions after the segment, and ``t`` is the device's motion cloc
 (the sum of executed segment, dwell and homing durations) in seconds, so it depends
 only on what was executed, never on link timing. Entries after a simulated reset
 carry ``"boot": k`` (k >= 1); an aborted segment carries ``"error"``.
+
+:class:`SegmentRecord` keeps the entries in compact integer columns (no Python
+object per segment, so a long print never makes the garbage collector pause the
+device) and, given a path, streams each entry to its file as it executes (so a
+killed simulator still leaves everything up to its last buffered line). Reading an
+entry builds its dict on demand.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import tempfile
+from array import array
+from collections.abc import Iterator, Sequence
+from typing import IO, Any, overload
+
+import numpy as np
 
 
 def record_entry(
     seq: int,
-    steps: list[int],
+    steps: Sequence[int],
     motion_ticks: int,
     clock_hz: int,
     boot: int = 0,
     error: str | None = None,
-) -> dict:
-    entry: dict = {"seq": seq, "steps": steps, "t": round(motion_ticks / clock_hz, 6)}
+) -> dict[str, Any]:
+    entry: dict[str, Any] = {
+        "seq": seq,
+        "steps": [int(v) for v in steps],
+        "t": round(motion_ticks / clock_hz, 6),
+    }
     if boot:
         entry["boot"] = boot
     if error:
@@ -32,25 +45,113 @@ def record_entry(
     return entry
 
 
-def write_record(path: str | os.PathLike[str], entries: list[dict]) -> None:
-    """Write entries as JSON lines, atomically: the file is complete or absent, never half
-    written (a temporary file beside it, renamed over it only on success)."""
-    target = os.fspath(path)
-    folder = os.path.dirname(target) or "."
-    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(target)}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            for e in entries:
-                fh.write(json.dumps(e, separators=(",", ":")) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+def _line(entry: dict[str, Any]) -> str:
+    return json.dumps(entry, separators=(",", ":")) + "\n"
 
 
-def read_record(path: str | os.PathLike[str]) -> list[dict]:
+class SegmentRecord(Sequence[dict[str, Any]]):
+    """Executed segments in columns; optionally streamed to ``path`` (JSON lines)."""
+
+    def __init__(self, path: str | os.PathLike[str] | None = None, *, clock_hz: int = 100_000):
+        self.clock_hz = clock_hz
+        self._seq = array("q")
+        self._steps = array("q")  # 4 per entry
+        self._ticks = array("q")
+        self._boot = array("q")
+        self._error = array("q")  # index into ERROR_NAMES
+        self._errors: list[str] = [""]
+        self._fh: IO[str] | None = None
+        self.path = os.fspath(path) if path is not None else None
+        if self.path is not None:
+            self._fh = open(self.path, "w", encoding="utf-8", buffering=1 << 16)  # noqa: SIM115 - held for the device's life, closed by close()
+
+    def append(
+        self,
+        seq: int,
+        steps: Sequence[int],
+        motion_ticks: int,
+        boot: int = 0,
+        error: str | None = None,
+    ) -> None:
+        code = 0
+        if error:
+            if error not in self._errors:
+                self._errors.append(error)
+            code = self._errors.index(error)
+        self._seq.append(seq)
+        self._steps.extend(steps)
+        self._ticks.append(motion_ticks)
+        self._boot.append(boot)
+        self._error.append(code)
+        if self._fh is not None:
+            self._fh.write(
+                _line(record_entry(seq, steps, motion_ticks, self.clock_hz, boot, error))
+            )
+
+    def flush(self) -> None:
+        if self._fh is not None:
+            self._fh.flush()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    # ------------------------------------------------------------------ reading
+
+    def __len__(self) -> int:
+        return len(self._seq)
+
+    def _entry(self, i: int) -> dict[str, Any]:
+        k = 4 * i
+        return record_entry(
+            self._seq[i],
+            self._steps[k : k + 4],
+            self._ticks[i],
+            self.clock_hz,
+            self._boot[i],
+            self._errors[self._error[i]] or None,
+        )
+
+    @overload
+    def __getitem__(self, index: int) -> dict[str, Any]: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[dict[str, Any]]: ...
+
+    def __getitem__(self, index: int | slice) -> dict[str, Any] | list[dict[str, Any]]:
+        if isinstance(index, slice):
+            return [self._entry(i) for i in range(*index.indices(len(self)))]
+        n = len(self)
+        if index < 0:
+            index += n
+        if not 0 <= index < n:
+            raise IndexError("record index out of range")
+        return self._entry(index)
+
+    def __iter__(self) -> Iterator[dict[str, Any]]:
+        return (self._entry(i) for i in range(len(self)))
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, SegmentRecord):
+            other = list(other)
+        if not isinstance(other, list):
+            return NotImplemented
+        return len(other) == len(self) and all(a == b for a, b in zip(self, other))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def steps(self, last: int | None = None) -> np.ndarray:
+        """(n, 4) absolute steps after each executed segment (the last ``last`` ones)."""
+        arr = np.frombuffer(self._steps, dtype=np.int64).reshape(-1, 4) if len(self) else None
+        if arr is None:
+            return np.zeros((0, 4), dtype=np.int64)
+        return (arr if last is None else arr[-last:]).copy()
+
+    def __repr__(self) -> str:
+        return f"SegmentRecord({len(self)} segments{', ' + self.path if self.path else ''})"
+
+
+def read_record(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
     with open(path, encoding="utf-8") as fh:
         return [json.loads(line) for line in fh if line.strip()]

@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from cdprhost.calibration.planning import read_plan_csv
+from cdprhost.calibration.plan_files import read_plan_csv
 from cdprhost.cli.main import main
 from cdprhost.kinematics import MachineModel
 from cdprhost.kinematics.grid import workspace_grid

@@ -93,7 +93,7 @@ def test_wizard_calibrates_then_printing_gets_accurate(
             Machine(link, sim_profile, sim_model, settle_s=0.5),
             FolderWatcher(tmp_path / "mocap", timeout_s=5, poll_s=0.01),
             mocap=mocap_config().mocap,
-            options=WizardOptions(),
+            options=WizardOptions(n_poses=4),
             log=logs.append,
         )
         out = wiz.run()
@@ -154,6 +154,7 @@ def test_interrupted_session_resumes_without_losing_takes(
             Machine(link, sim_profile, sim_model, settle_s=0.5),
             takes,
             mocap=mocap_config().mocap,
+            options=WizardOptions(n_poses=4),
             log=lambda m: None,
         )
         with pytest.raises(KeyboardInterrupt):
@@ -172,6 +173,7 @@ def test_interrupted_session_resumes_without_losing_takes(
             Machine(link, sim_profile, sim_model, settle_s=0.5),
             FolderWatcher(mocap, timeout_s=5, poll_s=0.01),
             mocap=None,
+            options=WizardOptions(n_poses=4),
             log=lambda m: None,
         )
         assert wiz.state.pending == [3, 4, 5, 6]
@@ -213,13 +215,13 @@ def test_wrong_take_is_rejected_at_once_and_asked_again(
             Machine(link, sim_profile, sim_model, settle_s=0.5),
             source,
             mocap=mocap_config().mocap,
-            options=WizardOptions(n_check=1),
+            options=WizardOptions(n_poses=4, n_check=1),
             log=logs.append,
         )
         out = wiz.run()
     finally:
         link.close()
-    assert any("take rejected" in m and "from the commanded pose" in m for m in logs)
+    assert any("take refused (wrong-pose" in m and "from the commanded pose" in m for m in logs)
     rows = list(csv.DictReader(open(tmp_path / "s" / "poses.csv")))
     assert len(rows) == 5 and out.identification.ok
 
@@ -248,8 +250,9 @@ def test_wizard_cli_end_to_end(truth_path, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "before/after" in out and "check poses RMS" in out
     data = json.loads(report.read_text())
-    assert data["poses_used"] == 4 and data["rms_after_mm"] < 1e-3
-    assert load_profile(tmp_path / "cal.toml").calibration["poses_used"] == 4
+    assert data["poses_used"] == 6 and data["ok"] is True
+    assert data["rms_after_mm"] < 0.05 and data["predicted_workspace_max_mm"] < 0.3
+    assert load_profile(tmp_path / "cal.toml").calibration["poses_used"] == 6
 
     # the same takes, recorded beforehand, through --takes-from (no virtual mocap this time)
     code = main(

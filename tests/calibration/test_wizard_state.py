@@ -7,8 +7,9 @@ import numpy as np
 from cdprhost.calibration.planning import PosePlan
 from cdprhost.calibration.wizard import (
     Finished,
-    Identify,
+    IdentifyStep,
     MoveTo,
+    PlanMore,
     RecordTake,
     WizardState,
     resume_state,
@@ -36,24 +37,47 @@ def test_moves_then_records_each_pose_then_identifies():
         elif isinstance(action, RecordTake):
             assert action.attempt == 1
             state = state.accepted(action.index)
-        elif isinstance(action, Identify):
-            state = state.done()
+        elif isinstance(action, IdentifyStep):
+            state = state.identified_as(True)
         else:
             break
-    assert seen == ["MoveTo", "RecordTake"] * 5 + ["Identify", "Finished"]
+    assert seen == ["MoveTo", "RecordTake"] * 5 + ["IdentifyStep", "Finished"]
     assert state.next_action() == Finished("identified")
 
 
-def test_rejected_take_is_asked_again_then_the_pose_is_skipped():
+def test_rejected_take_is_recaptured_at_once_then_the_pose_is_skipped():
     state = WizardState(small_plan(), max_attempts=3).moved(0)
-    state = state.rejected(0, "not static")
-    action = state.next_action()
-    assert action == RecordTake(0, 2, "not static")
-    state = state.rejected(0, "not static again")
+    state = state.rejected(0, "drift")
+    action = state.next_action()  # move again (a fresh settle), then capture again
+    assert isinstance(action, MoveTo) and action.index == 0
+    state = state.moved(0)
+    assert state.next_action() == RecordTake(0, 2, "drift")
+    state = state.rejected(0, "drift again").moved(0)
     assert state.next_action().attempt == 3
     state = state.rejected(0, "still moving")
     assert 0 in state.skipped
     assert isinstance(state.next_action(), MoveTo) and state.next_action().index == 1
+
+
+def test_refused_identification_plans_more_then_gives_up():
+    state = WizardState(small_plan(), max_rounds=1)
+    for i in range(5):
+        state = state.accepted(i)
+    assert state.next_action() == IdentifyStep(0)
+    state = state.identified_as(False, "predicted 2 mm")
+    assert state.next_action() == PlanMore(1, "predicted 2 mm")
+    bigger = small_plan(("fit", "fit", "check", "fit", "fit", "fit"))
+    state = state.augmented(bigger)
+    action = state.next_action()
+    assert isinstance(action, MoveTo) and action.index == 5
+    state = state.moved(5).accepted(5)
+    assert state.next_action() == IdentifyStep(1)
+    state = state.identified_as(False, "still 1.2 mm")
+    action = state.next_action()
+    assert isinstance(action, Finished) and "refused after 1 augmentation" in action.reason
+    done = WizardState(small_plan(), recorded=frozenset(range(5)))
+    stuck = done.identified_as(False, "x").augmented(small_plan())
+    assert "no pose can be added" in stuck.next_action().reason
 
 
 def test_too_few_fit_poses_finishes_without_identifying():
@@ -66,12 +90,7 @@ def test_too_few_fit_poses_finishes_without_identifying():
 
 def test_resume_skips_recorded_poses():
     plan = small_plan()
-    rows = [
-        {"plan_pose": "1", "t_s": "0"},
-        {"plan_pose": "3", "t_s": "5"},
-        {"plan_pose": "", "t_s": "9"},
-    ]
-    state = resume_state(plan, rows)
+    state = resume_state(plan, ["1", "3", ""])
     assert state.recorded == frozenset({0, 2})
     assert state.pending == [1, 3, 4]
     assert state.next_action().index == 1

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import tempfile
 from pathlib import Path
 
@@ -21,6 +22,8 @@ from cdprhost.calibration.readers import (
 from cdprhost.calibration.readers.writers import write_motive
 from cdprhost.calibration.takes import measure_effector
 from cdprhost.errors import InputError
+from cdprhost.sim.mocap_noise import MocapNoise
+from cdprhost.sim.synthetic_session import synthesize_take
 from tests.calibration_io.helpers import DATA, SAMPLE_POINT, mocap_config, random_take
 
 # Worst rounding of each writer's text: Motive 6 decimals of the unit, Vicon 5, QTM 3 (mm).
@@ -238,3 +241,77 @@ def test_any_names_and_gaps_survive_every_format(fmt, names, seed, frames, gaps)
     with tempfile.TemporaryDirectory() as tmp:
         read = roundtrip(Path(tmp), take, fmt)
     assert_same(read, take, {"motive-csv": 5.1e-7, "c3d": 2e-4}.get(fmt, TOL_MM.get(fmt, 0.0)))
+
+
+def test_c3d_with_a_unit_per_point(tmp_path):
+    """Optotrak and others write POINT:UNITS as an array, one unit per point."""
+    rng = np.random.default_rng(41)
+    units = ["m", "mm", "cm", "mm", "m", "mm"]
+    take = synthesize_take(
+        SAMPLE_POINT, n_frames=60, rng=rng, path=tmp_path / "pp.c3d", format="c3d", units=units
+    )
+    back = read_take(tmp_path / "pp.c3d")
+    np.testing.assert_allclose(back.positions, take.positions, atol=2e-3)
+    assert any("differs between points" in n for n in back.notes)
+    m = measure_effector(back, mocap_config())
+    np.testing.assert_allclose(m.point, SAMPLE_POINT, atol=0.01)
+
+
+def test_c3d_without_marker_positions_is_a_clear_error(tmp_path):
+    import io
+    import warnings
+
+    import c3d
+
+    writer = c3d.Writer(point_rate=100.0, analog_rate=100.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        writer.add_frames(
+            [(np.zeros((0, 5), np.float32), np.zeros((2, 1), np.float32)) for _ in range(5)]
+        )
+        writer.set_analog_labels(["gyro x", "gyro y"])
+        buf = io.BytesIO()
+        writer.write(buf)
+    (tmp_path / "rot.c3d").write_bytes(buf.getvalue())
+    with pytest.raises(InputError, match=r"rot\.c3d: no marker positions: .*POINT:USED = 0") as err:
+        read_take(tmp_path / "rot.c3d")
+    assert err.value.exit_code == 2
+
+
+@pytest.mark.parametrize(
+    ("fmt", "options"),
+    [
+        ("motive-csv", {"european": True, "units": "Meters"}),
+        ("motive-csv", {"european": True, "units": "Millimeters", "version": "1.25"}),
+        ("vicon-csv", {"european": True}),
+    ],
+)
+def test_european_exports_semicolons_and_decimal_commas(tmp_path, fmt, options):
+    rng = np.random.default_rng(42)
+    noise = MocapNoise(jitter_mm=0.1, gap_fraction=0.05, gap_run_frames=6)
+    path = tmp_path / "eu.csv"
+    take = synthesize_take(
+        SAMPLE_POINT, realism=noise, n_frames=120, rng=rng, path=path, format=fmt, **options
+    )
+    text = path.read_text()
+    assert ";" in text.splitlines()[0] or ";" in text.splitlines()[2]
+    assert re.search(r";-?\d+,\d+;", text)  # decimal commas
+    assert detect_format(path) == fmt
+    back = read_take(path)
+    assert back.marker_names == take.marker_names
+    np.testing.assert_allclose(back.positions, take.positions, atol=1e-3)  # gaps stay NaN
+    np.testing.assert_allclose(np.diff(back.times_s), 1 / 120, atol=1e-5)
+
+
+@pytest.mark.parametrize("fmt", ["motive-csv", "vicon-csv", "qualisys-tsv", "c3d"])
+def test_runs_of_gaps_survive_every_format(tmp_path, fmt):
+    rng = np.random.default_rng(43)
+    noise = MocapNoise(jitter_mm=0.05, gap_fraction=0.08, gap_run_frames=10)
+    path = tmp_path / f"g{EXTENSIONS[fmt]}"
+    options = {"zero_gaps": False} if fmt == "qualisys-tsv" else {}
+    take = synthesize_take(
+        SAMPLE_POINT, realism=noise, n_frames=200, rng=rng, path=path, format=fmt, **options
+    )
+    back = read_take(path)
+    np.testing.assert_array_equal(np.isnan(back.positions), np.isnan(take.positions))
+    assert np.isnan(take.positions).mean() > 0.03

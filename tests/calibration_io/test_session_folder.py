@@ -10,12 +10,11 @@ import pytest
 from cdprhost.calibration.readers import FORMATS
 from cdprhost.calibration.session import (
     POSE_COLUMNS,
-    SessionWriter,
     load_session,
     load_session_config,
     read_poses,
-    session_toml,
 )
+from cdprhost.calibration.session_writer import SessionWriter, session_toml
 from cdprhost.errors import InputError
 from cdprhost.sim.synthetic_session import (
     synthesize_take,
@@ -65,9 +64,10 @@ def test_synthetic_session_roundtrip(tmp_path, fmt):
     np.testing.assert_allclose(m.s_cmd, s_cmd, atol=1e-6)
     np.testing.assert_allclose(m.t_s, t_s, atol=1e-6)
     np.testing.assert_array_equal(m.dirs, dirs)
-    assert m.std.shape == (6, 3) and (m.base_fit_rms_mm < 0.1).all()
-    obs = m.observations(sigma_mm=0.05)
-    assert len(obs) == 6 and obs.sigma_mm == 0.05
+    assert m.se.shape == (6, 3) and (m.base_fit_rms_mm < 0.1).all()
+    obs = m.observations()
+    np.testing.assert_allclose(obs.sigma_mm, np.sqrt(np.mean(m.se**2, axis=1)))
+    assert len(obs) == 6 and (obs.sigma_mm > 0).all() and (obs.sigma_mm < 0.02).all()
 
 
 def test_spec_example_folder_assembled_by_hand(tmp_path):
@@ -272,3 +272,80 @@ def test_load_session_requires_both_files(tmp_path):
     (tmp_path / "poses.csv").write_text(",".join(POSE_COLUMNS) + "\n")
     m = load_session(tmp_path).measure()
     assert len(m) == 0 and m.measured.shape == (0, 3)
+
+
+@pytest.mark.parametrize(
+    "take,why",
+    [
+        ("../../etc/passwd", "leads outside the session folder ('..')"),
+        ("takes/../../x.csv", "leads outside the session folder"),
+        ("/etc/passwd", "is an absolute path"),
+        ("C:\\\\Users\\\\me\\\\take.csv", "is an absolute path"),
+        ("\\\\\\\\server\\\\share\\\\t.csv", "is an absolute path"),
+    ],
+)
+def test_take_paths_stay_inside_the_session_folder(tmp_path, take, why):
+    (tmp_path / "session.toml").write_text(SPEC_SESSION_TOML)
+    (tmp_path / "poses.csv").write_text(
+        ",".join(POSE_COLUMNS)
+        + "\n"
+        + GOOD_ROW
+        + "\n"
+        + GOOD_ROW.replace("1,takes/a.csv", f"2,{take}")
+        + "\n"
+    )
+    with pytest.raises(InputError) as err:
+        load_session(tmp_path)
+    text = str(err.value)
+    assert "poses.csv: line 3, column 'take' (column 2)" in text and why in text
+    assert err.value.exit_code == 2
+
+
+def test_a_link_out_of_the_folder_is_refused_and_windows_separators_work(tmp_path):
+    outside = tmp_path / "outside.csv"
+    shutil.copy(DATA / "motive_1.25_parent_mm.csv", outside)
+    root = tmp_path / "s"
+    (root / "takes").mkdir(parents=True)
+    (root / "takes" / "link.csv").symlink_to(outside)
+    shutil.copy(DATA / "motive_1.25_parent_mm.csv", root / "takes" / "a.csv")
+    (root / "session.toml").write_text(SPEC_SESSION_TOML)
+    (root / "poses.csv").write_text(
+        ",".join(POSE_COLUMNS) + "\n" + GOOD_ROW.replace("takes/a.csv", "takes\\\\a.csv") + "\n"
+    )
+    session = load_session(root)
+    assert session.take_path(0) == (root / "takes" / "a.csv").resolve()
+    (root / "poses.csv").write_text(
+        ",".join(POSE_COLUMNS) + "\n" + GOOD_ROW.replace("takes/a.csv", "takes/link.csv") + "\n"
+    )
+    with pytest.raises(InputError, match="outside the session folder"):
+        load_session(root)
+
+
+def test_roles_and_extra_columns_are_read_once(tmp_path):
+    header = ",".join(POSE_COLUMNS) + ",role,plan_pose\n"
+    (tmp_path / "poses.csv").write_text(
+        header
+        + GOOD_ROW
+        + ",fit,3\n"
+        + GOOD_ROW.replace("1,takes", "2,takes")
+        + ",CHECK,4\n"
+        + GOOD_ROW.replace("1,takes", "3,takes")
+        + ",,\n"
+    )
+    table = read_poses(tmp_path / "poses.csv")
+    assert table.roles == ("fit", "check", "fit") and table.extra["plan_pose"] == ("3", "4", "")
+    (tmp_path / "poses.csv").write_text(header + GOOD_ROW + ",spare,1\n")
+    with pytest.raises(
+        InputError, match=r"line 2, column 'role' \(column 13\): must be fit or check"
+    ):
+        read_poses(tmp_path / "poses.csv")
+
+
+def test_unknown_acceptance_keys_are_reported_not_refused(tmp_path):
+    (tmp_path / "session.toml").write_text(
+        SPEC_SESSION_TOML + "\n[mocap.acceptance]\nmax_drift_mm = 0.1\nspread_limit = 2\n"
+    )
+    (tmp_path / "poses.csv").write_text(",".join(POSE_COLUMNS) + "\n")
+    session = load_session(tmp_path)
+    assert session.config.acceptance.max_drift_mm == 0.1
+    assert session.warnings and "spread_limit" in session.warnings[0]

@@ -101,7 +101,7 @@ def test_clean_session_says_none_and_exits_zero(tmp_path, sim_model):
     result = json.loads(report.read_text())
     assert result["verdict"] == "none" and result["effect"] is None
     assert result["where"].startswith("no disagreement beyond the noise floor")
-    assert result["noise"]["source"] == "default"
+    assert result["noise"]["source"] == "takes"
 
 
 def test_declared_noise_is_read_from_session_toml(tmp_path, sim_model):
@@ -110,8 +110,9 @@ def test_declared_noise_is_read_from_session_toml(tmp_path, sim_model):
     toml = session / "session.toml"
     toml.write_text(toml.read_text().replace("[session]\n", "[session]\nnoise_mm = 0.06\n", 1))
     data = load_session_data(session)
-    assert data.noise.source == "declared" and data.noise.sigma_mm == 0.06
-    assert data.observations.sigma_mm == 0.06 and len(data.observations) == 12
+    assert data.noise.source == "takes + declared" and data.noise.extra_mm == 0.06
+    np.testing.assert_allclose(data.observations.sigma_mm, np.hypot(data.noise.take_mm, 0.06))
+    assert len(data.observations) == 12
     toml.write_text(toml.read_text().replace("noise_mm = 0.06", "noise_mm = -1"))
     assert main(["diagnose", str(session), "-p", "paper-simulation", "-q"]) == 2
 
@@ -158,3 +159,30 @@ def test_out_of_catalogue_effect_is_unexplained_end_to_end(tmp_path, sim_model):
     assert "repeat with slider position" in result["where"]
     assert result["chi2_after"]["p_value"] < 1e-3
     assert load_profile(out).calibration["diagnosis"]["verdict"] == "unexplained"
+
+
+@pytest.mark.parametrize(
+    ("pair", "fmt", "seed"),
+    [
+        (("drive_scale", "backlash"), "qualisys-tsv", 301),
+        (("cable_elasticity", "drift"), "c3d", 302),
+    ],
+)
+def test_two_effects_at_once_are_both_named(tmp_path, sim_model, pair, fmt, seed, capsys):
+    session = tmp_path / "two"
+    write_hidden_session(
+        session, sim_model, list(pair), seed, format=fmt, rate_hz=240.0, duration_s=3.0
+    )
+    report = tmp_path / "r.json"
+    assert main(["diagnose", str(session), "-p", "paper-simulation", "--json", str(report)]) == 0
+    data = json.loads(report.read_text())
+    assert data["verdict"] == "named" and set(data["effects"]) == set(pair)
+    assert data["effect"] == data["effects"][0]
+    steps = data["steps"]
+    assert [s["added"] for s in steps] == [None, *data["effects"]]
+    held = [s["heldout_rms_mm"] for s in steps]
+    assert held[0] > held[1] > held[2]  # each step closes part of the gap...
+    assert held[2] <= 1.3 * steps[2]["noise_floor_mm"]  # ...and the last closes it
+    out = capsys.readouterr().out
+    assert "forward selection: the gap after each step" in out
+    assert f"geometry + {data['effects'][0]} + {data['effects'][1]}" in out

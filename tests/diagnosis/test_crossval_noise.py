@@ -11,7 +11,6 @@ from cdprhost.diagnosis.crossval import (
     pose_folds,
     rms,
 )
-from cdprhost.diagnosis.noise import DEFAULT_NOISE_MM, estimate_noise, repeated_pose_sigma
 from cdprhost.diagnosis.signatures import fit_jacobian
 
 
@@ -58,32 +57,3 @@ def test_noise_floor_matches_heldout_rms_of_a_correct_model(make_session, sim_mo
     assert (
         1.6 < noise_floor_mm(fit_jacobian(fit, obs), 0.05, folds) / 0.05 < 2.0
     )  # ~ sqrt(3 + leverage)
-
-
-def test_declared_noise_wins():
-    est = estimate_noise(0.07, sliders=np.zeros((4, 3)), measured=np.zeros((4, 3)))
-    assert est.sigma_mm == 0.07 and est.source == "declared"
-
-
-def test_noise_from_repeated_poses():
-    rng = np.random.default_rng(5)
-    sliders = np.repeat(rng.uniform(-100, 0, (10, 3)), 4, axis=0)
-    measured = np.repeat(rng.uniform(-50, 50, (10, 3)), 4, axis=0) + rng.normal(0, 0.08, (40, 3))
-    sigma, dof = repeated_pose_sigma(sliders, measured)
-    assert dof == 90 and sigma == pytest.approx(0.08, rel=0.2)
-    assert estimate_noise(None, sliders=sliders, measured=measured).source == "repeated poses"
-
-
-def test_default_noise_and_frame_scatter_as_a_lower_bound():
-    rng = np.random.default_rng(6)
-    sliders = rng.uniform(-100, 0, (20, 3))
-    small = estimate_noise(
-        None, sliders=sliders, measured=np.zeros((20, 3)), take_std_mm=np.full((20, 3), 0.01)
-    )
-    assert (
-        small.source == "default"
-        and small.sigma_mm == DEFAULT_NOISE_MM
-        and "lower bound" in small.note
-    )
-    big = estimate_noise(None, take_std_mm=np.full((20, 3), 0.09))
-    assert big.source == "take scatter" and big.sigma_mm == pytest.approx(0.09)

@@ -13,7 +13,7 @@ from cdprhost.job.runner import PrintJob, PrintResult
 from cdprhost.kinematics import MachineModel
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.program import read_items
-from cdprhost.motion.segments import SegmentBatch
+from cdprhost.motion.segments import PlannedSegments
 from cdprhost.profile import load_profile
 from cdprhost.sim.embedded import open_embedded
 
@@ -53,7 +53,7 @@ def print_embedded(path: Path, profile_name: str = "paper-prototype") -> PrintRu
                 starts[ln], ends[ln] = s, e
             e_final = float(item.e_end[-1])
     for out in segment_program(read_items(path, profile, model), profile, model, clock_hz=clock):
-        if isinstance(out, SegmentBatch):
+        if isinstance(out, PlannedSegments):
             steps.append(out.steps_abs)
             lines.append(out.line)
     return PrintRun(

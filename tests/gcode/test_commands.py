@@ -5,17 +5,22 @@ from __future__ import annotations
 import pytest
 
 from cdprhost.gcode import (
-    Dwell,
+    ColdExtrusion,
+    DisplayMessage,
+    DwellCommand,
     Fan,
+    FilamentChange,
+    FlowFactor,
     GcodeError,
-    Home,
+    HomeCommand,
     LayerChange,
-    Message,
     MotorsOff,
     MoveChunk,
+    SetMotionLimits,
     SetTemperature,
+    SpeedFactor,
     ToolSelect,
-    Unknown,
+    UnknownCommand,
     WaitMoves,
 )
 
@@ -37,29 +42,58 @@ from .helpers import commands, moves, read
         ("M106 P1 S255", Fan(1, 1.0, index=1)),
         ("M106 S300", Fan(1, 1.0)),
         ("M107", Fan(1, 0.0)),
-        ("G4 P250", Dwell(1, 0.25)),
-        ("G4 S2", Dwell(1, 2.0)),
-        ("G4", Dwell(1, 0.0)),
-        ("G28", Home(1, ())),
-        ("G28 X Y", Home(1, ("X", "Y"))),
-        ("G28 Z0", Home(1, ("Z",))),
+        ("G4 P250", DwellCommand(1, 0.25)),
+        ("G4 S2", DwellCommand(1, 2.0)),
+        ("G4", DwellCommand(1, 0.0)),
+        ("G28", HomeCommand(1, ())),
+        ("G28 X Y", HomeCommand(1, ("X", "Y"))),
+        ("G28 Z0", HomeCommand(1, ("Z",))),
         ("M84", MotorsOff(1)),
         ("M18", MotorsOff(1)),
         ("M400", WaitMoves(1)),
-        ("M117 Printing Layer 3; comment", Message(1, "Printing Layer 3")),
-        ("M117", Message(1, "")),
-        ("M117 X5 Y7", Message(1, "X5 Y7")),
-        ("m117 Mixed Case", Message(1, "Mixed Case")),
+        ("M117 Printing Layer 3; comment", DisplayMessage(1, "Printing Layer 3")),
+        ("M117", DisplayMessage(1, "")),
+        ("M117 X5 Y7", DisplayMessage(1, "X5 Y7")),
+        ("m117 Mixed Case", DisplayMessage(1, "Mixed Case")),
         ("T0", ToolSelect(1, 0)),
-        ("M73 P10 R5", Unknown(1, "M73", harmless=True)),
-        ("M204 S1000", Unknown(1, "M204", harmless=True)),
-        ('M862.3 P "MK3S" ; printer model check', Unknown(1, "M862.3", harmless=True)),
-        ("M115 U3.10.0", Unknown(1, "M115", harmless=True)),
-        ("M221 S100", Unknown(1, "M221", harmless=True)),
-        ("M221 S95", Unknown(1, "M221", harmless=False)),
-        ("M600", Unknown(1, "M600", harmless=False)),
-        ("G10", Unknown(1, "G10", harmless=False)),
-        ("M84 S600", Unknown(1, "M84", harmless=True)),
+        ("M73 P10 R5", UnknownCommand(1, "M73", harmless=True)),
+        ("M204 S1000", SetMotionLimits(1, "M204", print_accel=1000.0, travel_accel=1000.0)),
+        (
+            "M204 P800 T1500 R900",
+            SetMotionLimits(1, "M204", print_accel=800.0, travel_accel=1500.0, retract_accel=900.0),
+        ),
+        (
+            "M201 X1000 Y900 Z200 E5000",
+            SetMotionLimits(1, "M201", axis_accel=(1000.0, 900.0, 200.0, 5000.0)),
+        ),
+        (
+            "M203 X200 Y200 Z12 E120",
+            SetMotionLimits(1, "M203", axis_velocity=(200.0, 200.0, 12.0, 120.0)),
+        ),
+        ("M205 X8 Y10 Z0.4 E4.5", SetMotionLimits(1, "M205", corner_velocity=8.0)),
+        ("M205 J0.02", SetMotionLimits(1, "M205", junction_deviation=0.02)),
+        ('M862.3 P "MK3S" ; printer model check', UnknownCommand(1, "M862.3", harmless=True)),
+        ("M115 U3.10.0", UnknownCommand(1, "M115", harmless=True)),
+        ("M221 S100", FlowFactor(1, 1.0)),
+        ("M221 S95", FlowFactor(1, 0.95)),
+        ("M220 S50", SpeedFactor(1, 0.5)),
+        ("M600", FilamentChange(1)),
+        ("M302 P1", ColdExtrusion(1, True)),
+        ("M302 S160", ColdExtrusion(1, None, 160.0)),
+        ("M302", UnknownCommand(1, "M302", harmless=True)),
+        ("M555 X10 Y10 W50 H50", UnknownCommand(1, "M555", harmless=True)),
+        ("M569 S1 X Y", UnknownCommand(1, "M569", harmless=True)),
+        ("M84 E", UnknownCommand(1, "M84", harmless=True)),
+        ("G10 L2 P1 X0", UnknownCommand(1, "G10", harmless=False, text="G10 L2 P1 X0")),
+        ("GET_POSITION", UnknownCommand(1, "GET_POSITION", harmless=True, text="GET_POSITION")),
+        (
+            "PRINT_START BED=60 EXTRUDER=215",
+            UnknownCommand(
+                1, "PRINT_START", harmless=False, text="PRINT_START BED=60 EXTRUDER=215"
+            ),
+        ),
+        ("@pause", UnknownCommand(1, "@PAUSE", harmless=False, text="@PAUSE")),
+        ("M84 S600", UnknownCommand(1, "M84", harmless=True)),
     ],
 )
 def test_single_command(line, expected):
@@ -81,7 +115,7 @@ def test_home_returns_to_home_position_and_clears_offsets():
     assert m["end"][0].tolist() == [10.0, 10.0, 10.0]
     assert m["start"][1].tolist() == [1.0, 2.0, 3.0]  # after G28
     assert m["end"][1].tolist() == [5.0, 2.0, 3.0]  # G92 X0 offset cleared by G28
-    assert any(isinstance(i, Home) for i in items)
+    assert any(isinstance(i, HomeCommand) for i in items)
 
 
 @pytest.mark.parametrize(
@@ -92,7 +126,7 @@ def test_home_returns_to_home_position_and_clears_offsets():
         ("M104 S-5", 6, "below 0"),
         ("G4 P-10", 4, "below 0"),
         ("M106 S-1", 6, "below 0"),
-        ("X10 Y5", 1, "no command"),
+        ("S10 Y5", 1, "no command before 'S10'"),
     ],
 )
 def test_bad_command_values(line, column, fragment):

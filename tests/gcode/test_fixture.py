@@ -8,7 +8,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from cdprhost.gcode import Home, LayerChange, MoveChunk, ProgramSummary, read_program
+from cdprhost.gcode import HomeCommand, LayerChange, MoveChunk, ProgramSummary, read_program
 
 
 def simple_filament(path) -> float:
@@ -67,7 +67,7 @@ def test_moves_are_continuous_and_ordered(fixture_items):
     chunks = [i for i in fixture_items if isinstance(i, MoveChunk)]
     start = np.concatenate([c.start for c in chunks])
     end = np.concatenate([c.end for c in chunks])
-    homes = [i.line for i in fixture_items if isinstance(i, Home)]
+    homes = [i.line for i in fixture_items if isinstance(i, HomeCommand)]
     line = np.concatenate([c.line for c in chunks])
     assert np.all(np.diff(line) > 0)
     jumps = np.flatnonzero(np.any(start[1:] != end[:-1], axis=1))

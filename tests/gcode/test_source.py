@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.gcode import GcodeError, LayerChange, ProgramSummary, Unknown, read_program
+from cdprhost.gcode import GcodeError, LayerChange, ProgramSummary, UnknownCommand, read_program
 
 from .helpers import moves, read
 
@@ -64,7 +64,7 @@ def test_summary_totals_and_layer_lookup():
     assert s.retracted_mm == 0.0
     assert s.layer_start_lines == [2, 7]
     assert [s.layer_of_line(n) for n in (1, 2, 4, 6, 7, 10, 99)] == [-1, 0, 0, 0, 1, 1, 1]
-    assert s.unknown == [Unknown(5, "M73", harmless=True)]
+    assert s.unknown == [UnknownCommand(5, "M73", harmless=True)]
     np.testing.assert_allclose(s.extrude_min, [0, 0, 0])
     np.testing.assert_allclose(s.extrude_max, [2, 1, 0.4])
 

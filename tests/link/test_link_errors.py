@@ -99,10 +99,10 @@ def test_port_vanishing_mid_session():
 
 
 def test_protocol_major_mismatch(monkeypatch):
-    monkeypatch.setattr(firmware, "PROTOCOL_MAJOR", 2)
-    with pytest.raises(ProtocolMismatch, match="protocol 2.0") as exc:
+    monkeypatch.setattr(firmware, "PROTOCOL_MAJOR", 3)
+    with pytest.raises(ProtocolMismatch, match="protocol 3.0") as exc:
         open_embedded()
-    assert exc.value.device_version == (2, 0) and exc.value.host_version == (1, 0)
+    assert exc.value.device_version == (3, 0) and exc.value.host_version == (2, 0)
 
 
 def test_sim_device_cli_rejects_bad_options(capsys):

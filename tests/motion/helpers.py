@@ -7,7 +7,7 @@ import numpy as np
 from cdprhost.motion.limits import Caps
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.planner import Planner
-from cdprhost.motion.segments import SegmentBatch, Segmenter
+from cdprhost.motion.segments import PlannedSegments, Segmenter
 from cdprhost.motion.trapezoid import PlannedMoves
 
 
@@ -53,7 +53,7 @@ def concat_planned(parts: list[PlannedMoves]) -> dict[str, np.ndarray]:
 
 def segment_all(
     parts: list[PlannedMoves], profile, model, start_point=None
-) -> tuple[list[SegmentBatch], Segmenter]:
+) -> tuple[list[PlannedSegments], Segmenter]:
     seg = Segmenter(model, profile.drive.home_mm, e_steps_per_mm=profile.extruder.steps_per_mm)
     if start_point is not None:
         from dataclasses import replace
@@ -64,7 +64,7 @@ def segment_all(
     return [seg(p) for p in parts], seg
 
 
-def concat_batches(batches: list[SegmentBatch]) -> dict[str, np.ndarray]:
+def concat_batches(batches: list[PlannedSegments]) -> dict[str, np.ndarray]:
     keys = (
         "steps_abs",
         "delta",

@@ -37,8 +37,11 @@ def klipper_peaks(lim, smooth_delta, cruise):
     for i in range(n - 1, -1, -1):
         reachable = next_smoothed + smooth_delta[i]
         smoothed = min(max_smoothed[i], reachable)
-        if smoothed < reachable:
-            if smoothed + smooth_delta[i] > next_smoothed or delayed:
+        # Ties within rounding (1e-9 relative) count as equal, as in hump_caps: which side
+        # of a one-ulp tie a move falls on is not a property of the plan.
+        tol = 1e-9 * max(reachable, 1.0)
+        if smoothed < reachable - tol:
+            if smoothed + smooth_delta[i] > next_smoothed + tol or delayed:
                 peak = min(cruise[i], (smoothed + reachable) * 0.5)
                 for j in delayed:
                     peaks[j] = peak

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.gcode import Dwell, Fan, Home, LayerChange, SetTemperature
+from cdprhost.gcode import DwellCommand, Fan, HomeCommand, LayerChange, SetTemperature
 from cdprhost.motion.pipeline import PipelineTotals, segment_program
 from cdprhost.motion.program import (
     ProgramPlanner,
@@ -14,7 +14,7 @@ from cdprhost.motion.program import (
     plan_program,
     read_items,
 )
-from cdprhost.motion.segments import SegmentBatch
+from cdprhost.motion.segments import PlannedSegments
 from cdprhost.motion.trapezoid import PlannedMoves
 
 PROGRAM = [
@@ -49,7 +49,7 @@ def test_commands_keep_their_place_between_moves(sim_profile, sim_model):
             order.append((type(item).__name__, item.line))
     lines = [ln for _, ln in order]
     assert lines == sorted(lines)
-    assert ("Fan", 4) in order and ("Dwell", 6) in order and ("Home", 13) in order
+    assert ("Fan", 4) in order and ("DwellCommand", 6) in order and ("HomeCommand", 13) in order
 
 
 def test_flushing_commands_stop_the_machine_and_others_do_not(sim_profile, sim_model):
@@ -65,8 +65,8 @@ def test_flushing_commands_stop_the_machine_and_others_do_not(sim_profile, sim_m
         elif isinstance(item, Fan):
             assert before.v_end[-1] > 0.0  # the corner at line 5 is taken at speed, not stopped
     assert (
-        flushes_motion(Dwell(1, 0.5))
-        and flushes_motion(Home(1))
+        flushes_motion(DwellCommand(1, 0.5))
+        and flushes_motion(HomeCommand(1))
         and flushes_motion(SetTemperature(1, "hotend", 200, True))
     )
     assert not flushes_motion(SetTemperature(1, "hotend", 200, False)) and not flushes_motion(
@@ -106,7 +106,7 @@ def test_pipeline_segments_and_homing_reset(sim_profile, sim_model):
             read_items(PROGRAM, sim_profile, sim_model), sim_profile, sim_model, totals=totals
         )
     )
-    batches = [o for o in out if isinstance(o, SegmentBatch)]
+    batches = [o for o in out if isinstance(o, PlannedSegments)]
     assert totals.segments == sum(len(b) for b in batches) and totals.moves == 7
     # the batch right after the second G28 starts from the endstop steps (0, 0, 0)
     after = next(b for b in batches if b.line[0] == 14)
@@ -128,7 +128,7 @@ def test_encode_hook_sees_every_batch(sim_profile, sim_model):
             encode=lambda b: seen.append(len(b)) or ("encoded", len(b)),
         )
     )
-    assert seen and all(isinstance(o, tuple) or not isinstance(o, SegmentBatch) for o in out)
+    assert seen and all(isinstance(o, tuple) or not isinstance(o, PlannedSegments) for o in out)
 
 
 def test_pipeline_keeps_commands_between_the_segments_of_their_moves(sim_profile, sim_model):
@@ -142,7 +142,7 @@ def test_pipeline_keeps_commands_between_the_segments_of_their_moves(sim_profile
         "G1 X0 Y0",
     ]
     for out in segment_program(read_items(program, sim_profile, sim_model), sim_profile, sim_model):
-        lines += [int(x) for x in out.line] if isinstance(out, SegmentBatch) else [out.line]
+        lines += [int(x) for x in out.line] if isinstance(out, PlannedSegments) else [out.line]
     assert lines == sorted(lines)
     assert 4 in lines and program.index("M106 S128") + 1 in lines  # the two fans
 
@@ -165,7 +165,7 @@ def test_segment_blocks_marks_match_the_ordered_stream(sim_profile, sim_model):
     flat = [p for b in blocks for p in (b.split() if isinstance(b, SegmentBlock) else [b])]
     assert [type(x).__name__ for x in flat] == [type(x).__name__ for x in ordered]
     for a, b in zip(flat, ordered):
-        if isinstance(a, SegmentBatch):
+        if isinstance(a, PlannedSegments):
             np.testing.assert_array_equal(a.steps_abs, b.steps_abs)
             np.testing.assert_array_equal(a.delta, b.delta)
         else:

@@ -208,7 +208,7 @@ def test_extrude_only_moves_are_cut_at_their_phases(sim_profile, sim_model):
 def test_fixture_pipeline_is_consistent(fixture_gcode, sim_profile, sim_model):
     from cdprhost.motion.pipeline import PipelineTotals, segment_program
     from cdprhost.motion.program import read_items
-    from cdprhost.motion.segments import SegmentBatch
+    from cdprhost.motion.segments import PlannedSegments
 
     totals = PipelineTotals()
     ticks = 0
@@ -217,7 +217,7 @@ def test_fixture_pipeline_is_consistent(fixture_gcode, sim_profile, sim_model):
     for out in segment_program(
         read_items(fixture_gcode, sim_profile, sim_model), sim_profile, sim_model, totals=totals
     ):
-        if isinstance(out, SegmentBatch):
+        if isinstance(out, PlannedSegments):
             assert out.ticks.min() >= 1 and out.ramp.min() >= 0.0 and out.ramp.max() <= 1.0
             ticks += int(out.ticks.sum())
             steps += out.delta.sum(axis=0)
@@ -225,7 +225,7 @@ def test_fixture_pipeline_is_consistent(fixture_gcode, sim_profile, sim_model):
                 steps, out.steps_abs[-1]
             )  # no homing inside the print body
             last = out
-        elif type(out).__name__ == "Home":
+        elif type(out).__name__ == "HomeCommand":
             steps[:3] = 0
     assert totals.moves == 122769
     assert abs(ticks / DEFAULT_CLOCK_HZ - totals.planned_time_s) < 1e-3

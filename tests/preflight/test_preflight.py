@@ -153,8 +153,14 @@ def test_heater_targets_and_unknown_commands(tmp_path, sim_profile, sim_model):
     rules = {v.rule: v for v in r.violations}
     assert rules["temperature"].line == line_of(path, "M104 S300")
     assert "by 15 C" in rules["temperature"].detail
-    assert rules["unknown_command"].line == line_of(path, "M999")
+    assert "unknown_command" not in rules  # the default policy: a warning, skipped when printing
+    assert [(w.word, w.kind, w.lines) for w in r.warnings] == [
+        ("M999", "unknown_command", [line_of(path, "M999")])
+    ]
     assert [(n.word, n.count) for n in r.notes] == [("M73", 2)]
+    strict = preflight(path, sim_profile, sim_model, strict=True)
+    rules = {v.rule: v for v in strict.violations}
+    assert rules["unknown_command"].line == line_of(path, "M999") and strict.warnings == []
 
 
 def test_fixture_passes_with_both_profiles(fixture_gcode, sim_profile, proto_profile):
@@ -169,20 +175,23 @@ def test_fixture_passes_with_both_profiles(fixture_gcode, sim_profile, proto_pro
             0.95 * 8587.2 < r.estimated_time_s < 1.05 * 8587.2
         )  # Klipper's estimate, same Cartesian limits
     assert r.filament_mm == pytest.approx(independent_filament(fixture_gcode), abs=1e-3)
+    assert r.filament_mm == pytest.approx(12173.73, abs=0.01)  # the slicer's header
 
 
 def independent_filament(path) -> float:
-    """Forward extrusion of an absolute-E file with G92 E resets, read line by line."""
+    """Forward extrusion of the moves that also move the effector (not the primes after
+    a retraction) of an absolute-E file with G92 E resets, read line by line."""
     e = total = 0.0
     for raw in open(path):
         words = raw.split(";", 1)[0].split()
         if not words:
             continue
         if words[0] in ("G1", "G0"):
+            moves = any(w[0] in "XYZ" for w in words[1:])
             for w in words[1:]:
                 if w[0] == "E":
                     v = float(w[1:])
-                    total += max(v - e, 0.0)
+                    total += max(v - e, 0.0) if moves else 0.0
                     e = v
         elif words[0] == "G92":
             for w in words[1:]:

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from firmware_protocol.crc import CRC8_CHECK, CRC16_CHECK, crc8, crc16, crc16_reference
+from firmware_protocol.crc import CRC8_CHECK, CRC32_CHECK, crc8, crc32, crc32_reference
 from firmware_protocol.varint import (
     VarintError,
     decode_svarint,
@@ -23,23 +23,23 @@ from firmware_protocol.varint import (
 
 
 def test_crc_check_values():
-    assert crc16(b"123456789") == CRC16_CHECK == 0x29B1
-    assert crc16_reference(b"123456789") == 0x29B1
+    assert crc32(b"123456789") == CRC32_CHECK == 0xCBF43926
+    assert crc32_reference(b"123456789") == 0xCBF43926
     assert crc8(b"123456789") == CRC8_CHECK == 0xF4
-    assert crc16(b"") == 0xFFFF
+    assert crc32(b"") == 0
 
 
 @given(st.binary(max_size=300))
-def test_fast_crc16_matches_the_bitwise_definition(data):
-    assert crc16(data) == crc16_reference(data)
+def test_fast_crc32_matches_the_bitwise_definition(data):
+    assert crc32(data) == crc32_reference(data)
 
 
 @given(st.binary(min_size=1, max_size=64), st.integers(0, 8 * 64 - 1))
-def test_crc16_detects_every_single_bit_flip(data, bit):
+def test_crc32_detects_every_single_bit_flip(data, bit):
     bit %= 8 * len(data)
     flipped = bytearray(data)
     flipped[bit // 8] ^= 1 << (bit % 8)
-    assert crc16(bytes(flipped)) != crc16(data)
+    assert crc32(bytes(flipped)) != crc32(data)
 
 
 @pytest.mark.parametrize(

@@ -191,11 +191,13 @@ def test_observer_is_told_when_motion_settles():
             seen.append((steps, t))
 
     link = open_embedded(observer=Observer())
+    t0 = link.now()
     link.queue_segments(SegmentBatch([10_000, 10_000], [[100, 0, 0, 0], [0, 50, 0, 0]], [-1, 255]))
     link.wait_idle(5)
     link.poll(0.5)
     assert len(seen) == 1 and seen[0][0] == (100, 50, 0, 0)
-    assert 0.4 <= seen[0][1] <= 0.45  # 0.2 s of motion + 0.2 s settle, after the bytes arrived
+    # 0.2 s of motion + 0.2 s settle, after the bytes arrived
+    assert t0 + 0.4 <= seen[0][1] <= t0 + 0.45
 
 
 def test_status_reports_are_parsed():

@@ -100,6 +100,11 @@ def test_rto_adapts_backs_off_and_respects_bounds():
     for _ in range(20):
         rto.sample(0.010)
     assert 0.02 <= rto.rto < 0.03
+    base = rto.rto
+    for _ in range(8):
+        rto.back_off()
+    assert rto.rto == pytest.approx(4 * base)  # a serial line: backoff stays short
+    rto = RtoEstimator(initial=0.4, floor=0.02, ceiling=1.0)
     for _ in range(8):
         rto.back_off()
     assert rto.rto == 1.0

@@ -137,3 +137,18 @@ def test_continuous_speed_across_segments():
     end = (2 - 2 * r) * batch.deltas[:, 0] / 0.1
     assert np.allclose(end[:-1], start[1:], rtol=0.01)
     assert peak_step_rates(batch, 100_000)[:, 0] == pytest.approx(end, rel=1e-9)
+
+
+@given(batches())
+def test_the_scalar_encoder_makes_the_same_bytes(batch):
+    from firmware_protocol.segments import encode_one_segment
+
+    ctx_v, ctx_s = SegmentContext(), SegmentContext()
+    data, _ = encode_segments(batch, ctx_v)
+    one = b"".join(
+        encode_one_segment(
+            int(batch.ticks[i]), tuple(int(v) for v in batch.deltas[i]), int(batch.ramps[i]), ctx_s
+        )
+        for i in range(len(batch))
+    )
+    assert one == data and ctx_v == ctx_s

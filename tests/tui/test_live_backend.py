@@ -31,7 +31,7 @@ def live():
 
 def test_embedded_device_home_jog_heaters(live):
     rows = dict(live.connect(EMBEDDED, 250000))
-    assert rows["firmware"].startswith("cdpr-sim") and rows["protocol"].startswith("1.")
+    assert rows["firmware"].startswith("cdpr-sim") and rows["protocol"].startswith("2.")
     status = live.device_status()
     assert not status.homed and status.position is None  # position unknown until homed
     with pytest.raises(Exception, match="not homed"):

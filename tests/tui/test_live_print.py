@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("cdprhost.job.runner", reason="the print runner has not landed yet")
 
 
+from cdprhost.job.resume import resume_path_for
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
@@ -94,12 +95,13 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         text = await shown(pilot)
         assert f"last executed line: {failure.last_line}" in text
         assert f"--resume-from-layer {max(failure.last_layer + 1, 1)}" in text
-        assert failure.resume_file == str(tmp_path / "resume" / "tube.resume.json")
+        # keyed by the file's content hash and path
+        assert failure.resume_file == str(resume_path_for(part, tmp_path / "resume"))
         await pilot.press("r")  # resume asked for: the link is checked first, and it is down
         await wait_for(pilot, lambda s: s.connection.status == "error", timeout=30)
         await pilot.pause(0.2)
         assert app.state.job_id == 1  # nothing started
-        saved = (tmp_path / "resume" / "tube.resume.json").read_text()
+        saved = resume_path_for(part, tmp_path / "resume").read_text()
         await pilot.press("f1", "c")  # reconnect: the embedded device again
         await wait_for(pilot, lambda s: s.connected, timeout=30)
         await pilot.press("f2")
@@ -109,7 +111,7 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         await pilot.press("l")
         await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
         assert "Is the part still on the bed and clear?" in await shown(pilot)
-        assert (tmp_path / "resume" / "tube.resume.json").read_text() == saved
+        assert resume_path_for(part, tmp_path / "resume").read_text() == saved
         await pilot.press("y")  # a new job starts at that layer
         state = await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, timeout=120)
         assert state.job_resumed_from == failure.last_layer + 1

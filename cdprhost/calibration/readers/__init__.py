@@ -63,7 +63,7 @@ def read_take(path: str | os.PathLike[str], format: str | None = None) -> Take:
             "('Trajectories'), a Qualisys TSV ('NO_OF_FRAMES') or a C3D file",
             source=str(path),
         )
-    chosen = detected or format
+    chosen = detected or format or ""
     take = _READERS[chosen](path)
     if format is not None and detected is not None and detected != format:
         note = f"session says {format} but the file is {detected}; read as {detected}"

@@ -4,20 +4,26 @@ Layout: a first line of key,value pairs (``Format Version``, ``Capture Frame Rat
 ``Length Units`` ...), optionally a blank line, then header rows whose second cell
 names them (``Type``, ``Name``, ``ID``, and from 1.25 ``Parent``), a row of
 ``Rotation`` / ``Position`` / ``Mean Marker Error`` / ``Marker Quality`` labels, the
-``Frame,Time (Seconds),X,Y,Z,...`` row, and data. Only columns of Type ``Marker`` and
+``Frame,Time (Seconds),X,Y,Z,...`` row, and data. Exports made with European locale
+settings separate with ``;`` and write decimal commas; both are read. Only columns of Type ``Marker`` and
 label ``Position`` are read, by name: Rigid Body and Rigid Body Marker columns are
 skipped (a rigid body's solved markers repeat the measured markers' names).
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import os
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take, numeric_block, read_text, unit_scale
+from cdprhost.calibration.readers.take import (
+    Take,
+    csv_rows,
+    numeric_block,
+    read_text,
+    to_float,
+    unit_scale,
+)
 from cdprhost.errors import InputError
 
 FORMAT = "motive-csv"
@@ -26,7 +32,8 @@ HEADER_KEYS = ("Type", "Name", "ID", "Parent")
 
 
 def looks_like_motive(first_line: str) -> bool:
-    return first_line.lstrip("\ufeff").startswith("Format Version,")
+    head = first_line.lstrip("\ufeff")
+    return head.startswith(("Format Version,", "Format Version;"))
 
 
 def parse_metadata(cells: list[str]) -> dict[str, str]:
@@ -43,14 +50,14 @@ def read_motive(path: str | os.PathLike[str]) -> Take:
 
 
 def parse_motive(text: str, source: str) -> Take:
-    rows = list(csv.reader(io.StringIO(text)))
+    rows = csv_rows(text)
     if not rows or not rows[0] or rows[0][0].strip() != "Format Version":
         raise InputError(
             "line 1: not a Motive CSV export (expected 'Format Version,...')", source=source
         )
     meta = parse_metadata(rows[0])
     notes: list[str] = []
-    version = meta.get("Format Version", "")
+    version = meta.get("Format Version", "").replace(",", ".")
     if version not in SUPPORTED_VERSIONS:
         notes.append(f"Motive format version {version!r} is outside 1.21-1.25; read as 1.23")
     if "Length Units" in meta:
@@ -155,7 +162,7 @@ def parse_motive(text: str, source: str) -> Take:
 def _frame_rate(meta: dict[str, str]) -> float | None:
     for key in ("Export Frame Rate", "Capture Frame Rate"):
         try:
-            rate = float(meta[key])
+            rate = to_float(meta[key])
         except (KeyError, ValueError):
             continue
         if rate > 0:

@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take, numeric_block, read_text
+from cdprhost.calibration.readers.take import Take, numeric_block, read_text, to_float
 from cdprhost.errors import InputError
 
 FORMAT = "qualisys-tsv"
@@ -81,7 +81,7 @@ def parse_qualisys(text: str, source: str) -> Take:
                 source=source,
             )
         col_idx = [lead + k for k in range(3 * len(names))]
-        frame_col, time_col = (0, 1) if lead == 2 else (None, None)
+        frame_col, time_col = (0, 1) if lead == 2 else (None, None)  # type: ignore[assignment]
 
     data = [(n + 1, r) for n, r in enumerate(rows[i:], start=i) if any(c.strip() for c in r)]
     body = [r for _, r in data]
@@ -114,7 +114,7 @@ def parse_qualisys(text: str, source: str) -> Take:
 
 def _float_meta(meta: dict[str, list[str]], key: str) -> float | None:
     try:
-        value = float(meta[key][0])
+        value = to_float(meta[key][0])
     except (KeyError, IndexError, ValueError):
         return None
     return value if value > 0 else None

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -105,19 +107,36 @@ def read_text(path: str | os.PathLike[str]) -> str:
         return raw.decode("latin-1")
 
 
+def sniff_delimiter(text: str, lines: int = 12) -> str:
+    """``;`` for exports written with European locale settings (where ``,`` is the decimal
+    separator), else ``,``: whichever of the two is more frequent in the first lines."""
+    head = "\n".join(text.splitlines()[:lines])
+    return ";" if head.count(";") > head.count(",") else ","
+
+
+def csv_rows(text: str) -> list[list[str]]:
+    """Rows of a comma- or semicolon-separated export (:func:`sniff_delimiter`)."""
+    return list(csv.reader(io.StringIO(text), delimiter=sniff_delimiter(text)))
+
+
+def to_float(cell: str) -> float:
+    """A number as exporters write it: ``.`` or (European locale) ``,`` as decimal separator."""
+    return float(cell.strip().replace(",", "."))
+
+
 def numeric_block(
     rows: Sequence[Sequence[str]],
     columns: Sequence[int],
     *,
     first_line: int,
-    column_label,
+    column_label: Callable[[int], str],
     source: str,
     line_numbers: Sequence[int] | None = None,
 ) -> np.ndarray:
     """Cells ``rows[i][columns[j]]`` as float (len(rows), len(columns)); empty or missing cells -> NaN.
 
     ``column_label(j)`` names column j in errors; rows are numbered from ``first_line``
-    unless ``line_numbers`` gives each row's file line.
+    unless ``line_numbers`` gives each row's file line. A decimal comma is accepted.
     """
     cols = np.asarray(columns, dtype=int)
     width = int(cols.max()) + 1 if cols.size else 0
@@ -128,6 +147,8 @@ def numeric_block(
     picked = cells[:, cols] if cols.size else np.empty((len(rows), 0), dtype=object)
     text = np.char.strip(picked.astype(str)) if picked.size else picked.astype(str)
     text = np.where(text == "", "nan", text)
+    # a comma inside a cell can only be a decimal comma (European locale exports)
+    text = np.char.replace(text, ",", ".") if text.size else text
     try:
         values = text.astype(float)
         bad = np.isinf(values)

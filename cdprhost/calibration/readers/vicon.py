@@ -2,19 +2,26 @@
 
 Layout of a section: its name (``Trajectories``), the frame rate, a row with a
 ``Subject:Marker`` name above each marker's X column, ``Frame,Sub Frame,X,Y,Z,...``,
-a units row (``mm``), then data rows until a blank line. Other sections (``Devices``,
+a units row (``mm``), then data rows until a blank line. European locale exports
+(``;`` separators, decimal commas) are read too. Other sections (``Devices``,
 ``Model Outputs``) may come before or after and are skipped. Gaps are empty cells.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import os
+import re
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take, numeric_block, read_text, unit_scale
+from cdprhost.calibration.readers.take import (
+    Take,
+    csv_rows,
+    numeric_block,
+    read_text,
+    to_float,
+    unit_scale,
+)
 from cdprhost.errors import InputError
 
 FORMAT = "vicon-csv"
@@ -28,7 +35,7 @@ def _first(row: list[str]) -> str:
 
 def looks_like_vicon(lines: list[str]) -> bool:
     """True if one of the first lines starts a Nexus section."""
-    return any(line.split(",")[0].strip().lower() in KNOWN_SECTIONS for line in lines)
+    return any(re.split("[,;]", line)[0].strip().lower() in KNOWN_SECTIONS for line in lines)
 
 
 def read_vicon(path: str | os.PathLike[str]) -> Take:
@@ -36,7 +43,7 @@ def read_vicon(path: str | os.PathLike[str]) -> Take:
 
 
 def parse_vicon(text: str, source: str) -> Take:
-    rows = list(csv.reader(io.StringIO(text)))
+    rows = csv_rows(text)
     start = next((i for i, r in enumerate(rows) if _first(r) == SECTION), None)
     if start is None:
         raise InputError(
@@ -45,7 +52,7 @@ def parse_vicon(text: str, source: str) -> Take:
     if len(rows) < start + 5:
         raise InputError(f"line {start + 1}: 'Trajectories' section is truncated", source=source)
     try:
-        rate = float(rows[start + 1][0])
+        rate = to_float(rows[start + 1][0])
         if not rate > 0:
             raise ValueError
     except (ValueError, IndexError):

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -41,6 +42,24 @@ def _join(table: np.ndarray, sep: str) -> list[str]:
     return [sep.join(row) for row in table.tolist()]
 
 
+def _european_line(line: str) -> str:
+    """A comma-separated line as European locale settings write it: ``;`` between cells,
+    decimal commas in numbers."""
+    cells = line.split(",")
+    out = []
+    for c in cells:
+        try:
+            float(c)
+            out.append(c.replace(".", ","))
+        except ValueError:
+            out.append(c)
+    return ";".join(out)
+
+
+def _european_table(table: np.ndarray) -> list[str]:
+    return _join(np.char.replace(table.astype(str), ".", ","), ";")
+
+
 def write_motive(
     path: str | os.PathLike[str],
     take: Take,
@@ -50,13 +69,15 @@ def write_motive(
     rigid_bodies: Mapping[str, Sequence[str]] | None = None,
     rate_hz: float | None = None,
     take_name: str = "Take 001",
+    european: bool = False,
 ) -> None:
     """Motive CSV of format ``version`` (1.21-1.25) in ``units`` (Meters/Centimeters/Millimeters).
 
     ``rigid_bodies`` maps a rigid-body name to its member markers: each gets Rigid Body
     columns (identity rotation, members' centroid, mean marker error) and Rigid Body
     Marker columns (the members' take-averaged positions), placed before the markers.
-    1.25 adds the Parent row; 1.21 has no blank line after the first line.
+    1.25 adds the Parent row; 1.21 has no blank line after the first line. ``european``:
+    ``;`` separators and decimal commas (Motive on a European locale).
     """
     if version not in SUPPORTED_VERSIONS:
         raise ValueError(f"Motive version must be one of {SUPPORTED_VERSIONS}, got {version!r}")
@@ -160,7 +181,11 @@ def write_motive(
         head.append(",Parent," + ",".join(parents))
     head += [",," + ",".join(labels), "Frame,Time (Seconds)," + ",".join(axes)]
     lead = np.column_stack([np.arange(n).astype(str), _fmt(take.times_s, "%.6f")])
-    body = _join(np.hstack([lead, *blocks]), ",")
+    table = np.hstack([lead, *blocks])
+    if european:
+        head, body = [_european_line(h) for h in head], _european_table(table)
+    else:
+        body = _join(table, ",")
     write_text_atomic(path, "\r\n".join(head + body) + "\r\n")
 
 
@@ -171,8 +196,10 @@ def write_vicon(
     rate_hz: float | None = None,
     units: str = "mm",
     devices_section: bool = False,
+    european: bool = False,
 ) -> None:
-    """Vicon Nexus CSV (CRLF): optional empty ``Devices`` section, then ``Trajectories``."""
+    """Vicon Nexus CSV (CRLF): optional empty ``Devices`` section, then ``Trajectories``;
+    ``european``: ``;`` separators and decimal commas."""
     scale = unit_scale(units, str(path), "units")
     rate = _rate_of(take, rate_hz)
     m = len(take.marker_names)
@@ -194,7 +221,11 @@ def write_vicon(
     n = take.n_frames
     lead = np.column_stack([(np.arange(n) + 1).astype(str), np.full(n, "0")])
     values = _fmt(take.positions.reshape(n, 3 * m) / scale, "%.5f")
-    lines += _join(np.hstack([lead, values]), ",")
+    if european:
+        lines = [_european_line(x) for x in lines]
+        lines += _european_table(np.hstack([lead, values]))
+    else:
+        lines += _join(np.hstack([lead, values]), ",")
     lines.append("")
     write_text_atomic(path, "\r\n".join(lines) + "\r\n")
 
@@ -235,9 +266,9 @@ def write_qualisys(
     write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def write_take(path: str | os.PathLike[str], take: Take, format: str, **options) -> None:
+def write_take(path: str | os.PathLike[str], take: Take, format: str, **options: Any) -> None:
     """Write ``take`` as ``format`` (one of FORMATS) with that writer's ``options``."""
-    writers = {
+    writers: dict[str, Callable[..., None]] = {
         "motive-csv": write_motive,
         "vicon-csv": write_vicon,
         "qualisys-tsv": write_qualisys,

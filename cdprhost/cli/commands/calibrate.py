@@ -5,17 +5,24 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from cdprhost.calibration import planning, report
+from cdprhost.calibration import plan_files, planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
+from cdprhost.cli.numbers import bounded_float
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.jsonsafe import dumps
 from cdprhost.profile import save_profile
 
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
 
-def register(sub: argparse._SubParsersAction) -> None:
+    from cdprhost.calibration.takes import MocapConfig
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     cal = sub.add_parser(
         "calibrate", help="kinematic calibration: plan poses, identify parameters, guided wizard"
     )
@@ -64,10 +71,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     ident.add_argument("--json", metavar="R", help="machine-readable report")
     ident.add_argument(
         "--noise-floor",
-        type=float,
-        default=0.05,
+        type=bounded_float(0.0, 10.0),
+        default=None,
         metavar="MM",
-        help="mocap noise per coordinate that averaging cannot remove (default 0.05 mm)",
+        help="mocap noise per coordinate that averaging cannot remove, added to each take's "
+        "standard error (default: noise_mm of session.toml, else none)",
+    )
+    ident.add_argument(
+        "--max-workspace-error",
+        type=_positive_mm,
+        default=1.0,
+        metavar="MM",
+        help="refuse when the predicted workspace error exceeds this (default 1 mm)",
+    )
+    ident.add_argument(
+        "--force",
+        action="store_true",
+        help="write the profile even when the trust gate refuses it (the report still says ok: false)",
     )
     ident.set_defaults(func=run_identify)
 
@@ -87,7 +107,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="session folder; an existing one is resumed (default: ./calibration-<date>)",
     )
     wiz.add_argument(
-        "--poses", type=_at_least_4, default=4, metavar="N", help="fit poses (default 4)"
+        "--poses",
+        type=_at_least_4,
+        default=6,
+        metavar="N",
+        help="fit poses (default 6: the workspace error then lands near its noise limit; "
+        "4 is the minimum)",
     )
     wiz.add_argument(
         "--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)"
@@ -134,7 +159,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="S",
         help="wait for a take at most S seconds",
     )
-    wiz.add_argument("--noise-floor", type=float, default=0.05, metavar="MM")
+    wiz.add_argument(
+        "--noise-floor",
+        type=bounded_float(0.0, 10.0),
+        default=None,
+        metavar="MM",
+        help="mocap noise per coordinate that averaging cannot remove (default: none)",
+    )
     wiz.add_argument(
         "--out", metavar="calibrated.toml", help="also write the calibrated profile here"
     )
@@ -149,6 +180,16 @@ def _at_least_4(text: str) -> int:
     return n
 
 
+def _positive_mm(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v > 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError("must be a positive number of millimetres")
+    return v
+
+
 def _non_negative(text: str) -> int:
     n = int(text)
     if n < 0:
@@ -156,7 +197,7 @@ def _non_negative(text: str) -> int:
     return n
 
 
-def write_json(path: str | None, data: dict) -> None:
+def write_json(path: str | None, data: dict[str, Any]) -> None:
     if path:
         write_text_atomic(path, dumps(data, indent=2) + "\n")
 
@@ -174,13 +215,13 @@ def run_plan(args: argparse.Namespace) -> int:
         )
     except ValueError as exc:
         raise InputError(str(exc)) from None
-    write_text_atomic(args.out, planning.plan_csv(plan))
+    write_text_atomic(args.out, plan_files.plan_csv(plan))
     write_json(args.json, planning_json(plan))
     print(report.plan_text(plan))
     return 0
 
 
-def planning_json(plan: planning.PosePlan) -> dict:
+def planning_json(plan: planning.PosePlan) -> dict[str, Any]:
     return {
         "poses": plan.poses.tolist(),
         "roles": list(plan.roles),
@@ -195,18 +236,28 @@ def planning_json(plan: planning.PosePlan) -> dict:
 
 
 def run_identify(args: argparse.Namespace) -> int:
+    from cdprhost.calibration.trust import TrustLimits
+
     profile, model = load_model(args.profile)
-    result = identify_session(args.session, model, noise_floor_mm=args.noise_floor)
-    write_json(args.json, result.to_json())
+    limits = TrustLimits(max_workspace_mm=args.max_workspace_error)
+    result = identify_session(args.session, model, noise_floor_mm=args.noise_floor, limits=limits)
+    forced = bool(args.force) and result.solved and not result.ok
+    write_json(args.json, {**result.to_json(), "forced": forced})
     print(report.identification_text(result))
-    if not result.ok:
+    if not result.ok and not forced:
         raise JobFailed(
-            "calibration failed; no profile written:\n"
+            "calibration refused; no profile written"
+            + (" (--force writes it anyway)" if result.solved else "")
+            + ":\n"
             + "\n".join(f"  - {p}" for p in result.problems())
         )
-    save_profile(
-        calibrated_profile(profile, result, session=str(Path(args.session).resolve())), args.out
-    )
+    calibrated = calibrated_profile(profile, result, session=str(Path(args.session).resolve()))
+    save_profile(calibrated, args.out)
+    if forced:
+        print(
+            "\nWARNING: the trust gate refused this result; written because of --force",
+            file=sys.stderr,
+        )
     print(f"\ncalibrated profile written to {args.out}", file=sys.stderr)
     return 0
 
@@ -214,7 +265,7 @@ def run_identify(args: argparse.Namespace) -> int:
 class PromptTakes:
     """Asks the user, on the terminal, for the take file of each pose."""
 
-    def take_for(self, index: int, pose, attempt: int) -> Path:
+    def take_for(self, index: int, pose: np.ndarray, attempt: int) -> Path:
         where = ", ".join(f"{v:.1f}" for v in pose)
         while True:
             try:
@@ -229,7 +280,7 @@ class PromptTakes:
             print(f"  not a file: {path}", file=sys.stderr)
 
 
-def _mocap_for(args: argparse.Namespace, session: Path):
+def _mocap_for(args: argparse.Namespace, session: Path) -> MocapConfig | None:
     from cdprhost.calibration.session import load_session_config
     from cdprhost.sim.virtual_mocap import mocap_config
 
@@ -262,6 +313,7 @@ def run_wizard(args: argparse.Namespace) -> int:
     session = Path(args.session or f"calibration-{dt.datetime.now():%Y%m%d-%H%M%S}")
     mocap = _mocap_for(args, session)
     watch = args.watch or (args.sim_mocap_dir if not args.takes_from else None)
+    takes: wizard.TakeSource
     if watch:
         takes = wizard.FolderWatcher(Path(watch), timeout_s=args.take_timeout)
     elif args.takes_from:
@@ -326,7 +378,7 @@ def run_wizard(args: argparse.Namespace) -> int:
             "calibration failed; no profile written:\n"
             + "\n".join(f"  - {p}" for p in result.problems())
         )
-    if args.out:
+    if args.out and outcome.profile is not None:
         save_profile(outcome.profile, args.out)
     print(
         f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or outcome.profile_path}"

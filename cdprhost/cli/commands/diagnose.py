@@ -18,7 +18,7 @@ from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.profile import save_profile
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "diagnose",
         help="find, name and add the physics the calibrated model lacks (model discrepancy workflow)",
@@ -84,11 +84,15 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     profile, model = load_model(args.profile)
     result, data = diagnose_session(args.session, model, settings)
-    rejected = [{"pose": r.pose, "take": r.take, "reason": r.reason} for r in data.rejected]
+    rejected = [
+        {"pose": r.pose, "take": r.take, "reason": r.reason, "text": str(r)} for r in data.rejected
+    ]
     if not args.quiet:
         print(to_text(result, session=str(args.session)), end="")
         for r in data.rejected:
-            print(f"rejected take: pose {r.pose} ({r.take}): {r.reason}", file=sys.stderr)
+            print(f"refused take: {r}", file=sys.stderr)
+        for w in data.warnings:
+            print(f"warning: {w}", file=sys.stderr)
     if args.json:
         write_text_atomic(
             args.json,

@@ -2,6 +2,8 @@
 
 Without ``--port`` the job runs on the embedded simulated device (accelerated).
 Ctrl-C pauses at the next rest point and asks whether to resume or cancel.
+``--resume`` continues exactly where the file's last print stopped (its resume point,
+kept up to date while printing); ``--resume-from-layer N`` restarts at a layer.
 """
 
 from __future__ import annotations
@@ -12,16 +14,26 @@ import queue
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
+from cdprhost.cli.numbers import bounded_float, bounded_int
+from cdprhost.cli.options import (
+    add_placement_arguments,
+    non_empty,
+    setup_from_args,
+)
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
-from cdprhost.job.resume import log_path_for
-from cdprhost.job.state import JobState
+from cdprhost.job.resume import find_resume_point, log_path_for
+from cdprhost.job.state import JobState, StateChanged
+
+BAUD_RANGE = (50, 10_000_000)
+MAX_SPEEDUP = 100_000.0
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "print", help="print a G-code file (embedded simulated device unless --port is given)"
     )
@@ -29,20 +41,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_profile_argument(p)
     p.add_argument(
         "--port",
+        type=non_empty,
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
-    p.add_argument("--baud", type=int, default=None, help="baud rate (default: the profile's)")
+    p.add_argument(
+        "--baud",
+        type=bounded_int(*BAUD_RANGE),
+        default=None,
+        help="baud rate (default: the profile's)",
+    )
     p.add_argument(
         "--speedup",
-        type=float,
+        type=bounded_float(0.0, MAX_SPEEDUP),
         default=None,
         help="embedded device: run at most X times real time (default: as fast as the host can)",
     )
     p.add_argument("--json", metavar="R", help="write the job summary as JSON to R")
     p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue exactly where this file's last print stopped (its saved resume point)",
+    )
+    p.add_argument(
         "--resume-from-layer",
-        type=int,
+        type=bounded_int(1, 1_000_000),
         metavar="N",
         help="restart the print at layer N (1-based, as shown)",
     )
@@ -57,10 +80,23 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SPEC",
         help="embedded device: inject faults (same SPEC as sim-device --faults)",
     )
+    add_placement_arguments(p, strict=False)
     p.set_defaults(func=run)
 
 
-def _link_factory(args: argparse.Namespace, profile):
+def _check_options(args: argparse.Namespace) -> None:
+    if args.resume and args.resume_from_layer is not None:
+        raise InputError("give --resume or --resume-from-layer, not both", source="--resume")
+    if args.sim_faults:
+        from firmware_protocol.device.faults import FaultSpec, FaultSpecError
+
+        try:
+            FaultSpec.parse(args.sim_faults)
+        except FaultSpecError as exc:
+            raise InputError(str(exc), source="--sim-faults") from None
+
+
+def _link_factory(args: argparse.Namespace, profile: Any) -> Any:
     from cdprhost.link import open_link
     from cdprhost.sim.embedded import open_embedded
 
@@ -78,27 +114,58 @@ def _confirm(question: str) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from cdprhost.job.runner import PrintJob, PrintOptions
+    from cdprhost.logs import attach_log_file, detach_log_file
     from cdprhost.profile import load_profile
 
+    _check_options(args)
     gcode = Path(args.gcode)
     if not gcode.is_file():
         raise InputError("G-code file not found", source=str(gcode))
     profile = load_profile(args.profile)
+    saved = find_resume_point(gcode)
     layer = None
-    if args.resume_from_layer is not None:
-        if args.resume_from_layer < 1:
-            raise InputError(f"--resume-from-layer must be 1 or more, got {args.resume_from_layer}")
+    point = None
+    if args.resume:
+        if saved is None or not saved.exact:
+            raise InputError(
+                "no resume point for this file (it completed, it changed since, or it never "
+                "stopped part-way); --resume-from-layer N restarts at a layer",
+                source=str(gcode),
+            )
+        point = saved
+        question = (
+            f"Resume {gcode.name} at line {saved.last_line} (layer {saved.last_layer}, "
+            f"stopped: {saved.reason}): the machine homes, heats, and lowers onto the part. "
+            "Is the part still on the bed and clear?"
+        )
+    elif args.resume_from_layer is not None:
         layer = args.resume_from_layer - 1
-        if not args.yes and not _confirm(
+        question = (
             f"Resume {gcode.name} from layer {args.resume_from_layer}: the machine homes, "
             "heats, and lowers onto the part. Is the part still on the bed and clear?"
-        ):
-            print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
-            return 1
-    options = PrintOptions(resume_from_layer=layer, log_path=args.log or log_path_for(gcode))
-    events: queue.Queue = queue.Queue()
+        )
+    if (args.resume or layer is not None) and not args.yes and not _confirm(question):
+        print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
+        return 1
+    if saved is not None and not args.resume and layer is None:
+        print(
+            f"note: {gcode.name} has a resume point (line {saved.last_line}, layer "
+            f"{saved.last_layer}, {saved.reason}); --resume continues there. "
+            "This print starts from the beginning.",
+            file=sys.stderr,
+        )
+    log_path = Path(args.log) if args.log else log_path_for(gcode)
+    if args.sim_faults is not None:
+        if args.port:
+            raise InputError("--sim-faults: only for the embedded device (without --port)")
+        _check_faults(args.sim_faults)
+    options = PrintOptions(
+        setup=setup_from_args(args), resume_from_layer=layer, resume=point, log_path=log_path
+    )
+    handler = attach_log_file(log_path.with_suffix(".log"), quiet=True) if not args.log else None
+    events: queue.Queue[Any] = queue.Queue()
     job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
-    outcome: dict = {}
+    outcome: dict[str, Any] = {}
 
     def work() -> None:
         try:
@@ -109,44 +176,65 @@ def run(args: argparse.Namespace) -> int:
             events.put(None)
 
     worker = threading.Thread(target=work, name="print-job", daemon=True)
-    with ProgressView() as view:
-        worker.start()
-        while True:
-            try:
-                event = events.get()
-                if event is None:
-                    break
-                view.update(event)
-                if (
-                    event.__class__.__name__ == "StateChanged"
-                    and event.state is JobState.PAUSED
-                    and "asked" not in outcome
-                ):
-                    outcome["asked"] = True
-                    _ask_after_pause(job)
-                    outcome.pop("asked")
-            except KeyboardInterrupt:
-                view._say("Ctrl-C: pausing at the next rest point...")
-                job.request_pause()
-                outcome["interrupted"] = True
-    worker.join()
+    try:
+        with ProgressView() as view:
+            worker.start()
+            while True:
+                try:
+                    event = events.get()
+                    if event is None:
+                        break
+                    view.update(event)
+                    if (
+                        isinstance(event, StateChanged)
+                        and event.state is JobState.PAUSED
+                        and "asked" not in outcome
+                    ):
+                        outcome["asked"] = True
+                        _ask_after_pause(job, event.reason)
+                        outcome.pop("asked")
+                except KeyboardInterrupt:
+                    view.say("Ctrl-C: pausing at the next rest point...")
+                    job.request_pause()
+                    outcome["interrupted"] = True
+        worker.join()
+    finally:
+        detach_log_file(handler)
     if "error" in outcome:
         raise outcome["error"]
     result = outcome["result"]
     _report(result, args)
     if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
         return 2
-    return result.exit_code
+    return int(result.exit_code)
 
 
-def _ask_after_pause(job) -> None:
+def _check_faults(spec: str) -> None:
+    """A bad ``--sim-faults`` SPEC is bad input (exit 2), named, before anything starts."""
+    import dataclasses
+    import math
+
+    from firmware_protocol.device.faults import FaultSpec, FaultSpecError
+
+    try:
+        parsed = FaultSpec.parse(spec)
+    except FaultSpecError as exc:
+        raise InputError(f"--sim-faults {spec!r}: {exc}") from None
+    for f in dataclasses.fields(parsed):
+        value = getattr(parsed, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise InputError(f"--sim-faults {spec!r}: {f.name} must be a finite number")
+
+
+def _ask_after_pause(job: Any, reason: str) -> None:
     if not sys.stdin.isatty():
-        print("paused without a terminal to ask: cancelling", file=sys.stderr)
+        print(f"paused ({reason}) without a terminal to ask: cancelling", file=sys.stderr)
         job.request_cancel()
         return
     while True:
         try:
-            answer = input("Paused (heaters kept). [r]esume or [c]ancel? ").strip().lower()
+            answer = input(f"Paused ({reason}; heaters kept). [r]esume or [c]ancel? ")
+            answer = answer.strip().lower()
         except (EOFError, KeyboardInterrupt):
             answer = "c"
         if answer in ("r", "resume"):
@@ -157,14 +245,14 @@ def _ask_after_pause(job) -> None:
             return
 
 
-def _report(result, args: argparse.Namespace) -> None:
+def _report(result: Any, args: argparse.Namespace) -> None:
     print(f"status: {result.status}")
     if result.status == "refused":
         for v in result.violations[:10]:
             print(f"  line {v['line']}: {v['rule']}: {v['detail']}")
         if len(result.violations) > 10:
             print(f"  ... {len(result.violations) - 10} more (see --json)")
-    else:
+    elif result.segments or result.status != "failed":
         print(
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
             f"(estimated {result.estimated_time_s:.1f} s)"
@@ -176,7 +264,11 @@ def _report(result, args: argparse.Namespace) -> None:
         print(f"reason: {result.reason}")
     if result.resume_file:
         print(
-            f"resume point saved: {result.resume_file} (restart with --resume-from-layer {max(result.last_layer or 1, 1)})"
+            f"resume point saved: {result.resume_file} (continue with --resume, or restart with "
+            f"--resume-from-layer {max(result.last_layer or 1, args.resume_from_layer or 1)})"
         )
     if args.json:
-        write_text_atomic(args.json, json.dumps(result.to_json(), indent=1) + "\n")
+        try:
+            write_text_atomic(args.json, json.dumps(result.to_json(), indent=1) + "\n")
+        except OSError as exc:
+            raise InputError(f"cannot write: {exc.strerror or exc}", source=args.json) from None

@@ -1,4 +1,5 @@
-"""`cdprhost profile show P` / `cdprhost profile check PATH`."""
+"""`cdprhost profile show P` / `cdprhost profile check PATH` /
+`cdprhost profile export-slicer P --to prusaslicer|cura|orca --out FILE`."""
 
 from __future__ import annotations
 
@@ -19,6 +20,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     check.add_argument("path", metavar="PATH")
     check.set_defaults(func=run_check)
+    export = psub.add_parser(
+        "export-slicer",
+        help="write a slicer printer definition for this machine (bed, height, limits, "
+        "start/end G-code)",
+    )
+    export.add_argument("profile", metavar="P")
+    export.add_argument(
+        "--to", required=True, choices=("prusaslicer", "cura", "orca"), help="the slicer"
+    )
+    export.add_argument("--out", required=True, metavar="FILE", help="where to write it")
+    export.set_defaults(func=run_export)
 
 
 def run_show(args: argparse.Namespace) -> int:
@@ -32,4 +44,24 @@ def run_check(args: argparse.Namespace) -> int:
     profile = load_profile(args.path)
     effects = ", ".join(profile.effects) or "none (ideal model)"
     print(f"{args.path}: ok (profile '{profile.name}', effects: {effects})")
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from cdprhost.fileio.atomic import write_text_atomic
+    from cdprhost.kinematics import MachineModel
+    from cdprhost.preflight.placement import printable_bed
+    from cdprhost.profile.slicer_export import export
+
+    profile = load_profile(args.profile)
+    model = MachineModel.from_profile(profile)
+    bed = printable_bed(model, np.asarray(profile.build_volume.bed_origin, dtype=float))
+    write_text_atomic(args.out, export(profile, args.to, bed.polygon, bed.height_mm))
+    corners = ", ".join(f"({x:g}, {y:g})" for x, y in bed.polygon)
+    print(
+        f"{args.out}: {args.to} printer '{profile.name}': bed triangle {corners} mm "
+        f"(origin at its centre), height {bed.height_mm:g} mm"
+    )
     return 0

@@ -6,21 +6,25 @@ import argparse
 import signal
 import sys
 
+from cdprhost.cli.numbers import bounded_float
 from cdprhost.errors import InputError
 from cdprhost.sim.virtual_mocap import make_observer
-from firmware_protocol.device.config import SimConfig
+from firmware_protocol.device.config import MAX_SPEEDUP, SimConfig
 from firmware_protocol.device.faults import FaultSpec, FaultSpecError
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.pty_server import PtyServer
-from firmware_protocol.device.record import write_record
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "sim-device", help="run the simulated device on a pseudo-terminal (prints its path)"
     )
     p.add_argument(
-        "--speedup", type=float, default=1.0, metavar="X", help="device time runs X times real time"
+        "--speedup",
+        type=bounded_float(0.0, MAX_SPEEDUP),
+        default=1.0,
+        metavar="X",
+        help="device time runs X times real time",
     )
     p.add_argument(
         "--faults",
@@ -30,7 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "heater_fail_after=S,seed=N",
     )
     p.add_argument(
-        "--record", metavar="FILE", help="JSON lines, one per executed segment, written on exit"
+        "--record",
+        metavar="FILE",
+        help="JSON lines, one per executed segment, streamed as they execute (flushed on exit)",
     )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
@@ -42,18 +48,29 @@ def run(args: argparse.Namespace) -> int:
         faults = FaultSpec.parse(args.faults)
     except FaultSpecError as exc:
         raise InputError(str(exc), source="--faults") from None
-    if args.speedup <= 0:
-        raise InputError(f"must be positive, got {args.speedup:g}", source="--speedup")
     if (args.truth is None) != (args.mocap_dir is None):
         given, missing = ("--truth", "--mocap-dir") if args.truth else ("--mocap-dir", "--truth")
         raise InputError(
             f"{given} needs {missing} as well (the virtual mocap needs both)", source=given
         )
     observer = make_observer(args.truth, args.mocap_dir) if args.truth else None
-    device = SimDevice(SimConfig(speedup=args.speedup), faults, observer)
+
+    def notice(text: str) -> None:
+        print(f"cdprhost sim-device: {text}", file=sys.stderr, flush=True)
+
+    try:
+        device = SimDevice(
+            SimConfig(speedup=args.speedup),
+            faults,
+            observer,
+            record_path=args.record,
+            on_notice=notice,
+        )
+    except OSError as exc:
+        raise InputError(f"cannot write: {exc.strerror or exc}", source=args.record) from None
     server = PtyServer(device, faults)
 
-    def stop(signum, frame):
+    def stop(signum: int, frame: object) -> None:
         server.stop()
 
     signal.signal(signal.SIGTERM, stop)
@@ -69,6 +86,5 @@ def run(args: argparse.Namespace) -> int:
         server.serve_forever()
     finally:
         server.close()
-        if args.record:
-            write_record(args.record, device.record)
+        device.close()
     return 0

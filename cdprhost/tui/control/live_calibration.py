@@ -206,10 +206,12 @@ class LiveCalibration:
         return PoseView(view.index, view.point, view.role, status, problem)
 
     def identify(self) -> IdentificationView:
-        from cdprhost.calibration.wizard import Identify
+        from cdprhost.calibration.wizard import IdentifyStep, PlanMore
 
-        self._require(Identify)
+        self._require(IdentifyStep)
         self.wizard.step()
+        if isinstance(self.wizard.state.next_action(), PlanMore):
+            self.wizard.step()  # the gate refused: extra poses join the plan, to be measured next
         outcome = self.wizard.outcome
         if outcome.identification is None:
             raise CdprError("identification did not run")

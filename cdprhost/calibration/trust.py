@@ -1,0 +1,193 @@
+"""May an identified geometry be trusted? Predicted workspace error and the gate.
+
+The parameter covariance Sigma (12 x 12, mm^2) of an identification is carried to the
+build volume: a calibrated model commanding a target x puts the effector off by
+dB = J0(x) dq, so the predicted position error there is sigma(x) = sqrt(tr(J0 Sigma J0^T)).
+On a grid over the build volume (:func:`~cdprhost.kinematics.grid.workspace_grid`) the
+RMS and the largest sigma(x) are the predicted workspace error.
+
+Sigma comes from the pose noise (the takes' standard errors), so it can only be believed
+when the data can contradict that noise: residual degrees of freedom of the fit, or check
+poses that were predicted, not fitted. Their pooled chi-square per degree of freedom scales
+Sigma up (never down). With neither, the noise cannot be estimated and the gate refuses.
+
+The gate refuses (unless forced) when the predicted error exceeds ``max_workspace_mm`` or
+the noise cannot be estimated; it warns above ``warn_workspace_mm``. The parameter
+combinations behind a large prediction are named: the generalised eigenvectors of the
+workspace metric W = mean J0^T J0 against the information Sigma^-1, each carrying its
+share of the mean squared workspace error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import linalg
+
+from cdprhost.calibration.fitting import GEOMETRY_NAMES
+from cdprhost.kinematics.geometry import CableGeometry
+from cdprhost.kinematics.jacobian import identification_jacobian
+
+
+@dataclass(frozen=True)
+class TrustLimits:
+    max_workspace_mm: float = 1.0
+    warn_workspace_mm: float = 0.3
+
+
+DEFAULT_TRUST = TrustLimits()
+
+
+@dataclass(frozen=True)
+class WeakCombination:
+    """A parameter direction (unit vector over the 12) and the RMS workspace error it carries."""
+
+    vector: np.ndarray
+    workspace_mm: float
+
+    def text(self, top: int = 4) -> str:
+        order = np.argsort(-np.abs(self.vector))[:top]
+        terms = " ".join(
+            f"{self.vector[i]:+.2f}*{GEOMETRY_NAMES[i]}"
+            for i in order
+            if abs(self.vector[i]) > 0.05
+        )
+        size = "unbounded" if not np.isfinite(self.workspace_mm) else f"{self.workspace_mm:.3g} mm"
+        return f"{terms} ({size} of workspace error)"
+
+
+@dataclass(frozen=True)
+class TrustReport:
+    predicted_rms_mm: float
+    predicted_max_mm: float
+    variance_factor: float  # chi2/dof of fit residuals and check poses pooled, >= 1 applied
+    noise_dof: int  # residual dof + 3 x check poses
+    weak: tuple[WeakCombination, ...]
+    refusals: tuple[str, ...]
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def trusted(self) -> bool:
+        return not self.refusals
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "predicted_workspace_rms_mm": self.predicted_rms_mm,
+            "predicted_workspace_max_mm": self.predicted_max_mm,
+            "variance_factor": self.variance_factor,
+            "noise_dof": self.noise_dof,
+            "weak_combinations": [w.text() for w in self.weak],
+            "refusals": list(self.refusals),
+            "warnings": list(self.warnings),
+        }
+
+
+def workspace_sigma(
+    geometry: CableGeometry, covariance: np.ndarray, grid: np.ndarray
+) -> np.ndarray:
+    """Predicted position error sqrt(tr(J0 Sigma J0^T)) at every grid point, (N,) mm."""
+    j0 = identification_jacobian(grid, geometry).reshape(-1, 3, 12)
+    var = np.einsum("nip,pq,niq->n", j0, covariance, j0)
+    return np.asarray(np.sqrt(np.clip(var, 0.0, None)))
+
+
+def workspace_metric(geometry: CableGeometry, grid: np.ndarray) -> np.ndarray:
+    """W = mean over the grid of J0^T J0, (12, 12): dq^T W dq is the mean squared error."""
+    j0 = identification_jacobian(grid, geometry).reshape(-1, 3, 12)
+    return np.asarray(np.einsum("nip,niq->pq", j0, j0) / j0.shape[0])
+
+
+def weak_combinations(
+    information: np.ndarray, metric: np.ndarray, threshold_mm: float, top: int = 3
+) -> tuple[WeakCombination, ...]:
+    """Parameter combinations whose uncertainty alone gives more than ``threshold_mm`` RMS
+    workspace error (largest first, at most ``top``)."""
+    if not (np.all(np.isfinite(information)) and np.all(np.isfinite(metric))):
+        return ()
+    scale = np.sqrt(np.maximum(np.diag(metric), 1e-300))
+    w = metric / np.outer(scale, scale) + 1e-12 * np.eye(metric.shape[0])
+    info = information / np.outer(scale, scale)
+    ridge = 1e-12 * max(float(np.trace(info)) / info.shape[0], 1e-300)
+    try:
+        mu, vec = linalg.eigh(info + ridge * np.eye(info.shape[0]), w)  # info v = mu W v
+    except linalg.LinAlgError:
+        return ()
+    contribution = np.where(mu > ridge * 10, 1.0 / np.maximum(mu, 1e-300), np.inf)
+    out = []
+    for k in np.argsort(-contribution)[:top]:
+        mm = float(np.sqrt(contribution[k]))
+        if mm <= threshold_mm:
+            break
+        v = vec[:, k] / scale
+        out.append(WeakCombination(v / np.linalg.norm(v), mm))
+    return tuple(out)
+
+
+def variance_factor(
+    chi2_fit: float,
+    dof_fit: int,
+    check_residuals: np.ndarray,
+    check_cov: np.ndarray,
+) -> tuple[float, int]:
+    """Pooled chi-square per degree of freedom of the fit residuals and the check poses'
+    prediction errors (each whitened by its predicted covariance, (M, 3, 3)), and the dof."""
+    chi2 = chi2_fit if dof_fit > 0 else 0.0
+    dof = max(dof_fit, 0)
+    if check_residuals.size:
+        r = check_residuals.reshape(-1, 3)
+        sol = np.linalg.solve(check_cov, r[..., None])[..., 0]
+        chi2 += float(np.sum(r * sol))
+        dof += 3 * r.shape[0]
+    return (chi2 / dof if dof > 0 else float("nan")), dof
+
+
+def trust_report(
+    geometry: CableGeometry,
+    covariance: np.ndarray,
+    information: np.ndarray,
+    grid: np.ndarray,
+    factor: float,
+    noise_dof: int,
+    limits: TrustLimits = DEFAULT_TRUST,
+) -> TrustReport:
+    """The gate on an identification whose (unscaled) covariance is ``covariance``."""
+    scale = max(factor, 1.0) if np.isfinite(factor) else 1.0
+    cov = covariance * scale
+    if np.all(np.isfinite(cov)):
+        sigma = workspace_sigma(geometry, cov, grid)
+        rms, worst = float(np.sqrt(np.mean(sigma**2))), float(np.max(sigma))
+    else:
+        rms = worst = float("inf")
+    weak = weak_combinations(
+        information / scale, workspace_metric(geometry, grid), limits.warn_workspace_mm
+    )
+    refusals, warnings = [], []
+    if noise_dof <= 0:
+        refusals.append(
+            "the noise cannot be estimated: no residual degrees of freedom (4 fit poses "
+            "determine the 12 parameters exactly; each further pose adds 3) and no check poses "
+            "to test the prediction against"
+        )
+    if not worst <= limits.max_workspace_mm:
+        shown = "unbounded" if not np.isfinite(worst) else f"{worst:.3g} mm"
+        refusals.append(
+            f"predicted workspace error up to {shown} (RMS {rms:.3g} mm) exceeds {limits.max_workspace_mm:g} mm"
+        )
+    elif worst > limits.warn_workspace_mm:
+        warnings.append(
+            f"predicted workspace error up to {worst:.3g} mm (RMS {rms:.3g} mm), above {limits.warn_workspace_mm:g} mm: "
+            "more or better-spread poses would help"
+        )
+    if weak and (refusals or warnings):
+        text = "; ".join(w.text() for w in weak)
+        (refusals if refusals else warnings).append(
+            f"weakly observed parameter combination(s): {text}"
+        )
+    if np.isfinite(factor) and factor > 1.0:
+        warnings.append(
+            f"residuals are {np.sqrt(factor):.2g}x the take noise (chi2/dof {factor:.3g} over {noise_dof} dof): "
+            "uncertainties scaled up accordingly"
+        )
+    return TrustReport(rms, worst, factor, noise_dof, weak, tuple(refusals), tuple(warnings))

@@ -1,0 +1,106 @@
+"""Option types and the shared placement options of ``check`` and ``print``.
+
+Every option is validated at parse time: a bad value is a usage error (exit 2)
+naming the option, never a traceback. Only the standard library is imported here
+(fast start); the placement is built lazily.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+
+def finite_positive(text: str) -> float:
+    """A finite number above 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number above 0")
+    return v
+
+
+def _whole(text: str, minimum: int) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if v < minimum:
+        raise argparse.ArgumentTypeError(f"{text!r} must be {minimum} or more")
+    return v
+
+
+def positive_int(text: str) -> int:
+    return _whole(text, 1)
+
+
+def non_negative_int(text: str) -> int:
+    return _whole(text, 0)
+
+
+def non_empty(text: str) -> str:
+    if not text.strip():
+        raise argparse.ArgumentTypeError("must not be empty")
+    return text
+
+
+def offset_xy(text: str) -> tuple[float, float]:
+    """``X,Y`` in mm."""
+    from cdprhost.errors import InputError
+    from cdprhost.gcode.placement import parse_offset
+
+    try:
+        return parse_offset(text, "")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[-1]) from None
+
+
+def add_placement_arguments(p: argparse.ArgumentParser, *, strict: bool) -> None:
+    """``--center``, ``--offset X,Y``, ``--retarget``, ``--cancel-object NAME`` (and ``--strict``)."""
+    p.add_argument(
+        "--center",
+        action="store_true",
+        help="shift X/Y so the part (from the first layer on) sits at the build volume's centre",
+    )
+    p.add_argument(
+        "--offset",
+        type=offset_xy,
+        default=(0.0, 0.0),
+        metavar="X,Y",
+        help="shift the whole program by X,Y mm (after --center / --retarget, if given)",
+    )
+    p.add_argument(
+        "--retarget",
+        action="store_true",
+        help="for files sliced for another printer: replace their start and end blocks by "
+        "the profile's start/end G-code and centre the part",
+    )
+    p.add_argument(
+        "--cancel-object",
+        action="append",
+        default=[],
+        type=non_empty,
+        metavar="NAME",
+        help="skip the moves of an object (M486 id or label, EXCLUDE_OBJECT name); repeatable",
+    )
+    if strict:
+        p.add_argument(
+            "--strict",
+            action="store_true",
+            help="unknown commands and ignored parameters are errors, not warnings",
+        )
+
+
+def setup_from_args(args: argparse.Namespace) -> Any:
+    """The `cdprhost.motion.prepared.Setup` the placement options ask for."""
+    from cdprhost.motion.prepared import Setup
+
+    return Setup(
+        center=bool(args.center),
+        offset=tuple(args.offset),
+        retarget=bool(args.retarget),
+        cancel_objects=tuple(args.cancel_object),
+    )

@@ -1,0 +1,365 @@
+"""Streaming a planned program to a connected device: the job's part that holds the link.
+
+The device's buffered motion is kept between the link's time watermarks
+(:meth:`HostLink.feed`); the loop wakes on the device's reports, never on a blind
+timer. Between sends it services the job: progress and temperature events, pause and
+cancel requests, the resume point (each layer and every few seconds), the health of
+the job log. Pause and cancel act at the next point where the planned motion comes to
+rest: the stream ends there with a FLUSH, the queue drains, nothing stops mid-segment.
+The end of the program is a FLUSH too, and the job completes only when the device
+reports the last segment executed.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cdprhost.gcode import items as g
+from cdprhost.job.resume import ResumePoint, ResumeWriter
+from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
+from cdprhost.job.segment_map import SegmentInfo, SegmentMap, first_rest_index
+from cdprhost.job.state import (
+    Event,
+    JobState,
+    LinkHealth,
+    Notice,
+    Progress,
+    StateChanged,
+    Temperatures,
+)
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.kinematics.statics import tensions
+from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
+from cdprhost.machine.commands import device_messages
+from cdprhost.motion.direct import to_wire
+from cdprhost.motion.segments import PlannedSegments
+from cdprhost.profile.models import MachineProfile
+from firmware_protocol.messages import BED, HOTEND, SetHeater
+
+log = logging.getLogger(__name__)
+
+SERVICE_S = 0.25  # longest the loop goes without servicing the job
+PROGRESS_EVERY_S = 0.1
+STATUS_EVERY_S = 0.5
+
+
+class Stop(Exception):
+    """Left the stream at a rest point: cancelled, or stopped safely (``reason``)."""
+
+    def __init__(self, reason: str = ""):
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass
+class Requests:
+    """Pause / resume / cancel from other threads, and a safe stop from the job itself."""
+
+    _set: set[str] = field(default_factory=set)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+    stop_reason: str = ""
+
+    def add(self, what: str) -> None:
+        with self._lock:
+            self._set.add(what)
+
+    def take(self, what: str) -> bool:
+        with self._lock:
+            if what in self._set:
+                self._set.discard(what)
+                return True
+            return False
+
+    def has(self, *what: str) -> bool:
+        with self._lock:
+            return bool(self._set.intersection(what))
+
+    def stop_safely(self, reason: str) -> None:
+        """Stop at the next rest point and end the job as failed with ``reason``."""
+        with self._lock:
+            if not self.stop_reason:
+                self.stop_reason = reason
+            self._set.add("stop")
+
+
+@dataclass
+class StreamContext:
+    """What the streamer needs from its job (everything but the link)."""
+
+    gcode_path: str
+    sha256: str
+    profile: MachineProfile
+    model: MachineModel
+    plan: PlanSpec
+    emit: Callable[[Event], None]
+    state: Callable[[], JobState]
+    requests: Requests
+    log_problem: Callable[[], str | None]
+    idle_timeout_s: float = 30.0
+    e_offset: Callable[[], float] = lambda: 0.0
+
+
+class Streamer:
+    """A connected job: streams planned segments and commands through a handshaken link."""
+
+    def __init__(self, link: HostLink, ctx: StreamContext, resume: ResumeWriter | None):
+        self.link = link
+        self.ctx = ctx
+        self.resume = resume
+        self.clock_hz = link.identity.clock_hz if link.identity else 100_000
+        self.map = SegmentMap(self.clock_hz)
+        self.first_segment = link.segments_sent + 1
+        self.boot_id = link.identity.boot_id if link.identity else 0
+        self.status: DeviceStatus | None = None
+        self._heat_item = 0
+        self._at_rest = True
+        self._last_progress = -1e9
+        self._last_status = -1e9
+        self._status_seen = 0
+        self._origin = np.asarray(ctx.profile.build_volume.bed_origin, dtype=float)
+
+    # ------------------------------------------------------------------ the stream
+    def run(self, planned: Iterable[Any]) -> None:
+        for out in planned:
+            if isinstance(out, PlannedSegments):
+                self._segments(out)
+            else:
+                self._command(out)
+        self.link.flush()
+        self.drain()
+
+    def _segments(self, batch: PlannedSegments) -> None:
+        wire = to_wire(batch)
+        i, n = 0, len(batch)
+        link = self.link
+        while i < n:
+            self.service()
+            stopping = self.ctx.requests.has("pause", "cancel", "stop")
+            end = n
+            if stopping:
+                rest = first_rest_index(batch, i)
+                if rest is not None:
+                    end = rest + 1
+            before = link.segments_sent
+            j = link.feed(wire, i, max_wait=SERVICE_S, end=end)
+            if j > i:
+                self.map.add(before + 1, batch.take(slice(i, j)))
+                self._at_rest = bool(batch.v_end[j - 1] <= 1e-9)
+                i = j
+            if stopping and self._at_rest and i == end:
+                self._hold_at_rest()
+
+    def _command(self, item: Any) -> None:
+        if isinstance(item, g.FilamentChange):
+            self._filament_change(item)
+            return
+        msgs = device_messages(
+            item,
+            model=self.ctx.model,
+            home_mm=self.ctx.profile.drive.home_mm,
+            clock_hz=self.clock_hz,
+        )
+        if isinstance(item, g.DisplayMessage):
+            self.ctx.emit(Notice(f"line {item.line}: {item.text}"))
+        if not msgs:
+            return
+        self._check_heater_limits(msgs)
+        numbers = self.link.send(*msgs)
+        if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
+            self._heat_item = max(numbers)
+            self._set(
+                JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
+            )
+        if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
+            self._hold_at_rest()
+
+    def _check_heater_limits(self, msgs: list[Any]) -> None:
+        """The device's announced maxima bound heater targets (it would refuse them)."""
+        identity = self.link.identity
+        if identity is None:
+            return
+        limits = {HOTEND: identity.hotend_max_c, BED: identity.bed_max_c}
+        for m in msgs:
+            if isinstance(m, SetHeater) and m.target_dc / 10 > limits.get(m.heater, 0.0):
+                raise LinkError(
+                    f"heater {m.heater} target {m.target_dc / 10:g} C is over the device's "
+                    f"maximum {limits.get(m.heater, 0.0):g} C"
+                )
+
+    def _set(self, state: JobState, reason: str = "") -> None:
+        if state is not self.ctx.state():
+            self.ctx.emit(StateChanged(state, reason))
+
+    # ------------------------------------------------------------------ pause / cancel
+    def _hold_at_rest(self) -> None:
+        """At a rest point: flush, drain, then pause (until resumed) or stop."""
+        req = self.ctx.requests
+        stop = req.has("cancel", "stop")
+        self._set(JobState.CANCELLING if stop else JobState.PAUSING)
+        self.link.flush()
+        self.drain(final=False)
+        if req.has("stop"):
+            raise Stop(req.stop_reason)
+        if stop or req.take("cancel"):
+            raise Stop()
+        req.take("pause")
+        self._set(JobState.PAUSED, "at rest; heaters kept")
+        self._wait_for_resume()
+
+    def _filament_change(self, item: g.FilamentChange) -> None:
+        """M600: the reader's park moves brought the machine to the park point; wait there
+        (paused, heaters kept) until the operator resumes or cancels."""
+        self._set(JobState.PAUSING, f"line {item.line}: M600 filament change")
+        self.link.flush()
+        self.drain(final=False)
+        self.ctx.emit(Notice(f"line {item.line}: M600: change the filament, then resume"))
+        self._set(JobState.PAUSED, f"line {item.line}: M600: change the filament, then resume")
+        self._wait_for_resume()
+
+    def _wait_for_resume(self) -> None:
+        req = self.ctx.requests
+        while True:
+            self.service(force_status=False)
+            if req.has("stop"):
+                self._set(JobState.CANCELLING)
+                raise Stop(req.stop_reason)
+            if req.take("cancel"):
+                self._set(JobState.CANCELLING)
+                raise Stop()
+            if req.take("resume"):
+                self._set(JobState.PRINTING)
+                return
+            self.link.wait_report(SERVICE_S)  # keep-alives go out while it waits
+
+    def drain(self, final: bool = True) -> None:
+        """Until the device has executed everything sent and stopped; with ``final`` it must
+        report the last segment sent as executed (a job is complete only then)."""
+        link = self.link
+        last, since = -1, time.monotonic()
+        while not link.idle():
+            link.wait_report(SERVICE_S)
+            self.service()
+            done = link.progress.items_done
+            if done != last:
+                last, since = done, time.monotonic()
+            elif (
+                time.monotonic() - since > self.ctx.idle_timeout_s
+                and self.ctx.state() is not JobState.HEATING
+            ):
+                raise LinkError(
+                    f"the device made no progress for {self.ctx.idle_timeout_s:g} s "
+                    f"(executed {done} of {link.items_sent} items)"
+                )
+        self.service(force_status=True)
+        p = link.progress
+        if final and (p.segments_done < link.segments_sent or p.fault):
+            raise LinkError(
+                f"the device stopped after segment {p.segments_done} of {link.segments_sent}"
+            )
+
+    # ------------------------------------------------------------------ observation
+    def service(self, force_status: bool = False) -> None:
+        link = self.link
+        for ev in link.poll(0.0):
+            if isinstance(ev, DeviceErrorEvent):
+                raise LinkError(f"device error {ev.text}")
+        now = time.monotonic()
+        if force_status:
+            self._on_status(link.request_status())
+        elif link.status_count > self._status_seen:  # a reply to an earlier request
+            self._status_seen = link.status_count
+            st = link.status()
+            if st is not None:
+                self._on_status(st)
+        if not force_status and now - self._last_status > STATUS_EVERY_S:
+            self._last_status = now
+            self._status_seen = link.ask_status()  # answered while streaming goes on
+        if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self._heat_item:
+            self._set(JobState.PRINTING)
+        info = self.map.lookup(link.progress.segments_done)
+        if force_status or now - self._last_progress > PROGRESS_EVERY_S:
+            self._last_progress = now
+            self._progress(info)
+        writer = self.resume
+        if (
+            writer is not None
+            and info is not None
+            and info.line != INSERTED_LINE
+            and writer.due(info.layer, info.number, now)
+        ):
+            writer.save(self.point("printing", info), now, info.layer)
+        problem = self.ctx.log_problem()
+        if problem:
+            self.ctx.requests.stop_safely(problem)
+
+    def _on_status(self, st: DeviceStatus) -> None:
+        self.status = st
+        self.ctx.emit(Temperatures(st.hotend_c, st.bed_c, st.hotend_target_c, st.bed_target_c))
+        c = self.link.counters
+        self.ctx.emit(
+            LinkHealth(c.retransmits, c.bad_frames + st.device_bad_frames, c.naks_received)
+        )
+
+    def _progress(self, info: SegmentInfo | None) -> None:
+        if info is None:
+            return
+        model = self.ctx.model
+        p = np.asarray(info.point)[None, :]
+        t = tensions(p, model.geometry.outlets, model.statics)[0]
+        sliders = model.sliders_from_steps(np.asarray(info.steps[:3]))
+        self.ctx.emit(
+            Progress(
+                info.number,
+                info.line,
+                info.layer,
+                info.t_end_s,
+                info.point,
+                (float(sliders[0]), float(sliders[1]), float(sliders[2])),
+                (float(t[0]), float(t[1]), float(t[2])),
+                info.steps,
+            )
+        )
+
+    # ------------------------------------------------------------------ where it is
+    def executed(self, last_segment: int | None = None) -> SegmentInfo | None:
+        """The last executed segment of this job (the device's number, or ``last_segment``)."""
+        number = self.link.progress.segments_done if last_segment is None else last_segment
+        if number < self.first_segment:
+            return None
+        return self.map.lookup(number)
+
+    def point(self, reason: str, info: SegmentInfo | None) -> ResumePoint:
+        """The resume point at ``info`` (the last executed segment)."""
+        st = self.status
+        gcode_point = None
+        e_mm = None
+        if info is not None:
+            p = np.asarray(info.point) - self._origin
+            gcode_point = (float(p[0]), float(p[1]), float(p[2]))
+            e_mm = float(info.e_mm + self.ctx.e_offset())
+        layer = info.layer + 1 if info is not None else None
+        return ResumePoint(
+            gcode=self.ctx.gcode_path,
+            sha256=self.ctx.sha256,
+            reason=reason,
+            last_line=info.line if info else None,
+            last_layer=layer,
+            position=info.point if info else None,
+            steps=info.steps if info else None,
+            hotend_target=st.hotend_target_c if st else 0.0,
+            bed_target=st.bed_target_c if st else 0.0,
+            suggested_layer=max(layer or 1, 1),
+            point=gcode_point,
+            e_mm=e_mm,
+            device_segment=info.number if info else 0,
+            boot_id=self.boot_id,
+            first_segment=self.first_segment,
+            plan=self.ctx.plan.to_json(),
+        )

@@ -1,0 +1,126 @@
+"""The program as this machine will run it: read, placed, retargeted, objects cancelled.
+
+``check`` and ``print`` (and the TUI) take the same `Setup` (``--center``,
+``--offset``, ``--retarget``, ``--cancel-object``) and get the same stream of items
+from `Prepared.items`, so what preflight checked is exactly what prints.
+
+- Placement shifts the whole program in X/Y (the reader adds it to every absolute
+  coordinate; homing and the machine's own points do not move). ``--center`` puts
+  the part's box (extruding moves from the first layer on) on the build volume's
+  centre; ``--offset`` adds its own shift.
+- ``--retarget`` replaces the file's start and end blocks with the profile's
+  (`cdprhost.gcode.retarget`) and centres the part.
+- Cancelled objects are skipped (`cdprhost.gcode.objects.exclude_objects`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from cdprhost.gcode.errors import GcodeError
+from cdprhost.gcode.items import ProgramItem
+from cdprhost.gcode.objects import exclude_objects
+from cdprhost.gcode.placement import PartExtent, centre_offset
+from cdprhost.gcode.reader import read_program
+from cdprhost.gcode.retarget import RetargetPlan, plan_retarget, retarget_items
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.program import reader_settings
+from cdprhost.profile.models import MachineProfile
+
+
+@dataclass(frozen=True)
+class Setup:
+    """How to run a file: placement, retargeting, objects to skip."""
+
+    center: bool = False
+    offset: tuple[float, float] = (0.0, 0.0)
+    retarget: bool = False
+    cancel_objects: tuple[str, ...] = ()
+
+
+def build_volume_centre(profile: MachineProfile) -> tuple[float, float]:
+    """The build triangle's centre (machine X/Y = 0) in the G-code frame."""
+    ox, oy, _ = profile.build_volume.bed_origin
+    return (-float(ox), -float(oy))
+
+
+@dataclass(frozen=True)
+class Prepared:
+    path: str
+    profile: MachineProfile
+    model: MachineModel
+    setup: Setup
+    placement: tuple[float, float]  # the X/Y shift applied to the file (mm)
+    plan: RetargetPlan | None
+
+    def items(self) -> Iterator[ProgramItem]:
+        """A fresh stream of the program's items (every call reads the file again)."""
+        settings = reader_settings(self.profile, self.model)
+        mute = self.plan.mute if self.plan else ()
+        items: Iterable[ProgramItem] = read_program(
+            self.path, placement=self.placement, mute=mute, **settings
+        )
+        if self.plan is not None:
+            items = retarget_items(
+                items,
+                self.plan,
+                self._profile_code("start", None),
+                self._end_code,
+                settings["home_position"],
+            )
+        if self.setup.cancel_objects:
+            items = exclude_objects(items, self.setup.cancel_objects, settings["home_position"])
+        return iter(items)
+
+    def _profile_code(self, which: str, here: np.ndarray | None) -> Iterator[ProgramItem]:
+        gc = self.profile.gcode
+        plan = self.plan
+        text = gc.filled(
+            gc.start if which == "start" else gc.end,
+            plan.hotend_c if plan else None,
+            plan.bed_c if plan else None,
+        )
+        settings = reader_settings(self.profile, self.model)
+        start = None if here is None else (float(here[0]), float(here[1]), float(here[2]))
+        return read_program(
+            text.splitlines(),
+            name=f"profile {self.profile.name} [gcode] {which}",
+            start_position=start,
+            **settings,
+        )
+
+    def _end_code(self, here: np.ndarray) -> Iterator[ProgramItem]:
+        return self._profile_code("end", here)
+
+
+def prepare(
+    path: str | os.PathLike[str],
+    profile: MachineProfile,
+    model: MachineModel | None = None,
+    setup: Setup | None = None,
+) -> Prepared:
+    """Decide the placement (and the blocks to replace): one extra read of the file for
+    ``--center`` and ``--retarget``, none otherwise."""
+    model = model or MachineModel.from_profile(profile)
+    setup = setup or Setup()
+    source = os.fspath(path)
+    offset = setup.offset
+    plan = None
+    if setup.center or setup.retarget:
+        first = read_program(source, **reader_settings(profile, model))
+        if setup.retarget:
+            plan = plan_retarget(first, source)
+            extent = plan.extent
+        else:
+            extent = PartExtent.of(first)
+        if extent.empty:
+            raise GcodeError(
+                source, 0, 0, "no extruding moves from the first layer on: no part to place"
+            )
+        dx, dy = centre_offset(extent, build_volume_centre(profile))
+        offset = (dx + offset[0], dy + offset[1])
+    return Prepared(source, profile, model, setup, (float(offset[0]), float(offset[1])), plan)
