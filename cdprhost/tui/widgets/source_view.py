@@ -19,8 +19,10 @@ class SourceView(Widget):
     def show(self, lines: list[tuple[int, str]], focus: int | None, title: str = "") -> None:
         key = (tuple(lines), focus, title)
         if key != self._shown:
+            # a new line count or title changes the height: that needs a layout pass
+            resized = (len(lines), title) != (len(self._shown[0]), self._shown[2])
             self._shown = key
-            self.refresh()
+            self.refresh(layout=resized)
 
     def render(self) -> Text:
         lines, focus, title = self._shown
