@@ -281,7 +281,7 @@ class CdprApp(App[int]):
             ("pause_print", "Print: pause", "Pause at the end of the queued moves"),
             ("resume_print", "Print: resume", "Resume a paused print (asks first)"),
             ("cancel_print", "Print: cancel", "Cancel the print (asks first)"),
-            ("resume_failed", "Print: resume at layer", "Resume a failed print (checks first)"),
+            ("resume_failed", "Print: resume stopped", "Resume a stopped print (checks first)"),
         ):
             if self.check_print_action(action):
                 yield SystemCommand(title, help_, getattr(self, f"action_{action}"))

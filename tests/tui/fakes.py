@@ -322,10 +322,11 @@ class FakeBackend:
             pass
         return tap.result()
 
-    def make_job(self, path, on_event, resume_from_layer=None):
+    def make_job(self, path, on_event, resume_from_layer=None, resume=False):
         if self.link_dead:
             raise OSError("the port failed on write (was it unplugged?)")
         job = FakeJob(on_event, resume_from_layer=resume_from_layer, **self.job_kwargs)
+        job.resume_exact = resume
         self.jobs.append(job)
         return job
 

@@ -106,19 +106,24 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         await wait_for(pilot, lambda s: s.connected, timeout=30)
         await pilot.press("f2")
         state = await wait_for(pilot, lambda s: s.file.resume is not None, timeout=30)
-        assert state.file.resume.layer == failure.last_layer + 1 and not state.file.resume.problem
-        assert "resume point layer" in await shown(pilot)
+        resume = state.file.resume
+        # the runner saved the exact last executed move: offered like the CLI's --resume
+        assert resume.exact and not resume.problem
+        assert resume.layer == failure.last_layer + 1 and resume.last_line == failure.last_line
+        assert f"resume point line {failure.last_line} (layer {resume.layer})" in await shown(pilot)
         await pilot.press("l")
         await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
-        assert "Is the part still on the bed and clear?" in await shown(pilot)
+        text = await shown(pilot)
+        assert f"at line {failure.last_line}" in text
+        assert "Is the part still on the bed and clear?" in text
         assert resume_path_for(part, tmp_path / "resume").read_text() == saved
-        await pilot.press("y")  # a new job starts at that layer
+        await pilot.press("y")  # a new job continues at that line
         state = await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, timeout=120)
         assert state.job_resumed_from == failure.last_layer + 1
         second = state.job.failure  # the simulated device resets again after 150 segments
         assert second is not None, (state.job.state, state.job.reason, state.job.segments_done)
         assert second.last_layer >= failure.last_layer
-        assert second.last_line >= failure.last_line  # the stopped layer is printed again
+        assert second.last_line >= failure.last_line  # it went on from the stopped line
 
 
 async def test_jog_after_a_cancelled_print_moves(tmp_path):

@@ -110,9 +110,10 @@ async def test_operator_session_on_a_pty_device(tmp_path):
                 state = await wait_for(pilot, lambda s: s.file.resume is not None, 30, "resume")
                 resume = state.file.resume
                 assert resume.problem == "" and resume.layer == failure.last_layer + 1
-                assert f"resume point layer {resume.layer}" in await shown(pilot)
+                assert resume.exact and resume.last_line == failure.last_line  # --resume
+                assert f"resume point line {resume.last_line}" in await shown(pilot)
                 await pilot.press("l")
-                await confirm(pilot, contains="Is the part still on the bed and clear?")
+                await confirm(pilot, contains=f"at line {resume.last_line}")
                 state = await wait_for(
                     pilot,
                     lambda s: (s.job_id == 3 and s.job.segments_done > 20) or s.job.state.finished,

@@ -120,7 +120,7 @@ async def test_device_reset_mid_print_shows_stop_and_resume_point(gcode_file):
         text = str(app.screen.query_one("#failure-text").render())
         assert "device reset" in text and "last executed line: 22" in text
         assert "--resume-from-layer 2" in text
-        assert "Resume at layer (r)" in await shown(pilot)
+        assert "Resume (r)" in await shown(pilot)
         # the port went away with the device: resuming must check the link, not start a job
         backend.link_dead = True
         await pilot.press("r")
@@ -133,7 +133,7 @@ async def test_device_reset_mid_print_shows_stop_and_resume_point(gcode_file):
         await wait_for(pilot, lambda s: s.connected, what="reconnected")
         await pilot.press("f2")
         await wait_for(pilot, lambda s: s.file.resume is not None, what="resume point")
-        assert "resume point layer 2 (device reset) · l Resume at layer" in await shown(pilot)
+        assert "resume point layer 2 (device reset) · l Resume stopped" in await shown(pilot)
         await pilot.press("l")
         await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), what="question")
         assert "Resume part.gcode from layer 2" in await shown(pilot)

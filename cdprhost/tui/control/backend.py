@@ -90,11 +90,18 @@ class Backend(Protocol):
         """Blocking: check the file; the view carries its toolpath for the preview."""
 
     def find_resume(self, path: str) -> ResumeView | None:
-        """Blocking (short): the resume point saved for this file, if any."""
+        """Blocking (short): the resume point saved for this file (same content), if any."""
 
     def make_job(
-        self, path: str, on_event: EventSink, resume_from_layer: int | None = None
-    ) -> JobHandle: ...
+        self,
+        path: str,
+        on_event: EventSink,
+        resume_from_layer: int | None = None,
+        resume: bool = False,
+    ) -> JobHandle:
+        """A print job of ``path``: from the start, from ``resume_from_layer`` (0-based), or
+        (``resume``) exactly at the file's saved resume point, like ``print --resume``."""
+        ...
 
     def after_cancel(self) -> DeviceStatusView:
         """Blocking: what the profile asks after a cancelled print (park, heaters off)."""

@@ -226,38 +226,72 @@ class LiveBackend:
         return preflight_view(report, path, tap.result())
 
     def find_resume(self, path: str) -> ResumeView | None:
-        """The resume point the print job saved for ``path`` (same file, by path)."""
-        from cdprhost.job.resume import ResumePoint, resume_path_for
+        """The resume point the print job saved for ``path`` (same path and content), as the
+        CLI finds it: exact (``--resume``) when it names a move, else a layer."""
+        from cdprhost.job.resume import find_resume_point, resume_path_for, resume_question
 
-        saved = resume_path_for(path, self.job_options.get("resume_dir"))
-        if not saved.is_file():
-            return None
+        folder = self.job_options.get("resume_dir")
+        saved = resume_path_for(path, folder)
         try:
-            point = ResumePoint.load(saved)
-        except CdprError as exc:
+            point = find_resume_point(path, folder)
+        except (CdprError, OSError) as exc:
             return ResumeView(str(saved), path, "", 0, problem=str(exc))
-        if Path(point.gcode).resolve() != Path(path).resolve():
-            return None  # another file of the same name
-        saved_at = saved.stat().st_mtime
-        layer = point.suggested_layer or point.last_layer or 0
-        problem = ""
-        if layer < 1:
-            problem = "the stop was before the first layer: start the print again instead"
-        elif Path(path).stat().st_mtime > saved_at:
-            problem = "the file changed after the print stopped: it is not the same program"
+        if point is None:
+            return None  # none, or the file changed since (another program)
+        name = Path(path).name
+        at = saved.stat().st_mtime if saved.exists() else None
+        if point.exact:
+            question = resume_question(name, point=point)
+            layer = int(point.last_layer or 0)
+            return ResumeView(
+                str(saved),
+                point.gcode,
+                point.reason,
+                layer,
+                point.last_line,
+                at,
+                "",
+                True,
+                question,
+            )
+        layer = int(point.suggested_layer or point.last_layer or 0)
+        problem = "" if layer >= 1 else "the stop was before the first layer: start again instead"
+        question = resume_question(name, layer=layer)
         return ResumeView(
-            str(saved), point.gcode, point.reason, int(layer), point.last_line, saved_at, problem
+            str(saved),
+            point.gcode,
+            point.reason,
+            layer,
+            point.last_line,
+            at,
+            problem,
+            False,
+            question,
         )
 
     def make_job(
-        self, path: str, on_event: EventSink, resume_from_layer: int | None = None
+        self,
+        path: str,
+        on_event: EventSink,
+        resume_from_layer: int | None = None,
+        resume: bool = False,
     ) -> JobHandle:
         try:
+            from cdprhost.job.resume import find_resume_point
             from cdprhost.job.runner import PrintJob, PrintOptions
         except ImportError as exc:  # the runner is a separate piece of work
             raise CdprError(f"the print runner is not available: {exc}") from None
         self.link  # noqa: B018 - raises when not connected
-        options = PrintOptions(resume_from_layer=resume_from_layer, **self.job_options)
+        point = None
+        if resume:  # the CLI's --resume: the saved point of this very file, found again now
+            point = find_resume_point(path, self.job_options.get("resume_dir"))
+            if point is None or not point.exact:
+                raise CdprError(
+                    f"{path}: no resume point for this file (it completed, or it changed since)"
+                )
+        options = PrintOptions(
+            resume_from_layer=resume_from_layer, resume=point, **self.job_options
+        )
         return PrintJob(path, self.profile, self._job_link, options, on_event)
 
     def _job_link(self) -> Any:

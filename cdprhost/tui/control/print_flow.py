@@ -7,19 +7,12 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from cdprhost.job.resume import resume_question
 from cdprhost.job.state import JobSnapshot, JobState, StateChanged
 from cdprhost.tui.control.link_flow import ControllerBase
 from cdprhost.tui.control.views import ConsoleLine, JobRecord, ResumeView
 from cdprhost.tui.state import FileView
 from cdprhost.tui.tabs import screen_key
-
-
-def resume_question(name: str, layer: int) -> str:
-    """The question the CLI asks before ``print --resume-from-layer`` (the same words)."""
-    return (
-        f"Resume {name} from layer {layer}: the machine homes, heats, and lowers onto the part. "
-        "Is the part still on the bed and clear?"
-    )
 
 
 def job_record(state: Any, ended: float) -> JobRecord:
@@ -80,8 +73,9 @@ class PrintFlow(ControllerBase):
         self.lookup_resume()
 
     # -------------------------------------------------------------------- jobs
-    def start(self, resume_from_layer: int | None = None) -> None:
-        """Start the open file (``resume_from_layer``: 0-based layer to restart at)."""
+    def start(self, resume_from_layer: int | None = None, exact: ResumeView | None = None) -> None:
+        """Start the open file (``resume_from_layer``: 0-based layer to restart at; ``exact``:
+        continue at that saved resume point, ``print --resume``)."""
         path = self.state.file.path
         if not path or self.state.job_active:
             return
@@ -91,18 +85,26 @@ class PrintFlow(ControllerBase):
             job_id=job_id,
             job_path=path,
             job_started=self.app.wall_clock(),
-            job_resumed_from=None if resume_from_layer is None else resume_from_layer + 1,
+            job_resumed_from=exact.layer
+            if exact is not None
+            else None
+            if resume_from_layer is None
+            else resume_from_layer + 1,
             job_request="",
             rate_samples=(),
             device=None,
             jog=None,
         )
-        what = "print" if resume_from_layer is None else f"resume at layer {resume_from_layer + 1}"
+        what = "print"
+        if exact is not None:
+            what = f"resume at line {exact.last_line} (layer {exact.layer})"
+        elif resume_from_layer is not None:
+            what = f"resume at layer {resume_from_layer + 1}"
         self.say(ConsoleLine("notice", f"{what}: {path}", self.app.wall_clock()))
         sink = self.app.pump.sink(job_id)
 
         def work() -> Any:
-            job = self.backend.make_job(path, sink, resume_from_layer)
+            job = self.backend.make_job(path, sink, resume_from_layer, exact is not None)
             with self._job_lock:
                 self._job = job
             try:
@@ -173,7 +175,8 @@ class PrintFlow(ControllerBase):
 
     # ------------------------------------------------------------------ resume
     def resume_failed(self) -> None:
-        """Resume the open file's failed print at its saved layer, with the CLI's checks: the
+        """Resume the open file's failed print at its saved point (exact, like ``--resume``,
+        when it names a move; else at its layer), with the CLI's checks: the
         resume point belongs to this file and is usable, the link answers, the operator
         confirms that the part is on the bed and clear. Nothing starts when a check fails."""
         path = self.state.file.path
@@ -199,10 +202,11 @@ class PrintFlow(ControllerBase):
             if resume.problem:
                 self.app.notify(f"cannot resume: {resume.problem}", severity="error", timeout=10)
                 return
-            self.app.confirm(
-                resume_question(Path(path).name, resume.layer),
-                lambda: self.start(resume_from_layer=resume.layer - 1),
-            )
+            question = resume.question or resume_question(Path(path).name, layer=resume.layer)
+            if resume.exact:  # print --resume: exactly where it stopped
+                self.app.confirm(question, lambda: self.start(exact=resume))
+            else:
+                self.app.confirm(question, lambda: self.start(resume_from_layer=resume.layer - 1))
 
         def fail(exc: BaseException) -> None:
             text = str(exc) or type(exc).__name__

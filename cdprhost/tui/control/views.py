@@ -90,10 +90,12 @@ class ResumeView:
     path: str  # the resume point's file
     gcode: str
     reason: str
-    layer: int  # 1-based layer to restart at, as the CLI takes it
+    layer: int  # 1-based: the layer to restart at, or (exact) the layer of ``last_line``
     last_line: int | None = None
     saved_at: float | None = None  # epoch seconds
     problem: str = ""  # why it cannot be used (file changed since, ...), "" when usable
+    exact: bool = False  # names the exact move to continue at (``--resume``), not only a layer
+    question: str = ""  # what the operator confirms before it starts (the CLI's words)
 
 
 @dataclass(frozen=True)

@@ -58,11 +58,10 @@ def failure_text(failure: Failure | None, reason: str, line_text: str, path: str
     if failure.resume_file:
         out.append(f"resume point saved: {failure.resume_file}\n")
     if failure.last_layer is not None:
-        out.append(
-            f"resume here (after checking the link), or later: "
-            f"cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}",
-            style="italic",
-        )
+        later = f"cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}"
+        if failure.resume_file and failure.last_line:
+            later = f"cdprhost print {path} --resume (exactly there), or {later}"
+        out.append(f"resume here (after checking the link), or later: {later}", style="italic")
     return out
 
 
@@ -70,7 +69,7 @@ class FailureScreen(ModalScreen[str]):
     """Shows the stop and the resume point; dismisses with "resume" or "close"."""
 
     BINDINGS = [
-        Binding("r", "choose('resume')", "Resume at layer"),
+        Binding("r", "choose('resume')", "Resume"),
         Binding("escape,enter", "choose('close')", "Close"),
     ]
 
@@ -85,9 +84,7 @@ class FailureScreen(ModalScreen[str]):
             with Horizontal(classes="dialog-buttons"):
                 if self.can_resume:
                     key = key_for(app, self, "choose('resume')")
-                    yield Button(
-                        f"Resume at layer ({key})", variant="warning", id="resume", compact=True
-                    )
+                    yield Button(f"Resume ({key})", variant="warning", id="resume", compact=True)
                 close = key_for(app, self, "choose('close')")
                 yield Button(f"Close ({close})", id="close", compact=True)
 

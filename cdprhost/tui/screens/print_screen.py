@@ -79,7 +79,10 @@ def resume_line(state: UiState, resume_key: str) -> Text:
     if r is None or state.job_active:
         return out
     out.append("resume point ", style="bold yellow")
-    out.append(f"layer {r.layer}" if r.layer else "no layer")
+    if r.exact:
+        out.append(f"line {r.last_line} (layer {r.layer})")
+    else:
+        out.append(f"layer {r.layer}" if r.layer else "no layer")
     if r.reason:
         out.append(f" ({r.reason})", style="dim")
     if r.problem:
@@ -115,9 +118,9 @@ class PrintScreen(AppScreen):
         Binding(
             "l",
             "resume_failed",
-            "Resume at layer",
+            "Resume stopped",
             show=False,  # offered on the resume line when the open file has a resume point
-            tooltip="A failed print, from its saved layer; the link is checked first",
+            tooltip="A stopped print, at its saved point (else its layer); the link is checked first",
         ),
         Binding("v", "toggle_view", "Preview/violations", show=False),
         Binding("left_square_bracket", "layer(-1)", "Layer down", show=False),
