@@ -195,3 +195,39 @@ def test_preflight_summary_names_first_violation():
     text = preflight_summary(UiState(file=FileView(path="a.gcode", preflight=view))).plain
     assert text.startswith("2 violations (first at line 12)") and "machine time 0:01:05" in text
     assert "o Open picks one" in preflight_summary(UiState(), "o Open").plain
+
+
+def test_calibration_result_shows_the_trust_gate_verdict():
+    from cdprhost.tui.control.views import IdentificationView
+    from cdprhost.tui.screens.calibrate import result_text
+
+    base = IdentificationView((), 14.2, 0.05, 5, 12)
+    assert "trust gate: not run" in result_text(base).plain
+    trusted = IdentificationView(
+        (),
+        14.2,
+        0.05,
+        5,
+        12,
+        trusted=True,
+        predicted_rms_mm=0.021,
+        predicted_max_mm=0.05,
+        profile_path="/s/calibrated.toml",
+    )
+    text = result_text(trusted).plain
+    assert "trust gate: trusted" in text and "0.021 mm RMS, 0.050 mm max" in text
+    assert "profile written: /s/calibrated.toml" in text
+    refused = IdentificationView(
+        (),
+        14.2,
+        0.05,
+        5,
+        12,
+        warnings=("predicted error 0.9 mm",),
+        trusted=False,
+        predicted_rms_mm=0.9,
+        predicted_max_mm=2.0,
+    )
+    text = result_text(refused).plain
+    assert "trust gate: REFUSED: no profile written" in text and "! predicted error 0.9" in text
+    assert "profile written" not in text.replace("no profile written", "")

@@ -74,6 +74,9 @@ def identification_view(result: Any, profile_path: str = "") -> IdentificationVi
         result.check_rms_after_mm,
         warnings,
         profile_path,
+        None if result.trust is None else bool(result.ok),
+        None if result.trust is None else float(result.predicted_workspace_rms_mm),
+        None if result.trust is None else float(result.predicted_workspace_max_mm),
     )
 
 

@@ -188,6 +188,9 @@ class IdentificationView:
     check_after_mm: float | None = None
     warnings: tuple[str, ...] = ()
     profile_path: str = ""
+    trusted: bool | None = None  # the trust gate's verdict (None: the gate did not run)
+    predicted_rms_mm: float | None = None  # the gate's predicted workspace error
+    predicted_max_mm: float | None = None
 
 
 @dataclass(frozen=True)

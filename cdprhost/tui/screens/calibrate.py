@@ -43,6 +43,24 @@ def stage_text(cal: CalibrationView) -> Text:
     return out
 
 
+def trust_text(result: IdentificationView) -> Text:
+    """The trust gate's verdict, as ``calibrate identify`` decides (pure)."""
+    if result.trusted is None:
+        return Text("trust gate: not run", style="dim")
+    out = Text("trust gate: ", style="bold")
+    if result.trusted:
+        out.append("trusted", style="bold green")
+    else:
+        out.append("REFUSED: no profile written (the reasons below)", style="bold red")
+    if result.predicted_rms_mm is not None and result.predicted_max_mm is not None:
+        out.append(
+            f"   predicted workspace error {result.predicted_rms_mm:.3f} mm RMS, "
+            f"{result.predicted_max_mm:.3f} mm max",
+            style="dim",
+        )
+    return out
+
+
 def result_text(result: IdentificationView | None, identify_key: str = "i Identify") -> Text:
     if result is None:
         return Text(
@@ -57,6 +75,7 @@ def result_text(result: IdentificationView | None, identify_key: str = "i Identi
     if result.check_before_mm is not None and result.check_after_mm is not None:
         out.append(f"   check poses {result.check_before_mm:.3f} → {result.check_after_mm:.4f} mm")
     out.append(f"   {result.iterations} iterations, {result.poses_used} poses", style="dim")
+    out.append("\n").append_text(trust_text(result))
     for w in result.warnings:
         out.append(f"\n! {w}", style="yellow")
     if result.profile_path:

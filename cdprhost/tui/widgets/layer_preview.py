@@ -144,7 +144,7 @@ class LayerPreview(Widget):
         if w <= 0 or h <= 0 or not self.display:
             self._drawn_for = (0, 0)  # drawn in full when it shows again
             return
-        texts = preview_text(self._input, w, h, self._dots).split("\n")
+        texts = list(preview_text(self._input, w, h, self._dots).split("\n"))
         old = self._texts
         full = full or self._drawn_for != (w, h) or len(old) != len(texts)
         console = self.app.console
