@@ -3,12 +3,14 @@ the nozzle, drawn in braille dots (no graphics protocol needed)."""
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from rich.text import Text
 from textual.geometry import Region
 from textual.strip import Strip
+from textual.timer import Timer
 from textual.widget import Widget
 
 from cdprhost.tui.control.views import Toolpath
@@ -114,11 +116,19 @@ def preview_text(data: PreviewInput, cols: int, rows: int, dots: LayerDots | Non
 
 class LayerPreview(Widget):
     """Shows :func:`preview_text` for the last :meth:`show` input, line by line: only the
-    rows that changed are drawn again (the nozzle moving redraws a row or two)."""
+    rows that changed are drawn again (the nozzle moving redraws a row or two).
+
+    While a print advances on the same layer, it is drawn at most every ``FOLLOW_S`` seconds
+    (the last input is drawn when that time is up); another layer, file or title shows at
+    once. Drawing the preview is most of what the UI costs while it prints."""
+
+    FOLLOW_S = 2.0
 
     def __init__(self, *, id: str | None = None, classes: str | None = None):
         super().__init__(id=id, classes=classes)
         self._input = PreviewInput(None, 0, 0, None)
+        self._drawn_at = float("-inf")
+        self._deferred: Timer | None = None
         self._dots = LayerDots()
         self._lines: list[Strip] = []
         self._texts: list[Text] = []
@@ -129,9 +139,20 @@ class LayerPreview(Widget):
         return self._input
 
     def show(self, data: PreviewInput) -> None:
-        if data != self._input:
-            self._input = data
-            self._redraw()
+        if data == self._input:
+            return
+        old, self._input = self._input, data
+        follows = (data.toolpath, data.layer, data.title) == (old.toolpath, old.layer, old.title)
+        wait = self._drawn_at + self.FOLLOW_S - time.monotonic()
+        if follows and wait > 0:  # the same layer, drawn a moment ago: draw the latest later
+            if self._deferred is None:
+                self._deferred = self.set_timer(wait, self._draw_deferred)
+            return
+        self._redraw()
+
+    def _draw_deferred(self) -> None:
+        self._deferred = None
+        self._redraw()
 
     def on_resize(self) -> None:
         self._redraw(full=True)
@@ -140,6 +161,10 @@ class LayerPreview(Widget):
         self._redraw(full=True)
 
     def _redraw(self, full: bool = False) -> None:
+        if self._deferred is not None:
+            self._deferred.stop()
+            self._deferred = None
+        self._drawn_at = time.monotonic()
         w, h = self.content_size
         if w <= 0 or h <= 0 or not self.display:
             self._drawn_for = (0, 0)  # drawn in full when it shows again
