@@ -151,8 +151,12 @@ def main() -> None:
         time.sleep(args.warmup)  # past heating: the machine moves
         windows: list[float] = []
         main0 = main_thread_seconds(ui.pid)
+        mark = len(ui.output)
         printing = measure(ui.pid, args.seconds, windows)
         ui_loop = 100.0 * (main_thread_seconds(ui.pid) - main0) / args.seconds
+        for word in ("FAILED", "DONE", "CANCELLED"):  # it printed all along
+            if word.encode() in ui.output[mark:]:
+                raise SystemExit(f"the print ended while measuring ({word}): nothing measured")
         ui.keys("\x11", "y")  # ctrl+q, yes: cancel and quit
     finally:
         ui.stop()

@@ -151,7 +151,8 @@ class FakeCalibration:
         self.backend = backend
         self.moved: list[int] = []
 
-    def plan(self, n_fit, n_check, session_dir):
+    def plan(self, n_fit, n_check, session_dir, mocap_config=None):
+        self.mocap_config = mocap_config
         pts = [(-20.0 + 10 * i, 5.0 * i, 150.0 + 20 * i) for i in range(n_fit + n_check)]
         poses = tuple(
             PoseView(i + 1, p, "fit" if i < n_fit else "check") for i, p in enumerate(pts)

@@ -48,7 +48,9 @@ class JobHandle(Protocol):
 class CalibrationBackend(Protocol):
     """The calibration wizard as the UI drives it (all blocking)."""
 
-    def plan(self, n_fit: int, n_check: int, session_dir: str | None) -> CalibrationView: ...
+    def plan(
+        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+    ) -> CalibrationView: ...
 
     def move_to(self, pose: PoseView) -> PoseView: ...
 

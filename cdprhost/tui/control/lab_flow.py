@@ -48,13 +48,15 @@ class LabFlow(ControllerBase):
 
         self.background("calibration", work, finished, fail, exclusive=True)
 
-    def plan_calibration(self, n_fit: int, n_check: int, session_dir: str | None) -> None:
+    def plan_calibration(
+        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+    ) -> None:
         calib = self.backend.calibration
         if calib is None:
             self._calibration(lambda: None, lambda _: None, "planning")
             return
         self._calibration(
-            lambda: calib.plan(n_fit, n_check, session_dir),
+            lambda: calib.plan(n_fit, n_check, session_dir, mocap_config),
             lambda view: self.update(calibration=view),
             "planning",
             "planning poses",

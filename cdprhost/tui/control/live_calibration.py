@@ -120,19 +120,26 @@ class LiveCalibration:
         self.messages.append(text)
 
     # ---------------------------------------------------------------- steps
-    def plan(self, n_fit: int, n_check: int, session_dir: str | None) -> CalibrationView:
+    def plan(
+        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+    ) -> CalibrationView:
+        """A new session (its markers from ``mocap_config``, a TOML file with the ``[mocap]``
+        table, checked before anything is written) or the one in ``session_dir``."""
+        from cdprhost.calibration.session_setup import mocap_for_session
         from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
         from cdprhost.machine import Machine
 
         b = self.backend
-        mocap = None
+        folder = session_dir or DEFAULT_SESSION
+        virtual = None
         if b.sim_options.get("observer") is not None:
-            from cdprhost.sim.virtual_mocap import mocap_config
+            from cdprhost.sim.virtual_mocap import mocap_config as virtual_config
 
-            mocap = mocap_config(b.profile_name).mocap
+            virtual = virtual_config(b.profile_name).mocap
+        mocap = mocap_for_session(folder, mocap_config, virtual)
         device = Machine(b.link, b.profile, b.model, settle_s=0.5)
         self.wizard = CalibrationWizard(
-            session_dir or DEFAULT_SESSION,
+            folder,
             b.profile,
             device,
             self.source,

@@ -108,6 +108,10 @@ class CalibrateScreen(AppScreen):
             yield Input(
                 placeholder="session folder (new or to resume)", compact=True, id="session-dir"
             )
+            yield Label(" markers ")
+            yield Input(
+                placeholder="new session: a session.toml with its [mocap]", compact=True, id="mocap"
+            )
         yield Label(id="calib-stage")
         yield DataTable(id="poses", cursor_type="row", zebra_stripes=True)
         with Horizontal(id="take-row"):
@@ -227,7 +231,8 @@ class CalibrateScreen(AppScreen):
             )
             return
         session = self.query_one("#session-dir", Input).value.strip() or None
-        self.app.controller.plan_calibration(n_fit, n_check, session)
+        markers = self.query_one("#mocap", Input).value.strip() or None
+        self.app.controller.plan_calibration(n_fit, n_check, session, markers)
 
     def action_move(self) -> None:
         if self.check_action("move", ()):
