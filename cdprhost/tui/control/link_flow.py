@@ -28,6 +28,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from cdprhost.tui.app import CdprApp
 
 TEMPERATURE_HISTORY = 600
+JOB_HEALTH_EVERY_S = 5.0  # while a job runs its own events carry the link health
 
 
 class ControllerBase:
@@ -36,6 +37,7 @@ class ControllerBase:
         self.backend = backend
         self._job: JobHandle | None = None
         self._job_lock = threading.Lock()
+        self._health_at = float("-inf")
 
     # ------------------------------------------------------------ plumbing
     @property
@@ -132,12 +134,18 @@ class ControllerBase:
         self.background("connect", self.backend.disconnect, done, exclusive=True)
 
     def poll_health(self) -> None:
-        """Non-blocking: copy the link counters into the state when they changed."""
+        """Non-blocking: copy the link counters into the state when they changed. While a
+        job runs, its events carry them to the print screen: the copy (for the link screen)
+        is then made only every ``JOB_HEALTH_EVERY_S`` (each copy redraws the screen)."""
         conn = self.state.connection
         if conn.status != "connected":
             return
+        now = self.app.clock()
+        if self.state.job_active and now - self._health_at < JOB_HEALTH_EVERY_S:
+            return
         health = self.backend.link_health()
         if health != conn.health:
+            self._health_at = now
             self.update(connection=replace(conn, health=health))
 
     def refresh_device(self) -> None:
