@@ -240,23 +240,15 @@ class LiveBackend:
             return None  # none, or the file changed since (another program)
         name = Path(path).name
         at = saved.stat().st_mtime if saved.exists() else None
-        if point.exact:
-            question = resume_question(name, point=point)
+        problem = ""
+        if point.exact:  # print --resume: at that very move
             layer = int(point.last_layer or 0)
-            return ResumeView(
-                str(saved),
-                point.gcode,
-                point.reason,
-                layer,
-                point.last_line,
-                at,
-                "",
-                True,
-                question,
-            )
-        layer = int(point.suggested_layer or point.last_layer or 0)
-        problem = "" if layer >= 1 else "the stop was before the first layer: start again instead"
-        question = resume_question(name, layer=layer)
+            question = resume_question(name, point=point)
+        else:  # print --resume-from-layer
+            layer = int(point.suggested_layer or point.last_layer or 0)
+            question = resume_question(name, layer=layer)
+            if layer < 1:
+                problem = "the stop was before the first layer: start again instead"
         return ResumeView(
             str(saved),
             point.gcode,
@@ -265,7 +257,7 @@ class LiveBackend:
             point.last_line,
             at,
             problem,
-            False,
+            point.exact,
             question,
         )
 
