@@ -11,6 +11,7 @@ their values while the geometry is fitted.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import os
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ from cdprhost.calibration.trust import (
     trust_report,
     variance_factor,
 )
+from cdprhost.calibration.verification import DEFAULT_ALPHA, Verification, verify_checks
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.jsonsafe import json_safe
 from cdprhost.kinematics.geometry import CableGeometry
@@ -69,6 +71,7 @@ class Identification:
     pose_numbers: np.ndarray | None = None  # (K,) poses.csv numbers
     noise: PoseNoise | None = None
     notes: tuple[str, ...] = ()
+    verification: Verification | None = None
 
     names = GEOMETRY_NAMES
 
@@ -92,12 +95,33 @@ class Identification:
         return self._rms(self.errors_after, self.fit_mask)
 
     @property
+    def _refined(self) -> bool:
+        return self.verification is not None and self.verification.refined
+
+    @property
+    def check_rows(self) -> np.ndarray:
+        """Rows of the check poses (after a refinement: those the fit-only geometry predicted)."""
+        if self.verification is not None and self.verification.refined:
+            return np.asarray(self.verification.rows, dtype=int)
+        return np.flatnonzero(~self.fit_mask)
+
+    @property
+    def check_errors_after(self) -> np.ndarray:
+        """Check poses' errors as predicted, not fitted (after a refinement: by the fit-only
+        geometry, the verification's residuals)."""
+        if self.verification is not None and self.verification.refined:
+            return self.verification.errors_mm
+        return np.asarray(self.errors_after[~self.fit_mask])
+
+    @property
     def check_rms_before_mm(self) -> float | None:
-        return self._rms(self.errors_before, ~self.fit_mask)
+        e = self.errors_before[self.check_rows]
+        return float(np.sqrt(np.mean(e**2))) if e.size else None
 
     @property
     def check_rms_after_mm(self) -> float | None:
-        return self._rms(self.errors_after, ~self.fit_mask)
+        e = self.check_errors_after
+        return float(np.sqrt(np.mean(e**2))) if e.size else None
 
     @property
     def identifiable(self) -> bool:
@@ -111,7 +135,11 @@ class Identification:
     @property
     def ok(self) -> bool:
         """Solved and trusted by the gate."""
-        return self.solved and (self.trust is None or self.trust.trusted)
+        return (
+            self.solved
+            and (self.trust is None or self.trust.trusted)
+            and (self.verification is None or self.verification.problem() is None)
+        )
 
     @property
     def predicted_workspace_rms_mm(self) -> float:
@@ -133,6 +161,9 @@ class Identification:
             out.append("unidentifiable parameter combination(s): " + "; ".join(self.unidentifiable))
         if self.trust is not None:
             out += list(self.trust.refusals)
+        problem = self.verification.problem() if self.verification else None
+        if problem:
+            out.append(problem)
         return out
 
     def warnings(self) -> list[str]:
@@ -173,6 +204,7 @@ class Identification:
             "predicted_workspace_rms_mm": self.predicted_workspace_rms_mm,
             "predicted_workspace_max_mm": self.predicted_workspace_max_mm,
             "trust": self.trust.to_json() if self.trust else None,
+            "verification": self.verification.to_json() if self.verification else None,
             "noise": self.noise.as_dict() if self.noise else None,
             "iterations": self.iterations,
             "converged": self.converged,
@@ -208,9 +240,12 @@ def identify(
     noise: PoseNoise | None = None,
     pose_numbers: np.ndarray | None = None,
     notes: tuple[str, ...] = (),
+    alpha: float = DEFAULT_ALPHA,
 ) -> Identification:
     """Fit the geometry on the ``fit`` poses of ``obs``; predict every pose before/after;
-    judge the result with the trust gate over ``grid`` (default: the build volume)."""
+    test the ``check`` poses against that prediction (:mod:`.verification`, false-alarm
+    rate ``alpha``); judge the result with the trust gate over ``grid`` (default: the
+    build volume)."""
     k = len(obs)
     roles = tuple(roles) if roles is not None else ("fit",) * k
     if len(roles) != k:
@@ -270,6 +305,17 @@ def identify(
         noise_dof,
         limits,
     )
+    numbers = np.arange(1, k + 1) if pose_numbers is None else np.asarray(pose_numbers)
+    verification = (
+        dataclasses.replace(
+            verify_checks(residuals[check], sigma[check], j0, cov, numbers[check], alpha),
+            fit_only_rms_mm=trust.predicted_rms_mm,
+            fit_only_max_mm=trust.predicted_max_mm,
+            rows=tuple(int(i) for i in check),
+        )
+        if check.size
+        else None
+    )
     inflate = max(factor, 1.0) if np.isfinite(factor) else 1.0
     cov = cov * inflate
     stderr = np.array(est.stderr_[:12]) * np.sqrt(inflate)
@@ -295,7 +341,36 @@ def identify(
         model=model,
         trust=trust,
         covariance=cov,
+        verification=verification,
         **common,  # type: ignore[arg-type]
+    )
+
+
+def identify_verified(
+    obs: Observations,
+    base: MachineModel,
+    roles: tuple[str, ...] | list[str] | None = None,
+    *,
+    refine: bool = True,
+    **options: Any,
+) -> Identification:
+    """Verify, then refine: identify on the ``fit`` poses and test the ``check`` poses
+    against that prediction; when they agree (and ``refine``), identify again on every
+    pose, keeping the verification (with both predicted workspace errors) in the result.
+    Options as for :func:`identify`."""
+    first = identify(obs, base, roles, **options)
+    v = first.verification
+    if not refine or v is None or not v.consistent or not first.solved:
+        return first
+    second = identify(obs, base, ("fit",) * len(obs), **options)
+    return dataclasses.replace(
+        second,
+        verification=dataclasses.replace(
+            v,
+            refined=True,
+            refined_rms_mm=second.predicted_workspace_rms_mm,
+            refined_max_mm=second.predicted_workspace_max_mm,
+        ),
     )
 
 
@@ -334,7 +409,7 @@ def calibrated_profile(
     if not result.ok:
         provenance["forced"] = True
     if result.check_rms_after_mm is not None:
-        provenance["check_poses"] = int((~result.fit_mask).sum())
+        provenance["check_poses"] = int(result.check_rows.size)
         provenance["check_rms_before_mm"] = result.check_rms_before_mm
         provenance["check_rms_after_mm"] = result.check_rms_after_mm
     name = profile.name if profile.name.endswith("-calibrated") else f"{profile.name}-calibrated"
@@ -363,8 +438,11 @@ def identify_session(
     *,
     noise_floor_mm: float | None = None,
     limits: TrustLimits = DEFAULT_TRUST,
+    refine: bool = True,
+    alpha: float = DEFAULT_ALPHA,
 ) -> Identification:
-    """Measure every take of a session folder and identify (refused takes are listed, not used).
+    """Measure every take of a session folder and identify (refused takes are listed, not
+    used): verify on the check poses, then refine on all poses (:func:`identify_verified`).
 
     Each pose's noise is its take's standard error (:mod:`.pose_noise`); ``noise_floor_mm``
     adds a part no take shows (default: ``noise_mm`` of session.toml, if declared)."""
@@ -378,10 +456,12 @@ def identify_session(
         )
     noise = meas.noise(base.steps_per_mm, floor_mm=noise_floor_mm)
     notes = tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ())
-    return identify(
+    return identify_verified(
         meas.observations(noise),
         base,
         meas.roles,
+        refine=refine,
+        alpha=alpha,
         rejected=tuple(str(r) for r in meas.rejected),
         limits=limits,
         noise=noise,

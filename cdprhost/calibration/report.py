@@ -54,7 +54,7 @@ def plan_text(plan: PosePlan) -> str:
 
 def summary_text(r: Identification) -> str:
     """The before/after table."""
-    fit, chk = r.fit_mask, ~r.fit_mask
+    fit, chk = r.fit_mask, r.check_rows
     rows = [
         ["fit poses RMS", _mm(r.rms_before_mm), _mm(r.rms_after_mm)],
         [
@@ -63,10 +63,15 @@ def summary_text(r: Identification) -> str:
             _mm(r.errors_after[fit].max() if fit.any() else None),
         ],
     ]
-    if chk.any():
+    if chk.size:
+        note = " (predicted by the fit poses)" if r.verification and r.verification.refined else ""
         rows += [
-            ["check poses RMS", _mm(r.check_rms_before_mm), _mm(r.check_rms_after_mm)],
-            ["check poses max", _mm(r.errors_before[chk].max()), _mm(r.errors_after[chk].max())],
+            ["check poses RMS" + note, _mm(r.check_rms_before_mm), _mm(r.check_rms_after_mm)],
+            [
+                "check poses max" + note,
+                _mm(r.errors_before[chk].max()),
+                _mm(r.check_errors_after.max()),
+            ],
         ]
     return _table(["position error (mm)", "before", "after"], rows)
 
@@ -90,10 +95,14 @@ def parameters_text(r: Identification) -> str:
 
 
 def poses_text(r: Identification) -> str:
+    roles = list(r.roles)
+    if r.verification is not None and r.verification.refined:
+        for i in r.check_rows:
+            roles[i] = "check+fit"  # verified as a check pose, then used in the refit
     rows = [
         [str(i + 1), role, _mm(b), _mm(a), *(_mm(v, 4) for v in res), _mm(s)]
         for i, (role, b, a, res, s) in enumerate(
-            zip(r.roles, r.errors_before, r.errors_after, r.residuals_after, r.sigma_mm)
+            zip(roles, r.errors_before, r.errors_after, r.residuals_after, r.sigma_mm)
         )
     ]
     return _table(["pose", "role", "before", "after", "dx", "dy", "dz", "sigma"], rows)
@@ -136,6 +145,8 @@ def identification_text(r: Identification) -> str:
         )
     if r.unidentifiable:
         parts.append("UNIDENTIFIABLE combinations: " + "; ".join(r.unidentifiable))
+    if r.verification is not None:
+        parts.append(r.verification.text())
     parts.append(trust_text(r))
     if r.rejected:
         parts.append("rejected takes:\n" + "\n".join(f"  {t}" for t in r.rejected))

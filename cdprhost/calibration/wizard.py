@@ -9,7 +9,9 @@ again and a new take is asked for. Sound takes are appended to the session folde
 going on, so a crash or Ctrl-C loses nothing; running again on the same folder resumes
 from ``plan.csv`` and the rows already in ``poses.csv``.
 
-When the trust gate refuses the identification, the wizard plans extra poses by D-optimal
+The identification verifies the fit poses on the check poses, then refines on all of
+them (:func:`~.identification.identify_verified`). When the trust gate refuses, or the
+check poses disagree, the wizard plans extra poses by D-optimal
 augmentation of the poses measured (:mod:`.augmentation`), appends them to the plan and
 asks for them, then identifies again (at most ``max_augment_rounds`` times).
 """
@@ -42,6 +44,7 @@ from cdprhost.calibration.takes import (
     prepare_take,
 )
 from cdprhost.calibration.trust import TrustLimits
+from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.calibration.wizard_state import (
     Action,
     Finished,
@@ -97,8 +100,10 @@ class TakeSource(Protocol):
 
 @dataclass(frozen=True)
 class WizardOptions:
-    n_poses: int = 6
-    n_check: int = 3
+    n_poses: int = 4  # the paper's four optimal poses, planned over the whole workspace
+    n_check: int = 3  # verify the four, then refine on all seven
+    refine: bool = True
+    alpha: float = DEFAULT_ALPHA  # false-alarm rate of the check-pose verification
     criterion: str = "D"
     seed: int = 0
     noise_floor_mm: float | None = None  # added to each take's standard error (None: session's)
@@ -295,7 +300,11 @@ class CalibrationWizard:
             self.model,
             noise_floor_mm=self.options.noise_floor_mm,
             limits=self.options.trust,
+            refine=self.options.refine,
+            alpha=self.options.alpha,
         )
+        if result.verification is not None:
+            self.log(result.verification.text())
         write_text_atomic(self.dir / REPORT_FILE, dumps(result.to_json(), indent=2) + "\n")
         self.identification = result
         if result.ok:
@@ -308,7 +317,9 @@ class CalibrationWizard:
                 f"max {result.predicted_workspace_max_mm:.3f} mm"
             )
         else:
-            self.log("the trust gate refused: " + "; ".join(result.problems()))
+            gate = result.trust is not None and bool(result.trust.refusals)
+            who = "the trust gate" if gate or result.verification is None else "the verification"
+            self.log(f"{who} refused: " + "; ".join(result.problems()))
         self.state = self.state.identified_as(result.ok, "; ".join(result.problems()))
 
     def _plan_more(self, action: PlanMore) -> None:

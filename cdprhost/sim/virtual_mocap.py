@@ -9,7 +9,8 @@ motion, drift the time) and writes a motion-capture take of that point into the
 mocap folder, an OptiTrack Motive CSV (in metres) by default, with the noise of a
 real system (:data:`REALISTIC`: autocorrelated jitter of 0.1 mm per marker at 120 fps,
 a settling swing after each move, runs of gaps; ``creep_probability`` of a slow creep).
-``creep_takes`` (take numbers, from 1) creep by ``creep_mm`` for sure. ``crept`` records,
+``creep_takes`` (take numbers, from 1) creep by ``creep_mm`` for sure; ``offset_takes``
+(take number -> vector, mm) are displaced, as by a bumped effector or a wrong marker. ``crept`` records,
 per take written, whether it crept. Takes use the synthetic session layout's markers
 (:mod:`cdprhost.sim.synthetic_session`); :func:`mocap_config` is the matching
 ``[mocap]`` configuration. ``make_observer(None, None)`` is None (no observer).
@@ -19,7 +20,7 @@ from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -74,6 +75,7 @@ class VirtualMocap:
         creep_probability: float = 0.0,
         creep_takes: Collection[int] = (),
         creep_mm: float = 0.3,
+        offset_takes: Mapping[int, ArrayLike] | None = None,
         noise_mm: float = 0.0,
         seed: int | None = 0,
         format: str = "motive-csv",
@@ -88,6 +90,9 @@ class VirtualMocap:
         self.creep_probability = float(creep_probability)
         self.creep_takes = frozenset(int(n) for n in creep_takes)
         self.creep_mm = float(creep_mm)
+        self.offset_takes = {
+            int(k): np.asarray(v, dtype=float).reshape(3) for k, v in (offset_takes or {}).items()
+        }
         self.noise_mm = float(noise_mm)
         self.crept: list[bool] = []
         self.format = format
@@ -147,6 +152,7 @@ class VirtualMocap:
             if not np.isfinite(point).all():
                 return None
             self.count += 1
+            point = point + self.offset_takes.get(self.count, 0.0)
             path = self.directory / f"take-{self.count:04d}{EXTENSIONS[self.format]}"
             noise = vary(self.realism, self._rng, creep_probability=self.creep_probability)
             if self.count in self.creep_takes:

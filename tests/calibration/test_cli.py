@@ -154,26 +154,27 @@ def test_identify_uses_role_column_for_check_poses(tmp_path, plan4, session_case
     with open(session / "poses.csv", "w", newline="") as fh:
         csv.writer(fh).writerows(rows)
     rep = tmp_path / "r.json"
-    assert (
-        main(
-            [
-                "calibrate",
-                "identify",
-                str(session),
-                "--profile",
-                "paper-simulation",
-                "--out",
-                str(tmp_path / "c.toml"),
-                "--json",
-                str(rep),
-            ]
-        )
-        == 0
-    )
+    args = ["calibrate", "identify", str(session), "--profile", "paper-simulation"]
+    args += ["--out", str(tmp_path / "c.toml"), "--json", str(rep)]
+    # the session's takes carry a 0.05 mm static offset each that no take shows: the check
+    # poses disagree with the take noise alone...
+    assert main([*args, "--no-refine"]) == 1
+    data = json.loads(rep.read_text())
+    assert data["verification"]["verdict"] == "inconsistent" and not data["ok"]
+    assert not (tmp_path / "c.toml").exists()
+    # ...and agree once that noise is declared: verified on the check poses, then kept
+    assert main([*args, "--no-refine", "--noise-floor", "0.05"]) == 0
     data = json.loads(rep.read_text())
     assert (
         data["poses_used"] == 4 and data["check_rms_after_mm"] < 0.6 < data["check_rms_before_mm"]
     )
+    assert data["verification"]["verdict"] == "consistent" and not data["verification"]["refined"]
+    # by default the check poses then join the fit
+    assert main([*args, "--noise-floor", "0.05"]) == 0
+    data = json.loads(rep.read_text())
+    v = data["verification"]
+    assert data["poses_used"] == 6 and v["refined"] and len(v["checks"]) == 2
+    assert v["workspace_refined"]["rms_mm"] < v["workspace_fit_only"]["rms_mm"]
 
 
 def test_invalid_sessions_give_clear_errors(tmp_path, plan12, session_case, capsys):

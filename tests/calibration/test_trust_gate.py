@@ -96,7 +96,8 @@ def test_planned_session_is_trusted_and_the_prediction_matches_reality(
         seed=4,
     )
     code, out, data = identify_cli(tmp_path / "s", tmp_path)
-    assert code == 0 and data["ok"] is True and data["poses_used"] == 8
+    assert code == 0 and data["ok"] is True and data["poses_used"] == 10  # verified, refined
+    assert data["verification"]["verdict"] == "consistent" and data["verification"]["refined"]
     assert 0 < data["predicted_workspace_rms_mm"] < data["predicted_workspace_max_mm"] < 0.3
     assert "TRUSTED" in capsys.readouterr().out
     from cdprhost.kinematics import MachineModel

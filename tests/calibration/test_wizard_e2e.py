@@ -100,8 +100,10 @@ def test_wizard_calibrates_then_printing_gets_accurate(
     finally:
         link.close()
     r = out.identification
-    assert r.ok and r.poses_used == 4 and list(r.roles).count("check") == 3
-    assert r.rms_before_mm > 5.0 and r.rms_after_mm < 1e-3
+    # 4 fit poses verified on 3 check poses, then refined on all 7
+    assert r.ok and r.poses_used == 7 and r.verification is not None
+    assert r.verification.consistent and r.verification.refined and len(r.verification.checks) == 3
+    assert r.rms_before_mm > 5.0 and r.rms_after_mm < 0.05 and r.dof == 9
     assert r.check_rms_before_mm > 2.0 and r.check_rms_after_mm < 0.5
     assert (tmp_path / "session" / "calibrated.toml").is_file() and (
         tmp_path / "session" / "identification.json"
@@ -250,9 +252,11 @@ def test_wizard_cli_end_to_end(truth_path, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "before/after" in out and "check poses RMS" in out
     data = json.loads(report.read_text())
-    assert data["poses_used"] == 6 and data["ok"] is True
+    assert data["poses_used"] == 7 and data["ok"] is True  # 4 fit + 3 check, verified, refined
+    assert data["verification"]["verdict"] == "consistent" and data["verification"]["refined"]
+    assert "verification of the fit poses on 3 check pose(s): CONSISTENT" in out
     assert data["rms_after_mm"] < 0.05 and data["predicted_workspace_max_mm"] < 0.3
-    assert load_profile(tmp_path / "cal.toml").calibration["poses_used"] == 6
+    assert load_profile(tmp_path / "cal.toml").calibration["poses_used"] == 7
 
     # the same takes, recorded beforehand, through --takes-from (no virtual mocap this time)
     code = main(

@@ -12,6 +12,7 @@ import pytest
 
 from cdprhost.calibration.augmentation import predicted_workspace
 from cdprhost.calibration.identification import Identification
+from cdprhost.calibration.planning import plan_poses
 from cdprhost.calibration.session import Session, load_session
 from cdprhost.calibration.wizard import CalibrationWizard, FolderWatcher, WizardOptions
 from cdprhost.kinematics import MachineModel
@@ -71,7 +72,8 @@ def drive(profile, model, tmp_path, observer, options, fmt="motive-csv"):
         link.close()
 
 
-def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
+def realistic_mocap(model, tmp_path, seed: int, **options) -> tuple[MachineModel, VirtualMocap]:
+    """A true machine off ``model`` and its virtual motion capture (0.2 mm, 240 fps, 3 s)."""
     truth = model.with_geometry(
         perturbed_geometry(model.geometry, np.random.default_rng(seed), 2.0)
     )
@@ -81,9 +83,19 @@ def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
         realism=REALISM,
         rate_hz=240.0,
         duration_s=3.0,
+        seed=seed,
+        **options,
+    )
+    return truth, observer
+
+
+def run_wizard(profile, model, tmp_path, seed: int, fmt: str) -> Run:
+    truth, observer = realistic_mocap(
+        model,
+        tmp_path,
+        seed,
         creep_takes={3},
         creep_mm=0.4,  # above the bench's 90 % detection limit for 0.2 mm jitter, 240 fps, 3 s
-        seed=seed,
         format=fmt,
     )
     out, logs = drive(profile, model, tmp_path, observer, WizardOptions(), fmt)
@@ -127,14 +139,26 @@ def test_the_creep_is_caught_and_recaptured_and_no_sound_take_refused(runs):
         refused = [m for m in run.logs if m.startswith("take refused")]
         assert sum(run.crept) == 1 and run.crept[2], seed
         assert len(refused) == 1 and refused[0].startswith("take refused (drift:"), (seed, refused)
-        assert len(run.session.poses) == 9 and not run.session.measure().rejected  # 6 fit + 3 check
+        assert len(run.session.poses) == 7 and not run.session.measure().rejected  # 4 fit + 3 check
+
+
+def test_the_defaults_verify_four_fit_poses_on_three_check_poses_then_refine(runs):
+    for seed, run in runs.items():
+        r = run.identification
+        assert list(run.session.poses.roles).count("check") == 3, seed
+        v = r.verification
+        assert v is not None and v.consistent and v.refined and len(v.checks) == 3, seed
+        assert r.poses_used == 7 and v.refined_rms_mm < v.fit_only_rms_mm, seed
+        assert any(
+            m.startswith("verification of the fit poses on 3 check pose(s)") for m in run.logs
+        )
 
 
 def test_the_calibrated_machine_reaches_the_noise_limit_of_its_poses(runs):
     """Within 1.3x of the noise limit (the bench's 'limit': the workspace RMS predicted from
-    the takes' noise for this pose set). One session is one draw of a quadratic form in the
-    12 parameter errors (the bench puts ~85-90 % of sessions of 6+ poses within 1.3x), so
-    the median over the sessions must be within 1.3x, and every session within 2x."""
+    the takes' noise for this pose set, the default 4 fit + 3 check poses refined on all 7).
+    One session is one draw of a quadratic form in the 12 parameter errors, so the median
+    over the sessions must be within 1.3x, and every session within 2x."""
     ratios = [run.ratio for run in runs.values()]
     assert all(run.before_mm > 2.0 for run in runs.values())
     assert np.median(ratios) <= 1.3 and max(ratios) <= 2.0, ratios
@@ -166,3 +190,25 @@ def test_refused_identification_plans_more_poses_and_asks_for_them(
     assert out.state.rounds == 1 and len(out.state.plan.poses) == r.poses_used
     # the plan file says which poses were added, so a resumed session knows
     assert "round" in (tmp_path / "session" / "plan.csv").read_text().splitlines()[0]
+
+
+def test_a_bumped_check_take_fails_verification_and_no_profile_is_written(
+    sim_profile, sim_model, tmp_path
+):
+    """The effector of one check pose's take is 0.5 mm off (bumped): the check poses disagree
+    with the four fit poses, the wizard names that pose and writes no profile."""
+    defaults = WizardOptions()
+    plan = plan_poses(sim_model, defaults.n_poses, n_check=defaults.n_check, seed=defaults.seed)
+    bumped = plan.roles.index("check") + 1  # its take number: one take per pose, in order
+    _, observer = realistic_mocap(sim_model, tmp_path, 26, offset_takes={bumped: (0, 0.5, 0)})
+    out, logs = drive(
+        sim_profile, sim_model, tmp_path, observer, WizardOptions(max_augment_rounds=0)
+    )
+    r = out.identification
+    assert r is not None and not r.ok and out.profile_path is None
+    assert not (tmp_path / "session" / "calibrated.toml").exists()
+    v = r.verification
+    assert v is not None and v.verdict == "inconsistent" and v.suspects == (bumped,)
+    assert not v.refined and r.poses_used == 4
+    refusal = next(m for m in logs if m.startswith("the verification refused"))
+    assert f"pose {bumped} off by" in refusal and "bad take" in refusal

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from cdprhost.calibration import plan_files, planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
+from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.cli.numbers import bounded_float
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
@@ -36,9 +37,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     plan.add_argument(
         "--check-poses",
         type=_non_negative,
-        default=0,
+        default=3,
         metavar="M",
-        help="extra check poses (default 0)",
+        help="check poses that verify the fit poses (default 3)",
     )
     plan.add_argument(
         "--criterion",
@@ -87,8 +88,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     ident.add_argument(
         "--force",
         action="store_true",
-        help="write the profile even when the trust gate refuses it (the report still says ok: false)",
+        help="write the profile even when the trust gate or the verification refuses it "
+        "(the report still says ok: false)",
     )
+    _add_verification_arguments(ident)
     ident.set_defaults(func=run_identify)
 
     wiz = cal_sub.add_parser(
@@ -109,13 +112,22 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     wiz.add_argument(
         "--poses",
         type=_at_least_4,
-        default=6,
+        default=4,
         metavar="N",
-        help="fit poses (default 6: the workspace error then lands near its noise limit; "
-        "4 is the minimum)",
+        help="fit poses, planned D-optimally over the whole workspace (default 4, the minimum)",
     )
     wiz.add_argument(
-        "--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)"
+        "--check-poses",
+        type=_non_negative,
+        default=3,
+        metavar="M",
+        help="check poses that verify the fit poses before the refit on all (default 3)",
+    )
+    _add_verification_arguments(wiz)
+    wiz.add_argument(
+        "--force",
+        action="store_true",
+        help="write the profile even when the trust gate or the verification refuses it",
     )
     wiz.add_argument("--criterion", choices=planning.CRITERIA, default="D")
     src = wiz.add_mutually_exclusive_group()
@@ -171,6 +183,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     wiz.add_argument("--json", metavar="R", help="machine-readable report")
     wiz.set_defaults(func=run_wizard)
+
+
+def _add_verification_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--no-refine",
+        dest="refine",
+        action="store_false",
+        help="keep the fit on the fit poses only (default: once the check poses agree with "
+        "its prediction, refit on fit + check poses)",
+    )
+    parser.add_argument(
+        "--false-alarm",
+        type=bounded_float(1e-9, 0.5),
+        default=DEFAULT_ALPHA,
+        metavar="P",
+        help="false-alarm rate of the check-pose test (default 0.01)",
+    )
 
 
 def _at_least_4(text: str) -> int:
@@ -240,7 +269,14 @@ def run_identify(args: argparse.Namespace) -> int:
 
     profile, model = load_model(args.profile)
     limits = TrustLimits(max_workspace_mm=args.max_workspace_error)
-    result = identify_session(args.session, model, noise_floor_mm=args.noise_floor, limits=limits)
+    result = identify_session(
+        args.session,
+        model,
+        noise_floor_mm=args.noise_floor,
+        limits=limits,
+        refine=args.refine,
+        alpha=args.false_alarm,
+    )
     forced = bool(args.force) and result.solved and not result.ok
     write_json(args.json, {**result.to_json(), "forced": forced})
     print(report.identification_text(result))
@@ -337,6 +373,8 @@ def run_wizard(args: argparse.Namespace) -> int:
             n_check=args.check_poses,
             criterion=args.criterion,
             noise_floor_mm=args.noise_floor,
+            refine=args.refine,
+            alpha=args.false_alarm,
         )
         wiz = wizard.CalibrationWizard(
             session,
@@ -363,23 +401,34 @@ def run_wizard(args: argparse.Namespace) -> int:
         raise JobFailed(
             f"calibration incomplete: {getattr(finished, 'reason', '')}; session kept in {session}"
         )
+    forced = bool(args.force) and result.solved and not result.ok
+    calibrated, profile_path = outcome.profile, outcome.profile_path
+    if forced:
+        calibrated = calibrated_profile(profile, result, session=str(session.resolve()))
+        profile_path = session / wizard.PROFILE_FILE
+        save_profile(calibrated, profile_path)
     write_json(
         args.json,
         {
             **result.to_json(),
+            "forced": forced,
             "session": str(session),
-            "profile_path": str(outcome.profile_path) if outcome.profile_path else None,
+            "profile_path": str(profile_path) if profile_path else None,
         },
     )
     print(report.identification_text(result))
-    if not result.ok:
+    if not result.ok and not forced:
         raise JobFailed(
-            "calibration failed; no profile written:\n"
+            "calibration failed; no profile written"
+            + (" (--force writes it anyway)" if result.solved else "")
+            + ":\n"
             + "\n".join(f"  - {p}" for p in result.problems())
         )
-    if args.out and outcome.profile is not None:
-        save_profile(outcome.profile, args.out)
+    if forced:
+        print("\nWARNING: calibration refused; written because of --force", file=sys.stderr)
+    if args.out and calibrated is not None:
+        save_profile(calibrated, args.out)
     print(
-        f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or outcome.profile_path}"
+        f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or profile_path}"
     )
     return 0
