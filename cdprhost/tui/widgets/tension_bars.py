@@ -19,12 +19,14 @@ class TensionBars(Widget):
         self._tensions: tuple[float, float, float] | None = None
 
     def show(self, tensions: tuple[float, float, float] | None) -> None:
-        self._tensions = (
+        shown = (
             None
             if tensions is None
             else (float(tensions[0]), float(tensions[1]), float(tensions[2]))
         )
-        self.refresh()
+        if shown != self._tensions:
+            self._tensions = shown
+            self.refresh()
 
     def levels(self) -> tuple[str, ...]:
         if self._tensions is None:
