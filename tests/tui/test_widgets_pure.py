@@ -231,3 +231,17 @@ def test_calibration_result_shows_the_trust_gate_verdict():
     text = result_text(refused).plain
     assert "trust gate: REFUSED: no profile written" in text and "! predicted error 0.9" in text
     assert "profile written" not in text.replace("no profile written", "")
+
+
+def test_event_pump_wakes_again_for_an_urgent_event():
+    wakes = []
+    pump = EventPump(lambda: wakes.append(1), urgent=lambda e: e == "state")
+    pump.put(1, "progress")
+    pump.put(1, "progress")
+    assert len(wakes) == 1 and not pump.urgent  # progress waits for the next fold
+    pump.put(1, "state")
+    assert len(wakes) == 2 and pump.urgent  # a state change is shown at once
+    pump.put(1, "state")
+    assert len(wakes) == 2
+    assert [e for _, e in pump.drain()] == ["progress", "progress", "state", "state"]
+    assert not pump.urgent
