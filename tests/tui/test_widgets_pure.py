@@ -245,3 +245,12 @@ def test_event_pump_wakes_again_for_an_urgent_event():
     assert len(wakes) == 2
     assert [e for _, e in pump.drain()] == ["progress", "progress", "state", "state"]
     assert not pump.urgent
+
+
+def test_position_numbers_never_run_together():
+    from cdprhost.tui.widgets.position_panel import position_rows
+
+    text = position_rows((-150.25, -1200.5, 330.0), (-100.125, -250.5, -1000.25), (1, 2, 3, 4))
+    rows = text.plain.split("\n")
+    assert rows[0].split()[1:4] == ["-150.25", "-1200.50", "330.00"]  # machine frame, labelled
+    assert rows[2].split()[1:4] == ["-100.125", "-250.500", "-1000.250"]
