@@ -4,10 +4,9 @@ One :class:`~cdprhost.tui.state.UiState` (``CdprApp.state``) is the only thing
 the screens read; it changes only in the UI thread. Job events from worker
 threads reach it through an :class:`~cdprhost.tui.control.pump.EventPump` and
 the job reducer, so the screen can never disagree with the job. Progress is folded at most
-``fold_interval_s`` apart (one repaint per fold: every 2 s keeps the UI's CPU low while the
-job reports progress 10 times a second; the screens' once-a-second tick keeps the clocks
-going); a state change, a failure or a notice is folded at once, and what the operator
-does shows at once.
+``fold_interval_s`` apart (one repaint per fold: once a second keeps the UI's CPU low while
+the job reports progress 10 times a second); a state change, a failure or a notice is
+folded at once, and what the operator does shows at once.
 """
 
 from __future__ import annotations
@@ -107,7 +106,7 @@ class CdprApp(App[int]):
         connect_on_start: bool = True,
         health_interval_s: float = 0.5,
         status_interval_s: float = 1.0,
-        fold_interval_s: float = 2.0,
+        fold_interval_s: float = 1.0,
         open_file: str | None = None,
         state_folder: Path | None = None,
         clock: Callable[[], float] = time.monotonic,
