@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
@@ -68,3 +69,27 @@ def mocap_config(
         raise InputError(
             "invalid motion-capture configuration", problems=validation_problems(exc)
         ) from None
+
+
+def mocap_for_session(
+    session: str | os.PathLike[str],
+    config_path: str | os.PathLike[str] | None = None,
+    virtual: MocapConfig | None = None,
+) -> MocapConfig | None:
+    """The ``[mocap]`` configuration a wizard needs for ``session``: None when the folder
+    already has its ``session.toml`` (resuming), else the one in ``config_path`` (a TOML
+    file with the ``[mocap]`` table), else ``virtual`` (the simulator's); :class:`InputError`
+    when a new session has none (checked before anything is written)."""
+    from cdprhost.calibration.session import load_session_config
+
+    if (Path(session) / "session.toml").is_file():
+        return None
+    if config_path:
+        return load_session_config(config_path).mocap
+    if virtual is not None:
+        return virtual
+    raise InputError(
+        "a new session needs the motion-capture configuration: a TOML file with the [mocap] "
+        "table of session.toml (base markers, effector markers and offset)",
+        source=str(session),
+    )

@@ -139,6 +139,25 @@ def find_resume_point(
     return point
 
 
+def resume_question(
+    name: str, point: ResumePoint | None = None, layer: int | None = None, placement: str = ""
+) -> str:
+    """What the operator confirms before a resumed print: at the exact ``point`` (``--resume``,
+    with the saved job's ``placement`` options, if any) or from ``layer`` (1-based,
+    ``--resume-from-layer``)."""
+    if point is not None:
+        placed = f", placement {placement}" if placement else ""
+        where = (
+            f"at line {point.last_line} (layer {point.last_layer}{placed}, stopped: {point.reason})"
+        )
+    else:
+        where = f"from layer {layer}"
+    return (
+        f"Resume {name} {where}: the machine homes, heats, and lowers onto the part. "
+        "Is the part still on the bed and clear?"
+    )
+
+
 def remove_resume_point(gcode: str | Path, folder: str | Path | None, sha256: str) -> None:
     with contextlib.suppress(OSError):
         resume_path_for(gcode, folder, sha256).unlink()

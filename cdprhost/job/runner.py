@@ -374,10 +374,12 @@ class PrintJob:
         self._set(state, status)
 
     def _stop_tail(self, streamer: Streamer, result: PrintResult, reason: str) -> None:
-        """At a rest point after a cancel or a safe stop: heaters off, resume point, end."""
+        """At a rest point after a cancel or a safe stop: heaters off (after a cancel, as the
+        profile's ``heaters.on_cancel`` says), resume point, end."""
         link = streamer.link
         try:
-            link.send(*heaters_off())
+            if reason or self.profile.heaters.on_cancel == "off":
+                link.send(*heaters_off())
             streamer.drain(final=False)
         except LinkError as exc:
             self._give_up(link, streamer, result, f"{reason or 'cancelled'}; then {exc}", exc)

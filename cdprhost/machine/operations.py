@@ -117,10 +117,14 @@ class Machine:
             if not home_if_needed:
                 raise NotHomed("the modules are not homed: home first")
             st = self.home()
+        # The wire carries step deltas: plan from the device's module steps with the extruder
+        # counter at zero, so a move never tries to undo the filament a print pushed (a print
+        # or a cancelled print leaves that counter far from zero).
+        modules_only = (*st.steps[:3], 0)
         wire, seconds, _ = direct_path(
             self.profile,
             self.model,
-            state_at_steps(self.model, st.steps),
+            state_at_steps(self.model, modules_only),
             points,
             feedrate_mm_s=self.feed_mm_s if feed_mm_s is None else float(feed_mm_s),
             clock_hz=self.clock_hz,
@@ -155,6 +159,16 @@ class Machine:
         if target[2] <= here[2]:
             return st
         return self.move_to(target)
+
+    def after_cancel(self) -> DeviceStatus:
+        """What the profile asks once a print is cancelled: park (lift clear of the part)
+        when ``park.on_cancel``, heaters off when ``heaters.on_cancel`` is "off"."""
+        st = self.status()
+        if self.profile.park.on_cancel and self.profile.park.lift_mm > 0:
+            st = self.park(lift_mm=self.profile.park.lift_mm)
+        if self.profile.heaters.on_cancel == "off":
+            st = self.set_heaters(0.0, 0.0)
+        return st
 
     def emergency_stop(self, timeout_s: float = 1.0, flags: int = 0) -> bool:
         """Stop now, bypassing the queue: motion, heaters and motors off on the device

@@ -197,6 +197,18 @@ class Heaters(_Strict):
     on_failure: Literal["off", "keep"] = Field(
         default="off", description="heater policy when a print fails or the link is lost"
     )
+    on_cancel: Literal["off", "keep"] = Field(
+        default="off", description="heater policy when a print is cancelled"
+    )
+
+
+class Park(_Strict):
+    """Where the effector goes when a print is cancelled (clear of the part)."""
+
+    on_cancel: bool = True
+    lift_mm: NonNegative = Field(
+        default=10.0, description="straight up from where it stopped, capped at the build volume"
+    )
 
 
 class Serial(_Strict):
@@ -227,6 +239,7 @@ class MachineProfile(_Strict):
     motion: MotionLimits = MotionLimits()
     extruder: Extruder = Extruder()
     heaters: Heaters = Heaters()
+    park: Park = Park()
     serial: Serial = Serial()
     gcode: PrintGcode = PrintGcode()
     effects: dict[str, dict[str, Any]] = Field(default_factory=dict)

@@ -3,7 +3,7 @@
 The app holds one :class:`UiState` (a Textual reactive) and replaces it only in
 the UI thread. The print job's part is a :class:`~cdprhost.job.state.JobSnapshot`
 advanced by the job reducer; the rest (connection, open file, jog target,
-calibration, diagnosis) are small immutable views replaced whole.
+calibration, diagnosis, console, history) are small immutable views replaced whole.
 """
 
 from __future__ import annotations
@@ -11,15 +11,34 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from cdprhost.job.state import IllegalTransition, JobSnapshot, JobState, LinkHealth, reduce
+from cdprhost.job.state import (
+    IllegalTransition,
+    JobSnapshot,
+    JobState,
+    LinkHealth,
+    Progress,
+    StateChanged,
+    Temperatures,
+    reduce,
+)
+from cdprhost.tui.control.eta import Eta, estimate, heating_rate, machine_rate
 from cdprhost.tui.control.views import (
     CalibrationView,
-    DeviceStatus,
+    ConsoleLine,
+    DeviceStatusView,
     DiagnosisView,
+    JobRecord,
     JogCheck,
     PreflightView,
+    ResumeView,
     Vec3,
 )
+
+RATE_SAMPLES = 120
+CONSOLE_LINES = 500
+STALE_AFTER_S = 5.0
+"""Temperatures older than this are marked stale (the job reports every 0.5 s, the idle
+status comes every second)."""
 
 
 @dataclass(frozen=True)
@@ -30,6 +49,7 @@ class ConnectionView:
     identity: tuple[tuple[str, str], ...] = ()
     error: str = ""
     health: LinkHealth | None = None
+    simulated: bool = False  # the embedded simulated device (no hardware)
 
 
 @dataclass(frozen=True)
@@ -38,6 +58,7 @@ class FileView:
     checking: bool = False
     preflight: PreflightView | None = None
     error: str = ""
+    resume: ResumeView | None = None
 
 
 @dataclass(frozen=True)
@@ -53,14 +74,23 @@ class UiState:
     job: JobSnapshot = field(default_factory=JobSnapshot)
     job_id: int = 0
     job_path: str = ""
+    job_started: float = 0.0  # wall clock (epoch s) when the job was started
+    job_resumed_from: int | None = None  # 1-based layer a resumed job restarts at
+    job_request: str = ""  # "pause" or "cancel" asked of the job and not yet taken up
+    rate_samples: tuple[tuple[float, float], ...] = ()  # (monotonic s, device time s) printing
+    temps_at: float | None = None  # monotonic time of the newest temperature reading
+    temp_samples: tuple[tuple[float, float, float], ...] = ()  # (monotonic s, hotend, bed)
     connection: ConnectionView = field(default_factory=ConnectionView)
     file: FileView = field(default_factory=FileView)
-    device: DeviceStatus | None = None
+    device: DeviceStatusView | None = None
     device_temps: tuple[tuple[float, float], ...] = ()  # (hotend, bed) polled while no job runs
     jog: JogCheck | None = None
     busy: str = ""  # a device operation in flight (jog, home, heaters...)
     calibration: CalibrationView = field(default_factory=CalibrationView)
     diagnose: DiagnoseView = field(default_factory=DiagnoseView)
+    console: tuple[ConsoleLine, ...] = ()
+    history: tuple[JobRecord, ...] = ()  # newest first
+    recent: tuple[str, ...] = ()  # recently opened G-code files, newest first
 
     @property
     def job_active(self) -> bool:
@@ -71,24 +101,70 @@ class UiState:
         return self.connection.status == "connected"
 
 
-def fold_job_events(state: UiState, items: list[tuple[int, Any]]) -> tuple[UiState, list[str]]:
-    """Apply queued (job id, event) pairs of the current job, in order.
+def shown_job_state(state: UiState) -> JobState:
+    """The job state as the operator should see it: a pause or cancel that was asked for and
+    waits for the next rest point shows as PAUSING / CANCELLING at once."""
+    s = state.job.state
+    if state.job_request == "cancel" and s.active and s is not JobState.CANCELLING:
+        return JobState.CANCELLING
+    if state.job_request == "pause" and s in (JobState.PRINTING, JobState.HEATING):
+        return JobState.PAUSING
+    return s
+
+
+def _request_after(request: str, old: JobState, new: JobState) -> str:
+    """A pending request is taken up once the job reaches (or passes) the state it asked for."""
+    if not request or new is old:
+        return request
+    if new.finished or new in (JobState.PAUSED, JobState.CANCELLING):
+        return ""
+    if request == "pause" and new is JobState.PAUSING:
+        return ""
+    return request
+
+
+def fold_job_events(
+    state: UiState, items: list[tuple[int, Any]], now: float = 0.0
+) -> tuple[UiState, list[str]]:
+    """Apply queued (job id, event) pairs of the current job, in order; ``now`` is the
+    monotonic time they are applied at (temperature age, the time estimate's rate).
 
     Events of an older job are dropped. A transition the job machine forbids is
     not applied; its text is returned so the shell can show it.
     """
     snap = state.job
     problems: list[str] = []
+    request, samples, temps_at = state.job_request, state.rate_samples, state.temps_at
+    heat = state.temp_samples
     for job_id, event in items:
         if job_id != state.job_id:
             continue
+        before = snap.state
         try:
             snap = reduce(snap, event)
         except IllegalTransition as exc:
             problems.append(str(exc))
+            continue
+        if isinstance(event, StateChanged):
+            request = _request_after(request, before, snap.state)
+        elif isinstance(event, Temperatures):
+            temps_at = now
+            heat = (*heat[-(RATE_SAMPLES - 1) :], (now, event.hotend, event.bed))
+        elif isinstance(event, Progress) and snap.state is JobState.PRINTING:
+            samples = (*samples[-(RATE_SAMPLES - 1) :], (now, snap.device_time_s))
     if snap is state.job:
         return state, problems
-    return replace(state, job=snap), problems
+    return (
+        replace(
+            state,
+            job=snap,
+            job_request=request,
+            rate_samples=samples,
+            temps_at=temps_at,
+            temp_samples=heat,
+        ),
+        problems,
+    )
 
 
 def live_position(
@@ -101,6 +177,48 @@ def live_position(
     if state.device is not None:
         return state.device.position, state.device.sliders, None
     return job.position, job.sliders, job.tensions
+
+
+def job_eta(state: UiState, default_rate: float) -> Eta | None:
+    """Time left of the running job (or of the open file, before it starts), heating
+    included; None when there is nothing to estimate."""
+    job = state.job
+    temps: dict[str, float | None] = {"hotend": None, "bed": None}
+    if job.temperatures is not None and state.job_active:
+        temps = {"hotend": job.temperatures.hotend, "bed": job.temperatures.bed}
+    elif state.device is not None:
+        temps = {"hotend": state.device.hotend, "bed": state.device.bed}
+    pre = state.file.preflight
+    waits = pre.toolpath.heat_waits if pre is not None and pre.toolpath is not None else ()
+    if state.job_path != state.file.path and state.job_active:
+        waits = ()  # the open file is not the one printing
+    rate = machine_rate(state.rate_samples, default_rate)
+    if state.job_active and job.state is not JobState.PREFLIGHT:
+        heating: dict[str, float] = {}
+        if job.state is JobState.HEATING and state.temp_samples:
+            for k, name in ((1, "hotend"), (2, "bed")):
+                r = heating_rate([(t[0], t[k]) for t in state.temp_samples])
+                if r is not None:
+                    heating[name] = r
+        left = job.eta_s if job.eta_s is not None else 0.0
+        return estimate(
+            left,
+            line=job.line,
+            temperatures=temps,
+            heat_waits=waits,
+            rate=rate,
+            heating_now=heating,
+        )
+    if pre is not None and pre.ok and not state.job_active:
+        return estimate(
+            pre.estimated_time_s, line=0, temperatures=temps, heat_waits=waits, rate=rate
+        )
+    return None
+
+
+def temperature_age(state: UiState, now: float) -> float | None:
+    """Seconds since the newest temperature reading (None: never had one)."""
+    return None if state.temps_at is None else max(now - state.temps_at, 0.0)
 
 
 def hms(seconds: float | None) -> str:

@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import inspect
+import signal
+import subprocess
+import sys
+import tempfile
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -47,9 +53,21 @@ def fake_backend() -> FakeBackend:
 
 
 def make_app(backend, **kw) -> CdprApp:
+    """The app on ``backend``, without timers, keeping its recent files and history in a
+    folder of its own."""
     kw.setdefault("status_interval_s", 0)
     kw.setdefault("health_interval_s", 0)
+    kw.setdefault("state_folder", Path(tempfile.mkdtemp(prefix="cdpr-tui-")))
     return CdprApp(backend, **kw)
+
+
+async def pick_file(pilot, path) -> None:
+    """o, then the picker's path field (its own key), type the path, Enter."""
+    await pilot.press("o")
+    await wait_for(pilot, lambda s: pilot.app.screen.query("#file-input"), what="the picker")
+    await pilot.press("ctrl+o")
+    pilot.app.screen.query_one("#file-input").value = str(path)
+    await pilot.press("enter")
 
 
 @pytest.fixture
@@ -71,3 +89,24 @@ async def shown(pilot) -> str:
     """Screen text after the pending repaint."""
     await pilot.pause()
     return screen_text(pilot.app)
+
+
+@contextlib.contextmanager
+def sim_device(*options: str):
+    """``cdprhost sim-device`` in its own process; yields (pty path, process)."""
+    cmd = [sys.executable, "-m", "cdprhost", "sim-device", *options]
+    dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        path = dev.stdout.readline().strip()
+        if not path.startswith("/dev/"):
+            err = dev.stderr.read() if dev.poll() is not None else ""
+            raise AssertionError(f"sim-device printed {path!r}: {err}")
+        yield path, dev
+    finally:
+        if dev.poll() is None:
+            dev.send_signal(signal.SIGTERM)
+            try:
+                dev.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                dev.kill()
+                dev.wait()

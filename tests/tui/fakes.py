@@ -22,14 +22,16 @@ from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.views import (
     CalibrationView,
     CandidateRow,
-    DeviceStatus,
+    ConsoleLine,
+    DeviceStatusView,
     DiagnosisView,
     IdentificationView,
     ParameterRow,
     PortChoice,
     PoseView,
     PreflightView,
-    Violation,
+    ResumeView,
+    ViolationRow,
 )
 
 
@@ -40,9 +42,22 @@ class FakeJob:
     makes the device "reset" after that many segments.
     """
 
-    def __init__(self, on_event, *, segments=30, layers=3, gate=None, fail_at=None, start_line=10):
+    def __init__(
+        self,
+        on_event,
+        *,
+        segments=30,
+        layers=3,
+        gate=None,
+        fail_at=None,
+        start_line=10,
+        rest_every=1,
+        resume_from_layer=None,
+    ):
         self.on_event, self.segments, self.layers = on_event, segments, layers
         self.gate, self.fail_at, self.start_line = gate, fail_at, start_line
+        self.rest_every = rest_every  # pause/cancel take effect only after these many segments
+        self.resume_from_layer = resume_from_layer
         self._pause, self._resume, self._cancel = (
             threading.Event(),
             threading.Event(),
@@ -80,11 +95,12 @@ class FakeJob:
         self._state(JobState.PRINTING)
         per_layer = max(self.segments // self.layers, 1)
         for i in range(1, self.segments + 1):
+            at_rest = (i - 1) % self.rest_every == 0
             if self.gate is not None:
                 while not self.gate.acquire(timeout=0.05):
-                    if self._cancel.is_set() or self._pause.is_set():
+                    if at_rest and (self._cancel.is_set() or self._pause.is_set()):
                         break
-            if self._pause.is_set() and not self._cancel.is_set():
+            if at_rest and self._pause.is_set() and not self._cancel.is_set():
                 self._state(JobState.PAUSING)
                 self._state(JobState.PAUSED)
                 self._resume.wait(timeout=30)
@@ -94,7 +110,7 @@ class FakeJob:
                     self._state(JobState.PRINTING)
                 if self.gate is not None:
                     self.gate.acquire(timeout=30)
-            if self._cancel.is_set():
+            if at_rest and self._cancel.is_set():
                 self._state(JobState.CANCELLING)
                 self._state(JobState.CANCELLED)
                 return "cancelled"
@@ -135,7 +151,8 @@ class FakeCalibration:
         self.backend = backend
         self.moved: list[int] = []
 
-    def plan(self, n_fit, n_check, session_dir):
+    def plan(self, n_fit, n_check, session_dir, mocap_config=None):
+        self.mocap_config = mocap_config
         pts = [(-20.0 + 10 * i, 5.0 * i, 150.0 + 20 * i) for i in range(n_fit + n_check)]
         poses = tuple(
             PoseView(i + 1, p, "fit" if i < n_fit else "check") for i, p in enumerate(pts)
@@ -188,12 +205,19 @@ class FakeBackend:
         self.moves: list[tuple[float, float, float]] = []
         self.status = self._status_at(self.model.home_point(np.zeros(3)))
         self.preflight_views: dict[str, PreflightView] = {}
+        self.resume_points: dict[str, ResumeView] = {}
+        self.link_dead = False  # device_status raises (a port that vanished)
+        self.log: list[ConsoleLine] = []
+        self.sent: list[str] = []
+        self.cancels_handled = 0
+        self.rate = 1.0
+        self.now = 1_750_000_000.0  # the wall clock of the console's replies
 
     def _status_at(self, point):
         p = np.asarray(point, dtype=float)[None, :]
         s = self.model.ik(p)[0]
         steps = tuple(int(v) for v in self.model.steps(s[None, :])[0]) + (0,)
-        return DeviceStatus(
+        return DeviceStatusView(
             steps,
             tuple(float(v) for v in s),
             tuple(float(v) for v in p[0]),
@@ -216,6 +240,7 @@ class FakeBackend:
         if port != EMBEDDED:
             raise OSError(f"{port}: no such device")
         self._connected = True
+        self.link_dead = False
         return (
             ("firmware", "cdpr-sim 0.1"),
             ("protocol", "1"),
@@ -234,7 +259,40 @@ class FakeBackend:
         return LinkHealth(0, 0) if self._connected else None
 
     def device_status(self):
+        if self.link_dead:
+            raise OSError("the port failed on read (was it unplugged?)")
         return self.status if self._connected else None
+
+    def machine_rate(self):
+        return self.rate
+
+    def device_log(self):
+        out, self.log = self.log, []
+        return out
+
+    def find_resume(self, path):
+        return self.resume_points.get(path)
+
+    def after_cancel(self):
+        self.cancels_handled += 1
+        self.status = replace(self.status, hotend_target=0.0, bed_target=0.0)
+        return self.status
+
+    def emergency_stop(self):
+        return True
+
+    def console(self, line):
+        self.sent.append(line)
+        now = self.now
+        if line.strip().upper() == "M105":
+            return [
+                ConsoleLine("sent", line, now),
+                ConsoleLine("reply", "hotend 25.0 / 0.0 °C", now),
+            ]
+        return [
+            ConsoleLine("sent", line, now),
+            ConsoleLine("error", f"{line.split()[0]} is not a console command", now),
+        ]
 
     def preflight(self, path):
         if path in self.preflight_views:
@@ -244,20 +302,32 @@ class FakeBackend:
                 path,
                 False,
                 (
-                    Violation(12, "build_volume", "outside the build volume by 30 mm", (0, 0, 400)),
-                    Violation(15, "unknown_command", "M999 is not understood"),
+                    ViolationRow(
+                        12, "build_volume", "outside the build volume by 30 mm", (0, 0, 400)
+                    ),
+                    ViolationRow(15, "unknown_command", "M999 is not understood"),
                 ),
                 20,
                 2,
                 30.0,
                 3.0,
             )
-        with open(path, encoding="utf-8"):
-            pass
-        return PreflightView(path, True, (), 30, 3, 60.0, 12.5)
+        return PreflightView(path, True, (), 30, 3, 60.0, 12.5, (), self._toolpath(path))
 
-    def make_job(self, path, on_event, resume_from_layer=None):
-        job = FakeJob(on_event, **self.job_kwargs)
+    def _toolpath(self, path):
+        from cdprhost.motion.program import read_items
+        from cdprhost.tui.control.toolpath import ToolpathTap
+
+        tap = ToolpathTap(tuple(self.profile.build_volume.bed_origin))
+        for _ in tap.tap(read_items(path, self.profile, self.model)):
+            pass
+        return tap.result()
+
+    def make_job(self, path, on_event, resume_from_layer=None, resume=False):
+        if self.link_dead:
+            raise OSError("the port failed on write (was it unplugged?)")
+        job = FakeJob(on_event, resume_from_layer=resume_from_layer, **self.job_kwargs)
+        job.resume_exact = resume
         self.jobs.append(job)
         return job
 

@@ -46,6 +46,15 @@ def test_port_profile_and_virtual_mocap_options(captured, tmp_path):
     assert captured[-1].backend.sim_options["observer"] is not None
 
 
+def test_a_file_to_open_on_start(captured, tmp_path, capsys):
+    part = tmp_path / "part.gcode"
+    part.write_text("G28\n")
+    assert main(["tui", str(part)]) == 0
+    assert captured[-1]._open_file == str(part)
+    assert main(["tui", str(tmp_path / "missing.gcode")]) == 2
+    assert "missing.gcode" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [

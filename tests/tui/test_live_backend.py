@@ -187,6 +187,44 @@ async def test_calibration_wizard_screen_with_virtual_mocap(sim_profile, tmp_pat
         assert screen.query_one("#parameters", DataTable).row_count == 12
         assert (tmp_path / "session" / "calibrated.toml").is_file()
         assert result.profile_path.endswith("calibrated.toml")
+        assert result.trusted is True  # the trust gate's verdict, shown
+        assert "trust gate: trusted" in await shown(pilot)
+
+
+async def test_a_new_calibration_session_needs_its_markers_first(tmp_path):
+    """On a device without virtual motion capture, a new session takes its [mocap] table from
+    a TOML file (as the CLI's --mocap-config); without one nothing is written."""
+    import tomli_w
+
+    from cdprhost.sim.virtual_mocap import mocap_config
+
+    markers = tmp_path / "markers.toml"
+    table = mocap_config("paper-prototype").mocap.model_dump(mode="json", exclude_none=True)
+    session = {"session": {"profile": "paper-prototype"}, "mocap": table}
+    markers.write_text(tomli_w.dumps(session), encoding="utf-8")
+    backend = LiveBackend("paper-prototype", speedup=None)
+    app = make_app(backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected, timeout=20)
+        await pilot.press("f4")
+        screen = app.screen
+        screen.query_one("#session-dir", Input).value = str(tmp_path / "session")
+        await pilot.press("n")
+        state = await wait_for(pilot, lambda s: s.calibration.stage in ("planned", "error"), 60)
+        assert state.calibration.stage == "error"
+        assert "needs the motion-capture configuration" in state.calibration.message
+        assert not (tmp_path / "session").exists()  # no plan.csv before the check
+        screen.query_one("#mocap", Input).value = str(tmp_path / "missing.toml")
+        await pilot.press("n")
+        state = await wait_for(pilot, lambda s: not s.busy and s.calibration.stage == "error", 60)
+        assert "missing.toml" in state.calibration.message
+        assert not (tmp_path / "session").exists()
+        screen.query_one("#mocap", Input).value = str(markers)
+        await pilot.press("n")
+        state = await wait_for(pilot, lambda s: s.calibration.stage in ("planned", "error"), 60)
+        assert state.calibration.stage == "planned", state.calibration.message
+        assert (tmp_path / "session" / "session.toml").is_file()
+        assert (tmp_path / "session" / "plan.csv").is_file()
 
 
 def test_idle_status_keeps_the_embedded_device_clock_running():

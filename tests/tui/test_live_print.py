@@ -16,39 +16,8 @@ from cdprhost.job.state import JobState
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
 
-from .conftest import make_app, shown, wait_for
-
-
-def small_part(layers: int = 10, side: float = 30.0) -> str:
-    """A square tube of 0.2 mm layers with slicer layer annotations; each layer ends with a
-    retraction, so the motion comes to rest there (where a pause takes effect)."""
-    out = [
-        "; generated for the UI tests",
-        "G21",
-        "G90",
-        "M82",
-        "M140 S60",
-        "M104 S200",
-        "G28",
-        "G92 E0",
-    ]
-    e, h = 0.0, side / 2
-    corners = [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)]
-    for k in range(layers):
-        z = 0.3 + 0.2 * k
-        out += [
-            ";LAYER_CHANGE",
-            f";Z:{z:.1f}",
-            f"G1 Z{z:.2f} F600",
-            f"G1 X{-h:.2f} Y{-h:.2f} F6000",
-            f"G1 E{e:.4f} F2400",
-        ]
-        for x, y in corners[1:]:
-            e += side * 0.033
-            out.append(f"G1 X{x:.2f} Y{y:.2f} E{e:.4f} F1800")
-        out.append(f"G1 E{e - 0.8:.4f} F2400")
-    out += ["M104 S0", "M140 S0", "G1 Z20 F600"]
-    return "\n".join(out) + "\n"
+from .conftest import make_app, pick_file, shown, wait_for
+from .parts import small_part
 
 
 @pytest.fixture
@@ -59,9 +28,7 @@ def part(tmp_path):
 
 
 async def open_file(pilot, path):
-    await pilot.press("o")
-    pilot.app.screen.query_one("#file-input").value = str(path)
-    await pilot.press("enter")
+    await pick_file(pilot, path)
     state = await wait_for(
         pilot, lambda s: s.file.preflight is not None or s.file.error, timeout=30
     )
@@ -130,14 +97,69 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         assert f"--resume-from-layer {max(failure.last_layer + 1, 1)}" in text
         # keyed by the file's content hash and path
         assert failure.resume_file == str(resume_path_for(part, tmp_path / "resume"))
-        await pilot.press(
-            "r"
-        )  # resume from that layer: the link is re-opened, a new job starts there
+        await pilot.press("r")  # resume asked for: the link is checked first, and it is down
+        await wait_for(pilot, lambda s: s.connection.status == "error", timeout=30)
+        await pilot.pause(0.2)
+        assert app.state.job_id == 1  # nothing started
+        saved = resume_path_for(part, tmp_path / "resume").read_text()
+        await pilot.press("f1", "c")  # reconnect: the embedded device again
+        await wait_for(pilot, lambda s: s.connected, timeout=30)
+        await pilot.press("f2")
+        state = await wait_for(pilot, lambda s: s.file.resume is not None, timeout=30)
+        resume = state.file.resume
+        # the runner saved the exact last executed move: offered like the CLI's --resume
+        assert resume.exact and not resume.problem
+        assert resume.layer == failure.last_layer + 1 and resume.last_line == failure.last_line
+        assert f"resume point line {failure.last_line} (layer {resume.layer})" in await shown(pilot)
+        await pilot.press("l")
+        await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
+        text = await shown(pilot)
+        assert f"at line {failure.last_line}" in text
+        assert "Is the part still on the bed and clear?" in text
+        assert resume_path_for(part, tmp_path / "resume").read_text() == saved
+        await pilot.press("y")  # a new job continues at that line
         state = await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, timeout=120)
-        assert state.connection.status in ("connected", "error")
+        assert state.job_resumed_from == failure.last_layer + 1
         second = state.job.failure  # the simulated device resets again after 150 segments
         assert second is not None, (state.job.state, state.job.reason, state.job.segments_done)
-        assert second is not None and second.last_layer >= failure.last_layer
-        assert (
-            second.last_line >= failure.last_line
-        )  # the stopped layer is printed again from its start
+        assert second.last_layer >= failure.last_layer
+        assert second.last_line >= failure.last_line  # it went on from the stopped line
+
+
+async def test_jog_after_a_cancelled_print_moves(tmp_path):
+    """A cancelled print leaves the extruder's step counter where the print left it; the next
+    jog must keep the extruder still, not try to undo the whole print's filament in one move."""
+    part = tmp_path / "tall.gcode"
+    part.write_text(small_part(layers=80), encoding="utf-8")
+    backend = LiveBackend(
+        "paper-prototype",
+        speedup=20.0,
+        job_options={"resume_dir": tmp_path / "resume", "log_path": tmp_path / "job.jsonl"},
+    )
+    app = make_app(backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected, timeout=20)
+        await open_file(pilot, part)
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.segments_done > 200 or s.job.state.finished, 60)
+        await pilot.press("x", "y")
+        state = await wait_for(pilot, lambda s: s.job.state.finished, timeout=60)
+        assert state.job.state is JobState.CANCELLED, state.job.reason
+        assert state.job.steps is not None and state.job.steps[3] > 100  # filament was pushed
+        stopped_z = state.job.position[2]
+        # then it parks (lifted by the profile's park.lift_mm) and turns the heaters off
+        state = await wait_for(
+            pilot, lambda s: s.device is not None and not s.busy and s.history, timeout=60
+        )
+        lift = backend.profile.park.lift_mm
+        assert state.device.position[2] == pytest.approx(stopped_z + lift, abs=0.05)
+        assert state.device.hotend_target == 0 and state.device.bed_target == 0
+        assert state.history[0].status == "cancelled"
+        await pilot.press("f3", "3", "right")
+        target = app.state.jog.target
+        assert app.state.jog.ok, app.state.jog.reason
+        await pilot.press("enter")
+        state = await wait_for(pilot, lambda s: not s.busy, timeout=60)
+        assert not app._notifications, [n.message for n in app._notifications]
+        assert state.device.position == pytest.approx(target, abs=0.01)
+        assert state.device.steps[3] == app.state.job.steps[3]  # the extruder did not move

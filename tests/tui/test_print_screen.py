@@ -4,21 +4,18 @@ from __future__ import annotations
 
 import threading
 
-from textual.widgets import Input
-
 from cdprhost.job.state import JobState
+from cdprhost.tui.control.views import ResumeView
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
 from cdprhost.tui.widgets.progress_panel import progress_lines
 from cdprhost.tui.widgets.violation_list import ViolationList
 
-from .conftest import make_app, shown, wait_for
+from .conftest import make_app, pick_file, shown, wait_for
 from .fakes import FakeBackend
 
 
 async def open_file(pilot, path) -> None:
-    await pilot.press("o")
-    pilot.app.screen.query_one("#file-input", Input).value = str(path)
-    await pilot.press("enter")
+    await pick_file(pilot, path)
     await wait_for(pilot, lambda s: s.file.preflight is not None or s.file.error, what="preflight")
 
 
@@ -108,6 +105,9 @@ async def test_preflight_violations_listed_and_jump_to_line(tmp_path):
 
 async def test_device_reset_mid_print_shows_stop_and_resume_point(gcode_file):
     backend = FakeBackend(segments=30, layers=3, fail_at=12)
+    backend.resume_points[str(gcode_file)] = ResumeView(
+        "/state/part.resume.json", str(gcode_file), "device reset", 2, 22
+    )
     app = make_app(backend)
     async with app.run_test(size=(100, 32)) as pilot:
         await wait_for(pilot, lambda s: s.connected)
@@ -120,6 +120,24 @@ async def test_device_reset_mid_print_shows_stop_and_resume_point(gcode_file):
         text = str(app.screen.query_one("#failure-text").render())
         assert "device reset" in text and "last executed line: 22" in text
         assert "--resume-from-layer 2" in text
-        await pilot.press("r")  # resume from the layer: a new job
+        assert "Resume (r)" in await shown(pilot)
+        # the port went away with the device: resuming must check the link, not start a job
+        backend.link_dead = True
+        await pilot.press("r")
+        await wait_for(pilot, lambda s: s.connection.status == "error", what="link checked")
+        await pilot.pause(0.1)
+        assert len(backend.jobs) == 1 and app.state.job_id == 1
+        assert any("reconnect" in n.message for n in app._notifications)
+        # reconnect, then resume from the print screen: the point is found by the file
+        await pilot.press("f1", "c")
+        await wait_for(pilot, lambda s: s.connected, what="reconnected")
+        await pilot.press("f2")
+        await wait_for(pilot, lambda s: s.file.resume is not None, what="resume point")
+        assert "resume point layer 2 (device reset) · l Resume stopped" in await shown(pilot)
+        await pilot.press("l")
+        await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), what="question")
+        assert "Resume part.gcode from layer 2" in await shown(pilot)
+        await pilot.press("y")
         await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, what="second job")
-        assert len(backend.jobs) == 2
+        assert len(backend.jobs) == 2 and backend.jobs[1].resume_from_layer == 1  # 0-based
+        assert app.state.job_resumed_from == 2

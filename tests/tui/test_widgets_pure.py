@@ -19,7 +19,7 @@ from cdprhost.job.state import (
 from cdprhost.tui.control.jog import check_jog, jog_target
 from cdprhost.tui.control.pump import EventPump
 from cdprhost.tui.control.source import SourceLines
-from cdprhost.tui.control.views import PreflightView, Violation
+from cdprhost.tui.control.views import PreflightView, ViolationRow
 from cdprhost.tui.screens.dialogs import failure_text
 from cdprhost.tui.screens.print_screen import preflight_summary
 from cdprhost.tui.state import FileView, UiState, fold_job_events, hms
@@ -165,11 +165,13 @@ def test_progress_lines_layers_eta_and_line():
         device_time_s=100.0,
         line=42,
     )
-    head, stats, line = progress_lines(snap, "G1 X1 Y2")
+    head, stats, line = progress_lines(snap, "G1 X1 Y2", elapsed_s=130.0)
     assert "PRINTING" in head.plain
-    assert stats.plain == "layer 5/12  elapsed 0:01:40  ETA 0:05:00"
+    assert stats.plain == "layer 5/12 · elapsed 0:02:10 · machine 0:01:40"  # wall vs machine
     assert line.plain == "line 42: G1 X1 Y2"
     assert hms(3725) == "1:02:05" and hms(None) == "--:--:--"
+    head, _, _ = progress_lines(snap, "", shown=JobState.PAUSING)
+    assert "PAUSING" in head.plain and "comes to rest" in head.plain
 
 
 def test_failure_text_names_stop_and_resume_point():
@@ -184,12 +186,71 @@ def test_preflight_summary_names_first_violation():
     view = PreflightView(
         "a.gcode",
         False,
-        (Violation(40, "tension", "x"), Violation(12, "build_volume", "y")),
+        (ViolationRow(40, "tension", "x"), ViolationRow(12, "build_volume", "y")),
         5,
         1,
         65.0,
         2.0,
     )
     text = preflight_summary(UiState(file=FileView(path="a.gcode", preflight=view))).plain
-    assert text.startswith("2 violations (first at line 12)") and "est 0:01:05" in text
-    assert "press o" in preflight_summary(UiState()).plain
+    assert text.startswith("2 violations (first at line 12)") and "machine time 0:01:05" in text
+    assert "o Open picks one" in preflight_summary(UiState(), "o Open").plain
+
+
+def test_calibration_result_shows_the_trust_gate_verdict():
+    from cdprhost.tui.control.views import IdentificationView
+    from cdprhost.tui.screens.calibrate import result_text
+
+    base = IdentificationView((), 14.2, 0.05, 5, 12)
+    assert "trust gate: not run" in result_text(base).plain
+    trusted = IdentificationView(
+        (),
+        14.2,
+        0.05,
+        5,
+        12,
+        trusted=True,
+        predicted_rms_mm=0.021,
+        predicted_max_mm=0.05,
+        profile_path="/s/calibrated.toml",
+    )
+    text = result_text(trusted).plain
+    assert "trust gate: trusted" in text and "0.021 mm RMS, 0.050 mm max" in text
+    assert "profile written: /s/calibrated.toml" in text
+    refused = IdentificationView(
+        (),
+        14.2,
+        0.05,
+        5,
+        12,
+        warnings=("predicted error 0.9 mm",),
+        trusted=False,
+        predicted_rms_mm=0.9,
+        predicted_max_mm=2.0,
+    )
+    text = result_text(refused).plain
+    assert "trust gate: REFUSED: no profile written" in text and "! predicted error 0.9" in text
+    assert "profile written" not in text.replace("no profile written", "")
+
+
+def test_event_pump_wakes_again_for_an_urgent_event():
+    wakes = []
+    pump = EventPump(lambda: wakes.append(1), urgent=lambda e: e == "state")
+    pump.put(1, "progress")
+    pump.put(1, "progress")
+    assert len(wakes) == 1 and not pump.urgent  # progress waits for the next fold
+    pump.put(1, "state")
+    assert len(wakes) == 2 and pump.urgent  # a state change is shown at once
+    pump.put(1, "state")
+    assert len(wakes) == 2
+    assert [e for _, e in pump.drain()] == ["progress", "progress", "state", "state"]
+    assert not pump.urgent
+
+
+def test_position_numbers_never_run_together():
+    from cdprhost.tui.widgets.position_panel import position_rows
+
+    text = position_rows((-150.25, -1200.5, 330.0), (-100.125, -250.5, -1000.25), (1, 2, 3, 4))
+    rows = text.plain.split("\n")
+    assert rows[0].split()[1:4] == ["-150.25", "-1200.50", "330.00"]  # machine frame, labelled
+    assert rows[2].split()[1:4] == ["-100.125", "-250.500", "-1000.250"]

@@ -317,19 +317,18 @@ class PromptTakes:
 
 
 def _mocap_for(args: argparse.Namespace, session: Path) -> MocapConfig | None:
-    from cdprhost.calibration.session import load_session_config
+    from cdprhost.calibration.session_setup import mocap_for_session
     from cdprhost.sim.virtual_mocap import mocap_config
 
     if (session / "session.toml").is_file():
         return None  # resuming: the folder's own configuration
-    if args.mocap_config:
-        return load_session_config(args.mocap_config).mocap
-    if args.sim_mocap_dir and not args.port:
-        return mocap_config().mocap
-    raise InputError(
-        "a new session needs --mocap-config (a TOML file with the [mocap] table of session.toml: "
-        "base markers, effector markers and offset)"
-    )
+    if not args.mocap_config and not (args.sim_mocap_dir and not args.port):
+        raise InputError(
+            "a new session needs --mocap-config (a TOML file with the [mocap] table of "
+            "session.toml: base markers, effector markers and offset)"
+        )
+    virtual = mocap_config().mocap if args.sim_mocap_dir and not args.port else None
+    return mocap_for_session(session, args.mocap_config, virtual)
 
 
 def run_wizard(args: argparse.Namespace) -> int:

@@ -26,7 +26,7 @@ from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
-from cdprhost.job.resume import find_resume_point, log_path_for, resume_setup
+from cdprhost.job.resume import find_resume_point, log_path_for, resume_question, resume_setup
 from cdprhost.job.state import JobState, StateChanged
 
 BAUD_RANGE = (50, 10_000_000)
@@ -134,18 +134,11 @@ def run(args: argparse.Namespace) -> int:
             )
         point = saved
         setup = resume_setup(saved, setup_from_args(args))  # refuses conflicting options
-        placed = "" if setup.default else f", placement {setup.options()}"
-        question = (
-            f"Resume {gcode.name} at line {saved.last_line} (layer {saved.last_layer}{placed}, "
-            f"stopped: {saved.reason}): the machine homes, heats, and lowers onto the part. "
-            "Is the part still on the bed and clear?"
-        )
+        placed = "" if setup.default else setup.options()
+        question = resume_question(gcode.name, point=saved, placement=placed)
     elif args.resume_from_layer is not None:
         layer = args.resume_from_layer - 1
-        question = (
-            f"Resume {gcode.name} from layer {args.resume_from_layer}: the machine homes, "
-            "heats, and lowers onto the part. Is the part still on the bed and clear?"
-        )
+        question = resume_question(gcode.name, layer=args.resume_from_layer)
     if (args.resume or layer is not None) and not args.yes and not _confirm(question):
         print("not confirmed; nothing moved (use --yes to skip the question)", file=sys.stderr)
         return 1

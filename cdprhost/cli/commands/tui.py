@@ -1,15 +1,19 @@
-"""`cdprhost tui [--profile P] [--port DEV]`: the terminal UI."""
+"""`cdprhost tui [FILE.gcode] [--profile P] [--port DEV]`: the terminal UI."""
 
 from __future__ import annotations
 
 import argparse
+import os
 
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
 
 
-def register(sub: argparse._SubParsersAction) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser("tui", help="terminal UI: connect, print, jog, calibrate, diagnose")
+    parser.add_argument(
+        "gcode", metavar="FILE.gcode", nargs="?", help="open this file on the print screen"
+    )
     add_profile_argument(parser, default="paper-prototype")
     parser.add_argument(
         "--port",
@@ -62,7 +66,13 @@ def run(args: argparse.Namespace) -> int:
         sim_options={"observer": observer} if observer else None,
         idle_pump_s=0.8 * status_interval_s,
     )
+    if args.gcode is not None and not os.path.isfile(args.gcode):
+        raise InputError("G-code file not found", source=args.gcode)
     app = CdprApp(
-        backend, port=args.port or EMBEDDED, baud=args.baud, status_interval_s=status_interval_s
+        backend,
+        port=args.port or EMBEDDED,
+        baud=args.baud,
+        status_interval_s=status_interval_s,
+        open_file=args.gcode,
     )
     return int(app.run() or 0)

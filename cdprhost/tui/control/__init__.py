@@ -1,1 +1,2 @@
-"""Adapters between the UI and the lower layers (no drawing here)."""
+"""Control of the terminal UI: the backend seam, its implementation on the real layers, and
+the controller (:class:`Controller`) that runs blocking calls in workers."""

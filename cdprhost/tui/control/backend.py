@@ -3,7 +3,7 @@
 The app talks to one :class:`Backend`. Every method marked *blocking* is called
 from a Textual thread worker, never from the UI thread; non-blocking ones only
 read counters. :mod:`cdprhost.tui.control.live` implements it on the real link,
-print job, preflight, calibration and diagnosis; the tests use fakes.
+print job, preflight, machine operations, calibration and diagnosis; the tests use fakes.
 """
 
 from __future__ import annotations
@@ -16,12 +16,14 @@ from cdprhost.kinematics import MachineModel
 from cdprhost.profile import MachineProfile
 from cdprhost.tui.control.views import (
     CalibrationView,
-    DeviceStatus,
+    ConsoleLine,
+    DeviceStatusView,
     DiagnosisView,
     IdentificationView,
     PortChoice,
     PoseView,
     PreflightView,
+    ResumeView,
 )
 
 EMBEDDED = "sim"
@@ -46,7 +48,9 @@ class JobHandle(Protocol):
 class CalibrationBackend(Protocol):
     """The calibration wizard as the UI drives it (all blocking)."""
 
-    def plan(self, n_fit: int, n_check: int, session_dir: str | None) -> CalibrationView: ...
+    def plan(
+        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+    ) -> CalibrationView: ...
 
     def move_to(self, pose: PoseView) -> PoseView: ...
 
@@ -61,7 +65,8 @@ class Backend(Protocol):
     model: MachineModel
     calibration: CalibrationBackend | None
 
-    def ports(self) -> list[PortChoice]: ...
+    def ports(self) -> list[PortChoice]:
+        """Blocking (short): ports to offer, the embedded simulated device first."""
 
     def connect(self, port: str, baud: int) -> tuple[tuple[str, str], ...]:
         """Blocking: open the link and return the device identity as (key, value) rows."""
@@ -70,25 +75,52 @@ class Backend(Protocol):
 
     def connected(self) -> bool: ...
 
+    def machine_rate(self) -> float:
+        """Non-blocking: machine seconds per wall second to expect before any is measured
+        (1 on hardware, the speed-up of a simulated device)."""
+
     def link_health(self) -> LinkHealth | None:
         """Non-blocking: the link's counters, or None when not connected."""
 
-    def device_status(self) -> DeviceStatus | None:
-        """Blocking (short): the device's latest status."""
+    def device_status(self) -> DeviceStatusView | None:
+        """Blocking (short): the device's latest status; raises when the link is dead."""
 
-    def preflight(self, path: str) -> PreflightView: ...
+    def device_log(self) -> list[ConsoleLine]:
+        """Non-blocking: what the device said since the last call (errors, resets)."""
+
+    def preflight(self, path: str) -> PreflightView:
+        """Blocking: check the file; the view carries its toolpath for the preview."""
+
+    def find_resume(self, path: str) -> ResumeView | None:
+        """Blocking (short): the resume point saved for this file (same content), if any."""
 
     def make_job(
-        self, path: str, on_event: EventSink, resume_from_layer: int | None = None
-    ) -> JobHandle: ...
+        self,
+        path: str,
+        on_event: EventSink,
+        resume_from_layer: int | None = None,
+        resume: bool = False,
+    ) -> JobHandle:
+        """A print job of ``path``: from the start, from ``resume_from_layer`` (0-based), or
+        (``resume``) exactly at the file's saved resume point, like ``print --resume``."""
+        ...
 
-    def jog_to(self, target: tuple[float, float, float]) -> DeviceStatus: ...
+    def after_cancel(self) -> DeviceStatusView:
+        """Blocking: what the profile asks after a cancelled print (park, heaters off)."""
 
-    def home(self) -> DeviceStatus: ...
+    def jog_to(self, target: tuple[float, float, float]) -> DeviceStatusView: ...
 
-    def motors_off(self) -> DeviceStatus: ...
+    def home(self) -> DeviceStatusView: ...
 
-    def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatus: ...
+    def motors_off(self) -> DeviceStatusView: ...
+
+    def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatusView: ...
+
+    def emergency_stop(self) -> bool:
+        """Blocking (short): stop now, bypassing the queue; True when the device confirmed."""
+
+    def console(self, line: str) -> list[ConsoleLine]:
+        """Blocking: carry out one console command; the reply lines."""
 
     def diagnose(self, session_dir: str) -> DiagnosisView: ...
 

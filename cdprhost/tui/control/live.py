@@ -1,4 +1,5 @@
-"""The UI backend on the real layers: host link, print job, preflight, calibration, diagnosis.
+"""The UI backend on the real layers: host link, print job, preflight, machine operations,
+calibration and diagnosis.
 
 Every method that talks to the device or computes runs in a worker thread (see
 :mod:`cdprhost.tui.control.backend`); the link itself is thread-safe. While a
@@ -8,6 +9,9 @@ print runs, the job owns the link: the UI only reads its counters.
 from __future__ import annotations
 
 import threading
+import time
+from collections import deque
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,23 +21,26 @@ from cdprhost.job.state import LinkHealth
 from cdprhost.kinematics import MachineModel
 from cdprhost.machine import Machine, NotHomed
 from cdprhost.profile import MachineProfile, load_profile
-from cdprhost.tui.control.backend import EMBEDDED, EventSink, JobHandle
+from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
 from cdprhost.tui.control.views import (
-    DeviceStatus,
+    ConsoleLine,
+    DeviceStatusView,
     DiagnosisView,
     PortChoice,
     PreflightView,
-    Violation,
+    ResumeView,
+    ViolationRow,
 )
 
 ALL_MODULES = 0b111
 JOG_SPEED_MM_S = 40.0
+DEVICE_LOG = 200
 
 
 def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str], ...]:
     """The device identity as (key, value) rows for the connection screen."""
     rows = [
-        ("port", port if port != EMBEDDED else "embedded simulated device"),
+        ("port", port if port != EMBEDDED else "embedded simulated device (no hardware)"),
         ("firmware", f"{identity.firmware_name} {identity.firmware_version}"),
         ("protocol", ".".join(str(v) for v in identity.protocol)),
         ("axes", str(identity.axes)),
@@ -48,10 +55,11 @@ def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str],
     return tuple(rows)
 
 
-def preflight_view(report: Any, path: str) -> PreflightView:
+def preflight_view(report: Any, path: str, toolpath: Any = None) -> PreflightView:
     """A :class:`cdprhost.preflight.PreflightReport` as the print screen shows it."""
     violations = tuple(
-        Violation(v.line, v.rule, v.detail, tuple(v.point)) for v in report.violations
+        ViolationRow(v.line, v.rule, v.detail, tuple(v.point) if v.point is not None else None)
+        for v in report.violations
     )
     notes = tuple(f"line {n.line}: {n.text}" for n in report.notes)
     return PreflightView(
@@ -63,6 +71,7 @@ def preflight_view(report: Any, path: str) -> PreflightView:
         float(report.estimated_time_s),
         float(report.filament_mm),
         notes,
+        toolpath,
     )
 
 
@@ -90,31 +99,28 @@ class LiveBackend:
         self._link: Any = None
         self._embedded = False
         self._where: tuple[str, int] | None = None
+        self._identity: tuple[tuple[str, str], ...] = ()
         self._lock = threading.RLock()
+        self._log: deque[ConsoleLine] = deque(maxlen=DEVICE_LOG)
         from cdprhost.tui.control.live_calibration import LiveCalibration
 
-        self.calibration = LiveCalibration(self)
+        self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ---------------------------------------------------------------- link
     @property
     def link(self) -> Any:
         if self._link is None:
-            raise CdprError("not connected: pick a port on the connection screen (F1)")
+            raise CdprError("not connected: pick a port on the link screen")
         return self._link
 
     def ports(self) -> list[PortChoice]:
-        speed = "as fast as possible" if not self.speedup else f"{self.speedup:g}x real time"
-        choices = [PortChoice(EMBEDDED, "embedded simulated device", speed)]
-        try:
-            from serial.tools import list_ports
+        from cdprhost.tui.control.ports import pty_choices, serial_choices
 
-            for p in sorted(list_ports.comports(), key=lambda p: p.device):
-                choices.append(
-                    PortChoice(p.device, p.device, p.description if p.description != "n/a" else "")
-                )
-        except Exception:  # noqa: BLE001, S110 - a broken port enumeration must not hide the simulator
-            pass
-        return choices
+        speed = "as fast as possible" if not self.speedup else f"{self.speedup:g}x real time"
+        embedded = PortChoice(
+            EMBEDDED, "embedded simulated device", f"no hardware, {speed}", simulated=True
+        )
+        return [embedded, *pty_choices(), *serial_choices()]
 
     def connect(self, port: str, baud: int) -> tuple[tuple[str, str], ...]:
         from cdprhost.link import open_link
@@ -132,9 +138,11 @@ class LiveBackend:
                 )  # directions of motion for the truth's backlash
         else:
             link = open_link(port, baud, self.profile.serial.timeout_s)
+        rows = identity_rows(link.identity, port, baud)
         with self._lock:
             self._link, self._embedded, self._where = link, port == EMBEDDED, (port, baud)
-        return identity_rows(link.identity, port, baud)
+            self._identity = rows
+        return rows
 
     def disconnect(self) -> None:
         with self._lock:
@@ -145,6 +153,9 @@ class LiveBackend:
     def connected(self) -> bool:
         return self._link is not None
 
+    def machine_rate(self) -> float:
+        return float(self.speedup) if self._embedded and self.speedup else 1.0
+
     def link_health(self) -> LinkHealth | None:
         link = self._link
         if link is None:
@@ -152,27 +163,46 @@ class LiveBackend:
         c = link.counters
         return LinkHealth(retransmits=c.retransmits, bad_frames=c.bad_frames, naks=c.naks_received)
 
-    def device_status(self) -> DeviceStatus | None:
+    def _note_events(self, events: list[Any]) -> None:
+        from cdprhost.link import DeviceErrorEvent, DeviceEvent
+
+        for ev in events:
+            if isinstance(ev, DeviceErrorEvent):
+                text = (
+                    f"device error {ev.name}: {ev.text}" if ev.text else f"device error {ev.name}"
+                )
+                self._log.append(ConsoleLine("error", text, time.time()))
+            elif isinstance(ev, DeviceEvent):
+                values = " ".join(str(v) for v in ev.values)
+                self._log.append(ConsoleLine("device", f"{ev.name} {values}".strip(), time.time()))
+
+    def device_log(self) -> list[ConsoleLine]:
+        out = []
+        while self._log:
+            out.append(self._log.popleft())
+        return out
+
+    def device_status(self) -> DeviceStatusView | None:
         link = self._link
         if link is None:
             return None
         # The embedded device lives on a virtual clock that only runs while the link is
         # pumped: keep it going between status requests (paced to the speed-up).
         pump = self.idle_pump_s * (self.speedup or 1.0) if self._embedded else 0.0
-        link.poll(pump)
+        self._note_events(link.poll(pump))
         return self._status_view(link.request_status())
 
-    def _status_view(self, st: Any) -> DeviceStatus:
-        steps = tuple(int(v) for v in st.steps)
-        sliders = self.model.sliders_from_steps(np.asarray(steps[:3]))
+    def _status_view(self, st: Any) -> DeviceStatusView:
+        steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
+        s = self.model.sliders_from_steps(np.asarray(steps[:3]))
         homed = st.homed_mask & ALL_MODULES == ALL_MODULES
         position = None
         if homed:
-            p = self.model.fk(sliders[None, :])[0]
-            position = tuple(float(v) for v in p) if np.all(np.isfinite(p)) else None
-        return DeviceStatus(
+            p = self.model.fk(s[None, :])[0]
+            position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
+        return DeviceStatusView(
             steps,
-            tuple(float(v) for v in sliders),
+            (float(s[0]), float(s[1]), float(s[2])),
             position,
             st.hotend_c,
             st.bed_c,
@@ -185,19 +215,75 @@ class LiveBackend:
 
     # --------------------------------------------------------------- print
     def preflight(self, path: str) -> PreflightView:
-        from cdprhost.preflight import preflight
+        from cdprhost.motion.program import read_items
+        from cdprhost.preflight.run import preflight_items
+        from cdprhost.tui.control.toolpath import ToolpathTap
 
-        return preflight_view(preflight(path, self.profile, self.model), path)
+        bed = self.profile.build_volume.bed_origin
+        tap = ToolpathTap((float(bed[0]), float(bed[1]), float(bed[2])))
+        items = tap.tap(read_items(path, self.profile, self.model))
+        report = preflight_items(items, self.profile, self.model, source=path)
+        return preflight_view(report, path, tap.result())
+
+    def find_resume(self, path: str) -> ResumeView | None:
+        """The resume point the print job saved for ``path`` (same path and content), as the
+        CLI finds it: exact (``--resume``) when it names a move, else a layer."""
+        from cdprhost.job.resume import find_resume_point, resume_path_for, resume_question
+
+        folder = self.job_options.get("resume_dir")
+        saved = resume_path_for(path, folder)
+        try:
+            point = find_resume_point(path, folder)
+        except (CdprError, OSError) as exc:
+            return ResumeView(str(saved), path, "", 0, problem=str(exc))
+        if point is None:
+            return None  # none, or the file changed since (another program)
+        name = Path(path).name
+        at = saved.stat().st_mtime if saved.exists() else None
+        problem = ""
+        if point.exact:  # print --resume: at that very move
+            layer = int(point.last_layer or 0)
+            question = resume_question(name, point=point)
+        else:  # print --resume-from-layer
+            layer = int(point.suggested_layer or point.last_layer or 0)
+            question = resume_question(name, layer=layer)
+            if layer < 1:
+                problem = "the stop was before the first layer: start again instead"
+        return ResumeView(
+            str(saved),
+            point.gcode,
+            point.reason,
+            layer,
+            point.last_line,
+            at,
+            problem,
+            point.exact,
+            question,
+        )
 
     def make_job(
-        self, path: str, on_event: EventSink, resume_from_layer: int | None = None
+        self,
+        path: str,
+        on_event: EventSink,
+        resume_from_layer: int | None = None,
+        resume: bool = False,
     ) -> JobHandle:
         try:
+            from cdprhost.job.resume import find_resume_point
             from cdprhost.job.runner import PrintJob, PrintOptions
         except ImportError as exc:  # the runner is a separate piece of work
             raise CdprError(f"the print runner is not available: {exc}") from None
         self.link  # noqa: B018 - raises when not connected
-        options = PrintOptions(resume_from_layer=resume_from_layer, **self.job_options)
+        point = None
+        if resume:  # the CLI's --resume: the saved point of this very file, found again now
+            point = find_resume_point(path, self.job_options.get("resume_dir"))
+            if point is None or not point.exact:
+                raise CdprError(
+                    f"{path}: no resume point for this file (it completed, or it changed since)"
+                )
+        options = PrintOptions(
+            resume_from_layer=resume_from_layer, resume=point, **self.job_options
+        )
         return PrintJob(path, self.profile, self._job_link, options, on_event)
 
     def _job_link(self) -> Any:
@@ -215,6 +301,9 @@ class LiveBackend:
             link = self.link
         return link
 
+    def after_cancel(self) -> DeviceStatusView:
+        return self._status_view(self.machine.after_cancel())
+
     # ----------------------------------------------------------------- jog
     @property
     def machine(self) -> Machine:
@@ -222,24 +311,43 @@ class LiveBackend:
 
     def move_to(
         self, target: tuple[float, float, float], speed_mm_s: float = JOG_SPEED_MM_S
-    ) -> DeviceStatus:
+    ) -> DeviceStatusView:
         """Plan and execute a straight move to ``target`` (machine frame); requires homing."""
         try:
             return self._status_view(self.machine.move_to(target, feed_mm_s=speed_mm_s))
         except NotHomed:
-            raise CdprError("the modules are not homed: home first (h)") from None
+            raise CdprError("the modules are not homed: home first") from None
 
-    def jog_to(self, target: tuple[float, float, float]) -> DeviceStatus:
+    def jog_to(self, target: tuple[float, float, float]) -> DeviceStatusView:
         return self.move_to(target)
 
-    def home(self) -> DeviceStatus:
+    def home(self) -> DeviceStatusView:
         return self._status_view(self.machine.home())
 
-    def motors_off(self) -> DeviceStatus:
+    def motors_off(self) -> DeviceStatusView:
         return self._status_view(self.machine.motors_off())
 
-    def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatus:
+    def set_heaters(self, hotend_c: float, bed_c: float) -> DeviceStatusView:
         return self._status_view(self.machine.set_heaters(hotend_c, bed_c))
+
+    def emergency_stop(self) -> bool:
+        return bool(self.machine.emergency_stop())
+
+    def console(self, line: str) -> list[ConsoleLine]:
+        from cdprhost.tui.control.live_console import run_console
+
+        try:
+            machine = self.machine
+        except CdprError as exc:
+            return [ConsoleLine("sent", line, time.time()), ConsoleLine("error", str(exc))]
+        from cdprhost.link import LinkError
+
+        out = run_console(line, machine, self._status_view, self._identity, JOG_SPEED_MM_S)
+        try:
+            self._note_events(machine.link.poll(0.0))
+        except (LinkError, OSError) as exc:  # stopped (M112) or lost: said, not raised
+            out.append(ConsoleLine("device", f"{type(exc).__name__}: {exc}", time.time()))
+        return out + self.device_log()
 
     # ------------------------------------------------------------ diagnose
     def diagnose(self, session_dir: str) -> DiagnosisView:

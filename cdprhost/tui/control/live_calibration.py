@@ -74,6 +74,9 @@ def identification_view(result: Any, profile_path: str = "") -> IdentificationVi
         result.check_rms_after_mm,
         warnings,
         profile_path,
+        None if result.trust is None else bool(result.ok),
+        None if result.trust is None else float(result.predicted_workspace_rms_mm),
+        None if result.trust is None else float(result.predicted_workspace_max_mm),
     )
 
 
@@ -117,19 +120,26 @@ class LiveCalibration:
         self.messages.append(text)
 
     # ---------------------------------------------------------------- steps
-    def plan(self, n_fit: int, n_check: int, session_dir: str | None) -> CalibrationView:
+    def plan(
+        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+    ) -> CalibrationView:
+        """A new session (its markers from ``mocap_config``, a TOML file with the ``[mocap]``
+        table, checked before anything is written) or the one in ``session_dir``."""
+        from cdprhost.calibration.session_setup import mocap_for_session
         from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
         from cdprhost.machine import Machine
 
         b = self.backend
-        mocap = None
+        folder = session_dir or DEFAULT_SESSION
+        virtual = None
         if b.sim_options.get("observer") is not None:
-            from cdprhost.sim.virtual_mocap import mocap_config
+            from cdprhost.sim.virtual_mocap import mocap_config as virtual_config
 
-            mocap = mocap_config(b.profile_name).mocap
+            virtual = virtual_config(b.profile_name).mocap
+        mocap = mocap_for_session(folder, mocap_config, virtual)
         device = Machine(b.link, b.profile, b.model, settle_s=0.5)
         self.wizard = CalibrationWizard(
-            session_dir or DEFAULT_SESSION,
+            folder,
             b.profile,
             device,
             self.source,
@@ -142,9 +152,11 @@ class LiveCalibration:
 
     def _require(self, kind: type, index: int | None = None) -> Any:
         if self.wizard is None:
-            raise CdprError("plan the poses first (n)")
+            raise CdprError("plan the poses first")
         action = self.wizard.state.next_action()
-        if not isinstance(action, kind) or (index is not None and action.index != index - 1):
+        if not isinstance(action, kind) or (
+            index is not None and getattr(action, "index", None) != index - 1
+        ):
             raise CdprError(f"the wizard expects {type(action).__name__} next, not {kind.__name__}")
         return action
 

@@ -16,18 +16,25 @@ from typing import Any
 
 
 class EventPump:
-    def __init__(self, wake: Callable[[], Any]):
+    """``urgent(event)``: events the UI shows at once (a state change, a failure): they wake
+    it again even when a wake is pending, and set :attr:`urgent` until the next drain."""
+
+    def __init__(self, wake: Callable[[], Any], urgent: Callable[[Any], bool] | None = None):
         self._wake = wake
+        self._is_urgent = urgent or (lambda event: False)
         self._items: deque[tuple[int, Any]] = deque()
         self._lock = threading.Lock()
         self._pending = False
+        self.urgent = False
 
     def put(self, job_id: int, event: Any) -> None:
+        hurry = self._is_urgent(event)
         with self._lock:
             self._items.append((job_id, event))
-            if self._pending:
+            if self._pending and (not hurry or self.urgent):
                 return
             self._pending = True
+            self.urgent = self.urgent or hurry
         self._wake()
 
     def sink(self, job_id: int) -> Callable[[Any], None]:
@@ -39,4 +46,5 @@ class EventPump:
             items = list(self._items)
             self._items.clear()
             self._pending = False
+            self.urgent = False
         return items

@@ -8,24 +8,64 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
 class PortChoice:
-    """A port the user can pick: ``port`` is what ``connect`` receives."""
+    """A port the user can pick: ``port`` is what ``connect`` receives; ``simulated`` marks a
+    simulated device (embedded, or a ``cdprhost sim-device`` on a pseudo-terminal)."""
 
     port: str
     label: str
     detail: str = ""
+    simulated: bool = False
 
 
 @dataclass(frozen=True)
-class Violation:
+class ViolationRow:
     line: int
     rule: str
     detail: str
     point: Vec3 | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Toolpath:
+    """The moves of a G-code file in the G-code frame (machine frame minus ``bed_origin``),
+    program order, for the layer preview; ``heat_waits`` are (line, heater, target °C) of the
+    program's waits for temperature, for the time estimate."""
+
+    xy0: np.ndarray  # (n, 2) float32, move starts
+    xy1: np.ndarray  # (n, 2) float32, move ends
+    line: np.ndarray  # (n,) int64
+    layer: np.ndarray  # (n,) int32
+    extrude: np.ndarray  # (n,) bool
+    layer_z: tuple[float, ...] = ()  # height of each layer (its first extrusion), mm
+    heat_waits: tuple[tuple[int, str, float], ...] = ()
+    bed_origin: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def layers(self) -> int:
+        return len(self.layer_z)
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """(x min, y min, x max, y max) of the extrusions (of every move when none extrudes);
+        computed once."""
+        cached: tuple[float, float, float, float] | None = self.__dict__.get("_bounds")
+        if cached is not None:
+            return cached
+        sel = self.extrude if self.extrude.any() else np.ones(len(self.line), dtype=bool)
+        if not sel.any():
+            box = (-1.0, -1.0, 1.0, 1.0)
+        else:
+            lo = np.minimum(self.xy0[sel].min(axis=0), self.xy1[sel].min(axis=0))
+            hi = np.maximum(self.xy0[sel].max(axis=0), self.xy1[sel].max(axis=0))
+            box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+        object.__setattr__(self, "_bounds", box)
+        return box
 
 
 @dataclass(frozen=True)
@@ -34,16 +74,59 @@ class PreflightView:
 
     path: str
     ok: bool
-    violations: tuple[Violation, ...] = ()
+    violations: tuple[ViolationRow, ...] = ()
     moves: int = 0
     layers: int = 0
     estimated_time_s: float = 0.0
     filament_mm: float = 0.0
     notes: tuple[str, ...] = ()
+    toolpath: Toolpath | None = None
 
 
 @dataclass(frozen=True)
-class DeviceStatus:
+class ResumeView:
+    """A saved resume point that belongs to the open file."""
+
+    path: str  # the resume point's file
+    gcode: str
+    reason: str
+    layer: int  # 1-based: the layer to restart at, or (exact) the layer of ``last_line``
+    last_line: int | None = None
+    saved_at: float | None = None  # epoch seconds
+    problem: str = ""  # why it cannot be used (file changed since, ...), "" when usable
+    exact: bool = False  # names the exact move to continue at (``--resume``), not only a layer
+    question: str = ""  # what the operator confirms before it starts (the CLI's words)
+
+
+@dataclass(frozen=True)
+class ConsoleLine:
+    """One line of the console: what was sent, the reply, or something the device said."""
+
+    kind: str  # sent | reply | error | device | notice
+    text: str
+    at: float = 0.0  # epoch seconds
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    """One finished print, for the job history."""
+
+    file: str
+    status: str  # done | cancelled | failed | refused
+    started: float  # epoch seconds
+    ended: float
+    layers_done: int = 0
+    layers: int = 0
+    reason: str = ""
+    resumed_from_layer: int | None = None  # 1-based
+
+    @property
+    def duration_s(self) -> float:
+        return max(self.ended - self.started, 0.0)
+
+
+@dataclass(frozen=True)
+class DeviceStatusView:
     """What the device reports while no job runs (jog screen, idle panels)."""
 
     steps: tuple[int, int, int, int] | None = None
@@ -105,6 +188,9 @@ class IdentificationView:
     check_after_mm: float | None = None
     warnings: tuple[str, ...] = ()
     profile_path: str = ""
+    trusted: bool | None = None  # the trust gate's verdict (None: the gate did not run)
+    predicted_rms_mm: float | None = None  # the gate's predicted workspace error
+    predicted_max_mm: float | None = None
 
 
 @dataclass(frozen=True)

@@ -1,28 +1,32 @@
-"""What every screen shares: the tab bar on top, the key bar below, state watching."""
+"""What every screen shares: the tab bar on top, the key bar below, state watching, and a
+once-a-second tick for what ages (temperatures, clocks)."""
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
 from textual.widgets import Footer
 
-from cdprhost.tui.state import UiState
+from cdprhost.tui.state import UiState, shown_job_state
+from cdprhost.tui.tabs import TABS
 from cdprhost.tui.widgets.nav_bar import NavBar
 
-TABS = (
-    ("connection", "f1", "Link"),
-    ("print", "f2", "Print"),
-    ("jog", "f3", "Jog"),
-    ("calibrate", "f4", "Calibrate"),
-    ("diagnose", "f5", "Diagnose"),
-)
+if TYPE_CHECKING:  # pragma: no cover
+    from cdprhost.tui.app import CdprApp
 
 
-class AppScreen(Screen):
-    """Subclasses set ``MODE``, yield their body from ``compose_body`` and draw in ``render_state``."""
+class AppScreen(Screen[None]):
+    """Subclasses set ``MODE``, yield their body from ``compose_body``, draw in
+    ``render_state`` and (optionally) redraw what ages in ``render_tick``."""
 
     MODE = ""
+    TICK_S = 1.0
+
+    if TYPE_CHECKING:  # pragma: no cover - the app these screens run in
+        app: CdprApp
 
     def compose(self) -> ComposeResult:
         yield NavBar(id="nav")
@@ -33,13 +37,30 @@ class AppScreen(Screen):
         yield from ()
 
     def on_mount(self) -> None:
-        self.watch(self.app, "state", self._state_changed)
+        self.watch(self.app, "state", self._state_changed, init=False)
+        self.set_interval(self.TICK_S, self._tick)
+        self._state_changed(self.app.state)
 
     def on_screen_resume(self) -> None:
         self._state_changed(self.app.state)
 
+    def _tick(self) -> None:
+        app = self.app
+        if not self.is_current or app.clock() - app.last_fold < self.TICK_S:
+            return  # events were folded (and drawn) within the last second
+        self.render_tick(app.state)
+
     def _state_changed(self, state: UiState) -> None:
-        self.query_one(NavBar).show(self.app.backend.profile_name, TABS, self.MODE, state.job.state)
+        if not self.is_current:
+            return  # drawn again when it comes back (on_screen_resume)
+        c = state.connection
+        self.query_one(NavBar).show(
+            self.app.backend.profile_name,
+            TABS,
+            self.MODE,
+            shown_job_state(state),
+            "SIMULATOR" if c.simulated and c.status == "connected" else "",
+        )
         self.render_state(state)
         signature = self._bindings_signature()
         if signature != getattr(self, "_signature", None):  # rebuilding the key bar is not free
@@ -54,4 +75,7 @@ class AppScreen(Screen):
         return tuple(self.check_action(name, ()) for name in names)
 
     def render_state(self, state: UiState) -> None:
-        """Draw ``state``; called in the UI thread on every change."""
+        """Draw ``state``; called in the UI thread on every change while this screen shows."""
+
+    def render_tick(self, state: UiState) -> None:
+        """Redraw what ages with time (called once a second while this screen shows)."""

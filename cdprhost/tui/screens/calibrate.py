@@ -9,8 +9,10 @@ from textual.containers import Horizontal
 from textual.widgets import DataTable, Input, Label
 
 from cdprhost.tui.control.views import CalibrationView, IdentificationView
+from cdprhost.tui.keys import hint
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState
+from cdprhost.tui.widgets.show import show_text
 
 STATUS_STYLE = {
     "planned": "dim",
@@ -41,10 +43,28 @@ def stage_text(cal: CalibrationView) -> Text:
     return out
 
 
-def result_text(result: IdentificationView | None) -> Text:
+def trust_text(result: IdentificationView) -> Text:
+    """The trust gate's verdict, as ``calibrate identify`` decides (pure)."""
+    if result.trusted is None:
+        return Text("trust gate: not run", style="dim")
+    out = Text("trust gate: ", style="bold")
+    if result.trusted:
+        out.append("trusted", style="bold green")
+    else:
+        out.append("REFUSED: no profile written (the reasons below)", style="bold red")
+    if result.predicted_rms_mm is not None and result.predicted_max_mm is not None:
+        out.append(
+            f"   predicted workspace error {result.predicted_rms_mm:.3f} mm RMS, "
+            f"{result.predicted_max_mm:.3f} mm max",
+            style="dim",
+        )
+    return out
+
+
+def result_text(result: IdentificationView | None, identify_key: str = "i Identify") -> Text:
     if result is None:
         return Text(
-            "identification: not run yet (i identifies once the fit poses are measured)",
+            f"identification: not run yet ({identify_key}, once the fit poses are measured)",
             style="dim",
         )
     out = Text.assemble(
@@ -55,6 +75,7 @@ def result_text(result: IdentificationView | None) -> Text:
     if result.check_before_mm is not None and result.check_after_mm is not None:
         out.append(f"   check poses {result.check_before_mm:.3f} → {result.check_after_mm:.4f} mm")
     out.append(f"   {result.iterations} iterations, {result.poses_used} poses", style="dim")
+    out.append("\n").append_text(trust_text(result))
     for w in result.warnings:
         out.append(f"\n! {w}", style="yellow")
     if result.profile_path:
@@ -86,6 +107,10 @@ class CalibrateScreen(AppScreen):
             yield Label(" session ")
             yield Input(
                 placeholder="session folder (new or to resume)", compact=True, id="session-dir"
+            )
+            yield Label(" markers ")
+            yield Input(
+                placeholder="new session: a session.toml with its [mocap]", compact=True, id="mocap"
             )
         yield Label(id="calib-stage")
         yield DataTable(id="poses", cursor_type="row", zebra_stripes=True)
@@ -124,7 +149,7 @@ class CalibrateScreen(AppScreen):
 
     def render_state(self, state: UiState) -> None:
         cal = state.calibration
-        self.query_one("#calib-stage", Label).update(stage_text(cal))
+        show_text(self.query_one("#calib-stage", Label), stage_text(cal), layout=True)
         poses = self.query_one("#poses", DataTable)
         if getattr(poses, "_shown", None) != cal.poses:
             cursor = poses.cursor_row
@@ -138,7 +163,7 @@ class CalibrateScreen(AppScreen):
                     Text(p.status, style=style),
                     p.detail,
                 )
-            poses._shown = cal.poses
+            poses._shown = cal.poses  # type: ignore[attr-defined]
             if cal.poses:
                 poses.move_cursor(row=min(cursor, len(cal.poses) - 1))
         waiting = self.app.controller.awaiting_take()
@@ -146,14 +171,18 @@ class CalibrateScreen(AppScreen):
         if waiting is not None and waiting.take and self._offered != (waiting.index, waiting.take):
             take_input.value = waiting.take  # offered by the virtual motion capture, once per pose
             self._offered = (waiting.index, waiting.take)
-        self.query_one("#calib-result", Label).update(result_text(cal.result))
+        show_text(
+            self.query_one("#calib-result", Label),
+            result_text(cal.result, hint(self.app, self, "identify")),
+            layout=True,
+        )
         params = self.query_one("#parameters", DataTable)
         if getattr(params, "_shown", None) is not cal.result:
             params.clear()
             for r in cal.result.rows if cal.result else ():
                 ci = "" if r.ci_low is None else f"[{r.ci_low:.4f}, {r.ci_high:.4f}]"
                 params.add_row(r.name, _num(r.before, ".3f"), _num(r.after), _num(r.stderr), ci)
-            params._shown = cal.result
+            params._shown = cal.result  # type: ignore[attr-defined]
 
     # ------------------------------------------------------------ actions
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
@@ -202,7 +231,8 @@ class CalibrateScreen(AppScreen):
             )
             return
         session = self.query_one("#session-dir", Input).value.strip() or None
-        self.app.controller.plan_calibration(n_fit, n_check, session)
+        markers = self.query_one("#mocap", Input).value.strip() or None
+        self.app.controller.plan_calibration(n_fit, n_check, session, markers)
 
     def action_move(self) -> None:
         if self.check_action("move", ()):

@@ -11,6 +11,7 @@ from textual.widgets import DataTable, Input, Label
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import DiagnoseView, UiState
 from cdprhost.tui.widgets.gap_plot import GapPlot
+from cdprhost.tui.widgets.show import show_text
 
 VERDICT_STYLE = {
     "named": "bold green",
@@ -83,7 +84,7 @@ class DiagnoseScreen(AppScreen):
 
     def render_state(self, state: UiState) -> None:
         view = state.diagnose
-        self.query_one("#diag-verdict", Label).update(verdict_text(view))
+        show_text(self.query_one("#diag-verdict", Label), verdict_text(view), layout=True)
         table = self.query_one("#candidates", DataTable)
         result = view.result
         if getattr(table, "_shown", None) is not result:
@@ -95,7 +96,7 @@ class DiagnoseScreen(AppScreen):
                     _opt(c.delta_bic, ".1f"),
                     _opt(c.heldout_rms_mm, ".4f"),
                 )
-            table._shown = result
+            table._shown = result  # type: ignore[attr-defined]
         gap = self.query_one(GapPlot)
         if result is None:
             gap.show((), (), 0.0)

@@ -10,6 +10,7 @@ from textual.screen import ModalScreen
 from textual.widgets import Button, Label, Static
 
 from cdprhost.job.state import Failure
+from cdprhost.tui.keys import key_for
 
 
 class ConfirmScreen(ModalScreen[bool]):
@@ -17,16 +18,19 @@ class ConfirmScreen(ModalScreen[bool]):
 
     BINDINGS = [Binding("y", "answer(True)", "Yes"), Binding("n,escape", "answer(False)", "No")]
 
-    def __init__(self, question: str, yes: str = "Yes", no: str = "No"):
+    def __init__(self, question: str):
         super().__init__(classes="dialog-screen")
-        self.question, self.yes, self.no = question, yes, no
+        self.question = question
 
     def compose(self) -> ComposeResult:
+        app = self.app
         with Vertical(classes="dialog"):
             yield Label(self.question, classes="dialog-text")
             with Horizontal(classes="dialog-buttons"):
-                yield Button(f"{self.yes} (y)", variant="primary", id="yes", compact=True)
-                yield Button(f"{self.no} (n)", id="no", compact=True)
+                yes = key_for(app, self, "answer(True)")
+                no = key_for(app, self, "answer(False)")
+                yield Button(f"Yes ({yes})", variant="primary", id="yes", compact=True)
+                yield Button(f"No ({no})", id="no", compact=True)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id == "yes")
@@ -54,10 +58,10 @@ def failure_text(failure: Failure | None, reason: str, line_text: str, path: str
     if failure.resume_file:
         out.append(f"resume point saved: {failure.resume_file}\n")
     if failure.last_layer is not None:
-        out.append(
-            f"resume: cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}",
-            style="italic",
-        )
+        later = f"cdprhost print {path} --resume-from-layer {max(failure.last_layer + 1, 1)}"
+        if failure.resume_file and failure.last_line:
+            later = f"cdprhost print {path} --resume (exactly there), or {later}"
+        out.append(f"resume here (after checking the link), or later: {later}", style="italic")
     return out
 
 
@@ -65,7 +69,7 @@ class FailureScreen(ModalScreen[str]):
     """Shows the stop and the resume point; dismisses with "resume" or "close"."""
 
     BINDINGS = [
-        Binding("r", "choose('resume')", "Resume from layer"),
+        Binding("r", "choose('resume')", "Resume"),
         Binding("escape,enter", "choose('close')", "Close"),
     ]
 
@@ -74,14 +78,15 @@ class FailureScreen(ModalScreen[str]):
         self.text, self.can_resume = text, can_resume
 
     def compose(self) -> ComposeResult:
+        app = self.app
         with Vertical(classes="dialog failure"):
             yield Static(self.text, id="failure-text")
             with Horizontal(classes="dialog-buttons"):
                 if self.can_resume:
-                    yield Button(
-                        "Resume from layer (r)", variant="warning", id="resume", compact=True
-                    )
-                yield Button("Close (esc)", id="close", compact=True)
+                    key = key_for(app, self, "choose('resume')")
+                    yield Button(f"Resume ({key})", variant="warning", id="resume", compact=True)
+                close = key_for(app, self, "choose('close')")
+                yield Button(f"Close ({close})", id="close", compact=True)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
         self.dismiss(event.button.id or "close")

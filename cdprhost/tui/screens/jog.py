@@ -2,20 +2,44 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from rich.text import Text
-from textual.app import ComposeResult
+from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal
+from textual.dom import DOMNode
 from textual.widgets import Input, Label
 
 from cdprhost.tui.control.jog import STEPS_MM, static_tensions
+from cdprhost.tui.keys import key_for
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.state import UiState, live_position
 from cdprhost.tui.widgets.position_panel import PositionPanel
+from cdprhost.tui.widgets.show import show_text
 from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
 from cdprhost.tui.widgets.tension_bars import TensionBars
 
-KEYS_HELP = "←→ x  ↓↑ y  PgDn/PgUp z  1-4 step size  Enter move  Esc clear"
+
+def keys_help(app: App[Any], screen: DOMNode) -> str:
+    """The jog keys as the help screen names them (taken from the bindings)."""
+
+    def pair(axis: str) -> str:
+        minus = key_for(app, screen, f"jog('{axis}', -1)")
+        plus = key_for(app, screen, f"jog('{axis}', 1)")
+        return f"{minus}{plus}" if len(minus) == len(plus) == 1 else f"{minus}/{plus}"
+
+    first, last = (
+        key_for(app, screen, "step(0)"),
+        key_for(app, screen, f"step({len(STEPS_MM) - 1})"),
+    )
+    go, clear, keys = (
+        key_for(app, n, a) for n, a in ((screen, "go"), (screen, "clear"), (app, "help"))
+    )
+    return (
+        f"{pair('x')} x   {pair('y')} y   {pair('z')} z   {first}-{last} step   "
+        f"{go} move   {clear} clear   {keys} all keys"
+    )
 
 
 def target_text(state: UiState) -> Text:
@@ -48,6 +72,7 @@ class JogScreen(AppScreen):
         Binding("h", "home", "Home"),
         Binding("m", "motors_off", "Motors off"),
         Binding("t", "heaters", "Set heaters"),
+        Binding("e", "edit_heaters", "Heater targets", show=False),
     ]
 
     def __init__(self) -> None:
@@ -55,30 +80,36 @@ class JogScreen(AppScreen):
         self.step_index = 1
 
     def compose_body(self) -> ComposeResult:
-        statics = self.app.backend.model.statics
+        backend = self.app.backend
+        statics = backend.model.statics
+        bed = backend.profile.build_volume.bed_origin
         with Horizontal(id="jog-top"):
-            yield PositionPanel(id="jog-position")
+            yield PositionPanel((float(bed[0]), float(bed[1]), float(bed[2])), id="jog-position")
             yield TensionBars(statics.t_min, statics.t_max, id="jog-tensions")
         yield Label(id="jog-step")
         yield Label(id="jog-target")
-        yield Label(KEYS_HELP, id="jog-help")
+        yield Label(id="jog-help")
         yield Label(id="jog-busy")
         with Horizontal(id="heater-row"):
             yield Label("hotend °C ")
             yield Input("0", type="number", compact=True, id="hotend-input")
             yield Label(" bed °C ")
             yield Input("0", type="number", compact=True, id="bed-input")
-            yield Label("  t sets both", classes="hint")
+            yield Label(id="heater-hint", classes="hint")
         yield TemperatureGraph(id="jog-temperatures")
 
     def on_mount(self) -> None:
+        self.query_one("#jog-help", Label).update(keys_help(self.app, self))
+        edit, apply = key_for(self.app, self, "edit_heaters"), key_for(self.app, self, "heaters")
+        self.query_one("#heater-hint", Label).update(f"  {edit} edits, Enter or {apply} sets both")
         super().on_mount()
 
     def render_state(self, state: UiState) -> None:
         position, sliders, _ = live_position(state)
         steps = state.device.steps if state.device else None
         self.query_one(PositionPanel).show(position, sliders, steps)
-        self.query_one("#jog-step", Label).update(
+        show_text(
+            self.query_one("#jog-step", Label),
             Text.assemble(
                 ("step  ", "bold"),
                 *(
@@ -86,13 +117,13 @@ class JogScreen(AppScreen):
                     for i, s in enumerate(STEPS_MM)
                 ),
                 ("  mm", "dim"),
-            )
+            ),
         )
-        self.query_one("#jog-target", Label).update(target_text(state))
+        show_text(self.query_one("#jog-target", Label), target_text(state), layout=True)
         busy = state.busy or ("print running: jog disabled" if state.job_active else "")
         if not state.connected:
             busy = "not connected"
-        self.query_one("#jog-busy", Label).update(Text(busy, style="yellow"))
+        show_text(self.query_one("#jog-busy", Label), Text(busy, style="yellow"), layout=True)
         target = state.jog.target if state.jog is not None else position
         self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target))
         dev = state.device
@@ -106,6 +137,9 @@ class JogScreen(AppScreen):
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.action_heaters()
+
+    def action_edit_heaters(self) -> None:
+        self.query_one("#hotend-input", Input).focus()
 
     # ------------------------------------------------------------ actions
     def _can_move(self) -> bool:

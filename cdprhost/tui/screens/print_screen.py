@@ -1,4 +1,4 @@
-"""The print screen: open a file, preflight, run and watch a print."""
+"""The print screen: pick a file, preflight, preview, run and watch a print."""
 
 from __future__ import annotations
 
@@ -9,27 +9,40 @@ from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
-from textual.widgets import Input, Label
+from textual.widgets import Label
 
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.jog import static_tensions
 from cdprhost.tui.control.source import SourceLines
+from cdprhost.tui.keys import hint
 from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.screens.dialogs import FailureScreen, failure_text
-from cdprhost.tui.state import UiState, hms, live_position
+from cdprhost.tui.screens.file_picker import FilePickerScreen
+from cdprhost.tui.state import (
+    STALE_AFTER_S,
+    UiState,
+    hms,
+    job_eta,
+    live_position,
+    shown_job_state,
+    temperature_age,
+)
+from cdprhost.tui.tabs import screen_key
+from cdprhost.tui.widgets.layer_preview import LayerPreview, PreviewInput
 from cdprhost.tui.widgets.position_panel import PositionPanel
 from cdprhost.tui.widgets.progress_panel import ProgressPanel
+from cdprhost.tui.widgets.show import show_text
 from cdprhost.tui.widgets.source_view import SourceView
 from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
 from cdprhost.tui.widgets.tension_bars import TensionBars
 from cdprhost.tui.widgets.violation_list import ViolationList
 
 
-def preflight_summary(state: UiState) -> Text:
+def preflight_summary(state: UiState, open_key: str = "o Open") -> Text:
     """One line about the open file's preflight (pure)."""
     f = state.file
     if not f.path:
-        return Text("no file open: press o and type a G-code path", style="dim")
+        return Text(f"no file open: {open_key} picks one (recent files, folders, or a path)")
     if f.checking:
         return Text(f"checking {Path(f.path).name} ...", style="cyan")
     if f.error:
@@ -47,7 +60,8 @@ def preflight_summary(state: UiState) -> Text:
             style="bold red",
         )
     out.append(
-        f" · {p.moves} moves · {p.layers} layers · est {hms(p.estimated_time_s)} · {p.filament_mm:.0f} mm filament",
+        f" · {p.moves} moves · {p.layers} layers · machine time {hms(p.estimated_time_s)}"
+        f" · {p.filament_mm:.0f} mm filament",
         style="dim",
     )
     if p.notes:
@@ -58,12 +72,33 @@ def preflight_summary(state: UiState) -> Text:
     return out
 
 
+def resume_line(state: UiState, resume_key: str) -> Text:
+    """The saved resume point of the open file, and how to use it (pure)."""
+    r = state.file.resume
+    out = Text()
+    if r is None or state.job_active:
+        return out
+    out.append("resume point ", style="bold yellow")
+    if r.exact:
+        out.append(f"line {r.last_line} (layer {r.layer})")
+    else:
+        out.append(f"layer {r.layer}" if r.layer else "no layer")
+    if r.reason:
+        out.append(f" ({r.reason})", style="dim")
+    if r.problem:
+        return out.append(f" · cannot resume: {r.problem}", style="red")
+    if not state.connected:
+        return out.append(f" · connect on {screen_key('connection')} to resume", style="yellow")
+    return out.append(f" · {resume_key}", style="bold")
+
+
 def link_line(state: UiState) -> Text:
     c = state.connection
     health = state.job.link if state.job_active else c.health
     out = Text("link ", style="bold")
     style = {"connected": "green", "connecting": "cyan", "error": "bold red"}.get(c.status, "dim")
-    out.append(f"{c.port} {c.status}".strip(), style=style)
+    port = "simulator" if c.simulated else c.port
+    out.append(f"{port} {c.status}".strip(), style=style)
     if health is not None:
         out.append(f" · retx {health.retransmits} · bad {health.bad_frames}", style="dim")
     if state.busy:
@@ -75,81 +110,147 @@ class PrintScreen(AppScreen):
     MODE = "print"
     AUTO_FOCUS = "#violations"
     BINDINGS = [
-        Binding("o", "open", "Open"),
+        Binding("o", "open", "Open", tooltip="Pick a G-code file: recent, folders, or a path"),
         Binding("s", "start", "Start"),
-        Binding("p", "pause", "Pause"),
+        Binding("p", "pause", "Pause", tooltip="At the next point where the motion rests"),
         Binding("r", "resume", "Resume"),
-        Binding("x", "cancel", "Cancel"),
-        Binding("v", "violations", "Violations", show=False),
-        Binding("escape", "leave_input", "Back", show=False),
+        Binding("x", "cancel", "Cancel", tooltip="Stops at rest, then parks as configured"),
+        Binding(
+            "l",
+            "resume_failed",
+            "Resume stopped",
+            show=False,  # offered on the resume line when the open file has a resume point
+            tooltip="A stopped print, at its saved point (else its layer); the link is checked first",
+        ),
+        Binding("v", "toggle_view", "Preview/violations", show=False),
+        Binding("left_square_bracket", "layer(-1)", "Layer down", show=False),
+        Binding("right_square_bracket", "layer(1)", "Layer up", show=False),
+        Binding("f", "follow", "Follow the print", show=False),
     ]
 
     def __init__(self) -> None:
         super().__init__(id="print-screen")
         self.source: SourceLines | None = None
         self._jump: int | None = None
+        self._layer: int | None = None  # browsed layer (None: follow the print)
+        self._source_path = ""
 
     def compose_body(self) -> ComposeResult:
-        statics = self.app.backend.model.statics
+        backend = self.app.backend
+        statics = backend.model.statics
+        bed = backend.profile.build_volume.bed_origin
         with Horizontal(id="file-row"):
             yield Label("G-code ", id="file-label")
-            yield Input(
-                placeholder="path to a .gcode file, Enter to check it",
-                compact=True,
-                id="file-input",
-            )
+            yield Label(id="file-name")
         yield Label(id="preflight-summary")
-        with Horizontal(id="panels"):
-            with Vertical(id="left-panels"):
-                yield ProgressPanel(id="progress")
-                yield PositionPanel(id="position")
-                yield Label(id="link-line")
-            with Vertical(id="right-panels"):
-                yield TemperatureGraph(id="temperatures")
-                yield TensionBars(statics.t_min, statics.t_max, id="tensions")
-        with Horizontal(id="bottom"):
-            yield ViolationList(id="violations")
-            yield SourceView(id="source")
-
-    def on_mount(self) -> None:
-        super().on_mount()
+        yield Label(id="resume-line")
+        with Horizontal(id="main"):
+            with Vertical(id="dash"):
+                with Horizontal(id="panels"):
+                    with Vertical(id="left-panels"):
+                        yield ProgressPanel(id="progress")
+                        yield PositionPanel(
+                            (float(bed[0]), float(bed[1]), float(bed[2])), id="position"
+                        )
+                        yield Label(id="link-line")
+                    with Vertical(id="right-panels"):
+                        yield TemperatureGraph(id="temperatures")
+                        yield TensionBars(statics.t_min, statics.t_max, id="tensions")
+                with Horizontal(id="bottom"):
+                    yield LayerPreview(id="preview", classes="preview")
+                    yield ViolationList(id="violations")
+                    yield SourceView(id="source")
+            yield LayerPreview(id="side-preview", classes="preview")  # wide terminals
 
     # ------------------------------------------------------------- render
     def render_state(self, state: UiState) -> None:
         job = state.job
+        app = self.app
+        if state.file.path != self._source_path:  # a new file: its text, its first layer
+            self._source_path = state.file.path
+            self.source, self._jump, self._layer = None, None, None
+            if state.file.path:
+                self._load_source(state.file.path)
         line_text = self.source.line(job.line) if self.source is not None and job.line else ""
-        self.query_one(ProgressPanel).show(job, line_text)
+        elapsed = app.wall_clock() - state.job_started if state.job_started else None
+        self.query_one(ProgressPanel).show(job, line_text, shown_job_state(state), elapsed)
         position, sliders, tensions = live_position(state)
         if tensions is None:
-            tensions = static_tensions(self.app.backend.model, position)
+            tensions = static_tensions(app.backend.model, position)
         steps = job.steps if state.job_active or state.device is None else state.device.steps
         self.query_one(PositionPanel).show(position, sliders, steps)
         self.query_one(TensionBars).show(tensions)
-        self._render_temperatures(state)
-        self.query_one("#link-line", Label).update(link_line(state))
-        self.query_one("#preflight-summary", Label).update(preflight_summary(state))
-        violations = state.file.preflight.violations if state.file.preflight else ()
+        show_text(self.query_one("#link-line", Label), link_line(state))
+        name = Text(state.file.path or "none", style="bold" if state.file.path else "dim")
+        name.append(f"   {hint(app, self, 'open')}", style="dim")
+        show_text(self.query_one("#file-name", Label), name)
+        show_text(
+            self.query_one("#preflight-summary", Label),
+            preflight_summary(state, hint(app, self, "open")),
+        )
+        resume = resume_line(state, hint(app, self, "resume_failed"))
+        line = self.query_one("#resume-line", Label)
+        show_text(line, resume)
+        if line.display != bool(resume.plain):
+            line.display = bool(resume.plain)
+        pre = state.file.preflight
+        violations = pre.violations if pre else ()
         table = self.query_one(ViolationList)
-        if getattr(table, "_shown", None) is not violations:
+        if table.shown is not violations:
             table.show(violations)
-            table._shown = violations
+            self.set_class(bool(violations), "-violations")
         self._render_source(state)
+        self._render_times(state)
+        self._render_preview(state)
 
-    def _render_temperatures(self, state: UiState) -> None:
+    def render_tick(self, state: UiState) -> None:
+        """What ages: temperatures (stale marking), elapsed and time left, the preview."""
+        self._render_times(state)
+        self._render_preview(state)
+
+    def _render_times(self, state: UiState) -> None:
+        app = self.app
+        self._render_temperatures(state, temperature_age(state, app.clock()))
+        eta = job_eta(state, app.backend.machine_rate())
+        wall = app.wall_clock()
+        elapsed = wall - state.job_started if state.job_started else None
+        self.query_one(ProgressPanel).show_times(state.job, elapsed, eta, wall)
+
+    def _render_temperatures(self, state: UiState, age: float | None) -> None:
         job = state.job
         graph = self.query_one(TemperatureGraph)
+        stale = round(age) if age is not None and age > STALE_AFTER_S else None
         if job.state is not JobState.IDLE and job.temperatures is not None:
             t = job.temperatures
             graph.show(
                 (t.hotend, t.bed),
                 (t.hotend_target, t.bed_target),
                 [(h, b) for _, h, b in job.temperature_history],
+                stale if state.job_active else None,
             )
         elif state.device is not None:
             d = state.device
-            graph.show((d.hotend, d.bed), (d.hotend_target, d.bed_target), state.device_temps)
+            graph.show(
+                (d.hotend, d.bed), (d.hotend_target, d.bed_target), state.device_temps, stale
+            )
         else:
             graph.show((None, None), (0.0, 0.0), ())
+
+    def _render_preview(self, state: UiState) -> None:
+        pre = state.file.preflight
+        toolpath = pre.toolpath if pre is not None else None
+        job = state.job
+        printing_this = state.job_path == state.file.path and job.state is not JobState.IDLE
+        follow = printing_this and job.line > 0
+        layer = self._layer if self._layer is not None else (job.layer if follow else 0)
+        nozzle = None
+        if follow and job.position is not None and toolpath is not None:
+            o = toolpath.bed_origin
+            nozzle = (job.position[0] - o[0], job.position[1] - o[1])
+        title = "browsing ([ ] layers, f follows)" if self._layer is not None else ""
+        data = PreviewInput(toolpath, layer, job.line if follow else 0, nozzle, title)
+        for preview in self.query(LayerPreview):
+            preview.show(data)
 
     def _render_source(self, state: UiState) -> None:
         view = self.query_one(SourceView)
@@ -173,15 +274,8 @@ class PrintScreen(AppScreen):
             view.show(self.source.around(1, 0, 6), None, Path(self.source.path).name)
 
     # ------------------------------------------------------------- events
-    def on_input_submitted(self, event: Input.Submitted) -> None:
-        path = event.value.strip()
-        if not path:
-            return
-        self._jump = None
-        self.source = None
+    def open_path(self, path: str) -> None:
         self.app.controller.open_file(path)
-        self._load_source(path)
-        self.query_one(ViolationList).focus()
 
     @work(thread=True, exclusive=True, group="source")
     def _load_source(self, path: str) -> None:
@@ -214,8 +308,8 @@ class PrintScreen(AppScreen):
         can_resume = failure is not None and failure.last_layer is not None
 
         def chosen(choice: str | None) -> None:
-            if choice == "resume" and failure is not None:
-                self.app.controller.start(resume_from_layer=max(failure.last_layer, 0))
+            if choice == "resume":
+                self.app.controller.resume_failed()
 
         self.app.push_screen(FailureScreen(text, can_resume), chosen)
 
@@ -226,19 +320,40 @@ class PrintScreen(AppScreen):
             "pause": "pause_print",
             "resume": "resume_print",
             "cancel": "cancel_print",
+            "resume_failed": "resume_failed",
         }
         if action in mapping:
             return self.app.check_print_action(mapping[action])
+        if action == "open":
+            return None if self.app.state.job_active else True
         return True
 
     def action_open(self) -> None:
-        self.query_one("#file-input", Input).focus()
+        if self.app.state.job_active:
+            return
+        state = self.app.state
 
-    def action_leave_input(self) -> None:
-        self.query_one(ViolationList).focus()
+        def chosen(path: str | None) -> None:
+            if path:
+                self.open_path(path)
 
-    def action_violations(self) -> None:
-        self.query_one(ViolationList).focus()
+        start = str(Path(state.file.path).parent) if state.file.path else None
+        self.app.push_screen(FilePickerScreen(state.recent, start), chosen)
+
+    def action_toggle_view(self) -> None:
+        self.toggle_class("-violations")
+
+    def action_layer(self, step: int) -> None:
+        pre = self.app.state.file.preflight
+        if pre is None or pre.toolpath is None or pre.toolpath.layers == 0:
+            return
+        current = self.query_one("#preview", LayerPreview).shown.layer
+        self._layer = min(max(current + step, 0), pre.toolpath.layers - 1)
+        self._render_preview(self.app.state)
+
+    def action_follow(self) -> None:
+        self._layer = None
+        self._render_preview(self.app.state)
 
     def action_start(self) -> None:
         self.app.action_start_print()
@@ -251,3 +366,6 @@ class PrintScreen(AppScreen):
 
     def action_cancel(self) -> None:
         self.app.action_cancel_print()
+
+    def action_resume_failed(self) -> None:
+        self.app.action_resume_failed()

@@ -1,14 +1,20 @@
-"""Job state, progress bar, layer n/N, elapsed and remaining time, current line."""
+"""Job state, progress bar, layer n/N, wall-clock elapsed and time left (heating
+included), current line."""
 
 from __future__ import annotations
+
+import time
 
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Vertical
-from textual.widgets import Label, ProgressBar
+from textual.widgets import Label
 
 from cdprhost.job.state import JobSnapshot, JobState
+from cdprhost.tui.control.eta import Eta
 from cdprhost.tui.state import hms
+from cdprhost.tui.widgets.charts import hbar
+from cdprhost.tui.widgets.show import show_text
 
 STATE_STYLE = {
     JobState.IDLE: "dim",
@@ -23,6 +29,10 @@ STATE_STYLE = {
     JobState.FAILED: "bold red",
     JobState.DONE: "bold green",
 }
+WAITING_FOR_REST = {
+    JobState.PAUSING: "finishing the current path; pauses where the motion comes to rest",
+    JobState.CANCELLING: "finishing the current path; stops where the motion comes to rest",
+}
 
 
 def progress_fraction(snap: JobSnapshot) -> float:
@@ -34,11 +44,60 @@ def progress_fraction(snap: JobSnapshot) -> float:
     return 0.0
 
 
-def progress_lines(snap: JobSnapshot, line_text: str) -> tuple[Text, Text, Text]:
-    """The panel's three text lines for a snapshot (pure, for tests too)."""
+def bar_text(fraction: float, width: int, state: JobState) -> Text:
+    """The progress bar: blocks to eighths of a cell, then the percentage."""
+    style = "green" if state is JobState.DONE else STATE_STYLE[state].replace("bold ", "")
+    cells = max(width - 6, 4)
+    done = hbar(fraction, 1.0, cells).rstrip()
+    out = Text(done, style=style)
+    out.append("─" * (cells - len(done)), style="dim")
+    return out.append(f" {100 * fraction:3.0f}%", style="bold")
+
+
+def clock_time(epoch: float) -> str:
+    return time.strftime("%H:%M", time.localtime(epoch))
+
+
+def eta_text(eta: Eta | None, now_wall: float, state: JobState) -> Text:
+    """ "left 0:12:34 wall-clock · done ≈ 14:05 · heating 0:00:40 · machine time left 0:11:54"
+    (the most useful first: a narrow panel cuts the end)."""
+    out = Text()
+    if state is JobState.DONE:
+        return out.append("finished", style="green")
+    if eta is not None and not (state.active or state is JobState.PREFLIGHT):
+        out.append("takes ≈ ", style="dim")  # the open file, before it starts
+        out.append(hms(eta.wall_s), style="bold")
+        out.append(" wall-clock", style="dim")
+        if eta.heating_left_s >= 1:
+            out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
+        return out
+    if eta is None or not (state.active or state is JobState.PREFLIGHT):
+        return out.append("left --:--:--", style="dim")
+    out.append("left ", style="dim")
+    out.append(hms(eta.wall_s), style="bold")
+    out.append(" wall-clock", style="dim")
+    out.append(f" · done ≈ {clock_time(now_wall + eta.wall_s)}")
+    if eta.heating_left_s >= 1:
+        out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
+    out.append(f" · machine time left {hms(eta.motion_left_s)}", style="dim")
+    return out
+
+
+def progress_lines(
+    snap: JobSnapshot,
+    line_text: str,
+    shown: JobState | None = None,
+    elapsed_s: float | None = None,
+) -> tuple[Text, Text, Text]:
+    """The panel's text lines for a snapshot (pure, for tests too): state, layer and
+    elapsed wall-clock time, current line. ``shown`` is the state to display (PAUSING while
+    a pause waits for a rest point)."""
+    state = shown or snap.state
     head = Text()
-    head.append(f" {snap.state.value.upper()} ", style="reverse " + STATE_STYLE[snap.state])
-    if snap.reason:
+    head.append(f" {state.value.upper()} ", style="reverse " + STATE_STYLE[state])
+    if state in WAITING_FOR_REST and state is not snap.state:
+        head.append(f" {WAITING_FOR_REST[state]}", style="italic")
+    elif snap.reason:
         head.append(f" {snap.reason}", style="italic")
     elif snap.notices:
         head.append(f" {snap.notices[-1]}", style="dim italic")
@@ -46,10 +105,10 @@ def progress_lines(snap: JobSnapshot, line_text: str) -> tuple[Text, Text, Text]
     stats = Text.assemble(
         ("layer ", "dim"),
         layers,
-        ("  elapsed ", "dim"),
+        (" · elapsed ", "dim"),
+        hms(elapsed_s if snap.state is not JobState.IDLE else None),
+        (" · machine ", "dim"),
         hms(snap.device_time_s if snap.state is not JobState.IDLE else None),
-        ("  ETA ", "dim"),
-        hms(snap.eta_s if snap.state.active else (0.0 if snap.state is JobState.DONE else None)),
     )
     cur = Text()
     if snap.line:
@@ -61,15 +120,34 @@ def progress_lines(snap: JobSnapshot, line_text: str) -> tuple[Text, Text, Text]
 class ProgressPanel(Vertical):
     def compose(self) -> ComposeResult:
         yield Label(id="job-state")
-        yield ProgressBar(total=1000, show_eta=False, id="job-bar")
+        yield Label(id="job-bar")
         yield Label(id="job-stats")
+        yield Label(id="job-eta")
         yield Label(id="job-line")
 
-    def show(self, snap: JobSnapshot, line_text: str = "") -> None:
-        head, stats, cur = progress_lines(snap, line_text)
-        self.query_one("#job-state", Label).update(head)
-        self.query_one("#job-stats", Label).update(stats)
-        self.query_one("#job-line", Label).update(cur)
-        self.query_one("#job-bar", ProgressBar).update(
-            progress=round(1000 * progress_fraction(snap))
-        )
+    def show(
+        self,
+        snap: JobSnapshot,
+        line_text: str = "",
+        shown: JobState | None = None,
+        elapsed_s: float | None = None,
+    ) -> None:
+        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s)
+        show_text(self.query_one("#job-state", Label), head)
+        show_text(self.query_one("#job-stats", Label), stats)
+        show_text(self.query_one("#job-line", Label), cur)
+        bar = self.query_one("#job-bar", Label)
+        show_text(bar, bar_text(progress_fraction(snap), bar.size.width or 40, snap.state))
+
+    def show_times(
+        self,
+        snap: JobSnapshot,
+        elapsed_s: float | None,
+        eta: Eta | None,
+        now_wall: float,
+        shown: JobState | None = None,
+    ) -> None:
+        """What changes with the clock alone: elapsed and time left."""
+        _, stats, _ = progress_lines(snap, "", shown, elapsed_s)
+        show_text(self.query_one("#job-stats", Label), stats)
+        show_text(self.query_one("#job-eta", Label), eta_text(eta, now_wall, snap.state))

@@ -1,4 +1,5 @@
-"""Hotend and bed temperatures against their targets, with a history chart."""
+"""Hotend and bed temperatures against their targets, with a history chart; readings older
+than a few seconds are marked stale (the link may be gone)."""
 
 from __future__ import annotations
 
@@ -21,16 +22,26 @@ class TemperatureGraph(Widget):
         self._current: tuple[float | None, float | None] = (None, None)
         self._targets: tuple[float, float] = (0.0, 0.0)
         self._history: Sequence[tuple[float, float]] = ()
+        self._stale_s: float | None = None
 
     def show(
         self,
         current: tuple[float | None, float | None],
         targets: tuple[float, float],
         history: Sequence[tuple[float, float]],
+        stale_s: float | None = None,
     ) -> None:
-        """``history`` holds (hotend, bed) samples, oldest first."""
-        self._current, self._targets, self._history = current, targets, tuple(history)
+        """``history`` holds (hotend, bed) samples, oldest first; ``stale_s``: the age of the
+        readings when they are too old to trust (None: fresh)."""
+        args = (current, targets, tuple(history), stale_s)
+        if args == (self._current, self._targets, self._history, self._stale_s):
+            return
+        self._current, self._targets, self._history, self._stale_s = args
         self.refresh()
+
+    @property
+    def stale(self) -> bool:
+        return self._stale_s is not None
 
     def render(self) -> Text:
         width, height = self.size.width, self.size.height
@@ -38,8 +49,14 @@ class TemperatureGraph(Widget):
         out = Text(no_wrap=True, overflow="crop")
         for k, (name, colour) in enumerate(HEATERS):
             now, target = self._current[k], self._targets[k]
-            now_text = "  --.-" if now is None else f"{now:6.1f}"
-            out.append(f"{name:<6} {now_text} / {target:5.1f} °C", style=f"bold {colour}")
+            now_text = " --.-" if now is None else f"{now:5.1f}"
+            stale = self._stale_s is not None and now is not None
+            out.append(
+                f"{name:<6} {now_text}/{target:<3.0f} °C",
+                style="dim" if stale else f"bold {colour}",
+            )
+            if stale:
+                out.append(f" STALE {self._stale_s:.0f}s", style="bold reverse red")
             out.append("\n")
             series = [h[k] for h in self._history]
             hi = max([target * 1.1, 60.0, *series]) if series else max(target * 1.1, 60.0)

@@ -19,8 +19,14 @@ class TensionBars(Widget):
         self._tensions: tuple[float, float, float] | None = None
 
     def show(self, tensions: tuple[float, float, float] | None) -> None:
-        self._tensions = None if tensions is None else tuple(float(t) for t in tensions)
-        self.refresh()
+        shown = (
+            None
+            if tensions is None
+            else (float(tensions[0]), float(tensions[1]), float(tensions[2]))
+        )
+        if shown != self._tensions:
+            self._tensions = shown
+            self.refresh()
 
     def levels(self) -> tuple[str, ...]:
         if self._tensions is None:

@@ -5,10 +5,10 @@ from __future__ import annotations
 from textual.message import Message
 from textual.widgets import DataTable
 
-from cdprhost.tui.control.views import Violation
+from cdprhost.tui.control.views import ViolationRow
 
 
-class ViolationList(DataTable):
+class ViolationList(DataTable[str]):
     class Jump(Message):
         """The user wants to see G-code line ``line``."""
 
@@ -19,13 +19,16 @@ class ViolationList(DataTable):
     def __init__(self, *, id: str | None = None, classes: str | None = None):
         super().__init__(id=id, classes=classes, cursor_type="row", zebra_stripes=True)
         self._lines: list[int] = []
+        self.shown: tuple[ViolationRow, ...] | None = None
 
     def on_mount(self) -> None:
         self.add_column("line", key="line", width=7)
         self.add_column("rule", key="rule", width=15)
         self.add_column("detail", key="detail", width=90)
 
-    def show(self, violations: tuple[Violation, ...]) -> None:
+    def show(self, violations: tuple[ViolationRow, ...]) -> None:
+        self.shown = violations
+        self.set_class(not violations, "-empty")
         self.clear()
         self._lines = [v.line for v in violations]
         for i, v in enumerate(violations):

@@ -1,0 +1,204 @@
+"""CPU of the terminal UI while it prints at 1x, against the CLI printing the same file.
+
+Run: python bench/tui_cpu.py [--seconds 60] [--size 200x60] [--file PATH]
+
+Two ``cdprhost sim-device --speedup 1`` processes on pseudo-terminals stand in for the
+machine. The UI (``cdprhost tui --port PTY FILE``) runs in a pseudo-terminal of the given
+size, drawing as it would for an operator (its output is read and thrown away); the keys
+``s`` and ``y`` start the print. Its process CPU time (every thread: screen, job runner,
+link) is read from /proc over ``--seconds`` of printing, after the same time connected and
+idle, once the machine moves (``--warmup`` after the start: the fixture heats first). The
+baseline, measured in the same run: ``cdprhost print --port PTY FILE`` (the same
+job runner and link, no screen) over the same time. Reported: CPU as % of one core, and the
+UI's printing cost as a ratio of the CLI's.
+
+Target (issue 15): the UI process at <= 5 % of one core while printing at 1x.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import os
+import pty
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+FIXTURE = ROOT.parent / "shared" / "fixtures" / "part-prusaslicer.gcode"
+TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process (all its threads)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
+def main_thread_seconds(pid: int) -> float:
+    """CPU time of the process's main thread (the UI's event loop: screen and drawing)."""
+    fields = Path(f"/proc/{pid}/task/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICKS
+
+
+def sim_device() -> tuple[subprocess.Popen[str], str]:
+    dev = subprocess.Popen(
+        [sys.executable, "-m", "cdprhost", "sim-device", "--speedup", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    assert dev.stdout is not None
+    return dev, dev.stdout.readline().strip()
+
+
+class Terminal:
+    """A program in a pseudo-terminal of ``cols`` x ``rows``; its output is kept (last 1 MB)."""
+
+    def __init__(self, argv: list[str], cols: int, rows: int):
+        self.pid, self.fd = pty.fork()
+        if self.pid == 0:  # the child: the program
+            os.environ["TERM"] = "xterm-256color"
+            os.execvp(argv[0], argv)
+        fcntl.ioctl(self.fd, termios.TIOCSWINSZ, struct.pack("HHHH", rows, cols, 0, 0))
+        self.output = bytearray()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        while True:
+            try:
+                data = os.read(self.fd, 65536)
+            except OSError:
+                return
+            if not data:
+                return
+            self.output += data
+            del self.output[:-1_000_000]
+
+    def wait_for(self, text: str, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        needle = text.encode()
+        while needle not in self.output:
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the screen never showed {text!r}")
+            time.sleep(0.2)
+
+    def keys(self, *keys: str) -> None:
+        for k in keys:
+            os.write(self.fd, k.encode())
+            time.sleep(0.5)
+
+    def stop(self) -> None:
+        with_timeout_kill(self.pid)
+
+
+def with_timeout_kill(pid: int) -> None:
+    try:
+        os.kill(pid, signal.SIGTERM)
+        for _ in range(50):
+            if os.waitpid(pid, os.WNOHANG)[0]:
+                return
+            time.sleep(0.1)
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+    except (ProcessLookupError, ChildProcessError):
+        pass
+
+
+def measure(pid: int, seconds: float, windows: list[float] | None = None) -> float:
+    """% of one core over ``seconds``; ``windows`` collects it per 10 s."""
+    c0, t0 = cpu_seconds(pid), time.monotonic()
+    c, t = c0, t0
+    while time.monotonic() - t0 < seconds:
+        time.sleep(min(10.0, seconds - (time.monotonic() - t0)))
+        c1, t1 = cpu_seconds(pid), time.monotonic()
+        if windows is not None:
+            windows.append(100.0 * (c1 - c) / (t1 - t))
+        c, t = c1, t1
+    return 100.0 * (cpu_seconds(pid) - c0) / (time.monotonic() - t0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--size", default="200x60")
+    ap.add_argument("--file", type=Path, default=FIXTURE)
+    ap.add_argument(
+        "--warmup",
+        type=float,
+        default=75.0,
+        help="seconds after the start before measuring (the fixture heats first: at 1x about a minute)",
+    )
+    args = ap.parse_args()
+    cols, rows = (int(v) for v in args.size.split("x"))
+    cdprhost = [sys.executable, "-m", "cdprhost"]
+
+    dev, port = sim_device()
+    ui = Terminal([*cdprhost, "tui", "--port", port, str(args.file)], cols, rows)
+    try:
+        ui.wait_for("preflight ok", timeout=300)
+        time.sleep(3)
+        idle = measure(ui.pid, args.seconds / 2)
+        ui.keys("s", "y")
+        ui.wait_for("PRINTING", timeout=120)
+        time.sleep(args.warmup)  # past heating: the machine moves
+        windows: list[float] = []
+        main0 = main_thread_seconds(ui.pid)
+        mark = len(ui.output)
+        printing = measure(ui.pid, args.seconds, windows)
+        ui_loop = 100.0 * (main_thread_seconds(ui.pid) - main0) / args.seconds
+        for word in ("FAILED", "DONE", "CANCELLED"):  # it printed all along
+            if word.encode() in ui.output[mark:]:
+                raise SystemExit(f"the print ended while measuring ({word}): nothing measured")
+        ui.keys("\x11", "y")  # ctrl+q, yes: cancel and quit
+    finally:
+        ui.stop()
+        dev.terminate()
+        dev.wait()
+
+    dev, port = sim_device()
+    cli = subprocess.Popen(
+        [
+            *cdprhost,
+            "print",
+            str(args.file),
+            "--profile",
+            "paper-prototype",
+            "--port",
+            port,
+            "--log",
+            os.devnull,
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        time.sleep(15 + args.warmup)  # preflight, heating: the machine moves
+        baseline = measure(cli.pid, args.seconds)
+    finally:
+        cli.send_signal(signal.SIGTERM)
+        try:
+            cli.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            cli.kill()
+        dev.terminate()
+        dev.wait()
+
+    print(f"file {args.file.name}, terminal {cols}x{rows}, {args.seconds:g} s per measurement")
+    print(f"UI connected, idle:        {idle:5.1f} % of one core")
+    print(f"UI printing at 1x:         {printing:5.1f} % of one core (target <= 5 %)")
+    print("  per 10 s:                " + " ".join(f"{w:.1f}" for w in windows))
+    print(f"  of which the UI thread:  {ui_loop:5.1f} % (the rest: job runner and link threads)")
+    print(f"CLI printing at 1x (base): {baseline:5.1f} % of one core")
+    print(f"UI / CLI while printing:   {printing / baseline if baseline else float('nan'):5.2f}x")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,326 @@
+"""The controller's base: worker plumbing, the link, device operations and the console.
+
+Every blocking backend call runs in a Textual thread worker. Its result comes
+back through ``App.call_from_thread`` and is applied to the app's single
+:class:`~cdprhost.tui.state.UiState` in the UI thread; job events go through
+the :class:`~cdprhost.tui.control.pump.EventPump`. Nothing here draws.
+
+The controller (:mod:`.controller`) is one object in three parts: this module,
+:mod:`.print_flow` (files, print jobs, resume, history) and :mod:`.lab_flow` (calibration
+and diagnosis).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
+
+from cdprhost.tui.control.backend import EMBEDDED, Backend, JobHandle
+from cdprhost.tui.control.console import ConsoleError, parse_command
+from cdprhost.tui.control.jog import check_jog, jog_target
+from cdprhost.tui.control.live_console import status_lines, temperature_line
+from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView
+from cdprhost.tui.state import CONSOLE_LINES, ConnectionView, UiState
+
+if TYPE_CHECKING:  # pragma: no cover
+    from cdprhost.tui.app import CdprApp
+
+TEMPERATURE_HISTORY = 600
+JOB_HEALTH_EVERY_S = 5.0  # while a job runs its own events carry the link health
+
+
+class ControllerBase:
+    def __init__(self, app: CdprApp, backend: Backend):
+        self.app = app
+        self.backend = backend
+        self._job: JobHandle | None = None
+        self._job_lock = threading.Lock()
+        self._health_at = float("-inf")
+
+    # ------------------------------------------------------------ plumbing
+    @property
+    def state(self) -> UiState:
+        return self.app.state
+
+    def update(self, **changes: Any) -> None:
+        """Replace fields of the UI state (UI thread only)."""
+        self.app.state = replace(self.app.state, **changes)
+
+    def background(
+        self,
+        name: str,
+        work: Callable[[], Any],
+        done: Callable[[Any], None],
+        fail: Callable[[BaseException], None] | None = None,
+        *,
+        exclusive: bool = False,
+    ) -> None:
+        """Run ``work`` in a thread worker; ``done``/``fail`` then run in the UI thread."""
+        app = self.app
+
+        def body() -> None:
+            try:
+                result = work()
+            except BaseException as exc:  # noqa: BLE001 - every failure is shown, none kills the UI
+                app.call_later_safe(fail or self.report, exc)
+                return
+            app.call_later_safe(done, result)
+
+        app.run_worker(
+            body, name=name, group=name, thread=True, exclusive=exclusive, exit_on_error=False
+        )
+
+    def report(self, exc: BaseException) -> None:
+        self.app.notify(str(exc) or type(exc).__name__, title="error", severity="error", timeout=8)
+
+    def say(self, *lines: ConsoleLine) -> None:
+        """Add lines to the console (UI thread)."""
+        if lines:
+            self.update(console=(*self.state.console, *lines)[-CONSOLE_LINES:])
+
+    # ---------------------------------------------------------- connection
+    def connect(self, port: str, baud: int) -> None:
+        simulated = port == EMBEDDED
+        self.update(
+            connection=ConnectionView(
+                status="connecting", port=port, baud=baud, simulated=simulated
+            )
+        )
+
+        def done(identity: tuple[tuple[str, str], ...]) -> None:
+            self.update(
+                connection=ConnectionView(
+                    "connected",
+                    port,
+                    baud,
+                    tuple(identity),
+                    "",
+                    self.backend.link_health(),
+                    simulated,
+                )
+            )
+            where = "the embedded simulated device (no hardware)" if simulated else port
+            self.say(ConsoleLine("notice", f"connected to {where}", self.app.wall_clock()))
+            self.refresh_device()
+            self.connected_again()
+
+        def fail(exc: BaseException) -> None:
+            text = str(exc) or type(exc).__name__
+            self.update(connection=ConnectionView("error", port, baud, (), text, None, simulated))
+            self.say(
+                ConsoleLine("error", f"cannot connect to {port}: {text}", self.app.wall_clock())
+            )
+            self.report(exc)
+
+        self.background(
+            "connect", lambda: self.backend.connect(port, baud), done, fail, exclusive=True
+        )
+
+    def connected_again(self) -> None:
+        """Hook for the print flow: a new link (look for a resume point again)."""
+
+    def disconnect(self) -> None:
+        conn = self.state.connection
+
+        def done(_: Any) -> None:
+            self.update(
+                connection=ConnectionView("disconnected", conn.port, conn.baud),
+                device=None,
+                jog=None,
+            )
+
+        self.background("connect", self.backend.disconnect, done, exclusive=True)
+
+    def poll_health(self) -> None:
+        """Non-blocking: copy the link counters into the state when they changed. While a
+        job runs, its events carry them to the print screen: the copy (for the link screen)
+        is then made only every ``JOB_HEALTH_EVERY_S`` (each copy redraws the screen)."""
+        conn = self.state.connection
+        if conn.status != "connected":
+            return
+        now = self.app.clock()
+        if self.state.job_active and now - self._health_at < JOB_HEALTH_EVERY_S:
+            return
+        health = self.backend.link_health()
+        if health != conn.health:
+            self._health_at = now
+            self.update(connection=replace(conn, health=health))
+
+    def refresh_device(self) -> None:
+        if not self.state.connected or self.state.job_active or self.state.busy:
+            return
+
+        def done(status: Any) -> None:
+            self.say(*self.backend.device_log())
+            if status is not None and not self.state.job_active:
+                self.device_seen(status)
+
+        def fail(exc: BaseException) -> None:  # the link died (device reset, port gone): say so
+            conn = self.state.connection
+            self.say(*self.backend.device_log())
+            if conn.status == "connected" and not self.state.job_active:
+                text = str(exc) or type(exc).__name__
+                self.update(connection=replace(conn, status="error", error=text))
+                self.say(ConsoleLine("error", f"link lost: {text}", self.app.wall_clock()))
+
+        self.background("status", self.backend.device_status, done, fail, exclusive=True)
+
+    def recheck_link(self, then: Callable[[], None] | None = None) -> None:
+        """Ask the device for its status: the link is "connected" again when it answers (after
+        a job, an emergency stop, a cleared fault), "error" when it does not; ``then`` runs
+        either way."""
+        conn = self.state.connection
+        if conn.status not in ("connected", "error") or not self.backend.connected():
+            if then is not None:
+                then()
+            return
+
+        def done(status: Any) -> None:
+            self.update(connection=replace(self.state.connection, status="connected", error=""))
+            if status is not None:
+                self.device_seen(status)
+            if then is not None:
+                then()
+
+        def fail(exc: BaseException) -> None:
+            text = str(exc) or type(exc).__name__
+            if self.state.connection.status == "connected":
+                self.say(ConsoleLine("error", f"link lost: {text}", self.app.wall_clock()))
+            self.update(connection=replace(self.state.connection, status="error", error=text))
+            if then is not None:
+                then()
+
+        self.background("status", self.backend.device_status, done, fail, exclusive=True)
+
+    def device_seen(self, status: DeviceStatusView) -> None:
+        hist = self.state.device_temps
+        if status.hotend is not None and status.bed is not None:
+            hist = (*hist[-(TEMPERATURE_HISTORY - 1) :], (status.hotend, status.bed))
+        self.update(device=status, device_temps=hist, temps_at=self.app.clock())
+
+    # ------------------------------------------------------------------- jog
+    def preview_jog(self, axis: str, step_mm: float) -> None:
+        """Set the pending jog target from the last target (or the device position) and check it."""
+        base = self.state.jog.target if self.state.jog is not None else self._position()
+        if base is None:
+            self.app.notify("position unknown: connect and home first", severity="warning")
+            return
+        target = jog_target(base, axis, step_mm)
+        self.update(jog=check_jog(self.backend.model, self._position(), target))
+
+    def clear_jog(self) -> None:
+        self.update(jog=None)
+
+    def _position(self) -> tuple[float, float, float] | None:
+        dev = self.state.device
+        return None if dev is None else dev.position
+
+    def device_op(
+        self, label: str, work: Callable[[], Any], then: Callable[[], None] | None = None
+    ) -> None:
+        if self.state.busy or self.state.job_active or not self.state.connected:
+            return
+        self.update(busy=label)
+
+        def done(status: Any) -> None:
+            self.update(busy="", jog=None)
+            if status is not None:
+                self.device_seen(status)
+            if then is not None:
+                then()
+
+        def fail(exc: BaseException) -> None:
+            self.update(busy="")
+            self.say(ConsoleLine("error", f"{label}: {exc}", self.app.wall_clock()))
+            self.report(exc)
+
+        self.background("device", work, done, fail)
+
+    def jog_go(self) -> None:
+        check = self.state.jog
+        if check is None or not check.ok:
+            return
+        target = check.target
+        self.device_op(
+            f"moving to ({target[0]:.1f}, {target[1]:.1f}, {target[2]:.1f})",
+            lambda: self.backend.jog_to(target),
+        )
+
+    def home(self) -> None:
+        self.device_op("homing", self.backend.home)
+
+    def motors_off(self) -> None:
+        self.device_op("motors off", self.backend.motors_off)
+
+    def set_heaters(self, hotend_c: float, bed_c: float) -> None:
+        self.device_op("heaters", lambda: self.backend.set_heaters(hotend_c, bed_c))
+
+    # --------------------------------------------------------------- console
+    def console_send(self, text: str) -> None:
+        """Send one console line: answered from the running job's state while a print runs
+        (only what does not move), else carried out on the device."""
+        if not text.strip():
+            return
+        now = self.app.wall_clock()
+        if self.state.job_active:
+            self.say(ConsoleLine("sent", text.strip(), now), *self._answer_while_printing(text))
+            return
+        if self.state.connection.status not in ("connected", "error"):
+            self.say(
+                ConsoleLine("sent", text.strip(), now),
+                ConsoleLine("error", "not connected: connect on the link screen first", now),
+            )
+            return
+        if self.state.busy:
+            self.say(
+                ConsoleLine("sent", text.strip(), now),
+                ConsoleLine("error", f"busy ({self.state.busy}): try again when it is done", now),
+            )
+            return
+        self.update(busy=f"console: {text.strip()}")
+
+        def done(lines: list[ConsoleLine]) -> None:
+            self.update(busy="")
+            self.say(*lines)
+            self.recheck_link()
+
+        def fail(exc: BaseException) -> None:
+            self.update(busy="")
+            self.say(ConsoleLine("error", str(exc) or type(exc).__name__, self.app.wall_clock()))
+
+        self.background("device", lambda: self.backend.console(text), done, fail)
+
+    def emergency_stop(self) -> None:
+        """Stop now, bypassing the queue (also while a print runs: the job then fails)."""
+
+        def done(answered: Any) -> None:
+            text = "emergency stop: the device confirmed" if answered else "emergency stop sent"
+            self.say(ConsoleLine("notice", text, self.app.wall_clock()))
+
+        self.background("estop", self.backend.emergency_stop, done)
+
+    def _answer_while_printing(self, text: str) -> list[ConsoleLine]:
+        now = self.app.wall_clock()
+        try:
+            cmd = parse_command(text)
+        except ConsoleError as exc:
+            return [ConsoleLine("error", str(exc), now)]
+        job = self.state.job
+        if cmd.op == "temps" and job.temperatures is not None:
+            t = job.temperatures
+            view = DeviceStatusView(
+                hotend=t.hotend, bed=t.bed, hotend_target=t.hotend_target, bed_target=t.bed_target
+            )
+            return [ConsoleLine("reply", temperature_line(view), now)]
+        if cmd.op == "position":
+            view = DeviceStatusView(steps=job.steps, position=job.position)
+            bed = self.backend.profile.build_volume.bed_origin
+            return [ConsoleLine("reply", line, now) for line in status_lines(view, bed)]
+        if cmd.op == "estop":
+            self.emergency_stop()
+            return [ConsoleLine("reply", "emergency stop sent (bypasses the queue)", now)]
+        return [
+            ConsoleLine("error", "a print is running: only M105 and M114 are answered now", now)
+        ]

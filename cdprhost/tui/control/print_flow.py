@@ -1,0 +1,222 @@
+"""The print side of the controller: open a file, run a job, pause/cancel, resume a failed
+print (after checking the link), and remember files and finished jobs."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from cdprhost.job.resume import resume_question
+from cdprhost.job.state import JobSnapshot, JobState, StateChanged
+from cdprhost.tui.control.link_flow import ControllerBase
+from cdprhost.tui.control.views import ConsoleLine, JobRecord, ResumeView
+from cdprhost.tui.state import FileView
+from cdprhost.tui.tabs import screen_key
+
+
+def job_record(state: Any, ended: float) -> JobRecord:
+    """The history record of the job in ``state`` (a :class:`UiState`) as it ended."""
+    job = state.job
+    done = min(job.layer + 1, job.layers) if job.segments_done else 0
+    return JobRecord(
+        state.job_path,
+        job.state.value,
+        state.job_started,
+        ended,
+        done,
+        job.layers,
+        job.reason if job.state is not JobState.DONE else "",
+        state.job_resumed_from,
+    )
+
+
+class PrintFlow(ControllerBase):
+    # ------------------------------------------------------------------ files
+    def open_file(self, path: str) -> None:
+        path = str(Path(path).expanduser())
+        self.update(file=FileView(path=path, checking=True))
+        backend, recent = self.backend, self.app.recent_files
+
+        def work() -> tuple[Any, ResumeView | None, tuple[str, ...]]:
+            view = backend.preflight(path)
+            return view, backend.find_resume(path), recent.add(path)
+
+        def done(result: tuple[Any, ResumeView | None, tuple[str, ...]]) -> None:
+            view, resume, files = result
+            if self.state.file.path == path:
+                self.update(file=FileView(path=path, preflight=view, resume=resume), recent=files)
+            else:
+                self.update(recent=files)
+
+        def fail(exc: BaseException) -> None:
+            if self.state.file.path == path:
+                self.update(file=FileView(path=path, error=str(exc) or type(exc).__name__))
+
+        self.background("preflight", work, done, fail, exclusive=True)
+
+    def lookup_resume(self) -> None:
+        """Look for a resume point of the open file again (after a job, after a reconnect)."""
+        path = self.state.file.path
+        if not path or self.state.file.preflight is None:
+            return
+
+        def done(resume: ResumeView | None) -> None:
+            if self.state.file.path == path:
+                self.update(file=replace(self.state.file, resume=resume))
+
+        self.background(
+            "resume-lookup", lambda: self.backend.find_resume(path), done, lambda _: None
+        )
+
+    def connected_again(self) -> None:
+        self.lookup_resume()
+
+    # -------------------------------------------------------------------- jobs
+    def start(self, resume_from_layer: int | None = None, exact: ResumeView | None = None) -> None:
+        """Start the open file (``resume_from_layer``: 0-based layer to restart at; ``exact``:
+        continue at that saved resume point, ``print --resume``)."""
+        path = self.state.file.path
+        if not path or self.state.job_active:
+            return
+        job_id = self.state.job_id + 1
+        self.update(
+            job=JobSnapshot(),
+            job_id=job_id,
+            job_path=path,
+            job_started=self.app.wall_clock(),
+            job_resumed_from=exact.layer
+            if exact is not None
+            else None
+            if resume_from_layer is None
+            else resume_from_layer + 1,
+            job_request="",
+            rate_samples=(),
+            device=None,
+            jog=None,
+        )
+        what = "print"
+        if exact is not None:
+            what = f"resume at line {exact.last_line} (layer {exact.layer})"
+        elif resume_from_layer is not None:
+            what = f"resume at layer {resume_from_layer + 1}"
+        self.say(ConsoleLine("notice", f"{what}: {path}", self.app.wall_clock()))
+        sink = self.app.pump.sink(job_id)
+
+        def work() -> Any:
+            job = self.backend.make_job(path, sink, resume_from_layer, exact is not None)
+            with self._job_lock:
+                self._job = job
+            try:
+                return job.run()
+            finally:
+                with self._job_lock:
+                    self._job = None
+
+        def done(result: Any) -> None:
+            self.finished(job_id, None)
+
+        def fail(exc: BaseException) -> None:
+            if not self.state.job.state.finished:  # the runner died without saying so
+                sink(StateChanged(JobState.FAILED, str(exc) or type(exc).__name__))
+            self.finished(job_id, exc)
+
+        self.background("job", work, done, fail)
+
+    def finished(self, job_id: int, error: BaseException | None) -> None:
+        """The runner returned (or raised); its last events may still be in the pump."""
+        self.app.drain_events()
+        if job_id != self.state.job_id:
+            return
+        state = self.state
+        if error is not None:
+            self.app.notify(
+                str(error) or type(error).__name__, title="print", severity="error", timeout=10
+            )
+        elif state.job.state is JobState.DONE:
+            self.app.notify("print finished", title="print")
+        if state.job.state.finished and state.job_path:
+            record = job_record(state, self.app.wall_clock())
+            self.update(history=(record, *state.history))
+            history = self.app.job_history
+            self.background("history", lambda: history.append(record), lambda _: None)
+        self.probe_connection(after_cancel=state.job.state is JobState.CANCELLED)
+
+    def probe_connection(self, after_cancel: bool = False) -> None:
+        """After a job: is the link alive? (A job may have re-opened it, or lost it.) After a
+        cancel, do what the profile asks (park, heaters off)."""
+
+        def then() -> None:
+            self.lookup_resume()
+            if after_cancel and self.state.connected:
+                self.device_op("parking", self.backend.after_cancel)
+
+        self.recheck_link(then)
+
+    def _request(self, what: str) -> bool:
+        with self._job_lock:
+            job = self._job
+        if job is None:
+            return False
+        getattr(job, f"request_{what}")()
+        return True
+
+    def pause(self) -> None:
+        if self.state.job.state in (JobState.PRINTING, JobState.HEATING) and self._request("pause"):
+            self.update(job_request="pause")
+
+    def resume(self) -> None:
+        if self._request("resume"):
+            self.update(job_request="")
+
+    def cancel(self) -> None:
+        if self.state.job.state.active and self._request("cancel"):
+            self.update(job_request="cancel")
+
+    # ------------------------------------------------------------------ resume
+    def resume_failed(self) -> None:
+        """Resume the open file's failed print at its saved point (exact, like ``--resume``,
+        when it names a move; else at its layer), with the CLI's checks: the
+        resume point belongs to this file and is usable, the link answers, the operator
+        confirms that the part is on the bed and clear. Nothing starts when a check fails."""
+        path = self.state.file.path
+        if not path or self.state.job_active:
+            return
+        if not self.state.connected:
+            self.app.notify(
+                f"not connected: reconnect on {screen_key('connection')} first; nothing started",
+                severity="warning",
+            )
+            return
+        backend = self.backend
+
+        def work() -> ResumeView | None:
+            backend.device_status()  # raises when the link is dead
+            return backend.find_resume(path)
+
+        def done(resume: ResumeView | None) -> None:
+            self.update(file=replace(self.state.file, resume=resume))
+            if resume is None:
+                self.app.notify(f"no resume point saved for {Path(path).name}", severity="warning")
+                return
+            if resume.problem:
+                self.app.notify(f"cannot resume: {resume.problem}", severity="error", timeout=10)
+                return
+            question = resume.question or resume_question(Path(path).name, layer=resume.layer)
+            if resume.exact:  # print --resume: exactly where it stopped
+                self.app.confirm(question, lambda: self.start(exact=resume))
+            else:
+                self.app.confirm(question, lambda: self.start(resume_from_layer=resume.layer - 1))
+
+        def fail(exc: BaseException) -> None:
+            text = str(exc) or type(exc).__name__
+            conn = self.state.connection
+            self.update(connection=replace(conn, status="error", error=text))
+            self.app.notify(
+                f"the link does not answer ({text}): reconnect on {screen_key('connection')}; "
+                "nothing started, the resume point is kept",
+                severity="error",
+                timeout=10,
+            )
+
+        self.background("resume-check", work, done, fail, exclusive=True)
