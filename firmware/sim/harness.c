@@ -272,17 +272,28 @@ static void record_segment(void)
     segments_recorded++;
 }
 
+/* A marker pin's level changed (a compare output also carries AVR_IOPORT_OUTPUT, so
+ * only bit 0 counts); only toggles of a running firmware (its mailbox is known) count. */
+static int toggled(uint32_t value, uint32_t *level)
+{
+    value &= 1;
+    if (value == *level || !mailbox_addr)
+        return 0;
+    *level = value;
+    return 1;
+}
+
+static int trace_motion; /* CDPR_SIM_TRACE_MOTION, read once at start */
+
 /* MARK_EDGE toggled: the firmware left what it means in the mailbox. */
 static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
-    (void)irq; (void)param;
     static uint32_t level;
-    if (value == level || !mailbox_addr)
-        return; /* only toggles of a running firmware */
-    level = value;
+    (void)irq; (void)param;
+    if (!toggled(value, &level))
+        return;
     uint8_t edge = avr->data[mailbox_addr + 48];
-    if (getenv("CDPR_SIM_TRACE_MOTION"))
+    if (trace_motion)
         fprintf(stderr, "edge %x at %llu\n", edge, (unsigned long long)avr->cycle);
     if ((edge & EDGE_MOTION_START) && !motion_level) {
         motion_since = avr->cycle;
@@ -298,24 +309,18 @@ static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 
 static void abort_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
-    (void)irq; (void)param;
     static uint32_t level;
-    if (value == level || !mailbox_addr)
-        return; /* only toggles of a running firmware */
-    level = value;
+    (void)irq; (void)param;
+    if (!toggled(value, &level))
+        return;
     abort_next = 1;
 }
 
 static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
-    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
-    (void)irq; (void)param;
     static uint32_t level;
-    if (value == level || !mailbox_addr)
-        return; /* only toggles of a running firmware */
-    level = value;
-    if (!mailbox_addr)
+    (void)irq; (void)param;
+    if (!toggled(value, &level))
         return;
     for (int k = 0; k < 4; k++)
         offset[k] = (int64_t)(int32_t)mailbox_u32(8 + 4 * k) - phys[k];
@@ -577,6 +582,7 @@ int main(int argc, char **argv)
     avr->frequency = F_CPU;
     avr->vcc = avr->avcc = avr->aref = 5000;
     avr->log = getenv("CDPR_SIM_DEBUG") ? LOG_TRACE : LOG_ERROR;
+    trace_motion = getenv("CDPR_SIM_TRACE_MOTION") != NULL;
     fflush(stdout);
     dup2(saved_stdout, 1);
     close(saved_stdout);

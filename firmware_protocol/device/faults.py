@@ -10,6 +10,7 @@ device resets / stops answering after N executed segments), ``heater_fail_after`
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, fields
 from typing import Any
@@ -59,6 +60,8 @@ class FaultSpec:
                 )
             except ValueError:
                 raise FaultSpecError(f"{key}: '{raw}' is not a number") from None
+            if not math.isfinite(value):
+                raise FaultSpecError(f"{key} must be a finite number, not '{raw}'")
             if key in ("corrupt", "drop", "dup") and not 0.0 <= value <= 1.0:
                 raise FaultSpecError(f"{key}: probability {raw} is outside [0, 1]")
             if value < 0:

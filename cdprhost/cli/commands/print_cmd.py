@@ -150,10 +150,8 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     log_path = Path(args.log) if args.log else log_path_for(gcode)
-    if args.sim_faults is not None:
-        if args.port:
-            raise InputError("--sim-faults: only for the embedded device (without --port)")
-        _check_faults(args.sim_faults)
+    if args.sim_faults is not None and args.port:
+        raise InputError("--sim-faults: only for the embedded device (without --port)")
     options = PrintOptions(
         setup=setup_from_args(args), resume_from_layer=layer, resume=point, log_path=log_path
     )
@@ -202,23 +200,6 @@ def run(args: argparse.Namespace) -> int:
     if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
         return 2
     return int(result.exit_code)
-
-
-def _check_faults(spec: str) -> None:
-    """A bad ``--sim-faults`` SPEC is bad input (exit 2), named, before anything starts."""
-    import dataclasses
-    import math
-
-    from firmware_protocol.device.faults import FaultSpec, FaultSpecError
-
-    try:
-        parsed = FaultSpec.parse(spec)
-    except FaultSpecError as exc:
-        raise InputError(f"--sim-faults {spec!r}: {exc}") from None
-    for f in dataclasses.fields(parsed):
-        value = getattr(parsed, f.name)
-        if isinstance(value, float) and not math.isfinite(value):
-            raise InputError(f"--sim-faults {spec!r}: {f.name} must be a finite number")
 
 
 def _ask_after_pause(job: Any, reason: str) -> None:
