@@ -186,11 +186,8 @@ def report(t: Trial) -> None:
     )
 
 
-def idle_link_cpu(seconds: float) -> float:
-    """The baseline of (4): host CPU per second of a link connected to a 1x device and
-    left idle (its keep-alive thread only), over ``seconds`` in this process."""
-    from cdprhost.link import open_link
-
+def real_time_device() -> tuple[subprocess.Popen[str], str]:
+    """A ``sim-device`` at 1x in its own process, and the pty it prints."""
     dev = subprocess.Popen(
         [sys.executable, "-m", "cdprhost", "sim-device", "--speedup", "1"],
         stdout=subprocess.PIPE,
@@ -198,7 +195,16 @@ def idle_link_cpu(seconds: float) -> float:
         text=True,
     )
     assert dev.stdout is not None
-    link = open_link(dev.stdout.readline().strip())
+    return dev, dev.stdout.readline().strip()
+
+
+def idle_link_cpu(seconds: float) -> float:
+    """The baseline of (4): host CPU per second of a link connected to a 1x device and
+    left idle (its keep-alive thread only), over ``seconds`` in this process."""
+    from cdprhost.link import open_link
+
+    dev, port = real_time_device()
+    link = open_link(port)
     try:
         c0, w0 = time.process_time(), time.monotonic()
         time.sleep(seconds)
@@ -218,14 +224,7 @@ def host_cpu_at_1x(gcode: Path, seconds: float) -> tuple[float, float]:
     from cdprhost.link import open_link
     from cdprhost.profile import load_profile
 
-    dev = subprocess.Popen(
-        [sys.executable, "-m", "cdprhost", "sim-device", "--speedup", "1"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
-    assert dev.stdout is not None
-    port = dev.stdout.readline().strip()
+    dev, port = real_time_device()
     moving = threading.Event()
 
     def on_event(e):

@@ -8,6 +8,7 @@ from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.device_limits import STEP_RATE_MARGIN, caps_for_device
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.pipeline import segment_program
+from cdprhost.motion.program import read_items
 from cdprhost.profile import load_profile
 from firmware_protocol.segments import peak_step_rates
 from tests.e2e.processes import square_part
@@ -34,7 +35,6 @@ def test_planned_segments_stay_under_the_announced_rate(tmp_path):
     profile = load_profile("paper-prototype")
     model = MachineModel.from_profile(profile)
     path = square_part(tmp_path / "part.gcode", layers=2)
-    from cdprhost.motion.program import read_items
 
     def peak(p):
         out = [
