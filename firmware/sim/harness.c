@@ -519,17 +519,18 @@ static void write_stats(void)
     unsigned stalls = mailbox_addr ? (avr->data[mailbox_addr + 38] | avr->data[mailbox_addr + 39] << 8) : 0;
     unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
     unsigned latency = mailbox_addr ? avr->data[mailbox_addr + 47] : 0;
+    unsigned late = mailbox_addr ? (avr->data[mailbox_addr + 49] | avr->data[mailbox_addr + 50] << 8) : 0;
     fprintf(f,
             "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
-            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
+            "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
             "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
-            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, latency,
+            min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, late, latency,
             loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
             step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0);

@@ -23,6 +23,7 @@ struct sim_mailbox {
     uint8_t link_valid;
     uint8_t latency_max;
     uint8_t edge; /* what the next MARK_EDGE toggle means: EDGE_* */
+    uint16_t late_pulses; /* step pulses issued after their tick ended (never lost) */
 };
 extern volatile struct sim_mailbox sim_mailbox;
 

@@ -139,6 +139,7 @@ int main(void)
         sim_mailbox.lost_steps = stepper_lost_steps;
         sim_mailbox.plan_stalls = stepper_plan_stalls;
         sim_mailbox.overruns = stepper_overruns;
+        sim_mailbox.late_pulses = stepper_late_pulses;
         sim_mailbox.latency_max = stepper_latency_max;
         sim_mailbox.last_error = mc.last_error;
     }

@@ -31,7 +31,7 @@ volatile struct stepper_report stepper_report;
 volatile uint8_t stepper_start_ok, stepper_wait_ok;
 volatile uint8_t heater_duty[2], fan_duty;
 volatile uint16_t stepper_isr_max_cycles;
-volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns;
+volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns, stepper_late_pulses;
 volatile uint8_t stepper_latency_max;
 
 #define OUT_MOTION 0x01
@@ -765,10 +765,32 @@ ISR(TIMER1_COMPB_vect, ISR_NAKED)
 static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
 static uint8_t edge_armed; /* OCR1C set to toggle MARK_EDGE at the next boundary */
 
+/* Phases of the tick that just ended that compare B has not issued yet (the tick
+ * started so late that its phases ran past its end): issued now, before the new
+ * tick's, 2 us high and 2 us low each, so no step is lost; each is counted late.
+ * With interrupts off. */
+static void __attribute__((noinline)) flush_phases(void)
+{
+    for (uint8_t k = (uint8_t)(phase + 1); k < emit->phases; k++) {
+        uint8_t m = emit->m[k];
+        if (!m)
+            continue;
+        pulse_on(m);
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        pulse_off();
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        stepper_late_pulses++;
+    }
+    TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+    TIFR1 = _BV(OCF1B);
+}
+
 /* The start of a tick: markers, this tick's length, directions, first pulses. */
 static void __attribute__((noinline)) tick_start(void)
 {
     uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
+    if (TIMSK1 & _BV(OCIE1B))
+        flush_phases(); /* compare B disables itself after a tick's last phase */
     struct out *e = nx;
     nx = emit;
     emit = e;

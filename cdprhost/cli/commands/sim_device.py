@@ -6,7 +6,7 @@ import argparse
 import signal
 import sys
 
-from cdprhost.cli.numbers import bounded_float
+from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.errors import InputError
 from cdprhost.sim.virtual_mocap import make_observer
 from firmware_protocol.device.config import MAX_SPEEDUP, SimConfig
@@ -44,6 +44,14 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         default="python",
         help="python: the device model; avr: the C firmware's ELF in simavr",
     )
+    p.add_argument(
+        "--max-step-rate",
+        type=bounded_int(1, 10_000_000),
+        default=None,
+        metavar="N",
+        help="steps/s per axis the Python device announces and enforces (default "
+        f"{SimConfig.max_step_rate}); the AVR firmware announces its own",
+    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -60,6 +68,11 @@ def run(args: argparse.Namespace) -> int:
             f"{given} needs {missing} as well (the virtual mocap needs both)", source=given
         )
     if args.firmware == "avr":
+        if args.max_step_rate is not None:
+            raise InputError(
+                "the AVR firmware announces its own rate (MAX_STEP_RATE, firmware/src/config.h)",
+                source="--max-step-rate",
+            )
         from cdprhost.sim.avr_device import run as run_avr
 
         return run_avr(args, faults)
@@ -70,7 +83,10 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         device = SimDevice(
-            SimConfig(speedup=args.speedup),
+            SimConfig(
+                speedup=args.speedup,
+                max_step_rate=args.max_step_rate or SimConfig.max_step_rate,
+            ),
             faults,
             observer,
             record_path=args.record,
