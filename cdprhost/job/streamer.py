@@ -273,6 +273,14 @@ class Streamer:
         for ev in link.poll(0.0):
             if isinstance(ev, DeviceErrorEvent):
                 raise LinkError(f"device error {ev.text}")
+        if link.progress.fault:
+            # faulted without an error report reaching us: a faulted device discards what
+            # it is sent, so streaming on would never end
+            p = link.progress
+            raise LinkError(
+                f"the device stopped after segment {p.segments_done} of {link.segments_sent}: "
+                "it reports a fault (its error report did not arrive)"
+            )
         now = time.monotonic()
         if force_status:
             self._on_status(link.request_status())
