@@ -13,11 +13,13 @@ import numpy as np
 
 from cdprhost.errors import CdprError
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.link.errors import LinkError
 from cdprhost.link.events import DeviceStatus
 from cdprhost.link.host_link import HostLink
 from cdprhost.machine.commands import enable_all, heater_messages, home_commands, motors_off
 from cdprhost.motion.direct import direct_path, state_at_steps
 from cdprhost.profile.models import MachineProfile
+from firmware_protocol.codes import ErrorCode
 
 ALL_MODULES = 0b111
 HOMING_TIMEOUT_S = 180.0
@@ -26,6 +28,13 @@ COMMAND_TIMEOUT_S = 10.0
 
 class NotHomed(CdprError):
     """A move was asked of modules whose position is unknown."""
+
+
+def _error_name(code: int) -> str:
+    try:
+        return f"{ErrorCode(code).name} reported" if code else "it reports a fault"
+    except ValueError:
+        return f"error code {code} reported"
 
 
 @dataclass(frozen=True)
@@ -137,6 +146,12 @@ class Machine:
         if self.settle_s > 0:
             self.link.poll(self.settle_s)  # let it come to rest
         after = self.status()
+        if after.faulted:
+            # a device that faulted mid-move is idle too: the move did not happen as asked
+            raise LinkError(
+                f"the device stopped during the move (after segment {after.segments_done}): "
+                f"{_error_name(after.last_error)}"
+            )
         return MoveResult(np.asarray(after.steps[:3], dtype=np.int64), float(self.link.now()))
 
     def move_to(
