@@ -82,7 +82,11 @@ def render_text(report: PreflightReport, *, max_rows: int = 20) -> str:
             if report.cancelled_objects
             else ""
         )
-        lines.append(f"objects: {', '.join(report.objects)}{cancelled}")
+        labels = report.object_labels
+        named = [f'{o} "{labels[o]}"' if labels.get(o) else o for o in report.objects]
+        lines.append(
+            f"objects ({len(named)}; --cancel-object NAME skips one): {', '.join(named)}{cancelled}"
+        )
     if report.notes:
         notes = ", ".join(f"{n.word} x{n.count} (first at line {n.line})" for n in report.notes)
         lines.append(f"skipped harmless commands: {notes}")

@@ -102,6 +102,7 @@ class PreflightReport(BaseModel):
     warnings_total: int = 0
     strict: bool = False
     objects: list[str] = Field(default_factory=list)
+    object_labels: dict[str, str] = Field(default_factory=dict)  # name -> the file's label
     cancelled_objects: list[str] = Field(default_factory=list)
     moves: int
     layers: int

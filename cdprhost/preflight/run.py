@@ -83,7 +83,7 @@ class Preflight:
         self.notes = NoteLog()
         self.warnings = WarningLog()
         self.summary = ProgramSummary()
-        self.objects: dict[str, None] = {}
+        self.objects: dict[str, str] = {}  # name -> label (M486 A, Klipper NAME)
         self.extent = PartExtent()
         self.cold_allowed = False
         self.motion_box = BoxAccumulator()
@@ -130,8 +130,11 @@ class Preflight:
                     self.cold_allowed = allow
                 if min_temp is not None:
                     self.limits = replace(self.limits, min_extrude_temp_c=min_temp)
-            case ObjectDefine(name=name) | ObjectStart(name=name):
-                self.objects.setdefault(name, None)
+            case ObjectDefine(name=name, label=label):
+                if label or name not in self.objects:
+                    self.objects[name] = label
+            case ObjectStart(name=name):
+                self.objects.setdefault(name, "")
             case LayerChange(index=index):
                 self.layers = max(self.layers, index + 1)
             case _:
@@ -217,6 +220,7 @@ class Preflight:
             warnings_total=self.warnings.total,
             strict=self.strict,
             objects=list(self.objects),
+            object_labels={k: v for k, v in self.objects.items() if v},
             moves=self.summary.moves,
             layers=self.layers,
             filament_mm=round(self.summary.filament_mm, 4),

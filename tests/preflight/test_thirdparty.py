@@ -9,6 +9,7 @@ import pytest
 
 from cdprhost.motion.prepared import Setup
 from cdprhost.preflight import preflight
+from cdprhost.preflight.render import render_text
 
 DATA = Path(__file__).resolve().parents[1] / "gcode" / "data" / "thirdparty"
 FILES = sorted(DATA.glob("*.gcode"))
@@ -85,6 +86,10 @@ def test_cancelling_an_object_removes_its_filament(proto_profile):
     path = DATA / "prusaslicer25_ender3_two_objects_m486.gcode"
     full = preflight(path, proto_profile, setup=Setup(retarget=True))
     assert full.objects == ["0", "1"]
+    assert full.object_labels == {"0": "cube_small_stl", "1": "tube_stl"}  # shown by check
+    assert 'objects (2; --cancel-object NAME skips one): 0 "cube_small_stl", 1 "tube_stl"' in (
+        render_text(full)
+    )
     less = preflight(path, proto_profile, setup=Setup(retarget=True, cancel_objects=("1",)))
     by_label = preflight(
         path, proto_profile, setup=Setup(retarget=True, cancel_objects=("tube_stl",))
