@@ -31,7 +31,7 @@ from cdprhost.gcode.items import (
     WaitMoves,
 )
 from cdprhost.gcode.reader import read_program
-from cdprhost.gcode.settings import FirmwareRetraction, Park
+from cdprhost.gcode.settings import FirmwareRetraction, ParkPoint
 from cdprhost.gcode.summary import ProgramSummary
 
 __all__ = [
@@ -54,7 +54,7 @@ __all__ = [
     "ObjectDefine",
     "ObjectEnd",
     "ObjectStart",
-    "Park",
+    "ParkPoint",
     "ProgramItem",
     "ProgramSummary",
     "SetMotionLimits",

@@ -33,7 +33,7 @@ from cdprhost.gcode.items import (
     ProgramItem,
 )
 from cdprhost.gcode.line_parser import TEXT_COMMANDS, ParsedLine, find_column, parse_line
-from cdprhost.gcode.settings import FirmwareRetraction, Park
+from cdprhost.gcode.settings import FirmwareRetraction, ParkPoint
 from cdprhost.gcode.source import BLOCK_BYTES, BLOCK_LINES, Block, iter_blocks, source_name
 from cdprhost.gcode.state import ModalState
 from cdprhost.gcode.tokenize import Tokens, tokenize
@@ -49,7 +49,7 @@ def read_program(
     home_position: tuple[float, float, float] = (0.0, 0.0, 0.0),
     placement: tuple[float, float] = (0.0, 0.0),
     retraction: FirmwareRetraction | None = None,
-    park: Park | None = None,
+    park: ParkPoint | None = None,
     filament_diameter_mm: float = 1.75,
     mute: tuple[tuple[int, int], ...] = (),
     start_position: tuple[float, float, float] | None = None,

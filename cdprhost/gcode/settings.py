@@ -1,7 +1,7 @@
 """Machine settings the reader needs to execute a few commands (pure values).
 
 ``FirmwareRetraction``: what G10/G11 do (M207/M208 and Klipper's SET_RETRACTION
-change it while reading). ``Park``: where M600 parks the effector while the
+change it while reading). ``ParkPoint``: where M600 parks the effector while the
 operator changes the filament. Both in the G-code frame; the caller takes them
 from the machine profile (``cdprhost.motion.program.reader_settings``).
 """
@@ -22,7 +22,7 @@ class FirmwareRetraction:
 
 
 @dataclass(frozen=True, slots=True)
-class Park:
+class ParkPoint:
     """M600: retract ``retract_mm``, lift ``lift_mm`` (up to ``z_max``), travel to ``xy``.
 
     ``xy`` and ``z_max`` in the G-code frame; ``speed_mm_s`` for the park travel.

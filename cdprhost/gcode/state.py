@@ -8,7 +8,7 @@ import numpy as np
 
 from cdprhost.gcode.annotations import LayerStyle
 from cdprhost.gcode.items import LayerChange
-from cdprhost.gcode.settings import FirmwareRetraction, Park
+from cdprhost.gcode.settings import FirmwareRetraction, ParkPoint
 
 DEFAULT_FEEDRATE_MM_S = 25.0  # Marlin's start-up feedrate (1500 mm/min)
 
@@ -28,7 +28,7 @@ class ModalState:
     home: np.ndarray
     placement: np.ndarray = field(default_factory=lambda: np.zeros(2))
     retraction: FirmwareRetraction = field(default_factory=FirmwareRetraction)
-    park: Park | None = None
+    park: ParkPoint | None = None
     pos: np.ndarray = field(init=False)
     off: np.ndarray = field(init=False)
     e_machine: float = 0.0

@@ -32,7 +32,7 @@ from cdprhost.gcode.items import (
     SetTemperature,
     WaitMoves,
 )
-from cdprhost.gcode.settings import FirmwareRetraction, Park
+from cdprhost.gcode.settings import FirmwareRetraction, ParkPoint
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.file_limits import FileLimits, apply_file_limits
 from cdprhost.motion.limits import Caps
@@ -201,7 +201,7 @@ def reader_settings(profile: MachineProfile, model: MachineModel) -> dict[str, A
         "retraction": FirmwareRetraction(
             ex.retract_mm, ex.retract_speed_mm_s, ex.unretract_extra_mm, ex.unretract_speed_mm_s
         ),
-        "park": Park(
+        "park": ParkPoint(
             xy=(gc.park_xy_mm[0] - float(origin[0]), gc.park_xy_mm[1] - float(origin[1])),
             z_max=profile.build_volume.z_max_mm - float(origin[2]),
             lift_mm=gc.park_lift_mm,

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from firmware_protocol.device import queue_items as m
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
-from firmware_protocol.device.machine import Machine, Observer
+from firmware_protocol.device.machine import DeviceMachine, Observer
 from firmware_protocol.device.queue_items import BadValue, item_of
 from firmware_protocol.device.record import SegmentRecord
 from firmware_protocol.endpoint import Endpoint
@@ -94,7 +94,7 @@ class SimDevice:
         cfg = self.config
         self.cause = int(cause)
         self.boot_id = (cfg.seed * 2654435761 + self.boots * 40503 + 0x5EED) & U32
-        self.machine = Machine(
+        self.machine = DeviceMachine(
             cfg, self.record, boot=self.boots, physical=physical, observer=self.observer
         )
         if self.faults.reset_after and not self._reset_done:

@@ -66,7 +66,7 @@ class Observer(Protocol):
     def on_settled(self, steps: tuple[int, ...], t: float, /) -> object: ...
 
 
-class Machine:
+class DeviceMachine:
     def __init__(
         self,
         cfg: SimConfig,

@@ -17,7 +17,7 @@ from cdprhost.gcode import (
     ObjectDefine,
     ObjectEnd,
     ObjectStart,
-    Park,
+    ParkPoint,
     ProgramSummary,
     SpeedFactor,
     UnknownCommand,
@@ -153,7 +153,7 @@ def test_firmware_retraction_uses_the_settings_and_m207():
 
 
 def test_filament_change_parks_and_comes_back():
-    park = Park(xy=(0.0, -40.0), z_max=50.0, lift_mm=10.0, retract_mm=2.0, speed_mm_s=50.0)
+    park = ParkPoint(xy=(0.0, -40.0), z_max=50.0, lift_mm=10.0, retract_mm=2.0, speed_mm_s=50.0)
     items = [
         i
         for i in read("G1 X10 Y10 Z45 E1 F600\nM600\nG1 X11 E2\n", park=park)

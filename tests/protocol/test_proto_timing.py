@@ -12,7 +12,7 @@ from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.harness import VirtualBench
-from firmware_protocol.device.machine import Machine
+from firmware_protocol.device.machine import DeviceMachine
 from firmware_protocol.device.queue_items import SEG, make_item
 from firmware_protocol.device.record import SegmentRecord, read_record
 from firmware_protocol.messages import ErrorCode, Flag, SetHeater
@@ -24,8 +24,8 @@ def seg(n: int, T: float, ticks: int = 10_000, ramp: int = RAMP_CONSTANT, d: int
     return make_item(SEG, n, T, seg=n, ticks=ticks, deltas=(d, 0, 0, 0), ramp=ramp)
 
 
-def machine(**cfg) -> Machine:
-    m = Machine(SimConfig(**cfg), SegmentRecord())
+def machine(**cfg) -> DeviceMachine:
+    m = DeviceMachine(SimConfig(**cfg), SegmentRecord())
     m.start_ticks = 50_000  # 0.5 s
     return m
 
