@@ -1,10 +1,11 @@
-"""`cdprhost tui [FILE.gcode] [--profile P] [--port DEV]`: the terminal UI."""
+"""`cdprhost tui [FILE.gcode] [--profile P] [--port DEV] [--center ...]`: the terminal UI."""
 
 from __future__ import annotations
 
 import argparse
 import os
 
+from cdprhost.cli.options import add_placement_arguments, setup_from_args
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
 
@@ -41,6 +42,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="DIR",
         help="embedded device only: folder where the virtual motion capture writes its takes",
     )
+    add_placement_arguments(parser, strict=False)
     parser.set_defaults(func=run)
 
 
@@ -65,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         speedup=args.speedup,
         sim_options={"observer": observer} if observer else None,
         idle_pump_s=0.8 * status_interval_s,
+        setup=setup_from_args(args),
     )
     if args.gcode is not None and not os.path.isfile(args.gcode):
         raise InputError("G-code file not found", source=args.gcode)

@@ -89,7 +89,10 @@ class Backend(Protocol):
         """Non-blocking: what the device said since the last call (errors, resets)."""
 
     def preflight(self, path: str) -> PreflightView:
-        """Blocking: check the file; the view carries its toolpath for the preview."""
+        """Blocking: check the file (placed as set); the view carries its toolpath."""
+
+    def toggle_center(self) -> bool:
+        """Centre files on the build volume (``--center``) or stop; True: centred now."""
 
     def find_resume(self, path: str) -> ResumeView | None:
         """Blocking (short): the resume point saved for this file (same content), if any."""

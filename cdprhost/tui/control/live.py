@@ -72,7 +72,25 @@ def preflight_view(report: Any, path: str, toolpath: Any = None) -> PreflightVie
         float(report.filament_mm),
         notes,
         toolpath,
+        placement_note(report),
     )
+
+
+def placement_note(report: Any) -> str:
+    """One short line: the shift applied and, for a part that does not fit, the offset
+    that would (the CLI's report says more)."""
+    p = report.placement
+    if p is None:
+        return ""
+    out = []
+    if tuple(p.offset) != (0.0, 0.0):
+        out.append(f"shifted by X {p.offset[0]:+.2f}, Y {p.offset[1]:+.2f} mm")
+    if not report.ok and p.allowed is not None:
+        fit = p.fit_offset
+        out.append(
+            f"fits with --offset {fit[0]:g},{fit[1]:g}" if fit is not None else "fits nowhere"
+        )
+    return " · ".join(out)
 
 
 class LiveBackend:
@@ -87,7 +105,10 @@ class LiveBackend:
         diagnosis_settings: Any = None,
         job_options: dict[str, Any] | None = None,
         idle_pump_s: float = 0.0,
+        setup: Any = None,
     ):
+        from cdprhost.motion.prepared import Setup
+
         self.profile = load_profile(profile) if isinstance(profile, str) else profile
         self.profile_name = self.profile.name
         self.model = MachineModel.from_profile(self.profile)
@@ -96,6 +117,7 @@ class LiveBackend:
         self.diagnosis_settings = diagnosis_settings
         self.job_options = dict(job_options or {})
         self.idle_pump_s = idle_pump_s
+        self.setup: Setup = setup or Setup()  # placement, --retarget, cancelled objects
         self._link: Any = None
         self._embedded = False
         self._where: tuple[str, int] | None = None
@@ -215,15 +237,23 @@ class LiveBackend:
 
     # --------------------------------------------------------------- print
     def preflight(self, path: str) -> PreflightView:
-        from cdprhost.motion.program import read_items
-        from cdprhost.preflight.run import preflight_items
+        from cdprhost.motion.prepared import prepare
+        from cdprhost.preflight.run import preflight_prepared
         from cdprhost.tui.control.toolpath import ToolpathTap
 
         bed = self.profile.build_volume.bed_origin
         tap = ToolpathTap((float(bed[0]), float(bed[1]), float(bed[2])))
-        items = tap.tap(read_items(path, self.profile, self.model))
-        report = preflight_items(items, self.profile, self.model, source=path)
+        prepared = prepare(path, self.profile, self.model, self.setup)
+        report = preflight_prepared(prepared, tap.tap(prepared.items()))
         return preflight_view(report, path, tap.result())
+
+    def toggle_center(self) -> bool:
+        """Centre the part on the build volume (``--center``), or stop centring; returns
+        whether it is centred now. The open file must be checked again."""
+        from dataclasses import replace
+
+        self.setup = replace(self.setup, center=not self.setup.center)
+        return self.setup.center
 
     def find_resume(self, path: str) -> ResumeView | None:
         """The resume point the print job saved for ``path`` (same path and content), as the
@@ -282,7 +312,7 @@ class LiveBackend:
                     f"{path}: no resume point for this file (it completed, or it changed since)"
                 )
         options = PrintOptions(
-            resume_from_layer=resume_from_layer, resume=point, **self.job_options
+            resume_from_layer=resume_from_layer, resume=point, setup=self.setup, **self.job_options
         )
         return PrintJob(path, self.profile, self._job_link, options, on_event)
 

@@ -55,6 +55,15 @@ class PrintFlow(ControllerBase):
 
         self.background("preflight", work, done, fail, exclusive=True)
 
+    def toggle_center(self) -> None:
+        """Centre the open file's part on the build volume (or stop) and check it again."""
+        path = self.state.file.path
+        if not path or self.state.job_active:
+            return
+        centred = self.backend.toggle_center()
+        self.app.notify("part centred on the build volume" if centred else "part as sliced")
+        self.open_file(path)
+
     def lookup_resume(self) -> None:
         """Look for a resume point of the open file again (after a job, after a reconnect)."""
         path = self.state.file.path

@@ -81,6 +81,7 @@ class PreflightView:
     filament_mm: float = 0.0
     notes: tuple[str, ...] = ()
     toolpath: Toolpath | None = None
+    placement: str = ""  # the shift applied and, for a part that does not fit, the advice
 
 
 @dataclass(frozen=True)

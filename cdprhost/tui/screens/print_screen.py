@@ -38,7 +38,9 @@ from cdprhost.tui.widgets.tension_bars import TensionBars
 from cdprhost.tui.widgets.violation_list import ViolationList
 
 
-def preflight_summary(state: UiState, open_key: str = "o Open") -> Text:
+def preflight_summary(
+    state: UiState, open_key: str = "o Open", center_key: str = "c Center part"
+) -> Text:
     """One line about the open file's preflight (pure)."""
     f = state.file
     if not f.path:
@@ -59,6 +61,8 @@ def preflight_summary(state: UiState, open_key: str = "o Open") -> Text:
             f"{len(p.violations)} violation{'s' * (len(p.violations) != 1)} (first at line {first})",
             style="bold red",
         )
+        if p.placement:  # where the part would fit, and the key that centres it
+            out.append(f" · {p.placement}: {center_key}", style="yellow")
     out.append(
         f" · {p.moves} moves · {p.layers} layers · machine time {hms(p.estimated_time_s)}"
         f" · {p.filament_mm:.0f} mm filament",
@@ -69,6 +73,8 @@ def preflight_summary(state: UiState, open_key: str = "o Open") -> Text:
             f" · {len(p.notes)} note{'s' * (len(p.notes) != 1)} (harmless commands skipped)",
             style="dim",
         )
+    if p.placement and p.ok:
+        out.append(f" · {p.placement} ({center_key} puts it back)", style="dim")
     return out
 
 
@@ -126,6 +132,13 @@ class PrintScreen(AppScreen):
         Binding("left_square_bracket", "layer(-1)", "Layer down", show=False),
         Binding("right_square_bracket", "layer(1)", "Layer up", show=False),
         Binding("f", "follow", "Follow the print", show=False),
+        Binding(
+            "c",
+            "center",
+            "Center part",
+            show=False,  # offered on the preflight line
+            tooltip="Shift the part to the build volume's centre (as --center), or back",
+        ),
     ]
 
     def __init__(self) -> None:
@@ -186,7 +199,7 @@ class PrintScreen(AppScreen):
         show_text(self.query_one("#file-name", Label), name)
         show_text(
             self.query_one("#preflight-summary", Label),
-            preflight_summary(state, hint(app, self, "open")),
+            preflight_summary(state, hint(app, self, "open"), hint(app, self, "center")),
         )
         resume = resume_line(state, hint(app, self, "resume_failed"))
         line = self.query_one("#resume-line", Label)
@@ -326,7 +339,13 @@ class PrintScreen(AppScreen):
             return self.app.check_print_action(mapping[action])
         if action == "open":
             return None if self.app.state.job_active else True
+        if action == "center":
+            return bool(self.app.state.file.path) and not self.app.state.job_active
         return True
+
+    def action_center(self) -> None:
+        if self.check_action("center", ()):
+            self.app.controller.toggle_center()
 
     def action_open(self) -> None:
         if self.app.state.job_active:
