@@ -24,6 +24,7 @@ from cdprhost.gcode.items import (
     Fan,
     FlowFactor,
     HomeCommand,
+    IgnoredParameters,
     MotorsOff,
     ProgramItem,
     SetMotionLimits,
@@ -242,6 +243,9 @@ def _retraction_settings(length_field: str, speed_field: str) -> Handler:
         if feed is not None:
             changes[speed_field] = feed * st.scale
         st.retraction = replace(st.retraction, **changes)
+        hop = p.get("Z")
+        if hop is not None and not math.isnan(hop) and hop != 0:  # M207 Z: hop on retract
+            return IgnoredParameters(line, "M207", f"Z{hop:g}")  # a warning: no Z hop here
         return None
 
     return handle

@@ -81,6 +81,12 @@ def test_ignored_parameters_are_reported_not_refused():
     assert moves(items)["end"][:, 0].tolist() == [1.0, 2.0, 5.0]  # G92 X0 at X2
 
 
+def test_m207_z_hop_is_a_warning_not_silence():
+    items = read("M207 S2 F2400 Z0.4\nM207 S1 Z0\nG1 X1\n")
+    got = [c for c in commands(items) if isinstance(c, IgnoredParameters)]
+    assert got == [IgnoredParameters(1, "M207", "Z0.4")]  # Z0 asks for no hop: nothing to say
+
+
 @pytest.mark.parametrize("number", ["1e308", "1E5", "2.5e-3", "1e+2", ".5e3"])
 def test_numbers_with_an_exponent_are_refused(number):
     """Regression: 'G1 X1e308' read as X1 E308."""
