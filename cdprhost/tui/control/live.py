@@ -88,7 +88,7 @@ def placement_note(report: Any) -> str:
     if not report.ok and p.allowed is not None:
         fit = p.fit_offset
         out.append(
-            f"fits with --offset {fit[0]:g},{fit[1]:g}" if fit is not None else "fits nowhere"
+            f"fits with --offset {fit[0]:g},{fit[1]:g}" if fit is not None else "no shift fits it"
         )
     return " · ".join(out)
 
