@@ -99,12 +99,20 @@ def _temperature(heater: Literal["hotend", "bed"], wait: bool) -> Handler:
         r = _number(p, "R", fail)
         s = _number(p, "S", fail)
         if r is not None:
+            st.targets[heater] = r
             return SetTemperature(line, heater, r, wait, wait_cooling=wait)
         if s is not None:
+            st.targets[heater] = s
             return SetTemperature(line, heater, s, wait)
         return None
 
     return handle
+
+
+def _wait_for_heaters(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    """M116 (RepRapFirmware): wait until the heaters reach the targets set so far (its P/H
+    selections name tools and heaters of bigger machines: all of ours are waited for)."""
+    return [SetTemperature(line, h, t, True) for h, t in st.targets.items() if t > 0]
 
 
 def _fan_on(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
@@ -300,8 +308,18 @@ def _m486(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Pro
 
 
 def _g10(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
-    """G10 alone is firmware retraction; with L or P it sets CNC work offsets (not done)."""
-    if set(p) - {"S"}:
+    """G10 alone is firmware retraction. ``G10 P<tool> S<active> [R<standby>]`` sets tool
+    temperatures (RepRapFirmware: tool 0 is our hotend; standby has no meaning with one
+    tool); with L it sets CNC work offsets (not done)."""
+    keys = set(p)
+    if "P" in keys and keys <= {"P", "S", "R"}:
+        tool, active = _number(p, "P", fail), _number(p, "S", fail)
+        if tool == 0 and active is not None:
+            st.targets["hotend"] = active
+            return SetTemperature(line, "hotend", active, False)
+        if tool == 0:
+            return None  # a standby temperature only
+    if keys - {"S"}:
         return UnknownCommand(line, "G10", False, _param_text("G10", p))
     return firmware_moves.retract(st, line)
 
@@ -315,6 +333,7 @@ _HANDLERS: dict[str, Handler] = {
     "M109": _temperature("hotend", True),
     "M140": _temperature("bed", False),
     "M190": _temperature("bed", True),
+    "M116": _wait_for_heaters,
     "M106": _fan_on,
     "M107": _fan_off,
     "G4": _dwell,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -52,6 +53,7 @@ class ModalState:
     mute: tuple[tuple[int, int], ...] = ()  # line ranges whose machine settings do not count
     objects: dict[int, str] = field(default_factory=dict)  # M486 id -> name
     object_id: int | None = None  # M486 S: the object being printed
+    targets: dict[Literal["hotend", "bed"], float] = field(default_factory=dict)  # for M116
 
     def __post_init__(self) -> None:
         self.home = np.asarray(self.home, dtype=np.float64).reshape(3)

@@ -19,6 +19,7 @@ from cdprhost.gcode import (
     ObjectStart,
     ParkPoint,
     ProgramSummary,
+    SetTemperature,
     SpeedFactor,
     UnknownCommand,
     read_program,
@@ -79,6 +80,22 @@ def test_ignored_parameters_are_reported_not_refused():
         IgnoredParameters(4, "G1", "I1"),
     ]
     assert moves(items)["end"][:, 0].tolist() == [1.0, 2.0, 5.0]  # G92 X0 at X2
+
+
+def test_reprapfirmware_tool_temperatures_and_m116():
+    """RepRapFirmware files heat with `G10 P0 S<active> R<standby>` and wait with M116:
+    read as firmware retraction or skipped, the print started cold."""
+    items = read("G10 P0 S210 R170\nM140 S60\nM116\nG10 P0 R150\nG10 P1 S200\nG10\n")
+    temps = [c for c in commands(items) if isinstance(c, SetTemperature)]
+    assert temps == [
+        SetTemperature(1, "hotend", 210.0, False),
+        SetTemperature(2, "bed", 60.0, False),
+        SetTemperature(3, "hotend", 210.0, True),
+        SetTemperature(3, "bed", 60.0, True),
+    ]
+    unknown = [c for c in commands(items) if isinstance(c, UnknownCommand)]
+    assert [u.line for u in unknown] == [5]  # another tool's temperature: a warning
+    assert moves(items)["line"].tolist() == [6]  # the bare G10 still retracts
 
 
 def test_m207_z_hop_is_a_warning_not_silence():
