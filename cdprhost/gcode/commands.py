@@ -97,16 +97,26 @@ def _temperature(heater: Literal["hotend", "bed"], wait: bool) -> Handler:
     def handle(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
         _check_tool(p, fail)
         r = _number(p, "R", fail)
-        s = _number(p, "S", fail)
-        if r is not None:
-            st.targets[heater] = r
-            return SetTemperature(line, heater, r, wait, wait_cooling=wait)
-        if s is not None:
-            st.targets[heater] = s
-            return SetTemperature(line, heater, s, wait)
-        return None
+        s = _number(p, "S", fail)  # checked even beside R
+        target = r if r is not None else s
+        if target is None:
+            return None
+        return _set_target(st, line, heater, target, wait, wait_cooling=wait and r is not None)
 
     return handle
+
+
+def _set_target(
+    st: ModalState,
+    line: int,
+    heater: Literal["hotend", "bed"],
+    target: float,
+    wait: bool,
+    wait_cooling: bool = False,
+) -> SetTemperature:
+    """A heater target, remembered for M116."""
+    st.targets[heater] = target
+    return SetTemperature(line, heater, target, wait, wait_cooling=wait_cooling)
 
 
 def _wait_for_heaters(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
@@ -315,8 +325,7 @@ def _g10(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Prod
     if "P" in keys and keys <= {"P", "S", "R"}:
         tool, active = _number(p, "P", fail), _number(p, "S", fail)
         if tool == 0 and active is not None:
-            st.targets["hotend"] = active
-            return SetTemperature(line, "hotend", active, False)
+            return _set_target(st, line, "hotend", active, False)
         if tool == 0:
             return None  # a standby temperature only
     if keys - {"S"}:

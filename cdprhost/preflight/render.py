@@ -98,13 +98,26 @@ def advice(report: PreflightReport) -> list[str]:
     return _placement(report)
 
 
+NO_FIT = "no offset fits the part in the workspace"
+
+
+def shift_text(offset: tuple[float, float]) -> str:
+    """The X/Y shift applied to a file, as the reports say it."""
+    return f"shifted by X {offset[0]:+.2f}, Y {offset[1]:+.2f} mm"
+
+
+def offset_option(offset: tuple[float, float]) -> str:
+    """The ``--offset`` that applies ``offset``."""
+    return f"--offset {offset[0]:g},{offset[1]:g}"
+
+
 def _placement(report: PreflightReport) -> list[str]:
     p = report.placement
     if p is None:
         return []
     out = []
     if p.offset != (0.0, 0.0):
-        out.append(f"placement: shifted by X {p.offset[0]:+.2f}, Y {p.offset[1]:+.2f} mm")
+        out.append(f"placement: {shift_text(p.offset)}")
     if p.allowed is not None and p.part_min is not None and p.part_max is not None:
         a = p.allowed
         out.append(
@@ -113,9 +126,9 @@ def _placement(report: PreflightReport) -> list[str]:
             f"height): x {a.x[0]:.1f}..{a.x[1]:.1f}, y {a.y[0]:.1f}..{a.y[1]:.1f} mm (a triangle)"
         )
         if p.fit_offset is not None:
-            out.append(f"  the part fits with --offset {p.fit_offset[0]:g},{p.fit_offset[1]:g}")
+            out.append(f"  the part fits with {offset_option(p.fit_offset)}")
         else:
-            out.append("  no offset fits the part in the workspace")
+            out.append(f"  {NO_FIT}")
     hint = start_block_hint(report)
     if hint:
         out.append(hint)

@@ -79,17 +79,17 @@ def preflight_view(report: Any, path: str, toolpath: Any = None) -> PreflightVie
 def placement_note(report: Any) -> str:
     """One short line: the shift applied and, for a part that does not fit, the offset
     that would (the CLI's report says more)."""
+    from cdprhost.preflight.render import NO_FIT, offset_option, shift_text
+
     p = report.placement
     if p is None:
         return ""
     out = []
     if tuple(p.offset) != (0.0, 0.0):
-        out.append(f"shifted by X {p.offset[0]:+.2f}, Y {p.offset[1]:+.2f} mm")
+        out.append(shift_text(p.offset))
     if not report.ok and p.allowed is not None:
         fit = p.fit_offset
-        out.append(
-            f"fits with --offset {fit[0]:g},{fit[1]:g}" if fit is not None else "no shift fits it"
-        )
+        out.append(f"fits with {offset_option(fit)}" if fit is not None else NO_FIT)
     return " · ".join(out)
 
 
