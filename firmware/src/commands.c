@@ -274,10 +274,16 @@ static void immediate(uint8_t op, const uint32_t *v)
     case OP_IDENTIFY:
         report_ident(0, 0);
         break;
-    case OP_CLEAR_FAULT:
-        if (machine_clear_fault())
-            report_event(EVT_FAULT_CLEARED, st.items_done, 0, 0);
+    case OP_CLEAR_FAULT: {
+        uint32_t items, segs;
+        uint8_t latched = mc.fault, done = machine_clear_fault();
+        stepper_counts(&items, &segs);
+        if (done == CLEAR_DONE)
+            report_event(EVT_FAULT_CLEARED, items, 0, 0);
+        else if (done == CLEAR_REFUSED) /* a thermal fault: only a reset leaves it */
+            report_error(latched, items, segs, OP_CLEAR_FAULT, CLEAR_REFUSED_VALUE);
         break;
+    }
     case OP_FLUSH:
         mc.flush_item = mc.items_received;
         break;

@@ -65,5 +65,8 @@
 #define BED_HYSTERESIS_DC 100
 #define WATCH_MIN_RISE_DC 20
 #define REACHED_BAND_DC 10
+/* The heater duties the control loop sets expire after this many step ticks
+ * (100 us each: 0.3 s, three control periods) unless the loop refreshes them. */
+#define HEATER_LEASE_TICKS 3000
 
 #endif

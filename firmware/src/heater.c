@@ -4,6 +4,9 @@
  * the hysteresis below it for a whole watch period is a runaway. A reading
  * below MINTEMP_DC with a target set (open thermistor) or above the cut-off
  * (shorted thermistor, stuck MOSFET) is a fault whatever the target. */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+
 #include "adc.h"
 #include "board_ramps14.h"
 #include "config.h"
@@ -44,13 +47,27 @@ void heater_init(void)
         heaters[i].temp_dc = 250;
 }
 
-void heater_all_off(void)
+/* Heaters and fan off now: the pins low directly (not through the interrupt's PWM,
+ * which may not be running), the duties and targets zero, a target the interrupt
+ * passed on but the main loop has not taken yet dropped. */
+void heater_outputs_off(void)
 {
+    uint8_t s = SREG;
+    cli();
+    heater_duty[0] = heater_duty[1] = 0;
+    fan_duty = 0;
+    st.fan = 0;
+    heater_lease = 0;
+    HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
+    BED_PORT &= (uint8_t)~_BV(BED_BIT);
+    FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
+    st.heater_target[0] = st.heater_target[1] = 0;
+    st.heater_target_changed = 0;
+    SREG = s;
     for (uint8_t i = 0; i < 2; i++) {
         heaters[i].target_dc = 0;
         heaters[i].state = HS_OFF;
         heaters[i].integ = 0;
-        heater_duty[i] = 0;
     }
 }
 
@@ -153,4 +170,10 @@ void heater_poll(uint32_t now)
         protect(i, now);
         heater_duty[i] = pid(i);
     }
+    /* the duties stand for HEATER_LEASE_TICKS step ticks: if this loop stops
+     * refreshing them, the interrupt switches the heaters off by itself */
+    uint8_t s = SREG;
+    cli();
+    heater_lease = HEATER_LEASE_TICKS;
+    SREG = s;
 }

@@ -22,7 +22,8 @@ void heater_init(void);
 /* Run every few ms from the main loop: ADC conversions, control every HEATER_PERIOD_MS. */
 void heater_poll(uint32_t now);
 void heater_set_target(uint8_t id, uint16_t target_dc, uint32_t now);
-void heater_all_off(void);
+/* Heaters and fan off at once, pins driven low directly (the shutdown path). */
+void heater_outputs_off(void);
 uint16_t heater_max_dc(uint8_t id);
 
 #endif

@@ -32,12 +32,23 @@ void machine_account(void);
 void machine_queued(const struct item *it);
 /* Motion not yet executed: the rest of the executing item and the queue (saturates). */
 uint32_t machine_buffered_ticks(void);
-/* Enter the fault state: stop where it is, flush the queue (flushed items count
- * as done); heaters off for thermal faults, the watchdog and e-stop (unless kept);
- * report the error. */
+/* The one shutdown path: stop the steppers where they are (motors stay enabled
+ * unless SD_MOTORS_OFF), flush the queue (flushed items count as done), drive the
+ * heater and fan pins low when SD_HEATERS_OFF, record the cause (a thermal fault
+ * latches: nothing replaces it until a reset) and report it, every time. */
+#define SD_HEATERS_OFF 0x01
+#define SD_MOTORS_OFF 0x02
+void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
+                      int32_t value, uint8_t how);
+/* A fault: heaters off for thermal faults, the watchdog and e-stop. */
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
 /* E-stop or host watchdog: stop now, fail with `code`, keep what the flags say. */
 void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32_t value);
+/* THERMAL_RUNAWAY and OVERTEMP: latched until a reset. */
+uint8_t machine_thermal(uint8_t code);
+enum { CLEAR_NOTHING, CLEAR_DONE, CLEAR_REFUSED };
+/* ERROR(latched code, axis = CLEAR_FAULT's opcode, value) answers a refused CLEAR_FAULT */
+#define CLEAR_REFUSED_VALUE 1
 uint8_t machine_clear_fault(void);
 /* A new session: the settings go back to their defaults. */
 void machine_session_defaults(void);

@@ -95,9 +95,11 @@ void session_poll(uint32_t now)
             announce_boot(now);
         return;
     }
-    /* host watchdog: no valid frame for watchdog_ms while there is something to do:
-     * stop, heaters off, motors held (a cable robot would drop its effector) */
-    if (active() && !mc.fault &&
+    /* host watchdog, in every state (faulted included: a fault keeps a heater on for
+     * the host to resume, and a host that dies after it must not leave it on): no
+     * valid frame for watchdog_ms while there is something to do: stop, heaters off,
+     * motors held (a cable robot would drop its effector) */
+    if (active() &&
         now - mc.last_frame_at >= (uint32_t)mc.watchdog_ms * (CLOCK_HZ / 1000)) {
         machine_stop(ERR_WATCHDOG, 0, 1, mc.watchdog_ms);
         return;

@@ -30,6 +30,7 @@ volatile struct stepper_state st;
 volatile struct stepper_report stepper_report;
 volatile uint8_t stepper_start_ok, stepper_wait_ok;
 volatile uint8_t heater_duty[2], fan_duty;
+volatile uint16_t heater_lease;
 volatile uint16_t stepper_isr_max_cycles;
 volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns, stepper_late_pulses;
 volatile uint8_t stepper_latency_max;
@@ -147,13 +148,14 @@ static uint8_t endstop(uint8_t axis)
     return v == ENDSTOP_TRIGGERED_LEVEL;
 }
 
-void stepper_init(void)
+void stepper_init(uint8_t hold_mask)
 {
     X_STEP_DDR |= _BV(X_STEP_BIT); X_DIR_DDR |= _BV(X_DIR_BIT); X_EN_DDR |= _BV(X_EN_BIT);
     Y_STEP_DDR |= _BV(Y_STEP_BIT); Y_DIR_DDR |= _BV(Y_DIR_BIT); Y_EN_DDR |= _BV(Y_EN_BIT);
     Z_STEP_DDR |= _BV(Z_STEP_BIT); Z_DIR_DDR |= _BV(Z_DIR_BIT); Z_EN_DDR |= _BV(Z_EN_BIT);
     E_STEP_DDR |= _BV(E_STEP_BIT); E_DIR_DDR |= _BV(E_DIR_BIT); E_EN_DDR |= _BV(E_EN_BIT);
-    apply_enables(0);
+    st.enabled_mask = hold_mask & 0x0F;
+    apply_enables(st.enabled_mask);
     X_MIN_DDR &= (uint8_t)~_BV(X_MIN_BIT); X_MIN_PORT |= _BV(X_MIN_BIT);
     Y_MIN_DDR &= (uint8_t)~_BV(Y_MIN_BIT); Y_MIN_PORT |= _BV(Y_MIN_BIT);
     Z_MIN_DDR &= (uint8_t)~_BV(Z_MIN_BIT); Z_MIN_PORT |= _BV(Z_MIN_BIT);
@@ -172,6 +174,15 @@ void stepper_init(void)
     OCR1A = TICK_CYCLES - 1;
     OCR1C = EDGE_NEVER;
     TIMSK1 = _BV(OCIE1A);
+}
+
+void stepper_counts(uint32_t *items, uint32_t *segments)
+{
+    uint8_t s = SREG;
+    cli();
+    *items = st.items_done;
+    *segments = st.segments_done;
+    SREG = s;
 }
 
 uint32_t stepper_ticks_left(void)
@@ -835,6 +846,10 @@ static void __attribute__((noinline)) tick_start(void)
     }
     sched_clock_count += units;
     uint8_t p = ++pwm;
+    if (heater_lease)
+        heater_lease--;
+    else
+        heater_duty[0] = heater_duty[1] = 0; /* the control loop stopped refreshing them */
     if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
     if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
     if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
