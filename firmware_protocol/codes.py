@@ -29,6 +29,10 @@ class ErrorCode(IntEnum):
     OVERTEMP = 10
     WATCHDOG = 11
     BAD_VALUE = 12
+    # protocol 2.1
+    PLANNER_LATE = 13  # segment preparation missed its start (not a step-rate excess)
+    HEATER_LEASE = 14  # the host's heater lease ran out with a heater on
+    AUTOTUNE_FAILED = 15  # PID autotune gave up (value: AutotuneFailure)
 
 
 #: faults a host must not clear on its own (the heater or its sensor needs a look first)
@@ -39,6 +43,17 @@ class EventCode(IntEnum):
     HOMED = 1
     HEATER_REACHED = 2
     FAULT_CLEARED = 3
+    # protocol 2.1
+    CLEAR_REFUSED = 4  # CLEAR_FAULT refused: values (the latched ErrorCode,)
+    AUTOTUNE_DONE = 5  # values (heater, kp, ki, kd) in thousandths (gains already applied)
+
+
+class AutotuneFailure(IntEnum):
+    """``Error.value`` of ``AUTOTUNE_FAILED``."""
+
+    TIMEOUT = 1  # no complete cycle within the time allowed
+    OVERSHOOT = 2  # the temperature went more than 20 C over the target
+    NO_OSCILLATION = 3  # the heater could not swing around the target (too weak or too slow)
 
 
 class BootCause(IntEnum):

@@ -22,6 +22,7 @@ from typing import ClassVar
 # the codes and field types are part of the message table's vocabulary: re-exported here
 from firmware_protocol.codes import (
     THERMAL_ERRORS,
+    AutotuneFailure,
     BootCause,
     ErrorCode,
     EstopFlag,
@@ -38,7 +39,10 @@ from firmware_protocol.fields import (
 from firmware_protocol.segments import SEG_BASE
 
 PROTOCOL_MAJOR = 2
-PROTOCOL_MINOR = 0
+PROTOCOL_MINOR = 1
+# the first minor version with soft limits, PID gains and autotune, the heater lease,
+# CAPS and HEALTH (a host sends those commands only to a device that announces it)
+MINOR_SAFETY = 1
 
 HOTEND, BED = 0, 1
 MAX_EVENT_VALUES = 4
@@ -46,6 +50,9 @@ DWELL_MAX_S = 3600  # longest DWELL, in seconds of the device clock
 WATCHDOG_MS_RANGE = (100, 60_000)
 WATCHDOG_MS_DEFAULT = 2000
 TOLERANCE_DC_RANGE = (1, 1000)
+LEASE_MS_RANGE = (100, 60_000)
+AUTOTUNE_CYCLES_RANGE = (3, 20)
+GAIN_SCALE = 1000  # PID gains travel in thousandths
 
 # ------------------------------------------------------------------ messages
 
@@ -109,6 +116,60 @@ class Configure(Message):
         F("start_ticks", "u32", "start from rest once this much motion is queued"),
         F("flow_ticks", "u32", "unsolicited FLOW every this much executed motion (0: off)"),
     )
+
+
+# host -> device, immediate, protocol 2.1
+@dataclass(frozen=True)
+class SetLimits(Message):
+    """Soft travel limits of one module, in step counts (the frame HOME and SET_POSITION
+    set), inclusive; checked for a homed module only."""
+
+    module: int
+    lo: int
+    hi: int
+    OPCODE: ClassVar[int] = 0x08
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("module", "u8", "0..2", hi=2),
+        F("lo", "i32", "lowest allowed position"),
+        F("hi", "i32", "highest allowed position (>= lo)"),
+    )
+
+
+@dataclass(frozen=True)
+class SetPid(Message):
+    """PID gains of one heater in thousandths: output 0..255 per degree C (kp), per
+    degree C second (ki), per degree C per second (kd). All three 0: the device's own."""
+
+    heater: int
+    kp: int
+    ki: int
+    kd: int
+    OPCODE: ClassVar[int] = 0x09
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("heater", "u8", "0 hotend, 1 bed", hi=1, limit="< heaters"),
+        F("kp", "u32", "thousandths"),
+        F("ki", "u32", "thousandths"),
+        F("kd", "u32", "thousandths"),
+    )
+
+
+@dataclass(frozen=True)
+class HeaterLease(Message):
+    """Heater targets stay set for ``ms`` from receipt (renewed by the host's job, never
+    by its bare keep-alive); run out with a heater on: ``ERROR HEATER_LEASE``."""
+
+    ms: int
+    OPCODE: ClassVar[int] = 0x0A
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("ms", "u16", "lease length", lo=LEASE_MS_RANGE[0], hi=LEASE_MS_RANGE[1]),
+    )
+
+
+@dataclass(frozen=True)
+class GetCaps(Message):
+    """Device replies ``CAPS``."""
+
+    OPCODE: ClassVar[int] = 0x0B
 
 
 # host -> device, URGENT frames only
@@ -221,6 +282,25 @@ class WaitHeater(Message):
     FIELDS: ClassVar[tuple[Field, ...]] = (
         F("heater", "u8", hi=1, limit="< heaters"),
         F("tolerance_dc", "u16", "0.1 C", lo=TOLERANCE_DC_RANGE[0], hi=TOLERANCE_DC_RANGE[1]),
+    )
+
+
+@dataclass(frozen=True)
+class Autotune(Message):
+    """PID autotune (relay method) of one heater around ``target_dc`` for ``cycles``
+    cycles; holds the queue like WAIT_HEATER, leaves the heater off, answers
+    ``EVENT AUTOTUNE_DONE`` (and applies the gains) or ``ERROR AUTOTUNE_FAILED``."""
+
+    heater: int
+    target_dc: int
+    cycles: int = 5
+    OPCODE: ClassVar[int] = 0x17
+    CLASS: ClassVar[str] = "Q"
+    QUEUED: ClassVar[bool] = True
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("heater", "u8", "0 hotend, 1 bed", hi=1, limit="< heaters"),
+        F("target_dc", "u16", "0.1 C", lo=1, limit="<= hotend_max_dc / bed_max_dc"),
+        F("cycles", "u8", lo=AUTOTUNE_CYCLES_RANGE[0], hi=AUTOTUNE_CYCLES_RANGE[1]),
     )
 
 
@@ -422,6 +502,40 @@ class Flow(Message):
     )
 
 
+@dataclass(frozen=True)
+class Health(Message):
+    """Protocol 2.1: follows every STATUS (same payload) in a session of minor >= 1."""
+
+    late_pulses: int
+    late_worst_us: int
+    rx_overruns: int
+    loop_worst_us: int
+    OPCODE: ClassVar[int] = 0x48
+    CLASS: ClassVar[str] = "D"
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("late_pulses", "u32", "step pulses issued later than late_tolerance_us, wraps"),
+        F("late_worst_us", "u32", "the worst lateness of a pulse against its ideal time"),
+        F("rx_overruns", "u32", "received bytes lost (receive ring full or UART overrun), wraps"),
+        F("loop_worst_us", "u32", "the longest main-loop turn"),
+    )
+
+
+@dataclass(frozen=True)
+class Caps(Message):
+    """Protocol 2.1: the answer to ``GET_CAPS``."""
+
+    min_segment_ticks: int
+    segment_rate: int
+    late_tolerance_us: int
+    OPCODE: ClassVar[int] = 0x49
+    CLASS: ClassVar[str] = "D"
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("min_segment_ticks", "u32", "shortest segment it takes (shorter: BAD_VALUE)", lo=1),
+        F("segment_rate", "u32", "segments/s it sustains (0: not stated)"),
+        F("late_tolerance_us", "u16", "a pulse later than this counts as late"),
+    )
+
+
 MESSAGES: tuple[type[Message], ...] = (
     Identify,
     GetStatus,
@@ -437,6 +551,11 @@ MESSAGES: tuple[type[Message], ...] = (
     SetHeater,
     SetFan,
     WaitHeater,
+    SetLimits,
+    SetPid,
+    HeaterLease,
+    GetCaps,
+    Autotune,
     Ident,
     Status,
     Event,
@@ -444,16 +563,22 @@ MESSAGES: tuple[type[Message], ...] = (
     Boot,
     EstopAck,
     Flow,
+    Health,
+    Caps,
 )
 _BY_OPCODE: dict[int, type[Message]] = {cls.OPCODE: cls for cls in MESSAGES}
 
 __all__ = [
+    "AUTOTUNE_CYCLES_RANGE",
     "BED",
     "DWELL_MAX_S",
+    "GAIN_SCALE",
     "HOTEND",
+    "LEASE_MS_RANGE",
     "MAX_EVENT_VALUES",
     "MAX_TEXT",
     "MESSAGES",
+    "MINOR_SAFETY",
     "PROTOCOL_MAJOR",
     "PROTOCOL_MINOR",
     "THERMAL_ERRORS",
@@ -461,8 +586,11 @@ __all__ = [
     "TYPE_RANGE",
     "WATCHDOG_MS_DEFAULT",
     "WATCHDOG_MS_RANGE",
+    "Autotune",
+    "AutotuneFailure",
     "Boot",
     "BootCause",
+    "Caps",
     "ClearFault",
     "Configure",
     "Dwell",
@@ -479,7 +607,10 @@ __all__ = [
     "Flag",
     "Flow",
     "Flush",
+    "GetCaps",
     "GetStatus",
+    "Health",
+    "HeaterLease",
     "Hello",
     "Home",
     "Ident",
@@ -489,6 +620,8 @@ __all__ = [
     "Segment",
     "SetFan",
     "SetHeater",
+    "SetLimits",
+    "SetPid",
     "SetPosition",
     "Status",
     "WaitHeater",

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define CDPR_PROTOCOL_MAJOR 2
-#define CDPR_PROTOCOL_MINOR 0
+#define CDPR_PROTOCOL_MINOR 1
 
 /* frames */
 #define CDPR_SYNC 0xA5
@@ -63,9 +63,14 @@
 #define CDPR_ERR_OVERTEMP 0x0A
 #define CDPR_ERR_WATCHDOG 0x0B
 #define CDPR_ERR_BAD_VALUE 0x0C
+#define CDPR_ERR_PLANNER_LATE 0x0D
+#define CDPR_ERR_HEATER_LEASE 0x0E
+#define CDPR_ERR_AUTOTUNE_FAILED 0x0F
 #define CDPR_EVT_HOMED 0x01
 #define CDPR_EVT_HEATER_REACHED 0x02
 #define CDPR_EVT_FAULT_CLEARED 0x03
+#define CDPR_EVT_CLEAR_REFUSED 0x04
+#define CDPR_EVT_AUTOTUNE_DONE 0x05
 #define CDPR_BOOT_POWER_ON 0x00
 #define CDPR_BOOT_WATCHDOG 0x01
 #define CDPR_BOOT_SOFT_RESET 0x02
@@ -102,6 +107,16 @@
 #define CDPR_SET_FAN_MAX_LEN 3
 #define CDPR_OP_WAIT_HEATER 0x16
 #define CDPR_WAIT_HEATER_MAX_LEN 5
+#define CDPR_OP_SET_LIMITS 0x08
+#define CDPR_SET_LIMITS_MAX_LEN 12
+#define CDPR_OP_SET_PID 0x09
+#define CDPR_SET_PID_MAX_LEN 17
+#define CDPR_OP_HEATER_LEASE 0x0A
+#define CDPR_HEATER_LEASE_MAX_LEN 4
+#define CDPR_OP_GET_CAPS 0x0B
+#define CDPR_GET_CAPS_MAX_LEN 1
+#define CDPR_OP_AUTOTUNE 0x17
+#define CDPR_AUTOTUNE_MAX_LEN 6
 #define CDPR_OP_IDENT 0x41
 #define CDPR_IDENT_MAX_LEN 136
 #define CDPR_OP_STATUS 0x42
@@ -116,6 +131,10 @@
 #define CDPR_ESTOP_ACK_MAX_LEN 11
 #define CDPR_OP_FLOW 0x47
 #define CDPR_FLOW_MAX_LEN 25
+#define CDPR_OP_HEALTH 0x48
+#define CDPR_HEALTH_MAX_LEN 21
+#define CDPR_OP_CAPS 0x49
+#define CDPR_CAPS_MAX_LEN 14
 
 /* Identify: class I, opcode 0x01 */
 
@@ -218,6 +237,57 @@ typedef struct cdpr_wait_heater {
 #define CDPR_WAIT_HEATER_HEATER_MAX (1)
 #define CDPR_WAIT_HEATER_TOLERANCE_DC_MIN (1)
 #define CDPR_WAIT_HEATER_TOLERANCE_DC_MAX (1000)
+
+/* SetLimits: class I, opcode 0x08 */
+typedef struct cdpr_set_limits {
+    uint8_t module; /* 0..2 */
+    int32_t lo; /* lowest allowed position */
+    int32_t hi; /* highest allowed position (>= lo) */
+} cdpr_set_limits_t;
+#define CDPR_SET_LIMITS_MODULE_MIN (0)
+#define CDPR_SET_LIMITS_MODULE_MAX (2)
+#define CDPR_SET_LIMITS_LO_MIN (-2147483647L - 1)
+#define CDPR_SET_LIMITS_LO_MAX (2147483647L)
+#define CDPR_SET_LIMITS_HI_MIN (-2147483647L - 1)
+#define CDPR_SET_LIMITS_HI_MAX (2147483647L)
+
+/* SetPid: class I, opcode 0x09 */
+typedef struct cdpr_set_pid {
+    uint8_t heater; /* 0 hotend, 1 bed; device checks < heaters */
+    uint32_t kp; /* thousandths */
+    uint32_t ki; /* thousandths */
+    uint32_t kd; /* thousandths */
+} cdpr_set_pid_t;
+#define CDPR_SET_PID_HEATER_MIN (0)
+#define CDPR_SET_PID_HEATER_MAX (1)
+#define CDPR_SET_PID_KP_MIN (0)
+#define CDPR_SET_PID_KP_MAX (4294967295UL)
+#define CDPR_SET_PID_KI_MIN (0)
+#define CDPR_SET_PID_KI_MAX (4294967295UL)
+#define CDPR_SET_PID_KD_MIN (0)
+#define CDPR_SET_PID_KD_MAX (4294967295UL)
+
+/* HeaterLease: class I, opcode 0x0A */
+typedef struct cdpr_heater_lease {
+    uint16_t ms; /* lease length */
+} cdpr_heater_lease_t;
+#define CDPR_HEATER_LEASE_MS_MIN (100)
+#define CDPR_HEATER_LEASE_MS_MAX (60000UL)
+
+/* GetCaps: class I, opcode 0x0B */
+
+/* Autotune: class Q, opcode 0x17 */
+typedef struct cdpr_autotune {
+    uint8_t heater; /* 0 hotend, 1 bed; device checks < heaters */
+    uint16_t target_dc; /* 0.1 C; device checks <= hotend_max_dc / bed_max_dc */
+    uint8_t cycles;
+} cdpr_autotune_t;
+#define CDPR_AUTOTUNE_HEATER_MIN (0)
+#define CDPR_AUTOTUNE_HEATER_MAX (1)
+#define CDPR_AUTOTUNE_TARGET_DC_MIN (1)
+#define CDPR_AUTOTUNE_TARGET_DC_MAX (65535UL)
+#define CDPR_AUTOTUNE_CYCLES_MIN (3)
+#define CDPR_AUTOTUNE_CYCLES_MAX (20)
 
 /* Ident: class D, opcode 0x41 */
 typedef struct cdpr_ident {
@@ -444,5 +514,34 @@ typedef struct cdpr_flow {
 #define CDPR_FLOW_BUFFERED_TICKS_MAX (4294967295UL)
 #define CDPR_FLOW_CLOCK_MIN (0)
 #define CDPR_FLOW_CLOCK_MAX (4294967295UL)
+
+/* Health: class D, opcode 0x48 */
+typedef struct cdpr_health {
+    uint32_t late_pulses; /* step pulses issued later than late_tolerance_us, wraps */
+    uint32_t late_worst_us; /* the worst lateness of a pulse against its ideal time */
+    uint32_t rx_overruns; /* received bytes lost (receive ring full or UART overrun), wraps */
+    uint32_t loop_worst_us; /* the longest main-loop turn */
+} cdpr_health_t;
+#define CDPR_HEALTH_LATE_PULSES_MIN (0)
+#define CDPR_HEALTH_LATE_PULSES_MAX (4294967295UL)
+#define CDPR_HEALTH_LATE_WORST_US_MIN (0)
+#define CDPR_HEALTH_LATE_WORST_US_MAX (4294967295UL)
+#define CDPR_HEALTH_RX_OVERRUNS_MIN (0)
+#define CDPR_HEALTH_RX_OVERRUNS_MAX (4294967295UL)
+#define CDPR_HEALTH_LOOP_WORST_US_MIN (0)
+#define CDPR_HEALTH_LOOP_WORST_US_MAX (4294967295UL)
+
+/* Caps: class D, opcode 0x49 */
+typedef struct cdpr_caps {
+    uint32_t min_segment_ticks; /* shortest segment it takes (shorter: BAD_VALUE) */
+    uint32_t segment_rate; /* segments/s it sustains (0: not stated) */
+    uint16_t late_tolerance_us; /* a pulse later than this counts as late */
+} cdpr_caps_t;
+#define CDPR_CAPS_MIN_SEGMENT_TICKS_MIN (1)
+#define CDPR_CAPS_MIN_SEGMENT_TICKS_MAX (4294967295UL)
+#define CDPR_CAPS_SEGMENT_RATE_MIN (0)
+#define CDPR_CAPS_SEGMENT_RATE_MAX (4294967295UL)
+#define CDPR_CAPS_LATE_TOLERANCE_US_MIN (0)
+#define CDPR_CAPS_LATE_TOLERANCE_US_MAX (65535UL)
 
 #endif /* CDPR_PROTOCOL_H */
