@@ -35,8 +35,17 @@ class ErrorCode(IntEnum):
     AUTOTUNE_FAILED = 15  # PID autotune gave up (value: AutotuneFailure)
 
 
-#: faults a host must not clear on its own (the heater or its sensor needs a look first)
+#: faults a host must not clear on its own (the heater or its sensor needs a look first);
+#: a 2.1 device latches them until a reset
 THERMAL_ERRORS = frozenset({ErrorCode.THERMAL_RUNAWAY, ErrorCode.OVERTEMP})
+#: faults whose shutdown switches the heaters off (the others leave them to the host, whose
+#: watchdog and heater lease still guard them)
+HEATERS_OFF = THERMAL_ERRORS | {
+    ErrorCode.ESTOP,
+    ErrorCode.WATCHDOG,
+    ErrorCode.HEATER_LEASE,
+    ErrorCode.AUTOTUNE_FAILED,
+}
 
 
 class EventCode(IntEnum):

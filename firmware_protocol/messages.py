@@ -21,6 +21,7 @@ from typing import ClassVar
 
 # the codes and field types are part of the message table's vocabulary: re-exported here
 from firmware_protocol.codes import (
+    HEATERS_OFF,
     THERMAL_ERRORS,
     AutotuneFailure,
     BootCause,
@@ -573,6 +574,7 @@ __all__ = [
     "BED",
     "DWELL_MAX_S",
     "GAIN_SCALE",
+    "HEATERS_OFF",
     "HOTEND",
     "LEASE_MS_RANGE",
     "MAX_EVENT_VALUES",

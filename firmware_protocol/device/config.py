@@ -43,6 +43,9 @@ class SimConfig:
     homing_max_steps: int = 160_000  # give up (HOMING_FAILED) beyond this travel
     boot_physical: tuple[int, int, int] = (-8000, -8000, -8000)  # carriage vs switch at boot
     overtravel_steps: int = 16_400  # ENDSTOP_HIT when motion goes this far past the switch
+    min_segment_ticks: int = 1  # CAPS: every segment of 1 tick or more runs exactly
+    segment_rate: int = 0  # CAPS: segments/s sustained (0: not stated)
+    late_tolerance_us: int = 0  # CAPS: every pulse is issued at its exact time
     speedup: float = 1.0  # device time = link time * speedup
     hotend: HeaterModel = field(default=HOTEND_MODEL)
     bed: HeaterModel = field(default=BED_MODEL)

@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import math
 import os
+import secrets
 from collections.abc import Callable
 
 from firmware_protocol.device import queue_items as m
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
+from firmware_protocol.device.flow_reports import FlowReports
+from firmware_protocol.device.heater_control import PidGains
 from firmware_protocol.device.machine import DeviceMachine, Observer
 from firmware_protocol.device.queue_items import BadValue, item_of
 from firmware_protocol.device.record import SegmentRecord
@@ -24,10 +27,12 @@ from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
     MAX_EVENT_VALUES,
+    MINOR_SAFETY,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     Boot,
     BootCause,
+    Caps,
     ClearFault,
     Configure,
     EmergencyStop,
@@ -37,15 +42,19 @@ from firmware_protocol.messages import (
     Event,
     EventCode,
     Flag,
-    Flow,
     Flush,
+    GetCaps,
     GetStatus,
+    Health,
+    HeaterLease,
     Hello,
     Ident,
     Identify,
     Message,
     MessageError,
     Segment,
+    SetLimits,
+    SetPid,
     Status,
 )
 from firmware_protocol.messages import Error as ErrorReport
@@ -93,7 +102,12 @@ class SimDevice:
     def _start_boot(self, cause: int, physical: list[int] | None) -> None:
         cfg = self.config
         self.cause = int(cause)
-        self.boot_id = (cfg.seed * 2654435761 + self.boots * 40503 + 0x5EED) & U32
+        old = getattr(self, "boot_id", 0)
+        # new at every start of the device, a restart of the program included (a host
+        # relies on it to tell a reset); never the previous one
+        self.boot_id = old
+        while self.boot_id in (0, old):
+            self.boot_id = secrets.randbits(32)
         self.machine = DeviceMachine(
             cfg, self.record, boot=self.boots, physical=physical, observer=self.observer
         )
@@ -106,13 +120,14 @@ class SimDevice:
         self.endpoint = Endpoint(
             window=cfg.window,
             accept=self._accept,
-            flow=self._flow_payload,
+            flow=lambda: self.flow.payload(self.machine, self._now, self.device_time(self._now)),
             rto_initial=0.05,
             rto_floor=0.02,
             rto_ceiling=0.25,
         )
         self.synced = False
         self.nonce: int | None = None
+        self.session_minor = 0  # min(host minor, device minor) of the session
         self.ctx = SegmentContext()
         self._boot_sent = -math.inf
         self._open_session_state(-math.inf)
@@ -120,14 +135,17 @@ class SimDevice:
     def _open_session_state(self, now: float) -> None:
         cfg = self.config
         self.watchdog_ms = cfg.watchdog_ms
-        self.flow_ticks = round(cfg.flow_s * cfg.clock_hz)
         self.machine.start_ticks = round(cfg.start_s * cfg.clock_hz)
         self.last_rx = now
-        self._flow_sent: tuple[int, int] | None = None
-        self._flow_free_sent = 0
-        self._flow_motion_sent = 0
-        self._flow_step = max(1, self.machine.capacity // 8)
-        self._flow_time = -math.inf
+        self.flow = FlowReports(
+            round(cfg.flow_s * cfg.clock_hz), cfg.flow_interval_s, self.machine.capacity // 8
+        )
+        self.lease_ms = 0  # the session's heater lease (0: not armed)
+        self.lease_until = math.inf
+
+    @property
+    def flow_ticks(self) -> int:
+        return self.flow.flow_ticks
 
     def reboot(self, now: float, cause: int = BootCause.WATCHDOG) -> None:
         """Simulated reset: the queue, positions and session are lost; the carriages stay put.
@@ -218,6 +236,14 @@ class SimDevice:
             duplicates=ep.counters.duplicates & U32,
         )
 
+    def health(self) -> Health:
+        """The model issues every pulse at its exact time and reads without limit."""
+        return Health(late_pulses=0, late_worst_us=0, rx_overruns=0, loop_worst_us=0)
+
+    def caps(self) -> Caps:
+        c = self.config
+        return Caps(c.min_segment_ticks, c.segment_rate, c.late_tolerance_us)
+
     # ------------------------------------------------------------------ main loop
 
     def step(self, now: float, data: bytes = b"") -> list[bytes]:
@@ -245,7 +271,7 @@ class SimDevice:
                 self.last_rx = now
             self._report(self.machine.advance(T))
         self._watchdog(now, T)
-        if self.synced and self._flow_wanted(now, T):
+        if self.synced and self.flow.wanted(self.machine, now, T):
             self.endpoint.request_ack()
         if not self.synced and now >= self._boot_sent + self.config.boot_announce_s:
             self._announce_boot(now)
@@ -260,7 +286,6 @@ class SimDevice:
         if ep is not None:
             cands.append(max(ep, now))
         mc, sp, cfg = self.machine, self.config.speedup, self.config
-        T = self.device_time(now)
         cur = mc.current
         if cur is not None:
             if cur.kind == m.WAIT:
@@ -271,11 +296,13 @@ class SimDevice:
         if start is not None:
             cands.append(start / sp)
         if self.synced:
-            flow = self._flow_due(now, T)
+            flow = self.flow.due(mc, now, sp)
             if flow is not None:
                 cands.append(flow)
             if mc.active():
                 cands.append(self.last_rx + self.watchdog_ms / 1000.0)
+            if mc.heating():
+                cands.append(self.lease_until)
         if any(h.target > 0 for h in mc.heaters):
             cands.append(now + 0.5 / sp)
         if mc.heater_fail_at is not None and mc.heater_fail_at / sp > now:
@@ -289,82 +316,24 @@ class SimDevice:
     # ------------------------------------------------------------------ watchdog and flow
 
     def _watchdog(self, now: float, T: float) -> None:
-        """No valid frame for watchdog_ms while there is something to do: stop, heaters off."""
+        """In every state, faulted included: no valid frame for watchdog_ms while there is
+        something to do, or the heater lease run out with a heater on: stop, heaters off,
+        motors held (the one shutdown path)."""
         mc = self.machine
-        if not self.synced or not mc.active():
+        if not self.synced:
             return
-        if now - self.last_rx < self.watchdog_ms / 1000.0:
-            return
-        self._report(mc.stop(T, ErrorCode.WATCHDOG, keep_motors=True, value=self.watchdog_ms))
-        self._notice(
-            f"host watchdog: no valid frame for {self.watchdog_ms} ms; motion stopped after "
-            f"segment {mc.segments_done}, heaters off, motors held"
-        )
-
-    def _executed_ticks(self, T: float) -> int:
-        """Motion executed so far, the running segment's elapsed part included."""
-        mc = self.machine
-        cur = mc.current
-        extra = 0
-        if cur is not None and cur.kind in m.TIMED and mc.cur_end > mc.cur_start:
-            extra = int((min(T, mc.cur_end) - mc.cur_start) * mc.clock_hz)
-        return mc.motion_ticks + max(0, extra)
-
-    def _flow_wanted(self, now: float, T: float) -> bool:
-        """Unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of the
-        queue freed, or any other change after flow_interval_s."""
-        mc = self.machine
-        sent = self._flow_sent
-        if sent is None:
-            return True
-        if (
-            self.flow_ticks > 0
-            and self._executed_ticks(T) - self._flow_motion_sent >= self.flow_ticks
-        ):
-            return True
-        state = (mc.items_done, mc.flags())
-        if state == sent:
-            return False
-        return (
-            state[1] != sent[1]
-            or mc.free_slots() >= self._flow_free_sent + self._flow_step
-            or now >= self._flow_time + self.config.flow_interval_s
-        )
-
-    def _flow_due(self, now: float, T: float) -> float | None:
-        """When the next unsolicited FLOW falls due if nothing arrives (None: never)."""
-        mc = self.machine
-        if self._flow_sent is None:
-            return now
-        due = math.inf
-        if (mc.items_done, mc.flags()) != self._flow_sent:
-            due = self._flow_time + self.config.flow_interval_s
-        cur = mc.current
-        if self.flow_ticks > 0 and cur is not None and cur.kind in m.TIMED:
-            # when the executed motion reaches the threshold if it runs on without a gap
-            # (an absolute time: the machine may not have been advanced to ``now`` yet)
-            need = self._flow_motion_sent + self.flow_ticks - mc.motion_ticks + 1
-            due = min(due, (mc.cur_start + need / mc.clock_hz) / self.config.speedup)
-        return None if due == math.inf else max(now, due)
-
-    def _flow_payload(self) -> bytes:
-        mc = self.machine
-        T = self.device_time(self._now)
-        flags = mc.flags()
-        self._flow_sent = (mc.items_done, flags)
-        self._flow_free_sent = mc.free_slots()
-        self._flow_motion_sent = self._executed_ticks(T)
-        self._flow_time = self._now
-        return encode_message(
-            Flow(
-                flags,
-                max(0, mc.free_slots()),
-                mc.items_done,
-                mc.segments_done,
-                mc.buffered_ticks(T),
-                mc.clock(T),
+        if mc.active() and now - self.last_rx >= self.watchdog_ms / 1000.0:
+            self._report(mc.stop(T, ErrorCode.WATCHDOG, keep_motors=True, value=self.watchdog_ms))
+            self._notice(
+                f"host watchdog: no valid frame for {self.watchdog_ms} ms; motion stopped after "
+                f"segment {mc.segments_done}, heaters off, motors held"
             )
-        )
+        elif mc.heating() and now >= self.lease_until:
+            self._report(mc.stop(T, ErrorCode.HEATER_LEASE, keep_motors=True, value=self.lease_ms))
+            self._notice(
+                f"heater lease of {self.lease_ms} ms not renewed by the host: heaters off, "
+                f"motion stopped after segment {mc.segments_done}, motors held"
+            )
 
     # ------------------------------------------------------------------ protocol handlers
 
@@ -373,11 +342,18 @@ class SimDevice:
         self.endpoint.send_urgent(encode_message(self._boot_message()))
 
     def _report(self, reports: list[Message]) -> None:
+        """One DATA frame per report; a HEALTH rides with the STATUS before it."""
         if not self.synced:
             return
+        payloads: list[bytes] = []
         for r in reports:
+            if isinstance(r, Health) and payloads:
+                payloads[-1] += encode_message(r)
+            else:
+                payloads.append(encode_message(r))
+        for payload in payloads:
             if len(self.endpoint.sender.backlog) < MAX_REPORT_BACKLOG:
-                self.endpoint.send(encode_message(r))
+                self.endpoint.send(payload)
             else:
                 self.reports_dropped += 1
 
@@ -395,6 +371,7 @@ class SimDevice:
                 self.ctx = SegmentContext()
                 self.synced = True
                 self.nonce = msg.nonce
+                self.session_minor = min(msg.minor, PROTOCOL_MINOR)
                 self._open_session_state(now)
             self.endpoint.send_urgent(encode_message(self.ident(msg.nonce)))
         elif isinstance(msg, EmergencyStop):
@@ -452,21 +429,46 @@ class SimDevice:
         for msg in msgs:
             if msg.QUEUED:
                 reports += self._enqueue(msg, T)
-            elif isinstance(msg, GetStatus):
-                reports.append(self.status())
-            elif isinstance(msg, Identify):
-                reports.append(self.ident(0))
-            elif isinstance(msg, ClearFault):
-                if mc.clear_fault():
-                    reports.append(Event(EventCode.FAULT_CLEARED, mc.items_done, ()))
-            elif isinstance(msg, Flush):
-                mc.flush(T)
-            elif isinstance(msg, Configure):
-                self.watchdog_ms = msg.watchdog_ms
-                mc.start_ticks = msg.start_ticks
-                self.flow_ticks = msg.flow_ticks
+            else:
+                reports += self._immediate(msg, T)
         self._report(reports)
         return True
+
+    def _immediate(self, msg: Message, T: float) -> list[Message]:
+        mc = self.machine
+        if isinstance(msg, GetStatus):
+            return (
+                [self.status(), self.health()]
+                if self.session_minor >= MINOR_SAFETY
+                else [self.status()]
+            )
+        if isinstance(msg, Identify):
+            return [self.ident(0)]
+        if isinstance(msg, GetCaps):
+            return [self.caps()]
+        if isinstance(msg, ClearFault):
+            if mc.latched:  # a thermal fault: only a reset clears it
+                return [Event(EventCode.CLEAR_REFUSED, mc.items_done, (mc.latched,))]
+            if mc.clear_fault():
+                return [Event(EventCode.FAULT_CLEARED, mc.items_done, ())]
+        elif isinstance(msg, Flush):
+            mc.flush(T)
+        elif isinstance(msg, Configure):
+            self.watchdog_ms = msg.watchdog_ms
+            mc.start_ticks = msg.start_ticks
+            self.flow.flow_ticks = msg.flow_ticks
+        elif isinstance(msg, HeaterLease):
+            self.lease_ms = msg.ms
+            self.lease_until = self._now + msg.ms / 1000.0
+        elif isinstance(msg, SetLimits):
+            if msg.lo > msg.hi:
+                return self._bad_value(0, msg.OPCODE, msg.module, T)
+            mc.limits.set(msg.module, msg.lo, msg.hi)
+        elif isinstance(msg, SetPid):
+            if msg.heater >= HEATERS:
+                return self._bad_value(0, msg.OPCODE, msg.heater, T)
+            mc.heaters[msg.heater].set_gains(PidGains.from_wire(msg.kp, msg.ki, msg.kd))
+        return []
 
     def _bad_value(self, n: int, opcode: int, value: int, T: float) -> list[Message]:
         return [self.machine.fail(ErrorCode.BAD_VALUE, n, 0, T, opcode, value)]
@@ -477,7 +479,8 @@ class SimDevice:
         mc.items_received += 1
         n = mc.items_received
         seg = mc.segments_received + 1 if isinstance(msg, Segment) else 0
-        item = item_of(msg, n, T, seg, self.config.clock_hz, HEATERS, self.config.fans)
+        cfg = self.config
+        item = item_of(msg, n, T, seg, cfg.clock_hz, HEATERS, cfg.fans, cfg.min_segment_ticks)
         if isinstance(item, BadValue):
             return self._bad_value(n, msg.OPCODE, item.value, T)
         mc.segments_received += seg > 0

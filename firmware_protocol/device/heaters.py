@@ -1,7 +1,9 @@
-"""First-order heater model with bang-bang control and runaway detection.
+"""First-order heater model with its control (bang-bang, PID, relay autotune) and
+runaway detection.
 
-``dT/dt = (ambient + gain * u - T) / tau`` with the power ``u`` in {0, 1} held for
-one control period and integrated exactly. Runaway is declared when the heater
+``dT/dt = (ambient + gain * u - T) / tau`` with the power ``u`` (0..1; bang-bang
+without gains, PID with ``SET_PID`` gains, the relay of an autotune) held for one
+control period and integrated exactly. Runaway is declared when the heater
 has been at full power for ``runaway_period_s`` and the temperature rose less than
 ``runaway_min_rise_c``, or when a temperature that had reached its target stays
 more than ``runaway_hysteresis_c`` below it for ``runaway_period_s`` (Marlin's two
@@ -12,6 +14,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from firmware_protocol.codes import ErrorCode
+from firmware_protocol.device.heater_control import Pid, PidGains, RelayTune
 
 
 @dataclass(frozen=True)
@@ -42,7 +47,8 @@ BED_MODEL = HeaterModel(
 
 
 class Heater:
-    """One heater. ``advance(t)`` returns the events that happened: ``reached``, ``runaway``, ``overtemp``."""
+    """One heater. ``advance(t)`` returns the events that happened: ``reached``, ``runaway``,
+    ``overtemp``, ``tuned`` / ``tune_failed`` (``tuned`` holds the result)."""
 
     def __init__(self, model: HeaterModel, t: float = 0.0):
         self.model = model
@@ -54,6 +60,18 @@ class Heater:
         self._t = t
         self._window: tuple[float, float] | None = None
         self._below_since: float | None = None
+        self.pid: Pid | None = None
+        self.tune: RelayTune | None = None
+        self.tuned: RelayTune | None = None  # the last autotune that ended
+
+    def set_gains(self, gains: PidGains | None) -> None:
+        self.pid = Pid(gains) if gains is not None else None
+
+    def start_tune(self, target_c: float, cycles: int, t: float) -> list[str]:
+        """Relay autotune around ``target_c`` (the heater goes off when it ends)."""
+        events = self.set_target(target_c, t)
+        self.tune = RelayTune(target_c, cycles, t)
+        return events
 
     def set_target(self, target_c: float, t: float) -> list[str]:
         events = self.advance(t)
@@ -68,6 +86,7 @@ class Heater:
         self.target = 0.0
         self.power = 0.0
         self.reached = False
+        self.tune = None
 
     def _relax(self, dt: float) -> None:
         m = self.model
@@ -85,13 +104,29 @@ class Heater:
             return []
         events: list[str] = []
         while self._t + m.control_period_s <= t:
-            self.power = 1.0 if self.temp < self.target else 0.0
+            self.power = self._control(m.control_period_s)
             self._relax(m.control_period_s)
             self._t += m.control_period_s
             events += self._check(self._t)
             if "runaway" in events or "overtemp" in events:
                 break
+            tune = self.tune
+            if tune is not None and tune.done:
+                events.append("tuned" if tune.result is not None else "tune_failed")
+                self.target = self.power = 0.0
+                self.reached = False
+                self.tune, self.tuned = None, tune
+                if tune.result is not None:
+                    self.set_gains(tune.result)
+                break
         return events
+
+    def _control(self, dt: float) -> float:
+        if self.tune is not None:
+            return self.tune.step(self._t, self.temp)
+        if self.pid is not None:
+            return self.pid.step(self.target, self.temp, dt)
+        return 1.0 if self.temp < self.target else 0.0
 
     def _check(self, t: float) -> list[str]:
         m = self.model
@@ -119,3 +154,25 @@ class Heater:
         else:
             self._below_since = None
         return out
+
+
+def heater_outcomes(heaters: list[Heater], t: float) -> list[tuple[str, int, tuple[int, ...]]]:
+    """Advance every heater to ``t``; what happened as (kind, heater, values): ``reached``
+    (temperature in 0.1 C,), ``tuned`` (kp, ki, kd in thousandths), ``fault`` (ErrorCode,
+    value): a runaway or overtemperature (the temperature) or a failed autotune (why)."""
+    out: list[tuple[str, int, tuple[int, ...]]] = []
+    for hid, h in enumerate(heaters):
+        for ev in h.advance(t):
+            temp_dc = round(h.temp * 10)
+            if ev == "reached":
+                out.append(("reached", hid, (temp_dc,)))
+            elif ev == "runaway":
+                out.append(("fault", hid, (ErrorCode.THERMAL_RUNAWAY, temp_dc)))
+            elif ev == "overtemp":
+                out.append(("fault", hid, (ErrorCode.OVERTEMP, temp_dc)))
+            elif h.tuned is not None and h.tuned.result is not None:
+                out.append(("tuned", hid, h.tuned.result.wire()))
+            else:
+                reason = int(h.tuned.failure or 0) if h.tuned is not None else 0
+                out.append(("fault", hid, (ErrorCode.AUTOTUNE_FAILED, reason)))
+    return out

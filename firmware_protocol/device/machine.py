@@ -21,23 +21,27 @@ from collections import deque
 from typing import Protocol
 
 from firmware_protocol.device.config import SimConfig
-from firmware_protocol.device.heaters import Heater
+from firmware_protocol.device.heaters import Heater, heater_outcomes
 from firmware_protocol.device.queue_items import (
     DWELL,
     ENABLE,
     FAN,
     HEATER,
+    HOLDING,
     HOME,
     SEG,
     SETPOS,
     TIMED,
+    TUNE,
     U32,
     WAIT,
     Item,
     _ends_block,
 )
 from firmware_protocol.device.record import SegmentRecord
+from firmware_protocol.device.travel import SoftLimits, segment_refusal, switch_crossing
 from firmware_protocol.messages import (
+    HEATERS_OFF,
     HOTEND,
     THERMAL_ERRORS,
     Error,
@@ -47,16 +51,19 @@ from firmware_protocol.messages import (
     Flag,
     Message,
 )
-from firmware_protocol.segments import MAX_DELTA, RAMP_TO_REST, ramp_share, steps_done
+from firmware_protocol.segments import MAX_DELTA, RAMP_TO_REST, steps_done
 
 _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
-    int(Flag.MOVING),
-    int(Flag.FAULT),
-    int(Flag.ESTOP),
-    int(Flag.HOMED),
-    int(Flag.ENABLED),
-    int(Flag.HEATING),
-    int(Flag.WAITING),
+    int(f)
+    for f in (
+        Flag.MOVING,
+        Flag.FAULT,
+        Flag.ESTOP,
+        Flag.HOMED,
+        Flag.ENABLED,
+        Flag.HEATING,
+        Flag.WAITING,
+    )
 )
 
 
@@ -103,8 +110,11 @@ class DeviceMachine:
         self.t_free = 0.0
         self.fault = 0
         self.last_error = 0
+        self.latched = 0  # a thermal fault: only a reset clears it
         self.estopped = False
         self.enabled_mask = self.homed_mask = 0
+        self.tail_homed = 0  # homed once everything queued has run
+        self.limits = SoftLimits()
         self.fan = 0
         self.heaters = [Heater(cfg.hotend), Heater(cfg.bed)]
         self.max_dc = [round(cfg.hotend.max_c * 10), round(cfg.bed.max_c * 10)]
@@ -134,18 +144,17 @@ class DeviceMachine:
             f |= _ENABLED
         if self.heaters[0].target > 0 or self.heaters[1].target > 0:
             f |= _HEATING
-        if cur is not None and cur.kind == WAIT:
+        if cur is not None and cur.kind in HOLDING:
             f |= _WAITING
         return f
 
     def active(self) -> bool:
         """Anything to do: motion executing or queued, a heater on (the watchdog guards it)."""
-        return (
-            self.current is not None
-            or bool(self.queue)
-            or self.heaters[0].target > 0
-            or self.heaters[1].target > 0
-        )
+        return self.current is not None or bool(self.queue) or self.heating()
+
+    def heating(self) -> bool:
+        """A heater target above 0 or an autotune running (the heater lease guards them)."""
+        return any(h.target > 0 or h.tune is not None for h in self.heaters)
 
     def buffered_ticks(self, T: float) -> int:
         """Queued motion not yet executed: the rest of the current timed item and the queue."""
@@ -176,18 +185,19 @@ class DeviceMachine:
         kind = item.kind
         if kind == SEG:
             ticks, deltas = item.ticks, item.deltas
-            r = float(ramp_share(item.ramp))
-            factor = max(2 * r, 2 - 2 * r) * self.clock_hz / ticks
-            for axis, d in enumerate(deltas):
-                rate = abs(d) * factor
-                if rate > self.cfg.max_step_rate * (1 + 1e-9):
-                    return [self.fail(ErrorCode.STEP_RATE, item.item, item.seg, T, axis, int(rate))]
-            tail = [p + d for p, d in zip(self.tail_pos, deltas)]
-            if any(abs(p) > MAX_DELTA for p in tail):
-                worst = max(range(4), key=lambda k: abs(tail[k]))
-                value = max(-MAX_DELTA, min(MAX_DELTA, tail[worst]))
-                return [self.fail(ErrorCode.BAD_VALUE, item.item, item.seg, T, 0x80, value)]
-            self.tail_pos = tail
+            refused = segment_refusal(
+                ticks,
+                deltas,
+                item.ramp,
+                self.tail_pos,
+                homed=self.tail_homed,
+                limits=self.limits,
+                clock_hz=self.clock_hz,
+                max_step_rate=self.cfg.max_step_rate,
+            )
+            if refused is not None:  # before any of it moves
+                return [self.fail(refused[0], item.item, item.seg, T, *refused[1:])]
+            self.tail_pos = [p + d for p, d in zip(self.tail_pos, deltas)]
             self.queued_ticks += ticks
         elif kind == DWELL:
             self.queued_ticks += item.ticks
@@ -198,8 +208,9 @@ class DeviceMachine:
             for k in range(3):
                 if mask >> k & 1:
                     self.tail_pos[k] = targets[k]
-        elif kind == HEATER:
-            hid, target = item.arg
+            self.tail_homed |= mask
+        elif kind in (HEATER, TUNE):
+            hid, target = item.arg[:2]
             if target > self.max_dc[hid]:
                 return [self.fail(ErrorCode.HEATER_RANGE, item.item, 0, T, hid, target)]
         if _ends_block(item):
@@ -224,14 +235,18 @@ class DeviceMachine:
         *,
         heaters_off: bool | None = None,
     ) -> Error:
-        """Enter the fault state: stop now, flush the queue; heaters off for thermal faults,
-        the watchdog and an e-stop (unless ``heaters_off`` says otherwise)."""
+        """The one shutdown path: stop now, flush the queue, keep the motors enabled, record
+        the cause and return its report (a second fault too); heaters off for thermal faults,
+        the watchdog, the heater lease and an e-stop (unless ``heaters_off`` says otherwise);
+        a thermal fault latches until a reset."""
         if self.current is not None and self.current.kind == SEG and self.cur_end > T:
             cur = self.current
             tau = (T - self.cur_start) / (cur.ticks / self.clock_hz)
             self._apply_partial(cur, tau, ErrorCode(code).name.lower())
         self.fault = int(code)
         self.last_error = int(code)
+        if code in THERMAL_ERRORS:
+            self.latched = int(code)
         self.queue.clear()
         self.queued_ticks = 0
         self.block_ends = 0
@@ -240,15 +255,17 @@ class DeviceMachine:
         self.t_free = T
         self.items_done = self.items_received
         self.tail_pos = list(self.pos)
+        self.tail_homed = self.homed_mask
         if heaters_off is None:
-            heaters_off = code in THERMAL_ERRORS or code in (ErrorCode.ESTOP, ErrorCode.WATCHDOG)
-        if heaters_off:
-            for h in self.heaters:
+            heaters_off = code in HEATERS_OFF
+        for h in self.heaters:
+            if heaters_off or h.tune is not None:  # an autotune never outlives its queue item
                 h.off(T)
         return Error(int(code), item, segment, axis, max(-MAX_DELTA, min(MAX_DELTA, value)))
 
     def clear_fault(self) -> bool:
-        if not self.fault:
+        """Leave the fault state (False: not faulted, or a latched thermal fault)."""
+        if not self.fault or self.latched:
             return False
         self.fault = 0
         self.estopped = False
@@ -283,10 +300,14 @@ class DeviceMachine:
         while not self.halted and not self.fault:
             cur = self.current
             if cur is not None:
-                if cur.kind == WAIT:
+                if cur.kind in HOLDING:
                     reports += self._heaters_to(T)
                     h = self.heaters[cur.arg[0]]
-                    if self.fault or (h.target > 0 and abs(h.temp - h.target) > cur.arg[1] / 10.0):
+                    if self.fault or (
+                        h.tune is not None
+                        if cur.kind == TUNE
+                        else h.target > 0 and abs(h.temp - h.target) > cur.arg[1] / 10.0
+                    ):
                         break
                     self.cur_end = T
                 if self.cur_end > T:
@@ -310,8 +331,7 @@ class DeviceMachine:
             if _ends_block(head):
                 self.block_ends -= 1
             reports += self._start(head, start)
-        if not self.fault:
-            reports += self._heaters_to(T)
+        reports += self._heaters_to(T)  # in every state: thermal protection never pauses
         if (
             self.observer is not None
             and not self.settled
@@ -325,20 +345,16 @@ class DeviceMachine:
         return reports
 
     def _heaters_to(self, T: float) -> list[Message]:
+        """Heater reports up to ``T``; a thermal fault is one even when already faulted."""
         out: list[Message] = []
-        for hid, h in enumerate(self.heaters):
-            for ev in h.advance(T):
-                if ev == "reached":
-                    out.append(
-                        Event(EventCode.HEATER_REACHED, self.items_done, (hid, round(h.temp * 10)))
-                    )
-                elif not self.fault:
-                    code = ErrorCode.THERMAL_RUNAWAY if ev == "runaway" else ErrorCode.OVERTEMP
-                    out.append(
-                        self.fail(
-                            code, self.items_done, self.segments_done, T, hid, round(h.temp * 10)
-                        )
-                    )
+        for kind, hid, v in heater_outcomes(self.heaters, T):
+            if kind == "reached":
+                out.append(Event(EventCode.HEATER_REACHED, self.items_done, (hid, *v)))
+            elif kind == "tuned":  # the gains are applied; the AUTOTUNE item is the current one
+                item = self.current.item if self.current is not None else self.items_done
+                out.append(Event(EventCode.AUTOTUNE_DONE, item, (hid, *v)))
+            else:
+                out.append(self.fail(v[0], self.items_done, self.segments_done, T, hid, v[1]))
         return out
 
     def _start(self, it: Item, t: float) -> list[Message]:
@@ -346,7 +362,8 @@ class DeviceMachine:
         clock = self.clock_hz
         kind = it.kind
         if kind == SEG:
-            self._abort = self._endstop_crossing(it)
+            phys = [self.pos[k] + self.offset[k] for k in range(3)]
+            self._abort = switch_crossing(phys, it.deltas, it.ramp, self.cfg.overtravel_steps)
             deltas = it.deltas
             if deltas[0] or deltas[1] or deltas[2] or deltas[3]:
                 self.enabled_mask |= sum(1 << k for k, d in enumerate(deltas) if d)
@@ -354,9 +371,12 @@ class DeviceMachine:
             tau = self._abort[0] if self._abort else 1.0
             self.cur_end = t + tau * it.ticks / clock
             return []
-        if kind in (DWELL, HOME, WAIT):
+        if kind in (DWELL, HOME, WAIT, TUNE):
             self.at_rest = True
             ticks = it.ticks
+            if kind == TUNE:
+                hid, target, cycles = it.arg
+                self.heaters[hid].start_tune(target / 10.0, cycles, t)
             if kind == HOME:
                 mask = it.arg[0]
                 dist = max(
@@ -369,7 +389,7 @@ class DeviceMachine:
                 it = it._replace(ticks=ticks)
                 self.enabled_mask |= mask
             self.current, self.cur_start = it, t
-            self.cur_end = t + ticks / clock if kind != WAIT else math.inf
+            self.cur_end = t + ticks / clock if kind not in HOLDING else math.inf
             return []
         reports: list[Message] = []
         arg = it.arg
@@ -391,21 +411,6 @@ class DeviceMachine:
         if not self.at_rest and not self.queue and self.current is None:
             reports.append(self.fail(ErrorCode.UNDERRUN, it.item, self.segments_done, t))
         return reports
-
-    def _endstop_crossing(self, it: Item) -> tuple[float, int, int] | None:
-        limit = self.cfg.overtravel_steps
-        best = None
-        deltas = it.deltas
-        for k in range(3):
-            d = deltas[k]
-            start = self.pos[k] + self.offset[k]
-            if d > 0 and start <= limit < start + d:
-                x = (limit + 1 - start - 0.5) / d  # normalised position of the offending step
-                r = float(ramp_share(it.ramp))
-                tau = x / (r + math.sqrt(r * r + (1 - 2 * r) * x))
-                if best is None or tau < best[0]:
-                    best = (tau, k, limit + 1)
-        return best
 
     def _apply_partial(self, it: Item, tau: float, error: str) -> None:
         done = steps_done(it.deltas, it.ramp, tau)
@@ -487,5 +492,5 @@ class DeviceMachine:
         )
         if not keep_motors:
             self.enabled_mask = 0
-            self.homed_mask = 0  # motors released: positions are no longer trustworthy
+            self.homed_mask = self.tail_homed = 0  # released: positions no longer trustworthy
         return reports

@@ -6,6 +6,7 @@ from typing import Any, NamedTuple
 
 from firmware_protocol.messages import (
     DWELL_MAX_S,
+    Autotune,
     Dwell,
     Enable,
     Home,
@@ -18,8 +19,9 @@ from firmware_protocol.messages import (
 )
 from firmware_protocol.segments import RAMP_TO_REST
 
-SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT = range(8)
+SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT, TUNE = range(9)
 TIMED = (SEG, DWELL, HOME)
+HOLDING = (WAIT, TUNE)  # hold the queue until a heater says so
 U32 = 0xFFFF_FFFF
 
 
@@ -27,7 +29,7 @@ class Item(NamedTuple):
     """One queue slot (a tuple: cheap to make, nothing for the garbage collector to follow).
 
     ``arg``: SETPOS the four positions; ENABLE (mask,); HOME (mask, positions);
-    HEATER/FAN/WAIT (index, value)."""
+    HEATER/FAN/WAIT (index, value); TUNE (heater, target_dc, cycles)."""
 
     kind: int
     item: int  # queue item number
@@ -65,11 +67,20 @@ class BadValue(NamedTuple):
 
 
 def item_of(
-    msg: Message, n: int, T: float, seg: int, clock_hz: int, heaters: int, fans: int
+    msg: Message,
+    n: int,
+    T: float,
+    seg: int,
+    clock_hz: int,
+    heaters: int,
+    fans: int,
+    min_ticks: int = 1,
 ) -> Item | BadValue:
     """The queue slot for queued command ``msg`` (item number ``n``, segment number ``seg``
     for a segment, arriving at device time ``T``), or the value the device refuses."""
     if isinstance(msg, Segment):
+        if msg.ticks < min_ticks:
+            return BadValue(msg.ticks)
         return make_item(SEG, n, T, seg=seg, ticks=msg.ticks, deltas=msg.deltas, ramp=msg.ramp)
     if isinstance(msg, Dwell):
         if msg.ticks > DWELL_MAX_S * clock_hz:
@@ -81,12 +92,14 @@ def item_of(
         return make_item(SETPOS, n, T, arg=msg.steps)
     if isinstance(msg, Enable):
         return make_item(ENABLE, n, T, arg=(msg.mask,))
-    if isinstance(msg, (SetHeater, WaitHeater)) and msg.heater >= heaters:
+    if isinstance(msg, (SetHeater, WaitHeater, Autotune)) and msg.heater >= heaters:
         return BadValue(msg.heater)
     if isinstance(msg, SetHeater):
         return make_item(HEATER, n, T, arg=(msg.heater, msg.target_dc))
     if isinstance(msg, WaitHeater):
         return make_item(WAIT, n, T, arg=(msg.heater, msg.tolerance_dc))
+    if isinstance(msg, Autotune):
+        return make_item(TUNE, n, T, arg=(msg.heater, msg.target_dc, msg.cycles))
     if isinstance(msg, SetFan):
         if msg.fan >= fans:
             return BadValue(msg.fan)
