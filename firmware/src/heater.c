@@ -28,10 +28,35 @@ static const uint8_t channel[2] = {HOTEND_ADC_CHANNEL, BED_ADC_CHANNEL};
 static const uint32_t watch_ticks[2] = {MS_TO_CLOCK(HOTEND_WATCH_MS), MS_TO_CLOCK(BED_WATCH_MS)};
 static const int16_t hysteresis[2] = {HOTEND_HYSTERESIS_DC, BED_HYSTERESIS_DC};
 static const int16_t cutoff[2] = {HOTEND_CUTOFF_DC, BED_CUTOFF_DC};
-/* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS */
-static const float kp[2] = {2.0f, 6.0f};
-static const float ki[2] = {0.02f, 0.02f};
-static const float kd[2] = {8.0f, 20.0f};
+/* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS (defaults; SET_PID) */
+static const float kp0[2] = {2.0f, 6.0f};
+static const float ki0[2] = {0.02f, 0.02f};
+static const float kd0[2] = {8.0f, 20.0f};
+static float kp[2] = {2.0f, 6.0f};
+static float ki[2] = {0.02f, 0.02f};
+static float kd[2] = {8.0f, 20.0f};
+
+/* SET_PID gains x1000 in Marlin's units (output 0..255, error in C, time in s): per
+ * 0.1 C and a 100 ms period, Kp / 10, Ki / 100 (the sum of errors times 0.1 s / 10)
+ * and Kd (a change per period is d/dt x 0.1 s / 10). All 0: the defaults. */
+void heater_set_pid(uint8_t id, uint32_t p, uint32_t i, uint32_t d)
+{
+    if (!p && !i && !d) {
+        kp[id] = kp0[id];
+        ki[id] = ki0[id];
+        kd[id] = kd0[id];
+    } else {
+        kp[id] = (float)p * 1e-4f;
+        ki[id] = (float)i * 1e-5f;
+        kd[id] = (float)d * 1e-3f;
+    }
+    heaters[id].integ = 0;
+}
+
+uint8_t heater_tune_supported(void)
+{
+    return 0; /* relay autotune: not on this firmware yet (ERROR AUTOTUNE_FAILED 3) */
+}
 
 uint16_t heater_max_dc(uint8_t id)
 {

@@ -100,20 +100,23 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
         heater_outputs_off();
     sim_mailbox.last_error = code; /* before the abort marker names it */
     stepper_halt();
-    if (!machine_thermal(mc.fault))
-        mc.fault = code;
+    mc.fault = code; /* the newest; a thermal one stays latched whatever follows */
     mc.last_error = code;
+    if (machine_thermal(code))
+        mc.latched = code;
     stepper_flush(mc.items_received);
     machine_account();
     stepper_positions(mc.tail_pos);
     if (how & SD_MOTORS_OFF)
         stepper_disable_all(); /* positions are no longer trustworthy */
+    mc.tail_homed = st.homed_mask;
     report_error(code, item, segment, axis, value);
 }
 
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
 {
-    uint8_t off = machine_thermal(code) || code == ERR_ESTOP || code == ERR_WATCHDOG;
+    uint8_t off = machine_thermal(code) || code == ERR_ESTOP || code == ERR_WATCHDOG ||
+                  code == ERR_HEATER_LEASE;
     machine_shutdown(code, item, segment, axis, value, off ? SD_HEATERS_OFF : 0);
 }
 
@@ -130,7 +133,7 @@ uint8_t machine_clear_fault(void)
 {
     if (!mc.fault)
         return CLEAR_NOTHING;
-    if (machine_thermal(mc.fault))
+    if (mc.latched)
         return CLEAR_REFUSED; /* latched until a reset, as Marlin and Klipper do */
     mc.fault = 0;
     mc.estopped = 0;
@@ -138,9 +141,21 @@ uint8_t machine_clear_fault(void)
     return CLEAR_DONE;
 }
 
+int8_t machine_limits_violation(const int32_t *end, int32_t *pos)
+{
+    uint8_t check = mc.limits_set & mc.tail_homed;
+    for (uint8_t k = 0; k < 3; k++)
+        if ((check >> k & 1) && (end[k] < mc.limit_lo[k] || end[k] > mc.limit_hi[k])) {
+            *pos = end[k];
+            return (int8_t)k;
+        }
+    return -1;
+}
+
 void machine_session_defaults(void)
 {
     mc.watchdog_ms = WATCHDOG_MS_DEFAULT;
+    mc.lease_armed = 0;
     mc.start_ticks = MS_TO_CLOCK(DEV_START_MS);
     mc.flow_ticks = MS_TO_CLOCK(DEV_FLOW_MS);
 }

@@ -7,6 +7,16 @@
 struct machine {
     uint32_t items_received, segments_received;
     uint8_t fault, last_error, estopped;
+    uint8_t latched;        /* a thermal fault: only a reset clears it */
+    uint8_t host_minor;     /* min(HELLO minor, ours): 2.1 reports (HEALTH) when >= 1 */
+    /* soft travel limits (SET_LIMITS, kept until reset) and the modules homed once
+     * everything queued has run (a queued HOME counts) */
+    uint8_t limits_set, tail_homed;
+    int32_t limit_lo[3], limit_hi[3];
+    /* heater lease (HEATER_LEASE): armed by the first lease of a session */
+    uint8_t lease_armed;
+    uint16_t lease_ms;
+    uint32_t lease_at;
     uint8_t synced;
     uint16_t nonce;
     uint16_t overflow_rejects;
@@ -47,9 +57,10 @@ void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32
 /* THERMAL_RUNAWAY and OVERTEMP: latched until a reset. */
 uint8_t machine_thermal(uint8_t code);
 enum { CLEAR_NOTHING, CLEAR_DONE, CLEAR_REFUSED };
-/* ERROR(latched code, axis = CLEAR_FAULT's opcode, value) answers a refused CLEAR_FAULT */
-#define CLEAR_REFUSED_VALUE 1
 uint8_t machine_clear_fault(void);
+/* ENDSTOP_HIT module (>= 0) and *pos when a segment ending at end[] leaves the soft
+ * limits of a homed module; -1 when it stays inside. */
+int8_t machine_limits_violation(const int32_t *end, int32_t *pos);
 /* A new session: the settings go back to their defaults. */
 void machine_session_defaults(void);
 

@@ -24,6 +24,18 @@ struct item queue[QUEUE_SIZE];
 volatile uint8_t queue_head, queue_tail;
 volatile struct sim_mailbox sim_mailbox;
 uint32_t link_now;
+static uint16_t loop_worst_us;
+
+void health_read(struct health *out)
+{
+    uint8_t s = SREG;
+    cli();
+    out->late_pulses = stepper_late_pulses;
+    out->late_worst_us = (stepper_late_worst + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
+    SREG = s;
+    out->rx_overruns = uart_rx_overruns();
+    out->loop_worst_us = loop_worst_us;
+}
 
 void sched_update_link_time(void)
 {
@@ -137,8 +149,8 @@ int main(void)
         watchdog_kick(now);
         sched_update_link_time();
         uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / CLOCK_HZ));
-        if (loop_us > sim_mailbox.main_loop_max_us)
-            sim_mailbox.main_loop_max_us = loop_us;
+        if (loop_us > loop_worst_us)
+            sim_mailbox.main_loop_max_us = loop_worst_us = loop_us;
         last = now;
         int16_t c;
         uint8_t got = 0;

@@ -104,6 +104,13 @@ void session_poll(uint32_t now)
         machine_stop(ERR_WATCHDOG, 0, 1, mc.watchdog_ms);
         return;
     }
+    /* heater lease (2.1): heater targets stand only while the host's job keeps renewing
+     * them (a wedged host whose keep-alive thread still runs does not) */
+    if (mc.lease_armed && (heaters[0].target_dc || heaters[1].target_dc) &&
+        now - mc.lease_at >= MS_TO_CLOCK(mc.lease_ms)) {
+        machine_stop(ERR_HEATER_LEASE, 0, 1, mc.lease_ms);
+        return;
+    }
     /* unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of
      * the queue freed, or any other change after DEV_FLOW_INTERVAL_MS */
     uint8_t want = !flow_valid;

@@ -34,6 +34,8 @@ volatile uint16_t heater_lease;
 volatile uint16_t stepper_isr_max_cycles;
 volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns, stepper_late_pulses;
 volatile uint8_t stepper_latency_max;
+volatile uint16_t stepper_late_worst;
+static volatile uint8_t computing, tick_missed;
 
 #define OUT_MOTION 0x01
 #define OUT_SEG_END 0x02
@@ -398,11 +400,11 @@ static void __attribute__((noinline)) dispatch(void)
             struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
             if (plan_tail == plan_head || p->index != queue_tail) {
                 if (!st.at_rest) {
-                    /* the main loop fell behind while moving: the motion would stretch
-                     * and lose steps (all axes near the top rate at once), so say so */
+                        /* the main loop did not prepare it in time: the motion would stretch,
+                     * so stop and say so (not a step-rate excess: PLANNER_LATE) */
                     stepper_plan_stalls++;
-                    raise_error(ERR_STEP_RATE, st.items_done, st.segments_done, 0xFF,
-                                (int32_t)MAX_STEP_RATE);
+                    raise_error(ERR_PLANNER_LATE, st.items_done, st.segments_done, 0xFF,
+                                TICK_UNITS);
                 }
                 return;
             }
@@ -808,7 +810,16 @@ static void __attribute__((noinline)) tick_start(void)
     uint8_t units = e->units;
     if (units != ocr_units) {
         ocr_units = units;
-        OCR1A = (uint16_t)(units * UNIT_CYCLES - 1);
+        uint16_t top = (uint16_t)(units * UNIT_CYCLES - 1);
+        OCR1A = top;
+        uint16_t now = TCNT1;
+        if ((uint16_t)(now + 8) > top) {
+            /* this (shorter) tick is over already: its compare match would be missed
+             * and the timer run on to 0xFFFF (a 4 ms hole). Wrap the period by hand,
+             * keeping the time base, and start the next tick at once (late). */
+            TCNT1 = (uint16_t)(now - top + 1);
+            tick_missed = 1;
+        }
     }
     uint8_t pulses = e->m[0], t0 = 0;
     if (pulses) {
@@ -823,6 +834,11 @@ static void __attribute__((noinline)) tick_start(void)
     /* useful work while the pulses are high */
     if (entry > stepper_latency_max && !late)
         stepper_latency_max = entry;
+    uint16_t lateness = entry + late; /* cycles after the tick's due start */
+    if (lateness > stepper_late_worst)
+        stepper_late_worst = lateness;
+    if (pulses && lateness > LATE_TOLERANCE_US * (F_CPU / 1000000UL))
+        stepper_late_pulses++; /* counted (HEALTH), never silent */
     uint8_t f = e->flags;
     if (f & (OUT_POS | OUT_ABORT)) {
         /* positions were set (at rest); a segment was abandoned (before the
@@ -878,8 +894,6 @@ static void __attribute__((noinline)) motion_marker(void)
 
 /* After a tick's computation: the interrupt's length so far, and whether the
  * next tick has already begun (returns 1: start it now). */
-static volatile uint8_t computing, tick_missed;
-
 static uint8_t __attribute__((noinline)) tick_end(void)
 {
     uint16_t used = TCNT1 + late;
