@@ -169,6 +169,10 @@ static void enqueue_segment(const struct segment *s)
     sim_mailbox.segments_parsed++;
     if (discard_if_fault())
         return;
+    if (s->ticks < MIN_SEGMENT_TICKS) { /* CAPS min_segment_ticks */
+        bad_value(SEG_BASE, (int32_t)s->ticks, mc.segments_received);
+        return;
+    }
     uint32_t rate;
     int8_t axis = motion_rate_check(s, &rate);
     if (axis >= 0) {
@@ -184,6 +188,13 @@ static void enqueue_segment(const struct segment *s)
             return;
         }
         tail[k] = (int32_t)p;
+    }
+    int32_t at;
+    int8_t module = machine_limits_violation(tail, &at);
+    if (module >= 0) { /* refused on receipt: nothing of it moves */
+        machine_fail(ERR_ENDSTOP_HIT, mc.items_received, mc.segments_received, (uint8_t)module,
+                     at);
+        return;
     }
     memcpy(mc.tail_pos, tail, sizeof tail);
     motion_store(new_item(IT_SEG), s);
@@ -204,6 +215,7 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
         break;
     case OP_SET_HEATER:
     case OP_WAIT_HEATER:
+    case OP_AUTOTUNE:
         if (v[0] > 1) {
             bad_value(op, (int32_t)v[0], 0);
             return;
@@ -236,6 +248,7 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
             if (v[0] >> k & 1)
                 mc.tail_pos[k] = (int32_t)v[1 + k];
         }
+        mc.tail_homed |= (uint8_t)(v[0] & 7);
         break;
     case OP_DWELL:
         it = new_item(IT_DWELL);
@@ -254,6 +267,20 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
         it = new_item(IT_FAN);
         it->u.cmd.id = (uint8_t)v[0];
         it->u.cmd.value = (uint16_t)v[1];
+        break;
+    case OP_AUTOTUNE:
+        if (v[1] > heater_max_dc((uint8_t)v[0])) {
+            machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
+            return;
+        }
+        if (!heater_tune_supported()) {
+            machine_fail(ERR_AUTOTUNE_FAILED, mc.items_received, 0, (uint8_t)v[0], 3);
+            return;
+        }
+        it = new_item(IT_TUNE);
+        it->u.tune.id = (uint8_t)v[0];
+        it->u.tune.target = (uint16_t)v[1];
+        it->u.tune.cycles = (uint8_t)v[2];
         break;
     default: /* OP_WAIT_HEATER */
         it = new_item(IT_WAIT);
@@ -274,9 +301,37 @@ static void immediate(uint8_t op, const uint32_t *v)
     case OP_IDENTIFY:
         report_ident(0, 0);
         break;
-    case OP_CLEAR_FAULT:
-        if (machine_clear_fault())
-            report_event(EVT_FAULT_CLEARED, st.items_done, 0, 0);
+    case OP_CLEAR_FAULT: {
+        uint32_t items, segs;
+        uint8_t done = machine_clear_fault();
+        stepper_counts(&items, &segs);
+        if (done == CLEAR_DONE) {
+            report_event(EVT_FAULT_CLEARED, items, 0, 0);
+        } else if (done == CLEAR_REFUSED) { /* a thermal fault: only a reset leaves it */
+            int32_t code = mc.latched;
+            report_event(EVT_CLEAR_REFUSED, items, 1, &code);
+        }
+        break;
+    }
+    case OP_SET_LIMITS:
+        if ((int32_t)v[1] > (int32_t)v[2]) {
+            bad_value(op, (int32_t)v[0], 0);
+            break;
+        }
+        mc.limit_lo[v[0]] = (int32_t)v[1];
+        mc.limit_hi[v[0]] = (int32_t)v[2];
+        mc.limits_set |= (uint8_t)(1 << v[0]);
+        break;
+    case OP_SET_PID:
+        heater_set_pid((uint8_t)v[0], v[1], v[2], v[3]);
+        break;
+    case OP_HEATER_LEASE:
+        mc.lease_ms = (uint16_t)v[0];
+        mc.lease_at = link_now;
+        mc.lease_armed = 1;
+        break;
+    case OP_GET_CAPS:
+        report_caps();
         break;
     case OP_FLUSH:
         mc.flush_item = mc.items_received;
@@ -352,6 +407,7 @@ void proto_urgent(const uint8_t *payload, uint8_t len)
             session_opened();
             mc.synced = 1;
             mc.nonce = nonce;
+            mc.host_minor = (uint8_t)(v[2] < PROTO_MINOR ? v[2] : PROTO_MINOR);
         }
         report_ident(nonce, 1);
     } else { /* OP_EMERGENCY_STOP */

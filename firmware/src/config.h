@@ -30,6 +30,14 @@
 #define PHASE_CYCLES 200
 #define MAX_STEP_RATE 40000UL /* steps/s, any one axis */
 
+/* CAPS (protocol 2.1). The shortest segment: one whole tick (a shorter one would make
+ * the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
+ * rate sustained at 250000 baud (bench/firmware.py). A pulse later than the tolerance
+ * against its place in the firmware's schedule counts as late (HEALTH). */
+#define MIN_SEGMENT_TICKS TICK_UNITS
+#define SEGMENT_RATE 1000UL
+#define LATE_TOLERANCE_US 25
+
 /* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */
 #define QUEUE_SIZE 128
 /* Segments prepared ahead of the step interrupt (DDA constants, 72 bytes each). */
@@ -45,7 +53,7 @@
 
 /* Device-to-host report slots (window + backlog), bytes per report. */
 #define REPORT_SLOTS 8
-#define REPORT_MAX 96
+#define REPORT_MAX 112 /* STATUS and HEALTH in one payload */
 
 
 /* Host watchdog: no valid frame for this long while a session is open and the
@@ -65,5 +73,8 @@
 #define BED_HYSTERESIS_DC 100
 #define WATCH_MIN_RISE_DC 20
 #define REACHED_BAND_DC 10
+/* The heater duties the control loop sets expire after this many step ticks
+ * (100 us each: 0.3 s, three control periods) unless the loop refreshes them. */
+#define HEATER_LEASE_TICKS 3000
 
 #endif

@@ -4,6 +4,9 @@
  * the hysteresis below it for a whole watch period is a runaway. A reading
  * below MINTEMP_DC with a target set (open thermistor) or above the cut-off
  * (shorted thermistor, stuck MOSFET) is a fault whatever the target. */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+
 #include "adc.h"
 #include "board_ramps14.h"
 #include "config.h"
@@ -25,10 +28,35 @@ static const uint8_t channel[2] = {HOTEND_ADC_CHANNEL, BED_ADC_CHANNEL};
 static const uint32_t watch_ticks[2] = {MS_TO_CLOCK(HOTEND_WATCH_MS), MS_TO_CLOCK(BED_WATCH_MS)};
 static const int16_t hysteresis[2] = {HOTEND_HYSTERESIS_DC, BED_HYSTERESIS_DC};
 static const int16_t cutoff[2] = {HOTEND_CUTOFF_DC, BED_CUTOFF_DC};
-/* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS */
-static const float kp[2] = {2.0f, 6.0f};
-static const float ki[2] = {0.02f, 0.02f};
-static const float kd[2] = {8.0f, 20.0f};
+/* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS (defaults; SET_PID) */
+static const float kp0[2] = {2.0f, 6.0f};
+static const float ki0[2] = {0.02f, 0.02f};
+static const float kd0[2] = {8.0f, 20.0f};
+static float kp[2] = {2.0f, 6.0f};
+static float ki[2] = {0.02f, 0.02f};
+static float kd[2] = {8.0f, 20.0f};
+
+/* SET_PID gains x1000 in Marlin's units (output 0..255, error in C, time in s): per
+ * 0.1 C and a 100 ms period, Kp / 10, Ki / 100 (the sum of errors times 0.1 s / 10)
+ * and Kd (a change per period is d/dt x 0.1 s / 10). All 0: the defaults. */
+void heater_set_pid(uint8_t id, uint32_t p, uint32_t i, uint32_t d)
+{
+    if (!p && !i && !d) {
+        kp[id] = kp0[id];
+        ki[id] = ki0[id];
+        kd[id] = kd0[id];
+    } else {
+        kp[id] = (float)p * 1e-4f;
+        ki[id] = (float)i * 1e-5f;
+        kd[id] = (float)d * 1e-3f;
+    }
+    heaters[id].integ = 0;
+}
+
+uint8_t heater_tune_supported(void)
+{
+    return 0; /* relay autotune: not on this firmware yet (ERROR AUTOTUNE_FAILED 3) */
+}
 
 uint16_t heater_max_dc(uint8_t id)
 {
@@ -44,13 +72,27 @@ void heater_init(void)
         heaters[i].temp_dc = 250;
 }
 
-void heater_all_off(void)
+/* Heaters and fan off now: the pins low directly (not through the interrupt's PWM,
+ * which may not be running), the duties and targets zero, a target the interrupt
+ * passed on but the main loop has not taken yet dropped. */
+void heater_outputs_off(void)
 {
+    uint8_t s = SREG;
+    cli();
+    heater_duty[0] = heater_duty[1] = 0;
+    fan_duty = 0;
+    st.fan = 0;
+    heater_lease = 0;
+    HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
+    BED_PORT &= (uint8_t)~_BV(BED_BIT);
+    FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
+    st.heater_target[0] = st.heater_target[1] = 0;
+    st.heater_target_changed = 0;
+    SREG = s;
     for (uint8_t i = 0; i < 2; i++) {
         heaters[i].target_dc = 0;
         heaters[i].state = HS_OFF;
         heaters[i].integ = 0;
-        heater_duty[i] = 0;
     }
 }
 
@@ -153,4 +195,10 @@ void heater_poll(uint32_t now)
         protect(i, now);
         heater_duty[i] = pid(i);
     }
+    /* the duties stand for HEATER_LEASE_TICKS step ticks: if this loop stops
+     * refreshing them, the interrupt switches the heaters off by itself */
+    uint8_t s = SREG;
+    cli();
+    heater_lease = HEATER_LEASE_TICKS;
+    SREG = s;
 }

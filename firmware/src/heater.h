@@ -22,7 +22,11 @@ void heater_init(void);
 /* Run every few ms from the main loop: ADC conversions, control every HEATER_PERIOD_MS. */
 void heater_poll(uint32_t now);
 void heater_set_target(uint8_t id, uint16_t target_dc, uint32_t now);
-void heater_all_off(void);
+/* Heaters and fan off at once, pins driven low directly (the shutdown path). */
+void heater_outputs_off(void);
 uint16_t heater_max_dc(uint8_t id);
+/* SET_PID: gains x1000 in Marlin's units; all 0 = the defaults. */
+void heater_set_pid(uint8_t id, uint32_t kp, uint32_t ki, uint32_t kd);
+uint8_t heater_tune_supported(void);
 
 #endif

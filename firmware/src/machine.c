@@ -81,56 +81,81 @@ uint32_t machine_buffered_ticks(void)
     return mc.queued_units - executed;
 }
 
-static void fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value,
-                 uint8_t heaters_off)
+uint8_t machine_thermal(uint8_t code)
 {
+    return code == ERR_THERMAL_RUNAWAY || code == ERR_OVERTEMP;
+}
+
+/* The one shutdown path (Klipper's shutdown): every fault that stops the machine
+ * comes here. The heater (and fan) pins go low at once, written directly rather
+ * than through the interrupt's PWM, so a stopped timer cannot keep them on; the
+ * steppers stop where they are but stay enabled (a cable robot must not drop its
+ * effector) unless SD_MOTORS_OFF; the cause is recorded (a thermal fault latches
+ * until a reset: a later fault never replaces it) and every fault is reported, a
+ * second one included. */
+void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
+                      int32_t value, uint8_t how)
+{
+    if (how & SD_HEATERS_OFF)
+        heater_outputs_off();
     sim_mailbox.last_error = code; /* before the abort marker names it */
     stepper_halt();
-    mc.fault = code;
+    mc.fault = code; /* the newest; a thermal one stays latched whatever follows */
     mc.last_error = code;
+    if (machine_thermal(code))
+        mc.latched = code;
     stepper_flush(mc.items_received);
     machine_account();
     stepper_positions(mc.tail_pos);
-    if (heaters_off) {
-        heater_all_off();
-        cli();
-        st.heater_target[0] = st.heater_target[1] = 0;
-        st.heater_target_changed = 0;
-        sei();
-    }
+    if (how & SD_MOTORS_OFF)
+        stepper_disable_all(); /* positions are no longer trustworthy */
+    mc.tail_homed = st.homed_mask;
     report_error(code, item, segment, axis, value);
 }
 
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
 {
-    fail(code, item, segment, axis, value,
-         code == ERR_THERMAL_RUNAWAY || code == ERR_OVERTEMP || code == ERR_ESTOP ||
-             code == ERR_WATCHDOG);
+    uint8_t off = machine_thermal(code) || code == ERR_ESTOP || code == ERR_WATCHDOG ||
+                  code == ERR_HEATER_LEASE;
+    machine_shutdown(code, item, segment, axis, value, off ? SD_HEATERS_OFF : 0);
 }
 
 void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32_t value)
 {
-    fail(code, st.items_done, st.segments_done, 0xFF, value, !keep_heaters);
-    if (!keep_motors)
-        stepper_disable_all(); /* positions are no longer trustworthy */
+    uint32_t items, segs;
+    stepper_counts(&items, &segs);
+    machine_shutdown(code, items, segs, 0xFF, value,
+                     (uint8_t)((keep_heaters ? 0 : SD_HEATERS_OFF) |
+                               (keep_motors ? 0 : SD_MOTORS_OFF)));
 }
 
 uint8_t machine_clear_fault(void)
 {
     if (!mc.fault)
-        return 0;
+        return CLEAR_NOTHING;
+    if (mc.latched)
+        return CLEAR_REFUSED; /* latched until a reset, as Marlin and Klipper do */
     mc.fault = 0;
     mc.estopped = 0;
-    cli();
-    stepper_report.error = 0;
-    sei();
     stepper_resume();
-    return 1;
+    return CLEAR_DONE;
+}
+
+int8_t machine_limits_violation(const int32_t *end, int32_t *pos)
+{
+    uint8_t check = mc.limits_set & mc.tail_homed;
+    for (uint8_t k = 0; k < 3; k++)
+        if ((check >> k & 1) && (end[k] < mc.limit_lo[k] || end[k] > mc.limit_hi[k])) {
+            *pos = end[k];
+            return (int8_t)k;
+        }
+    return -1;
 }
 
 void machine_session_defaults(void)
 {
     mc.watchdog_ms = WATCHDOG_MS_DEFAULT;
+    mc.lease_armed = 0;
     mc.start_ticks = MS_TO_CLOCK(DEV_START_MS);
     mc.flow_ticks = MS_TO_CLOCK(DEV_FLOW_MS);
 }

@@ -7,6 +7,16 @@
 struct machine {
     uint32_t items_received, segments_received;
     uint8_t fault, last_error, estopped;
+    uint8_t latched;        /* a thermal fault: only a reset clears it */
+    uint8_t host_minor;     /* min(HELLO minor, ours): 2.1 reports (HEALTH) when >= 1 */
+    /* soft travel limits (SET_LIMITS, kept until reset) and the modules homed once
+     * everything queued has run (a queued HOME counts) */
+    uint8_t limits_set, tail_homed;
+    int32_t limit_lo[3], limit_hi[3];
+    /* heater lease (HEATER_LEASE): armed by the first lease of a session */
+    uint8_t lease_armed;
+    uint16_t lease_ms;
+    uint32_t lease_at;
     uint8_t synced;
     uint16_t nonce;
     uint16_t overflow_rejects;
@@ -32,13 +42,25 @@ void machine_account(void);
 void machine_queued(const struct item *it);
 /* Motion not yet executed: the rest of the executing item and the queue (saturates). */
 uint32_t machine_buffered_ticks(void);
-/* Enter the fault state: stop where it is, flush the queue (flushed items count
- * as done); heaters off for thermal faults, the watchdog and e-stop (unless kept);
- * report the error. */
+/* The one shutdown path: stop the steppers where they are (motors stay enabled
+ * unless SD_MOTORS_OFF), flush the queue (flushed items count as done), drive the
+ * heater and fan pins low when SD_HEATERS_OFF, record the cause (a thermal fault
+ * latches: nothing replaces it until a reset) and report it, every time. */
+#define SD_HEATERS_OFF 0x01
+#define SD_MOTORS_OFF 0x02
+void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
+                      int32_t value, uint8_t how);
+/* A fault: heaters off for thermal faults, the watchdog and e-stop. */
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
 /* E-stop or host watchdog: stop now, fail with `code`, keep what the flags say. */
 void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32_t value);
+/* THERMAL_RUNAWAY and OVERTEMP: latched until a reset. */
+uint8_t machine_thermal(uint8_t code);
+enum { CLEAR_NOTHING, CLEAR_DONE, CLEAR_REFUSED };
 uint8_t machine_clear_fault(void);
+/* ENDSTOP_HIT module (>= 0) and *pos when a segment ending at end[] leaves the soft
+ * limits of a homed module; -1 when it stays inside. */
+int8_t machine_limits_violation(const int32_t *end, int32_t *pos);
 /* A new session: the settings go back to their defaults. */
 void machine_session_defaults(void);
 

@@ -24,6 +24,18 @@ struct item queue[QUEUE_SIZE];
 volatile uint8_t queue_head, queue_tail;
 volatile struct sim_mailbox sim_mailbox;
 uint32_t link_now;
+static uint16_t loop_worst_us;
+
+void health_read(struct health *out)
+{
+    uint8_t s = SREG;
+    cli();
+    out->late_pulses = stepper_late_pulses;
+    out->late_worst_us = (stepper_late_worst + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
+    SREG = s;
+    out->rx_overruns = uart_rx_overruns();
+    out->loop_worst_us = loop_worst_us;
+}
 
 void sched_update_link_time(void)
 {
@@ -39,8 +51,29 @@ void sched_update_link_time(void)
     link_now = t;
 }
 
+/* A WAIT item is done at once when its heater's target is 0, else within the
+ * tolerance. Decided with interrupts masked, for the WAIT executing at that moment
+ * and with no target change still on its way from the interrupt, so a WAIT that
+ * follows another (or a SET_HEATER) is never satisfied by the other one's state. */
+static void decide_wait(void)
+{
+    uint8_t s = SREG;
+    cli();
+    if (st.current == IT_WAIT) {
+        uint8_t id = st.wait_heater & 1;
+        const struct heater *h = &heaters[id];
+        int16_t diff = (int16_t)(h->temp_dc - (int16_t)h->target_dc);
+        if (diff < 0)
+            diff = (int16_t)-diff;
+        stepper_wait_ok = !(st.heater_target_changed >> id & 1) &&
+                          (!h->target_dc || (uint16_t)diff <= st.wait_tolerance);
+    }
+    SREG = s;
+}
+
 static void take_interrupt_reports(uint32_t now)
 {
+    static uint8_t thermal_reported[2];
     struct stepper_report r = {0};
     uint8_t changed = 0;
     uint16_t targets[2] = {0, 0};
@@ -50,6 +83,7 @@ static void take_interrupt_reports(uint32_t now)
         cli();
         r = *(struct stepper_report *)&stepper_report;
         stepper_report.homed = 0;
+        stepper_report.error = 0;
         changed = st.heater_target_changed;
         targets[0] = st.heater_target[0];
         targets[1] = st.heater_target[1];
@@ -64,32 +98,31 @@ static void take_interrupt_reports(uint32_t now)
         stepper_positions(pos);
         report_event(EVT_HOMED, r.homed_item, 3, pos);
     }
-    if (r.error && !mc.fault)
+    if (r.error)
         machine_fail(r.error, r.item, r.segment, r.axis, r.value);
+    uint32_t items, segs;
+    stepper_counts(&items, &segs);
     for (uint8_t i = 0; i < 2; i++) {
         struct heater *h = &heaters[i];
         if (h->reached_event) {
             h->reached_event = 0;
             int32_t v[2] = {i, h->temp_dc};
-            report_event(EVT_HEATER_REACHED, st.items_done, 2, v);
+            report_event(EVT_HEATER_REACHED, items, 2, v);
         }
         if (h->fault) {
             uint8_t code = h->fault;
             h->fault = 0;
-            if (!mc.fault)
-                machine_fail(code, st.items_done, st.segments_done, i, h->temp_dc);
-            else
-                heater_all_off();
+            /* every thermal fault is reported once, faulted or not (it latches; an
+             * over-temperature that persists is not repeated every period) */
+            if (thermal_reported[i] != code) {
+                thermal_reported[i] = code;
+                machine_fail(code, items, segs, i, h->temp_dc);
+            } else {
+                heater_outputs_off();
+            }
         }
     }
-    if (st.current == IT_WAIT) {
-        /* done at once when the target is 0, else within the tolerance */
-        struct heater *h = &heaters[st.wait_heater & 1];
-        int16_t diff = (int16_t)(h->temp_dc - (int16_t)h->target_dc);
-        if (diff < 0)
-            diff = (int16_t)-diff;
-        stepper_wait_ok = !h->target_dc || (uint16_t)diff <= st.wait_tolerance;
-    }
+    decide_wait();
 }
 
 int main(void)
@@ -103,19 +136,21 @@ int main(void)
     sim_mailbox.version = 1;
     LED_DDR |= _BV(LED_BIT);
     heater_init();
-    stepper_init();
-    uart_init();
     watchdog_start();
+    /* after a watchdog or soft reset the motors that were enabled stay enabled: the
+     * effector hangs on them (positions are unknown: the host re-homes) */
+    stepper_init(watchdog_prev_enabled());
+    uart_init();
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
     for (;;) {
-        watchdog_kick();
         uint32_t now = sched_clock();
+        watchdog_kick(now);
         sched_update_link_time();
         uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / CLOCK_HZ));
-        if (loop_us > sim_mailbox.main_loop_max_us)
-            sim_mailbox.main_loop_max_us = loop_us;
+        if (loop_us > loop_worst_us)
+            sim_mailbox.main_loop_max_us = loop_worst_us = loop_us;
         last = now;
         int16_t c;
         uint8_t got = 0;
@@ -134,7 +169,9 @@ int main(void)
         stepper_start_ok = session_may_start();
         session_poll(link_now);
         link_poll(link_now);
-        watchdog_save(st.items_done, st.segments_done);
+        uint32_t items, segs;
+        stepper_counts(&items, &segs);
+        watchdog_save(items, segs, st.enabled_mask);
         sim_mailbox.isr_max_cycles = stepper_isr_max_cycles;
         sim_mailbox.lost_steps = stepper_lost_steps;
         sim_mailbox.plan_stalls = stepper_plan_stalls;

@@ -9,7 +9,6 @@
  * stored with 40 fraction bits; the last tick issues whatever is left, so the
  * totals are exact whatever the rounding. */
 #include <avr/interrupt.h>
-#include <math.h>
 
 #include "config.h"
 #include "motion.h"
@@ -84,13 +83,95 @@ uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units)
     return ticks;
 }
 
-/* x as 48-bit fixed point: hi = floor(x 2^24), lo = the next 16 fraction bits */
-static void fixed48(float x, int32_t *hi, uint16_t *lo)
+/* A per-segment constant K as floor(|K| 2^40) (48 bits: lo, the low 16, and hi, the
+ * next 32) and its sign: one float conversion per segment shape; per axis only
+ * integer products follow. */
+struct fx40 {
+    uint16_t lo;
+    uint32_t hi;
+    uint8_t neg;
+};
+
+static struct fx40 fx40_of(float k)
 {
-    float s = x * 16777216.0f;
-    float f = floorf(s);
-    *hi = (int32_t)f;
-    *lo = (uint16_t)((s - f) * 65536.0f);
+    struct fx40 f;
+    f.neg = k < 0.0f;
+    uint64_t v = (uint64_t)((f.neg ? -k : k) * 1099511627776.0f); /* 2^40 */
+    f.lo = (uint16_t)v;
+    f.hi = (uint32_t)(v >> 16);
+    return f;
+}
+
+/* a b, 16 x 16 -> 32 bits, inline (libgcc's call costs more than the four multiplies) */
+static inline __attribute__((always_inline)) uint32_t mul16x16(uint16_t a, uint16_t b)
+{
+    uint32_t r;
+    __asm__("mul %A1, %A2\n\t"
+            "movw %A0, r0\n\t"
+            "mul %B1, %B2\n\t"
+            "movw %C0, r0\n\t"
+            "mul %A1, %B2\n\t"
+            "add %B0, r0\n\t"
+            "adc %C0, r1\n\t"
+            "clr __zero_reg__\n\t"
+            "adc %D0, __zero_reg__\n\t"
+            "mul %B1, %A2\n\t"
+            "add %B0, r0\n\t"
+            "adc %C0, r1\n\t"
+            "clr __zero_reg__\n\t"
+            "adc %D0, __zero_reg__"
+            : "=&r"(r)
+            : "r"(a), "r"(b));
+    return r;
+}
+
+/* the same for n >= 2^16 (a long segment): 64-bit arithmetic, out of the common path */
+static void __attribute__((noinline)) times_fx40_wide(uint32_t n, const struct fx40 *k, uint16_t *l,
+                                                      uint32_t *h)
+{
+    uint64_t v = (uint64_t)n * (((uint64_t)k->hi << 16) | k->lo);
+    *l = (uint16_t)v;
+    *h = (uint32_t)(v >> 16);
+}
+
+static uint32_t __attribute__((noinline)) times_frac32_wide(uint32_t n, uint32_t p)
+{
+    return (uint32_t)(((uint64_t)n * p + 0x80000000UL) >> 32);
+}
+
+/* n K in Q40 as the interrupt's pair (lo: 16 fraction bits, hi: Q8.24), modulo 2^48
+ * (the value fits: a segment that passed the rate check moves a few steps a tick).
+ * Three 16 x 16-bit products when n < 2^16 (every segment of a print). */
+static inline __attribute__((always_inline)) void times_fx40(uint32_t n, const struct fx40 *k, uint16_t *lo, int32_t *hi)
+{
+    uint16_t l;
+    uint32_t h;
+    if (n >> 16) {
+        times_fx40_wide(n, k, &l, &h);
+    } else {
+        uint16_t n16 = (uint16_t)n;
+        uint32_t r0 = mul16x16(n16, k->lo);
+        uint32_t r1 = mul16x16(n16, (uint16_t)k->hi);
+        uint16_t r2 = (uint16_t)(n16 * (uint16_t)(k->hi >> 16)); /* its low half counts */
+        l = (uint16_t)r0;
+        h = (r0 >> 16) + r1 + ((uint32_t)r2 << 16);
+    }
+    if (k->neg) {
+        l = (uint16_t)-l;
+        h = ~h + (l == 0);
+    }
+    *lo = l;
+    *hi = (int32_t)h;
+}
+
+/* round(n P) for P = floor(P 2^32) / 2^32 in [0, 1) */
+static inline __attribute__((always_inline)) uint32_t times_frac32(uint32_t n, uint32_t p)
+{
+    if (n >> 16)
+        return times_frac32_wide(n, p);
+    uint16_t n16 = (uint16_t)n;
+    uint32_t t = mul16x16(n16, (uint16_t)(p >> 16)) + (mul16x16(n16, (uint16_t)p) >> 16);
+    return (t + 0x8000UL) >> 16;
 }
 
 /* floor(n (ka i + kb i^2) + 1/2): the steps due by the end of tick i */
@@ -101,35 +182,73 @@ uint32_t motion_steps_due(float n, float ka, float kb, uint32_t i)
     return q <= 0.0f ? 0 : (uint32_t)q;
 }
 
-static void prepare(struct plan *p, const struct item *it, uint8_t index)
+/* What all axes of a segment share: a handful of float operations, done again only
+ * when the duration or the ramp changes (a cruise repeats them). Per axis the work
+ * is integer: n times each constant. */
+static struct {
+    uint32_t units;
+    uint8_t ramp, flags;
+    float ka, kb;
+    struct fx40 v0, a; /* ka - kb, 2 kb */
+    uint32_t before;   /* (ka T' + kb T'^2) 2^32, T' = ticks - 1 */
+    uint32_t ticks;
+    uint8_t last_units;
+} shape;
+
+static void shape_of(const struct item *it)
 {
-    float r = (it->flags & SEGF_RAMP) ? (float)it->ramp / 255.0f : 0.5f;
+    uint8_t ramp_flag = it->flags & SEGF_RAMP;
+    if (shape.units == it->ticks && shape.flags == ramp_flag && shape.ramp == it->ramp)
+        return;
+    shape.units = it->ticks;
+    shape.flags = ramp_flag;
+    shape.ramp = it->ramp;
+    float r = ramp_flag ? (float)it->ramp * (1.0f / 255.0f) : 0.5f;
     float inv = (float)TICK_UNITS / (float)it->ticks; /* 1 / Dt */
     float ka = 2.0f * r * inv, kb = (1.0f - 2.0f * r) * inv * inv;
+    shape.ka = ka;
+    shape.kb = kb;
+    shape.ticks = motion_ticks_of(it->ticks, &shape.last_units);
+    float t = (float)(shape.ticks - 1);
+    /* the interrupt adds a before it uses v: start one a early */
+    shape.v0 = fx40_of(ka - kb);
+    shape.a = fx40_of(2.0f * kb);
+    float before = ka * t + kb * t * t;
+    shape.before = before >= 1.0f ? 0xFFFFFFFFUL : before <= 0.0f ? 0 : (uint32_t)(before * 4294967296.0f);
+}
+
+static void prepare(struct plan *p, const struct item *it, uint8_t index)
+{
+    shape_of(it);
     p->index = index;
     p->dir = it->flags >> 4;
     p->moving = 0;
-    p->accel = kb != 0.0f;
+    p->accel = shape.kb != 0.0f;
     p->at_rest = it->flags & SEGF_AT_REST;
-    p->ticks = motion_ticks_of(it->ticks, &p->last_units);
-    p->ka = ka;
-    p->kb = kb;
+    p->ticks = shape.ticks;
+    p->last_units = shape.last_units;
+    p->ka = shape.ka;
+    p->kb = shape.kb;
     for (uint8_t k = 0; k < 4; k++) {
         struct axis_plan *x = &p->ax[k];
         uint32_t n = it->u.n[k];
-        float nf = (float)n;
         p->delta[k] = (p->dir >> k & 1) ? -(int32_t)n : (int32_t)n;
-        uint32_t before = motion_steps_due(nf, ka, kb, p->ticks - 1);
+        x->acc = 1UL << 23;
+        if (!n) {
+            x->v_hi = x->a_hi = 0;
+            x->v_lo = x->a_lo = 0;
+            x->last_n = 0;
+            x->est_low = 0;
+            continue;
+        }
+        p->moving |= (uint8_t)(1 << k);
+        uint32_t before = times_frac32(n, shape.before);
         if (before > n)
             before = n;
         x->last_n = n - before;
         x->est_low = (uint8_t)before;
-        x->acc = 1UL << 23;
-        if (n)
-            p->moving |= (uint8_t)(1 << k);
-        /* the interrupt adds a before it uses v: start one a early */
-        fixed48(nf * (ka - kb), &x->v_hi, &x->v_lo);
-        fixed48(2.0f * nf * kb, &x->a_hi, &x->a_lo);
+        times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
+        times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
     }
 }
 

@@ -14,7 +14,7 @@
 #include <stdint.h>
 #include "config.h"
 
-enum { IT_SEG, IT_DWELL, IT_HOME, IT_SETPOS, IT_ENABLE, IT_HEATER, IT_FAN, IT_WAIT };
+enum { IT_SEG, IT_DWELL, IT_HOME, IT_SETPOS, IT_ENABLE, IT_HEATER, IT_FAN, IT_WAIT, IT_TUNE };
 
 #define SEGF_AT_REST 0x01 /* ends at rest (ramp 255 or no deltas) */
 #define SEGF_RAMP 0x02    /* ramp holds a code; else constant speed */
@@ -31,6 +31,10 @@ struct item {
             uint8_t id, mask;
             uint16_t value;
         } cmd;
+        struct {
+            uint8_t id, cycles;
+            uint16_t target;
+        } tune; /* AUTOTUNE */
     } u;
 };
 

@@ -90,6 +90,24 @@ void report_status(void)
     wr_uv(&w, link_counters.retransmits);
     wr_uv(&w, link_counters.naks_sent);
     wr_uv(&w, link_counters.duplicates);
+    if (mc.host_minor >= 1) { /* 2.1: HEALTH right after STATUS, in the same payload */
+        struct health hl;
+        health_read(&hl);
+        wr_u8(&w, CDPR_OP_HEALTH);
+        wr_uv(&w, hl.late_pulses);
+        wr_uv(&w, hl.late_worst_us);
+        wr_uv(&w, hl.rx_overruns);
+        wr_uv(&w, hl.loop_worst_us);
+    }
+    send(&w, 0);
+}
+
+void report_caps(void)
+{
+    struct writer w = start(CDPR_OP_CAPS);
+    wr_uv(&w, MIN_SEGMENT_TICKS);
+    wr_uv(&w, SEGMENT_RATE);
+    wr_uv(&w, LATE_TOLERANCE_US);
     send(&w, 0);
 }
 

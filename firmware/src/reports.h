@@ -10,6 +10,12 @@ void report_status(void);
 void report_ident(uint16_t nonce, uint8_t urgent);
 void report_boot(void);
 void report_estop_ack(void);
+void report_caps(void);
+/* What HEALTH reports (2.1), gathered by the main loop. */
+struct health {
+    uint32_t late_pulses, late_worst_us, rx_overruns, loop_worst_us;
+};
+void health_read(struct health *out);
 #define FLOW_MAX CDPR_FLOW_MAX_LEN
 uint8_t report_flow(uint8_t *out); /* FLOW payload into out[FLOW_MAX] */
 

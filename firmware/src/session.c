@@ -95,11 +95,20 @@ void session_poll(uint32_t now)
             announce_boot(now);
         return;
     }
-    /* host watchdog: no valid frame for watchdog_ms while there is something to do:
-     * stop, heaters off, motors held (a cable robot would drop its effector) */
-    if (active() && !mc.fault &&
+    /* host watchdog, in every state (faulted included: a fault keeps a heater on for
+     * the host to resume, and a host that dies after it must not leave it on): no
+     * valid frame for watchdog_ms while there is something to do: stop, heaters off,
+     * motors held (a cable robot would drop its effector) */
+    if (active() &&
         now - mc.last_frame_at >= (uint32_t)mc.watchdog_ms * (CLOCK_HZ / 1000)) {
         machine_stop(ERR_WATCHDOG, 0, 1, mc.watchdog_ms);
+        return;
+    }
+    /* heater lease (2.1): heater targets stand only while the host's job keeps renewing
+     * them (a wedged host whose keep-alive thread still runs does not) */
+    if (mc.lease_armed && (heaters[0].target_dc || heaters[1].target_dc) &&
+        now - mc.lease_at >= MS_TO_CLOCK(mc.lease_ms)) {
+        machine_stop(ERR_HEATER_LEASE, 0, 1, mc.lease_ms);
         return;
     }
     /* unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of

@@ -30,9 +30,12 @@ volatile struct stepper_state st;
 volatile struct stepper_report stepper_report;
 volatile uint8_t stepper_start_ok, stepper_wait_ok;
 volatile uint8_t heater_duty[2], fan_duty;
+volatile uint16_t heater_lease;
 volatile uint16_t stepper_isr_max_cycles;
 volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns, stepper_late_pulses;
 volatile uint8_t stepper_latency_max;
+volatile uint16_t stepper_late_worst;
+static volatile uint8_t computing, tick_missed;
 
 #define OUT_MOTION 0x01
 #define OUT_SEG_END 0x02
@@ -147,13 +150,14 @@ static uint8_t endstop(uint8_t axis)
     return v == ENDSTOP_TRIGGERED_LEVEL;
 }
 
-void stepper_init(void)
+void stepper_init(uint8_t hold_mask)
 {
     X_STEP_DDR |= _BV(X_STEP_BIT); X_DIR_DDR |= _BV(X_DIR_BIT); X_EN_DDR |= _BV(X_EN_BIT);
     Y_STEP_DDR |= _BV(Y_STEP_BIT); Y_DIR_DDR |= _BV(Y_DIR_BIT); Y_EN_DDR |= _BV(Y_EN_BIT);
     Z_STEP_DDR |= _BV(Z_STEP_BIT); Z_DIR_DDR |= _BV(Z_DIR_BIT); Z_EN_DDR |= _BV(Z_EN_BIT);
     E_STEP_DDR |= _BV(E_STEP_BIT); E_DIR_DDR |= _BV(E_DIR_BIT); E_EN_DDR |= _BV(E_EN_BIT);
-    apply_enables(0);
+    st.enabled_mask = hold_mask & 0x0F;
+    apply_enables(st.enabled_mask);
     X_MIN_DDR &= (uint8_t)~_BV(X_MIN_BIT); X_MIN_PORT |= _BV(X_MIN_BIT);
     Y_MIN_DDR &= (uint8_t)~_BV(Y_MIN_BIT); Y_MIN_PORT |= _BV(Y_MIN_BIT);
     Z_MIN_DDR &= (uint8_t)~_BV(Z_MIN_BIT); Z_MIN_PORT |= _BV(Z_MIN_BIT);
@@ -172,6 +176,15 @@ void stepper_init(void)
     OCR1A = TICK_CYCLES - 1;
     OCR1C = EDGE_NEVER;
     TIMSK1 = _BV(OCIE1A);
+}
+
+void stepper_counts(uint32_t *items, uint32_t *segments)
+{
+    uint8_t s = SREG;
+    cli();
+    *items = st.items_done;
+    *segments = st.segments_done;
+    SREG = s;
 }
 
 uint32_t stepper_ticks_left(void)
@@ -387,11 +400,11 @@ static void __attribute__((noinline)) dispatch(void)
             struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
             if (plan_tail == plan_head || p->index != queue_tail) {
                 if (!st.at_rest) {
-                    /* the main loop fell behind while moving: the motion would stretch
-                     * and lose steps (all axes near the top rate at once), so say so */
+                        /* the main loop did not prepare it in time: the motion would stretch,
+                     * so stop and say so (not a step-rate excess: PLANNER_LATE) */
                     stepper_plan_stalls++;
-                    raise_error(ERR_STEP_RATE, st.items_done, st.segments_done, 0xFF,
-                                (int32_t)MAX_STEP_RATE);
+                    raise_error(ERR_PLANNER_LATE, st.items_done, st.segments_done, 0xFF,
+                                TICK_UNITS);
                 }
                 return;
             }
@@ -797,7 +810,16 @@ static void __attribute__((noinline)) tick_start(void)
     uint8_t units = e->units;
     if (units != ocr_units) {
         ocr_units = units;
-        OCR1A = (uint16_t)(units * UNIT_CYCLES - 1);
+        uint16_t top = (uint16_t)(units * UNIT_CYCLES - 1);
+        OCR1A = top;
+        uint16_t now = TCNT1;
+        if ((uint16_t)(now + 8) > top) {
+            /* this (shorter) tick is over already: its compare match would be missed
+             * and the timer run on to 0xFFFF (a 4 ms hole). Wrap the period by hand,
+             * keeping the time base, and start the next tick at once (late). */
+            TCNT1 = (uint16_t)(now - top + 1);
+            tick_missed = 1;
+        }
     }
     uint8_t pulses = e->m[0], t0 = 0;
     if (pulses) {
@@ -812,6 +834,11 @@ static void __attribute__((noinline)) tick_start(void)
     /* useful work while the pulses are high */
     if (entry > stepper_latency_max && !late)
         stepper_latency_max = entry;
+    uint16_t lateness = entry + late; /* cycles after the tick's due start */
+    if (lateness > stepper_late_worst)
+        stepper_late_worst = lateness;
+    if (pulses && lateness > LATE_TOLERANCE_US * (F_CPU / 1000000UL))
+        stepper_late_pulses++; /* counted (HEALTH), never silent */
     uint8_t f = e->flags;
     if (f & (OUT_POS | OUT_ABORT)) {
         /* positions were set (at rest); a segment was abandoned (before the
@@ -835,6 +862,10 @@ static void __attribute__((noinline)) tick_start(void)
     }
     sched_clock_count += units;
     uint8_t p = ++pwm;
+    if (heater_lease)
+        heater_lease--;
+    else
+        heater_duty[0] = heater_duty[1] = 0; /* the control loop stopped refreshing them */
     if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
     if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
     if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
@@ -863,8 +894,6 @@ static void __attribute__((noinline)) motion_marker(void)
 
 /* After a tick's computation: the interrupt's length so far, and whether the
  * next tick has already begun (returns 1: start it now). */
-static volatile uint8_t computing, tick_missed;
-
 static uint8_t __attribute__((noinline)) tick_end(void)
 {
     uint16_t used = TCNT1 + late;

@@ -23,6 +23,9 @@ extern volatile struct stepper_state st;
 extern volatile uint8_t stepper_start_ok; /* the start rule allows leaving rest */
 extern volatile uint8_t stepper_wait_ok;  /* the waited-for heater is within tolerance */
 extern volatile uint8_t heater_duty[2], fan_duty;
+/* step ticks the heater duties stay valid; the heater loop refreshes it, the
+ * interrupt counts it down and zeroes the duties at 0 */
+extern volatile uint16_t heater_lease;
 
 /* raised by the interrupt, taken by the main loop */
 struct stepper_report {
@@ -34,13 +37,16 @@ struct stepper_report {
 };
 extern volatile struct stepper_report stepper_report;
 
-void stepper_init(void);
+/* Pins and Timer1; the motors in hold_mask stay enabled (after a watchdog reset). */
+void stepper_init(uint8_t hold_mask);
 /* Stop now (fault, estop): the executing item is abandoned, nothing more runs. */
 void stepper_halt(void);
 void stepper_resume(void);
 void stepper_flush(uint32_t items_received);
 void stepper_disable_all(void);
 uint8_t stepper_moving(void);
+/* items_done and segments_done, read with interrupts masked (the interrupt owns them). */
+void stepper_counts(uint32_t *items, uint32_t *segments);
 /* Ticks the executing segment or dwell has left (interrupts off). */
 uint32_t stepper_ticks_left(void);
 
@@ -50,7 +56,8 @@ extern volatile uint16_t stepper_lost_steps;  /* pulses a tick had no room for *
 extern volatile uint16_t stepper_plan_stalls; /* ticks motion waited for a plan */
 extern volatile uint16_t stepper_overruns;    /* ticks computed after their start */
 extern volatile uint16_t stepper_late_pulses; /* pulses issued after their tick ended */
-extern volatile uint8_t stepper_latency_max;  /* cycles from a tick's compare match to its first work */
+extern volatile uint8_t stepper_latency_max;
+extern volatile uint16_t stepper_late_worst; /* cycles: the latest a tick started (HEALTH) */  /* cycles from a tick's compare match to its first work */
 /* Step positions now (mid-segment: the steps issued so far). */
 void stepper_positions(int32_t *out);
 

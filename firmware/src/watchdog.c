@@ -15,6 +15,7 @@ struct saved {
     uint16_t magic;
     uint32_t items_done, segments_done;
     uint16_t soft_boots;
+    uint8_t enabled_mask; /* motors enabled when it was saved */
     uint16_t check;
 };
 
@@ -22,6 +23,8 @@ static uint8_t mcusr_at_boot __attribute__((section(".noinit")));
 static struct saved saved __attribute__((section(".noinit")));
 static uint8_t prev_valid;
 static uint32_t prev_items, prev_segments, boot_id;
+static uint8_t prev_enabled;
+static uint32_t kicked_at;
 static uint16_t EEMEM ee_boots;
 
 void early_init(void) __attribute__((naked, used, section(".init3")));
@@ -40,7 +43,7 @@ static uint16_t check_of(const struct saved *s)
 {
     return (uint16_t)(s->magic ^ (uint16_t)s->items_done ^ (uint16_t)(s->items_done >> 16) ^
                       (uint16_t)s->segments_done ^ (uint16_t)(s->segments_done >> 16) ^
-                      s->soft_boots ^ 0x5A5A);
+                      s->soft_boots ^ s->enabled_mask ^ 0x5A5A);
 }
 
 uint8_t watchdog_boot_cause(void)
@@ -60,6 +63,7 @@ void watchdog_start(void)
     if (prev_valid) {
         prev_items = saved.items_done;
         prev_segments = saved.segments_done;
+        prev_enabled = saved.enabled_mask & 0x0F;
     }
     uint16_t soft = valid ? (uint16_t)(saved.soft_boots + 1) : 0;
     uint16_t boots = eeprom_read_word(&ee_boots);
@@ -70,23 +74,31 @@ void watchdog_start(void)
     boot_id = ((uint32_t)boots * 2654435761UL) ^ ((uint32_t)soft * 40503UL) ^ 0x5EEDUL;
     saved.magic = SAVED_MAGIC;
     saved.soft_boots = soft;
-    watchdog_save(0, 0);
+    watchdog_save(0, 0, prev_enabled);
     wdt_enable(WDTO_2S);
 }
 
-void watchdog_kick(void)
+/* Fed only while the scheduler's clock advances: a stopped step timer (whose
+ * interrupt also runs the heaters' PWM and their lease) resets the board within
+ * 2 s, and the first code after the reset drives the heater gates low. */
+void watchdog_kick(uint32_t clock)
 {
-    wdt_reset();
+    if (clock != kicked_at) {
+        kicked_at = clock;
+        wdt_reset();
+    }
 }
 
-void watchdog_save(uint32_t items_done, uint32_t segments_done)
+void watchdog_save(uint32_t items_done, uint32_t segments_done, uint8_t enabled_mask)
 {
     saved.items_done = items_done;
     saved.segments_done = segments_done;
+    saved.enabled_mask = enabled_mask;
     saved.check = check_of(&saved);
 }
 
 uint8_t watchdog_prev_valid(void) { return prev_valid; }
+uint8_t watchdog_prev_enabled(void) { return prev_enabled; }
 uint32_t watchdog_prev_items(void) { return prev_items; }
 uint32_t watchdog_prev_segments(void) { return prev_segments; }
 uint32_t watchdog_boot_id(void) { return boot_id; }

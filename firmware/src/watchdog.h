@@ -4,13 +4,16 @@
 #include <stdint.h>
 
 void watchdog_start(void);
-void watchdog_kick(void);
+/* Feed the hardware watchdog if the scheduler's clock moved since the last feed. */
+void watchdog_kick(uint32_t clock);
 uint8_t watchdog_boot_cause(void);  /* BOOT_* */
 uint8_t watchdog_prev_valid(void);
+/* Motors enabled before a watchdog or soft reset (0 after power-on): held again at boot. */
+uint8_t watchdog_prev_enabled(void);
 uint32_t watchdog_prev_items(void);
 uint32_t watchdog_prev_segments(void);
 uint32_t watchdog_boot_id(void);
 /* keep the counters where a watchdog reset finds them */
-void watchdog_save(uint32_t items_done, uint32_t segments_done);
+void watchdog_save(uint32_t items_done, uint32_t segments_done, uint8_t enabled_mask);
 
 #endif

@@ -58,3 +58,22 @@ def test_thermistor_table_is_monotonic_and_matches_beta_3950():
     temps = [int(t) for _, t in rows]
     assert adc == sorted(adc, reverse=True) and temps == sorted(temps)
     assert abs(tool.adc_at(25.0) - 1024 * 100_000 / 104_700) < 1e-6
+
+
+def test_crc_tables_in_flash_are_the_polynomials():
+    """crc.c's byte tables: CRC-32/ISO-HDLC (zlib's) and CRC-8/SMBUS, entry by entry."""
+    import zlib
+
+    src = (TOOLS.parent / "src" / "crc.c").read_text()
+    body32 = src[src.index("crc32_table[256]") : src.index("crc8_table[256]")]
+    t32 = [int(x, 16) for x in re.findall(r"0x([0-9A-F]{8})UL", body32)]
+    assert len(t32) == 256
+    for i, v in enumerate(t32):  # the register after byte i from 0 (zlib's ~ undone)
+        assert v == zlib.crc32(bytes([i]), 0xFFFFFFFF) ^ 0xFFFFFFFF, i
+    body8 = src[src.index("crc8_table[256]") :]
+    t8 = [int(x, 16) for x in re.findall(r"0x([0-9A-F]{2})[,\n]", body8)][:256]
+    for i, v in enumerate(t8):
+        c = i
+        for _ in range(8):
+            c = ((c << 1) ^ 0x07) & 0xFF if c & 0x80 else (c << 1) & 0xFF
+        assert v == c, i

@@ -1,0 +1,119 @@
+"""The AVR firmware's one shutdown path, in simavr (issue 20, deliverable 1).
+
+- host silence after a non-thermal fault (UNDERRUN) with a heater on: the heater pin goes
+  low within the watchdog time plus 0.1 s (the harness times the pin against the host's
+  last byte);
+- a thermal fault latches: CLEAR_FAULT is refused (EVENT CLEAR_REFUSED naming the code),
+  and a thermal fault arriving while already faulted is reported too;
+- every fault is reported, a second one included.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from cdprhost.sim import avr_device
+from firmware_protocol.messages import (
+    ClearFault,
+    Configure,
+    Error,
+    ErrorCode,
+    Event,
+    EventCode,
+    Flag,
+    Flush,
+    Segment,
+    SetFan,
+    SetHeater,
+)
+from tests.conformance.device import RawHost, start
+
+pytestmark = [
+    pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals"),
+    pytest.mark.timeout(300),
+]
+
+WATCHDOG_MS = 500
+
+
+@pytest.fixture(scope="module")
+def avr_built():
+    missing = avr_device.toolchain_missing()
+    if missing:
+        pytest.skip(missing)
+    avr_device.build()
+
+
+def _errors(h: RawHost, code: int) -> list[Error]:
+    return [m for m in h.reports if isinstance(m, Error) and m.code == code]
+
+
+def _refused(h: RawHost) -> list[Event]:
+    return [m for m in h.reports if isinstance(m, Event) and m.code == EventCode.CLEAR_REFUSED]
+
+
+def _underrun(h: RawHost) -> None:
+    """A segment that ends moving, then FLUSH: it starts and the queue runs dry."""
+    h.send(Segment(ticks=2000, deltas=(40, 0, 0, 0), ramp=-1), Flush())
+    h.wait_for(lambda: _errors(h, ErrorCode.UNDERRUN), what="UNDERRUN")
+
+
+def test_host_silence_after_an_underrun_turns_the_heater_off(avr_built, tmp_path):
+    dev = start("avr", tmp_path, "--speedup", "1")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        h.send(Configure(watchdog_ms=WATCHDOG_MS, start_ticks=100_000, flow_ticks=12_500))
+        h.send(SetHeater(0, 1000))
+        h.wait_for(lambda: h.status().hotend_target_dc == 1000, what="target set")
+        _underrun(h)
+        st = h.status()
+        assert st.flags & Flag.FAULT and st.hotend_target_dc == 1000  # kept for a resume
+        h.keepalive = 0  # the host dies
+        h.reports.clear()
+        end = time.monotonic() + 3 * WATCHDOG_MS / 1000
+        while time.monotonic() < end:
+            h.pump(0.05)  # reads only: nothing is sent
+        assert _errors(h, ErrorCode.WATCHDOG), h.reports  # reported though faulted
+    finally:
+        h.close()
+        dev.stop()
+    silence = dev.stats()["heater_on_silence_max_s"]
+    assert 0 < silence <= WATCHDOG_MS / 1000 + 0.1, silence
+
+
+def test_thermal_fault_latches_and_a_second_fault_is_reported(avr_built, tmp_path):
+    # the hotend element fails at once: heating at full power does not raise the
+    # temperature, THERMAL_RUNAWAY after the 20 s watch period (device time, 4x)
+    dev = start("avr", tmp_path, "--speedup", "4", "--faults", "heater_fail_after=0")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        h.send(SetHeater(0, 2000))
+        _underrun(h)  # a first, non-thermal fault: the heater stays on
+        h.wait_for(
+            lambda: _errors(h, ErrorCode.THERMAL_RUNAWAY), timeout=30, what="THERMAL_RUNAWAY"
+        )
+        st = h.status()
+        assert st.last_error == ErrorCode.THERMAL_RUNAWAY and st.hotend_target_dc == 0
+        h.reports.clear()
+        h.send(ClearFault())
+        h.wait_for(lambda: _refused(h), what="CLEAR_FAULT refused")
+        assert not any(
+            isinstance(m, Event) and m.code == EventCode.FAULT_CLEARED for m in h.reports
+        )
+        assert h.status().flags & Flag.FAULT
+        # a non-thermal fault after it is reported and does not replace the latch
+        h.send(SetFan(3, 0))  # BAD_VALUE (one fan)
+        h.wait_for(lambda: _errors(h, ErrorCode.BAD_VALUE), what="BAD_VALUE")
+        h.reports.clear()
+        h.send(ClearFault())
+        assert h.wait_for(lambda: _refused(h), what="refused again")[0].values == (
+            ErrorCode.THERMAL_RUNAWAY,
+        )
+    finally:
+        h.close()
+        dev.stop()
