@@ -17,6 +17,7 @@ threads. Every way a job ends is safe:
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +38,8 @@ from cdprhost.job.resume import (
 )
 from cdprhost.job.resume_items import PlanSpec, Restart
 from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
-from cdprhost.job.streamer import Requests, Stop, StreamContext, Streamer
+from cdprhost.job.stopping import Stop, StopRecord
+from cdprhost.job.streamer import Requests, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
@@ -110,7 +112,10 @@ class PrintJob:
         self.log = JobLog(self.options.log_path)
         self.requests = Requests()
         self._state = JobState.IDLE
+        self._done = threading.Event()  # run() has returned
+        self._started = False
         self.link: HostLink | None = None  # set once connected (the streamer holds it)
+        self._streamer: Streamer | None = None
         self._sha256 = ""
         self._restart: Restart | None = None
         self._prepared: Prepared | None = None
@@ -129,12 +134,69 @@ class PrintJob:
     def request_resume(self) -> None:
         self._request("resume")
 
-    def request_cancel(self) -> None:
+    def request_cancel(self, reason: str = "") -> None:
+        """Stop within the buffered motion, park and end CANCELLED (``reason``: who asked, e.g.
+        "quit" or "SIGTERM"; recorded in the final state)."""
+        if reason:
+            self.requests.cancel_reason = self.requests.cancel_reason or reason
         self._request("cancel")
 
+    def emergency_stop(self) -> bool:
+        """ESTOP now (motors kept, heaters off unless the profile keeps them on failure); the
+        job ends FAILED. True when the device acknowledged (False without a link)."""
+        self._emit(Notice("emergency stop requested"))
+        self.log.write("request", what="estop")
+        self.requests.add("estop")
+        link = self.link
+        if link is None or self._done.is_set():
+            return False
+        try:
+            return bool(link.emergency_stop(timeout=1.0, flags=self._estop_flags()))
+        except (LinkError, OSError) as exc:
+            log.warning("emergency stop not acknowledged: %s", exc)
+            return False
+
+    def _estop_flags(self) -> int:
+        keep = EstopFlag.KEEP_MOTORS
+        if self.profile.heaters.on_failure == "keep":
+            keep |= EstopFlag.KEEP_HEATERS
+        return int(keep)
+
+    @property
+    def last_stop(self) -> StopRecord | None:
+        """The last controlled stop (pause or cancel): its device segments and speeds."""
+        return self._streamer.stops.record if self._streamer is not None else None
+
+    @property
+    def finished(self) -> bool:
+        """``run()`` has returned (the machine is left safe, the result is final)."""
+        return self._done.is_set()
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """Until ``run()`` has returned (True) or ``timeout_s`` passed (False)."""
+        if not self._started:
+            return True
+        return self._done.wait(timeout_s)
+
+    def shutdown(self, reason: str = "quit", timeout_s: float = 10.0) -> bool:
+        """Quit and signals: cancel (stop, park, heaters off, resume point) and wait until the
+        job has ended; an e-stop when it has not within ``timeout_s``. Close the link only after
+        this returns."""
+        if not self._started or self._done.is_set():
+            return True
+        self.request_cancel(reason)
+        if self._done.wait(timeout_s):
+            return True
+        log.warning("the job did not stop within %g s: emergency stop", timeout_s)
+        self.emergency_stop()
+        return self._done.wait(2.0)
+
     def _request(self, what: str) -> None:
+        """Recorded when asked (a Notice and the job log); the state changes when it acts."""
         self.requests.add(what)
         self.log.write("request", what=what)
+        if self._started and not self._done.is_set():
+            self._emit(Notice(f"{what} requested ({self._state.value})"))
 
     @property
     def state(self) -> JobState:
@@ -198,10 +260,12 @@ class PrintJob:
 
     # ------------------------------------------------------------ the job
     def run(self) -> PrintResult:
+        self._started = True
         try:
             return self._run()
         finally:
             self.log.close()
+            self._done.set()
 
     def _run(self) -> PrintResult:
         self._set(JobState.PREFLIGHT, str(self.gcode))
@@ -281,6 +345,7 @@ class PrintJob:
                 self.options.resume_layer_s,
             )
             streamer = Streamer(link, self._context(), writer)
+            self._streamer = streamer
             self._set(JobState.PRINTING)
             planned = segment_program(
                 self._items(),
@@ -374,11 +439,17 @@ class PrintJob:
         self._set(state, status)
 
     def _stop_tail(self, streamer: Streamer, result: PrintResult, reason: str) -> None:
-        """At a rest point after a cancel or a safe stop: heaters off (after a cancel, as the
-        profile's ``heaters.on_cancel`` says), resume point, end."""
+        """Stopped at rest after a cancel or a safe stop: park (``park.on_cancel``), heaters
+        off (``heaters.on_cancel``; always when the host quits or the stop is a failure),
+        resume point, end."""
         link = streamer.link
+        quitting = self.requests.cancel_reason
         try:
-            if reason or self.profile.heaters.on_cancel == "off":
+            machine = Machine(link, self.profile, self.model)
+            park = self.profile.park
+            if park.on_cancel and park.lift_mm > 0 and not streamer.stops.parked:
+                machine.park(lift_mm=park.lift_mm)
+            if reason or quitting or self.profile.heaters.on_cancel == "off":
                 link.send(*heaters_off())
             streamer.drain(final=False)
         except LinkError as exc:
@@ -390,7 +461,14 @@ class PrintJob:
             result.status, result.reason = "failed", reason
             self._failed(streamer, result, reason)
             return
-        self._finish(streamer, result, JobState.CANCELLED, "cancelled")
+        result.reason = quitting
+        self._finish(
+            streamer,
+            result,
+            JobState.CANCELLED,
+            "cancelled" + (f": {quitting}" if quitting else ""),
+        )
+        result.status = "cancelled"
 
     def _give_up(
         self,
@@ -401,12 +479,9 @@ class PrintJob:
         exc: BaseException,
     ) -> None:
         """Emergency stop first, then name the exact last executed segment and save it."""
-        keep = EstopFlag.KEEP_MOTORS
-        if self.profile.heaters.on_failure == "keep":
-            keep |= EstopFlag.KEEP_HEATERS
         if not isinstance(exc, DeviceReset):
             try:
-                link.emergency_stop(timeout=1.0, flags=keep)
+                link.emergency_stop(timeout=1.0, flags=self._estop_flags())
             except (LinkError, OSError) as stop_exc:  # the device's watchdog stops it
                 log.warning("emergency stop not acknowledged: %s", stop_exc)
         result.status, result.reason = "failed", reason
