@@ -26,14 +26,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from cdprhost.kinematics.machine import MachineModel  # noqa: E402
-from tests.job.stop_figures import fast_lines, peak_decel, run_with_request  # noqa: E402
-from tests.job.test_stop_within_buffer import _first_layers  # noqa: E402
+from tests.e2e.conftest import first_layers  # noqa: E402
+from tests.job.stop_figures import CUP, fast_lines, peak_decel, run_with_request  # noqa: E402
 
 
 def signals() -> None:
     from cdprhost.link import open_link
-    from tests.e2e.processes import SimDeviceProcess, square_part, start_print
-    from tests.e2e.test_stop_signals_pty import printing
+    from tests.e2e.processes import SimDeviceProcess, printing_point, square_part, start_print
 
     print(f"{'signal':7} {'exit s':>6} {'status':9} {'faulted':7} {'busy':5} heaters")
     for sig in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
@@ -43,7 +42,7 @@ def signals() -> None:
             gcode = square_part(tmp / "part.gcode", layers=30)
             with SimDeviceProcess(tmp, "--speedup", "1") as dev:
                 host = start_print(gcode, dev.path, state, "--json", str(report))
-                printing(gcode, state)
+                printing_point(gcode, state)
                 t0 = time.monotonic()
                 host.send_signal(sig)
                 host.communicate(timeout=120)
@@ -64,7 +63,7 @@ def main() -> None:
         return
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        cup = _first_layers(tmp)
+        cup = first_layers(CUP, tmp, 3, ("M104 S0", "M140 S0"))
         fast = fast_lines(tmp / "fast.gcode")
         cases = [
             ("cup", cup, "cancel", 40.0),

@@ -19,7 +19,6 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +26,9 @@ from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
+from cdprhost.job.options import PrintOptions, PrintResult
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
-    ResumePoint,
     ResumeWriter,
     file_sha256,
     remove_resume_point,
@@ -46,51 +45,14 @@ from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import heaters_off
 from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.pipeline import segment_program
-from cdprhost.motion.prepared import Prepared, Setup, prepare
+from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.messages import EstopFlag
 
 log = logging.getLogger(__name__)
 
-
-@dataclass
-class PrintOptions:
-    setup: Setup = field(default_factory=Setup)  # placement, --retarget, cancelled objects
-    resume_from_layer: int | None = None  # 0-based
-    resume: ResumePoint | None = None  # continue exactly at this point (``--resume``)
-    log_path: str | Path | None = None
-    resume_dir: str | Path | None = None
-    idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
-    resume_every_s: float = 3.0  # the resume point is saved this often (wall clock) ...
-    resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
-    batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
-
-
-@dataclass
-class PrintResult:
-    status: str
-    segments: int = 0
-    retransmits: int = 0
-    final_steps: list[int] | None = None
-    last_line: int | None = None
-    last_layer: int | None = None
-    print_time_s: float = 0.0
-    estimated_time_s: float = 0.0
-    violations: list[dict[str, Any]] = field(default_factory=list)
-    reason: str = ""
-    resume_file: str | None = None
-    notices: list[str] = field(default_factory=list)
-    bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
-
-    @property
-    def exit_code(self) -> int:
-        if self.status == "completed":
-            return 0
-        return 2 if self.bad_input else 1
-
-    def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if k != "bad_input"}
+__all__ = ["PrintJob", "PrintOptions", "PrintResult"]
 
 
 class PrintJob:
@@ -418,20 +380,11 @@ class PrintJob:
         )
 
     # ------------------------------------------------------------- endings
-    def _fill(self, streamer: Streamer, result: PrintResult, last: int | None = None) -> None:
-        link = streamer.link
-        info = streamer.executed(last)
-        result.segments = max(0, (last or link.progress.segments_done) - streamer.first_segment + 1)
-        result.retransmits = link.counters.retransmits
-        result.last_line = info.line if info else None
-        result.last_layer = info.layer + 1 if info else None
-        result.final_steps = list(info.steps) if info else None
-
     def _finish(
         self, streamer: Streamer, result: PrintResult, state: JobState, status: str
     ) -> None:
         st = streamer.link.request_status()
-        self._fill(streamer, result)
+        streamer.fill(result)
         result.status = status
         result.final_steps = list(st.steps)
         result.print_time_s = round(st.motion_time_s - self._t0, 6)
@@ -457,7 +410,7 @@ class PrintJob:
             return
         self._save_point(streamer, result, reason or "cancelled")
         if reason:
-            self._fill(streamer, result)
+            streamer.fill(result)
             result.status, result.reason = "failed", reason
             self._failed(streamer, result, reason)
             return
@@ -490,7 +443,7 @@ class PrintJob:
             self._set(JobState.FAILED, reason)
             return
         last = exc.last_segment if isinstance(exc, DeviceReset) else None
-        self._fill(streamer, result, last)
+        streamer.fill(result, last)
         self._save_point(streamer, result, reason, last)
         self._failed(streamer, result, reason, last)
 
@@ -498,7 +451,7 @@ class PrintJob:
         self, streamer: Streamer, result: PrintResult, reason: str, last: int | None = None
     ) -> None:
         """The machine time printed, the Failure event and the final state."""
-        result.print_time_s = self._print_time(streamer, last)
+        result.print_time_s = streamer.print_time(last)
         info = streamer.executed(last)
         # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
         self._emit(
@@ -526,16 +479,6 @@ class PrintJob:
         except OSError as exc:
             log.warning("resume point %s not written: %s", path, exc.strerror or exc)
             result.resume_file = str(path) if path.exists() else None
-
-    @staticmethod
-    def _print_time(streamer: Streamer, last: int | None = None) -> float:
-        """Machine time printed by this job up to its last executed segment (planned time:
-        the device may be unreachable now)."""
-        info = streamer.executed(last)
-        start = streamer.map.start_s
-        if info is None or start is None:
-            return 0.0
-        return round(max(0.0, info.t_end_s - start), 6)
 
 
 def _violations_reason(report: Any) -> str:

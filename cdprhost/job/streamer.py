@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from cdprhost.gcode import items as g
+from cdprhost.job.options import PrintResult
 from cdprhost.job.resume import ResumePoint, ResumeWriter
 from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
 from cdprhost.job.segment_map import SegmentInfo, SegmentMap
@@ -335,6 +336,26 @@ class Streamer:
         if number < self.first_segment:
             return None
         return self.map.lookup(number)
+
+    def fill(self, result: PrintResult, last: int | None = None) -> None:
+        """The result's counts and last executed program segment (``last``: the device's
+        number when known otherwise, e.g. after a reset)."""
+        link = self.link
+        info = self.executed(last)
+        result.segments = max(0, (last or link.progress.segments_done) - self.first_segment + 1)
+        result.retransmits = link.counters.retransmits
+        result.last_line = info.line if info else None
+        result.last_layer = info.layer + 1 if info else None
+        result.final_steps = list(info.steps) if info else None
+
+    def print_time(self, last: int | None = None) -> float:
+        """Machine time printed by this job up to its last executed segment (planned time:
+        the device may be unreachable now)."""
+        info = self.executed(last)
+        start = self.map.start_s
+        if info is None or start is None:
+            return 0.0
+        return round(max(0.0, info.t_end_s - start), 6)
 
     def point(self, reason: str, info: SegmentInfo | None) -> ResumePoint:
         """The resume point at ``info`` (the last executed segment)."""

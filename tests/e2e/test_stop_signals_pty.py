@@ -11,27 +11,14 @@ import sys
 
 import pytest
 
-from cdprhost.job.resume import ResumePoint, resume_path_for
+from cdprhost.job.resume import ResumePoint
 from cdprhost.link import open_link
-from tests.e2e.processes import SimDeviceProcess, square_part, start_print, wait_until
+from tests.e2e.processes import SimDeviceProcess, printing_point, square_part, start_print
 
 pytestmark = [
     pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminals as on Linux"),
     pytest.mark.timeout(240),
 ]
-
-
-def printing(gcode, state) -> ResumePoint:
-    """Once the job's resume point names executed motion."""
-    path = resume_path_for(gcode, state / "jobs")
-
-    def ready():
-        if not path.exists():
-            return None
-        point = ResumePoint.load(path)
-        return point if point.device_segment > 20 else None
-
-    return wait_until(ready, 120, "a resume point written while printing")  # type: ignore[return-value]
 
 
 @pytest.mark.parametrize(
@@ -43,7 +30,7 @@ def test_a_signal_mid_print_cancels_and_leaves_the_device_safe(tmp_path, sig):
     report = tmp_path / "result.json"
     with SimDeviceProcess(tmp_path, "--speedup", "1") as dev:
         host = start_print(gcode, dev.path, state, "--json", str(report))
-        printing(gcode, state)
+        printing_point(gcode, state)
         host.send_signal(sig)
         out, err = host.communicate(timeout=120)
         assert host.returncode == 1, out + err  # cancelled, not completed

@@ -20,6 +20,8 @@ from cdprhost.kinematics.machine import MachineModel
 from cdprhost.profile import load_profile
 from cdprhost.sim.embedded import open_embedded
 
+CUP = Path(__file__).resolve().parents[2] / "examples" / "example.gcode"
+
 
 @dataclass
 class StopRun:

@@ -11,23 +11,14 @@ import pytest
 from cdprhost.job.resume import ResumePoint
 from cdprhost.job.state import JobState
 from cdprhost.kinematics.machine import MachineModel
-from tests.job.stop_figures import fast_lines, peak_decel, run_with_request, speeds
+from tests.e2e.conftest import first_layers
+from tests.job.stop_figures import CUP, fast_lines, peak_decel, run_with_request, speeds
 
-CUP = Path(__file__).resolve().parents[2] / "examples" / "example.gcode"
 LATENCY_S = 2.0  # the acceptance: at rest within 2 s of the request
 
 
 def _first_layers(tmp: Path, layers: int = 3) -> Path:
-    out, seen = [], 0
-    for line in CUP.read_text().splitlines():
-        if line.startswith(";LAYER_CHANGE"):
-            seen += 1
-            if seen > layers:
-                break
-        out.append(line)
-    path = tmp / "cup.gcode"
-    path.write_text("\n".join([*out, "M104 S0", "M140 S0"]) + "\n")
-    return path
+    return first_layers(CUP, tmp, layers, ("M104 S0", "M140 S0"))
 
 
 def _check_controlled(run, model, accel_margin=1.6):
