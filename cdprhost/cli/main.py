@@ -17,6 +17,7 @@ from cdprhost import __version__
 
 # command -> (module in cdprhost.cli.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
+    "api-key": ("api_key", "print (or replace) the API key the print server requires"),
     "calibrate": (
         "calibrate",
         "kinematic calibration: plan poses, identify parameters, guided wizard",
@@ -33,6 +34,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "print a G-code file (embedded simulated device unless --port is given)",
     ),
     "profile": ("profile", "show, validate or export machine profiles"),
+    "serve": (
+        "serve",
+        "headless print server: the slicer upload API (OctoPrint subset) on 127.0.0.1:5000",
+    ),
     "sim-device": ("sim_device", "run the simulated device on a pseudo-terminal (prints its path)"),
     "tui": ("tui", "terminal UI: connect, print, jog, calibrate, diagnose"),
 }

@@ -1,0 +1,177 @@
+"""`cdprhost serve --profile P [--port DEV] [--listen [HOST:]PORT]`: the headless print server.
+
+Answers the slicer upload API (the OctoPrint REST subset) until SIGTERM or SIGINT; a running
+print is stopped safely first (the job's safe-stop path), then the link is closed. Without
+``--port`` the prints run on the embedded simulated device.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from typing import Any
+
+from cdprhost.cli.numbers import bounded_float
+from cdprhost.cli.options import add_placement_arguments, non_empty, setup_from_args
+from cdprhost.cli.profile_arg import add_profile_argument
+from cdprhost.errors import InputError
+
+DEFAULT_MAX_UPLOAD_MB = 256.0
+STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+def listen_arg(text: str) -> tuple[str, int]:
+    from cdprhost.server.listen import parse_listen
+
+    try:
+        return parse_listen(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_server_arguments(p: argparse.ArgumentParser, *, default_listen: bool) -> None:
+    """``--listen``, ``--uploads``, ``--max-upload-mb`` (shared with ``tui --listen``)."""
+    p.add_argument(
+        "--listen",
+        type=listen_arg,
+        default=("127.0.0.1", 5000) if default_listen else None,
+        metavar="[HOST:]PORT",
+        help="answer the slicer upload API here"
+        + (" (default 127.0.0.1:5000)" if default_listen else "")
+        + "; a HOST other than this machine's loopback is warned about",
+    )
+    p.add_argument(
+        "--uploads",
+        metavar="DIR",
+        help="upload folder (default: ~/.local/state/cdprhost/uploads)",
+    )
+    p.add_argument(
+        "--max-upload-mb",
+        type=bounded_float(0.001, 1e6),
+        default=DEFAULT_MAX_UPLOAD_MB,
+        metavar="MB",
+        help=f"largest upload accepted, MB (default {DEFAULT_MAX_UPLOAD_MB:g}; larger: 413)",
+    )
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "serve",
+        help="headless print server: the slicer upload API (OctoPrint subset) on 127.0.0.1:5000",
+    )
+    add_profile_argument(p)
+    p.add_argument(
+        "--port",
+        type=non_empty,
+        metavar="DEV",
+        help="serial device path or pyserial URL (default: embedded simulated device)",
+    )
+    p.add_argument("--baud", type=int, default=None, metavar="N", help="default: the profile's")
+    p.add_argument(
+        "--speedup",
+        type=bounded_float(0.0, 100_000.0),
+        default=10.0,
+        metavar="X",
+        help="embedded device: clock speed-up (default 10)",
+    )
+    add_server_arguments(p, default_listen=True)
+    add_placement_arguments(p, strict=False)
+    p.set_defaults(func=run)
+
+
+def start_api(args: argparse.Namespace, printer: Any) -> Any:
+    """Key, upload folder, app and server thread (started); says where, once."""
+    from cdprhost.server.apikey import KeyFile
+    from cdprhost.server.app import create_app
+    from cdprhost.server.listen import ServerThread, exposure_warning, is_loopback
+    from cdprhost.server.uploads import UploadFolder
+
+    keys = KeyFile()
+    if keys.created:
+        print(
+            f"API key (made now, stored in {keys.path}, mode 600; `cdprhost api-key` shows it "
+            f"again): {keys.key}",
+            file=sys.stderr,
+        )
+    uploads = UploadFolder(args.uploads)
+    try:
+        uploads.ensure()
+    except OSError as exc:
+        raise InputError(
+            f"cannot use the upload folder: {exc.strerror or exc}", source=str(uploads.root)
+        ) from None
+    app = create_app(printer, uploads, keys.current, max_upload_bytes=int(args.max_upload_mb * 1e6))
+    host, port = args.listen
+    server = ServerThread(app, host, port)
+    if not is_loopback(host):
+        print(exposure_warning(host, server.port), file=sys.stderr)
+    server.start()
+    print(
+        f"upload API on {server.url} (OctoPrint subset; key in X-Api-Key, see `cdprhost api-key`); "
+        f"uploads in {uploads.root}",
+        file=sys.stderr,
+    )
+    return server
+
+
+def _say_event(event: Any) -> None:
+    from cdprhost.job.state import Failure, Notice, StateChanged
+
+    if isinstance(event, StateChanged):
+        print(
+            f"job {event.state.value}{': ' + event.reason if event.reason else ''}", file=sys.stderr
+        )
+    elif isinstance(event, Notice):
+        print(f"job: {event.text}", file=sys.stderr)
+    elif isinstance(event, Failure):
+        print(f"job stopped: {event.reason}", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cdprhost.profile import load_profile
+    from cdprhost.server.headless import HeadlessPrinter
+
+    profile = load_profile(args.profile)
+    if args.port:
+        from cdprhost.link import open_link
+
+        baud = args.baud or profile.serial.baud
+
+        def open_device() -> Any:
+            return open_link(args.port, baud=baud, timeout_s=profile.serial.timeout_s)
+
+    else:
+        from cdprhost.sim.embedded import open_embedded
+
+        def open_device() -> Any:
+            return open_embedded(speedup=args.speedup or None)
+
+    printer = HeadlessPrinter(
+        profile, open_device, setup=setup_from_args(args), on_event=_say_event
+    )
+    stop = threading.Event()
+    caught: list[str] = []
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        caught.append(signal.Signals(signum).name)
+        stop.set()
+
+    previous = {name: signal.signal(getattr(signal, name), on_signal) for name in STOP_SIGNALS}
+    server = None
+    try:
+        server = start_api(args, printer)
+        while not stop.wait(1.0):  # until a signal: this is the server's life
+            pass
+        reason = caught[0] if caught else "stopped"
+        print(f"{reason}: stopping (a running print is stopped safely first)", file=sys.stderr)
+        ended = printer.shutdown(reason)
+    finally:
+        if server is not None:
+            server.stop()
+        else:
+            printer.shutdown("not started")
+        for name, handler in previous.items():
+            signal.signal(getattr(signal, name), handler)
+    return 0 if ended else 1

@@ -1,0 +1,120 @@
+"""The gate in front of every route: the API key, and the cap on a request's size.
+
+A plain ASGI middleware, so it runs before any route and before a byte of the body is read:
+a request without the right key is answered 401 (no key, or an empty one) or 403 (a wrong
+key) and nothing behind it runs. A body announced larger than the cap is answered 413 at
+once; a body that grows past it while it streams (chunked) is cut and answered 413.
+No CORS headers are ever added: a browser page on another origin cannot read a reply.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Awaitable, Callable, MutableMapping
+from typing import Any
+from urllib.parse import parse_qs
+
+from cdprhost.server.apikey import key_matches
+
+Scope = MutableMapping[str, Any]
+Message = MutableMapping[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+
+class BodyTooLarge(Exception):
+    pass
+
+
+def given_key(scope: Scope) -> str | None:
+    """The key in ``X-Api-Key`` (first), else in the ``apikey`` query parameter."""
+    for name, value in scope.get("headers", ()):
+        if name == b"x-api-key":
+            return str(value.decode("latin-1")).strip()
+    query = parse_qs(scope.get("query_string", b"").decode("latin-1"), keep_blank_values=True)
+    values = query.get("apikey")
+    return values[0].strip() if values else None
+
+
+async def send_error(send: Send, status: int, text: str) -> None:
+    body = json.dumps({"error": text}).encode()
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [
+                (b"content-type", b"application/json"),
+                (b"content-length", str(len(body)).encode()),
+                (b"connection", b"close"),
+            ],
+        }
+    )
+    await send({"type": "http.response.body", "body": body})
+
+
+class KeyGuard:
+    def __init__(self, app: ASGIApp, key: Callable[[], str], max_body_bytes: int):
+        """``key`` returns the key in force (read per request: a rotation applies at once)."""
+        self.app = app
+        self.key = key
+        self.max_body_bytes = max_body_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            if scope["type"] == "websocket":
+                await send({"type": "websocket.close", "code": 1008})
+                return
+            await self.app(scope, receive, send)
+            return
+        given = given_key(scope)
+        if not given:
+            await send_error(send, 401, "an API key is required (X-Api-Key header)")
+            return
+        if not key_matches(self.key(), given):
+            await send_error(send, 403, "invalid API key")
+            return
+        length = _content_length(scope)
+        if length is not None and length > self.max_body_bytes:
+            await send_error(send, 413, _too_large(self.max_body_bytes))
+            return
+        await self._capped(scope, receive, send)
+
+    async def _capped(self, scope: Scope, receive: Receive, send: Send) -> None:
+        seen = 0
+        started = False
+
+        async def counted_receive() -> Message:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.max_body_bytes:
+                    raise BodyTooLarge
+            return message
+
+        async def watched_send(message: Message) -> None:
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+            await send(message)
+
+        try:
+            await self.app(scope, counted_receive, watched_send)
+        except BodyTooLarge:
+            if not started:
+                await send_error(send, 413, _too_large(self.max_body_bytes))
+
+
+def _content_length(scope: Scope) -> int | None:
+    for name, value in scope.get("headers", ()):
+        if name == b"content-length":
+            try:
+                return int(value)
+            except ValueError:
+                return None
+    return None
+
+
+def _too_large(cap: int) -> str:
+    return f"request larger than the upload cap ({cap / 1e6:g} MB; serve --max-upload-mb)"

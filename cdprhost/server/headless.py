@@ -1,0 +1,202 @@
+"""The printer of ``cdprhost serve``: print jobs run here, one at a time, on one link.
+
+The link is opened at the first start and kept (the simulated device keeps its state between
+jobs like a real one); a job finds it dead and it is opened again. Job events are folded into
+one :class:`~cdprhost.job.state.JobSnapshot` the API reports. Pause, cancel and
+:meth:`HeadlessPrinter.shutdown` go through :mod:`cdprhost.server.jobcontrol` (the safe stop).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from cdprhost.errors import CdprError
+from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.resume import log_path_for
+from cdprhost.job.runner import PrintJob, PrintOptions
+from cdprhost.job.state import Event, IllegalTransition, JobSnapshot, JobState, reduce
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.link import HostLink, LinkError
+from cdprhost.motion.prepared import Setup, prepare
+from cdprhost.preflight.run import preflight_prepared
+from cdprhost.profile.models import MachineProfile
+from cdprhost.server import jobcontrol
+from cdprhost.server.printer import (
+    PrinterStatus,
+    Refused,
+    busy_reason,
+    preflight_refusal,
+)
+
+log = logging.getLogger(__name__)
+
+
+class HeadlessPrinter:
+    def __init__(
+        self,
+        profile: MachineProfile,
+        open_link: Callable[[], HostLink],
+        *,
+        setup: Setup | None = None,
+        job_options: dict[str, Any] | None = None,
+        on_event: Callable[[Event], None] | None = None,
+    ):
+        self.profile = profile
+        self.model = MachineModel.from_profile(profile)
+        self.setup = setup or Setup()
+        self.job_options = dict(job_options or {})
+        self._open_link = open_link
+        self._link: HostLink | None = None
+        self._lock = threading.RLock()
+        self._status = PrinterStatus()
+        self._job: PrintJob | None = None
+        self._worker: threading.Thread | None = None
+        self._closing = False
+        self._listeners: list[Callable[[Event], None]] = [on_event] if on_event else []
+
+    # ------------------------------------------------------------ status
+    def status(self) -> PrinterStatus:
+        return self._status
+
+    def _on_event(self, event: Event) -> None:
+        with self._lock:
+            try:
+                job = reduce(self._status.job, event)
+            except IllegalTransition as exc:
+                log.warning("job event out of order: %s", exc)
+                return
+            ended = (
+                time.time() if job.state.finished and not self._status.job.state.finished else None
+            )
+            self._status = replace(self._status, job=job, ended_at=ended or self._status.ended_at)
+        for listener in self._listeners:
+            listener(event)
+
+    # ------------------------------------------------------------- start
+    def check_start(self, path: Path) -> None:
+        self._refuse_if_busy()
+        try:
+            report = preflight_prepared(prepare(path, self.profile, self.model, self.setup))
+        except GcodeError as exc:
+            raise Refused(f"the file does not parse: {exc}; nothing started") from None
+        except (CdprError, OSError) as exc:
+            raise Refused(f"{exc}; nothing started") from None
+        if not report.ok:
+            v = report.violations[0]
+            raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+
+    def _refuse_if_busy(self) -> None:
+        if self._closing:
+            raise Refused("the server is shutting down; nothing started")
+        status = self._status
+        if status.busy:
+            raise Refused(busy_reason(status))
+
+    def start(self, path: Path, who: str) -> None:
+        with self._lock:
+            self._refuse_if_busy()
+            options = PrintOptions(
+                setup=self.setup, log_path=log_path_for(path), **self.job_options
+            )
+            job = PrintJob(path, self.profile, self._job_link, options, self._on_event)
+            self._status = PrinterStatus(
+                connected=True,
+                file=path,
+                started_by=who,
+                job=JobSnapshot(state=JobState.IDLE),
+                started_at=time.time(),
+            )
+            self._job = job
+            self._worker = threading.Thread(
+                target=self._run, args=(job,), name="server-print-job", daemon=True
+            )
+            self._worker.start()
+        log.info("print of %s started by %s", path.name, who)
+
+    def _run(self, job: PrintJob) -> None:
+        try:
+            result = job.run()
+            log.info("print of %s: %s %s", job.gcode.name, result.status, result.reason)
+        except Exception:  # the job already stopped the machine; never kill the server
+            log.exception("print job of %s raised", job.gcode.name)
+
+    def _job_link(self) -> HostLink:
+        """The kept link, checked; opened (again) when there is none or it has failed."""
+        link = self._link
+        if link is not None:
+            try:
+                link.request_status(timeout=self.profile.serial.timeout_s)
+                return link
+            except (LinkError, OSError):
+                self._close_link()
+        self._link = self._open_link()
+        return self._link
+
+    def _close_link(self) -> None:
+        link, self._link = self._link, None
+        if link is not None:
+            try:
+                link.close()
+            except (LinkError, OSError) as exc:
+                log.warning("closing the link: %s", exc)
+
+    # ---------------------------------------------------------- controls
+    def _active_job(self, what: str) -> PrintJob:
+        job = self._job
+        if job is None or not self._status.job.state.active:
+            state = self._status.job.state.value
+            raise Refused(f"no print is running ({state}): nothing to {what}")
+        return job
+
+    def pause(self, action: str) -> None:
+        job = self._active_job(action)
+        state = self._status.job.state
+        if action == "toggle":
+            action = "resume" if state is JobState.PAUSED else "pause"
+        if action == "pause":
+            if state not in (JobState.PRINTING, JobState.HEATING):
+                raise Refused(f"cannot pause while {state.value}")
+            jobcontrol.pause(job)
+        elif action == "resume":
+            if state is not JobState.PAUSED:
+                raise Refused(f"cannot resume while {state.value}")
+            jobcontrol.resume(job)
+        else:
+            raise ValueError(f"unknown pause action {action!r}")
+
+    def cancel(self) -> None:
+        job = self._active_job("cancel")
+        if self._status.job.state is JobState.CANCELLING:
+            return
+        jobcontrol.cancel(job)
+
+    def uploaded(self, path: Path) -> None:
+        log.info("stored upload %s", path)
+
+    # ---------------------------------------------------------- shutdown
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Blocking: until no job runs (for tests and the CLI)."""
+        worker = self._worker
+        if worker is None:
+            return True
+        worker.join(timeout=timeout_s)
+        return not worker.is_alive()
+
+    def shutdown(self, reason: str = "server shutdown", timeout_s: float = 30.0) -> bool:
+        """Blocking: refuse new starts, stop a running print safely, then close the link.
+        True when no job was left running."""
+        with self._lock:
+            self._closing = True
+            job, worker = self._job, self._worker
+        ended = True
+        if job is not None and worker is not None and worker.is_alive():
+            log.warning("stopping the running print of %s (%s)", job.gcode.name, reason)
+            ended = jobcontrol.shutdown(job, worker, reason, timeout_s)
+        self._close_link()
+        return ended

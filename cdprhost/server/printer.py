@@ -1,0 +1,70 @@
+"""What the server asks of the machine: one small interface, two implementations.
+
+The HTTP layer (:mod:`cdprhost.server.app`) never touches a job or a link: it talks to a
+:class:`Printer`. :class:`cdprhost.server.headless.HeadlessPrinter` runs jobs itself (``cdprhost
+serve``); the terminal UI provides its own (``cdprhost tui --listen``), so that a print started
+from a slicer is the TUI's print, shown and stoppable there. Every refusal is a
+:class:`Refused` carrying the reason the client is told (409).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+from cdprhost.job.state import JobSnapshot, JobState
+
+
+class Refused(Exception):
+    """The machine cannot do this now (409); the message says why."""
+
+
+@dataclass(frozen=True)
+class PrinterStatus:
+    connected: bool = True
+    file: Path | None = None  # the job's file (the last job's, once it ended)
+    started_by: str = ""
+    job: JobSnapshot = field(default_factory=JobSnapshot)
+    started_at: float | None = None  # wall clock (epoch s)
+    ended_at: float | None = None
+
+    @property
+    def busy(self) -> bool:
+        return self.job.state.active or self.job.state is JobState.PREFLIGHT
+
+
+def busy_reason(status: PrinterStatus) -> str:
+    name = status.file.name if status.file else "a file"
+    who = f", started by {status.started_by}" if status.started_by else ""
+    return f"the machine is busy: {status.job.state.value} {name}{who}; nothing started"
+
+
+class Printer(Protocol):
+    def status(self) -> PrinterStatus:
+        """Non-blocking: the machine and its current (or last) job."""
+
+    def check_start(self, path: Path) -> None:
+        """Blocking (preflight): raise :class:`Refused` unless ``path`` could start now: the
+        machine idle and connected, and the file passing preflight."""
+
+    def start(self, path: Path, who: str) -> None:
+        """Start ``path`` (checked by :meth:`check_start` just before); ``who`` started it.
+        Raises :class:`Refused` when the machine became busy meanwhile."""
+
+    def pause(self, action: str) -> None:
+        """``pause`` | ``resume`` | ``toggle``; :class:`Refused` when there is nothing to do."""
+
+    def cancel(self) -> None:
+        """Cancel the running job (the one safe-stop path); :class:`Refused` when none runs."""
+
+    def uploaded(self, path: Path) -> None:
+        """A file was stored in the upload folder (the TUI lists it)."""
+
+
+def preflight_refusal(total: int, line: int | None, rule: str, detail: str) -> str:
+    """The 409 reason of a file that fails preflight (the first violation named)."""
+    return (
+        f"preflight refused the file: {total} violation(s); first at line {line}: "
+        f"{rule}: {detail}; nothing started"
+    )

@@ -1,0 +1,138 @@
+"""OctoPrint's reply shapes, built from the printer's status (pure functions).
+
+Only what slicers and phone apps read: ``/api/version``, ``/api/job``, the upload reply and
+the file listing, with OctoPrint's field names and types. Times in ``/api/job`` are seconds:
+``printTime`` is wall time since the start, ``printTimeLeft`` the planned machine time still
+to run (``printTimeLeftOrigin``: ``estimate``), ``completion`` a percentage.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from cdprhost import __version__
+from cdprhost.job.state import JobState
+from cdprhost.server.printer import PrinterStatus
+from cdprhost.server.uploads import Entry
+
+API_VERSION = "0.1"
+SERVER_VERSION = "1.10.0"  # the OctoPrint API level answered (the subset slicers use)
+
+STATE_TEXT = {
+    JobState.IDLE: "Operational",
+    JobState.PREFLIGHT: "Starting",
+    JobState.REFUSED: "Operational",
+    JobState.HEATING: "Printing",
+    JobState.PRINTING: "Printing",
+    JobState.PAUSING: "Pausing",
+    JobState.PAUSED: "Paused",
+    JobState.CANCELLING: "Cancelling",
+    JobState.CANCELLED: "Operational",
+    JobState.FAILED: "Error",
+    JobState.DONE: "Operational",
+}
+
+
+def version() -> dict[str, str]:
+    return {
+        "api": API_VERSION,
+        "server": SERVER_VERSION,
+        "text": f"OctoPrint {SERVER_VERSION} (cdprhost {__version__})",
+    }
+
+
+def state_text(status: PrinterStatus) -> str:
+    if not status.connected and not status.busy:
+        return "Offline"
+    return STATE_TEXT[status.job.state]
+
+
+def file_info(path: Path | None, relative: str | None) -> dict[str, Any]:
+    if path is None:
+        return {"name": None, "path": None, "origin": None, "size": None, "date": None}
+    try:
+        st = path.stat()
+        size, date = st.st_size, int(st.st_mtime)
+    except OSError:
+        size, date = None, None
+    return {
+        "name": path.name,
+        "path": relative or path.name,
+        "display": path.name,
+        "origin": "local",
+        "size": size,
+        "date": date,
+    }
+
+
+def job(status: PrinterStatus, relative: str | None, now: float | None = None) -> dict[str, Any]:
+    snap = status.job
+    now = time.time() if now is None else now
+    has_job = status.file is not None
+    print_time = None
+    if has_job and status.started_at is not None:
+        end = status.ended_at if snap.state.finished and status.ended_at else now
+        print_time = round(max(0.0, end - status.started_at))
+    completion = None
+    if has_job:
+        completion = round(100.0 * snap.fraction, 2) if snap.state is not JobState.DONE else 100.0
+    left = snap.eta_s if has_job and snap.state.active else None
+    reply: dict[str, Any] = {
+        "job": {
+            "file": file_info(status.file, relative),
+            "estimatedPrintTime": round(snap.estimated_time_s, 1) if has_job else None,
+            "filament": {"tool0": {"length": round(snap.filament_mm, 1), "volume": None}}
+            if has_job
+            else None,
+            "lastPrintTime": None,
+            "user": status.started_by or None,
+        },
+        "progress": {
+            "completion": completion,
+            "filepos": None,
+            "printTime": print_time,
+            "printTimeLeft": round(left) if left is not None else None,
+            "printTimeLeftOrigin": "estimate" if left is not None else None,
+        },
+        "state": state_text(status),
+    }
+    if snap.state in (JobState.FAILED, JobState.REFUSED) and snap.reason:
+        reply["error"] = snap.reason
+    return reply
+
+
+def refs(base_url: str, relative: str) -> dict[str, str]:
+    return {"resource": f"{base_url}/api/files/local/{relative}"}
+
+
+def entry(e: Entry, base_url: str) -> dict[str, Any]:
+    return {
+        "name": e.name,
+        "path": e.path,
+        "display": e.name,
+        "type": "machinecode",
+        "typePath": ["machinecode", "gcode"],
+        "origin": "local",
+        "size": e.size,
+        "date": e.date,
+        "refs": refs(base_url, e.path),
+    }
+
+
+def uploaded(name: str, relative: str, base_url: str, select: bool, start: bool) -> dict[str, Any]:
+    return {
+        "files": {
+            "local": {
+                "name": name,
+                "path": relative,
+                "display": name,
+                "origin": "local",
+                "refs": refs(base_url, relative),
+            }
+        },
+        "done": True,
+        "effectiveSelect": select,
+        "effectivePrint": start,
+    }

@@ -1,0 +1,136 @@
+"""`cdprhost serve` and `cdprhost api-key` as a user runs them (separate processes)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import stat
+import subprocess
+import sys
+import time
+import urllib.request
+
+import pytest
+
+from cdprhost.server.apikey import KeyFile, key_matches, read_key, rotate
+from cdprhost.server.listen import is_loopback, parse_listen
+from tests.server.conftest import multipart, small_part
+
+CLI = [sys.executable, "-m", "cdprhost"]
+
+
+def _env(tmp_path) -> dict[str, str]:
+    return {**os.environ, "XDG_CONFIG_HOME": str(tmp_path / "cfg")}
+
+
+def test_api_key_made_once_with_mode_600_and_rotated(tmp_path):
+    env = _env(tmp_path)
+    first = subprocess.run([*CLI, "api-key"], env=env, capture_output=True, text=True, timeout=60)
+    again = subprocess.run([*CLI, "api-key"], env=env, capture_output=True, text=True, timeout=60)
+    path = tmp_path / "cfg" / "cdprhost" / "api-key"
+    assert first.returncode == again.returncode == 0
+    assert "made now" in first.stderr and "made now" not in again.stderr
+    assert first.stdout == again.stdout and len(first.stdout.strip()) == 32
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+    rotated = subprocess.run(
+        [*CLI, "api-key", "--rotate"], env=env, capture_output=True, text=True, timeout=60
+    )
+    assert rotated.stdout != first.stdout and read_key(path) == rotated.stdout.strip()
+    path.chmod(0o644)
+    loose = subprocess.run([*CLI, "api-key"], env=env, capture_output=True, text=True, timeout=60)
+    assert loose.returncode == 2 and "readable by others" in loose.stderr
+
+
+def test_a_running_server_takes_a_rotated_key_at_once(make_server, config_home):
+    server = make_server()
+    assert server.request("GET", "/api/version").status == 200
+    new = rotate(config_home / "cdprhost" / "api-key")
+    assert server.request("GET", "/api/version").status == 403  # the old key
+    assert server.request("GET", "/api/version", key=new).status == 200
+
+
+def test_key_comparison_refuses_empty_keys(tmp_path):
+    assert not key_matches("", "")
+    assert not key_matches("ABC", "")
+    assert not key_matches("ABC", None)
+    assert key_matches("ABC", "ABC")
+    keys = KeyFile(tmp_path / "k")
+    assert keys.created and len(keys.current()) == 32
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("5000", ("127.0.0.1", 5000)),
+        ("0.0.0.0:8080", ("0.0.0.0", 8080)),
+        ("[::1]:5001", ("::1", 5001)),
+        ("localhost:0", ("localhost", 0)),
+    ],
+)
+def test_listen_forms(text, expected):
+    assert parse_listen(text) == expected
+
+
+@pytest.mark.parametrize("text", ["x", "1:2:3", "70000", "host:"])
+def test_bad_listen_is_a_usage_error(text, tmp_path):
+    with pytest.raises(ValueError):
+        parse_listen(text)
+    out = subprocess.run(
+        [*CLI, "serve", "-p", "paper-prototype", "--listen", text],
+        env=_env(tmp_path),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and "--listen" in out.stderr
+
+
+def test_loopback_or_not():
+    assert is_loopback("127.0.0.1") and is_loopback("::1") and is_loopback("localhost")
+    assert not is_loopback("0.0.0.0") and not is_loopback("192.168.1.5")
+
+
+def _post(url: str, key: str, body: bytes, ctype: str) -> int:
+    req = urllib.request.Request(url, body, {"X-Api-Key": key, "Content-Type": ctype})
+    with urllib.request.urlopen(req, timeout=60) as resp:
+        return int(resp.status)
+
+
+def _get_job(url: str, key: str) -> dict:
+    req = urllib.request.Request(url + "/api/job", headers={"X-Api-Key": key})
+    with urllib.request.urlopen(req, timeout=60) as resp:
+        return json.loads(resp.read())
+
+
+def test_serve_prints_an_upload_and_sigterm_stops_the_print_safely(tmp_path):
+    env = {**_env(tmp_path), "CDPRHOST_STATE": str(tmp_path / "state")}
+    cmd = [*CLI, "serve", "-p", "paper-prototype", "--listen", "127.0.0.1:0", "--speedup", "10"]
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
+    assert proc.stderr is not None
+    try:
+        lines = []
+        for _ in range(50):  # bounded: the banner comes within a few lines
+            line = proc.stderr.readline()
+            lines.append(line)
+            if "upload API on" in line or not line:
+                break
+        text = "".join(lines)
+        assert "API key (made now" in text  # printed once, at first use
+        url = re.search(r"http://127\.0\.0\.1:\d+", text).group(0)
+        key = read_key(tmp_path / "cfg" / "cdprhost" / "api-key")
+        body, ctype = multipart([("print", "true")], ("long.gcode", small_part(40).encode()))
+        assert _post(url + "/api/files/local", key, body, ctype) == 201
+        end = time.monotonic() + 120
+        while _get_job(url, key)["state"] != "Printing" and time.monotonic() < end:
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        rest = proc.communicate(timeout=120)[1]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=30)
+    assert proc.returncode == 0, rest
+    assert "SIGTERM: stopping" in rest and "job cancelled" in rest
+    assert (tmp_path / "state" / "uploads" / "long.gcode").is_file()
