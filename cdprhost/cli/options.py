@@ -104,3 +104,17 @@ def setup_from_args(args: argparse.Namespace) -> Any:
         retarget=bool(args.retarget),
         cancel_objects=tuple(args.cancel_object),
     )
+
+
+def existing_gcode(text: str) -> Any:
+    """The G-code file ``text`` as a Path; the one wording of ``check`` and ``print`` when
+    it is missing (exit 2)."""
+    from pathlib import Path
+
+    from cdprhost.errors import InputError
+
+    path = Path(text)
+    if not path.is_file():
+        reason = "is a folder, not a G-code file" if path.is_dir() else "G-code file not found"
+        raise InputError(reason, source=str(path))
+    return path

@@ -339,7 +339,13 @@ def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> Pos
 
 def observations_check(obs: Observations) -> None:
     if len(obs) < MIN_POSES:
-        raise InputError(f"a diagnosis needs at least {MIN_POSES} measured poses, got {len(obs)}")
+        raise InputError(
+            f"a diagnosis needs at least {MIN_POSES} measured poses, got {len(obs)} (a "
+            "calibration's default is 4 fit + 3 check poses): record a session with more, "
+            "e.g. `cdprhost calibrate wizard --profile P --session NEW_DIR --poses 12` "
+            "(12 fit + 3 check poses), or try one of the simulated world: "
+            "`cdprhost calibrate demo --profile P --out DIR`"
+        )
     for label, arr in (("measured points", obs.measured), ("commanded sliders", obs.sliders)):
         bad = np.flatnonzero(~np.isfinite(np.asarray(arr, float)).all(axis=1))
         if bad.size:

@@ -5,6 +5,8 @@ levelling, purge lines at the edge of its bed, printer checks) and end block
 (presenting the bed, parking). `plan_retarget` finds them: the start block is
 everything before the first layer (the slicer's layer markers, or else the first
 extruding move), the end block everything after the last extruding move. It also
+recognises the purge lines of a start G-code that no slicer marker sets apart
+(``purge``) and extends the start block over them. It also
 notes the temperatures the start block set (M104/M109/M140/M190, or the BED= and
 EXTRUDER= parameters of a start macro), which fill the profile's start G-code.
 
@@ -39,6 +41,7 @@ from cdprhost.gcode.items import (
     UnknownCommand,
 )
 from cdprhost.gcode.placement import PartExtent
+from cdprhost.gcode.purge import PurgeFinder, PurgeRun, scan_resets
 from cdprhost.gcode.stream import Gap
 
 OPEN_END = 1 << 62
@@ -60,6 +63,7 @@ class RetargetPlan:
     replaced: tuple[str, ...]
     extent: PartExtent
     file_lines: int = 0
+    purge_lines: tuple[PurgeRun, ...] = ()  # purge moves found inside the first layer
 
     @property
     def mute(self) -> tuple[tuple[int, int], ...]:
@@ -77,6 +81,7 @@ def plan_retarget(items: Iterable[ProgramItem], path: str | None = None) -> Reta
     purge = 0.0
     temps: dict[str, float] = {}
     extent = PartExtent()
+    finder = PurgeFinder(scan_resets(path) if path else np.zeros(0, dtype=np.int64))
     for item in items:
         match item:
             case MoveChunk():
@@ -86,7 +91,7 @@ def plan_retarget(items: Iterable[ProgramItem], path: str | None = None) -> Reta
                 part = extruding & (item.layer >= 0)
                 if part.any():
                     last_extrusion = max(last_extrusion, int(item.line[part][-1]))
-                    extent.add(item)
+                    extent.add(finder.take(item))
                 purge += float(item.de[extruding & (item.layer < 0)].sum())
             case LayerChange(index=0, line=line):
                 first_layer = line
@@ -101,9 +106,16 @@ def plan_retarget(items: Iterable[ProgramItem], path: str | None = None) -> Reta
                         temps.setdefault("bed", float(value))
             case _:
                 pass
+    purge_end, purge_runs, part_moves = finder.decide()
+    for chunk in part_moves:
+        extent.add(chunk)
     start = (1, first_layer - 1) if first_layer and first_layer > 1 else None
     end = (last_extrusion + 1, OPEN_END) if last_extrusion else None
     found = "the first and last extruding move" if on_move else "the slicer's layer markers"
+    if purge_end:
+        start = (1, max(purge_end, start[1] if start else 0))
+        purge += sum(run.filament_mm for run in purge_runs)
+        found += ", and the purge lines before the part ended by an extruder reset"
     replaced, lines = _replaced(path, start, end) if path else ((), 0)
     return RetargetPlan(
         start,
@@ -115,6 +127,7 @@ def plan_retarget(items: Iterable[ProgramItem], path: str | None = None) -> Reta
         replaced,
         extent,
         lines,
+        purge_runs,
     )
 
 
@@ -180,6 +193,8 @@ def retarget_items(
                     yield from gap.keep(kept)
             case ObjectDefine() | ObjectStart() | ObjectEnd() | CancelObject():
                 yield item
+            case LayerChange() if plan.purge_lines and item.index >= 0:
+                yield item  # the first layer began on a purge line: the part keeps it
             case _ if plan.replaced_line(item.line):
                 last_line = item.line
             case _:

@@ -166,7 +166,13 @@ def remove_resume_point(gcode: str | Path, folder: str | Path | None, sha256: st
 def log_path_for(gcode: str | Path, folder: str | Path | None = None) -> Path:
     g = Path(gcode)
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    return (Path(folder) if folder else state_dir()) / f"{g.stem}-{stamp}.jsonl"
+    base = Path(folder) if folder else state_dir()
+    path = base / f"{g.stem}-{stamp}.jsonl"
+    n = 1
+    while path.exists() or path.with_suffix(".log").exists():  # two prints in one second
+        n += 1
+        path = base / f"{g.stem}-{stamp}-{n}.jsonl"
+    return path
 
 
 class ResumeWriter:

@@ -76,6 +76,11 @@ def render_text(report: PreflightReport, *, max_rows: int = 20) -> str:
         )
         if r.replaced:
             lines.append(f"  replaced commands: {', '.join(r.replaced)}")
+        if r.purge_lines:
+            lines.append(
+                f"  replaced purge lines (start G-code without slicer markers): "
+                f"{'; '.join(r.purge_lines)}"
+            )
     if report.objects:
         cancelled = (
             f"; cancelled: {', '.join(report.cancelled_objects)}"

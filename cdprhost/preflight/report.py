@@ -81,6 +81,10 @@ class RetargetReport(BaseModel):
     end_lines: tuple[int, int] | None = Field(description="replaced end block (first, last)")
     found_by: str = Field(description="slicer markers or first/last extruding move")
     replaced: list[str] = Field(description="commands of the replaced blocks, counted")
+    purge_lines: list[str] = Field(
+        default_factory=list,
+        description="purge moves of a start G-code found inside the first layer (replaced)",
+    )
     hotend_c: float = Field(description="{hotend_c} of the profile's start G-code")
     bed_c: float = Field(description="{bed_c} of the profile's start G-code")
 

@@ -288,6 +288,7 @@ def preflight_prepared(
             else (plan.end[0], max(plan.end[0], plan.file_lines)),
             found_by=plan.found_by,
             replaced=list(plan.replaced),
+            purge_lines=[run.text() for run in plan.purge_lines],
             hotend_c=plan.hotend_c
             if plan.hotend_c is not None
             else prepared.profile.gcode.hotend_c,

@@ -565,8 +565,13 @@ int main(int argc, char **argv)
 
     elf_firmware_t fw;
     memset(&fw, 0, sizeof fw);
-    int saved_stdout = dup(1); /* simavr's loader talks on stdout: the pty path must come first */
-    dup2(2, 1);
+    /* simavr's loader talks on stdout ("Loaded N .text ..."): the pty path must be the
+     * first thing a user sees, so that chatter is dropped (kept on stderr with CDPR_SIM_DEBUG) */
+    int saved_stdout = dup(1);
+    int quiet = getenv("CDPR_SIM_DEBUG") ? -1 : open("/dev/null", O_WRONLY);
+    dup2(quiet >= 0 ? quiet : 2, 1);
+    if (quiet >= 0)
+        close(quiet);
     int bad = elf_read_firmware(elf, &fw);
     fflush(stdout);
     if (bad) {

@@ -293,4 +293,6 @@ def test_wizard_cli_end_to_end(truth_path, tmp_path, capsys):
             str(tmp_path / "m2"),
         ]
     )
-    assert code == 2 and "--truth" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # the wizard's own flags, not sim-device's --truth / --mocap-dir
+    assert code == 2 and "--sim-mocap-dir needs --sim-truth" in err and " --truth" not in err

@@ -1,4 +1,5 @@
-"""`cdprhost calibrate plan | identify | wizard`: kinematic calibration from motion capture."""
+"""`cdprhost calibrate plan | identify | wizard | demo`: kinematic calibration from motion
+capture (``demo``: a session folder from the simulated world, to try the others)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
     from cdprhost.calibration.takes import MocapConfig
+    from cdprhost.kinematics import MachineModel
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -184,6 +186,28 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     wiz.add_argument("--json", metavar="R", help="machine-readable report")
     wiz.set_defaults(func=run_wizard)
 
+    demo = cal_sub.add_parser(
+        "demo",
+        help="write a session folder measured on a hidden simulated machine, to try identify, "
+        "diagnose and the wizard without a machine",
+    )
+    add_profile_argument(demo)
+    demo.add_argument("--out", required=True, metavar="DIR", help="the session folder to write")
+    demo.add_argument(
+        "--effect",
+        default="cable_elasticity",
+        help="effect the hidden machine has and the profile lacks, or 'none' "
+        "(default cable_elasticity)",
+    )
+    demo.add_argument(
+        "--poses", type=_at_least_4, default=12, metavar="N", help="fit poses (default 12)"
+    )
+    demo.add_argument(
+        "--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)"
+    )
+    demo.add_argument("--seed", type=int, default=1)
+    demo.set_defaults(func=run_demo)
+
 
 def _add_verification_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -325,7 +349,9 @@ def _mocap_for(args: argparse.Namespace, session: Path) -> MocapConfig | None:
     if not args.mocap_config and not (args.sim_mocap_dir and not args.port):
         raise InputError(
             "a new session needs --mocap-config (a TOML file with the [mocap] table of "
-            "session.toml: base markers, effector markers and offset)"
+            "session.toml: base markers, effector markers and offset); or, on the embedded "
+            "simulated device, --sim-truth PROFILE --sim-mocap-dir DIR (its virtual motion "
+            "capture; `cdprhost calibrate demo` writes a truth to try)"
         )
     virtual = mocap_config().mocap if args.sim_mocap_dir and not args.port else None
     return mocap_for_session(session, args.mocap_config, virtual)
@@ -345,6 +371,18 @@ def run_wizard(args: argparse.Namespace) -> int:
         raise InputError(
             "--sim-truth/--sim-mocap-dir drive the embedded simulated device; drop them with --port"
         )
+    if bool(args.sim_truth) != bool(args.sim_mocap_dir):
+        given, missing = (
+            ("--sim-truth", "--sim-mocap-dir")
+            if args.sim_truth
+            else ("--sim-mocap-dir", "--sim-truth")
+        )
+        raise InputError(
+            f"{given} needs {missing} too (the virtual motion capture needs a true machine "
+            "and a folder for its takes)"
+        )
+    if args.sim_truth and not args.port:
+        _check_sim_truth(args.sim_truth, args.profile, model)
     session = Path(args.session or f"calibration-{dt.datetime.now():%Y%m%d-%H%M%S}")
     mocap = _mocap_for(args, session)
     watch = args.watch or (args.sim_mocap_dir if not args.takes_from else None)
@@ -432,3 +470,56 @@ def run_wizard(args: argparse.Namespace) -> int:
         f"\nbefore/after:\n{report.summary_text(result)}\ncalibrated profile: {args.out or profile_path}"
     )
     return 0
+
+
+def _check_sim_truth(truth_ref: str, profile_ref: str, model: MachineModel) -> None:
+    from cdprhost.calibration.wizard import WizardOptions
+    from cdprhost.kinematics import MachineModel
+    from cdprhost.profile import load_profile
+    from cdprhost.sim.demo_session import sim_truth_problem
+
+    truth = MachineModel.from_profile(load_profile(truth_ref))
+    problem = sim_truth_problem(model, truth, WizardOptions().max_offset_mm, truth_ref, profile_ref)
+    if problem:
+        raise InputError(problem)
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    from cdprhost.sim.demo_session import truth_profile, write_demo_session
+
+    profile, _ = load_model(args.profile)
+    effect = None if args.effect == "none" else args.effect
+    if effect is not None and effect not in _effect_names():
+        raise InputError(
+            f"--effect {args.effect}: unknown (known: {', '.join(_effect_names())}, none)"
+        )
+    try:
+        demo = write_demo_session(
+            args.out,
+            profile,
+            effect=effect,
+            n_fit=args.poses,
+            n_check=args.check_poses,
+            seed=args.seed,
+        )
+    except FileExistsError as exc:
+        raise InputError(str(exc)) from None
+    truth_path = demo.directory / "hidden-truth.toml"
+    save_profile(truth_profile(profile, demo.truth), truth_path)
+    fit = sum(1 for r in demo.roles if r == "fit")
+    print(
+        f"{demo.directory}: a calibration session of a hidden machine (geometry off profile "
+        f"{profile.name} by up to 2 mm, {effect or 'no effect'} added): {fit} fit + "
+        f"{len(demo.roles) - fit} check poses, Motive CSV takes of a realistic virtual "
+        f"motion capture\n"
+        f"  the hidden machine (for --sim-truth, and to compare; do not peek): {truth_path}\n"
+        f"  next: cdprhost calibrate identify {demo.directory} --profile {args.profile} "
+        f"--out calibrated.toml"
+    )
+    return 0
+
+
+def _effect_names() -> list[str]:
+    from cdprhost.effects.registry import CATALOGUE
+
+    return list(CATALOGUE)

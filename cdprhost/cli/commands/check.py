@@ -6,7 +6,12 @@ from __future__ import annotations
 import argparse
 import json
 
-from cdprhost.cli.options import add_placement_arguments, non_negative_int, setup_from_args
+from cdprhost.cli.options import (
+    add_placement_arguments,
+    existing_gcode,
+    non_negative_int,
+    setup_from_args,
+)
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.fileio.atomic import write_text_atomic
 
@@ -32,10 +37,9 @@ def run(args: argparse.Namespace) -> int:
     from cdprhost.preflight import preflight
     from cdprhost.preflight.render import render_text
 
+    gcode = existing_gcode(args.gcode)
     profile, model = load_model(args.profile)
-    report = preflight(
-        args.gcode, profile, model, setup=setup_from_args(args), strict=bool(args.strict)
-    )
+    report = preflight(gcode, profile, model, setup=setup_from_args(args), strict=bool(args.strict))
     print(render_text(report, max_rows=args.max_rows))
     if args.json:
         write_text_atomic(args.json, json.dumps(report.model_dump(mode="json"), indent=1) + "\n")

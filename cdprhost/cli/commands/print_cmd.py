@@ -11,6 +11,8 @@ kept up to date while printing); ``--resume-from-layer N`` restarts at a layer.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import dataclasses
 import json
 import queue
 import sys
@@ -22,6 +24,7 @@ from typing import Any
 from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import (
     add_placement_arguments,
+    existing_gcode,
     non_empty,
     setup_from_args,
 )
@@ -122,9 +125,7 @@ def run(args: argparse.Namespace) -> int:
     from cdprhost.profile import load_profile
 
     _check_options(args)
-    gcode = Path(args.gcode)
-    if not gcode.is_file():
-        raise InputError("G-code file not found", source=str(gcode))
+    gcode = existing_gcode(args.gcode)
     profile = load_profile(args.profile)
     saved = find_resume_point(gcode)
     layer = None
@@ -159,6 +160,9 @@ def run(args: argparse.Namespace) -> int:
     options = PrintOptions(
         setup=setup_from_args(args), resume_from_layer=layer, resume=point, log_path=log_path
     )
+    if not args.log:
+        with contextlib.suppress(OSError):  # a new state folder: the .log goes there too
+            log_path.parent.mkdir(parents=True, exist_ok=True)
     handler = attach_log_file(log_path.with_suffix(".log"), quiet=True) if not args.log else None
     events: queue.Queue[Any] = queue.Queue()
     job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
@@ -183,6 +187,8 @@ def run(args: argparse.Namespace) -> int:
                     continue
                 if event is None:
                     break
+                if isinstance(event, StateChanged) and event.state is JobState.REFUSED:
+                    event = dataclasses.replace(event, reason="")  # the report says why
                 view.update(event)
                 if (
                     isinstance(event, StateChanged)
@@ -198,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     if "error" in outcome:
         raise outcome["error"]
     result = outcome["result"]
-    _report(result, args)
+    _report(result, args, log_path)
     if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
         return 2
     return int(result.exit_code)
@@ -242,13 +248,18 @@ def _ask_after_pause(job: Any, reason: str) -> None:
             return
 
 
-def _report(result: Any, args: argparse.Namespace) -> None:
+def _report(result: Any, args: argparse.Namespace, log_path: Path) -> None:
     print(f"status: {result.status}")
+    reason = result.reason
     if result.status == "refused":
         for v in result.violations[:10]:
             print(f"  line {v['line']}: {v['rule']}: {v['detail']}")
         if len(result.violations) > 10:
             print(f"  ... {len(result.violations) - 10} more (see --json)")
+        if result.violations and reason:  # its first line repeats the first violation
+            lines = reason.splitlines()
+            count = f"{lines[0].split(';')[0]}, the first listed above; nothing moved"
+            reason = "\n".join([count, *lines[1:]])
     elif result.segments or result.status != "failed":
         print(
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
@@ -257,8 +268,20 @@ def _report(result: Any, args: argparse.Namespace) -> None:
         print(
             f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}"
         )
-    if result.reason and result.status != "completed":
-        print(f"reason: {result.reason}")
+        print(
+            "  (final steps: the device's absolute step counters of modules 1, 2, 3 and the "
+            "extruder when the job ended)"
+        )
+    if reason and result.status != "completed":
+        print(f"reason: {reason}")
+    if result.status != "refused":
+        where = (
+            f"the device at {args.port}"
+            if args.port
+            else "the embedded simulated device (no --port: nothing physical moved)"
+        )
+        print(f"ran on {where}")
+        print(f"job log: {log_path} (JSON lines)")
     if result.resume_file:
         print(
             f"resume point saved: {result.resume_file} (continue with --resume, or restart with "

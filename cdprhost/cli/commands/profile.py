@@ -1,5 +1,6 @@
 """`cdprhost profile show P` / `cdprhost profile check PATH` /
-`cdprhost profile export-slicer P --to prusaslicer|cura|orca --out FILE`."""
+`cdprhost profile export-slicer P --to prusaslicer|cura|orca --out FILE` /
+`cdprhost profile export-firmware P --to klipper --out FILE`."""
 
 from __future__ import annotations
 
@@ -31,6 +32,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     export.add_argument("--out", required=True, metavar="FILE", help="where to write it")
     export.set_defaults(func=run_export)
+    firmware = psub.add_parser(
+        "export-firmware",
+        help="write a firmware configuration for this machine's kinematics (Klipper winch), "
+        "saying what it cannot express",
+    )
+    firmware.add_argument("profile", metavar="P")
+    firmware.add_argument("--to", required=True, choices=("klipper",), help="the firmware")
+    firmware.add_argument("--out", required=True, metavar="FILE", help="where to write it")
+    firmware.set_defaults(func=run_export_firmware)
 
 
 def run_show(args: argparse.Namespace) -> int:
@@ -64,4 +74,34 @@ def run_export(args: argparse.Namespace) -> int:
         f"{args.out}: {args.to} printer '{profile.name}': bed triangle {corners} mm "
         f"(origin at its centre), height {bed.height_mm:g} mm"
     )
+    return 0
+
+
+def run_export_firmware(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from cdprhost.fileio.atomic import write_text_atomic
+    from cdprhost.kinematics import MachineModel
+    from cdprhost.kinematics.winch import dropped_effects, winch_equivalent
+    from cdprhost.profile.klipper_export import NOT_IN_KLIPPER, dropped_lines, klipper_config
+
+    profile = load_profile(args.profile)
+    model = MachineModel.from_profile(profile)
+    origin = np.asarray(profile.build_volume.bed_origin, dtype=float)
+    winch = winch_equivalent(model, origin, np.asarray(profile.drive.home_mm, dtype=float))
+    dropped = dropped_effects(model, origin, np.asarray(profile.drive.home_mm, dtype=float))
+    write_text_atomic(args.out, klipper_config(profile, winch, dropped))
+    folded = (
+        " (drive_scale folded into rotation_distance)" if "drive_scale" in profile.effects else ""
+    )
+    print(f"{args.out}: Klipper winch kinematics for '{profile.name}'{folded}")
+    if dropped:
+        print("calibrated effects Klipper cannot express:")
+    else:
+        print("calibrated effects: every one expressed (the config reproduces the model exactly)")
+    for line in dropped_lines(dropped):
+        print(f"  {line}")
+    print("not done by Klipper's winch kinematics (cdprhost does them):")
+    for line in NOT_IN_KLIPPER:
+        print(f"  {line.split(':')[0]}")
     return 0
