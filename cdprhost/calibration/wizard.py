@@ -256,7 +256,7 @@ class CalibrationWizard:
         try:
             m = validate_take(
                 path,
-                self.writer.config.mocap,
+                self.writer.config.motion_capture,
                 self.plan.poses[i],
                 self.options.max_offset_mm,
                 self._history,
