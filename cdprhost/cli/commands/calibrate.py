@@ -1,4 +1,5 @@
-"""`cdprhost calibrate plan | identify | wizard`: kinematic calibration from motion capture."""
+"""`cdprhost calibrate plan | identify | camera | wizard`: kinematic calibration from motion
+capture or one camera (`camera`: :mod:`cdprhost.cli.camera_calibration`)."""
 
 from __future__ import annotations
 
@@ -93,6 +94,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     _add_verification_arguments(ident)
     ident.set_defaults(func=run_identify)
+
+    from cdprhost.cli import camera_calibration
+
+    camera_calibration.register(cal_sub)
 
     wiz = cal_sub.add_parser(
         "wizard", help="guided calibration: move to planned poses, record takes, identify"
