@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CharucoBoard
+from cdprhost.calibration.camera_visibility import sheet_outline
 from cdprhost.sim.camera.optics import PinholeCamera
 
 PAPER = 0.85  # reflectance of white paper
@@ -72,11 +73,7 @@ class PlacedBoard:
 
     def outline(self) -> np.ndarray:
         """The four corners of the printed sheet (with its margin), base frame (4, 3)."""
-        m = self.margin_squares * self.layout.square_mm
-        w = self.layout.squares[0] * self.layout.square_mm + m
-        h = self.layout.squares[1] * self.layout.square_mm + m
-        c = np.array([[-m, -m, 0.0], [w, -m, 0.0], [w, h, 0.0], [-m, h, 0.0]])
-        return self.origin + c @ self.rotation.T
+        return self.origin + sheet_outline(self.layout, self.margin_squares) @ self.rotation.T
 
 
 def _cubic_weights(x: np.ndarray, n: int) -> np.ndarray:

@@ -25,6 +25,8 @@ from cdprhost.calibration.camera.boards import (
     ReferenceBoard,
     rotation_matrix,
 )
+from cdprhost.calibration.camera.intrinsics import Intrinsics
+from cdprhost.calibration.camera_visibility import CameraView, visible_mask
 from cdprhost.sim.camera.imaging import Imaging, encode, expose, occlude
 from cdprhost.sim.camera.optics import PinholeCamera
 from cdprhost.sim.camera.render import PlacedBoard, Renderer
@@ -96,32 +98,16 @@ class CameraRig:
         """One stored picture (JPEG or PNG bytes, :attr:`Imaging.extension`)."""
         return encode(self.picture(renderer, b_point, rng, occluders), self.imaging)
 
-    def visible(
-        self, b_points: ArrayLike, *, margin_px: float = 10.0, max_angle_deg: float = 60.0
-    ) -> np.ndarray:
-        """Per point (N,): the effector board lies inside the image and is seen less
-        obliquely than ``max_angle_deg`` (the reference board is fixed: check it once)."""
-        pts = np.asarray(b_points, dtype=float).reshape(-1, 3)
-        ok = np.ones(len(pts), dtype=bool)
-        for i, p in enumerate(pts):
-            board = self.effector_board(p)
-            ok[i] = board_visible(self.camera, board, margin_px, max_angle_deg)
-        return ok
+    def view(self) -> CameraView:
+        """The truth as the planner's :class:`CameraView`."""
+        cam = self.camera
+        intr = Intrinsics(np.asarray(cam.matrix), np.asarray(cam.distortion), cam.image_size)
+        return CameraView(intr, cam.rotation, cam.translation, self.effector_rotation)
 
-
-def board_visible(
-    camera: PinholeCamera, board: PlacedBoard, margin_px: float = 10.0, max_angle_deg: float = 60.0
-) -> bool:
-    """The board's sheet is inside the image and faces the camera within ``max_angle_deg``."""
-    corners = board.outline()
-    px = camera.project(corners)
-    if not np.isfinite(px).all() or not camera.in_image(px, margin_px).all():
-        return False
-    centre = corners.mean(axis=0)
-    to_camera = camera.position - centre
-    face = -board.rotation[:, 2]  # the printed face looks along -z
-    cos = float(face @ to_camera) / float(np.linalg.norm(to_camera))
-    return cos >= math.cos(math.radians(max_angle_deg))
+    def visible(self, b_points: ArrayLike, **limits: float) -> np.ndarray:
+        """Per point (N,): the camera can measure ``B`` there
+        (:func:`~cdprhost.calibration.camera_visibility.visible_mask`)."""
+        return visible_mask(np.asarray(b_points, dtype=float), self.view(), self.setup, **limits)
 
 
 def tilted_toward(camera_position: ArrayLike, at: ArrayLike, fraction: float = 0.6) -> np.ndarray:
