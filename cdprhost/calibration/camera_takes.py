@@ -189,3 +189,66 @@ def session_intrinsics(
     assert board is not None  # the model's validator guarantees it
     result, _ = calibrate_from_views(where, board.board(), settings)
     return result.intrinsics, result
+
+
+@dataclass(frozen=True, eq=False)
+class CameraTakeCheck:
+    """A camera take judged on its own (the wizard, before the session fit)."""
+
+    point: np.ndarray  # mean B of the frames used (base frame, mm)
+    spread_mm: float  # RMS distance of the frames' B from it
+    n_used: int
+    n_frames: int
+
+
+def skipped_text(names: tuple[str, ...], skipped: tuple[str, ...]) -> str:
+    """'the effector board: frame_1.jpg, frame_2.jpg (too few corners); ...', per board."""
+    by_board: dict[str, list[str]] = {}
+    for name, why in zip(names, skipped):
+        if why:
+            board = "reference" if "reference" in why else "effector" if "effector" in why else ""
+            by_board.setdefault(board or why, []).append(f"{name} ({why})")
+    return "; ".join(
+        f"{'the ' + b + ' board' if b in ('reference', 'effector') else b} not seen well enough in "
+        + ", ".join(frames)
+        for b, frames in by_board.items()
+    )
+
+
+def judge_camera_take(
+    path: str | os.PathLike[str],
+    setup: CameraSetup,
+    intrinsics: Intrinsics,
+    pose: np.ndarray,
+    max_offset_mm: float,
+    min_valid_fraction: float = 0.5,
+) -> CameraTakeCheck:
+    """Detect both boards in every frame and solve B per frame; refuse (TakeRejected,
+    naming the board and the frames) when too few frames show both boards well, or when
+    the take measures far from the commanded pose."""
+    from cdprhost.calibration.camera.positions import effector_positions
+    from cdprhost.calibration.takes import TakeRejected
+
+    frames = detect_take(path, setup, intrinsics.image_size)
+    d = frames.detections
+    fp = effector_positions(list(d.reference), list(d.effector), setup, intrinsics)
+    valid = fp.valid & np.isfinite(fp.positions).all(axis=1)
+    n = len(frames.names)
+    if valid.sum() == 0 or valid.mean() < min_valid_fraction:
+        raise TakeRejected(
+            f"{int(valid.sum())} of {n} frames usable: {skipped_text(frames.names, fp.skipped)}",
+            source=str(path),
+            reason="missing-marker",
+        )
+    pts = fp.positions[valid]
+    point = pts.mean(axis=0)
+    offset = float(np.linalg.norm(point - np.asarray(pose, float)))
+    if offset > max_offset_mm:
+        raise TakeRejected(
+            f"the effector measures {offset:.1f} mm from the commanded pose; limit "
+            f"{max_offset_mm:g} mm: is the effector board's offset right?",
+            source=str(path),
+            reason="wrong-pose",
+        )
+    spread = float(np.sqrt(np.mean(np.sum((pts - point) ** 2, axis=1))))
+    return CameraTakeCheck(point, spread, int(valid.sum()), n)

@@ -149,9 +149,9 @@ class SessionWriter:
         number = self.next_pose if pose is None else int(pose)
         if number <= self._last:
             raise ValueError(f"pose {number} is not after the last pose {self._last}")
-        if not (self.directory / take).is_file():
+        if not (self.directory / take).exists():
             raise InputError(
-                f"take file {take!r} does not exist; write it before its row",
+                f"take {take!r} does not exist; write it before its row",
                 source=str(self.directory),
             )
         values = {"pose": str(number), "take": take, "t_s": _fmt(float(t_s))}
