@@ -11,6 +11,8 @@ import argparse
 import math
 import re
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -184,3 +186,161 @@ def run_camera(args: argparse.Namespace) -> int:
         )
     print(f"\nintrinsics written to {args.out}", file=sys.stderr)
     return 0
+
+
+# ---------------------------------------------------------------- the wizard with a camera
+def add_wizard_arguments(wiz: argparse.ArgumentParser) -> None:
+    wiz.add_argument(
+        "--camera",
+        metavar="SOURCE",
+        help="take pictures with a camera instead of motion capture: a device index (0), a "
+        "video file or a URL that OpenCV opens, or 'sim' (the simulated camera beside the "
+        "embedded simulated device)",
+    )
+    wiz.add_argument(
+        "--camera-config",
+        metavar="TOML",
+        help="a session.toml-like file whose [camera] table describes the boards "
+        "(needed for a new session with a real camera)",
+    )
+    wiz.add_argument(
+        "--camera-intrinsics",
+        metavar="camera.toml",
+        help="the camera's intrinsics (from `cdprhost calibrate camera`)",
+    )
+    wiz.add_argument(
+        "--frames", type=int, default=5, metavar="N", help="pictures per take (default 5)"
+    )
+    wiz.add_argument(
+        "--sim-camera",
+        default="1920x1080",
+        metavar="WxH",
+        help="simulated camera: picture size (default 1920x1080; smaller sizes get bigger boards)",
+    )
+
+
+@dataclass
+class CameraWizard:
+    """What `calibrate wizard --camera` adds: the capture, the [camera] configuration, the
+    intrinsics and (for the simulated camera) the device observer."""
+
+    capture: Any
+    config: Any  # CameraConfig
+    intrinsics: Any  # Intrinsics
+    observer: Any = None
+
+    def takes(self, session: Path, frames: int, log: Callable[[str], None]) -> Any:
+        from cdprhost.calibration.camera_capture import CameraTakes
+
+        return CameraTakes(
+            self.capture,
+            session / "captures",
+            self.config.setup(),
+            self.intrinsics,
+            frames,
+            log=log,
+        )
+
+    def candidates(self, takes: Any, model: Any, needed: int) -> Any:
+        """The planner's candidate poses the camera can measure (after the first look)."""
+        from cdprhost.calibration.camera_visibility import visible_mask
+        from cdprhost.calibration.planning import candidate_poses
+
+        view = takes.first_look()
+        cand = candidate_poses(model)
+        keep = cand[visible_mask(cand, view, self.config.setup())]
+        print(f"camera: {len(keep)} of {len(cand)} candidate poses are in good view", flush=True)
+        if len(keep) < needed:
+            raise InputError(
+                f"the camera sees the effector board well at only {len(keep)} candidate poses "
+                f"({needed} needed): move the camera back or tilt the effector board toward it"
+            )
+        return keep
+
+
+def sim_rig(size_text: str) -> Any:
+    from cdprhost.calibration.camera.boards import (
+        CameraSetup,
+        CharucoBoard,
+        EffectorBoard,
+        ReferenceBoard,
+    )
+    from cdprhost.sim.camera.scene import standard_rig
+
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", size_text)
+    if not m or int(m[1]) < 320 or int(m[2]) < 240:
+        raise InputError(f"--sim-camera: expected WxH of at least 320x240, got {size_text!r}")
+    size = (int(m[1]), int(m[2]))
+    if size[0] >= 1280:
+        return standard_rig(image_size=size)
+    # small pictures: boards with bigger markers (coarser dictionary), a narrower lens
+    setup = CameraSetup(
+        ReferenceBoard(CharucoBoard((7, 5), 30.0, 22.0, "DICT_4X4_100", 0), (-105.0, 75.0, 3.0)),
+        EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 20), (60.0, 45.0, 69.0)),
+    )
+    return standard_rig(image_size=size, hfov_deg=60.0, distance_mm=750.0, setup=setup)
+
+
+def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> CameraWizard:
+    """The capture, the [camera] configuration and the intrinsics of `wizard --camera`."""
+    from cdprhost.calibration.camera_config import load_intrinsics
+    from cdprhost.calibration.camera_takes import session_intrinsics
+    from cdprhost.calibration.session import SESSION_FILE, load_session_config
+
+    sim = args.camera.strip().lower() == "sim"
+    if sim and args.port:
+        raise InputError("--camera sim watches the embedded simulated device; drop --port")
+    if not sim and (args.sim_truth or args.sim_mocap_dir):
+        raise InputError("--sim-truth/--sim-mocap-dir need the simulated camera (--camera sim)")
+    observer: Any = None
+    capture: Any = None
+    rig: Any = None
+    if sim:
+        from cdprhost.kinematics import MachineModel
+        from cdprhost.profile import load_profile
+        from cdprhost.sim.camera.device import VirtualCamera
+
+        rig = sim_rig(args.sim_camera)
+        truth = MachineModel.from_profile(load_profile(args.sim_truth)) if args.sim_truth else model
+        capture = observer = VirtualCamera(truth, rig)
+    else:
+        from cdprhost.calibration.camera_capture import open_capture
+
+        capture = open_capture(args.camera)
+    if (session / SESSION_FILE).is_file():
+        config = load_session_config(session / SESSION_FILE).camera
+        if config is None:
+            raise InputError(
+                "this session measures with motion capture, not a camera", source=str(session)
+            )
+    elif args.camera_config:
+        config = load_session_config(args.camera_config).camera
+        if config is None:
+            raise InputError("no [camera] table", source=args.camera_config)
+    elif rig is not None:
+        from cdprhost.sim.camera.session import camera_config
+
+        config = camera_config(rig)
+    else:
+        raise InputError(
+            "a new camera session needs --camera-config (a TOML file with the [camera] table "
+            "of session.toml: the reference and effector boards)"
+        )
+    if args.camera_intrinsics:
+        intrinsics = load_intrinsics(args.camera_intrinsics)
+    elif (session / SESSION_FILE).is_file():
+        intrinsics = session_intrinsics(session, config)[0]
+    elif rig is not None:
+        from cdprhost.sim.camera.session import calibrated_intrinsics
+
+        print("simulated camera: calibrating its intrinsics from rendered views", flush=True)
+        result = calibrated_intrinsics(rig)
+        if not result.ok:  # pragma: no cover - the rendered views cover the image
+            raise JobFailed("; ".join(result.problems))
+        intrinsics = result.intrinsics
+    else:
+        raise InputError(
+            "a camera needs its intrinsics: give --camera-intrinsics camera.toml "
+            "(from `cdprhost calibrate camera`)"
+        )
+    return CameraWizard(capture, config, intrinsics, observer)
