@@ -24,11 +24,13 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath, PureWindowsPath
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
+from cdprhost.calibration.camera_config import CameraConfig
 from cdprhost.calibration.fitting import Observations
 from cdprhost.calibration.pose_noise import PoseNoise, pose_noise
 from cdprhost.calibration.readers import read_take
@@ -77,26 +79,51 @@ class SessionInfo(BaseModel):
 
 
 class SessionConfig(BaseModel):
-    """The whole ``session.toml`` (extra top-level tables are allowed and kept)."""
+    """The whole ``session.toml`` (extra top-level tables are allowed and kept): a
+    motion-capture session (``[mocap]``) or a camera session (``[camera]``,
+    camera-session.md), exactly one of them."""
 
     model_config = ConfigDict(extra="allow", frozen=True)
     session: SessionInfo
-    mocap: MocapConfig
+    mocap: MocapConfig | None = None
+    camera: CameraConfig | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> SessionConfig:
+        if (self.mocap is None) == (self.camera is None):
+            raise ValueError(
+                "a session has exactly one of [mocap] (motion capture) and [camera] "
+                f"(one camera and ChArUco boards); this one has {'both' if self.mocap else 'neither'}"
+            )
+        return self
+
+    @property
+    def motion_capture(self) -> MocapConfig:
+        """``[mocap]``; a camera session has none (InputError)."""
+        if self.mocap is None:
+            raise InputError(
+                "this is a camera session ([camera]): it has no motion-capture takes",
+                source=SESSION_FILE,
+            )
+        return self.mocap
 
     @property
     def declared_noise_mm(self) -> float | None:
         """``noise_mm`` of ``[mocap]``, else of ``[session]``."""
-        return self.mocap.noise_mm if self.mocap.noise_mm is not None else self.session.noise_mm
+        if self.mocap is not None and self.mocap.noise_mm is not None:
+            return self.mocap.noise_mm
+        return self.session.noise_mm
 
     @property
     def acceptance(self) -> AcceptanceLimits:
-        return self.mocap.acceptance
+        return self.mocap.acceptance if self.mocap is not None else self.camera.acceptance  # type: ignore[union-attr]
 
 
-def validation_problems(exc: ValidationError) -> list[str]:
+def validation_problems(exc: ValidationError, prefix: str = "") -> list[str]:
+    """One line per problem: the key's dotted place (under ``prefix``) and what is wrong."""
     out = []
     for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        loc = ".".join(str(p) for p in (prefix, *err["loc"]) if p != "") or "(top level)"
         msg = {"missing": "missing required key", "extra_forbidden": "unknown key"}.get(
             err["type"], err["msg"].removeprefix("Value error, ")
         )
@@ -104,15 +131,20 @@ def validation_problems(exc: ValidationError) -> list[str]:
     return out
 
 
-def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
-    src = str(path)
+def read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A TOML file's tables; InputError naming the file when unreadable or not TOML."""
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+            return tomllib.load(fh)
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", source=src) from None
+        raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", source=src) from None
+        raise InputError(f"not valid TOML: {exc}", source=str(path)) from None
+
+
+def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
+    src = str(path)
+    data = read_toml(path)
     try:
         return SessionConfig.model_validate(data)
     except ValidationError as exc:
@@ -323,7 +355,7 @@ class Session:
         unknown = self.config.acceptance.unknown_keys
         return (
             [
-                f"{SESSION_FILE}: [mocap.acceptance] key(s) not known here, ignored: {', '.join(unknown)}"
+                f"{SESSION_FILE}: [{'mocap' if self.config.mocap else 'camera'}.acceptance] key(s) not known here, ignored: {', '.join(unknown)}"
             ]
             if unknown
             else []
@@ -339,8 +371,8 @@ class Session:
         return self.take_paths[i] if self.take_paths else self.directory / self.poses.take[i]
 
     def prepare(self, i: int, limits: AcceptanceLimits | None = None) -> TakeSeries:
-        take = read_take(self.take_path(i), self.config.mocap.format)
-        return prepare_take(take, self.config.mocap, limits)
+        mocap = self.config.motion_capture
+        return prepare_take(read_take(self.take_path(i), mocap.format), mocap, limits)
 
     def measure(
         self, limits: AcceptanceLimits | None = None, *, strict: bool = False
