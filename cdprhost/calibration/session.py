@@ -85,8 +85,12 @@ class SessionConfig(BaseModel):
 
     @property
     def declared_noise_mm(self) -> float | None:
-        """``noise_mm`` of ``[mocap]``, else of ``[session]``."""
-        return self.mocap.noise_mm if self.mocap.noise_mm is not None else self.session.noise_mm
+        """``accuracy_mm`` of ``[mocap]``, else its ``noise_mm``, else ``noise_mm`` of
+        ``[session]``."""
+        for value in (self.mocap.accuracy_mm, self.mocap.noise_mm, self.session.noise_mm):
+            if value is not None:
+                return value
+        return None
 
     @property
     def acceptance(self) -> AcceptanceLimits:
