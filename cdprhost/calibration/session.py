@@ -109,10 +109,14 @@ class SessionConfig(BaseModel):
 
     @property
     def declared_noise_mm(self) -> float | None:
-        """``noise_mm`` of ``[mocap]``, else of ``[session]``."""
-        if self.mocap is not None and self.mocap.noise_mm is not None:
-            return self.mocap.noise_mm
-        return self.session.noise_mm
+        """``accuracy_mm`` of ``[mocap]``, else its ``noise_mm``, else ``noise_mm`` of
+        ``[session]``."""
+        mocap = self.mocap
+        candidates = (mocap.accuracy_mm, mocap.noise_mm) if mocap is not None else ()
+        for value in (*candidates, self.session.noise_mm):
+            if value is not None:
+                return value
+        return None
 
     @property
     def acceptance(self) -> AcceptanceLimits:
