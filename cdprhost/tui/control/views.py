@@ -120,6 +120,7 @@ class JobRecord:
     layers: int = 0
     reason: str = ""
     resumed_from_layer: int | None = None  # 1-based
+    resume_at: str = ""  # the resume point saved when it stopped: "line 1165 (layer 5)"
 
     @property
     def duration_s(self) -> float:
@@ -140,6 +141,7 @@ class DeviceStatusView:
     motors_on: bool = False
     homed: bool = False
     queue_free: int | None = None
+    fault: str = ""  # the device's latched fault, explained ("" when none)
 
 
 @dataclass(frozen=True)

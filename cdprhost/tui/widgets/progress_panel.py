@@ -88,10 +88,11 @@ def progress_lines(
     line_text: str,
     shown: JobState | None = None,
     elapsed_s: float | None = None,
+    notice: str = "",
 ) -> tuple[Text, Text, Text]:
     """The panel's text lines for a snapshot (pure, for tests too): state, layer and
     elapsed wall-clock time, current line. ``shown`` is the state to display (PAUSING while
-    a pause waits for a rest point)."""
+    a pause waits for a rest point); ``notice``: a recent notice of the job."""
     state = shown or snap.state
     head = Text()
     head.append(f" {state.value.upper()} ", style="reverse " + STATE_STYLE[state])
@@ -99,8 +100,8 @@ def progress_lines(
         head.append(f" {WAITING_FOR_REST[state]}", style="italic")
     elif snap.reason:
         head.append(f" {snap.reason}", style="italic")
-    elif snap.notices:
-        head.append(f" {snap.notices[-1]}", style="dim italic")
+    elif notice:
+        head.append(f" {notice}", style="dim italic")
     layers = f"{min(snap.layer + 1, snap.layers)}/{snap.layers}" if snap.layers else "-/-"
     stats = Text.assemble(
         ("layer ", "dim"),
@@ -131,13 +132,18 @@ class ProgressPanel(Vertical):
         line_text: str = "",
         shown: JobState | None = None,
         elapsed_s: float | None = None,
+        notice: str = "",
     ) -> None:
-        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s)
+        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s, notice)
         show_text(self.query_one("#job-state", Label), head)
         show_text(self.query_one("#job-stats", Label), stats)
         show_text(self.query_one("#job-line", Label), cur)
         bar = self.query_one("#job-bar", Label)
         show_text(bar, bar_text(progress_fraction(snap), bar.size.width or 40, snap.state))
+
+    def show_notice(self, snap: JobSnapshot, shown: JobState, notice: str) -> None:
+        head, _, _ = progress_lines(snap, "", shown, None, notice)
+        show_text(self.query_one("#job-state", Label), head)
 
     def show_times(
         self,
