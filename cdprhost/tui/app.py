@@ -30,6 +30,7 @@ from textual.screen import Screen
 from cdprhost.job.state import Failure, JobState, Notice, StateChanged
 from cdprhost.tui.control.backend import EMBEDDED, Backend
 from cdprhost.tui.control.controller import Controller
+from cdprhost.tui.control.log_route import ConsoleHandler, route_logging
 from cdprhost.tui.control.pump import EventPump
 from cdprhost.tui.control.store import JobHistory, RecentFiles, screenshot_dir, tui_dir
 from cdprhost.tui.control.views import ConsoleLine
@@ -55,6 +56,10 @@ STOP_SIGNALS = ("SIGTERM", "SIGHUP", "SIGINT")
 
 class EventsReady(Message):
     """Job events are waiting in the pump."""
+
+
+class LogReady(Message):
+    """Log records are waiting for the console."""
 
 
 def job_console_lines(items: list[tuple[int, Any]], job_id: int, now: float) -> list[ConsoleLine]:
@@ -96,12 +101,6 @@ class CdprApp(App[int]):
     DEFAULT_MODE = "print"
     HORIZONTAL_BREAKPOINTS = [(0, "-narrow"), (120, "-wide")]
     BINDINGS = [
-        *(
-            Binding(t.key, f"app.switch_mode('{t.mode}')", t.label, tooltip=t.help, show=False)
-            for t in TABS
-        ),
-        Binding("question_mark", "help", "Keys", tooltip="Every key of this screen"),
-        Binding("ctrl+s", "screenshot", "Screenshot", show=False, tooltip="Save an SVG"),
         Binding(
             ESTOP_KEY,
             "emergency_stop",
@@ -109,6 +108,12 @@ class CdprApp(App[int]):
             priority=True,  # from every screen, dialog and field
             tooltip=f"Press twice within {ESTOP_ARM_S:g} s: stop now, bypassing the queue",
         ),
+        *(
+            Binding(t.key, f"app.switch_mode('{t.mode}')", t.label, tooltip=t.help, show=False)
+            for t in TABS
+        ),
+        Binding("question_mark", "help", "Keys", tooltip="Every key of this screen"),
+        Binding("ctrl+s", "screenshot", "Screenshot", show=False, tooltip="Save an SVG"),
         Binding("ctrl+q", "quit", "Quit", priority=True),
     ]
 
@@ -140,6 +145,9 @@ class CdprApp(App[int]):
         folder = state_folder or tui_dir()
         self.recent_files = RecentFiles(folder / "recent.json")
         self.job_history = JobHistory(folder / "history.jsonl")
+        self.log_file = folder / "tui.log"
+        self._log_lines = ConsoleHandler(lambda: self.post_message(LogReady()))
+        self._unroute_logging: Callable[[], None] = lambda: None
         self._screenshots = (folder / "screenshots") if state_folder else None
         self._port = port
         self._baud = baud or backend.profile.serial.baud
@@ -155,6 +163,7 @@ class CdprApp(App[int]):
 
     # -------------------------------------------------------------- life
     def on_mount(self) -> None:
+        self._unroute_logging = route_logging(self._log_lines, self.log_file)
         health, status = self._intervals
         if health > 0:
             self.set_interval(health, self.controller.poll_health)
@@ -187,6 +196,10 @@ class CdprApp(App[int]):
         self.controller.stop_before_close()
         with contextlib.suppress(Exception):  # closing must not mask the exit
             self.backend.close()
+        self._unroute_logging()
+
+    def on_log_ready(self, _: LogReady) -> None:
+        self.controller.say(*self._log_lines.drain())
 
     def call_later_safe(self, fn: Callable[..., Any], *args: Any) -> None:
         """From a worker thread: run ``fn`` in the UI thread (dropped once the app has closed)."""

@@ -85,6 +85,7 @@ class UiState:
     rate_samples: tuple[tuple[float, float], ...] = ()  # (monotonic s, device time s) printing
     temps_at: float | None = None  # monotonic time of the newest temperature reading
     temp_samples: tuple[tuple[float, float, float], ...] = ()  # (monotonic s, hotend, bed)
+    heat_rates: tuple[tuple[str, float], ...] = ()  # measured warm-up °C per wall s, by heater
     connection: ConnectionView = field(default_factory=ConnectionView)
     file: FileView = field(default_factory=FileView)
     device: DeviceStatusView | None = None
@@ -128,6 +129,24 @@ def _request_after(request: str, old: JobState, new: JobState) -> str:
     return request
 
 
+def rates_measured(
+    rates: tuple[tuple[str, float], ...],
+    samples: tuple[tuple[float, float, float], ...],
+    reading: Temperatures,
+) -> tuple[tuple[str, float], ...]:
+    """The heaters' warm-up rates, updated from the samples of a heater still well below its
+    target (near it, the controller slows the rise down)."""
+    out = dict(rates)
+    for k, name, target in ((1, "hotend", reading.hotend_target), (2, "bed", reading.bed_target)):
+        now = reading.hotend if k == 1 else reading.bed
+        if target <= 0 or now > target - 5.0:
+            continue
+        r = heating_rate([(t[0], t[k]) for t in samples])
+        if r is not None:
+            out[name] = r
+    return tuple(sorted(out.items()))
+
+
 def fold_job_events(
     state: UiState, items: list[tuple[int, Any]], now: float = 0.0, wall: float = 0.0
 ) -> tuple[UiState, list[str]]:
@@ -142,6 +161,7 @@ def fold_job_events(
     problems: list[str] = []
     request, samples, temps_at = state.job_request, state.rate_samples, state.temps_at
     heat, notice_at, ended = state.temp_samples, state.notice_at, state.job_ended
+    rates = state.heat_rates
     for job_id, event in items:
         if job_id != state.job_id:
             continue
@@ -160,6 +180,8 @@ def fold_job_events(
         elif isinstance(event, Temperatures):
             temps_at = now
             heat = (*heat[-(RATE_SAMPLES - 1) :], (now, event.hotend, event.bed))
+            if snap.state is JobState.HEATING:
+                rates = rates_measured(rates, heat, event)
         elif isinstance(event, Progress) and snap.state is JobState.PRINTING:
             samples = (*samples[-(RATE_SAMPLES - 1) :], (now, snap.device_time_s))
     if snap is state.job:
@@ -174,8 +196,25 @@ def fold_job_events(
             temp_samples=heat,
             notice_at=notice_at,
             job_ended=ended,
+            heat_rates=rates,
         ),
         problems,
+    )
+
+
+def for_open_file(state: UiState) -> UiState:
+    """The state as the print screen shows it: a finished job of another file than the one
+    open now is not shown (its figures, lines and times belong to that file)."""
+    if state.job_active or not state.job_path or state.job_path == state.file.path:
+        return state
+    return replace(
+        state,
+        job=JobSnapshot(),
+        job_started=0.0,
+        job_ended=0.0,
+        notice_at=None,
+        rate_samples=(),
+        job_request="",
     )
 
 
@@ -205,13 +244,10 @@ def job_eta(state: UiState, default_rate: float) -> Eta | None:
     if state.job_path != state.file.path and state.job_active:
         waits = ()  # the open file is not the one printing
     rate = machine_rate(state.rate_samples, default_rate)
+    heating = dict(state.heat_rates)
+    tp = pre.toolpath if pre is not None else None
+    first = int(tp.line[0]) if tp is not None and len(tp.line) else 0
     if state.job_active and job.state is not JobState.PREFLIGHT:
-        heating: dict[str, float] = {}
-        if job.state is JobState.HEATING and state.temp_samples:
-            for k, name in ((1, "hotend"), (2, "bed")):
-                r = heating_rate([(t[0], t[k]) for t in state.temp_samples])
-                if r is not None:
-                    heating[name] = r
         left = job.eta_s if job.eta_s is not None else 0.0
         return estimate(
             left,
@@ -220,10 +256,17 @@ def job_eta(state: UiState, default_rate: float) -> Eta | None:
             heat_waits=waits,
             rate=rate,
             heating_now=heating,
+            first_move_line=first,
         )
     if pre is not None and pre.ok and not state.job_active:
         return estimate(
-            pre.estimated_time_s, line=0, temperatures=temps, heat_waits=waits, rate=rate
+            pre.estimated_time_s,
+            line=0,
+            temperatures=temps,
+            heat_waits=waits,
+            rate=rate,
+            heating_now=heating,
+            first_move_line=first,
         )
     return None
 

@@ -202,3 +202,19 @@ async def test_a_notice_from_the_start_does_not_stay_on_the_status_line(gcode_fi
         app.controller.cancel()
         for _ in range(40):
             gate.release()
+
+
+async def test_logging_goes_to_the_console_and_a_file_never_the_terminal(fake_backend, tmp_path):
+    import logging
+    import sys
+
+    app = make_app(fake_backend, state_folder=tmp_path / "state")
+    before = list(logging.getLogger().handlers)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        handlers = logging.getLogger().handlers + logging.getLogger("cdprhost").handlers
+        assert not any(getattr(h, "stream", None) is sys.stderr for h in handlers)
+        logging.getLogger("cdprhost.job.runner").warning("emergency stop not acknowledged")
+        await wait_for(pilot, lambda s: any("not acknowledged" in c.text for c in s.console))
+    assert "not acknowledged" in (tmp_path / "state" / "tui.log").read_text()
+    assert logging.getLogger().handlers == before  # put back on exit

@@ -282,10 +282,15 @@ class ControllerBase:
                 ConsoleLine("error", f"busy ({self.state.busy}): try again when it is done", now),
             )
             return
-        self.update(busy=f"console: {text.strip()}")
+        sent = text.strip()
+        self.update(busy=f"console: {sent}")
+        self.say(ConsoleLine("sent", sent, now))  # at once, not when the command has ended
 
         def done(lines: list[ConsoleLine]) -> None:
             self.update(busy="")
+            echo = next((i for i, c in enumerate(lines) if c.kind == "sent"), None)
+            if echo is not None and lines[echo].text.strip() == sent:
+                lines = lines[:echo] + lines[echo + 1 :]
             self.say(*lines)
             self.recheck_link()
 

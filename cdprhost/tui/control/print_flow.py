@@ -139,6 +139,7 @@ class PrintFlow(ControllerBase):
             else resume_from_layer + 1,
             job_request="",
             rate_samples=(),
+            temp_samples=(),
             device=None,
             jog=None,
         )

@@ -13,6 +13,12 @@ import numpy as np
 Vec3 = tuple[float, float, float]
 
 
+def unsigned_zero(value: float, digits: int) -> float:
+    """``value`` rounded to ``digits``, a rounded -0 as 0 (so it prints "0.00", not "-0.00")."""
+    rounded = round(float(value), digits)
+    return 0.0 if rounded == 0 else rounded
+
+
 @dataclass(frozen=True)
 class PortChoice:
     """A port the user can pick: ``port`` is what ``connect`` receives; ``simulated`` marks a

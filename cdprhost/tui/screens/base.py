@@ -31,7 +31,7 @@ class AppScreen(Screen[None]):
     def compose(self) -> ComposeResult:
         yield NavBar(id="nav")
         yield from self.compose_body()
-        yield Footer()
+        yield Footer(compact=True)
 
     def compose_body(self) -> ComposeResult:
         yield from ()

@@ -125,7 +125,10 @@ class JogScreen(AppScreen):
             busy = "not connected"
         show_text(self.query_one("#jog-busy", Label), Text(busy, style="yellow"), layout=True)
         target = state.jog.target if state.jog is not None else position
-        self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target))
+        title = (
+            "tension at target (predicted)" if state.jog is not None else "tension here (predicted)"
+        )
+        self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target), title)
         self._render_temperatures(state)
 
     def render_tick(self, state: UiState) -> None:

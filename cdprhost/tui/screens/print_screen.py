@@ -12,6 +12,7 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import Label
 
 from cdprhost.job.state import JobState
+from cdprhost.tui.control.eta import EtaSmoother
 from cdprhost.tui.control.jog import static_tensions
 from cdprhost.tui.control.source import SourceLines
 from cdprhost.tui.keys import hint
@@ -21,6 +22,7 @@ from cdprhost.tui.screens.file_picker import FilePickerScreen
 from cdprhost.tui.state import (
     UiState,
     elapsed,
+    for_open_file,
     hms,
     job_eta,
     live_position,
@@ -163,6 +165,8 @@ class PrintScreen(AppScreen):
         self._jump: int | None = None
         self._layer: int | None = None  # browsed layer (None: follow the print)
         self._source_path = ""
+        self._eta = EtaSmoother()
+        self._eta_job = 0
 
     def compose_body(self) -> ComposeResult:
         backend = self.app.backend
@@ -193,6 +197,7 @@ class PrintScreen(AppScreen):
 
     # ------------------------------------------------------------- render
     def render_state(self, state: UiState) -> None:
+        state = for_open_file(state)
         job = state.job
         app = self.app
         if state.file.path != self._source_path:  # a new file: its text, its first layer
@@ -209,11 +214,15 @@ class PrintScreen(AppScreen):
             shown_notice(state, app.clock()),
         )
         position, sliders, tensions = live_position(state)
+        title = "tension (planned)"
         if tensions is None:
-            tensions = static_tensions(app.backend.model, position)
+            tensions, title = (
+                static_tensions(app.backend.model, position),
+                "tension here (predicted)",
+            )
         steps = job.steps if state.job_active or state.device is None else state.device.steps
         self.query_one(PositionPanel).show(position, sliders, steps)
-        self.query_one(TensionBars).show(tensions)
+        self.query_one(TensionBars).show(tensions, title)
         show_text(self.query_one("#link-line", Label), link_line(state))
         name = Text(state.file.path or "none", style="bold" if state.file.path else "dim")
         name.append(f"   {hint(app, self, 'open')}", style="dim")
@@ -239,6 +248,7 @@ class PrintScreen(AppScreen):
 
     def render_tick(self, state: UiState) -> None:
         """What ages: temperatures (stale marking), elapsed and time left, the preview."""
+        state = for_open_file(state)
         self._render_times(state)
         self._render_preview(state)
 
@@ -248,7 +258,13 @@ class PrintScreen(AppScreen):
         eta = job_eta(state, app.backend.machine_rate())
         wall = app.wall_clock()
         panel = self.query_one(ProgressPanel)
-        panel.show_times(state.job, elapsed(state, wall), eta, wall)
+        left = None
+        if eta is not None and state.job.state in (JobState.HEATING, JobState.PRINTING):
+            if self._eta_job != state.job_id:
+                self._eta_job = state.job_id
+                self._eta.reset()
+            left = self._eta.update(app.clock(), eta.wall_s)
+        panel.show_times(state.job, elapsed(state, wall), eta, wall, None, left)
         if state.notice_at is not None:  # a notice goes after a while
             panel.show_notice(state.job, shown_job_state(state), shown_notice(state, app.clock()))
 
