@@ -11,13 +11,16 @@ folded at once, and what the operator does shows at once.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
+import signal
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from textual import events
 from textual.app import App, SystemCommand
 from textual.binding import Binding
 from textual.message import Message
@@ -27,24 +30,36 @@ from textual.screen import Screen
 from cdprhost.job.state import Failure, JobState, Notice, StateChanged
 from cdprhost.tui.control.backend import EMBEDDED, Backend
 from cdprhost.tui.control.controller import Controller
+from cdprhost.tui.control.log_route import ConsoleHandler, route_logging
 from cdprhost.tui.control.pump import EventPump
 from cdprhost.tui.control.store import JobHistory, RecentFiles, screenshot_dir, tui_dir
 from cdprhost.tui.control.views import ConsoleLine
+from cdprhost.tui.keys import action_name
 from cdprhost.tui.screens.calibrate import CalibrateScreen
 from cdprhost.tui.screens.connection import ConnectionScreen
 from cdprhost.tui.screens.console import ConsoleScreen
 from cdprhost.tui.screens.diagnose import DiagnoseScreen
-from cdprhost.tui.screens.dialogs import ConfirmScreen
+from cdprhost.tui.screens.dialogs import ConfirmScreen, start_text
 from cdprhost.tui.screens.help import HelpScreen
 from cdprhost.tui.screens.history import HistoryScreen
 from cdprhost.tui.screens.jog import JogScreen
 from cdprhost.tui.screens.print_screen import PrintScreen
 from cdprhost.tui.state import CONSOLE_LINES, UiState, fold_job_events, shown_job_state
-from cdprhost.tui.tabs import TAB_OF, TABS
+from cdprhost.tui.tabs import TAB_OF, TABS, screen_key
+
+ESTOP_KEY = "f9"
+ESTOP_ARM_S = 3.0
+"""The emergency stop is a double press of its key within this many seconds: fast to do on
+purpose, hard to do by accident (a dialog would cost a look and a second key anyway)."""
+STOP_SIGNALS = ("SIGTERM", "SIGHUP", "SIGINT")
 
 
 class EventsReady(Message):
     """Job events are waiting in the pump."""
+
+
+class LogReady(Message):
+    """Log records are waiting for the console."""
 
 
 def job_console_lines(items: list[tuple[int, Any]], job_id: int, now: float) -> list[ConsoleLine]:
@@ -86,6 +101,13 @@ class CdprApp(App[int]):
     DEFAULT_MODE = "print"
     HORIZONTAL_BREAKPOINTS = [(0, "-narrow"), (120, "-wide")]
     BINDINGS = [
+        Binding(
+            ESTOP_KEY,
+            "emergency_stop",
+            "E-STOP",
+            priority=True,  # from every screen, dialog and field
+            tooltip=f"Press twice within {ESTOP_ARM_S:g} s: stop now, bypassing the queue",
+        ),
         *(
             Binding(t.key, f"app.switch_mode('{t.mode}')", t.label, tooltip=t.help, show=False)
             for t in TABS
@@ -123,6 +145,9 @@ class CdprApp(App[int]):
         folder = state_folder or tui_dir()
         self.recent_files = RecentFiles(folder / "recent.json")
         self.job_history = JobHistory(folder / "history.jsonl")
+        self.log_file = folder / "tui.log"
+        self._log_lines = ConsoleHandler(lambda: self.post_message(LogReady()))
+        self._unroute_logging: Callable[[], None] = lambda: None
         self._screenshots = (folder / "screenshots") if state_folder else None
         self._port = port
         self._baud = baud or backend.profile.serial.baud
@@ -133,10 +158,12 @@ class CdprApp(App[int]):
         self.last_fold = float("-inf")
         self._fold_pending = False
         self._failure_shown: int = 0
+        self._estop_armed: float | None = None  # when the e-stop key was first pressed
         self.problems: list[str] = []
 
     # -------------------------------------------------------------- life
     def on_mount(self) -> None:
+        self._unroute_logging = route_logging(self._log_lines, self.log_file)
         health, status = self._intervals
         if health > 0:
             self.set_interval(health, self.controller.poll_health)
@@ -154,11 +181,25 @@ class CdprApp(App[int]):
             self.controller.connect(self._port, self._baud)
         if self._open_file:
             self.controller.open_file(self._open_file)
+        if not self.is_headless:
+            self._catch_stop_signals()
+
+    def _catch_stop_signals(self) -> None:
+        """SIGTERM, SIGHUP, SIGINT stop the machine like the quit key (no question asked)."""
+        loop = asyncio.get_running_loop()
+        for name in STOP_SIGNALS:
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.add_signal_handler(getattr(signal, name), self.controller.stop_and_quit, name)
 
     def on_unmount(self) -> None:
-        self.controller.cancel()
+        """The link closes last: a job still running is stopped (and waited for) first."""
+        self.controller.stop_before_close()
         with contextlib.suppress(Exception):  # closing must not mask the exit
             self.backend.close()
+        self._unroute_logging()
+
+    def on_log_ready(self, _: LogReady) -> None:
+        self.controller.say(*self._log_lines.drain())
 
     def call_later_safe(self, fn: Callable[..., Any], *args: Any) -> None:
         """From a worker thread: run ``fn`` in the UI thread (dropped once the app has closed)."""
@@ -181,7 +222,7 @@ class CdprApp(App[int]):
         items = self.pump.drain()
         if not items:
             return
-        new, problems = fold_job_events(self.state, items, now)
+        new, problems = fold_job_events(self.state, items, now, self.wall_clock())
         self.problems.extend(problems)
         lines = job_console_lines(items, new.job_id, self.wall_clock())
         if lines:
@@ -201,18 +242,43 @@ class CdprApp(App[int]):
 
     # ------------------------------------------------------------ actions
     async def action_quit(self) -> None:
+        if self.controller.quitting:  # asked again while the machine stops: e-stop, then exit
+            self.controller.stop_and_quit()
+            return
         if not self.state.job_active:
             self.exit(0)
             return
+        self.confirm(
+            "A print is running. Stop it (like a cancel: stop, park, heaters off, resume point "
+            "saved) and quit when the machine is at rest?",
+            self.controller.stop_and_quit,
+        )
 
-        def cancel_and_quit() -> None:
-            self.controller.cancel()
-            self.exit(0)
+    def action_emergency_stop(self) -> None:
+        """First press arms, a second within ``ESTOP_ARM_S`` stops."""
+        now = self.clock()
+        if not self.state.connected and not self.state.job_active:
+            self.notify("not connected: there is no device to stop", severity="warning")
+            return
+        if self._estop_armed is None or now - self._estop_armed > ESTOP_ARM_S:
+            self._estop_armed = now
+            key = self.get_key_display(self._estop_binding())
+            self.notify(
+                f"press {key} again within {ESTOP_ARM_S:g} s to stop the machine NOW "
+                "(bypasses the queue; heaters off)",
+                title="emergency stop armed",
+                severity="error",
+                timeout=ESTOP_ARM_S,
+            )
+            return
+        self._estop_armed = None
+        self.controller.emergency_stop()
 
-        self.confirm("A print is running. Cancel it and quit?", cancel_and_quit)
+    def _estop_binding(self) -> Binding:
+        return next(b for b in self.BINDINGS if isinstance(b, Binding) and b.key == ESTOP_KEY)
 
     def confirm(self, question: str, then: Callable[[], None]) -> None:
-        self.push_screen(ConfirmScreen(question), lambda yes: then() if yes else None)
+        self.push_screen(ConfirmScreen(question), lambda yes: then() if yes is True else None)
 
     def action_help(self) -> None:
         screen = self.screen
@@ -232,11 +298,26 @@ class CdprApp(App[int]):
         return super().deliver_screenshot(filename, path or str(folder), time_format)
 
     def action_start_print(self) -> None:
-        path = self.state.file.path
-        if not path:
-            self.notify("open a G-code file first", severity="warning")
+        """Asks first, naming a fault the device reports (starting clears it) and offering a
+        resume point saved for this file."""
+        why = self.why_not_print("start_print")
+        if why:
+            self.notify(f"cannot start: {why}", severity="warning")
             return
-        self.confirm(f"Start printing {path}?", self.controller.start)
+        state = self.state
+        path, resume = state.file.path, state.file.resume
+        usable = resume is not None and not resume.problem
+        fault = state.device.fault if state.device is not None else ""
+        c = self.controller
+
+        def chosen(choice: bool | str | None) -> None:
+            if choice == "other":  # the link checked, the part on the bed confirmed
+                c.resume_failed()
+            elif choice is True:
+                c.start()
+
+        other = "Resume there" if usable else ""
+        self.push_screen(ConfirmScreen(start_text(path, fault, resume), other, "Start"), chosen)
 
     def action_pause_print(self) -> None:
         self.controller.pause()
@@ -254,24 +335,72 @@ class CdprApp(App[int]):
     def action_resume_failed(self) -> None:
         self.controller.resume_failed()
 
-    def check_print_action(self, action: str) -> bool | None:
-        """Enabled state of the print actions from the job state (None: shown greyed)."""
+    def why_not_print(self, action: str) -> str:
+        """Why a print action cannot act now ("" when it can): what the key says when pressed,
+        and what the help shows."""
         state = self.state
-        s, pre = shown_job_state(state), state.file.preflight
-        if action == "start_print":
-            ready = bool(state.file.path) and pre is not None and pre.ok and state.connected
-            return None if state.job_active or not ready else True
+        s, f = shown_job_state(state), state.file
+        link = f"not connected: connect on {screen_key('connection')}"
+        running = "a print is running"
+        if action in ("start_print", "resume_failed"):
+            if state.job_active:
+                return running
+            if not f.path:
+                return "no file open: open one first"
+            if f.checking:
+                return "the file is still being checked"
+            if action == "resume_failed":
+                if f.resume is None:
+                    return "no resume point is saved for this file"
+                if f.resume.problem:
+                    return f.resume.problem
+            elif f.error or f.preflight is None:
+                return f"the file could not be checked: {f.error or 'no result'}"
+            elif not f.preflight.ok:
+                return "the preflight found violations (the list shows them)"
+            if not state.connected:
+                return link
+            return f"busy: {state.busy}" if state.busy else ""
+        if not s.active:
+            return "no print is running"
         if action == "pause_print":
-            return s in (JobState.PRINTING, JobState.HEATING)
+            if s is JobState.PAUSED:
+                return "already paused"
+            return "" if s in (JobState.PRINTING, JobState.HEATING) else f"the print is {s.value}"
         if action == "resume_print":
-            return s is JobState.PAUSED
+            return "" if s is JobState.PAUSED else "the print is not paused"
         if action == "cancel_print":
-            return True if s.active and s is not JobState.CANCELLING else None
-        if action == "resume_failed":
-            resume = state.file.resume
-            usable = resume is not None and not resume.problem and state.connected
-            return None if state.job_active or not usable else True
-        return True
+            return "already cancelling" if s is JobState.CANCELLING else ""
+        return ""
+
+    def check_print_action(self, action: str) -> bool | None:
+        """Enabled state of the print actions: True, None (greyed: the key says why), False
+        (hidden: no link and no job, so nothing to start or stop)."""
+        if not self.why_not_print(action):
+            return True
+        if not self.state.connected and not self.state.job_active:
+            return False
+        return None
+
+    def why_not(self, action: str) -> str:
+        if action == "emergency_stop" and not (self.state.connected or self.state.job_active):
+            return "not connected: there is no device to stop"
+        return ""
+
+    def on_key(self, event: events.Key) -> None:
+        """A key bound to an action that cannot act now says why, never nothing."""
+        reasons = []
+        for namespace, bindings in self.screen._modal_binding_chain:
+            for b in bindings.key_to_bindings.get(event.key, ()):
+                name = action_name(b)
+                if namespace.check_action(name, ()):
+                    return  # it acted (or another binding of the key did)
+                why = getattr(namespace, "why_not", None)
+                reason = why(name) if why is not None else ""
+                if reason:
+                    reasons.append(f"{self.get_key_display(b)} {b.description}: {reason}")
+        if reasons:
+            self.notify(reasons[0], title="not now", severity="warning", timeout=4)
 
     # ---------------------------------------------------- command palette
     def get_system_commands(self, screen: Screen[Any]) -> Iterable[SystemCommand]:

@@ -21,6 +21,7 @@ class KeyRow:
     description: str
     tooltip: str
     enabled: bool  # False: not possible right now (greyed in the footer)
+    why: str = ""  # why not, when not enabled
 
 
 def _bindings(node: DOMNode) -> list[Binding]:
@@ -53,13 +54,16 @@ def key_rows(app: App[Any], node: DOMNode, ours: bool = True) -> list[KeyRow]:
         grouped.setdefault((b.action, b.description), []).append(b)
     rows = []
     for (action, description), bindings in grouped.items():
-        enabled = node.check_action(action.split("(", 1)[0], ())
+        name = action.split("(", 1)[0]
+        enabled = bool(node.check_action(name, ()))
+        why = getattr(node, "why_not", None)
         rows.append(
             KeyRow(
                 "/".join(app.get_key_display(b) for b in bindings),
                 description or action,
                 bindings[0].tooltip,
-                bool(enabled),
+                enabled,
+                why(name) if why is not None and not enabled else "",
             )
         )
     return rows

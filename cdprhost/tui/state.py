@@ -16,6 +16,7 @@ from cdprhost.job.state import (
     JobSnapshot,
     JobState,
     LinkHealth,
+    Notice,
     Progress,
     StateChanged,
     Temperatures,
@@ -36,6 +37,8 @@ from cdprhost.tui.control.views import (
 
 RATE_SAMPLES = 120
 CONSOLE_LINES = 500
+NOTICE_SHOWN_S = 15.0
+"""A job's notice stays on its status line this long (the console keeps them all)."""
 STALE_AFTER_S = 5.0
 """Temperatures older than this are marked stale (the job reports every 0.5 s, the idle
 status comes every second)."""
@@ -75,11 +78,14 @@ class UiState:
     job_id: int = 0
     job_path: str = ""
     job_started: float = 0.0  # wall clock (epoch s) when the job was started
+    job_ended: float = 0.0  # wall clock when it reached a final state (0: not yet)
+    notice_at: float | None = None  # monotonic time of the job's newest notice
     job_resumed_from: int | None = None  # 1-based layer a resumed job restarts at
     job_request: str = ""  # "pause" or "cancel" asked of the job and not yet taken up
     rate_samples: tuple[tuple[float, float], ...] = ()  # (monotonic s, device time s) printing
     temps_at: float | None = None  # monotonic time of the newest temperature reading
     temp_samples: tuple[tuple[float, float, float], ...] = ()  # (monotonic s, hotend, bed)
+    heat_rates: tuple[tuple[str, float], ...] = ()  # measured warm-up °C per wall s, by heater
     connection: ConnectionView = field(default_factory=ConnectionView)
     file: FileView = field(default_factory=FileView)
     device: DeviceStatusView | None = None
@@ -123,11 +129,30 @@ def _request_after(request: str, old: JobState, new: JobState) -> str:
     return request
 
 
+def rates_measured(
+    rates: tuple[tuple[str, float], ...],
+    samples: tuple[tuple[float, float, float], ...],
+    reading: Temperatures,
+) -> tuple[tuple[str, float], ...]:
+    """The heaters' warm-up rates, updated from the samples of a heater still well below its
+    target (near it, the controller slows the rise down)."""
+    out = dict(rates)
+    for k, name, target in ((1, "hotend", reading.hotend_target), (2, "bed", reading.bed_target)):
+        now = reading.hotend if k == 1 else reading.bed
+        if target <= 0 or now > target - 5.0:
+            continue
+        r = heating_rate([(t[0], t[k]) for t in samples])
+        if r is not None:
+            out[name] = r
+    return tuple(sorted(out.items()))
+
+
 def fold_job_events(
-    state: UiState, items: list[tuple[int, Any]], now: float = 0.0
+    state: UiState, items: list[tuple[int, Any]], now: float = 0.0, wall: float = 0.0
 ) -> tuple[UiState, list[str]]:
     """Apply queued (job id, event) pairs of the current job, in order; ``now`` is the
-    monotonic time they are applied at (temperature age, the time estimate's rate).
+    monotonic time they are applied at (temperature age, the time estimate's rate, notice
+    age), ``wall`` the wall clock (when the job ended).
 
     Events of an older job are dropped. A transition the job machine forbids is
     not applied; its text is returned so the shell can show it.
@@ -135,7 +160,8 @@ def fold_job_events(
     snap = state.job
     problems: list[str] = []
     request, samples, temps_at = state.job_request, state.rate_samples, state.temps_at
-    heat = state.temp_samples
+    heat, notice_at, ended = state.temp_samples, state.notice_at, state.job_ended
+    rates = state.heat_rates
     for job_id, event in items:
         if job_id != state.job_id:
             continue
@@ -147,9 +173,15 @@ def fold_job_events(
             continue
         if isinstance(event, StateChanged):
             request = _request_after(request, before, snap.state)
+            if snap.state.finished and not ended:
+                ended = wall
+        elif isinstance(event, Notice):
+            notice_at = now
         elif isinstance(event, Temperatures):
             temps_at = now
             heat = (*heat[-(RATE_SAMPLES - 1) :], (now, event.hotend, event.bed))
+            if snap.state is JobState.HEATING:
+                rates = rates_measured(rates, heat, event)
         elif isinstance(event, Progress) and snap.state is JobState.PRINTING:
             samples = (*samples[-(RATE_SAMPLES - 1) :], (now, snap.device_time_s))
     if snap is state.job:
@@ -162,8 +194,27 @@ def fold_job_events(
             rate_samples=samples,
             temps_at=temps_at,
             temp_samples=heat,
+            notice_at=notice_at,
+            job_ended=ended,
+            heat_rates=rates,
         ),
         problems,
+    )
+
+
+def for_open_file(state: UiState) -> UiState:
+    """The state as the print screen shows it: a finished job of another file than the one
+    open now is not shown (its figures, lines and times belong to that file)."""
+    if state.job_active or not state.job_path or state.job_path == state.file.path:
+        return state
+    return replace(
+        state,
+        job=JobSnapshot(),
+        job_started=0.0,
+        job_ended=0.0,
+        notice_at=None,
+        rate_samples=(),
+        job_request="",
     )
 
 
@@ -193,13 +244,10 @@ def job_eta(state: UiState, default_rate: float) -> Eta | None:
     if state.job_path != state.file.path and state.job_active:
         waits = ()  # the open file is not the one printing
     rate = machine_rate(state.rate_samples, default_rate)
+    heating = dict(state.heat_rates)
+    tp = pre.toolpath if pre is not None else None
+    first = int(tp.line[0]) if tp is not None and len(tp.line) else 0
     if state.job_active and job.state is not JobState.PREFLIGHT:
-        heating: dict[str, float] = {}
-        if job.state is JobState.HEATING and state.temp_samples:
-            for k, name in ((1, "hotend"), (2, "bed")):
-                r = heating_rate([(t[0], t[k]) for t in state.temp_samples])
-                if r is not None:
-                    heating[name] = r
         left = job.eta_s if job.eta_s is not None else 0.0
         return estimate(
             left,
@@ -208,12 +256,65 @@ def job_eta(state: UiState, default_rate: float) -> Eta | None:
             heat_waits=waits,
             rate=rate,
             heating_now=heating,
+            first_move_line=first,
         )
     if pre is not None and pre.ok and not state.job_active:
         return estimate(
-            pre.estimated_time_s, line=0, temperatures=temps, heat_waits=waits, rate=rate
+            pre.estimated_time_s,
+            line=0,
+            temperatures=temps,
+            heat_waits=waits,
+            rate=rate,
+            heating_now=heating,
+            first_move_line=first,
         )
     return None
+
+
+@dataclass(frozen=True)
+class TemperaturesShown:
+    current: tuple[float | None, float | None]
+    targets: tuple[float, float]
+    history: tuple[tuple[float, float], ...]
+    stale_s: float | None  # the readings' age when too old to trust
+
+
+def shown_temperatures(state: UiState, now: float) -> TemperaturesShown:
+    """The temperatures to show: the running job's readings, else the device's latest status;
+    either marked stale once older than ``STALE_AFTER_S`` (a finished job's readings are
+    never shown as current: the device is read again after a job)."""
+    age = temperature_age(state, now)
+    stale = round(age) if age is not None and age > STALE_AFTER_S else None
+    job, dev = state.job, state.device
+    if state.job_active and job.temperatures is not None:
+        t = job.temperatures
+        history = tuple((h, b) for _, h, b in job.temperature_history)
+        return TemperaturesShown((t.hotend, t.bed), (t.hotend_target, t.bed_target), history, stale)
+    if dev is not None:
+        return TemperaturesShown(
+            (dev.hotend, dev.bed), (dev.hotend_target, dev.bed_target), state.device_temps, stale
+        )
+    if job.temperatures is not None:  # a job just ended: its last reading, until the device
+        t = job.temperatures  # answers again (marked as old as it is)
+        return TemperaturesShown(
+            (t.hotend, t.bed), (t.hotend_target, t.bed_target), (), stale if stale else 0
+        )
+    return TemperaturesShown((None, None), (0.0, 0.0), (), None)
+
+
+def shown_notice(state: UiState, now: float) -> str:
+    """The job's newest notice while it is recent ("" after ``NOTICE_SHOWN_S``)."""
+    notices = state.job.notices
+    if not notices or state.notice_at is None or now - state.notice_at > NOTICE_SHOWN_S:
+        return ""
+    return notices[-1]
+
+
+def elapsed(state: UiState, wall: float) -> float | None:
+    """Wall-clock time of the job: up to now, or to its end once it has ended."""
+    if not state.job_started:
+        return None
+    return max((state.job_ended or wall) - state.job_started, 0.0)
 
 
 def temperature_age(state: UiState, now: float) -> float | None:

@@ -64,6 +64,9 @@ class FakeJob:
             threading.Event(),
         )
         self.result = None
+        self.reason = ""
+        self.ended = threading.Event()
+        self.estops = 0
 
     def request_pause(self):
         self._pause.set()
@@ -71,14 +74,46 @@ class FakeJob:
     def request_resume(self):
         self._resume.set()
 
-    def request_cancel(self):
+    def request_cancel(self, reason=""):
+        self.reason = reason
         self._cancel.set()
         self._resume.set()
+
+    # the safe-stop API of cdprhost.job.runner.PrintJob
+    @property
+    def finished(self):
+        return self.ended.is_set()
+
+    def wait(self, timeout_s=None):
+        return self.ended.wait(timeout_s)
+
+    def emergency_stop(self):
+        self.estops += 1
+        self.reason = "emergency stop"
+        self._cancel.set()
+        self._resume.set()
+        return True
+
+    def shutdown(self, reason="quit", timeout_s=10.0):
+        if self.finished:
+            return True
+        self.request_cancel(reason)
+        if self.wait(timeout_s):
+            return True
+        self.emergency_stop()
+        return self.wait(2.0)
 
     def _state(self, s, reason=""):
         self.on_event(StateChanged(s, reason))
 
     def run(self):
+        try:
+            self.result = self._run()
+            return self.result
+        finally:
+            self.ended.set()
+
+    def _run(self):
         emit = self.on_event
         self._state(JobState.PREFLIGHT)
         emit(
@@ -112,7 +147,12 @@ class FakeJob:
                     self.gate.acquire(timeout=30)
             if at_rest and self._cancel.is_set():
                 self._state(JobState.CANCELLING)
-                self._state(JobState.CANCELLED)
+                if self.reason == "emergency stop":
+                    self._state(JobState.FAILED, "emergency stop")
+                    return "failed"
+                self._state(
+                    JobState.CANCELLED, f"cancelled: {self.reason}" if self.reason else "cancelled"
+                )
                 return "cancelled"
             if self.fail_at is not None and i > self.fail_at:
                 layer = (i - 2) // per_layer
@@ -210,6 +250,8 @@ class FakeBackend:
         self.log: list[ConsoleLine] = []
         self.sent: list[str] = []
         self.cancels_handled = 0
+        self.estops = 0
+        self.closed_after_jobs: list[bool] | None = None
         self.rate = 1.0
         self.now = 1_750_000_000.0  # the wall clock of the console's replies
 
@@ -279,6 +321,8 @@ class FakeBackend:
         return self.status
 
     def emergency_stop(self):
+        self.estops += 1
+        self.status = replace(self.status, hotend_target=0.0, bed_target=0.0)
         return True
 
     def console(self, line):
@@ -372,4 +416,5 @@ class FakeBackend:
         )
 
     def close(self):
+        self.closed_after_jobs = [job.finished for job in self.jobs]  # the link closes last
         self._connected = False

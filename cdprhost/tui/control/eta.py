@@ -3,12 +3,19 @@
 The planned motion time is machine time: the device executes it at ``rate`` machine seconds
 per wall second (1 on a real machine, the speed-up on a simulated one), measured from the
 job's progress while it prints. Waits for temperature are not in the plan: each wait still
-ahead costs the time its heater needs from where it will be to its target, at a nominal
-heating rate (the measured one for the heater warming up now).
+ahead costs the time its heater needs from where it will be to its target, at the heater's
+measured rate (learnt while it warmed up, in this job or an earlier one), else a nominal
+one. The waits before the first move overlap (the heaters warm up together), so they cost
+the longest of them, not their sum.
+
+What is shown is smoothed (:class:`EtaSmoother`): it counts down with the clock and moves
+toward each new estimate with a time constant, so a burst of progress or one odd sample does
+not make it jump.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -67,16 +74,17 @@ def estimate(
     heat_waits: Sequence[tuple[int, str, float]],
     rate: float,
     heating_now: dict[str, float] | None = None,
+    first_move_line: int = 0,
 ) -> Eta:
     """Time left when the program has executed up to ``line``.
 
     ``temperatures``: each heater's current temperature; ``heat_waits``: the program's
-    (line, heater, target) waits; ``heating_now``: measured °C per wall second of heaters
-    warming up now (used for the first wait of that heater still ahead).
+    (line, heater, target) waits; ``heating_now``: measured °C per wall second of each heater
+    (used for its waits still ahead); ``first_move_line``: the waits before it overlap.
     """
     expected = dict(temperatures)
     measured = dict(heating_now or {})
-    wall = 0.0
+    wall, start_group = 0.0, 0.0
     for wait_line, heater, target in heat_waits:
         if wait_line <= line:
             expected[heater] = max(expected.get(heater) or 0.0, target)
@@ -85,10 +93,34 @@ def estimate(
         start = 25.0 if now is None else now
         gap = target - start
         if gap > 0:
-            c_per_s = measured.pop(heater, None)
-            if c_per_s:
-                wall += gap / c_per_s
+            c_per_s = measured.get(heater)
+            cost = gap / c_per_s if c_per_s else gap / NOMINAL_C_PER_S.get(heater, 1.0) / rate
+            if wait_line < first_move_line:  # warming up together before the print moves
+                start_group = max(start_group, cost)
             else:
-                wall += gap / NOMINAL_C_PER_S.get(heater, 1.0) / rate
+                wall += cost
         expected[heater] = target
-    return Eta(max(motion_left_s, 0.0), wall, rate)
+    return Eta(max(motion_left_s, 0.0), wall + start_group, rate)
+
+
+class EtaSmoother:
+    """The time left as shown: it counts down with the clock between estimates and moves
+    toward each new one by ``1 - exp(-dt / tau_s)`` (pure but for its memory)."""
+
+    def __init__(self, tau_s: float = 20.0):
+        self.tau_s = tau_s
+        self._left: float | None = None
+        self._at = 0.0
+
+    def reset(self) -> None:
+        self._left = None
+
+    def update(self, now: float, estimate_s: float) -> float:
+        if self._left is None:
+            self._left, self._at = estimate_s, now
+            return estimate_s
+        dt = max(now - self._at, 0.0)
+        self._at = now
+        predicted = max(self._left - dt, 0.0)
+        self._left = predicted + (1.0 - math.exp(-dt / self.tau_s)) * (estimate_s - predicted)
+        return self._left

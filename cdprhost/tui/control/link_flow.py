@@ -37,6 +37,9 @@ class ControllerBase:
         self.backend = backend
         self._job: JobHandle | None = None
         self._job_lock = threading.Lock()
+        self._job_ended = threading.Event()  # set when the running job's ``run`` returned
+        self._quitting = ""  # why the app quits once the job has stopped ("quit", "SIGTERM")
+        self._finished_id = 0  # the last job whose end was handled
         self._health_at = float("-inf")
 
     # ------------------------------------------------------------ plumbing
@@ -279,10 +282,15 @@ class ControllerBase:
                 ConsoleLine("error", f"busy ({self.state.busy}): try again when it is done", now),
             )
             return
-        self.update(busy=f"console: {text.strip()}")
+        sent = text.strip()
+        self.update(busy=f"console: {sent}")
+        self.say(ConsoleLine("sent", sent, now))  # at once, not when the command has ended
 
         def done(lines: list[ConsoleLine]) -> None:
             self.update(busy="")
+            echo = next((i for i, c in enumerate(lines) if c.kind == "sent"), None)
+            if echo is not None and lines[echo].text.strip() == sent:
+                lines = lines[:echo] + lines[echo + 1 :]
             self.say(*lines)
             self.recheck_link()
 
@@ -293,13 +301,39 @@ class ControllerBase:
         self.background("device", lambda: self.backend.console(text), done, fail)
 
     def emergency_stop(self) -> None:
-        """Stop now, bypassing the queue (also while a print runs: the job then fails)."""
+        """Stop now, bypassing the queue (also while a print runs: through the job, which then
+        ends with its resume point). The device's answer goes to the console and a
+        notification; then the device is read again (temperatures, state)."""
+        with self._job_lock:
+            job = self._job
+        stop = getattr(job, "emergency_stop", None) if job is not None else None
+        work: Callable[[], Any] = stop if stop is not None else self.backend.emergency_stop
+        self.say(ConsoleLine("sent", "M112 (emergency stop key)", self.app.wall_clock()))
 
         def done(answered: Any) -> None:
-            text = "emergency stop: the device confirmed" if answered else "emergency stop sent"
-            self.say(ConsoleLine("notice", text, self.app.wall_clock()))
+            if answered:
+                text = "EMERGENCY STOP: the device confirmed; motion stopped, heaters off"
+            else:
+                text = (
+                    "EMERGENCY STOP sent but the device did not confirm: check the machine "
+                    "(cut its power if it still moves)"
+                )
+            self.say(ConsoleLine("notice" if answered else "error", text, self.app.wall_clock()))
+            self.app.notify(
+                text,
+                title="emergency stop",
+                severity="warning" if answered else "error",
+                timeout=20,
+            )
+            self.recheck_link()
 
-        self.background("estop", self.backend.emergency_stop, done)
+        def fail(exc: BaseException) -> None:
+            text = f"EMERGENCY STOP failed: {exc or type(exc).__name__}: cut the machine's power"
+            self.say(ConsoleLine("error", text, self.app.wall_clock()))
+            self.app.notify(text, title="emergency stop", severity="error", timeout=30)
+            self.recheck_link()
+
+        self.background("estop", work, done, fail)
 
     def _answer_while_printing(self, text: str) -> list[ConsoleLine]:
         now = self.app.wall_clock()

@@ -55,6 +55,19 @@ def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str],
     return tuple(rows)
 
 
+def fault_text(status: Any) -> str:
+    """The device's latched fault in words ("" when it has none)."""
+    if not status.faulted:
+        return ""
+    from cdprhost.machine.prepare import _WHY, _fault_name
+    from firmware_protocol.messages import ErrorCode
+
+    code = int(status.last_error)
+    name = _fault_name(code).replace("_", " ")
+    why = _WHY.get(ErrorCode(code), "") if code in ErrorCode._value2member_map_ else ""
+    return f"{name}: {why}" if why and why != name else name
+
+
 def preflight_view(report: Any, path: str, toolpath: Any = None) -> PreflightView:
     """A :class:`cdprhost.preflight.PreflightReport` as the print screen shows it."""
     violations = tuple(
@@ -233,6 +246,7 @@ class LiveBackend:
             bool(st.enabled_mask),
             homed,
             st.queue_free,
+            fault_text(st),
         )
 
     # --------------------------------------------------------------- print

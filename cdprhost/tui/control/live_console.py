@@ -12,7 +12,7 @@ from cdprhost.errors import CdprError
 from cdprhost.machine import Machine, NotHomed
 from cdprhost.tui.control.console import HELP, ConsoleCommand, ConsoleError, parse_command
 from cdprhost.tui.control.jog import check_jog
-from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView
+from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView, unsigned_zero
 
 HEAT_WAIT_S = 900.0
 
@@ -28,7 +28,7 @@ def status_lines(view: DeviceStatusView, bed_origin: Any) -> list[str]:
         g = np.asarray(view.position) - np.asarray(bed_origin, dtype=float)
         out.append(
             "position X{:.2f} Y{:.2f} Z{:.2f} (G-code frame); machine frame ({:.2f}, {:.2f}, "
-            "{:.2f}) mm".format(*g, *view.position)
+            "{:.2f}) mm".format(*(unsigned_zero(v, 2) for v in (*g, *view.position)))
         )
     else:
         out.append("position unknown: not homed (G28 homes)")

@@ -1,34 +1,70 @@
 """The print side of the controller: open a file, run a job, pause/cancel, resume a failed
-print (after checking the link), and remember files and finished jobs."""
+print (after checking the link), and remember files and finished jobs.
+
+Quitting (the quit key, SIGHUP/SIGTERM/SIGINT) while a job runs goes through the job's one
+safe-stop path: the job is stopped like a cancel (stop within the buffered motion, park,
+heaters off, resume point saved) and waited for, its record goes to the history, and only
+then does the app exit and close the link."""
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from cdprhost.job.resume import resume_question
 from cdprhost.job.state import JobSnapshot, JobState, StateChanged
+from cdprhost.tui.control.backend import JobHandle
 from cdprhost.tui.control.link_flow import ControllerBase
 from cdprhost.tui.control.views import ConsoleLine, JobRecord, ResumeView
 from cdprhost.tui.state import FileView
 from cdprhost.tui.tabs import screen_key
+
+SHUTDOWN_TIMEOUT_S = 10.0
+"""How long a quit waits for the job's controlled stop before an emergency stop."""
+
+
+def shutdown_job(job: JobHandle, ended: threading.Event, reason: str, timeout_s: float) -> bool:
+    """Blocking: stop ``job`` like a cancel and wait until its ``run`` returned (``ended``);
+    True when it did. The job's own ``shutdown`` when it has one (it e-stops after
+    ``timeout_s``), else a cancel request and a wait."""
+    shutdown = getattr(job, "shutdown", None)
+    if shutdown is not None:
+        return bool(shutdown(reason, timeout_s=timeout_s)) and ended.wait(timeout_s)
+    job.request_cancel()
+    if ended.wait(timeout_s):
+        return True
+    stop = getattr(job, "emergency_stop", None)
+    if stop is not None:
+        stop()
+    return ended.wait(2.0)
 
 
 def job_record(state: Any, ended: float) -> JobRecord:
     """The history record of the job in ``state`` (a :class:`UiState`) as it ended."""
     job = state.job
     done = min(job.layer + 1, job.layers) if job.segments_done else 0
+    status, reason = job.state.value, job.reason if job.state is not JobState.DONE else ""
+    if not job.state.finished:  # quitting, and the job did not stop in time
+        status, reason = "failed", reason or "the job did not stop in time"
     return JobRecord(
         state.job_path,
-        job.state.value,
+        status,
         state.job_started,
         ended,
         done,
         job.layers,
-        job.reason if job.state is not JobState.DONE else "",
+        reason,
         state.job_resumed_from,
     )
+
+
+def _quiet(fn: Any) -> Any:
+    try:
+        return fn()
+    except Exception:  # noqa: BLE001 - a best effort while stopping
+        return None
 
 
 class PrintFlow(ControllerBase):
@@ -94,6 +130,8 @@ class PrintFlow(ControllerBase):
             job_id=job_id,
             job_path=path,
             job_started=self.app.wall_clock(),
+            job_ended=0.0,
+            notice_at=None,
             job_resumed_from=exact.layer
             if exact is not None
             else None
@@ -101,6 +139,7 @@ class PrintFlow(ControllerBase):
             else resume_from_layer + 1,
             job_request="",
             rate_samples=(),
+            temp_samples=(),
             device=None,
             jog=None,
         )
@@ -111,16 +150,18 @@ class PrintFlow(ControllerBase):
             what = f"resume at layer {resume_from_layer + 1}"
         self.say(ConsoleLine("notice", f"{what}: {path}", self.app.wall_clock()))
         sink = self.app.pump.sink(job_id)
+        ended = self._job_ended = threading.Event()
 
         def work() -> Any:
-            job = self.backend.make_job(path, sink, resume_from_layer, exact is not None)
-            with self._job_lock:
-                self._job = job
             try:
+                job = self.backend.make_job(path, sink, resume_from_layer, exact is not None)
+                with self._job_lock:
+                    self._job = job
                 return job.run()
             finally:
                 with self._job_lock:
                     self._job = None
+                ended.set()
 
         def done(result: Any) -> None:
             self.finished(job_id, None)
@@ -133,10 +174,13 @@ class PrintFlow(ControllerBase):
         self.background("job", work, done, fail)
 
     def finished(self, job_id: int, error: BaseException | None) -> None:
-        """The runner returned (or raised); its last events may still be in the pump."""
+        """The runner returned (or raised); its last events may still be in the pump. Once per
+        job: the history record (with the resume point saved), then a look at the link, or
+        (quitting) the exit."""
         self.app.drain_events()
-        if job_id != self.state.job_id:
+        if job_id != self.state.job_id or self._finished_id == job_id:
             return
+        self._finished_id = job_id
         state = self.state
         if error is not None:
             self.app.notify(
@@ -144,12 +188,86 @@ class PrintFlow(ControllerBase):
             )
         elif state.job.state is JobState.DONE:
             self.app.notify("print finished", title="print")
-        if state.job.state.finished and state.job_path:
-            record = job_record(state, self.app.wall_clock())
-            self.update(history=(record, *state.history))
-            history = self.app.job_history
-            self.background("history", lambda: history.append(record), lambda _: None)
+        if state.job_path and (state.job.state.finished or self._quitting):
+            self._record(job_record(state, self.app.wall_clock()))
+        if self._quitting:
+            self.app.exit(0)
+            return
         self.probe_connection(after_cancel=state.job.state is JobState.CANCELLED)
+
+    def _record(self, record: JobRecord) -> None:
+        """Into the history: at once on the screen; the resume point (read from its file) and
+        the line in the history file from a worker, or here when quitting (the app exits)."""
+        backend, history = self.backend, self.app.job_history
+
+        def work() -> JobRecord:
+            full = record
+            if record.status != "done":
+                resume = _quiet(lambda: backend.find_resume(record.file))
+                if resume is not None and not resume.problem:
+                    at = f"line {resume.last_line} " if resume.exact else ""
+                    full = replace(record, resume_at=f"{at}(layer {resume.layer})".strip())
+            history.append(full)
+            return full
+
+        def done(full: JobRecord) -> None:
+            self.update(history=tuple(full if r is record else r for r in self.state.history))
+
+        self.update(history=(record, *self.state.history))
+        if self._quitting:
+            done(work())
+        else:
+            self.background("history", work, done, lambda _: None)
+
+    # -------------------------------------------------------------- quitting
+    @property
+    def quitting(self) -> str:
+        return self._quitting
+
+    def stop_and_quit(self, reason: str = "quit") -> None:
+        """Quit safely: a running job is stopped like a cancel (``reason`` recorded: "quit",
+        "SIGTERM" ...) and waited for; then its record, then the exit (the link is closed
+        after that, on unmount). Asked twice: an emergency stop, then the exit."""
+        with self._job_lock:
+            job = self._job
+        if self._quitting:
+            self.emergency_stop()
+            return
+        if job is None:
+            self.app.exit(0)
+            return
+        self._quitting = reason
+        job_id, ended = self.state.job_id, self._job_ended
+        self.update(job_request="cancel")
+        self.say(
+            ConsoleLine("notice", f"{reason}: stopping the print first", self.app.wall_clock())
+        )
+        self.app.notify(
+            "stopping the machine before quitting (stop, park, heaters off); the app closes when "
+            "it is at rest",
+            title=reason,
+            timeout=SHUTDOWN_TIMEOUT_S + 5,
+        )
+
+        def work() -> bool:
+            return shutdown_job(job, ended, reason, SHUTDOWN_TIMEOUT_S)
+
+        def done(stopped: bool) -> None:
+            if not stopped:
+                self.say(
+                    ConsoleLine("error", "the job did not stop in time", self.app.wall_clock())
+                )
+            self.finished(job_id, None)
+
+        self.background("quit", work, done, lambda exc: self.finished(job_id, exc))
+
+    def stop_before_close(self) -> None:
+        """Blocking, on unmount: a job still running (the app left without the quit path) is
+        stopped before the link closes."""
+        with self._job_lock:
+            job = self._job
+        if job is not None:
+            _quiet(lambda: shutdown_job(job, self._job_ended, "quit", SHUTDOWN_TIMEOUT_S))
 
     def probe_connection(self, after_cancel: bool = False) -> None:
         """After a job: is the link alive? (A job may have re-opened it, or lost it.) After a

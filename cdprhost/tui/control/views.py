@@ -13,6 +13,12 @@ import numpy as np
 Vec3 = tuple[float, float, float]
 
 
+def unsigned_zero(value: float, digits: int) -> float:
+    """``value`` rounded to ``digits``, a rounded -0 as 0 (so it prints "0.00", not "-0.00")."""
+    rounded = round(float(value), digits)
+    return 0.0 if rounded == 0 else rounded
+
+
 @dataclass(frozen=True)
 class PortChoice:
     """A port the user can pick: ``port`` is what ``connect`` receives; ``simulated`` marks a
@@ -120,6 +126,7 @@ class JobRecord:
     layers: int = 0
     reason: str = ""
     resumed_from_layer: int | None = None  # 1-based
+    resume_at: str = ""  # the resume point saved when it stopped: "line 1165 (layer 5)"
 
     @property
     def duration_s(self) -> float:
@@ -140,6 +147,7 @@ class DeviceStatusView:
     motors_on: bool = False
     homed: bool = False
     queue_free: int | None = None
+    fault: str = ""  # the device's latched fault, explained ("" when none)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from textual.screen import Screen
 from textual.widgets import Footer
 
 from cdprhost.tui.state import UiState, shown_job_state
-from cdprhost.tui.tabs import TABS
+from cdprhost.tui.tabs import TABS, screen_key
 from cdprhost.tui.widgets.nav_bar import NavBar
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -31,7 +31,7 @@ class AppScreen(Screen[None]):
     def compose(self) -> ComposeResult:
         yield NavBar(id="nav")
         yield from self.compose_body()
-        yield Footer()
+        yield Footer(compact=True)
 
     def compose_body(self) -> ComposeResult:
         yield from ()
@@ -73,6 +73,18 @@ class AppScreen(Screen[None]):
             b.action.split("(", 1)[0] for b in self.BINDINGS if isinstance(b, Binding)
         )
         return tuple(self.check_action(name, ()) for name in names)
+
+    def why_not(self, action: str) -> str:
+        """Why ``action`` cannot act now (said when its key is pressed, shown by the help);
+        screens name their own reasons, this is what they share."""
+        state = self.app.state
+        if state.job_active:
+            return "a print is running"
+        if not state.connected:
+            return f"not connected: connect on {screen_key('connection')}"
+        if state.busy:
+            return f"busy: {state.busy}"
+        return "not possible in this state"
 
     def render_state(self, state: UiState) -> None:
         """Draw ``state``; called in the UI thread on every change while this screen shows."""

@@ -7,36 +7,76 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
-from textual.widgets import Button, Label, Static
+from textual.widgets import Button, Static
 
 from cdprhost.job.state import Failure
+from cdprhost.tui.control.views import ResumeView
 from cdprhost.tui.keys import key_for
 
 
-class ConfirmScreen(ModalScreen[bool]):
-    """Ask before doing something that moves or stops the machine."""
+class ConfirmScreen(ModalScreen[bool | str]):
+    """Ask before doing something that moves or stops the machine: yes (True), no (False),
+    or, when offered, one other choice (``other``: its button label; dismisses with "other")."""
 
-    BINDINGS = [Binding("y", "answer(True)", "Yes"), Binding("n,escape", "answer(False)", "No")]
+    BINDINGS = [
+        Binding("y", "answer(True)", "Yes"),
+        Binding("l", "other", "Other", show=False),
+        Binding("n,escape", "answer(False)", "No"),
+    ]
 
-    def __init__(self, question: str):
+    def __init__(self, question: str | Text, other: str = "", yes: str = "Yes"):
         super().__init__(classes="dialog-screen")
-        self.question = question
+        self.question, self.other, self.yes = question, other, yes
 
     def compose(self) -> ComposeResult:
         app = self.app
         with Vertical(classes="dialog"):
-            yield Label(self.question, classes="dialog-text")
+            yield Static(self.question, classes="dialog-text", id="question")
             with Horizontal(classes="dialog-buttons"):
                 yes = key_for(app, self, "answer(True)")
                 no = key_for(app, self, "answer(False)")
-                yield Button(f"Yes ({yes})", variant="primary", id="yes", compact=True)
+                yield Button(f"{self.yes} ({yes})", variant="primary", id="yes", compact=True)
+                if self.other:
+                    key = key_for(app, self, "other")
+                    yield Button(
+                        f"{self.other} ({key})", variant="warning", id="other", compact=True
+                    )
                 yield Button(f"No ({no})", id="no", compact=True)
 
     def on_button_pressed(self, event: Button.Pressed) -> None:
-        self.dismiss(event.button.id == "yes")
+        self.dismiss("other" if event.button.id == "other" else event.button.id == "yes")
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        return bool(self.other) if action == "other" else True
 
     def action_answer(self, answer: bool) -> None:
         self.dismiss(answer)
+
+    def action_other(self) -> None:
+        self.dismiss("other")
+
+
+def start_text(path: str, fault: str, resume: ResumeView | None) -> Text:
+    """The start question: the device's fault explained (starting clears it: the operator's
+    decision) and a resume point saved for this file (pure)."""
+    out = Text(f"Start printing {path} from the beginning?")
+    if fault:
+        out.append("\n\nThe device reports a fault: ", style="bold red")
+        out.append(fault, style="red")
+        out.append(
+            "\nStarting clears it. Check the machine first (the nozzle may rest on a part).",
+            style="red",
+        )
+    if resume is not None and not resume.problem:
+        where = (
+            f"line {resume.last_line} (layer {resume.layer})"
+            if resume.exact
+            else (f"layer {resume.layer}")
+        )
+        out.append("\n\nA resume point is saved for this file: ", style="bold yellow")
+        out.append(where + (f" ({resume.reason})" if resume.reason else ""))
+        out.append("\nResume continues there; a new start replaces it.", style="dim")
+    return out
 
 
 def failure_text(failure: Failure | None, reason: str, line_text: str, path: str) -> Text:

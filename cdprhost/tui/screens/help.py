@@ -26,7 +26,7 @@ def keys_table(title: str, rows: list[KeyRow] | tuple[KeyRow, ...]) -> Table:
         if row.tooltip and row.tooltip != row.description:
             does.append(f"  {row.tooltip}", style="dim")
         if not row.enabled:
-            does.append("  (not now)", style="dim italic")
+            does.append(f"  (not now: {row.why or 'not possible in this state'})", style="italic")
         table.add_row(Text(row.keys, style="bold" if row.enabled else "dim"), does)
     return table
 

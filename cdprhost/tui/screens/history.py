@@ -29,7 +29,9 @@ def history_row(r: JobRecord) -> tuple[str | Text, ...]:
         Text(r.status, style=STATUS_STYLE.get(r.status, "")),
         layers,
         hms(r.duration_s),
-        r.reason,
+        " · ".join(
+            x for x in (r.reason, f"resume point {r.resume_at}" if r.resume_at else "") if x
+        ),
     )
 
 

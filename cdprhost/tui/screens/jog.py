@@ -14,7 +14,7 @@ from textual.widgets import Input, Label
 from cdprhost.tui.control.jog import STEPS_MM, static_tensions
 from cdprhost.tui.keys import key_for
 from cdprhost.tui.screens.base import AppScreen
-from cdprhost.tui.state import UiState, live_position
+from cdprhost.tui.state import UiState, live_position, shown_temperatures
 from cdprhost.tui.widgets.position_panel import PositionPanel
 from cdprhost.tui.widgets.show import show_text
 from cdprhost.tui.widgets.temperature_graph import TemperatureGraph
@@ -125,15 +125,18 @@ class JogScreen(AppScreen):
             busy = "not connected"
         show_text(self.query_one("#jog-busy", Label), Text(busy, style="yellow"), layout=True)
         target = state.jog.target if state.jog is not None else position
-        self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target))
-        dev = state.device
-        graph = self.query_one(TemperatureGraph)
-        if dev is None:
-            graph.show((None, None), (0.0, 0.0), ())
-        else:
-            graph.show(
-                (dev.hotend, dev.bed), (dev.hotend_target, dev.bed_target), state.device_temps
-            )
+        title = (
+            "tension at target (predicted)" if state.jog is not None else "tension here (predicted)"
+        )
+        self.query_one(TensionBars).show(static_tensions(self.app.backend.model, target), title)
+        self._render_temperatures(state)
+
+    def render_tick(self, state: UiState) -> None:
+        self._render_temperatures(state)
+
+    def _render_temperatures(self, state: UiState) -> None:
+        t = shown_temperatures(state, self.app.clock())
+        self.query_one(TemperatureGraph).show(t.current, t.targets, t.history, t.stale_s)
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.action_heaters()
@@ -145,6 +148,12 @@ class JogScreen(AppScreen):
     def _can_move(self) -> bool:
         s = self.app.state
         return s.connected and not s.job_active and not s.busy
+
+    def why_not(self, action: str) -> str:
+        jog = self.app.state.jog
+        if action == "go" and self._can_move():
+            return "no target: an arrow key sets one" if jog is None else f"target {jog.reason}"
+        return super().why_not(action)
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         if action in ("go", "home", "motors_off", "heaters"):

@@ -12,6 +12,7 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import Label
 
 from cdprhost.job.state import JobState
+from cdprhost.tui.control.eta import EtaSmoother
 from cdprhost.tui.control.jog import static_tensions
 from cdprhost.tui.control.source import SourceLines
 from cdprhost.tui.keys import hint
@@ -19,13 +20,15 @@ from cdprhost.tui.screens.base import AppScreen
 from cdprhost.tui.screens.dialogs import FailureScreen, failure_text
 from cdprhost.tui.screens.file_picker import FilePickerScreen
 from cdprhost.tui.state import (
-    STALE_AFTER_S,
     UiState,
+    elapsed,
+    for_open_file,
     hms,
     job_eta,
     live_position,
     shown_job_state,
-    temperature_age,
+    shown_notice,
+    shown_temperatures,
 )
 from cdprhost.tui.tabs import screen_key
 from cdprhost.tui.widgets.layer_preview import LayerPreview, PreviewInput
@@ -82,6 +85,12 @@ def resume_line(state: UiState, resume_key: str) -> Text:
     """The saved resume point of the open file, and how to use it (pure)."""
     r = state.file.resume
     out = Text()
+    fault = state.device.fault if state.device is not None and not state.job_active else ""
+    if fault:
+        out.append(f"device fault: {fault}", style="bold red")
+        out.append(" (a start clears it: check the machine first)", style="red")
+        if r is not None:
+            out.append(" · ")
     if r is None or state.job_active:
         return out
     out.append("resume point ", style="bold yellow")
@@ -110,6 +119,15 @@ def link_line(state: UiState) -> Text:
     if state.busy:
         out.append(f" · {state.busy}", style="yellow")
     return out
+
+
+PRINT_ACTIONS = {
+    "start": "start_print",
+    "pause": "pause_print",
+    "resume": "resume_print",
+    "cancel": "cancel_print",
+    "resume_failed": "resume_failed",
+}
 
 
 class PrintScreen(AppScreen):
@@ -147,6 +165,8 @@ class PrintScreen(AppScreen):
         self._jump: int | None = None
         self._layer: int | None = None  # browsed layer (None: follow the print)
         self._source_path = ""
+        self._eta = EtaSmoother()
+        self._eta_job = 0
 
     def compose_body(self) -> ComposeResult:
         backend = self.app.backend
@@ -177,6 +197,7 @@ class PrintScreen(AppScreen):
 
     # ------------------------------------------------------------- render
     def render_state(self, state: UiState) -> None:
+        state = for_open_file(state)
         job = state.job
         app = self.app
         if state.file.path != self._source_path:  # a new file: its text, its first layer
@@ -185,14 +206,23 @@ class PrintScreen(AppScreen):
             if state.file.path:
                 self._load_source(state.file.path)
         line_text = self.source.line(job.line) if self.source is not None and job.line else ""
-        elapsed = app.wall_clock() - state.job_started if state.job_started else None
-        self.query_one(ProgressPanel).show(job, line_text, shown_job_state(state), elapsed)
+        self.query_one(ProgressPanel).show(
+            job,
+            line_text,
+            shown_job_state(state),
+            elapsed(state, app.wall_clock()),
+            shown_notice(state, app.clock()),
+        )
         position, sliders, tensions = live_position(state)
+        title = "tension (planned)"
         if tensions is None:
-            tensions = static_tensions(app.backend.model, position)
+            tensions, title = (
+                static_tensions(app.backend.model, position),
+                "tension here (predicted)",
+            )
         steps = job.steps if state.job_active or state.device is None else state.device.steps
         self.query_one(PositionPanel).show(position, sliders, steps)
-        self.query_one(TensionBars).show(tensions)
+        self.query_one(TensionBars).show(tensions, title)
         show_text(self.query_one("#link-line", Label), link_line(state))
         name = Text(state.file.path or "none", style="bold" if state.file.path else "dim")
         name.append(f"   {hint(app, self, 'open')}", style="dim")
@@ -218,36 +248,29 @@ class PrintScreen(AppScreen):
 
     def render_tick(self, state: UiState) -> None:
         """What ages: temperatures (stale marking), elapsed and time left, the preview."""
+        state = for_open_file(state)
         self._render_times(state)
         self._render_preview(state)
 
     def _render_times(self, state: UiState) -> None:
         app = self.app
-        self._render_temperatures(state, temperature_age(state, app.clock()))
+        self._render_temperatures(state)
         eta = job_eta(state, app.backend.machine_rate())
         wall = app.wall_clock()
-        elapsed = wall - state.job_started if state.job_started else None
-        self.query_one(ProgressPanel).show_times(state.job, elapsed, eta, wall)
+        panel = self.query_one(ProgressPanel)
+        left = None
+        if eta is not None and state.job.state in (JobState.HEATING, JobState.PRINTING):
+            if self._eta_job != state.job_id:
+                self._eta_job = state.job_id
+                self._eta.reset()
+            left = self._eta.update(app.clock(), eta.wall_s)
+        panel.show_times(state.job, elapsed(state, wall), eta, wall, None, left)
+        if state.notice_at is not None:  # a notice goes after a while
+            panel.show_notice(state.job, shown_job_state(state), shown_notice(state, app.clock()))
 
-    def _render_temperatures(self, state: UiState, age: float | None) -> None:
-        job = state.job
-        graph = self.query_one(TemperatureGraph)
-        stale = round(age) if age is not None and age > STALE_AFTER_S else None
-        if job.state is not JobState.IDLE and job.temperatures is not None:
-            t = job.temperatures
-            graph.show(
-                (t.hotend, t.bed),
-                (t.hotend_target, t.bed_target),
-                [(h, b) for _, h, b in job.temperature_history],
-                stale if state.job_active else None,
-            )
-        elif state.device is not None:
-            d = state.device
-            graph.show(
-                (d.hotend, d.bed), (d.hotend_target, d.bed_target), state.device_temps, stale
-            )
-        else:
-            graph.show((None, None), (0.0, 0.0), ())
+    def _render_temperatures(self, state: UiState) -> None:
+        t = shown_temperatures(state, self.app.clock())
+        self.query_one(TemperatureGraph).show(t.current, t.targets, t.history, t.stale_s)
 
     def _render_preview(self, state: UiState) -> None:
         pre = state.file.preflight
@@ -327,16 +350,19 @@ class PrintScreen(AppScreen):
         self.app.push_screen(FailureScreen(text, can_resume), chosen)
 
     # ------------------------------------------------------------ actions
+    def why_not(self, action: str) -> str:
+        state = self.app.state
+        if action in PRINT_ACTIONS:
+            return self.app.why_not_print(PRINT_ACTIONS[action])
+        if action in ("open", "center") and state.job_active:
+            return "a print is running: wait until it has ended"
+        if action == "center" and not state.file.path:
+            return "no file open"
+        return super().why_not(action)
+
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        mapping = {
-            "start": "start_print",
-            "pause": "pause_print",
-            "resume": "resume_print",
-            "cancel": "cancel_print",
-            "resume_failed": "resume_failed",
-        }
-        if action in mapping:
-            return self.app.check_print_action(mapping[action])
+        if action in PRINT_ACTIONS:
+            return self.app.check_print_action(PRINT_ACTIONS[action])
         if action == "open":
             return None if self.app.state.job_active else True
         if action == "center":

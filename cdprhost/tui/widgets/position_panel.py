@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from rich.text import Text
 from textual.widgets import Static
 
+from cdprhost.tui.control.views import unsigned_zero
 from cdprhost.tui.widgets.show import show_text
 
 Vec3 = tuple[float, float, float]
@@ -18,6 +19,9 @@ def _row(label: str, values: Sequence[float] | None, fmt: str, unit: str) -> Tex
     row = Text(f"{label:<8}", style="bold")
     if values is None:
         return row.append("       --", style="dim")
+    if fmt.endswith("f"):  # no "-0.00"
+        digits = int(fmt.rsplit(".", 1)[1][:-1])
+        values = [unsigned_zero(v, digits) for v in values]
     row.append("".join(" " + format(v, fmt) for v in values))
     return row.append(unit, style="dim")
 

@@ -58,9 +58,12 @@ def clock_time(epoch: float) -> str:
     return time.strftime("%H:%M", time.localtime(epoch))
 
 
-def eta_text(eta: Eta | None, now_wall: float, state: JobState) -> Text:
+def eta_text(
+    eta: Eta | None, now_wall: float, state: JobState, left_s: float | None = None
+) -> Text:
     """ "left 0:12:34 wall-clock · done ≈ 14:05 · heating 0:00:40 · machine time left 0:11:54"
-    (the most useful first: a narrow panel cuts the end)."""
+    (the most useful first: a narrow panel cuts the end); ``left_s``: the time left as shown
+    (smoothed), else the estimate's."""
     out = Text()
     if state is JobState.DONE:
         return out.append("finished", style="green")
@@ -73,10 +76,11 @@ def eta_text(eta: Eta | None, now_wall: float, state: JobState) -> Text:
         return out
     if eta is None or not (state.active or state is JobState.PREFLIGHT):
         return out.append("left --:--:--", style="dim")
+    left = eta.wall_s if left_s is None else left_s
     out.append("left ", style="dim")
-    out.append(hms(eta.wall_s), style="bold")
+    out.append(hms(left), style="bold")
     out.append(" wall-clock", style="dim")
-    out.append(f" · done ≈ {clock_time(now_wall + eta.wall_s)}")
+    out.append(f" · done ≈ {clock_time(now_wall + left)}")
     if eta.heating_left_s >= 1:
         out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
     out.append(f" · machine time left {hms(eta.motion_left_s)}", style="dim")
@@ -88,10 +92,11 @@ def progress_lines(
     line_text: str,
     shown: JobState | None = None,
     elapsed_s: float | None = None,
+    notice: str = "",
 ) -> tuple[Text, Text, Text]:
     """The panel's text lines for a snapshot (pure, for tests too): state, layer and
     elapsed wall-clock time, current line. ``shown`` is the state to display (PAUSING while
-    a pause waits for a rest point)."""
+    a pause waits for a rest point); ``notice``: a recent notice of the job."""
     state = shown or snap.state
     head = Text()
     head.append(f" {state.value.upper()} ", style="reverse " + STATE_STYLE[state])
@@ -99,8 +104,8 @@ def progress_lines(
         head.append(f" {WAITING_FOR_REST[state]}", style="italic")
     elif snap.reason:
         head.append(f" {snap.reason}", style="italic")
-    elif snap.notices:
-        head.append(f" {snap.notices[-1]}", style="dim italic")
+    elif notice:
+        head.append(f" {notice}", style="dim italic")
     layers = f"{min(snap.layer + 1, snap.layers)}/{snap.layers}" if snap.layers else "-/-"
     stats = Text.assemble(
         ("layer ", "dim"),
@@ -131,13 +136,18 @@ class ProgressPanel(Vertical):
         line_text: str = "",
         shown: JobState | None = None,
         elapsed_s: float | None = None,
+        notice: str = "",
     ) -> None:
-        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s)
+        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s, notice)
         show_text(self.query_one("#job-state", Label), head)
         show_text(self.query_one("#job-stats", Label), stats)
         show_text(self.query_one("#job-line", Label), cur)
         bar = self.query_one("#job-bar", Label)
         show_text(bar, bar_text(progress_fraction(snap), bar.size.width or 40, snap.state))
+
+    def show_notice(self, snap: JobSnapshot, shown: JobState, notice: str) -> None:
+        head, _, _ = progress_lines(snap, "", shown, None, notice)
+        show_text(self.query_one("#job-state", Label), head)
 
     def show_times(
         self,
@@ -146,8 +156,9 @@ class ProgressPanel(Vertical):
         eta: Eta | None,
         now_wall: float,
         shown: JobState | None = None,
+        left_s: float | None = None,
     ) -> None:
         """What changes with the clock alone: elapsed and time left."""
         _, stats, _ = progress_lines(snap, "", shown, elapsed_s)
         show_text(self.query_one("#job-stats", Label), stats)
-        show_text(self.query_one("#job-eta", Label), eta_text(eta, now_wall, snap.state))
+        show_text(self.query_one("#job-eta", Label), eta_text(eta, now_wall, snap.state, left_s))

@@ -17,15 +17,17 @@ class TensionBars(Widget):
         super().__init__(id=id, classes=classes)
         self.t_min, self.t_max = t_min, t_max
         self._tensions: tuple[float, float, float] | None = None
+        self._title = "tension"
 
-    def show(self, tensions: tuple[float, float, float] | None) -> None:
+    def show(self, tensions: tuple[float, float, float] | None, title: str = "tension") -> None:
+        """``title`` says what the figures are (predicted where, measured...)."""
         shown = (
             None
             if tensions is None
             else (float(tensions[0]), float(tensions[1]), float(tensions[2]))
         )
-        if shown != self._tensions:
-            self._tensions = shown
+        if shown != self._tensions or title != self._title:
+            self._tensions, self._title = shown, title
             self.refresh()
 
     def levels(self) -> tuple[str, ...]:
@@ -35,7 +37,11 @@ class TensionBars(Widget):
 
     def render(self) -> Text:
         out = Text(no_wrap=True, overflow="crop")
-        out.append(f"tension  limits [{self.t_min:g}, {self.t_max:g}] N", style="bold")
+        limits = f" [{self.t_min:g}-{self.t_max:g} N]"
+        width = self.size.width or 80
+        out.append(self._title, style="bold")
+        if len(self._title) + len(limits) <= width:  # the limits when there is room
+            out.append(limits, style="dim")
         bar_w = max(self.size.width - 14, 4)
         for k in range(3):
             out.append("\n")

@@ -1,0 +1,132 @@
+"""What the print screen shows is true now (issue 23, the lower points): the elapsed time
+stops at the end, another file does not show the last job's figures, the console shows a
+command when it is sent, no "-0.00", a steady time estimate whose heating comes from the
+heaters' measured rate."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+
+from cdprhost.job.state import JobState, Progress, StateChanged, Temperatures
+from cdprhost.tui.control.eta import NOMINAL_C_PER_S, EtaSmoother, estimate
+from cdprhost.tui.control.live_console import status_lines
+from cdprhost.tui.control.views import DeviceStatusView
+from cdprhost.tui.state import UiState, elapsed, fold_job_events
+from cdprhost.tui.widgets.position_panel import position_rows
+
+from .conftest import make_app, pick_file, shown, wait_for
+from .fakes import FakeBackend
+
+
+def test_elapsed_stops_when_the_job_ends():
+    state = UiState(job_id=1, job_started=1000.0)
+    items = [(1, StateChanged(JobState.PREFLIGHT)), (1, StateChanged(JobState.PRINTING))]
+    state, _ = fold_job_events(state, items, now=5.0, wall=1010.0)
+    assert elapsed(state, 1020.0) == 20.0  # runs while printing
+    state, _ = fold_job_events(state, [(1, StateChanged(JobState.CANCELLING))], 6.0, 1030.0)
+    state, _ = fold_job_events(state, [(1, StateChanged(JobState.CANCELLED))], 7.0, 1040.0)
+    assert elapsed(state, 1040.0) == 40.0
+    assert elapsed(state, 5000.0) == 40.0  # and stays
+
+
+def test_no_negative_zero_in_positions():
+    view = DeviceStatusView(position=(0.0, -0.001, 110.0), steps=(0, 0, 0, 0))
+    line = status_lines(view, (0.0, 0.0, 110.0))[0]
+    assert "Y0.00" in line and "-0.00" not in line
+    assert "-0.00" not in position_rows((-0.0001, -0.004, 5.0), (-0.0001, 0.0, 0.0), None).plain
+
+
+def test_the_shown_time_left_is_steady():
+    """The estimate jumped 2:20 -> 5:49 -> 3:57 -> 2:19 within 40 s: what is shown counts down
+    with the clock and moves toward a new estimate slowly."""
+    smooth = EtaSmoother(tau_s=20.0)
+    shown = [smooth.update(t, est) for t, est in ((0, 140), (10, 349), (20, 237), (30, 139))]
+    steps = [abs(b - a) for a, b in zip(shown, shown[1:])]
+    assert max(steps) < 90  # the raw estimate moved by up to 209 s in 10 s
+    steady = [smooth.update(40 + t, 100 - t) for t in range(0, 65, 5)]  # a good estimate
+    assert steady[-1] == pytest.approx(100 - 60, abs=4)  # it follows it within a minute
+
+
+def test_heating_before_the_first_move_overlaps_and_uses_the_measured_rate():
+    waits = [(3, "bed", 60.0), (4, "hotend", 200.0)]
+    temps = {"hotend": 25.0, "bed": 25.0}
+    nominal = estimate(0.0, line=0, temperatures=temps, heat_waits=waits, rate=1.0)
+    together = estimate(
+        0.0, line=0, temperatures=temps, heat_waits=waits, rate=1.0, first_move_line=10
+    )
+    bed, hotend = 35.0 / NOMINAL_C_PER_S["bed"], 175.0 / NOMINAL_C_PER_S["hotend"]
+    assert nominal.heating_left_s == pytest.approx(bed + hotend)
+    assert together.heating_left_s == pytest.approx(max(bed, hotend))
+    measured = estimate(
+        0.0,
+        line=0,
+        temperatures=temps,
+        heat_waits=waits,
+        rate=1.0,
+        heating_now={"bed": 1.5, "hotend": 5.0},
+        first_move_line=10,
+    )
+    assert measured.heating_left_s == pytest.approx(35.0)  # 175 °C at 5 °C/s
+
+
+def test_the_heaters_rate_is_learnt_while_heating():
+    state = UiState(job_id=1)
+    state, _ = fold_job_events(
+        state, [(1, StateChanged(JobState.PREFLIGHT)), (1, StateChanged(JobState.HEATING))]
+    )
+    for t in range(6):
+        state, _ = fold_job_events(
+            state, [(1, Temperatures(25.0 + 4 * t, 25.0 + t, 200.0, 60.0))], now=float(t)
+        )
+    rates = dict(state.heat_rates)
+    assert rates["hotend"] == pytest.approx(4.0) and rates["bed"] == pytest.approx(1.0)
+
+
+async def test_another_file_does_not_show_the_last_jobs_figures(gcode_file, tmp_path):
+    other = tmp_path / "other.gcode"
+    other.write_text("G1 X1 Y1 E1 F600\nG1 X2 Y2 E2\n")
+    app = make_app(FakeBackend(segments=30, layers=3, start_line=100))
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        await pick_file(pilot, gcode_file)
+        await wait_for(pilot, lambda s: s.file.preflight is not None)
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.state is JobState.DONE)
+        text = await shown(pilot)
+        assert "DONE" in text and "layer 3/3" in text and "line 130" in text
+        await pick_file(pilot, other)
+        await wait_for(pilot, lambda s: s.file.path == str(other) and s.file.preflight)
+        text = await shown(pilot)
+        assert "DONE" not in text and "layer 3/3" not in text and "line 130" not in text
+        assert "IDLE" in text
+
+
+async def test_the_console_shows_a_command_when_it_is_sent(fake_backend):
+    release = threading.Event()
+    answer = fake_backend.console
+
+    def slow_console(line):  # G28 takes as long as homing takes
+        release.wait(10)
+        return answer(line)
+
+    fake_backend.console = slow_console
+    app = make_app(fake_backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        await pilot.press("f6", *"G28", "enter")
+        await wait_for(pilot, lambda s: s.busy, what="sent")
+        assert "> G28" in await shown(pilot)  # before the device has answered
+        release.set()
+        await wait_for(pilot, lambda s: not s.busy, what="answered")
+        text = await shown(pilot)
+        assert text.count("> G28") == 1 and "is not a console command" in text
+
+
+def test_progress_events_fold_in_order():
+    state = UiState(job_id=1)
+    items = [(1, StateChanged(JobState.PREFLIGHT)), (1, StateChanged(JobState.PRINTING))]
+    items += [(1, Progress(5, 20, 0, 3.0))]
+    state, problems = fold_job_events(state, items)
+    assert not problems and state.job.segments_done == 5
