@@ -93,6 +93,7 @@ class LinkCore:
         self.garbage_since_valid = 0
         self._last_retx = 0
         self._acked_clean = 0
+        self.pumping = False  # a pump slice runs (the keep-alive thread then leaves it be)
 
     # ------------------------------------------------------------------ locking
 
@@ -167,6 +168,14 @@ class LinkCore:
         ``max_wait``), handle them, check liveness. Raises the tracker's failure."""
         if self.dev.failure is not None:
             raise self.dev.failure
+        self.pumping = True
+        try:
+            self._pump(max_wait)
+        finally:
+            self.pumping = False
+            self.last_pump = self.t.now()
+
+    def _pump(self, max_wait: float) -> None:
         ep = self.ep
         now = self.t.now()
         self.last_pump = now

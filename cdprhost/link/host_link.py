@@ -200,6 +200,8 @@ class HostLink:
 
     def set_machine(self, setup: DeviceSetup) -> None:
         """The travel limits and heater gains to send at every connect, sent now as well."""
+        if setup == self._session.setup:
+            return
         self._session.setup = setup
         if self._dev.identity is not None:
             self._session.send_setup()
@@ -235,14 +237,34 @@ class HostLink:
         )
         self._ka_thread.start()
 
-    def keepalive_tick(self) -> None:
-        """One wake of the keep-alive thread: pump if nobody did for half the interval, and
-        until the frames in flight are acknowledged (a short wait: an acknowledgement left
-        unread until the next wake would look lost and be retransmitted). It never renews
-        the heater lease."""
+    def keepalive_step(self) -> None:
+        """One turn of the keep-alive thread. While the caller's thread pumps, it only naps;
+        otherwise it waits (without the lock) until the device sends something or a
+        quarter of the keep-alive interval passes, then pumps: a report, an error or an
+        acknowledgement is read and answered at once rather than left in the port's
+        buffer until it looks lost (the device retransmits a report nobody acknowledged).
+        When it sends a keep-alive it waits for its acknowledgement. It never renews the
+        heater lease."""
         core = self._core
         interval = core.keepalive_interval()
-        if self._dev.failure is not None or core.t.now() - core.last_pump < interval / 2:
+        thread = self._ka_stop  # None: no thread, a caller drives the turns (tests)
+        stop = thread or threading.Event()
+        if core.pumping or self._dev.failure is not None:  # nothing to keep alive once failed
+            stop.wait(SLICE_S if core.pumping else interval / 2)
+            return
+        wait_readable = getattr(self._t, "wait_readable", None)
+        readable = False
+        if wait_readable is not None:
+            readable = bool(wait_readable(interval / 2))
+        else:
+            stop.wait(interval / 2)
+        if self._dev.failure is not None or stop.is_set():
+            return
+        recent = core.t.now() - core.last_pump
+        if readable and thread is not None and (core.pumping or recent < SLICE_S):
+            stop.wait(SLICE_S)  # the caller's thread is pumping: it reads them
+            return
+        if not readable and recent < interval / 2:
             return
         try:
             with core.locked():
@@ -256,8 +278,8 @@ class HostLink:
     def _keepalive_loop(self) -> None:
         stop = self._ka_stop
         assert stop is not None
-        while not stop.wait(self._core.keepalive_interval() / 2):
-            self.keepalive_tick()
+        while not stop.is_set():
+            self.keepalive_step()
 
     # ------------------------------------------------------------------ commands
 
