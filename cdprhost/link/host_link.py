@@ -21,7 +21,6 @@ does, so a wedged job whose keep-alive still runs loses its heaters within the l
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -39,6 +38,7 @@ from cdprhost.link.events import (
     error_name,
 )
 from cdprhost.link.flow import Watermarks
+from cdprhost.link.keepalive import KeepAlive
 from cdprhost.link.segment_feed import SegmentFeed
 from cdprhost.link.session_setup import SessionSetup
 from cdprhost.link.tuning import HEATER_LEASE_S, MAX_WINDOW, SLICE_S, STATUS_TIMEOUTS
@@ -98,8 +98,7 @@ class HostLink:
         self._dev = self._core.dev
         self.lease_ms = max(lo, min(hi, round(heater_lease_s * 1000)))
         self._lease_sent = -1e9
-        self._ka_stop: threading.Event | None = None
-        self._ka_thread: threading.Thread | None = None
+        self._keepalive = KeepAlive(self._core, getattr(transport, "wait_readable", None))
 
     # ------------------------------------------------------------------ properties
 
@@ -229,57 +228,11 @@ class HostLink:
 
     def start_keepalive(self) -> None:
         """Pump from a background thread whenever nobody else has for a while (real ports)."""
-        if self._ka_thread is not None:
-            return
-        self._ka_stop = threading.Event()
-        self._ka_thread = threading.Thread(
-            target=self._keepalive_loop, name="link-keepalive", daemon=True
-        )
-        self._ka_thread.start()
+        self._keepalive.start()
 
     def keepalive_step(self) -> None:
-        """One turn of the keep-alive thread. While the caller's thread pumps, it only naps;
-        otherwise it waits (without the lock) until the device sends something or a
-        quarter of the keep-alive interval passes, then pumps: a report, an error or an
-        acknowledgement is read and answered at once rather than left in the port's
-        buffer until it looks lost (the device retransmits a report nobody acknowledged).
-        When it sends a keep-alive it waits for its acknowledgement. It never renews the
-        heater lease."""
-        core = self._core
-        interval = core.keepalive_interval()
-        thread = self._ka_stop  # None: no thread, a caller drives the turns (tests)
-        stop = thread or threading.Event()
-        if core.pumping or self._dev.failure is not None:  # nothing to keep alive once failed
-            stop.wait(SLICE_S if core.pumping else interval / 2)
-            return
-        wait_readable = getattr(self._t, "wait_readable", None)
-        readable = False
-        if wait_readable is not None:
-            readable = bool(wait_readable(interval / 2))
-        else:
-            stop.wait(interval / 2)
-        if self._dev.failure is not None or stop.is_set():
-            return
-        recent = core.t.now() - core.last_pump
-        if readable and thread is not None and (core.pumping or recent < SLICE_S):
-            stop.wait(SLICE_S)  # the caller's thread is pumping: it reads them
-            return
-        if not readable and recent < interval / 2:
-            return
-        try:
-            with core.locked():
-                core.pump(0.0)
-                end = core.t.now() + min(interval / 2, 4 * core.ep.sender.rto.rto)
-                while not core.ep.sender.idle() and core.t.now() < end:
-                    core.pump(min(SLICE_S, max(0.0, end - core.t.now())))
-        except (LinkError, OSError):
-            pass
-
-    def _keepalive_loop(self) -> None:
-        stop = self._ka_stop
-        assert stop is not None
-        while not stop.is_set():
-            self.keepalive_step()
+        """One turn of the keep-alive thread (see :mod:`cdprhost.link.keepalive`)."""
+        self._keepalive.step()
 
     # ------------------------------------------------------------------ commands
 
@@ -506,11 +459,7 @@ class HostLink:
             self._core.items_sent = max(self._core.items_sent, dev.progress.items_done)
 
     def close(self) -> None:
-        if self._ka_stop is not None:
-            self._ka_stop.set()
-        if self._ka_thread is not None:
-            self._ka_thread.join(timeout=2.0)
-            self._ka_thread = None
+        self._keepalive.stop()
         with self._core.locked():
             self._t.close()
 
