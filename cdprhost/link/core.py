@@ -25,6 +25,7 @@ from cdprhost.link.tuning import (
     MAX_WINDOW,
     MIN_PAYLOAD,
     MIN_WINDOW,
+    RTO_FAST,
     RTO_FLOOR_S,
     RTO_MAX_BACKOFF,
     SLICE_S,
@@ -77,6 +78,7 @@ class LinkCore:
             rto_max_backoff=RTO_MAX_BACKOFF,
             rto_ceiling=min(0.25, self.timeout_s / 4),
             byte_time=10.0 / baud if baud else 0.0,
+            rto_fast=RTO_FAST,
         )
         self.ctx = SegmentContext()
         self.max_payload: int = max_payload
