@@ -3,7 +3,7 @@ safety behaviour of protocol 2.1 (PROTOCOL.md 3.3, 3.4, 4, 8). Each behaviour is
 over both devices (the ``kind`` fixture); the two must agree on every outcome.
 
 AVR cases of behaviour the firmware does not have yet are marked xfail (not strict) with
-what is missing (``AVR_PENDING``); they pass as soon as the firmware does.
+what is missing (``AVR_PENDING``). The others need the 2.1 firmware of branch i20fw.
 """
 
 from __future__ import annotations
@@ -44,12 +44,10 @@ pytestmark = pytest.mark.timeout(300)
 
 # what the AVR firmware of this branch lacks (i20fw lands it): test name -> reason
 AVR_PENDING = {
-    "test_host_death_after_an_underrun_turns_the_heaters_off": "watchdog in every state",
-    "test_thermal_runaway_latches_until_a_reset": "thermal latch and CLEAR_REFUSED",
-    "test_motion_leaving_the_travel_is_refused": "SET_LIMITS soft limits",
-    "test_shortest_segments_run_exactly_or_are_refused": "GET_CAPS/CAPS",
-    "test_a_wedged_host_loses_its_heaters_with_its_lease": "HEATER_LEASE",
-    "test_status_carries_health_in_a_2_1_session": "HEALTH after STATUS",
+    "test_shortest_segments_run_exactly_or_are_refused": (
+        "a segment refused on receipt (BAD_VALUE under min_segment_ticks) does not keep its "
+        "segment number (PROTOCOL.md 4, Numbering)"
+    ),
     "test_autotune_reports_gains": "AUTOTUNE (the AVR answers AUTOTUNE_FAILED)",
 }
 
@@ -146,8 +144,9 @@ def test_motion_leaving_the_travel_is_refused(device_factory, host_factory, pend
 
 
 def test_shortest_segments_run_exactly_or_are_refused(device_factory, host_factory, pending):
-    """A segment under the advertised minimum is refused (BAD_VALUE naming its ticks); a run
-    of one-step segments of exactly the minimum executes exactly (positions and time)."""
+    """A segment under the advertised minimum is refused (BAD_VALUE naming its ticks);
+    one-step segments of exactly the minimum between ordinary ones execute exactly
+    (positions and time)."""
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello()
@@ -158,19 +157,26 @@ def test_shortest_segments_run_exactly_or_are_refused(device_factory, host_facto
         assert (err.axis, err.value) == (0x80, shortest - 1)
         h.send(ClearFault())
         h.wait_for(lambda: h.of(Event, code=EventCode.FAULT_CLEARED), what="FAULT_CLEARED")
-    n = 80  # one step each at constant speed, then a segment at rest ends the block
+    # shortest segments (one step each) between ordinary ones, then a segment at rest
     ticks = max(shortest, 1)
+    n = 20
+    seg_ticks = np.where(np.arange(n) % 2 == 0, 2000, ticks)
     deltas = np.zeros((n + 1, 4), dtype=np.int64)
-    deltas[:n, 0] = 1
+    deltas[:n, 0] = np.where(seg_ticks == ticks, 1, 20)
     ramps = np.full(n + 1, -1)
     ramps[-1] = 255
-    batch = SegmentBatch(np.full(n + 1, ticks), deltas, ramps)
+    batch = SegmentBatch(np.append(seg_ticks, 2000), deltas, ramps)
     first = 1 if shortest == 1 else 2  # a refused segment keeps its number
-    h.send(*[Segment(ticks, tuple(int(v) for v in d), int(r)) for d, r in zip(deltas, ramps)])
+    h.send(
+        *[
+            Segment(int(t), tuple(int(v) for v in d), int(r))
+            for t, d, r in zip(batch.ticks, deltas, ramps)
+        ]
+    )
     h.send(Flush())
     last = first + n
     h.wait_for(lambda: h.flows and h.flows[-1].segments_done == last, timeout=30, what="the run")
-    assert not h.of(Error, code=ErrorCode.STEP_RATE)
+    assert not h.of(Error, code=ErrorCode.STEP_RATE) and not h.of(Error, code=ErrorCode.UNDERRUN)
     assert dev.stop() == 0
     rows = [row for row in _record(dev) if "error" not in row]
     assert rows == expected_record(batch, first_seq=first)
