@@ -18,6 +18,7 @@ from cdprhost import __version__
 # command -> (module in cdprhost.cli.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "api-key": ("api_key", "print (or replace) the API key the print server requires"),
+    "autotune": ("autotune", "PID autotune of a heater on the device (M303); gains to the profile"),
     "calibrate": (
         "calibrate",
         "kinematic calibration: plan poses, identify parameters, guided wizard",

@@ -25,6 +25,7 @@ from cdprhost.link.tuning import (
     MAX_WINDOW,
     MIN_PAYLOAD,
     MIN_WINDOW,
+    RTO_FAST,
     RTO_FLOOR_S,
     RTO_MAX_BACKOFF,
     SLICE_S,
@@ -77,6 +78,7 @@ class LinkCore:
             rto_max_backoff=RTO_MAX_BACKOFF,
             rto_ceiling=min(0.25, self.timeout_s / 4),
             byte_time=10.0 / baud if baud else 0.0,
+            rto_fast=RTO_FAST,
         )
         self.ctx = SegmentContext()
         self.max_payload: int = max_payload
@@ -93,6 +95,7 @@ class LinkCore:
         self.garbage_since_valid = 0
         self._last_retx = 0
         self._acked_clean = 0
+        self.pumping = False  # a pump slice runs (the keep-alive thread then leaves it be)
 
     # ------------------------------------------------------------------ locking
 
@@ -167,6 +170,14 @@ class LinkCore:
         ``max_wait``), handle them, check liveness. Raises the tracker's failure."""
         if self.dev.failure is not None:
             raise self.dev.failure
+        self.pumping = True
+        try:
+            self._pump(max_wait)
+        finally:
+            self.pumping = False
+            self.last_pump = self.t.now()
+
+    def _pump(self, max_wait: float) -> None:
         ep = self.ep
         now = self.t.now()
         self.last_pump = now

@@ -21,7 +21,6 @@ does, so a wedged job whose keep-alive still runs loses its heaters within the l
 from __future__ import annotations
 
 import logging
-import threading
 from collections.abc import Callable
 from typing import Any
 
@@ -39,6 +38,7 @@ from cdprhost.link.events import (
     error_name,
 )
 from cdprhost.link.flow import Watermarks
+from cdprhost.link.keepalive import KeepAlive
 from cdprhost.link.segment_feed import SegmentFeed
 from cdprhost.link.session_setup import SessionSetup
 from cdprhost.link.tuning import HEATER_LEASE_S, MAX_WINDOW, SLICE_S, STATUS_TIMEOUTS
@@ -98,8 +98,7 @@ class HostLink:
         self._dev = self._core.dev
         self.lease_ms = max(lo, min(hi, round(heater_lease_s * 1000)))
         self._lease_sent = -1e9
-        self._ka_stop: threading.Event | None = None
-        self._ka_thread: threading.Thread | None = None
+        self._keepalive = KeepAlive(self._core, getattr(transport, "wait_readable", None))
 
     # ------------------------------------------------------------------ properties
 
@@ -200,6 +199,8 @@ class HostLink:
 
     def set_machine(self, setup: DeviceSetup) -> None:
         """The travel limits and heater gains to send at every connect, sent now as well."""
+        if setup == self._session.setup:
+            return
         self._session.setup = setup
         if self._dev.identity is not None:
             self._session.send_setup()
@@ -227,37 +228,11 @@ class HostLink:
 
     def start_keepalive(self) -> None:
         """Pump from a background thread whenever nobody else has for a while (real ports)."""
-        if self._ka_thread is not None:
-            return
-        self._ka_stop = threading.Event()
-        self._ka_thread = threading.Thread(
-            target=self._keepalive_loop, name="link-keepalive", daemon=True
-        )
-        self._ka_thread.start()
+        self._keepalive.start()
 
-    def keepalive_tick(self) -> None:
-        """One wake of the keep-alive thread: pump if nobody did for half the interval, and
-        until the frames in flight are acknowledged (a short wait: an acknowledgement left
-        unread until the next wake would look lost and be retransmitted). It never renews
-        the heater lease."""
-        core = self._core
-        interval = core.keepalive_interval()
-        if self._dev.failure is not None or core.t.now() - core.last_pump < interval / 2:
-            return
-        try:
-            with core.locked():
-                core.pump(0.0)
-                end = core.t.now() + min(interval / 2, 4 * core.ep.sender.rto.rto)
-                while not core.ep.sender.idle() and core.t.now() < end:
-                    core.pump(min(SLICE_S, max(0.0, end - core.t.now())))
-        except (LinkError, OSError):
-            pass
-
-    def _keepalive_loop(self) -> None:
-        stop = self._ka_stop
-        assert stop is not None
-        while not stop.wait(self._core.keepalive_interval() / 2):
-            self.keepalive_tick()
+    def keepalive_step(self) -> None:
+        """One turn of the keep-alive thread (see :mod:`cdprhost.link.keepalive`)."""
+        self._keepalive.step()
 
     # ------------------------------------------------------------------ commands
 
@@ -484,11 +459,7 @@ class HostLink:
             self._core.items_sent = max(self._core.items_sent, dev.progress.items_done)
 
     def close(self) -> None:
-        if self._ka_stop is not None:
-            self._ka_stop.set()
-        if self._ka_thread is not None:
-            self._ka_thread.join(timeout=2.0)
-            self._ka_thread = None
+        self._keepalive.stop()
         with self._core.locked():
             self._t.close()
 

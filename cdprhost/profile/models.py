@@ -293,3 +293,11 @@ class MachineProfile(_Strict):
         data["geometry"] = geometry.model_dump()
         data.update(updates)
         return MachineProfile.model_validate(data)
+
+
+def with_pid(
+    profile: MachineProfile, heater: Literal["hotend", "bed"], gains: PidGains
+) -> MachineProfile:
+    """A copy with ``heater``'s PID gains (what ``M303`` found)."""
+    heaters = profile.heaters.model_copy(update={f"{heater}_pid": gains})
+    return profile.model_copy(update={"heaters": heaters})

@@ -90,6 +90,7 @@ def test_bad_fields_are_answered_with_an_error(device_factory, host_factory, pay
     assert err.code == code
     st = h.status()
     assert st.flags & Flag.FAULT and st.last_error == code
+    assert st.motion_ticks == 0  # never executed
     h.send(ClearFault())
     h.wait_for(lambda: h.of(Event, code=EventCode.FAULT_CLEARED), what="FAULT_CLEARED")
 
