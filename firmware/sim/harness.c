@@ -3,6 +3,7 @@
  *   cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE]
  *            [--time-limit SIM_SECONDS] [--exit-on-hangup]
  *            [--heater-fail-after SIM_SECONDS] [--boot-physical STEPS]
+ *            [--travel-steps STEPS]
  *
  * The first line on stdout is the pty path. Single-threaded: a cycle timer polls
  * the pty every POLL_US of simulated time, feeds received bytes to UART0 only
@@ -147,23 +148,54 @@ static void xoff_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     xon = 0;
 }
 
-/* The switch sits at physical 0 and reads high (pressed) from there on. It is
- * an external driver of the pin: simavr's "external pull" for that bit, so
- * that the firmware's pull-up and every later write to the same PORT register
- * do not override it (simavr re-asserts a pulled-up input high on each write). */
-static void set_endstop(int k)
+/* Switches, as external drivers of their pins (simavr's "external pull" for that bit, so
+ * that the firmware's pull-up and every later write to the same PORT register do not
+ * override them; simavr re-asserts a pulled-up input high on each write). A module's
+ * homing switch is pressed only at its flag, physical 0 .. HOME_SWITCH_BAND - 1 (the
+ * carriage approaches it from below while homing and prints above it); its limit
+ * switch (RAMPS MAX socket) is pressed past the end of travel, physical > travel_steps
+ * (the Python model's overtravel_steps: 16400 by default). */
+#define HOME_SWITCH_BAND 100
+static int64_t travel_steps = 16400;
+static int limit_level[3] = {-1, -1, -1};
+static avr_irq_t *limit_irq[3];
+
+static void drive_pin(const struct pin *pin, avr_irq_t *irq, int level)
 {
-    int level = (phys[k] + boot_physical) >= 0;
-    if (level == endstop_level[k])
-        return;
-    endstop_level[k] = level;
     static uint8_t mask[256], value[256];
-    uint8_t port = (uint8_t)ENDSTOP_PINS[k].port, bit = (uint8_t)(1u << ENDSTOP_PINS[k].bit);
+    uint8_t port = (uint8_t)pin->port, bit = (uint8_t)(1u << pin->bit);
     mask[port] |= bit;
     value[port] = (uint8_t)(level ? value[port] | bit : value[port] & ~bit);
     avr_ioport_external_t ext = {.name = (char)port, .mask = mask[port], .value = value[port]};
     avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(port), &ext);
-    avr_raise_irq(endstop_irq[k], (uint32_t)level);
+    avr_raise_irq(irq, (uint32_t)level);
+}
+
+/* the switch levels driven again (poll): a write to the port's pull-up after the last
+ * change would otherwise leave a released switch reading high */
+static void redrive_switches(void)
+{
+    for (int k = 0; k < 3; k++) {
+        if (endstop_level[k] >= 0)
+            drive_pin(&ENDSTOP_PINS[k], endstop_irq[k], endstop_level[k]);
+        if (limit_level[k] >= 0)
+            drive_pin(&LIMIT_PINS[k], limit_irq[k], limit_level[k]);
+    }
+}
+
+static void set_endstop(int k)
+{
+    int64_t at = phys[k] + boot_physical;
+    int level = at >= 0 && at < HOME_SWITCH_BAND;
+    if (level != endstop_level[k]) {
+        endstop_level[k] = level;
+        drive_pin(&ENDSTOP_PINS[k], endstop_irq[k], level);
+    }
+    level = at > travel_steps;
+    if (level != limit_level[k]) {
+        limit_level[k] = level;
+        drive_pin(&LIMIT_PINS[k], limit_irq[k], level);
+    }
 }
 
 /* Step timing against the firmware's schedule: phase k of a tick is due PHASE_BASE +
@@ -495,6 +527,7 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         avr->data[mailbox_addr + 46] = 1;
     }
     check_lost_interrupts();
+    redrive_switches();
     if (heater_level[0] || heater_level[1])
         note_heater_silence();
     update_thermal();
@@ -541,7 +574,7 @@ static void usage(void)
 {
     fprintf(stderr, "usage: cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE] "
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
-                    "[--boot-physical STEPS]\n");
+                    "[--boot-physical STEPS] [--travel-steps STEPS]\n");
     exit(2);
 }
 
@@ -556,6 +589,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--time-limit") && i + 1 < argc) time_limit = atof(argv[++i]);
         else if (!strcmp(a, "--heater-fail-after") && i + 1 < argc) heater_fail_after = atof(argv[++i]);
         else if (!strcmp(a, "--boot-physical") && i + 1 < argc) boot_physical = atoll(argv[++i]);
+        else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
         else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
         else if (a[0] == '-') usage();
         else elf = a;
@@ -604,8 +638,10 @@ int main(int argc, char **argv)
     avr_irq_t *compa = avr_get_interrupt_irq(avr, TIMER1_COMPA_VECTOR);
     if (compa)
         avr_irq_register_notify(compa + AVR_INT_IRQ_PENDING, compa_pending_cb, NULL);
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
         endstop_irq[k] = pin_irq(ENDSTOP_PINS[k].port, ENDSTOP_PINS[k].bit);
+        limit_irq[k] = pin_irq(LIMIT_PINS[k].port, LIMIT_PINS[k].bit);
+    }
     watch(MARK_EDGE.port, MARK_EDGE.bit, edge_cb, 0);
     watch(MARK_POS.port, MARK_POS.bit, pos_cb, 0);
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
@@ -653,6 +689,7 @@ int main(int argc, char **argv)
     int state = cpu_Running;
     int debug = getenv("CDPR_SIM_DEBUG") != NULL;
     int profile_isr = getenv("CDPR_SIM_PROFILE_ISR") != NULL;
+    int profile_all = getenv("CDPR_SIM_PROFILE_ALL") != NULL;
     avr_flashaddr_t prev_pc = 0;
     while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
         state = avr_run(avr);
@@ -662,6 +699,8 @@ int main(int argc, char **argv)
                         prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
             prev_pc = avr->pc;
         }
+        if (profile_all && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
+            pc_hist[avr->pc]++; /* every instruction: where the CPU's time goes */
         if (profile_isr) {
             /* cycles from the step timer's vector to its own RETI (the one executed
              * with the stack pointer it entered with; nested interrupts included) */
@@ -709,7 +748,16 @@ int main(int argc, char **argv)
     if (record)
         fclose(record);
     write_stats();
-    if (getenv("CDPR_SIM_PROFILE_ISR")) {
+    if (getenv("CDPR_SIM_PEEK")) { /* debugging: N uint16 at a data address, to a file */
+        unsigned addr = 0, n = 0;
+        sscanf(getenv("CDPR_SIM_PEEK"), "%x,%u", &addr, &n);
+        FILE *f = fopen("/tmp/cdpr-peek.txt", "w");
+        for (unsigned i = 0; f && i < n && addr + 2 * i + 1 < avr->ramend; i++)
+            fprintf(f, "%u ", avr->data[addr + 2 * i] | avr->data[addr + 2 * i + 1] << 8);
+        if (f)
+            fclose(f);
+    }
+    if (getenv("CDPR_SIM_PROFILE_ISR") || profile_all) {
         FILE *f = fopen("/tmp/cdpr-pc-hist.txt", "w");
         for (unsigned i = 0; f && i < 65536; i++)
             if (pc_hist[i])

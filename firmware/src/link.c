@@ -141,6 +141,8 @@ static void on_ack(uint8_t ack, uint32_t now)
     base_seq += n;
 }
 
+static uint8_t send_ack(uint32_t now);
+
 static void want_nak(uint32_t now)
 {
     if (last_nak_expected != expected || now - last_nak_at >= NAK_HOLDOFF)
@@ -153,13 +155,13 @@ void frame_rejected(uint8_t kind, uint8_t seq)
         want_nak(link_now);
 }
 
-void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
+uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
 {
     uint32_t now = link_now;
     proto_frame_seen();
     if (kind == KIND_URGENT) {
         proto_urgent(payload, len);
-        return;
+        return 0;
     }
     on_ack(ack, now);
     if (kind == KIND_NAK && n_out && base_seq == ack) {
@@ -171,25 +173,52 @@ void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *paylo
         }
     }
     if (kind != KIND_DATA)
-        return;
-    uint8_t d = (uint8_t)(seq - expected);
+        return 0;
+    uint8_t d = (uint8_t)(seq - expected), hold = 0;
     if (d == 0) {
-        if (proto_accept(payload, len))
+        /* checked (every field, room for its items): acknowledged at once, before it
+         * is executed, so the host's window moves on while the device works */
+        uint8_t verdict = proto_accept(payload, len);
+        if (verdict) {
             expected++;
-        else
+            hold = verdict == PROTO_PENDING;
+        } else {
             link_counters.rejected++;
+        }
         ack_due = 1;
+        send_ack(now);
     } else if (d > MAX_WINDOW) {
         link_counters.duplicates++;
         ack_due = 1;
     } else {
         want_nak(now);
     }
+    return hold;
+}
+
+/* The ACK (or NAK) with FLOW that is due, now if the UART has room. */
+static uint8_t send_ack(uint32_t now)
+{
+    uint8_t flow[FLOW_MAX];
+    if (!(nak_due || ack_due))
+        return 1;
+    if (uart_tx_free() < FRAME_SIZE(sizeof flow))
+        return 0;
+    uint8_t n = proto_flow(flow);
+    if (nak_due) {
+        frame_send(KIND_NAK, 0, expected, flow, n);
+        link_counters.naks_sent++;
+        last_nak_expected = expected;
+        last_nak_at = now;
+    } else {
+        frame_send(KIND_ACK, 0, expected, flow, n);
+    }
+    nak_due = ack_due = 0;
+    return 1;
 }
 
 void link_poll(uint32_t now)
 {
-    uint8_t flow[FLOW_MAX];
     if (urgent_len) {
         if (uart_tx_free() < FRAME_SIZE(urgent_len))
             return;
@@ -225,18 +254,5 @@ void link_poll(uint32_t now)
         n_out++;
         n_back--;
     }
-    if (nak_due || ack_due) {
-        if (uart_tx_free() < FRAME_SIZE(sizeof flow))
-            return;
-        uint8_t n = proto_flow(flow);
-        if (nak_due) {
-            frame_send(KIND_NAK, 0, expected, flow, n);
-            link_counters.naks_sent++;
-            last_nak_expected = expected;
-            last_nak_at = now;
-        } else {
-            frame_send(KIND_ACK, 0, expected, flow, n);
-        }
-        nak_due = ack_due = 0;
-    }
+    send_ack(now);
 }
