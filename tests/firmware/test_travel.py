@@ -17,9 +17,7 @@ import os
 
 import pytest
 
-from cdprhost.sim import avr_device
 from firmware_protocol.messages import (
-    Error,
     ErrorCode,
     Event,
     EventCode,
@@ -29,6 +27,7 @@ from firmware_protocol.messages import (
     SetLimits,
 )
 from tests.conformance.device import RawHost, start
+from tests.firmware.raw import errors
 
 pytestmark = [
     pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals"),
@@ -36,18 +35,6 @@ pytestmark = [
 ]
 
 TO_REST = 255
-
-
-@pytest.fixture(scope="module")
-def avr_built():
-    missing = avr_device.toolchain_missing()
-    if missing:
-        pytest.skip(missing)
-    avr_device.build()
-
-
-def _errors(h: RawHost, code: int) -> list[Error]:
-    return [m for m in h.reports if isinstance(m, Error) and m.code == code]
 
 
 def _homed(h: RawHost) -> None:
@@ -74,7 +61,7 @@ def test_soft_limit_refuses_a_segment_on_receipt(avr_built, tmp_path):
         h.send(Segment(ticks=20_000, deltas=(800, 0, 0, 0), ramp=TO_REST), Flush())
         h.wait_for(lambda: h.status().steps[0] == 800, timeout=30, what="the first move")
         h.send(Segment(ticks=20_000, deltas=(400, 0, 0, 0), ramp=TO_REST), Flush())
-        hit = h.wait_for(lambda: _errors(h, ErrorCode.ENDSTOP_HIT), what="ENDSTOP_HIT")[0]
+        hit = h.wait_for(lambda: errors(h, ErrorCode.ENDSTOP_HIT), what="ENDSTOP_HIT")[0]
         assert (hit.axis, hit.value) == (0, 1200)
         assert h.status().steps[0] == 800  # nothing of it moved
     finally:
@@ -92,7 +79,7 @@ def test_limit_switch_at_the_end_of_travel_stops_motion(avr_built, tmp_path):
         # 20000 steps at 5000 steps/s: through the travel (the homing switch is not
         # read as pressed on the way) into the limit switch at physical 16400
         h.send(Segment(ticks=400_000, deltas=(20_000, 0, 0, 0), ramp=TO_REST), Flush())
-        hit = h.wait_for(lambda: _errors(h, ErrorCode.ENDSTOP_HIT), timeout=60, what="hit")[0]
+        hit = h.wait_for(lambda: errors(h, ErrorCode.ENDSTOP_HIT), timeout=60, what="hit")[0]
         assert hit.axis == 0 and 16_401 <= hit.value <= 16_401 + 40, hit
         assert 16_401 <= h.status().steps[0] <= 16_401 + 40
     finally:
