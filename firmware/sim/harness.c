@@ -228,6 +228,18 @@ static void note_step_timing(uint64_t now)
         step_err_max = err;
 }
 
+/* CDPR_SIM_STEP_LOG=FILE: every rising step edge as "axis cycles", the cycles counted on
+ * the motion clock (cycles of motion since boot: the record's t times 16e6), so the
+ * benchmark can set each edge against the step's ideal time on its segment's profile. */
+static FILE *step_log;
+static uint64_t motion_now_cycles(uint64_t now);
+
+static void log_step(int k, uint64_t now)
+{
+    if (step_log)
+        fprintf(step_log, "%d %llu\n", k, (unsigned long long)motion_now_cycles(now));
+}
+
 static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
@@ -243,6 +255,7 @@ static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         last_rise[k] = now;
         rise_at[k] = now;
         note_step_timing(now);
+        log_step(k, now);
         phys[k] += dir_level[k] ? 1 : -1;
         steps_total++;
         if (k < 3)
@@ -271,6 +284,11 @@ static void dir_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 static uint64_t units_since(uint64_t since)
 {
     return (avr->cycle - since + UNIT_CYCLES / 2) / UNIT_CYCLES;
+}
+
+static uint64_t motion_now_cycles(uint64_t now)
+{
+    return motion_units * UNIT_CYCLES + (motion_level ? now - motion_since : 0);
 }
 
 static uint64_t motion_now(void)
@@ -553,12 +571,13 @@ static void write_stats(void)
     unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
     unsigned latency = mailbox_addr ? avr->data[mailbox_addr + 47] : 0;
     unsigned late = mailbox_addr ? (avr->data[mailbox_addr + 49] | avr->data[mailbox_addr + 50] << 8) : 0;
+    unsigned stack_free = mailbox_addr ? (avr->data[mailbox_addr + 51] | avr->data[mailbox_addr + 52] << 8) : 0;
     fprintf(f,
             "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"isr_profiled_count\":%llu}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -566,7 +585,8 @@ static void write_stats(void)
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, late, latency,
             loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
-            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0);
+            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
+            (unsigned long long)isr_count);
     fclose(f);
 }
 
@@ -659,6 +679,8 @@ int main(int argc, char **argv)
     for (int k = 0; k < 3; k++)
         set_endstop(k);
 
+    if (getenv("CDPR_SIM_STEP_LOG"))
+        step_log = fopen(getenv("CDPR_SIM_STEP_LOG"), "w");
     if (record_path) {
         record = fopen(record_path, "w");
         if (!record) { perror(record_path); return 2; }
@@ -747,6 +769,8 @@ int main(int argc, char **argv)
     }
     if (record)
         fclose(record);
+    if (step_log)
+        fclose(step_log);
     write_stats();
     if (getenv("CDPR_SIM_PEEK")) { /* debugging: N uint16 at a data address, to a file */
         unsigned addr = 0, n = 0;

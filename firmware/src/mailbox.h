@@ -24,6 +24,7 @@ struct sim_mailbox {
     uint8_t latency_max;
     uint8_t edge; /* what the next MARK_EDGE toggle means: EDGE_* */
     uint16_t late_pulses; /* step pulses issued after their tick ended (never lost) */
+    uint16_t stack_free;  /* bytes of the painted gap below the stack never written */
 };
 extern volatile struct sim_mailbox sim_mailbox;
 

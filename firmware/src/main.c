@@ -152,6 +152,7 @@ int main(void)
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
+    uint8_t turns = 0;
     for (;;) {
         uint32_t now = sched_clock();
         watchdog_kick(now);
@@ -184,5 +185,7 @@ int main(void)
         sim_mailbox.late_pulses = stepper_late_pulses;
         sim_mailbox.latency_max = stepper_latency_max;
         sim_mailbox.last_error = mc.last_error;
+        if (!++turns) /* the stack's high-water mark, now and then (a scan of ~1 KB) */
+            sim_mailbox.stack_free = watchdog_stack_free();
     }
 }
