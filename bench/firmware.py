@@ -1,30 +1,28 @@
-"""Figures of the AVR firmware: flash/RAM, ISR cycles, step timing, simulator speed, parse rate.
+"""Figures of the AVR firmware: flash/RAM/stack, ISR load, step timing, streaming, watchdog.
 
     python bench/firmware.py [--quick]
 
 Builds the firmware and the simavr harness, reads `avr-size`, then streams through the
-harness (a real HostLink over the harness's pty at 250000 baud) and reports what the
-harness measured:
+harness (a real HostLink over the harness's pty at 250000 baud, in real time) and reports
+what the harness measured:
 
-- ISR worst case: cycle-exact profile of every interrupt (entry to its RETI) over a
-  smooth three-module print stream (the demo stream).
-- step timing: for step rates of 10k..60k steps/s on all four axes at once, the spread of
-  every rising step edge against the firmware's own schedule (phase k of a tick is due a
-  fixed time after the tick's compare match); the highest rate whose spread stays within
-  5 us with no pulse lost is the figure.
-- simulator speed: simulated over wall seconds for the demo stream with the harness
-  unpaced (speed-up 100), and its baseline in the same run: the same stream on the Python
-  device model at speed-up 100 (device seconds over wall seconds).
-- streaming / parse rate: segments of ever shorter duration (5 ms .. 2 ms) streamed by
-  the real host link at 250000 baud in real time to the firmware and, as the baseline,
-  to the Python model; the highest segment rate each executes with its record exact (no
-  underrun). Both have 128 slots, so the host link bounds both alike; the line's own
-  limit (payload bytes per segment plus framing) is shown beside it.
-- max_step_rate_exact_all_axes: the highest swept rate, on all four axes at once, whose
-  record is exact (above it the tick computation overruns and steps go missing).
+- ISR worst case and mean: cycle-exact profile of every step interrupt (entry to its RETI)
+  over a smooth three-module print stream (the demo stream); the stack's high-water mark
+  (the firmware paints the gap below the stack at boot).
+- step timing: constant rates of 10k..40k steps/s (the advertised rate) on all four axes
+  at once; every rising step edge against the step's exact time on its segment's profile
+  (PROTOCOL.md 5.1), worst and 99th percentile; the step interrupt's load (its cycles over
+  the motion's cycles); the record exact, no pulse lost or late.
+- streaming: segments of 2 ms down to 0.5 ms (500..2000 segments/s, a few seconds of
+  device time each) at 1x, on a clean line and with `--faults corrupt=0.001,drop=0.001`:
+  record exact or not, the host's retransmissions, the longest main-loop turn; the line's
+  own limit beside it.
+- heaters off after the host's silence, in each device state (idle heating, moving,
+  faulted after an UNDERRUN, waiting for a heater): the time from the host's last byte to
+  the heater pin going low, minus the watchdog time (500 ms).
 
-Simulated-time speed depends on the machine's load; the other figures are in simulated
-(device) time and do not.
+Real-time runs depend on the machine's load (simavr must keep up with 1x); the step
+timing and ISR figures are in simulated time and do not.
 """
 
 from __future__ import annotations
