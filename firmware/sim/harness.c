@@ -37,10 +37,8 @@
 #include <avr_ioport.h>
 #include <avr_uart.h>
 
+#include "mailbox_layout.h"
 #include "pins.h"
-#define EDGE_SEG_END 0x01 /* as firmware/src/mailbox.h */
-#define EDGE_MOTION_START 0x02
-#define EDGE_MOTION_STOP 0x04
 #include "thermal.h"
 
 #define F_CPU 16000000ULL
@@ -107,6 +105,11 @@ static uint32_t mailbox_u32(unsigned off)
     for (int i = 3; i >= 0; i--)
         v = (v << 8) | avr->data[mailbox_addr + off + i];
     return v;
+}
+
+static unsigned mailbox_u16(unsigned off)
+{
+    return avr->data[mailbox_addr + off] | (unsigned)avr->data[mailbox_addr + off + 1] << 8;
 }
 
 static void out_push(uint8_t b)
@@ -309,13 +312,13 @@ static void record_segment(void)
     if (!record)
         return;
     uint64_t ticks = motion_now();
-    uint32_t seq = mailbox_u32(4);
+    uint32_t seq = mailbox_u32(MB_SEQ);
     fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
             (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
             (long long)(phys[2] + offset[2]), (long long)(phys[3] + offset[3]),
             (double)ticks / (double)CLOCK_HZ);
     if (abort_next)
-        fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + 24]));
+        fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + MB_LAST_ERROR]));
     fputs("}\n", record);
     fflush(record); /* streamed: a killed simulator leaves every line written so far */
     abort_next = 0;
@@ -342,7 +345,7 @@ static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     (void)irq; (void)param;
     if (!toggled(value, &level))
         return;
-    uint8_t edge = avr->data[mailbox_addr + 48];
+    uint8_t edge = avr->data[mailbox_addr + MB_EDGE];
     if (trace_motion)
         fprintf(stderr, "edge %x at %llu\n", edge, (unsigned long long)avr->cycle);
     if ((edge & EDGE_MOTION_START) && !motion_level) {
@@ -373,7 +376,7 @@ static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     if (!toggled(value, &level))
         return;
     for (int k = 0; k < 4; k++)
-        offset[k] = (int64_t)(int32_t)mailbox_u32(8 + 4 * k) - phys[k];
+        offset[k] = (int64_t)(int32_t)mailbox_u32(MB_POS + 4 * k) - phys[k];
 }
 
 /* The host watchdog seen from outside: the longest time a heater pin was high after the
@@ -532,8 +535,8 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R') {
             mailbox_addr = addr;
             unsigned s16 = (unsigned)(speedup * 16.0 + 0.5);
-            avr->data[addr + 36] = (uint8_t)s16;
-            avr->data[addr + 37] = (uint8_t)(s16 >> 8);
+            avr->data[addr + MB_SPEEDUP_X16] = (uint8_t)s16;
+            avr->data[addr + MB_SPEEDUP_X16 + 1] = (uint8_t)(s16 >> 8);
         }
     }
     poll_pty();
@@ -541,8 +544,8 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         /* the link's clock for the firmware: wall time in clock units */
         uint64_t u = (uint64_t)(wall_seconds() * (double)CLOCK_HZ);
         for (int i = 0; i < 4; i++)
-            avr->data[mailbox_addr + 42 + i] = (uint8_t)(u >> (8 * i));
-        avr->data[mailbox_addr + 46] = 1;
+            avr->data[mailbox_addr + MB_LINK_CLOCK + i] = (uint8_t)(u >> (8 * i));
+        avr->data[mailbox_addr + MB_LINK_VALID] = 1;
     }
     check_lost_interrupts();
     redrive_switches();
@@ -564,14 +567,14 @@ static void write_stats(void)
     struct timespec now;
     clock_gettime(CLOCK_MONOTONIC, &now);
     double wall = (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
-    unsigned isr_max = mailbox_addr ? (avr->data[mailbox_addr + 26] | avr->data[mailbox_addr + 27] << 8) : 0;
-    unsigned lost = mailbox_addr ? (avr->data[mailbox_addr + 28] | avr->data[mailbox_addr + 29] << 8) : 0;
-    unsigned loop_us = mailbox_addr ? (avr->data[mailbox_addr + 30] | avr->data[mailbox_addr + 31] << 8) : 0;
-    unsigned stalls = mailbox_addr ? (avr->data[mailbox_addr + 38] | avr->data[mailbox_addr + 39] << 8) : 0;
-    unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
-    unsigned latency = mailbox_addr ? avr->data[mailbox_addr + 47] : 0;
-    unsigned late = mailbox_addr ? (avr->data[mailbox_addr + 49] | avr->data[mailbox_addr + 50] << 8) : 0;
-    unsigned stack_free = mailbox_addr ? (avr->data[mailbox_addr + 51] | avr->data[mailbox_addr + 52] << 8) : 0;
+    unsigned isr_max = mailbox_addr ? mailbox_u16(MB_ISR_MAX) : 0;
+    unsigned lost = mailbox_addr ? mailbox_u16(MB_LOST_STEPS) : 0;
+    unsigned loop_us = mailbox_addr ? mailbox_u16(MB_LOOP_MAX_US) : 0;
+    unsigned stalls = mailbox_addr ? mailbox_u16(MB_PLAN_STALLS) : 0;
+    unsigned overruns = mailbox_addr ? mailbox_u16(MB_OVERRUNS) : 0;
+    unsigned latency = mailbox_addr ? avr->data[mailbox_addr + MB_LATENCY_MAX] : 0;
+    unsigned late = mailbox_addr ? mailbox_u16(MB_LATE_PULSES) : 0;
+    unsigned stack_free = mailbox_addr ? mailbox_u16(MB_STACK_FREE) : 0;
     fprintf(f,
             "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
@@ -583,7 +586,7 @@ static void write_stats(void)
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, late, latency,
-            loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
+            loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
             step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
             (unsigned long long)isr_count);
