@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "frame.h"
+#include "commands.h"
 #include "heater.h"
 #include "link.h"
 #include "machine.h"

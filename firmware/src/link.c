@@ -13,6 +13,12 @@
 #define NAK_HOLDOFF T_MS(30)
 
 struct link_counters link_counters;
+static const struct link_upper *upper;
+
+void link_attach(const struct link_upper *u)
+{
+    upper = u;
+}
 
 struct slot {
     uint8_t len;
@@ -158,9 +164,9 @@ void frame_rejected(uint8_t kind, uint8_t seq)
 uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
 {
     uint32_t now = link_now;
-    proto_frame_seen();
+    upper->frame_seen();
     if (kind == KIND_URGENT) {
-        proto_urgent(payload, len);
+        upper->urgent(payload, len);
         return 0;
     }
     on_ack(ack, now);
@@ -178,7 +184,7 @@ uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *pa
     if (d == 0) {
         /* checked (every field, room for its items): acknowledged at once, before it
          * is executed, so the host's window moves on while the device works */
-        uint8_t verdict = proto_accept(payload, len);
+        uint8_t verdict = upper->accept(payload, len);
         if (verdict) {
             expected++;
             hold = verdict == PROTO_PENDING;
@@ -204,7 +210,7 @@ static uint8_t send_ack(uint32_t now)
         return 1;
     if (uart_tx_free() < FRAME_SIZE(sizeof flow))
         return 0;
-    uint8_t n = proto_flow(flow);
+    uint8_t n = upper->flow(flow);
     if (nak_due) {
         frame_send(KIND_NAK, 0, expected, flow, n);
         link_counters.naks_sent++;

@@ -1,5 +1,6 @@
 #include <avr/interrupt.h>
 
+#include "commands.h"
 #include "heater.h"
 #include "link.h"
 #include "machine.h"

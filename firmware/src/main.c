@@ -6,6 +6,7 @@
 
 #include "board_ramps14.h"
 #include "frame.h"
+#include "commands.h"
 #include "heater.h"
 #include "link.h"
 #include "machine.h"
@@ -149,6 +150,9 @@ int main(void)
      * effector hangs on them (positions are unknown: the host re-homes) */
     stepper_init(watchdog_prev_enabled());
     uart_init();
+    static const struct link_upper upper = {proto_accept, proto_urgent, proto_flow,
+                                            proto_frame_seen};
+    link_attach(&upper); /* the layers are wired here, the transport knows none above it */
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
