@@ -12,12 +12,13 @@ Reported (with the machine's load average, since 2 cores are shared):
 3. the highest speed-up with corrupt=0.01,drop=0.01, searched on the first layer, then
    the whole fixture at that speed-up (record identical?);
 4. host CPU per second of printing at 1x (the print process, over --cpu-seconds);
-5. wire bytes per segment on the fixture and the same motion as Marlin ASCII.
+5. wire bytes per segment on the fixture and the same motion as Marlin ASCII;
+6. retransmissions on a clean link left idle, then paused, --idle-seconds each (issue 23).
 
    Baseline: the same link connected to a 1x device and idle, over as long, same run.
 Run: python bench/link.py [--quick] [--cpu-seconds 60] [--skip-lossy-whole] [--only SECTION]
 ``--quick``: the first 6 layers instead of the whole fixture (ladder and lossy run);
-``--only clean|light|lossy|cpu|wire`` (repeatable) runs those sections only.
+``--only clean|light|lossy|cpu|wire|idle`` (repeatable) runs those sections only.
 Figures of the latest run are in the closing note of issue 12 (and docs in PROTOCOL.md).
 """
 
@@ -216,6 +217,36 @@ def idle_link_cpu(seconds: float) -> float:
     return (c1 - c0) / (w1 - w0)
 
 
+def idle_retransmissions(seconds: float) -> dict[str, int]:
+    """Issue 23: a link to a 1x device over a pty, left to its keep-alive thread for
+    ``seconds`` idle and ``seconds`` paused (a heater on, the queue held by a heater wait,
+    the job polling every 0.5 s); host and device retransmissions in each."""
+    from cdprhost.link import open_link
+    from firmware_protocol.messages import SetHeater, WaitHeater
+
+    dev, port = real_time_device()
+    link = open_link(port)
+    link.start_keepalive()
+    out: dict[str, int] = {}
+    try:
+        for phase in ("idle", "paused"):
+            if phase == "paused":
+                link.send(SetHeater(0, 2000), WaitHeater(0, 10))
+            before, dev_before = link.counters, link.request_status().device_retransmits
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                time.sleep(0.5)
+                if phase == "paused":
+                    link.poll(0.0)
+            out[f"{phase}_host"] = link.counters.retransmits - before.retransmits
+            out[f"{phase}_device"] = link.request_status().device_retransmits - dev_before
+    finally:
+        link.close()
+        dev.send_signal(signal.SIGTERM)
+        dev.wait(30)
+    return out
+
+
 def host_cpu_at_1x(gcode: Path, seconds: float) -> tuple[float, float]:
     """Host CPU (this process: the print job and its threads) per second of printing at 1x,
     measured over ``seconds`` once the print is under way; and the wall time measured."""
@@ -299,7 +330,7 @@ def wire_bytes(gcode: Path) -> dict[str, float]:
     }
 
 
-SECTIONS = ("clean", "light", "lossy", "cpu", "wire")
+SECTIONS = ("clean", "light", "lossy", "cpu", "wire", "idle")
 
 
 def main() -> None:
@@ -309,6 +340,7 @@ def main() -> None:
     )
     ap.add_argument("--cpu-seconds", type=float, default=60.0)
     ap.add_argument("--skip-lossy-whole", action="store_true")
+    ap.add_argument("--idle-seconds", type=float, default=60.0)
     ap.add_argument(
         "--lossy-speedup",
         type=float,
@@ -391,6 +423,16 @@ def main() -> None:
                 f"{wb['payload_per_segment']:.2f} B, frames {wb['wire_per_segment']:.2f} B "
                 f"(target <= 12); ASCII {wb['ascii_per_segment']:.1f} B "
                 f"({wb['ascii_per_segment'] / wb['wire_per_segment']:.1f}x)"
+            )
+        if "idle" in run:
+            print(
+                f"\n6. retransmissions on a clean idle and paused link, {args.idle_seconds:g} s each"
+            )
+            r = idle_retransmissions(args.idle_seconds)
+            print(f"  {r}")
+            summary.append(
+                f"idle {args.idle_seconds:g} s: {r['idle_host']} host / {r['idle_device']} device "
+                f"retransmissions; paused: {r['paused_host']} / {r['paused_device']} (target 0)"
             )
     print("\nsummary")
     for line in summary:

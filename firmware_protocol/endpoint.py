@@ -45,7 +45,8 @@ class Endpoint:
     this side sends; without it ACKs ride on outgoing DATA frames when possible.
     ``byte_time`` (seconds per byte on the wire, 0 if unknown) lets the RTT samples
     start when a frame has left the wire rather than when it was queued; it switches
-    itself off when an acknowledgement proves the wire faster (USB CDC, a pty).
+    itself off when an acknowledgement proves the wire faster (USB CDC, a pty), and
+    ``rto_fast`` (floor, max backoff) then replaces the retransmission timing.
     """
 
     def __init__(
@@ -61,10 +62,12 @@ class Endpoint:
         flow: Callable[[], bytes] | None = None,
         byte_time: float = 0.0,
         window_bytes: int | None = None,
+        rto_fast: tuple[float, int] | None = None,
     ):
         self._window = window
         self.window_bytes = window_bytes
         self._rto_args = (rto_initial, rto_floor, rto_ceiling, rto_max_backoff)
+        self._rto_fast = rto_fast  # (floor, max backoff) once the wire proves faster
         self.nak_holdoff = nak_holdoff
         self.accept = accept
         self.flow = flow
@@ -84,6 +87,17 @@ class Endpoint:
         self._ack_due = False
         self._nak_due = False
         self._last_nak = (-1, -1e9)
+
+    def _fast_path(self) -> None:
+        """No slow UART behind this path: the fast retransmission timing, if one was given."""
+        if self._rto_fast is None:
+            return
+        floor, backoff = self._rto_fast
+        initial, _, ceiling, _ = self._rto_args
+        self._rto_args = (initial, floor, ceiling, backoff)
+        rto = self.sender.rto
+        rto.floor, rto.max_backoff = floor, max(1, backoff)
+        rto.reset_backoff()
 
     @property
     def retransmits(self) -> int:
@@ -122,6 +136,7 @@ class Endpoint:
                 self.byte_time = (
                     0.0  # acknowledged before it could have left: the wire is faster (USB, pty)
                 )
+                self._fast_path()
             if frame.kind == Kind.NAK:
                 self.counters.naks_received += 1
                 self.sender.on_nak(frame.ack, now)

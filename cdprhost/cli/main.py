@@ -17,6 +17,7 @@ from cdprhost import __version__
 
 # command -> (module in cdprhost.cli.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
+    "autotune": ("autotune", "PID autotune of a heater on the device (M303); gains to the profile"),
     "calibrate": (
         "calibrate",
         "kinematic calibration: plan poses, identify parameters, guided wizard",

@@ -26,6 +26,7 @@ from cdprhost.gcode.items import (
     HomeCommand,
     IgnoredParameters,
     MotorsOff,
+    PidAutotune,
     ProgramItem,
     SetMotionLimits,
     SetTemperature,
@@ -104,6 +105,23 @@ def _temperature(heater: Literal["hotend", "bed"], wait: bool) -> Handler:
         return _set_target(st, line, heater, target, wait, wait_cooling=wait and r is not None)
 
     return handle
+
+
+def _autotune(line: int, p: Params, st: ModalState, fail: Fail, other: Other) -> Produced:
+    """M303 E0 (hotend) / E-1 (bed) S<target> C<cycles> (Marlin's defaults: E0, 150 C, 5)."""
+    e = p.get("E", 0.0)
+    if math.isnan(e) or e not in (0.0, -1.0):
+        fail("E must be 0 (the hotend) or -1 (the bed)", "E")
+    target = _number(p, "S", fail)
+    cycles = _number(p, "C", fail)
+    if cycles is not None and not 3 <= cycles <= 20:
+        fail(f"C{cycles:g}: autotune takes 3..20 cycles", "C")
+    return PidAutotune(
+        line,
+        "bed" if e == -1.0 else "hotend",
+        150.0 if target is None else target,
+        5 if cycles is None else int(cycles),
+    )
 
 
 def _set_target(
@@ -343,6 +361,7 @@ _HANDLERS: dict[str, Handler] = {
     "M140": _temperature("bed", False),
     "M190": _temperature("bed", True),
     "M116": _wait_for_heaters,
+    "M303": _autotune,
     "M106": _fan_on,
     "M107": _fan_off,
     "G4": _dwell,

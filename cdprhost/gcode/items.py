@@ -82,6 +82,17 @@ class SetTemperature:
 
 
 @dataclass(frozen=True, slots=True)
+class PidAutotune:
+    """M303 E<0 hotend | -1 bed> S<target> C<cycles>: the device's relay autotune (it
+    reports the gains; the heater is off afterwards)."""
+
+    line: int
+    heater: Literal["hotend", "bed"]
+    target_c: float
+    cycles: int = 5
+
+
+@dataclass(frozen=True, slots=True)
 class Fan:
     """M106/M107: part-cooling fan ``index`` at ``speed`` in 0..1."""
 
@@ -273,6 +284,7 @@ class UnknownCommand:
 
 Command = (
     SetTemperature
+    | PidAutotune
     | Fan
     | DwellCommand
     | HomeCommand

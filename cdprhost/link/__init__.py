@@ -33,9 +33,17 @@ holds the session while nobody calls)::
     link.wait_idle(timeout)  FLUSH, then wait until all queued items executed and motion stopped
     link.wait_items(n, timeout)
     link.emergency_stop(timeout=1.0, flags=0) -> bool   bypasses the queue and the window
-    link.clear_fault()       leave the device's fault state (after DeviceFault / e-stop)
+    link.clear_fault()       leave the device's fault state (after DeviceFault / e-stop); a
+                             latched thermal fault is refused: DeviceFault naming it
     link.counters            LinkCounters(retransmits, timeouts, naks_received, naks_sent,
-                             bad_frames, frames_sent, frames_received, bytes_sent, ...)
+                             bad_frames, frames_sent, frames_received, bytes_sent, ...,
+                             late_pulses, late_worst_us, rx_overruns: the device's HEALTH)
+    link.set_machine(DeviceSetup)  travel limits and PID gains, sent at every connect
+                             (Machine does it from the profile: device_setup.setup_from_profile)
+    link.caps, link.health   a 2.1 device's CAPS and latest HEALTH (None from a 2.0 device)
+    link.tuned_gains         heater -> (kp, ki, kd) x1000 of its last AUTOTUNE
+    link.start_keepalive()   a thread that keeps the session (never the heater lease: the
+                             calls above renew it, so a wedged caller loses its heaters)
     link.clock_rate          device ticks per host second (measured)
     link.handshake()         a new session (e.g. after DeviceReset); numbering continues
                              from the device's counters

@@ -5,7 +5,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Union
 
-from firmware_protocol.messages import Error, ErrorCode, Event, EventCode, Flag, Ident, Status
+from firmware_protocol.messages import (
+    AutotuneFailure,
+    Caps,
+    Error,
+    ErrorCode,
+    Event,
+    EventCode,
+    Flag,
+    Health,
+    Ident,
+    Status,
+)
 
 
 @dataclass(frozen=True)
@@ -70,6 +81,35 @@ class DeviceProgress:
 
 
 @dataclass(frozen=True)
+class DeviceHealth:
+    """A 2.1 device's timing and receive figures (HEALTH, after every STATUS): pulses
+    issued later than its tolerance, the worst lateness, received bytes lost, the longest
+    main-loop turn."""
+
+    late_pulses: int = 0
+    late_worst_us: int = 0
+    rx_overruns: int = 0
+    loop_worst_us: int = 0
+
+    @classmethod
+    def from_message(cls, m: Health) -> DeviceHealth:
+        return cls(m.late_pulses, m.late_worst_us, m.rx_overruns, m.loop_worst_us)
+
+
+@dataclass(frozen=True)
+class DeviceCaps:
+    """What a 2.1 device announced in CAPS."""
+
+    min_segment_ticks: int = 1
+    segment_rate: int = 0
+    late_tolerance_us: int = 0
+
+    @classmethod
+    def from_message(cls, m: Caps) -> DeviceCaps:
+        return cls(m.min_segment_ticks, m.segment_rate, m.late_tolerance_us)
+
+
+@dataclass(frozen=True)
 class DeviceStatus:
     flags: int
     queue_free: int
@@ -92,6 +132,7 @@ class DeviceStatus:
     received_at: float  # host link time
     items_received: int = 0
     buffered_s: float = 0.0  # queued motion not yet executed, device seconds
+    health: DeviceHealth | None = None  # a 2.1 device's HEALTH (None: a 2.0 device)
 
     @property
     def faulted(self) -> bool:
@@ -164,6 +205,10 @@ class LinkCounters:
     bytes_sent: int
     bytes_received: int
     duplicates: int
+    # the device's own figures from its latest HEALTH (2.1; 0 without)
+    late_pulses: int = 0
+    late_worst_us: int = 0
+    rx_overruns: int = 0
 
 
 LinkEvent = Union[DeviceProgress, DeviceEvent, DeviceErrorEvent]  # noqa: UP007
@@ -176,6 +221,21 @@ def _name(enum: type[ErrorCode] | type[EventCode], code: int) -> str:
         return f"code_{code}"
 
 
+def error_name(code: int) -> str:
+    """``THERMAL_RUNAWAY`` for 2, ``code 99`` for a code this host does not know."""
+    try:
+        return ErrorCode(code).name
+    except ValueError:
+        return f"code {code}"
+
+
+def _failure(value: int) -> str:
+    try:
+        return AutotuneFailure(value).name.lower().replace("_", " ")
+    except ValueError:
+        return f"reason {value}"
+
+
 def error_text(m: Error) -> str:
     name = _name(ErrorCode, m.code)
     axis = (
@@ -186,7 +246,9 @@ def error_text(m: Error) -> str:
     details: dict[int, str] = {
         ErrorCode.UNDERRUN: "the move queue ran empty while moving",
         ErrorCode.THERMAL_RUNAWAY: f"heater temperature {m.value / 10:g} C not following its target",
-        ErrorCode.ENDSTOP_HIT: f"endstop hit during motion at physical step {m.value}",
+        ErrorCode.ENDSTOP_HIT: (
+            f"the motion would take the module past the end of its travel (step {m.value})"
+        ),
         ErrorCode.STEP_RATE: f"step rate {m.value}/s over the limit",
         ErrorCode.OVERTEMP: f"temperature {m.value / 10:g} C over the maximum",
         ErrorCode.HEATER_RANGE: f"target {m.value / 10:g} C over the maximum",
@@ -194,7 +256,11 @@ def error_text(m: Error) -> str:
         ErrorCode.WATCHDOG: f"no word from the host for {m.value} ms: motion stopped, heaters off",
         ErrorCode.BAD_VALUE: f"value {m.value} out of range in command 0x{m.axis:02X}",
         ErrorCode.BAD_COMMAND: f"malformed command 0x{m.axis:02X} at byte {m.value}",
+        ErrorCode.PLANNER_LATE: f"the device's segment preparation fell {m.value} ticks behind",
+        ErrorCode.HEATER_LEASE: f"the host did not renew its {m.value} ms heater lease: heaters off",
+        ErrorCode.AUTOTUNE_FAILED: f"PID autotune failed ({_failure(m.value)})",
     }
+
     detail = details.get(m.code, "")
     return f"{name} at item {m.item}, segment {m.segment}{axis}" + (f": {detail}" if detail else "")
 

@@ -9,73 +9,63 @@ of the device's watchdog, so an idle or paused host keeps its session (PROTOCOL.
 fault, silence, port gone) are raised by whichever call notices them and stay raised
 by every later call.
 
-Motion is streamed with :meth:`HostLink.feed`: it sends as much of a batch as the
-device's free slots and the time watermarks allow (PROTOCOL.md section 6) and waits
-for room at most ``max_wait`` seconds.
+The link is made of parts: a :class:`~cdprhost.link.core.LinkCore` (transport,
+endpoint, device tracker, pumping), the :class:`~cdprhost.link.session_setup.SessionSetup`
+and the :class:`~cdprhost.link.segment_feed.SegmentFeed`, each working on the core.
+
+**Heater lease** (2.1 devices): the calls of the code that drives the machine (this
+class's public methods) renew the device's heater lease; the keep-alive thread never
+does, so a wedged job whose keep-alive still runs loses its heaters within the lease.
 """
 
 from __future__ import annotations
 
 import logging
-import threading
-import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from typing import Any, Protocol
+from collections.abc import Callable
+from typing import Any
 
-from cdprhost.link.errors import (
-    DeviceFault,
-    DeviceReset,
-    DeviceSilent,
-    LinkError,
-    LinkTimeout,
+from cdprhost.link.core import LinkCore, Transport
+from cdprhost.link.device_setup import DeviceSetup
+from cdprhost.link.errors import DeviceFault, DeviceReset, DeviceSilent, LinkError, LinkTimeout
+from cdprhost.link.events import (
+    DeviceCaps,
+    DeviceHealth,
+    DeviceProgress,
+    DeviceStatus,
+    Identity,
+    LinkCounters,
+    LinkEvent,
+    error_name,
 )
-from cdprhost.link.events import DeviceProgress, DeviceStatus, Identity, LinkCounters, LinkEvent
-from cdprhost.link.flow import TimeFlow, Watermarks
+from cdprhost.link.flow import Watermarks
+from cdprhost.link.keepalive import KeepAlive
 from cdprhost.link.segment_feed import SegmentFeed
 from cdprhost.link.session_setup import SessionSetup
-from cdprhost.link.tracker import DeviceTracker
-from cdprhost.link.tuning import (
-    MAX_WINDOW,
-    MIN_PAYLOAD,
-    MIN_WINDOW,
-    RTO_FLOOR_S,
-    RTO_MAX_BACKOFF,
-    SLICE_S,
-    START_WINDOW,
-    STATUS_TIMEOUTS,
-)
-from firmware_protocol.endpoint import Endpoint
-from firmware_protocol.framing import MAX_PAYLOAD, Kind, encode_frame
+from cdprhost.link.tuning import HEATER_LEASE_S, MAX_WINDOW, SLICE_S, STATUS_TIMEOUTS
+from firmware_protocol.framing import MAX_PAYLOAD
 from firmware_protocol.message_codec import encode_message, encode_messages
 from firmware_protocol.messages import (
+    MINOR_SAFETY,
     WATCHDOG_MS_DEFAULT,
     WATCHDOG_MS_RANGE,
     ClearFault,
     EmergencyStop,
     ErrorCode,
     Flag,
+    Flush,
     GetStatus,
+    HeaterLease,
     Message,
     Segment,
 )
-from firmware_protocol.segments import (
-    SegmentContext,
-)
+from firmware_protocol.segments import SegmentBatch
 
 log = logging.getLogger(__name__)
 
-
-class Transport(Protocol):
-    name: str
-
-    def now(self) -> float: ...
-    def write(self, data: bytes) -> None: ...
-    def read(self, timeout: float) -> bytes: ...
-    def close(self) -> None: ...
+__all__ = ["HostLink", "Transport"]
 
 
-class HostLink(SessionSetup, SegmentFeed):
+class HostLink:
     """See the package docstring (:mod:`cdprhost.link`) for the API summary."""
 
     def __init__(
@@ -89,62 +79,40 @@ class HostLink(SessionSetup, SegmentFeed):
         device: Any = None,
         watermarks: Watermarks | None = None,
         watchdog_ms: int = WATCHDOG_MS_DEFAULT,
+        heater_lease_s: float = HEATER_LEASE_S,
     ):
-        self._t = transport
-        self.timeout_s = float(timeout_s)
-        self.device = device  # the SimDevice when embedded, else None
-        self.watermarks = watermarks or Watermarks()
         lo, hi = WATCHDOG_MS_RANGE
-        self.watchdog_ms = max(lo, min(hi, int(watchdog_ms)))
-        self._lock = threading.RLock()
-        self._waiters = 0
-        self._max_window = max(1, min(MAX_WINDOW, window))
-        self._ep = Endpoint(
-            window=min(START_WINDOW, self._max_window),
-            rto_initial=min(0.05, self.timeout_s / 4),
-            rto_floor=RTO_FLOOR_S,
-            rto_max_backoff=RTO_MAX_BACKOFF,
-            rto_ceiling=min(0.25, self.timeout_s / 4),
-            byte_time=10.0 / baud if baud else 0.0,
+        self.device = device  # the SimDevice when embedded, else None
+        self._core = LinkCore(
+            transport,
+            timeout_s=timeout_s,
+            window=window,
+            max_payload=max_payload,
+            baud=baud,
+            watermarks=watermarks,
+            watchdog_ms=max(lo, min(hi, int(watchdog_ms))),
         )
-        self._ctx = SegmentContext()
-        self._max_payload: int = max_payload
-        self._payload_limit = max_payload
-        self._dev: DeviceTracker = DeviceTracker(getattr(transport, "name", "port"))
-        self._flow: TimeFlow = TimeFlow(self.watermarks)
-        self._items_sent = 0
-        self._segments_sent = 0
-        now = transport.now()
-        self._last_rx = now
-        self._last_tx = now
-        self._last_pump = now
-        self._waiting_since: float | None = None
-        self._garbage_since_valid = 0
-        self._last_retx = 0
-        self._acked_clean = 0
-        self._configured_rate = 0.0
-        self._start_ticks = 0
-        self._ka_stop: threading.Event | None = None
-        self._ka_thread: threading.Thread | None = None
-
-    # ------------------------------------------------------------------ locking
-
-    @contextmanager
-    def _locked(self) -> Iterator[None]:
-        self._waiters += 1
-        self._lock.acquire()
-        self._waiters -= 1
-        try:
-            yield
-        finally:
-            self._lock.release()
-
-    def _let_others_in(self) -> None:
-        """Between pump slices, let a thread that waits for the lock have its turn."""
-        if self._waiters:
-            time.sleep(0.0005)
+        self._session = SessionSetup(self._core)
+        self._feed = SegmentFeed(self._core, self._session)
+        self._t = transport
+        self._dev = self._core.dev
+        self.lease_ms = max(lo, min(hi, round(heater_lease_s * 1000)))
+        self._lease_sent = -1e9
+        self._keepalive = KeepAlive(self._core, getattr(transport, "wait_readable", None))
 
     # ------------------------------------------------------------------ properties
+
+    @property
+    def timeout_s(self) -> float:
+        return self._core.timeout_s
+
+    @property
+    def watchdog_ms(self) -> int:
+        return self._core.watchdog_ms
+
+    @property
+    def watermarks(self) -> Watermarks:
+        return self._core.watermarks
 
     @property
     def identity(self) -> Identity | None:
@@ -153,8 +121,23 @@ class HostLink(SessionSetup, SegmentFeed):
     def _identity(self) -> Identity:
         identity = self._dev.identity
         if identity is None:
-            raise LinkError(f"{self._t.name}: no session (handshake first)")
+            raise LinkError(f"{self._core.name}: no session (handshake first)")
         return identity
+
+    @property
+    def caps(self) -> DeviceCaps | None:
+        """What a 2.1 device announced (None: a 2.0 device)."""
+        return self._dev.caps
+
+    @property
+    def health(self) -> DeviceHealth | None:
+        """The device's latest timing and receive figures (None: none yet, or a 2.0 device)."""
+        return self._dev.health
+
+    @property
+    def tuned_gains(self) -> dict[int, tuple[int, ...]]:
+        """Heater -> (kp, ki, kd) in thousandths from the device's last AUTOTUNE_DONE."""
+        return dict(self._dev.tuned)
 
     @property
     def progress(self) -> DeviceProgress:
@@ -166,21 +149,22 @@ class HostLink(SessionSetup, SegmentFeed):
 
     @property
     def items_sent(self) -> int:
-        return self._items_sent
+        return self._core.items_sent
 
     @property
     def segments_sent(self) -> int:
-        return self._segments_sent
+        return self._core.segments_sent
 
     @property
     def clock_rate(self) -> float:
-        """Device clock ticks per host second, as measured (PROTOCOL.md 3.2)."""
-        return self._dev.clock.rate()
+        """Device ticks per host second, as measured (PROTOCOL.md 3.2)."""
+        return self._core.clock_rate()
 
     @property
     def counters(self) -> LinkCounters:
-        ep = self._ep
+        ep = self._core.ep
         c = ep.counters
+        h = self._dev.health or DeviceHealth()
         return LinkCounters(
             ep.retransmits,
             ep.sender.timeouts,
@@ -192,134 +176,71 @@ class HostLink(SessionSetup, SegmentFeed):
             c.bytes_sent,
             c.bytes_received,
             c.duplicates,
+            h.late_pulses,
+            h.late_worst_us,
+            h.rx_overruns,
         )
 
     def now(self) -> float:
         return self._t.now()
 
-    def _urgent_frame(self, msg: Message) -> bytes:
-        return encode_frame(Kind.URGENT, 0, self._ep.receiver.expected, encode_message(msg))
+    # ------------------------------------------------------------------ session
 
-    def _write(self, frames: list[bytes]) -> None:
-        for f in frames:  # one write per frame: a wire's faults (duplication) act per frame
-            self._t.write(f)
-        if frames:
-            self._last_tx = self._t.now()
+    def handshake(self) -> Identity:
+        """A new session (e.g. after DeviceReset); numbering continues from the device's
+        counters. Sends the machine set-up (:meth:`set_machine`) to a 2.1 device."""
+        identity = self._session.handshake()
+        self._lease_sent = -1e9
+        self._renew_lease()
+        return identity
 
-    def _read(self, timeout: float) -> bytes:
-        return self._t.read(timeout)
+    def configure(self) -> None:
+        self._session.configure()
 
-    def _keepalive_due(self, now: float) -> bool:
-        interval = min(self.watchdog_ms / 4000.0, self.timeout_s / 4)
-        return now - self._last_tx > interval or now - self._last_rx > self.timeout_s / 4
+    def set_machine(self, setup: DeviceSetup) -> None:
+        """The travel limits and heater gains to send at every connect, sent now as well."""
+        if setup == self._session.setup:
+            return
+        self._session.setup = setup
+        if self._dev.identity is not None:
+            self._session.send_setup()
+
+    def _renew_lease(self) -> None:
+        """From the caller's thread only (never the keep-alive): the heater lease (2.1)."""
+        core = self._core
+        now = core.t.now()
+        if self._session.minor < MINOR_SAFETY or now - self._lease_sent < self.lease_ms / 4000:
+            return
+        with core.locked():
+            self._lease_sent = now
+            core.send_immediate(HeaterLease(self.lease_ms))
+            core.write(core.ep.flush(now))
 
     def _pump(self, max_wait: float = SLICE_S) -> None:
-        """One slice: write, wait for bytes (at most ``max_wait``), handle, check liveness."""
-        if self._dev.failure is not None:
-            raise self._dev.failure
-        ep = self._ep
-        now = self._t.now()
-        self._last_pump = now
-        if not ep.sender.idle() and self._waiting_since is None:
-            self._waiting_since = now
-        self._write(ep.flush(now))
-        deadline = ep.next_deadline()
-        wait = max_wait if deadline is None else min(max_wait, max(0.0, deadline - now))
-        data = self._read(wait)
-        now = self._t.now()
-        if data:
-            before = ep.deframer.frames
-            for inc in ep.feed(data, now):
-                self._dev.handle(inc, now)
-            if ep.deframer.frames > before:
-                self._last_rx = now
-                self._garbage_since_valid = 0
-                self._waiting_since = None if ep.sender.idle() else now
-            else:
-                self._garbage_since_valid += len(data)
-        self._adapt()
-        if self._keepalive_due(now) and ep.sender.idle():
-            ep.send(encode_message(GetStatus()))
-            if self._waiting_since is None:
-                self._waiting_since = now
-        self._write(ep.flush(now))
-        if self._dev.failure is not None:
-            raise self._dev.failure
-        if (
-            self._waiting_since is not None
-            and now - self._waiting_since > self.timeout_s
-            and now - self._last_rx > self.timeout_s
-        ):
-            log.warning("%s: device silent for %.1f s", self._t.name, now - self._last_rx)
-            self._dev.failure = self._silent_error(self._garbage_since_valid, "")
-            raise self._dev.failure
-
-    def _adapt(self) -> None:
-        """On a retransmission: shorter frames, half the window; every frame acknowledged
-        without one grows them back (2 bytes, 1 frame): a noisy line settles on short frames
-        that get through, a clean one on full ones. A frame once sent keeps its size (its
-        retransmissions are byte-identical), so frames start small and grow."""
-        ep = self._ep
-        retx = ep.retransmits
-        sender = ep.sender
-        clean, self._acked_clean = sender.acked_clean - self._acked_clean, sender.acked_clean
-        if retx > self._last_retx:
-            self._payload_limit = max(MIN_PAYLOAD, int(self._payload_limit * 0.7))
-            sender.window = max(MIN_WINDOW, sender.window // 2)
-            log.debug(
-                "%s: %d retransmissions; payload %d, window %d",
-                self._t.name,
-                retx - self._last_retx,
-                self._payload_limit,
-                sender.window,
-            )
-        elif clean:
-            self._payload_limit = min(self._max_payload, self._payload_limit + 2 * clean)
-            sender.window = min(self._max_window, sender.window + clean)
-        self._last_retx = retx
+        """A pump from the caller's thread (renews the heater lease)."""
+        self._renew_lease()
+        self._core.pump(max_wait)
 
     def _wait(self, done: Callable[[], bool], timeout: float | None, what: str) -> None:
-        start = self._t.now()
-        while True:
-            self._let_others_in()
-            with self._locked():
-                if done():
-                    return
-                if timeout is not None and self._t.now() - start > timeout:
-                    raise LinkTimeout(
-                        f"{self._t.name}: {what} did not happen within {timeout:g} s "
-                        f"(executed {self.progress.items_done} of {self._items_sent} items)"
-                    )
-                self._pump()
+        self._core.wait(done, timeout, what, pump=self._pump)
 
     # ------------------------------------------------------------------ keep-alive
 
     def start_keepalive(self) -> None:
         """Pump from a background thread whenever nobody else has for a while (real ports)."""
-        if self._ka_thread is not None:
-            return
-        self._ka_stop = threading.Event()
-        self._ka_thread = threading.Thread(
-            target=self._keepalive_loop, name="link-keepalive", daemon=True
-        )
-        self._ka_thread.start()
+        self._keepalive.start()
 
-    def _keepalive_loop(self) -> None:
-        stop = self._ka_stop
-        assert stop is not None
-        interval = min(self.watchdog_ms / 4000.0, self.timeout_s / 4)
-        while not stop.wait(interval / 2):
-            if self._dev.failure is not None or self._t.now() - self._last_pump < interval / 2:
-                continue
-            try:
-                with self._locked():
-                    self._pump(0.0)
-            except (LinkError, OSError):
-                continue
+    def keepalive_step(self) -> None:
+        """One turn of the keep-alive thread (see :mod:`cdprhost.link.keepalive`)."""
+        self._keepalive.step()
+
+    # ------------------------------------------------------------------ commands
 
     def send(self, *commands: Message, timeout: float | None = None) -> list[int]:
         """Send commands in order; returns the item number of each queued one (0 for immediate ones)."""
         self._identity()
+        self._renew_lease()
+        core = self._core
         numbers: list[int] = []
         start = self._t.now()
         for cmd in commands:
@@ -327,45 +248,85 @@ class HostLink(SessionSetup, SegmentFeed):
             payload = b"" if is_segment else encode_message(cmd)
             items = 1 if cmd.QUEUED else 0
             while True:
-                self._let_others_in()
-                with self._locked():
+                core.let_others_in()
+                with core.locked():
                     if self._dev.failure is not None and not isinstance(
                         cmd, (ClearFault, GetStatus)
                     ):
                         raise self._dev.failure
-                    if self._ep.sender.window_free > 0 and self._credit() >= items:
+                    if core.ep.sender.window_free > 0 and core.credit() >= items:
                         ticks = 0
                         if is_segment:  # encoded only now: the coder context follows send order
                             assert isinstance(cmd, Segment)
-                            payload = encode_messages([cmd], self._ctx)
-                            self._segments_sent += 1
+                            payload = encode_messages([cmd], core.ctx)
+                            core.segments_sent += 1
                             ticks = cmd.ticks
-                        self._ep.send(payload, items=items, ticks=ticks)
+                        core.ep.send(payload, items=items, ticks=ticks)
                         if items:
-                            self._items_sent += 1
-                        numbers.append(self._items_sent if items else 0)
-                        self._write(self._ep.flush(self._t.now()))
+                            core.items_sent += 1
+                        numbers.append(core.items_sent if items else 0)
+                        core.write(core.ep.flush(self._t.now()))
                         break
                     if timeout is not None and self._t.now() - start > timeout:
                         raise LinkTimeout(
-                            f"{self._t.name}: could not send {type(cmd).__name__} within {timeout:g} s"
+                            f"{core.name}: could not send {type(cmd).__name__} within {timeout:g} s"
                         )
                     self._pump()
         return numbers
+
+    def feed(
+        self, batch: SegmentBatch, start: int = 0, max_wait: float = 0.0, end: int | None = None
+    ) -> int:
+        """Send segments ``start..end`` of ``batch`` as far as slots, the time watermarks and
+        the window allow, waiting for room at most ``max_wait`` s (waking on reports);
+        returns the index after the last segment sent. Their segment numbers continue from
+        :attr:`segments_sent`."""
+        self._renew_lease()
+        return self._feed.feed(batch, self._identity(), start, max_wait, end)
+
+    def check_step_rates(self, batch: SegmentBatch) -> None:
+        """Raise :class:`StepRateError` for a segment the device would refuse (step rate,
+        shorter than its minimum)."""
+        self._feed.check_step_rates(batch, self._identity())
+
+    def ahead_ticks(self) -> float:
+        return self._feed.ahead_ticks()
+
+    def queue_segments(self, batch: SegmentBatch, timeout: float | None = None) -> range:
+        """Stream move segments (blocking until all are sent); returns their segment numbers
+        (as in the device record). Raises :class:`StepRateError` for a segment over the
+        device's step-rate limit."""
+        first = self.segments_sent + 1
+        n = len(batch)
+        start = self._t.now()
+        i = 0
+        while i < n:
+            left = None if timeout is None else timeout - (self._t.now() - start)
+            if left is not None and left <= 0:
+                raise LinkTimeout(
+                    f"{self._core.name}: could not queue segments within {timeout:g} s"
+                )
+            i = self.feed(batch, i, max_wait=0.25 if left is None else min(0.25, left))
+        return range(first, first + n)
+
+    def flush(self) -> None:
+        """FLUSH: the motion sent so far may start now (end of a stream, a pause)."""
+        self.send(Flush())
 
     # ------------------------------------------------------------------ waiting and queries
 
     def poll(self, timeout: float = 0.0) -> list[LinkEvent]:
         """Pump for up to ``timeout`` seconds (at least once); return the events since the last
         poll."""
+        core = self._core
         end = self._t.now() + timeout
         while True:
-            self._let_others_in()
-            with self._locked():
+            core.let_others_in()
+            with core.locked():
                 self._pump(min(SLICE_S * 5, max(0.0, end - self._t.now())))
                 if self._t.now() >= end - 1e-9:
                     break
-        with self._locked():
+        with core.locked():
             return self._dev.take_events()
 
     def wait_report(self, timeout: float) -> None:
@@ -376,8 +337,8 @@ class HostLink(SessionSetup, SegmentFeed):
             left = end - self._t.now()
             if left <= 0:
                 return
-            self._let_others_in()
-            with self._locked():
+            self._core.let_others_in()
+            with self._core.locked():
                 self._pump(min(left, 0.25))
 
     def ask_status(self) -> int:
@@ -412,8 +373,8 @@ class HostLink(SessionSetup, SegmentFeed):
         identity = self._dev.identity
         return (
             identity is not None
-            and p.items_done >= self._items_sent
-            and self._ep.sender.idle()
+            and p.items_done >= self.items_sent
+            and self._core.ep.sender.idle()
             and not p.flags & Flag.MOVING
             and p.queue_free >= identity.queue_capacity
         )
@@ -424,23 +385,26 @@ class HostLink(SessionSetup, SegmentFeed):
         self._wait(self.idle, timeout, "the end of motion")
         return self.progress
 
+    # ------------------------------------------------------------------ stopping
+
     def emergency_stop(self, timeout: float = 1.0, flags: int = 0) -> bool:
         """Stop now, bypassing the queue (URGENT frames, repeated until acknowledged);
         ``flags`` (EstopFlag) keep the heaters or motors on."""
+        core = self._core
         dev = self._dev
         dev.estop_acked = False
         start = self._t.now()
-        with self._locked():
-            frame = self._urgent_frame(EmergencyStop(flags))
-            log.warning("%s: emergency stop (flags %d)", self._t.name, flags)
+        with core.locked():
+            frame = core.urgent_frame(EmergencyStop(flags))
+            log.warning("%s: emergency stop (flags %d)", core.name, flags)
             while not dev.estop_acked and self._t.now() - start <= timeout:
-                self._write([frame])
+                core.write([frame])
                 failure, dev.failure = dev.failure, None
                 try:
                     for _ in range(3):
                         if dev.estop_acked:
                             break
-                        self._pump(SLICE_S)
+                        core.pump(SLICE_S)
                 except LinkError:
                     pass
                 finally:
@@ -448,7 +412,7 @@ class HostLink(SessionSetup, SegmentFeed):
             if dev.estop_acked and not isinstance(dev.failure, (DeviceReset, DeviceSilent)):
                 p = dev.progress
                 dev.failure = DeviceFault(
-                    f"{self._t.name}: emergency stop",
+                    f"{core.name}: emergency stop",
                     code=ErrorCode.ESTOP,
                     item=p.items_done,
                     segment=p.segments_done,
@@ -458,30 +422,45 @@ class HostLink(SessionSetup, SegmentFeed):
             return dev.estop_acked
 
     def clear_fault(self, timeout: float | None = None) -> None:
-        """Leave the device's fault state (after a DeviceFault or an emergency stop)."""
+        """Leave the device's fault state (after a DeviceFault or an emergency stop). A 2.1
+        device refuses to clear a latched thermal fault: DeviceFault naming it."""
         dev = self._dev
-        with self._locked():
+        with self._core.locked():
             if isinstance(dev.failure, (DeviceReset, DeviceSilent)):
                 raise dev.failure
             dev.failure = None
             dev.cleared = False
             dev.clearing = True
+            dev.refused = 0
         try:
             self.send(ClearFault())
-            self._wait(lambda: dev.cleared, timeout or self.timeout_s, "fault clearing")
+            self._wait(
+                lambda: dev.cleared or bool(dev.refused),
+                timeout or self.timeout_s,
+                "fault clearing",
+            )
         finally:
             dev.clearing = False
-        with self._locked():
+        with self._core.locked():
+            if dev.refused:
+                name = error_name(dev.refused)
+                p = dev.progress
+                dev.failure = DeviceFault(
+                    f"{self._core.name}: the device refuses to clear {name}: a thermal fault "
+                    "stays until the device is reset (check the heater and its sensor first)",
+                    code=dev.refused,
+                    item=p.items_done,
+                    segment=p.segments_done,
+                    axis=0xFF,
+                    value=0,
+                )
+                raise dev.failure
             dev.failure = None
-            self._items_sent = max(self._items_sent, dev.progress.items_done)
+            self._core.items_sent = max(self._core.items_sent, dev.progress.items_done)
 
     def close(self) -> None:
-        if self._ka_stop is not None:
-            self._ka_stop.set()
-        if self._ka_thread is not None:
-            self._ka_thread.join(timeout=2.0)
-            self._ka_thread = None
-        with self._locked():
+        self._keepalive.stop()
+        with self._core.locked():
             self._t.close()
 
     def __enter__(self) -> HostLink:

@@ -1,60 +1,68 @@
-# mypy: disable-error-code="misc"
-# (mixin methods typed with the class that uses them as ``self``: mypy only allows
-# supertypes there, but the bodies are then checked against HostLink in full)
 """Streaming motion: credit, time watermarks and the window decide how much of a batch
 goes out (PROTOCOL.md section 6).
 
-A mixin of :class:`cdprhost.link.host_link.HostLink` (its methods take the link as
-``self``).
+A part of the link: it works on the link's :class:`~cdprhost.link.core.LinkCore` and
+asks the session set-up (:class:`SessionConfig`: the configured start threshold, and a
+new configuration when the measured clock rate has moved) for nothing else.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
-from cdprhost.link.errors import LinkTimeout, StepRateError
-from firmware_protocol.messages import Flag, Flush
+from cdprhost.link.core import LinkCore
+from cdprhost.link.errors import StepRateError
+from cdprhost.link.events import Identity
+from firmware_protocol.messages import Flag
 from firmware_protocol.segments import SegmentBatch, encode_segments, peak_step_rates
 
-if TYPE_CHECKING:
-    from cdprhost.link.host_link import HostLink
+
+class SessionConfig(Protocol):
+    """What the stream needs of the session set-up."""
+
+    configured_rate: float
+    start_ticks: int
+
+    def configure(self) -> None: ...
 
 
 class SegmentFeed:
-    """HostLink's segment streaming: ``feed``, ``queue_segments``, ``flush``."""
+    """The segment stream of one link (its core): ``feed``, ``queue_segments``."""
 
-    def _credit(self: HostLink) -> int:
-        flow = self._dev.flow
-        return flow.free - self._ep.sender.items_after(flow.ack)
+    def __init__(self, core: LinkCore, session: SessionConfig):
+        self.core = core
+        self.session = session
 
-    def ahead_ticks(self: HostLink) -> float:
+    def ahead_ticks(self) -> float:
         """Device ticks of motion held ahead of the device's now (estimated; see flow.py)."""
-        flow = self._dev.flow
-        return self._flow.ahead_ticks(
-            flow, self._t.now(), self.clock_rate, self._ep.sender.ticks_after(flow.ack)
+        c = self.core
+        flow = c.dev.flow
+        return c.flow.ahead_ticks(
+            flow, c.t.now(), c.clock_rate(), c.ep.sender.ticks_after(flow.ack)
         )
 
-    def _window_room(self: HostLink) -> int:
+    def _window_room(self) -> int:
         """Payload bytes the window can still take (sent or queued frames count)."""
-        s = self._ep.sender
+        s = self.core.ep.sender
         if s.window_free <= 0:
             return 0
         cap = s.window_bytes or 1 << 20
         queued = sum(len(o.payload) for o in s.outstanding) + sum(len(b.payload) for b in s.backlog)
         return max(0, cap - queued)
 
-    def _sendable(self: HostLink, ticks: np.ndarray) -> int:
+    def _sendable(self, ticks: np.ndarray) -> int:
         """How many of the segments with durations ``ticks`` may go now."""
-        slots = self._credit()
+        c = self.core
+        slots = c.credit()
         if slots <= 0:
             return 0
-        rate = self.clock_rate
-        if abs(rate - self._configured_rate) > 0.1 * self._configured_rate:
-            self.configure()
-        moving = bool(self._dev.flow.flags & Flag.MOVING)
-        room = self._flow.room_ticks(self.ahead_ticks(), rate, moving, self._start_ticks)
+        rate = c.clock_rate()
+        if abs(rate - self.session.configured_rate) > 0.1 * self.session.configured_rate:
+            self.session.configure()
+        moving = bool(c.dev.flow.flags & Flag.MOVING)
+        room = c.flow.room_ticks(self.ahead_ticks(), rate, moving, self.session.start_ticks)
         if room <= 0:
             return 0
         window = self._window_room()
@@ -64,29 +72,37 @@ class SegmentFeed:
         cum = np.cumsum(ticks[:limit])
         return min(limit, int(np.searchsorted(cum, room, side="right")) + 1)
 
-    def _send_segments(self: HostLink, batch: SegmentBatch, i: int, j: int) -> None:
+    def _send_segments(self, batch: SegmentBatch, i: int, j: int) -> None:
+        c = self.core
         sub = batch[i:j]
-        data, offsets = encode_segments(sub, self._ctx)
+        data, offsets = encode_segments(sub, c.ctx)
         n = j - i
         pos = 0
-        limit = self._payload_limit
+        limit = c.payload_limit
         ticks = sub.ticks
         while pos < n:
             end = int(np.searchsorted(offsets, offsets[pos] + limit, side="right")) - 1
             end = max(pos + 1, min(end, n))
-            self._ep.send(
+            c.ep.send(
                 data[offsets[pos] : offsets[end]],
                 items=end - pos,
                 ticks=int(ticks[pos:end].sum()),
             )
             pos = end
-        self._items_sent += n
-        self._segments_sent += n
-        self._write(self._ep.flush(self._t.now()))
+        c.items_sent += n
+        c.segments_sent += n
+        c.write(c.ep.flush(c.t.now()))
 
-    def check_step_rates(self: HostLink, batch: SegmentBatch) -> None:
-        """Raise :class:`StepRateError` for a segment over the device's max step rate."""
-        identity = self._identity()
+    def check_step_rates(self, batch: SegmentBatch, identity: Identity) -> None:
+        """Raise :class:`StepRateError` for a segment over the device's max step rate, or
+        shorter than the shortest one it takes (CAPS)."""
+        caps = self.core.dev.caps
+        if caps is not None and len(batch) and int(batch.ticks.min()) < caps.min_segment_ticks:
+            k = int(np.argmin(batch.ticks))
+            raise StepRateError(
+                f"segment {k} of the batch lasts {int(batch.ticks[k])} ticks; the device takes "
+                f"no segment under {caps.min_segment_ticks} ticks"
+            )
         rates = peak_step_rates(batch, identity.clock_hz)
         over = np.flatnonzero((rates > identity.max_step_rate).any(axis=1))
         if over.size:
@@ -97,8 +113,9 @@ class SegmentFeed:
             )
 
     def feed(
-        self: HostLink,
+        self,
         batch: SegmentBatch,
+        identity: Identity,
         start: int = 0,
         max_wait: float = 0.0,
         end: int | None = None,
@@ -111,45 +128,27 @@ class SegmentFeed:
         if start >= n:
             return start
         if start == 0:
-            self.check_step_rates(batch)
-        until = self._t.now() + max_wait
+            self.check_step_rates(batch, identity)
+        c = self.core
+        until = c.t.now() + max_wait
         i = start
         while i < n:
-            self._let_others_in()
-            with self._locked():
-                if self._dev.failure is not None:
-                    raise self._dev.failure
+            c.let_others_in()
+            with c.locked():
+                if c.dev.failure is not None:
+                    raise c.dev.failure
                 k = self._sendable(batch.ticks[i:n])
                 if k > 0:
                     self._send_segments(batch, i, i + k)
                     i += k
                     continue
-                now = self._t.now()
+                now = c.t.now()
                 if now >= until:
                     break
-                wake = self._flow.wake_in(
-                    self.ahead_ticks(), self.clock_rate, bool(self._dev.flow.flags & Flag.MOVING)
+                wake = c.flow.wake_in(
+                    self.ahead_ticks(), c.clock_rate(), bool(c.dev.flow.flags & Flag.MOVING)
                 )
                 # below the low watermark already: only a report can give room
                 wait = until - now if not wake else min(until - now, wake)
-                self._pump(min(wait, 0.25))
+                c.pump(min(wait, 0.25))
         return i
-
-    def queue_segments(self: HostLink, batch: SegmentBatch, timeout: float | None = None) -> range:
-        """Stream move segments (blocking until all are sent); returns their segment numbers
-        (as in the device record). Raises :class:`StepRateError` for a segment over the
-        device's step-rate limit."""
-        first = self._segments_sent + 1
-        n = len(batch)
-        start = self._t.now()
-        i = 0
-        while i < n:
-            left = None if timeout is None else timeout - (self._t.now() - start)
-            if left is not None and left <= 0:
-                raise LinkTimeout(f"{self._t.name}: could not queue segments within {timeout:g} s")
-            i = self.feed(batch, i, max_wait=0.25 if left is None else min(0.25, left))
-        return range(first, first + n)
-
-    def flush(self: HostLink) -> None:
-        """FLUSH: the motion sent so far may start now (end of a stream, a pause)."""
-        self.send(Flush())

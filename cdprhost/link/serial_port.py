@@ -83,6 +83,20 @@ class SerialTransport:
                 f"{self.name}: port failed on read ({exc}); was it unplugged?"
             ) from None
 
+    def wait_readable(self, timeout: float) -> bool:
+        """True when bytes are waiting or arrive within ``timeout`` s, without reading them
+        (the link's keep-alive thread waits here without holding the link's lock)."""
+        try:
+            if self._ser.in_waiting:
+                return True
+            if self._fd is not None:
+                ready, _, _ = select.select([self._fd], [], [], timeout)
+                return bool(ready)
+        except (serial.SerialException, OSError, ValueError, TypeError):
+            pass  # closed or vanished: the next read names it
+        time.sleep(min(timeout, READ_SLICE_S))
+        return False
+
     def _read_select(self, fd: int, timeout: float) -> bytes:
         waiting = self._ser.in_waiting
         if not waiting and timeout > 0:

@@ -1,88 +1,87 @@
-# mypy: disable-error-code="misc"
-# (mixin methods typed with the class that uses them as ``self``: mypy only allows
-# supertypes there, but the bodies are then checked against HostLink in full)
 """The opening of a session: HELLO until IDENT, the protocol version, the device clock
-measured, and CONFIGURE (watchdog, start threshold, flow reports).
+measured (and CAPS asked for), CONFIGURE (watchdog, start threshold, flow reports) and,
+with a 2.1 device, the machine's travel limits and heater gains (PROTOCOL.md 3.1).
 
-A mixin of :class:`cdprhost.link.host_link.HostLink` (its methods take the link as
-``self``); kept apart so the streaming code and the session set-up read on their own.
+A part of the link: it works on the link's :class:`~cdprhost.link.core.LinkCore` and
+nothing else.
 """
 
 from __future__ import annotations
 
 import logging
 import os
-from typing import TYPE_CHECKING
 
-from cdprhost.link.errors import DeviceSilent, ProtocolMismatch
+from cdprhost.link.core import LinkCore
+from cdprhost.link.device_setup import DeviceSetup
+from cdprhost.link.errors import ProtocolMismatch
 from cdprhost.link.events import Identity
 from cdprhost.link.tracker import decode_one
-from cdprhost.link.tuning import (
-    CLOCK_SYNC_S,
-    SLICE_S,
-    START_PAYLOAD,
-    START_WINDOW,
-    STATUS_TIMEOUTS,
-)
+from cdprhost.link.tuning import CLOCK_SYNC_S, SLICE_S, START_PAYLOAD, STATUS_TIMEOUTS
 from firmware_protocol.framing import Kind
 from firmware_protocol.messages import (
+    MINOR_SAFETY,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     Boot,
     Configure,
+    GetCaps,
+    GetStatus,
     Hello,
     Ident,
+    Message,
 )
-from firmware_protocol.segments import SegmentContext
 
 log = logging.getLogger("cdprhost.link.host_link")
 
-if TYPE_CHECKING:
-    from cdprhost.link.host_link import HostLink
-
 
 class SessionSetup:
-    """HostLink's handshake and configuration (PROTOCOL.md section 3)."""
+    """Handshake and configuration of one link (its core)."""
 
-    def handshake(self: HostLink) -> Identity:
+    def __init__(self, core: LinkCore):
+        self.core = core
+        self.configured_rate = 0.0
+        self.start_ticks = 0
+        self.setup = DeviceSetup()
+
+    def handshake(self) -> Identity:
         """HELLO with a fresh nonce until the device answers IDENT; check the protocol version;
-        measure the device clock; configure the watchdog, start threshold and flow reports."""
-        with self._locked():
+        measure the device clock; configure the watchdog, start threshold and flow reports;
+        send the machine set-up to a 2.1 device."""
+        c = self.core
+        with c.locked():
             nonce = int.from_bytes(os.urandom(2), "little") or 1
-            self._ep.reset_session()
-            self._ep.sender.window = min(START_WINDOW, self._max_window)
-            self._last_retx = self._acked_clean = 0
-            self._ctx = SegmentContext()
-            start = self._t.now()
+            c.new_session()
+            start = c.t.now()
             resend_at = start
             rx_bytes = 0
             identity = None
             while identity is None:
-                now = self._t.now()
-                if now - start > self.timeout_s:
-                    raise self._silent_error(rx_bytes, "during the handshake")
+                now = c.t.now()
+                if now - start > c.timeout_s:
+                    raise c.silent_error(rx_bytes, "during the handshake")
                 if now >= resend_at:
-                    self._write([self._urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))])
-                    resend_at = now + max(0.05, self.timeout_s / 8)
-                data = self._read(min(SLICE_S * 5, max(0.0, resend_at - now)))
+                    c.write([c.urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))])
+                    resend_at = now + max(0.05, c.timeout_s / 8)
+                data = c.read(min(SLICE_S * 5, max(0.0, resend_at - now)))
                 rx_bytes += len(data)
-                frames = self._ep.deframer.feed(data)
+                frames = c.ep.deframer.feed(data)
                 for k, fr in enumerate(frames):
                     if fr.kind != Kind.URGENT:
                         continue
                     msg = decode_one(fr.payload)
                     if isinstance(msg, Ident) and msg.nonce == nonce:
                         self._accept_ident(msg)
-                        now = self._t.now()
-                        for inc in self._ep.process(frames[k + 1 :], now):
-                            self._dev.handle(inc, now)
-                        identity = self._identity()
+                        now = c.t.now()
+                        for inc in c.ep.process(frames[k + 1 :], now):
+                            c.dev.handle(inc, now)
+                        identity = c.dev.identity
                         break
                     if isinstance(msg, Boot) and msg.major != PROTOCOL_MAJOR:
                         self._mismatch(msg.major, msg.minor)
+        assert identity is not None
         log.info(
             "%s: session with %s %s (protocol %d.%d, queue %d, clock %d Hz)",
-            self._t.name,
+            c.name,
             identity.firmware_name,
             identity.firmware_version,
             *identity.protocol,
@@ -91,70 +90,91 @@ class SessionSetup:
         )
         self._sync_clock()
         self.configure()
+        self.send_setup()
         return identity
 
-    def _mismatch(self: HostLink, major: int, minor: int) -> None:
+    @property
+    def minor(self) -> int:
+        """The minor version both ends speak (0 before a session)."""
+        identity = self.core.dev.identity
+        return min(identity.protocol[1], PROTOCOL_MINOR) if identity is not None else 0
+
+    def _mismatch(self, major: int, minor: int) -> None:
         raise ProtocolMismatch(
-            f"{self._t.name}: device speaks protocol {major}.{minor}, host speaks {PROTOCOL_MAJOR}.{PROTOCOL_MINOR}; "
-            "update the firmware or the host so the major versions match",
+            f"{self.core.name}: device speaks protocol {major}.{minor}, host speaks "
+            f"{PROTOCOL_MAJOR}.{PROTOCOL_MINOR}; update the firmware or the host so the major "
+            "versions match",
             device_version=(major, minor),
             host_version=(PROTOCOL_MAJOR, PROTOCOL_MINOR),
         )
 
-    def _accept_ident(self: HostLink, msg: Ident) -> None:
+    def _accept_ident(self, msg: Ident) -> None:
+        c = self.core
         if msg.major != PROTOCOL_MAJOR:
             self._mismatch(msg.major, msg.minor)
-        self._max_payload = min(self._max_payload, msg.max_payload)
-        self._payload_limit = min(self._max_payload, START_PAYLOAD)
-        self._ep.sender.window_bytes = msg.rx_window
-        now = self._t.now()
-        self._dev.accept_ident(msg, now)
-        self._items_sent = msg.items_received
-        self._segments_sent = msg.segments_received
-        self._last_rx = now
+        c.max_payload = min(c.max_payload, msg.max_payload)
+        c.payload_limit = min(c.max_payload, START_PAYLOAD)
+        c.ep.sender.window_bytes = msg.rx_window
+        now = c.t.now()
+        c.dev.accept_ident(msg, now)
+        c.items_sent = msg.items_received
+        c.segments_sent = msg.segments_received
+        c.last_rx = now
 
-    def _sync_clock(self: HostLink) -> None:
-        """Status requests until the device clock's rate is measured (a few tens of ms)."""
-        start = self._t.now()
-        while not self._dev.clock.known:
-            if self._t.now() - start > self.timeout_s:
-                raise self._silent_error(0, "while reading the device clock")
-            count = self.ask_status()
-            self._wait(
-                lambda c=count: self._dev.status_count > c,
-                STATUS_TIMEOUTS * self.timeout_s,
-                "a status report",
-            )
-            if not self._dev.clock.known:
-                self.poll(CLOCK_SYNC_S / 3)
+    def _ask(self, *msgs: Message) -> int:
+        """Send immediate commands now; returns the status count before them."""
+        c = self.core
+        with c.locked():
+            count = c.dev.status_count
+            for msg in msgs:
+                c.send_immediate(msg)
+            c.write(c.ep.flush(c.t.now()))
+        return count
 
-    def configure(self: HostLink) -> None:
+    def _sync_clock(self) -> None:
+        """Status requests until the device clock's rate is measured (a few tens of ms); the
+        first goes with GET_CAPS to a 2.1 device (its CAPS arrives before that STATUS)."""
+        c = self.core
+        start = c.t.now()
+        first = True
+        while not c.dev.clock.known:
+            if c.t.now() - start > c.timeout_s:
+                raise c.silent_error(0, "while reading the device clock")
+            caps = (GetCaps(),) if first and self.minor >= MINOR_SAFETY else ()
+            first = False
+            count = self._ask(*caps, GetStatus())
+
+            def answered(n: int = count) -> bool:
+                return c.dev.status_count > n
+
+            c.wait(answered, STATUS_TIMEOUTS * c.timeout_s, "a status report")
+            if not c.dev.clock.known:
+                end = c.t.now() + CLOCK_SYNC_S / 3
+
+                def later(e: float = end) -> bool:
+                    return c.t.now() >= e
+
+                c.wait(later, None, "clock samples")
+
+    def configure(self) -> None:
         """Send the watchdog, the start threshold (most of the high watermark) and the flow
         interval (half the watermarks' gap), in device ticks at the measured clock rate."""
-        rate = self.clock_rate
-        marks = self.watermarks
+        c = self.core
+        rate = c.clock_rate()
+        marks = c.watermarks
         cap = 0xFFFF_FFFF
-        start = min(cap, self._flow.start_ticks(rate))
+        start = min(cap, c.flow.start_ticks(rate))
         flow = min(cap, max(1, round((marks.high_s - marks.low_s) * rate / 2)))
-        self._configured_rate = rate
-        self._start_ticks = start
-        self.send(Configure(self.watchdog_ms, start, flow))
-        log.debug("%s: configured start %d ticks, flow %d ticks", self._t.name, start, flow)
+        self.configured_rate = rate
+        self.start_ticks = start
+        self._ask(Configure(c.watchdog_ms, start, flow))
+        log.debug("%s: configured start %d ticks, flow %d ticks", c.name, start, flow)
 
-    def _silent_error(self: HostLink, rx_bytes: int, when: str) -> DeviceSilent:
-        name = self._t.name
-        p = self._dev.progress
-        when = f" {when}" if when else ""
-        if rx_bytes and self._ep.deframer.frames == 0:
-            text = (
-                f"{name}: {rx_bytes} bytes but no valid frame{when} within {self.timeout_s:g} s; "
-                "wrong baud rate, or not a cdpr device (or one speaking protocol 1)?"
-            )
-        else:
-            text = (
-                f"{name}: no answer from the device{when} within {self.timeout_s:g} s "
-                f"(last reported executed segment {p.segments_done}); is it powered and connected?"
-            )
-        return DeviceSilent(text, last_segment=p.segments_done, last_item=p.items_done)
-
-    # ------------------------------------------------------------------ pumping
+    def send_setup(self) -> None:
+        """The machine's travel limits and heater gains, to a 2.1 device (else nothing)."""
+        if self.minor < MINOR_SAFETY:
+            return
+        msgs = self.setup.messages()
+        if msgs:
+            self._ask(*msgs)
+            log.debug("%s: machine set-up sent (%d messages)", self.core.name, len(msgs))

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from dataclasses import replace
 
 from cdprhost.link.clock_sync import ClockSync
 from cdprhost.link.errors import DeviceFault, DeviceReset, LinkError
 from cdprhost.link.events import (
+    DeviceCaps,
+    DeviceHealth,
     DeviceProgress,
     DeviceStatus,
     Identity,
@@ -25,11 +28,13 @@ from firmware_protocol.endpoint import Incoming
 from firmware_protocol.message_codec import decode_messages
 from firmware_protocol.messages import (
     Boot,
+    Caps,
     EstopAck,
     Event,
     EventCode,
     Flag,
     Flow,
+    Health,
     Ident,
     Message,
     MessageError,
@@ -66,6 +71,10 @@ class DeviceTracker:
         self.estop_acked = False
         self.cleared = False
         self.clearing = False  # errors reported before CLEAR_FAULT reached the device are stale
+        self.refused: int = 0  # the latched fault of a CLEAR_FAULT the device refused
+        self.caps: DeviceCaps | None = None
+        self.health: DeviceHealth | None = None
+        self.tuned: dict[int, tuple[int, ...]] = {}  # heater -> gains of its last AUTOTUNE
 
     def accept_ident(self, msg: Ident, now: float) -> None:
         self.identity = Identity.from_message(msg)
@@ -126,6 +135,12 @@ class DeviceTracker:
                 # no clock sample: a status may be a retransmission (an old clock, late)
                 self.status = DeviceStatus.from_message(msg, self.identity, now)
                 self.status_count += 1
+            elif isinstance(msg, Health):  # follows its STATUS in the same payload
+                self.health = DeviceHealth.from_message(msg)
+                if self.status is not None:
+                    self.status = replace(self.status, health=self.health)
+            elif isinstance(msg, Caps):
+                self.caps = DeviceCaps.from_message(msg)
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:
@@ -144,6 +159,10 @@ class DeviceTracker:
                     log.info("%s: device fault cleared", self.name)
                     self.cleared = True
                     self.clearing = False
+                elif msg.code == EventCode.CLEAR_REFUSED and msg.values:
+                    self.refused = msg.values[0]
+                elif msg.code == EventCode.AUTOTUNE_DONE and len(msg.values) == 4:
+                    self.tuned[msg.values[0]] = tuple(msg.values[1:])
             elif isinstance(msg, Ident):
                 self.identity = Identity.from_message(msg)
 

@@ -1,4 +1,5 @@
-"""The host link's tuning: frame and window sizes, clock sync, retransmission timing."""
+"""The host link's tuning: frame and window sizes, clock sync, retransmission timing,
+the heater lease."""
 
 from __future__ import annotations
 
@@ -10,16 +11,18 @@ START_WINDOW = 8
 MIN_WINDOW = 8
 CLOCK_SYNC_S = 0.06  # clock samples this far apart before streaming
 STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a lossy line
-# The retransmission timeout never goes below this. The estimator (SRTT + 4 RTTVAR, wire
-# time included) sets it above the measured round trip; the floor only matters on a fast
-# line (a pty, USB) where the round trip is ~1 ms: there, on a noisy line, most timeouts
-# are lost ACKs and each one stalls the stream for the whole timeout. At 1 % corrupt +
-# 1 % drop a 10 ms floor spent most of the time waiting (the first layer underran at 20x,
-# 0 of 6 trials); 3 ms printed it (3 of 4). A spurious timeout costs one window resent.
-RTO_FLOOR_S = 0.003
-# No exponential backoff on the host: a timeout is a lost frame or ACK (noise), and a
-# longer wait only stretches the stall; a slow device still raises the RTO through the
-# estimator (each ACK of a frame sent once is a sample). With 4x backoff the first layer
-# at 1 %+1 % and 10x underran 3 of 3 times (strings of lost ACKs: each try fails ~80 %
-# at 2 % per byte); without, it printed 3 of 3.
-RTO_MAX_BACKOFF = 1
+# The retransmission timeout never goes below this, and doubles on consecutive timeouts
+# (back to 1x on the next acknowledgement), as Klipper's host does: a device whose main
+# loop is busy, or whose receive ring is full, must not be stormed by go-back-N
+# resends on a real UART (PROTOCOL.md section 2). The estimator (SRTT + 4 RTTVAR, wire
+# time included) raises it above the measured round trip.
+RTO_FLOOR_S = 0.025
+RTO_MAX_BACKOFF = 8
+# When acknowledgements prove the path faster than the configured baud (a pty, native
+# USB: no slow UART behind it), a fast noisy path loses ACKs to noise and each timeout is
+# a stall of the stream: 3 ms and no backoff (the 1 %+1 % pty benchmark underran at 5x
+# with the UART timing; it completes with this).
+RTO_FAST = (0.003, 1)
+# Heater lease of a 2.1 device (PROTOCOL.md 3.3): renewed every quarter of it by the calls
+# of the code that drives the machine, never by the keep-alive thread.
+HEATER_LEASE_S = 10.0

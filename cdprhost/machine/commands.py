@@ -65,6 +65,8 @@ def device_messages(
             if wait and target > 0:
                 out.append(m.WaitHeater(heater))
             return out
+        case g.PidAutotune(heater=heater_name, target_c=target, cycles=cycles):
+            return [m.Autotune(HEATER_IDS[heater_name], int(round(target * 10)), cycles)]
         case g.Fan(speed=speed, index=index):
             return [m.SetFan(index, int(round(max(0.0, min(1.0, speed)) * 255)))]
         case g.DwellCommand(seconds=seconds):

@@ -13,6 +13,7 @@ import numpy as np
 
 from cdprhost.errors import CdprError
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.link.device_setup import setup_from_profile
 from cdprhost.link.errors import LinkError
 from cdprhost.link.events import DeviceStatus
 from cdprhost.link.host_link import HostLink
@@ -62,6 +63,7 @@ class Machine:
         self.model = model or MachineModel.from_profile(profile)
         self.feed_mm_s = float(feed_mm_s)
         self.settle_s = float(settle_s)
+        link.set_machine(setup_from_profile(profile))  # travel limits, PID gains (2.1)
 
     # ------------------------------------------------------------------ state
     @property

@@ -27,6 +27,7 @@ from cdprhost.gcode.items import (
     HomeCommand,
     MotorsOff,
     MoveChunk,
+    PidAutotune,
     ProgramItem,
     SetMotionLimits,
     SetTemperature,
@@ -45,7 +46,14 @@ from cdprhost.profile.models import MachineProfile
 def flushes_motion(item: ProgramItem) -> bool:
     """True for commands that must wait until the machine is at rest."""
     match item:
-        case DwellCommand() | HomeCommand() | MotorsOff() | WaitMoves() | FilamentChange():
+        case (
+            DwellCommand()
+            | HomeCommand()
+            | MotorsOff()
+            | WaitMoves()
+            | FilamentChange()
+            | PidAutotune()
+        ):
             return True
         case SetTemperature(wait=wait):
             return wait

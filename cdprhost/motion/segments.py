@@ -16,6 +16,7 @@ of its length (r = 1/2: constant speed; 0: starts at rest; 1: ends at rest).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -27,6 +28,9 @@ from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.trapezoid import PlannedMoves
 
 DEFAULT_CLOCK_HZ = 1_000_000
+# the shortest segment planned: a 2.1 device announces the shortest it takes (CAPS; the
+# AVR firmware 10 ticks of 10 us), shorter ones are merged into the next
+MIN_SEGMENT_S = 100e-6
 #: phases shorter than this (mm) are merged into a neighbour instead of making a segment
 MIN_PHASE_MM = 1e-4
 
@@ -242,8 +246,9 @@ def segment_moves_ends(
         t_end,
     )
     move_end = ends + 1
-    if n and ticks.min() < 1:
-        batch, move_end = _absorb_empty(batch, state.steps, ends)
+    min_ticks = max(1, math.ceil(MIN_SEGMENT_S * clock_hz - 1e-9))
+    if n and ticks.min() < min_ticks:
+        batch, move_end = _absorb_empty(batch, state.steps, ends, min_ticks)
     if n:
         state = replace(
             state,
@@ -255,18 +260,19 @@ def segment_moves_ends(
 
 
 def _absorb_empty(
-    batch: PlannedSegments, prev_steps: np.ndarray, ends: np.ndarray
+    batch: PlannedSegments, prev_steps: np.ndarray, ends: np.ndarray, min_ticks: int = 1
 ) -> tuple[PlannedSegments, np.ndarray]:
-    """Segments shorter than one tick merged into the next one (the device needs >= 1 tick).
+    """Segments shorter than ``min_ticks`` merged into the next one (a device takes no
+    shorter segment: PROTOCOL.md, CAPS).
 
-    Rounded absolute times make such a segment's time part of the next one already;
-    the absolute steps make its motion part of the next one once it is dropped. A
-    last segment under one tick is stretched to one tick.
+    The next one takes its time (the ticks are differences of rounded absolute times)
+    and, through the absolute steps, its motion. A last segment under ``min_ticks`` is
+    stretched to it.
     """
-    keep = batch.ticks >= 1
+    keep = batch.ticks >= min_ticks
     keep[-1] = True
-    ticks = batch.ticks[keep].copy()
-    ticks[-1] = max(int(ticks[-1]), 1)
+    ticks = np.diff(np.cumsum(batch.ticks)[keep], prepend=0)  # a dropped one's time included
+    ticks[-1] = max(int(ticks[-1]), min_ticks)
     steps = batch.steps_abs[keep]
     delta = np.diff(steps, axis=0, prepend=prev_steps[None, :])
     kept = PlannedSegments(

@@ -191,9 +191,28 @@ class PrintGcode(_Strict):
         )
 
 
+class PidGains(_Strict):
+    """Heater PID gains in Marlin's ``M301`` units (output 0..255, degrees C, seconds); found
+    by ``M303`` (PID autotune) and sent to the device at every connect."""
+
+    kp: NonNegative
+    ki: NonNegative
+    kd: NonNegative
+
+    def wire(self) -> tuple[int, int, int]:
+        """Thousandths, as ``SET_PID`` carries them."""
+        return (round(self.kp * 1000), round(self.ki * 1000), round(self.kd * 1000))
+
+
 class Heaters(_Strict):
     hotend_max_c: Positive = 285.0
     bed_max_c: Positive = 120.0
+    hotend_pid: PidGains | None = Field(
+        default=None, description="hotend PID gains (M303 E0 finds them; none: the device's own)"
+    )
+    bed_pid: PidGains | None = Field(
+        default=None, description="bed PID gains (M303 E-1 finds them; none: the device's own)"
+    )
     on_failure: Literal["off", "keep"] = Field(
         default="off", description="heater policy when a print fails or the link is lost"
     )
@@ -274,3 +293,11 @@ class MachineProfile(_Strict):
         data["geometry"] = geometry.model_dump()
         data.update(updates)
         return MachineProfile.model_validate(data)
+
+
+def with_pid(
+    profile: MachineProfile, heater: Literal["hotend", "bed"], gains: PidGains
+) -> MachineProfile:
+    """A copy with ``heater``'s PID gains (what ``M303`` found)."""
+    heaters = profile.heaters.model_copy(update={f"{heater}_pid": gains})
+    return profile.model_copy(update={"heaters": heaters})

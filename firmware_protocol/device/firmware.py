@@ -481,9 +481,9 @@ class SimDevice:
         seg = mc.segments_received + 1 if isinstance(msg, Segment) else 0
         cfg = self.config
         item = item_of(msg, n, T, seg, cfg.clock_hz, HEATERS, cfg.fans, cfg.min_segment_ticks)
+        mc.segments_received += seg > 0  # a refused segment keeps its number too
         if isinstance(item, BadValue):
             return self._bad_value(n, msg.OPCODE, item.value, T)
-        mc.segments_received += seg > 0
         return mc.enqueue(item, T)
 
     def close(self) -> None:

@@ -55,6 +55,12 @@ class VirtualBench:
         self._host_rx.clear()
         return out
 
+    def wait_readable(self, timeout: float) -> bool:
+        """Run the device until bytes reach the host (True) or ``timeout`` s pass (False);
+        the bytes stay for ``read``."""
+        self.run_until(self.t + max(0.0, timeout), stop_on_data=True)
+        return bool(self._host_rx)
+
     def close(self) -> None:
         self.closed = True
 

@@ -113,11 +113,11 @@ def test_a_report_acknowledging_frames_does_not_grant_credit():
     dev.inbox += encode_frame(Kind.DATA, dev.seq, after, encode_message(M.Event(2, 0, (0, 2000))))
     dev.t += 0.001
     link.poll()
-    assert link._credit() == 3  # 10 free before the frame, minus its 7 items
+    assert link._core.credit() == 3  # 10 free before the frame, minus its 7 items
     dev.inbox += encode_frame(Kind.ACK, 0, after, encode_message(M.Flow(0x11, 3, 0, 0)))
     link.poll()
-    assert link._credit() == 3
+    assert link._core.credit() == 3
     # six executed
     dev.inbox += encode_frame(Kind.ACK, 0, after, encode_message(M.Flow(0x11, 9, 6, 6)))
     link.poll()
-    assert link._credit() == 9
+    assert link._core.credit() == 9

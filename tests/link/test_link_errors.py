@@ -22,6 +22,7 @@ from cdprhost.link import (
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.firmware import SimDevice
 from firmware_protocol.device.pty_server import PtyServer
+from firmware_protocol.messages import PROTOCOL_MINOR
 from firmware_protocol.streams import demo_stream
 
 needs_pty = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
@@ -99,9 +100,10 @@ def test_port_vanishing_mid_session():
 
 def test_protocol_major_mismatch(monkeypatch):
     monkeypatch.setattr(firmware, "PROTOCOL_MAJOR", 3)
-    with pytest.raises(ProtocolMismatch, match="protocol 3.0") as exc:
+    with pytest.raises(ProtocolMismatch, match=f"protocol 3.{PROTOCOL_MINOR}") as exc:
         open_embedded()
-    assert exc.value.device_version == (3, 0) and exc.value.host_version == (2, 0)
+    assert exc.value.device_version == (3, PROTOCOL_MINOR)
+    assert exc.value.host_version == (2, PROTOCOL_MINOR)
 
 
 def test_sim_device_cli_rejects_bad_options(capsys):

@@ -65,7 +65,57 @@ BAD_PAYLOADS = [
     (encode_message(M.SetHeater(1, 1300)), ErrorCode.HEATER_RANGE),  # bed 130 C over 120
     (encode_message(M.Hello(7)), ErrorCode.BAD_COMMAND),  # URGENT-only message in DATA
     (encode_message(M.Flow(0, 0, 0, 0)), ErrorCode.BAD_COMMAND),  # a device report
+    # protocol 2.1 commands out of range
+    (b"\x08\x03\x00\x02", ErrorCode.BAD_COMMAND),  # SET_LIMITS module 3
+    (encode_message(M.SetLimits(1, 10, -10)), ErrorCode.BAD_VALUE),  # lo > hi
+    (b"\x0a\x32", ErrorCode.BAD_COMMAND),  # HEATER_LEASE 50 ms, under 100
+    (b"\x17\x00\xb4\x10\x02", ErrorCode.BAD_COMMAND),  # AUTOTUNE 2 cycles, under 3
+    (encode_message(M.Health(0, 0, 0, 0)), ErrorCode.BAD_COMMAND),  # a device report
+    (b"\xe2\x10", ErrorCode.BAD_COMMAND),  # a segment with a reserved flag bit
 ]
+
+
+def _corrupt(frame: bytes, at: int) -> bytes:
+    b = bytearray(frame)
+    b[at] ^= 0x5A
+    return bytes(b)
+
+
+# Frames carrying a DWELL whose framing is damaged, built for the device's expected
+# sequence number ``seq``: each must be dropped (or answered with a NAK), never executed,
+# and the device must answer a clean frame after it.
+MALFORMED_FRAMES = {
+    "bad payload crc": lambda f: _corrupt(f, len(f) - 3),
+    "bad header crc": lambda f: _corrupt(f, 5),
+    "bad length": lambda f: _corrupt(f, 1),
+    "length over 248": lambda f: f[:1] + bytes((249,)) + f[2:],
+    "unknown kind": lambda f: f[:2] + bytes((9,)) + f[3:],
+    "bad end byte": lambda f: f[:-1] + b"\x00",
+    "a byte dropped": lambda f: f[:7] + f[8:],
+    "a byte inserted": lambda f: f[:7] + b"\x00" + f[7:],
+    "truncated": lambda f: f[: len(f) // 2],
+    "sequence ahead": lambda f: f,  # built with seq + 5 by the caller
+    "sync only": lambda f: b"\xa5" * 16,
+}
+
+
+def malformed_frame(name: str, seq: int, ack: int) -> bytes:
+    """The named malformed frame (its payload a DWELL of 10 ticks)."""
+    payload = encode_message(M.Dwell(10))
+    if name == "sequence ahead":
+        seq = (seq + 5) % 256
+    return MALFORMED_FRAMES[name](encode_frame(Kind.DATA, seq, ack, payload))
+
+
+@pytest.mark.parametrize("name", sorted(MALFORMED_FRAMES))
+def test_malformed_frames_are_never_executed(name):
+    s = Session()
+    s.step(malformed_frame(name, s.seq, s.expected), dt=0.05)
+    s.step(dt=0.05)
+    assert s.dev.machine.items_received == 0 and not s.errors()
+    s.send(encode_message(M.GetStatus()))
+    s.step(dt=0.05)
+    assert [m for m in s.reports if isinstance(m, M.Status)]
 
 
 @pytest.mark.parametrize("payload, code", BAD_PAYLOADS)

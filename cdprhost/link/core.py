@@ -1,0 +1,278 @@
+"""The part of the host link that every other part uses: the transport, the endpoint,
+what the host knows of the device, the numbering of what was sent, and pumping.
+
+:class:`LinkCore` is thread-safe through one re-entrant lock (:meth:`locked`). A pump
+slice reads what has already arrived *before* it writes retransmissions that fell due,
+so an acknowledgement that waited in the port's buffer (a keep-alive thread pumps
+rarely) never looks lost. The session set-up (:mod:`.session_setup`), the segment
+stream (:mod:`.segment_feed`) and :class:`~cdprhost.link.host_link.HostLink` hold the
+one core of a link.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Protocol
+
+from cdprhost.link.errors import DeviceSilent, LinkTimeout
+from cdprhost.link.flow import TimeFlow, Watermarks
+from cdprhost.link.tracker import DeviceTracker
+from cdprhost.link.tuning import (
+    MAX_WINDOW,
+    MIN_PAYLOAD,
+    MIN_WINDOW,
+    RTO_FAST,
+    RTO_FLOOR_S,
+    RTO_MAX_BACKOFF,
+    SLICE_S,
+    START_WINDOW,
+)
+from firmware_protocol.endpoint import Endpoint
+from firmware_protocol.framing import MAX_PAYLOAD, Kind, encode_frame
+from firmware_protocol.message_codec import encode_message
+from firmware_protocol.messages import GetStatus, Message
+from firmware_protocol.segments import SegmentContext
+
+log = logging.getLogger("cdprhost.link.host_link")
+
+
+class Transport(Protocol):
+    name: str
+
+    def now(self) -> float: ...
+    def write(self, data: bytes) -> None: ...
+    def read(self, timeout: float) -> bytes: ...
+    def close(self) -> None: ...
+
+
+class LinkCore:
+    """Shared state of one link and its pump (PROTOCOL.md sections 2 and 6)."""
+
+    def __init__(
+        self,
+        transport: Transport,
+        *,
+        timeout_s: float,
+        window: int = MAX_WINDOW,
+        max_payload: int = MAX_PAYLOAD,
+        baud: int | None = 250_000,
+        watermarks: Watermarks | None = None,
+        watchdog_ms: int,
+    ):
+        self.t = transport
+        self.name: str = getattr(transport, "name", "port")
+        self.timeout_s = float(timeout_s)
+        self.watchdog_ms = watchdog_ms
+        self.watermarks = watermarks or Watermarks()
+        self._lock = threading.RLock()
+        self._waiters = 0
+        self.max_window = max(1, min(MAX_WINDOW, window))
+        self.ep = Endpoint(
+            window=min(START_WINDOW, self.max_window),
+            rto_initial=min(0.05, self.timeout_s / 4),
+            rto_floor=RTO_FLOOR_S,
+            rto_max_backoff=RTO_MAX_BACKOFF,
+            rto_ceiling=min(0.25, self.timeout_s / 4),
+            byte_time=10.0 / baud if baud else 0.0,
+            rto_fast=RTO_FAST,
+        )
+        self.ctx = SegmentContext()
+        self.max_payload: int = max_payload
+        self.payload_limit = max_payload
+        self.dev = DeviceTracker(self.name)
+        self.flow = TimeFlow(self.watermarks)
+        self.items_sent = 0
+        self.segments_sent = 0
+        now = transport.now()
+        self.last_rx = now
+        self.last_tx = now
+        self.last_pump = now
+        self._waiting_since: float | None = None
+        self.garbage_since_valid = 0
+        self._last_retx = 0
+        self._acked_clean = 0
+        self.pumping = False  # a pump slice runs (the keep-alive thread then leaves it be)
+
+    # ------------------------------------------------------------------ locking
+
+    @contextmanager
+    def locked(self) -> Iterator[None]:
+        self._waiters += 1
+        self._lock.acquire()
+        self._waiters -= 1
+        try:
+            yield
+        finally:
+            self._lock.release()
+
+    def let_others_in(self) -> None:
+        """Between pump slices, let a thread that waits for the lock have its turn."""
+        if self._waiters:
+            time.sleep(0.0005)
+
+    # ------------------------------------------------------------------ session state
+
+    def new_session(self) -> None:
+        """Fresh sequence numbers, coder context and adaptation (a handshake)."""
+        self.ep.reset_session()
+        self.ep.sender.window = min(START_WINDOW, self.max_window)
+        self._last_retx = self._acked_clean = 0
+        self.ctx = SegmentContext()
+
+    def credit(self) -> int:
+        """Queue slots the host may still fill (PROTOCOL.md section 6)."""
+        flow = self.dev.flow
+        return flow.free - self.ep.sender.items_after(flow.ack)
+
+    def clock_rate(self) -> float:
+        return self.dev.clock.rate()
+
+    # ------------------------------------------------------------------ I/O
+
+    def urgent_frame(self, msg: Message) -> bytes:
+        return encode_frame(Kind.URGENT, 0, self.ep.receiver.expected, encode_message(msg))
+
+    def write(self, frames: list[bytes]) -> None:
+        for f in frames:  # one write per frame: a wire's faults (duplication) act per frame
+            self.t.write(f)
+        if frames:
+            self.last_tx = self.t.now()
+
+    def read(self, timeout: float) -> bytes:
+        return self.t.read(timeout)
+
+    def keepalive_interval(self) -> float:
+        return min(self.watchdog_ms / 4000.0, self.timeout_s / 4)
+
+    def _keepalive_due(self, now: float) -> bool:
+        interval = self.keepalive_interval()
+        return now - self.last_tx > interval or now - self.last_rx > self.timeout_s / 4
+
+    def _take(self, data: bytes, now: float) -> None:
+        """Hand received bytes to the endpoint and the tracker."""
+        ep = self.ep
+        before = ep.deframer.frames
+        for inc in ep.feed(data, now):
+            self.dev.handle(inc, now)
+        if ep.deframer.frames > before:
+            self.last_rx = now
+            self.garbage_since_valid = 0
+            self._waiting_since = None if ep.sender.idle() else now
+        else:
+            self.garbage_since_valid += len(data)
+
+    def pump(self, max_wait: float = SLICE_S) -> None:
+        """One slice: take what already arrived, write, wait for bytes (at most
+        ``max_wait``), handle them, check liveness. Raises the tracker's failure."""
+        if self.dev.failure is not None:
+            raise self.dev.failure
+        self.pumping = True
+        try:
+            self._pump(max_wait)
+        finally:
+            self.pumping = False
+            self.last_pump = self.t.now()
+
+    def _pump(self, max_wait: float) -> None:
+        ep = self.ep
+        now = self.t.now()
+        self.last_pump = now
+        early = self.read(0.0)  # acknowledgements first: a due retransmission may be moot
+        if early:
+            self._take(early, now)
+        if not ep.sender.idle() and self._waiting_since is None:
+            self._waiting_since = now
+        self.write(ep.flush(now))
+        deadline = ep.next_deadline()
+        wait = max_wait if deadline is None else min(max_wait, max(0.0, deadline - now))
+        data = self.read(wait)
+        now = self.t.now()
+        if data:
+            self._take(data, now)
+        self._adapt()
+        if self._keepalive_due(now) and ep.sender.idle():
+            ep.send(encode_message(GetStatus()))
+            if self._waiting_since is None:
+                self._waiting_since = now
+        self.write(ep.flush(now))
+        if self.dev.failure is not None:
+            raise self.dev.failure
+        if (
+            self._waiting_since is not None
+            and now - self._waiting_since > self.timeout_s
+            and now - self.last_rx > self.timeout_s
+        ):
+            log.warning("%s: device silent for %.1f s", self.name, now - self.last_rx)
+            self.dev.failure = self.silent_error(self.garbage_since_valid, "")
+            raise self.dev.failure
+
+    def _adapt(self) -> None:
+        """On a retransmission: shorter frames, half the window; every frame acknowledged
+        without one grows them back (2 bytes, 1 frame): a noisy line settles on short frames
+        that get through, a clean one on full ones. A frame once sent keeps its size (its
+        retransmissions are byte-identical), so frames start small and grow."""
+        ep = self.ep
+        retx = ep.retransmits
+        sender = ep.sender
+        clean, self._acked_clean = sender.acked_clean - self._acked_clean, sender.acked_clean
+        if retx > self._last_retx:
+            self.payload_limit = max(MIN_PAYLOAD, int(self.payload_limit * 0.7))
+            sender.window = max(MIN_WINDOW, sender.window // 2)
+            log.debug(
+                "%s: %d retransmissions; payload %d, window %d",
+                self.name,
+                retx - self._last_retx,
+                self.payload_limit,
+                sender.window,
+            )
+        elif clean:
+            self.payload_limit = min(self.max_payload, self.payload_limit + 2 * clean)
+            sender.window = min(self.max_window, sender.window + clean)
+        self._last_retx = retx
+
+    def wait(
+        self,
+        done: Callable[[], bool],
+        timeout: float | None,
+        what: str,
+        pump: Callable[[], None] | None = None,
+    ) -> None:
+        """Pump (with ``pump``, else :meth:`pump`) until ``done()`` (LinkTimeout after
+        ``timeout`` s)."""
+        pump = pump or self.pump
+        start = self.t.now()
+        while True:
+            self.let_others_in()
+            with self.locked():
+                if done():
+                    return
+                if timeout is not None and self.t.now() - start > timeout:
+                    raise LinkTimeout(
+                        f"{self.name}: {what} did not happen within {timeout:g} s "
+                        f"(executed {self.dev.progress.items_done} of {self.items_sent} items)"
+                    )
+                pump()
+
+    def send_immediate(self, msg: Message) -> None:
+        """Queue one immediate command for the next flush (no credit needed)."""
+        assert not msg.QUEUED
+        self.ep.send(encode_message(msg))
+
+    def silent_error(self, rx_bytes: int, when: str) -> DeviceSilent:
+        p = self.dev.progress
+        when = f" {when}" if when else ""
+        if rx_bytes and self.ep.deframer.frames == 0:
+            text = (
+                f"{self.name}: {rx_bytes} bytes but no valid frame{when} within {self.timeout_s:g} s; "
+                "wrong baud rate, or not a cdpr device (or one speaking protocol 1)?"
+            )
+        else:
+            text = (
+                f"{self.name}: no answer from the device{when} within {self.timeout_s:g} s "
+                f"(last reported executed segment {p.segments_done}); is it powered and connected?"
+            )
+        return DeviceSilent(text, last_segment=p.segments_done, last_item=p.items_done)
