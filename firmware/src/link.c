@@ -23,12 +23,16 @@ void link_attach(const struct link_upper *u)
 struct slot {
     uint8_t len;
     uint8_t retransmitted;
+    uint8_t important; /* an error report */
     uint32_t sent_at;
     uint8_t data[REPORT_MAX];
 };
 static struct slot slots[REPORT_SLOTS];
 static uint8_t first;       /* index of the oldest slot (outstanding first, then backlog) */
 static uint8_t n_out, n_back;
+/* error reports not sent yet: a FLOW (whose flags and counts show the fault) waits for
+ * them, so the host never sees the effect of a fault before its cause */
+static uint8_t errors_unsent;
 static uint8_t base_seq, next_seq;
 static uint8_t expected;
 static uint8_t ack_due, nak_due, resend;
@@ -52,7 +56,7 @@ static uint32_t rto(void)
 
 void link_reset_session(void)
 {
-    first = n_out = n_back = 0;
+    first = n_out = n_back = errors_unsent = 0;
     base_seq = next_seq = 0;
     expected = 0;
     ack_due = nak_due = resend = 0;
@@ -94,11 +98,14 @@ uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important)
         if (!n_back)
             return 0;
         n_back--;
+        errors_unsent -= slots[(first + n_out + n_back) % REPORT_SLOTS].important;
     }
     struct slot *s = &slots[(first + n_out + n_back) % REPORT_SLOTS];
     memcpy(s->data, payload, len);
     s->len = len;
     s->retransmitted = 0;
+    s->important = important ? 1 : 0;
+    errors_unsent += s->important;
     n_back++;
     return 1;
 }
@@ -208,6 +215,8 @@ static uint8_t send_ack(uint32_t now)
     uint8_t flow[FLOW_MAX];
     if (!(nak_due || ack_due))
         return 1;
+    if (errors_unsent && !nak_due)
+        return 0; /* after the error reports (link_poll sends them as the window opens) */
     if (uart_tx_free() < FRAME_SIZE(sizeof flow))
         return 0;
     uint8_t n = upper->flow(flow);
@@ -259,6 +268,7 @@ void link_poll(uint32_t now)
         next_seq++;
         n_out++;
         n_back--;
+        errors_unsent -= s->important;
     }
     send_ack(now);
 }
