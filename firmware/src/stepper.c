@@ -449,6 +449,9 @@ static void __attribute__((noinline)) dispatch(void)
             st.current = IT_DWELL;
             return;
         case IT_HOME:
+            if (budget != 3)
+                return; /* first in its tick: the homing computation must not overrun the
+                         * tick (its start edge would be lost) */
             st.at_rest = 1;
             start_homing(it);
             st.current = IT_HOME;
