@@ -1,30 +1,28 @@
-"""Figures of the AVR firmware: flash/RAM, ISR cycles, step timing, simulator speed, parse rate.
+"""Figures of the AVR firmware: flash/RAM/stack, ISR load, step timing, streaming, watchdog.
 
     python bench/firmware.py [--quick]
 
 Builds the firmware and the simavr harness, reads `avr-size`, then streams through the
-harness (a real HostLink over the harness's pty at 250000 baud) and reports what the
-harness measured:
+harness (a real HostLink over the harness's pty at 250000 baud, in real time) and reports
+what the harness measured:
 
-- ISR worst case: cycle-exact profile of every interrupt (entry to its RETI) over a
-  smooth three-module print stream (the demo stream).
-- step timing: for step rates of 10k..60k steps/s on all four axes at once, the spread of
-  every rising step edge against the firmware's own schedule (phase k of a tick is due a
-  fixed time after the tick's compare match); the highest rate whose spread stays within
-  5 us with no pulse lost is the figure.
-- simulator speed: simulated over wall seconds for the demo stream with the harness
-  unpaced (speed-up 100), and its baseline in the same run: the same stream on the Python
-  device model at speed-up 100 (device seconds over wall seconds).
-- streaming / parse rate: segments of ever shorter duration (5 ms .. 2 ms) streamed by
-  the real host link at 250000 baud in real time to the firmware and, as the baseline,
-  to the Python model; the highest segment rate each executes with its record exact (no
-  underrun). Both have 128 slots, so the host link bounds both alike; the line's own
-  limit (payload bytes per segment plus framing) is shown beside it.
-- max_step_rate_exact_all_axes: the highest swept rate, on all four axes at once, whose
-  record is exact (above it the tick computation overruns and steps go missing).
+- ISR worst case and mean: cycle-exact profile of every step interrupt (entry to its RETI)
+  over a smooth three-module print stream (the demo stream); the stack's high-water mark
+  (the firmware paints the gap below the stack at boot).
+- step timing: constant rates of 10k..40k steps/s (the advertised rate) on all four axes
+  at once; every rising step edge against the step's exact time on its segment's profile
+  (PROTOCOL.md 5.1), worst and 99th percentile; the step interrupt's load (its cycles over
+  the motion's cycles); the record exact, no pulse lost or late.
+- streaming: segments of 2 ms down to 0.5 ms (500..2000 segments/s, a few seconds of
+  device time each) at 1x, on a clean line and with `--faults corrupt=0.001,drop=0.001`:
+  record exact or not, the host's retransmissions, the longest main-loop turn; the line's
+  own limit beside it.
+- heaters off after the host's silence, in each device state (idle heating, moving,
+  faulted after an UNDERRUN, waiting for a heater): the time from the host's last byte to
+  the heater pin going low, minus the watchdog time (500 ms).
 
-Simulated-time speed depends on the machine's load; the other figures are in simulated
-(device) time and do not.
+Real-time runs depend on the machine's load (simavr must keep up with 1x); the step
+timing and ISR figures are in simulated time and do not.
 """
 
 from __future__ import annotations
@@ -46,13 +44,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cdprhost.link import LinkError, open_link
 from cdprhost.sim import avr_device
-from firmware_protocol.framing import MAX_PAYLOAD, OVERHEAD
+from firmware_protocol.framing import OVERHEAD
 from firmware_protocol.segments import (
     RAMP_CONSTANT,
     RAMP_TO_REST,
     SegmentBatch,
     SegmentContext,
     encode_segments,
+    ramp_share,
 )
 from firmware_protocol.streams import demo_stream, expected_record
 
@@ -61,22 +60,34 @@ BAUD = 250_000
 
 
 def _stream(
-    kind: str, batch: SegmentBatch, *, speedup: float = 1.0, profile: bool = False
+    kind: str,
+    batch: SegmentBatch,
+    *,
+    speedup: float = 1.0,
+    profile: bool = False,
+    faults: str | None = None,
+    step_log: Path | None = None,
 ) -> tuple[dict[str, Any], list[dict[str, Any]], bool, float]:
-    """Stream ``batch`` to a ``sim-device --firmware kind``: (harness stats, record, ok, wall)."""
+    """Stream ``batch`` to a ``sim-device --firmware kind``: (harness stats, record, ok, wall).
+    The stats gain the host's ``host_retransmits`` and ``host_timeouts``."""
     tmp = Path(tempfile.mkdtemp())
     stats, record = tmp / "stats.json", tmp / "record.jsonl"
     env = dict(os.environ, **{avr_device.STATS_ENV: str(stats)})
     if profile:
         env["CDPR_SIM_PROFILE_ISR"] = "1"
+    if step_log is not None:
+        env["CDPR_SIM_STEP_LOG"] = str(step_log)
     cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--firmware", kind]
     cmd += ["--speedup", f"{speedup:g}", "--record", str(record)]
+    if faults:
+        cmd += ["--faults", faults]
     proc = subprocess.Popen(
         cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env
     )
     assert proc.stdout is not None
     path = proc.stdout.readline().strip()
     ok = True
+    retx = timeouts = -1
     t0 = time.monotonic()
     try:
         link = open_link(path)
@@ -86,6 +97,7 @@ def _stream(
         except LinkError:  # an underrun or another device fault: this rate failed
             ok = False
         finally:
+            retx, timeouts = link.counters.retransmits, link.counters.timeouts
             link.close()
     finally:
         wall = time.monotonic() - t0
@@ -93,7 +105,43 @@ def _stream(
         proc.wait(60)
     rows = [json.loads(x) for x in record.read_text().splitlines() if x.strip()]
     s = json.loads(stats.read_text()) if stats.exists() else {}
+    s["host_retransmits"], s["host_timeouts"] = retx, timeouts
     return s, rows, ok and rows == expected_record(batch), wall
+
+
+def _ideal_step_times(batch: SegmentBatch) -> list[np.ndarray]:
+    """Per axis, the exact time (clock units from the start of motion) of every step of
+    ``batch`` on its segments' profiles (PROTOCOL.md 5.1: step j where |n| p crosses
+    j - 1/2), in order."""
+    starts = np.concatenate([[0], np.cumsum(batch.ticks)[:-1]]).astype(np.float64)
+    r_all = ramp_share(batch.ramps)
+    out: list[list[np.ndarray]] = [[], [], [], []]
+    for i in range(len(batch)):
+        r, d = float(r_all[i]), float(batch.ticks[i])
+        for k in range(4):
+            n = abs(int(batch.deltas[i, k]))
+            if not n:
+                continue
+            x = (np.arange(1, n + 1) - 0.5) / n
+            tau = x / (r + np.sqrt(r * r + (1 - 2 * r) * x))
+            out[k].append(starts[i] + d * tau)
+    return [np.concatenate(a) if a else np.zeros(0) for a in out]
+
+
+def _step_error(log: Path, batch: SegmentBatch) -> dict[str, float]:
+    """Every rising step edge the harness logged against its ideal time: worst and 99th
+    percentile of |error| in us (1 clock unit = 10 us, 16 cycles = 1 us)."""
+    rows = np.loadtxt(log, dtype=np.int64, ndmin=2)
+    ideal = _ideal_step_times(batch)
+    errs = []
+    for k in range(4):
+        got = rows[rows[:, 0] == k, 1] / 16.0  # us on the motion clock
+        want = ideal[k] * 1e6 / CLOCK_HZ
+        m = min(len(got), len(want))
+        if m:
+            errs.append(got[:m] - want[:m])
+    e = np.abs(np.concatenate(errs)) if errs else np.zeros(1)
+    return {"worst_us": round(float(e.max()), 2), "p99_us": round(float(np.percentile(e, 99)), 2)}
 
 
 def _rate_batch(rate: int, n: int = 40, ticks: int = 1000) -> SegmentBatch:
@@ -132,6 +180,37 @@ def _size() -> dict[str, Any]:
     }
 
 
+def _heaters_off_latency(state: str, watchdog_ms: int = 500) -> float:
+    """Seconds from the host's last byte to the heater pin going low, minus the watchdog
+    time, with the device in ``state`` when the host falls silent (wall time: the link's
+    clock in the harness)."""
+    from firmware_protocol.messages import Configure, Flush, Segment, SetHeater, WaitHeater
+    from tests.conformance.device import RawHost, start
+
+    tmp = Path(tempfile.mkdtemp())
+    dev = start("avr", tmp, "--speedup", "1")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        h.send(Configure(watchdog_ms=watchdog_ms, start_ticks=100_000, flow_ticks=12_500))
+        h.send(SetHeater(0, 1500))
+        if state == "moving":
+            h.send(Segment(ticks=1_000_000, deltas=(2000, 0, 0, 0), ramp=RAMP_TO_REST), Flush())
+        elif state == "faulted (underrun)":
+            h.send(Segment(ticks=2000, deltas=(40, 0, 0, 0), ramp=RAMP_CONSTANT), Flush())
+        elif state == "waiting (WAIT_HEATER)":
+            h.send(WaitHeater(0, 1))
+        h.pump(0.5)
+        h.keepalive = 0  # the host dies: nothing more is sent
+        end = time.monotonic() + 3 * watchdog_ms / 1000
+        while time.monotonic() < end:
+            h.pump(0.05)
+    finally:
+        h.close()
+        dev.stop()
+    return round(dev.stats()["heater_on_silence_max_s"] - watchdog_ms / 1000, 4)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer rates and shorter streams")
@@ -148,64 +227,68 @@ def main() -> int:
     fig["isr_worst_us"] = round(s["isr_profiled_max_cycles"] / 16, 2)
     fig["isr_mean_cycles"] = s["isr_profiled_mean_cycles"]
     fig["isr_profile_record_exact"] = ok
+    fig["stack_free_bytes_after_demo"] = s.get("stack_free_bytes")
 
-    s, _, ok, _ = _stream("avr", demo, speedup=100.0)
-    _, _, py_ok, py_wall = _stream("python", demo, speedup=100.0)
-    fig["sim_over_wall_avr"] = round(s["sim_seconds"] / s["wall_seconds"], 2)
-    device_s = demo.ticks.sum() / CLOCK_HZ
-    fig["baseline_python_device_s_over_wall"] = round(device_s / py_wall, 2)
-    fig["demo_record_exact"] = ok and py_ok
-
+    # step edges against the ideal trajectory, all four axes at once, and the step
+    # interrupt's load (compare A, nested compare B included) at each rate
     sweep = []
-    for rate in [10_000, 30_000, 60_000] if args.quick else range(10_000, 60_001, 10_000):
-        s, _, ok, _ = _stream("avr", _rate_batch(rate))
-        spread = s["step_err_max_us"] - s["step_err_min_us"]
-        good = ok and s["lost_steps"] == 0 and s["unrepaired"] == 0 and spread <= 5.0
+    rates = [10_000, 40_000] if args.quick else [10_000, 20_000, 30_000, 40_000]
+    for rate in rates:
+        log = Path(tempfile.mkdtemp()) / "steps.txt"
+        batch = _rate_batch(rate, n=200)
+        s, _, ok, _ = _stream("avr", batch, profile=True, step_log=log)
+        err = _step_error(log, batch)
+        motion_cycles = batch.ticks.sum() * 160
+        load = s["isr_profiled_mean_cycles"] * s["isr_profiled_count"] / max(s["cycles"], 1)
         sweep.append(
             {
                 "steps_per_s_each_axis": rate,
-                "step_err_min_us": s["step_err_min_us"],
-                "step_err_max_us": s["step_err_max_us"],
-                "spread_us": round(spread, 3),
+                "step_err_vs_ideal_worst_us": err["worst_us"],
+                "step_err_vs_ideal_p99_us": err["p99_us"],
+                "isr_load_pct_whole_run": round(100 * load, 1),
+                "isr_load_pct_of_motion": round(
+                    100 * s["isr_profiled_mean_cycles"] * s["isr_profiled_count"] / motion_cycles,
+                    1,
+                ),
                 "min_pulse_high_us": s["min_pulse_high_us"],
                 "min_dir_setup_us": s["min_dir_setup_us"],
                 "lost_steps": s["lost_steps"],
+                "late_pulses": s["late_pulses"],
                 "record_exact": ok,
-                "within_5us": good,
             }
         )
     fig["step_timing"] = sweep
-    fig["max_step_rate_within_5us"] = max(
-        (r["steps_per_s_each_axis"] for r in sweep if r["within_5us"]), default=0
-    )
 
-    fig["max_step_rate_exact_all_axes"] = max(
-        (r["steps_per_s_each_axis"] for r in sweep if r["record_exact"]), default=0
-    )
-
-    # streaming: segments of ever shorter duration until one device underruns; the
-    # Python model is the baseline (the host link and its 128-slot window bound both)
-    parse = []
-    n = 600 if args.quick else 1500
-    for ticks in (500, 400, 300, 250, 200):
-        batch = _short_batch(ticks, n)
+    # streaming at 1x over 250000 baud: segments of ever shorter duration (3-4 s of
+    # device time each), clean and with 1e-3 corruption and drop per byte
+    n_s = 2.0 if args.quick else 4.0
+    stream = []
+    for ticks in (200, 130, 100, 80, 65, 50):
+        batch = _short_batch(ticks, int(n_s * CLOCK_HZ / ticks))
         payload, _ = encode_segments(batch, SegmentContext())
-        row = {"segment_ms": ticks / 100, "segments_per_s": CLOCK_HZ // ticks}
-        row["payload_bytes_per_segment"] = round(len(payload) / n, 2)
-        for kind in ("avr", "python"):
-            row[f"{kind}_record_exact"] = _stream(kind, batch)[2]
-        parse.append(row)
-        if not (row["avr_record_exact"] or row["python_record_exact"]):
+        row: dict[str, Any] = {"segment_ms": ticks / 100, "segments_per_s": CLOCK_HZ // ticks}
+        row["payload_bytes_per_segment"] = round(len(payload) / len(batch), 2)
+        for name, faults in (("clean", None), ("faults", "corrupt=0.001,drop=0.001")):
+            s, _, ok, _ = _stream("avr", batch, faults=faults)
+            row[f"{name}_record_exact"] = ok
+            row[f"{name}_host_retransmits"] = s["host_retransmits"]
+            row[f"{name}_main_loop_max_us"] = s.get("main_loop_max_us")
+        stream.append(row)
+        if not (row["clean_record_exact"] or row["faults_record_exact"]):
             break
-    fig["streaming"] = parse
-    for kind in ("avr", "python"):
-        fig[f"segments_per_s_streamed_{kind}"] = max(
-            (p["segments_per_s"] for p in parse if p[f"{kind}_record_exact"]), default=0
+    fig["streaming"] = stream
+    for name in ("clean", "faults"):
+        fig[f"segments_per_s_streamed_{name}"] = max(
+            (r["segments_per_s"] for r in stream if r[f"{name}_record_exact"]), default=0
         )
-    # what 250000 baud carries: 10 bits a byte, full frames of segments
-    seg = parse[0]["payload_bytes_per_segment"]
-    per_seg = seg * (1 + OVERHEAD / MAX_PAYLOAD)
+    seg = stream[0]["payload_bytes_per_segment"]
+    per_seg = seg * (1 + OVERHEAD / 120)  # frames of the 120-byte max_payload the AVR asks for
     fig["segments_per_s_line_limit_250000_baud"] = round(BAUD / 10 / per_seg)
+
+    fig["heaters_off_after_watchdog_s"] = {
+        state: _heaters_off_latency(state)
+        for state in ("idle, heating", "moving", "faulted (underrun)", "waiting (WAIT_HEATER)")
+    }
     print(json.dumps(fig, indent=1))
     return 0
 

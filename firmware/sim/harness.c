@@ -3,6 +3,7 @@
  *   cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE]
  *            [--time-limit SIM_SECONDS] [--exit-on-hangup]
  *            [--heater-fail-after SIM_SECONDS] [--boot-physical STEPS]
+ *            [--travel-steps STEPS]
  *
  * The first line on stdout is the pty path. Single-threaded: a cycle timer polls
  * the pty every POLL_US of simulated time, feeds received bytes to UART0 only
@@ -36,10 +37,8 @@
 #include <avr_ioport.h>
 #include <avr_uart.h>
 
+#include "mailbox_layout.h"
 #include "pins.h"
-#define EDGE_SEG_END 0x01 /* as firmware/src/mailbox.h */
-#define EDGE_MOTION_START 0x02
-#define EDGE_MOTION_STOP 0x04
 #include "thermal.h"
 
 #define F_CPU 16000000ULL
@@ -108,6 +107,11 @@ static uint32_t mailbox_u32(unsigned off)
     return v;
 }
 
+static unsigned mailbox_u16(unsigned off)
+{
+    return avr->data[mailbox_addr + off] | (unsigned)avr->data[mailbox_addr + off + 1] << 8;
+}
+
 static void out_push(uint8_t b)
 {
     if (out_len == out_cap) {
@@ -147,23 +151,54 @@ static void xoff_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     xon = 0;
 }
 
-/* The switch sits at physical 0 and reads high (pressed) from there on. It is
- * an external driver of the pin: simavr's "external pull" for that bit, so
- * that the firmware's pull-up and every later write to the same PORT register
- * do not override it (simavr re-asserts a pulled-up input high on each write). */
-static void set_endstop(int k)
+/* Switches, as external drivers of their pins (simavr's "external pull" for that bit, so
+ * that the firmware's pull-up and every later write to the same PORT register do not
+ * override them; simavr re-asserts a pulled-up input high on each write). A module's
+ * homing switch is pressed only at its flag, physical 0 .. HOME_SWITCH_BAND - 1 (the
+ * carriage approaches it from below while homing and prints above it); its limit
+ * switch (RAMPS MAX socket) is pressed past the end of travel, physical > travel_steps
+ * (the Python model's overtravel_steps: 16400 by default). */
+#define HOME_SWITCH_BAND 100
+static int64_t travel_steps = 16400;
+static int limit_level[3] = {-1, -1, -1};
+static avr_irq_t *limit_irq[3];
+
+static void drive_pin(const struct pin *pin, avr_irq_t *irq, int level)
 {
-    int level = (phys[k] + boot_physical) >= 0;
-    if (level == endstop_level[k])
-        return;
-    endstop_level[k] = level;
     static uint8_t mask[256], value[256];
-    uint8_t port = (uint8_t)ENDSTOP_PINS[k].port, bit = (uint8_t)(1u << ENDSTOP_PINS[k].bit);
+    uint8_t port = (uint8_t)pin->port, bit = (uint8_t)(1u << pin->bit);
     mask[port] |= bit;
     value[port] = (uint8_t)(level ? value[port] | bit : value[port] & ~bit);
     avr_ioport_external_t ext = {.name = (char)port, .mask = mask[port], .value = value[port]};
     avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL(port), &ext);
-    avr_raise_irq(endstop_irq[k], (uint32_t)level);
+    avr_raise_irq(irq, (uint32_t)level);
+}
+
+/* the switch levels driven again (poll): a write to the port's pull-up after the last
+ * change would otherwise leave a released switch reading high */
+static void redrive_switches(void)
+{
+    for (int k = 0; k < 3; k++) {
+        if (endstop_level[k] >= 0)
+            drive_pin(&ENDSTOP_PINS[k], endstop_irq[k], endstop_level[k]);
+        if (limit_level[k] >= 0)
+            drive_pin(&LIMIT_PINS[k], limit_irq[k], limit_level[k]);
+    }
+}
+
+static void set_endstop(int k)
+{
+    int64_t at = phys[k] + boot_physical;
+    int level = at >= 0 && at < HOME_SWITCH_BAND;
+    if (level != endstop_level[k]) {
+        endstop_level[k] = level;
+        drive_pin(&ENDSTOP_PINS[k], endstop_irq[k], level);
+    }
+    level = at > travel_steps;
+    if (level != limit_level[k]) {
+        limit_level[k] = level;
+        drive_pin(&LIMIT_PINS[k], limit_irq[k], level);
+    }
 }
 
 /* Step timing against the firmware's schedule: phase k of a tick is due PHASE_BASE +
@@ -196,6 +231,18 @@ static void note_step_timing(uint64_t now)
         step_err_max = err;
 }
 
+/* CDPR_SIM_STEP_LOG=FILE: every rising step edge as "axis cycles", the cycles counted on
+ * the motion clock (cycles of motion since boot: the record's t times 16e6), so the
+ * benchmark can set each edge against the step's ideal time on its segment's profile. */
+static FILE *step_log;
+static uint64_t motion_now_cycles(uint64_t now);
+
+static void log_step(int k, uint64_t now)
+{
+    if (step_log)
+        fprintf(step_log, "%d %llu\n", k, (unsigned long long)motion_now_cycles(now));
+}
+
 static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
@@ -211,6 +258,7 @@ static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         last_rise[k] = now;
         rise_at[k] = now;
         note_step_timing(now);
+        log_step(k, now);
         phys[k] += dir_level[k] ? 1 : -1;
         steps_total++;
         if (k < 3)
@@ -241,6 +289,11 @@ static uint64_t units_since(uint64_t since)
     return (avr->cycle - since + UNIT_CYCLES / 2) / UNIT_CYCLES;
 }
 
+static uint64_t motion_now_cycles(uint64_t now)
+{
+    return motion_units * UNIT_CYCLES + (motion_level ? now - motion_since : 0);
+}
+
 static uint64_t motion_now(void)
 {
     return motion_units + (motion_level ? units_since(motion_since) : 0);
@@ -259,13 +312,13 @@ static void record_segment(void)
     if (!record)
         return;
     uint64_t ticks = motion_now();
-    uint32_t seq = mailbox_u32(4);
+    uint32_t seq = mailbox_u32(MB_SEQ);
     fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
             (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
             (long long)(phys[2] + offset[2]), (long long)(phys[3] + offset[3]),
             (double)ticks / (double)CLOCK_HZ);
     if (abort_next)
-        fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + 24]));
+        fprintf(record, ",\"error\":\"%s\"", error_name(avr->data[mailbox_addr + MB_LAST_ERROR]));
     fputs("}\n", record);
     fflush(record); /* streamed: a killed simulator leaves every line written so far */
     abort_next = 0;
@@ -292,7 +345,7 @@ static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     (void)irq; (void)param;
     if (!toggled(value, &level))
         return;
-    uint8_t edge = avr->data[mailbox_addr + 48];
+    uint8_t edge = avr->data[mailbox_addr + MB_EDGE];
     if (trace_motion)
         fprintf(stderr, "edge %x at %llu\n", edge, (unsigned long long)avr->cycle);
     if ((edge & EDGE_MOTION_START) && !motion_level) {
@@ -323,7 +376,7 @@ static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     if (!toggled(value, &level))
         return;
     for (int k = 0; k < 4; k++)
-        offset[k] = (int64_t)(int32_t)mailbox_u32(8 + 4 * k) - phys[k];
+        offset[k] = (int64_t)(int32_t)mailbox_u32(MB_POS + 4 * k) - phys[k];
 }
 
 /* The host watchdog seen from outside: the longest time a heater pin was high after the
@@ -482,8 +535,8 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R') {
             mailbox_addr = addr;
             unsigned s16 = (unsigned)(speedup * 16.0 + 0.5);
-            avr->data[addr + 36] = (uint8_t)s16;
-            avr->data[addr + 37] = (uint8_t)(s16 >> 8);
+            avr->data[addr + MB_SPEEDUP_X16] = (uint8_t)s16;
+            avr->data[addr + MB_SPEEDUP_X16 + 1] = (uint8_t)(s16 >> 8);
         }
     }
     poll_pty();
@@ -491,10 +544,11 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         /* the link's clock for the firmware: wall time in clock units */
         uint64_t u = (uint64_t)(wall_seconds() * (double)CLOCK_HZ);
         for (int i = 0; i < 4; i++)
-            avr->data[mailbox_addr + 42 + i] = (uint8_t)(u >> (8 * i));
-        avr->data[mailbox_addr + 46] = 1;
+            avr->data[mailbox_addr + MB_LINK_CLOCK + i] = (uint8_t)(u >> (8 * i));
+        avr->data[mailbox_addr + MB_LINK_VALID] = 1;
     }
     check_lost_interrupts();
+    redrive_switches();
     if (heater_level[0] || heater_level[1])
         note_heater_silence();
     update_thermal();
@@ -513,27 +567,29 @@ static void write_stats(void)
     struct timespec now;
     clock_gettime(CLOCK_MONOTONIC, &now);
     double wall = (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
-    unsigned isr_max = mailbox_addr ? (avr->data[mailbox_addr + 26] | avr->data[mailbox_addr + 27] << 8) : 0;
-    unsigned lost = mailbox_addr ? (avr->data[mailbox_addr + 28] | avr->data[mailbox_addr + 29] << 8) : 0;
-    unsigned loop_us = mailbox_addr ? (avr->data[mailbox_addr + 30] | avr->data[mailbox_addr + 31] << 8) : 0;
-    unsigned stalls = mailbox_addr ? (avr->data[mailbox_addr + 38] | avr->data[mailbox_addr + 39] << 8) : 0;
-    unsigned overruns = mailbox_addr ? (avr->data[mailbox_addr + 40] | avr->data[mailbox_addr + 41] << 8) : 0;
-    unsigned latency = mailbox_addr ? avr->data[mailbox_addr + 47] : 0;
-    unsigned late = mailbox_addr ? (avr->data[mailbox_addr + 49] | avr->data[mailbox_addr + 50] << 8) : 0;
+    unsigned isr_max = mailbox_addr ? mailbox_u16(MB_ISR_MAX) : 0;
+    unsigned lost = mailbox_addr ? mailbox_u16(MB_LOST_STEPS) : 0;
+    unsigned loop_us = mailbox_addr ? mailbox_u16(MB_LOOP_MAX_US) : 0;
+    unsigned stalls = mailbox_addr ? mailbox_u16(MB_PLAN_STALLS) : 0;
+    unsigned overruns = mailbox_addr ? mailbox_u16(MB_OVERRUNS) : 0;
+    unsigned latency = mailbox_addr ? avr->data[mailbox_addr + MB_LATENCY_MAX] : 0;
+    unsigned late = mailbox_addr ? mailbox_u16(MB_LATE_PULSES) : 0;
+    unsigned stack_free = mailbox_addr ? mailbox_u16(MB_STACK_FREE) : 0;
     fprintf(f,
             "{\"sim_seconds\":%.6f,\"wall_seconds\":%.6f,\"cycles\":%llu,\"repairs\":%u,"
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"isr_profiled_count\":%llu}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, late, latency,
-            loop_us, mailbox_addr ? mailbox_u32(32) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
+            loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
-            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0);
+            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
+            (unsigned long long)isr_count);
     fclose(f);
 }
 
@@ -541,7 +597,7 @@ static void usage(void)
 {
     fprintf(stderr, "usage: cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE] "
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
-                    "[--boot-physical STEPS]\n");
+                    "[--boot-physical STEPS] [--travel-steps STEPS]\n");
     exit(2);
 }
 
@@ -556,6 +612,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--time-limit") && i + 1 < argc) time_limit = atof(argv[++i]);
         else if (!strcmp(a, "--heater-fail-after") && i + 1 < argc) heater_fail_after = atof(argv[++i]);
         else if (!strcmp(a, "--boot-physical") && i + 1 < argc) boot_physical = atoll(argv[++i]);
+        else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
         else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
         else if (a[0] == '-') usage();
         else elf = a;
@@ -609,8 +666,10 @@ int main(int argc, char **argv)
     avr_irq_t *compa = avr_get_interrupt_irq(avr, TIMER1_COMPA_VECTOR);
     if (compa)
         avr_irq_register_notify(compa + AVR_INT_IRQ_PENDING, compa_pending_cb, NULL);
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 3; k++) {
         endstop_irq[k] = pin_irq(ENDSTOP_PINS[k].port, ENDSTOP_PINS[k].bit);
+        limit_irq[k] = pin_irq(LIMIT_PINS[k].port, LIMIT_PINS[k].bit);
+    }
     watch(MARK_EDGE.port, MARK_EDGE.bit, edge_cb, 0);
     watch(MARK_POS.port, MARK_POS.bit, pos_cb, 0);
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
@@ -628,6 +687,8 @@ int main(int argc, char **argv)
     for (int k = 0; k < 3; k++)
         set_endstop(k);
 
+    if (getenv("CDPR_SIM_STEP_LOG"))
+        step_log = fopen(getenv("CDPR_SIM_STEP_LOG"), "w");
     if (record_path) {
         record = fopen(record_path, "w");
         if (!record) { perror(record_path); return 2; }
@@ -658,6 +719,7 @@ int main(int argc, char **argv)
     int state = cpu_Running;
     int debug = getenv("CDPR_SIM_DEBUG") != NULL;
     int profile_isr = getenv("CDPR_SIM_PROFILE_ISR") != NULL;
+    int profile_all = getenv("CDPR_SIM_PROFILE_ALL") != NULL;
     avr_flashaddr_t prev_pc = 0;
     while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
         state = avr_run(avr);
@@ -667,6 +729,8 @@ int main(int argc, char **argv)
                         prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
             prev_pc = avr->pc;
         }
+        if (profile_all && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
+            pc_hist[avr->pc]++; /* every instruction: where the CPU's time goes */
         if (profile_isr) {
             /* cycles from the step timer's vector to its own RETI (the one executed
              * with the stack pointer it entered with; nested interrupts included) */
@@ -713,8 +777,19 @@ int main(int argc, char **argv)
     }
     if (record)
         fclose(record);
+    if (step_log)
+        fclose(step_log);
     write_stats();
-    if (getenv("CDPR_SIM_PROFILE_ISR")) {
+    if (getenv("CDPR_SIM_PEEK")) { /* debugging: N uint16 at a data address, to a file */
+        unsigned addr = 0, n = 0;
+        sscanf(getenv("CDPR_SIM_PEEK"), "%x,%u", &addr, &n);
+        FILE *f = fopen("/tmp/cdpr-peek.txt", "w");
+        for (unsigned i = 0; f && i < n && addr + 2 * i + 1 < avr->ramend; i++)
+            fprintf(f, "%u ", avr->data[addr + 2 * i] | avr->data[addr + 2 * i + 1] << 8);
+        if (f)
+            fclose(f);
+    }
+    if (getenv("CDPR_SIM_PROFILE_ISR") || profile_all) {
         FILE *f = fopen("/tmp/cdpr-pc-hist.txt", "w");
         for (unsigned i = 0; f && i < 65536; i++)
             if (pc_hist[i])

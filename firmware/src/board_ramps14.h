@@ -71,6 +71,20 @@
 #define Z_MIN_DDR DDRD
 #define Z_MIN_BIT 3
 #define ENDSTOP_TRIGGERED_LEVEL 1
+/* limit switches at the far end of each module's travel (RAMPS MAX sockets), wired and
+ * read like the homing switches */
+#define X_MAX_PIN PINE /* D2 */
+#define X_MAX_PORT PORTE
+#define X_MAX_DDR DDRE
+#define X_MAX_BIT 4
+#define Y_MAX_PIN PINJ /* D15 */
+#define Y_MAX_PORT PORTJ
+#define Y_MAX_DDR DDRJ
+#define Y_MAX_BIT 0
+#define Z_MAX_PIN PIND /* D19 */
+#define Z_MAX_PORT PORTD
+#define Z_MAX_DDR DDRD
+#define Z_MAX_BIT 2
 
 /* MOSFET outputs: high = on */
 #define HOTEND_PORT PORTB /* D10 */

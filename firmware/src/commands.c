@@ -6,8 +6,11 @@
  * unacknowledged), then to execute. */
 #include <avr/interrupt.h>
 #include <avr/pgmspace.h>
+#include <stdint.h>
 #include <string.h>
 
+#include "frame.h"
+#include "commands.h"
 #include "heater.h"
 #include "link.h"
 #include "machine.h"
@@ -50,10 +53,6 @@ static const struct message_desc messages[] PROGMEM = {
 
 static struct seg_ctx ctx;
 
-void commands_reset_session(void)
-{
-    memset(&ctx, 0, sizeof ctx);
-}
 
 static uint8_t find(uint8_t op, struct message_desc *out)
 {
@@ -182,12 +181,14 @@ static void enqueue_segment(const struct segment *s)
     }
     int32_t tail[4];
     for (uint8_t k = 0; k < 4; k++) {
-        int64_t p = (int64_t)mc.tail_pos[k] + s->deltas[k];
-        if (p > SEG_MAX_DELTA || p < -SEG_MAX_DELTA) {
-            bad_value(SEG_BASE, p > 0 ? SEG_MAX_DELTA : -SEG_MAX_DELTA, mc.segments_received);
+        /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic (no 64-bit library calls) */
+        int32_t p;
+        if (__builtin_add_overflow(mc.tail_pos[k], s->deltas[k], &p) || p == INT32_MIN) {
+            bad_value(SEG_BASE, s->deltas[k] > 0 ? SEG_MAX_DELTA : -SEG_MAX_DELTA,
+                      mc.segments_received);
             return;
         }
-        tail[k] = (int32_t)p;
+        tail[k] = p;
     }
     int32_t at;
     int8_t module = machine_limits_violation(tail, &at);
@@ -246,7 +247,7 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
         for (uint8_t k = 0; k < 3; k++) {
             it->u.pos[k] = (int32_t)v[1 + k];
             if (v[0] >> k & 1)
-                mc.tail_pos[k] = (int32_t)v[1 + k];
+                mc.tail_pos[k] = mc.home_at[k] = (int32_t)v[1 + k];
         }
         mc.tail_homed |= (uint8_t)(v[0] & 7);
         break;
@@ -344,48 +345,111 @@ static void immediate(uint8_t op, const uint32_t *v)
     }
 }
 
+/* Frames checked and acknowledged but not executed yet: their bytes wait in the
+ * deframer (deframer_first / deframer_pop), their queue item counts here; they are
+ * executed in order, a few messages per main-loop turn. `check` is the coder context
+ * after the last checked frame, `ctx` the one after the last executed message. */
+#define HELD_FRAMES 32
+static struct {
+    struct seg_ctx check;
+    uint8_t items[HELD_FRAMES]; /* queue items of each held frame not queued yet */
+    uint8_t head, n;
+    uint16_t items_total;
+    struct reader r; /* the frame being executed */
+    uint8_t active;
+} pend;
+
+void commands_reset_session(void)
+{
+    memset(&ctx, 0, sizeof ctx);
+    memset(&pend, 0, sizeof pend);
+    deframer_drop_held();
+}
+
+uint8_t proto_pending_items(void)
+{
+    return (uint8_t)pend.items_total;
+}
+
 uint8_t proto_accept(const uint8_t *payload, uint8_t len)
 {
     if (!mc.synced) {
         session_boot_on_data();
-        return 0;
+        return PROTO_REFUSED;
     }
-    struct seg_ctx work = ctx;
+    struct seg_ctx work = pend.check;
     uint8_t queued, bad_op = 0, bad_at = 0, wrong;
     if (!check_payload(payload, len, &work, &queued, &bad_op, &bad_at, &wrong)) {
         machine_fail(ERR_BAD_COMMAND, mc.items_received, mc.segments_received, bad_op, bad_at);
-        return 1;
+        return PROTO_DONE;
     }
     if (wrong) {
         machine_fail(ERR_BAD_COMMAND, mc.items_received, 0, wrong, 0);
-        return 1;
+        return PROTO_DONE;
     }
-    if (queued > machine_free() && !mc.fault) {
+    if ((queued > machine_free() && !mc.fault) || pend.n == HELD_FRAMES) {
         mc.overflow_rejects++;
-        return 0;
+        return PROTO_REFUSED;
     }
-    struct reader r = {payload, 0, len, 0};
+    pend.check = work;
+    pend.items[(uint8_t)(pend.head + pend.n) % HELD_FRAMES] = queued;
+    pend.n++;
+    pend.items_total += queued;
+    return PROTO_PENDING;
+}
+
+/* one queue item of the frame being executed was taken */
+static void took_item(void)
+{
+    pend.items[pend.head]--;
+    pend.items_total--;
+}
+
+void proto_execute(uint8_t budget)
+{
+    struct reader *r = &pend.r;
     struct segment s;
     struct message_desc m;
     uint32_t v[MAX_VALUES];
-    while (r.pos < len) {
-        uint8_t op = payload[r.pos];
-        if (op >= SEG_BASE) {
-            segment_decode(&r, &ctx, &s);
-            enqueue_segment(&s);
-            motion_prepare_ahead(); /* keep the interrupt's plans coming during long frames */
-            continue;
+    while (budget) {
+        if (!pend.active) {
+            uint8_t len;
+            const uint8_t *payload = deframer_first(&len);
+            if (!payload || !pend.n)
+                return;
+            r->buf = payload;
+            r->pos = 0;
+            r->len = len;
+            r->err = 0;
+            pend.active = 1;
         }
-        find(op, &m);
-        r.pos++;
-        parse_fields(&r, &m, v);
-        if (m.queued)
-            enqueue_command(op, v);
-        else
-            immediate(op, v);
+        while (r->pos < r->len && budget) {
+            budget--;
+            uint8_t op = r->buf[r->pos];
+            if (op >= SEG_BASE) {
+                segment_decode(r, &ctx, &s); /* checked before: it decodes */
+                took_item();
+                enqueue_segment(&s);
+                continue;
+            }
+            find(op, &m);
+            r->pos++;
+            parse_fields(r, &m, v);
+            if (m.queued) {
+                took_item();
+                enqueue_command(op, v);
+            } else {
+                immediate(op, v);
+            }
+        }
+        if (r->pos < r->len)
+            return; /* the rest next turn: the main loop's other work goes on */
+        pend.active = 0;
+        pend.items_total -= pend.items[pend.head]; /* 0 unless a fault discarded some */
+        pend.head = (uint8_t)(pend.head + 1) % HELD_FRAMES;
+        pend.n--;
+        deframer_pop();
     }
-    ctx = work;
-    return 1;
 }
 
 void proto_urgent(const uint8_t *payload, uint8_t len)

@@ -12,10 +12,41 @@
 struct deframer_stats deframer_stats;
 static uint8_t buf[DEFRAME_BUF];
 static uint16_t fill;
+/* buf[0..held) holds frames acknowledged but not executed yet (a FIFO: executed from
+ * the front, checked and appended behind it); the scan for new frames starts there */
+static uint16_t held;
+static uint8_t drop_held;
 
 void deframer_reset(void)
 {
     fill = 0;
+    held = 0;
+}
+
+uint8_t deframer_room(void)
+{
+    return fill < DEFRAME_BUF;
+}
+
+const uint8_t *deframer_first(uint8_t *len)
+{
+    if (!held)
+        return 0;
+    *len = buf[1];
+    return buf + FRAME_HEADER_LEN;
+}
+
+void deframer_pop(void)
+{
+    uint16_t total = FRAME_OVERHEAD + buf[1];
+    memmove(buf, buf + total, fill - total);
+    fill -= total;
+    held -= total;
+}
+
+void deframer_drop_held(void)
+{
+    drop_held = 1;
 }
 
 uint8_t deframer_push(uint8_t byte)
@@ -60,7 +91,7 @@ static int16_t complete_frame_after(uint16_t start)
 
 void deframer_run(void)
 {
-    uint16_t pos = 0;
+    uint16_t pos = held;
     for (;;) {
         while (pos < fill && buf[pos] != FRAME_SYNC)
             pos++;
@@ -88,12 +119,29 @@ void deframer_run(void)
             continue;
         }
         deframer_stats.frames++;
-        frame_received(p[2], p[3], p[4], p + 6, p[1]);
+        if (pos > held) { /* right behind the held frames: it may be held too */
+            memmove(buf + held, buf + pos, fill - pos);
+            fill -= pos - held;
+            pos = held;
+            p = buf + pos;
+        }
+        uint8_t hold = frame_received(p[2], p[3], p[4], p + FRAME_HEADER_LEN, p[1]);
+        if (drop_held) { /* a new session: the held frames are forgotten */
+            drop_held = 0;
+            memmove(buf, buf + held, fill - held);
+            fill -= held;
+            pos -= held;
+            held = 0;
+        }
         pos += total;
+        if (hold) {
+            held = pos;
+            break; /* one frame checked per call: bounded work per main-loop turn */
+        }
     }
-    if (pos) {
-        memmove(buf, buf + pos, fill - pos);
-        fill -= pos;
+    if (pos > held) {
+        memmove(buf + held, buf + pos, fill - pos);
+        fill -= pos - held;
     }
 }
 

@@ -13,14 +13,21 @@ struct deframer_stats {
 };
 extern struct deframer_stats deframer_stats;
 
-/* Called for each valid frame, and for each frame with a good header and a bad body. */
-void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len);
+/* Called for each valid frame (returns 1 to hold its bytes, acknowledged, until it has
+ * been executed: deframer_first / deframer_pop), and for each frame with a good header
+ * and a bad body. */
+uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len);
 void frame_rejected(uint8_t kind, uint8_t seq);
 
 void deframer_reset(void);
 /* Append a received byte; returns 0 when the buffer is full (call deframer_run first). */
 uint8_t deframer_push(uint8_t byte);
 void deframer_run(void);
+uint8_t deframer_room(void); /* a byte can be pushed */
+/* The oldest held frame's payload (0: none held); valid until deframer_pop(). */
+const uint8_t *deframer_first(uint8_t *len);
+void deframer_pop(void);        /* the oldest held frame was executed */
+void deframer_drop_held(void);  /* a new session: forget the held frames */
 
 /* Bytes a frame of this payload takes on the wire. */
 #define FRAME_SIZE(len) ((uint16_t)(len) + FRAME_OVERHEAD)

@@ -13,16 +13,26 @@
 #define NAK_HOLDOFF T_MS(30)
 
 struct link_counters link_counters;
+static const struct link_upper *upper;
+
+void link_attach(const struct link_upper *u)
+{
+    upper = u;
+}
 
 struct slot {
     uint8_t len;
     uint8_t retransmitted;
+    uint8_t important; /* an error report */
     uint32_t sent_at;
     uint8_t data[REPORT_MAX];
 };
 static struct slot slots[REPORT_SLOTS];
 static uint8_t first;       /* index of the oldest slot (outstanding first, then backlog) */
 static uint8_t n_out, n_back;
+/* error reports not sent yet: a FLOW (whose flags and counts show the fault) waits for
+ * them, so the host never sees the effect of a fault before its cause */
+static uint8_t errors_unsent;
 static uint8_t base_seq, next_seq;
 static uint8_t expected;
 static uint8_t ack_due, nak_due, resend;
@@ -46,7 +56,7 @@ static uint32_t rto(void)
 
 void link_reset_session(void)
 {
-    first = n_out = n_back = 0;
+    first = n_out = n_back = errors_unsent = 0;
     base_seq = next_seq = 0;
     expected = 0;
     ack_due = nak_due = resend = 0;
@@ -88,11 +98,14 @@ uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important)
         if (!n_back)
             return 0;
         n_back--;
+        errors_unsent -= slots[(first + n_out + n_back) % REPORT_SLOTS].important;
     }
     struct slot *s = &slots[(first + n_out + n_back) % REPORT_SLOTS];
     memcpy(s->data, payload, len);
     s->len = len;
     s->retransmitted = 0;
+    s->important = important ? 1 : 0;
+    errors_unsent += s->important;
     n_back++;
     return 1;
 }
@@ -141,6 +154,8 @@ static void on_ack(uint8_t ack, uint32_t now)
     base_seq += n;
 }
 
+static uint8_t send_ack(uint32_t now);
+
 static void want_nak(uint32_t now)
 {
     if (last_nak_expected != expected || now - last_nak_at >= NAK_HOLDOFF)
@@ -153,13 +168,13 @@ void frame_rejected(uint8_t kind, uint8_t seq)
         want_nak(link_now);
 }
 
-void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
+uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
 {
     uint32_t now = link_now;
-    proto_frame_seen();
+    upper->frame_seen();
     if (kind == KIND_URGENT) {
-        proto_urgent(payload, len);
-        return;
+        upper->urgent(payload, len);
+        return 0;
     }
     on_ack(ack, now);
     if (kind == KIND_NAK && n_out && base_seq == ack) {
@@ -171,25 +186,54 @@ void frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *paylo
         }
     }
     if (kind != KIND_DATA)
-        return;
-    uint8_t d = (uint8_t)(seq - expected);
+        return 0;
+    uint8_t d = (uint8_t)(seq - expected), hold = 0;
     if (d == 0) {
-        if (proto_accept(payload, len))
+        /* checked (every field, room for its items): acknowledged at once, before it
+         * is executed, so the host's window moves on while the device works */
+        uint8_t verdict = upper->accept(payload, len);
+        if (verdict) {
             expected++;
-        else
+            hold = verdict == PROTO_PENDING;
+        } else {
             link_counters.rejected++;
+        }
         ack_due = 1;
+        send_ack(now);
     } else if (d > MAX_WINDOW) {
         link_counters.duplicates++;
         ack_due = 1;
     } else {
         want_nak(now);
     }
+    return hold;
+}
+
+/* The ACK (or NAK) with FLOW that is due, now if the UART has room. */
+static uint8_t send_ack(uint32_t now)
+{
+    uint8_t flow[FLOW_MAX];
+    if (!(nak_due || ack_due))
+        return 1;
+    if (errors_unsent && !nak_due)
+        return 0; /* after the error reports (link_poll sends them as the window opens) */
+    if (uart_tx_free() < FRAME_SIZE(sizeof flow))
+        return 0;
+    uint8_t n = upper->flow(flow);
+    if (nak_due) {
+        frame_send(KIND_NAK, 0, expected, flow, n);
+        link_counters.naks_sent++;
+        last_nak_expected = expected;
+        last_nak_at = now;
+    } else {
+        frame_send(KIND_ACK, 0, expected, flow, n);
+    }
+    nak_due = ack_due = 0;
+    return 1;
 }
 
 void link_poll(uint32_t now)
 {
-    uint8_t flow[FLOW_MAX];
     if (urgent_len) {
         if (uart_tx_free() < FRAME_SIZE(urgent_len))
             return;
@@ -224,19 +268,7 @@ void link_poll(uint32_t now)
         next_seq++;
         n_out++;
         n_back--;
+        errors_unsent -= s->important;
     }
-    if (nak_due || ack_due) {
-        if (uart_tx_free() < FRAME_SIZE(sizeof flow))
-            return;
-        uint8_t n = proto_flow(flow);
-        if (nak_due) {
-            frame_send(KIND_NAK, 0, expected, flow, n);
-            link_counters.naks_sent++;
-            last_nak_expected = expected;
-            last_nak_at = now;
-        } else {
-            frame_send(KIND_ACK, 0, expected, flow, n);
-        }
-        nak_due = ack_due = 0;
-    }
+    send_ack(now);
 }

@@ -21,10 +21,17 @@ void link_request_ack(void);
 uint8_t link_expected(void);
 uint8_t link_backlog(void);
 
-/* provided by the protocol layer */
-uint8_t proto_accept(const uint8_t *payload, uint8_t len); /* 0: leave unacknowledged */
-void proto_urgent(const uint8_t *payload, uint8_t len);
-uint8_t proto_flow(uint8_t *out); /* FLOW payload for ACK/NAK frames, returns length */
-void proto_frame_seen(void);      /* any valid frame: feeds the host watchdog */
+/* What the link hands up, registered by the layer above (the transport never calls up
+ * into command execution by name: main.c wires it). */
+enum { PROTO_REFUSED, PROTO_DONE, PROTO_PENDING };
+struct link_upper {
+    /* a DATA frame in order: PROTO_REFUSED leaves it unacknowledged (no room), PROTO_DONE
+     * acknowledges it, PROTO_PENDING acknowledges it and keeps its bytes until executed */
+    uint8_t (*accept)(const uint8_t *payload, uint8_t len);
+    void (*urgent)(const uint8_t *payload, uint8_t len);
+    uint8_t (*flow)(uint8_t *out); /* FLOW payload for ACK/NAK frames, returns length */
+    void (*frame_seen)(void);      /* any valid frame: feeds the host watchdog */
+};
+void link_attach(const struct link_upper *upper);
 
 #endif

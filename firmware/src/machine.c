@@ -1,6 +1,8 @@
 #include <avr/interrupt.h>
 
+#include "commands.h"
 #include "heater.h"
+#include "link.h"
 #include "machine.h"
 #include "mailbox.h"
 #include "protocol_gen.h"
@@ -13,7 +15,8 @@ struct machine mc;
 
 uint8_t machine_free(void)
 {
-    return queue_free();
+    /* the items of a frame acknowledged but not yet executed are taken */
+    return (uint8_t)(queue_free() - proto_pending_items());
 }
 
 uint8_t machine_flags(void)

@@ -13,6 +13,7 @@ struct machine {
      * everything queued has run (a queued HOME counts) */
     uint8_t limits_set, tail_homed;
     int32_t limit_lo[3], limit_hi[3];
+    int32_t home_at[3]; /* logical position HOME gives a module at its switch (physical 0) */
     /* heater lease (HEATER_LEASE): armed by the first lease of a session */
     uint8_t lease_armed;
     uint16_t lease_ms;

@@ -24,11 +24,32 @@ struct sim_mailbox {
     uint8_t latency_max;
     uint8_t edge; /* what the next MARK_EDGE toggle means: EDGE_* */
     uint16_t late_pulses; /* step pulses issued after their tick ended (never lost) */
+    uint16_t stack_free;  /* bytes of the painted gap below the stack never written */
 };
 extern volatile struct sim_mailbox sim_mailbox;
 
-#define EDGE_SEG_END 0x01      /* a segment's last tick ended: seq names it */
-#define EDGE_MOTION_START 0x02 /* the first tick of motion begins */
-#define EDGE_MOTION_STOP 0x04  /* the last tick of motion ended */
+/* the harness's view of this struct (one definition, checked here at compile time) */
+#include <stddef.h>
+#include "../sim/mailbox_layout.h"
+#define MB_CHECK(field, off) _Static_assert(offsetof(struct sim_mailbox, field) == off, #field)
+MB_CHECK(seq, MB_SEQ);
+MB_CHECK(pos, MB_POS);
+MB_CHECK(last_error, MB_LAST_ERROR);
+MB_CHECK(isr_max_cycles, MB_ISR_MAX);
+MB_CHECK(lost_steps, MB_LOST_STEPS);
+MB_CHECK(main_loop_max_us, MB_LOOP_MAX_US);
+MB_CHECK(segments_parsed, MB_SEGMENTS_PARSED);
+MB_CHECK(speedup_x16, MB_SPEEDUP_X16);
+MB_CHECK(plan_stalls, MB_PLAN_STALLS);
+MB_CHECK(overruns, MB_OVERRUNS);
+MB_CHECK(link_clock, MB_LINK_CLOCK);
+MB_CHECK(link_valid, MB_LINK_VALID);
+MB_CHECK(latency_max, MB_LATENCY_MAX);
+MB_CHECK(edge, MB_EDGE);
+MB_CHECK(late_pulses, MB_LATE_PULSES);
+MB_CHECK(stack_free, MB_STACK_FREE);
+_Static_assert(sizeof(struct sim_mailbox) == MB_SIZE, "mailbox size");
+#undef MB_CHECK
+
 
 #endif

@@ -6,6 +6,7 @@
 
 #include "board_ramps14.h"
 #include "frame.h"
+#include "commands.h"
 #include "heater.h"
 #include "link.h"
 #include "machine.h"
@@ -24,13 +25,14 @@ struct item queue[QUEUE_SIZE];
 volatile uint8_t queue_head, queue_tail;
 volatile struct sim_mailbox sim_mailbox;
 uint32_t link_now;
+#define EXEC_PER_TURN 4 /* messages of a received frame executed per main-loop turn */
 static uint16_t loop_worst_us;
 
 void health_read(struct health *out)
 {
     uint8_t s = SREG;
     cli();
-    out->late_pulses = stepper_late_pulses;
+    out->late_pulses = stepper_late_tolerance;
     out->late_worst_us = (stepper_late_worst + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
     SREG = s;
     out->rx_overruns = uart_rx_overruns();
@@ -98,6 +100,13 @@ static void take_interrupt_reports(uint32_t now)
         stepper_positions(pos);
         report_event(EVT_HOMED, r.homed_item, 3, pos);
     }
+    if (r.error == ERR_ENDSTOP_HIT && r.axis < 3) {
+        /* a limit switch: where the module is, as a physical step (0 at its homing
+         * switch) once homed */
+        int32_t pos[4];
+        stepper_positions(pos);
+        r.value = pos[r.axis] - ((st.homed_mask >> r.axis & 1) ? mc.home_at[r.axis] : 0);
+    }
     if (r.error)
         machine_fail(r.error, r.item, r.segment, r.axis, r.value);
     uint32_t items, segs;
@@ -141,9 +150,13 @@ int main(void)
      * effector hangs on them (positions are unknown: the host re-homes) */
     stepper_init(watchdog_prev_enabled());
     uart_init();
+    static const struct link_upper upper = {proto_accept, proto_urgent, proto_flow,
+                                            proto_frame_seen};
+    link_attach(&upper); /* the layers are wired here, the transport knows none above it */
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
+    uint8_t turns = 0;
     for (;;) {
         uint32_t now = sched_clock();
         watchdog_kick(now);
@@ -152,17 +165,14 @@ int main(void)
         if (loop_us > loop_worst_us)
             sim_mailbox.main_loop_max_us = loop_worst_us = loop_us;
         last = now;
+        /* bounded work per turn: a few messages of the held frames, a few plans, the
+         * received bytes, one frame checked, then everything else */
+        proto_execute(EXEC_PER_TURN);
+        motion_prepare_ahead();
         int16_t c;
-        uint8_t got = 0;
-        while ((c = uart_getc()) >= 0) {
-            got = 1;
-            if (!deframer_push((uint8_t)c)) {
-                deframer_run();
-                deframer_push((uint8_t)c);
-            }
-        }
-        if (got)
-            deframer_run();
+        while (deframer_room() && (c = uart_getc()) >= 0) /* all of it: the ring is small */
+            deframer_push((uint8_t)c);
+        deframer_run(); /* checks and acknowledges at most one frame */
         motion_prepare_ahead();
         take_interrupt_reports(now);
         heater_poll(now);
@@ -179,5 +189,7 @@ int main(void)
         sim_mailbox.late_pulses = stepper_late_pulses;
         sim_mailbox.latency_max = stepper_latency_max;
         sim_mailbox.last_error = mc.last_error;
+        if (!++turns) /* the stack's high-water mark, now and then (a scan of ~1 KB) */
+            sim_mailbox.stack_free = watchdog_stack_free();
     }
 }

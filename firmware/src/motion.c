@@ -14,6 +14,7 @@
 #include "motion.h"
 #include "protocol_gen.h"
 
+#define PREPARE_PER_CALL 3
 struct plan plans[PLAN_SLOTS];
 volatile uint8_t plan_head, plan_tail;
 static uint8_t cursor; /* next queue position to look at */
@@ -267,13 +268,15 @@ void motion_prepare_ahead(void)
     /* the interrupt may have completed items the cursor had not reached yet */
     if ((uint8_t)(cursor - tail) > (uint8_t)(head - tail))
         cursor = tail;
-    while (cursor != head && (uint8_t)(plan_head - plan_tail) < PLAN_SLOTS) {
+    uint8_t budget = PREPARE_PER_CALL; /* bounded work per main-loop turn */
+    while (cursor != head && (uint8_t)(plan_head - plan_tail) < PLAN_SLOTS && budget) {
         const struct item *it = queue_slot(cursor);
         if (it->kind == IT_SEG) {
             prepare(&plans[plan_head & (PLAN_SLOTS - 1)], it, cursor);
             cli();
             plan_head++;
             sei();
+            budget--;
         }
         cursor++;
     }

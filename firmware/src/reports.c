@@ -129,7 +129,7 @@ void report_ident(uint16_t nonce, uint8_t urgent)
     wr_uv(&w, QUEUE_SIZE);
     wr_uv(&w, CLOCK_HZ);
     wr_uv(&w, MAX_STEP_RATE);
-    wr_u8(&w, FRAME_MAX_PAYLOAD);
+    wr_u8(&w, DEV_MAX_PAYLOAD);
     wr_uv(&w, RX_WINDOW);
     wr_u8(&w, 2);         /* heaters */
     wr_u8(&w, FAN_COUNT); /* fans */

@@ -1,3 +1,5 @@
+#include <stdint.h>
+
 #include "protocol_gen.h"
 #include "segment.h"
 
@@ -22,12 +24,13 @@ void segment_decode(struct reader *r, struct seg_ctx *ctx, struct segment *out)
     if (op & SEG_F_EXTRUDER)
         coded[3] = rd_delta(r);
     for (uint8_t k = 0; k < 4; k++) {
-        int64_t d = coded[k];
-        if (op & SEG_F_PREDICTED)
-            d += ctx->prev_deltas[k];
-        if (d > SEG_MAX_DELTA || d < -SEG_MAX_DELTA)
-            r->err = 1; /* within -(2^31 - 1)..2^31 - 1 */
-        out->deltas[k] = (int32_t)d;
+        int32_t d = coded[k];
+        /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic */
+        if ((op & SEG_F_PREDICTED) && __builtin_add_overflow(d, ctx->prev_deltas[k], &d))
+            r->err = 1;
+        if (d == INT32_MIN)
+            r->err = 1;
+        out->deltas[k] = d;
     }
     out->ramp = (op & SEG_F_RAMP) ? rd_u8(r) : SEG_RAMP_CONSTANT;
     if (r->err)

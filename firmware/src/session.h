@@ -8,6 +8,7 @@ void session_opened(void);
 void session_boot_on_data(void);
 void session_poll(uint32_t now);
 uint8_t session_may_start(void);
-void commands_reset_session(void);
+uint8_t proto_flow(uint8_t *out); /* FLOW payload (struct link_upper.flow) */
+void proto_frame_seen(void);      /* struct link_upper.frame_seen */
 
 #endif

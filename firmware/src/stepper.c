@@ -35,6 +35,7 @@ volatile uint16_t stepper_isr_max_cycles;
 volatile uint16_t stepper_lost_steps, stepper_plan_stalls, stepper_overruns, stepper_late_pulses;
 volatile uint8_t stepper_latency_max;
 volatile uint16_t stepper_late_worst;
+volatile uint32_t stepper_late_tolerance;
 static volatile uint8_t computing, tick_missed;
 
 #define OUT_MOTION 0x01
@@ -138,16 +139,41 @@ static void apply_dirs(uint8_t neg)
     if (((neg >> 3) & 1) ^ E_DIR_INVERT) E_DIR_PORT &= (uint8_t)~_BV(E_DIR_BIT); else E_DIR_PORT |= _BV(E_DIR_BIT);
 }
 
-static uint8_t endstop(uint8_t axis)
+static inline uint8_t endstops_raw(void)
 {
-    uint8_t v;
-    if (axis == 0)
-        v = (X_MIN_PIN >> X_MIN_BIT) & 1;
-    else if (axis == 1)
-        v = (Y_MIN_PIN >> Y_MIN_BIT) & 1;
-    else
-        v = (Z_MIN_PIN >> Z_MIN_BIT) & 1;
-    return v == ENDSTOP_TRIGGERED_LEVEL;
+    uint8_t m = 0;
+    if (((X_MIN_PIN >> X_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 1;
+    if (((Y_MIN_PIN >> Y_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 2;
+    if (((Z_MIN_PIN >> Z_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 4;
+    return m;
+}
+
+/* The homing switches as a module mask, debounced: a switch counts as pressed only when
+ * three reads about half a microsecond apart agree (a spike on the line does not stop
+ * homing; the time homing takes is unchanged). */
+static uint8_t endstops(void)
+{
+    uint8_t m = endstops_raw();
+    __builtin_avr_delay_cycles(8);
+    m &= endstops_raw();
+    __builtin_avr_delay_cycles(8);
+    return m & endstops_raw();
+}
+
+/* The limit switches at the end of travel, as a module mask. */
+static inline uint8_t limits_pressed(void)
+{
+    uint8_t m = 0;
+    if (((X_MAX_PIN >> X_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 1;
+    if (((Y_MAX_PIN >> Y_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 2;
+    if (((Z_MAX_PIN >> Z_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 4;
+    return m;
 }
 
 void stepper_init(uint8_t hold_mask)
@@ -161,6 +187,9 @@ void stepper_init(uint8_t hold_mask)
     X_MIN_DDR &= (uint8_t)~_BV(X_MIN_BIT); X_MIN_PORT |= _BV(X_MIN_BIT);
     Y_MIN_DDR &= (uint8_t)~_BV(Y_MIN_BIT); Y_MIN_PORT |= _BV(Y_MIN_BIT);
     Z_MIN_DDR &= (uint8_t)~_BV(Z_MIN_BIT); Z_MIN_PORT |= _BV(Z_MIN_BIT);
+    X_MAX_DDR &= (uint8_t)~_BV(X_MAX_BIT); X_MAX_PORT |= _BV(X_MAX_BIT);
+    Y_MAX_DDR &= (uint8_t)~_BV(Y_MAX_BIT); Y_MAX_PORT |= _BV(Y_MAX_BIT);
+    Z_MAX_DDR &= (uint8_t)~_BV(Z_MAX_BIT); Z_MAX_PORT |= _BV(Z_MAX_BIT);
     MARK_EDGE_DDR |= _BV(MARK_EDGE_BIT);
     MARK_POS_DDR |= _BV(MARK_POS_BIT);
     MARK_ABORT_DDR |= _BV(MARK_ABORT_BIT);
@@ -329,10 +358,7 @@ static void __attribute__((noinline)) set_pos_marker(void)
 static void start_homing(const struct item *it)
 {
     home_mask = it->flags & 7;
-    home_backoff = 0;
-    for (uint8_t k = 0; k < 3; k++)
-        if ((home_mask >> k & 1) && endstop(k))
-            home_backoff |= (uint8_t)(1 << k);
+    home_backoff = endstops() & home_mask;
     home_div = 0;
     home_steps = 0;
     st.enabled_mask |= home_mask;
@@ -350,12 +376,12 @@ static uint8_t __attribute__((noinline)) home_tick(void)
         return 0;
     }
     home_div = HOME_TICKS - 1;
-    uint8_t stepping = 0, neg = 0;
+    uint8_t stepping = 0, neg = 0, pressed = endstops();
     for (uint8_t k = 0; k < 3; k++) {
         uint8_t bit = (uint8_t)(1 << k);
         if (!(home_mask & bit))
             continue;
-        uint8_t hit = endstop(k);
+        uint8_t hit = pressed & bit;
         if (home_backoff & bit) {
             if (hit) {
                 stepping |= bit;
@@ -423,6 +449,9 @@ static void __attribute__((noinline)) dispatch(void)
             st.current = IT_DWELL;
             return;
         case IT_HOME:
+            if (budget != 3)
+                return; /* first in its tick: the homing computation must not overrun the
+                         * tick (its start edge would be lost) */
             st.at_rest = 1;
             start_homing(it);
             st.current = IT_HOME;
@@ -567,10 +596,30 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
 }
 
+/* A limit switch pressed on two ticks in a row (debounced) while its module moves
+ * toward it stops the motion: ENDSTOP_HIT (the main loop adds the position). */
+static uint8_t limit_seen;
+
+static void __attribute__((noinline)) limit_check(const struct plan *p)
+{
+    uint8_t hit = limits_pressed() & p->moving & (uint8_t)~p->dir & 7;
+    uint8_t both = hit & limit_seen;
+    limit_seen = hit;
+    if (!both)
+        return;
+    uint8_t k = both & 1 ? 0 : both & 2 ? 1 : 2;
+    raise_error(ERR_ENDSTOP_HIT, st.items_done + 1, st.segments_done + 1, k, 0);
+}
+
 static void __attribute__((noinline)) seg_tick(void)
 {
     struct plan *p = run;
     struct out *o = nx;
+    if (limits_pressed() | limit_seen) {
+        limit_check(p);
+        if (!st.running)
+            return;
+    }
     o->flags |= OUT_MOTION;
     o->dir = p->dir;
     if (--t_left == 0) {
@@ -793,6 +842,7 @@ static void __attribute__((noinline)) flush_phases(void)
         pulse_off();
         __builtin_avr_delay_cycles(PULSE_CYCLES);
         stepper_late_pulses++;
+        stepper_late_tolerance++;
     }
     TIMSK1 &= (uint8_t)~_BV(OCIE1B);
     TIFR1 = _BV(OCF1B);
@@ -838,7 +888,7 @@ static void __attribute__((noinline)) tick_start(void)
     if (lateness > stepper_late_worst)
         stepper_late_worst = lateness;
     if (pulses && lateness > LATE_TOLERANCE_US * (F_CPU / 1000000UL))
-        stepper_late_pulses++; /* counted (HEALTH), never silent */
+        stepper_late_tolerance++; /* counted (HEALTH), never silent */
     uint8_t f = e->flags;
     if (f & (OUT_POS | OUT_ABORT)) {
         /* positions were set (at rest); a segment was abandoned (before the

@@ -57,7 +57,10 @@ extern volatile uint16_t stepper_plan_stalls; /* ticks motion waited for a plan 
 extern volatile uint16_t stepper_overruns;    /* ticks computed after their start */
 extern volatile uint16_t stepper_late_pulses; /* pulses issued after their tick ended */
 extern volatile uint8_t stepper_latency_max;
-extern volatile uint16_t stepper_late_worst; /* cycles: the latest a tick started (HEALTH) */  /* cycles from a tick's compare match to its first work */
+extern volatile uint16_t stepper_late_worst; /* cycles: the latest a tick started (HEALTH) */
+/* pulses of a tick that started more than LATE_TOLERANCE_US late, or issued after their
+ * tick ended (HEALTH late_pulses) */
+extern volatile uint32_t stepper_late_tolerance;  /* cycles from a tick's compare match to its first work */
 /* Step positions now (mid-segment: the steps issued so far). */
 void stepper_positions(int32_t *out);
 

@@ -10,6 +10,7 @@
 #include "watchdog.h"
 
 #define SAVED_MAGIC 0xC0DEu
+#define STACK_PAINT 0xC5
 
 struct saved {
     uint16_t magic;
@@ -37,6 +38,20 @@ void early_init(void)
     mcusr_at_boot = MCUSR;
     MCUSR = 0;
     wdt_disable();
+    /* paint the gap between the static data and the stack: watchdog_stack_free() counts
+     * what the stack never reached (the C runtime clears .bss after this, below _end) */
+    extern uint8_t _end;
+    for (uint8_t *q = &_end; q < (uint8_t *)SP - 4; q++)
+        *q = STACK_PAINT;
+}
+
+uint16_t watchdog_stack_free(void)
+{
+    extern uint8_t _end;
+    const uint8_t *q = &_end;
+    while (q < (const uint8_t *)RAMEND && *q == STACK_PAINT)
+        q++;
+    return (uint16_t)(q - &_end);
 }
 
 static uint16_t check_of(const struct saved *s)

@@ -13,6 +13,8 @@ uint8_t watchdog_prev_enabled(void);
 uint32_t watchdog_prev_items(void);
 uint32_t watchdog_prev_segments(void);
 uint32_t watchdog_boot_id(void);
+/* Bytes between the static data and the deepest the stack has reached so far. */
+uint16_t watchdog_stack_free(void);
 /* keep the counters where a watchdog reset finds them */
 void watchdog_save(uint32_t items_done, uint32_t segments_done, uint8_t enabled_mask);
 

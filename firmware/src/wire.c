@@ -11,6 +11,8 @@ uint8_t rd_u8(struct reader *r)
 
 uint32_t rd_bounded(struct reader *r, uint8_t bits)
 {
+    if (r->pos < r->len && !(r->buf[r->pos] & 0x80))
+        return r->buf[r->pos++]; /* one byte (most fields): fits every width */
     uint8_t max_bytes = (uint8_t)((bits + 6) / 7);
     uint32_t value = 0;
     for (uint8_t i = 0; i < max_bytes; i++) {

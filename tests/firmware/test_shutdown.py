@@ -15,11 +15,9 @@ import time
 
 import pytest
 
-from cdprhost.sim import avr_device
 from firmware_protocol.messages import (
     ClearFault,
     Configure,
-    Error,
     ErrorCode,
     Event,
     EventCode,
@@ -30,6 +28,7 @@ from firmware_protocol.messages import (
     SetHeater,
 )
 from tests.conformance.device import RawHost, start
+from tests.firmware.raw import errors
 
 pytestmark = [
     pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals"),
@@ -39,18 +38,6 @@ pytestmark = [
 WATCHDOG_MS = 500
 
 
-@pytest.fixture(scope="module")
-def avr_built():
-    missing = avr_device.toolchain_missing()
-    if missing:
-        pytest.skip(missing)
-    avr_device.build()
-
-
-def _errors(h: RawHost, code: int) -> list[Error]:
-    return [m for m in h.reports if isinstance(m, Error) and m.code == code]
-
-
 def _refused(h: RawHost) -> list[Event]:
     return [m for m in h.reports if isinstance(m, Event) and m.code == EventCode.CLEAR_REFUSED]
 
@@ -58,7 +45,7 @@ def _refused(h: RawHost) -> list[Event]:
 def _underrun(h: RawHost) -> None:
     """A segment that ends moving, then FLUSH: it starts and the queue runs dry."""
     h.send(Segment(ticks=2000, deltas=(40, 0, 0, 0), ramp=-1), Flush())
-    h.wait_for(lambda: _errors(h, ErrorCode.UNDERRUN), what="UNDERRUN")
+    h.wait_for(lambda: errors(h, ErrorCode.UNDERRUN), what="UNDERRUN")
 
 
 def test_host_silence_after_an_underrun_turns_the_heater_off(avr_built, tmp_path):
@@ -77,7 +64,7 @@ def test_host_silence_after_an_underrun_turns_the_heater_off(avr_built, tmp_path
         end = time.monotonic() + 3 * WATCHDOG_MS / 1000
         while time.monotonic() < end:
             h.pump(0.05)  # reads only: nothing is sent
-        assert _errors(h, ErrorCode.WATCHDOG), h.reports  # reported though faulted
+        assert errors(h, ErrorCode.WATCHDOG), h.reports  # reported though faulted
     finally:
         h.close()
         dev.stop()
@@ -94,9 +81,7 @@ def test_thermal_fault_latches_and_a_second_fault_is_reported(avr_built, tmp_pat
         h.hello()
         h.send(SetHeater(0, 2000))
         _underrun(h)  # a first, non-thermal fault: the heater stays on
-        h.wait_for(
-            lambda: _errors(h, ErrorCode.THERMAL_RUNAWAY), timeout=30, what="THERMAL_RUNAWAY"
-        )
+        h.wait_for(lambda: errors(h, ErrorCode.THERMAL_RUNAWAY), timeout=30, what="THERMAL_RUNAWAY")
         st = h.status()
         assert st.last_error == ErrorCode.THERMAL_RUNAWAY and st.hotend_target_dc == 0
         h.reports.clear()
@@ -108,7 +93,7 @@ def test_thermal_fault_latches_and_a_second_fault_is_reported(avr_built, tmp_pat
         assert h.status().flags & Flag.FAULT
         # a non-thermal fault after it is reported and does not replace the latch
         h.send(SetFan(3, 0))  # BAD_VALUE (one fan)
-        h.wait_for(lambda: _errors(h, ErrorCode.BAD_VALUE), what="BAD_VALUE")
+        h.wait_for(lambda: errors(h, ErrorCode.BAD_VALUE), what="BAD_VALUE")
         h.reports.clear()
         h.send(ClearFault())
         assert h.wait_for(lambda: _refused(h), what="refused again")[0].values == (
