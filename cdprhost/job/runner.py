@@ -292,7 +292,7 @@ class PrintJob:
         machine = Machine(link, self.profile, self.model)
         streamer: Streamer | None = None
         try:
-            check = prepare_device(machine)
+            check = prepare_device(machine, clear_fault=self.options.clear_fault)
             rate = link.identity.max_step_rate if link.identity else None
             caps = caps_for_device(self.profile, rate)
             self._plan_profile = caps.profile
