@@ -80,6 +80,8 @@ class Planned:
     estimated_time_s: float
     filament_mm: float
     segments: int = 0
+    #: a resumed job: planned time of the file before its restart (progress counts from there)
+    done_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -158,6 +160,7 @@ class JobSnapshot:
     segments_total: int = 0
     estimated_time_s: float = 0.0
     filament_mm: float = 0.0
+    done_s: float = 0.0  # a resumed job: the file's planned time before the restart
     segments_done: int = 0
     line: int = 0
     layer: int = 0
@@ -187,8 +190,9 @@ class JobSnapshot:
             return 1.0
         if self.segments_total:
             return min(self.segments_done / self.segments_total, 1.0)
-        if self.estimated_time_s:  # device time runs at the planned rate
-            return min(self.device_time_s / self.estimated_time_s, 1.0)
+        if self.estimated_time_s:  # device time runs at the planned rate (from the restart on)
+            total = self.done_s + self.estimated_time_s
+            return min((self.done_s + self.device_time_s) / total, 1.0)
         return 0.0
 
     @property
@@ -224,6 +228,7 @@ def reduce(snap: JobSnapshot, event: Event) -> JobSnapshot:
             estimated_time_s=event.estimated_time_s,
             filament_mm=event.filament_mm,
             segments_total=event.segments,
+            done_s=event.done_s,
         )
     if isinstance(event, Progress):
         return replace(

@@ -9,6 +9,8 @@ from cdprhost.job.state import (
     STALE_S,
     JobSnapshot,
     JobState,
+    Planned,
+    Progress,
     StateChanged,
     Temperatures,
     reduce,
@@ -98,3 +100,46 @@ def test_a_fault_is_explained_before_a_start_and_not_cleared_unasked(tmp_path):
         assert PrintJob(gcode, profile, lambda: link, options).run().status == "completed"
     finally:
         link.close()
+
+
+def test_progress_after_a_restart_counts_from_where_the_file_restarts(tmp_path):
+    snap = _fold(
+        Planned(layers=10, moves=50, estimated_time_s=40.0, filament_mm=1.0, done_s=60.0),
+        Progress(segments_done=5, line=100, layer=6, device_time_s=10.0),
+    )
+    assert snap.fraction == 0.7 and snap.eta_s == 30.0
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text(
+        "G28\nM104 S200\nM109 S200\nG92 E0\n"
+        + "".join(
+            f";LAYER_CHANGE\nG1 Z{0.3 * (n + 1):.1f} F3000\nG1 X20 Y0 E{n + 1} F1800\n"
+            f"G1 X0 Y0 F3000\n"
+            for n in range(4)
+        )
+    )
+    planned = []
+    options = PrintOptions(resume_dir=tmp_path, resume_from_layer=2)
+    job = PrintJob(
+        gcode, load_profile("paper-prototype"), open_embedded, options, on_event=planned.append
+    )
+    assert job.run().status == "completed"
+    totals = next(e for e in planned if isinstance(e, Planned))
+    assert totals.layers == 4 and totals.done_s > 0  # the file's layers, and the time before
+
+
+def test_a_job_cancelled_before_it_moves_ends_at_once(tmp_path):
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text("G28\nG1 X5 Y5 Z1 F3000\n")
+    opened = []
+
+    def factory():
+        opened.append(True)
+        return open_embedded()
+
+    job = PrintJob(
+        gcode, load_profile("paper-prototype"), factory, PrintOptions(resume_dir=tmp_path)
+    )
+    assert job.shutdown("quit")  # not started: nothing to wait for
+    result = job.run()
+    assert result.status == "cancelled" and result.reason == "quit"
+    assert job.state is JobState.CANCELLED and not opened  # never connected
