@@ -49,3 +49,15 @@ class PrintResult:
 
     def to_json(self) -> dict[str, Any]:
         return {k: v for k, v in self.__dict__.items() if k != "bad_input"}
+
+
+def violations_reason(report: Any) -> str:
+    """A refused job's reason: the first violation and the advice."""
+    from cdprhost.preflight.render import advice
+
+    v = report.violations[0]
+    lines = [
+        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
+        *(line.strip() for line in advice(report)),
+    ]
+    return "\n".join(lines)

@@ -26,7 +26,7 @@ from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
-from cdprhost.job.options import PrintOptions, PrintResult
+from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
     ResumeWriter,
@@ -255,7 +255,7 @@ class PrintJob:
                 "refused",
                 violations=[v.model_dump() for v in report.violations],
                 estimated_time_s=report.estimated_time_s,
-                reason=_violations_reason(report),
+                reason=violations_reason(report),
             )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
         if self.requests.has("cancel", "estop"):  # asked while planning: nothing has moved
@@ -338,11 +338,13 @@ class PrintJob:
             self._give_up(link, streamer, result, f"{type(exc).__name__}: {exc}", exc)
         except (CdprError, GcodeError) as exc:
             self._give_up(link, streamer, result, str(exc), exc)
-        except Exception as exc:  # a bug must still leave the machine safe
+        except Exception as exc:  # a bug: stopped like a cancel when the link allows, else e-stop
             log.exception("print job failed unexpectedly")
-            self._give_up(
-                link, streamer, result, f"internal error: {type(exc).__name__}: {exc}", exc
-            )
+            why = f"internal error: {type(exc).__name__}: {exc}"
+            if streamer is not None and streamer.stops.stop_after_bug(why):
+                self._stop_tail(streamer, result, why)
+            else:
+                self._give_up(link, streamer, result, why, exc)
 
     def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
         """``--resume`` after a killed host: the device's own last segment, when it knows it."""
@@ -486,14 +488,3 @@ class PrintJob:
         except OSError as exc:
             log.warning("resume point %s not written: %s", path, exc.strerror or exc)
             result.resume_file = str(path) if path.exists() else None
-
-
-def _violations_reason(report: Any) -> str:
-    from cdprhost.preflight.render import advice
-
-    v = report.violations[0]
-    lines = [
-        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
-        *(line.strip() for line in advice(report)),
-    ]
-    return "\n".join(lines)

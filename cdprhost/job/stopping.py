@@ -169,6 +169,18 @@ class StopControl:
         s.wait_for_resume()  # raises Stop on a cancel
         self._resume()
 
+    def stop_after_bug(self, reason: str) -> bool:
+        """A bug in the host (not the link): the same controlled stop as a cancel when the
+        link still works; False when that fails too (the caller e-stops)."""
+        self.s.ctx.requests.stop_safely(reason)
+        try:
+            self.stop_here()
+        except Stop:
+            return True
+        except Exception:
+            log.exception("the controlled stop after an internal error failed")
+        return False
+
     def _decelerate_and_retract(self, what: str) -> None:
         s = self.s
         link = s.link
