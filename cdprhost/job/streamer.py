@@ -241,9 +241,13 @@ class Streamer:
         report the last segment sent as executed (a job is complete only then)."""
         link = self.link
         last, since = -1, time.monotonic()
+        told = not final
         while not link.idle():
             link.wait_report(SERVICE_S)
             self.service()
+            if not told and self.ctx.requests.has("pause", "cancel"):
+                told = True  # said, not silently ignored
+                self.ctx.emit(Notice("the rest of the print is on the device already: it ends"))
             done = link.progress.items_done
             if done != last:
                 last, since = done, time.monotonic()
