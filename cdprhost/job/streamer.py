@@ -34,7 +34,7 @@ from cdprhost.job.state import (
     Notice,
     Progress,
     StateChanged,
-    Temperatures,
+    temperatures_of,
 )
 from cdprhost.job.stopping import Stop, StopControl
 from cdprhost.kinematics.machine import MachineModel
@@ -123,7 +123,7 @@ class Streamer:
         self.stops = StopControl(self)
         self.boot_id = link.identity.boot_id if link.identity else 0
         self.status: DeviceStatus | None = None
-        self._heat_item = 0
+        self.heat_item = 0
         self._at_rest = True
         self._last_progress = -1e9
         self._last_status = -1e9
@@ -158,8 +158,10 @@ class Streamer:
             before = link.segments_sent
             j = link.feed(wire, i, max_wait=SERVICE_S)
             if j > i:
-                self.map.add(before + 1, batch.take(slice(i, j)))
+                part = batch.take(slice(i, j))
+                self.map.add(before + 1, part)
                 self.stops.sent(batch, j - 1, before + j - i)
+                self.stops.note(part)
                 self._at_rest = bool(batch.v_end[j - 1] <= 1e-9)
                 i = j
 
@@ -180,10 +182,13 @@ class Streamer:
         self._check_heater_limits(msgs)
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
-            self._heat_item = max(numbers)
+            self.heat_item = max(numbers)
+            self.stops.wait_sent(item)
             self.set_state(
                 JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
             )
+        else:
+            self.stops.note(item)
         if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
             self.stops.stop_here()
 
@@ -236,9 +241,13 @@ class Streamer:
         report the last segment sent as executed (a job is complete only then)."""
         link = self.link
         last, since = -1, time.monotonic()
+        told = not final
         while not link.idle():
             link.wait_report(SERVICE_S)
             self.service()
+            if not told and self.ctx.requests.has("pause", "cancel"):
+                told = True  # said, not silently ignored
+                self.ctx.emit(Notice("the rest of the print is on the device already: it ends"))
             done = link.progress.items_done
             if done != last:
                 last, since = done, time.monotonic()
@@ -283,7 +292,7 @@ class Streamer:
         if not force_status and now - self._last_status > STATUS_EVERY_S:
             self._last_status = now
             self._status_seen = link.ask_status()  # answered while streaming goes on
-        if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self._heat_item:
+        if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self.heat_item:
             self.set_state(JobState.PRINTING)
         info = self.map.lookup(link.progress.segments_done)
         if force_status or now - self._last_progress > PROGRESS_EVERY_S:
@@ -303,7 +312,7 @@ class Streamer:
 
     def _on_status(self, st: DeviceStatus) -> None:
         self.status = st
-        self.ctx.emit(Temperatures(st.hotend_c, st.bed_c, st.hotend_target_c, st.bed_target_c))
+        self.ctx.emit(temperatures_of(st))
         c = self.link.counters
         self.ctx.emit(
             LinkHealth(c.retransmits, c.bad_frames + st.device_bad_frames, c.naks_received)
