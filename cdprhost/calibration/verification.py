@@ -101,10 +101,12 @@ class Verification:
         one = len(self.suspects) == 1 and max(c.chi2 for c in self.checks) > 0.6 * self.chi2
         cause = (
             "likely a bad take of that pose (bumped, moved, a wrong marker: record it again), "
-            "else an effect the model lacks (run `cdprhost diagnose` on the session)"
+            "else an effect the model lacks (run `cdprhost diagnose` on a session of 8 poses "
+            "or more, e.g. the wizard's `--poses 12`)"
             if one
             else "likely an effect the model lacks (cable stretch, drive scale, backlash, drift: "
-            "run `cdprhost diagnose` on the session), else bad takes, or pose noise the takes "
+            "run `cdprhost diagnose` on a session of 8 poses or more, e.g. the wizard's "
+            "`--poses 12`), else bad takes, or pose noise the takes "
             "cannot show (a static positioning error: declare it with --noise-floor)"
         )
         return (

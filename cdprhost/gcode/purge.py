@@ -15,6 +15,9 @@ program is read, and decides at the end.
 
 from __future__ import annotations
 
+import mmap
+import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,16 +46,21 @@ class PurgeRun:
         return f"line {self.line}: X{x0:g} Y{y0:g} -> X{x1:g} Y{y1:g}, {self.filament_mm:g} mm"
 
 
+_RESET = re.compile(rb"^[ \t]*G92(?:\.0)?[ \t][^;\n]*?E", re.M | re.I)
+
+
 def scan_resets(path: str, limit: int = MAX_RESETS) -> np.ndarray:
     """Line numbers of the first ``limit`` extruder resets (``G92`` with an E word)."""
     found: list[int] = []
     with open(path, "rb") as fh:
-        for number, raw in enumerate(fh, start=1):
-            if b"92" not in raw:
-                continue
-            words = raw.split(b";", 1)[0].upper().split()
-            if words and words[0] in (b"G92", b"G92.0") and any(w[:1] == b"E" for w in words[1:]):
-                found.append(number)
+        if os.fstat(fh.fileno()).st_size == 0:
+            return np.zeros(0, dtype=np.int64)
+        with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as text:
+            line, pos = 1, 0
+            for m in _RESET.finditer(text):
+                line += text[pos : m.start()].count(b"\n")
+                pos = m.start()
+                found.append(line)
                 if len(found) >= limit:
                     break
     return np.asarray(found, dtype=np.int64)

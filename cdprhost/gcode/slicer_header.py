@@ -2,7 +2,9 @@
 
 Slicers write these in comments at the top (Cura, Simplify3D) or the bottom
 (PrusaSlicer, Slic3r, SuperSlicer, OrcaSlicer), so only the first and last 64 KiB
-of the file are read. `check` prints them next to its own figures.
+of the file are read. `check` prints them next to its own figures, and says when the
+file was sliced for a printer exported from a cdprhost profile (its time estimate then
+uses this machine's limits, so the two should agree).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ _PRUSA_TIME = re.compile(
 _CURA_TIME = re.compile(rb"^;TIME:([0-9.]+)", re.M)
 _S3D_TIME = re.compile(rb"^;\s*Build time: (\d+) hours? (\d+) minutes?", re.M)
 _DHMS = re.compile(rb"(\d+)([dhms])")
+# a printer exported by `cdprhost profile export-slicer` (PrusaSlicer/Orca config dump)
+_EXPORTED = re.compile(rb"^; printer_notes = cdprhost profile ([^\r\n]+)", re.M)
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,7 @@ class SlicerFigures:
     filament_mm: float | None = None
     filament_mm3: float | None = None
     time_s: float | None = None
+    exported_profile: str | None = None  # sliced for a printer exported from this profile
 
 
 def read_slicer_figures(path: str | os.PathLike[str]) -> SlicerFigures | None:
@@ -72,7 +77,9 @@ def read_slicer_figures(path: str | os.PathLike[str]) -> SlicerFigures | None:
     volume = volume or None
     if filament is None and volume is None and time_s is None:
         return None
-    return SlicerFigures(slicer or "unknown", filament, volume, time_s)
+    exported = _EXPORTED.search(text)
+    profile = exported.group(1).decode("utf-8", "replace").strip() if exported else None
+    return SlicerFigures(slicer or "unknown", filament, volume, time_s, profile)
 
 
 def _slicer(text: bytes) -> str | None:

@@ -51,9 +51,15 @@ def render_text(report: PreflightReport, *, max_rows: int = 20) -> str:
                 f"filament {s.filament_mm:.1f} mm (ours {_pct(report.filament_mm, s.filament_mm)})"
             )
         if s.time_s is not None:
+            target = (
+                f"with the limits of the printer exported from profile '{s.exported_profile}'"
+                if s.exported_profile
+                else "for its own printer"
+            )
             parts.append(
-                f"time {format_duration(s.time_s)} for its own printer "
-                f"(ours {_pct(report.estimated_time_s, s.time_s)})"
+                f"time {format_duration(s.time_s)} {target} (ours "
+                f"{format_duration(report.estimated_time_s)}, "
+                f"{_pct(report.estimated_time_s, s.time_s)})"
             )
         lines.append(f"the slicer ({s.slicer}) says: " + ", ".join(parts))
     if report.print_box_gcode is not None:

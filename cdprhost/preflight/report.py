@@ -51,6 +51,10 @@ class SlicerFigures(BaseModel):
     slicer: str
     filament_mm: float | None = None
     time_s: float | None = None
+    exported_profile: str | None = Field(
+        default=None,
+        description="the cdprhost profile whose exported printer the file was sliced for",
+    )
 
 
 class Region(BaseModel):

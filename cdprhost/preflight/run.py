@@ -312,4 +312,5 @@ def slicer_figures(path: str, profile: MachineProfile) -> SlicerFigures | None:
         slicer=fig.slicer,
         filament_mm=None if filament is None else round(filament, 3),
         time_s=fig.time_s,
+        exported_profile=fig.exported_profile,
     )

@@ -55,7 +55,9 @@ def test_prusaslicer_ini(bed):
     corners = [tuple(float(v) for v in p.split("x")) for p in ini["bed_shape"].split(",")]
     assert corners == [tuple(p) for p in b.polygon]
     assert float(ini["max_print_height"]) == b.height_mm
-    assert ini["use_firmware_retraction"] == "1" and float(ini["retract_length"]) == 1.0
+    # the slicer writes the retractions as moves, so its time estimate counts them
+    assert ini["use_firmware_retraction"] == "0" and float(ini["retract_length"]) == 1.0
+    assert float(ini["retract_speed"]) == 35.0
     assert float(ini["machine_max_acceleration_x"]) == 2000.0
     start = ini["start_gcode"].replace("\\n", "\n")
     assert "M104 S[first_layer_temperature]" in start and "G28" in start
@@ -70,7 +72,7 @@ def test_cura_definition(bed):
     assert o["machine_width"] >= 2 * 83.268 and o["machine_depth"] >= 2 * 96.15
     assert len(o["machine_disallowed_areas"]) == 3  # the rectangle minus the triangle
     assert "{material_print_temperature_layer_0}" in o["machine_start_gcode"]
-    assert o["machine_firmware_retract"] is True
+    assert o["machine_firmware_retract"] is False and o["retraction_enable"] is True
 
 
 def test_orca_preset(bed):
