@@ -259,26 +259,12 @@ class CameraWizard:
 
 
 def sim_rig(size_text: str) -> Any:
-    from cdprhost.calibration.camera.boards import (
-        CameraSetup,
-        CharucoBoard,
-        EffectorBoard,
-        ReferenceBoard,
-    )
-    from cdprhost.sim.camera.scene import standard_rig
+    from cdprhost.sim.camera.scene import rig_for_size
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", size_text)
     if not m or int(m[1]) < 320 or int(m[2]) < 240:
         raise InputError(f"--sim-camera: expected WxH of at least 320x240, got {size_text!r}")
-    size = (int(m[1]), int(m[2]))
-    if size[0] >= 1280:
-        return standard_rig(image_size=size)
-    # small pictures: boards with bigger markers (coarser dictionary), a narrower lens
-    setup = CameraSetup(
-        ReferenceBoard(CharucoBoard((7, 5), 30.0, 22.0, "DICT_4X4_100", 0), (-105.0, 75.0, 3.0)),
-        EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 20), (60.0, 45.0, 69.0)),
-    )
-    return standard_rig(image_size=size, hfov_deg=60.0, distance_mm=750.0, setup=setup)
+    return rig_for_size((int(m[1]), int(m[2])))
 
 
 def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> CameraWizard:

@@ -64,7 +64,7 @@ class VirtualCamera:
         point = self.tracker.point
         return self._home if point is None else point
 
-    def isOpened(self) -> bool:  # noqa: N802 - cv2.VideoCapture's name
+    def isOpened(self) -> bool:
         return True
 
     def read(self) -> tuple[bool, np.ndarray]:

@@ -171,3 +171,18 @@ def phone_rig(**changes: object) -> CameraRig:
     }
     options.update(changes)
     return standard_rig(**options)  # type: ignore[arg-type]
+
+
+#: Boards with bigger markers (a coarser dictionary) for small pictures.
+COARSE_SETUP = CameraSetup(
+    ReferenceBoard(CharucoBoard((7, 5), 30.0, 22.0, "DICT_4X4_100", 0), (-105.0, 75.0, 3.0)),
+    EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 20), (60.0, 45.0, 69.0)),
+)
+
+
+def rig_for_size(size: tuple[int, int]) -> CameraRig:
+    """The standard rig at ``size``; below 1280 px wide, the coarse boards and a narrower
+    lens (tests, quick demos)."""
+    if size[0] >= 1280:
+        return standard_rig(image_size=size)
+    return standard_rig(image_size=size, hfov_deg=60.0, distance_mm=750.0, setup=COARSE_SETUP)
