@@ -109,10 +109,17 @@ class SessionConfig(BaseModel):
 
     @property
     def declared_noise_mm(self) -> float | None:
-        """``noise_mm`` of ``[mocap]``, else of ``[session]``."""
-        if self.mocap is not None and self.mocap.noise_mm is not None:
-            return self.mocap.noise_mm
-        return self.session.noise_mm
+        """``accuracy_mm`` of ``[mocap]`` (or of ``[camera.acceptance]``), else its
+        ``noise_mm``, else ``noise_mm`` of ``[session]``."""
+        if self.mocap is not None:
+            values = (self.mocap.accuracy_mm, self.mocap.noise_mm, self.session.noise_mm)
+        else:
+            accuracy = self.camera.acceptance.accuracy_mm if self.camera else None
+            values = (accuracy, None, self.session.noise_mm)
+        for value in values:
+            if value is not None:
+                return value
+        return None
 
     @property
     def acceptance(self) -> AcceptanceLimits:

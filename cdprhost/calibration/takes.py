@@ -64,6 +64,12 @@ class MocapConfig(_Strict):
     noise_mm: float | None = Field(
         default=None, gt=0, description="declared mocap noise per coordinate (read by diagnosis)"
     )
+    accuracy_mm: float | None = Field(
+        default=None,
+        gt=0,
+        description="the system's accuracy at one place per coordinate, the same in every frame "
+        "of a take (calibration-session.md); added to each take's standard error",
+    )
 
     @field_validator("base_markers")
     @classmethod

@@ -320,12 +320,7 @@ def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> Pos
     degrees of freedom (sum r_i^2 / (sigma_i^2 + s^2) = dof, solved for s)."""
     sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
     r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)  # position misfit^2 per pose, mm^2
-    dof = max(fit.dof_, 1)
-    lo, hi = 0.0, float(np.sqrt(np.max(r2))) + 1e-9
-    for _ in range(60):  # bisection: the chi-square falls monotonically as s grows
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if np.sum(r2 / (sig**2 + mid**2)) > dof else (lo, mid)
-    extra = 0.5 * (lo + hi)
+    extra = variance_component(r2, sig, max(fit.dof_, 1))
     return PoseNoise(
         np.sqrt(sig**2 + extra**2),
         noise.take_mm,
@@ -334,6 +329,61 @@ def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> Pos
         f"the residuals exceed the takes' noise with no pattern (time, direction, tension, height, "
         f"slider position): {extra:.3g} mm per coordinate added to every pose as noise no take "
         "shows; declare noise_mm in session.toml, or repeat poses, to measure it",
+    )
+
+
+#: Source of a noise model whose accuracy term was estimated here (from the richest model).
+ACCURACY_FIT = "takes + accuracy (fit)"
+#: The richest model must leave at least this many degrees of freedom to estimate it.
+MIN_ACCURACY_DOF = 6
+
+
+def variance_component(r2: np.ndarray, sig: np.ndarray, dof: int) -> float:
+    """The common variance s^2 (returned as s, mm) that makes sum r2 / (sig^2 + s^2) = dof
+    (0 when the chi-square is already within it)."""
+    if np.sum(r2 / sig**2) <= dof:
+        return 0.0
+    lo, hi = 0.0, float(np.sqrt(np.max(r2))) + 1e-9
+    for _ in range(60):  # bisection: the chi-square falls monotonically as s grows
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.sum(r2 / (sig**2 + mid**2)) > dof else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def accuracy_from_fit(
+    obs: Observations,
+    start: MachineModel,
+    effects: Sequence[str],
+    noise: PoseNoise,
+    alpha: float,
+    localise_alpha: float = 0.01,
+) -> PoseNoise | None:
+    """The measuring system's accuracy at each place, which no take's scatter shows
+    (calibration-session.md), estimated as a variance component of the richest model (the
+    geometry and every candidate effect at once, so that no effect of the catalogue is taken
+    for noise): None when that model's chi-square is within the takes' noise (goodness of
+    fit p >= ``alpha``), it has too few degrees of freedom, or its residuals show a pattern
+    (:func:`~.localise.localise`: physics the catalogue lacks, not accuracy)."""
+    fit = CableModelFit(effects=tuple(effects)).fit(obs, start)
+    if fit.dof_ < MIN_ACCURACY_DOF or goodness_of_fit_p(fit.chi2_, fit.dof_) >= alpha:
+        return None
+    sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
+    r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)
+    extra = variance_component(r2, sig, fit.dof_)
+    if extra <= 0:
+        return None
+    wider = np.sqrt(sig**2 + extra**2)
+    widened = Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider)
+    if localise(fit.model_, widened, localise_alpha):
+        return None  # a pattern is physics the catalogue lacks, not accuracy
+    return PoseNoise(
+        np.sqrt(noise.sigma_mm**2 + extra**2),
+        noise.take_mm,
+        extra,
+        ACCURACY_FIT,
+        f"the measuring system's accuracy, which no take's scatter shows: {extra:.3g} mm per "
+        "coordinate, estimated as a variance component of the geometry fitted with every "
+        "candidate effect (declare accuracy_mm in session.toml, or repeat poses, to measure it)",
     )
 
 
@@ -373,6 +423,22 @@ def diagnose(
     confusable = signatures.confusable_pairs(list(reports.values()), settings.confusable_threshold)
     remaining = [n for n in names if not reports[n].absorbed]
     unabsorbed = {n: r.unabsorbed_min for n, r in reports.items()}
+    if noise.source == TAKES_ONLY:
+        accurate = accuracy_from_fit(
+            obs,
+            base.fit.model_,
+            base.effects + tuple(remaining),
+            noise,
+            settings.gof_alpha,
+            settings.localise_alpha,
+        )
+        if accurate is not None:
+            return diagnose(
+                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, accurate.sigma_mm),
+                base_model,
+                accurate,
+                settings,
+            )
 
     current: ModelResult = base
     named: list[str] = []
