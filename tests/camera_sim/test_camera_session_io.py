@@ -195,3 +195,16 @@ def test_video_takes(tmp_path, sim_model):
     assert session.poses.take[0].endswith(".avi")
     frames = list(read_frames(session.take_path(0), (640, 360)))
     assert [f.name for f in frames] == ["frame 1", "frame 2", "frame 3"]
+
+
+def test_session_toml_round_trip(tmp_path):
+    from cdprhost.calibration.session import SessionConfig
+    from cdprhost.calibration.session_writer import session_toml
+    from cdprhost.sim.camera.session import camera_config
+
+    cam = camera_config(rig_for_size((640, 360)), "views", max_spread_mm=0.5, accuracy_mm=0.2)
+    cfg = SessionConfig.model_validate({"session": {"profile": "p"}, "camera": cam})
+    (tmp_path / "session.toml").write_text(session_toml(cfg))
+    back = load_session_config(tmp_path / "session.toml")
+    assert back.model_dump() == cfg.model_dump()
+    assert back.declared_noise_mm == 0.2 and back.acceptance.max_spread_mm == 0.5
