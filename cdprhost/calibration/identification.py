@@ -253,7 +253,7 @@ def identify(
     fit_idx = np.flatnonzero(np.array(roles) == "fit")
     # Noise-free simulations state sigma = 0; weights need a positive one.
     sigma = np.maximum(np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (k,)), 1e-6)
-    obs = Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, sigma)
+    obs = obs.with_sigma(sigma)
     before = _errors(base, obs)
     common = {
         "rejected": rejected,
@@ -291,10 +291,13 @@ def identify(
     residuals = _residuals(model, obs)
     check = np.flatnonzero(np.array(roles) == "check")
     j0 = identification_jacobian(obs.measured[check], model.geometry).reshape(-1, 3, 12)
+    own = (
+        sigma[check, None, None] ** 2 * np.eye(3)
+        if obs.covariance is None
+        else np.asarray(obs.covariance)[check]
+    )
     with np.errstate(invalid="ignore"):
-        pred_cov = sigma[check, None, None] ** 2 * np.eye(3) + np.einsum(
-            "nip,pq,njq->nij", j0, np.where(np.isfinite(cov), cov, 0.0), j0
-        )
+        pred_cov = own + np.einsum("nip,pq,njq->nij", j0, np.where(np.isfinite(cov), cov, 0.0), j0)
     factor, noise_dof = variance_factor(est.chi2_, est.dof_, residuals[check], pred_cov)
     trust = trust_report(
         model.geometry,
@@ -304,6 +307,8 @@ def identify(
         factor,
         noise_dof,
         limits,
+        parameter_covariance=None if noise is None else noise.parameter_covariance,
+        common_covariance=None if noise is None else noise.common_covariance,
     )
     numbers = np.arange(1, k + 1) if pose_numbers is None else np.asarray(pose_numbers)
     verification = (

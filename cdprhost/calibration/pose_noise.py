@@ -33,6 +33,13 @@ class PoseNoise:
     extra_mm: float
     source: str
     note: str = ""
+    # a camera's noise (camera-session.md): each pose's full covariance (K, 3, 3), mm^2
+    # (sigma_mm is then sqrt(trace / 3)); the covariance of the one vector that moves every
+    # pose alike (3, 3), which identification cannot see; and what the camera parameters'
+    # uncertainty adds to the 12 geometric parameters (12, 12). The trust gate counts both.
+    covariance: np.ndarray | None = None
+    common_covariance: np.ndarray | None = None
+    parameter_covariance: np.ndarray | None = None
 
     @property
     def typical_mm(self) -> float:
@@ -50,11 +57,31 @@ class PoseNoise:
             "extra_mm": self.extra_mm,
             "source": self.source,
             "note": self.note,
+            "common_mm": None
+            if self.common_covariance is None
+            else float(np.sqrt(np.trace(self.common_covariance))),
+            "depth_to_lateral": self.anisotropy,
         }
+
+    @property
+    def anisotropy(self) -> float | None:
+        """Median over poses of the largest over the smallest principal std (a camera's depth
+        against its lateral precision); None without full covariances."""
+        if self.covariance is None or not len(self.covariance):
+            return None
+        w = np.linalg.eigvalsh(np.asarray(self.covariance, float))
+        return float(np.median(np.sqrt(w[:, -1] / np.maximum(w[:, 0], 1e-300))))
 
     def subset(self, index: np.ndarray) -> PoseNoise:
         return PoseNoise(
-            self.sigma_mm[index], self.take_mm[index], self.extra_mm, self.source, self.note
+            self.sigma_mm[index],
+            self.take_mm[index],
+            self.extra_mm,
+            self.source,
+            self.note,
+            None if self.covariance is None else self.covariance[index],
+            self.common_covariance,
+            self.parameter_covariance,
         )
 
 

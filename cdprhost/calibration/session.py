@@ -311,8 +311,10 @@ class SessionMeasurements:
 
     def observations(self, noise: PoseNoise | None = None) -> Observations:
         """The observations of identification and diagnosis (the one builder)."""
-        sigma = (noise or self.noise()).sigma_mm
-        return Observations(self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), sigma)
+        n = noise or self.noise()
+        return Observations(
+            self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), n.sigma_mm, n.covariance
+        )
 
 
 @dataclass(frozen=True)
