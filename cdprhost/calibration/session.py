@@ -24,11 +24,13 @@ import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath, PureWindowsPath
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
+from cdprhost.calibration.camera_config import CameraConfig
 from cdprhost.calibration.fitting import Observations
 from cdprhost.calibration.pose_noise import PoseNoise, pose_noise
 from cdprhost.calibration.readers import read_take
@@ -77,30 +79,58 @@ class SessionInfo(BaseModel):
 
 
 class SessionConfig(BaseModel):
-    """The whole ``session.toml`` (extra top-level tables are allowed and kept)."""
+    """The whole ``session.toml`` (extra top-level tables are allowed and kept): a
+    motion-capture session (``[mocap]``) or a camera session (``[camera]``,
+    camera-session.md), exactly one of them."""
 
     model_config = ConfigDict(extra="allow", frozen=True)
     session: SessionInfo
-    mocap: MocapConfig
+    mocap: MocapConfig | None = None
+    camera: CameraConfig | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> SessionConfig:
+        if (self.mocap is None) == (self.camera is None):
+            raise ValueError(
+                "a session has exactly one of [mocap] (motion capture) and [camera] "
+                f"(one camera and ChArUco boards); this one has {'both' if self.mocap else 'neither'}"
+            )
+        return self
+
+    @property
+    def motion_capture(self) -> MocapConfig:
+        """``[mocap]``; a camera session has none (InputError)."""
+        if self.mocap is None:
+            raise InputError(
+                "this is a camera session ([camera]): it has no motion-capture takes",
+                source=SESSION_FILE,
+            )
+        return self.mocap
 
     @property
     def declared_noise_mm(self) -> float | None:
-        """``accuracy_mm`` of ``[mocap]``, else its ``noise_mm``, else ``noise_mm`` of
-        ``[session]``."""
-        for value in (self.mocap.accuracy_mm, self.mocap.noise_mm, self.session.noise_mm):
+        """``accuracy_mm`` of ``[mocap]`` (or of ``[camera.acceptance]``), else its
+        ``noise_mm``, else ``noise_mm`` of ``[session]``."""
+        if self.mocap is not None:
+            values = (self.mocap.accuracy_mm, self.mocap.noise_mm, self.session.noise_mm)
+        else:
+            accuracy = self.camera.acceptance.accuracy_mm if self.camera else None
+            values = (accuracy, None, self.session.noise_mm)
+        for value in values:
             if value is not None:
                 return value
         return None
 
     @property
     def acceptance(self) -> AcceptanceLimits:
-        return self.mocap.acceptance
+        return self.mocap.acceptance if self.mocap is not None else self.camera.acceptance  # type: ignore[union-attr]
 
 
-def validation_problems(exc: ValidationError) -> list[str]:
+def validation_problems(exc: ValidationError, prefix: str = "") -> list[str]:
+    """One line per problem: the key's dotted place (under ``prefix``) and what is wrong."""
     out = []
     for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        loc = ".".join(str(p) for p in (prefix, *err["loc"]) if p != "") or "(top level)"
         msg = {"missing": "missing required key", "extra_forbidden": "unknown key"}.get(
             err["type"], err["msg"].removeprefix("Value error, ")
         )
@@ -108,15 +138,20 @@ def validation_problems(exc: ValidationError) -> list[str]:
     return out
 
 
-def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
-    src = str(path)
+def read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """A TOML file's tables; InputError naming the file when unreadable or not TOML."""
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+            return tomllib.load(fh)
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", source=src) from None
+        raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", source=src) from None
+        raise InputError(f"not valid TOML: {exc}", source=str(path)) from None
+
+
+def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
+    src = str(path)
+    data = read_toml(path)
     try:
         return SessionConfig.model_validate(data)
     except ValidationError as exc:
@@ -329,7 +364,7 @@ class Session:
         unknown = self.config.acceptance.unknown_keys
         return (
             [
-                f"{SESSION_FILE}: [mocap.acceptance] key(s) not known here, ignored: {', '.join(unknown)}"
+                f"{SESSION_FILE}: [{'mocap' if self.config.mocap else 'camera'}.acceptance] key(s) not known here, ignored: {', '.join(unknown)}"
             ]
             if unknown
             else []
@@ -345,8 +380,8 @@ class Session:
         return self.take_paths[i] if self.take_paths else self.directory / self.poses.take[i]
 
     def prepare(self, i: int, limits: AcceptanceLimits | None = None) -> TakeSeries:
-        take = read_take(self.take_path(i), self.config.mocap.format)
-        return prepare_take(take, self.config.mocap, limits)
+        mocap = self.config.motion_capture
+        return prepare_take(read_take(self.take_path(i), mocap.format), mocap, limits)
 
     def measure(
         self, limits: AcceptanceLimits | None = None, *, strict: bool = False

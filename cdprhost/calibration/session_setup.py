@@ -85,7 +85,7 @@ def mocap_for_session(
     if (Path(session) / "session.toml").is_file():
         return None
     if config_path:
-        return load_session_config(config_path).mocap
+        return load_session_config(config_path).motion_capture
     if virtual is not None:
         return virtual
     raise InputError(

@@ -45,10 +45,20 @@ def session_toml(config: SessionConfig) -> str:
     """session.toml text for ``config`` (the layout of the spec; default limits omitted)."""
     import tomli_w
 
-    mocap = config.mocap
     out = ["[session]"] + [
         f"{k} = {_toml_value(v)}" for k, v in config.session.model_dump().items() if v is not None
     ]
+    extra = {
+        k: v
+        for k, v in config.model_dump(exclude_none=True).items()
+        if k not in ("session", "mocap", "camera")
+    }
+    if config.camera is not None:
+        camera = config.camera.model_dump(exclude_none=True, exclude_defaults=True)
+        camera["reference_board"] = config.camera.reference_board.model_dump()
+        camera["effector_board"] = config.camera.effector_board.model_dump()
+        return "\n".join(out) + "\n\n" + tomli_w.dumps({"camera": camera, **extra})
+    mocap = config.motion_capture
     out += ["", "[mocap]"]
     if mocap.format is not None:
         out.append(f"format = {_toml_value(mocap.format)}")
@@ -67,7 +77,6 @@ def session_toml(config: SessionConfig) -> str:
             f"{k} = {_toml_value(v)}" for k, v in mocap.acceptance.model_dump().items()
         ]
     text = "\n".join(out) + "\n"
-    extra = {k: v for k, v in config.model_dump().items() if k not in ("session", "mocap")}
     return text + ("\n" + tomli_w.dumps(extra) if extra else "")
 
 
@@ -122,7 +131,7 @@ class SessionWriter:
 
     def take_relpath(self, pose: int | None = None, format: str | None = None) -> str:
         """Suggested take path for ``pose`` (default the next), relative to the folder."""
-        fmt = format or self.config.mocap.format or "motive-csv"
+        fmt = format or self.config.motion_capture.format or "motive-csv"
         return f"{TAKES_DIR}/pose_{pose or self.next_pose:04d}{EXTENSIONS[fmt]}"
 
     def append(
@@ -140,9 +149,9 @@ class SessionWriter:
         number = self.next_pose if pose is None else int(pose)
         if number <= self._last:
             raise ValueError(f"pose {number} is not after the last pose {self._last}")
-        if not (self.directory / take).is_file():
+        if not (self.directory / take).exists():
             raise InputError(
-                f"take file {take!r} does not exist; write it before its row",
+                f"take {take!r} does not exist; write it before its row",
                 source=str(self.directory),
             )
         values = {"pose": str(number), "take": take, "t_s": _fmt(float(t_s))}
@@ -190,7 +199,7 @@ class SessionWriter:
     ) -> int:
         """Write ``take`` under takes/ (atomically) and append its row (with ``extra`` columns,
         which a new folder's header gains); returns the pose number."""
-        fmt = format or self.config.mocap.format or "motive-csv"
+        fmt = format or self.config.motion_capture.format or "motive-csv"
         rel = self.take_relpath(self.next_pose, fmt)
         write_take(self.directory / rel, take, fmt, **writer_options)
         return self.append(

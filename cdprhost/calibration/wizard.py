@@ -28,6 +28,9 @@ from typing import Protocol
 import numpy as np
 
 from cdprhost.calibration.augmentation import extend_plan, extra_poses
+from cdprhost.calibration.camera.intrinsics import Intrinsics
+from cdprhost.calibration.camera_config import CameraConfig, intrinsics_toml
+from cdprhost.calibration.camera_takes import judge_camera_take, session_intrinsics
 from cdprhost.calibration.identification import Identification, calibrated_profile, identify_session
 from cdprhost.calibration.plan_files import plan_csv, read_plan_csv
 from cdprhost.calibration.planning import plan_poses
@@ -125,6 +128,19 @@ class WizardOutcome:
     session: Path
 
 
+def copy_take(source: Path, target: Path) -> None:
+    """Copy a take file, or a take folder of pictures, crash-safely (a temporary name first)."""
+    if source.is_dir():
+        tmp = target.with_name(target.name + ".tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(source, tmp)
+        shutil.rmtree(target, ignore_errors=True)
+        tmp.rename(target)
+        return
+    with atomic_open(target, "wb") as out, open(source, "rb") as src:
+        shutil.copyfileobj(src, out)
+
+
 def validate_take(
     path: Path,
     mocap: MocapConfig,
@@ -164,6 +180,9 @@ class CalibrationWizard:
         options: WizardOptions = WizardOptions(),
         log: Callable[[str], None] = print,
         profile_ref: str | None = None,
+        camera: CameraConfig | None = None,
+        intrinsics: Intrinsics | None = None,
+        candidates: np.ndarray | None = None,
     ):
         self.dir = Path(session_dir)
         self.profile = profile
@@ -172,6 +191,7 @@ class CalibrationWizard:
         self.takes = takes
         self.options = options
         self.log = log
+        self.candidates = candidates  # poses the measuring system can see (None: all)
         self.dir.mkdir(parents=True, exist_ok=True)
         plan_path = self.dir / PLAN_FILE
         if plan_path.is_file():
@@ -186,19 +206,28 @@ class CalibrationWizard:
                 n_check=options.n_check,
                 criterion=options.criterion,
                 seed=options.seed,
+                candidates=candidates,
             )
             write_text_atomic(plan_path, plan_csv(self.plan))
         if not (self.dir / POSES_FILE).is_file():
             write_text_atomic(self.dir / POSES_FILE, ",".join(POSE_COLUMNS + EXTRA_COLUMNS) + "\n")
         config = None
         if not (self.dir / "session.toml").is_file():
-            if mocap is None:
+            if mocap is None and camera is None:
                 raise InputError(
-                    "a new session needs the motion-capture configuration (markers)",
+                    "a new session needs the motion-capture configuration (markers) "
+                    "or the camera's ([camera]: boards)",
                     source=str(self.dir),
                 )
-            config = SessionConfig(session={"profile": profile_ref or profile.name}, mocap=mocap)  # type: ignore[arg-type]
+            config = SessionConfig(
+                session={"profile": profile_ref or profile.name},  # type: ignore[arg-type]
+                mocap=mocap,
+                camera=camera,
+            )
+            if camera is not None and camera.intrinsics and intrinsics is not None:
+                write_text_atomic(self.dir / camera.intrinsics, intrinsics_toml(intrinsics))
         self.writer = SessionWriter(self.dir, config)
+        self.intrinsics = intrinsics
         table = read_poses(self.dir / POSES_FILE)
         rounds = max((self.plan.round_of(i) for i in range(len(self.plan.poses))), default=0)
         self.state = dataclasses.replace(
@@ -254,13 +283,7 @@ class CalibrationWizard:
         self.log(f"{self._label(i)} has settled: record a take")
         path = Path(self.takes.take_for(i, self.plan.poses[i], action.attempt))
         try:
-            m = validate_take(
-                path,
-                self.writer.config.mocap,
-                self.plan.poses[i],
-                self.options.max_offset_mm,
-                self._history,
-            )
+            summary = self._judge(path, self.plan.poses[i])
         except InputError as exc:  # TakeRejected or an unreadable file
             reason = exc.reason if isinstance(exc, TakeRejected) else "unreadable"
             self.state = self.state.rejected(i, f"{reason}: {exc}")
@@ -273,9 +296,8 @@ class CalibrationWizard:
             return
         if self._steps is None:
             raise CdprError("internal: a take was recorded before any move")
-        rel = f"takes/pose_{self.writer.next_pose:04d}{path.suffix}"  # the take exactly as recorded
-        with atomic_open(self.dir / rel, "wb") as out, open(path, "rb") as src:
-            shutil.copyfileobj(src, out)
+        rel = f"takes/pose_{self.writer.next_pose:04d}{'' if path.is_dir() else path.suffix}"
+        copy_take(path, self.dir / rel)  # the take exactly as recorded
         s_cmd = self.model.sliders_from_steps(self._steps)
         self.writer.append(
             take=rel,
@@ -286,9 +308,32 @@ class CalibrationWizard:
             extra={"role": self.plan.roles[i], "plan_pose": str(i + 1), "mocap_file": str(path)},
         )
         self.state = self.state.accepted(i)
+        self.log(f"recorded {self._label(i)}: {summary}")
+
+    def _judge(self, path: Path, pose: np.ndarray) -> str:
+        """Judge a take now (raises on a refused one); a one-line summary."""
+        camera = self.writer.config.camera
+        if camera is not None:
+            intrinsics = self.intrinsics or session_intrinsics(self.dir, camera)[0]
+            c = judge_camera_take(
+                path,
+                camera.setup(),
+                intrinsics,
+                pose,
+                self.options.max_offset_mm,
+                camera.acceptance.min_valid_fraction,
+            )
+            return f"{c.n_used}/{c.n_frames} frames, spread {c.spread_mm:.3f} mm"
+        m = validate_take(
+            path,
+            self.writer.config.motion_capture,
+            pose,
+            self.options.max_offset_mm,
+            self._history,
+        )
         s = m.stats
-        self.log(
-            f"recorded {self._label(i)}: sigma {m.sigma_mm:.4f} mm, drift {s.drift_total_mm:.3f} mm, "
+        return (
+            f"sigma {m.sigma_mm:.4f} mm, drift {s.drift_total_mm:.3f} mm, "
             f"spread {m.spread_mm:.3f} mm, {m.n_frames_used} frames"
             + (f" ({'; '.join(m.warnings)})" if m.warnings else "")
         )
@@ -339,6 +384,7 @@ class CalibrationWizard:
             limits=self.options.trust,
             has_check_poses=any(self.plan.roles[i] == "check" for i in recorded),
             max_extra=self.options.max_extra_poses,
+            candidates=self.candidates,
         )
         plan = extend_plan(self.plan, self.model, extra.poses) if len(extra.poses) else self.plan
         if len(extra.poses):

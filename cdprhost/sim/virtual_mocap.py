@@ -30,7 +30,6 @@ from numpy.typing import ArrayLike
 
 from cdprhost.calibration.readers import EXTENSIONS
 from cdprhost.calibration.session import SessionConfig
-from cdprhost.effects.base import MotionContext
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import load_profile
@@ -41,6 +40,7 @@ from cdprhost.sim.synthetic_session import (
     synthesize_take,
     synthetic_config,
 )
+from cdprhost.sim.true_effector import TrueEffector
 
 #: What the virtual motion capture adds by default: a good but not perfect system.
 REALISTIC = MocapNoise(
@@ -100,55 +100,29 @@ class VirtualMocap:
         self.writer_options = dict(default_options if writer_options is None else writer_options)
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
-        self._last_steps: np.ndarray | None = None
-        self._dirs = np.ones(3)
+        self._tracker = TrueEffector(truth)
         self.count = sum(1 for p in self.directory.glob("take-*") if not p.name.startswith("."))
         self.written: list[Path] = []
-        self._record: Any = None
 
     def attach_record(self, record: Any) -> None:
-        """Read last-motion directions from the device's (growing) record of executed segments
-        (a ``SegmentRecord``: its ``steps(last=n)`` array, or a list of entries)."""
-        self._record = record
+        """Read last-motion directions from the device's record of executed segments."""
+        self._tracker.attach_record(record)
 
     def _record_directions(self, window: int = 4096) -> np.ndarray | None:
-        if not self._record:
-            return None
-        if hasattr(self._record, "steps"):
-            steps = self._record.steps(last=window)[:, :3]
-        else:
-            steps = np.array([e["steps"][:3] for e in self._record[-window:]], dtype=np.int64)
-        moves = np.diff(steps, axis=0)
-        dirs = self._dirs.copy()
-        for k in range(3):  # three columns; the record window is vectorised
-            nz = np.flatnonzero(moves[:, k])
-            if nz.size:
-                dirs[k] = np.sign(moves[nz[-1], k])
-        return dirs
+        return self._tracker.record_directions(window)
 
     def effector_point(
         self, steps: ArrayLike, device_time_s: float, directions: ArrayLike | None = None
     ) -> np.ndarray:
         """Where the true effector is for absolute module steps (the first three of ``steps``)."""
-        n = np.asarray(steps, dtype=float)[:3]
-        dirs = self._dirs if directions is None else np.asarray(directions, dtype=float)[:3]
-        ctx = MotionContext(t_s=np.array([float(device_time_s)]), directions=dirs[None, :])
-        return np.asarray(self.truth.fk(self.truth.sliders_from_steps(n)[None, :], ctx)[0])
+        return self._tracker.effector_point(steps, device_time_s, directions)
 
     def on_settled(
         self, steps: ArrayLike, device_time_s: float, directions: ArrayLike | None = None
     ) -> Path | None:
         """Write a take of the settled effector; returns its path (None if the cables cannot meet)."""
         with self._lock:
-            n = np.asarray(steps, dtype=np.int64)[:3]
-            from_record = self._record_directions() if directions is None else None
-            if from_record is not None:
-                self._dirs = from_record
-            elif self._last_steps is not None:
-                moved = n - self._last_steps
-                self._dirs = np.where(moved != 0, np.sign(moved), self._dirs)
-            self._last_steps = n
-            point = self.effector_point(n, device_time_s, directions)
+            point = self._tracker.settle(steps, device_time_s, directions)
             if not np.isfinite(point).all():
                 return None
             self.count += 1

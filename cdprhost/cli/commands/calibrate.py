@@ -1,4 +1,5 @@
-"""`cdprhost calibrate plan | identify | wizard`: kinematic calibration from motion capture."""
+"""`cdprhost calibrate plan | identify | camera | wizard`: kinematic calibration from motion
+capture or one camera (`camera`: :mod:`cdprhost.cli.camera_calibration`)."""
 
 from __future__ import annotations
 
@@ -94,6 +95,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_verification_arguments(ident)
     ident.set_defaults(func=run_identify)
 
+    from cdprhost.cli import camera_calibration
+
+    camera_calibration.register(cal_sub)
+
     wiz = cal_sub.add_parser(
         "wizard", help="guided calibration: move to planned poses, record takes, identify"
     )
@@ -143,6 +148,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="a session.toml-like file whose [mocap] table names the "
         "markers (needed for a new session with real motion capture)",
     )
+    camera_calibration.add_wizard_arguments(wiz)
     wiz.add_argument(
         "--sim-truth", metavar="PROFILE", help="embedded device: the hidden true machine"
     )
@@ -335,6 +341,7 @@ def run_wizard(args: argparse.Namespace) -> int:
     import datetime as dt
 
     from cdprhost.calibration import wizard
+    from cdprhost.cli.camera_calibration import camera_for_wizard
     from cdprhost.link import open_link
     from cdprhost.machine import Machine
     from cdprhost.sim.embedded import open_embedded
@@ -346,10 +353,14 @@ def run_wizard(args: argparse.Namespace) -> int:
             "--sim-truth/--sim-mocap-dir drive the embedded simulated device; drop them with --port"
         )
     session = Path(args.session or f"calibration-{dt.datetime.now():%Y%m%d-%H%M%S}")
-    mocap = _mocap_for(args, session)
+    camera = camera_for_wizard(args, session, model) if args.camera else None
+    mocap = None if camera else _mocap_for(args, session)
     watch = args.watch or (args.sim_mocap_dir if not args.takes_from else None)
     takes: wizard.TakeSource
-    if watch:
+    log = lambda m: print(m, flush=True)  # noqa: E731
+    if camera is not None:
+        takes = camera.takes(session, args.frames, log)
+    elif watch:
         takes = wizard.FolderWatcher(Path(watch), timeout_s=args.take_timeout)
     elif args.takes_from:
         takes = wizard.NumberedTakes(Path(args.takes_from))
@@ -362,7 +373,7 @@ def run_wizard(args: argparse.Namespace) -> int:
     if args.port:
         link = open_link(args.port, args.baud)
     else:
-        observer = make_observer(args.sim_truth, args.sim_mocap_dir)
+        observer = camera.observer if camera else make_observer(args.sim_truth, args.sim_mocap_dir)
         link = open_embedded(observer=observer, speedup=args.speedup)
         if observer is not None:
             observer.attach_record(link.device.record)
@@ -384,7 +395,12 @@ def run_wizard(args: argparse.Namespace) -> int:
             mocap=mocap,
             options=options,
             profile_ref=args.profile,
-            log=lambda m: print(m, flush=True),
+            log=log,
+            camera=camera.config if camera else None,
+            intrinsics=camera.intrinsics if camera else None,
+            candidates=(
+                camera.candidates(takes, model, args.poses + args.check_poses) if camera else None
+            ),
         )
         outcome = wiz.run()
     except KeyboardInterrupt:
