@@ -23,7 +23,7 @@ from scipy import stats
 
 from cdprhost.calibration.fitting import GEOMETRY_NAMES, CableModelFit, Observations
 from cdprhost.calibration.pose_noise import PoseNoise
-from cdprhost.calibration.session import Session, load_session
+from cdprhost.calibration.session import Session, SessionMeasurements, load_session
 from cdprhost.calibration.trust import (
     DEFAULT_TRUST,
     TrustLimits,
@@ -452,7 +452,7 @@ def identify_session(
     Each pose's noise is its take's standard error (:mod:`.pose_noise`); ``noise_floor_mm``
     adds a part no take shows (default: ``noise_mm`` of session.toml, if declared)."""
     session = directory if isinstance(directory, Session) else load_session(directory)
-    meas = session.measure()
+    meas = measure_any(session, base)
     if len(meas) == 0:
         raise InputError(
             "no usable take in the session",
@@ -460,8 +460,10 @@ def identify_session(
             problems=[str(r) for r in meas.rejected],
         )
     noise = meas.noise(base.steps_per_mm, floor_mm=noise_floor_mm)
-    notes = tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ())
-    return identify_verified(
+    notes = (
+        tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ()) + tuple(meas.notes)
+    )
+    result = identify_verified(
         meas.observations(noise),
         base,
         meas.roles,
@@ -473,3 +475,20 @@ def identify_session(
         pose_numbers=meas.pose,
         notes=notes,
     )
+    if meas.refusals and result.trust is not None:
+        trust = dataclasses.replace(result.trust, refusals=result.trust.refusals + meas.refusals)
+        result = dataclasses.replace(result, trust=trust)
+    return result
+
+
+def measure_any(
+    session: Session, base: MachineModel, *, refine: bool = True
+) -> SessionMeasurements:
+    """A session's measurements: motion-capture takes, or a camera session's pictures (with
+    ``refine``, the camera refined against ``base``'s commanded motion,
+    :mod:`.camera_session`)."""
+    if session.config.camera is not None:
+        from cdprhost.calibration.camera_session import measure_camera_session
+
+        return measure_camera_session(session, base, refine=refine)
+    return session.measure()

@@ -146,3 +146,33 @@ def pose_noise(
                 f"{expected:.3g} mm: {extra:.3g} mm added to every pose",
             )
     return PoseNoise(take.copy(), take, 0.0, "takes", "standard error of each take's centre")
+
+
+def camera_noise(
+    covariance: np.ndarray,
+    take_sigma_mm: np.ndarray,
+    declared_mm: float | None = None,
+    common_covariance: np.ndarray | None = None,
+    parameter_covariance: np.ndarray | None = None,
+) -> PoseNoise:
+    """A camera session's pose noise: each pose's covariance from its corners' noise through
+    the pose solution (anisotropic), plus a declared accuracy in quadrature; the parts that
+    are the same for every pose travel with it for the trust gate."""
+    cov = np.asarray(covariance, dtype=float)
+    extra = float(declared_mm) if declared_mm is not None and declared_mm > 0 else 0.0
+    if extra:
+        cov = cov + extra**2 * np.eye(3)
+    sigma = np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0)
+    note = "each pose's covariance from its corners' noise through the camera (depth worst)"
+    if extra:
+        note += f", plus accuracy_mm = {extra:g} declared"
+    return PoseNoise(
+        sigma,
+        np.asarray(take_sigma_mm, float),
+        extra,
+        "camera" + (" + declared" if extra else ""),
+        note,
+        cov,
+        common_covariance,
+        parameter_covariance,
+    )

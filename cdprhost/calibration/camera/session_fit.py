@@ -222,11 +222,13 @@ def fit_session(
     *,
     refine: tuple[str, ...] | None = None,
     quality: FrameQuality | None = None,
+    fit_rows: np.ndarray | None = None,
 ) -> SessionFit:
     """The session-level fit (module doc). With ``sliders`` (K, 3) commanded and ``model``
     (the profile's), the bundle adjustment refines the intrinsics named in ``refine``
     (default :data:`REFINABLE`) jointly with the 12 parameters; without them, the
-    camera-only positions. Raises ValueError when the reference board is never seen well
+    camera-only positions. ``fit_rows`` (K,) bool: the poses that enter the bundle
+    adjustment (default all; check poses are left out so that they test it). Raises ValueError when the reference board is never seen well
     enough (naming the frames) or no pose has a usable frame."""
     q_cfg = quality or FrameQuality()
     ref_board, eff_board = setup.reference.board, setup.effector.board
@@ -290,7 +292,7 @@ def fit_session(
     stage3 = _fit_camera_only(
         ref_obj, ref_px, eff_means, idx, board_pts, v0, cam_r, cam_t, rot0.as_rotvec(), origins
     )
-    cam_r, cam_t, eff_rv, origins[idx] = stage3
+    cam_r, cam_t, eff_rv, origins[idx], cov_eff_rot = stage3
     v = v0
     notes: list[str] = []
     refined: tuple[str, ...] = ()
@@ -298,13 +300,13 @@ def fit_session(
     extra_q = np.zeros((12, 12))
     sigma_px = float("nan")
     offset = np.asarray(setup.effector.offset, float)
-    cov_eff_rot = np.zeros((3, 3))
-    if sliders is not None and model is not None and idx.size >= 4:
+    ba_idx = idx if fit_rows is None else idx[np.asarray(fit_rows, bool)[idx]]
+    if sliders is not None and model is not None and ba_idx.size >= 4:
         ba = _bundle_adjust(
             ref_obj,
             ref_px,
             eff_means,
-            idx,
+            ba_idx,
             board_pts,
             offset,
             intrinsics,
@@ -312,9 +314,9 @@ def fit_session(
             cam_r,
             cam_t,
             eff_rv,
-            np.asarray(sliders, float)[idx],
+            np.asarray(sliders, float)[ba_idx],
             model,
-            origins[idx],
+            origins[ba_idx],
         )
         v, cam_r, cam_t, eff_rv, q_fit, sigma_px, refined, notes, extra_q, cov_eff_rot = ba
     rot_eff = rotvec_matrix(eff_rv)
@@ -429,8 +431,9 @@ def _fit_camera_only(
     cam_t: np.ndarray,
     eff_rv: np.ndarray,
     origins: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Camera pose, one board orientation and a free origin per pose, from every corner."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Camera pose, one board orientation and a free origin per pose, from every corner;
+    and the covariance of the orientation (rad^2)."""
     means = [eff_means[k] for k in idx]
 
     eff_local = np.concatenate([board_pts[m[0]] for m in means if m is not None])
@@ -447,7 +450,11 @@ def _fit_camera_only(
     sparsity = _sparsity(len(ref_px), [len(m[0]) for m in means if m is not None])
     res = least_squares(fun, x0, jac_sparsity=sparsity, method="trf", x_scale="jac", xtol=1e-12)
     x = res.x
-    return x[:3], x[3:6], x[6:9], x[9:].reshape(-1, 3)
+    jac = res.jac.toarray() if hasattr(res.jac, "toarray") else np.asarray(res.jac)
+    dof = max(res.fun.size - x.size, 1)
+    s2 = max(float(res.fun @ res.fun) / dof, MIN_PIXEL_SIGMA**2)
+    cov_er = s2 * np.linalg.pinv(jac.T @ jac)[6:9, 6:9]
+    return x[:3], x[3:6], x[6:9], x[9:].reshape(-1, 3), cov_er
 
 
 def _sparsity(n_ref: int, n_eff: list[int]) -> lil_matrix:
