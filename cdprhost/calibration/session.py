@@ -32,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from cdprhost.calibration.acceptance import AcceptanceLimits
 from cdprhost.calibration.camera_config import CameraConfig
 from cdprhost.calibration.fitting import Observations
-from cdprhost.calibration.pose_noise import PoseNoise, pose_noise
+from cdprhost.calibration.pose_noise import PoseNoise, camera_noise, pose_noise
 from cdprhost.calibration.readers import read_take
 from cdprhost.calibration.takes import (
     MocapConfig,
@@ -322,6 +322,14 @@ class SessionMeasurements:
     takes: tuple[TakeMeasurement, ...]
     rejected: tuple[RejectedTake, ...]
     declared_noise_mm: float | None = None
+    # a camera session's noise (camera-session.md, :mod:`.camera_session`): each pose's full
+    # covariance (K, 3, 3), the common vector's (3, 3), the parameters' part (12, 12); what
+    # refuses the session whatever the fit (calibration views of poor coverage); notes
+    covariance: np.ndarray | None = None
+    common_covariance: np.ndarray | None = None
+    parameter_covariance: np.ndarray | None = None
+    refusals: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.measured.shape[0])
@@ -336,6 +344,14 @@ class SessionMeasurements:
     ) -> PoseNoise:
         """The one noise model (:func:`~.pose_noise.pose_noise`); ``floor_mm`` overrides the
         declared noise."""
+        if self.covariance is not None:
+            return camera_noise(
+                self.covariance,
+                self.take_sigma_mm,
+                self.declared_noise_mm if floor_mm is None else floor_mm,
+                self.common_covariance,
+                self.parameter_covariance,
+            )
         return pose_noise(
             self.take_sigma_mm,
             declared_mm=self.declared_noise_mm if floor_mm is None else floor_mm,
@@ -346,8 +362,10 @@ class SessionMeasurements:
 
     def observations(self, noise: PoseNoise | None = None) -> Observations:
         """The observations of identification and diagnosis (the one builder)."""
-        sigma = (noise or self.noise()).sigma_mm
-        return Observations(self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), sigma)
+        n = noise or self.noise()
+        return Observations(
+            self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), n.sigma_mm, n.covariance
+        )
 
 
 @dataclass(frozen=True)

@@ -151,12 +151,24 @@ def trust_report(
     factor: float,
     noise_dof: int,
     limits: TrustLimits = DEFAULT_TRUST,
+    *,
+    parameter_covariance: np.ndarray | None = None,
+    common_covariance: np.ndarray | None = None,
 ) -> TrustReport:
-    """The gate on an identification whose (unscaled) covariance is ``covariance``."""
+    """The gate on an identification whose (unscaled) covariance is ``covariance``.
+
+    ``parameter_covariance`` (12, 12): what errors shared by every pose (a camera's
+    intrinsics and pose) add to the parameters, which the poses' noise cannot show;
+    ``common_covariance`` (3, 3): one vector added to every measured point (a camera's
+    effector-board orientation times its offset), which identification cannot see but a
+    print does: both are added to the prediction."""
     scale = max(factor, 1.0) if np.isfinite(factor) else 1.0
     cov = covariance * scale
+    if parameter_covariance is not None:
+        cov = cov + np.asarray(parameter_covariance, float)
+    common = 0.0 if common_covariance is None else float(np.trace(common_covariance))
     if np.all(np.isfinite(cov)):
-        sigma = workspace_sigma(geometry, cov, grid)
+        sigma = np.sqrt(workspace_sigma(geometry, cov, grid) ** 2 + common)
         rms, worst = float(np.sqrt(np.mean(sigma**2))), float(np.max(sigma))
     else:
         rms = worst = float("inf")

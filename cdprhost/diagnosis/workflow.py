@@ -373,7 +373,7 @@ def accuracy_from_fit(
     if extra <= 0:
         return None
     wider = np.sqrt(sig**2 + extra**2)
-    widened = Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider)
+    widened = obs.with_sigma(wider)
     if localise(fit.model_, widened, localise_alpha):
         return None  # a pattern is physics the catalogue lacks, not accuracy
     return PoseNoise(
@@ -434,7 +434,7 @@ def diagnose(
         )
         if accurate is not None:
             return diagnose(
-                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, accurate.sigma_mm),
+                obs.with_sigma(accurate.sigma_mm),
                 base_model,
                 accurate,
                 settings,
@@ -494,7 +494,7 @@ def diagnose(
             # calibration of the mocap): an excess with no pattern is that, not physics.
             wider = unseen_noise(current.fit, obs, noise)
             return diagnose(
-                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider.sigma_mm),
+                obs.with_sigma(wider.sigma_mm),
                 base_model,
                 wider,
                 settings,
