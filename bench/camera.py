@@ -44,7 +44,7 @@ from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.profile import load_profile
 from cdprhost.sim.camera.imaging import Imaging, decode
 from cdprhost.sim.camera.scene import CameraRig, phone_rig, standard_rig
-from cdprhost.sim.camera.session import write_camera_session
+from cdprhost.sim.camera.session import calibrated_intrinsics, write_camera_session
 from cdprhost.sim.measurement import achieved_points, perturbed_geometry
 from cdprhost.sim.scenarios import session_times
 from cdprhost.sim.synthetic_session import write_measured_session
@@ -102,7 +102,7 @@ def camera_row(
     poses: np.ndarray,
     folder: Path,
     frames: int,
-    intrinsics: str = "calibrated",
+    intrinsics: Any = "calibrated",
     seed: int = 0,
 ) -> dict[str, Any]:
     s = write_camera_session(
@@ -197,6 +197,11 @@ def main() -> int:
         cases = [(name, rig, "calibrated") for name, rig in rigs(args.quick).items()]
         cases.append(("1080p intrinsics from views", standard_rig(), "views"))
         for name, rig, source in cases:
+            if source == "calibrated":  # one calibration per camera, as a user makes
+                calib = calibrated_intrinsics(rig)
+                source = calib.intrinsics
+                f_err = calib.intrinsics.vector[0] / rig.camera.matrix[0, 0] - 1
+                print(f"  ({name}: calibrated focal length off by {100 * f_err:+.3f} %)")
             for seed, truth in enumerate(truths):
                 poses = plan_for(rig, nominal, args.poses, seed)
                 row = camera_row(
@@ -204,7 +209,7 @@ def main() -> int:
                     truth,
                     nominal,
                     poses,
-                    Path(tmp) / f"{len(name)}-{seed}-{source}",
+                    Path(tmp) / f"{name.replace(' ', '_')}-{seed}",
                     args.frames,
                     source,
                     seed,
@@ -215,9 +220,12 @@ def main() -> int:
                 )
         print("\n3. workspace RMS vs fit poses (reference set-up)")
         rig = standard_rig()
+        calib = calibrated_intrinsics(rig).intrinsics
         for n in (6, 10, 15, 20) if not args.quick else (15,):
             poses = plan_for(rig, nominal, n, 0)
-            row = camera_row(rig, truths[0], nominal, poses, Path(tmp) / f"n{n}", args.frames)
+            row = camera_row(
+                rig, truths[0], nominal, poses, Path(tmp) / f"n{n}", args.frames, calib
+            )
             print(
                 f"  {n:3d} poses: workspace RMS {row['rms']:.3f} mm (predicted {row['predicted']:.3f})"
             )
