@@ -267,6 +267,24 @@ def sim_rig(size_text: str) -> Any:
     return rig_for_size((int(m[1]), int(m[2])))
 
 
+def camera_table(path: Path) -> Any:
+    """The ``[camera]`` table of a TOML file (a session.toml or just that table)."""
+    from pydantic import ValidationError
+
+    from cdprhost.calibration.camera_config import CameraConfig
+    from cdprhost.calibration.session import read_toml, validation_problems
+
+    data = read_toml(path)
+    if "camera" not in data:
+        raise InputError("no [camera] table (the boards of camera-session.md)", source=str(path))
+    try:
+        return CameraConfig.model_validate(data["camera"])
+    except ValidationError as exc:
+        raise InputError(
+            "invalid [camera] table", source=str(path), problems=validation_problems(exc, "camera")
+        ) from None
+
+
 def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> CameraWizard:
     """The capture, the [camera] configuration and the intrinsics of `wizard --camera`."""
     from cdprhost.calibration.camera_config import load_intrinsics
@@ -300,9 +318,7 @@ def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> Ca
                 "this session measures with motion capture, not a camera", source=str(session)
             )
     elif args.camera_config:
-        config = load_session_config(args.camera_config).camera
-        if config is None:
-            raise InputError("no [camera] table", source=args.camera_config)
+        config = camera_table(Path(args.camera_config))
     elif rig is not None:
         from cdprhost.sim.camera.session import camera_config
 

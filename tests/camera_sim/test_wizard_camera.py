@@ -127,3 +127,56 @@ def test_wizard_cli_with_the_simulated_camera_ends_trusted(truth, tmp_path, caps
     assert data["ok"] is True
     assert load_profile(tmp_path / "cal.toml").calibration is not None
     assert (tmp_path / "s" / "camera.toml").is_file()
+
+
+def _wizard(tmp_path, *extra):
+    return main(
+        [
+            "calibrate",
+            "wizard",
+            "--profile",
+            "paper-simulation",
+            "--session",
+            str(tmp_path / "s"),
+            *extra,
+        ]
+    )
+
+
+def test_a_real_camera_needs_its_boards_and_intrinsics(rig, tmp_path, capsys):
+    import cv2
+
+    from cdprhost.calibration.camera_config import intrinsics_toml
+    from cdprhost.calibration.session import SessionConfig
+    from cdprhost.calibration.session_writer import session_toml
+
+    assert _wizard(tmp_path, "--camera", str(tmp_path / "none.avi")) == 2
+    assert "cannot open camera" in capsys.readouterr().err
+    video = tmp_path / "cam.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter.fourcc(*"MJPG"), 30.0, SIZE)
+    writer.write(np.full((SIZE[1], SIZE[0], 3), 128, np.uint8))
+    writer.release()
+    assert _wizard(tmp_path, "--camera", str(video)) == 2
+    assert "--camera-config" in capsys.readouterr().err
+    boards = tmp_path / "boards.toml"
+    cfg = SessionConfig.model_validate({"session": {"profile": "p"}, "camera": camera_config(rig)})
+    boards.write_text(session_toml(cfg).replace("square_mm = 30.0", "square_mm = -3.0", 1))
+    assert _wizard(tmp_path, "--camera", str(video), "--camera-config", str(boards)) == 2
+    assert "camera.reference_board.square_mm" in capsys.readouterr().err
+    boards.write_text(session_toml(cfg))
+    assert _wizard(tmp_path, "--camera", str(video), "--camera-config", str(boards)) == 2
+    assert "--camera-intrinsics" in capsys.readouterr().err
+    intr = tmp_path / "camera.toml"
+    intr.write_text(intrinsics_toml(true_intrinsics(rig)))
+    args = (
+        "--camera",
+        str(video),
+        "--camera-config",
+        str(boards),
+        "--camera-intrinsics",
+        str(intr),
+    )
+    assert _wizard(tmp_path, *args) == 2  # a grey picture: no board, nothing moves
+    err = capsys.readouterr().err
+    assert "reference and the effector board" in err and "before the first move" in err
+    assert not (tmp_path / "s" / "takes").exists() or not any((tmp_path / "s" / "takes").iterdir())
