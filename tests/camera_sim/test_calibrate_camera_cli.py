@@ -105,3 +105,14 @@ def test_bad_board_is_a_usage_error(good_views, tmp_path, capsys, board, why):
         == 2
     )
     assert why in capsys.readouterr().err
+
+
+def test_live_views_from_the_simulated_camera(tmp_path, capsys):
+    out, saved = tmp_path / "camera.toml", tmp_path / "views"
+    args = ["calibrate", "camera", "--camera", "sim", "--sim-camera", "640x480", "--views", "12"]
+    assert main([*args, "--out", str(out), "--save-views", str(saved)]) == 0
+    text = capsys.readouterr().out
+    assert "view 12/12" in text and "reprojection error RMS" in text
+    assert len(list(saved.glob("view_*.png"))) == 12
+    truth = true_intrinsics(rig_for_size((640, 480)))
+    assert abs(load_intrinsics(out).vector[0] / truth.vector[0] - 1) < 0.01

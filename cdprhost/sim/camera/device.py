@@ -79,3 +79,27 @@ class VirtualCamera:
 
     def release(self) -> None:
         pass
+
+
+class ViewsCapture:
+    """A simulated user waving the calibration board before the rig's camera: ``read``
+    gives rendered calibration views one after the other (then again from the first)."""
+
+    def __init__(self, rig: CameraRig, n_views: int = 18, seed: int = 0, supersample: int = 2):
+        from cdprhost.sim.camera.views import render_views
+
+        self._views = render_views(
+            rig.camera, rig.imaging, n_views=n_views, seed=seed, supersample=supersample
+        )
+        self._next = 0
+
+    def isOpened(self) -> bool:
+        return True
+
+    def read(self) -> tuple[bool, np.ndarray]:
+        image = decode(self._views[self._next % len(self._views)])
+        self._next += 1
+        return True, image
+
+    def release(self) -> None:
+        pass
