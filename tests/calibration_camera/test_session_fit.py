@@ -13,7 +13,7 @@ from cdprhost.calibration.fitting import Observations
 from cdprhost.calibration.identification import identify
 from cdprhost.calibration.planning import plan_poses
 from cdprhost.calibration.pose_noise import camera_noise
-from cdprhost.calibration.trust import TrustLimits
+from cdprhost.calibration.trust import DEFAULT_TRUST
 from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.sim.scenarios import hidden_truth
 from tests.calibration_camera.scene import analytic_takes, make_scene, workspace_rms
@@ -41,7 +41,7 @@ def session(sim_model):
     return truth, scene, takes, s_cmd, actual
 
 
-def identified(fit, s_cmd, model, limits=TrustLimits()):
+def identified(fit, s_cmd, model, limits=DEFAULT_TRUST):
     noise = camera_noise(
         fit.covariances,
         np.zeros(len(s_cmd)),
