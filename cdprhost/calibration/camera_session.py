@@ -31,11 +31,17 @@ CAMERA_MIN_FRAMES = 3
 _IDENTITY = RigidTransform(np.eye(3), np.zeros(3), np.zeros(()), np.zeros((), dtype=int))
 
 
+#: Smallest drift over a camera take that matters (mm): a frame's B scatters by tenths of a
+#: millimetre, and a drift test on a few frames must not refuse takes for that.
+CAMERA_MAX_DRIFT_MM = 0.5
+
+
 def camera_limits(limits: AcceptanceLimits) -> AcceptanceLimits:
-    """The take thresholds for pictures: a few frames suffice unless the session says."""
-    if "min_frames" in limits.model_fields_set:
-        return limits
-    return limits.model_copy(update={"min_frames": CAMERA_MIN_FRAMES})
+    """The take thresholds for pictures (unless the session sets them): a few frames
+    suffice, and a drift matters only when it is as large as a frame's scatter."""
+    defaults = {"min_frames": CAMERA_MIN_FRAMES, "max_drift_mm": CAMERA_MAX_DRIFT_MM}
+    update = {k: v for k, v in defaults.items() if k not in limits.model_fields_set}
+    return limits.model_copy(update=update)
 
 
 def measure_camera_session(
@@ -143,6 +149,7 @@ def measure_camera_session(
         covariance=cov,
         common_covariance=fit.common_covariance,
         parameter_covariance=fit.geometry_covariance_extra,
+        frame_covariance=fit.frame_covariance,
         refusals=refusals,
         notes=_fit_notes(fit),
     )

@@ -309,6 +309,7 @@ def identify(
         limits,
         parameter_covariance=None if noise is None else noise.parameter_covariance,
         common_covariance=None if noise is None else noise.common_covariance,
+        frame_covariance=None if noise is None else noise.frame_covariance,
     )
     numbers = np.arange(1, k + 1) if pose_numbers is None else np.asarray(pose_numbers)
     verification = (

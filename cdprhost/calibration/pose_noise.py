@@ -40,6 +40,9 @@ class PoseNoise:
     covariance: np.ndarray | None = None
     common_covariance: np.ndarray | None = None
     parameter_covariance: np.ndarray | None = None
+    # (6, 6): a rigid error of the whole measuring frame (rotation vector about the base
+    # origin, translation): a camera's pose from the reference board
+    frame_covariance: np.ndarray | None = None
 
     @property
     def typical_mm(self) -> float:
@@ -82,6 +85,7 @@ class PoseNoise:
             None if self.covariance is None else self.covariance[index],
             self.common_covariance,
             self.parameter_covariance,
+            self.frame_covariance,
         )
 
 
@@ -154,6 +158,7 @@ def camera_noise(
     declared_mm: float | None = None,
     common_covariance: np.ndarray | None = None,
     parameter_covariance: np.ndarray | None = None,
+    frame_covariance: np.ndarray | None = None,
 ) -> PoseNoise:
     """A camera session's pose noise: each pose's covariance from its corners' noise through
     the pose solution (anisotropic), plus a declared accuracy in quadrature; the parts that
@@ -175,4 +180,5 @@ def camera_noise(
         cov,
         common_covariance,
         parameter_covariance,
+        frame_covariance,
     )

@@ -328,6 +328,7 @@ class SessionMeasurements:
     covariance: np.ndarray | None = None
     common_covariance: np.ndarray | None = None
     parameter_covariance: np.ndarray | None = None
+    frame_covariance: np.ndarray | None = None
     refusals: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
 
@@ -351,6 +352,7 @@ class SessionMeasurements:
                 self.declared_noise_mm if floor_mm is None else floor_mm,
                 self.common_covariance,
                 self.parameter_covariance,
+                self.frame_covariance,
             )
         return pose_noise(
             self.take_sigma_mm,

@@ -37,7 +37,7 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
-from cdprhost.calibration.camera.boards import CameraSetup
+from cdprhost.calibration.camera.boards import CameraSetup, CharucoBoard
 from cdprhost.calibration.camera.detection import BoardDetection
 from cdprhost.calibration.camera.intrinsics import PARAMETER_NAMES, Intrinsics
 from cdprhost.calibration.camera.pose import solve_board_pose
@@ -109,6 +109,9 @@ class SessionFit:
     refined: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     geometry_q: np.ndarray | None = None
+    # (6, 6) of the rigid error (rotation vector about the base origin, rad; translation,
+    # mm) with which the reference board's pose puts every B in a slightly wrong frame
+    frame_covariance: np.ndarray = field(default_factory=lambda: np.zeros((6, 6)))
     extra: dict[str, float] = field(default_factory=dict)
 
     @property
@@ -354,6 +357,9 @@ def fit_session(
     lever = _skew(rot_eff @ offset)
     off_sigma = setup.effector.offset_sigma_mm or DEFAULT_OFFSET_SIGMA_MM
     common = lever @ cov_eff_rot @ lever.T + off_sigma**2 * np.eye(3)
+    frame = frame_covariance(
+        cam_r, cam_t, camera_pose_covariance(ref_ids, ref_obj, ref_px, ref_board, v, cam_r, cam_t)
+    )
     v_std = np.asarray(intrinsics.std, float).copy()
     out_intr = Intrinsics.from_vector(
         v, intrinsics.image_size, v_std, intrinsics.rms_reprojection_px
@@ -376,7 +382,74 @@ def fit_session(
         refined,
         tuple(notes),
         q_fit,
+        frame,
     )
+
+
+def camera_pose_covariance(
+    ids: np.ndarray,
+    obj: np.ndarray,
+    px: np.ndarray,
+    board: CharucoBoard,
+    v: np.ndarray,
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+) -> np.ndarray:
+    """Covariance (6, 6) of the camera pose (rvec, tvec) from the reference board's corners:
+    a block jackknife over the board's rows and columns of corners (the errors of
+    neighbouring corners are alike: lens model, detector bias, printing), or the formal one
+    from the residuals, whichever is larger."""
+    k = np.array([[v[0], 0, v[2]], [0, v[1], v[3]], [0, 0, 1]])
+    dist = v[4:9]
+    xy = board.corners_mm[ids, :2]
+    blocks = [xy[:, 0] == c for c in np.unique(xy[:, 0])] + [
+        xy[:, 1] == r for r in np.unique(xy[:, 1])
+    ]
+    x0 = np.concatenate([rvec, tvec])
+    proj, jac = cv2.projectPoints(obj, rvec, tvec, k, dist)
+    resid = proj.reshape(-1, 2) - px
+    dof = max(resid.size - 6, 1)
+    s2 = max(float(np.sum(resid**2)) / dof, MIN_PIXEL_SIGMA**2)
+    j = np.asarray(jac, float)[:, :6]
+    formal = s2 * np.linalg.pinv(j.T @ j)
+    est = []
+    for drop in blocks:
+        keep = ~drop
+        if keep.sum() < 6:
+            continue
+        r, t = cv2.solvePnPRefineLM(obj[keep], px[keep], k, dist, rvec.copy(), tvec.copy())
+        est.append(np.concatenate([np.ravel(r), np.ravel(t)]))
+    if len(est) < 3:
+        return formal
+    e = np.array(est) - x0
+    dev = e - e.mean(axis=0)
+    # blocks of rows and of columns each cover the board once: g - 2 independent deletions
+    g = len(est)
+    jack = (g - 2) / g * (dev.T @ dev) if g > 2 else formal
+    return jack if np.trace(jack[3:, 3:]) > np.trace(formal[3:, 3:]) else formal
+
+
+def frame_covariance(rvec: np.ndarray, tvec: np.ndarray, camera_cov: np.ndarray) -> np.ndarray:
+    """The camera pose's covariance as a rigid error of the base frame: dB = w x B + t
+    for every measured B, (6, 6) of (w, t)."""
+    r = rotvec_matrix(rvec)
+    probe = np.array([[0, 0, 150.0], [150, 0, 150], [0, 150, 150], [0, 0, 300], [-150, -100, 250]])
+    cam_pts = probe @ r.T + tvec
+
+    def to_base(x: np.ndarray) -> np.ndarray:
+        rr = rotvec_matrix(x[:3])
+        return np.asarray((cam_pts - x[3:]) @ rr)
+
+    x0 = np.concatenate([rvec, tvec])
+    design = np.concatenate([np.hstack([-_skew(p), np.eye(3)]) for p in probe])
+    mapping = np.empty((6, 6))
+    for j in range(6):
+        h = 1e-6 if j < 3 else 1e-3
+        step = np.zeros(6)
+        step[j] = h
+        d_b = (to_base(x0 + step) - to_base(x0 - step)).ravel() / (2 * h)
+        mapping[:, j] = np.linalg.lstsq(design, d_b, rcond=None)[0]
+    return np.asarray(mapping @ camera_cov @ mapping.T)
 
 
 def _skew(a: np.ndarray) -> np.ndarray:
