@@ -160,7 +160,7 @@ def test_a_real_camera_needs_its_boards_and_intrinsics(rig, tmp_path, capsys):
     assert "--camera-config" in capsys.readouterr().err
     boards = tmp_path / "boards.toml"
     cfg = SessionConfig.model_validate({"session": {"profile": "p"}, "camera": camera_config(rig)})
-    boards.write_text(session_toml(cfg).replace("square_mm = 30.0", "square_mm = -3.0", 1))
+    boards.write_text(session_toml(cfg).replace("square_mm = 35.0", "square_mm = -3.0", 1))
     assert _wizard(tmp_path, "--camera", str(video), "--camera-config", str(boards)) == 2
     assert "camera.reference_board.square_mm" in capsys.readouterr().err
     boards.write_text(session_toml(cfg))

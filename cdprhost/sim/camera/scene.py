@@ -175,8 +175,8 @@ def phone_rig(**changes: object) -> CameraRig:
 
 #: Boards with bigger markers (a coarser dictionary) for small pictures.
 COARSE_SETUP = CameraSetup(
-    ReferenceBoard(CharucoBoard((7, 5), 30.0, 22.0, "DICT_4X4_100", 0), (-105.0, 75.0, 3.0)),
-    EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 20), (60.0, 45.0, 69.0)),
+    ReferenceBoard(CharucoBoard((9, 7), 35.0, 26.0, "DICT_4X4_100", 0), (-157.5, 122.5, 3.0)),
+    EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 40), (60.0, 45.0, 69.0)),
 )
 
 
