@@ -24,6 +24,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from cdprhost.calibration.camera.boards import CharucoBoard
 from cdprhost.calibration.camera.detection import detect_board
 from cdprhost.calibration.camera.intrinsics import (
     Intrinsics,
@@ -52,10 +53,7 @@ def camera_config(
     true orientation is not in it: the reader finds it)."""
     ref, eff = rig.setup.reference, rig.setup.effector
 
-    def board(b: object) -> dict[str, object]:
-        from cdprhost.calibration.camera.boards import CharucoBoard
-
-        assert isinstance(b, CharucoBoard)
+    def board(b: CharucoBoard) -> dict[str, object]:
         return {
             "dictionary": b.dictionary,
             "squares": list(b.squares),
