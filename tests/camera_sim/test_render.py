@@ -130,3 +130,19 @@ def test_calibration_views_cover_the_image_and_tilt():
     assert max(tilt_of(p) for p in good) > 25 and max(tilt_of(p) for p in poor) < 6
     pics = render_views(cam, Imaging(), CALIBRATION_BOARD, 2, supersample=1)
     assert decode(pics[0]).shape == (480, 640, 3)
+
+
+def test_partial_occlusion_hides_some_corners(small_rig):
+    from cdprhost.sim.camera.scene import occluder_over
+
+    renderer = small_rig.renderer()
+    b = np.array([0.0, 0.0, 220.0])
+    ref = small_rig.reference_board()
+
+    def corners(hide):
+        img = decode(small_rig.frame(renderer, b, np.random.default_rng(0), hide))
+        return len(_detect(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), ref.layout)[1])
+
+    full = corners(())
+    half = corners([occluder_over(small_rig, b, 0.45, "reference", side=0)])
+    assert 0 < half < 0.75 * full
