@@ -126,7 +126,7 @@ def measure_camera_session(
             results.append(r)
     rejected.sort(key=lambda r: r.pose)
     k = np.asarray(keep, dtype=int)
-    cov = _pose_covariances(fit, k, results)
+    cov = _pose_covariances(fit, k, results, lim)
     refusals: tuple[str, ...] = ()
     if data.calibration is not None and not data.calibration.ok:
         refusals = tuple(
@@ -173,15 +173,16 @@ def _frame_reasons(take: object) -> list[str]:
 
 
 def _pose_covariances(
-    fit: SessionFit, rows: np.ndarray, takes: list[TakeMeasurement]
+    fit: SessionFit, rows: np.ndarray, takes: list[TakeMeasurement], lim: AcceptanceLimits
 ) -> np.ndarray:
-    """Each kept pose's covariance: its corners' noise through the pose solution, and, when
-    the frames scatter more than that says (the effector moved), the excess per coordinate."""
+    """Each kept pose's covariance: its corners' noise through the pose solution (the frames'
+    own scatter is not used: a few frames give a poor standard error, and the corners'
+    noise already counts them), plus the motion of a take whose drift is significant
+    (drift / sqrt(12) per coordinate)."""
     cov = np.array(fit.covariances[rows]).reshape(-1, 3, 3)
     for j, t in enumerate(takes):
-        model_var = np.diag(cov[j])
-        excess = np.clip(np.asarray(t.se) ** 2 - model_var, 0.0, None)
-        cov[j] = cov[j] + np.diag(excess)
+        if float(t.stats.drift_p) < lim.motion_alpha:
+            cov[j] = cov[j] + np.diag(np.asarray(t.stats.drift_mm) ** 2 / 12.0)
     return cov
 
 

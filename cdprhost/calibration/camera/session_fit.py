@@ -396,15 +396,13 @@ def camera_pose_covariance(
     tvec: np.ndarray,
 ) -> np.ndarray:
     """Covariance (6, 6) of the camera pose (rvec, tvec) from the reference board's corners:
-    a block jackknife over the board's rows and columns of corners (the errors of
-    neighbouring corners are alike: lens model, detector bias, printing), or the formal one
-    from the residuals, whichever is larger."""
+    block jackknifes over the board's columns and over its rows of corners, added (the
+    errors of neighbouring corners are alike: lens model, detector bias, printing, so the
+    formal covariance of independent corners is too small), or the formal one from the
+    residuals, whichever is larger."""
     k = np.array([[v[0], 0, v[2]], [0, v[1], v[3]], [0, 0, 1]])
     dist = v[4:9]
     xy = board.corners_mm[ids, :2]
-    blocks = [xy[:, 0] == c for c in np.unique(xy[:, 0])] + [
-        xy[:, 1] == r for r in np.unique(xy[:, 1])
-    ]
     x0 = np.concatenate([rvec, tvec])
     proj, jac = cv2.projectPoints(obj, rvec, tvec, k, dist)
     resid = proj.reshape(-1, 2) - px
@@ -412,20 +410,24 @@ def camera_pose_covariance(
     s2 = max(float(np.sum(resid**2)) / dof, MIN_PIXEL_SIGMA**2)
     j = np.asarray(jac, float)[:, :6]
     formal = s2 * np.linalg.pinv(j.T @ j)
-    est = []
-    for drop in blocks:
-        keep = ~drop
-        if keep.sum() < 6:
-            continue
-        r, t = cv2.solvePnPRefineLM(obj[keep], px[keep], k, dist, rvec.copy(), tvec.copy())
-        est.append(np.concatenate([np.ravel(r), np.ravel(t)]))
-    if len(est) < 3:
+    jacks = []
+    for axis in (0, 1):  # delete one column of corners at a time, then one row
+        est = []
+        for value in np.unique(xy[:, axis]):
+            keep = xy[:, axis] != value
+            if keep.sum() < 6:
+                continue
+            r, t = cv2.solvePnPRefineLM(obj[keep], px[keep], k, dist, rvec.copy(), tvec.copy())
+            est.append(np.concatenate([np.ravel(r), np.ravel(t)]) - x0)
+        g = len(est)
+        if g >= 3:
+            dev = np.array(est) - np.mean(est, axis=0)
+            jacks.append((g - 1) / g * (dev.T @ dev))
+    if not jacks:
         return formal
-    e = np.array(est) - x0
-    dev = e - e.mean(axis=0)
-    # blocks of rows and of columns each cover the board once: g - 2 independent deletions
-    g = len(est)
-    jack = (g - 2) / g * (dev.T @ dev) if g > 2 else formal
+    # deleting rows sees errors that differ from row to row, deleting columns those that
+    # differ from column to column; a pattern may do both, so the two parts add
+    jack = np.sum(jacks, axis=0)
     return jack if np.trace(jack[3:, 3:]) > np.trace(formal[3:, 3:]) else formal
 
 
@@ -600,28 +602,35 @@ def _bundle_adjust(
 
     observed = np.concatenate([ref_px.ravel()] + [m[1].ravel() for m in means if m is not None])
 
-    def fun(x: np.ndarray, sigma: float) -> np.ndarray:
+    def fun(x: np.ndarray, sigma: np.ndarray) -> np.ndarray:
         r = (predict(x) - observed) / sigma
         pri = (x[: layout.n_intr] - x_intr0) / prior
         return np.concatenate([r, pri])
 
     x0 = np.concatenate([x_intr0, cam_r, cam_t, eff_rv, q0])
-    sigma = 0.1
+    # the reference board's corners and the effector board's have their own noise (a large
+    # board seen obliquely, a small one face-on): each estimated from its own residuals
+    n_ref = ref_px.size
+    is_ref = np.arange(observed.size) < n_ref
+    sig_ref = sig_eff = 0.1
     res = None
-    used = sigma
+    used = np.where(is_ref, sig_ref, sig_eff)
     for _ in range(2):  # solve, estimate the corner noise from the residuals, solve again
-        used = sigma
+        used = np.where(is_ref, sig_ref, sig_eff)
         res = least_squares(
-            fun, x0, args=(sigma,), method="lm", x_scale="jac", xtol=1e-10, ftol=1e-12
+            fun, x0, args=(used,), method="lm", x_scale="jac", xtol=1e-10, ftol=1e-12
         )
-        n_obs = observed.size
-        dof = max(n_obs - (x0.size - layout.n_intr), 1)
-        pix = res.fun[:n_obs] * sigma
-        sigma = max(float(np.sqrt(np.sum(pix**2) / dof)), MIN_PIXEL_SIGMA)
+        pix = res.fun[: observed.size] * used
+        dof_ref = max(n_ref - 6, 1)
+        dof_eff = max(observed.size - n_ref - (x0.size - layout.n_intr - 6), 1)
+        sig_ref = max(float(np.sqrt(np.sum(pix[is_ref] ** 2) / dof_ref)), MIN_PIXEL_SIGMA)
+        sig_eff = max(float(np.sqrt(np.sum(pix[~is_ref] ** 2) / dof_eff)), MIN_PIXEL_SIGMA)
         x0 = res.x
+    sigma = sig_eff
     assert res is not None
     jac = np.array(res.jac.toarray() if hasattr(res.jac, "toarray") else res.jac, dtype=float)
-    jac[: observed.size] *= used / sigma  # the last solve weighed the corners by the previous sigma
+    # the last solve weighed the corners by the previous sigmas
+    jac[: observed.size] *= (used / np.where(is_ref, sig_ref, sig_eff))[:, None]
     info = jac.T @ jac
     cov = np.linalg.pinv(info)
     x = res.x
