@@ -138,3 +138,44 @@ class CameraTakes:
         ref, eff = self.status(images[-1])
         self.log(f"  live: {ref.text()}; {eff.text()}")
         return out
+
+
+def collect_views(
+    capture: Capture,
+    board: CharucoBoard,
+    n_views: int,
+    *,
+    max_frames: int | None = None,
+    min_move: float = 0.04,
+    min_corners: int = 8,
+    log: Callable[[str], None] = print,
+) -> tuple[list[BoardDetection | None], list[np.ndarray]]:
+    """Calibration views from a live camera while the user moves the board: a picture is
+    kept when the board is found with ``min_corners`` and has moved (mean corner shift of
+    ``min_move`` x the image width) from every view kept so far."""
+    kept: list[BoardDetection | None] = []
+    images: list[np.ndarray] = []
+    limit = max_frames if max_frames is not None else 40 * n_views
+    for _ in range(limit):
+        ok, image = capture.read()
+        if not ok or image is None:
+            break
+        det = detect_board(image, board)
+        if det is None or len(det) < min_corners:
+            continue
+        w = image.shape[1]
+        if any(_shift(det, k) < min_move * w for k in kept if k is not None):
+            continue
+        kept.append(det)
+        images.append(np.asarray(image))
+        log(f"view {len(kept)}/{n_views}: {len(det)} corners, sharpness {det.sharpness:.0f}")
+        if len(kept) >= n_views:
+            break
+    return kept, images
+
+
+def _shift(a: BoardDetection, b: BoardDetection) -> float:
+    common, ia, ib = np.intersect1d(a.ids, b.ids, return_indices=True)
+    if common.size < 4:
+        return float("inf")
+    return float(np.mean(np.linalg.norm(a.corners_px[ia] - b.corners_px[ib], axis=1)))

@@ -111,10 +111,6 @@ class CameraConfig(_Strict):
             EffectorBoard(eff.board(), eff.offset, eff.offset_sigma_mm),
         )
 
-    @property
-    def noise_mm(self) -> float | None:
-        return None
-
 
 class CameraFileModel(_Strict):
     """``[camera]`` of camera.toml."""

@@ -252,3 +252,42 @@ def judge_camera_take(
         )
     spread = float(np.sqrt(np.mean(np.sum((pts - point) ** 2, axis=1))))
     return CameraTakeCheck(point, spread, int(valid.sum()), n)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraSessionInput:
+    """Everything a camera session's pictures give, before any fit: per poses.csv row its
+    take's detections (None when unreadable: ``unreadable[row]`` says why), the boards,
+    the intrinsics and, when they came from ``calibration_views``, that calibration (whose
+    coverage verdict identification must honour)."""
+
+    takes: tuple[TakeFrames | None, ...]
+    unreadable: dict[int, str]
+    setup: CameraSetup
+    intrinsics: Intrinsics
+    calibration: IntrinsicsResult | None
+
+    def detections(self) -> list[TakeDetections]:
+        """Per row; an unreadable take counts as frames with neither board."""
+        empty = TakeDetections((), (), np.zeros(0))
+        return [t.detections if t is not None else empty for t in self.takes]
+
+
+def read_camera_session(
+    root: Path,
+    camera: CameraConfig,
+    take_paths: tuple[Path, ...],
+    settings: DetectorSettings | None = None,
+) -> CameraSessionInput:
+    """Detect both boards in every frame of every take of a camera session."""
+    intrinsics, calibration = session_intrinsics(root, camera, settings)
+    setup = camera.setup()
+    takes: list[TakeFrames | None] = []
+    unreadable: dict[int, str] = {}
+    for row, path in enumerate(take_paths):
+        try:
+            takes.append(detect_take(path, setup, intrinsics.image_size, settings))
+        except InputError as exc:
+            takes.append(None)
+            unreadable[row] = str(exc)
+    return CameraSessionInput(tuple(takes), unreadable, setup, intrinsics, calibration)

@@ -54,6 +54,9 @@ class Observations:
     t_s: np.ndarray | None = None  # (K,)
     directions: np.ndarray | None = None  # (K, 3)
     sigma_mm: float | np.ndarray = 0.05
+    # (K, 3, 3) full noise covariance of each pose (mm^2), e.g. a camera's, whose depth is
+    # worse than its lateral precision; when given it whitens the residuals instead of sigma
+    covariance: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.measured.shape[0])
@@ -70,7 +73,24 @@ class Observations:
             None if self.t_s is None else self.t_s[index],
             None if self.directions is None else self.directions[index],
             sig,
+            None if self.covariance is None else np.asarray(self.covariance)[index],
         )
+
+    def with_sigma(self, sigma_mm: float | np.ndarray) -> Observations:
+        """The same poses with another per-coordinate noise (a full covariance is widened by
+        the same factor per pose)."""
+        cov = self.covariance
+        if cov is not None:
+            old = np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0)
+            new = np.broadcast_to(np.asarray(sigma_mm, float), old.shape)
+            extra = np.clip(new**2 - old**2, 0.0, None)
+            cov = cov + extra[:, None, None] * np.eye(3)
+        return Observations(self.measured, self.sliders, self.t_s, self.directions, sigma_mm, cov)
+
+
+def sigma_from_covariance(covariance: np.ndarray) -> np.ndarray:
+    """Per-coordinate sigma of each pose, sqrt(trace / 3), (K,)."""
+    return np.asarray(np.sqrt(np.trace(covariance, axis1=1, axis2=2) / 3.0))
 
 
 def position_misfit(model: MachineModel, obs: Observations) -> np.ndarray:
@@ -81,8 +101,14 @@ def position_misfit(model: MachineModel, obs: Observations) -> np.ndarray:
 
 
 def whitened_residuals(model: MachineModel, obs: Observations) -> np.ndarray:
+    """The position misfit whitened by each pose's noise: divided by sigma, or with a full
+    covariance C = L L^T, L^-1 misfit (independent unit-variance residuals either way)."""
+    misfit = position_misfit(model, obs)
+    if obs.covariance is not None:
+        chol = np.linalg.cholesky(np.asarray(obs.covariance, dtype=float))
+        return np.asarray(np.linalg.solve(chol, misfit[..., None])[..., 0])
     sig = np.asarray(obs.sigma_mm, dtype=float)
-    return np.asarray(position_misfit(model, obs) / (sig if sig.ndim == 0 else sig[:, None]))
+    return np.asarray(misfit / (sig if sig.ndim == 0 else sig[:, None]))
 
 
 def prediction_errors(model: MachineModel, obs: Observations) -> np.ndarray:

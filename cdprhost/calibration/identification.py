@@ -23,7 +23,7 @@ from scipy import stats
 
 from cdprhost.calibration.fitting import GEOMETRY_NAMES, CableModelFit, Observations
 from cdprhost.calibration.pose_noise import PoseNoise
-from cdprhost.calibration.session import Session, load_session
+from cdprhost.calibration.session import Session, SessionMeasurements, load_session
 from cdprhost.calibration.trust import (
     DEFAULT_TRUST,
     TrustLimits,
@@ -253,7 +253,7 @@ def identify(
     fit_idx = np.flatnonzero(np.array(roles) == "fit")
     # Noise-free simulations state sigma = 0; weights need a positive one.
     sigma = np.maximum(np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (k,)), 1e-6)
-    obs = Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, sigma)
+    obs = obs.with_sigma(sigma)
     before = _errors(base, obs)
     common = {
         "rejected": rejected,
@@ -291,10 +291,13 @@ def identify(
     residuals = _residuals(model, obs)
     check = np.flatnonzero(np.array(roles) == "check")
     j0 = identification_jacobian(obs.measured[check], model.geometry).reshape(-1, 3, 12)
+    own = (
+        sigma[check, None, None] ** 2 * np.eye(3)
+        if obs.covariance is None
+        else np.asarray(obs.covariance)[check]
+    )
     with np.errstate(invalid="ignore"):
-        pred_cov = sigma[check, None, None] ** 2 * np.eye(3) + np.einsum(
-            "nip,pq,njq->nij", j0, np.where(np.isfinite(cov), cov, 0.0), j0
-        )
+        pred_cov = own + np.einsum("nip,pq,njq->nij", j0, np.where(np.isfinite(cov), cov, 0.0), j0)
     factor, noise_dof = variance_factor(est.chi2_, est.dof_, residuals[check], pred_cov)
     trust = trust_report(
         model.geometry,
@@ -304,6 +307,9 @@ def identify(
         factor,
         noise_dof,
         limits,
+        parameter_covariance=None if noise is None else noise.parameter_covariance,
+        common_covariance=None if noise is None else noise.common_covariance,
+        frame_covariance=None if noise is None else noise.frame_covariance,
     )
     numbers = np.arange(1, k + 1) if pose_numbers is None else np.asarray(pose_numbers)
     verification = (
@@ -447,7 +453,7 @@ def identify_session(
     Each pose's noise is its take's standard error (:mod:`.pose_noise`); ``noise_floor_mm``
     adds a part no take shows (default: ``noise_mm`` of session.toml, if declared)."""
     session = directory if isinstance(directory, Session) else load_session(directory)
-    meas = session.measure()
+    meas = measure_any(session, base)
     if len(meas) == 0:
         raise InputError(
             "no usable take in the session",
@@ -455,8 +461,10 @@ def identify_session(
             problems=[str(r) for r in meas.rejected],
         )
     noise = meas.noise(base.steps_per_mm, floor_mm=noise_floor_mm)
-    notes = tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ())
-    return identify_verified(
+    notes = (
+        tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ()) + tuple(meas.notes)
+    )
+    result = identify_verified(
         meas.observations(noise),
         base,
         meas.roles,
@@ -468,3 +476,20 @@ def identify_session(
         pose_numbers=meas.pose,
         notes=notes,
     )
+    if meas.refusals and result.trust is not None:
+        trust = dataclasses.replace(result.trust, refusals=result.trust.refusals + meas.refusals)
+        result = dataclasses.replace(result, trust=trust)
+    return result
+
+
+def measure_any(
+    session: Session, base: MachineModel, *, refine: bool = True
+) -> SessionMeasurements:
+    """A session's measurements: motion-capture takes, or a camera session's pictures (with
+    ``refine``, the camera refined against ``base``'s commanded motion,
+    :mod:`.camera_session`)."""
+    if session.config.camera is not None:
+        from cdprhost.calibration.camera_session import measure_camera_session
+
+        return measure_camera_session(session, base, refine=refine)
+    return session.measure()

@@ -33,6 +33,16 @@ class PoseNoise:
     extra_mm: float
     source: str
     note: str = ""
+    # a camera's noise (camera-session.md): each pose's full covariance (K, 3, 3), mm^2
+    # (sigma_mm is then sqrt(trace / 3)); the covariance of the one vector that moves every
+    # pose alike (3, 3), which identification cannot see; and what the camera parameters'
+    # uncertainty adds to the 12 geometric parameters (12, 12). The trust gate counts both.
+    covariance: np.ndarray | None = None
+    common_covariance: np.ndarray | None = None
+    parameter_covariance: np.ndarray | None = None
+    # (6, 6): a rigid error of the whole measuring frame (rotation vector about the base
+    # origin, translation): a camera's pose from the reference board
+    frame_covariance: np.ndarray | None = None
 
     @property
     def typical_mm(self) -> float:
@@ -50,11 +60,32 @@ class PoseNoise:
             "extra_mm": self.extra_mm,
             "source": self.source,
             "note": self.note,
+            "common_mm": None
+            if self.common_covariance is None
+            else float(np.sqrt(np.trace(self.common_covariance))),
+            "depth_to_lateral": self.anisotropy,
         }
+
+    @property
+    def anisotropy(self) -> float | None:
+        """Median over poses of the largest over the smallest principal std (a camera's depth
+        against its lateral precision); None without full covariances."""
+        if self.covariance is None or not len(self.covariance):
+            return None
+        w = np.linalg.eigvalsh(np.asarray(self.covariance, float))
+        return float(np.median(np.sqrt(w[:, -1] / np.maximum(w[:, 0], 1e-300))))
 
     def subset(self, index: np.ndarray) -> PoseNoise:
         return PoseNoise(
-            self.sigma_mm[index], self.take_mm[index], self.extra_mm, self.source, self.note
+            self.sigma_mm[index],
+            self.take_mm[index],
+            self.extra_mm,
+            self.source,
+            self.note,
+            None if self.covariance is None else self.covariance[index],
+            self.common_covariance,
+            self.parameter_covariance,
+            self.frame_covariance,
         )
 
 
@@ -119,3 +150,35 @@ def pose_noise(
                 f"{expected:.3g} mm: {extra:.3g} mm added to every pose",
             )
     return PoseNoise(take.copy(), take, 0.0, "takes", "standard error of each take's centre")
+
+
+def camera_noise(
+    covariance: np.ndarray,
+    take_sigma_mm: np.ndarray,
+    declared_mm: float | None = None,
+    common_covariance: np.ndarray | None = None,
+    parameter_covariance: np.ndarray | None = None,
+    frame_covariance: np.ndarray | None = None,
+) -> PoseNoise:
+    """A camera session's pose noise: each pose's covariance from its corners' noise through
+    the pose solution (anisotropic), plus a declared accuracy in quadrature; the parts that
+    are the same for every pose travel with it for the trust gate."""
+    cov = np.asarray(covariance, dtype=float)
+    extra = float(declared_mm) if declared_mm is not None and declared_mm > 0 else 0.0
+    if extra:
+        cov = cov + extra**2 * np.eye(3)
+    sigma = np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0)
+    note = "each pose's covariance from its corners' noise through the camera (depth worst)"
+    if extra:
+        note += f", plus accuracy_mm = {extra:g} declared"
+    return PoseNoise(
+        sigma,
+        np.asarray(take_sigma_mm, float),
+        extra,
+        "camera" + (" + declared" if extra else ""),
+        note,
+        cov,
+        common_covariance,
+        parameter_covariance,
+        frame_covariance,
+    )

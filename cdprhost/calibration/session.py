@@ -32,7 +32,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from cdprhost.calibration.acceptance import AcceptanceLimits
 from cdprhost.calibration.camera_config import CameraConfig
 from cdprhost.calibration.fitting import Observations
-from cdprhost.calibration.pose_noise import PoseNoise, pose_noise
+from cdprhost.calibration.pose_noise import PoseNoise, camera_noise, pose_noise
 from cdprhost.calibration.readers import read_take
 from cdprhost.calibration.takes import (
     MocapConfig,
@@ -109,11 +109,14 @@ class SessionConfig(BaseModel):
 
     @property
     def declared_noise_mm(self) -> float | None:
-        """``accuracy_mm`` of ``[mocap]``, else its ``noise_mm``, else ``noise_mm`` of
-        ``[session]``."""
-        mocap = self.mocap
-        candidates = (mocap.accuracy_mm, mocap.noise_mm) if mocap is not None else ()
-        for value in (*candidates, self.session.noise_mm):
+        """``accuracy_mm`` of ``[mocap]`` (or of ``[camera.acceptance]``), else its
+        ``noise_mm``, else ``noise_mm`` of ``[session]``."""
+        if self.mocap is not None:
+            values = (self.mocap.accuracy_mm, self.mocap.noise_mm, self.session.noise_mm)
+        else:
+            accuracy = self.camera.acceptance.accuracy_mm if self.camera else None
+            values = (accuracy, None, self.session.noise_mm)
+        for value in values:
             if value is not None:
                 return value
         return None
@@ -319,6 +322,15 @@ class SessionMeasurements:
     takes: tuple[TakeMeasurement, ...]
     rejected: tuple[RejectedTake, ...]
     declared_noise_mm: float | None = None
+    # a camera session's noise (camera-session.md, :mod:`.camera_session`): each pose's full
+    # covariance (K, 3, 3), the common vector's (3, 3), the parameters' part (12, 12); what
+    # refuses the session whatever the fit (calibration views of poor coverage); notes
+    covariance: np.ndarray | None = None
+    common_covariance: np.ndarray | None = None
+    parameter_covariance: np.ndarray | None = None
+    frame_covariance: np.ndarray | None = None
+    refusals: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return int(self.measured.shape[0])
@@ -333,6 +345,15 @@ class SessionMeasurements:
     ) -> PoseNoise:
         """The one noise model (:func:`~.pose_noise.pose_noise`); ``floor_mm`` overrides the
         declared noise."""
+        if self.covariance is not None:
+            return camera_noise(
+                self.covariance,
+                self.take_sigma_mm,
+                self.declared_noise_mm if floor_mm is None else floor_mm,
+                self.common_covariance,
+                self.parameter_covariance,
+                self.frame_covariance,
+            )
         return pose_noise(
             self.take_sigma_mm,
             declared_mm=self.declared_noise_mm if floor_mm is None else floor_mm,
@@ -343,8 +364,10 @@ class SessionMeasurements:
 
     def observations(self, noise: PoseNoise | None = None) -> Observations:
         """The observations of identification and diagnosis (the one builder)."""
-        sigma = (noise or self.noise()).sigma_mm
-        return Observations(self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), sigma)
+        n = noise or self.noise()
+        return Observations(
+            self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), n.sigma_mm, n.covariance
+        )
 
 
 @dataclass(frozen=True)

@@ -54,10 +54,24 @@ def session_toml(config: SessionConfig) -> str:
         if k not in ("session", "mocap", "camera")
     }
     if config.camera is not None:
-        camera = config.camera.model_dump(exclude_none=True, exclude_defaults=True)
-        camera["reference_board"] = config.camera.reference_board.model_dump()
-        camera["effector_board"] = config.camera.effector_board.model_dump()
-        return "\n".join(out) + "\n\n" + tomli_w.dumps({"camera": camera, **extra})
+        cam = config.camera
+        tables: dict[str, dict[str, Any]] = {
+            "camera": cam.model_dump(
+                exclude_none=True,
+                include={"intrinsics", "calibration_views"},
+            ),
+            "camera.reference_board": cam.reference_board.model_dump(),
+            "camera.effector_board": cam.effector_board.model_dump(),
+        }
+        if cam.calibration_board is not None:
+            tables["camera.calibration_board"] = cam.calibration_board.model_dump()
+        acceptance = cam.acceptance.model_dump(exclude_defaults=True, exclude_none=True)
+        if acceptance:
+            tables["camera.acceptance"] = acceptance
+        for name, table in tables.items():
+            out += ["", f"[{name}]"] + [f"{k} = {_toml_value(v)}" for k, v in table.items()]
+        text = "\n".join(out) + "\n"
+        return text + ("\n" + tomli_w.dumps(extra) if extra else "")
     mocap = config.motion_capture
     out += ["", "[mocap]"]
     if mocap.format is not None:

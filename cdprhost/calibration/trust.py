@@ -93,6 +93,19 @@ def workspace_sigma(
     return np.asarray(np.sqrt(np.clip(var, 0.0, None)))
 
 
+def frame_variance(frame_covariance: np.ndarray | None, grid: np.ndarray) -> np.ndarray | float:
+    """E|w x x + t|^2 at every grid point for a rigid error (w, t) of covariance (6, 6)."""
+    if frame_covariance is None:
+        return 0.0
+    x = np.asarray(grid, float)
+    jac = np.zeros((x.shape[0], 3, 6))
+    jac[:, 0, 1], jac[:, 0, 2] = x[:, 2], -x[:, 1]  # -[x]x w = w x x
+    jac[:, 1, 0], jac[:, 1, 2] = -x[:, 2], x[:, 0]
+    jac[:, 2, 0], jac[:, 2, 1] = x[:, 1], -x[:, 0]
+    jac[:, :, 3:] = np.eye(3)
+    return np.asarray(np.einsum("nip,pq,niq->n", jac, np.asarray(frame_covariance, float), jac))
+
+
 def workspace_metric(geometry: CableGeometry, grid: np.ndarray) -> np.ndarray:
     """W = mean over the grid of J0^T J0, (12, 12): dq^T W dq is the mean squared error."""
     j0 = identification_jacobian(grid, geometry).reshape(-1, 3, 12)
@@ -151,12 +164,31 @@ def trust_report(
     factor: float,
     noise_dof: int,
     limits: TrustLimits = DEFAULT_TRUST,
+    *,
+    parameter_covariance: np.ndarray | None = None,
+    common_covariance: np.ndarray | None = None,
+    frame_covariance: np.ndarray | None = None,
 ) -> TrustReport:
-    """The gate on an identification whose (unscaled) covariance is ``covariance``."""
+    """The gate on an identification whose (unscaled) covariance is ``covariance``.
+
+    ``parameter_covariance`` (12, 12): what errors shared by every pose (a camera's
+    intrinsics and pose) add to the parameters, which the poses' noise cannot show;
+    ``common_covariance`` (3, 3): one vector added to every measured point (a camera's
+    effector-board orientation times its offset), which identification cannot see but a
+    print does; ``frame_covariance`` (6, 6): a rigid error of the measuring frame (rotation
+    vector about the base origin, translation), which moves the point x by w x x + t: all
+    are added to the prediction."""
     scale = max(factor, 1.0) if np.isfinite(factor) else 1.0
     cov = covariance * scale
+    if parameter_covariance is not None:
+        cov = cov + np.asarray(parameter_covariance, float)
+    common = 0.0 if common_covariance is None else float(np.trace(common_covariance))
     if np.all(np.isfinite(cov)):
-        sigma = workspace_sigma(geometry, cov, grid)
+        sigma = np.sqrt(
+            workspace_sigma(geometry, cov, grid) ** 2
+            + common
+            + frame_variance(frame_covariance, grid)
+        )
         rms, worst = float(np.sqrt(np.mean(sigma**2))), float(np.max(sigma))
     else:
         rms = worst = float("inf")

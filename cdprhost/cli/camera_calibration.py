@@ -36,7 +36,26 @@ def register(cal_sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     cam.add_argument(
         "views",
         metavar="VIEWS",
+        nargs="?",
         help="folder of pictures, a video, or a camera session folder (its calibration_views)",
+    )
+    cam.add_argument(
+        "--camera",
+        metavar="SOURCE",
+        help="take the views live instead: a device index, a video or a URL that OpenCV "
+        "opens, or 'sim' (a simulated camera and board); move the board between views",
+    )
+    cam.add_argument(
+        "--views",
+        dest="n_views",
+        type=int,
+        default=20,
+        metavar="N",
+        help="live: views to take (default 20)",
+    )
+    cam.add_argument("--save-views", metavar="DIR", help="live: also store the views taken")
+    cam.add_argument(
+        "--sim-camera", default="1920x1080", metavar="WxH", help="--camera sim: picture size"
     )
     cam.add_argument("--board", metavar="SPEC", help=BOARD_HELP)
     cam.add_argument("--out", required=True, metavar="camera.toml", help="intrinsics to write")
@@ -118,6 +137,46 @@ def _views_and_board(args: argparse.Namespace) -> tuple[Path, CharucoBoard]:
     return views, parse_board(args.board)
 
 
+def _calibrate_live(args: argparse.Namespace) -> tuple[IntrinsicsResult, tuple[str, ...]]:
+    import cv2
+
+    from cdprhost.calibration.camera.intrinsics import calibrate_intrinsics
+    from cdprhost.calibration.camera_capture import collect_views, open_capture
+
+    if not args.board and args.camera.strip().lower() != "sim":
+        raise InputError("--board is needed with --camera")
+    if args.camera.strip().lower() == "sim":
+        from cdprhost.sim.camera.device import ViewsCapture
+        from cdprhost.sim.camera.scene import CALIBRATION_BOARD
+
+        capture: Any = ViewsCapture(sim_rig(args.sim_camera), args.n_views + 8)
+        board = parse_board(args.board) if args.board else CALIBRATION_BOARD
+    else:
+        capture = open_capture(args.camera)
+        board = parse_board(args.board)
+    try:
+        print(
+            f"move the board to a new place and tilt for each of {args.n_views} views", flush=True
+        )
+        detections, images = collect_views(
+            capture, board, args.n_views, log=lambda m: print(m, flush=True)
+        )
+    finally:
+        capture.release()
+    if len(images) < 3:
+        raise JobFailed(
+            f"the board was found in only {len(images)} distinct view(s); 3 or more needed"
+        )
+    names = tuple(f"view_{i:02d}.png" for i in range(1, len(images) + 1))
+    if args.save_views:
+        folder = Path(args.save_views)
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, image in zip(names, images):
+            cv2.imwrite(str(folder / name), image)
+    h, w = images[0].shape[:2]
+    return calibrate_intrinsics(detections, board, (w, h)), names
+
+
 def result_json(result: IntrinsicsResult, names: tuple[str, ...]) -> dict[str, Any]:
     c = result.coverage
     return {
@@ -168,8 +227,13 @@ def run_camera(args: argparse.Namespace) -> int:
     from cdprhost.cli.commands.calibrate import write_json
     from cdprhost.fileio.atomic import write_text_atomic
 
-    views, board = _views_and_board(args)
-    result, names = calibrate_from_views(views, board)
+    if args.camera:
+        result, names = _calibrate_live(args)
+    else:
+        if not args.views:
+            raise InputError("give VIEWS (a folder, a video or a session) or --camera")
+        views, board = _views_and_board(args)
+        result, names = calibrate_from_views(views, board)
     forced = bool(args.force) and not result.ok
     write_json(args.json, {**result_json(result, names), "forced": forced})
     print(result_text(result, names))
@@ -259,26 +323,30 @@ class CameraWizard:
 
 
 def sim_rig(size_text: str) -> Any:
-    from cdprhost.calibration.camera.boards import (
-        CameraSetup,
-        CharucoBoard,
-        EffectorBoard,
-        ReferenceBoard,
-    )
-    from cdprhost.sim.camera.scene import standard_rig
+    from cdprhost.sim.camera.scene import rig_for_size
 
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", size_text)
     if not m or int(m[1]) < 320 or int(m[2]) < 240:
         raise InputError(f"--sim-camera: expected WxH of at least 320x240, got {size_text!r}")
-    size = (int(m[1]), int(m[2]))
-    if size[0] >= 1280:
-        return standard_rig(image_size=size)
-    # small pictures: boards with bigger markers (coarser dictionary), a narrower lens
-    setup = CameraSetup(
-        ReferenceBoard(CharucoBoard((7, 5), 30.0, 22.0, "DICT_4X4_100", 0), (-105.0, 75.0, 3.0)),
-        EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 20), (60.0, 45.0, 69.0)),
-    )
-    return standard_rig(image_size=size, hfov_deg=60.0, distance_mm=750.0, setup=setup)
+    return rig_for_size((int(m[1]), int(m[2])))
+
+
+def camera_table(path: Path) -> Any:
+    """The ``[camera]`` table of a TOML file (a session.toml or just that table)."""
+    from pydantic import ValidationError
+
+    from cdprhost.calibration.camera_config import CameraConfig
+    from cdprhost.calibration.session import read_toml, validation_problems
+
+    data = read_toml(path)
+    if "camera" not in data:
+        raise InputError("no [camera] table (the boards of camera-session.md)", source=str(path))
+    try:
+        return CameraConfig.model_validate(data["camera"])
+    except ValidationError as exc:
+        raise InputError(
+            "invalid [camera] table", source=str(path), problems=validation_problems(exc, "camera")
+        ) from None
 
 
 def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> CameraWizard:
@@ -314,9 +382,7 @@ def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> Ca
                 "this session measures with motion capture, not a camera", source=str(session)
             )
     elif args.camera_config:
-        config = load_session_config(args.camera_config).camera
-        if config is None:
-            raise InputError("no [camera] table", source=args.camera_config)
+        config = camera_table(Path(args.camera_config))
     elif rig is not None:
         from cdprhost.sim.camera.session import camera_config
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.fitting import Observations
+from cdprhost.calibration.identification import measure_any
 from cdprhost.calibration.pose_noise import PoseNoise
 from cdprhost.calibration.session import RejectedTake, load_session
 from cdprhost.diagnosis.workflow import Diagnosis, DiagnosisSettings, diagnose
@@ -34,12 +35,16 @@ class SessionData:
 
 
 def load_session_data(
-    directory: str | os.PathLike[str], steps_per_mm: np.ndarray | float = 400.0
+    directory: str | os.PathLike[str],
+    steps_per_mm: np.ndarray | float = 400.0,
+    model: MachineModel | None = None,
 ) -> SessionData:
     """Measure every take of a session folder; refused takes are listed, not used."""
     root = Path(directory)
     session = load_session(root)
-    m = session.measure()
+    # a camera is not refined against the motion here: against the plain model it would
+    # take the very effect sought for a lens error (the session-level camera fit still holds)
+    m = measure_any(session, model, refine=False) if model is not None else session.measure()
     if len(m) == 0:
         raise InputError(
             "no usable take in the session"
@@ -65,5 +70,5 @@ def diagnose_session(
     settings: DiagnosisSettings | None = None,
 ) -> tuple[Diagnosis, SessionData]:
     """Load a session folder and run the workflow on it (for the CLI and the TUI backend)."""
-    data = load_session_data(directory, model.steps_per_mm)
+    data = load_session_data(directory, model.steps_per_mm, model)
     return diagnose(data.observations, model, data.noise, settings or DiagnosisSettings()), data

@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from cdprhost.calibration.fitting import CableModelFit, Observations
+from cdprhost.calibration.fitting import CableModelFit, Observations, position_misfit
 from cdprhost.calibration.pose_noise import PoseNoise
 from cdprhost.diagnosis import crossval, signatures
 from cdprhost.diagnosis.localise import Finding, describe, localise
@@ -332,8 +333,9 @@ def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> Pos
     )
 
 
-#: Source of a noise model whose accuracy term was estimated here (from the richest model).
-ACCURACY_FIT = "takes + accuracy (fit)"
+#: Sources of a noise model that knows nothing of the system's accuracy at each place: the
+#: accuracy is then estimated here (from the richest model).
+UNSEEN_ACCURACY = ("takes", "camera")
 #: The richest model must leave at least this many degrees of freedom to estimate it.
 MIN_ACCURACY_DOF = 6
 
@@ -368,23 +370,46 @@ def accuracy_from_fit(
     if fit.dof_ < MIN_ACCURACY_DOF or goodness_of_fit_p(fit.chi2_, fit.dof_) >= alpha:
         return None
     sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
-    r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)
-    extra = variance_component(r2, sig, fit.dof_)
+    if obs.covariance is not None:
+        extra = covariance_component(
+            position_misfit(fit.model_, obs), np.asarray(obs.covariance, float), fit.dof_
+        )
+    else:
+        r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)
+        extra = variance_component(r2, sig, fit.dof_)
     if extra <= 0:
         return None
     wider = np.sqrt(sig**2 + extra**2)
-    widened = Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider)
+    widened = obs.with_sigma(wider)
     if localise(fit.model_, widened, localise_alpha):
         return None  # a pattern is physics the catalogue lacks, not accuracy
-    return PoseNoise(
-        np.sqrt(noise.sigma_mm**2 + extra**2),
-        noise.take_mm,
-        extra,
-        ACCURACY_FIT,
-        f"the measuring system's accuracy, which no take's scatter shows: {extra:.3g} mm per "
-        "coordinate, estimated as a variance component of the geometry fitted with every "
+    return dataclasses.replace(
+        noise,
+        sigma_mm=np.sqrt(noise.sigma_mm**2 + extra**2),
+        extra_mm=extra,
+        source=f"{noise.source} + accuracy (fit)",
+        note=f"the measuring system's accuracy, which no take's scatter shows: {extra:.3g} mm "
+        "per coordinate, estimated as a variance component of the geometry fitted with every "
         "candidate effect (declare accuracy_mm in session.toml, or repeat poses, to measure it)",
+        covariance=None if noise.covariance is None else noise.covariance + extra**2 * np.eye(3),
     )
+
+
+def covariance_component(misfit: np.ndarray, covariance: np.ndarray, dof: int) -> float:
+    """The common variance s^2 (returned as s, mm) added to every pose's covariance that
+    makes sum m^T (C + s^2 I)^-1 m = dof (0 when already within it)."""
+
+    def chi2(s: float) -> float:
+        c = covariance + s * s * np.eye(3)
+        return float(np.sum(misfit * np.linalg.solve(c, misfit[..., None])[..., 0]))
+
+    if chi2(0.0) <= dof:
+        return 0.0
+    lo, hi = 0.0, float(np.sqrt(np.max(np.sum(misfit**2, axis=1)))) + 1e-9
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chi2(mid) > dof else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def observations_check(obs: Observations) -> None:
@@ -429,7 +454,7 @@ def diagnose(
     confusable = signatures.confusable_pairs(list(reports.values()), settings.confusable_threshold)
     remaining = [n for n in names if not reports[n].absorbed]
     unabsorbed = {n: r.unabsorbed_min for n, r in reports.items()}
-    if noise.source == TAKES_ONLY:
+    if noise.source in UNSEEN_ACCURACY:
         accurate = accuracy_from_fit(
             obs,
             base.fit.model_,
@@ -440,7 +465,7 @@ def diagnose(
         )
         if accurate is not None:
             return diagnose(
-                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, accurate.sigma_mm),
+                obs.with_sigma(accurate.sigma_mm),
                 base_model,
                 accurate,
                 settings,
@@ -500,7 +525,7 @@ def diagnose(
             # calibration of the mocap): an excess with no pattern is that, not physics.
             wider = unseen_noise(current.fit, obs, noise)
             return diagnose(
-                Observations(obs.measured, obs.sliders, obs.t_s, obs.directions, wider.sigma_mm),
+                obs.with_sigma(wider.sigma_mm),
                 base_model,
                 wider,
                 settings,

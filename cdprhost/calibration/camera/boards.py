@@ -40,6 +40,12 @@ class CharucoBoard:
         if not hasattr(cv2.aruco, self.dictionary):
             raise ValueError(f"unknown cv2.aruco dictionary {self.dictionary!r}")
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Picklable (the cached OpenCV board is not): it is rebuilt on first use."""
+        state = dict(self.__dict__)
+        state.pop("cv_board", None)
+        return state
+
     @property
     def n_markers(self) -> int:
         sx, sy = self.squares

@@ -14,6 +14,8 @@ import numpy as np
 from cdprhost.calibration.camera.boards import CameraSetup
 from cdprhost.calibration.camera.detection import BoardDetection
 from cdprhost.calibration.camera.intrinsics import Intrinsics
+from cdprhost.calibration.camera.pose import solve_board_pose
+from cdprhost.calibration.camera.projection import rotvec_matrix
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,32 @@ class FramePositions:
         return np.array([s == "" for s in self.skipped], dtype=bool)
 
 
+def judge_frame(
+    det: BoardDetection | None,
+    which: str,
+    board_setup: CameraSetup,
+    intr: Intrinsics,
+    quality: FrameQuality,
+) -> str:
+    """'' when the board is seen well enough in this frame, else the reason."""
+    board = board_setup.reference.board if which == "reference" else board_setup.effector.board
+    if det is None:
+        return f"{which} board not found"
+    if len(det) < quality.min_corners:
+        return f"{which} board: {len(det)} corners (need {quality.min_corners})"
+    if quality.min_sharpness > 0 and det.sharpness < quality.min_sharpness:
+        return f"{which} board blurred (sharpness {det.sharpness:.0f} < {quality.min_sharpness:g})"
+    pose = solve_board_pose(det, board, intr)
+    if pose is None:
+        return f"{which} board: no pose"
+    if pose.rms_px > quality.max_reprojection_px:
+        return (
+            f"{which} board: reprojection error {pose.rms_px:.2f} px "
+            f"(limit {quality.max_reprojection_px:g})"
+        )
+    return ""
+
+
 def effector_positions(
     reference: list[BoardDetection | None],
     effector: list[BoardDetection | None],
@@ -47,6 +75,51 @@ def effector_positions(
     intrinsics: Intrinsics,
     quality: FrameQuality | None = None,
 ) -> FramePositions:
-    """Each frame solved on its own (the baseline; the session-level fit of
-    :mod:`.session_fit` is far more accurate)."""
-    raise NotImplementedError
+    """Each frame solved on its own (the baseline, and the wizard's live check; the
+    session-level fit of :mod:`.session_fit` is far more accurate). Each B's covariance
+    carries both boards' pose covariances (corner noise) through the composition."""
+    q_cfg = quality or FrameQuality()
+    n = len(reference)
+    if len(effector) != n:
+        raise ValueError(f"{n} reference and {len(effector)} effector frames")
+    positions = np.full((n, 3), np.nan)
+    covariances = np.full((n, 3, 3), np.nan)
+    skipped = []
+    for i, (r, e) in enumerate(zip(reference, effector)):
+        why = judge_frame(r, "reference", setup, intrinsics, q_cfg) or judge_frame(
+            e, "effector", setup, intrinsics, q_cfg
+        )
+        ref_pose = (
+            None if why or r is None else solve_board_pose(r, setup.reference.board, intrinsics)
+        )
+        eff_pose = (
+            None if why or e is None else solve_board_pose(e, setup.effector.board, intrinsics)
+        )
+        if ref_pose is None or eff_pose is None:
+            skipped.append(why or "no pose")
+            continue
+        x = np.concatenate([ref_pose.rvec, ref_pose.tvec, eff_pose.rvec, eff_pose.tvec])
+        positions[i] = compose(x, setup)
+        jac = np.empty((3, 12))
+        for j in range(12):
+            h = 1e-6 if j % 6 < 3 else 1e-4
+            step = np.zeros(12)
+            step[j] = h
+            jac[:, j] = (compose(x + step, setup) - compose(x - step, setup)) / (2 * h)
+        cov = np.zeros((12, 12))
+        cov[:6, :6] = ref_pose.covariance
+        cov[6:, 6:] = eff_pose.covariance
+        covariances[i] = jac @ cov @ jac.T
+        skipped.append("")
+    return FramePositions(positions, covariances, tuple(skipped))
+
+
+def compose(x: np.ndarray, setup: CameraSetup) -> np.ndarray:
+    """B in the base frame from (reference rvec, tvec, effector rvec, tvec), each board ->
+    camera: camera -> reference board -> base, effector board -> camera, plus the offset."""
+    r_ref, t_ref = rotvec_matrix(x[:3]), x[3:6]
+    r_eff, t_eff = rotvec_matrix(x[6:9]), x[9:12]
+    b_cam = r_eff @ np.asarray(setup.effector.offset, float) + t_eff
+    in_ref = r_ref.T @ (b_cam - t_ref)
+    ref = setup.reference
+    return np.asarray(ref.rotation @ in_ref + np.asarray(ref.origin, float))

@@ -64,7 +64,7 @@ class VirtualCamera:
         point = self.tracker.point
         return self._home if point is None else point
 
-    def isOpened(self) -> bool:  # noqa: N802 - cv2.VideoCapture's name
+    def isOpened(self) -> bool:
         return True
 
     def read(self) -> tuple[bool, np.ndarray]:
@@ -75,6 +75,30 @@ class VirtualCamera:
             b = self.true_point + self._rng.normal(0.0, self.jitter_mm, 3)
             image = decode(rig.frame(self.renderer, b, self._rng))
             self.frames_read += 1
+        return True, image
+
+    def release(self) -> None:
+        pass
+
+
+class ViewsCapture:
+    """A simulated user waving the calibration board before the rig's camera: ``read``
+    gives rendered calibration views one after the other (then again from the first)."""
+
+    def __init__(self, rig: CameraRig, n_views: int = 18, seed: int = 0, supersample: int = 2):
+        from cdprhost.sim.camera.views import render_views
+
+        self._views = render_views(
+            rig.camera, rig.imaging, n_views=n_views, seed=seed, supersample=supersample
+        )
+        self._next = 0
+
+    def isOpened(self) -> bool:
+        return True
+
+    def read(self) -> tuple[bool, np.ndarray]:
+        image = decode(self._views[self._next % len(self._views)])
+        self._next += 1
         return True, image
 
     def release(self) -> None:

@@ -50,11 +50,18 @@ class Texture:
 @lru_cache(maxsize=32)
 def board_texture(layout: CharucoBoard, px_per_square: int, margin_squares: float = 0.5) -> Texture:
     """The printed face at ``px_per_square`` texels per square, in a white margin."""
-    px_per_square = max(int(px_per_square), 8)
+    px_per_square = max(int(px_per_square), 24)  # markers need a few texels per bit
     sx, sy = layout.squares
-    img = layout.cv_board.generateImage(
-        (sx * px_per_square, sy * px_per_square), marginSize=0, borderBits=1
-    )
+    for _ in range(8):  # OpenCV's generateImage fails for some sizes (a rounding of its ROI)
+        try:
+            img = layout.cv_board.generateImage(
+                (sx * px_per_square, sy * px_per_square), marginSize=0, borderBits=1
+            )
+            break
+        except cv2.error:
+            px_per_square += 1
+    else:  # pragma: no cover
+        raise ValueError(f"OpenCV cannot draw board {layout} at {px_per_square} px per square")
     pad = int(round(margin_squares * px_per_square))
     img = cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
     refl = (INK + (PAPER - INK) * (img.astype(np.float32) / 255.0)).astype(np.float32)

@@ -171,3 +171,38 @@ def phone_rig(**changes: object) -> CameraRig:
     }
     options.update(changes)
     return standard_rig(**options)  # type: ignore[arg-type]
+
+
+#: Boards with bigger markers (a coarser dictionary) for small pictures.
+COARSE_SETUP = CameraSetup(
+    ReferenceBoard(CharucoBoard((9, 7), 35.0, 26.0, "DICT_4X4_100", 0), (-157.5, 122.5, 3.0)),
+    EffectorBoard(CharucoBoard((4, 3), 30.0, 22.0, "DICT_4X4_100", 40), (60.0, 45.0, 69.0)),
+)
+
+
+def rig_for_size(size: tuple[int, int]) -> CameraRig:
+    """The standard rig at ``size``; below 1280 px wide, the coarse boards and a narrower
+    lens (tests, quick demos)."""
+    if size[0] >= 1280:
+        return standard_rig(image_size=size)
+    return standard_rig(image_size=size, hfov_deg=60.0, distance_mm=750.0, setup=COARSE_SETUP)
+
+
+def occluder_over(
+    rig: CameraRig, b_point: ArrayLike, fraction: float, board: str = "effector", side: int = 0
+) -> np.ndarray:
+    """A polygon (4, 2) px hiding ``fraction`` of a board's image from one ``side``
+    (0 left, 1 right, 2 top, 3 bottom), as a cable or a hand would."""
+    placed = rig.effector_board(b_point) if board == "effector" else rig.reference_board()
+    px = rig.camera.project(placed.outline())
+    (x0, y0), (x1, y1) = px.min(axis=0), px.max(axis=0)
+    f = float(np.clip(fraction, 0.0, 1.0))
+    if side == 0:
+        x1 = x0 + f * (x1 - x0)
+    elif side == 1:
+        x0 = x1 - f * (x1 - x0)
+    elif side == 2:
+        y1 = y0 + f * (y1 - y0)
+    else:
+        y0 = y1 - f * (y1 - y0)
+    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])

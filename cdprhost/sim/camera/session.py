@@ -5,8 +5,9 @@ does), finds where the ``truth`` machine really puts ``B`` (its geometry and eff
 ``drive_scale``), and renders each take as the rig's camera sees it: ``frames_per_take``
 pictures (a folder of JPEG/PNG files, or one MJPG video). The intrinsics the session
 carries are, by default, calibrated from rendered calibration views (``"calibrated"``,
-what a user gets, not the truth), or the truth (``"truth"``), or the views themselves
-are stored for the reader to calibrate (``"views"``). ``take_imaging`` overrides the
+what a user gets, not the truth), or the truth (``"truth"``), or given (an
+``Intrinsics``: a calibration made before), or the views themselves are stored for the
+reader to calibrate (``"views"``). ``take_imaging`` overrides the
 imaging of chosen takes (heavy blur, low light), ``occluders`` hide parts of chosen takes.
 """
 
@@ -23,6 +24,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from cdprhost.calibration.camera.boards import CharucoBoard
 from cdprhost.calibration.camera.detection import detect_board
 from cdprhost.calibration.camera.intrinsics import (
     Intrinsics,
@@ -51,10 +53,7 @@ def camera_config(
     true orientation is not in it: the reader finds it)."""
     ref, eff = rig.setup.reference, rig.setup.effector
 
-    def board(b: object) -> dict[str, object]:
-        from cdprhost.calibration.camera.boards import CharucoBoard
-
-        assert isinstance(b, CharucoBoard)
+    def board(b: CharucoBoard) -> dict[str, object]:
         return {
             "dictionary": b.dictionary,
             "squares": list(b.squares),
@@ -149,7 +148,7 @@ def write_camera_session(
     t_s: np.ndarray | None = None,
     frames_per_take: int = 4,
     take_kind: Literal["images", "video"] = "images",
-    intrinsics: IntrinsicsSource = "calibrated",
+    intrinsics: IntrinsicsSource | Intrinsics = "calibrated",
     n_views: int = 18,
     profile_name: str = "paper-simulation",
     roles: Sequence[str] | None = None,
@@ -172,7 +171,9 @@ def write_camera_session(
 
     calibration: IntrinsicsResult | None = None
     used = true_intrinsics(rig)
-    if intrinsics == "calibrated":
+    if isinstance(intrinsics, Intrinsics):  # a calibration made before (benchmarks)
+        used, intrinsics = intrinsics, "calibrated"
+    elif intrinsics == "calibrated":
         calibration = calibrated_intrinsics(rig, n_views, seed, supersample)
         used = calibration.intrinsics
     if intrinsics == "views":

@@ -1,0 +1,202 @@
+"""A camera session measured: pictures -> the session-level fit -> each pose's B with its
+covariance, judged take by take like motion-capture takes (camera-session.md).
+
+The boards are found in every frame (:func:`~.camera_takes.read_camera_session`), the
+session-level fit (:func:`~.camera.session_fit.fit_session`) solves one camera and one
+board orientation with the intrinsics refined against the robot's commanded motion (on
+the fit poses only, so that check poses still test it), and every take's frames are then
+judged by the statistical take test (settling, drift, spread, missing frames). A take whose
+boards are not seen well enough in enough frames is refused naming the board and the
+frames; calibration views of poor coverage refuse the session (their reason and the views
+to add).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cdprhost.calibration.acceptance import AcceptanceLimits
+from cdprhost.calibration.camera.session_fit import SessionFit, fit_session
+from cdprhost.calibration.camera_takes import read_camera_session, skipped_text
+from cdprhost.calibration.registration import RigidTransform
+from cdprhost.calibration.session import RejectedTake, Session, SessionMeasurements
+from cdprhost.calibration.takes import TakeMeasurement, TakeRejected, TakeSeries, judge_takes
+from cdprhost.errors import InputError
+from cdprhost.kinematics.machine import MachineModel
+
+#: A camera take has a few frames, not hundreds: the fewest it may have (unless
+#: ``[camera.acceptance] min_frames`` says otherwise).
+CAMERA_MIN_FRAMES = 3
+
+_IDENTITY = RigidTransform(np.eye(3), np.zeros(3), np.zeros(()), np.zeros((), dtype=int))
+
+
+#: Smallest drift over a camera take that matters (mm): a frame's B scatters by tenths of a
+#: millimetre, and a drift test on a few frames must not refuse takes for that.
+CAMERA_MAX_DRIFT_MM = 0.5
+
+
+def camera_limits(limits: AcceptanceLimits) -> AcceptanceLimits:
+    """The take thresholds for pictures (unless the session sets them): a few frames
+    suffice, and a drift matters only when it is as large as a frame's scatter."""
+    defaults = {"min_frames": CAMERA_MIN_FRAMES, "max_drift_mm": CAMERA_MAX_DRIFT_MM}
+    update = {k: v for k, v in defaults.items() if k not in limits.model_fields_set}
+    return limits.model_copy(update=update)
+
+
+def measure_camera_session(
+    session: Session,
+    model: MachineModel | None,
+    limits: AcceptanceLimits | None = None,
+    *,
+    refine: bool = True,
+) -> SessionMeasurements:
+    """Every take of a camera session measured (refused ones listed, not used); with
+    ``model`` (the profile that commanded the poses) and ``refine``, the intrinsics are
+    refined against the robot's motion. Raises InputError when no frame shows the
+    reference board well enough (naming the frames)."""
+    camera = session.config.camera
+    if camera is None:
+        raise InputError("not a camera session (no [camera] in session.toml)")
+    lim = camera_limits(limits or session.config.acceptance)
+    data = read_camera_session(session.directory, camera, session.take_paths)
+    p = session.poses
+    fit_rows = np.array([r != "check" for r in (p.roles or ("fit",) * len(p))])
+    try:
+        fit = fit_session(
+            data.detections(),
+            data.setup,
+            data.intrinsics,
+            p.s_cmd if refine and model is not None else None,
+            model if refine else None,
+            fit_rows=fit_rows,
+        )
+    except ValueError as exc:
+        named = "; ".join(
+            f"pose {p.pose[i]}: {skipped_text(t.names, tuple(_frame_reasons(t)))}"
+            for i, t in enumerate(data.takes[:6])
+            if t is not None
+        )
+        raise InputError(
+            f"{exc}" + (f" ({named})" if named else ""), source=str(session.directory)
+        ) from None
+    rejected: list[RejectedTake] = [
+        RejectedTake(int(p.pose[i]), p.take[i], "unreadable", msg)
+        for i, msg in data.unreadable.items()
+    ]
+    series: list[TakeSeries] = []
+    rows: list[int] = []
+    for i, take in enumerate(data.takes):
+        if take is None:
+            continue
+        skipped = fit.frame_skipped[i]
+        usable = sum(1 for s in skipped if not s)
+        if not np.isfinite(fit.positions[i]).all() or usable < lim.min_valid_fraction * len(
+            skipped
+        ):
+            rejected.append(
+                RejectedTake(
+                    int(p.pose[i]),
+                    p.take[i],
+                    "missing-marker",
+                    f"{usable} of {len(skipped)} frames usable: {skipped_text(take.names, skipped)}",
+                )
+            )
+            continue
+        series.append(
+            TakeSeries(
+                fit.frame_positions[i],
+                take.detections.times,
+                _IDENTITY,
+                np.zeros(3),
+                0.0,
+                (),
+                str(session.take_path(i)),
+            )
+        )
+        rows.append(i)
+    judged = judge_takes(series, lim)
+    keep: list[int] = []
+    results: list[TakeMeasurement] = []
+    for i, r in zip(rows, judged):
+        if isinstance(r, TakeRejected):
+            rejected.append(RejectedTake(int(p.pose[i]), p.take[i], r.reason, str(r)))
+        else:
+            keep.append(i)
+            results.append(r)
+    rejected.sort(key=lambda r: r.pose)
+    k = np.asarray(keep, dtype=int)
+    cov = _pose_covariances(fit, k, results, lim)
+    refusals: tuple[str, ...] = ()
+    if data.calibration is not None and not data.calibration.ok:
+        refusals = tuple(
+            f"the calibration views ({camera.calibration_views}): {text}"
+            for text in data.calibration.problems
+        )
+    return SessionMeasurements(
+        p.pose[k],
+        tuple(p.roles[i] for i in keep) if p.roles else ("fit",) * len(keep),
+        fit.positions[k].reshape(-1, 3),
+        p.commanded[k],
+        p.s_cmd[k],
+        p.t_s[k],
+        p.dirs[k],
+        np.sqrt(np.diagonal(cov, axis1=1, axis2=2)).reshape(-1, 3),
+        np.zeros(len(keep)),
+        tuple(results),
+        tuple(rejected),
+        session.config.declared_noise_mm,
+        covariance=cov,
+        common_covariance=fit.common_covariance,
+        parameter_covariance=fit.geometry_covariance_extra,
+        frame_covariance=fit.frame_covariance,
+        refusals=refusals,
+        notes=_fit_notes(fit),
+    )
+
+
+def _frame_reasons(take: object) -> list[str]:
+    """Why each frame of a take shows no usable board (before any fit)."""
+    dets = getattr(take, "detections", None)
+    if dets is None:
+        return []
+    out = []
+    for r, e in zip(dets.reference, dets.effector):
+        out.append(
+            "reference board not found"
+            if r is None
+            else "effector board not found"
+            if e is None
+            else ""
+        )
+    return out
+
+
+def _pose_covariances(
+    fit: SessionFit, rows: np.ndarray, takes: list[TakeMeasurement], lim: AcceptanceLimits
+) -> np.ndarray:
+    """Each kept pose's covariance: its corners' noise through the pose solution (the frames'
+    own scatter is not used: a few frames give a poor standard error, and the corners'
+    noise already counts them), plus the motion of a take whose drift is significant
+    (drift / sqrt(12) per coordinate)."""
+    cov = np.array(fit.covariances[rows]).reshape(-1, 3, 3)
+    for j, t in enumerate(takes):
+        if float(t.stats.drift_p) < lim.motion_alpha:
+            cov[j] = cov[j] + np.diag(np.asarray(t.stats.drift_mm) ** 2 / 12.0)
+    return cov
+
+
+def _fit_notes(fit: SessionFit) -> tuple[str, ...]:
+    notes = list(fit.notes)
+    if fit.refined:
+        notes.append(
+            "camera refined against the robot's motion: "
+            + ", ".join(fit.refined)
+            + f" (corner noise {fit.pixel_sigma:.3f} px)"
+        )
+    common = float(np.sqrt(np.trace(fit.common_covariance)))
+    notes.append(
+        f"every B shares one unknown vector of {common:.3g} mm RMS (effector-board orientation "
+        "x offset): identification cannot see it; the trust gate counts it"
+    )
+    return tuple(notes)
