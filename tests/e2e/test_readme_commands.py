@@ -34,6 +34,9 @@ SKIP = {
     "python bench/": "benchmarks: minutes each, measured by hand and reported as ratios",
     "cdprhost tui": "the interactive terminal UI (its own tests drive it)",
     "cdprhost serve": "a server that runs until stopped (its own tests drive it)",
+    "cdprhost calibrate camera --camera 0": "needs a real camera",
+    "cdprhost calibrate wizard --profile paper-simulation --port /dev/ttyACM0": "needs a real "
+    "machine and camera",
     "cdprhost sim-device": "a device that runs until stopped: the bash block that shows "
     "it with '&' is run, in the background",
 }
