@@ -51,7 +51,7 @@ async def test_pause_and_cancel_show_at_once_while_the_motion_runs_to_rest(gcode
         await pilot.press("p")
         text = await shown(pilot)
         assert app.state.job.state is JobState.PRINTING  # the job has not taken it yet
-        assert "PAUSING  finishing the current path" in text
+        assert "PAUSING  stopping within the moves sent" in text
         assert "pausing" in text.splitlines()[0]  # the tab bar says it too
         assert not app.check_print_action("pause_print")  # no second pause
         for _ in range(7):  # run to the rest point

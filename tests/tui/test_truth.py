@@ -130,3 +130,45 @@ def test_progress_events_fold_in_order():
     items += [(1, Progress(5, 20, 0, 3.0))]
     state, problems = fold_job_events(state, items)
     assert not problems and state.job.segments_done == 5
+
+
+async def test_the_file_picker_opens_a_typed_folder_and_goes_up(fake_backend, tmp_path):
+    from cdprhost.tui.screens.file_picker import FilePickerScreen, GcodeTree
+
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / "cup.gcode").write_text("G1 X1 Y1 E1 F600\n")
+    app = make_app(fake_backend)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        await pilot.press("o")
+        await wait_for(pilot, lambda s: isinstance(app.screen, FilePickerScreen))
+        picker = app.screen
+        await pilot.press("ctrl+o")
+        picker.query_one("#file-input").value = str(tmp_path / "parts")
+        await pilot.press("enter")
+        await pilot.pause(0.2)
+        assert app.screen is picker  # a folder is not a file to open
+        tree = picker.query_one(GcodeTree)
+        assert tree.path == tmp_path / "parts" and tree.has_focus
+        await pilot.press("backspace")  # up
+        await pilot.pause(0.2)
+        assert tree.path == tmp_path
+        assert "⌫ Parent folder" in await shown(pilot)
+
+
+async def test_the_port_list_follows_what_is_plugged_in(fake_backend):
+    clock = [100.0]
+    ports = fake_backend.ports()
+    fake_backend.ports = lambda: list(ports)
+    app = make_app(fake_backend, clock=lambda: clock[0])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        await pilot.press("f1")
+        screen = app.screen
+        await wait_for(pilot, lambda s: len(screen.choices) == 2, what="listed")
+        from cdprhost.tui.control.views import PortChoice
+
+        ports.append(PortChoice("/dev/ttyUSB7", "/dev/ttyUSB7", "USB serial"))  # plugged in
+        clock[0] += 10.0
+        await wait_for(pilot, lambda s: len(screen.choices) == 3, what="rescanned", timeout=10)
+        assert "/dev/ttyUSB7" in await shown(pilot)

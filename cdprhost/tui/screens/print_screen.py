@@ -136,9 +136,13 @@ class PrintScreen(AppScreen):
     BINDINGS = [
         Binding("o", "open", "Open", tooltip="Pick a G-code file: recent, folders, or a path"),
         Binding("s", "start", "Start"),
-        Binding("p", "pause", "Pause", tooltip="At the next point where the motion rests"),
+        Binding(
+            "p", "pause", "Pause", tooltip="Within the moves already sent; lifts, heaters kept"
+        ),
         Binding("r", "resume", "Resume"),
-        Binding("x", "cancel", "Cancel", tooltip="Stops at rest, then parks as configured"),
+        Binding(
+            "x", "cancel", "Cancel", tooltip="Within the moves already sent, then parks as set"
+        ),
         Binding(
             "l",
             "resume_failed",
