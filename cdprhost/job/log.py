@@ -8,6 +8,7 @@ stops the print safely (PrintJob checks it between steps).
 from __future__ import annotations
 
 import json
+import threading
 import time
 from pathlib import Path
 from typing import Any, TextIO
@@ -22,6 +23,7 @@ class JobLog:
         self.path = Path(path) if path else None
         self._fh: TextIO | None = None
         self.failed: OSError | None = None
+        self._lock = threading.Lock()  # requests are logged from the threads that make them
         if self.path:
             try:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -44,17 +46,22 @@ class JobLog:
             "event": kind,
             **{k: json_safe(v) for k, v in fields.items()},
         }
-        try:
-            self._fh.write(json.dumps(record) + "\n")
-            self._fh.flush()
-        except OSError as exc:
-            self.failed = exc
+        with self._lock:
+            fh = self._fh
+            if fh is None:
+                return
+            try:
+                fh.write(json.dumps(record) + "\n")
+                fh.flush()
+            except OSError as exc:
+                self.failed = exc
 
     def event(self, event: Any) -> None:
         self.write(type(event).__name__, **json_safe(event))
 
     def close(self) -> None:
-        fh, self._fh = self._fh, None
+        with self._lock:
+            fh, self._fh = self._fh, None
         if fh is not None:
             try:
                 fh.close()

@@ -17,8 +17,8 @@ threads. Every way a job ends is safe:
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,9 +26,9 @@ from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
+from cdprhost.job.options import PrintOptions, PrintResult
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
-    ResumePoint,
     ResumeWriter,
     file_sha256,
     remove_resume_point,
@@ -37,58 +37,22 @@ from cdprhost.job.resume import (
 )
 from cdprhost.job.resume_items import PlanSpec, Restart
 from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
-from cdprhost.job.streamer import Requests, Stop, StreamContext, Streamer
+from cdprhost.job.stopping import Stop, StopRecord
+from cdprhost.job.streamer import Requests, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import heaters_off
 from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.pipeline import segment_program
-from cdprhost.motion.prepared import Prepared, Setup, prepare
+from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.messages import EstopFlag
 
 log = logging.getLogger(__name__)
 
-
-@dataclass
-class PrintOptions:
-    setup: Setup = field(default_factory=Setup)  # placement, --retarget, cancelled objects
-    resume_from_layer: int | None = None  # 0-based
-    resume: ResumePoint | None = None  # continue exactly at this point (``--resume``)
-    log_path: str | Path | None = None
-    resume_dir: str | Path | None = None
-    idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
-    resume_every_s: float = 3.0  # the resume point is saved this often (wall clock) ...
-    resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
-    batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
-
-
-@dataclass
-class PrintResult:
-    status: str
-    segments: int = 0
-    retransmits: int = 0
-    final_steps: list[int] | None = None
-    last_line: int | None = None
-    last_layer: int | None = None
-    print_time_s: float = 0.0
-    estimated_time_s: float = 0.0
-    violations: list[dict[str, Any]] = field(default_factory=list)
-    reason: str = ""
-    resume_file: str | None = None
-    notices: list[str] = field(default_factory=list)
-    bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
-
-    @property
-    def exit_code(self) -> int:
-        if self.status == "completed":
-            return 0
-        return 2 if self.bad_input else 1
-
-    def to_json(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if k != "bad_input"}
+__all__ = ["PrintJob", "PrintOptions", "PrintResult"]
 
 
 class PrintJob:
@@ -110,7 +74,10 @@ class PrintJob:
         self.log = JobLog(self.options.log_path)
         self.requests = Requests()
         self._state = JobState.IDLE
+        self._done = threading.Event()  # run() has returned
+        self._started = False
         self.link: HostLink | None = None  # set once connected (the streamer holds it)
+        self._streamer: Streamer | None = None
         self._sha256 = ""
         self._restart: Restart | None = None
         self._prepared: Prepared | None = None
@@ -129,12 +96,69 @@ class PrintJob:
     def request_resume(self) -> None:
         self._request("resume")
 
-    def request_cancel(self) -> None:
+    def request_cancel(self, reason: str = "") -> None:
+        """Stop within the buffered motion, park and end CANCELLED (``reason``: who asked, e.g.
+        "quit" or "SIGTERM"; recorded in the final state)."""
+        if reason:
+            self.requests.cancel_reason = self.requests.cancel_reason or reason
         self._request("cancel")
 
+    def emergency_stop(self) -> bool:
+        """ESTOP now (motors kept, heaters off unless the profile keeps them on failure); the
+        job ends FAILED. True when the device acknowledged (False without a link)."""
+        self._emit(Notice("emergency stop requested"))
+        self.log.write("request", what="estop")
+        self.requests.add("estop")
+        link = self.link
+        if link is None or self._done.is_set():
+            return False
+        try:
+            return bool(link.emergency_stop(timeout=1.0, flags=self._estop_flags()))
+        except (LinkError, OSError) as exc:
+            log.warning("emergency stop not acknowledged: %s", exc)
+            return False
+
+    def _estop_flags(self) -> int:
+        keep = EstopFlag.KEEP_MOTORS
+        if self.profile.heaters.on_failure == "keep":
+            keep |= EstopFlag.KEEP_HEATERS
+        return int(keep)
+
+    @property
+    def last_stop(self) -> StopRecord | None:
+        """The last controlled stop (pause or cancel): its device segments and speeds."""
+        return self._streamer.stops.record if self._streamer is not None else None
+
+    @property
+    def finished(self) -> bool:
+        """``run()`` has returned (the machine is left safe, the result is final)."""
+        return self._done.is_set()
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """Until ``run()`` has returned (True) or ``timeout_s`` passed (False)."""
+        if not self._started:
+            return True
+        return self._done.wait(timeout_s)
+
+    def shutdown(self, reason: str = "quit", timeout_s: float = 10.0) -> bool:
+        """Quit and signals: cancel (stop, park, heaters off, resume point) and wait until the
+        job has ended; an e-stop when it has not within ``timeout_s``. Close the link only after
+        this returns."""
+        if not self._started or self._done.is_set():
+            return True
+        self.request_cancel(reason)
+        if self._done.wait(timeout_s):
+            return True
+        log.warning("the job did not stop within %g s: emergency stop", timeout_s)
+        self.emergency_stop()
+        return self._done.wait(2.0)
+
     def _request(self, what: str) -> None:
+        """Recorded when asked (a Notice and the job log); the state changes when it acts."""
         self.requests.add(what)
         self.log.write("request", what=what)
+        if self._started and not self._done.is_set():
+            self._emit(Notice(f"{what} requested ({self._state.value})"))
 
     @property
     def state(self) -> JobState:
@@ -198,10 +222,12 @@ class PrintJob:
 
     # ------------------------------------------------------------ the job
     def run(self) -> PrintResult:
+        self._started = True
         try:
             return self._run()
         finally:
             self.log.close()
+            self._done.set()
 
     def _run(self) -> PrintResult:
         self._set(JobState.PREFLIGHT, str(self.gcode))
@@ -281,6 +307,7 @@ class PrintJob:
                 self.options.resume_layer_s,
             )
             streamer = Streamer(link, self._context(), writer)
+            self._streamer = streamer
             self._set(JobState.PRINTING)
             planned = segment_program(
                 self._items(),
@@ -353,20 +380,11 @@ class PrintJob:
         )
 
     # ------------------------------------------------------------- endings
-    def _fill(self, streamer: Streamer, result: PrintResult, last: int | None = None) -> None:
-        link = streamer.link
-        info = streamer.executed(last)
-        result.segments = max(0, (last or link.progress.segments_done) - streamer.first_segment + 1)
-        result.retransmits = link.counters.retransmits
-        result.last_line = info.line if info else None
-        result.last_layer = info.layer + 1 if info else None
-        result.final_steps = list(info.steps) if info else None
-
     def _finish(
         self, streamer: Streamer, result: PrintResult, state: JobState, status: str
     ) -> None:
         st = streamer.link.request_status()
-        self._fill(streamer, result)
+        streamer.fill(result)
         result.status = status
         result.final_steps = list(st.steps)
         result.print_time_s = round(st.motion_time_s - self._t0, 6)
@@ -374,11 +392,17 @@ class PrintJob:
         self._set(state, status)
 
     def _stop_tail(self, streamer: Streamer, result: PrintResult, reason: str) -> None:
-        """At a rest point after a cancel or a safe stop: heaters off (after a cancel, as the
-        profile's ``heaters.on_cancel`` says), resume point, end."""
+        """Stopped at rest after a cancel or a safe stop: park (``park.on_cancel``), heaters
+        off (``heaters.on_cancel``; always when the host quits or the stop is a failure),
+        resume point, end."""
         link = streamer.link
+        quitting = self.requests.cancel_reason
         try:
-            if reason or self.profile.heaters.on_cancel == "off":
+            machine = Machine(link, self.profile, self.model)
+            park = self.profile.park
+            if park.on_cancel and park.lift_mm > 0 and not streamer.stops.parked:
+                machine.park(lift_mm=park.lift_mm)
+            if reason or quitting or self.profile.heaters.on_cancel == "off":
                 link.send(*heaters_off())
             streamer.drain(final=False)
         except LinkError as exc:
@@ -386,11 +410,18 @@ class PrintJob:
             return
         self._save_point(streamer, result, reason or "cancelled")
         if reason:
-            self._fill(streamer, result)
+            streamer.fill(result)
             result.status, result.reason = "failed", reason
             self._failed(streamer, result, reason)
             return
-        self._finish(streamer, result, JobState.CANCELLED, "cancelled")
+        result.reason = quitting
+        self._finish(
+            streamer,
+            result,
+            JobState.CANCELLED,
+            "cancelled" + (f": {quitting}" if quitting else ""),
+        )
+        result.status = "cancelled"
 
     def _give_up(
         self,
@@ -401,12 +432,9 @@ class PrintJob:
         exc: BaseException,
     ) -> None:
         """Emergency stop first, then name the exact last executed segment and save it."""
-        keep = EstopFlag.KEEP_MOTORS
-        if self.profile.heaters.on_failure == "keep":
-            keep |= EstopFlag.KEEP_HEATERS
         if not isinstance(exc, DeviceReset):
             try:
-                link.emergency_stop(timeout=1.0, flags=keep)
+                link.emergency_stop(timeout=1.0, flags=self._estop_flags())
             except (LinkError, OSError) as stop_exc:  # the device's watchdog stops it
                 log.warning("emergency stop not acknowledged: %s", stop_exc)
         result.status, result.reason = "failed", reason
@@ -415,7 +443,7 @@ class PrintJob:
             self._set(JobState.FAILED, reason)
             return
         last = exc.last_segment if isinstance(exc, DeviceReset) else None
-        self._fill(streamer, result, last)
+        streamer.fill(result, last)
         self._save_point(streamer, result, reason, last)
         self._failed(streamer, result, reason, last)
 
@@ -423,7 +451,7 @@ class PrintJob:
         self, streamer: Streamer, result: PrintResult, reason: str, last: int | None = None
     ) -> None:
         """The machine time printed, the Failure event and the final state."""
-        result.print_time_s = self._print_time(streamer, last)
+        result.print_time_s = streamer.print_time(last)
         info = streamer.executed(last)
         # the event carries the 0-based layer index, like Progress; the JSON result is 1-based
         self._emit(
@@ -451,16 +479,6 @@ class PrintJob:
         except OSError as exc:
             log.warning("resume point %s not written: %s", path, exc.strerror or exc)
             result.resume_file = str(path) if path.exists() else None
-
-    @staticmethod
-    def _print_time(streamer: Streamer, last: int | None = None) -> float:
-        """Machine time printed by this job up to its last executed segment (planned time:
-        the device may be unreachable now)."""
-        info = streamer.executed(last)
-        start = streamer.map.start_s
-        if info is None or start is None:
-            return 0.0
-        return round(max(0.0, info.t_end_s - start), 6)
 
 
 def _violations_reason(report: Any) -> str:

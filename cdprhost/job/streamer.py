@@ -4,10 +4,10 @@ The device's buffered motion is kept between the link's time watermarks
 (:meth:`HostLink.feed`); the loop wakes on the device's reports, never on a blind
 timer. Between sends it services the job: progress and temperature events, pause and
 cancel requests, the resume point (each layer and every few seconds), the health of
-the job log. Pause and cancel act at the next point where the planned motion comes to
-rest: the stream ends there with a FLUSH, the queue drains, nothing stops mid-segment.
-The end of the program is a FLUSH too, and the job completes only when the device
-reports the last segment executed.
+the job log. Pause and cancel act within the motion already sent: a controlled
+deceleration along the plan, a retract, then park (:mod:`cdprhost.job.stopping`); the
+rest of the plan waits in :attr:`Streamer.pending` for a resume. The end of the program
+is a FLUSH, and the job completes only when the device reports the last segment executed.
 """
 
 from __future__ import annotations
@@ -15,16 +15,18 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from cdprhost.gcode import items as g
+from cdprhost.job.options import PrintResult
 from cdprhost.job.resume import ResumePoint, ResumeWriter
 from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
-from cdprhost.job.segment_map import SegmentInfo, SegmentMap, first_rest_index
+from cdprhost.job.segment_map import SegmentInfo, SegmentMap
 from cdprhost.job.state import (
     Event,
     JobState,
@@ -34,6 +36,7 @@ from cdprhost.job.state import (
     StateChanged,
     Temperatures,
 )
+from cdprhost.job.stopping import Stop, StopControl
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tensions
 from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
@@ -42,21 +45,14 @@ from cdprhost.motion.direct import to_wire
 from cdprhost.motion.prepared import Setup
 from cdprhost.motion.segments import PlannedSegments
 from cdprhost.profile.models import MachineProfile
-from firmware_protocol.messages import BED, HOTEND, SetHeater
+from firmware_protocol.messages import BED, HOTEND, Flag, SetHeater
 
 log = logging.getLogger(__name__)
 
 SERVICE_S = 0.25  # longest the loop goes without servicing the job
 PROGRESS_EVERY_S = 0.1
 STATUS_EVERY_S = 0.5
-
-
-class Stop(Exception):
-    """Left the stream at a rest point: cancelled, or stopped safely (``reason``)."""
-
-    def __init__(self, reason: str = ""):
-        super().__init__(reason)
-        self.reason = reason
+_END = object()
 
 
 @dataclass
@@ -66,6 +62,7 @@ class Requests:
     _set: set[str] = field(default_factory=set)
     _lock: threading.Lock = field(default_factory=threading.Lock)
     stop_reason: str = ""
+    cancel_reason: str = ""  # who cancelled (quit, a signal); "" = the operator
 
     def add(self, what: str) -> None:
         with self._lock:
@@ -119,6 +116,11 @@ class Streamer:
         self.clock_hz = link.identity.clock_hz if link.identity else 100_000
         self.map = SegmentMap(self.clock_hz)
         self.first_segment = link.segments_sent + 1
+        # device number of program segment 0 (after a pause the re-sent plan gets new numbers)
+        self.index_base = self.first_segment
+        self.pending: deque[Any] = deque()  # plan items not sent yet, in order
+        self.source: Iterator[Any] = iter(())
+        self.stops = StopControl(self)
         self.boot_id = link.identity.boot_id if link.identity else 0
         self.status: DeviceStatus | None = None
         self._heat_item = 0
@@ -130,7 +132,11 @@ class Streamer:
 
     # ------------------------------------------------------------------ the stream
     def run(self, planned: Iterable[Any]) -> None:
-        for out in planned:
+        self.source = iter(planned)
+        while True:
+            out = self.pending.popleft() if self.pending else next(self.source, _END)
+            if out is _END:
+                break
             if isinstance(out, PlannedSegments):
                 self._segments(out)
             else:
@@ -144,20 +150,18 @@ class Streamer:
         link = self.link
         while i < n:
             self.service()
-            stopping = self.ctx.requests.has("pause", "cancel", "stop")
-            end = n
-            if stopping:
-                rest = first_rest_index(batch, i)
-                if rest is not None:
-                    end = rest + 1
+            if self.ctx.requests.has("pause", "cancel", "stop"):
+                if i < n:  # the rest of the plan waits (a pause resumes it)
+                    self.pending.appendleft(batch.take(slice(i, n)))
+                self.stops.stop_here()
+                return
             before = link.segments_sent
-            j = link.feed(wire, i, max_wait=SERVICE_S, end=end)
+            j = link.feed(wire, i, max_wait=SERVICE_S)
             if j > i:
                 self.map.add(before + 1, batch.take(slice(i, j)))
+                self.stops.sent(batch, j - 1, before + j - i)
                 self._at_rest = bool(batch.v_end[j - 1] <= 1e-9)
                 i = j
-            if stopping and self._at_rest and i == end:
-                self._hold_at_rest()
 
     def _command(self, item: Any) -> None:
         if isinstance(item, g.FilamentChange):
@@ -177,11 +181,11 @@ class Streamer:
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self._heat_item = max(numbers)
-            self._set(
+            self.set_state(
                 JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
             )
         if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
-            self._hold_at_rest()
+            self.stops.stop_here()
 
     def _check_heater_limits(self, msgs: list[Any]) -> None:
         """The device's announced maxima bound heater targets (it would refuse them)."""
@@ -196,48 +200,34 @@ class Streamer:
                     f"maximum {limits.get(m.heater, 0.0):g} C"
                 )
 
-    def _set(self, state: JobState, reason: str = "") -> None:
+    def set_state(self, state: JobState, reason: str = "") -> None:
         if state is not self.ctx.state():
             self.ctx.emit(StateChanged(state, reason))
 
     # ------------------------------------------------------------------ pause / cancel
-    def _hold_at_rest(self) -> None:
-        """At a rest point: flush, drain, then pause (until resumed) or stop."""
-        req = self.ctx.requests
-        stop = req.has("cancel", "stop")
-        self._set(JobState.CANCELLING if stop else JobState.PAUSING)
-        self.link.flush()
-        self.drain(final=False)
-        if req.has("stop"):
-            raise Stop(req.stop_reason)
-        if stop or req.take("cancel"):
-            raise Stop()
-        req.take("pause")
-        self._set(JobState.PAUSED, "at rest; heaters kept")
-        self._wait_for_resume()
-
     def _filament_change(self, item: g.FilamentChange) -> None:
         """M600: the reader's park moves brought the machine to the park point; wait there
         (paused, heaters kept) until the operator resumes or cancels."""
-        self._set(JobState.PAUSING, f"line {item.line}: M600 filament change")
+        self.set_state(JobState.PAUSING, f"line {item.line}: M600 filament change")
         self.link.flush()
         self.drain(final=False)
         self.ctx.emit(Notice(f"line {item.line}: M600: change the filament, then resume"))
-        self._set(JobState.PAUSED, f"line {item.line}: M600: change the filament, then resume")
-        self._wait_for_resume()
+        self.set_state(JobState.PAUSED, f"line {item.line}: M600: change the filament, then resume")
+        self.wait_for_resume()
+        self.set_state(JobState.PRINTING, f"line {item.line}: M600: resumed")
 
-    def _wait_for_resume(self) -> None:
+    def wait_for_resume(self) -> None:
+        """Paused: until a resume (the caller sets the state on) or a cancel (:class:`Stop`)."""
         req = self.ctx.requests
         while True:
             self.service(force_status=False)
             if req.has("stop"):
-                self._set(JobState.CANCELLING)
+                self.set_state(JobState.CANCELLING)
                 raise Stop(req.stop_reason)
             if req.take("cancel"):
-                self._set(JobState.CANCELLING)
+                self.set_state(JobState.CANCELLING)
                 raise Stop()
             if req.take("resume"):
-                self._set(JobState.PRINTING)
                 return
             self.link.wait_report(SERVICE_S)  # keep-alives go out while it waits
 
@@ -255,6 +245,7 @@ class Streamer:
             elif (
                 time.monotonic() - since > self.ctx.idle_timeout_s
                 and self.ctx.state() is not JobState.HEATING
+                and not link.progress.flags & Flag.WAITING  # a heater wait holds the queue
             ):
                 raise LinkError(
                     f"the device made no progress for {self.ctx.idle_timeout_s:g} s "
@@ -293,7 +284,7 @@ class Streamer:
             self._last_status = now
             self._status_seen = link.ask_status()  # answered while streaming goes on
         if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self._heat_item:
-            self._set(JobState.PRINTING)
+            self.set_state(JobState.PRINTING)
         info = self.map.lookup(link.progress.segments_done)
         if force_status or now - self._last_progress > PROGRESS_EVERY_S:
             self._last_progress = now
@@ -346,6 +337,26 @@ class Streamer:
             return None
         return self.map.lookup(number)
 
+    def fill(self, result: PrintResult, last: int | None = None) -> None:
+        """The result's counts and last executed program segment (``last``: the device's
+        number when known otherwise, e.g. after a reset)."""
+        link = self.link
+        info = self.executed(last)
+        result.segments = max(0, (last or link.progress.segments_done) - self.first_segment + 1)
+        result.retransmits = link.counters.retransmits
+        result.last_line = info.line if info else None
+        result.last_layer = info.layer + 1 if info else None
+        result.final_steps = list(info.steps) if info else None
+
+    def print_time(self, last: int | None = None) -> float:
+        """Machine time printed by this job up to its last executed segment (planned time:
+        the device may be unreachable now)."""
+        info = self.executed(last)
+        start = self.map.start_s
+        if info is None or start is None:
+            return 0.0
+        return round(max(0.0, info.t_end_s - start), 6)
+
     def point(self, reason: str, info: SegmentInfo | None) -> ResumePoint:
         """The resume point at ``info`` (the last executed segment)."""
         st = self.status
@@ -371,7 +382,7 @@ class Streamer:
             e_mm=e_mm,
             device_segment=info.number if info else 0,
             boot_id=self.boot_id,
-            first_segment=self.first_segment,
+            first_segment=self.index_base,
             plan=self.ctx.plan.to_json(),
             setup=self.ctx.setup.to_json(),
             placement=self.ctx.placement,

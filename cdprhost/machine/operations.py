@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from cdprhost.errors import CdprError
 from cdprhost.kinematics.machine import MachineModel
@@ -20,6 +21,7 @@ from cdprhost.machine.commands import enable_all, heater_messages, home_commands
 from cdprhost.motion.direct import direct_path, state_at_steps
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.codes import ErrorCode
+from firmware_protocol.segments import SegmentBatch
 
 ALL_MODULES = 0b111
 HOMING_TIMEOUT_S = 180.0
@@ -43,6 +45,23 @@ class MoveResult:
 
     steps: np.ndarray
     device_time_s: float
+
+
+def end_exactly(wire: SegmentBatch, reached: ArrayLike, target: ArrayLike) -> SegmentBatch:
+    """``wire`` ending at module steps ``target`` instead of ``reached`` (its last segment,
+    or one more segment ending at rest when there is none, takes up the few steps)."""
+    diff = np.asarray(target, dtype=np.int64)[:3] - np.asarray(reached, dtype=np.int64)[:3]
+    if not diff.any():
+        return wire
+    if len(wire) == 0:  # already there but for a few steps: a short move to rest
+        deltas = np.zeros((2, 4), dtype=np.int64)
+        half = diff // 2
+        deltas[0, :3], deltas[1, :3] = half, diff - half
+        ticks = np.full(2, max(int(np.abs(diff).max()) * 20, 20), dtype=np.int64)
+        return SegmentBatch(ticks, deltas, np.array([0, 255], dtype=np.int16))
+    deltas = wire.deltas.copy()
+    deltas[-1, :3] += diff
+    return SegmentBatch(wire.ticks, deltas, wire.ramps)
 
 
 class Machine:
@@ -117,10 +136,12 @@ class Machine:
         feed_mm_s: float | None = None,
         home_if_needed: bool = False,
         timeout_s: float | None = None,
+        end_steps: ArrayLike | None = None,
     ) -> MoveResult:
         """Straight moves through ``points`` (machine frame, in order), planned like a print
         (limits, ramps, ends at rest); returns when the device has executed them and waited
-        ``settle_s``."""
+        ``settle_s``. ``end_steps`` (module steps): end exactly there (the last point's own
+        steps may differ by rounding or backlash; the last segment takes up the difference)."""
         st = self.status()
         if st.homed_mask & ALL_MODULES != ALL_MODULES:
             if not home_if_needed:
@@ -130,7 +151,7 @@ class Machine:
         # counter at zero, so a move never tries to undo the filament a print pushed (a print
         # or a cancelled print leaves that counter far from zero).
         modules_only = (*st.steps[:3], 0)
-        wire, seconds, _ = direct_path(
+        wire, seconds, reached = direct_path(
             self.profile,
             self.model,
             state_at_steps(self.model, modules_only),
@@ -139,6 +160,8 @@ class Machine:
             clock_hz=self.clock_hz,
         )
         limit = timeout_s if timeout_s is not None else seconds + 60.0
+        if end_steps is not None:
+            wire = end_exactly(wire, reached.steps[:3], end_steps)
         if len(wire):
             self.link.send(enable_all())
             self.link.queue_segments(wire, timeout=limit)

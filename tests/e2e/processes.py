@@ -80,6 +80,22 @@ class SimDeviceProcess:
             self.stop()
 
 
+def printing_point(gcode: Path, state: Path, segments: int = 20) -> object:
+    """Wait until the job's resume point (written while printing) names more than
+    ``segments`` executed segments; the point."""
+    from cdprhost.job.resume import ResumePoint, resume_path_for
+
+    path = resume_path_for(gcode, state / "jobs")
+
+    def ready() -> object:
+        if not path.exists():
+            return None
+        point = ResumePoint.load(path)
+        return point if point.device_segment > segments else None
+
+    return wait_until(ready, 120, "a resume point written while printing")
+
+
 def start_print(gcode: Path, port: str, state: Path, *extra: str) -> subprocess.Popen[str]:
     """``cdprhost print`` in its own process (so the test can kill or stop it)."""
     env = {**os.environ, "CDPRHOST_STATE": str(state)}

@@ -17,7 +17,13 @@ import serial
 from cdprhost.job.resume import ResumePoint, resume_path_for
 from cdprhost.link import open_link
 from firmware_protocol.messages import ErrorCode, Flag
-from tests.e2e.processes import SimDeviceProcess, square_part, start_print, wait_until
+from tests.e2e.processes import (
+    SimDeviceProcess,
+    printing_point,
+    square_part,
+    start_print,
+    wait_until,
+)
 
 pytestmark = [
     pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminals as on Linux"),
@@ -29,15 +35,7 @@ SPEEDUP = "20"
 
 def _printing_point(gcode, state) -> ResumePoint:
     """Wait until the job's resume point names an executed segment."""
-    path = resume_path_for(gcode, state / "jobs")
-
-    def ready():
-        if not path.exists():
-            return None
-        point = ResumePoint.load(path)
-        return point if point.device_segment > 20 else None
-
-    return wait_until(ready, 120, "a resume point written while printing")  # type: ignore[return-value]
+    return printing_point(gcode, state)  # type: ignore[return-value]
 
 
 def _kill_mid_print(tmp_path, dev, gcode, state, *extra):

@@ -1,4 +1,5 @@
-"""Pause and cancel requests on a real job (embedded device): they act at rest points."""
+"""Pause and cancel requests on a real job (embedded device): a controlled stop within the
+motion sent, and an exact resume."""
 
 from __future__ import annotations
 
@@ -43,20 +44,35 @@ def _run_with(tmp_path, on_state):
     return job, result, holder["link"].device.record
 
 
-def test_pause_then_resume_completes_with_the_same_steps(tmp_path):
+def _program_steps(record, first, last):
+    """Steps of the record without the segments ``first..last`` (the host's own)."""
+    return [r["steps"] for r in record if not first <= r["seq"] <= last]
+
+
+def test_pause_then_resume_prints_the_same_segments_around_the_stop(tmp_path):
     _, clean, clean_record = _run_with(tmp_path, lambda job, s: None)
-    seen = []
+    seen, marks = [], {}
 
     def on_state(job, state):
         seen.append(state)
-        if state is JobState.PRINTING and JobState.PAUSED not in seen:
+        if state is JobState.PRINTING and JobState.HEATING in seen and "asked" not in marks:
+            marks["asked"] = True
             job.request_pause()
         if state is JobState.PAUSED:
+            marks["stop"] = job.last_stop
+            marks["paused_at"] = job.link.segments_sent
             threading.Timer(0.05, job.request_resume).start()
+        if state is JobState.PRINTING and "paused_at" in marks and "resumed_at" not in marks:
+            marks["resumed_at"] = job.link.segments_sent
 
     _, result, record = _run_with(tmp_path, on_state)
     assert JobState.PAUSED in seen and result.status == "completed"
-    assert [r["steps"] for r in record] == [r["steps"] for r in clean_record]
+    stop = marks["stop"]
+    # the host's own segments: the stop (deceleration, retract), the park, the way back and
+    # the unretract; everything else is the program, exactly as without the pause
+    inserted = (stop.first_segment, marks["resumed_at"])
+    assert _program_steps(record, *inserted) == [r["steps"] for r in clean_record]
+    assert record[-1]["steps"] == clean_record[-1]["steps"]
 
 
 def test_cancel_stops_at_rest_with_heaters_off(tmp_path):

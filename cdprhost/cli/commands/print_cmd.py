@@ -1,7 +1,9 @@
 """`cdprhost print FILE.gcode --profile P [--port DEV] ...`: preflight, then print.
 
 Without ``--port`` the job runs on the embedded simulated device (accelerated).
-Ctrl-C pauses at the next rest point and asks whether to resume or cancel.
+Ctrl-C, SIGHUP and SIGTERM cancel like the operator would: the machine stops within the
+motion already sent, parks, switches the heaters off and the resume point is saved; a
+second signal stops it at once (emergency stop). An M600 pause asks whether to resume.
 ``--resume`` continues exactly where the file's last print stopped (its resume point,
 kept up to date while printing); ``--resume-from-layer N`` restarts at a layer.
 """
@@ -13,6 +15,7 @@ import json
 import queue
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +27,7 @@ from cdprhost.cli.options import (
 )
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
+from cdprhost.cli.signals import stop_signals
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.job.resume import find_resume_point, log_path_for, resume_question, resume_setup
@@ -170,26 +174,24 @@ def run(args: argparse.Namespace) -> int:
 
     worker = threading.Thread(target=work, name="print-job", daemon=True)
     try:
-        with ProgressView() as view:
+        with ProgressView() as view, stop_signals(_on_signal(job, view, outcome)):
             worker.start()
             while True:
                 try:
-                    event = events.get()
-                    if event is None:
-                        break
-                    view.update(event)
-                    if (
-                        isinstance(event, StateChanged)
-                        and event.state is JobState.PAUSED
-                        and "asked" not in outcome
-                    ):
-                        outcome["asked"] = True
-                        _ask_after_pause(job, event.reason)
-                        outcome.pop("asked")
-                except KeyboardInterrupt:
-                    view.say("Ctrl-C: pausing at the next rest point...")
-                    job.request_pause()
-                    outcome["interrupted"] = True
+                    event = events.get(timeout=0.5)
+                except queue.Empty:
+                    continue
+                if event is None:
+                    break
+                view.update(event)
+                if (
+                    isinstance(event, StateChanged)
+                    and event.state is JobState.PAUSED
+                    and "asked" not in outcome
+                ):
+                    outcome["asked"] = True
+                    _ask_after_pause(job, event.reason)
+                    outcome.pop("asked")
         worker.join()
     finally:
         detach_log_file(handler)
@@ -200,6 +202,25 @@ def run(args: argparse.Namespace) -> int:
     if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
         return 2
     return int(result.exit_code)
+
+
+def _on_signal(job: Any, view: ProgressView, outcome: dict[str, Any]) -> Callable[[str], None]:
+    """The first signal cancels (stop, park, heaters off); the next one e-stops."""
+    seen: list[str] = []
+
+    def on_signal(name: str) -> None:
+        seen.append(name)
+        outcome["interrupted"] = name
+        if len(seen) == 1:
+            view.say(f"{name}: cancelling (stop, park, heaters off); again to stop at once")
+            job.request_cancel(name)
+        else:
+            view.say(f"{name}: emergency stop")
+            threading.Thread(target=job.emergency_stop, name="estop", daemon=True).start()
+        if "asked" in outcome:  # leave the question: the answer is given
+            raise KeyboardInterrupt
+
+    return on_signal
 
 
 def _ask_after_pause(job: Any, reason: str) -> None:

@@ -1,0 +1,50 @@
+"""What a print job is given (:class:`PrintOptions`) and what it returns (:class:`PrintResult`:
+the contract's ``print --json`` fields)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cdprhost.job.resume import ResumePoint
+from cdprhost.motion.prepared import Setup
+
+
+@dataclass
+class PrintOptions:
+    setup: Setup = field(default_factory=Setup)  # placement, --retarget, cancelled objects
+    resume_from_layer: int | None = None  # 0-based
+    resume: ResumePoint | None = None  # continue exactly at this point (``--resume``)
+    log_path: str | Path | None = None
+    resume_dir: str | Path | None = None
+    idle_timeout_s: float = 30.0  # longest the device may show no progress while it should move
+    resume_every_s: float = 3.0  # the resume point is saved this often (wall clock) ...
+    resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
+    batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
+
+
+@dataclass
+class PrintResult:
+    status: str
+    segments: int = 0
+    retransmits: int = 0
+    final_steps: list[int] | None = None
+    last_line: int | None = None
+    last_layer: int | None = None
+    print_time_s: float = 0.0
+    estimated_time_s: float = 0.0
+    violations: list[dict[str, Any]] = field(default_factory=list)
+    reason: str = ""
+    resume_file: str | None = None
+    notices: list[str] = field(default_factory=list)
+    bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
+
+    @property
+    def exit_code(self) -> int:
+        if self.status == "completed":
+            return 0
+        return 2 if self.bad_input else 1
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items() if k != "bad_input"}

@@ -1,0 +1,306 @@
+"""Pause and cancel within the motion already sent, and resume exactly (the streamer's part).
+
+The device holds at most the link's high watermark of motion (about a second at 1x,
+:mod:`cdprhost.link.flow`); it cannot be taken back. On a pause, cancel or safe-stop
+request the streamer stops feeding the plan and sends instead a deceleration along the
+planned path from the end of the last sent segment (:func:`cdprhost.motion.stop.decelerate`:
+the profile's acceleration limit, no extrusion), then a retract at rest. The stop is
+effective once the device reports it at rest. Then:
+
+- pause: lift by ``gcode.park_lift_mm`` and move to ``gcode.park_xy_mm`` (heaters kept),
+  wait; on resume travel back above the place where extrusion stopped (the end of the last
+  sent program segment), lower onto its exact steps, unretract, and send the rest of the
+  plan again from there, accelerating from rest until it meets the plan
+  (:func:`cdprhost.motion.stop.accelerate`);
+- cancel or safe stop: raise :class:`Stop`; the runner parks and switches the heaters off
+  as the profile says.
+
+A cancel while the device holds its queue for a heater (nothing moves) flushes the queue
+at once: an e-stop keeping heaters and motors, then the fault is cleared.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cdprhost.job.state import JobState, Notice
+from cdprhost.machine.operations import Machine
+from cdprhost.motion.direct import to_wire
+from cdprhost.motion.segments import PlannedSegments
+from cdprhost.motion.stop import (
+    Retimed,
+    accelerate,
+    concat_segments,
+    decelerate,
+    extruder_move,
+    path_accel,
+)
+from firmware_protocol.messages import EstopFlag, Flag
+
+if TYPE_CHECKING:
+    from cdprhost.job.streamer import Streamer
+
+log = logging.getLogger(__name__)
+
+_END = object()
+
+
+class Stop(Exception):
+    """Left the stream stopped at rest: cancelled, or stopped safely (``reason``)."""
+
+    def __init__(self, reason: str = ""):
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class LastSent:
+    """The end of the last program segment sent: where a stop starts and a resume returns."""
+
+    steps: np.ndarray  # (4,) absolute steps
+    point: np.ndarray  # (3,) machine frame
+    v_end: float  # mm/s
+    t_end: float  # program time (s)
+    number: int  # device segment number
+    line: int
+
+
+@dataclass(frozen=True)
+class StopRecord:
+    """The last controlled stop, for tests and figures: device segment numbers and speeds."""
+
+    what: str  # "pause" | "cancel" | "stop"
+    v0: float  # mm/s when the deceleration began
+    accel: float  # mm/s^2 it used
+    first_segment: int  # device number of its first segment (decel or retract)
+    last_segment: int  # device number of the retract's last segment: at rest after it
+    line: int  # program line where extrusion stopped
+    host_s: float  # link clock from noticing the request to rest
+
+
+class StopControl:
+    """The streamer's stops (composition: it holds the streamer it serves)."""
+
+    def __init__(self, streamer: Streamer):
+        self.s = streamer
+        self.last: LastSent | None = None
+        self.parked = False
+        self.retracted = 0  # extruder steps pulled back by the stop
+        self.record: StopRecord | None = None
+
+    # ------------------------------------------------------------ bookkeeping
+    def sent(self, batch: PlannedSegments, k: int, number: int) -> None:
+        """Segment ``k`` of ``batch`` went out as device segment ``number``."""
+        self.last = LastSent(
+            batch.steps_abs[k].copy(),
+            batch.point[k].copy(),
+            float(batch.v_end[k]),
+            float(batch.t_end[k]),
+            number,
+            int(batch.line[k]),
+        )
+
+    def _gather(self, done: Callable[[PlannedSegments], Retimed]) -> Retimed:
+        """The pending plan's segments (pulled from the source as needed) until ``done``
+        says the retimed motion has met its goal, or the plan ends."""
+        s = self.s
+        parts: list[PlannedSegments] = []
+        idx = 0
+        result: Retimed | None = None
+        while True:
+            if idx >= len(s.pending):
+                nxt = next(s.source, _END)
+                if nxt is _END:
+                    break
+                s.pending.append(nxt)
+            item = s.pending[idx]
+            idx += 1
+            if isinstance(item, PlannedSegments) and len(item):
+                parts.append(item)
+                result = done(concat_segments(parts))
+                if result.merged:
+                    return result
+        if result is None:
+            return done(concat_segments(parts)) if parts else Retimed(_no_segments(), 0)
+        return result
+
+    def _accel(self, path: PlannedSegments, start: np.ndarray) -> float:
+        s = self.s
+        return path_accel(s.ctx.profile, s.ctx.model.geometry.outlets, start, path.point)
+
+    # ------------------------------------------------------------------ stop
+    def stop_here(self) -> None:
+        """Stop within the motion sent; pause (returns once resumed) or raise :class:`Stop`."""
+        s = self.s
+        req = s.ctx.requests
+        link = s.link
+        cancel = req.has("cancel", "stop")
+        what = "stop" if req.has("stop") else "cancel" if cancel else "pause"
+        s.set_state(
+            JobState.CANCELLING if cancel else JobState.PAUSING,
+            "stopping within the motion already sent",
+        )
+        t0 = link.now()
+        if cancel and link.progress.flags & Flag.WAITING:
+            self._flush_heater_wait()
+        else:
+            self._decelerate_and_retract(what)
+        s.drain(final=False)
+        if self.record is not None:
+            self.record = _with_time(self.record, link.now() - t0)
+        line = self.last.line if self.last is not None else 0
+        s.ctx.emit(
+            Notice(f"{what}: at rest {link.now() - t0:.2f} s after the request (line {line})")
+        )
+        if req.has("stop"):
+            raise Stop(req.stop_reason)
+        if cancel:
+            req.take("cancel")
+            raise Stop()
+        req.take("pause")
+        self._park()
+        s.set_state(JobState.PAUSED, f"stopped at line {line}; lifted and parked; heaters kept")
+        s.wait_for_resume()  # raises Stop on a cancel
+        self._resume()
+
+    def _decelerate_and_retract(self, what: str) -> None:
+        s = self.s
+        link = s.link
+        last = self.last
+        first = link.segments_sent + 1
+        v0, accel = 0.0, 0.0
+        steps = np.zeros(4, dtype=np.int64) if last is None else last.steps.copy()
+        if last is not None and last.v_end > 1e-9:
+            v0 = last.v_end
+            seen: dict[str, float] = {}
+
+            def stop_along(path: PlannedSegments) -> Retimed:
+                seen["a"] = self._accel(path, last.point)
+                return decelerate(
+                    path, last.steps, last.point, v0, seen["a"], s.clock_hz, last.t_end
+                )
+
+            stopping = self._gather(stop_along)
+            accel = seen.get("a", 0.0)
+            if stopping.count:
+                link.queue_segments(to_wire(stopping.segments))
+                steps = stopping.segments.steps_abs[-1].copy()
+        ext = s.ctx.profile.extruder
+        # nothing of the plan sent yet: nothing to pull back
+        pull = int(round(ext.retract_mm * ext.steps_per_mm)) if last is not None else 0
+        retract = extruder_move(
+            steps, -pull, ext.retract_speed_mm_s, ext.max_accel_mm_s2, ext.steps_per_mm, s.clock_hz
+        )
+        if len(retract):
+            link.queue_segments(to_wire(retract))
+        self.retracted = pull
+        link.flush()
+        line = last.line if last is not None else 0
+        self.record = StopRecord(what, v0, accel, first, link.segments_sent, line, 0.0)
+
+    def _flush_heater_wait(self) -> None:
+        """The queue is held by a heater wait (nothing moves): flush it at once."""
+        link = self.s.link
+        link.emergency_stop(flags=EstopFlag.KEEP_HEATERS | EstopFlag.KEEP_MOTORS)
+        link.clear_fault()
+        self.record = None
+
+    # ------------------------------------------------------------ park / resume
+    def _machine(self) -> Machine:
+        s = self.s
+        gc = s.ctx.profile.gcode
+        return Machine(s.link, s.ctx.profile, s.ctx.model, feed_mm_s=gc.travel_speed_mm_s)
+
+    def _here(self, machine: Machine) -> np.ndarray | None:
+        st = machine.status()
+        if st.homed_mask & 0b111 != 0b111:
+            return None
+        model = self.s.ctx.model
+        here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+        return here if np.all(np.isfinite(here)) else None
+
+    def _park(self) -> None:
+        """Pause: lift clear of the part, then move to the profile's park point."""
+        machine = self._machine()
+        here = self._here(machine)
+        if here is None:
+            return
+        profile = self.s.ctx.profile
+        gc = profile.gcode
+        top = profile.build_volume.z_max_mm
+        z = float(min(here[2] + gc.park_lift_mm, top))
+        route = [(float(here[0]), float(here[1]), z), (gc.park_xy_mm[0], gc.park_xy_mm[1], z)]
+        machine.move_through(np.asarray(route, dtype=float))
+        self.parked = True
+
+    def _resume(self) -> None:
+        """Back onto the exact steps where extrusion stopped, unretract, re-send the plan from
+        there accelerating from rest."""
+        s = self.s
+        link = s.link
+        last = self.last
+        machine = self._machine()
+        here = self._here(machine)
+        if last is not None and here is not None:
+            above = (float(last.point[0]), float(last.point[1]), float(max(here[2], last.point[2])))
+            route = np.asarray([above, tuple(last.point)], dtype=float)
+            machine.move_through(route, end_steps=last.steps[:3])
+        self.parked = False
+        ext = s.ctx.profile.extruder
+        push = extruder_move(
+            last.steps if last is not None else np.zeros(4, np.int64),
+            self.retracted,
+            ext.unretract_speed_mm_s,
+            ext.max_accel_mm_s2,
+            ext.steps_per_mm,
+            s.clock_hz,
+        )
+        if len(push):
+            link.queue_segments(to_wire(push))
+            link.wait_idle()
+        self.retracted = 0
+        if last is not None:
+            self._ramp_from_rest(last)
+            # the re-sent plan continues the program's numbering from the next segment
+            s.index_base = link.segments_sent + 1 - (last.number + 1 - s.index_base)
+        s.set_state(JobState.PRINTING, f"resumed at line {last.line if last else 0}")
+
+    def _ramp_from_rest(self, last: LastSent) -> None:
+        """The pending plan retimed to start from rest where it stopped."""
+        s = self.s
+
+        def start_along(path: PlannedSegments) -> Retimed:
+            a = self._accel(path, last.point)
+            return accelerate(path, last.point, a, s.clock_hz, last.t_end)
+
+        ramp = self._gather(start_along)
+        if not ramp.merged:
+            log.warning("the plan ends before the restart meets its speed")
+        left, off = ramp.count, 0
+        out: deque[Any] = deque()
+        for item in s.pending:
+            if left > 0 and isinstance(item, PlannedSegments):
+                k = min(len(item), left)
+                out.append(ramp.segments.take(slice(off, off + k)))
+                if k < len(item):
+                    out.append(item.take(slice(k, len(item))))
+                off, left = off + k, left - k
+            else:
+                out.append(item)
+        s.pending = out
+
+
+def _with_time(rec: StopRecord, host_s: float) -> StopRecord:
+    return StopRecord(
+        rec.what, rec.v0, rec.accel, rec.first_segment, rec.last_segment, rec.line, host_s
+    )
+
+
+def _no_segments() -> PlannedSegments:
+    return extruder_move(np.zeros(4, np.int64), 0, 1.0, 1.0, 1.0, 1.0)
