@@ -249,7 +249,6 @@ class FakeBackend:
         self.link_dead = False  # device_status raises (a port that vanished)
         self.log: list[ConsoleLine] = []
         self.sent: list[str] = []
-        self.cancels_handled = 0
         self.estops = 0
         self.closed_after_jobs: list[bool] | None = None
         self.rate = 1.0
@@ -314,11 +313,6 @@ class FakeBackend:
 
     def find_resume(self, path):
         return self.resume_points.get(path)
-
-    def after_cancel(self):
-        self.cancels_handled += 1
-        self.status = replace(self.status, hotend_target=0.0, bed_target=0.0)
-        return self.status
 
     def emergency_stop(self):
         self.estops += 1

@@ -172,3 +172,19 @@ async def test_the_port_list_follows_what_is_plugged_in(fake_backend):
         clock[0] += 10.0
         await wait_for(pilot, lambda s: len(screen.choices) == 3, what="rescanned", timeout=10)
         assert "/dev/ttyUSB7" in await shown(pilot)
+
+
+async def test_the_key_bar_keeps_no_dead_keys(fake_backend):
+    """Every change of the enabled keys recomposes the key bar; the old keys must go (they
+    stayed alive, bound to the bar: the UI's memory grew with each print)."""
+    from cdprhost.tui.widgets.key_bar import KeyBar
+
+    app = make_app(fake_backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        for _ in range(5):
+            app.screen.refresh_bindings()
+            await pilot.pause(0.1)
+        bar = app.screen.query_one(KeyBar)
+        bound = [node for node, _ in getattr(bar, "__watchers")["compact"]]
+        assert bound and all(node.is_attached for node in bound)  # only the keys on show

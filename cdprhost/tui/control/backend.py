@@ -108,9 +108,6 @@ class Backend(Protocol):
         (``resume``) exactly at the file's saved resume point, like ``print --resume``."""
         ...
 
-    def after_cancel(self) -> DeviceStatusView:
-        """Blocking: what the profile asks after a cancelled print (park, heaters off)."""
-
     def jog_to(self, target: tuple[float, float, float]) -> DeviceStatusView: ...
 
     def home(self) -> DeviceStatusView: ...

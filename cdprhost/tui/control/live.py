@@ -345,9 +345,6 @@ class LiveBackend:
             link = self.link
         return link
 
-    def after_cancel(self) -> DeviceStatusView:
-        return self._status_view(self.machine.after_cancel())
-
     # ----------------------------------------------------------------- jog
     @property
     def machine(self) -> Machine:

@@ -193,7 +193,7 @@ class PrintFlow(ControllerBase):
         if self._quitting:
             self.app.exit(0)
             return
-        self.probe_connection(after_cancel=state.job.state is JobState.CANCELLED)
+        self.probe_connection()
 
     def _record(self, record: JobRecord) -> None:
         """Into the history: at once on the screen; the resume point (read from its file) and
@@ -269,16 +269,10 @@ class PrintFlow(ControllerBase):
         if job is not None:
             _quiet(lambda: shutdown_job(job, self._job_ended, "quit", SHUTDOWN_TIMEOUT_S))
 
-    def probe_connection(self, after_cancel: bool = False) -> None:
-        """After a job: is the link alive? (A job may have re-opened it, or lost it.) After a
-        cancel, do what the profile asks (park, heaters off)."""
-
-        def then() -> None:
-            self.lookup_resume()
-            if after_cancel and self.state.connected:
-                self.device_op("parking", self.backend.after_cancel)
-
-        self.recheck_link(then)
+    def probe_connection(self) -> None:
+        """After a job: is the link alive? (A job may have re-opened it, or lost it.) The
+        device is read again (temperatures, position: the job parked it after a cancel)."""
+        self.recheck_link(self.lookup_resume)
 
     def _request(self, what: str) -> bool:
         with self._job_lock:
