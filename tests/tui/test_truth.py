@@ -188,3 +188,28 @@ async def test_the_key_bar_keeps_no_dead_keys(fake_backend):
         bar = app.screen.query_one(KeyBar)
         bound = [node for node, _ in getattr(bar, "__watchers")["compact"]]
         assert bound and all(node.is_attached for node in bound)  # only the keys on show
+
+
+def test_a_resumed_jobs_progress_counts_from_the_resume_point():
+    import numpy as np
+
+    from cdprhost.tui.control.views import PreflightView, Toolpath
+    from cdprhost.tui.state import FileView, resumed_share
+
+    n = 100
+    xy = np.zeros((n, 2), np.float32)
+    tp = Toolpath(
+        xy,
+        xy,
+        np.arange(10, 10 + n, dtype=np.int64),
+        np.arange(n, dtype=np.int32) // 10,
+        np.ones(n, bool),
+        tuple(0.2 * k for k in range(10)),
+    )
+    pre = PreflightView("a.gcode", True, (), n, 10, 60.0, 1.0, (), tp)
+    base = UiState(job_path="a.gcode", file=FileView("a.gcode", preflight=pre))
+    assert resumed_share(base) == 0.0
+    exact = UiState(**{**base.__dict__, "job_resumed_from": 5, "job_resume_line": 60})
+    assert resumed_share(exact) == pytest.approx(0.5)  # lines 10..59 were done
+    layer = UiState(**{**base.__dict__, "job_resumed_from": 8})
+    assert resumed_share(layer) == pytest.approx(0.7)  # layers 1..7 were done

@@ -137,6 +137,7 @@ class PrintFlow(ControllerBase):
             else None
             if resume_from_layer is None
             else resume_from_layer + 1,
+            job_resume_line=exact.last_line if exact is not None else None,
             job_request="",
             rate_samples=(),
             temp_samples=(),

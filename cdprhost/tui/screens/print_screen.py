@@ -26,6 +26,7 @@ from cdprhost.tui.state import (
     hms,
     job_eta,
     live_position,
+    resumed_share,
     shown_job_state,
     shown_notice,
     shown_temperatures,
@@ -216,6 +217,7 @@ class PrintScreen(AppScreen):
             shown_job_state(state),
             elapsed(state, app.wall_clock()),
             shown_notice(state, app.clock()),
+            resumed_share(state),
         )
         position, sliders, tensions = live_position(state)
         title = "tension (planned)"

@@ -158,14 +158,17 @@ class ProgressPanel(Vertical):
         shown: JobState | None = None,
         elapsed_s: float | None = None,
         notice: str = "",
+        share_before: float = 0.0,
     ) -> None:
+        """``share_before``: the share of the file done before this (resumed) job began."""
         width = self.query_one("#job-stats", Label).content_region.width or None
         head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s, notice, width)
         show_text(self.query_one("#job-state", Label), head)
         show_text(self.query_one("#job-stats", Label), stats)
         show_text(self.query_one("#job-line", Label), cur)
         bar = self.query_one("#job-bar", Label)
-        show_text(bar, bar_text(progress_fraction(snap), bar.size.width or 40, snap.state))
+        done = share_before + (1.0 - share_before) * progress_fraction(snap)
+        show_text(bar, bar_text(done, bar.size.width or 40, snap.state))
 
     def show_notice(self, snap: JobSnapshot, shown: JobState, notice: str) -> None:
         head, _, _ = progress_lines(snap, "", shown, None, notice)
