@@ -7,8 +7,8 @@ threads. Every way a job ends is safe:
 
 - completed: only when the device reports the last segment executed; the resume point
   is removed;
-- cancelled, or stopped because the job log cannot be written: the stream ends at the
-  next rest point, heaters off, a resume point saved;
+- cancelled (the operator, quit, a signal) or stopped safely (the job log): a controlled
+  stop within the motion sent (:mod:`~cdprhost.job.stopping`), park, heaters off, resume point;
 - any other failure (link lost, device fault, a bug): the host gives up with an
   emergency stop first (motors kept, heaters off unless the profile keeps them), then
   saves the resume point naming the exact last segment the device executed.
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,7 @@ from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
-from cdprhost.job.options import PrintOptions, PrintResult
+from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
     ResumeWriter,
@@ -42,17 +42,20 @@ from cdprhost.job.streamer import Requests, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
-from cdprhost.machine.commands import heaters_off
+from cdprhost.machine.commands import estop_flags, heaters_off
 from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
-from firmware_protocol.messages import EstopFlag
 
 log = logging.getLogger(__name__)
 
 __all__ = ["PrintJob", "PrintOptions", "PrintResult"]
+
+
+class _CancelledEarly(Exception):
+    """A cancel arrived before anything moved."""
 
 
 class PrintJob:
@@ -113,16 +116,10 @@ class PrintJob:
         if link is None or self._done.is_set():
             return False
         try:
-            return bool(link.emergency_stop(timeout=1.0, flags=self._estop_flags()))
+            return bool(link.emergency_stop(timeout=1.0, flags=estop_flags(self.profile)))
         except (LinkError, OSError) as exc:
             log.warning("emergency stop not acknowledged: %s", exc)
             return False
-
-    def _estop_flags(self) -> int:
-        keep = EstopFlag.KEEP_MOTORS
-        if self.profile.heaters.on_failure == "keep":
-            keep |= EstopFlag.KEEP_HEATERS
-        return int(keep)
 
     @property
     def last_stop(self) -> StopRecord | None:
@@ -144,9 +141,9 @@ class PrintJob:
         """Quit and signals: cancel (stop, park, heaters off, resume point) and wait until the
         job has ended; an e-stop when it has not within ``timeout_s``. Close the link only after
         this returns."""
+        self.request_cancel(reason)  # before the start too: the job then ends at once
         if not self._started or self._done.is_set():
             return True
-        self.request_cancel(reason)
         if self._done.wait(timeout_s):
             return True
         log.warning("the job did not stop within %g s: emergency stop", timeout_s)
@@ -235,26 +232,21 @@ class PrintJob:
             self._sha256 = file_sha256(self.gcode)
             prepared = self._prepare()
             resumed = self.plan.start != "file"
-            report = preflight_prepared(prepared, self._items() if resumed else None)
+            items = self._items() if resumed else prepared.items()
+            report = preflight_prepared(prepared, self._unless_cancelled(items))
+            planned = self._planned(prepared, report, resumed)
+        except _CancelledEarly:
+            return self._cancelled_early()
         except GcodeError as exc:
             self._set(JobState.REFUSED, str(exc))
-            return PrintResult(
-                "refused",
-                reason=str(exc),
-                last_line=exc.line,
-                violations=[
-                    {"line": exc.line, "rule": "syntax", "point": None, "detail": exc.reason}
-                ],
-            )
+            return PrintResult.syntax_refusal(exc)
         except (CdprError, OSError) as exc:
             reason = (
                 str(exc) if isinstance(exc, CdprError) else f"{self.gcode}: {exc.strerror or exc}"
             )
             self._set(JobState.REFUSED, reason)
             return PrintResult("refused", reason=reason)
-        self._emit(
-            Planned(report.layers, report.moves, report.estimated_time_s, report.filament_mm)
-        )
+        self._emit(planned)
         if not report.ok:
             first = report.violations[0]
             self._set(
@@ -264,9 +256,11 @@ class PrintJob:
                 "refused",
                 violations=[v.model_dump() for v in report.violations],
                 estimated_time_s=report.estimated_time_s,
-                reason=_violations_reason(report),
+                reason=violations_reason(report),
             )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
+        if self.requests.has("cancel", "estop"):
+            return self._cancelled_early()
         if self.log.problem:  # nothing has moved: say so and stop here
             self._fail_early(result, f"{self.log.problem}; nothing moved")
             return result
@@ -283,6 +277,28 @@ class PrintJob:
         self._print(link, result)
         return result
 
+    def _unless_cancelled(self, items: Iterable[Any]) -> Iterator[Any]:
+        """``items``, until a cancel (a signal, quit) ends the preflight: nothing has moved."""
+        for item in items:
+            if self.requests.has("cancel", "estop"):
+                raise _CancelledEarly
+            yield item
+
+    def _cancelled_early(self) -> PrintResult:
+        self._set(JobState.CANCELLED, "cancelled before anything moved")
+        return PrintResult("cancelled", reason=self.requests.cancel_reason)
+
+    def _planned(self, prepared: Prepared, report: Any, resumed: bool) -> Planned:
+        """Totals to show; a resumed job counts its progress from where the file restarts."""
+        layers, done = report.layers, 0.0
+        if resumed:  # the whole file once more, for its totals
+            whole = preflight_prepared(prepared, self._unless_cancelled(prepared.items()))
+            layers = whole.layers
+            done = max(0.0, whole.estimated_time_s - report.estimated_time_s)
+        return Planned(
+            layers, report.moves, report.estimated_time_s, report.filament_mm, done_s=done
+        )
+
     def _fail_early(self, result: PrintResult, reason: str) -> None:
         result.status, result.reason = "failed", reason
         self._emit(Failure(reason, None, None))
@@ -292,7 +308,7 @@ class PrintJob:
         machine = Machine(link, self.profile, self.model)
         streamer: Streamer | None = None
         try:
-            check = prepare_device(machine)
+            check = prepare_device(machine, clear_fault=self.options.clear_fault)
             rate = link.identity.max_step_rate if link.identity else None
             caps = caps_for_device(self.profile, rate)
             self._plan_profile = caps.profile
@@ -331,11 +347,13 @@ class PrintJob:
             self._give_up(link, streamer, result, f"{type(exc).__name__}: {exc}", exc)
         except (CdprError, GcodeError) as exc:
             self._give_up(link, streamer, result, str(exc), exc)
-        except Exception as exc:  # a bug must still leave the machine safe
+        except Exception as exc:  # a bug: stopped like a cancel when the link allows, else e-stop
             log.exception("print job failed unexpectedly")
-            self._give_up(
-                link, streamer, result, f"internal error: {type(exc).__name__}: {exc}", exc
-            )
+            why = f"internal error: {type(exc).__name__}: {exc}"
+            if streamer is not None and streamer.stops.stop_after_bug(why):
+                self._stop_tail(streamer, result, why)
+            else:
+                self._give_up(link, streamer, result, why, exc)
 
     def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
         """``--resume`` after a killed host: the device's own last segment, when it knows it."""
@@ -434,7 +452,7 @@ class PrintJob:
         """Emergency stop first, then name the exact last executed segment and save it."""
         if not isinstance(exc, DeviceReset):
             try:
-                link.emergency_stop(timeout=1.0, flags=self._estop_flags())
+                link.emergency_stop(timeout=1.0, flags=estop_flags(self.profile))
             except (LinkError, OSError) as stop_exc:  # the device's watchdog stops it
                 log.warning("emergency stop not acknowledged: %s", stop_exc)
         result.status, result.reason = "failed", reason
@@ -479,14 +497,3 @@ class PrintJob:
         except OSError as exc:
             log.warning("resume point %s not written: %s", path, exc.strerror or exc)
             result.resume_file = str(path) if path.exists() else None
-
-
-def _violations_reason(report: Any) -> str:
-    from cdprhost.preflight.render import advice
-
-    v = report.violations[0]
-    lines = [
-        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
-        *(line.strip() for line in advice(report)),
-    ]
-    return "\n".join(lines)
