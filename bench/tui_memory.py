@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import ctypes
 import gc
 import sys
 import tempfile
@@ -44,7 +45,7 @@ def rss_mb() -> float:
     return float("nan")
 
 
-async def run(prints: int, layers: int, top: int) -> None:
+async def run(prints: int, layers: int, top: int, trim: bool = False) -> None:
     from cdprhost.job.state import JobState
     from cdprhost.tui.app import CdprApp
     from cdprhost.tui.control.live import LiveBackend
@@ -87,6 +88,8 @@ async def run(prints: int, layers: int, top: int) -> None:
             await pilot.pause(1.5)  # the device read again, the screen drawn
             assert app.state.job.state is JobState.DONE, app.state.job.reason
             gc.collect()
+            if trim:
+                ctypes.CDLL("libc.so.6").malloc_trim(0)
             current, _ = tracemalloc.get_traced_memory()
             rows.append((n, current / 2**20, rss_mb()))
             snaps.append(tracemalloc.take_snapshot())
@@ -118,8 +121,9 @@ def main() -> None:
     parser.add_argument("--prints", type=int, default=8)
     parser.add_argument("--layers", type=int, default=10)
     parser.add_argument("--top", type=int, default=8)
+    parser.add_argument("--trim", action="store_true", help="malloc_trim(0) after each print")
     args = parser.parse_args()
-    asyncio.run(run(args.prints, args.layers, args.top))
+    asyncio.run(run(args.prints, args.layers, args.top, args.trim))
 
 
 if __name__ == "__main__":

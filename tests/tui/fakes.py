@@ -361,7 +361,8 @@ class FakeBackend:
             pass
         return tap.result()
 
-    def make_job(self, path, on_event, resume_from_layer=None, resume=False):
+    def make_job(self, path, on_event, resume_from_layer=None, resume=False, clear_fault=False):
+        self.cleared_fault = clear_fault
         if self.link_dead:
             raise OSError("the port failed on write (was it unplugged?)")
         job = FakeJob(on_event, resume_from_layer=resume_from_layer, **self.job_kwargs)

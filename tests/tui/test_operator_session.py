@@ -6,6 +6,7 @@ heaters off and the job recorded before the link closes (no crash, no watchdog f
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import json
 import os
@@ -143,10 +144,10 @@ async def test_operator_session_on_a_pty_device(tmp_path):
                 await pilot.press("ctrl+q")
                 await confirm(pilot, contains="Stop it (like a cancel")
                 for _ in range(1200):
-                    if not app.is_running:
+                    if not app.is_running and not backend.connected():
                         break
-                    await pilot.pause(0.05)
-                assert not app.is_running
+                    await asyncio.sleep(0.05)
+                assert not app.is_running and not backend.connected()  # the link closed last
                 time.sleep(3.0)  # longer than the device's watchdog: it must not fire
                 with contextlib.closing(open_link(second_port, 250000, 2.0)) as link:
                     st = link.request_status()

@@ -88,7 +88,7 @@ def resume_line(state: UiState, resume_key: str) -> Text:
     out = Text()
     fault = state.device.fault if state.device is not None and not state.job_active else ""
     if fault:
-        out.append(f"device fault: {fault}", style="bold red")
+        out.append(fault, style="bold red")
         out.append(" (a start clears it: check the machine first)", style="red")
         if r is not None:
             out.append(" · ")
