@@ -213,3 +213,36 @@ def test_a_resumed_jobs_progress_counts_from_the_resume_point():
     assert resumed_share(exact) == pytest.approx(0.5)  # lines 10..59 were done
     layer = UiState(**{**base.__dict__, "job_resumed_from": 8})
     assert resumed_share(layer) == pytest.approx(0.7)  # layers 1..7 were done
+
+
+async def test_a_status_asked_before_a_job_is_not_shown_after_it(gcode_file):
+    """A status request that waited for the link through a whole print answers with what the
+    device was before it: it must not replace the status read after the print."""
+    from dataclasses import replace as copy
+
+    backend = FakeBackend(segments=5)
+    release, calls = threading.Event(), []
+    answer = backend.device_status
+
+    def device_status():
+        calls.append(1)
+        before = answer()
+        if len(calls) == 1:  # the first request waits for the link until the job is over
+            release.wait(10)
+        return before
+
+    backend.device_status = device_status
+    app = make_app(backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        app.controller.refresh_device()  # asked now, answered after the print
+        await wait_for(pilot, lambda s: calls, what="asked")
+        await pick_file(pilot, gcode_file)
+        await wait_for(pilot, lambda s: s.file.preflight is not None)
+        backend.status = copy(backend.status, hotend=180.0)  # the print warmed it up
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.state is JobState.DONE)
+        await wait_for(pilot, lambda s: s.device is not None and s.device.hotend == 180.0)
+        release.set()
+        await pilot.pause(0.3)
+        assert app.state.device.hotend == 180.0  # not the old answer (25 °C)

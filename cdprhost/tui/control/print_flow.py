@@ -131,6 +131,7 @@ class PrintFlow(ControllerBase):
         if not path or self.state.job_active:
             return
         job_id = self.state.job_id + 1
+        self._status_gen += 1  # a status asked before now is old news
         self.update(
             job=JobSnapshot(),
             job_id=job_id,
@@ -190,6 +191,7 @@ class PrintFlow(ControllerBase):
         if job_id != self.state.job_id or self._finished_id == job_id:
             return
         self._finished_id = job_id
+        self._status_gen += 1  # (a status asked while it ran answers only now: old news)
         state = self.state
         if error is not None:
             self.app.notify(

@@ -107,15 +107,15 @@ class FilePickerScreen(ModalScreen[str | None]):
         if not path:
             return
         typed = Path(path).expanduser()
-        if not typed.is_absolute():
-            base = Path(self.query_one(GcodeTree).path)
-            typed = base / typed if (base / typed).exists() else typed
+        if not typed.exists() and not typed.is_absolute():  # relative to the tree's folder
+            beside = Path(self.query_one(GcodeTree).path) / typed
+            typed = beside if beside.exists() else typed
         if typed.is_dir():
             self.show_folder(typed)
             event.input.value = ""
             self.query_one("#file-tree").focus()
             return
-        self.dismiss(str(typed) if typed.exists() else path)
+        self.dismiss(str(typed))
 
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
         event.stop()
