@@ -177,7 +177,15 @@ def at_rest_after(state) -> float | None:
     return None
 
 
-async def test_cancel_stops_within_the_buffered_motion(part, tmp_path):
+@pytest.fixture
+def tall(tmp_path):
+    """Long enough that a key pressed after 100 segments lands mid-print at full speed."""
+    path = tmp_path / "tall.gcode"
+    path.write_text(small_part(layers=150), encoding="utf-8")
+    return path
+
+
+async def test_cancel_stops_within_the_buffered_motion(tall, tmp_path):
     """On the embedded device (virtual time: link seconds are device seconds) the cancel key
     reaches the job at once and the machine is at rest within 2 device seconds."""
     backend = LiveBackend(
@@ -188,7 +196,7 @@ async def test_cancel_stops_within_the_buffered_motion(part, tmp_path):
     app = make_app(backend, state_folder=tmp_path / "state")
     async with app.run_test(size=(100, 32)) as pilot:
         await wait_for(pilot, lambda s: s.connected, timeout=20)
-        await open_file(pilot, part)
+        await open_file(pilot, tall)
         await pilot.press("s", "y")
         await wait_for(pilot, lambda s: s.job.segments_done > 100 or s.job.state.finished, 60)
         await pilot.press("x")
@@ -204,7 +212,7 @@ async def test_cancel_stops_within_the_buffered_motion(part, tmp_path):
         assert state.device.hotend_target == 0 and not state.device.fault
 
 
-async def test_quit_while_printing_stops_parks_and_records_before_closing(part, tmp_path):
+async def test_quit_while_printing_stops_parks_and_records_before_closing(tall, tmp_path):
     """^q, y mid-print: the job stops like a cancel (heaters off, parked, resume point), goes to
     the history, and only then is the link closed: no crash, no watchdog fault."""
     from cdprhost.job.resume import find_resume_point
@@ -217,7 +225,7 @@ async def test_quit_while_printing_stops_parks_and_records_before_closing(part, 
     app = make_app(backend, state_folder=tmp_path / "state")
     async with app.run_test(size=(100, 32)) as pilot:
         await wait_for(pilot, lambda s: s.connected, timeout=20)
-        await open_file(pilot, part)
+        await open_file(pilot, tall)
         await pilot.press("s", "y")
         await wait_for(pilot, lambda s: s.job.segments_done > 100 or s.job.state.finished, 60)
         assert app.state.job.state.active
@@ -240,7 +248,7 @@ async def test_quit_while_printing_stops_parks_and_records_before_closing(part, 
 
     record = json.loads((tmp_path / "state" / "history.jsonl").read_text().splitlines()[-1])
     assert record["status"] == "cancelled" and record["reason"] == "cancelled: quit"
-    point = find_resume_point(str(part), tmp_path / "resume")
+    point = find_resume_point(str(tall), tmp_path / "resume")
     assert point is not None and record["resume_at"].startswith(f"line {point.last_line} ")
     log = (tmp_path / "job.jsonl").read_text()
     assert "TypeError" not in log and "not open" not in log
