@@ -10,8 +10,6 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
-import numpy as np
-
 from cdprhost.motion.segments import PlannedSegments
 
 
@@ -39,6 +37,16 @@ class SegmentMap:
                 self.start_s = float(batch.t_end[0]) - float(batch.ticks[0]) / self.clock_hz
             self._batches.append((first_number, batch))
 
+    def drop_after(self, number: int) -> None:
+        """Forget the segments after ``number`` (flushed from the device: sent again later)."""
+        while self._batches and self._batches[-1][0] > number:
+            self._batches.pop()
+        if self._batches:
+            first, batch = self._batches[-1]
+            keep = number - first + 1
+            if keep < len(batch):
+                self._batches[-1] = (first, batch.take(slice(0, keep)))
+
     def lookup(self, number: int) -> SegmentInfo | None:
         """Info of segment ``number`` (1-based), dropping batches wholly before it."""
         if number <= 0:
@@ -63,9 +71,3 @@ class SegmentMap:
             float(batch.t_end[i]),
             float(batch.e[i]),
         )
-
-
-def first_rest_index(batch: PlannedSegments, start: int = 0) -> int | None:
-    """Index of the first segment at or after ``start`` that ends with the machine at rest."""
-    rest = np.flatnonzero(batch.v_end[start:] <= 1e-9)
-    return None if rest.size == 0 else start + int(rest[0])
