@@ -38,9 +38,12 @@ async def connect_listed(pilot, port: str) -> None:
     await pilot.press("r")
     await wait_for(pilot, lambda s: any(c.port == port for c in screen.choices), 30, "listed")
     options = screen.query_one("#port-list", OptionList)
-    await pilot.press("home")
-    for _ in range(next(i for i, c in enumerate(screen.choices) if c.port == port)):
-        await pilot.press("down")
+    for _ in range(5):  # the list is rescanned while shown: other terminals come and go
+        await pilot.press("home")
+        for _ in range(next(i for i, c in enumerate(screen.choices) if c.port == port)):
+            await pilot.press("down")
+        if screen.choices[options.highlighted].port == port:
+            break
     assert screen.choices[options.highlighted].port == port
     await pilot.press("enter")
     await wait_for(pilot, lambda s: s.connected and s.connection.port == port, 30, "connected")
