@@ -226,8 +226,8 @@ def resumed_share(state: UiState) -> float:
     resumed, or the file's toolpath is unknown): a resumed job's progress continues from there."""
     pre = state.file.preflight
     tp = pre.toolpath if pre is not None and state.job_path == state.file.path else None
-    if tp is None or not len(tp.line) or state.job_resumed_from is None:
-        return 0.0
+    if tp is None or not len(tp.line) or state.job_resumed_from is None or state.job.done_s:
+        return 0.0  # (a job that says what was done before its restart counts from there)
     if state.job_resume_line is not None:
         done = int(np.count_nonzero(tp.line < state.job_resume_line))
     else:

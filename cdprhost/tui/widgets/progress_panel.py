@@ -36,12 +36,9 @@ WAITING_FOR_REST = {
 
 
 def progress_fraction(snap: JobSnapshot) -> float:
-    """Done fraction: by segments when the job announced their total, else by planned time."""
-    if snap.state is JobState.DONE or snap.segments_total:
-        return snap.fraction
-    if snap.estimated_time_s > 0:
-        return min(max(snap.device_time_s / snap.estimated_time_s, 0.0), 1.0)
-    return 0.0
+    """Done fraction: by segments when the job announced their total, else by planned time
+    (of the whole file: a resumed job counts from the time planned before its restart)."""
+    return max(snap.fraction, 0.0)
 
 
 def bar_text(fraction: float, width: int, state: JobState) -> Text:
