@@ -313,8 +313,8 @@ class CdprApp(App[int]):
         def chosen(choice: bool | str | None) -> None:
             if choice == "other":  # the link checked, the part on the bed confirmed
                 c.resume_failed()
-            elif choice is True:
-                c.start()
+            elif choice is True:  # a fault shown here is cleared at the start; one found
+                c.start(clear_fault=bool(fault))  # later (not shown) is refused
 
         other = "Resume there" if usable else ""
         self.push_screen(ConfirmScreen(start_text(path, fault, resume), other, "Start"), chosen)
@@ -360,6 +360,9 @@ class CdprApp(App[int]):
                 return "the preflight found violations (the list shows them)"
             if not state.connected:
                 return link
+            dev = state.device
+            if dev is not None and dev.fault and not dev.fault_clearable:
+                return f"{dev.fault}: it cannot be cleared from here (check, power-cycle)"
             return f"busy: {state.busy}" if state.busy else ""
         if not s.active:
             return "no print is running"

@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
+
 from cdprhost.job.state import (
     IllegalTransition,
     JobSnapshot,
@@ -81,6 +83,7 @@ class UiState:
     job_ended: float = 0.0  # wall clock when it reached a final state (0: not yet)
     notice_at: float | None = None  # monotonic time of the job's newest notice
     job_resumed_from: int | None = None  # 1-based layer a resumed job restarts at
+    job_resume_line: int | None = None  # the line an exact resume continues at
     job_request: str = ""  # "pause" or "cancel" asked of the job and not yet taken up
     rate_samples: tuple[tuple[float, float], ...] = ()  # (monotonic s, device time s) printing
     temps_at: float | None = None  # monotonic time of the newest temperature reading
@@ -216,6 +219,20 @@ def for_open_file(state: UiState) -> UiState:
         rate_samples=(),
         job_request="",
     )
+
+
+def resumed_share(state: UiState) -> float:
+    """The share of the file's moves done before a resumed job started (0 when it was not
+    resumed, or the file's toolpath is unknown): a resumed job's progress continues from there."""
+    pre = state.file.preflight
+    tp = pre.toolpath if pre is not None and state.job_path == state.file.path else None
+    if tp is None or not len(tp.line) or state.job_resumed_from is None or state.job.done_s:
+        return 0.0  # (a job that says what was done before its restart counts from there)
+    if state.job_resume_line is not None:
+        done = int(np.count_nonzero(tp.line < state.job_resume_line))
+    else:
+        done = int(np.count_nonzero(tp.layer < state.job_resumed_from - 1))
+    return done / len(tp.line)
 
 
 def live_position(

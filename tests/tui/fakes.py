@@ -249,7 +249,6 @@ class FakeBackend:
         self.link_dead = False  # device_status raises (a port that vanished)
         self.log: list[ConsoleLine] = []
         self.sent: list[str] = []
-        self.cancels_handled = 0
         self.estops = 0
         self.closed_after_jobs: list[bool] | None = None
         self.rate = 1.0
@@ -315,11 +314,6 @@ class FakeBackend:
     def find_resume(self, path):
         return self.resume_points.get(path)
 
-    def after_cancel(self):
-        self.cancels_handled += 1
-        self.status = replace(self.status, hotend_target=0.0, bed_target=0.0)
-        return self.status
-
     def emergency_stop(self):
         self.estops += 1
         self.status = replace(self.status, hotend_target=0.0, bed_target=0.0)
@@ -367,7 +361,8 @@ class FakeBackend:
             pass
         return tap.result()
 
-    def make_job(self, path, on_event, resume_from_layer=None, resume=False):
+    def make_job(self, path, on_event, resume_from_layer=None, resume=False, clear_fault=False):
+        self.cleared_fault = clear_fault
         if self.link_dead:
             raise OSError("the port failed on write (was it unplugged?)")
         job = FakeJob(on_event, resume_from_layer=resume_from_layer, **self.job_kwargs)

@@ -155,6 +155,7 @@ async def test_jog_after_a_cancelled_print_moves(tmp_path):
         assert state.device.position[2] == pytest.approx(stopped_z + lift, abs=0.05)
         assert state.device.hotend_target == 0 and state.device.bed_target == 0
         assert state.history[0].status == "cancelled"
+        extruder = state.device.steps[3]  # after the stop's retract
         await pilot.press("f3", "3", "right")
         target = app.state.jog.target
         assert app.state.jog.ok, app.state.jog.reason
@@ -162,4 +163,92 @@ async def test_jog_after_a_cancelled_print_moves(tmp_path):
         state = await wait_for(pilot, lambda s: not s.busy, timeout=60)
         assert not app._notifications, [n.message for n in app._notifications]
         assert state.device.position == pytest.approx(target, abs=0.01)
-        assert state.device.steps[3] == app.state.job.steps[3]  # the extruder did not move
+        assert state.device.steps[3] == extruder  # the extruder did not move
+
+
+def at_rest_after(state) -> float | None:
+    """Device seconds from the stop's start to rest, from the job's notice (None: no stop)."""
+    import re
+
+    for text in state.job.notices:
+        m = re.match(r"(?:cancel|pause|stop): at rest ([0-9.]+) s after the request", text)
+        if m:
+            return float(m.group(1))
+    return None
+
+
+@pytest.fixture
+def tall(tmp_path):
+    """Long enough that a key pressed after 100 segments lands mid-print at full speed."""
+    path = tmp_path / "tall.gcode"
+    path.write_text(small_part(layers=150), encoding="utf-8")
+    return path
+
+
+async def test_cancel_stops_within_the_buffered_motion(tall, tmp_path):
+    """On the embedded device (its clock: link seconds are device seconds) the cancel key
+    reaches the job at once and the machine is at rest within 2 device seconds."""
+    backend = LiveBackend(
+        "paper-prototype",
+        speedup=5.0,  # paced: the keys land mid-print however fast the machine is
+        job_options={"resume_dir": tmp_path / "resume", "log_path": tmp_path / "job.jsonl"},
+    )
+    app = make_app(backend, state_folder=tmp_path / "state")
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected, timeout=20)
+        await open_file(pilot, tall)
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.segments_done > 30 or s.job.state.finished, 60)
+        await pilot.press("x")
+        await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
+        await pilot.press("y")
+        state = await wait_for(pilot, lambda s: s.job.state.finished, timeout=60)
+        assert state.job.state is JobState.CANCELLED, state.job.reason
+        assert any(n.startswith("cancel requested") for n in state.job.notices)
+        latency = at_rest_after(state)
+        assert latency is not None and latency <= 2.0, state.job.notices
+        state = await wait_for(pilot, lambda s: s.history and s.device is not None, timeout=60)
+        assert state.history[0].status == "cancelled" and state.history[0].resume_at
+        assert state.device.hotend_target == 0 and not state.device.fault
+
+
+async def test_quit_while_printing_stops_parks_and_records_before_closing(tall, tmp_path):
+    """^q, y mid-print: the job stops like a cancel (heaters off, parked, resume point), goes to
+    the history, and only then is the link closed: no crash, no watchdog fault."""
+    from cdprhost.job.resume import find_resume_point
+
+    backend = LiveBackend(
+        "paper-prototype",
+        speedup=5.0,  # paced: the keys land mid-print however fast the machine is
+        job_options={"resume_dir": tmp_path / "resume", "log_path": tmp_path / "job.jsonl"},
+    )
+    app = make_app(backend, state_folder=tmp_path / "state")
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected, timeout=20)
+        await open_file(pilot, tall)
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.segments_done > 30 or s.job.state.finished, 60)
+        assert app.state.job.state.active
+        device = backend.link.device
+        await pilot.press("ctrl+q")
+        await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
+        await pilot.press("y")
+        for _ in range(1200):
+            if not app.is_running:
+                break
+            await pilot.pause(0.05)
+    assert not app.is_running
+    assert not app.problems
+    status = device.status()
+    assert status.hotend_target_dc == 0 and status.bed_target_dc == 0  # heaters off
+    from firmware_protocol.messages import Flag
+
+    assert not status.flags & Flag.FAULT and not status.flags & Flag.MOVING
+    import json
+
+    record = json.loads((tmp_path / "state" / "history.jsonl").read_text().splitlines()[-1])
+    assert record["status"] == "cancelled" and record["reason"] == "cancelled: quit"
+    point = find_resume_point(str(tall), tmp_path / "resume")
+    assert point is not None and record["resume_at"].startswith(f"line {point.last_line} ")
+    log = (tmp_path / "job.jsonl").read_text()
+    assert "TypeError" not in log and "not open" not in log

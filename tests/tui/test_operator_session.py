@@ -1,17 +1,24 @@
 """Acceptance: one operator session, keys only, against ``cdprhost sim-device`` on a
-pseudo-terminal: connect, pick a file, print, pause, resume, cancel, jog; then the device
-dies mid-print, comes back on a new port, and the failed print resumes from its layer."""
+pseudo-terminal: connect, pick a file, print, pause, resume, cancel (at rest within the moves
+already sent), jog; then the device dies mid-print, comes back on a new port, and the failed
+print resumes from its layer; last, quit while printing: the machine is stopped, parked,
+heaters off and the job recorded before the link closes (no crash, no watchdog fault)."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import json
 import os
 import signal
 import sys
+import time
 
 import pytest
 from textual.widgets import OptionList
 
 from cdprhost.job.state import JobState
+from cdprhost.link import open_link
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
 from cdprhost.tui.screens.file_picker import FilePickerScreen
@@ -31,9 +38,12 @@ async def connect_listed(pilot, port: str) -> None:
     await pilot.press("r")
     await wait_for(pilot, lambda s: any(c.port == port for c in screen.choices), 30, "listed")
     options = screen.query_one("#port-list", OptionList)
-    await pilot.press("home")
-    for _ in range(next(i for i, c in enumerate(screen.choices) if c.port == port)):
-        await pilot.press("down")
+    for _ in range(5):  # the list is rescanned while shown: other terminals come and go
+        await pilot.press("home")
+        for _ in range(next(i for i, c in enumerate(screen.choices) if c.port == port)):
+            await pilot.press("down")
+        if screen.choices[options.highlighted].port == port:
+            break
     assert screen.choices[options.highlighted].port == port
     await pilot.press("enter")
     await wait_for(pilot, lambda s: s.connected and s.connection.port == port, 30, "connected")
@@ -81,7 +91,10 @@ async def test_operator_session_on_a_pty_device(tmp_path):
             # cancel: it stops at rest, parks, heaters off, and goes to the history
             await pilot.press("x")
             await confirm(pilot, contains="Cancel the print?")
-            await wait_for(pilot, lambda s: s.job.state is JobState.CANCELLED, 60, "cancelled")
+            state = await wait_for(
+                pilot, lambda s: s.job.state is JobState.CANCELLED, 60, "cancelled"
+            )
+            assert any(": at rest " in n for n in state.job.notices)  # within the moves sent
             state = await wait_for(
                 pilot, lambda s: s.history and not s.busy and s.device is not None, 60, "parked"
             )
@@ -127,3 +140,22 @@ async def test_operator_session_on_a_pty_device(tmp_path):
                 await confirm(pilot)
                 await wait_for(pilot, lambda s: s.job.state.finished and not s.busy, 60, "end")
                 assert [r.status for r in app.state.history] == ["cancelled", "failed", "cancelled"]
+                # quit while printing: stopped like a cancel before the link closes
+                await pilot.press("s")
+                await confirm(pilot)
+                await wait_for(pilot, lambda s: s.job_id == 4 and s.job.segments_done > 20, 120)
+                await pilot.press("ctrl+q")
+                await confirm(pilot, contains="Stop it (like a cancel")
+                for _ in range(1200):
+                    if not app.is_running and not backend.connected():
+                        break
+                    await asyncio.sleep(0.05)
+                assert not app.is_running and not backend.connected()  # the link closed last
+                time.sleep(3.0)  # longer than the device's watchdog: it must not fire
+                with contextlib.closing(open_link(second_port, 250000, 2.0)) as link:
+                    st = link.request_status()
+                assert not st.faulted and not st.busy, st
+                assert st.hotend_target_c == 0 and st.bed_target_c == 0
+    last = json.loads((app.job_history.path).read_text().splitlines()[-1])
+    assert last["status"] == "cancelled" and last["reason"] == "cancelled: quit"
+    assert last["resume_at"]  # the resume point it saved

@@ -1,4 +1,4 @@
-"""Snapshot tests of every screen at 80x24 and 200x60 (fake backend, fixed clocks, UTC).
+"""Snapshot tests of every screen at 80x24, 120x40 and 200x60 (fake backend, fixed clocks, UTC).
 
 Update after an intended change with ``pytest tests/tui/test_snapshots.py
 --snapshot-update`` and review the SVGs under ``__snapshots__``.
@@ -17,7 +17,9 @@ from .conftest import make_app, pick_file, wait_for
 from .fakes import FakeBackend
 from .parts import small_part
 
-SIZES = pytest.mark.parametrize("size", [(80, 24), (200, 60)], ids=["80x24", "200x60"])
+SIZES = pytest.mark.parametrize(
+    "size", [(80, 24), (120, 40), (200, 60)], ids=["80x24", "120x40", "200x60"]
+)
 WALL = 1_750_000_000.0  # 2025-06-15 15:06:40 UTC
 
 

@@ -163,7 +163,10 @@ async def test_a_finished_jobs_temperatures_are_not_shown_as_current(gcode_file)
 
 async def test_a_device_fault_is_explained_before_a_start_and_a_resume_point_offered(gcode_file):
     backend = FakeBackend()
-    backend.status = replace(backend.status, fault="watchdog: its host stopped answering")
+    backend.status = replace(
+        backend.status,
+        fault="the device is stopped by a fault (watchdog: its host stopped answering)",
+    )
     backend.resume_points[str(gcode_file)] = ResumeView(
         "/tmp/r.json", str(gcode_file), "watchdog", 2, 33, None, "", True
     )
@@ -173,16 +176,20 @@ async def test_a_device_fault_is_explained_before_a_start_and_a_resume_point_off
         app.controller.refresh_device()
         await pick_file(pilot, gcode_file)
         await wait_for(pilot, lambda s: s.file.resume is not None and s.device is not None)
-        assert "device fault: watchdog" in await shown(pilot)  # on the screen, before a start
+        assert "stopped by a fault (watchdog" in await shown(pilot)  # shown before a start
         await pilot.press("s")
         await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen))
-        text = await shown(pilot)
-        assert "The device reports a fault: watchdog: its host stopped answering" in text
+        text = " ".join(app.screen.question.plain.split())  # as asked (wrapped on screen)
+        assert "The device is stopped by a fault (watchdog: its host stopped answering)" in text
         assert "Starting clears it" in text
         assert "A resume point is saved for this file: line 33 (layer 2)" in text
         await pilot.press("n")
         await wait_for(pilot, lambda s: not isinstance(app.screen, ConfirmScreen))
         assert app.state.job_id == 0  # nothing started
+        await pilot.press("s", "y")  # now the operator accepts: the start clears it
+        await wait_for(pilot, lambda s: s.job_id == 1)
+        assert backend.cleared_fault
+        app.controller.cancel()
 
 
 async def test_a_notice_from_the_start_does_not_stay_on_the_status_line(gcode_file):

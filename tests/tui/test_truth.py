@@ -130,3 +130,119 @@ def test_progress_events_fold_in_order():
     items += [(1, Progress(5, 20, 0, 3.0))]
     state, problems = fold_job_events(state, items)
     assert not problems and state.job.segments_done == 5
+
+
+async def test_the_file_picker_opens_a_typed_folder_and_goes_up(fake_backend, tmp_path):
+    from cdprhost.tui.screens.file_picker import FilePickerScreen, GcodeTree
+
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "parts" / "cup.gcode").write_text("G1 X1 Y1 E1 F600\n")
+    app = make_app(fake_backend)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        await pilot.press("o")
+        await wait_for(pilot, lambda s: isinstance(app.screen, FilePickerScreen))
+        picker = app.screen
+        await pilot.press("ctrl+o")
+        picker.query_one("#file-input").value = str(tmp_path / "parts")
+        await pilot.press("enter")
+        await pilot.pause(0.2)
+        assert app.screen is picker  # a folder is not a file to open
+        tree = picker.query_one(GcodeTree)
+        assert tree.path == tmp_path / "parts" and tree.has_focus
+        await pilot.press("backspace")  # up
+        await pilot.pause(0.2)
+        assert tree.path == tmp_path
+        assert "⌫ Parent folder" in await shown(pilot)
+
+
+async def test_the_port_list_follows_what_is_plugged_in(fake_backend):
+    clock = [100.0]
+    ports = fake_backend.ports()
+    fake_backend.ports = lambda: list(ports)
+    app = make_app(fake_backend, clock=lambda: clock[0])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        await pilot.press("f1")
+        screen = app.screen
+        await wait_for(pilot, lambda s: len(screen.choices) == 2, what="listed")
+        from cdprhost.tui.control.views import PortChoice
+
+        ports.append(PortChoice("/dev/ttyUSB7", "/dev/ttyUSB7", "USB serial"))  # plugged in
+        clock[0] += 10.0
+        await wait_for(pilot, lambda s: len(screen.choices) == 3, what="rescanned", timeout=10)
+        assert "/dev/ttyUSB7" in await shown(pilot)
+
+
+async def test_the_key_bar_keeps_no_dead_keys(fake_backend):
+    """Every change of the enabled keys recomposes the key bar; the old keys must go (they
+    stayed alive, bound to the bar: the UI's memory grew with each print)."""
+    from cdprhost.tui.widgets.key_bar import KeyBar
+
+    app = make_app(fake_backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        for _ in range(5):
+            app.screen.refresh_bindings()
+            await pilot.pause(0.1)
+        bar = app.screen.query_one(KeyBar)
+        bound = [node for node, _ in getattr(bar, "__watchers")["compact"]]
+        assert bound and all(node.is_attached for node in bound)  # only the keys on show
+
+
+def test_a_resumed_jobs_progress_counts_from_the_resume_point():
+    import numpy as np
+
+    from cdprhost.tui.control.views import PreflightView, Toolpath
+    from cdprhost.tui.state import FileView, resumed_share
+
+    n = 100
+    xy = np.zeros((n, 2), np.float32)
+    tp = Toolpath(
+        xy,
+        xy,
+        np.arange(10, 10 + n, dtype=np.int64),
+        np.arange(n, dtype=np.int32) // 10,
+        np.ones(n, bool),
+        tuple(0.2 * k for k in range(10)),
+    )
+    pre = PreflightView("a.gcode", True, (), n, 10, 60.0, 1.0, (), tp)
+    base = UiState(job_path="a.gcode", file=FileView("a.gcode", preflight=pre))
+    assert resumed_share(base) == 0.0
+    exact = UiState(**{**base.__dict__, "job_resumed_from": 5, "job_resume_line": 60})
+    assert resumed_share(exact) == pytest.approx(0.5)  # lines 10..59 were done
+    layer = UiState(**{**base.__dict__, "job_resumed_from": 8})
+    assert resumed_share(layer) == pytest.approx(0.7)  # layers 1..7 were done
+
+
+async def test_a_status_asked_before_a_job_is_not_shown_after_it(gcode_file):
+    """A status request that waited for the link through a whole print answers with what the
+    device was before it: it must not replace the status read after the print."""
+    from dataclasses import replace as copy
+
+    backend = FakeBackend(segments=5)
+    release, calls = threading.Event(), []
+    answer = backend.device_status
+
+    def device_status():
+        calls.append(1)
+        before = answer()
+        if len(calls) == 1:  # the first request waits for the link until the job is over
+            release.wait(10)
+        return before
+
+    backend.device_status = device_status
+    app = make_app(backend)
+    async with app.run_test(size=(100, 32)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        app.controller.refresh_device()  # asked now, answered after the print
+        await wait_for(pilot, lambda s: calls, what="asked")
+        await pick_file(pilot, gcode_file)
+        await wait_for(pilot, lambda s: s.file.preflight is not None)
+        backend.status = copy(backend.status, hotend=180.0)  # the print warmed it up
+        await pilot.press("s", "y")
+        await wait_for(pilot, lambda s: s.job.state is JobState.DONE)
+        await wait_for(pilot, lambda s: s.device is not None and s.device.hotend == 180.0)
+        release.set()
+        await pilot.pause(0.3)
+        assert app.state.device.hotend == 180.0  # not the old answer (25 °C)

@@ -171,7 +171,7 @@ def test_progress_lines_layers_eta_and_line():
     assert line.plain == "line 42: G1 X1 Y2"
     assert hms(3725) == "1:02:05" and hms(None) == "--:--:--"
     head, _, _ = progress_lines(snap, "", shown=JobState.PAUSING)
-    assert "PAUSING" in head.plain and "comes to rest" in head.plain
+    assert "PAUSING" in head.plain and "stopping within the moves sent" in head.plain
 
 
 def test_failure_text_names_stop_and_resume_point():

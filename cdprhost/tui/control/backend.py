@@ -103,13 +103,13 @@ class Backend(Protocol):
         on_event: EventSink,
         resume_from_layer: int | None = None,
         resume: bool = False,
+        clear_fault: bool = False,
     ) -> JobHandle:
         """A print job of ``path``: from the start, from ``resume_from_layer`` (0-based), or
-        (``resume``) exactly at the file's saved resume point, like ``print --resume``."""
+        (``resume``) exactly at the file's saved resume point, like ``print --resume``;
+        ``clear_fault``: the operator accepted clearing the device's fault (else a faulted
+        device is refused)."""
         ...
-
-    def after_cancel(self) -> DeviceStatusView:
-        """Blocking: what the profile asks after a cancelled print (park, heaters off)."""
 
     def jog_to(self, target: tuple[float, float, float]) -> DeviceStatusView: ...
 

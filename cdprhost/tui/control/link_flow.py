@@ -41,6 +41,7 @@ class ControllerBase:
         self._quitting = ""  # why the app quits once the job has stopped ("quit", "SIGTERM")
         self._finished_id = 0  # the last job whose end was handled
         self._health_at = float("-inf")
+        self._status_gen = 0  # a status asked before this job began or ended is not shown
 
     # ------------------------------------------------------------ plumbing
     @property
@@ -154,16 +155,17 @@ class ControllerBase:
     def refresh_device(self) -> None:
         if not self.state.connected or self.state.job_active or self.state.busy:
             return
+        gen = self._status_gen
 
         def done(status: Any) -> None:
             self.say(*self.backend.device_log())
-            if status is not None and not self.state.job_active:
+            if status is not None and not self.state.job_active and gen == self._status_gen:
                 self.device_seen(status)
 
         def fail(exc: BaseException) -> None:  # the link died (device reset, port gone): say so
             conn = self.state.connection
             self.say(*self.backend.device_log())
-            if conn.status == "connected" and not self.state.job_active:
+            if conn.status == "connected" and not self.state.job_active and gen == self._status_gen:
                 text = str(exc) or type(exc).__name__
                 self.update(connection=replace(conn, status="error", error=text))
                 self.say(ConsoleLine("error", f"link lost: {text}", self.app.wall_clock()))

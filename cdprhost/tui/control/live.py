@@ -20,6 +20,7 @@ from cdprhost.errors import CdprError
 from cdprhost.job.state import LinkHealth
 from cdprhost.kinematics import MachineModel
 from cdprhost.machine import Machine, NotHomed
+from cdprhost.machine.prepare import describe_fault, fault_clearable
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
 from cdprhost.tui.control.views import (
@@ -53,19 +54,6 @@ def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str],
     if port != EMBEDDED:
         rows.insert(1, ("baud", str(baud)))
     return tuple(rows)
-
-
-def fault_text(status: Any) -> str:
-    """The device's latched fault in words ("" when it has none)."""
-    if not status.faulted:
-        return ""
-    from cdprhost.machine.prepare import _WHY, _fault_name
-    from firmware_protocol.messages import ErrorCode
-
-    code = int(status.last_error)
-    name = _fault_name(code).replace("_", " ")
-    why = _WHY.get(ErrorCode(code), "") if code in ErrorCode._value2member_map_ else ""
-    return f"{name}: {why}" if why and why != name else name
 
 
 def preflight_view(report: Any, path: str, toolpath: Any = None) -> PreflightView:
@@ -246,7 +234,8 @@ class LiveBackend:
             bool(st.enabled_mask),
             homed,
             st.queue_free,
-            fault_text(st),
+            describe_fault(st) or "",
+            fault_clearable(st),
         )
 
     # --------------------------------------------------------------- print
@@ -311,6 +300,7 @@ class LiveBackend:
         on_event: EventSink,
         resume_from_layer: int | None = None,
         resume: bool = False,
+        clear_fault: bool = False,
     ) -> JobHandle:
         try:
             from cdprhost.job.resume import find_resume_point
@@ -326,7 +316,11 @@ class LiveBackend:
                     f"{path}: no resume point for this file (it completed, or it changed since)"
                 )
         options = PrintOptions(
-            resume_from_layer=resume_from_layer, resume=point, setup=self.setup, **self.job_options
+            resume_from_layer=resume_from_layer,
+            resume=point,
+            setup=self.setup,
+            clear_fault=clear_fault,
+            **self.job_options,
         )
         return PrintJob(path, self.profile, self._job_link, options, on_event)
 
@@ -344,9 +338,6 @@ class LiveBackend:
             self.connect(*self._where)
             link = self.link
         return link
-
-    def after_cancel(self) -> DeviceStatusView:
-        return self._status_view(self.machine.after_cancel())
 
     # ----------------------------------------------------------------- jog
     @property

@@ -17,7 +17,7 @@ from cdprhost.job.resume import resume_question
 from cdprhost.job.state import JobSnapshot, JobState, StateChanged
 from cdprhost.tui.control.backend import JobHandle
 from cdprhost.tui.control.link_flow import ControllerBase
-from cdprhost.tui.control.views import ConsoleLine, JobRecord, ResumeView
+from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView, JobRecord, ResumeView
 from cdprhost.tui.state import FileView
 from cdprhost.tui.tabs import screen_key
 
@@ -118,13 +118,20 @@ class PrintFlow(ControllerBase):
         self.lookup_resume()
 
     # -------------------------------------------------------------------- jobs
-    def start(self, resume_from_layer: int | None = None, exact: ResumeView | None = None) -> None:
+    def start(
+        self,
+        resume_from_layer: int | None = None,
+        exact: ResumeView | None = None,
+        clear_fault: bool = False,
+    ) -> None:
         """Start the open file (``resume_from_layer``: 0-based layer to restart at; ``exact``:
-        continue at that saved resume point, ``print --resume``)."""
+        continue at that saved resume point, ``print --resume``; ``clear_fault``: the operator
+        was shown the device's fault and accepted that the start clears it)."""
         path = self.state.file.path
         if not path or self.state.job_active:
             return
         job_id = self.state.job_id + 1
+        self._status_gen += 1  # a status asked before now is old news
         self.update(
             job=JobSnapshot(),
             job_id=job_id,
@@ -137,6 +144,7 @@ class PrintFlow(ControllerBase):
             else None
             if resume_from_layer is None
             else resume_from_layer + 1,
+            job_resume_line=exact.last_line if exact is not None else None,
             job_request="",
             rate_samples=(),
             temp_samples=(),
@@ -154,7 +162,9 @@ class PrintFlow(ControllerBase):
 
         def work() -> Any:
             try:
-                job = self.backend.make_job(path, sink, resume_from_layer, exact is not None)
+                job = self.backend.make_job(
+                    path, sink, resume_from_layer, exact is not None, clear_fault
+                )
                 with self._job_lock:
                     self._job = job
                 return job.run()
@@ -181,6 +191,7 @@ class PrintFlow(ControllerBase):
         if job_id != self.state.job_id or self._finished_id == job_id:
             return
         self._finished_id = job_id
+        self._status_gen += 1  # (a status asked while it ran answers only now: old news)
         state = self.state
         if error is not None:
             self.app.notify(
@@ -190,10 +201,11 @@ class PrintFlow(ControllerBase):
             self.app.notify("print finished", title="print")
         if state.job_path and (state.job.state.finished or self._quitting):
             self._record(job_record(state, self.app.wall_clock()))
-        if self._quitting:
+        if self._quitting:  # the job has ended and is recorded: now the link closes
+            _quiet(self.backend.close)
             self.app.exit(0)
             return
-        self.probe_connection(after_cancel=state.job.state is JobState.CANCELLED)
+        self.probe_connection()
 
     def _record(self, record: JobRecord) -> None:
         """Into the history: at once on the screen; the resume point (read from its file) and
@@ -269,16 +281,10 @@ class PrintFlow(ControllerBase):
         if job is not None:
             _quiet(lambda: shutdown_job(job, self._job_ended, "quit", SHUTDOWN_TIMEOUT_S))
 
-    def probe_connection(self, after_cancel: bool = False) -> None:
-        """After a job: is the link alive? (A job may have re-opened it, or lost it.) After a
-        cancel, do what the profile asks (park, heaters off)."""
-
-        def then() -> None:
-            self.lookup_resume()
-            if after_cancel and self.state.connected:
-                self.device_op("parking", self.backend.after_cancel)
-
-        self.recheck_link(then)
+    def probe_connection(self) -> None:
+        """After a job: is the link alive? (A job may have re-opened it, or lost it.) The
+        device is read again (temperatures, position: the job parked it after a cancel)."""
+        self.recheck_link(self.lookup_resume)
 
     def _request(self, what: str) -> bool:
         with self._job_lock:
@@ -317,12 +323,18 @@ class PrintFlow(ControllerBase):
             return
         backend = self.backend
 
-        def work() -> ResumeView | None:
-            backend.device_status()  # raises when the link is dead
-            return backend.find_resume(path)
+        def work() -> tuple[DeviceStatusView | None, ResumeView | None]:
+            return backend.device_status(), backend.find_resume(path)  # raises: link dead
 
-        def done(resume: ResumeView | None) -> None:
+        def done(found: tuple[DeviceStatusView | None, ResumeView | None]) -> None:
+            status, resume = found
+            if status is not None:
+                self.device_seen(status)
+            fault = status.fault if status is not None else ""
             self.update(file=replace(self.state.file, resume=resume))
+            if fault and status is not None and not status.fault_clearable:
+                self.app.notify(f"cannot resume: {fault}", severity="error", timeout=10)
+                return
             if resume is None:
                 self.app.notify(f"no resume point saved for {Path(path).name}", severity="warning")
                 return
@@ -330,10 +342,16 @@ class PrintFlow(ControllerBase):
                 self.app.notify(f"cannot resume: {resume.problem}", severity="error", timeout=10)
                 return
             question = resume.question or resume_question(Path(path).name, layer=resume.layer)
+            if fault:  # clearing it is the operator's decision
+                question = f"{fault[0].upper()}{fault[1:]}; resuming clears it. {question}"
+            clear = bool(fault)
             if resume.exact:  # print --resume: exactly where it stopped
-                self.app.confirm(question, lambda: self.start(exact=resume))
+                self.app.confirm(question, lambda: self.start(exact=resume, clear_fault=clear))
             else:
-                self.app.confirm(question, lambda: self.start(resume_from_layer=resume.layer - 1))
+                layer = resume.layer - 1
+                self.app.confirm(
+                    question, lambda: self.start(resume_from_layer=layer, clear_fault=clear)
+                )
 
         def fail(exc: BaseException) -> None:
             text = str(exc) or type(exc).__name__

@@ -148,6 +148,7 @@ class DeviceStatusView:
     homed: bool = False
     queue_free: int | None = None
     fault: str = ""  # the device's latched fault, explained ("" when none)
+    fault_clearable: bool = True  # the host may clear it (a thermal fault: no)
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
-from textual.widgets import Footer
 
 from cdprhost.tui.state import UiState, shown_job_state
 from cdprhost.tui.tabs import TABS, screen_key
+from cdprhost.tui.widgets.key_bar import KeyBar
 from cdprhost.tui.widgets.nav_bar import NavBar
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -31,7 +31,7 @@ class AppScreen(Screen[None]):
     def compose(self) -> ComposeResult:
         yield NavBar(id="nav")
         yield from self.compose_body()
-        yield Footer(compact=True)
+        yield KeyBar(compact=True)
 
     def compose_body(self) -> ComposeResult:
         yield from ()

@@ -19,6 +19,7 @@ from cdprhost.tui.state import UiState
 from cdprhost.tui.widgets.show import show_text
 
 SIMULATOR = "embedded simulated device (no hardware)"
+RESCAN_S = 3.0
 
 
 def health_text(state: UiState) -> Text:
@@ -76,6 +77,7 @@ class ConnectionScreen(AppScreen):
     def __init__(self) -> None:
         super().__init__(id="connection-screen")
         self.choices: list[PortChoice] = []
+        self._scanned = float("-inf")
 
     def compose_body(self) -> ComposeResult:
         with Horizontal(id="conn-top"):
@@ -115,17 +117,33 @@ class ConnectionScreen(AppScreen):
                 table.add_row(key, value)
             table._shown = c.identity  # type: ignore[attr-defined]
 
-    @work(thread=True, exclusive=True, group="ports")
+    def on_screen_resume(self) -> None:
+        super().on_screen_resume()
+        self.action_rescan()
+
+    def render_tick(self, state: UiState) -> None:
+        """The port list follows what is plugged in (scanned every ``RESCAN_S`` here)."""
+        if self.app.clock() - self._scanned >= RESCAN_S:
+            self.action_rescan()
+
     def action_rescan(self) -> None:
+        self._scanned = self.app.clock()
+        self._scan()
+
+    @work(thread=True, exclusive=True, group="ports")
+    def _scan(self) -> None:
         choices = self.app.backend.ports()
         self.app.call_later_safe(self._show_ports, choices)
 
     def _show_ports(self, choices: list[PortChoice]) -> None:
+        if list(choices) == self.choices:
+            return  # nothing plugged or unplugged: the highlight stays
+        keep = self.selected_port()
         self.choices = list(choices)
         options = self.query_one("#port-list", OptionList)
         options.clear_options()
         options.add_options([port_option(p) for p in self.choices])
-        current = self.app.state.connection.port or self.app._port
+        current = keep or self.app.state.connection.port or self.app._port
         index = next((i for i, p in enumerate(self.choices) if p.port == current), 0)
         if self.choices:
             options.highlighted = index

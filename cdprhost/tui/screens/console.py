@@ -13,7 +13,7 @@ from textual.widgets import Input, Label, RichLog
 from cdprhost.tui.control.views import ConsoleLine
 from cdprhost.tui.keys import hint
 from cdprhost.tui.screens.base import AppScreen
-from cdprhost.tui.state import UiState
+from cdprhost.tui.state import CONSOLE_LINES, UiState
 
 KIND_STYLE = {
     "sent": "bold cyan",
@@ -51,7 +51,7 @@ class ConsoleScreen(AppScreen):
         self._recall = 0
 
     def compose_body(self) -> ComposeResult:
-        yield RichLog(id="console-log", wrap=True, max_lines=2000, auto_scroll=True)
+        yield RichLog(id="console-log", wrap=True, max_lines=CONSOLE_LINES, auto_scroll=True)
         yield Label(id="console-hint", classes="hint")
         yield Input(
             placeholder="G28, G1 X10 Z150, M104 S200, M105, M114, M112, help ... Enter sends",

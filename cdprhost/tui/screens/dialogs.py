@@ -61,8 +61,7 @@ def start_text(path: str, fault: str, resume: ResumeView | None) -> Text:
     decision) and a resume point saved for this file (pure)."""
     out = Text(f"Start printing {path} from the beginning?")
     if fault:
-        out.append("\n\nThe device reports a fault: ", style="bold red")
-        out.append(fault, style="red")
+        out.append(f"\n\n{fault[0].upper()}{fault[1:]}.", style="bold red")
         out.append(
             "\nStarting clears it. Check the machine first (the nozzle may rest on a part).",
             style="red",

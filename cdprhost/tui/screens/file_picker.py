@@ -54,7 +54,7 @@ class FilePickerScreen(ModalScreen[str | None]):
         Binding("ctrl+r", "focus_recent", "Recent files"),
         Binding("ctrl+t", "focus_tree", "Folder tree"),
         Binding("ctrl+o", "focus_path", "Type a path"),
-        Binding("backspace", "up", "Parent folder", show=False),
+        Binding("backspace", "up", "Parent folder"),
     ]
 
     def __init__(self, recent: tuple[str, ...], start: str | None = None):
@@ -91,7 +91,7 @@ class FilePickerScreen(ModalScreen[str | None]):
     def on_mount(self) -> None:
         app = self.app
         keys = "  ".join(
-            hint(app, self, a) for a in ("focus_recent", "focus_tree", "focus_path", "close")
+            hint(app, self, a) for a in ("focus_recent", "focus_tree", "focus_path", "up", "close")
         )
         self.query_one("#picker-hint", Label).update(keys)
         if self.recent:
@@ -101,10 +101,21 @@ class FilePickerScreen(ModalScreen[str | None]):
             self.query_one("#file-input").focus()
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
+        """A file opens; a folder is shown in the tree (relative to the tree's folder)."""
         event.stop()
         path = event.value.strip()
-        if path:
-            self.dismiss(path)
+        if not path:
+            return
+        typed = Path(path).expanduser()
+        if not typed.exists() and not typed.is_absolute():  # relative to the tree's folder
+            beside = Path(self.query_one(GcodeTree).path) / typed
+            typed = beside if beside.exists() else typed
+        if typed.is_dir():
+            self.show_folder(typed)
+            event.input.value = ""
+            self.query_one("#file-tree").focus()
+            return
+        self.dismiss(str(typed))
 
     def on_option_list_option_selected(self, event: OptionList.OptionSelected) -> None:
         event.stop()
@@ -129,7 +140,9 @@ class FilePickerScreen(ModalScreen[str | None]):
 
     def action_up(self) -> None:
         """Show the parent folder in the tree (Backspace, outside the path field)."""
-        tree = self.query_one(GcodeTree)
-        parent = Path(tree.path).resolve().parent
-        tree.path = parent
-        self.query_one("#tree-root", Label).update(shown_path(parent))
+        self.show_folder(Path(self.query_one(GcodeTree).path).resolve().parent)
+
+    def show_folder(self, folder: Path) -> None:
+        folder = folder.resolve()
+        self.query_one(GcodeTree).path = folder
+        self.query_one("#tree-root", Label).update(shown_path(folder))

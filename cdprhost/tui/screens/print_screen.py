@@ -26,6 +26,7 @@ from cdprhost.tui.state import (
     hms,
     job_eta,
     live_position,
+    resumed_share,
     shown_job_state,
     shown_notice,
     shown_temperatures,
@@ -87,7 +88,7 @@ def resume_line(state: UiState, resume_key: str) -> Text:
     out = Text()
     fault = state.device.fault if state.device is not None and not state.job_active else ""
     if fault:
-        out.append(f"device fault: {fault}", style="bold red")
+        out.append(fault, style="bold red")
         out.append(" (a start clears it: check the machine first)", style="red")
         if r is not None:
             out.append(" · ")
@@ -136,9 +137,13 @@ class PrintScreen(AppScreen):
     BINDINGS = [
         Binding("o", "open", "Open", tooltip="Pick a G-code file: recent, folders, or a path"),
         Binding("s", "start", "Start"),
-        Binding("p", "pause", "Pause", tooltip="At the next point where the motion rests"),
+        Binding(
+            "p", "pause", "Pause", tooltip="Within the moves already sent; lifts, heaters kept"
+        ),
         Binding("r", "resume", "Resume"),
-        Binding("x", "cancel", "Cancel", tooltip="Stops at rest, then parks as configured"),
+        Binding(
+            "x", "cancel", "Cancel", tooltip="Within the moves already sent, then parks as set"
+        ),
         Binding(
             "l",
             "resume_failed",
@@ -212,6 +217,7 @@ class PrintScreen(AppScreen):
             shown_job_state(state),
             elapsed(state, app.wall_clock()),
             shown_notice(state, app.clock()),
+            resumed_share(state),
         )
         position, sliders, tensions = live_position(state)
         title = "tension (planned)"

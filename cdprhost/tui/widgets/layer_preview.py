@@ -79,15 +79,21 @@ def preview_text(data: PreviewInput, cols: int, rows: int, dots: LayerDots | Non
         return out.append("layer preview: open a G-code file", style="dim")
     layer = min(max(data.layer, 0), tp.layers - 1)
     out.append(f"layer {layer + 1}/{tp.layers}", style="bold")
-    out.append(f" z {tp.layer_z[layer]:.2f}", style="dim")
-    wide = cols >= 60
-    for mark, style, word in ((" ⣿", PLANNED, "planned"), (" ⣿", PRINTED, "printed")):
-        out.append(mark, style=style)
-        out.append(f" {word}" if wide else word[:4], style="dim")
-    out.append(f" {NOZZLE_MARK}", style=NOZZLE)
-    out.append(" nozzle" if wide else "nozl", style="dim")
+    # the legend in whole words, long ones where they fit, as much of it as fits
+    z = f" z {tp.layer_z[layer]:.2f}"
+    for words in ((" planned", " printed", " nozzle"), (" plan", " done", " nozzle")):
+        if out.cell_len + sum(2 + len(w) for w in words) <= cols:
+            break
+    marks = ((" ⣿", PLANNED), (" ⣿", PRINTED), (f" {NOZZLE_MARK}", NOZZLE))
+    items = [(m, st, w, "dim") for (m, st), w in zip(marks, words)]
+    items.append(("", "", z, "dim"))
     if data.title:
-        out.append(f"  {data.title}", style="italic")
+        items.append(("  ", "", data.title, "italic"))
+    for mark, style, word, word_style in items:
+        if out.cell_len + len(mark) + len(word) > cols:
+            break
+        out.append(mark, style=style)
+        out.append(word, style=word_style)
     body_rows = rows - 1
     if body_rows < 1 or cols < 2:
         return out

@@ -30,18 +30,15 @@ STATE_STYLE = {
     JobState.DONE: "bold green",
 }
 WAITING_FOR_REST = {
-    JobState.PAUSING: "finishing the current path; pauses where the motion comes to rest",
-    JobState.CANCELLING: "finishing the current path; stops where the motion comes to rest",
+    JobState.PAUSING: "stopping within the moves sent",
+    JobState.CANCELLING: "stopping within the moves sent",
 }
 
 
 def progress_fraction(snap: JobSnapshot) -> float:
-    """Done fraction: by segments when the job announced their total, else by planned time."""
-    if snap.state is JobState.DONE or snap.segments_total:
-        return snap.fraction
-    if snap.estimated_time_s > 0:
-        return min(max(snap.device_time_s / snap.estimated_time_s, 0.0), 1.0)
-    return 0.0
+    """Done fraction: by segments when the job announced their total, else by planned time
+    (of the whole file: a resumed job counts from the time planned before its restart)."""
+    return max(snap.fraction, 0.0)
 
 
 def bar_text(fraction: float, width: int, state: JobState) -> Text:
@@ -58,33 +55,52 @@ def clock_time(epoch: float) -> str:
     return time.strftime("%H:%M", time.localtime(epoch))
 
 
-def eta_text(
-    eta: Eta | None, now_wall: float, state: JobState, left_s: float | None = None
-) -> Text:
-    """ "left 0:12:34 wall-clock · done ≈ 14:05 · heating 0:00:40 · machine time left 0:11:54"
-    (the most useful first: a narrow panel cuts the end); ``left_s``: the time left as shown
-    (smoothed), else the estimate's."""
+def _fit(parts: list[Text], width: int | None) -> Text:
+    """``parts`` joined by " · ", as many whole parts as fit in ``width`` (never one cut)."""
     out = Text()
-    if state is JobState.DONE:
-        return out.append("finished", style="green")
-    if eta is not None and not (state.active or state is JobState.PREFLIGHT):
-        out.append("takes ≈ ", style="dim")  # the open file, before it starts
-        out.append(hms(eta.wall_s), style="bold")
-        out.append(" wall-clock", style="dim")
-        if eta.heating_left_s >= 1:
-            out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
-        return out
-    if eta is None or not (state.active or state is JobState.PREFLIGHT):
-        return out.append("left --:--:--", style="dim")
-    left = eta.wall_s if left_s is None else left_s
-    out.append("left ", style="dim")
-    out.append(hms(left), style="bold")
-    out.append(" wall-clock", style="dim")
-    out.append(f" · done ≈ {clock_time(now_wall + left)}")
-    if eta.heating_left_s >= 1:
-        out.append(f" · heating {hms(eta.heating_left_s)}", style="dark_orange")
-    out.append(f" · machine time left {hms(eta.motion_left_s)}", style="dim")
+    for part in parts:
+        sep = " · " if out.plain else ""
+        if width and out.cell_len + len(sep) + part.cell_len > width and out.plain:
+            break
+        out.append(sep, style="dim")
+        out.append_text(part)
     return out
+
+
+def eta_text(
+    eta: Eta | None,
+    now_wall: float,
+    state: JobState,
+    left_s: float | None = None,
+    width: int | None = None,
+) -> Text:
+    """ "left 0:12:34 wall-clock · done ≈ 14:05 · heating 0:00:40 · machine time left 0:11:54",
+    the most useful first and as many whole parts as ``width`` holds; ``left_s``: the time
+    left as shown (smoothed), else the estimate's."""
+    if state is JobState.DONE:
+        return Text("finished", style="green")
+    heating = (
+        [Text(f"heating {hms(eta.heating_left_s)}", style="dark_orange")]
+        if eta is not None and eta.heating_left_s >= 1
+        else []
+    )
+    if eta is not None and not (state.active or state is JobState.PREFLIGHT):
+        takes = Text.assemble(("takes ≈ ", "dim"), (hms(eta.wall_s), "bold"))
+        wall = Text.assemble(takes, (" wall-clock", "dim"))
+        first = wall if not width or wall.cell_len <= width else takes
+        return _fit([first, *heating], width)  # the open file, before it starts
+    if eta is None or not (state.active or state is JobState.PREFLIGHT):
+        return Text("left --:--:--", style="dim")
+    left = eta.wall_s if left_s is None else left_s
+    short = Text.assemble(("left ", "dim"), (hms(left), "bold"))
+    long = Text.assemble(short, (" wall-clock", "dim"))
+    parts = [
+        long if not width or long.cell_len + 18 <= width else short,
+        Text(f"done ≈ {clock_time(now_wall + left)}"),
+        *heating,
+        Text(f"machine time left {hms(eta.motion_left_s)}", style="dim"),
+    ]
+    return _fit(parts, width)
 
 
 def progress_lines(
@@ -93,6 +109,7 @@ def progress_lines(
     shown: JobState | None = None,
     elapsed_s: float | None = None,
     notice: str = "",
+    width: int | None = None,
 ) -> tuple[Text, Text, Text]:
     """The panel's text lines for a snapshot (pure, for tests too): state, layer and
     elapsed wall-clock time, current line. ``shown`` is the state to display (PAUSING while
@@ -107,13 +124,14 @@ def progress_lines(
     elif notice:
         head.append(f" {notice}", style="dim italic")
     layers = f"{min(snap.layer + 1, snap.layers)}/{snap.layers}" if snap.layers else "-/-"
-    stats = Text.assemble(
-        ("layer ", "dim"),
-        layers,
-        (" · elapsed ", "dim"),
-        hms(elapsed_s if snap.state is not JobState.IDLE else None),
-        (" · machine ", "dim"),
-        hms(snap.device_time_s if snap.state is not JobState.IDLE else None),
+    idle = snap.state is JobState.IDLE
+    stats = _fit(
+        [
+            Text.assemble(("layer ", "dim"), layers),
+            Text.assemble(("elapsed ", "dim"), hms(None if idle else elapsed_s)),
+            Text.assemble(("machine ", "dim"), hms(None if idle else snap.device_time_s)),
+        ],
+        width,
     )
     cur = Text()
     if snap.line:
@@ -137,13 +155,17 @@ class ProgressPanel(Vertical):
         shown: JobState | None = None,
         elapsed_s: float | None = None,
         notice: str = "",
+        share_before: float = 0.0,
     ) -> None:
-        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s, notice)
+        """``share_before``: the share of the file done before this (resumed) job began."""
+        width = self.query_one("#job-stats", Label).content_region.width or None
+        head, stats, cur = progress_lines(snap, line_text, shown, elapsed_s, notice, width)
         show_text(self.query_one("#job-state", Label), head)
         show_text(self.query_one("#job-stats", Label), stats)
         show_text(self.query_one("#job-line", Label), cur)
         bar = self.query_one("#job-bar", Label)
-        show_text(bar, bar_text(progress_fraction(snap), bar.size.width or 40, snap.state))
+        done = share_before + (1.0 - share_before) * progress_fraction(snap)
+        show_text(bar, bar_text(done, bar.size.width or 40, snap.state))
 
     def show_notice(self, snap: JobSnapshot, shown: JobState, notice: str) -> None:
         head, _, _ = progress_lines(snap, "", shown, None, notice)
@@ -159,6 +181,10 @@ class ProgressPanel(Vertical):
         left_s: float | None = None,
     ) -> None:
         """What changes with the clock alone: elapsed and time left."""
-        _, stats, _ = progress_lines(snap, "", shown, elapsed_s)
-        show_text(self.query_one("#job-stats", Label), stats)
-        show_text(self.query_one("#job-eta", Label), eta_text(eta, now_wall, snap.state, left_s))
+        stats_label = self.query_one("#job-stats", Label)
+        width = stats_label.content_region.width or None
+        _, stats, _ = progress_lines(snap, "", shown, elapsed_s, "", width)
+        show_text(stats_label, stats)
+        label = self.query_one("#job-eta", Label)
+        width = label.content_region.width or None
+        show_text(label, eta_text(eta, now_wall, snap.state, left_s, width))
