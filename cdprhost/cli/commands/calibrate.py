@@ -378,7 +378,12 @@ def run_wizard(args: argparse.Namespace) -> int:
         raise InputError(
             "--sim-truth/--sim-mocap-dir drive the embedded simulated device; drop them with --port"
         )
-    if bool(args.sim_truth) != bool(args.sim_mocap_dir):
+    if args.camera and args.sim_mocap_dir:
+        raise InputError(
+            "--sim-mocap-dir is the virtual motion capture's folder; with --camera the "
+            "simulated camera takes the pictures: drop it"
+        )
+    if not args.camera and bool(args.sim_truth) != bool(args.sim_mocap_dir):
         given, missing = (
             ("--sim-truth", "--sim-mocap-dir")
             if args.sim_truth
