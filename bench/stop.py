@@ -1,6 +1,6 @@
 """Stop latency and deceleration of pause and cancel (issue 23), in device time at 1x.
 
-    python bench/stop.py            # the example cup (3 layers) and a fast-lines part
+    python bench/stop.py            # the example cup (3 layers) and fast circles
     python bench/stop.py --signals  # `cdprhost print` on a pty sim-device at 1x, signalled
 
 Each run prints a file on the embedded device (virtual time: device seconds are link
@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 from cdprhost.kinematics.machine import MachineModel  # noqa: E402
 from tests.e2e.conftest import first_layers  # noqa: E402
-from tests.job.stop_figures import CUP, fast_lines, peak_decel, run_with_request  # noqa: E402
+from tests.job.stop_figures import CUP, fast_circles, peak_decel, run_with_request  # noqa: E402
 
 
 def signals() -> None:
@@ -64,13 +64,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         cup = first_layers(CUP, tmp, 3, ("M104 S0", "M140 S0"))
-        fast = fast_lines(tmp / "fast.gcode")
+        fast = fast_circles(tmp / "fast.gcode")
         cases = [
             ("cup", cup, "cancel", 40.0),
             ("cup", cup, "cancel", 75.0),
             ("cup", cup, "pause", 60.0),
-            ("fast", fast, "cancel", 3.0),
-            ("fast", fast, "pause", 5.0),
+            ("fast", fast, "cancel", 6.0),
+            ("fast", fast, "pause", 9.0),
         ]
         print(
             f"{'file':5} {'request':7} {'at s':>5} {'latency s':>9} {'v0 mm/s':>8} "

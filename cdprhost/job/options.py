@@ -22,6 +22,7 @@ class PrintOptions:
     resume_every_s: float = 3.0  # the resume point is saved this often (wall clock) ...
     resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
     batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
+    clear_fault: bool = True  # a device fault is cleared at start (False: refused; ask first)
 
 
 @dataclass

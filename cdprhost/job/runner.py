@@ -7,8 +7,8 @@ threads. Every way a job ends is safe:
 
 - completed: only when the device reports the last segment executed; the resume point
   is removed;
-- cancelled, or stopped because the job log cannot be written: the stream ends at the
-  next rest point, heaters off, a resume point saved;
+- cancelled (the operator, quit, a signal) or stopped safely (the job log): a controlled
+  stop within the motion sent (:mod:`~cdprhost.job.stopping`), park, heaters off, resume point;
 - any other failure (link lost, device fault, a bug): the host gives up with an
   emergency stop first (motors kept, heaters off unless the profile keeps them), then
   saves the resume point naming the exact last segment the device executed.
@@ -42,13 +42,12 @@ from cdprhost.job.streamer import Requests, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
-from cdprhost.machine.commands import heaters_off
+from cdprhost.machine.commands import estop_flags, heaters_off
 from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
-from firmware_protocol.messages import EstopFlag
 
 log = logging.getLogger(__name__)
 
@@ -113,16 +112,10 @@ class PrintJob:
         if link is None or self._done.is_set():
             return False
         try:
-            return bool(link.emergency_stop(timeout=1.0, flags=self._estop_flags()))
+            return bool(link.emergency_stop(timeout=1.0, flags=estop_flags(self.profile)))
         except (LinkError, OSError) as exc:
             log.warning("emergency stop not acknowledged: %s", exc)
             return False
-
-    def _estop_flags(self) -> int:
-        keep = EstopFlag.KEEP_MOTORS
-        if self.profile.heaters.on_failure == "keep":
-            keep |= EstopFlag.KEEP_HEATERS
-        return int(keep)
 
     @property
     def last_stop(self) -> StopRecord | None:
@@ -144,9 +137,9 @@ class PrintJob:
         """Quit and signals: cancel (stop, park, heaters off, resume point) and wait until the
         job has ended; an e-stop when it has not within ``timeout_s``. Close the link only after
         this returns."""
+        self.request_cancel(reason)  # before the start too: the job then ends at once
         if not self._started or self._done.is_set():
             return True
-        self.request_cancel(reason)
         if self._done.wait(timeout_s):
             return True
         log.warning("the job did not stop within %g s: emergency stop", timeout_s)
@@ -252,9 +245,7 @@ class PrintJob:
             )
             self._set(JobState.REFUSED, reason)
             return PrintResult("refused", reason=reason)
-        self._emit(
-            Planned(report.layers, report.moves, report.estimated_time_s, report.filament_mm)
-        )
+        self._emit(self._planned(prepared, report, resumed))
         if not report.ok:
             first = report.violations[0]
             self._set(
@@ -267,6 +258,10 @@ class PrintJob:
                 reason=_violations_reason(report),
             )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
+        if self.requests.has("cancel", "estop"):  # asked while planning: nothing has moved
+            self._set(JobState.CANCELLED, "cancelled before anything moved")
+            result.status, result.reason = "cancelled", self.requests.cancel_reason
+            return result
         if self.log.problem:  # nothing has moved: say so and stop here
             self._fail_early(result, f"{self.log.problem}; nothing moved")
             return result
@@ -283,6 +278,18 @@ class PrintJob:
         self._print(link, result)
         return result
 
+    @staticmethod
+    def _planned(prepared: Prepared, report: Any, resumed: bool) -> Planned:
+        """Totals to show; a resumed job counts its progress from where the file restarts."""
+        layers, done = report.layers, 0.0
+        if resumed:  # the whole file once more, for its totals
+            whole = preflight_prepared(prepared)
+            layers = whole.layers
+            done = max(0.0, whole.estimated_time_s - report.estimated_time_s)
+        return Planned(
+            layers, report.moves, report.estimated_time_s, report.filament_mm, done_s=done
+        )
+
     def _fail_early(self, result: PrintResult, reason: str) -> None:
         result.status, result.reason = "failed", reason
         self._emit(Failure(reason, None, None))
@@ -292,7 +299,7 @@ class PrintJob:
         machine = Machine(link, self.profile, self.model)
         streamer: Streamer | None = None
         try:
-            check = prepare_device(machine)
+            check = prepare_device(machine, clear_fault=self.options.clear_fault)
             rate = link.identity.max_step_rate if link.identity else None
             caps = caps_for_device(self.profile, rate)
             self._plan_profile = caps.profile
@@ -434,7 +441,7 @@ class PrintJob:
         """Emergency stop first, then name the exact last executed segment and save it."""
         if not isinstance(exc, DeviceReset):
             try:
-                link.emergency_stop(timeout=1.0, flags=self._estop_flags())
+                link.emergency_stop(timeout=1.0, flags=estop_flags(self.profile))
             except (LinkError, OSError) as stop_exc:  # the device's watchdog stops it
                 log.warning("emergency stop not acknowledged: %s", stop_exc)
         result.status, result.reason = "failed", reason

@@ -8,8 +8,13 @@ worker threads and the screen (the shells apply events in their own thread).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from typing import Any
+
+#: a temperature older than this (s) is shown as stale
+STALE_S = 3.0
 
 
 class JobState(StrEnum):
@@ -62,6 +67,8 @@ ALLOWED: dict[JobState, frozenset[JobState]] = {
 class StateChanged:
     state: JobState
     reason: str = ""
+    #: host monotonic clock when it happened (the elapsed time stops at the end)
+    at: float = field(default_factory=time.monotonic, compare=False)
 
 
 @dataclass(frozen=True)
@@ -73,6 +80,8 @@ class Planned:
     estimated_time_s: float
     filament_mm: float
     segments: int = 0
+    #: a resumed job: planned time of the file before its restart (progress counts from there)
+    done_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -95,6 +104,20 @@ class Temperatures:
     bed: float
     hotend_target: float
     bed_target: float
+    age_s: float = 0.0  # how old the reading was when sent (a machine-level poll sets it)
+
+    @property
+    def stale(self) -> bool:
+        """Too old to show as the present (mark it)."""
+        return self.age_s > STALE_S
+
+
+def temperatures_of(status: Any, age_s: float = 0.0) -> Temperatures:
+    """The event from a device status (``cdprhost.link.DeviceStatus``; ``age_s``: how old it
+    is, e.g. ``cdprhost.machine.poll.Reading.age_s``)."""
+    return Temperatures(
+        status.hotend_c, status.bed_c, status.hotend_target_c, status.bed_target_c, age_s
+    )
 
 
 @dataclass(frozen=True)
@@ -137,6 +160,7 @@ class JobSnapshot:
     segments_total: int = 0
     estimated_time_s: float = 0.0
     filament_mm: float = 0.0
+    done_s: float = 0.0  # a resumed job: the file's planned time before the restart
     segments_done: int = 0
     line: int = 0
     layer: int = 0
@@ -150,6 +174,15 @@ class JobSnapshot:
     link: LinkHealth = field(default_factory=lambda: LinkHealth(0, 0))
     failure: Failure | None = None
     notices: tuple[str, ...] = ()
+    started_at: float | None = None  # host monotonic clock: first HEATING or PRINTING
+    ended_at: float | None = None  # ... and the end (DONE, CANCELLED, FAILED, REFUSED)
+
+    def elapsed_s(self, now: float) -> float:
+        """Seconds since the job started printing (``now``: time.monotonic()); stops at its end."""
+        if self.started_at is None:
+            return 0.0
+        end = self.ended_at if self.ended_at is not None else now
+        return max(0.0, end - self.started_at)
 
     @property
     def fraction(self) -> float:
@@ -157,8 +190,9 @@ class JobSnapshot:
             return 1.0
         if self.segments_total:
             return min(self.segments_done / self.segments_total, 1.0)
-        if self.estimated_time_s:  # device time runs at the planned rate
-            return min(self.device_time_s / self.estimated_time_s, 1.0)
+        if self.estimated_time_s:  # device time runs at the planned rate (from the restart on)
+            total = self.done_s + self.estimated_time_s
+            return min((self.done_s + self.device_time_s) / total, 1.0)
         return 0.0
 
     @property
@@ -179,7 +213,13 @@ def reduce(snap: JobSnapshot, event: Event) -> JobSnapshot:
             return snap
         if event.state not in ALLOWED[snap.state]:
             raise IllegalTransition(f"{snap.state.value} -> {event.state.value} is not allowed")
-        return replace(snap, state=event.state, reason=event.reason)
+        started = snap.started_at
+        if started is None and event.state in (JobState.HEATING, JobState.PRINTING):
+            started = event.at
+        ended = event.at if event.state.finished and snap.ended_at is None else snap.ended_at
+        return replace(
+            snap, state=event.state, reason=event.reason, started_at=started, ended_at=ended
+        )
     if isinstance(event, Planned):
         return replace(
             snap,
@@ -188,6 +228,7 @@ def reduce(snap: JobSnapshot, event: Event) -> JobSnapshot:
             estimated_time_s=event.estimated_time_s,
             filament_mm=event.filament_mm,
             segments_total=event.segments,
+            done_s=event.done_s,
         )
     if isinstance(event, Progress):
         return replace(

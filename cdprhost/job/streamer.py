@@ -34,7 +34,7 @@ from cdprhost.job.state import (
     Notice,
     Progress,
     StateChanged,
-    Temperatures,
+    temperatures_of,
 )
 from cdprhost.job.stopping import Stop, StopControl
 from cdprhost.kinematics.machine import MachineModel
@@ -303,7 +303,7 @@ class Streamer:
 
     def _on_status(self, st: DeviceStatus) -> None:
         self.status = st
-        self.ctx.emit(Temperatures(st.hotend_c, st.bed_c, st.hotend_target_c, st.bed_target_c))
+        self.ctx.emit(temperatures_of(st))
         c = self.link.counters
         self.ctx.emit(
             LinkHealth(c.retransmits, c.bad_frames + st.device_bad_frames, c.naks_received)

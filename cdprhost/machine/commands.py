@@ -50,6 +50,15 @@ def heater_messages(
     return out
 
 
+def estop_flags(profile: Any) -> int:
+    """The e-stop of a host that gives up: motors kept (a cable robot must not drop its
+    effector), heaters off unless the profile's ``heaters.on_failure`` keeps them."""
+    keep = m.EstopFlag.KEEP_MOTORS
+    if profile.heaters.on_failure == "keep":
+        keep |= m.EstopFlag.KEEP_HEATERS
+    return int(keep)
+
+
 def heaters_off() -> list[m.Message]:
     return heater_messages(0.0, 0.0)
 

@@ -56,19 +56,37 @@ def _fault_name(code: int) -> str:
         return f"error {code}"
 
 
-def prepare_device(machine: Machine) -> DeviceCheck:
-    """Read the device's state; stop an earlier session's motion, clear a fault (saying so),
-    or raise :class:`DeviceNotReady`."""
+def describe_fault(st: DeviceStatus) -> str | None:
+    """The device's fault in words (None when it is not faulted): what, why, where it stopped."""
+    if not st.faulted:
+        return None
+    code = st.last_error
+    why = _WHY.get(ErrorCode(code), "") if code in ErrorCode._value2member_map_ else ""
+    text = f"the device is stopped by a fault ({_fault_name(code)}{': ' + why if why else ''})"
+    return f"{text} after segment {st.segments_done}"
+
+
+def fault_clearable(st: DeviceStatus) -> bool:
+    """A host may clear it (thermal faults need the heater checked and a power cycle)."""
+    return not (st.faulted and st.last_error in THERMAL_ERRORS)
+
+
+def prepare_device(machine: Machine, *, clear_fault: bool = True) -> DeviceCheck:
+    """Read the device's state; stop an earlier session's motion, clear a fault (saying so;
+    only when ``clear_fault``: otherwise a fault is refused, the operator decides), or raise
+    :class:`DeviceNotReady`."""
     link = machine.link
     found = machine.status()
     notices: list[str] = []
     st = found
-    if st.faulted and st.last_error in THERMAL_ERRORS:
+    if not fault_clearable(st):
         raise DeviceNotReady(
             f"the device reports {_fault_name(st.last_error).replace('_', ' ')} "
             f"(hotend {st.hotend_c:.0f} C, bed {st.bed_c:.0f} C) from before this connection: "
             "check the heater and its sensor, then power-cycle the device"
         )
+    if st.faulted and not clear_fault:
+        raise DeviceNotReady(f"{describe_fault(st)}: clear it first (nothing moved)")
     if st.busy and not st.faulted:
         queued = st.items_received - st.items_done
         notices.append(

@@ -80,12 +80,14 @@ def _retimed(
     v_end: np.ndarray,
     clock_hz: float,
     t0: float,
+    flat: np.ndarray,
 ) -> PlannedSegments:
-    """Segments ``0..n-1`` of ``path`` with new speeds (durations and ramps follow)."""
+    """Segments ``0..n-1`` of ``path`` with new speeds (durations and ramps follow);
+    ``flat``: extruder-only segments (they keep their planned durations)."""
     seg = path.take(slice(0, n))
     with np.errstate(invalid="ignore", divide="ignore"):
         sec = np.where(
-            lengths > NO_PATH_MM,
+            ~flat[:n],
             2.0 * lengths / np.maximum(v_start + v_end, 1e-12),
             seg.ticks / clock_hz,  # extruder-only: as planned
         )
@@ -150,7 +152,7 @@ def decelerate(
     if lens[-1] > NO_PATH_MM and stop_len < lens[-1]:
         cut = max(stop_len / lens[-1], 1e-9)
         lens[-1] = stop_len
-    seg = _retimed(path, n, lens, v_start, v_end, clock_hz, t0)
+    seg = _retimed(path, n, lens, v_start, v_end, clock_hz, t0, flat)
     prev_steps = seg.steps_abs[-2] if n > 1 else np.asarray(start_steps, dtype=np.int64)
     prev_point = seg.point[-2] if n > 1 else np.asarray(start_point, dtype=float)
     steps = seg.steps_abs.copy()
@@ -194,7 +196,7 @@ def accelerate(
     v_end = np.minimum(path.v_end[:n], cap[:n])
     v_end[-1] = path.v_end[n - 1]  # met: continue exactly as planned
     v_start = np.append(0.0, v_end[:-1])
-    seg = _retimed(path, n, lengths[:n], v_start, v_end, clock_hz, t0)
+    seg = _retimed(path, n, lengths[:n], v_start, v_end, clock_hz, t0, flat)
     return Retimed(seg, n)
 
 
@@ -210,16 +212,19 @@ def extruder_move(
     segments, up to ``speed_mm_s`` and back to rest (within ``accel_mm_s2``)."""
     if e_steps == 0:
         return _empty(steps)
-    dist = abs(e_steps) / steps_per_mm
-    half_t = max(dist / max(speed_mm_s, 1e-9), float(np.sqrt(dist / max(accel_mm_s2, 1e-9))))
     first = e_steps // 2 if e_steps > 0 else -((-e_steps) // 2)
     parts = np.array([first, e_steps - first], dtype=np.int64)
-    ticks = np.maximum(np.full(2, int(round(half_t * clock_hz))), 1)
+    # each half from (to) rest: its peak speed 2 part / t and acceleration 2 part / t^2
+    half = float(np.abs(parts).max()) / steps_per_mm
+    half_t = max(
+        2.0 * half / max(speed_mm_s, 1e-9), float(np.sqrt(2.0 * half / max(accel_mm_s2, 1e-9)))
+    )
+    ticks = np.maximum(np.full(2, int(np.ceil(half_t * clock_hz))), 1)
     base = np.asarray(steps, dtype=np.int64).reshape(4)
     delta = np.zeros((2, 4), dtype=np.int64)
     delta[:, 3] = parts
     abs_steps = base + np.cumsum(delta, axis=0)
-    v_peak = dist / half_t
+    v_peak = 2.0 * half / half_t
     n = 2
     return PlannedSegments(
         abs_steps,

@@ -105,14 +105,21 @@ def run_with_request(
     return StopRun(job, result, list(link.device.record), holder.get("t", 0.0), states, link)
 
 
-def fast_lines(path: Path, feed_mm_s: float = 120.0, layers: int = 2) -> Path:
-    """Long straight extrusions at ``feed_mm_s``: a stop there decelerates over many segments."""
+def fast_circles(
+    path: Path, feed_mm_s: float = 120.0, loops: int = 20, radius: float = 30.0
+) -> Path:
+    """Loops of a circle extruded at ``feed_mm_s`` (1 degree chords: the plan keeps its speed
+    all the way round), so a stop almost anywhere starts at full speed and decelerates along
+    a curved path over several segments."""
     lines = ["G28", "M104 S200", "M109 S200", "G92 E0", "M83", "G1 Z0.3 F3000"]
-    for n in range(layers):
-        lines.append(f"G1 Z{0.3 * (n + 1):.2f} F3000")
-        for y in range(-20, 21, 4):
-            x = 40 if (y // 4) % 2 == 0 else -40
-            lines.append(f"G1 X{-x} Y{y} F6000")
-            lines.append(f"G1 X{x} Y{y} E4.0 F{feed_mm_s * 60:.0f}")
+    lines.append(f"G1 X{radius:.3f} Y0 F6000")
+    step = np.deg2rad(1.0)
+    chord = 2 * radius * np.sin(step / 2)
+    for k in range(1, 360 * loops + 1):
+        a = k * step
+        lines.append(
+            f"G1 X{radius * np.cos(a):.3f} Y{radius * np.sin(a):.3f} E{chord * 0.05:.4f} "
+            f"F{feed_mm_s * 60:.0f}"
+        )
     path.write_text("\n".join([*lines, "M104 S0"]) + "\n")
     return path

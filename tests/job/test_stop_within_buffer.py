@@ -12,7 +12,7 @@ from cdprhost.job.resume import ResumePoint
 from cdprhost.job.state import JobState
 from cdprhost.kinematics.machine import MachineModel
 from tests.e2e.conftest import first_layers
-from tests.job.stop_figures import CUP, fast_lines, peak_decel, run_with_request, speeds
+from tests.job.stop_figures import CUP, fast_circles, peak_decel, run_with_request, speeds
 
 LATENCY_S = 2.0  # the acceptance: at rest within 2 s of the request
 
@@ -73,10 +73,10 @@ def test_pause_on_the_cup_stops_parks_and_resumes_to_completion(tmp_path):
 
 
 def test_a_fast_stop_decelerates_over_several_segments_at_the_limit(tmp_path):
-    run = run_with_request(fast_lines(tmp_path / "fast.gcode"), "cancel", 3.0, tmp_path)
+    run = run_with_request(fast_circles(tmp_path / "fast.gcode"), "cancel", 6.0, tmp_path)
     assert run.result.status == "cancelled"
     stop = run.stop
-    assert stop.v0 > 50.0  # stopped in the middle of a fast line
+    assert stop.v0 > 50.0  # stopped at speed, on the curve
     assert run.latency_s <= LATENCY_S
     model = MachineModel.from_profile(run.job.profile)
     _check_controlled(run, model)
