@@ -84,3 +84,19 @@ def test_version_job_and_listing_shapes(make_server):
     assert one.status == 200 and one.json()["size"] > 0
     assert server.request("GET", "/api/files/local/none.gcode").status == 404
     assert server.request("GET", "/api/files/local/..%2Fx.gcode").status in (400, 404)
+
+
+def test_a_faulted_device_refuses_a_remote_start_with_the_fault_explained(make_server):
+    server = make_server()
+    assert _upload(server, "one.gcode").status == 201
+    server.wait_job(lambda j: j["state"] == "Operational" and j["progress"]["completion"])
+    link = server.links[0]
+    link.emergency_stop(timeout=5.0)  # as M112 would: the device stays stopped by a fault
+    executed = len(link.device.record)
+    reply = _upload(server, "two.gcode")
+    assert reply.status == 409
+    text = reply.json()["error"]
+    assert "fault" in text and "--clear-fault" in text and "nothing started" in text
+    assert "two.gcode" not in server.stored()
+    assert server.printer.status().file.name == "one.gcode"
+    assert len(link.device.record) == executed  # nothing moved

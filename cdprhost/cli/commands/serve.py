@@ -76,6 +76,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="X",
         help="embedded device: clock speed-up (default 10)",
     )
+    p.add_argument(
+        "--clear-fault",
+        action="store_true",
+        help="a start clears a device fault (watchdog, e-stop) once the machine was checked; "
+        "default: a faulted device refuses remote starts (409, the fault explained)",
+    )
     add_server_arguments(p, default_listen=True)
     add_placement_arguments(p, strict=False)
     p.set_defaults(func=run)
@@ -149,7 +155,11 @@ def run(args: argparse.Namespace) -> int:
             return open_embedded(speedup=args.speedup or None)
 
     printer = HeadlessPrinter(
-        profile, open_device, setup=setup_from_args(args), on_event=_say_event
+        profile,
+        open_device,
+        setup=setup_from_args(args),
+        on_event=_say_event,
+        clear_fault=args.clear_fault,
     )
     stop = threading.Event()
     caught: list[str] = []

@@ -18,7 +18,10 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from cdprhost.errors import CdprError
+from cdprhost.job.before_start import before_start
 from cdprhost.job.state import JobState
+from cdprhost.link import LinkError
 from cdprhost.server.printer import PrinterStatus, Refused, busy_reason, preflight_refusal
 from cdprhost.tui.control.views import ConsoleLine, PreflightView
 from cdprhost.tui.state import FileView
@@ -80,8 +83,19 @@ class TuiPrinter:
         if not view.ok:
             v = view.violations[0]
             raise Refused(preflight_refusal(len(view.violations), v.line, v.rule, v.detail))
+        self._refuse_if_faulted(path)
         with self._lock:
             self._checked[path.name] = view
+
+    def _refuse_if_faulted(self, path: Path) -> None:
+        """A device stopped by a fault is the operator's to clear, at the TUI: never remotely."""
+        try:
+            link = self.app.backend.link
+            fault = before_start(link, path).fault
+        except (CdprError, LinkError, OSError) as exc:
+            raise Refused(f"the device does not answer: {exc}; nothing started") from None
+        if fault is not None:
+            raise Refused(f"{fault}: the operator decides at the terminal UI; nothing started")
 
     def start(self, path: Path, who: str) -> None:
         with self._lock:
