@@ -54,13 +54,13 @@ def test_uploads_inside_the_tui(tmp_path, config_home):
             path = str(uploads.root / "cup.gcode")
             assert state.job_path == path and path in state.recent
             said = " ".join(line.text for line in state.console)
-            assert "started by upload API (127.0.0.1" in said
+            assert "upload API: print of cup.gcode started by 127.0.0.1" in said
 
             busy = await asyncio.to_thread(upload, "two.gcode", small_part())
             assert busy.status == 409 and "busy" in busy.json()["error"]
             assert "two.gcode" not in server.stored()
             job = (await asyncio.to_thread(server.request, "GET", "/api/job")).json()
-            assert job["state"] == "Printing" and "upload API" in job["job"]["user"]
+            assert job["state"] == "Printing" and job["job"]["user"].startswith("127.0.0.1")
 
             body = json.dumps({"command": "cancel"}).encode()
             headers = {"Content-Type": "application/json"}

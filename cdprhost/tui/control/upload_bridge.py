@@ -67,7 +67,11 @@ class TuiPrinter:
         return PrinterStatus(
             connected=state.connected,
             file=Path(state.job_path) if state.job_path else None,
-            started_by=who if job_id == state.job_id else "",
+            started_by=who
+            if job_id == state.job_id
+            else "the terminal UI"
+            if state.job_path
+            else "",
             job=state.job,
             started_at=state.job_started or None,
         )
