@@ -155,6 +155,12 @@ class HeadlessPrinter:
         except Exception:  # the job already stopped the machine; never kill the server
             log.exception("print job of %s raised", job.gcode.name)
 
+    def connect(self) -> None:
+        """Open the device now (``serve`` at start: a wrong port is said before anything
+        listens). Raises the link's error."""
+        with self._lock:
+            self._job_link()
+
     def _job_link(self) -> HostLink:
         """The kept link, checked; opened (again) when there is none or it has failed."""
         link = self._link

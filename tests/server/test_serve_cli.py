@@ -134,3 +134,15 @@ def test_serve_prints_an_upload_and_sigterm_stops_the_print_safely(tmp_path):
     assert proc.returncode == 0, rest
     assert "SIGTERM: stopping" in rest and "job cancelled" in rest
     assert (tmp_path / "state" / "uploads" / "long.gcode").is_file()
+
+
+def test_serve_on_a_port_that_does_not_exist_says_so_before_listening(tmp_path):
+    out = subprocess.run(
+        [*CLI, "serve", "-p", "paper-prototype", "--port", str(tmp_path / "no-tty")],
+        env=_env(tmp_path),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and "no such port" in out.stderr
+    assert "upload API on" not in out.stderr

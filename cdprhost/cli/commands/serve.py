@@ -161,6 +161,12 @@ def run(args: argparse.Namespace) -> int:
         on_event=_say_event,
         clear_fault=args.clear_fault,
     )
+    try:
+        printer.connect()
+    except OSError as exc:
+        raise InputError(
+            f"cannot open the device: {exc.strerror or exc}", source=args.port
+        ) from None
     stop = threading.Event()
     caught: list[str] = []
 
