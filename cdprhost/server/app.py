@@ -32,7 +32,14 @@ from starlette.datastructures import UploadFile
 from cdprhost.server import shapes
 from cdprhost.server.guard import BodyTooLarge, KeyGuard
 from cdprhost.server.printer import Printer, Refused, busy_reason
-from cdprhost.server.uploads import BadName, NotGcode, UploadFolder, check_filename, check_folder
+from cdprhost.server.uploads import (
+    BadName,
+    Entry,
+    NotGcode,
+    UploadFolder,
+    check_filename,
+    check_folder,
+)
 
 log = logging.getLogger(__name__)
 
@@ -165,16 +172,16 @@ def create_app(
             return error(400, f"job command: {text}")
         try:
             if command.command == "pause":
-                printer.pause(command.action)
+                await run_in_threadpool(printer.pause, command.action)
             elif command.command == "cancel":
-                printer.cancel()
+                await run_in_threadpool(printer.cancel)
             else:
                 if api.selected is None or not api.selected.is_file():
                     raise Refused("no file selected: upload one with select=true first")
                 selected = api.selected
                 async with api.lock:
                     await run_in_threadpool(printer.check_start, selected)
-                    printer.start(selected, client_name(request))
+                    await run_in_threadpool(printer.start, selected, client_name(request))
         except Refused as exc:
             return error(409, str(exc))
         return Response(status_code=204)
@@ -199,8 +206,6 @@ def create_app(
         if path is None:
             return error(404, f"{relative}: no such file")
         st = path.stat()
-        from cdprhost.server.uploads import Entry
-
         entry = Entry(path.name, uploads.relative(path), st.st_size, int(st.st_mtime))
         return JSONResponse(shapes.entry(entry, base(request)))
 
@@ -234,12 +239,12 @@ def create_app(
                     return error(409, str(exc))
                 except BadName as exc:
                     return error(400, str(exc))
-                printer.uploaded(final)
+                await run_in_threadpool(printer.uploaded, final)
                 if select:
                     api.selected = final
                 if start:
                     try:
-                        printer.start(final, who)
+                        await run_in_threadpool(printer.start, final, who)
                     except Refused as exc:  # became busy in between: the file is kept
                         return error(409, f"{exc} (the file is stored)")
         finally:
