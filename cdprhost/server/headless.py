@@ -185,8 +185,8 @@ class HeadlessPrinter:
 
     # ---------------------------------------------------------- controls
     def _active_job(self, what: str) -> PrintJob:
-        job = self._job
-        if job is None or not self._status.job.state.active:
+        job, worker = self._job, self._worker
+        if job is None or worker is None or not worker.is_alive():
             state = self._status.job.state.value
             raise Refused(f"no print is running ({state}): nothing to {what}")
         return job
@@ -208,6 +208,7 @@ class HeadlessPrinter:
             raise ValueError(f"unknown pause action {action!r}")
 
     def cancel(self) -> None:
+        """Also while the job starts (preflight, connecting): it then ends before moving."""
         job = self._active_job("cancel")
         if self._status.job.state is JobState.CANCELLING:
             return

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from concurrent.futures import ThreadPoolExecutor
 
 from tests.server.conftest import multipart, small_part
 
@@ -100,3 +101,13 @@ def test_a_faulted_device_refuses_a_remote_start_with_the_fault_explained(make_s
     assert "two.gcode" not in server.stored()
     assert server.printer.status().file.name == "one.gcode"
     assert len(link.device.record) == executed  # nothing moved
+
+
+def test_two_uploads_with_print_at_once_start_one_job(make_server):
+    server = make_server(speedup=10.0)
+    with ThreadPoolExecutor(2) as pool:
+        replies = list(pool.map(lambda n: _upload(server, n, layers=40), ["a.gcode", "b.gcode"]))
+    assert sorted(r.status for r in replies) == [201, 409]
+    assert len(server.links) == 1 and len(server.stored()) == 1
+    assert _command(server, command="cancel").status == 204
+    server.wait_job(lambda j: j["state"] == "Operational")

@@ -46,15 +46,20 @@ def test_uploads_inside_the_tui(tmp_path, config_home):
             assert refused.status == 409 and "preflight" in refused.json()["error"]
             assert server.stored() == [] and app.state.job_id == 0
 
-            reply = await asyncio.to_thread(upload, "cup.gcode", small_part(40))
-            assert reply.status == 201, reply
+            both = await asyncio.gather(  # at once: one starts, the other is refused
+                asyncio.to_thread(upload, "cup.gcode", small_part(40)),
+                asyncio.to_thread(upload, "mug.gcode", small_part(40)),
+            )
+            assert sorted(r.status for r in both) == [201, 409], both
+            winner = "cup" if both[0].status == 201 else "mug"
+            assert server.stored() == [f"{winner}.gcode"]  # the refused one was not kept
             state = await wait_for(
                 pilot, lambda s: s.job.state is JobState.PRINTING, timeout=60, what="printing"
             )
-            path = str(uploads.root / "cup.gcode")
+            path = str(uploads.root / f"{winner}.gcode")
             assert state.job_path == path and path in state.recent
             said = " ".join(line.text for line in state.console)
-            assert "upload API: print of cup.gcode started by 127.0.0.1" in said
+            assert f"upload API: print of {winner}.gcode started by 127.0.0.1" in said
 
             busy = await asyncio.to_thread(upload, "two.gcode", small_part())
             assert busy.status == 409 and "busy" in busy.json()["error"]

@@ -61,18 +61,26 @@ class TuiPrinter:
         threading.Thread(target=later, name="upload-api-announce", daemon=True).start()
 
     # -------------------------------------------------------------- status
+    def _starting(self, state: Any) -> bool:
+        """A job started here whose first event has not arrived yet (still IDLE): busy."""
+        return self._who[0] == state.job_id > 0 and state.job.state is JobState.IDLE
+
+    def _busy(self, state: Any) -> bool:
+        return bool(state.job_active) or self._starting(state)
+
     def status(self) -> PrinterStatus:
         state = self.app.state  # one immutable value: safe to read from any thread
         job_id, who = self._who
+        if job_id != state.job_id:
+            who = "the terminal UI" if state.job_path else ""
+        job = state.job
+        if self._starting(state):
+            job = replace(job, state=JobState.PREFLIGHT)
         return PrinterStatus(
             connected=state.connected,
             file=Path(state.job_path) if state.job_path else None,
-            started_by=who
-            if job_id == state.job_id
-            else "the terminal UI"
-            if state.job_path
-            else "",
-            job=state.job,
+            started_by=who,
+            job=job,
             started_at=state.job_started or None,
         )
 
@@ -81,7 +89,7 @@ class TuiPrinter:
         state = self.app.state
         if not state.connected:
             raise Refused("the terminal UI is not connected to a device; nothing started")
-        if state.job_active:
+        if self._busy(state):
             raise Refused(busy_reason(self.status()))
         view = self.app.backend.preflight(str(path))
         if not view.ok:
@@ -112,11 +120,15 @@ class TuiPrinter:
 
     def _start_in_ui(self, path: Path, who: str, view: PreflightView) -> str:
         state = self.app.state
-        if state.job_active or not state.connected:
-            return busy_reason(self.status()) if state.job_active else "not connected"
+        if self._busy(state):
+            return busy_reason(self.status())
+        if not state.connected:
+            return "the terminal UI is not connected to a device; nothing started"
         controller = self.app.controller
         controller.update(file=FileView(path=str(path), preflight=view))
         controller.start()
+        if self.app.state.job_id == state.job_id:  # the controller did not start it
+            return "the terminal UI did not start the job; nothing started"
         self._who = (self.app.state.job_id, who)
         self._say(f"print of {path.name} started by {who}")
         return ""
@@ -147,7 +159,10 @@ class TuiPrinter:
             raise Refused(reason)
 
     def _cancel_in_ui(self) -> str:
-        s = self.app.state.job.state
+        state = self.app.state
+        s = state.job.state
+        if s is JobState.PREFLIGHT or self._starting(state):
+            return "the print is starting (preflight): cancel again in a moment"
         if not s.active:
             return f"no print is running ({s.value}): nothing to cancel"
         self.app.controller.cancel()
