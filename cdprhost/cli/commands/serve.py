@@ -13,7 +13,7 @@ import sys
 import threading
 from typing import Any
 
-from cdprhost.cli.numbers import bounded_float
+from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import add_placement_arguments, non_empty, setup_from_args
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
@@ -68,13 +68,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
-    p.add_argument("--baud", type=int, default=None, metavar="N", help="default: the profile's")
+    p.add_argument(
+        "--baud",
+        type=bounded_int(50, 10_000_000),
+        default=None,
+        metavar="N",
+        help="baud rate (default: the profile's)",
+    )
     p.add_argument(
         "--speedup",
         type=bounded_float(0.0, 100_000.0),
         default=10.0,
         metavar="X",
-        help="embedded device: clock speed-up (default 10)",
+        help="embedded device: clock speed-up (default 10; 0: as fast as the host can)",
     )
     p.add_argument(
         "--clear-fault",
