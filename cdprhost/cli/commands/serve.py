@@ -80,7 +80,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         type=bounded_float(0.0, 100_000.0),
         default=10.0,
         metavar="X",
-        help="embedded device: clock speed-up (default 10; 0: as fast as the host can)",
+        help="embedded device: clock speed-up (default 10)",
     )
     p.add_argument(
         "--clear-fault",
