@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.resume import ResumePoint
 from cdprhost.motion.prepared import Setup
 
@@ -47,5 +48,27 @@ class PrintResult:
             return 0
         return 2 if self.bad_input else 1
 
+    @classmethod
+    def syntax_refusal(cls, exc: GcodeError) -> PrintResult:
+        """Refused: a line that does not parse (exit status 2)."""
+        return cls(
+            "refused",
+            reason=str(exc),
+            last_line=exc.line,
+            violations=[{"line": exc.line, "rule": "syntax", "point": None, "detail": exc.reason}],
+        )
+
     def to_json(self) -> dict[str, Any]:
         return {k: v for k, v in self.__dict__.items() if k != "bad_input"}
+
+
+def violations_reason(report: Any) -> str:
+    """A refused job's reason: the first violation and the advice."""
+    from cdprhost.preflight.render import advice
+
+    v = report.violations[0]
+    lines = [
+        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
+        *(line.strip() for line in advice(report)),
+    ]
+    return "\n".join(lines)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +26,7 @@ from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
-from cdprhost.job.options import PrintOptions, PrintResult
+from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
     ResumeWriter,
@@ -52,6 +52,10 @@ from cdprhost.profile.models import MachineProfile
 log = logging.getLogger(__name__)
 
 __all__ = ["PrintJob", "PrintOptions", "PrintResult"]
+
+
+class _CancelledEarly(Exception):
+    """A cancel arrived before anything moved."""
 
 
 class PrintJob:
@@ -228,24 +232,21 @@ class PrintJob:
             self._sha256 = file_sha256(self.gcode)
             prepared = self._prepare()
             resumed = self.plan.start != "file"
-            report = preflight_prepared(prepared, self._items() if resumed else None)
+            items = self._items() if resumed else prepared.items()
+            report = preflight_prepared(prepared, self._unless_cancelled(items))
+            planned = self._planned(prepared, report, resumed)
+        except _CancelledEarly:
+            return self._cancelled_early()
         except GcodeError as exc:
             self._set(JobState.REFUSED, str(exc))
-            return PrintResult(
-                "refused",
-                reason=str(exc),
-                last_line=exc.line,
-                violations=[
-                    {"line": exc.line, "rule": "syntax", "point": None, "detail": exc.reason}
-                ],
-            )
+            return PrintResult.syntax_refusal(exc)
         except (CdprError, OSError) as exc:
             reason = (
                 str(exc) if isinstance(exc, CdprError) else f"{self.gcode}: {exc.strerror or exc}"
             )
             self._set(JobState.REFUSED, reason)
             return PrintResult("refused", reason=reason)
-        self._emit(self._planned(prepared, report, resumed))
+        self._emit(planned)
         if not report.ok:
             first = report.violations[0]
             self._set(
@@ -255,13 +256,11 @@ class PrintJob:
                 "refused",
                 violations=[v.model_dump() for v in report.violations],
                 estimated_time_s=report.estimated_time_s,
-                reason=_violations_reason(report),
+                reason=violations_reason(report),
             )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
-        if self.requests.has("cancel", "estop"):  # asked while planning: nothing has moved
-            self._set(JobState.CANCELLED, "cancelled before anything moved")
-            result.status, result.reason = "cancelled", self.requests.cancel_reason
-            return result
+        if self.requests.has("cancel", "estop"):
+            return self._cancelled_early()
         if self.log.problem:  # nothing has moved: say so and stop here
             self._fail_early(result, f"{self.log.problem}; nothing moved")
             return result
@@ -278,12 +277,22 @@ class PrintJob:
         self._print(link, result)
         return result
 
-    @staticmethod
-    def _planned(prepared: Prepared, report: Any, resumed: bool) -> Planned:
+    def _unless_cancelled(self, items: Iterable[Any]) -> Iterator[Any]:
+        """``items``, until a cancel (a signal, quit) ends the preflight: nothing has moved."""
+        for item in items:
+            if self.requests.has("cancel", "estop"):
+                raise _CancelledEarly
+            yield item
+
+    def _cancelled_early(self) -> PrintResult:
+        self._set(JobState.CANCELLED, "cancelled before anything moved")
+        return PrintResult("cancelled", reason=self.requests.cancel_reason)
+
+    def _planned(self, prepared: Prepared, report: Any, resumed: bool) -> Planned:
         """Totals to show; a resumed job counts its progress from where the file restarts."""
         layers, done = report.layers, 0.0
         if resumed:  # the whole file once more, for its totals
-            whole = preflight_prepared(prepared)
+            whole = preflight_prepared(prepared, self._unless_cancelled(prepared.items()))
             layers = whole.layers
             done = max(0.0, whole.estimated_time_s - report.estimated_time_s)
         return Planned(
@@ -338,11 +347,13 @@ class PrintJob:
             self._give_up(link, streamer, result, f"{type(exc).__name__}: {exc}", exc)
         except (CdprError, GcodeError) as exc:
             self._give_up(link, streamer, result, str(exc), exc)
-        except Exception as exc:  # a bug must still leave the machine safe
+        except Exception as exc:  # a bug: stopped like a cancel when the link allows, else e-stop
             log.exception("print job failed unexpectedly")
-            self._give_up(
-                link, streamer, result, f"internal error: {type(exc).__name__}: {exc}", exc
-            )
+            why = f"internal error: {type(exc).__name__}: {exc}"
+            if streamer is not None and streamer.stops.stop_after_bug(why):
+                self._stop_tail(streamer, result, why)
+            else:
+                self._give_up(link, streamer, result, why, exc)
 
     def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
         """``--resume`` after a killed host: the device's own last segment, when it knows it."""
@@ -486,14 +497,3 @@ class PrintJob:
         except OSError as exc:
             log.warning("resume point %s not written: %s", path, exc.strerror or exc)
             result.resume_file = str(path) if path.exists() else None
-
-
-def _violations_reason(report: Any) -> str:
-    from cdprhost.preflight.render import advice
-
-    v = report.violations[0]
-    lines = [
-        f"{report.violations_total} violation(s); first at line {v.line}: {v.rule}: {v.detail}",
-        *(line.strip() for line in advice(report)),
-    ]
-    return "\n".join(lines)

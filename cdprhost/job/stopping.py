@@ -147,7 +147,7 @@ class StopControl:
             "stopping within the motion already sent",
         )
         t0 = link.now()
-        if cancel and link.progress.flags & Flag.WAITING:
+        if cancel and self._at_heater_wait():
             self._flush_heater_wait()
         else:
             self._decelerate_and_retract(what)
@@ -168,6 +168,18 @@ class StopControl:
         s.set_state(JobState.PAUSED, f"stopped at line {line}; lifted and parked; heaters kept")
         s.wait_for_resume()  # raises Stop on a cancel
         self._resume()
+
+    def stop_after_bug(self, reason: str) -> bool:
+        """A bug in the host (not the link): the same controlled stop as a cancel when the
+        link still works; False when that fails too (the caller e-stops)."""
+        self.s.ctx.requests.stop_safely(reason)
+        try:
+            self.stop_here()
+        except Stop:
+            return True
+        except Exception:
+            log.exception("the controlled stop after an internal error failed")
+        return False
 
     def _decelerate_and_retract(self, what: str) -> None:
         s = self.s
@@ -204,11 +216,25 @@ class StopControl:
         line = last.line if last is not None else 0
         self.record = StopRecord(what, v0, accel, first, link.segments_sent, line, 0.0)
 
+    def _at_heater_wait(self) -> bool:
+        """A heater wait sent and not done: until the device holds at it (the motion before
+        a wait ends at rest) or has passed it; True when it holds there."""
+        s = self.s
+        link = s.link
+        while link.progress.items_done < s.heat_item:
+            if link.progress.flags & Flag.WAITING:
+                return True
+            link.wait_report(0.25)
+            s.service()
+        return False
+
     def _flush_heater_wait(self) -> None:
         """The queue is held by a heater wait (nothing moves): flush it at once."""
         link = self.s.link
         link.emergency_stop(flags=EstopFlag.KEEP_HEATERS | EstopFlag.KEEP_MOTORS)
         link.clear_fault()
+        link.request_status()  # a fresh report: the fault flags of the e-stop are history
+        link.poll(0.0)  # the e-stop's own error report: ours, not a failure
         self.record = None
 
     # ------------------------------------------------------------ park / resume

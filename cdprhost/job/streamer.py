@@ -123,7 +123,7 @@ class Streamer:
         self.stops = StopControl(self)
         self.boot_id = link.identity.boot_id if link.identity else 0
         self.status: DeviceStatus | None = None
-        self._heat_item = 0
+        self.heat_item = 0
         self._at_rest = True
         self._last_progress = -1e9
         self._last_status = -1e9
@@ -180,7 +180,7 @@ class Streamer:
         self._check_heater_limits(msgs)
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
-            self._heat_item = max(numbers)
+            self.heat_item = max(numbers)
             self.set_state(
                 JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
             )
@@ -283,7 +283,7 @@ class Streamer:
         if not force_status and now - self._last_status > STATUS_EVERY_S:
             self._last_status = now
             self._status_seen = link.ask_status()  # answered while streaming goes on
-        if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self._heat_item:
+        if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self.heat_item:
             self.set_state(JobState.PRINTING)
         info = self.map.lookup(link.progress.segments_done)
         if force_status or now - self._last_progress > PROGRESS_EVERY_S:

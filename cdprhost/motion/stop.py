@@ -162,11 +162,21 @@ def decelerate(
         point[-1] = prev_point + cut * (seg.point[-1] - prev_point)
     steps[:, 3] = int(start_steps[3])  # no extrusion while stopping
     delta = np.diff(steps, axis=0, prepend=np.asarray(start_steps, np.int64).reshape(1, 4))
+    ticks = seg.ticks
+    if cut < 1.0 and v_start[-1] > 0:
+        # rounding the cut to whole steps must not start it faster than the plan ran there:
+        # joint speed 2 n / D at its start (it ends at rest) <= |delta| v / L of the plan
+        full = np.abs(path.delta[k, :3]).astype(float)
+        n_cut = np.abs(delta[-1, :3]).astype(float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            need = np.where(full > 0, 2.0 * n_cut * lengths[k] / (full * v_start[-1]), 0.0)
+        ticks = ticks.copy()
+        ticks[-1] = max(int(ticks[-1]), int(np.ceil(float(need.max()) * clock_hz)))
     e = np.full(n, np.nan)  # the filament is not where the program has it
     out = PlannedSegments(
         steps,
         delta,
-        seg.ticks,
+        ticks,
         seg.ramp,
         seg.v_start,
         seg.v_end,

@@ -13,6 +13,7 @@ import pytest
 
 from cdprhost.job.resume import ResumePoint
 from cdprhost.link import open_link
+from cdprhost.profile import load_profile
 from tests.e2e.processes import SimDeviceProcess, printing_point, square_part, start_print
 
 pytestmark = [
@@ -50,5 +51,10 @@ def test_a_signal_mid_print_cancels_and_leaves_the_device_safe(tmp_path, sig):
         assert point.reason == "cancelled"
         # the resume point names a segment the device executed, before the host's stop moves
         assert 0 < point.device_segment < st.segments_done
-        executed = {r["seq"] for r in dev.records() if "error" not in r}
-        assert point.device_segment in executed
+        records = [r for r in dev.records() if "error" not in r]
+        assert point.device_segment in {r["seq"] for r in records}
+        # after the last program segment: no extrusion, only the retract (then the lift)
+        after = [r["steps"][3] for r in records if r["seq"] >= point.device_segment]
+        assert all(b <= a for a, b in zip(after, after[1:]))
+        ext = load_profile("paper-prototype").extruder
+        assert after[0] - after[-1] == round(ext.retract_mm * ext.steps_per_mm)

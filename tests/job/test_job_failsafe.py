@@ -218,3 +218,28 @@ def test_a_killed_atomic_write_leaves_no_temporary_behind_for_long(tmp_path):
     os.utime(stale, (old, old))
     write_text_atomic(target, "{}\n")
     assert target.read_text() == "{}\n" and not stale.exists() and fresh.exists()
+
+
+def test_a_bug_in_the_job_stops_like_a_cancel_not_an_e_stop(part, tmp_path, monkeypatch):
+    """One safe-stop path: an unexpected exception decelerates, retracts, parks and switches
+    the heaters off, with the resume point naming the last program segment executed."""
+    from cdprhost.job.streamer import Streamer
+
+    real = Streamer._segments
+    calls = {"n": 0}
+
+    def buggy(self, batch):
+        calls["n"] += 1
+        if calls["n"] == 30:
+            raise RuntimeError("simulated bug")
+        return real(self, batch)
+
+    monkeypatch.setattr(Streamer, "_segments", buggy)
+    result, link = run_job(part, tmp_path)
+    mc = link.device.machine
+    assert result.status == "failed" and "internal error: RuntimeError" in result.reason
+    assert not mc.fault and not mc.estopped  # stopped by the host, in control
+    assert mc.heaters[0].target == 0 and mc.heaters[1].target == 0
+    assert "error" not in link.device.record[-1]  # nothing cut mid-segment
+    point = ResumePoint.load(result.resume_file)
+    assert 0 < point.device_segment < mc.segments_done  # the program's, before the stop moves

@@ -91,3 +91,24 @@ def test_cancel_stops_at_rest_with_heaters_off(tmp_path):
         assert result.segments == len(record)
     status = job.link.request_status()
     assert status.hotend_target_c == 0 and status.bed_target_c == 0
+
+
+def test_cancel_while_paused_keeps_the_park_and_switches_the_heaters_off(tmp_path):
+    seen, marks = [], {}
+
+    def on_state(job, state):
+        seen.append(state)
+        if state is JobState.PRINTING and JobState.HEATING in seen and "asked" not in marks:
+            marks["asked"] = True
+            job.request_pause()
+        if state is JobState.PAUSED:
+            marks["parked"] = job.link.request_status().steps
+            job.request_cancel()
+
+    job, result, record = _run_with(tmp_path, on_state)
+    assert result.status == "cancelled"
+    assert seen[-3:] == [JobState.PAUSED, JobState.CANCELLING, JobState.CANCELLED]
+    status = job.link.request_status()
+    assert status.steps[:3] == marks["parked"][:3]  # no second lift: it stays parked
+    assert status.hotend_target_c == 0 and status.bed_target_c == 0
+    assert not status.faulted and not status.busy

@@ -143,3 +143,23 @@ def test_a_job_cancelled_before_it_moves_ends_at_once(tmp_path):
     result = job.run()
     assert result.status == "cancelled" and result.reason == "quit"
     assert job.state is JobState.CANCELLED and not opened  # never connected
+
+
+def test_a_cancel_during_the_preflight_ends_it_there(tmp_path):
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text("G28\n" + "".join(f"G1 X{i % 20} Y{i % 7} Z1 F3000\n" for i in range(2000)))
+    opened = []
+
+    def on_event(e):
+        if isinstance(e, StateChanged) and e.state is JobState.PREFLIGHT:
+            job.request_cancel("SIGTERM")
+
+    job = PrintJob(
+        gcode,
+        load_profile("paper-prototype"),
+        lambda: opened.append(True),
+        PrintOptions(resume_dir=tmp_path),
+        on_event=on_event,
+    )
+    result = job.run()
+    assert result.status == "cancelled" and result.reason == "SIGTERM" and not opened

@@ -9,8 +9,11 @@ import numpy as np
 import pytest
 
 from cdprhost.job.resume import ResumePoint
-from cdprhost.job.state import JobState
+from cdprhost.job.runner import PrintJob
+from cdprhost.job.state import JobState, StateChanged
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.profile import load_profile
+from cdprhost.sim.embedded import open_embedded
 from tests.e2e.conftest import first_layers
 from tests.job.stop_figures import CUP, fast_circles, peak_decel, run_with_request, speeds
 
@@ -88,3 +91,27 @@ def test_a_request_is_logged_when_asked_and_when_effective(tmp_path):
     text = (tmp_path / "job.jsonl").read_text()
     assert '"what": "cancel"' in text  # asked
     assert "cancel requested" in text and "cancel: at rest" in text  # and effective
+
+
+def test_a_cancel_while_the_device_waits_for_its_heater_acts_at_once(tmp_path):
+    gcode = tmp_path / "hot.gcode"
+    gcode.write_text("G28\nM104 S240\nM109 S240\nG92 E0\nG1 X10 Y0 Z1 E1 F1800\n")
+    holder = {}
+
+    def factory():
+        holder["link"] = open_embedded()
+        return holder["link"]
+
+    def on_event(e):
+        if isinstance(e, StateChanged) and e.state is JobState.HEATING:
+            holder["asked"] = holder["link"].now()
+            job.request_cancel()
+
+    job = PrintJob(gcode, load_profile("paper-prototype"), factory, on_event=on_event)
+    result = job.run()
+    link = holder["link"]
+    st = link.request_status()
+    assert result.status == "cancelled"
+    assert st.hotend_c < 150  # it never finished heating: the wait was flushed
+    assert link.now() - holder["asked"] < LATENCY_S + 1.0  # the lift included, device time
+    assert st.hotend_target_c == 0 and not st.faulted and not st.busy
