@@ -214,6 +214,11 @@ class HeadlessPrinter:
             return
         jobcontrol.cancel(job)
 
+    def emergency_stop(self) -> bool:
+        """Stop now (a second signal while stopping): the job's e-stop, when one runs."""
+        job = self._job
+        return bool(job is not None and not job.finished and jobcontrol.emergency_stop(job))
+
     def uploaded(self, path: Path) -> None:
         log.info("stored upload %s", path)
 

@@ -8,7 +8,6 @@ print is stopped safely first (the job's safe-stop path), then the link is close
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
 from typing import Any
@@ -16,10 +15,10 @@ from typing import Any
 from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import add_placement_arguments, non_empty, setup_from_args
 from cdprhost.cli.profile_arg import add_profile_argument
+from cdprhost.cli.signals import stop_signals
 from cdprhost.errors import InputError
 
 DEFAULT_MAX_UPLOAD_MB = 256.0
-STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
 
 def listen_arg(text: str) -> tuple[str, int]:
@@ -176,24 +175,28 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     caught: list[str] = []
 
-    def on_signal(signum: int, _frame: Any) -> None:
-        caught.append(signal.Signals(signum).name)
+    def on_signal(name: str) -> None:
+        """First signal: stop (a running print safely, then the server); a second one while
+        stopping: emergency stop of the print."""
+        caught.append(name)
+        if len(caught) > 1:
+            print(f"{name} again: emergency stop", file=sys.stderr)
+            printer.emergency_stop()
         stop.set()
 
-    previous = {name: signal.signal(getattr(signal, name), on_signal) for name in STOP_SIGNALS}
     server = None
-    try:
-        server = start_api(args, printer)
-        while not stop.wait(1.0):  # until a signal: this is the server's life
-            pass
-        reason = caught[0] if caught else "stopped"
-        print(f"{reason}: stopping (a running print is stopped safely first)", file=sys.stderr)
-        ended = printer.shutdown(reason)
-    finally:
-        if server is not None:
-            server.stop()
-        else:
-            printer.shutdown("not started")
-        for name, handler in previous.items():
-            signal.signal(getattr(signal, name), handler)
+    ended = False
+    with stop_signals(on_signal):
+        try:
+            server = start_api(args, printer)
+            while not stop.wait(1.0):  # until a signal: this is the server's life
+                pass
+            reason = caught[0]
+            print(f"{reason}: stopping (a running print is stopped safely first)", file=sys.stderr)
+            ended = printer.shutdown(reason)
+        finally:
+            if server is not None:
+                server.stop()
+            if not ended:
+                printer.shutdown("serve stopped")
     return 0 if ended else 1
