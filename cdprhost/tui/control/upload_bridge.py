@@ -65,13 +65,19 @@ class TuiPrinter:
         """A job started here whose first event has not arrived yet (still IDLE): busy."""
         return self._who[0] == state.job_id > 0 and state.job.state is JobState.IDLE
 
-    def _busy(self, state: Any) -> bool:
-        return bool(state.job_active) or self._starting(state)
+    def _busy(self, state: Any) -> str:
+        """Why the machine is not idle now ("" when it is): a job, or a device operation
+        (jog, home, heaters) the operator started."""
+        if state.job_active or self._starting(state):
+            return busy_reason(self.status())
+        if state.busy:
+            return f"the machine is busy at the terminal UI ({state.busy}); nothing started"
+        return ""
 
     def status(self) -> PrinterStatus:
         state = self.app.state  # one immutable value: safe to read from any thread
         job_id, who = self._who
-        if job_id != state.job_id:
+        if not job_id or job_id != state.job_id:
             who = "the terminal UI" if state.job_path else ""
         job = state.job
         if self._starting(state):
@@ -89,8 +95,9 @@ class TuiPrinter:
         state = self.app.state
         if not state.connected:
             raise Refused("the terminal UI is not connected to a device; nothing started")
-        if self._busy(state):
-            raise Refused(busy_reason(self.status()))
+        busy = self._busy(state)
+        if busy:
+            raise Refused(busy)
         view = self.app.backend.preflight(str(path))
         if not view.ok:
             v = view.violations[0]
@@ -120,8 +127,9 @@ class TuiPrinter:
 
     def _start_in_ui(self, path: Path, who: str, view: PreflightView) -> str:
         state = self.app.state
-        if self._busy(state):
-            return busy_reason(self.status())
+        busy = self._busy(state)
+        if busy:
+            return busy
         if not state.connected:
             return "the terminal UI is not connected to a device; nothing started"
         controller = self.app.controller
