@@ -7,7 +7,8 @@ exact upload request (the example cup, print=true) is sent over loopback N times
 at a time (each cancelled once its first segment has run). Wall-clock seconds, so noisy on a
 loaded machine: the reply (stored and preflighted), the job printing (its own preflight,
 connect, device checks), and the first segment executed by the device (after G28 and the
-heating waits, which run on the device's virtual clock: ``--speedup`` paces it).
+heating waits, which run on the device's virtual clock: ``--speedup`` paces it). Then one
+store-only upload of ``--store-mb`` MB (PrusaSlicer's request with Expect: 100-continue).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--speedup", type=float, default=None)
+    parser.add_argument("--store-mb", type=float, default=50.0, help="store-only upload size")
     args = parser.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-upload-"))
     os.environ["XDG_CONFIG_HOME"] = str(tmp / "cfg")
@@ -80,6 +82,15 @@ def main() -> None:
             print(
                 f"run {n}: reply {t_reply:.3f} s, printing {t_printing:.3f} s, first segment {t_first:.3f} s"
             )
+        big = data + b";" + b"p" * int(args.store_mb * 1e6) + b"\n"
+        _, upload = prusaslicer_requests(server.port, keys.key, "big.gcode", big, False)
+        t0 = time.perf_counter()
+        status, body = raw_exchange(server.port, upload, expect_continue=b"Expect:" in upload)
+        t_store = time.perf_counter() - t0
+        assert status == 201, body
+        print(
+            f"store only: {len(big) / 1e6:.1f} MB in {t_store:.2f} s ({len(big) / 1e6 / t_store:.0f} MB/s)"
+        )
     finally:
         printer.shutdown("bench over")
         server.stop()
