@@ -114,3 +114,24 @@ def test_serve_on_a_port_that_does_not_exist_says_so_before_listening(tmp_path):
     )
     assert out.returncode == 2 and "no such port" in out.stderr
     assert "upload API on" not in out.stderr
+
+
+def test_a_listen_address_beyond_loopback_is_warned_about(
+    tmp_path, config_home, monkeypatch, capsys
+):
+    """(Bound on 127.0.0.1 all the same: the test never listens beyond this machine.)"""
+    import argparse
+
+    from cdprhost.cli.commands import serve as serve_cmd
+    from cdprhost.server import listen
+
+    monkeypatch.setattr(listen, "is_loopback", lambda host: False)
+    args = argparse.Namespace(
+        uploads=str(tmp_path / "up"), max_upload_mb=1.0, listen=("127.0.0.1", 0)
+    )
+    server = serve_cmd.start_api(args, printer=None)
+    try:
+        err = capsys.readouterr().err
+        assert "warning: listening on 127.0.0.1" in err and "not only on this machine" in err
+    finally:
+        server.stop()
