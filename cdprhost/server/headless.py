@@ -110,8 +110,8 @@ class HeadlessPrinter:
         if info.fault is None or (self.clear_fault and info.clearable):
             return
         how = (
-            "clear it at the machine (`cdprhost tui`), or restart `cdprhost serve --clear-fault` "
-            "once the machine is checked"
+            "check the machine, then restart `cdprhost serve --clear-fault` (or clear it in "
+            "`cdprhost tui`)"
             if info.clearable
             else "it cannot be cleared from the host"
         )
