@@ -39,6 +39,16 @@ class SegmentMap:
                 self.start_s = float(batch.t_end[0]) - float(batch.ticks[0]) / self.clock_hz
             self._batches.append((first_number, batch))
 
+    def drop_after(self, number: int) -> None:
+        """Forget the segments after ``number`` (flushed from the device: sent again later)."""
+        while self._batches and self._batches[-1][0] > number:
+            self._batches.pop()
+        if self._batches:
+            first, batch = self._batches[-1]
+            keep = number - first + 1
+            if keep < len(batch):
+                self._batches[-1] = (first, batch.take(slice(0, keep)))
+
     def lookup(self, number: int) -> SegmentInfo | None:
         """Info of segment ``number`` (1-based), dropping batches wholly before it."""
         if number <= 0:

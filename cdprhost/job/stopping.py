@@ -93,6 +93,11 @@ class StopControl:
         self.parked = False
         self.retracted = 0  # extruder steps pulled back by the stop
         self.record: StopRecord | None = None
+        # what was sent since a heater wait the device has not passed yet (a pause there
+        # flushes it and sends it again on resume), and where the plan stood before the wait
+        self.replay: list[Any] | None = None
+        self.before_wait: LastSent | None = None
+        self.parked_from: tuple[np.ndarray, np.ndarray] | None = None  # module steps, point
 
     # ------------------------------------------------------------ bookkeeping
     def sent(self, batch: PlannedSegments, k: int, number: int) -> None:
@@ -105,6 +110,20 @@ class StopControl:
             number,
             int(batch.line[k]),
         )
+
+    def wait_sent(self, item: Any) -> None:
+        """A heater wait (``item``) went out: record what follows until the device passes it."""
+        self.replay = [item]
+        self.before_wait = self.last
+
+    def note(self, item: Any) -> None:
+        """``item`` (a command, or the segments of one feed) went out."""
+        if self.replay is None:
+            return
+        if self.s.link.progress.items_done >= self.s.heat_item:
+            self.replay = None  # the wait is over: nothing to send again
+        else:
+            self.replay.append(item)
 
     def _gather(self, done: Callable[[PlannedSegments], Retimed]) -> Retimed:
         """The pending plan's segments (pulled from the source as needed) until ``done``
@@ -147,8 +166,11 @@ class StopControl:
             "stopping within the motion already sent",
         )
         t0 = link.now()
-        if cancel and self._at_heater_wait():
+        if self._at_heater_wait():
             self._flush_heater_wait()
+            if not cancel:  # resumed later: the wait and what followed go out again
+                self._send_again_after_resume()
+                self._decelerate_and_retract(what)  # at rest: the retract only
         else:
             self._decelerate_and_retract(what)
         s.drain(final=False)
@@ -237,6 +259,13 @@ class StopControl:
         link.poll(0.0)  # the e-stop's own error report: ours, not a failure
         self.record = None
 
+    def _send_again_after_resume(self) -> None:
+        s = self.s
+        replay, self.replay = self.replay or [], None
+        s.pending.extendleft(reversed(replay))
+        s.map.drop_after(s.link.progress.segments_done)
+        self.last = self.before_wait
+
     # ------------------------------------------------------------ park / resume
     def _machine(self) -> Machine:
         s = self.s
@@ -262,6 +291,7 @@ class StopControl:
         top = profile.build_volume.z_max_mm
         z = float(min(here[2] + gc.park_lift_mm, top))
         route = [(float(here[0]), float(here[1]), z), (gc.park_xy_mm[0], gc.park_xy_mm[1], z)]
+        self.parked_from = (np.asarray(machine.status().steps[:3], dtype=np.int64), here)
         machine.move_through(np.asarray(route, dtype=float))
         self.parked = True
 
@@ -273,11 +303,14 @@ class StopControl:
         last = self.last
         machine = self._machine()
         here = self._here(machine)
-        if last is not None and here is not None:
-            above = (float(last.point[0]), float(last.point[1]), float(max(here[2], last.point[2])))
-            route = np.asarray([above, tuple(last.point)], dtype=float)
-            machine.move_through(route, end_steps=last.steps[:3])
-        self.parked = False
+        # where the plan goes on: the last program segment sent, else where the park began
+        back = (last.steps[:3], last.point) if last is not None else self.parked_from
+        if back is not None and here is not None and self.parked:
+            steps, point = back
+            above = (float(point[0]), float(point[1]), float(max(here[2], point[2])))
+            route = np.asarray([above, tuple(point)], dtype=float)
+            machine.move_through(route, end_steps=steps)
+        self.parked, self.parked_from = False, None
         ext = s.ctx.profile.extruder
         push = extruder_move(
             last.steps if last is not None else np.zeros(4, np.int64),

@@ -158,8 +158,10 @@ class Streamer:
             before = link.segments_sent
             j = link.feed(wire, i, max_wait=SERVICE_S)
             if j > i:
-                self.map.add(before + 1, batch.take(slice(i, j)))
+                part = batch.take(slice(i, j))
+                self.map.add(before + 1, part)
                 self.stops.sent(batch, j - 1, before + j - i)
+                self.stops.note(part)
                 self._at_rest = bool(batch.v_end[j - 1] <= 1e-9)
                 i = j
 
@@ -181,9 +183,12 @@ class Streamer:
         numbers = self.link.send(*msgs)
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self.heat_item = max(numbers)
+            self.stops.wait_sent(item)
             self.set_state(
                 JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
             )
+        else:
+            self.stops.note(item)
         if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
             self.stops.stop_here()
 
@@ -236,9 +241,13 @@ class Streamer:
         report the last segment sent as executed (a job is complete only then)."""
         link = self.link
         last, since = -1, time.monotonic()
+        told = not final
         while not link.idle():
             link.wait_report(SERVICE_S)
             self.service()
+            if not told and self.ctx.requests.has("pause", "cancel"):
+                told = True  # said, not silently ignored
+                self.ctx.emit(Notice("the rest of the print is on the device already: it ends"))
             done = link.progress.items_done
             if done != last:
                 last, since = done, time.monotonic()

@@ -112,3 +112,27 @@ def test_cancel_while_paused_keeps_the_park_and_switches_the_heaters_off(tmp_pat
     assert status.steps[:3] == marks["parked"][:3]  # no second lift: it stays parked
     assert status.hotend_target_c == 0 and status.bed_target_c == 0
     assert not status.faulted and not status.busy
+
+
+def test_pause_while_heating_parks_at_once_and_resumes_with_the_wait(tmp_path):
+    _, _, clean_record = _run_with(tmp_path, lambda job, s: None)
+    seen, marks = [], {}
+
+    def on_state(job, state):
+        seen.append(state)
+        if state is JobState.HEATING and "asked" not in marks:
+            marks["asked"] = True
+            job.request_pause()
+        if state is JobState.PAUSED:
+            marks["stop"] = job.last_stop
+            marks["hotend"] = job.link.request_status().hotend_c
+            threading.Timer(0.05, job.request_resume).start()
+        if state is JobState.PRINTING and "stop" in marks and "resumed_at" not in marks:
+            marks["resumed_at"] = job.link.segments_sent
+
+    _, result, record = _run_with(tmp_path, on_state)
+    assert result.status == "completed"
+    assert marks["hotend"] < 190  # paused without waiting for the heater
+    assert seen.count(JobState.HEATING) == 2  # the wait again after the resume
+    inserted = (marks["stop"].first_segment, marks["resumed_at"])
+    assert _program_steps(record, *inserted) == [r["steps"] for r in clean_record]
