@@ -23,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -89,7 +90,25 @@ class Api:
         self.printer = printer
         self.uploads = uploads
         self.selected: Path | None = None
+        self._offsets: tuple[tuple[str, int, int], np.ndarray] | None = None
         self.lock = asyncio.Lock()  # one upload-and-start decision at a time
+
+    def filepos(self, path: Path | None, line: int) -> int | None:
+        """Blocking (the first time per file): the byte offset where G-code ``line`` (1-based)
+        starts, OctoPrint's ``progress.filepos``."""
+        if path is None or line < 1:
+            return None
+        try:
+            st = path.stat()
+            key = (str(path), st.st_mtime_ns, st.st_size)
+            if self._offsets is None or self._offsets[0] != key:
+                data = np.fromfile(path, dtype=np.uint8)
+                starts = np.concatenate(([0], np.flatnonzero(data == 10) + 1))
+                self._offsets = (key, starts.astype(np.int64))
+        except OSError:
+            return None
+        starts = self._offsets[1]
+        return int(starts[min(line, len(starts)) - 1])
 
     def relative(self, path: Path | None) -> str | None:
         if path is None:
@@ -161,7 +180,8 @@ def create_app(
     @app.get("/api/job")
     async def get_job() -> dict[str, Any]:
         status = printer.status()
-        return shapes.job(status, api.relative(status.file))
+        filepos = await run_in_threadpool(api.filepos, status.file, status.job.line)
+        return shapes.job(status, api.relative(status.file), filepos=filepos)
 
     @app.post("/api/job")
     async def post_job(request: Request) -> Response:

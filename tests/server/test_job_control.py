@@ -40,7 +40,9 @@ def test_start_while_printing_is_409_and_pause_resume_cancel_work(make_server):
     server.wait_job(lambda j: j["state"] == "Paused")
     assert _command(server, command="start").status == 409  # a paused job is still a job
     assert _command(server, command="pause", action="resume").status == 204
-    server.wait_job(lambda j: j["state"] == "Printing")
+    job = server.wait_job(lambda j: j["state"] == "Printing" and j["progress"]["filepos"])
+    text, pos = small_part(layers=40).encode(), job["progress"]["filepos"]
+    assert 0 < pos < len(text) and text[pos - 1 : pos] == b"\n"  # where a line starts
 
     assert _command(server, command="cancel").status == 204
     job = server.wait_job(lambda j: j["state"] == "Operational")
