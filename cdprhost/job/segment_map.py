@@ -10,8 +10,6 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 
-import numpy as np
-
 from cdprhost.motion.segments import PlannedSegments
 
 
@@ -73,9 +71,3 @@ class SegmentMap:
             float(batch.t_end[i]),
             float(batch.e[i]),
         )
-
-
-def first_rest_index(batch: PlannedSegments, start: int = 0) -> int | None:
-    """Index of the first segment at or after ``start`` that ends with the machine at rest."""
-    rest = np.flatnonzero(batch.v_end[start:] <= 1e-9)
-    return None if rest.size == 0 else start + int(rest[0])
