@@ -23,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -32,7 +33,14 @@ from starlette.datastructures import UploadFile
 from cdprhost.server import shapes
 from cdprhost.server.guard import BodyTooLarge, KeyGuard
 from cdprhost.server.printer import Printer, Refused, busy_reason
-from cdprhost.server.uploads import BadName, NotGcode, UploadFolder, check_filename, check_folder
+from cdprhost.server.uploads import (
+    BadName,
+    Entry,
+    NotGcode,
+    UploadFolder,
+    check_filename,
+    check_folder,
+)
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +80,7 @@ def client_name(request: Request) -> str:
     """Who sent it, as the TUI and /api/job show it: the client's address and program."""
     host = request.client.host if request.client else "?"
     agent = "".join(c for c in request.headers.get("user-agent", "") if c.isprintable())[:60]
-    return f"upload API ({host}{', ' + agent if agent else ''})"
+    return f"{host} ({agent})" if agent else host
 
 
 class Api:
@@ -82,7 +90,25 @@ class Api:
         self.printer = printer
         self.uploads = uploads
         self.selected: Path | None = None
+        self._offsets: tuple[tuple[str, int, int], np.ndarray] | None = None
         self.lock = asyncio.Lock()  # one upload-and-start decision at a time
+
+    def filepos(self, path: Path | None, line: int) -> int | None:
+        """Blocking (the first time per file): the byte offset where G-code ``line`` (1-based)
+        starts, OctoPrint's ``progress.filepos``."""
+        if path is None or line < 1:
+            return None
+        try:
+            st = path.stat()
+            key = (str(path), st.st_mtime_ns, st.st_size)
+            if self._offsets is None or self._offsets[0] != key:
+                data = np.fromfile(path, dtype=np.uint8)
+                starts = np.concatenate(([0], np.flatnonzero(data == 10) + 1))
+                self._offsets = (key, starts.astype(np.int64))
+        except OSError:
+            return None
+        starts = self._offsets[1]
+        return int(starts[min(line, len(starts)) - 1])
 
     def relative(self, path: Path | None) -> str | None:
         if path is None:
@@ -154,7 +180,8 @@ def create_app(
     @app.get("/api/job")
     async def get_job() -> dict[str, Any]:
         status = printer.status()
-        return shapes.job(status, api.relative(status.file))
+        filepos = await run_in_threadpool(api.filepos, status.file, status.job.line)
+        return shapes.job(status, api.relative(status.file), filepos=filepos)
 
     @app.post("/api/job")
     async def post_job(request: Request) -> Response:
@@ -165,16 +192,16 @@ def create_app(
             return error(400, f"job command: {text}")
         try:
             if command.command == "pause":
-                printer.pause(command.action)
+                await run_in_threadpool(printer.pause, command.action)
             elif command.command == "cancel":
-                printer.cancel()
+                await run_in_threadpool(printer.cancel)
             else:
                 if api.selected is None or not api.selected.is_file():
                     raise Refused("no file selected: upload one with select=true first")
                 selected = api.selected
                 async with api.lock:
                     await run_in_threadpool(printer.check_start, selected)
-                    printer.start(selected, client_name(request))
+                    await run_in_threadpool(printer.start, selected, client_name(request))
         except Refused as exc:
             return error(409, str(exc))
         return Response(status_code=204)
@@ -199,8 +226,6 @@ def create_app(
         if path is None:
             return error(404, f"{relative}: no such file")
         st = path.stat()
-        from cdprhost.server.uploads import Entry
-
         entry = Entry(path.name, uploads.relative(path), st.st_size, int(st.st_mtime))
         return JSONResponse(shapes.entry(entry, base(request)))
 
@@ -234,12 +259,12 @@ def create_app(
                     return error(409, str(exc))
                 except BadName as exc:
                     return error(400, str(exc))
-                printer.uploaded(final)
+                await run_in_threadpool(printer.uploaded, final)
                 if select:
                     api.selected = final
                 if start:
                     try:
-                        printer.start(final, who)
+                        await run_in_threadpool(printer.start, final, who)
                     except Refused as exc:  # became busy in between: the file is kept
                         return error(409, f"{exc} (the file is stored)")
         finally:

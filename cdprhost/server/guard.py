@@ -23,6 +23,9 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 
+DRAIN_BYTES = 1 << 20
+
+
 class BodyTooLarge(Exception):
     pass
 
@@ -68,13 +71,17 @@ class KeyGuard:
             await self.app(scope, receive, send)
             return
         given = given_key(scope)
-        if not given:
-            await send_error(send, 401, "an API key is required (X-Api-Key header)")
-            return
-        if not key_matches(self.key(), given):
-            await send_error(send, 403, "invalid API key")
-            return
         length = _content_length(scope)
+        if not given or not key_matches(self.key(), given):
+            # a small body is read and dropped first, so that the client reads the refusal
+            # instead of a connection reset; a large one is not read at all
+            if length is not None and 0 < length <= DRAIN_BYTES:
+                await _drain(receive)
+            if not given:
+                await send_error(send, 401, "an API key is required (X-Api-Key header)")
+            else:
+                await send_error(send, 403, "invalid API key")
+            return
         if length is not None and length > self.max_body_bytes:
             await send_error(send, 413, _too_large(self.max_body_bytes))
             return
@@ -104,6 +111,13 @@ class KeyGuard:
         except BodyTooLarge:
             if not started:
                 await send_error(send, 413, _too_large(self.max_body_bytes))
+
+
+async def _drain(receive: Receive) -> None:
+    for _ in range(DRAIN_BYTES // 1024 + 2):  # bounded: at most DRAIN_BYTES announced
+        message = await receive()
+        if message["type"] != "http.request" or not message.get("more_body", False):
+            return
 
 
 def _content_length(scope: Scope) -> int | None:

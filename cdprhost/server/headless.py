@@ -18,11 +18,13 @@ from typing import Any
 
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.before_start import before_start
 from cdprhost.job.resume import log_path_for
 from cdprhost.job.runner import PrintJob, PrintOptions
 from cdprhost.job.state import Event, IllegalTransition, JobSnapshot, JobState, reduce
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import HostLink, LinkError
+from cdprhost.link.errors import DeviceFault
 from cdprhost.motion.prepared import Setup, prepare
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
@@ -46,12 +48,16 @@ class HeadlessPrinter:
         setup: Setup | None = None,
         job_options: dict[str, Any] | None = None,
         on_event: Callable[[Event], None] | None = None,
+        clear_fault: bool = False,
     ):
+        """``clear_fault``: a device fault is cleared at a start (someone checked the
+        machine); by default a faulted device refuses the start (409, the fault explained)."""
         self.profile = profile
         self.model = MachineModel.from_profile(profile)
         self.setup = setup or Setup()
         self.job_options = dict(job_options or {})
         self._open_link = open_link
+        self.clear_fault = clear_fault
         self._link: HostLink | None = None
         self._lock = threading.RLock()
         self._status = PrinterStatus()
@@ -90,6 +96,26 @@ class HeadlessPrinter:
         if not report.ok:
             v = report.violations[0]
             raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+        self._refuse_if_faulted(path)
+
+    def _refuse_if_faulted(self, path: Path) -> None:
+        """A device stopped by a fault starts nothing unless ``clear_fault`` (and the fault
+        is one the host may clear): nobody at the machine has looked at it."""
+        with self._lock:
+            self._refuse_if_busy()
+            try:
+                info = before_start(self._job_link(), path)
+            except (LinkError, OSError) as exc:
+                raise Refused(f"the device does not answer: {exc}; nothing started") from None
+        if info.fault is None or (self.clear_fault and info.clearable):
+            return
+        how = (
+            "check the machine, then restart `cdprhost serve --clear-fault` (or clear it in "
+            "`cdprhost tui`)"
+            if info.clearable
+            else "it cannot be cleared from the host"
+        )
+        raise Refused(f"{info.fault}: {how}; nothing started")
 
     def _refuse_if_busy(self) -> None:
         if self._closing:
@@ -102,7 +128,10 @@ class HeadlessPrinter:
         with self._lock:
             self._refuse_if_busy()
             options = PrintOptions(
-                setup=self.setup, log_path=log_path_for(path), **self.job_options
+                setup=self.setup,
+                log_path=log_path_for(path),
+                clear_fault=self.clear_fault,
+                **self.job_options,
             )
             job = PrintJob(path, self.profile, self._job_link, options, self._on_event)
             self._status = PrinterStatus(
@@ -126,12 +155,20 @@ class HeadlessPrinter:
         except Exception:  # the job already stopped the machine; never kill the server
             log.exception("print job of %s raised", job.gcode.name)
 
+    def connect(self) -> None:
+        """Open the device now (``serve`` at start: a wrong port is said before anything
+        listens). Raises the link's error."""
+        with self._lock:
+            self._job_link()
+
     def _job_link(self) -> HostLink:
         """The kept link, checked; opened (again) when there is none or it has failed."""
         link = self._link
         if link is not None:
             try:
                 link.request_status(timeout=self.profile.serial.timeout_s)
+                return link
+            except DeviceFault:  # alive, and stopped by a fault: the start decides
                 return link
             except (LinkError, OSError):
                 self._close_link()
@@ -148,8 +185,8 @@ class HeadlessPrinter:
 
     # ---------------------------------------------------------- controls
     def _active_job(self, what: str) -> PrintJob:
-        job = self._job
-        if job is None or not self._status.job.state.active:
+        job, worker = self._job, self._worker
+        if job is None or worker is None or not worker.is_alive():
             state = self._status.job.state.value
             raise Refused(f"no print is running ({state}): nothing to {what}")
         return job
@@ -171,10 +208,16 @@ class HeadlessPrinter:
             raise ValueError(f"unknown pause action {action!r}")
 
     def cancel(self) -> None:
+        """Also while the job starts (preflight, connecting): it then ends before moving."""
         job = self._active_job("cancel")
         if self._status.job.state is JobState.CANCELLING:
             return
         jobcontrol.cancel(job)
+
+    def emergency_stop(self) -> bool:
+        """Stop now (a second signal while stopping): the job's e-stop, when one runs."""
+        job = self._job
+        return bool(job is not None and not job.finished and jobcontrol.emergency_stop(job))
 
     def uploaded(self, path: Path) -> None:
         log.info("stored upload %s", path)

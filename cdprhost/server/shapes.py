@@ -3,7 +3,8 @@
 Only what slicers and phone apps read: ``/api/version``, ``/api/job``, the upload reply and
 the file listing, with OctoPrint's field names and types. Times in ``/api/job`` are seconds:
 ``printTime`` is wall time since the start, ``printTimeLeft`` the planned machine time still
-to run (``printTimeLeftOrigin``: ``estimate``), ``completion`` a percentage.
+to run (``printTimeLeftOrigin``: ``estimate``), ``completion`` a percentage, ``filepos`` the
+byte offset of the G-code line the device is executing.
 """
 
 from __future__ import annotations
@@ -67,7 +68,12 @@ def file_info(path: Path | None, relative: str | None) -> dict[str, Any]:
     }
 
 
-def job(status: PrinterStatus, relative: str | None, now: float | None = None) -> dict[str, Any]:
+def job(
+    status: PrinterStatus,
+    relative: str | None,
+    now: float | None = None,
+    filepos: int | None = None,
+) -> dict[str, Any]:
     snap = status.job
     now = time.time() if now is None else now
     has_job = status.file is not None
@@ -91,7 +97,7 @@ def job(status: PrinterStatus, relative: str | None, now: float | None = None) -
         },
         "progress": {
             "completion": completion,
-            "filepos": None,
+            "filepos": filepos if has_job else None,
             "printTime": print_time,
             "printTimeLeft": round(left) if left is not None else None,
             "printTimeLeftOrigin": "estimate" if left is not None else None,

@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import http.client
 import json
+import os
+import re
+import signal
+import subprocess
+import sys
 import time
+import urllib.request
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,7 +20,7 @@ from typing import Any
 import pytest
 
 from cdprhost.profile import load_profile
-from cdprhost.server.apikey import KeyFile
+from cdprhost.server.apikey import KeyFile, read_key
 from cdprhost.server.app import create_app
 from cdprhost.server.headless import HeadlessPrinter
 from cdprhost.server.listen import ServerThread
@@ -37,6 +43,20 @@ def small_part(layers: int = 3, side: float = 20.0) -> str:
 
 
 OUTSIDE = "G28\nG1 Z1 F1200\nG1 X5000 Y0 F1200\n"  # far outside every workspace
+
+
+def wait_job(
+    get: Callable[[], dict[str, Any]], cond: Callable[[dict[str, Any]], bool], timeout: float
+) -> dict[str, Any]:
+    """Poll ``GET /api/job`` until ``cond`` holds (bounded)."""
+    end = time.monotonic() + timeout
+    last: dict[str, Any] = {}
+    while time.monotonic() < end:
+        last = get()
+        if cond(last):
+            return last
+        time.sleep(0.05)
+    raise AssertionError(f"job did not reach the condition within {timeout:g} s: {last}")
 
 
 @dataclass
@@ -86,14 +106,7 @@ class Server:
         return reply.json()
 
     def wait_job(self, cond: Callable[[dict[str, Any]], bool], timeout: float = 120.0) -> dict:
-        end = time.monotonic() + timeout
-        last: dict[str, Any] = {}
-        while time.monotonic() < end:
-            last = self.job()
-            if cond(last):
-                return last
-            time.sleep(0.05)
-        raise AssertionError(f"job did not reach the condition within {timeout:g} s: {last}")
+        return wait_job(self.job, cond, timeout)
 
     def stored(self) -> list[str]:
         """Every file under the upload folder (staging included)."""
@@ -125,6 +138,70 @@ def multipart(
         )
     out += f"--{boundary}--\r\n".encode()
     return out, f"multipart/form-data; boundary={boundary}"
+
+
+class ServeProcess:
+    """``cdprhost serve`` in its own process on 127.0.0.1 (ephemeral port): url, key, and a
+    bounded wait for its job state."""
+
+    def __init__(self, tmp: Path, *args: str):
+        self.env = {
+            **os.environ,
+            "XDG_CONFIG_HOME": str(tmp / "cfg"),
+            "CDPRHOST_STATE": str(tmp / "state"),
+        }
+        cmd = [sys.executable, "-m", "cdprhost", "serve", "-p", PROFILE, "--listen", "127.0.0.1:0"]
+        self.proc = subprocess.Popen([*cmd, *args], env=self.env, stderr=subprocess.PIPE, text=True)
+        assert self.proc.stderr is not None
+        lines = []
+        for _ in range(50):  # bounded: the banner comes within a few lines
+            line = self.proc.stderr.readline()
+            lines.append(line)
+            if "upload API on" in line or not line:
+                break
+        self.banner = "".join(lines)
+        found = re.search(r"http://127\.0\.0\.1:(\d+)", self.banner)
+        assert found, self.banner
+        self.url, self.port = found.group(0), int(found.group(1))
+        self.key = read_key(tmp / "cfg" / "cdprhost" / "api-key") or ""
+        self.uploads = tmp / "state" / "uploads"
+
+    def job(self) -> dict[str, Any]:
+        req = urllib.request.Request(self.url + "/api/job", headers={"X-Api-Key": self.key})
+        with urllib.request.urlopen(req, timeout=60) as resp:
+            return dict(json.loads(resp.read()))
+
+    def wait_job(self, cond: Callable[[dict[str, Any]], bool], timeout: float = 120.0) -> dict:
+        return wait_job(self.job, cond, timeout)
+
+    def stop(self, sig: int = signal.SIGTERM) -> tuple[int, str]:
+        """Signal it; (exit status, the rest of its stderr)."""
+        try:
+            self.proc.send_signal(sig)
+            rest = self.proc.communicate(timeout=120)[1]
+        finally:
+            if self.proc.poll() is None:
+                self.proc.kill()
+                self.proc.wait(timeout=30)
+        return self.proc.returncode, rest
+
+
+def printed_to_the_end(job: dict[str, Any]) -> bool:
+    return job["state"] == "Operational" and job["progress"]["completion"] == 100.0
+
+
+@pytest.fixture
+def serve(tmp_path) -> Iterator[Callable[..., ServeProcess]]:
+    made: list[ServeProcess] = []
+
+    def start(*args: str) -> ServeProcess:
+        made.append(ServeProcess(tmp_path / f"serve{len(made)}", *args))
+        return made[-1]
+
+    yield start
+    for p in made:
+        if p.proc.poll() is None:
+            p.stop()
 
 
 @pytest.fixture

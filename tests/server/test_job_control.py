@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from concurrent.futures import ThreadPoolExecutor
 
 from tests.server.conftest import multipart, small_part
 
@@ -39,7 +40,9 @@ def test_start_while_printing_is_409_and_pause_resume_cancel_work(make_server):
     server.wait_job(lambda j: j["state"] == "Paused")
     assert _command(server, command="start").status == 409  # a paused job is still a job
     assert _command(server, command="pause", action="resume").status == 204
-    server.wait_job(lambda j: j["state"] == "Printing")
+    job = server.wait_job(lambda j: j["state"] == "Printing" and j["progress"]["filepos"])
+    text, pos = small_part(layers=40).encode(), job["progress"]["filepos"]
+    assert 0 < pos < len(text) and text[pos - 1 : pos] == b"\n"  # where a line starts
 
     assert _command(server, command="cancel").status == 204
     job = server.wait_job(lambda j: j["state"] == "Operational")
@@ -84,3 +87,29 @@ def test_version_job_and_listing_shapes(make_server):
     assert one.status == 200 and one.json()["size"] > 0
     assert server.request("GET", "/api/files/local/none.gcode").status == 404
     assert server.request("GET", "/api/files/local/..%2Fx.gcode").status in (400, 404)
+
+
+def test_a_faulted_device_refuses_a_remote_start_with_the_fault_explained(make_server):
+    server = make_server()
+    assert _upload(server, "one.gcode").status == 201
+    server.wait_job(lambda j: j["state"] == "Operational" and j["progress"]["completion"])
+    link = server.links[0]
+    link.emergency_stop(timeout=5.0)  # as M112 would: the device stays stopped by a fault
+    executed = len(link.device.record)
+    reply = _upload(server, "two.gcode")
+    assert reply.status == 409
+    text = reply.json()["error"]
+    assert "fault" in text and "--clear-fault" in text and "nothing started" in text
+    assert "two.gcode" not in server.stored()
+    assert server.printer.status().file.name == "one.gcode"
+    assert len(link.device.record) == executed  # nothing moved
+
+
+def test_two_uploads_with_print_at_once_start_one_job(make_server):
+    server = make_server(speedup=10.0)
+    with ThreadPoolExecutor(2) as pool:
+        replies = list(pool.map(lambda n: _upload(server, n, layers=40), ["a.gcode", "b.gcode"]))
+    assert sorted(r.status for r in replies) == [201, 409]
+    assert len(server.links) == 1 and len(server.stored()) == 1
+    assert _command(server, command="cancel").status == 204
+    server.wait_job(lambda j: j["state"] == "Operational")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.server.conftest import multipart, small_part
+from tests.server.conftest import multipart, printed_to_the_end, small_part
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "examples" / "example.gcode"
@@ -81,21 +81,21 @@ def prusaslicer_requests(port: int, key: str, name: str, data: bytes, start: boo
     return [version, upload]
 
 
-def test_prusaslicer_upload_and_print_replayed_byte_for_byte_prints_to_the_end(make_server):
-    server = make_server()
+def test_prusaslicer_upload_and_print_replayed_byte_for_byte_prints_to_the_end(serve):
+    """On `cdprhost serve` with the simulated device: the connection test, then the upload."""
+    server = serve("--speedup", "1000")
     data = EXAMPLE.read_bytes()
     version, upload = prusaslicer_requests(server.port, server.key, "cup.gcode", data, True)
     status, body = raw_exchange(server.port, version)
     assert status == 200 and b'"text":"OctoPrint' in body and b'"api"' in body
     status, body = raw_exchange(server.port, upload)
     assert status == 201, body
-    assert server.stored() == ["cup.gcode"]
     assert (server.uploads / "cup.gcode").read_bytes() == data
-    job = server.wait_job(lambda j: j["state"] == "Operational" and j["progress"]["completion"])
-    assert job["progress"]["completion"] == 100.0
+    job = server.wait_job(printed_to_the_end)
     assert job["job"]["file"]["name"] == "cup.gcode"
     assert "PrusaSlicer/2.8.1" in job["job"]["user"]
-    assert server.printer.status().job.state.value == "done"  # the device ran the last segment
+    code, err = server.stop()
+    assert code == 0 and "job done: completed" in err, err
 
 
 def test_prusaslicer_large_upload_with_expect_100_continue(make_server):
@@ -114,11 +114,12 @@ def octoprint_executable() -> str | None:
     return os.environ.get("CDPRHOST_OCTOPRINT") or shutil.which("octoprint")
 
 
-def test_octoprint_client_upload_with_print_true_prints_to_the_end(make_server, tmp_path):
+def test_octoprint_client_upload_with_print_true_prints_to_the_end(serve, tmp_path):
+    """`octoprint client ... upload /api/files/local FILE -P print true` on `cdprhost serve`."""
     exe = octoprint_executable()
     if exe is None:
         pytest.skip("OctoPrint is not installed (CI installs it in .venv-octoprint)")
-    server = make_server()
+    server = serve("--speedup", "1000")
     part = tmp_path / "part.gcode"
     part.write_text(small_part())
     cmd = [exe, "--basedir", str(tmp_path / "octo"), "client", "--apikey", server.key]
@@ -130,9 +131,9 @@ def test_octoprint_client_upload_with_print_true_prints_to_the_end(make_server, 
         timeout=120,
     )
     assert "Status Code: 201" in out.stdout, out.stdout + out.stderr
-    job = server.wait_job(lambda j: j["state"] == "Operational" and j["progress"]["completion"])
-    assert job["progress"]["completion"] == 100.0
-    assert server.printer.status().job.state.value == "done"
+    server.wait_job(printed_to_the_end)
+    code, err = server.stop()
+    assert code == 0 and "job done: completed" in err, err
 
 
 def test_octoprint_client_request_replayed_prints(make_server):

@@ -8,18 +8,17 @@ print is stopped safely first (the job's safe-stop path), then the link is close
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
 from typing import Any
 
-from cdprhost.cli.numbers import bounded_float
+from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import add_placement_arguments, non_empty, setup_from_args
 from cdprhost.cli.profile_arg import add_profile_argument
+from cdprhost.cli.signals import stop_signals
 from cdprhost.errors import InputError
 
 DEFAULT_MAX_UPLOAD_MB = 256.0
-STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
 
 def listen_arg(text: str) -> tuple[str, int]:
@@ -68,13 +67,25 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="DEV",
         help="serial device path or pyserial URL (default: embedded simulated device)",
     )
-    p.add_argument("--baud", type=int, default=None, metavar="N", help="default: the profile's")
+    p.add_argument(
+        "--baud",
+        type=bounded_int(50, 10_000_000),
+        default=None,
+        metavar="N",
+        help="baud rate (default: the profile's)",
+    )
     p.add_argument(
         "--speedup",
         type=bounded_float(0.0, 100_000.0),
         default=10.0,
         metavar="X",
         help="embedded device: clock speed-up (default 10)",
+    )
+    p.add_argument(
+        "--clear-fault",
+        action="store_true",
+        help="a start clears a device fault (watchdog, e-stop) once the machine was checked; "
+        "default: a faulted device refuses remote starts (409, the fault explained)",
     )
     add_server_arguments(p, default_listen=True)
     add_placement_arguments(p, strict=False)
@@ -149,29 +160,43 @@ def run(args: argparse.Namespace) -> int:
             return open_embedded(speedup=args.speedup or None)
 
     printer = HeadlessPrinter(
-        profile, open_device, setup=setup_from_args(args), on_event=_say_event
+        profile,
+        open_device,
+        setup=setup_from_args(args),
+        on_event=_say_event,
+        clear_fault=args.clear_fault,
     )
+    try:
+        printer.connect()
+    except OSError as exc:
+        raise InputError(
+            f"cannot open the device: {exc.strerror or exc}", source=args.port
+        ) from None
     stop = threading.Event()
     caught: list[str] = []
 
-    def on_signal(signum: int, _frame: Any) -> None:
-        caught.append(signal.Signals(signum).name)
+    def on_signal(name: str) -> None:
+        """First signal: stop (a running print safely, then the server); a second one while
+        stopping: emergency stop of the print."""
+        caught.append(name)
+        if len(caught) > 1:
+            print(f"{name} again: emergency stop", file=sys.stderr)
+            printer.emergency_stop()
         stop.set()
 
-    previous = {name: signal.signal(getattr(signal, name), on_signal) for name in STOP_SIGNALS}
     server = None
-    try:
-        server = start_api(args, printer)
-        while not stop.wait(1.0):  # until a signal: this is the server's life
-            pass
-        reason = caught[0] if caught else "stopped"
-        print(f"{reason}: stopping (a running print is stopped safely first)", file=sys.stderr)
-        ended = printer.shutdown(reason)
-    finally:
-        if server is not None:
-            server.stop()
-        else:
-            printer.shutdown("not started")
-        for name, handler in previous.items():
-            signal.signal(getattr(signal, name), handler)
+    ended = False
+    with stop_signals(on_signal):
+        try:
+            server = start_api(args, printer)
+            while not stop.wait(1.0):  # until a signal: this is the server's life
+                pass
+            reason = caught[0]
+            print(f"{reason}: stopping (a running print is stopped safely first)", file=sys.stderr)
+            ended = printer.shutdown(reason)
+        finally:
+            if server is not None:
+                server.stop()
+            if not ended:
+                printer.shutdown("serve stopped")
     return 0 if ended else 1

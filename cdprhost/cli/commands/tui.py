@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from cdprhost.cli.commands.serve import add_server_arguments
 from cdprhost.cli.options import add_placement_arguments, setup_from_args
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
@@ -42,6 +43,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="DIR",
         help="embedded device only: folder where the virtual motion capture writes its takes",
     )
+    add_server_arguments(parser, default_listen=False)
     add_placement_arguments(parser, strict=False)
     parser.set_defaults(func=run)
 
@@ -78,4 +80,15 @@ def run(args: argparse.Namespace) -> int:
         status_interval_s=status_interval_s,
         open_file=args.gcode,
     )
-    return int(app.run() or 0)
+    if args.listen is None:
+        return int(app.run() or 0)
+    from cdprhost.cli.commands.serve import start_api
+    from cdprhost.tui.control.upload_bridge import TuiPrinter
+
+    bridge = TuiPrinter(app)
+    server = start_api(args, bridge)  # the TUI's own quit stops a running print safely
+    bridge.announce(f"listening on {server.url} (slicer uploads; key: `cdprhost api-key`)")
+    try:
+        return int(app.run() or 0)
+    finally:
+        server.stop()
