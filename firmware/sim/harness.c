@@ -75,6 +75,7 @@ static FILE *record;
 static char *record_path, *stats_path;
 static uint32_t mailbox_addr;
 static uint64_t segments_recorded;
+static unsigned motion_clock_slips; /* segment ends where the edge clock disagreed */
 
 /* step timing figures */
 static uint64_t last_rise[4], last_dir_change[4], rise_at[4];
@@ -311,7 +312,17 @@ static void record_segment(void)
 {
     if (!record)
         return;
+    /* the firmware's motion clock at the segment's end; the edge clock must agree (a
+     * motion start or stop marker is lost when a tick's computation overran the
+     * boundary it was due at): a slip is counted and the edge clock set right */
+    uint32_t fw = mailbox_u32(MB_MOTION_TICKS);
     uint64_t ticks = motion_now();
+    int64_t slip = (int64_t)(int32_t)(fw - (uint32_t)ticks);
+    if (slip) {
+        motion_clock_slips++;
+        motion_units = (uint64_t)((int64_t)motion_units + slip);
+        ticks = (uint64_t)((int64_t)ticks + slip);
+    }
     uint32_t seq = mailbox_u32(MB_SEQ);
     fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
             (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
@@ -580,7 +591,7 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"isr_profiled_count\":%llu}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -589,7 +600,7 @@ static void write_stats(void)
             loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
             step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
-            (unsigned long long)isr_count);
+            motion_clock_slips, (unsigned long long)isr_count);
     fclose(f);
 }
 

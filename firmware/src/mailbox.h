@@ -1,7 +1,8 @@
 /* What the simulation harness may read from RAM (its address is left in
- * GPIOR1:GPIOR2 at boot). The record itself is built from pin edges; the
- * mailbox only names segments (their protocol numbers), the positions a
- * SET_POSITION or HOME set, and figures for the benchmark. */
+ * GPIOR1:GPIOR2 at boot). The record's positions are built from pin edges; the
+ * mailbox names segments (their protocol numbers) and the motion clock at
+ * their end, the positions a SET_POSITION or HOME set, and figures for the
+ * benchmark. */
 #ifndef MAILBOX_H
 #define MAILBOX_H
 #include <stdint.h>
@@ -25,6 +26,7 @@ struct sim_mailbox {
     uint8_t edge; /* what the next MARK_EDGE toggle means: EDGE_* */
     uint16_t late_pulses; /* step pulses issued after their tick ended (never lost) */
     uint16_t stack_free;  /* bytes of the painted gap below the stack never written */
+    uint32_t motion_ticks; /* motion clock (units) at the end of segment `seq` */
 };
 extern volatile struct sim_mailbox sim_mailbox;
 
@@ -48,6 +50,7 @@ MB_CHECK(latency_max, MB_LATENCY_MAX);
 MB_CHECK(edge, MB_EDGE);
 MB_CHECK(late_pulses, MB_LATE_PULSES);
 MB_CHECK(stack_free, MB_STACK_FREE);
+MB_CHECK(motion_ticks, MB_MOTION_TICKS);
 _Static_assert(sizeof(struct sim_mailbox) == MB_SIZE, "mailbox size");
 #undef MB_CHECK
 

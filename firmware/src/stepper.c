@@ -903,6 +903,7 @@ static void __attribute__((noinline)) tick_start(void)
      * or stop of motion to that boundary */
     if (f & OUT_SEG_END) {
         sim_mailbox.seq = e->seq;
+        sim_mailbox.motion_ticks = st.motion_ticks; /* through this tick (computed) */
         sim_mailbox.edge = EDGE_SEG_END;
         edge_armed = 1;
         OCR1C = EDGE_AT_NEXT_TICK;
