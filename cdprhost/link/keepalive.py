@@ -64,7 +64,7 @@ class KeepAlive:
         if core.dev.failure is not None or stop.is_set():
             return
         recent = core.t.now() - core.last_pump
-        if readable and thread is not None and (core.pumping or recent < SLICE_S):
+        if readable and thread is not None and core.pumping:
             stop.wait(SLICE_S)  # the caller's thread is pumping: it reads them
             return
         if not readable and recent < interval / 2:
