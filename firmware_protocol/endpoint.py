@@ -68,6 +68,7 @@ class Endpoint:
         self.window_bytes = window_bytes
         self._rto_args = (rto_initial, rto_floor, rto_ceiling, rto_max_backoff)
         self._rto_fast = rto_fast  # (floor, max backoff) once the wire proves faster
+        self._calm_floor = 0.0  # the slow floor, for frames without queue items, once fast
         self.nak_holdoff = nak_holdoff
         self.accept = accept
         self.flow = flow
@@ -83,6 +84,7 @@ class Endpoint:
     def reset_session(self) -> None:
         """Start sequence numbers from 0 on both directions (after HELLO)."""
         self.sender = Sender(self._window, RtoEstimator(*self._rto_args), self.window_bytes)
+        self.sender.calm_floor = self._calm_floor
         self.receiver = Receiver()
         self._ack_due = False
         self._nak_due = False
@@ -93,7 +95,8 @@ class Endpoint:
         if self._rto_fast is None:
             return
         floor, backoff = self._rto_fast
-        initial, _, ceiling, _ = self._rto_args
+        initial, calm, ceiling, _ = self._rto_args
+        self._calm_floor = self.sender.calm_floor = max(self._calm_floor, calm)
         self._rto_args = (initial, floor, ceiling, backoff)
         rto = self.sender.rto
         rto.floor, rto.max_backoff = floor, max(1, backoff)

@@ -131,3 +131,19 @@ def test_items_after_an_ack_point():
     assert s.items_after(1) == 7 and s.items_after(3) == 2 and s.items_after(4) == 0
     s.on_ack(3, 0.01)  # releasing frames does not change what a report at ack 1 covers
     assert s.items_after(1) == 7
+
+
+def test_a_frame_without_queue_items_waits_for_the_calm_floor_before_a_resend():
+    """On a fast path (3 ms floor) a keep-alive or status request is not resent before the
+    slow floor: a clean idle link must not count scheduling hiccups as losses; a frame of
+    queue items still is, at the fast timeout."""
+    s = Sender(window=8, rto=RtoEstimator(initial=0.003, floor=0.003))
+    s.calm_floor = 0.025
+    s.queue(b"keep-alive")
+    assert [seq for seq, _ in s.frames_to_send(0.0)] == [0]
+    assert s.frames_to_send(0.010) == [] and s.next_deadline() == pytest.approx(0.025)
+    assert [seq for seq, _ in s.frames_to_send(0.026)] == [0]  # resent at the calm floor
+    s.on_ack(1, 0.027)
+    s.queue(b"segments", items=3, ticks=100)
+    assert [seq for seq, _ in s.frames_to_send(0.030)] == [1]
+    assert [seq for seq, _ in s.frames_to_send(0.040)] == [1]  # the fast timeout

@@ -138,8 +138,13 @@ async def test_operator_session_on_a_pty_device(tmp_path):
                 assert state.job.layer >= failure.last_layer  # it restarted at the stopped layer
                 await pilot.press("x")
                 await confirm(pilot)
-                await wait_for(pilot, lambda s: s.job.state.finished and not s.busy, 60, "end")
-                assert [r.status for r in app.state.history] == ["cancelled", "failed", "cancelled"]
+                state = await wait_for(
+                    pilot,
+                    lambda s: s.job.state.finished and not s.busy and len(s.history) == 3,
+                    60,
+                    "end",
+                )  # the job's end is shown before its history line is added
+                assert [r.status for r in state.history] == ["cancelled", "failed", "cancelled"]
                 # quit while printing: stopped like a cancel before the link closes
                 await pilot.press("s")
                 await confirm(pilot)
