@@ -254,3 +254,13 @@ def test_position_numbers_never_run_together():
     rows = text.plain.split("\n")
     assert rows[0].split()[1:4] == ["-150.25", "-1200.50", "330.00"]  # machine frame, labelled
     assert rows[2].split()[1:4] == ["-100.125", "-250.500", "-1000.250"]
+
+
+def test_a_source_line_too_wide_loses_its_comment_before_its_code():
+    from cdprhost.tui.widgets.source_view import fit_line
+
+    assert fit_line("G1 X1 Y2", 20) == "G1 X1 Y2"
+    assert fit_line("G1 X15.00 Y-15.00 E4.5 ; perimeter", 26) == "G1 X15.00 Y-15.00 E4.5 ;…"
+    assert fit_line("G1 X15.00 Y-15.00 E4.5 ; perimeter", 22) == "G1 X15.00 Y-15.00 E4.5"
+    assert fit_line("G1 X15.00 Y-15.00 E4.56789", 10) == "G1 X15.00…"
+    assert fit_line("; generated for the cup", 10) == "; generat…"

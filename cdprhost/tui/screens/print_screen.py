@@ -236,6 +236,7 @@ class PrintScreen(AppScreen):
         show_text(
             self.query_one("#preflight-summary", Label),
             preflight_summary(state, hint(app, self, "open"), hint(app, self, "center")),
+            layout=True,  # one row, or two on a narrow terminal
         )
         resume = resume_line(state, hint(app, self, "resume_failed"))
         line = self.query_one("#resume-line", Label)

@@ -7,8 +7,8 @@ from textual.widget import Widget
 
 
 class SourceView(Widget):
-    """The title wraps (it may carry a violation's detail); the source lines are cut at the
-    widget's width (one line each)."""
+    """The title wraps (it may carry a violation's detail); each source line takes one row:
+    a line too wide loses its comment first, then is cut (``fit_line``)."""
 
     DEFAULT_CSS = "SourceView { height: auto; }"
 
@@ -30,14 +30,26 @@ class SourceView(Widget):
         out = Text(title + "\n", style="bold") if title else Text()
         if not lines:
             return out.append("(no G-code line)", style="dim")
+        digits = max(3, *(len(str(number)) for number, _ in lines))
+        room = width - digits - 2
         for i, (number, text) in enumerate(lines):
             mark = number == focus
             out.append(
-                f"{'>' if mark else ' '}{number:>7} ", style="bold yellow" if mark else "dim"
+                f"{'>' if mark else ' '}{number:>{digits}} ",
+                style="bold yellow" if mark else "dim",
             )
-            room = width - 9
-            shown = text if len(text) <= room else text[: max(room - 1, 0)] + "…"
-            out.append(shown, style="reverse" if mark else "")
+            out.append(fit_line(text, room), style="reverse" if mark else "")
             if i < len(lines) - 1:
                 out.append("\n")
         return out
+
+
+def fit_line(text: str, room: int) -> str:
+    """A G-code line in ``room`` columns: whole if it fits, else without its trailing
+    comment, else cut with an ellipsis (a comment-only line is cut)."""
+    if len(text) <= room:
+        return text
+    code = text.split(";", 1)[0].rstrip()
+    if code and len(code) <= room:
+        return code + " ;…" if len(code) + 3 <= room else code
+    return text[: max(room - 1, 0)] + "…"
