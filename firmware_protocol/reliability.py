@@ -93,9 +93,9 @@ class Sender:
         self.window = window
         self.window_bytes = window_bytes
         self.rto = rto or RtoEstimator()
-        # a frame that carries no queue items (a keep-alive, a status request) is never
-        # retransmitted before this: nothing waits on it, and on a fast path (3 ms floor)
-        # a scheduling hiccup of either side would count as a loss on a clean idle link
+        # while no queue items are in flight (only keep-alives, status requests) nothing
+        # is resent before this: nothing waits on them, and on a fast path (3 ms floor) a
+        # scheduling hiccup of either side would count as a loss on a clean idle link
         self.calm_floor = 0.0
         self.next_seq = 0
         self.outstanding: deque[_Outstanding] = deque()
@@ -103,6 +103,7 @@ class Sender:
         self.items_queued = 0
         self.ticks_queued = 0
         self._bytes_out = 0
+        self._items_out = 0  # queue items in the outstanding frames
         self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
         self.retransmits = 0
         self.timeouts = 0
@@ -154,6 +155,7 @@ class Sender:
         for _ in range(n):
             last = self.outstanding.popleft()
             self._bytes_out -= len(last.payload)
+            self._items_out -= last.items
             clean += not last.retransmitted
         self.acked_clean += clean
         if last is not None and not last.retransmitted:
@@ -192,9 +194,10 @@ class Sender:
         return self.outstanding[0].sent_at + self._timeout()
 
     def _timeout(self) -> float:
-        """The head frame's retransmission timeout."""
+        """The retransmission timeout: the calm floor at least while no queue items wait
+        (sent or not)."""
         rto = self.rto.rto
-        return rto if self.outstanding[0].items else max(rto, self.calm_floor)
+        return rto if self._items_out or self.backlog else max(rto, self.calm_floor)
 
     def frames_to_send(self, now: float) -> list[tuple[int, bytes]]:
         """Retransmissions that are due (timeout or NAK) and new frames the window allows."""
@@ -221,6 +224,7 @@ class Sender:
             self.next_seq = (self.next_seq + 1) % SEQ_MOD
             self.outstanding.append(o)
             self._bytes_out += len(q.payload)
+            self._items_out += q.items
             out.append((o.seq, o.payload))
         return out
 

@@ -343,10 +343,23 @@ class HostLink:
 
     def ask_status(self) -> int:
         """Ask for a status report without waiting for it; returns the count of reports so
-        far (:meth:`status` is newer once :attr:`status_count` exceeds it)."""
+        far (:meth:`status` is newer once :attr:`status_count` exceeds it). Asking is not
+        driving: it does not renew the heater lease, so a thread that only watches (a screen
+        refreshing temperatures) cannot keep a wedged job's heaters on."""
         count = self._dev.status_count
-        self.send(GetStatus())
-        return count
+        self._identity()
+        core = self._core
+        start = self._t.now()
+        while True:
+            core.let_others_in()
+            with core.locked():
+                if core.ep.sender.window_free > 0:
+                    core.send_immediate(GetStatus())
+                    core.write(core.ep.flush(self._t.now()))
+                    return count
+                if self._t.now() - start > self.timeout_s:
+                    raise LinkTimeout(f"{core.name}: no room to ask for a status")
+                core.pump(SLICE_S)
 
     @property
     def status_count(self) -> int:

@@ -67,6 +67,25 @@ def test_the_heater_lease_holds_while_the_job_lives_and_lapses_when_it_is_wedged
         link.close()
 
 
+def test_a_watcher_asking_for_status_does_not_hold_a_wedged_jobs_heaters():
+    """A screen refreshing temperatures asks for statuses from its own thread: asking is
+    not driving, so the lease still lapses when the job stops calling."""
+    link = open_embedded(speedup=None, heater_lease_s=2.0)
+    try:
+        link.send(SetHeater(0, 2000))
+        bench = link._t
+        end, asked = bench.t + 3.0, bench.t
+        while bench.t < end and link._dev.failure is None:
+            link.keepalive_step()
+            if bench.t - asked >= 0.5:
+                asked = bench.t
+                link.ask_status()
+        assert link.device.machine.heaters[0].target == 0.0
+        assert link.device.machine.last_error == ErrorCode.HEATER_LEASE
+    finally:
+        link.close()
+
+
 def test_host_death_after_an_underrun_turns_the_heaters_off_within_the_watchdog():
     """A non-thermal fault (UNDERRUN) leaves the heater on; the host then goes silent."""
     link = open_embedded(speedup=None, watchdog_ms=500)

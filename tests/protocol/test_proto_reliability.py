@@ -147,3 +147,12 @@ def test_a_frame_without_queue_items_waits_for_the_calm_floor_before_a_resend():
     s.queue(b"segments", items=3, ticks=100)
     assert [seq for seq, _ in s.frames_to_send(0.030)] == [1]
     assert [seq for seq, _ in s.frames_to_send(0.040)] == [1]  # the fast timeout
+
+
+def test_a_status_request_ahead_of_segments_keeps_the_fast_timeout():
+    s = Sender(window=8, rto=RtoEstimator(initial=0.003, floor=0.003))
+    s.calm_floor = 0.025
+    s.queue(b"status")
+    s.queue(b"segments", items=3, ticks=100)
+    assert [seq for seq, _ in s.frames_to_send(0.0)] == [0, 1]
+    assert [seq for seq, _ in s.frames_to_send(0.004)] == [0, 1]  # segments wait behind it

@@ -250,6 +250,7 @@ class FakeBackend:
         self.log: list[ConsoleLine] = []
         self.sent: list[str] = []
         self.estops = 0
+        self.busy_status_asks = 0
         self.closed_after_jobs: list[bool] | None = None
         self.rate = 1.0
         self.now = 1_750_000_000.0  # the wall clock of the console's replies
@@ -302,6 +303,10 @@ class FakeBackend:
     def device_status(self):
         if self.link_dead:
             raise OSError("the port failed on read (was it unplugged?)")
+        return self.status if self._connected else None
+
+    def status_while_busy(self):
+        self.busy_status_asks += 1
         return self.status if self._connected else None
 
     def machine_rate(self):

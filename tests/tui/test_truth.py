@@ -246,3 +246,39 @@ async def test_a_status_asked_before_a_job_is_not_shown_after_it(gcode_file):
         release.set()
         await pilot.pause(0.3)
         assert app.state.device.hotend == 180.0  # not the old answer (25 °C)
+
+
+class _SlowHoming(FakeBackend):
+    """Homing holds the link until released; the hotend warms meanwhile."""
+
+    def __init__(self):
+        super().__init__()
+        self.release = threading.Event()
+
+    def home(self):
+        self.release.wait(20)
+        return super().home()
+
+    def status_while_busy(self):
+        from dataclasses import replace
+
+        self.status = replace(self.status, hotend=(self.status.hotend or 25.0) + 5.0)
+        return super().status_while_busy()
+
+
+async def test_temperatures_stay_fresh_while_an_operation_holds_the_link():
+    """Homing, a jog or a heater wait took the status refresh away: the screens showed the
+    temperature from before the operation for as long as it ran."""
+    backend = _SlowHoming()
+    app = make_app(backend, status_interval_s=0.1)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        app.controller.refresh_device()
+        state = await wait_for(pilot, lambda s: s.device is not None)
+        before = state.device.hotend
+        app.controller.device_op("homing", backend.home)
+        await wait_for(pilot, lambda s: bool(s.busy))
+        state = await wait_for(pilot, lambda s: s.device.hotend >= before + 10, 10, "fresh temps")
+        assert state.busy and backend.busy_status_asks >= 2
+        backend.release.set()
+        await wait_for(pilot, lambda s: not s.busy, 10, "homed")

@@ -85,6 +85,11 @@ class Backend(Protocol):
     def device_status(self) -> DeviceStatusView | None:
         """Blocking (short): the device's latest status; raises when the link is dead."""
 
+    def status_while_busy(self) -> DeviceStatusView | None:
+        """Blocking (short): while an operation holds the link (homing, a jog, a heater
+        wait), ask for a status without waiting for it and return the latest one received,
+        if it is recent (the operation's own waiting reads the reply); else None."""
+
     def device_log(self) -> list[ConsoleLine]:
         """Non-blocking: what the device said since the last call (errors, resets)."""
 

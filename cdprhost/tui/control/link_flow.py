@@ -153,9 +153,18 @@ class ControllerBase:
             self.update(connection=replace(conn, health=health))
 
     def refresh_device(self) -> None:
-        if not self.state.connected or self.state.job_active or self.state.busy:
+        if not self.state.connected or self.state.job_active:
             return
         gen = self._status_gen
+        if self.state.busy:  # homing, a jog, a heater wait: temperatures stay fresh
+            self.background(
+                "status-busy",
+                self.backend.status_while_busy,
+                lambda status: self._seen_while_busy(status, gen),
+                lambda _exc: None,  # the operation itself reports a dead link
+                exclusive=True,
+            )
+            return
 
         def done(status: Any) -> None:
             self.say(*self.backend.device_log())
@@ -198,6 +207,10 @@ class ControllerBase:
                 then()
 
         self.background("status", self.backend.device_status, done, fail, exclusive=True)
+
+    def _seen_while_busy(self, status: DeviceStatusView | None, gen: int) -> None:
+        if status is not None and self.state.busy and gen == self._status_gen:
+            self.device_seen(status)
 
     def device_seen(self, status: DeviceStatusView) -> None:
         hist = self.state.device_temps

@@ -36,6 +36,7 @@ from cdprhost.tui.control.views import (
 ALL_MODULES = 0b111
 JOG_SPEED_MM_S = 40.0
 DEVICE_LOG = 200
+BUSY_STATUS_MAX_AGE_S = 2.0  # older while busy: not shown as fresh (the screens mark it stale)
 
 
 def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str], ...]:
@@ -214,6 +215,16 @@ class LiveBackend:
         pump = self.idle_pump_s * (self.speedup or 1.0) if self._embedded else 0.0
         self._note_events(link.poll(pump))
         return self._status_view(link.request_status())
+
+    def status_while_busy(self) -> DeviceStatusView | None:
+        link = self._link
+        if link is None:
+            return None
+        link.ask_status()  # not a pump: the busy operation's own waiting reads the reply
+        st = link.status()
+        if st is None or link.now() - st.received_at > BUSY_STATUS_MAX_AGE_S:
+            return None
+        return self._status_view(st)
 
     def _status_view(self, st: Any) -> DeviceStatusView:
         steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
