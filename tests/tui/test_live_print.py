@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("cdprhost.job.runner", reason="the print runner has not landed yet")
 
 
-from cdprhost.job.resume import resume_path_for
+from cdprhost.job.resume import find_resume_point, resume_path_for
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen, FailureScreen
@@ -207,16 +207,23 @@ async def test_cancel_stops_within_the_buffered_motion(tall, tmp_path):
         assert any(n.startswith("cancel requested") for n in state.job.notices)
         latency = at_rest_after(state)
         assert latency is not None and latency <= 2.0, state.job.notices
-        state = await wait_for(pilot, lambda s: s.history and s.device is not None, timeout=60)
-        assert state.history[0].status == "cancelled" and state.history[0].resume_at
+        # the record is listed at once; its resume point, read from the saved file, follows
+        # from a worker that runs alongside the device's new status read
+        state = await wait_for(
+            pilot,
+            lambda s: s.history and s.history[0].resume_at and s.device is not None,
+            timeout=60,
+            what="the history record with its resume point, and the device read again",
+        )
+        point = find_resume_point(str(tall), tmp_path / "resume")
+        assert point is not None and state.history[0].status == "cancelled"
+        assert state.history[0].resume_at == f"line {point.last_line} (layer {point.last_layer})"
         assert state.device.hotend_target == 0 and not state.device.fault
 
 
 async def test_quit_while_printing_stops_parks_and_records_before_closing(tall, tmp_path):
     """^q, y mid-print: the job stops like a cancel (heaters off, parked, resume point), goes to
     the history, and only then is the link closed: no crash, no watchdog fault."""
-    from cdprhost.job.resume import find_resume_point
-
     backend = LiveBackend(
         "paper-prototype",
         speedup=5.0,  # paced: the keys land mid-print however fast the machine is

@@ -295,20 +295,26 @@ async def test_time_left_is_wall_clock_and_includes_heating(tmp_path):
     gate = threading.Semaphore(0)
     backend = FakeBackend(gate=gate)
     backend.rate = 10.0  # a simulator at 10x: machine time runs 10 times faster
-    app = make_app(backend)
+    clock = FakeClock()  # the shown time left counts down with this clock: the test moves it
+    app = make_app(backend, clock=clock)
     async with app.run_test(size=(120, 32)) as pilot:
         await wait_for(pilot, lambda s: s.connected)
         app.controller.refresh_device()
         await wait_for(pilot, lambda s: s.device is not None)
         await pick_file(pilot, part)
         await wait_for(pilot, lambda s: s.file.preflight is not None)
-        await pilot.pause(1.2)  # one tick
         text = await shown(pilot)
         # before the start: 60 s machine time at 10x, plus heating from 25 °C (bed, hotend)
         assert "takes ≈ 0:00:" in text and "wall-clock" in text and "heating 0:00:" in text
         await pilot.press("s", "y")
         await wait_for(pilot, lambda s: s.job.state is JobState.PRINTING)
-        await pilot.pause(1.2)
+        # The job waits at its first move (the gate). What is shown started from the first
+        # estimate drawn (heating included or not, as the events were folded) and counts
+        # down; two minutes on it has settled on the estimate. The next tick draws it, and
+        # the temperatures read two minutes ago as stale.
+        graph = app.screen.query_one(TemperatureGraph)
+        clock.t += 120.0
+        await wait_for(pilot, lambda s: graph.stale, what="the next tick")
         text = await shown(pilot)
         assert "left 0:00:06 wall-clock · done ≈" in text  # 60 s of machine time at 10x
         app.controller.cancel()
