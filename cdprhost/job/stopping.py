@@ -15,8 +15,9 @@ effective once the device reports it at rest. Then:
 - cancel or safe stop: raise :class:`Stop`; the runner parks and switches the heaters off
   as the profile says.
 
-A cancel while the device holds its queue for a heater (nothing moves) flushes the queue
-at once: an e-stop keeping heaters and motors, then the fault is cleared.
+A cancel while the device holds its queue for a heater (nothing moves) or homes (at a
+crawl) flushes the queue at once: an e-stop keeping heaters and motors, then the fault is
+cleared (after homing was cut short the modules are not homed: nothing parks).
 """
 
 from __future__ import annotations
@@ -166,7 +167,9 @@ class StopControl:
             "stopping within the motion already sent",
         )
         t0 = link.now()
-        if self._at_heater_wait():
+        if cancel and self._homing():
+            self._flush_queue()  # the modules stop where they are, not homed
+        elif self._at_heater_wait():
             self._flush_heater_wait()
             if not cancel:  # resumed later: the wait and what followed go out again
                 self._send_again_after_resume()
@@ -250,8 +253,19 @@ class StopControl:
             s.service()
         return False
 
+    def _homing(self) -> bool:
+        """The device is homing (or about to: only the G28's own items are left before it):
+        homing is slow, at a crawl; a cancel need not wait for it."""
+        first, last = self.s.home_items
+        return first - 1 <= self.s.link.progress.items_done < last
+
     def _flush_heater_wait(self) -> None:
         """The queue is held by a heater wait (nothing moves): flush it at once."""
+        self._flush_queue()
+
+    def _flush_queue(self) -> None:
+        """Stop the device's queue at once (an e-stop keeping heaters and motors), then clear
+        the e-stop's fault: only for what may stop dead (a heater wait, homing's crawl)."""
         link = self.s.link
         link.emergency_stop(flags=EstopFlag.KEEP_HEATERS | EstopFlag.KEEP_MOTORS)
         link.clear_fault()

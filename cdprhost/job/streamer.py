@@ -124,6 +124,7 @@ class Streamer:
         self.boot_id = link.identity.boot_id if link.identity else 0
         self.status: DeviceStatus | None = None
         self.heat_item = 0
+        self.home_items = (0, 0)  # the queue items of the last G28 (enable, home)
         self._at_rest = True
         self._last_progress = -1e9
         self._last_status = -1e9
@@ -181,6 +182,8 @@ class Streamer:
             return
         self._check_heater_limits(msgs)
         numbers = self.link.send(*msgs)
+        if isinstance(item, g.HomeCommand):
+            self.home_items = (min(numbers), max(numbers))
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self.heat_item = max(numbers)
             self.stops.wait_sent(item)

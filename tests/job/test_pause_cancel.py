@@ -4,6 +4,7 @@ motion sent, and an exact resume."""
 from __future__ import annotations
 
 import threading
+import time
 
 from cdprhost.job.runner import PrintJob
 from cdprhost.job.state import JobState, StateChanged
@@ -136,3 +137,29 @@ def test_pause_while_heating_parks_at_once_and_resumes_with_the_wait(tmp_path):
     assert seen.count(JobState.HEATING) == 2  # the wait again after the resume
     inserted = (marks["stop"].first_segment, marks["resumed_at"])
     assert _program_steps(record, *inserted) == [r["steps"] for r in clean_record]
+
+
+def test_cancel_during_homing_does_not_wait_for_it(tmp_path):
+    """Homing crawls (2 s from where the simulated device starts, minutes on a tall machine):
+    a cancel stops it at once, nothing of the program runs, heaters off."""
+    marks = {}
+
+    def cancel_once_homing(job):
+        link = job.link
+        while link.progress.items_done < 1:  # the G28's enable has run: homing now
+            time.sleep(0.002)
+        marks["asked"] = link.now()
+        job.request_cancel()
+
+    def on_state(job, state):  # in the job's thread: the watcher needs its own
+        if state is JobState.PRINTING and "watcher" not in marks:
+            marks["watcher"] = threading.Thread(target=cancel_once_homing, args=(job,))
+            marks["watcher"].start()
+
+    job, result, record = _run_with(tmp_path, on_state)
+    assert result.status == "cancelled"
+    assert record == []  # nothing of the program moved
+    status = job.link.request_status()
+    assert status.homed_mask == 0  # cut short: not homed, so nothing parked
+    assert status.hotend_target_c == 0 and status.bed_target_c == 0
+    assert job.link.now() - marks["asked"] < 1.0  # homing alone takes 2 s here
