@@ -1,12 +1,16 @@
 """Memory of the terminal UI over repeated prints: it must stay flat (issue 23: 143 -> 253 MB).
 
-Run: python bench/tui_memory.py [--prints 8] [--layers 10] [--top 8]
+Run: python bench/tui_memory.py [--prints 14] [--since 4] [--layers 10] [--top 8] [--frames 1]
 
 The UI runs headless (Textual's test driver, 120x40) on the embedded simulated device at full
 speed and prints the same small part ``--prints`` times, keys only (s, y). After each print
 (and a settle), Python's traced memory (tracemalloc) and the process RSS are read. Reported:
-both per print, the growth from the second print to the last per print, and the allocation
-sites that grew most over that span (what accumulates, if anything).
+both per print, the growth per print from print ``--since`` to the last (least-squares
+slope), and the allocation sites (``--frames`` > 1: whole tracebacks) that grew most over
+that span (from the print before it: what accumulates, if anything). Only the two snapshots
+compared are taken, the first before the span and on disk until the end: snapshots held in
+memory (one of every print, before) grew the RSS by megabytes per print themselves, and even
+a freed one leaves a few MB of RSS behind (fragmented arenas).
 """
 
 from __future__ import annotations
@@ -45,7 +49,16 @@ def rss_mb() -> float:
     return float("nan")
 
 
-async def run(prints: int, layers: int, top: int, trim: bool = False) -> None:
+def slope(xs: list[float], ys: list[float]) -> float:
+    """Least-squares growth of ``ys`` per unit of ``xs``."""
+    mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
+    den = sum((x - mx) ** 2 for x in xs)
+    return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / den if den else 0.0
+
+
+async def run(
+    prints: int, layers: int, top: int, trim: bool = False, since: int = 4, frames: int = 1
+) -> None:
     from cdprhost.job.state import JobState
     from cdprhost.tui.app import CdprApp
     from cdprhost.tui.control.live import LiveBackend
@@ -76,10 +89,12 @@ async def run(prints: int, layers: int, top: int, trim: bool = False) -> None:
 
     rows: list[tuple[int, float, float]] = []
     counts: dict[int, dict[str, int]] = {}
-    snaps = []
+    snaps: dict[int, tracemalloc.Snapshot] = {}
+    since = min(max(since, 2), max(prints - 1, 2))
+    first = since - 1  # the first snapshot: before the span, so what it leaves is not growth
     async with app.run_test(size=(120, 40)) as pilot:
         await until(lambda: app.state.connected and app.state.file.preflight is not None)
-        tracemalloc.start(1)
+        tracemalloc.start(frames)
         for n in range(1, prints + 1):
             await pilot.press("s")
             await until(lambda: isinstance(app.screen, ConfirmScreen))
@@ -92,38 +107,48 @@ async def run(prints: int, layers: int, top: int, trim: bool = False) -> None:
                 ctypes.CDLL("libc.so.6").malloc_trim(0)
             current, _ = tracemalloc.get_traced_memory()
             rows.append((n, current / 2**20, rss_mb()))
-            snaps.append(tracemalloc.take_snapshot())
-            print(
-                f"print {n}: traced {current / 2**20:7.2f} MB  rss {rss_mb():7.1f} MB", flush=True
-            )
+            print(f"print {n}: traced {rows[-1][1]:7.2f} MB  rss {rows[-1][2]:7.1f} MB", flush=True)
+            if n == first:  # on disk until the end: held, it would add to every later RSS
+                snapshot = tracemalloc.take_snapshot()
+                snapshot.dump(str(work / "first.snapshot"))
+                del snapshot
+            elif n == prints:
+                snaps[n] = tracemalloc.take_snapshot()
+                snaps[first] = tracemalloc.Snapshot.load(str(work / "first.snapshot"))
             counts[n] = widget_counts()
-    if len(rows) >= 3:
-        span = rows[-1][0] - rows[1][0]
-        traced = (rows[-1][1] - rows[1][1]) / span
-        rss = (rows[-1][2] - rows[1][2]) / span
+    span = [r for r in rows if r[0] >= since]
+    if len(span) >= 2:
+        xs = [float(r[0]) for r in span]
+        traced, rss = slope(xs, [r[1] for r in span]), slope(xs, [r[2] for r in span])
         print(
-            f"growth per print (print 2 -> {rows[-1][0]}): traced {traced:+.3f} MB, rss {rss:+.2f} MB"
+            f"growth per print (print {since} -> {rows[-1][0]}, least squares): "
+            f"traced {traced:+.3f} MB, rss {rss:+.2f} MB"
         )
         grown = {
-            k: v - counts[rows[1][0]].get(k, 0)
+            k: v - counts[since].get(k, 0)
             for k, v in counts[rows[-1][0]].items()
-            if v > counts[rows[1][0]].get(k, 0)
+            if v > counts[since].get(k, 0)
         }
         print("live widgets that grew:", grown or "none")
-        stats = snaps[-1].compare_to(snaps[1], "lineno")
-        print("largest growth by allocation site:")
+        key = "traceback" if frames > 1 else "lineno"
+        stats = snaps[prints].compare_to(snaps[first], key)
+        print(f"largest growth by allocation site (print {first} -> {prints}):")
         for stat in stats[:top]:
             print(f"  {stat.size_diff / 1024:+9.1f} KiB  {stat.traceback[0]}")
+            for frame in list(stat.traceback)[1:frames]:
+                print(f"                 {frame}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--prints", type=int, default=8)
+    parser.add_argument("--since", type=int, default=4, help="growth from this print on")
+    parser.add_argument("--frames", type=int, default=1, help="traceback depth of the sites")
     parser.add_argument("--layers", type=int, default=10)
     parser.add_argument("--top", type=int, default=8)
     parser.add_argument("--trim", action="store_true", help="malloc_trim(0) after each print")
     args = parser.parse_args()
-    asyncio.run(run(args.prints, args.layers, args.top, args.trim))
+    asyncio.run(run(args.prints, args.layers, args.top, args.trim, args.since, args.frames))
 
 
 if __name__ == "__main__":

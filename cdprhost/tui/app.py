@@ -32,7 +32,13 @@ from cdprhost.tui.control.backend import EMBEDDED, Backend
 from cdprhost.tui.control.controller import Controller
 from cdprhost.tui.control.log_route import ConsoleHandler, route_logging
 from cdprhost.tui.control.pump import EventPump
-from cdprhost.tui.control.store import JobHistory, RecentFiles, screenshot_dir, tui_dir
+from cdprhost.tui.control.store import (
+    HISTORY_MAX,
+    JobHistory,
+    RecentFiles,
+    screenshot_dir,
+    tui_dir,
+)
 from cdprhost.tui.control.views import ConsoleLine
 from cdprhost.tui.keys import action_name
 from cdprhost.tui.screens.calibrate import CalibrateScreen
@@ -174,7 +180,7 @@ class CdprApp(App[int]):
             "stores",
             lambda: (recent.load(), history.load()),
             lambda loaded: self.controller.update(
-                recent=loaded[0], history=(*self.state.history, *loaded[1])
+                recent=loaded[0], history=(*self.state.history, *loaded[1])[:HISTORY_MAX]
             ),
         )
         if self._connect_on_start:

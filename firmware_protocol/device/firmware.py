@@ -69,7 +69,8 @@ assert MAX_EVENT_VALUES >= 3  # HOMED carries three positions
 
 class SimDevice:
     """The simulated firmware. ``record`` lists every executed segment (see record.py);
-    with ``record_path`` it is also streamed to that file as segments execute."""
+    with ``record_path`` it is also streamed to that file as segments execute; with
+    ``record_keep`` n it holds only about the newest n in memory (the file gets all)."""
 
     def __init__(
         self,
@@ -78,13 +79,14 @@ class SimDevice:
         observer: Observer | None = None,
         *,
         record_path: str | os.PathLike[str] | None = None,
+        record_keep: int | None = None,
         on_notice: Callable[[str], None] | None = None,
     ):
         self.config = config or SimConfig()
         self.faults = faults or FaultSpec()
         self.observer = observer
         self.on_notice = on_notice
-        self.record = SegmentRecord(record_path, clock_hz=self.config.clock_hz)
+        self.record = SegmentRecord(record_path, clock_hz=self.config.clock_hz, keep=record_keep)
         attach = getattr(observer, "attach_record", None)
         if attach is not None:  # the observer may read motion directions from the record
             attach(self.record)

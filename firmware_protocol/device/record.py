@@ -12,6 +12,12 @@ object per segment, so a long print never makes the garbage collector pause the
 device) and, given a path, streams each entry to its file as it executes (so a
 killed simulator still leaves everything up to its last buffered line). Reading an
 entry builds its dict on demand.
+
+With ``keep`` n, only the newest entries stay in memory: at most ``n + n // 8`` (the
+oldest are dropped in batches, so appending stays cheap); :attr:`SegmentRecord.dropped`
+counts them and the file, if any, still gets every entry. A device that runs for weeks
+(the terminal UI's embedded one) keeps a bounded record this way; indices and ``len``
+cover the entries held.
 """
 
 from __future__ import annotations
@@ -52,8 +58,18 @@ def _line(entry: dict[str, Any]) -> str:
 class SegmentRecord(Sequence[dict[str, Any]]):
     """Executed segments in columns; optionally streamed to ``path`` (JSON lines)."""
 
-    def __init__(self, path: str | os.PathLike[str] | None = None, *, clock_hz: int = 100_000):
+    def __init__(
+        self,
+        path: str | os.PathLike[str] | None = None,
+        *,
+        clock_hz: int = 100_000,
+        keep: int | None = None,
+    ):
+        if keep is not None and keep < 1:
+            raise ValueError(f"keep must be at least 1, not {keep}")
         self.clock_hz = clock_hz
+        self.keep = keep
+        self.dropped = 0  # the oldest entries no longer held (``keep``)
         self._seq = array("q")
         self._steps = array("q")  # 4 per entry
         self._ticks = array("q")
@@ -87,6 +103,15 @@ class SegmentRecord(Sequence[dict[str, Any]]):
             self._fh.write(
                 _line(record_entry(seq, steps, motion_ticks, self.clock_hz, boot, error))
             )
+        if self.keep is not None and len(self._seq) > self.keep + self.keep // 8:
+            self._drop(len(self._seq) - self.keep)
+
+    def _drop(self, n: int) -> None:
+        """Forget the ``n`` oldest entries (the file keeps them)."""
+        for column in (self._seq, self._ticks, self._boot, self._error):
+            del column[:n]
+        del self._steps[: 4 * n]
+        self.dropped += n
 
     def flush(self) -> None:
         if self._fh is not None:

@@ -161,3 +161,16 @@ def test_motion_that_is_not_a_whole_block_waits_for_the_host():
     link.queue_segments(SegmentBatch([2000], [[100, 0, 0, 0]], [RAMP_TO_REST]))
     link.wait_idle(5)
     assert [r["steps"][0] for r in dev.record] == [100, 200]
+
+
+def test_a_record_with_keep_holds_only_the_newest_and_streams_all(tmp_path):
+    path = tmp_path / "rec.jsonl"
+    rec = SegmentRecord(path, keep=8)
+    for seq in range(1, 101):
+        rec.append(seq, [seq, 2 * seq, 3 * seq, 0], 100 * seq)
+        assert len(rec) <= 8 + 8 // 8
+    rec.close()
+    assert rec.dropped + len(rec) == 100
+    assert rec[-1]["seq"] == 100 and rec[0]["seq"] == rec.dropped + 1
+    assert rec.steps(last=2).tolist() == [[99, 198, 297, 0], [100, 200, 300, 0]]
+    assert [e["seq"] for e in read_record(path)] == list(range(1, 101))

@@ -37,6 +37,11 @@ ALL_MODULES = 0b111
 JOG_SPEED_MM_S = 40.0
 DEVICE_LOG = 200
 BUSY_STATUS_MAX_AGE_S = 2.0  # older while busy: not shown as fresh (the screens mark it stale)
+DEVICE_RECORD_KEEP = 4096
+"""Executed segments the embedded simulated device holds in memory (at most an eighth more):
+the newest, enough for an observer's motion directions (its window is 4096). Without a cap
+its record grew by 64 bytes a segment for as long as the UI ran (65 KB per print of the
+memory bench's small part; 32 MB for a print of half a million segments)."""
 
 
 def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str], ...]:
@@ -152,8 +157,9 @@ class LiveBackend:
 
         self.disconnect()
         if port == EMBEDDED:
+            options = {"record_keep": DEVICE_RECORD_KEEP, **self.sim_options}
             link = open_embedded(
-                speedup=self.speedup, timeout_s=self.profile.serial.timeout_s, **self.sim_options
+                speedup=self.speedup, timeout_s=self.profile.serial.timeout_s, **options
             )
             observer = self.sim_options.get("observer")
             if observer is not None and hasattr(observer, "attach_record"):

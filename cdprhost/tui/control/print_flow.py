@@ -17,6 +17,7 @@ from cdprhost.job.resume import resume_question
 from cdprhost.job.state import JobSnapshot, JobState, StateChanged
 from cdprhost.tui.control.backend import JobHandle
 from cdprhost.tui.control.link_flow import ControllerBase
+from cdprhost.tui.control.store import HISTORY_MAX
 from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView, JobRecord, ResumeView
 from cdprhost.tui.state import FileView
 from cdprhost.tui.tabs import screen_key
@@ -225,7 +226,7 @@ class PrintFlow(ControllerBase):
         def done(full: JobRecord) -> None:
             self.update(history=tuple(full if r is record else r for r in self.state.history))
 
-        self.update(history=(record, *self.state.history))
+        self.update(history=(record, *self.state.history)[:HISTORY_MAX])  # the file keeps all
         if self._quitting:
             done(work())
         else:

@@ -19,6 +19,7 @@ from cdprhost.tui.control.views import JobRecord
 
 RECENT_MAX = 15
 HISTORY_MAX = 500
+"""The newest finished prints the UI holds and shows (the history file keeps every one)."""
 
 
 def tui_dir() -> Path:
