@@ -145,14 +145,12 @@ static void push_item(void)
     sei();
 }
 
-/* a queue item has been numbered; discard it while faulted */
+/* a queue item has been numbered; discard it while faulted (the queue is empty) */
 static uint8_t discard_if_fault(void)
 {
     if (!mc.fault)
         return 0;
-    cli();
-    st.items_done = mc.items_received;
-    sei();
+    stepper_flush(mc.items_received, mc.segments_received);
     return 1;
 }
 

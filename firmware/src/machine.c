@@ -107,7 +107,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
     mc.last_error = code;
     if (machine_thermal(code))
         mc.latched = code;
-    stepper_flush(mc.items_received);
+    stepper_flush(mc.items_received, mc.segments_received);
     machine_account();
     stepper_positions(mc.tail_pos);
     if (how & SD_MOTORS_OFF)

@@ -197,6 +197,7 @@ void stepper_init(uint8_t hold_mask)
     st.current = 0xFF;
     st.at_rest = 1;
     st.running = 1;
+    st.seg_next = 1;
     outs[0].units = outs[1].units = TICK_UNITS;
     /* Timer1: CTC on OCR1A, no prescaler; compare C toggles OC1C (MARK_EDGE)
      * when OCR1C is set to match one cycle into the next tick */
@@ -298,7 +299,7 @@ void stepper_halt(void)
     seg_snapshot(&sn);
     if (st.current == IT_SEG) {
         abort_pending = 1;
-        abort_seq = st.segments_done + 1;
+        abort_seq = st.seg_next;
     }
     st.current = 0xFF;
     st.at_rest = 1;
@@ -319,12 +320,13 @@ void stepper_resume(void)
     st.running = 1;
 }
 
-void stepper_flush(uint32_t items_received)
+void stepper_flush(uint32_t items_received, uint32_t segments_received)
 {
     uint8_t s = SREG;
     cli();
     queue_tail = queue_head;
     st.items_done = items_received;
+    st.seg_next = segments_received + 1;
     motion_plans_reset();
     SREG = s;
 }
@@ -587,7 +589,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
     }
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
-    o->seq = ++s->segments_done;
+    o->seq = s->segments_done = s->seg_next++;
     s->at_rest = p->at_rest;
     plan_tail++;
     s->items_done++;
