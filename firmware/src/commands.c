@@ -272,10 +272,6 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
             machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
             return;
         }
-        if (!heater_tune_supported()) {
-            machine_fail(ERR_AUTOTUNE_FAILED, mc.items_received, 0, (uint8_t)v[0], 3);
-            return;
-        }
         it = new_item(IT_TUNE);
         it->u.tune.id = (uint8_t)v[0];
         it->u.tune.target = (uint16_t)v[1];

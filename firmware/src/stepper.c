@@ -459,11 +459,13 @@ static void __attribute__((noinline)) dispatch(void)
             st.current = IT_HOME;
             return;
         case IT_WAIT:
-            st.at_rest = 1;
-            stepper_wait_ok = 0;
             st.wait_heater = it->u.cmd.id;
             st.wait_tolerance = it->u.cmd.value;
-            st.current = IT_WAIT;
+            /* fall through */
+        case IT_TUNE: /* the main loop runs it (autotune.c) */
+            st.at_rest = 1;
+            stepper_wait_ok = 0;
+            st.current = it->kind;
             return;
         case IT_SETPOS:
             for (uint8_t k = 0; k < 4; k++)
@@ -692,6 +694,7 @@ static void __attribute__((noinline)) compute_other(void)
             }
             break;
         case IT_WAIT:
+        case IT_TUNE:
             if (stepper_wait_ok) {
                 st.current = 0xFF;
                 complete_item();

@@ -43,9 +43,7 @@ from tests.protocol.test_proto_fuzz import MALFORMED_FRAMES, malformed_frame
 pytestmark = pytest.mark.timeout(300)
 
 # what the AVR firmware of this branch lacks (i20fw lands it): test name -> reason
-AVR_PENDING = {
-    "test_autotune_reports_gains": "AUTOTUNE (the AVR answers AUTOTUNE_FAILED)",
-}
+AVR_PENDING: dict[str, str] = {}
 
 
 @pytest.fixture
