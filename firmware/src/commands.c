@@ -145,14 +145,12 @@ static void push_item(void)
     sei();
 }
 
-/* a queue item has been numbered; discard it while faulted */
+/* a queue item has been numbered; discard it while faulted (the queue is empty) */
 static uint8_t discard_if_fault(void)
 {
     if (!mc.fault)
         return 0;
-    cli();
-    st.items_done = mc.items_received;
-    sei();
+    stepper_flush(mc.items_received, mc.segments_received);
     return 1;
 }
 
@@ -272,10 +270,6 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
     case OP_AUTOTUNE:
         if (v[1] > heater_max_dc((uint8_t)v[0])) {
             machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
-            return;
-        }
-        if (!heater_tune_supported()) {
-            machine_fail(ERR_AUTOTUNE_FAILED, mc.items_received, 0, (uint8_t)v[0], 3);
             return;
         }
         it = new_item(IT_TUNE);

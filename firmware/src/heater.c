@@ -8,6 +8,7 @@
 #include <avr/io.h>
 
 #include "adc.h"
+#include "autotune.h"
 #include "board_ramps14.h"
 #include "config.h"
 #include "heater.h"
@@ -51,11 +52,6 @@ void heater_set_pid(uint8_t id, uint32_t p, uint32_t i, uint32_t d)
         kd[id] = (float)d * 1e-3f;
     }
     heaters[id].integ = 0;
-}
-
-uint8_t heater_tune_supported(void)
-{
-    return 0; /* relay autotune: not on this firmware yet (ERROR AUTOTUNE_FAILED 3) */
 }
 
 uint16_t heater_max_dc(uint8_t id)
@@ -146,11 +142,13 @@ static void protect(uint8_t id, uint32_t now)
     }
 }
 
-static uint8_t pid(uint8_t id)
+static uint8_t pid(uint8_t id, uint32_t now)
 {
     struct heater *h = &heaters[id];
     if (h->state == HS_OFF || h->fault)
         return 0;
+    if (autotune_heater() == (int8_t)id)
+        return autotune_relay(h->temp_dc, now); /* AUTOTUNE: the relay instead */
     float err = (float)h->target_dc - (float)h->temp_dc;
     float d = (float)(h->temp_dc - h->last_dc);
     if (err > 150.0f) {
@@ -193,7 +191,7 @@ void heater_poll(uint32_t now)
             adc_n[i] = 0;
         }
         protect(i, now);
-        heater_duty[i] = pid(i);
+        heater_duty[i] = pid(i, now);
     }
     /* the duties stand for HEATER_LEASE_TICKS step ticks: if this loop stops
      * refreshing them, the interrupt switches the heaters off by itself */

@@ -27,6 +27,5 @@ void heater_outputs_off(void);
 uint16_t heater_max_dc(uint8_t id);
 /* SET_PID: gains x1000 in Marlin's units; all 0 = the defaults. */
 void heater_set_pid(uint8_t id, uint32_t kp, uint32_t ki, uint32_t kd);
-uint8_t heater_tune_supported(void);
 
 #endif

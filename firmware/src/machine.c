@@ -1,5 +1,6 @@
 #include <avr/interrupt.h>
 
+#include "autotune.h"
 #include "commands.h"
 #include "heater.h"
 #include "link.h"
@@ -34,7 +35,7 @@ uint8_t machine_flags(void)
         f |= FLAG_ENABLED;
     if (heaters[0].target_dc || heaters[1].target_dc)
         f |= FLAG_HEATING;
-    if (st.current == IT_WAIT)
+    if (st.current == IT_WAIT || st.current == IT_TUNE)
         f |= FLAG_WAITING;
     return f;
 }
@@ -99,6 +100,7 @@ uint8_t machine_thermal(uint8_t code)
 void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
                       int32_t value, uint8_t how)
 {
+    autotune_cancel(); /* an autotune never outlives its queue item */
     if (how & SD_HEATERS_OFF)
         heater_outputs_off();
     sim_mailbox.last_error = code; /* before the abort marker names it */
@@ -107,7 +109,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
     mc.last_error = code;
     if (machine_thermal(code))
         mc.latched = code;
-    stepper_flush(mc.items_received);
+    stepper_flush(mc.items_received, mc.segments_received);
     machine_account();
     stepper_positions(mc.tail_pos);
     if (how & SD_MOTORS_OFF)
@@ -119,7 +121,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
 {
     uint8_t off = machine_thermal(code) || code == ERR_ESTOP || code == ERR_WATCHDOG ||
-                  code == ERR_HEATER_LEASE;
+                  code == ERR_HEATER_LEASE || code == ERR_AUTOTUNE_FAILED;
     machine_shutdown(code, item, segment, axis, value, off ? SD_HEATERS_OFF : 0);
 }
 

@@ -51,7 +51,8 @@ uint32_t machine_buffered_ticks(void);
 #define SD_MOTORS_OFF 0x02
 void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
                       int32_t value, uint8_t how);
-/* A fault: heaters off for thermal faults, the watchdog and e-stop. */
+/* A fault: heaters off for thermal faults, the watchdog, e-stop, the heater lease and a
+ * failed autotune (any fault cancels an autotune and switches its heater off). */
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
 /* E-stop or host watchdog: stop now, fail with `code`, keep what the flags say. */
 void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32_t value);

@@ -4,6 +4,7 @@
 #include <avr/interrupt.h>
 #include <avr/io.h>
 
+#include "autotune.h"
 #include "board_ramps14.h"
 #include "frame.h"
 #include "commands.h"
@@ -176,6 +177,7 @@ int main(void)
         motion_prepare_ahead();
         take_interrupt_reports(now);
         heater_poll(now);
+        autotune_poll(now);
         stepper_start_ok = session_may_start();
         session_poll(link_now);
         link_poll(link_now);

@@ -197,6 +197,7 @@ void stepper_init(uint8_t hold_mask)
     st.current = 0xFF;
     st.at_rest = 1;
     st.running = 1;
+    st.seg_next = 1;
     outs[0].units = outs[1].units = TICK_UNITS;
     /* Timer1: CTC on OCR1A, no prescaler; compare C toggles OC1C (MARK_EDGE)
      * when OCR1C is set to match one cycle into the next tick */
@@ -298,7 +299,7 @@ void stepper_halt(void)
     seg_snapshot(&sn);
     if (st.current == IT_SEG) {
         abort_pending = 1;
-        abort_seq = st.segments_done + 1;
+        abort_seq = st.seg_next;
     }
     st.current = 0xFF;
     st.at_rest = 1;
@@ -319,12 +320,13 @@ void stepper_resume(void)
     st.running = 1;
 }
 
-void stepper_flush(uint32_t items_received)
+void stepper_flush(uint32_t items_received, uint32_t segments_received)
 {
     uint8_t s = SREG;
     cli();
     queue_tail = queue_head;
     st.items_done = items_received;
+    st.seg_next = segments_received + 1;
     motion_plans_reset();
     SREG = s;
 }
@@ -457,11 +459,13 @@ static void __attribute__((noinline)) dispatch(void)
             st.current = IT_HOME;
             return;
         case IT_WAIT:
-            st.at_rest = 1;
-            stepper_wait_ok = 0;
             st.wait_heater = it->u.cmd.id;
             st.wait_tolerance = it->u.cmd.value;
-            st.current = IT_WAIT;
+            /* fall through */
+        case IT_TUNE: /* the main loop runs it (autotune.c) */
+            st.at_rest = 1;
+            stepper_wait_ok = 0;
+            st.current = it->kind;
             return;
         case IT_SETPOS:
             for (uint8_t k = 0; k < 4; k++)
@@ -587,7 +591,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
     }
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
-    o->seq = ++s->segments_done;
+    o->seq = s->segments_done = s->seg_next++;
     s->at_rest = p->at_rest;
     plan_tail++;
     s->items_done++;
@@ -690,6 +694,7 @@ static void __attribute__((noinline)) compute_other(void)
             }
             break;
         case IT_WAIT:
+        case IT_TUNE:
             if (stepper_wait_ok) {
                 st.current = 0xFF;
                 complete_item();

@@ -6,6 +6,8 @@
 struct stepper_state {
     int32_t pos[4];            /* logical step positions */
     uint32_t items_done, segments_done;
+    uint32_t seg_next;         /* the number the next executed segment has (PROTOCOL.md 4,
+                                  Numbering: refused and flushed segments keep theirs) */
     uint32_t motion_ticks;     /* executed durations, clock units */
     uint8_t enabled_mask, homed_mask;
     uint8_t at_rest;           /* the last executed motion ended at rest */
@@ -42,7 +44,9 @@ void stepper_init(uint8_t hold_mask);
 /* Stop now (fault, estop): the executing item is abandoned, nothing more runs. */
 void stepper_halt(void);
 void stepper_resume(void);
-void stepper_flush(uint32_t items_received);
+/* Empty the queue: its items count as done; the next segment queued is number
+ * segments_received + 1. */
+void stepper_flush(uint32_t items_received, uint32_t segments_received);
 void stepper_disable_all(void);
 uint8_t stepper_moving(void);
 /* items_done and segments_done, read with interrupts masked (the interrupt owns them). */

@@ -43,13 +43,7 @@ from tests.protocol.test_proto_fuzz import MALFORMED_FRAMES, malformed_frame
 pytestmark = pytest.mark.timeout(300)
 
 # what the AVR firmware of this branch lacks (i20fw lands it): test name -> reason
-AVR_PENDING = {
-    "test_shortest_segments_run_exactly_or_are_refused": (
-        "a segment refused on receipt (BAD_VALUE under min_segment_ticks) does not keep its "
-        "segment number (PROTOCOL.md 4, Numbering)"
-    ),
-    "test_autotune_reports_gains": "AUTOTUNE (the AVR answers AUTOTUNE_FAILED)",
-}
+AVR_PENDING: dict[str, str] = {}
 
 
 @pytest.fixture
