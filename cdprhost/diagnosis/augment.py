@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from cdprhost.diagnosis.workflow import Diagnosis, admissible
+from cdprhost.diagnosis.effect_values import admissible
+from cdprhost.diagnosis.workflow import Diagnosis
 from cdprhost.jsonsafe import json_safe
 from cdprhost.profile.models import MachineProfile
 

@@ -17,26 +17,24 @@
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from pydantic import ValidationError
 
-from cdprhost.calibration.fitting import CableModelFit, Observations, position_misfit
+from cdprhost.calibration.fitting import CableModelFit, Observations
 from cdprhost.calibration.pose_noise import PoseNoise
 from cdprhost.diagnosis import crossval, signatures
+from cdprhost.diagnosis.effect_values import admissible, effect_parameters, geometry_parameters
 from cdprhost.diagnosis.localise import Finding, describe, localise
+from cdprhost.diagnosis.noise_floor import accuracy_from_fit, unseen_noise
 from cdprhost.diagnosis.stat_tests import bic, goodness_of_fit_p, holm, nested_f_test
 from cdprhost.effects.registry import CATALOGUE
 from cdprhost.errors import InputError
-from cdprhost.jsonsafe import finite_or_none
 from cdprhost.kinematics.machine import MachineModel
 
 MIN_POSES = 8
-Z95 = 1.959963984540054
 
 
 @dataclass(frozen=True)
@@ -189,53 +187,6 @@ def fit_model(
     return ModelResult(tuple(effects), fit, errors)
 
 
-def effect_parameters(fit: CableModelFit, name: str) -> dict[str, Any]:
-    """Fitted vector, standard errors, 95% intervals, and the profile table of one effect."""
-    effect = CATALOGUE[name]
-    vec, sd = fit.effect_vector(name)
-    lo, hi = vec - Z95 * sd, vec + Z95 * sd
-    table = effect.to_params(vec, sd if np.all(np.isfinite(sd)) else None)
-    natural_lo, natural_hi = effect.to_params(lo), effect.to_params(hi)
-    ci = {}
-    for key in effect.to_params(vec):
-        a, b = np.asarray(natural_lo[key], float), np.asarray(natural_hi[key], float)
-        ci[key] = _interval(np.minimum(a, b), np.maximum(a, b))
-    return {
-        "vector_names": list(effect.vector_names),
-        "vector": vec.tolist(),
-        "stderr": sd.tolist(),
-        "ci95_vector": np.stack([lo, hi], axis=1).tolist(),
-        "table": table,
-        "ci95": ci,
-    }
-
-
-def _interval(lo: np.ndarray, hi: np.ndarray) -> list[Any]:
-    """[lo, hi] (or a list of them); an unbounded end is None."""
-    if lo.ndim == 0:
-        return [finite_or_none(float(lo)), finite_or_none(float(hi))]
-    return [[finite_or_none(a), finite_or_none(b)] for a, b in zip(lo, hi)]
-
-
-def admissible(fit: CableModelFit, name: str) -> bool:
-    """The fitted parameters form a valid profile table (e.g. EA > 0, |eps| < 0.5)."""
-    vec, _ = fit.effect_vector(name)
-    try:
-        CATALOGUE[name].params_model.model_validate(CATALOGUE[name].to_params(vec))
-    except (ValidationError, ValueError):
-        return False
-    return True
-
-
-def geometry_parameters(fit: CableModelFit) -> dict[str, Any]:
-    q, sd = fit.x_[:12], fit.stderr_[:12]
-    return {
-        "outlets": q[:9].reshape(3, 3).tolist(),
-        "initial_lengths": q[9:12].tolist(),
-        "stderr": {"outlets": sd[:9].reshape(3, 3).tolist(), "initial_lengths": sd[9:12].tolist()},
-    }
-
-
 class _Round:
     """Evaluate and rank the candidates of one round against the current model."""
 
@@ -316,100 +267,10 @@ class _Round:
 TAKES_ONLY = "takes"
 
 
-def unseen_noise(fit: CableModelFit, obs: Observations, noise: PoseNoise) -> PoseNoise:
-    """``noise`` plus the common part s that makes the fitted model's chi-square equal its
-    degrees of freedom (sum r_i^2 / (sigma_i^2 + s^2) = dof, solved for s)."""
-    sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
-    r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)  # position misfit^2 per pose, mm^2
-    extra = variance_component(r2, sig, max(fit.dof_, 1))
-    return PoseNoise(
-        np.sqrt(sig**2 + extra**2),
-        noise.take_mm,
-        extra,
-        "takes + unstructured excess",
-        f"the residuals exceed the takes' noise with no pattern (time, direction, tension, height, "
-        f"slider position): {extra:.3g} mm per coordinate added to every pose as noise no take "
-        "shows; declare noise_mm in session.toml, or repeat poses, to measure it",
-    )
-
-
 #: Sources of a noise model that knows nothing of the system's accuracy at each place: the
 #: accuracy is then estimated here (from the richest model).
 UNSEEN_ACCURACY = ("takes", "camera")
 #: The richest model must leave at least this many degrees of freedom to estimate it.
-MIN_ACCURACY_DOF = 6
-
-
-def variance_component(r2: np.ndarray, sig: np.ndarray, dof: int) -> float:
-    """The common variance s^2 (returned as s, mm) that makes sum r2 / (sig^2 + s^2) = dof
-    (0 when the chi-square is already within it)."""
-    if np.sum(r2 / sig**2) <= dof:
-        return 0.0
-    lo, hi = 0.0, float(np.sqrt(np.max(r2))) + 1e-9
-    for _ in range(60):  # bisection: the chi-square falls monotonically as s grows
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if np.sum(r2 / (sig**2 + mid**2)) > dof else (lo, mid)
-    return 0.5 * (lo + hi)
-
-
-def accuracy_from_fit(
-    obs: Observations,
-    start: MachineModel,
-    effects: Sequence[str],
-    noise: PoseNoise,
-    alpha: float,
-    localise_alpha: float = 0.01,
-) -> PoseNoise | None:
-    """The measuring system's accuracy at each place, which no take's scatter shows
-    (calibration-session.md), estimated as a variance component of the richest model (the
-    geometry and every candidate effect at once, so that no effect of the catalogue is taken
-    for noise): None when that model's chi-square is within the takes' noise (goodness of
-    fit p >= ``alpha``), it has too few degrees of freedom, or its residuals show a pattern
-    (:func:`~.localise.localise`: physics the catalogue lacks, not accuracy)."""
-    fit = CableModelFit(effects=tuple(effects)).fit(obs, start)
-    if fit.dof_ < MIN_ACCURACY_DOF or goodness_of_fit_p(fit.chi2_, fit.dof_) >= alpha:
-        return None
-    sig = np.broadcast_to(np.asarray(obs.sigma_mm, dtype=float), (len(obs),))
-    if obs.covariance is not None:
-        extra = covariance_component(
-            position_misfit(fit.model_, obs), np.asarray(obs.covariance, float), fit.dof_
-        )
-    else:
-        r2 = np.sum((fit.residuals_ * sig[:, None]) ** 2, axis=1)
-        extra = variance_component(r2, sig, fit.dof_)
-    if extra <= 0:
-        return None
-    wider = np.sqrt(sig**2 + extra**2)
-    widened = obs.with_sigma(wider)
-    if localise(fit.model_, widened, localise_alpha):
-        return None  # a pattern is physics the catalogue lacks, not accuracy
-    return dataclasses.replace(
-        noise,
-        sigma_mm=np.sqrt(noise.sigma_mm**2 + extra**2),
-        extra_mm=extra,
-        source=f"{noise.source} + accuracy (fit)",
-        note=f"the measuring system's accuracy, which no take's scatter shows: {extra:.3g} mm "
-        "per coordinate, estimated as a variance component of the geometry fitted with every "
-        "candidate effect (declare accuracy_mm in session.toml, or repeat poses, to measure it)",
-        covariance=None if noise.covariance is None else noise.covariance + extra**2 * np.eye(3),
-    )
-
-
-def covariance_component(misfit: np.ndarray, covariance: np.ndarray, dof: int) -> float:
-    """The common variance s^2 (returned as s, mm) added to every pose's covariance that
-    makes sum m^T (C + s^2 I)^-1 m = dof (0 when already within it)."""
-
-    def chi2(s: float) -> float:
-        c = covariance + s * s * np.eye(3)
-        return float(np.sum(misfit * np.linalg.solve(c, misfit[..., None])[..., 0]))
-
-    if chi2(0.0) <= dof:
-        return 0.0
-    lo, hi = 0.0, float(np.sqrt(np.max(np.sum(misfit**2, axis=1)))) + 1e-9
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if chi2(mid) > dof else (lo, mid)
-    return 0.5 * (lo + hi)
 
 
 def observations_check(obs: Observations) -> None:

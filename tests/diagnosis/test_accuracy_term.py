@@ -12,7 +12,8 @@ import pytest
 
 from cdprhost.calibration.commanding import commanded_path
 from cdprhost.calibration.session import load_session
-from cdprhost.diagnosis.workflow import FAST, diagnose, variance_component
+from cdprhost.diagnosis.noise_floor import variance_component
+from cdprhost.diagnosis.workflow import FAST, diagnose
 from cdprhost.effects.base import MotionContext
 from cdprhost.sim.scenarios import hidden_truth, measurement_tour, session_times
 from cdprhost.sim.synthetic_session import write_synthetic_session
