@@ -224,7 +224,7 @@ def result_text(result: IntrinsicsResult, names: tuple[str, ...]) -> str:
 def run_camera(args: argparse.Namespace) -> int:
     from cdprhost.calibration.camera_config import intrinsics_toml
     from cdprhost.calibration.camera_takes import calibrate_from_views
-    from cdprhost.cli.commands.calibrate import write_json
+    from cdprhost.cli.json_report import write_json
     from cdprhost.fileio.atomic import write_text_atomic
 
     if args.camera:
