@@ -1,0 +1,38 @@
+"""The message table's vocabulary: protocol versions, the bounds fixed by the protocol,
+and the base every message derives from (opcode, wire fields, class)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from firmware_protocol.fields import Field
+
+PROTOCOL_MAJOR = 2
+PROTOCOL_MINOR = 1
+# the first minor version with soft limits, PID gains and autotune, the heater lease,
+# CAPS and HEALTH (a host sends those commands only to a device that announces it)
+MINOR_SAFETY = 1
+
+HOTEND, BED = 0, 1
+MAX_EVENT_VALUES = 4
+DWELL_MAX_S = 3600  # longest DWELL, in seconds of the device clock
+WATCHDOG_MS_RANGE = (100, 60_000)
+WATCHDOG_MS_DEFAULT = 2000
+TOLERANCE_DC_RANGE = (1, 1000)
+LEASE_MS_RANGE = (100, 60_000)
+AUTOTUNE_CYCLES_RANGE = (3, 20)
+GAIN_SCALE = 1000  # PID gains travel in thousandths
+
+# ------------------------------------------------------------------ messages
+
+
+@dataclass(frozen=True)
+class Message:
+    """Base: ``OPCODE``, ``FIELDS`` (the wire table), ``CLASS`` (Q queued, I immediate,
+    U urgent, D device report)."""
+
+    OPCODE: ClassVar[int] = 0
+    FIELDS: ClassVar[tuple[Field, ...]] = ()
+    CLASS: ClassVar[str] = "I"
+    QUEUED: ClassVar[bool] = False  # occupies a move-queue slot
