@@ -5,7 +5,7 @@
 #include "heater.h"
 #include "link.h"
 #include "machine.h"
-#include "mailbox.h"
+#include "sim_hooks.h"
 #include "protocol_gen.h"
 #include "queue.h"
 #include "reports.h"
@@ -103,7 +103,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
     autotune_cancel(); /* an autotune never outlives its queue item */
     if (how & SD_HEATERS_OFF)
         heater_outputs_off();
-    sim_mailbox.last_error = code; /* before the abort marker names it */
+    sim_last_error(code); /* before the abort marker names it */
     stepper_halt();
     mc.fault = code; /* the newest; a thermal one stays latched whatever follows */
     mc.last_error = code;
