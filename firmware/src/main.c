@@ -22,13 +22,10 @@
 #include "uart.h"
 #include "watchdog.h"
 
-struct item queue[QUEUE_SIZE];
-volatile uint8_t queue_head, queue_tail;
-uint32_t link_now;
 #define EXEC_PER_TURN 4 /* messages of a received frame executed per main-loop turn */
 static uint16_t loop_worst_us;
 
-void health_read(struct health *out)
+static void health_read(struct health *out)
 {
     uint8_t s = SREG;
     cli();
@@ -129,6 +126,18 @@ static void take_interrupt_reports(uint32_t now)
 int main(void)
 {
     sim_boot();
+    /* The layers are wired here: each names only those below it, and what it hands up
+     * goes through these tables (the transport knows nothing above it, the machine
+     * neither the commands nor the reports, the heater not the autotune above it). */
+    static const struct frame_upper frame_up = {link_frame_received, link_frame_rejected};
+    static const struct machine_upper machine_up = {report_error, proto_pending_items};
+    static const struct autotune_upper autotune_up = {report_event, machine_fail};
+    static const struct heater_override relay = {autotune_heater, autotune_relay};
+    deframer_attach(&frame_up);
+    machine_attach(&machine_up);
+    autotune_attach(&autotune_up);
+    heater_attach_override(&relay);
+    reports_attach_health(health_read);
     LED_DDR |= _BV(LED_BIT);
     heater_init();
     watchdog_start();
@@ -138,7 +147,7 @@ int main(void)
     uart_init();
     static const struct link_upper upper = {proto_accept, proto_urgent, proto_flow,
                                             proto_frame_seen};
-    link_attach(&upper); /* the layers are wired here, the transport knows none above it */
+    link_attach(&upper);
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
