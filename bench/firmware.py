@@ -169,7 +169,7 @@ def _short_batch(ticks: int, n: int) -> SegmentBatch:
 
 def _size() -> dict[str, Any]:
     out = subprocess.run(
-        ["avr-size", str(avr_device.ELF)], capture_output=True, text=True, check=True
+        ["avr-size", str(avr_device.BOARD_ELF)], capture_output=True, text=True, check=True
     ).stdout
     text, data, bss = (int(x) for x in out.splitlines()[1].split()[:3])
     return {

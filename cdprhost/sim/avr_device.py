@@ -25,7 +25,8 @@ from cdprhost.errors import InputError
 from firmware_protocol.device.faults import FaultSpec, FaultyChannel
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
-ELF = FIRMWARE_DIR / "build" / "cdpr.elf"
+ELF = FIRMWARE_DIR / "build" / "cdpr-sim.elf"  # the simulator target (mailbox hooks)
+BOARD_ELF = FIRMWARE_DIR / "build" / "cdpr.elf"  # the board target, the one flashed
 HARNESS = FIRMWARE_DIR / "build" / "cdpr-sim"
 INSTALL_HINT = (
     "the AVR toolchain or simavr is missing: install it with "

@@ -18,10 +18,8 @@
 #include "autotune.h"
 #include "config.h"
 #include "heater.h"
-#include "machine.h"
 #include "protocol_gen.h"
 #include "queue.h"
-#include "reports.h"
 #include "sched.h"
 #include "stepper.h"
 
@@ -105,6 +103,13 @@ static int32_t wire(float x)
     return x > 2.0e9f ? 2000000000L : (int32_t)x;
 }
 
+static const struct autotune_upper *upper;
+
+void autotune_attach(const struct autotune_upper *u)
+{
+    upper = u;
+}
+
 void autotune_poll(uint32_t now)
 {
     uint8_t s = SREG;
@@ -137,10 +142,10 @@ void autotune_poll(uint32_t now)
         int32_t v[4] = {tu.id, wire(kp), wire(2.0f * kp / period), wire(kp * period / 8.0f)};
         autotune_cancel();
         heater_set_pid(tu.id, (uint32_t)v[1], (uint32_t)v[2], (uint32_t)v[3]);
-        report_event(EVT_AUTOTUNE_DONE, tu.item, 4, v);
+        upper->event(EVT_AUTOTUNE_DONE, tu.item, 4, v);
         stepper_wait_ok = 1; /* the item completes: the queue goes on */
     } else if (tu.state == AT_FAILED) {
         autotune_cancel();
-        machine_fail(ERR_AUTOTUNE_FAILED, items, segs, tu.id, tu.failure);
+        upper->fail(ERR_AUTOTUNE_FAILED, items, segs, tu.id, tu.failure);
     }
 }

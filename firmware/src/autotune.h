@@ -13,5 +13,12 @@ int8_t autotune_heater(void);
 uint8_t autotune_relay(int16_t temp_dc, uint32_t now);
 /* The shutdown path: a tune never outlives its queue item (its heater goes off). */
 void autotune_cancel(void);
+/* How a tune ends, registered by main.c (the tune names neither the reports nor the
+ * machine above it): EVENT AUTOTUNE_DONE, and the fault (machine_fail). */
+struct autotune_upper {
+    void (*event)(uint8_t code, uint32_t item, uint8_t n, const int32_t *values);
+    void (*fail)(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
+};
+void autotune_attach(const struct autotune_upper *upper);
 
 #endif

@@ -14,7 +14,7 @@
 #include "heater.h"
 #include "link.h"
 #include "machine.h"
-#include "mailbox.h"
+#include "sim_hooks.h"
 #include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
@@ -163,7 +163,7 @@ static void enqueue_segment(const struct segment *s)
 {
     mc.items_received++;
     mc.segments_received++;
-    sim_mailbox.segments_parsed++;
+    sim_segment_parsed();
     if (discard_if_fault())
         return;
     if (s->ticks < MIN_SEGMENT_TICKS) { /* CAPS min_segment_ticks */

@@ -10,6 +10,12 @@
 #include "uart.h"
 
 struct deframer_stats deframer_stats;
+static const struct frame_upper *upper;
+
+void deframer_attach(const struct frame_upper *u)
+{
+    upper = u;
+}
 static uint8_t buf[DEFRAME_BUF];
 static uint16_t fill;
 /* buf[0..held) holds frames acknowledged but not executed yet (a FIFO: executed from
@@ -114,7 +120,7 @@ void deframer_run(void)
         }
         if (!body_ok(p)) {
             deframer_stats.bad_frames++;
-            frame_rejected(p[2], p[3]);
+            upper->rejected(p[2], p[3]);
             pos++;
             continue;
         }
@@ -125,7 +131,7 @@ void deframer_run(void)
             pos = held;
             p = buf + pos;
         }
-        uint8_t hold = frame_received(p[2], p[3], p[4], p + FRAME_HEADER_LEN, p[1]);
+        uint8_t hold = upper->received(p[2], p[3], p[4], p + FRAME_HEADER_LEN, p[1]);
         if (drop_held) { /* a new session: the held frames are forgotten */
             drop_held = 0;
             memmove(buf, buf + held, fill - held);

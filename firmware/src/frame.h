@@ -13,11 +13,16 @@ struct deframer_stats {
 };
 extern struct deframer_stats deframer_stats;
 
-/* Called for each valid frame (returns 1 to hold its bytes, acknowledged, until it has
- * been executed: deframer_first / deframer_pop), and for each frame with a good header
- * and a bad body. */
-uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len);
-void frame_rejected(uint8_t kind, uint8_t seq);
+/* What the deframer hands up, registered by the layer above (the link; main.c wires
+ * it): each valid frame (returns 1 to hold its bytes, acknowledged, until it has been
+ * executed: deframer_first / deframer_pop), and each frame with a good header and a
+ * bad body. */
+struct frame_upper {
+    uint8_t (*received)(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload,
+                        uint8_t len);
+    void (*rejected)(uint8_t kind, uint8_t seq);
+};
+void deframer_attach(const struct frame_upper *upper);
 
 void deframer_reset(void);
 /* Append a received byte; returns 0 when the buffer is full (call deframer_run first). */

@@ -8,7 +8,6 @@
 #include <avr/io.h>
 
 #include "adc.h"
-#include "autotune.h"
 #include "board_ramps14.h"
 #include "config.h"
 #include "heater.h"
@@ -142,13 +141,20 @@ static void protect(uint8_t id, uint32_t now)
     }
 }
 
+static const struct heater_override *override;
+
+void heater_attach_override(const struct heater_override *o)
+{
+    override = o;
+}
+
 static uint8_t pid(uint8_t id, uint32_t now)
 {
     struct heater *h = &heaters[id];
     if (h->state == HS_OFF || h->fault)
         return 0;
-    if (autotune_heater() == (int8_t)id)
-        return autotune_relay(h->temp_dc, now); /* AUTOTUNE: the relay instead */
+    if (override->heater() == (int8_t)id)
+        return override->duty(h->temp_dc, now); /* AUTOTUNE: the relay instead */
     float err = (float)h->target_dc - (float)h->temp_dc;
     float d = (float)(h->temp_dc - h->last_dc);
     if (err > 150.0f) {

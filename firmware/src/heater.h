@@ -27,5 +27,12 @@ void heater_outputs_off(void);
 uint16_t heater_max_dc(uint8_t id);
 /* SET_PID: gains x1000 in Marlin's units; all 0 = the defaults. */
 void heater_set_pid(uint8_t id, uint32_t kp, uint32_t ki, uint32_t kd);
+/* A controller that takes a heater over (AUTOTUNE's relay), registered by main.c: the
+ * heater it drives (-1: none), and its duty every control period of that heater. */
+struct heater_override {
+    int8_t (*heater)(void);
+    uint8_t (*duty)(int16_t temp_dc, uint32_t now);
+};
+void heater_attach_override(const struct heater_override *o);
 
 #endif

@@ -2,7 +2,6 @@
 
 #include "frame.h"
 #include "link.h"
-#include "reports.h"
 #include "sched.h"
 #include "uart.h"
 
@@ -13,6 +12,7 @@
 #define NAK_HOLDOFF T_MS(30)
 
 struct link_counters link_counters;
+uint32_t link_now; /* the link's clock (sched.h), kept by the main loop */
 static const struct link_upper *upper;
 
 void link_attach(const struct link_upper *u)
@@ -162,13 +162,14 @@ static void want_nak(uint32_t now)
         nak_due = 1;
 }
 
-void frame_rejected(uint8_t kind, uint8_t seq)
+void link_frame_rejected(uint8_t kind, uint8_t seq)
 {
     if (kind == KIND_DATA && seq == expected)
         want_nak(link_now);
 }
 
-uint8_t frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, uint8_t len)
+uint8_t link_frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload,
+                           uint8_t len)
 {
     uint32_t now = link_now;
     upper->frame_seen();

@@ -6,6 +6,9 @@
 #include <stdint.h>
 
 #include "config.h"
+#include "protocol_gen.h"
+
+#define FLOW_MAX CDPR_FLOW_MAX_LEN /* a FLOW payload's bytes at most */
 
 struct link_counters {
     uint16_t retransmits, naks_sent, duplicates, rejected;
@@ -29,9 +32,13 @@ struct link_upper {
      * acknowledges it, PROTO_PENDING acknowledges it and keeps its bytes until executed */
     uint8_t (*accept)(const uint8_t *payload, uint8_t len);
     void (*urgent)(const uint8_t *payload, uint8_t len);
-    uint8_t (*flow)(uint8_t *out); /* FLOW payload for ACK/NAK frames, returns length */
+    uint8_t (*flow)(uint8_t *out); /* FLOW payload (out[FLOW_MAX]) for ACK/NAK frames */
     void (*frame_seen)(void);      /* any valid frame: feeds the host watchdog */
 };
 void link_attach(const struct link_upper *upper);
+/* The deframer's frames (struct frame_upper, wired by main.c). */
+uint8_t link_frame_received(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload,
+                            uint8_t len);
+void link_frame_rejected(uint8_t kind, uint8_t seq);
 
 #endif

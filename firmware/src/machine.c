@@ -1,23 +1,26 @@
 #include <avr/interrupt.h>
 
 #include "autotune.h"
-#include "commands.h"
 #include "heater.h"
-#include "link.h"
 #include "machine.h"
-#include "mailbox.h"
+#include "sim_hooks.h"
 #include "protocol_gen.h"
 #include "queue.h"
-#include "reports.h"
 #include "sched.h"
 #include "stepper.h"
 
 struct machine mc;
+static const struct machine_upper *upper;
+
+void machine_attach(const struct machine_upper *u)
+{
+    upper = u;
+}
 
 uint8_t machine_free(void)
 {
     /* the items of a frame acknowledged but not yet executed are taken */
-    return (uint8_t)(queue_free() - proto_pending_items());
+    return (uint8_t)(queue_free() - upper->pending_items());
 }
 
 uint8_t machine_flags(void)
@@ -103,7 +106,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
     autotune_cancel(); /* an autotune never outlives its queue item */
     if (how & SD_HEATERS_OFF)
         heater_outputs_off();
-    sim_mailbox.last_error = code; /* before the abort marker names it */
+    sim_last_error(code); /* before the abort marker names it */
     stepper_halt();
     mc.fault = code; /* the newest; a thermal one stays latched whatever follows */
     mc.last_error = code;
@@ -115,7 +118,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
     if (how & SD_MOTORS_OFF)
         stepper_disable_all(); /* positions are no longer trustworthy */
     mc.tail_homed = st.homed_mask;
-    report_error(code, item, segment, axis, value);
+    upper->report_error(code, item, segment, axis, value);
 }
 
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)

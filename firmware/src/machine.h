@@ -51,7 +51,8 @@ uint32_t machine_buffered_ticks(void);
 #define SD_MOTORS_OFF 0x02
 void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
                       int32_t value, uint8_t how);
-/* A fault: heaters off for thermal faults, the watchdog, e-stop, the heater lease and a
+/* A fault, the narrow way to raise one: machine_shutdown with what the code implies.
+ * Heaters off for thermal faults, the watchdog, e-stop, the heater lease and a
  * failed autotune (any fault cancels an autotune and switches its heater off). */
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
 /* E-stop or host watchdog: stop now, fail with `code`, keep what the flags say. */
@@ -65,5 +66,15 @@ uint8_t machine_clear_fault(void);
 int8_t machine_limits_violation(const int32_t *end, int32_t *pos);
 /* A new session: the settings go back to their defaults. */
 void machine_session_defaults(void);
+
+/* What the machine needs from the layers above it, registered by main.c (the machine
+ * names neither the command layer nor the reports): the report of every fault, and
+ * the queue items of acknowledged frames not queued yet (not free for the host). */
+struct machine_upper {
+    void (*report_error)(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
+                         int32_t value);
+    uint8_t (*pending_items)(void);
+};
+void machine_attach(const struct machine_upper *upper);
 
 #endif

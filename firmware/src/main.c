@@ -11,25 +11,21 @@
 #include "heater.h"
 #include "link.h"
 #include "machine.h"
-#include "mailbox.h"
 #include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
 #include "reports.h"
 #include "sched.h"
 #include "session.h"
+#include "sim_hooks.h"
 #include "stepper.h"
 #include "uart.h"
 #include "watchdog.h"
 
-struct item queue[QUEUE_SIZE];
-volatile uint8_t queue_head, queue_tail;
-volatile struct sim_mailbox sim_mailbox;
-uint32_t link_now;
 #define EXEC_PER_TURN 4 /* messages of a received frame executed per main-loop turn */
 static uint16_t loop_worst_us;
 
-void health_read(struct health *out)
+static void health_read(struct health *out)
 {
     uint8_t s = SREG;
     cli();
@@ -42,16 +38,8 @@ void health_read(struct health *out)
 
 void sched_update_link_time(void)
 {
-    uint32_t t = sched_clock();
-    /* In the simulator the harness keeps the wall clock here: the link's timers
-     * (retransmission, announcements, host watchdog) then run in real time
-     * whatever the simulation's speed, as the Python model's do. */
-    if (sim_mailbox.link_valid) {
-        cli();
-        t = sim_mailbox.link_clock;
-        sei();
-    }
-    link_now = t;
+    /* in the simulator the harness's wall clock (sim_hooks.h) */
+    link_now = sim_link_clock(sched_clock());
 }
 
 /* A WAIT item is done at once when its heater's target is 0, else within the
@@ -137,13 +125,19 @@ static void take_interrupt_reports(uint32_t now)
 
 int main(void)
 {
-    GPIOR1 = (uint8_t)((uint16_t)&sim_mailbox);
-    GPIOR2 = (uint8_t)((uint16_t)&sim_mailbox >> 8);
-    sim_mailbox.magic[0] = 'C';
-    sim_mailbox.magic[1] = 'D';
-    sim_mailbox.magic[2] = 'P';
-    sim_mailbox.magic[3] = 'R';
-    sim_mailbox.version = 1;
+    sim_boot();
+    /* The layers are wired here: each names only those below it, and what it hands up
+     * goes through these tables (the transport knows nothing above it, the machine
+     * neither the commands nor the reports, the heater not the autotune above it). */
+    static const struct frame_upper frame_up = {link_frame_received, link_frame_rejected};
+    static const struct machine_upper machine_up = {report_error, proto_pending_items};
+    static const struct autotune_upper autotune_up = {report_event, machine_fail};
+    static const struct heater_override relay = {autotune_heater, autotune_relay};
+    deframer_attach(&frame_up);
+    machine_attach(&machine_up);
+    autotune_attach(&autotune_up);
+    heater_attach_override(&relay);
+    reports_attach_health(health_read);
     LED_DDR |= _BV(LED_BIT);
     heater_init();
     watchdog_start();
@@ -153,7 +147,7 @@ int main(void)
     uart_init();
     static const struct link_upper upper = {proto_accept, proto_urgent, proto_flow,
                                             proto_frame_seen};
-    link_attach(&upper); /* the layers are wired here, the transport knows none above it */
+    link_attach(&upper);
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
@@ -164,7 +158,7 @@ int main(void)
         sched_update_link_time();
         uint16_t loop_us = (uint16_t)((now - last) * (1000000UL / CLOCK_HZ));
         if (loop_us > loop_worst_us)
-            sim_mailbox.main_loop_max_us = loop_worst_us = loop_us;
+            sim_loop_max_us(loop_worst_us = loop_us);
         last = now;
         /* bounded work per turn: a few messages of the held frames, a few plans, the
          * received bytes, one frame checked, then everything else */
@@ -184,14 +178,9 @@ int main(void)
         uint32_t items, segs;
         stepper_counts(&items, &segs);
         watchdog_save(items, segs, st.enabled_mask);
-        sim_mailbox.isr_max_cycles = stepper_isr_max_cycles;
-        sim_mailbox.lost_steps = stepper_lost_steps;
-        sim_mailbox.plan_stalls = stepper_plan_stalls;
-        sim_mailbox.overruns = stepper_overruns;
-        sim_mailbox.late_pulses = stepper_late_pulses;
-        sim_mailbox.latency_max = stepper_latency_max;
-        sim_mailbox.last_error = mc.last_error;
-        if (!++turns) /* the stack's high-water mark, now and then (a scan of ~1 KB) */
-            sim_mailbox.stack_free = watchdog_stack_free();
+        SIM_STATS(stepper_isr_max_cycles, stepper_lost_steps, stepper_plan_stalls,
+                  stepper_overruns, stepper_late_pulses, stepper_latency_max, mc.last_error);
+        if (SIM_HOOKS && !++turns) /* the stack's high-water mark, now and then (~1 KB scan) */
+            sim_stack_free(watchdog_stack_free());
     }
 }

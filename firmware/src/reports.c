@@ -14,6 +14,12 @@
 #include "sched.h"
 
 static uint8_t buf[REPORT_MAX];
+static void (*health_source)(struct health *out);
+
+void reports_attach_health(void (*read)(struct health *out))
+{
+    health_source = read;
+}
 
 static struct writer start(uint8_t op)
 {
@@ -92,7 +98,7 @@ void report_status(void)
     wr_uv(&w, link_counters.duplicates);
     if (mc.host_minor >= 1) { /* 2.1: HEALTH right after STATUS, in the same payload */
         struct health hl;
-        health_read(&hl);
+        health_source(&hl);
         wr_u8(&w, CDPR_OP_HEALTH);
         wr_uv(&w, hl.late_pulses);
         wr_uv(&w, hl.late_worst_us);

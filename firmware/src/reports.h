@@ -2,6 +2,7 @@
 #ifndef REPORTS_H
 #define REPORTS_H
 #include <stdint.h>
+#include "link.h" /* FLOW_MAX */
 #include "protocol_gen.h"
 
 void report_error(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value);
@@ -15,8 +16,8 @@ void report_caps(void);
 struct health {
     uint32_t late_pulses, late_worst_us, rx_overruns, loop_worst_us;
 };
-void health_read(struct health *out);
-#define FLOW_MAX CDPR_FLOW_MAX_LEN
+/* The source of HEALTH's figures, registered by main.c (which gathers them). */
+void reports_attach_health(void (*read)(struct health *out));
 uint8_t report_flow(uint8_t *out); /* FLOW payload into out[FLOW_MAX] */
 
 #endif

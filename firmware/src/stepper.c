@@ -18,7 +18,7 @@
 
 #include "board_ramps14.h"
 #include "config.h"
-#include "mailbox.h"
+#include "sim_hooks.h"
 #include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
@@ -351,8 +351,7 @@ static void complete_item(void)
 
 static void __attribute__((noinline)) set_pos_marker(void)
 {
-    for (uint8_t k = 0; k < 4; k++)
-        sim_mailbox.pos[k] = st.pos[k];
+    SIM_POSITIONS(st.pos);
     nx->flags |= OUT_POS;
     hold = 2;
 }
@@ -907,9 +906,7 @@ static void __attribute__((noinline)) tick_start(void)
      * reads the segment's number at that edge); motion_marker may add a start
      * or stop of motion to that boundary */
     if (f & OUT_SEG_END) {
-        sim_mailbox.seq = e->seq;
-        sim_mailbox.motion_ticks = st.motion_ticks; /* through this tick (computed) */
-        sim_mailbox.edge = EDGE_SEG_END;
+        sim_segment_end(e->seq, &st.motion_ticks); /* through this tick (computed) */
         edge_armed = 1;
         OCR1C = EDGE_AT_NEXT_TICK;
     } else if (edge_armed) {
@@ -941,9 +938,7 @@ static void __attribute__((noinline)) motion_marker(void)
     uint8_t next = nx->flags & OUT_MOTION;
     if (next == (emit->flags & OUT_MOTION))
         return;
-    if (!edge_armed)
-        sim_mailbox.edge = 0;
-    sim_mailbox.edge |= next ? EDGE_MOTION_START : EDGE_MOTION_STOP;
+    sim_motion_edge(edge_armed, next);
     edge_armed = 1;
     OCR1C = EDGE_AT_NEXT_TICK;
 }
