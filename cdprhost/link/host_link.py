@@ -390,9 +390,14 @@ class HostLink:
         )
 
     def wait_idle(self, timeout: float | None = None) -> DeviceProgress:
-        """FLUSH, then wait until everything queued has executed and motion has stopped."""
+        """FLUSH, then wait until everything queued has executed and motion has stopped.
+        A fault that arrives meanwhile is raised, even when the progress that shows the
+        queue done (a refused item counts as done) is read before the error report."""
+        faulted_before = self.progress.fault
         self.flush()
         self._wait(self.idle, timeout, "the end of motion")
+        if self.progress.fault and not faulted_before:
+            self._wait(lambda: False, self.timeout_s, "the device's error report")
         return self.progress
 
     # ------------------------------------------------------------------ stopping
