@@ -109,7 +109,7 @@ def run_wizard(args: argparse.Namespace) -> int:
             "no way to get takes: give --watch DIR or --takes-from DIR (or run on a terminal)"
         )
     if args.port:
-        link = open_link(args.port, args.baud)
+        link = open_link(args.port, args.baud or profile.serial.baud)
     else:
         observer = camera.observer if camera else make_observer(args.sim_truth, args.sim_mocap_dir)
         link = open_embedded(observer=observer, speedup=args.speedup)

@@ -47,6 +47,30 @@ def non_empty(text: str) -> str:
     return text
 
 
+BAUD_RANGE = (50, 10_000_000)
+
+
+def add_device_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--port DEV`` (a serial device or pyserial URL; without it the embedded simulated
+    device) and ``--baud N`` (default: the profile's ``serial.baud``)."""
+    from cdprhost.cli.numbers import bounded_int
+
+    parser.add_argument(
+        "--port",
+        type=non_empty,
+        metavar="DEV",
+        default=None,
+        help="serial device path or pyserial URL (default: the embedded simulated device)",
+    )
+    parser.add_argument(
+        "--baud",
+        type=bounded_int(*BAUD_RANGE),
+        default=None,
+        metavar="N",
+        help="baud rate (default: the profile's)",
+    )
+
+
 def offset_xy(text: str) -> tuple[float, float]:
     """``X,Y`` in mm."""
     from cdprhost.errors import InputError

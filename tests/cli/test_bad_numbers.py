@@ -22,6 +22,12 @@ from cdprhost.job.state import Failure, Planned
             "--resume",
         ),
         (["print", "{g}", "-p", "paper-prototype", "--sim-faults", "drop=3"], "--sim-faults"),
+        # every command that opens a device takes the same --port/--baud
+        (["tui", "--baud", "-5"], "--baud"),
+        (["serve", "-p", "paper-prototype", "--baud", "0"], "--baud"),
+        (["autotune", "M303 E0 S210 C8", "-p", "paper-prototype", "--baud", "-1"], "--baud"),
+        (["calibrate", "wizard", "-p", "paper-prototype", "--baud", "7"], "--baud"),
+        (["print", "{g}", "-p", "paper-prototype", "--port", " "], "--port"),
         (["sim-device", "--speedup", "nan"], "--speedup"),
         (["sim-device", "--speedup", "-1"], "--speedup"),
         (

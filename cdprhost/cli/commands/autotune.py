@@ -9,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from cdprhost.cli.options import finite_positive
+from cdprhost.cli.options import add_device_arguments, finite_positive
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
 
@@ -26,8 +26,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("command", metavar='"M303 ..."', help="e.g. 'M303 E0 S210 C8' (bed: E-1)")
     add_profile_argument(p)
-    p.add_argument("--port", metavar="DEV", help="serial port (default: embedded device)")
-    p.add_argument("--baud", type=int, help="baud rate (default: the profile's)")
+    add_device_arguments(p)
     p.add_argument(
         "--speedup", type=finite_positive, help="embedded device: at most X times real time"
     )

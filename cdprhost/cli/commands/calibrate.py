@@ -16,6 +16,7 @@ from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.cli.calibration_wizard import run_wizard
 from cdprhost.cli.json_report import write_json
 from cdprhost.cli.numbers import bounded_float
+from cdprhost.cli.options import add_device_arguments
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
@@ -104,12 +105,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "wizard", help="guided calibration: move to planned poses, record takes, identify"
     )
     add_profile_argument(wiz)
-    wiz.add_argument(
-        "--port",
-        metavar="DEV",
-        help="device path or pyserial URL (default: the embedded simulated device)",
-    )
-    wiz.add_argument("--baud", type=int, default=250000)
+    add_device_arguments(wiz)
     wiz.add_argument(
         "--session",
         metavar="DIR",

@@ -23,9 +23,9 @@ from typing import Any
 
 from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import (
+    add_device_arguments,
     add_placement_arguments,
     existing_gcode,
-    non_empty,
     setup_from_args,
 )
 from cdprhost.cli.profile_arg import add_profile_argument
@@ -36,7 +36,6 @@ from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.job.resume import find_resume_point, log_path_for, resume_question, resume_setup
 from cdprhost.job.state import JobState, StateChanged
 
-BAUD_RANGE = (50, 10_000_000)
 MAX_SPEEDUP = 100_000.0
 
 
@@ -46,18 +45,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("gcode", metavar="FILE.gcode")
     add_profile_argument(p)
-    p.add_argument(
-        "--port",
-        type=non_empty,
-        metavar="DEV",
-        help="serial device path or pyserial URL (default: embedded simulated device)",
-    )
-    p.add_argument(
-        "--baud",
-        type=bounded_int(*BAUD_RANGE),
-        default=None,
-        help="baud rate (default: the profile's)",
-    )
+    add_device_arguments(p)
     p.add_argument(
         "--speedup",
         type=bounded_float(0.0, MAX_SPEEDUP),

@@ -12,8 +12,12 @@ import sys
 import threading
 from typing import Any
 
-from cdprhost.cli.numbers import bounded_float, bounded_int
-from cdprhost.cli.options import add_placement_arguments, non_empty, setup_from_args
+from cdprhost.cli.numbers import bounded_float
+from cdprhost.cli.options import (
+    add_device_arguments,
+    add_placement_arguments,
+    setup_from_args,
+)
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.signals import stop_signals
 from cdprhost.errors import InputError
@@ -61,19 +65,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="headless print server: the slicer upload API (OctoPrint subset) on 127.0.0.1:5000",
     )
     add_profile_argument(p)
-    p.add_argument(
-        "--port",
-        type=non_empty,
-        metavar="DEV",
-        help="serial device path or pyserial URL (default: embedded simulated device)",
-    )
-    p.add_argument(
-        "--baud",
-        type=bounded_int(50, 10_000_000),
-        default=None,
-        metavar="N",
-        help="baud rate (default: the profile's)",
-    )
+    add_device_arguments(p)
     p.add_argument(
         "--speedup",
         type=bounded_float(0.0, 100_000.0),

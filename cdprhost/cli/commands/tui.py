@@ -6,7 +6,7 @@ import argparse
 import os
 
 from cdprhost.cli.commands.serve import add_server_arguments
-from cdprhost.cli.options import add_placement_arguments, setup_from_args
+from cdprhost.cli.options import add_device_arguments, add_placement_arguments, setup_from_args
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.errors import InputError
 
@@ -17,15 +17,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "gcode", metavar="FILE.gcode", nargs="?", help="open this file on the print screen"
     )
     add_profile_argument(parser, default="paper-prototype")
-    parser.add_argument(
-        "--port",
-        metavar="DEV",
-        default=None,
-        help="device path or pyserial URL (default: the embedded simulated device)",
-    )
-    parser.add_argument(
-        "--baud", type=int, default=None, metavar="N", help="baud rate (default: the profile's)"
-    )
+    add_device_arguments(parser)
     parser.add_argument(
         "--speedup",
         type=float,
