@@ -240,6 +240,13 @@ class HostLink:
         """Send commands in order; returns the item number of each queued one (0 for immediate ones)."""
         self._identity()
         self._renew_lease()
+        return self._send_each(commands, timeout, self._pump)
+
+    def _send_each(
+        self, commands: tuple[Message, ...], timeout: float | None, pump: Callable[[], None]
+    ) -> list[int]:
+        """Each command once the window and the device's credit have room, pumping with
+        ``pump`` while they have none."""
         core = self._core
         numbers: list[int] = []
         start = self._t.now()
@@ -271,7 +278,7 @@ class HostLink:
                         raise LinkTimeout(
                             f"{core.name}: could not send {type(cmd).__name__} within {timeout:g} s"
                         )
-                    self._pump()
+                    pump()
         return numbers
 
     def feed(
@@ -348,15 +355,8 @@ class HostLink:
         refreshing temperatures) cannot keep a wedged job's heaters on."""
         count = self._dev.status_count
         self._identity()
-        core = self._core
-        while True:  # a full window waits for room, as any command does
-            core.let_others_in()
-            with core.locked():
-                if core.ep.sender.window_free > 0:
-                    core.send_immediate(GetStatus())
-                    core.write(core.ep.flush(self._t.now()))
-                    return count
-                core.pump(SLICE_S)
+        self._send_each((GetStatus(),), None, self._core.pump)  # a pump that renews nothing
+        return count
 
     @property
     def status_count(self) -> int:
