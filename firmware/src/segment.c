@@ -3,39 +3,83 @@
 #include "protocol_gen.h"
 #include "segment.h"
 
-/* A coded delta: an i32 (zigzag u32, at most 5 bytes). */
-static int32_t rd_delta(struct reader *r)
+/* A coded delta: an i32 (zigzag u32, at most 5 bytes). Inline for the one-byte
+ * case (a print's small corrections to the predicted deltas): the call and the
+ * 32-bit zigzag cost more than the rest of the segment. */
+static inline __attribute__((always_inline)) int32_t rd_delta(struct reader *r)
 {
+    uint8_t pos = r->pos;
+    if (pos < r->len) {
+        uint8_t b = r->buf[pos];
+        if (!(b & 0x80)) {
+            r->pos = (uint8_t)(pos + 1);
+            return (int8_t)((b >> 1) ^ (uint8_t)-(b & 1));
+        }
+    }
     return unzigzag(rd_bounded(r, 32));
 }
 
-void segment_decode(struct reader *r, struct seg_ctx *ctx, struct segment *out)
+/* One axis: the coded value, plus the previous delta when predicted; within
+ * -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic. */
+static inline __attribute__((always_inline)) int32_t axis_delta(struct reader *r, int32_t coded,
+                                                                 uint8_t predicted, int32_t prev)
 {
-    uint8_t op = rd_u8(r);
-    int32_t coded[4] = {0, 0, 0, 0};
-    if (op & SEG_F_RESERVED)
+    int32_t d = coded;
+    if (predicted && __builtin_add_overflow(coded, prev, &d))
         r->err = 1;
-    out->ticks = (op & SEG_F_DURATION) ? rd_bounded(r, 32) : ctx->prev_ticks;
-    if (out->ticks == 0)
+    if (d == INT32_MIN)
         r->err = 1;
-    if (op & SEG_F_SLIDERS)
-        for (uint8_t k = 0; k < 3; k++)
-            coded[k] = rd_delta(r);
-    if (op & SEG_F_EXTRUDER)
-        coded[3] = rd_delta(r);
-    for (uint8_t k = 0; k < 4; k++) {
-        int32_t d = coded[k];
-        /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic */
-        if ((op & SEG_F_PREDICTED) && __builtin_add_overflow(d, ctx->prev_deltas[k], &d))
-            r->err = 1;
-        if (d == INT32_MIN)
-            r->err = 1;
-        out->deltas[k] = d;
+    return d;
+}
+
+/* Called twice for every segment (checked on arrival, decoded again to execute),
+ * thousands of times a second: straight-line code, no arrays, optimized for speed. */
+void __attribute__((optimize("O2"))) segment_decode(struct reader *r, struct seg_ctx *ctx,
+                                                    struct segment *out)
+{
+    uint8_t op = r->buf[r->pos++]; /* the caller saw it */
+    if (op & SEG_F_RESERVED) {
+        r->err = 1;
+        return;
     }
-    out->ramp = (op & SEG_F_RAMP) ? rd_u8(r) : SEG_RAMP_CONSTANT;
+    uint32_t ticks = ctx->prev_ticks;
+    if (op & SEG_F_DURATION) {
+        uint8_t pos = r->pos;
+        if (pos < r->len && !(r->buf[pos] & 0x80)) {
+            ticks = r->buf[pos];
+            r->pos = (uint8_t)(pos + 1);
+        } else {
+            ticks = rd_bounded(r, 32);
+        }
+    }
+    if (ticks == 0)
+        r->err = 1;
+    int32_t c0 = 0, c1 = 0, c2 = 0, c3 = 0;
+    if (op & SEG_F_SLIDERS) {
+        c0 = rd_delta(r);
+        c1 = rd_delta(r);
+        c2 = rd_delta(r);
+    }
+    if (op & SEG_F_EXTRUDER)
+        c3 = rd_delta(r);
+    uint8_t predicted = op & SEG_F_PREDICTED;
+    int32_t d0 = axis_delta(r, c0, predicted, ctx->prev_deltas[0]);
+    int32_t d1 = axis_delta(r, c1, predicted, ctx->prev_deltas[1]);
+    int32_t d2 = axis_delta(r, c2, predicted, ctx->prev_deltas[2]);
+    int32_t d3 = axis_delta(r, c3, predicted, ctx->prev_deltas[3]);
+    int16_t ramp = SEG_RAMP_CONSTANT;
+    if (op & SEG_F_RAMP) {
+        if (r->pos >= r->len)
+            r->err = 1;
+        else
+            ramp = r->buf[r->pos++];
+    }
     if (r->err)
         return;
-    ctx->prev_ticks = out->ticks;
-    for (uint8_t k = 0; k < 4; k++)
-        ctx->prev_deltas[k] = out->deltas[k];
+    out->ticks = ctx->prev_ticks = ticks;
+    out->deltas[0] = ctx->prev_deltas[0] = d0;
+    out->deltas[1] = ctx->prev_deltas[1] = d1;
+    out->deltas[2] = ctx->prev_deltas[2] = d2;
+    out->deltas[3] = ctx->prev_deltas[3] = d3;
+    out->ramp = ramp;
 }
