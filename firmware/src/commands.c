@@ -106,6 +106,7 @@ static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx
     *queued = 0;
     *wrong = 0;
     while (r.pos < len) {
+        motion_prepare_ahead(1); /* a frame of short segments takes milliseconds */
         uint8_t at = r.pos, op = payload[at];
         if (op >= SEG_BASE) {
             segment_decode(&r, work, &s);
@@ -399,13 +400,14 @@ static void took_item(void)
     pend.items_total--;
 }
 
-void proto_execute(uint8_t budget)
+void proto_execute(uint16_t units)
 {
     struct reader *r = &pend.r;
     struct segment s;
     struct message_desc m;
     uint32_t v[MAX_VALUES];
-    while (budget) {
+    uint32_t start = sched_clock();
+    for (;;) {
         if (!pend.active) {
             uint8_t len;
             const uint8_t *payload = deframer_first(&len);
@@ -417,24 +419,27 @@ void proto_execute(uint8_t budget)
             r->err = 0;
             pend.active = 1;
         }
-        while (r->pos < r->len && budget) {
-            budget--;
+        while (r->pos < r->len) {
+            /* the plans first: they are what the interrupt waits on */
+            motion_prepare_ahead(1);
             uint8_t op = r->buf[r->pos];
             if (op >= SEG_BASE) {
                 segment_decode(r, &ctx, &s); /* checked before: it decodes */
                 took_item();
                 enqueue_segment(&s);
-                continue;
-            }
-            find(op, &m);
-            r->pos++;
-            parse_fields(r, &m, v);
-            if (m.queued) {
-                took_item();
-                enqueue_command(op, v);
             } else {
-                immediate(op, v);
+                find(op, &m);
+                r->pos++;
+                parse_fields(r, &m, v);
+                if (m.queued) {
+                    took_item();
+                    enqueue_command(op, v);
+                } else {
+                    immediate(op, v);
+                }
             }
+            if (sched_clock() - start >= units)
+                break;
         }
         if (r->pos < r->len)
             return; /* the rest next turn: the main loop's other work goes on */
@@ -443,6 +448,8 @@ void proto_execute(uint8_t budget)
         pend.head = (uint8_t)(pend.head + 1) % HELD_FRAMES;
         pend.n--;
         deframer_pop();
+        if (sched_clock() - start >= units)
+            return;
     }
 }
 

@@ -22,7 +22,10 @@
 #include "uart.h"
 #include "watchdog.h"
 
-#define EXEC_PER_TURN 4 /* messages of a received frame executed per main-loop turn */
+/* Clock units per main-loop turn spent executing the held frames: a time, not a
+ * count of messages, so short segments are executed as fast as they are checked
+ * (a count made the turn's other work, a frame checked, the rate's limit). */
+#define EXEC_UNITS 400
 static uint16_t loop_worst_us;
 
 static void health_read(struct health *out)
@@ -160,15 +163,15 @@ int main(void)
         if (loop_us > loop_worst_us)
             sim_loop_max_us(loop_worst_us = loop_us);
         last = now;
-        /* bounded work per turn: a few messages of the held frames, a few plans, the
-         * received bytes, one frame checked, then everything else */
-        proto_execute(EXEC_PER_TURN);
-        motion_prepare_ahead();
+        /* bounded work per turn: the held frames for a while, the plans, the received
+         * bytes, one frame checked, then everything else */
+        proto_execute(EXEC_UNITS);
+        motion_prepare_ahead(PLAN_SLOTS);
         int16_t c;
         while (deframer_room() && (c = uart_getc()) >= 0) /* all of it: the ring is small */
             deframer_push((uint8_t)c);
         deframer_run(); /* checks and acknowledges at most one frame */
-        motion_prepare_ahead();
+        motion_prepare_ahead(PLAN_SLOTS);
         take_interrupt_reports(now);
         heater_poll(now);
         autotune_poll(now);

@@ -14,7 +14,6 @@
 #include "motion.h"
 #include "protocol_gen.h"
 
-#define PREPARE_PER_CALL 3
 struct plan plans[PLAN_SLOTS];
 volatile uint8_t plan_head, plan_tail;
 static uint8_t cursor; /* next queue position to look at */
@@ -24,8 +23,21 @@ static uint8_t cursor; /* next queue position to look at */
 #define RATE_K (MAX_STEP_RATE * 255UL / CLOCK_HZ)
 _Static_assert(RATE_K * CLOCK_HZ == MAX_STEP_RATE * 255UL, "RATE_K must be exact");
 
+/* |d| of a delta that is not INT32_MIN (the decoder refuses it) */
+static inline uint32_t abs32(int32_t d)
+{
+    return (uint32_t)(d < 0 ? -d : d);
+}
+
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
 {
+    /* F <= 510 = 5 RATE_K: no axis is over when 5 max|n| <= D (every segment of a
+     * print), decided without the per-axis products */
+    _Static_assert(510 == 5 * RATE_K, "the fast test assumes RATE_K = 102");
+    uint32_t most = abs32(s->deltas[0]) | abs32(s->deltas[1]) | abs32(s->deltas[2]) |
+                    abs32(s->deltas[3]); /* >= max |n|, < 2 max |n| */
+    if (most < (1UL << 24) && most * 5 <= s->ticks)
+        return -1;
     uint16_t f;
     if (s->ramp < 0)
         f = 255;
@@ -196,11 +208,28 @@ static struct {
     uint8_t last_units;
 } shape;
 
+/* The constants of an axis of n < MEMO_N steps in the current shape, kept as they are
+ * computed: short segments (thousands a second) move each axis by a few steps, so
+ * the same small n comes back again and again while the shape stays (a cruise).
+ * An entry is valid while its gen is the shape's (0: never). */
+#define MEMO_N 8
+static struct {
+    uint16_t v_lo, a_lo;
+    int32_t v_hi, a_hi;
+    uint8_t last_n, est_low, gen;
+} memo[MEMO_N];
+static uint8_t shape_gen;
+
 static void shape_of(const struct item *it)
 {
     uint8_t ramp_flag = it->flags & SEGF_RAMP;
     if (shape.units == it->ticks && shape.flags == ramp_flag && shape.ramp == it->ramp)
         return;
+    if (!++shape_gen) { /* wrapped: forget the entries of 256 shapes ago */
+        for (uint8_t i = 0; i < MEMO_N; i++)
+            memo[i].gen = 0;
+        shape_gen = 1;
+    }
     shape.units = it->ticks;
     shape.flags = ramp_flag;
     shape.ramp = it->ramp;
@@ -218,7 +247,7 @@ static void shape_of(const struct item *it)
     shape.before = before >= 1.0f ? 0xFFFFFFFFUL : before <= 0.0f ? 0 : (uint32_t)(before * 4294967296.0f);
 }
 
-static void prepare(struct plan *p, const struct item *it, uint8_t index)
+static void __attribute__((optimize("O2"))) prepare(struct plan *p, const struct item *it, uint8_t index)
 {
     shape_of(it);
     p->index = index;
@@ -243,6 +272,15 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             continue;
         }
         p->moving |= (uint8_t)(1 << k);
+        if (n < MEMO_N && memo[n].gen == shape_gen) {
+            x->v_lo = memo[n].v_lo;
+            x->v_hi = memo[n].v_hi;
+            x->a_lo = memo[n].a_lo;
+            x->a_hi = memo[n].a_hi;
+            x->last_n = memo[n].last_n;
+            x->est_low = memo[n].est_low;
+            continue;
+        }
         uint32_t before = times_frac32(n, shape.before);
         if (before > n)
             before = n;
@@ -250,6 +288,15 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
         x->est_low = (uint8_t)before;
         times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
         times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
+        if (n < MEMO_N) {
+            memo[n].v_lo = x->v_lo;
+            memo[n].v_hi = x->v_hi;
+            memo[n].a_lo = x->a_lo;
+            memo[n].a_hi = x->a_hi;
+            memo[n].last_n = (uint8_t)x->last_n;
+            memo[n].est_low = x->est_low;
+            memo[n].gen = shape_gen;
+        }
     }
 }
 
@@ -262,13 +309,12 @@ void motion_plans_reset(void)
     SREG = s;
 }
 
-void motion_prepare_ahead(void)
+void motion_prepare_ahead(uint8_t budget)
 {
     uint8_t head = queue_head, tail = queue_tail;
     /* the interrupt may have completed items the cursor had not reached yet */
     if ((uint8_t)(cursor - tail) > (uint8_t)(head - tail))
         cursor = tail;
-    uint8_t budget = PREPARE_PER_CALL; /* bounded work per main-loop turn */
     while (cursor != head && (uint8_t)(plan_head - plan_tail) < PLAN_SLOTS && budget) {
         const struct item *it = queue_slot(cursor);
         if (it->kind == IT_SEG) {

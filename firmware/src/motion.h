@@ -10,9 +10,11 @@
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate);
 /* Store a decoded segment in a queue item (no arithmetic beyond signs). */
 void motion_store(struct item *it, const struct segment *s);
-/* Prepare the DDA constants of queued segments ahead of the interrupt (main loop;
- * cheap when nothing is to do). */
-void motion_prepare_ahead(void);
+/* Prepare the DDA constants of up to `budget` queued segments ahead of the
+ * interrupt (main loop; cheap when nothing is to do). Called between the messages
+ * of every long piece of work too (checking, executing a frame): with segments of
+ * half a millisecond the plans last only a few milliseconds. */
+void motion_prepare_ahead(uint8_t budget);
 /* Forget all plans (the queue was flushed; interrupts off or the ISR idle). */
 void motion_plans_reset(void);
 /* Steps due by the end of tick i of an axis of n steps (float estimate). */
