@@ -16,7 +16,8 @@
 
 struct plan plans[PLAN_SLOTS];
 volatile uint8_t plan_head, plan_tail;
-static uint8_t cursor; /* next queue position to look at */
+
+uint8_t motion_cursor; /* next queue position to look at */
 
 /* The rate test |n| F clock_hz / (255 D) > MAX_STEP_RATE, F = 255 max(2r, 2 - 2r),
  * becomes |n| F > RATE_K D with an integer RATE_K. */
@@ -202,6 +203,7 @@ static struct {
     uint32_t units;
     uint8_t ramp, flags;
     float ka, kb;
+    uint8_t accel;     /* kb != 0 */
     struct fx40 v0, a; /* ka - kb, 2 kb */
     uint32_t before;   /* (ka T' + kb T'^2) 2^32, T' = ticks - 1 */
     uint32_t ticks;
@@ -238,6 +240,7 @@ static void shape_of(const struct item *it)
     float ka = 2.0f * r * inv, kb = (1.0f - 2.0f * r) * inv * inv;
     shape.ka = ka;
     shape.kb = kb;
+    shape.accel = kb != 0.0f;
     shape.ticks = motion_ticks_of(it->ticks, &shape.last_units);
     float t = (float)(shape.ticks - 1);
     /* the interrupt adds a before it uses v: start one a early */
@@ -247,22 +250,46 @@ static void shape_of(const struct item *it)
     shape.before = before >= 1.0f ? 0xFFFFFFFFUL : before <= 0.0f ? 0 : (uint32_t)(before * 4294967296.0f);
 }
 
-static void __attribute__((optimize("O2"))) prepare(struct plan *p, const struct item *it, uint8_t index)
+/* An axis of n > 0 steps whose constants are not kept: the products, out of the
+ * common path */
+static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32_t n)
+{
+    uint32_t before = times_frac32(n, shape.before);
+    if (before > n)
+        before = n;
+    x->last_n = n - before;
+    x->est_low = (uint8_t)before;
+    times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
+    times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
+    if (n < MEMO_N) {
+        memo[n].v_lo = x->v_lo;
+        memo[n].v_hi = x->v_hi;
+        memo[n].a_lo = x->a_lo;
+        memo[n].a_hi = x->a_hi;
+        memo[n].last_n = (uint8_t)x->last_n;
+        memo[n].est_low = x->est_low;
+        memo[n].gen = shape_gen;
+    }
+}
+
+static void prepare(struct plan *p, const struct item *it, uint8_t index)
 {
     shape_of(it);
+    uint8_t dir = it->flags >> 4, moving = 0, bit = 1;
     p->index = index;
-    p->dir = it->flags >> 4;
-    p->moving = 0;
-    p->accel = shape.kb != 0.0f;
+    p->dir = dir;
+    p->accel = shape.accel;
     p->at_rest = it->flags & SEGF_AT_REST;
     p->ticks = shape.ticks;
     p->last_units = shape.last_units;
     p->ka = shape.ka;
     p->kb = shape.kb;
-    for (uint8_t k = 0; k < 4; k++) {
-        struct axis_plan *x = &p->ax[k];
-        uint32_t n = it->u.n[k];
-        p->delta[k] = (p->dir >> k & 1) ? -(int32_t)n : (int32_t)n;
+    struct axis_plan *x = p->ax;
+    const uint32_t *np = it->u.n;
+    int32_t *delta = p->delta;
+    for (; bit != 0x10; bit <<= 1, x++, np++, delta++) {
+        uint32_t n = *np;
+        *delta = (dir & bit) ? -(int32_t)n : (int32_t)n;
         x->acc = 1UL << 23;
         if (!n) {
             x->v_hi = x->a_hi = 0;
@@ -271,7 +298,7 @@ static void __attribute__((optimize("O2"))) prepare(struct plan *p, const struct
             x->est_low = 0;
             continue;
         }
-        p->moving |= (uint8_t)(1 << k);
+        moving |= bit;
         if (n < MEMO_N && memo[n].gen == shape_gen) {
             x->v_lo = memo[n].v_lo;
             x->v_hi = memo[n].v_hi;
@@ -279,25 +306,11 @@ static void __attribute__((optimize("O2"))) prepare(struct plan *p, const struct
             x->a_hi = memo[n].a_hi;
             x->last_n = memo[n].last_n;
             x->est_low = memo[n].est_low;
-            continue;
-        }
-        uint32_t before = times_frac32(n, shape.before);
-        if (before > n)
-            before = n;
-        x->last_n = n - before;
-        x->est_low = (uint8_t)before;
-        times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
-        times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
-        if (n < MEMO_N) {
-            memo[n].v_lo = x->v_lo;
-            memo[n].v_hi = x->v_hi;
-            memo[n].a_lo = x->a_lo;
-            memo[n].a_hi = x->a_hi;
-            memo[n].last_n = (uint8_t)x->last_n;
-            memo[n].est_low = x->est_low;
-            memo[n].gen = shape_gen;
+        } else {
+            axis_constants(x, n);
         }
     }
+    p->moving = moving;
 }
 
 void motion_plans_reset(void)
@@ -305,25 +318,25 @@ void motion_plans_reset(void)
     uint8_t s = SREG;
     cli();
     plan_head = plan_tail = 0;
-    cursor = queue_head;
+    motion_cursor = queue_head;
     SREG = s;
 }
 
-void motion_prepare_ahead(uint8_t budget)
+void motion_prepare_some(uint8_t budget)
 {
     uint8_t head = queue_head, tail = queue_tail;
     /* the interrupt may have completed items the cursor had not reached yet */
-    if ((uint8_t)(cursor - tail) > (uint8_t)(head - tail))
-        cursor = tail;
-    while (cursor != head && (uint8_t)(plan_head - plan_tail) < PLAN_SLOTS && budget) {
-        const struct item *it = queue_slot(cursor);
+    if ((uint8_t)(motion_cursor - tail) > (uint8_t)(head - tail))
+        motion_cursor = tail;
+    while (motion_cursor != head && (uint8_t)(plan_head - plan_tail) < PLAN_SLOTS && budget) {
+        const struct item *it = queue_slot(motion_cursor);
         if (it->kind == IT_SEG) {
-            prepare(&plans[plan_head & (PLAN_SLOTS - 1)], it, cursor);
+            prepare(&plans[plan_head & (PLAN_SLOTS - 1)], it, motion_cursor);
             cli();
             plan_head++;
             sei();
             budget--;
         }
-        cursor++;
+        motion_cursor++;
     }
 }

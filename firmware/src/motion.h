@@ -14,7 +14,14 @@ void motion_store(struct item *it, const struct segment *s);
  * interrupt (main loop; cheap when nothing is to do). Called between the messages
  * of every long piece of work too (checking, executing a frame): with segments of
  * half a millisecond the plans last only a few milliseconds. */
-void motion_prepare_ahead(uint8_t budget);
+void motion_prepare_some(uint8_t budget);
+extern uint8_t motion_cursor; /* the next queue position to prepare */
+static inline void motion_prepare_ahead(uint8_t budget)
+{
+    /* inline, what most calls find: every plan ready, or nothing queued to prepare */
+    if ((uint8_t)(plan_head - plan_tail) < PLAN_SLOTS && motion_cursor != queue_head)
+        motion_prepare_some(budget);
+}
 /* Forget all plans (the queue was flushed; interrupts off or the ISR idle). */
 void motion_plans_reset(void);
 /* Steps due by the end of tick i of an axis of n steps (float estimate). */

@@ -34,8 +34,8 @@ static inline __attribute__((always_inline)) int32_t axis_delta(struct reader *r
 
 /* Called twice for every segment (checked on arrival, decoded again to execute),
  * thousands of times a second: straight-line code, no arrays, optimized for speed. */
-void __attribute__((optimize("O2"))) segment_decode(struct reader *r, struct seg_ctx *ctx,
-                                                    struct segment *out)
+void __attribute__((optimize("O2"))) segment_decode_full(struct reader *r, struct seg_ctx *ctx,
+                                                         struct segment *out)
 {
     uint8_t op = r->buf[r->pos++]; /* the caller saw it */
     if (op & SEG_F_RESERVED) {
