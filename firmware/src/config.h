@@ -32,10 +32,11 @@
 
 /* CAPS (protocol 2.1). The shortest segment: one whole tick (a shorter one would make
  * the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
- * rate sustained at 250000 baud (bench/firmware.py: 769/s exact, 1000/s not). A pulse later than the tolerance
- * against its place in the firmware's schedule counts as late (HEALTH). */
+ * rate sustained at 250000 baud on a clean line (bench/firmware.py's stream: 2000/s,
+ * 0.5 ms segments, exact). A pulse later than the tolerance against its place in the firmware's schedule counts
+ * as late (HEALTH). */
 #define MIN_SEGMENT_TICKS TICK_UNITS
-#define SEGMENT_RATE 750UL
+#define SEGMENT_RATE 2000UL
 #define LATE_TOLERANCE_US 25
 
 /* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */

@@ -63,6 +63,11 @@ uint8_t deframer_push(uint8_t byte)
     return 1;
 }
 
+void deframer_receive(void)
+{
+    fill += uart_read(buf + fill, DEFRAME_BUF - fill);
+}
+
 static uint8_t header_ok(const uint8_t *p)
 {
     return crc8(p + 1, 4) == p[5] && p[1] <= FRAME_MAX_PAYLOAD && p[2] >= KIND_DATA &&
@@ -99,6 +104,7 @@ void deframer_run(void)
 {
     uint16_t pos = held;
     for (;;) {
+        upper->meanwhile();
         while (pos < fill && buf[pos] != FRAME_SYNC)
             pos++;
         if (fill - pos < FRAME_HEADER_LEN)

@@ -21,12 +21,16 @@ struct frame_upper {
     uint8_t (*received)(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload,
                         uint8_t len);
     void (*rejected)(uint8_t kind, uint8_t seq);
+    /* between the candidates of one deframer_run (each costs a CRC, and a damaged
+     * stream has many): the work above that cannot wait that long */
+    void (*meanwhile)(void);
 };
 void deframer_attach(const struct frame_upper *upper);
 
 void deframer_reset(void);
 /* Append a received byte; returns 0 when the buffer is full (call deframer_run first). */
 uint8_t deframer_push(uint8_t byte);
+void deframer_receive(void); /* the UART's received bytes, as many as there is room for */
 void deframer_run(void);
 uint8_t deframer_room(void); /* a byte can be pushed */
 /* The oldest held frame's payload (0: none held); valid until deframer_pop(). */

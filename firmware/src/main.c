@@ -22,10 +22,12 @@
 #include "uart.h"
 #include "watchdog.h"
 
-/* Clock units per main-loop turn spent executing the held frames: a time, not a
- * count of messages, so short segments are executed as fast as they are checked
- * (a count made the turn's other work, a frame checked, the rate's limit). */
-#define EXEC_UNITS 400
+/* Clock units per main-loop turn spent executing the held frames (10 ms at most: it
+ * ends sooner when they are done): a time, not a count of messages, so short segments
+ * are executed as fast as they are checked (four messages a turn made the turn's other
+ * work the rate's limit, and with 2 ms the turns' fixed work was; the plans are
+ * prepared between the messages, the UART ring holds what arrives meanwhile). */
+#define EXEC_UNITS 1000
 static uint16_t loop_worst_us;
 
 static void health_read(struct health *out)
@@ -126,13 +128,21 @@ static void take_interrupt_reports(uint32_t now)
     decide_wait();
 }
 
+/* A plan between two pieces of a long job: with short segments the plans last only a
+ * few milliseconds, less than a turn's work on a damaged stream. */
+static void prepare_one(void)
+{
+    motion_prepare_ahead(1);
+}
+
 int main(void)
 {
     sim_boot();
     /* The layers are wired here: each names only those below it, and what it hands up
      * goes through these tables (the transport knows nothing above it, the machine
      * neither the commands nor the reports, the heater not the autotune above it). */
-    static const struct frame_upper frame_up = {link_frame_received, link_frame_rejected};
+    static const struct frame_upper frame_up = {link_frame_received, link_frame_rejected,
+                                                prepare_one};
     static const struct machine_upper machine_up = {report_error, proto_pending_items};
     static const struct autotune_upper autotune_up = {report_event, machine_fail};
     static const struct heater_override relay = {autotune_heater, autotune_relay};
@@ -167,9 +177,7 @@ int main(void)
          * bytes, one frame checked, then everything else */
         proto_execute(EXEC_UNITS);
         motion_prepare_ahead(PLAN_SLOTS);
-        int16_t c;
-        while (deframer_room() && (c = uart_getc()) >= 0) /* all of it: the ring is small */
-            deframer_push((uint8_t)c);
+        deframer_receive(); /* all of it: the ring is small */
         deframer_run(); /* checks and acknowledges at most one frame */
         motion_prepare_ahead(PLAN_SLOTS);
         take_interrupt_reports(now);

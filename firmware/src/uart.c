@@ -55,6 +55,19 @@ int16_t uart_getc(void)
     return c;
 }
 
+uint16_t uart_read(uint8_t *dst, uint16_t max)
+{
+    /* the ring's indices once: the interrupt only appends */
+    uint8_t head = rx_head, tail = rx_tail;
+    uint16_t n = 0;
+    while (tail != head && n < max) {
+        dst[n++] = rx_buf[tail];
+        tail = (uint8_t)(tail + 1) & (UART_RX_SIZE - 1);
+    }
+    rx_tail = tail;
+    return n;
+}
+
 uint16_t uart_tx_free(void)
 {
     uint16_t head, tail;

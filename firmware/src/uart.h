@@ -8,6 +8,9 @@
 
 void uart_init(void);
 int16_t uart_getc(void);              /* -1 when empty */
+/* Up to max received bytes into dst (one call for a main-loop turn's bytes: a call
+ * per byte cost more than the copy); returns how many. */
+uint16_t uart_read(uint8_t *dst, uint16_t max);
 uint16_t uart_tx_free(void);
 void uart_write(const uint8_t *data, uint16_t len); /* caller checks uart_tx_free() */
 uint8_t uart_rx_overruns(void);
