@@ -33,8 +33,8 @@
 /* CAPS (protocol 2.1). The shortest segment: one whole tick (a shorter one would make
  * the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
  * rate sustained at 250000 baud on a clean line (bench/firmware.py's stream: 2000/s,
- * 0.5 ms segments, exact). A pulse later than the tolerance against its place in the firmware's schedule counts
- * as late (HEALTH). */
+ * 0.5 ms segments, exact). A pulse later than the tolerance against its place in the
+ * firmware's schedule counts as late (HEALTH). */
 #define MIN_SEGMENT_TICKS TICK_UNITS
 #define SEGMENT_RATE 2000UL
 #define LATE_TOLERANCE_US 25

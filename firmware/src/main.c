@@ -183,9 +183,11 @@ int main(void)
         take_interrupt_reports(now);
         heater_poll(now);
         autotune_poll(now);
+        motion_prepare_ahead(PLAN_SLOTS); /* 0.5 ms segments: 8 plans last 4 ms */
         stepper_start_ok = session_may_start();
         session_poll(link_now);
         link_poll(link_now);
+        motion_prepare_ahead(PLAN_SLOTS);
         uint32_t items, segs;
         stepper_counts(&items, &segs);
         watchdog_save(items, segs, st.enabled_mask);

@@ -74,11 +74,14 @@ void motion_store(struct item *it, const struct segment *s)
         it->flags |= SEGF_RAMP;
         it->ramp = (uint8_t)s->ramp;
     }
-    for (uint8_t k = 0; k < 4; k++) {
+    /* thousands of segments a second: no 64-bit negation (the decoder refuses
+     * INT32_MIN), no variable shifts */
+    uint8_t bit = 0x10;
+    for (uint8_t k = 0; k < 4; k++, bit <<= 1) {
         int32_t d = s->deltas[k];
-        it->u.n[k] = (uint32_t)(d < 0 ? -(int64_t)d : d);
+        it->u.n[k] = abs32(d);
         if (d < 0)
-            it->flags |= (uint8_t)(0x10 << k);
+            it->flags |= bit;
         if (d)
             any = 1;
     }
