@@ -9,7 +9,7 @@
 #define RTO_INITIAL T_MS(50)
 #define RTO_FLOOR T_MS(20)
 #define RTO_CEILING T_MS(250)
-#define NAK_HOLDOFF T_MS(30)
+#define NAK_HOLDOFF T_MS(10) /* PROTOCOL.md 2: at most once per expected number per 10 ms */
 
 struct link_counters link_counters;
 uint32_t link_now; /* the link's clock (sched.h), kept by the main loop */
