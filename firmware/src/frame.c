@@ -29,11 +29,6 @@ void deframer_reset(void)
     held = 0;
 }
 
-uint8_t deframer_room(void)
-{
-    return fill < DEFRAME_BUF;
-}
-
 const uint8_t *deframer_first(uint8_t *len)
 {
     if (!held)
@@ -53,14 +48,6 @@ void deframer_pop(void)
 void deframer_drop_held(void)
 {
     drop_held = 1;
-}
-
-uint8_t deframer_push(uint8_t byte)
-{
-    if (fill >= DEFRAME_BUF)
-        return 0;
-    buf[fill++] = byte;
-    return 1;
 }
 
 void deframer_receive(void)

@@ -28,11 +28,8 @@ struct frame_upper {
 void deframer_attach(const struct frame_upper *upper);
 
 void deframer_reset(void);
-/* Append a received byte; returns 0 when the buffer is full (call deframer_run first). */
-uint8_t deframer_push(uint8_t byte);
 void deframer_receive(void); /* the UART's received bytes, as many as there is room for */
 void deframer_run(void);
-uint8_t deframer_room(void); /* a byte can be pushed */
 /* The oldest held frame's payload (0: none held); valid until deframer_pop(). */
 const uint8_t *deframer_first(uint8_t *len);
 void deframer_pop(void);        /* the oldest held frame was executed */

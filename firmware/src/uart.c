@@ -46,15 +46,6 @@ ISR(USART0_UDRE_vect)
     tx_tail = (tx_tail + 1) & (UART_TX_SIZE - 1);
 }
 
-int16_t uart_getc(void)
-{
-    if (rx_head == rx_tail)
-        return -1;
-    uint8_t c = rx_buf[rx_tail];
-    rx_tail = (uint8_t)(rx_tail + 1) & (UART_RX_SIZE - 1);
-    return c;
-}
-
 uint16_t uart_read(uint8_t *dst, uint16_t max)
 {
     /* the ring's indices once: the interrupt only appends */

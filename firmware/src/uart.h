@@ -7,7 +7,6 @@
 #define UART_TX_SIZE 256 /* power of two */
 
 void uart_init(void);
-int16_t uart_getc(void);              /* -1 when empty */
 /* Up to max received bytes into dst (one call for a main-loop turn's bytes: a call
  * per byte cost more than the copy); returns how many. */
 uint16_t uart_read(uint8_t *dst, uint16_t max);
