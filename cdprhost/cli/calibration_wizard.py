@@ -19,6 +19,7 @@ from cdprhost.profile import save_profile
 if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
+    from cdprhost.calibration.identification import Identification
     from cdprhost.calibration.takes import MocapConfig
     from cdprhost.kinematics import MachineModel
 
@@ -56,6 +57,19 @@ def _mocap_for(args: argparse.Namespace, session: Path) -> MocapConfig | None:
         )
     virtual = mocap_config().mocap if args.sim_mocap_dir and not args.port else None
     return mocap_for_session(session, args.mocap_config, virtual)
+
+
+def refuse_unless_written(result: Identification, forced: bool, verdict: str) -> None:
+    """Raise JobFailed naming ``result``'s problems unless it passed or ``--force`` writes
+    it anyway (``verdict``: what happened to the calibration, for the message)."""
+    if result.ok or forced:
+        return
+    raise JobFailed(
+        f"calibration {verdict}; no profile written"
+        + (" (--force writes it anyway)" if result.solved else "")
+        + ":\n"
+        + "\n".join(f"  - {p}" for p in result.problems())
+    )
 
 
 def run_wizard(args: argparse.Namespace) -> int:
@@ -171,13 +185,7 @@ def run_wizard(args: argparse.Namespace) -> int:
         },
     )
     print(report.identification_text(result))
-    if not result.ok and not forced:
-        raise JobFailed(
-            "calibration failed; no profile written"
-            + (" (--force writes it anyway)" if result.solved else "")
-            + ":\n"
-            + "\n".join(f"  - {p}" for p in result.problems())
-        )
+    refuse_unless_written(result, forced, "failed")
     if forced:
         print("\nWARNING: calibration refused; written because of --force", file=sys.stderr)
     if args.out and calibrated is not None:

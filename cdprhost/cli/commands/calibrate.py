@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING, Any
 from cdprhost.calibration import plan_files, planning, report
 from cdprhost.calibration.identification import calibrated_profile, identify_session
 from cdprhost.calibration.verification import DEFAULT_ALPHA
-from cdprhost.cli.calibration_wizard import run_wizard
+from cdprhost.cli.calibration_wizard import refuse_unless_written, run_wizard
 from cdprhost.cli.json_report import write_json
 from cdprhost.cli.numbers import bounded_float
 from cdprhost.cli.options import add_device_arguments
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
-from cdprhost.errors import InputError, JobFailed
+from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.profile import save_profile
 
@@ -300,13 +300,7 @@ def run_identify(args: argparse.Namespace) -> int:
     forced = bool(args.force) and result.solved and not result.ok
     write_json(args.json, {**result.to_json(), "forced": forced})
     print(report.identification_text(result))
-    if not result.ok and not forced:
-        raise JobFailed(
-            "calibration refused; no profile written"
-            + (" (--force writes it anyway)" if result.solved else "")
-            + ":\n"
-            + "\n".join(f"  - {p}" for p in result.problems())
-        )
+    refuse_unless_written(result, forced, "refused")
     calibrated = calibrated_profile(profile, result, session=str(Path(args.session).resolve()))
     save_profile(calibrated, args.out)
     if forced:
