@@ -21,7 +21,7 @@ from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec, Restart
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceStatus
 from cdprhost.motion.pipeline import segment_program
-from cdprhost.motion.segments import PlannedSegments
+from cdprhost.motion.segments import DEFAULT_LIMITS, PlannedSegments, SegmentLimits
 from cdprhost.profile.models import MachineProfile
 
 
@@ -35,6 +35,7 @@ def refine_point(
     *,
     clock_hz: int,
     batch_moves: int,
+    limits: SegmentLimits = DEFAULT_LIMITS,
 ) -> ResumePoint | None:
     """``point`` moved to the device's own last executed segment, or None when the device's
     counters cannot be trusted for it (another boot, the fault cleared since, nothing more
@@ -49,7 +50,10 @@ def refine_point(
     e_offset = 0.0
     count = 0
     origin = np.asarray(profile.build_volume.bed_origin, dtype=float)
-    for out in segment_program(program, profile, model, clock_hz=clock_hz, batch_moves=batch_moves):
+    planned = segment_program(
+        program, profile, model, clock_hz=clock_hz, limits=limits, batch_moves=batch_moves
+    )
+    for out in planned:
         if not isinstance(out, PlannedSegments):
             continue
         if isinstance(program, Restart):

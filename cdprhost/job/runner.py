@@ -46,6 +46,7 @@ from cdprhost.machine.commands import estop_flags, heaters_off
 from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
+from cdprhost.motion.segments import DEFAULT_LIMITS
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
 
@@ -70,6 +71,7 @@ class PrintJob:
         self.gcode = Path(gcode)
         self.profile = profile
         self._plan_profile = profile  # capped to the device's step rate once connected
+        self._segment_limits = DEFAULT_LIMITS  # the device's, once connected
         self.model = MachineModel.from_profile(profile)
         self.link_factory = link_factory
         self.options = options or PrintOptions()
@@ -309,9 +311,12 @@ class PrintJob:
         streamer: Streamer | None = None
         try:
             check = prepare_device(machine, clear_fault=self.options.clear_fault)
-            rate = link.identity.max_step_rate if link.identity else None
-            caps = caps_for_device(self.profile, rate)
+            ident, dev_caps = link.identity, link.caps
+            rate = ident.max_step_rate if ident else None
+            shortest = dev_caps.min_segment_ticks / ident.clock_hz if ident and dev_caps else None
+            caps = caps_for_device(self.profile, rate, shortest)
             self._plan_profile = caps.profile
+            self._segment_limits = caps.segments
             for text in [*check.notices, *([caps.notice] if caps.notice else [])]:
                 self._emit(Notice(text))
                 result.notices.append(text)
@@ -330,6 +335,7 @@ class PrintJob:
                 self._plan_profile,
                 self.model,
                 clock_hz=streamer.clock_hz,
+                limits=self._segment_limits,
                 batch_moves=self.options.batch_moves,
             )
             ahead = Prefetch(planned)
@@ -369,6 +375,7 @@ class PrintJob:
             self.model,
             clock_hz=link.identity.clock_hz,
             batch_moves=self.options.batch_moves,
+            limits=self._segment_limits,
         )
         if exact is None:
             return

@@ -18,7 +18,13 @@ from typing import Any
 from cdprhost.gcode.items import HomeCommand, MoveChunk
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.program import MarkedMoves, ProgramPlanner, split_at_marks
-from cdprhost.motion.segments import DEFAULT_CLOCK_HZ, PlannedSegments, Segmenter
+from cdprhost.motion.segments import (
+    DEFAULT_CLOCK_HZ,
+    DEFAULT_LIMITS,
+    PlannedSegments,
+    Segmenter,
+    SegmentLimits,
+)
 from cdprhost.profile.models import MachineProfile
 
 
@@ -50,6 +56,7 @@ def segment_blocks(
     model: MachineModel,
     *,
     clock_hz: float = DEFAULT_CLOCK_HZ,
+    limits: SegmentLimits = DEFAULT_LIMITS,
     encode: Callable[[PlannedSegments], Any] | None = None,
     totals: PipelineTotals | None = None,
     **planner_options: Any,
@@ -61,6 +68,7 @@ def segment_blocks(
         profile.drive.home_mm,
         e_steps_per_mm=profile.extruder.steps_per_mm,
         clock_hz=clock_hz,
+        limits=limits,
     )
     totals = totals if totals is not None else PipelineTotals()
 

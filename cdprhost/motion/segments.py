@@ -26,13 +26,30 @@ from cdprhost.effects.backlash import path_directions
 from cdprhost.effects.base import MotionContext
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.trapezoid import PlannedMoves
+from firmware_protocol.segments import SegmentBatch, peak_step_rates, ramp_codes_from_speeds
 
 DEFAULT_CLOCK_HZ = 1_000_000
 # the shortest segment planned: a 2.1 device announces the shortest it takes (CAPS; the
 # AVR firmware 10 ticks of 10 us), shorter ones are merged into the next
-MIN_SEGMENT_S = 100e-6
+MIN_SEGMENT_S = 200e-6
+#: passes of merging segments whose rounded steps exceed the device's step rate
+RATE_MERGE_PASSES = 6
 #: phases shorter than this (mm) are merged into a neighbour instead of making a segment
 MIN_PHASE_MM = 1e-4
+
+
+@dataclass(frozen=True)
+class SegmentLimits:
+    """What the device takes: its shortest segment (s) and its step rate on any one axis
+    (steps/s; None: any). The planner keeps the speeds under the rate; these limits are
+    for what rounding does to short segments (a 110 us piece can round to 2 steps)."""
+
+    min_segment_s: float = MIN_SEGMENT_S
+    max_step_rate: float | None = None
+
+
+#: a device that announced nothing
+DEFAULT_LIMITS = SegmentLimits()
 
 
 @dataclass(frozen=True)
@@ -180,10 +197,11 @@ def segment_moves(
     *,
     e_steps_per_mm: float,
     clock_hz: float = DEFAULT_CLOCK_HZ,
+    limits: SegmentLimits = DEFAULT_LIMITS,
 ) -> tuple[PlannedSegments, SegmentState]:
     """Cut planned moves into joint-space segments; returns the batch and the new state."""
     batch, state, _ = segment_moves_ends(
-        planned, model, state, e_steps_per_mm=e_steps_per_mm, clock_hz=clock_hz
+        planned, model, state, e_steps_per_mm=e_steps_per_mm, clock_hz=clock_hz, limits=limits
     )
     return batch, state
 
@@ -195,6 +213,7 @@ def segment_moves_ends(
     *,
     e_steps_per_mm: float,
     clock_hz: float = DEFAULT_CLOCK_HZ,
+    limits: SegmentLimits = DEFAULT_LIMITS,
 ) -> tuple[PlannedSegments, SegmentState, np.ndarray]:
     """:func:`segment_moves`, plus per planned move the number of segments up to its end."""
     pc = piece_positions(planned)
@@ -246,9 +265,13 @@ def segment_moves_ends(
         t_end,
     )
     move_end = ends + 1
-    min_ticks = max(1, math.ceil(MIN_SEGMENT_S * clock_hz - 1e-9))
+    min_ticks = max(1, math.ceil(limits.min_segment_s * clock_hz - 1e-9))
     if n and ticks.min() < min_ticks:
-        batch, move_end = _absorb_empty(batch, state.steps, ends, min_ticks)
+        batch, move_end = _at_least(batch, state.steps, move_end, min_ticks)
+    if n and limits.max_step_rate is not None:
+        batch, move_end = _within_step_rate(
+            batch, state.steps, move_end, limits.max_step_rate, clock_hz
+        )
     if n:
         state = replace(
             state,
@@ -259,36 +282,91 @@ def segment_moves_ends(
     return batch, state, move_end
 
 
-def _absorb_empty(
-    batch: PlannedSegments, prev_steps: np.ndarray, ends: np.ndarray, min_ticks: int = 1
+def _absorb(
+    batch: PlannedSegments, prev_steps: np.ndarray, move_end: np.ndarray, keep: np.ndarray
 ) -> tuple[PlannedSegments, np.ndarray]:
-    """Segments shorter than ``min_ticks`` merged into the next one (a device takes no
-    shorter segment: PROTOCOL.md, CAPS).
+    """Segments not kept merged into the next kept one (the last one is always kept).
 
-    The next one takes its time (the ticks are differences of rounded absolute times)
-    and, through the absolute steps, its motion. A last segment under ``min_ticks`` is
-    stretched to it.
+    The kept one takes their time (the ticks are differences of rounded absolute
+    times), their motion (through the absolute steps) and the start speed of the first
+    of them. ``move_end`` (segments up to each move's end) is counted again. A device
+    takes no segment under its shortest (PROTOCOL.md, CAPS); the merged one is also
+    slower than the rounded sliver it absorbed.
     """
-    keep = batch.ticks >= min_ticks
+    keep = keep.copy()
     keep[-1] = True
-    ticks = np.diff(np.cumsum(batch.ticks)[keep], prepend=0)  # a dropped one's time included
-    ticks[-1] = max(int(ticks[-1]), min_ticks)
+    ticks = np.diff(np.cumsum(batch.ticks)[keep], prepend=0)
     steps = batch.steps_abs[keep]
     delta = np.diff(steps, axis=0, prepend=prev_steps[None, :])
-    kept = PlannedSegments(
+    kept = np.flatnonzero(keep)
+    first = np.concatenate([[0], kept[:-1] + 1])  # the first segment each kept one absorbs
+    v_start = batch.v_start[first]
+    v_end = batch.v_end[keep]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ramp = np.where(v_start + v_end > 0, v_start / (v_start + v_end), 0.5)
+    merged = PlannedSegments(
         steps,
         delta,
         ticks,
-        batch.ramp[keep],
-        batch.v_start[keep],
-        batch.v_end[keep],
+        ramp,
+        v_start,
+        v_end,
         batch.line[keep],
         batch.layer[keep],
         batch.point[keep],
         batch.e[keep],
         batch.t_end[keep],
     )
-    return kept, np.cumsum(keep)[ends]
+    counted = np.cumsum(keep)
+    return merged, np.where(move_end > 0, counted[np.maximum(move_end, 1) - 1], 0)
+
+
+def _at_least(
+    batch: PlannedSegments, prev_steps: np.ndarray, move_end: np.ndarray, min_ticks: int
+) -> tuple[PlannedSegments, np.ndarray]:
+    """Segments under ``min_ticks`` merged into the next (a short last one takes the one
+    before it); a single one still short is stretched to ``min_ticks``."""
+    keep = batch.ticks >= min_ticks
+    if not keep[-1] and len(batch) > 1:
+        keep[-2] = False
+    batch, move_end = _absorb(batch, prev_steps, move_end, keep)
+    if batch.ticks[-1] < min_ticks:
+        ticks = batch.ticks.copy()
+        ticks[-1] = min_ticks
+        batch = replace(batch, ticks=ticks)
+    return batch, move_end
+
+
+def peak_rates(batch: PlannedSegments, clock_hz: float) -> np.ndarray:
+    """(n,) the fastest axis's peak step rate of each segment, as the device checks it
+    (PROTOCOL.md 5.1, from the ramp codes the wire carries)."""
+    codes = ramp_codes_from_speeds(batch.v_start, batch.v_end)
+    wire = SegmentBatch(batch.ticks, batch.delta, codes)
+    return np.asarray(peak_step_rates(wire, int(clock_hz)).max(axis=1))
+
+
+def _within_step_rate(
+    batch: PlannedSegments,
+    prev_steps: np.ndarray,
+    move_end: np.ndarray,
+    max_step_rate: float,
+    clock_hz: float,
+) -> tuple[PlannedSegments, np.ndarray]:
+    """Segments whose rounded steps exceed ``max_step_rate`` merged into the next (the
+    last one into the one before), a few passes: the speeds were planned under the
+    rate, so what exceeds it is the rounding of a short piece, which its neighbour
+    averages out. What is still over after the passes is left to the feed's check
+    (StepRateError names it)."""
+    limit = max_step_rate * (1.0 - 1e-6)  # the device's integer test, with float slack
+    for _ in range(RATE_MERGE_PASSES):
+        over = peak_rates(batch, clock_hz) > limit
+        if not over.any() or len(batch) < 2:
+            break
+        keep = ~over
+        if over[-1]:
+            keep[-2] = False  # the last merges backwards: the one before absorbs into it
+        batch, move_end = _absorb(batch, prev_steps, move_end, keep)
+    return batch, move_end
 
 
 class Segmenter:
@@ -301,8 +379,10 @@ class Segmenter:
         *,
         e_steps_per_mm: float,
         clock_hz: float = DEFAULT_CLOCK_HZ,
+        limits: SegmentLimits = DEFAULT_LIMITS,
     ):
         self.model = model
+        self.limits = limits
         self.home_sliders = np.asarray(home_sliders, dtype=float)
         self.e_steps_per_mm = float(e_steps_per_mm)
         self.clock_hz = float(clock_hz)
@@ -320,6 +400,7 @@ class Segmenter:
             self.state,
             e_steps_per_mm=self.e_steps_per_mm,
             clock_hz=self.clock_hz,
+            limits=self.limits,
         )
         self.segments += len(batch)
         return batch, move_end

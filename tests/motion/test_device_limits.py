@@ -48,3 +48,43 @@ def test_planned_segments_stay_under_the_announced_rate(tmp_path):
     rate = 0.6 * free  # a device slower than this file needs
     capped = caps_for_device(profile, rate).profile
     assert peak(capped) <= rate
+
+
+def _first_segments(path, profile, model, limits, n=40_000):
+    """Segments of the start of ``path``'s program (commands dropped), as one wire batch."""
+    from cdprhost.motion.segments import PlannedSegments
+
+    parts, count = [], 0
+    for out in segment_program(
+        read_items(path, profile, model), profile, model, clock_hz=100_000, limits=limits
+    ):
+        if isinstance(out, PlannedSegments):
+            parts.append(out)
+            count += len(out)
+            if count >= n:
+                break
+    return parts
+
+
+def test_rounded_slivers_are_merged_under_the_device_rate(fixture_gcode):
+    """The planner keeps speeds under 90 % of the rate, but a short piece can round to
+    more steps than its time allows (2 steps in 110 us); with the device's limits such
+    a segment is merged into its neighbour, keeping the steps and the time."""
+    from cdprhost.motion.segments import SegmentLimits, peak_rates
+
+    profile = load_profile("paper-prototype")
+    model = MachineModel.from_profile(profile)
+    rate = 10_000
+    capped = caps_for_device(profile, rate, 200e-6)
+    assert capped.segments == SegmentLimits(200e-6, rate)
+    plain = _first_segments(fixture_gcode, capped.profile, model, SegmentLimits(200e-6, None))
+    kept = _first_segments(fixture_gcode, capped.profile, model, capped.segments)
+    over = np.concatenate([peak_rates(b, 100_000) for b in plain]) > rate
+    assert over.any()  # the file has slivers over the rate without the limit
+    for a, b in zip(plain, kept):
+        assert peak_rates(b, 100_000).max() <= rate
+        assert peak_step_rates(to_wire(b), 100_000).max() <= rate  # what the feed checks
+        assert b.ticks.min() >= 20
+        assert int(a.ticks.sum()) == int(b.ticks.sum())  # the same time
+        np.testing.assert_array_equal(a.steps_abs[-1], b.steps_abs[-1])  # the same motion
+        assert len(b) < len(a) or not (peak_rates(a, 100_000) > rate).any()
