@@ -89,6 +89,9 @@ static int suspect[2];
 static uint32_t pc_hist[65536];
 static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count, isr_hist[64];
 static uint16_t isr_sp;
+/* compare B interrupts outside compare A's (the steps it issues between ticks) */
+static uint64_t b_entry, b_cycles_sum, b_count;
+static uint16_t b_sp;
 static uint32_t trace_pc[8192];
 static size_t trace_len;
 
@@ -591,7 +594,7 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -600,7 +603,8 @@ static void write_stats(void)
             loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
             step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
-            motion_clock_slips, (unsigned long long)isr_count);
+            motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
+            (unsigned long long)b_count);
     fclose(f);
 }
 
@@ -731,9 +735,25 @@ int main(int argc, char **argv)
     int debug = getenv("CDPR_SIM_DEBUG") != NULL;
     int profile_isr = getenv("CDPR_SIM_PROFILE_ISR") != NULL;
     int profile_all = getenv("CDPR_SIM_PROFILE_ALL") != NULL;
+    FILE *cli_log = getenv("CDPR_SIM_CLI_LOG") ? fopen(getenv("CDPR_SIM_CLI_LOG"), "w") : NULL;
+    avr_cycle_count_t cli_start = 0;
+    avr_flashaddr_t cli_pc = 0;
     avr_flashaddr_t prev_pc = 0;
     while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
         state = avr_run(avr);
+        if (cli_log) { /* debugging: spans with interrupts masked, over 60 cycles */
+            if (!avr->sreg[S_I]) {
+                if (!cli_start) {
+                    cli_start = avr->cycle;
+                    cli_pc = avr->pc;
+                }
+            } else if (cli_start) {
+                if (avr->cycle - cli_start > 60)
+                    fprintf(cli_log, "%llu %llu %x %x\n", (unsigned long long)cli_start,
+                            (unsigned long long)(avr->cycle - cli_start), cli_pc, avr->pc);
+                cli_start = 0;
+            }
+        }
         if (debug) {
             if (avr->pc == 0 && prev_pc != 0)
                 fprintf(stderr, "cdpr-sim: reset at %.6f s, from pc 0x%x, sp 0x%x\n", sim_seconds(),
@@ -750,6 +770,15 @@ int main(int argc, char **argv)
                 pc_hist[avr->pc]++;
             if (isr_entry && trace_len < sizeof trace_pc / sizeof trace_pc[0])
                 trace_pc[trace_len++] = avr->pc | (uint32_t)(avr->data[0x84] | avr->data[0x85] << 8) << 16 ;
+            if (avr->pc == 0x48 && !isr_entry && !b_entry) {
+                b_entry = avr->cycle;
+                b_sp = sp;
+            } else if (b_entry && sp == b_sp && avr->flash[avr->pc] == 0x18 &&
+                       avr->flash[avr->pc + 1] == 0x95) {
+                b_cycles_sum += avr->cycle - b_entry + 4;
+                b_count++;
+                b_entry = 0;
+            }
             if (avr->pc == 0x44 && !isr_entry) {
                 isr_entry = avr->cycle;
                 isr_sp = sp;
@@ -771,7 +800,8 @@ int main(int argc, char **argv)
                     if (trace_lo)
                         trace_lo = 1; /* the first one only */
                     /* the first over-long tick: its instruction trace, for the profile */
-                    FILE *f = fopen("/tmp/cdpr-long-isr.txt", "w");
+                    const char *trace_path = getenv("CDPR_SIM_LONG_ISR");
+                    FILE *f = fopen(trace_path ? trace_path : "/tmp/cdpr-long-isr.txt", "w");
                     for (size_t i = 0; f && i < trace_len; i++)
                         fprintf(f, "%x %u\n", trace_pc[i] & 0xFFFF, trace_pc[i] >> 16);
                     if (f)
@@ -801,7 +831,8 @@ int main(int argc, char **argv)
             fclose(f);
     }
     if (getenv("CDPR_SIM_PROFILE_ISR") || profile_all) {
-        FILE *f = fopen("/tmp/cdpr-pc-hist.txt", "w");
+        const char *hist_path = getenv("CDPR_SIM_PC_HIST");
+        FILE *f = fopen(hist_path ? hist_path : "/tmp/cdpr-pc-hist.txt", "w");
         for (unsigned i = 0; f && i < 65536; i++)
             if (pc_hist[i])
                 fprintf(f, "%x %u\n", i, pc_hist[i]);

@@ -12,23 +12,22 @@
 /* Time. Segment and dwell durations, the device clock and every timer are in
  * units of the protocol clock: CLOCK_HZ (10 us), as in the Python device model,
  * so the host plans the same segments for both. The step interrupt runs on its
- * own grid of TICK_UNITS units (100 us, 10 kHz) and makes the last tick of each
- * timed item as long as it needs to be, so
- * every segment and dwell lasts exactly its duration. Homing ticks are
- * HOME_TICK_UNITS long: one homing step each, 4000 steps/s. */
+ * own grid of TICK_UNITS units (200 us, 5 kHz) and makes the last tick of each
+ * timed item as long as it needs to be, so every segment and dwell lasts exactly
+ * its duration; each step inside a tick is issued at its own time on the
+ * segment's profile (stepper.c). Homing ticks are HOME_TICK_UNITS long: one
+ * homing step each, 4000 steps/s. */
 #define CLOCK_HZ 100000UL
 #define UNIT_CYCLES (F_CPU / CLOCK_HZ)                  /* 160 */
-#define TICK_UNITS 10
-#define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 1600 */
+#define TICK_UNITS 20
+#define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 3200 */
 #define HOME_TICK_UNITS 25
-/* Step pulses within a tick at k * PHASE_CYCLES (12.5 us apart): a 100 us tick
- * holds 8 of them per axis, so 80000 steps/s could be issued by one axis alone.
- * What limits the rate is the CPU: every phase is an interrupt, and with the three
- * modules near 52000 steps/s at once, the extruder and the UART at 250000 baud, the
- * ticks overran (a pulse fell past its tick, found in CI). The firmware advertises
- * 40000 (the host plans for 90 % of it), at which a print leaves the tick room. */
-#define PHASE_CYCLES 200
-#define MAX_STEP_RATE 40000UL /* steps/s, any one axis */
+/* Every step costs the interrupt about 140 cycles (placed, sorted, issued by its
+ * own compare B), so the rate the firmware advertises is what four axes at once
+ * can take with the interrupt under 70 % of the CPU: 10000 steps/s each (63 %,
+ * bench/firmware.py; 12000 measured 69 % with late pulses). The host plans for
+ * 90 % of it. */
+#define MAX_STEP_RATE 10000UL /* steps/s, any one axis */
 
 /* CAPS (protocol 2.1). The shortest segment: one whole tick (a shorter one would make
  * the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
@@ -81,6 +80,6 @@
 #define REACHED_BAND_DC 10
 /* The heater duties the control loop sets expire after this many step ticks
  * (100 us each: 0.3 s, three control periods) unless the loop refreshes them. */
-#define HEATER_LEASE_TICKS 3000
+#define HEATER_LEASE_TICKS (30000UL / TICK_UNITS)
 
 #endif

@@ -13,6 +13,7 @@
 #include "config.h"
 #include "motion.h"
 #include "protocol_gen.h"
+#include "step_rate.h"
 
 struct plan plans[PLAN_SLOTS];
 volatile uint8_t plan_head, plan_tail;
@@ -20,9 +21,10 @@ volatile uint8_t plan_head, plan_tail;
 uint8_t motion_cursor; /* next queue position to look at */
 
 /* The rate test |n| F clock_hz / (255 D) > MAX_STEP_RATE, F = 255 max(2r, 2 - 2r),
- * becomes |n| F > RATE_K D with an integer RATE_K. */
-#define RATE_K (MAX_STEP_RATE * 255UL / CLOCK_HZ)
-_Static_assert(RATE_K * CLOCK_HZ == MAX_STEP_RATE * 255UL, "RATE_K must be exact");
+ * becomes 100 |n| F > RATE_K100 D with an integer RATE_K100 (MAX_STEP_RATE a multiple
+ * of 200). */
+#define RATE_K100 (MAX_STEP_RATE * 255UL / (CLOCK_HZ / 100))
+_Static_assert(RATE_K100 * (CLOCK_HZ / 100) == MAX_STEP_RATE * 255UL, "RATE_K100 must be exact");
 
 /* |d| of a delta that is not INT32_MIN (the decoder refuses it) */
 static inline uint32_t abs32(int32_t d)
@@ -32,28 +34,28 @@ static inline uint32_t abs32(int32_t d)
 
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
 {
-    /* F <= 510 = 5 RATE_K: no axis is over when 5 max|n| <= D (every segment of a
-     * print), decided without the per-axis products */
-    _Static_assert(510 == 5 * RATE_K, "the fast test assumes RATE_K = 102");
+    /* 100 F <= 51000 <= FAST_K RATE_K100: no axis is over when FAST_K max|n| <= D
+     * (every segment of a print), decided without the per-axis products */
+#define FAST_K ((51000UL + RATE_K100 - 1) / RATE_K100)
+    _Static_assert(FAST_K * RATE_K100 >= 51000UL && FAST_K <= 64, "the fast test's bound");
     uint32_t most = abs32(s->deltas[0]) | abs32(s->deltas[1]) | abs32(s->deltas[2]) |
                     abs32(s->deltas[3]); /* >= max |n|, < 2 max |n| */
-    if (most < (1UL << 24) && most * 5 <= s->ticks)
+    if (most < (1UL << 24) && most * FAST_K <= s->ticks)
         return -1;
     uint16_t f;
     if (s->ramp < 0)
         f = 255;
     else
         f = (uint16_t)(s->ramp * 2 > 510 - s->ramp * 2 ? s->ramp * 2 : 510 - s->ramp * 2);
-    /* D * RATE_K, saturated: a longer segment cannot be too fast for 32-bit step counts */
-    uint32_t limit = s->ticks > 0xFFFFFFFFUL / RATE_K ? 0xFFFFFFFFUL : s->ticks * RATE_K;
     for (uint8_t k = 0; k < 4; k++) {
         int32_t d = s->deltas[k];
         uint32_t n = (uint32_t)(d < 0 ? -(int64_t)d : d);
+        /* 100 n F < 2^32 when n < 2^16 (a fast segment of a print); else 64 bits */
         uint8_t over;
-        if (n < (1UL << 22))
-            over = n * f > limit; /* < 2^31: no overflow */
+        if (n < (1UL << 16))
+            over = (uint64_t)(n * f * 100UL) > (uint64_t)s->ticks * RATE_K100;
         else
-            over = (uint64_t)n * f > (uint64_t)s->ticks * RATE_K;
+            over = (uint64_t)n * f * 100U > (uint64_t)s->ticks * RATE_K100;
         if (over) {
             float r = (float)n * (float)f * (float)CLOCK_HZ / (255.0f * (float)s->ticks);
             *rate = r > 2147483647.0f ? 0x7FFFFFFFUL : (uint32_t)r;
@@ -219,7 +221,7 @@ static struct {
  * An entry is valid while its gen is the shape's (0: never). */
 #define MEMO_N 8
 static struct {
-    uint16_t v_lo, a_lo;
+    uint16_t v_lo, a_lo, cps8;
     int32_t v_hi, a_hi;
     uint8_t last_n, est_low, gen;
 } memo[MEMO_N];
@@ -255,7 +257,7 @@ static void shape_of(const struct item *it)
 
 /* An axis of n > 0 steps whose constants are not kept: the products, out of the
  * common path */
-static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32_t n)
+static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32_t n, uint8_t accel)
 {
     uint32_t before = times_frac32(n, shape.before);
     if (before > n)
@@ -264,6 +266,8 @@ static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32
     x->est_low = (uint8_t)before;
     times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
     times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
+    /* a steady segment moves v_hi every tick: the interrupt's step rate, now */
+    x->cps8 = accel ? 0 : step_cycles8((uint32_t)x->v_hi, TICK_CYCLES);
     if (n < MEMO_N) {
         memo[n].v_lo = x->v_lo;
         memo[n].v_hi = x->v_hi;
@@ -271,6 +275,7 @@ static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32
         memo[n].a_hi = x->a_hi;
         memo[n].last_n = (uint8_t)x->last_n;
         memo[n].est_low = x->est_low;
+        memo[n].cps8 = x->cps8;
         memo[n].gen = shape_gen;
     }
 }
@@ -294,6 +299,7 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
         uint32_t n = *np;
         *delta = (dir & bit) ? -(int32_t)n : (int32_t)n;
         x->acc = 1UL << 23;
+        x->cps8 = 0;
         if (!n) {
             x->v_hi = x->a_hi = 0;
             x->v_lo = x->a_lo = 0;
@@ -309,8 +315,9 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             x->a_hi = memo[n].a_hi;
             x->last_n = memo[n].last_n;
             x->est_low = memo[n].est_low;
+            x->cps8 = memo[n].cps8;
         } else {
-            axis_constants(x, n);
+            axis_constants(x, n, p->accel);
         }
     }
     p->moving = moving;

@@ -5,20 +5,27 @@
  * the tick whose length differs), so items start and end on exact clock units.
  * Work is pipelined one tick deep: at a tick's start the interrupt first marks
  * what the tick that just ended completed (segment end, positions set, abort),
- * then sets this tick's directions and its first pulses, all computed during
- * the previous interrupt; further pulses of the tick follow at k * PHASE_CYCLES
- * from compare B. Then, with its own interrupt masked and the others allowed
- * (so compare B keeps its time), it computes the next tick.
+ * then sets this tick's directions, all computed during the previous interrupt.
+ * Each step has its own time: the DDA counts a tick's steps per axis and places
+ * each at the time the segment's profile gives it (interpolated inside the tick
+ * from the accumulator and the axis's cycles per step), on a time wheel of
+ * SLOT_CYCLES slots; the axes that fall in one slot form one event, and compare B
+ * issues the events at their times. Then, with its own interrupt masked and the
+ * others allowed (so compare B keeps its time), it computes the next tick.
  *
  * Pulses are high for at least 2 us and a direction change leads the next pulse
  * by at least 1 us (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208:
- * 0.1 us / 20 ns); pulses of one axis are at least PHASE_CYCLES apart. */
+ * 0.1 us / 20 ns). A pulse issued later than LATE_TOLERANCE_US after its time is
+ * counted (HEALTH late_pulses) and the worst lateness kept. */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <avr/pgmspace.h>
 
 #include "board_ramps14.h"
 #include "config.h"
 #include "sim_hooks.h"
+#include "mul16.h"
+#include "step_rate.h"
 #include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
@@ -37,6 +44,10 @@ volatile uint8_t stepper_latency_max;
 volatile uint16_t stepper_late_worst;
 volatile uint32_t stepper_late_tolerance;
 static volatile uint8_t computing, tick_missed;
+/* bumped by every tick interrupt: the main loop's snapshots retry until none came
+ * between their first and last read, instead of masking interrupts for 20 us */
+static volatile uint8_t tick_gen;
+static uint8_t handed_over; /* the next tick's first event went out with this one's */
 
 #define OUT_MOTION 0x01
 #define OUT_SEG_END 0x02
@@ -53,43 +64,177 @@ static volatile uint8_t computing, tick_missed;
 _Static_assert(HOME_TICKS * DEV_HOMING_RATE * HOME_TICK_UNITS == CLOCK_HZ,
                "a homing step must take a whole number of homing ticks");
 
+/* A tick's output: its step events in time order, each the axes pulsed together and
+ * the cycle (from the tick's compare match) at which the step is due on the
+ * segment's profile. The layout is fixed: compare B's assembly addresses it. */
+#define EV_MAX 24 /* events a tick holds (axes stepping within a slot share one) */
+#define AX_MAX 16 /* steps of one axis a tick holds (80000 steps/s in a 200 us tick) */
+struct event {
+    uint8_t mask; /* axes pulsed together; 0 ends a tick's list */
+    uint16_t at;  /* cycles from the tick's compare match */
+};
 struct out {
-    uint8_t m[16];  /* axes stepping in phase k of the tick (offset 0) */
-    uint8_t phases; /* phases with pulses (offset 16) */
-    uint8_t dir;    /* axis bit set: negative */
+    struct event ev[EV_MAX + 1]; /* offset 0, in time order */
+    uint8_t n;
+    uint8_t dir; /* axis bit set: negative */
     uint8_t flags;
     uint8_t units; /* length of the tick */
     uint32_t seq;
 };
 static struct out outs[2];
-struct out *stepper_emit = &outs[0]; /* the tick being emitted (global: compare B's assembly) */
-#define emit stepper_emit
+static struct out *emit = &outs[0]; /* the tick being emitted */
 static struct out *nx = &outs[1];   /* the tick being computed */
-volatile uint8_t stepper_phase; /* the phase last emitted (global: compare B's assembly) */
-#define phase stepper_phase
+struct event *stepper_next; /* compare B's next event (global: its assembly) */
 static uint8_t cur_dir = 0xFF, ocr_units = TICK_UNITS;
 
-/* Phase k of a tick starts PHASE_BASE + k * PHASE_CYCLES cycles after its
- * compare match (phase 0 leaves the interrupt's entry at about PHASE_BASE).
- * Pulses that fit a tick of u units (index u): the last one ends (and has its
- * low time) before the next tick's first. */
-#define PHASE_BASE 80
-#define CAP(u) ((u) * UNIT_CYCLES < PHASE_BASE + 64 + PHASE_CYCLES ? 1 \
-                : ((u) * UNIT_CYCLES - PHASE_BASE - 64) / PHASE_CYCLES + 1)
-static const uint8_t phase_cap[2 * TICK_UNITS] = {
-    CAP(0), CAP(1), CAP(2), CAP(3), CAP(4), CAP(5), CAP(6), CAP(7), CAP(8), CAP(9),
-    CAP(10), CAP(11), CAP(12), CAP(13), CAP(14), CAP(15), CAP(16), CAP(17), CAP(18), CAP(19)};
-_Static_assert(2 * TICK_UNITS == 20, "phase_cap lists 20 lengths");
-_Static_assert(CAP(19) <= 16, "phase masks per tick");
+/* The time wheel of the tick being computed: slot s holds the axes that step in
+ * cycles [32 s, 32 s + 32) of the tick (a step goes out at its slot's middle, within
+ * 1 us of its time); occ marks the slots in use, a bit each. */
+#define SLOT_CYCLES 32
+#define SLOTS (2 * TICK_CYCLES / SLOT_CYCLES)
+static uint8_t wheel[SLOTS];
+static uint8_t occ[(SLOTS + 7) / 8];
+static uint8_t occ_lo = 0xFF, occ_hi; /* the bytes of occ in use */
+static const uint8_t bit_of[8] = {1, 2, 4, 8, 16, 32, 64, 128};
+_Static_assert(SLOTS <= 255 && 2 * TICK_CYCLES * 8 < 65536UL, "slots and times x8 fit their types");
 
-/* axis `bit` steps in phases 0..n-1 of the tick */
-static inline __attribute__((always_inline)) void add_pulses(struct out *o, uint8_t bit, uint8_t n)
+static inline __attribute__((always_inline)) void wheel_add(uint8_t slot, uint8_t bit)
 {
-    uint8_t *m = o->m;
-    if (n > o->phases)
-        o->phases = n;
-    while (n--)
-        *m++ |= bit;
+    uint8_t w = wheel[slot];
+    if (!w) {
+        uint8_t byte = slot >> 3;
+        occ[byte] |= bit_of[slot & 7];
+        if (byte < occ_lo)
+            occ_lo = byte;
+        if (byte > occ_hi)
+            occ_hi = byte;
+    }
+    wheel[slot] = w | bit;
+}
+
+/* the lowest set bit of a byte, by table (the wheel's scan) */
+#define LSB1(m) ((m) & 1 ? 0 : (m) & 2 ? 1 : (m) & 4 ? 2 : (m) & 8 ? 3 : (m) & 16 ? 4 : (m) & 32 ? 5 : (m) & 64 ? 6 : 7)
+#define LSB4(m) LSB1(m), LSB1(m + 1), LSB1(m + 2), LSB1(m + 3)
+#define LSB16(m) LSB4(m), LSB4(m + 4), LSB4(m + 8), LSB4(m + 12)
+#define LSB64(m) LSB16(m), LSB16(m + 16), LSB16(m + 32), LSB16(m + 48)
+static const uint8_t lsb_of[256] PROGMEM = {LSB64(0), LSB64(64), LSB64(128), LSB64(192)};
+
+/* The latest cycle of a tick of u units a step may be placed at: its pulse (high and
+ * low) ends before the next tick's first. */
+#define LAST_AT(u) ((uint16_t)((u) * UNIT_CYCLES - 2 * PULSE_CYCLES - 8))
+#define LAST_SLOT(u) ((uint8_t)(LAST_AT(u) / SLOT_CYCLES - 1))
+
+/* The tick's events from its wheel, in time order (and the wheel emptied). Slots
+ * next to each other are one event, at the earlier one's time (within 3 us). */
+static void __attribute__((noinline)) wheel_take(struct out *o)
+{
+    struct event *e = o->ev, *last = 0;
+    uint8_t n = 0, prev = 0xFE;
+    uint8_t hi = occ_hi;
+    for (uint8_t byte = occ_lo; byte <= hi; byte++) {
+        uint8_t m = occ[byte];
+        if (!m)
+            continue;
+        occ[byte] = 0;
+        do {
+            uint8_t slot = (uint8_t)((byte << 3) | pgm_read_byte(&lsb_of[m]));
+            m &= (uint8_t)(m - 1);
+            uint8_t axes = wheel[slot];
+            wheel[slot] = 0;
+            if ((uint8_t)(slot - 1) == prev) {
+                last->mask |= axes; /* next to the last: together */
+                continue;
+            }
+            prev = slot;
+            if (n == EV_MAX) {
+                for (; axes; axes &= (uint8_t)(axes - 1))
+                    stepper_lost_steps++; /* never at the advertised rate */
+                continue;
+            }
+            last = e;
+            e->mask = axes;
+            e->at = (uint16_t)(mul8x8(slot, SLOT_CYCLES) + SLOT_CYCLES / 2);
+            e++;
+            n++;
+        } while (m);
+    }
+    occ_lo = 0xFF;
+    occ_hi = 0;
+    e->mask = 0;
+    o->n = n;
+}
+
+/* One step slower than 1953 steps/s (cycles x 8 per step >= 2^16: one step a tick at
+ * most), at x / dist of the tick, x = 1 - frac: the fraction to 1/64 by halving
+ * (no division), in 16 bits. */
+static void __attribute__((noinline)) place_slow(uint8_t bit, uint32_t frac, uint32_t dist,
+                                                  uint16_t span, uint8_t last)
+{
+    uint32_t x32 = 0x1000000UL - frac;
+    if (x32 > dist)
+        x32 = dist; /* the crossing is within the tick (rounding aside) */
+    if (!(uint16_t)(dist >> 16)) { /* under 1/256 step a tick: scale up (byte moves) */
+        dist <<= 8;
+        x32 <<= 8;
+    }
+    uint16_t d, x;
+    if ((uint8_t)(dist >> 24)) {
+        d = (uint16_t)(dist >> 16);
+        x = (uint16_t)(x32 >> 16);
+    } else {
+        d = (uint16_t)(dist >> 8);
+        x = (uint16_t)(x32 >> 8);
+    }
+    uint8_t f = 0;
+    for (uint8_t i = 0; i < 6; i++) {
+        d >>= 1;
+        f <<= 1;
+        if (x >= d) {
+            x -= d;
+            f |= 1;
+        }
+    }
+    uint8_t slot = (uint8_t)(mul16x16((uint16_t)(2 * f + 1), span) >> 12); /* f + 1/2 */
+    wheel_add(slot > last ? last : slot, bit);
+}
+
+/* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x 8
+ * per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the tick's
+ * start; step j (1..n) falls where the distance crosses j - f16, at (j - f16) c / 8
+ * cycles. No step is placed after slot `last`. */
+static inline __attribute__((always_inline)) void place_steps(uint8_t bit, uint8_t n,
+                                                              uint16_t f16, uint16_t c,
+                                                              uint8_t last)
+{
+    /* the distance to the first crossing, Q0.16 (1 - 2^-16 stands for 1); its time
+     * (cycles x 8) is the high half of x c, its slot the high byte of the time */
+    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
+    uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
+    do {
+        uint8_t slot = (uint8_t)(t >> 8);
+        if (slot > last)
+            slot = last;
+        wheel_add(slot, bit);
+        t += c;
+    } while (--n);
+}
+
+
+/* Steps of axis k over a tick of `span` cycles in which it moves `dist` (Q8.24),
+ * starting `frac` (Q0.24) past its last step boundary. */
+static void __attribute__((noinline)) place_axis(uint8_t k, uint8_t n, uint32_t frac,
+                                                 uint32_t dist, uint16_t span, uint8_t last)
+{
+    uint16_t c = step_cycles8(dist, span);
+    uint8_t bit = bit_of[k];
+    if (n > AX_MAX) {
+        stepper_lost_steps += (uint16_t)(n - AX_MAX); /* never at the advertised rate */
+        n = AX_MAX;
+    }
+    if (!c)
+        place_slow(bit, frac, dist, span, last);
+    else
+        place_steps(bit, n, (uint16_t)(frac >> 8), c, last);
 }
 
 /* the executing item */
@@ -284,10 +429,11 @@ static void seg_positions(const struct seg_snapshot *sn, int32_t *out)
 void stepper_positions(int32_t *out)
 {
     struct seg_snapshot sn;
-    uint8_t s = SREG;
-    cli();
-    seg_snapshot(&sn);
-    SREG = s;
+    uint8_t gen;
+    do {
+        gen = tick_gen;
+        seg_snapshot(&sn);
+    } while (gen != tick_gen);
     seg_positions(&sn, out);
 }
 
@@ -408,8 +554,12 @@ static uint8_t __attribute__((noinline)) home_tick(void)
     for (uint8_t k = 0; k < 3; k++)
         if (stepping >> k & 1)
             pos[k] += (neg >> k & 1) ? -1 : 1;
-    nx->m[0] = stepping;
-    nx->phases = stepping ? 1 : 0;
+    if (stepping) {
+        nx->ev[0].mask = stepping;
+        nx->ev[0].at = 0;
+        nx->ev[1].mask = 0;
+        nx->n = 1;
+    }
     return 0;
 }
 
@@ -553,41 +703,45 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
     return n;
 }
 
-/* More pulses than a tick holds (a rate over the advertised one): count the
- * excess as lost. */
-static void __attribute__((noinline)) too_many(struct out *o)
-{
-    uint8_t cap = phase_cap[TICK_UNITS];
-    for (uint8_t i = cap; i < o->phases; i++) {
-        for (uint8_t m = o->m[i]; m; m &= (uint8_t)(m - 1))
-            stepper_lost_steps++;
-        o->m[i] = 0;
-    }
-    o->phases = cap;
-}
-
 /* The segment's last tick: each axis issues what is left (the exact total). */
-static void __attribute__((noinline)) seg_last_tick(struct plan *p, uint8_t cap)
+static void __attribute__((noinline)) seg_last_tick(struct plan *p)
 {
+    uint16_t span = (uint16_t)(p->last_units * UNIT_CYCLES);
     struct stepper_state *s = (struct stepper_state *)&st; /* private to this interrupt here */
     struct out *o = nx;
     struct axis_plan *x = p->ax;
     int32_t *pos = s->pos;
     const int32_t *d = p->delta;
-    for (uint8_t bit = 1; bit < 16; bit <<= 1, x++, pos++, d++) {
-        if (!(p->moving & bit))
+    for (uint8_t k = 0; k < 4; k++, x++, pos++, d++) {
+        if (!(p->moving >> k & 1))
             continue;
         /* N minus what was issued: the estimate's difference to the DDA */
         int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
         uint32_t rem = x->last_n - (int32_t)off;
-        uint8_t n = (uint8_t)rem;
-        if ((rem >> 8) || n > cap) {
-            stepper_lost_steps += (uint16_t)(rem - cap); /* never at the advertised rate */
-            n = cap;
+        int32_t moved = *d;
+        if (rem) {
+            uint8_t n = rem > AX_MAX ? AX_MAX : (uint8_t)rem;
+            if (rem > AX_MAX) {
+                /* more than a tick holds (never at the advertised rate): the position
+                 * counts only the steps issued */
+                uint32_t lost = rem - AX_MAX;
+                stepper_lost_steps += (uint16_t)lost;
+                moved += moved < 0 ? (int32_t)lost : -(int32_t)lost;
+            }
+            uint32_t frac = x->acc & 0xFFFFFFUL;
+            if (x->cps8)
+                /* at the rate of the axis's last tick with steps (a steady segment's) */
+                place_steps(bit_of[k], n, (uint16_t)(frac >> 8), x->cps8,
+                            LAST_SLOT(p->last_units));
+            else
+                /* no rate known yet: over the distance left, from the last crossing to
+                 * N + 1/2, which the accumulator (N p + 1/2) reaches at the end */
+                place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
+                           LAST_SLOT(p->last_units));
         }
-        add_pulses(o, bit, n);
-        *pos += *d;
+        *pos += moved;
     }
+    wheel_take(o);
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
     o->seq = s->segments_done = s->seg_next++;
@@ -627,20 +781,39 @@ static void __attribute__((noinline)) seg_tick(void)
     o->dir = p->dir;
     if (--t_left == 0) {
         o->units = p->last_units;
-        seg_last_tick(p, phase_cap[p->last_units]);
+        seg_last_tick(p);
         return;
     }
-    uint8_t moving = p->moving, accel = p->accel;
-    if (moving & 1)
-        add_pulses(o, 1, dda_tick(&p->ax[0], accel));
-    if (moving & 2)
-        add_pulses(o, 2, dda_tick(&p->ax[1], accel));
-    if (moving & 4)
-        add_pulses(o, 4, dda_tick(&p->ax[2], accel));
-    if (moving & 8)
-        add_pulses(o, 8, dda_tick(&p->ax[3], accel));
-    if (o->phases > phase_cap[TICK_UNITS])
-        too_many(o); /* never at the advertised rate */
+    uint8_t moving = p->moving, accel = p->accel, any = 0;
+    struct axis_plan *x = p->ax;
+    const uint8_t *bit = bit_of;
+    for (uint8_t m = moving; m; m >>= 1, x++, bit++) {
+        if (!(m & 1))
+            continue;
+        /* before the tick: how far past its last crossing the axis is (Q0.16, the
+         * accumulator's bits 8..23) */
+        uint16_t f16 = *(const uint16_t *)((const uint8_t *)&x->acc + 1);
+        uint8_t n = dda_tick(x, accel);
+        if (!n)
+            continue;
+        any = 1;
+        /* the tick moved the axis v_hi (Q8.24, after the acceleration's add): a steady
+         * segment's rate was found with its plan, an accelerating one's changes */
+        uint16_t c = x->cps8;
+        if (accel)
+            x->cps8 = c = step_cycles8((uint32_t)x->v_hi, TICK_CYCLES);
+        if (n > AX_MAX) {
+            stepper_lost_steps += (uint16_t)(n - AX_MAX); /* never at the advertised rate */
+            n = AX_MAX;
+        }
+        if (c)
+            place_steps(*bit, n, f16, c, LAST_SLOT(TICK_UNITS));
+        else
+            place_slow(*bit, (uint32_t)f16 << 8, (uint32_t)x->v_hi, TICK_CYCLES,
+                       LAST_SLOT(TICK_UNITS));
+    }
+    if (any)
+        wheel_take(o);
 }
 
 /* Everything but a segment's tick. */
@@ -706,9 +879,8 @@ static void __attribute__((noinline)) compute_other(void)
 static void __attribute__((noinline)) compute(void)
 {
     struct out *o = nx;
-    for (uint8_t i = 0; i < o->phases; i++)
-        o->m[i] = 0;
-    o->phases = 0;
+    o->n = 0;
+    o->ev[0].mask = 0;
     o->flags = 0;
     o->dir = cur_dir;
     o->units = TICK_UNITS;
@@ -723,98 +895,91 @@ static void __attribute__((noinline)) compute(void)
 /* ---------------------------------------------------------------- interrupts */
 
 
-/* At a tick's start, after phase 0: arm compare B for phase 1, at its time or,
- * when the tick started late, just ahead of now (the later phases then follow
- * at their spacing: compare B's interrupt does the same for each). The tick's
- * computation runs with interrupts on, so compare B keeps its time meanwhile.
- * With interrupts off. */
-#define PHASE_SLACK 40 /* cycles: the earliest compare B can be armed for */
-static inline __attribute__((always_inline)) void phases_arm(void)
-{
-    if (emit->phases < 2) {
-        TIMSK1 &= (uint8_t)~_BV(OCIE1B);
-        return;
-    }
-    uint16_t at = PHASE_BASE + PHASE_CYCLES, soon = TCNT1 + PHASE_SLACK;
-    OCR1B = (int16_t)(at - soon) > 0 ? at : soon;
-    TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
-    TIMSK1 |= _BV(OCIE1B);
-}
+/* Lateness of a step: the cycles between its due time and its pulse. A step later
+ * than the tolerance is counted (HEALTH late_pulses, never silent) and the worst of
+ * those kept (late_worst_us, with the lateness of every step compare A issues). */
+#define LATE_TOLERANCE_CYCLES (LATE_TOLERANCE_US * (F_CPU / 1000000UL))
 
-/* Compare B: the tick's further phases, one per interrupt, 60-odd cycles
- * (hand-written: the compiler's version took twice that, and at 60000 steps/s
- * on three axes a tick has up to seven of them). Sets phase k's pulses, moves
- * OCR1B on by PHASE_CYCLES (or to just ahead of now, if that is already past)
- * or disables itself after the last phase, then ends the pulses >= 2 us later. */
+/* Compare B: a tick's events after the first, one per interrupt, 50-odd cycles
+ * (hand-written: the compiler's version took twice that). Raises the event's pulses,
+ * counts it if late, arms OCR1B for the next (or just ahead of now, if that is
+ * already past) or disables itself after the last, then ends the pulses >= 2 us
+ * after they rose. */
 ISR(TIMER1_COMPB_vect, ISR_NAKED)
 {
     __asm__ volatile(
         "push r24\n\t"
         "in r24, __SREG__\n\t"
         "push r24\n\t"
-        "push r25\n\t"
         "push r30\n\t"
         "push r31\n\t"
-        "lds r30, stepper_emit\n\t"
-        "lds r31, stepper_emit+1\n\t"
-        "ldd r25, Z+16\n\t" /* phases */
-        "lds r24, stepper_phase\n\t"
-        "inc r24\n\t"
-        "sts stepper_phase, r24\n\t"
-        "add r30, r24\n\t"
-        "brcc 1f\n\t"
-        "inc r31\n"
-        "1:\n\t"
-        "ld r30, Z\n\t" /* this phase's axes */
-        "sbrc r30, 0\n\t"
+        "lds r30, stepper_next\n\t"
+        "lds r31, stepper_next+1\n\t"
+        "ld r24, Z+\n\t" /* this event's axes */
+        "sbrc r24, 0\n\t"
         "sbi %[pf], %[xb]\n\t"
-        "sbrc r30, 1\n\t"
+        "sbrc r24, 1\n\t"
         "sbi %[pf], %[yb]\n\t"
-        "sbrc r30, 3\n\t"
+        "sbrc r24, 3\n\t"
         "sbi %[pa], %[eb]\n\t"
-        "sbrs r30, 2\n\t"
-        "rjmp 2f\n\t"
-        "lds r31, %[pl]\n\t"
-        "ori r31, %[zm]\n\t"
-        "sts %[pl], r31\n"
+        "sbrs r24, 2\n\t"
+        "rjmp 1f\n\t"
+        "lds r24, %[pl]\n\t"
+        "ori r24, %[zm]\n\t"
+        "sts %[pl], r24\n"
+        "1:\n\t"
+        "push r25\n\t"
+        "push r26\n\t"
+        "push r27\n\t"
+        /* lateness: TCNT1 - at, late beyond the tolerance: counted */
+        "lds r26, %[tcntl]\n\t"
+        "lds r27, %[tcntl]+1\n\t"
+        "ld r24, Z+\n\t"
+        "ld r25, Z+\n\t"
+        "sub r26, r24\n\t"
+        "sbc r27, r25\n\t"
+        "cpi r26, lo8(%[tol] + 1)\n\t"
+        "ldi r24, hi8(%[tol] + 1)\n\t"
+        "cpc r27, r24\n\t"
+        "brlt 2f\n\t" /* within the tolerance, or early (merged with an earlier step) */
+        "call stepper_late_step\n"
         "2:\n\t"
-        "inc r24\n\t"
-        "cp r24, r25\n\t"
-        "brlo 3f\n\t"
-        "lds r24, %[timsk]\n\t" /* that was the last phase */
+        /* the next event: a mask of 0 ends the list */
+        "ld r24, Z\n\t"
+        "tst r24\n\t"
+        "brne 3f\n\t"
+        "lds r24, %[timsk]\n\t"
         "andi r24, %[nocieb]\n\t"
         "sts %[timsk], r24\n\t"
-        "rjmp 4f\n"
+        "rjmp 5f\n"
         "3:\n\t"
-        "lds r24, %[ocrl]\n\t"
-        "lds r25, %[ocrl]+1\n\t"
-        "subi r24, lo8(-(%[step]))\n\t"
-        "sbci r25, hi8(-(%[step]))\n\t"
-        "lds r30, %[tcntl]\n\t"
-        "lds r31, %[tcntl]+1\n\t"
-        "adiw r30, 24\n\t"
-        "cp r30, r24\n\t"
-        "cpc r31, r25\n\t"
-        "brlo 5f\n\t"
-        "movw r24, r30\n\t" /* already past: just ahead of now */
+        "ldd r24, Z+1\n\t"
+        "ldd r25, Z+2\n\t"
+        "lds r26, %[tcntl]\n\t"
+        "lds r27, %[tcntl]+1\n\t"
+        "adiw r26, 24\n\t"
+        "cp r26, r24\n\t"
+        "cpc r27, r25\n\t"
+        "brlo 4f\n\t"
+        "movw r24, r26\n\t" /* already past: just ahead of now */
         "adiw r24, 16\n"
-        "5:\n\t"
+        "4:\n\t"
         "sts %[ocrl]+1, r25\n\t"
         "sts %[ocrl], r24\n"
-        "4:\n\t"
-        "ldi r24, 5\n" /* the rest of the pulse's 2 us */
-        "6:\n\t"
-        "dec r24\n\t"
-        "brne 6b\n\t"
-        "cbi %[pf], %[xb]\n\t"
+        "5:\n\t"
+        "sts stepper_next+1, r31\n\t"
+        "sts stepper_next, r30\n\t"
+        "pop r27\n\t"
+        "pop r26\n\t"
+        "pop r25\n\t"
+        "cbi %[pf], %[xb]\n\t" /* high since the sbi: >= 34 cycles on every path */
         "cbi %[pf], %[yb]\n\t"
         "cbi %[pa], %[eb]\n\t"
-        "lds r31, %[pl]\n\t"
-        "andi r31, %[nzm]\n\t"
-        "sts %[pl], r31\n\t"
+        "lds r24, %[pl]\n\t"
+        "andi r24, %[nzm]\n\t"
+        "sts %[pl], r24\n\t"
         "pop r31\n\t"
         "pop r30\n\t"
-        "pop r25\n\t"
         "pop r24\n\t"
         "out __SREG__, r24\n\t"
         "pop r24\n\t"
@@ -824,43 +989,122 @@ ISR(TIMER1_COMPB_vect, ISR_NAKED)
           [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
           [nzm] "n"(0xFF & ~_BV(Z_STEP_BIT)), [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)),
           [nocieb] "n"(0xFF & ~_BV(OCIE1B)), [ocrl] "n"(_SFR_MEM_ADDR(OCR1BL)),
-          [tcntl] "n"(_SFR_MEM_ADDR(TCNT1L)), [step] "n"(PHASE_CYCLES));
+          [tcntl] "n"(_SFR_MEM_ADDR(TCNT1L)), [tol] "n"(LATE_TOLERANCE_CYCLES));
 }
 /* compare B's assembly assumes the RAMPS step ports: X and Y on PORTF, Z on PORTL, E on PORTA */
+_Static_assert(sizeof(struct event) == 3 && LATE_TOLERANCE_CYCLES < 0x7FFF, "compare B's layout");
+
+/* A step compare B issued late beyond the tolerance, r27:r26 cycles: counted, the
+ * worst kept. Called from compare B's assembly, which saved r24..r27, r30, r31 and
+ * SREG: this saves whatever else it uses. */
+void stepper_late_step(void) __attribute__((naked, used));
+void stepper_late_step(void)
+{
+    __asm__ volatile(
+        "lds r24, stepper_late_tolerance\n\t"
+        "lds r25, stepper_late_tolerance+1\n\t"
+        "adiw r24, 1\n\t"
+        "sts stepper_late_tolerance+1, r25\n\t"
+        "sts stepper_late_tolerance, r24\n\t"
+        "brne 1f\n\t"
+        "lds r24, stepper_late_tolerance+2\n\t"
+        "lds r25, stepper_late_tolerance+3\n\t"
+        "adiw r24, 1\n\t"
+        "sts stepper_late_tolerance+3, r25\n\t"
+        "sts stepper_late_tolerance+2, r24\n"
+        "1:\n\t"
+        "lds r24, stepper_late_worst\n\t"
+        "lds r25, stepper_late_worst+1\n\t"
+        "cp r24, r26\n\t"
+        "cpc r25, r27\n\t"
+        "brsh 2f\n\t"
+        "sts stepper_late_worst+1, r27\n\t"
+        "sts stepper_late_worst, r26\n"
+        "2:\n\t"
+        "ret\n\t");
+}
 
 static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
 static uint8_t edge_armed; /* OCR1C set to toggle MARK_EDGE at the next boundary */
 
-/* Phases of the tick that just ended that compare B has not issued yet (the tick
- * started so late that its phases ran past its end): issued now, before the new
+/* One step event now, from compare A (with interrupts off): its lateness noted as
+ * compare B notes it, pulses 2 us high. */
+static void __attribute__((noinline)) event_now(uint8_t m, uint16_t at, uint16_t now)
+{
+    pulse_on(m);
+    uint16_t l = (int16_t)(now - at) > 0 ? (uint16_t)(now - at) : 0;
+    if (l > stepper_late_worst)
+        stepper_late_worst = l;
+    if (l > LATE_TOLERANCE_CYCLES)
+        stepper_late_tolerance++;
+    __builtin_avr_delay_cycles(PULSE_CYCLES - 8);
+    pulse_off();
+}
+
+/* Events of the tick that just ended that compare B has not issued yet (the tick
+ * started so late that its events ran past its end): issued now, before the new
  * tick's, 2 us high and 2 us low each, so no step is lost; each is counted late.
  * With interrupts off. */
-static void __attribute__((noinline)) flush_phases(void)
+static void __attribute__((noinline)) flush_events(void)
 {
-    for (uint8_t k = (uint8_t)(phase + 1); k < emit->phases; k++) {
-        uint8_t m = emit->m[k];
-        if (!m)
-            continue;
-        pulse_on(m);
+    /* lateness: from the event's time in the tick that ended (its period) to now */
+    uint16_t ended = (uint16_t)(ocr_units * UNIT_CYCLES);
+    for (const struct event *e = stepper_next; e->mask; e++) {
+        uint16_t l = (uint16_t)(TCNT1 + ended - e->at);
+        pulse_on(e->mask);
+        if (l > stepper_late_worst)
+            stepper_late_worst = l;
+        if (l > LATE_TOLERANCE_CYCLES) {
+            stepper_late_pulses++;
+            stepper_late_tolerance++;
+        }
         __builtin_avr_delay_cycles(PULSE_CYCLES);
         pulse_off();
         __builtin_avr_delay_cycles(PULSE_CYCLES);
-        stepper_late_pulses++;
-        stepper_late_tolerance++;
     }
     TIMSK1 &= (uint8_t)~_BV(OCIE1B);
     TIFR1 = _BV(OCF1B);
 }
 
-/* The start of a tick: markers, this tick's length, directions, first pulses. */
+/* Events due within this many cycles are issued by compare A itself (it holds the
+ * CPU until then); compare B is armed for the first one after. */
+#define A_EARLY 48
+
+/* The start of a tick, with interrupts off and as short as it can be: this tick's
+ * length, directions, the events due at once, compare B armed for the rest. */
 static void __attribute__((noinline)) tick_start(void)
 {
     uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
     if (TIMSK1 & _BV(OCIE1B))
-        flush_phases(); /* compare B disables itself after a tick's last phase */
+        flush_events(); /* compare B disables itself after a tick's last event */
     struct out *e = nx;
     nx = emit;
     emit = e;
+    struct event *ev = e->ev;
+    if (handed_over) {
+        ev++; /* issued by the last tick's compare B, just before this tick began */
+        handed_over = 0;
+    }
+    uint16_t high_from = 0;
+    uint8_t first = 0;
+    if (ev->mask && e->dir == cur_dir && !late) {
+        /* a first step due at once goes out before anything else (the bookkeeping
+         * below runs while its pulse is high) */
+        uint16_t at = ev->at;
+        if ((int16_t)(at - TCNT1) < A_EARLY) {
+            while ((int16_t)(TCNT1 - at) < 0)
+                ;
+            pulse_on(ev->mask);
+            high_from = TCNT1;
+            uint16_t l = (int16_t)(high_from - at) > 0 ? (uint16_t)(high_from - at) : 0;
+            if (l > stepper_late_worst)
+                stepper_late_worst = l;
+            if (l > LATE_TOLERANCE_CYCLES)
+                stepper_late_tolerance++;
+            ev++;
+            first = 1;
+        }
+    }
     uint8_t units = e->units;
     if (units != ocr_units) {
         ocr_units = units;
@@ -875,24 +1119,50 @@ static void __attribute__((noinline)) tick_start(void)
             tick_missed = 1;
         }
     }
-    uint8_t pulses = e->m[0], t0 = 0;
-    if (pulses) {
-        if (e->dir != cur_dir) {
-            apply_dirs(e->dir);
-            cur_dir = e->dir;
-            __builtin_avr_delay_cycles(16);
-        }
-        pulse_on(pulses);
-        t0 = TCNT1L;
-    }
-    /* useful work while the pulses are high */
     if (entry > stepper_latency_max && !late)
         stepper_latency_max = entry;
-    uint16_t lateness = entry + late; /* cycles after the tick's due start */
-    if (lateness > stepper_late_worst)
-        stepper_late_worst = lateness;
-    if (pulses && lateness > LATE_TOLERANCE_US * (F_CPU / 1000000UL))
-        stepper_late_tolerance++; /* counted (HEALTH), never silent */
+    if (first) {
+        while ((uint16_t)(TCNT1 - high_from) < PULSE_CYCLES)
+            ;
+        pulse_off();
+        __builtin_avr_delay_cycles(PULSE_CYCLES); /* low before another pulse */
+    }
+    if (!ev->mask)
+        return;
+    if (e->dir != cur_dir) {
+        apply_dirs(e->dir);
+        cur_dir = e->dir;
+        __builtin_avr_delay_cycles(16);
+    }
+    for (; ev->mask; ev++) {
+        /* (a tick started late runs in its own timer period all the same: its later
+         * steps keep their time) */
+        uint16_t at = ev->at, now = TCNT1;
+        if ((int16_t)(at - now) <= 0) {
+            event_now(ev->mask, at, now);
+        } else if (at - now < A_EARLY) {
+            while ((int16_t)(TCNT1 - at) < 0)
+                ;
+            event_now(ev->mask, at, at);
+        } else {
+            break;
+        }
+        __builtin_avr_delay_cycles(PULSE_CYCLES); /* low before another pulse */
+    }
+    stepper_next = ev;
+    if (ev->mask) {
+        OCR1B = ev->at;
+        TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
+        TIMSK1 |= _BV(OCIE1B);
+    }
+}
+
+/* What a tick's start does that needs no exact time: markers, the scheduler's clock,
+ * the heater lease and the PWM outputs. With interrupts on (compare B may nest:
+ * nothing here touches its pins or its data). */
+static void __attribute__((noinline)) tick_chores(void)
+{
+    struct out *e = emit;
     uint8_t f = e->flags;
     if (f & (OUT_POS | OUT_ABORT)) {
         /* positions were set (at rest); a segment was abandoned (before the
@@ -913,7 +1183,7 @@ static void __attribute__((noinline)) tick_start(void)
         edge_armed = 0;
         OCR1C = EDGE_NEVER;
     }
-    sched_clock_count += units;
+    sched_clock_count += e->units;
     uint8_t p = ++pwm;
     if (heater_lease)
         heater_lease--;
@@ -922,13 +1192,6 @@ static void __attribute__((noinline)) tick_start(void)
     if (p < heater_duty[0]) HOTEND_PORT |= _BV(HOTEND_BIT); else HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
     if (p < heater_duty[1]) BED_PORT |= _BV(BED_BIT); else BED_PORT &= (uint8_t)~_BV(BED_BIT);
     if (p < fan_duty) FAN_PORT |= _BV(FAN_BIT); else FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
-    if (pulses) {
-        while ((uint8_t)(TCNT1L - t0) < PULSE_CYCLES)
-            ;
-        pulse_off();
-        phase = 0;
-        phases_arm();
-    }
 }
 
 /* Motion starts or stops at the next tick boundary: MARK_EDGE toggles there
@@ -967,8 +1230,50 @@ static uint8_t __attribute__((noinline)) tick_end(void)
  * (without masking compare A: simavr 1.6 never queues an interrupt that was
  * enabled after its flag rose). Nothing lives across the calls, so the entry
  * saves only what a call clobbers. */
+/* The tick's tail runs with interrupts off (~130 cycles to its return): a compare B
+ * event due in that time goes out first, unless it is so close to the tick's end
+ * that waiting for it would run the tail into the next tick. */
+#define TAIL_CYCLES 144
+static inline void tail_guard(void)
+{
+    uint16_t last = (uint16_t)(OCR1A - TAIL_CYCLES);
+    while (TIMSK1 & _BV(OCIE1B)) {
+        uint16_t b = OCR1B;
+        if ((uint16_t)(b - TCNT1) >= TAIL_CYCLES || b > last)
+            break;
+    }
+}
+
+/* A step due in the first cycles of the next tick goes out from this tick's compare
+ * B, HANDOVER_LEAD cycles before the boundary (its pulse rises about when the tick
+ * begins), rather than from compare A once its entry has run (~130 cycles, 8 us,
+ * late). Only when the next tick keeps the directions and this one ends on time. */
+#define HANDOVER_LEAD 8
+static void __attribute__((noinline)) hand_over_first(void)
+{
+    const struct event *f = nx->ev;
+    uint8_t n = emit->n;
+    if (!f->mask || f->at >= A_EARLY || nx->dir != cur_dir || n >= EV_MAX)
+        return;
+    uint16_t at = (uint16_t)(ocr_units * UNIT_CYCLES - 1 - HANDOVER_LEAD);
+    if ((int16_t)(at - TCNT1) < 24)
+        return; /* too close to arm compare B in time */
+    struct event *e = &emit->ev[n];
+    e->mask = f->mask;
+    e->at = at;
+    e[1].mask = 0;
+    emit->n = (uint8_t)(n + 1);
+    handed_over = 1;
+    if (!(TIMSK1 & _BV(OCIE1B))) {
+        stepper_next = e;
+        OCR1B = at;
+        TIFR1 = _BV(OCF1B);
+        TIMSK1 |= _BV(OCIE1B);
+    }
+}
 ISR(TIMER1_COMPA_vect)
 {
+    tick_gen++;
     if (computing) {
         tick_missed = 1;
         return;
@@ -977,9 +1282,12 @@ ISR(TIMER1_COMPA_vect)
         tick_start();
         computing = 1;
         sei();
+        tick_chores();
         compute();
+        tail_guard();
         cli();
         computing = 0;
         motion_marker();
     } while (tick_end());
+    hand_over_first();
 }
