@@ -25,7 +25,10 @@
 #include "config.h"
 #include "sim_hooks.h"
 #include "mul16.h"
+#include "step_pins.h"
+#include "step_events.h"
 #include "step_rate.h"
+#include "step_wheel.h"
 #include "motion.h"
 #include "protocol_gen.h"
 #include "queue.h"
@@ -54,7 +57,6 @@ static uint8_t handed_over; /* the next tick's first event went out with this on
 #define OUT_POS 0x04
 #define OUT_ABORT 0x08
 
-#define PULSE_CYCLES 34 /* >= 2 us high */
 /* OCR1C: toggle MARK_EDGE (OC1C) a few cycles into the next tick (simavr only
  * arms a compare whose time has not passed when its timer period starts, and
  * that start may be seen a few cycles late); above TOP: never */
@@ -64,177 +66,17 @@ static uint8_t handed_over; /* the next tick's first event went out with this on
 _Static_assert(HOME_TICKS * DEV_HOMING_RATE * HOME_TICK_UNITS == CLOCK_HZ,
                "a homing step must take a whole number of homing ticks");
 
-/* A tick's output: its step events in time order, each the axes pulsed together and
- * the cycle (from the tick's compare match) at which the step is due on the
- * segment's profile. The layout is fixed: compare B's assembly addresses it. */
-#define EV_MAX 24 /* events a tick holds (axes stepping within a slot share one) */
-#define AX_MAX 16 /* steps of one axis a tick holds (80000 steps/s in a 200 us tick) */
-struct event {
-    uint8_t mask; /* axes pulsed together; 0 ends a tick's list */
-    uint16_t at;  /* cycles from the tick's compare match */
-};
-struct out {
-    struct event ev[EV_MAX + 1]; /* offset 0, in time order */
-    uint8_t n;
-    uint8_t dir; /* axis bit set: negative */
-    uint8_t flags;
-    uint8_t units; /* length of the tick */
-    uint32_t seq;
-};
 static struct out outs[2];
 static struct out *emit = &outs[0]; /* the tick being emitted */
 static struct out *nx = &outs[1];   /* the tick being computed */
-struct event *stepper_next; /* compare B's next event (global: its assembly) */
 static uint8_t cur_dir = 0xFF, ocr_units = TICK_UNITS;
 
-/* The time wheel of the tick being computed: slot s holds the axes that step in
- * cycles [32 s, 32 s + 32) of the tick (a step goes out at its slot's middle, within
- * 1 us of its time); occ marks the slots in use, a bit each. */
-#define SLOT_CYCLES 32
-#define SLOTS (2 * TICK_CYCLES / SLOT_CYCLES)
-static uint8_t wheel[SLOTS];
-static uint8_t occ[(SLOTS + 7) / 8];
-static uint8_t occ_lo = 0xFF, occ_hi; /* the bytes of occ in use */
-static const uint8_t bit_of[8] = {1, 2, 4, 8, 16, 32, 64, 128};
-_Static_assert(SLOTS <= 255 && 2 * TICK_CYCLES * 8 < 65536UL, "slots and times x8 fit their types");
-
-static inline __attribute__((always_inline)) void wheel_add(uint8_t slot, uint8_t bit)
+/* steps the wheel had no room for (never at the advertised rate): counted, not lost
+ * silently */
+static inline __attribute__((always_inline)) void lost_count(uint8_t lost)
 {
-    uint8_t w = wheel[slot];
-    if (!w) {
-        uint8_t byte = slot >> 3;
-        occ[byte] |= bit_of[slot & 7];
-        if (byte < occ_lo)
-            occ_lo = byte;
-        if (byte > occ_hi)
-            occ_hi = byte;
-    }
-    wheel[slot] = w | bit;
-}
-
-/* the lowest set bit of a byte, by table (the wheel's scan) */
-#define LSB1(m) ((m) & 1 ? 0 : (m) & 2 ? 1 : (m) & 4 ? 2 : (m) & 8 ? 3 : (m) & 16 ? 4 : (m) & 32 ? 5 : (m) & 64 ? 6 : 7)
-#define LSB4(m) LSB1(m), LSB1(m + 1), LSB1(m + 2), LSB1(m + 3)
-#define LSB16(m) LSB4(m), LSB4(m + 4), LSB4(m + 8), LSB4(m + 12)
-#define LSB64(m) LSB16(m), LSB16(m + 16), LSB16(m + 32), LSB16(m + 48)
-static const uint8_t lsb_of[256] PROGMEM = {LSB64(0), LSB64(64), LSB64(128), LSB64(192)};
-
-/* The latest cycle of a tick of u units a step may be placed at: its pulse (high and
- * low) ends before the next tick's first. */
-#define LAST_AT(u) ((uint16_t)((u) * UNIT_CYCLES - 2 * PULSE_CYCLES - 8))
-#define LAST_SLOT(u) ((uint8_t)(LAST_AT(u) / SLOT_CYCLES - 1))
-
-/* The tick's events from its wheel, in time order (and the wheel emptied). Slots
- * next to each other are one event, at the earlier one's time (within 3 us). */
-static void __attribute__((noinline)) wheel_take(struct out *o)
-{
-    struct event *e = o->ev, *last = 0;
-    uint8_t n = 0, prev = 0xFE;
-    uint8_t hi = occ_hi;
-    for (uint8_t byte = occ_lo; byte <= hi; byte++) {
-        uint8_t m = occ[byte];
-        if (!m)
-            continue;
-        occ[byte] = 0;
-        do {
-            uint8_t slot = (uint8_t)((byte << 3) | pgm_read_byte(&lsb_of[m]));
-            m &= (uint8_t)(m - 1);
-            uint8_t axes = wheel[slot];
-            wheel[slot] = 0;
-            if ((uint8_t)(slot - 1) == prev) {
-                last->mask |= axes; /* next to the last: together */
-                continue;
-            }
-            prev = slot;
-            if (n == EV_MAX) {
-                for (; axes; axes &= (uint8_t)(axes - 1))
-                    stepper_lost_steps++; /* never at the advertised rate */
-                continue;
-            }
-            last = e;
-            e->mask = axes;
-            e->at = (uint16_t)(mul8x8(slot, SLOT_CYCLES) + SLOT_CYCLES / 2);
-            e++;
-            n++;
-        } while (m);
-    }
-    occ_lo = 0xFF;
-    occ_hi = 0;
-    e->mask = 0;
-    o->n = n;
-}
-
-/* One step slower than 1953 steps/s (cycles x 8 per step >= 2^16: one step a tick at
- * most), at x / dist of the tick, x = 1 - frac: the fraction to 1/64 by halving
- * (no division), in 16 bits. */
-static void __attribute__((noinline)) place_slow(uint8_t bit, uint32_t frac, uint32_t dist,
-                                                  uint16_t span, uint8_t last)
-{
-    uint32_t x32 = 0x1000000UL - frac;
-    if (x32 > dist)
-        x32 = dist; /* the crossing is within the tick (rounding aside) */
-    if (!(uint16_t)(dist >> 16)) { /* under 1/256 step a tick: scale up (byte moves) */
-        dist <<= 8;
-        x32 <<= 8;
-    }
-    uint16_t d, x;
-    if ((uint8_t)(dist >> 24)) {
-        d = (uint16_t)(dist >> 16);
-        x = (uint16_t)(x32 >> 16);
-    } else {
-        d = (uint16_t)(dist >> 8);
-        x = (uint16_t)(x32 >> 8);
-    }
-    uint8_t f = 0;
-    for (uint8_t i = 0; i < 6; i++) {
-        d >>= 1;
-        f <<= 1;
-        if (x >= d) {
-            x -= d;
-            f |= 1;
-        }
-    }
-    uint8_t slot = (uint8_t)(mul16x16((uint16_t)(2 * f + 1), span) >> 12); /* f + 1/2 */
-    wheel_add(slot > last ? last : slot, bit);
-}
-
-/* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x 8
- * per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the tick's
- * start; step j (1..n) falls where the distance crosses j - f16, at (j - f16) c / 8
- * cycles. No step is placed after slot `last`. */
-static inline __attribute__((always_inline)) void place_steps(uint8_t bit, uint8_t n,
-                                                              uint16_t f16, uint16_t c,
-                                                              uint8_t last)
-{
-    /* the distance to the first crossing, Q0.16 (1 - 2^-16 stands for 1); its time
-     * (cycles x 8) is the high half of x c, its slot the high byte of the time */
-    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
-    uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
-    do {
-        uint8_t slot = (uint8_t)(t >> 8);
-        if (slot > last)
-            slot = last;
-        wheel_add(slot, bit);
-        t += c;
-    } while (--n);
-}
-
-
-/* Steps of axis k over a tick of `span` cycles in which it moves `dist` (Q8.24),
- * starting `frac` (Q0.24) past its last step boundary. */
-static void __attribute__((noinline)) place_axis(uint8_t k, uint8_t n, uint32_t frac,
-                                                 uint32_t dist, uint16_t span, uint8_t last)
-{
-    uint16_t c = step_cycles8(dist, span);
-    uint8_t bit = bit_of[k];
-    if (n > AX_MAX) {
-        stepper_lost_steps += (uint16_t)(n - AX_MAX); /* never at the advertised rate */
-        n = AX_MAX;
-    }
-    if (!c)
-        place_slow(bit, frac, dist, span, last);
-    else
-        place_steps(bit, n, (uint16_t)(frac >> 8), c, last);
+    if (lost)
+        stepper_lost_steps += lost;
 }
 
 /* the executing item */
@@ -247,79 +89,6 @@ static uint32_t abort_seq;
 static uint8_t home_mask, home_backoff, home_div;
 static uint32_t home_steps;
 static uint8_t pwm;
-
-/* step pins of an axis mask on the X/Y port (the Z and E pins have ports of their own) */
-static const uint8_t xy_bits[4] = {0, _BV(X_STEP_BIT), _BV(Y_STEP_BIT), _BV(X_STEP_BIT) | _BV(Y_STEP_BIT)};
-
-static inline __attribute__((always_inline)) void pulse_on(uint8_t m)
-{
-    X_STEP_PORT |= xy_bits[m & 3];
-    if (m & 4)
-        Z_STEP_PORT |= _BV(Z_STEP_BIT);
-    if (m & 8)
-        E_STEP_PORT |= _BV(E_STEP_BIT);
-}
-
-static inline __attribute__((always_inline)) void pulse_off(void)
-{
-    X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
-    Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
-    E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
-}
-
-static void apply_enables(uint8_t mask)
-{
-    /* active low */
-    if (mask & 1) X_EN_PORT &= (uint8_t)~_BV(X_EN_BIT); else X_EN_PORT |= _BV(X_EN_BIT);
-    if (mask & 2) Y_EN_PORT &= (uint8_t)~_BV(Y_EN_BIT); else Y_EN_PORT |= _BV(Y_EN_BIT);
-    if (mask & 4) Z_EN_PORT &= (uint8_t)~_BV(Z_EN_BIT); else Z_EN_PORT |= _BV(Z_EN_BIT);
-    if (mask & 8) E_EN_PORT &= (uint8_t)~_BV(E_EN_BIT); else E_EN_PORT |= _BV(E_EN_BIT);
-}
-
-static void apply_dirs(uint8_t neg)
-{
-    if (((neg >> 0) & 1) ^ X_DIR_INVERT) X_DIR_PORT &= (uint8_t)~_BV(X_DIR_BIT); else X_DIR_PORT |= _BV(X_DIR_BIT);
-    if (((neg >> 1) & 1) ^ Y_DIR_INVERT) Y_DIR_PORT &= (uint8_t)~_BV(Y_DIR_BIT); else Y_DIR_PORT |= _BV(Y_DIR_BIT);
-    if (((neg >> 2) & 1) ^ Z_DIR_INVERT) Z_DIR_PORT &= (uint8_t)~_BV(Z_DIR_BIT); else Z_DIR_PORT |= _BV(Z_DIR_BIT);
-    if (((neg >> 3) & 1) ^ E_DIR_INVERT) E_DIR_PORT &= (uint8_t)~_BV(E_DIR_BIT); else E_DIR_PORT |= _BV(E_DIR_BIT);
-}
-
-static inline uint8_t endstops_raw(void)
-{
-    uint8_t m = 0;
-    if (((X_MIN_PIN >> X_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
-        m |= 1;
-    if (((Y_MIN_PIN >> Y_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
-        m |= 2;
-    if (((Z_MIN_PIN >> Z_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
-        m |= 4;
-    return m;
-}
-
-/* The homing switches as a module mask, debounced: a switch counts as pressed only when
- * three reads about half a microsecond apart agree (a spike on the line does not stop
- * homing; the time homing takes is unchanged). */
-static uint8_t endstops(void)
-{
-    uint8_t m = endstops_raw();
-    __builtin_avr_delay_cycles(8);
-    m &= endstops_raw();
-    __builtin_avr_delay_cycles(8);
-    return m & endstops_raw();
-}
-
-/* The limit switches at the end of travel, as a module mask. */
-static inline uint8_t limits_pressed(void)
-{
-    uint8_t m = 0;
-    if (((X_MAX_PIN >> X_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
-        m |= 1;
-    if (((Y_MAX_PIN >> Y_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
-        m |= 2;
-    if (((Z_MAX_PIN >> Z_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
-        m |= 4;
-    return m;
-}
 
 void stepper_init(uint8_t hold_mask)
 {
@@ -736,12 +505,12 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
             else
                 /* no rate known yet: over the distance left, from the last crossing to
                  * N + 1/2, which the accumulator (N p + 1/2) reaches at the end */
-                place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
-                           LAST_SLOT(p->last_units));
+                lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
+                           LAST_SLOT(p->last_units)));
         }
         *pos += moved;
     }
-    wheel_take(o);
+    lost_count(wheel_take(o));
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
     o->seq = s->segments_done = s->seg_next++;
@@ -813,7 +582,7 @@ static void __attribute__((noinline)) seg_tick(void)
                        LAST_SLOT(TICK_UNITS));
     }
     if (any)
-        wheel_take(o);
+        lost_count(wheel_take(o));
 }
 
 /* Everything but a segment's tick. */
@@ -894,135 +663,6 @@ static void __attribute__((noinline)) compute(void)
 
 /* ---------------------------------------------------------------- interrupts */
 
-
-/* Lateness of a step: the cycles between its due time and its pulse. A step later
- * than the tolerance is counted (HEALTH late_pulses, never silent) and the worst of
- * those kept (late_worst_us, with the lateness of every step compare A issues). */
-#define LATE_TOLERANCE_CYCLES (LATE_TOLERANCE_US * (F_CPU / 1000000UL))
-
-/* Compare B: a tick's events after the first, one per interrupt, 50-odd cycles
- * (hand-written: the compiler's version took twice that). Raises the event's pulses,
- * counts it if late, arms OCR1B for the next (or just ahead of now, if that is
- * already past) or disables itself after the last, then ends the pulses >= 2 us
- * after they rose. */
-ISR(TIMER1_COMPB_vect, ISR_NAKED)
-{
-    __asm__ volatile(
-        "push r24\n\t"
-        "in r24, __SREG__\n\t"
-        "push r24\n\t"
-        "push r30\n\t"
-        "push r31\n\t"
-        "lds r30, stepper_next\n\t"
-        "lds r31, stepper_next+1\n\t"
-        "ld r24, Z+\n\t" /* this event's axes */
-        "sbrc r24, 0\n\t"
-        "sbi %[pf], %[xb]\n\t"
-        "sbrc r24, 1\n\t"
-        "sbi %[pf], %[yb]\n\t"
-        "sbrc r24, 3\n\t"
-        "sbi %[pa], %[eb]\n\t"
-        "sbrs r24, 2\n\t"
-        "rjmp 1f\n\t"
-        "lds r24, %[pl]\n\t"
-        "ori r24, %[zm]\n\t"
-        "sts %[pl], r24\n"
-        "1:\n\t"
-        "push r25\n\t"
-        "push r26\n\t"
-        "push r27\n\t"
-        /* lateness: TCNT1 - at, late beyond the tolerance: counted */
-        "lds r26, %[tcntl]\n\t"
-        "lds r27, %[tcntl]+1\n\t"
-        "ld r24, Z+\n\t"
-        "ld r25, Z+\n\t"
-        "sub r26, r24\n\t"
-        "sbc r27, r25\n\t"
-        "cpi r26, lo8(%[tol] + 1)\n\t"
-        "ldi r24, hi8(%[tol] + 1)\n\t"
-        "cpc r27, r24\n\t"
-        "brlt 2f\n\t" /* within the tolerance, or early (merged with an earlier step) */
-        "call stepper_late_step\n"
-        "2:\n\t"
-        /* the next event: a mask of 0 ends the list */
-        "ld r24, Z\n\t"
-        "tst r24\n\t"
-        "brne 3f\n\t"
-        "lds r24, %[timsk]\n\t"
-        "andi r24, %[nocieb]\n\t"
-        "sts %[timsk], r24\n\t"
-        "rjmp 5f\n"
-        "3:\n\t"
-        "ldd r24, Z+1\n\t"
-        "ldd r25, Z+2\n\t"
-        "lds r26, %[tcntl]\n\t"
-        "lds r27, %[tcntl]+1\n\t"
-        "adiw r26, 24\n\t"
-        "cp r26, r24\n\t"
-        "cpc r27, r25\n\t"
-        "brlo 4f\n\t"
-        "movw r24, r26\n\t" /* already past: just ahead of now */
-        "adiw r24, 16\n"
-        "4:\n\t"
-        "sts %[ocrl]+1, r25\n\t"
-        "sts %[ocrl], r24\n"
-        "5:\n\t"
-        "sts stepper_next+1, r31\n\t"
-        "sts stepper_next, r30\n\t"
-        "pop r27\n\t"
-        "pop r26\n\t"
-        "pop r25\n\t"
-        "cbi %[pf], %[xb]\n\t" /* high since the sbi: >= 34 cycles on every path */
-        "cbi %[pf], %[yb]\n\t"
-        "cbi %[pa], %[eb]\n\t"
-        "lds r24, %[pl]\n\t"
-        "andi r24, %[nzm]\n\t"
-        "sts %[pl], r24\n\t"
-        "pop r31\n\t"
-        "pop r30\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "reti\n\t"
-        :
-        : [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),
-          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
-          [nzm] "n"(0xFF & ~_BV(Z_STEP_BIT)), [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)),
-          [nocieb] "n"(0xFF & ~_BV(OCIE1B)), [ocrl] "n"(_SFR_MEM_ADDR(OCR1BL)),
-          [tcntl] "n"(_SFR_MEM_ADDR(TCNT1L)), [tol] "n"(LATE_TOLERANCE_CYCLES));
-}
-/* compare B's assembly assumes the RAMPS step ports: X and Y on PORTF, Z on PORTL, E on PORTA */
-_Static_assert(sizeof(struct event) == 3 && LATE_TOLERANCE_CYCLES < 0x7FFF, "compare B's layout");
-
-/* A step compare B issued late beyond the tolerance, r27:r26 cycles: counted, the
- * worst kept. Called from compare B's assembly, which saved r24..r27, r30, r31 and
- * SREG: this saves whatever else it uses. */
-void stepper_late_step(void) __attribute__((naked, used));
-void stepper_late_step(void)
-{
-    __asm__ volatile(
-        "lds r24, stepper_late_tolerance\n\t"
-        "lds r25, stepper_late_tolerance+1\n\t"
-        "adiw r24, 1\n\t"
-        "sts stepper_late_tolerance+1, r25\n\t"
-        "sts stepper_late_tolerance, r24\n\t"
-        "brne 1f\n\t"
-        "lds r24, stepper_late_tolerance+2\n\t"
-        "lds r25, stepper_late_tolerance+3\n\t"
-        "adiw r24, 1\n\t"
-        "sts stepper_late_tolerance+3, r25\n\t"
-        "sts stepper_late_tolerance+2, r24\n"
-        "1:\n\t"
-        "lds r24, stepper_late_worst\n\t"
-        "lds r25, stepper_late_worst+1\n\t"
-        "cp r24, r26\n\t"
-        "cpc r25, r27\n\t"
-        "brsh 2f\n\t"
-        "sts stepper_late_worst+1, r27\n\t"
-        "sts stepper_late_worst, r26\n"
-        "2:\n\t"
-        "ret\n\t");
-}
 
 static uint16_t late; /* cycles of earlier ticks handled in this interrupt */
 static uint8_t edge_armed; /* OCR1C set to toggle MARK_EDGE at the next boundary */

@@ -59,12 +59,13 @@ extern volatile uint16_t stepper_isr_max_cycles;
 extern volatile uint16_t stepper_lost_steps;  /* pulses a tick had no room for */
 extern volatile uint16_t stepper_plan_stalls; /* ticks motion waited for a plan */
 extern volatile uint16_t stepper_overruns;    /* ticks computed after their start */
-extern volatile uint16_t stepper_late_pulses; /* pulses issued after their tick ended */
-extern volatile uint8_t stepper_latency_max;
-extern volatile uint16_t stepper_late_worst; /* cycles: the latest a tick started (HEALTH) */
-/* pulses of a tick that started more than LATE_TOLERANCE_US late, or issued after their
- * tick ended (HEALTH late_pulses) */
-extern volatile uint32_t stepper_late_tolerance;  /* cycles from a tick's compare match to its first work */
+/* pulses issued after their tick ended, later than LATE_TOLERANCE_US */
+extern volatile uint16_t stepper_late_pulses;
+extern volatile uint8_t stepper_latency_max; /* cycles from a compare match to its tick's work */
+/* cycles: the worst lateness of a pulse against its time on the profile (HEALTH) */
+extern volatile uint16_t stepper_late_worst;
+/* pulses issued more than LATE_TOLERANCE_US after their time (HEALTH late_pulses) */
+extern volatile uint32_t stepper_late_tolerance;
 /* Step positions now (mid-segment: the steps issued so far). */
 void stepper_positions(int32_t *out);
 

@@ -1,0 +1,84 @@
+/* The stepper's pins on the RAMPS 1.4 (board_ramps14.h): step pulses, directions,
+ * driver enables, the homing switches and the limit switches, as axis masks. */
+#ifndef STEP_PINS_H
+#define STEP_PINS_H
+
+#include <avr/io.h>
+#include <stdint.h>
+
+#include "board_ramps14.h"
+
+/* step pins of an axis mask on the X/Y port (the Z and E pins have ports of their own) */
+static const uint8_t xy_bits[4] = {0, _BV(X_STEP_BIT), _BV(Y_STEP_BIT), _BV(X_STEP_BIT) | _BV(Y_STEP_BIT)};
+
+static inline __attribute__((always_inline)) void pulse_on(uint8_t m)
+{
+    X_STEP_PORT |= xy_bits[m & 3];
+    if (m & 4)
+        Z_STEP_PORT |= _BV(Z_STEP_BIT);
+    if (m & 8)
+        E_STEP_PORT |= _BV(E_STEP_BIT);
+}
+
+static inline __attribute__((always_inline)) void pulse_off(void)
+{
+    X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
+    Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
+    E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+}
+
+static inline void apply_enables(uint8_t mask)
+{
+    /* active low */
+    if (mask & 1) X_EN_PORT &= (uint8_t)~_BV(X_EN_BIT); else X_EN_PORT |= _BV(X_EN_BIT);
+    if (mask & 2) Y_EN_PORT &= (uint8_t)~_BV(Y_EN_BIT); else Y_EN_PORT |= _BV(Y_EN_BIT);
+    if (mask & 4) Z_EN_PORT &= (uint8_t)~_BV(Z_EN_BIT); else Z_EN_PORT |= _BV(Z_EN_BIT);
+    if (mask & 8) E_EN_PORT &= (uint8_t)~_BV(E_EN_BIT); else E_EN_PORT |= _BV(E_EN_BIT);
+}
+
+static inline void apply_dirs(uint8_t neg)
+{
+    if (((neg >> 0) & 1) ^ X_DIR_INVERT) X_DIR_PORT &= (uint8_t)~_BV(X_DIR_BIT); else X_DIR_PORT |= _BV(X_DIR_BIT);
+    if (((neg >> 1) & 1) ^ Y_DIR_INVERT) Y_DIR_PORT &= (uint8_t)~_BV(Y_DIR_BIT); else Y_DIR_PORT |= _BV(Y_DIR_BIT);
+    if (((neg >> 2) & 1) ^ Z_DIR_INVERT) Z_DIR_PORT &= (uint8_t)~_BV(Z_DIR_BIT); else Z_DIR_PORT |= _BV(Z_DIR_BIT);
+    if (((neg >> 3) & 1) ^ E_DIR_INVERT) E_DIR_PORT &= (uint8_t)~_BV(E_DIR_BIT); else E_DIR_PORT |= _BV(E_DIR_BIT);
+}
+
+static inline uint8_t endstops_raw(void)
+{
+    uint8_t m = 0;
+    if (((X_MIN_PIN >> X_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 1;
+    if (((Y_MIN_PIN >> Y_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 2;
+    if (((Z_MIN_PIN >> Z_MIN_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 4;
+    return m;
+}
+
+/* The homing switches as a module mask, debounced: a switch counts as pressed only when
+ * three reads about half a microsecond apart agree (a spike on the line does not stop
+ * homing; the time homing takes is unchanged). */
+static inline uint8_t endstops(void)
+{
+    uint8_t m = endstops_raw();
+    __builtin_avr_delay_cycles(8);
+    m &= endstops_raw();
+    __builtin_avr_delay_cycles(8);
+    return m & endstops_raw();
+}
+
+/* The limit switches at the end of travel, as a module mask. */
+static inline uint8_t limits_pressed(void)
+{
+    uint8_t m = 0;
+    if (((X_MAX_PIN >> X_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 1;
+    if (((Y_MAX_PIN >> Y_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 2;
+    if (((Z_MAX_PIN >> Z_MAX_BIT) & 1) == ENDSTOP_TRIGGERED_LEVEL)
+        m |= 4;
+    return m;
+}
+
+#endif

@@ -1,0 +1,101 @@
+/* The time wheel: where inside a tick each step goes.
+ *
+ * The stepper's DDA says how many steps an axis makes in a tick and how far past its
+ * last step boundary it starts; the wheel turns that into times. Each step lands in
+ * a slot of SLOT_CYCLES at the time the segment's profile gives it; wheel_take turns
+ * the occupied slots into the tick's event list (the axes pulsed together and when),
+ * which compare B issues. Placing a step costs a multiply-free add per step (the
+ * axis's cycles per step come from step_rate.c), so this is inline where it is hot. */
+#ifndef STEP_WHEEL_H
+#define STEP_WHEEL_H
+
+#include <stdint.h>
+
+#include "config.h"
+#include "mul16.h"
+
+#define PULSE_CYCLES 34 /* >= 2 us high */
+
+/* A tick's output: its step events in time order, each the axes pulsed together and
+ * the cycle (from the tick's compare match) at which the step is due on the
+ * segment's profile. The layout is fixed: compare B's assembly addresses it. */
+#define EV_MAX 24 /* events a tick holds (axes stepping within a slot share one) */
+#define AX_MAX 16 /* steps of one axis a tick holds (80000 steps/s in a 200 us tick) */
+struct event {
+    uint8_t mask; /* axes pulsed together; 0 ends a tick's list */
+    uint16_t at;  /* cycles from the tick's compare match */
+};
+struct out {
+    struct event ev[EV_MAX + 1]; /* offset 0, in time order */
+    uint8_t n;
+    uint8_t dir; /* axis bit set: negative */
+    uint8_t flags;
+    uint8_t units; /* length of the tick */
+    uint32_t seq;
+};
+/* The time wheel of the tick being computed: slot s holds the axes that step in
+ * cycles [32 s, 32 s + 32) of the tick (a step goes out at its slot's middle, within
+ * 1 us of its time); occ marks the slots in use, a bit each. */
+#define SLOT_CYCLES 32
+#define SLOTS (2 * TICK_CYCLES / SLOT_CYCLES)
+extern uint8_t wheel[SLOTS];
+extern uint8_t occ[(SLOTS + 7) / 8];
+extern uint8_t occ_lo, occ_hi; /* the bytes of occ in use */
+extern const uint8_t bit_of[8];
+_Static_assert(SLOTS <= 255 && 2 * TICK_CYCLES * 8 < 65536UL, "slots and times x8 fit their types");
+
+
+static inline __attribute__((always_inline)) void wheel_add(uint8_t slot, uint8_t bit)
+{
+    uint8_t w = wheel[slot];
+    if (!w) {
+        uint8_t byte = slot >> 3;
+        occ[byte] |= bit_of[slot & 7];
+        if (byte < occ_lo)
+            occ_lo = byte;
+        if (byte > occ_hi)
+            occ_hi = byte;
+    }
+    wheel[slot] = w | bit;
+}
+
+/* The latest cycle of a tick of u units a step may be placed at: its pulse (high and
+ * low) ends before the next tick's first. */
+#define LAST_AT(u) ((uint16_t)((u) * UNIT_CYCLES - 2 * PULSE_CYCLES - 8))
+#define LAST_SLOT(u) ((uint8_t)(LAST_AT(u) / SLOT_CYCLES - 1))
+
+/* The tick's events from its wheel, in time order (and the wheel emptied); returns
+ * the steps that found no room (never at the advertised rate). */
+uint8_t wheel_take(struct out *o);
+/* One step of an axis slower than one step a tick (see step_wheel.c). */
+void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last);
+
+/* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x 8
+ * per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the tick's
+ * start; step j (1..n) falls where the distance crosses j - f16, at (j - f16) c / 8
+ * cycles. No step is placed after slot `last`. */
+static inline __attribute__((always_inline)) void place_steps(uint8_t bit, uint8_t n,
+                                                              uint16_t f16, uint16_t c,
+                                                              uint8_t last)
+{
+    /* the distance to the first crossing, Q0.16 (1 - 2^-16 stands for 1); its time
+     * (cycles x 8) is the high half of x c, its slot the high byte of the time */
+    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
+    uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
+    do {
+        uint8_t slot = (uint8_t)(t >> 8);
+        if (slot > last)
+            slot = last;
+        wheel_add(slot, bit);
+        t += c;
+    } while (--n);
+}
+
+
+/* Steps of axis k over a tick of `span` cycles in which it moves `dist` (Q8.24),
+ * starting `frac` (Q0.24) past its last step boundary; returns the steps over AX_MAX
+ * that were not placed (never at the advertised rate). */
+uint8_t place_axis(uint8_t k, uint8_t n, uint32_t frac, uint32_t dist, uint16_t span,
+                   uint8_t last);
+
+#endif
