@@ -51,6 +51,8 @@ static volatile uint8_t computing, tick_missed;
  * between their first and last read, instead of masking interrupts for 20 us */
 static volatile uint8_t tick_gen;
 static uint8_t handed_over; /* the next tick's first event went out with this one's */
+/* the axes of a pending compare B event that compare A's entry raised */
+static volatile uint8_t prepulsed __attribute__((used));
 
 #define OUT_MOTION 0x01
 #define OUT_SEG_END 0x02
@@ -689,7 +691,23 @@ static void __attribute__((noinline)) flush_events(void)
 {
     /* lateness: from the event's time in the tick that ended (its period) to now */
     uint16_t ended = (uint16_t)(ocr_units * UNIT_CYCLES);
-    for (const struct event *e = stepper_next; e->mask; e++) {
+    const struct event *e = stepper_next;
+    if (prepulsed) {
+        /* raised by compare A's entry: held high, then ended */
+        uint16_t l = (uint16_t)(TCNT1 + ended - e->at);
+        if (l > stepper_late_worst)
+            stepper_late_worst = l;
+        if (l > LATE_TOLERANCE_CYCLES) {
+            stepper_late_pulses++;
+            stepper_late_tolerance++;
+        }
+        prepulsed = 0;
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        pulse_off();
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        e++;
+    }
+    for (; e->mask; e++) {
         uint16_t l = (uint16_t)(TCNT1 + ended - e->at);
         pulse_on(e->mask);
         if (l > stepper_late_worst)
@@ -725,9 +743,16 @@ static void __attribute__((noinline)) tick_start(void)
         ev++; /* issued by the last tick's compare B, just before this tick began */
         handed_over = 0;
     }
+    if (e->dir != cur_dir) {
+        /* first, and in a tick without steps too: a reversal's first step, at the next
+         * tick's start, can then go out with this tick's compare B (hand_over_first) */
+        apply_dirs(e->dir);
+        cur_dir = e->dir;
+        __builtin_avr_delay_cycles(16);
+    }
     uint16_t high_from = 0;
     uint8_t first = 0;
-    if (ev->mask && e->dir == cur_dir && !late) {
+    if (ev->mask && !late) {
         /* a first step due at once goes out before anything else (the bookkeeping
          * below runs while its pulse is high) */
         uint16_t at = ev->at;
@@ -769,11 +794,6 @@ static void __attribute__((noinline)) tick_start(void)
     }
     if (!ev->mask)
         return;
-    if (e->dir != cur_dir) {
-        apply_dirs(e->dir);
-        cur_dir = e->dir;
-        __builtin_avr_delay_cycles(16);
-    }
     for (; ev->mask; ev++) {
         /* (a tick started late runs in its own timer period all the same: its later
          * steps keep their time) */
@@ -911,7 +931,55 @@ static void __attribute__((noinline)) hand_over_first(void)
         TIMSK1 |= _BV(OCIE1B);
     }
 }
-ISR(TIMER1_COMPA_vect)
+/* Compare A's entry, before the compiler's prologue (about 50 cycles): a compare B
+ * event still pending at the boundary (another interrupt held compare B past it, and
+ * compare A comes first) has its pulses raised at once; flush_events ends them. Then
+ * the tick proper, a signal handler entered as if from the vector. */
+void __vector_tick(void) __attribute__((signal, used));
+ISR(TIMER1_COMPA_vect, ISR_NAKED)
+{
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "lds r24, %[timsk]\n\t"
+        "sbrs r24, %[ocieb]\n\t"
+        "rjmp 1f\n\t"
+        "lds r24, computing\n\t"
+        "tst r24\n\t"
+        "brne 1f\n\t" /* an overrun: the interrupted tick flushes */
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r30, stepper_next\n\t"
+        "lds r31, stepper_next+1\n\t"
+        "ld r24, Z\n\t"
+        "sts prepulsed, r24\n\t"
+        "sbrc r24, 0\n\t"
+        "sbi %[pf], %[xb]\n\t"
+        "sbrc r24, 1\n\t"
+        "sbi %[pf], %[yb]\n\t"
+        "sbrc r24, 3\n\t"
+        "sbi %[pa], %[eb]\n\t"
+        "sbrs r24, 2\n\t"
+        "rjmp 2f\n\t"
+        "lds r24, %[pl]\n\t"
+        "ori r24, %[zm]\n\t"
+        "sts %[pl], r24\n"
+        "2:\n\t"
+        "pop r31\n\t"
+        "pop r30\n"
+        "1:\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "jmp __vector_tick\n\t"
+        :
+        : [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),
+          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
+          [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), [ocieb] "I"(OCIE1B));
+}
+
+void __vector_tick(void)
 {
     tick_gen++;
     if (computing) {

@@ -6,11 +6,12 @@
 #include "config.h"
 #include "uart.h"
 
-static volatile uint8_t rx_buf[UART_RX_SIZE];
-static volatile uint8_t rx_head, rx_tail;
-static volatile uint8_t tx_buf[UART_TX_SIZE];
-static volatile uint16_t tx_head, tx_tail;
-static volatile uint8_t rx_overruns;
+/* (used: the interrupts' assembly names them) */
+static volatile uint8_t rx_buf[UART_RX_SIZE] __attribute__((used));
+static volatile uint8_t rx_head __attribute__((used)), rx_tail __attribute__((used));
+static volatile uint8_t tx_buf[UART_TX_SIZE] __attribute__((used));
+static volatile uint8_t tx_head __attribute__((used)), tx_tail __attribute__((used));
+static volatile uint8_t rx_overruns __attribute__((used));
 
 void uart_init(void)
 {
@@ -21,29 +22,91 @@ void uart_init(void)
     UCSR0B = _BV(RXEN0) | _BV(TXEN0) | _BV(RXCIE0);
 }
 
-ISR(USART0_RX_vect)
+/* The UART's interrupts are hand-written: they run with interrupts masked, so every
+ * cycle of theirs can delay a step's compare B (about 55 cycles each instead of the
+ * compiler's 80). The rings are 256 bytes: their 8-bit indices wrap by themselves. */
+_Static_assert(UART_RX_SIZE == 256 && UART_TX_SIZE == 256, "8-bit ring indices");
+
+/* A received byte into the ring; a UART error or a full ring counted as an overrun
+ * (status read before the data register, as the datasheet asks). */
+ISR(USART0_RX_vect, ISR_NAKED)
 {
-    uint8_t status = UCSR0A;
-    uint8_t c = UDR0;
-    uint8_t next = (uint8_t)(rx_head + 1) & (UART_RX_SIZE - 1);
-    if (status & (_BV(DOR0) | _BV(FE0)))
-        rx_overruns++;
-    if (next == rx_tail) {
-        rx_overruns++;
-        return;
-    }
-    rx_buf[rx_head] = c;
-    rx_head = next;
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r25\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r25, %[ucsra]\n\t"
+        "lds r24, %[udr]\n\t"
+        "andi r25, %[errs]\n\t"
+        "breq 1f\n\t"
+        "lds r25, rx_overruns\n\t"
+        "inc r25\n\t"
+        "sts rx_overruns, r25\n"
+        "1:\n\t"
+        "lds r30, rx_head\n\t"
+        "mov r25, r30\n\t"
+        "inc r25\n\t"
+        "lds r31, rx_tail\n\t"
+        "cp r25, r31\n\t"
+        "breq 2f\n\t" /* full: the byte is lost, counted */
+        "ldi r31, 0\n\t"
+        "subi r30, lo8(-(rx_buf))\n\t"
+        "sbci r31, hi8(-(rx_buf))\n\t"
+        "st Z, r24\n\t"
+        "sts rx_head, r25\n\t"
+        "rjmp 3f\n"
+        "2:\n\t"
+        "lds r25, rx_overruns\n\t"
+        "inc r25\n\t"
+        "sts rx_overruns, r25\n"
+        "3:\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r25\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t" ::[ucsra] "n"(_SFR_MEM_ADDR(UCSR0A)),
+        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [errs] "M"(_BV(DOR0) | _BV(FE0)));
 }
 
-ISR(USART0_UDRE_vect)
+/* The next byte to send, or the interrupt off when the ring is empty. */
+ISR(USART0_UDRE_vect, ISR_NAKED)
 {
-    if (tx_head == tx_tail) {
-        UCSR0B &= (uint8_t)~_BV(UDRIE0);
-        return;
-    }
-    UDR0 = tx_buf[tx_tail];
-    tx_tail = (tx_tail + 1) & (UART_TX_SIZE - 1);
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r30, tx_tail\n\t"
+        "lds r24, tx_head\n\t"
+        "cp r30, r24\n\t"
+        "brne 1f\n\t"
+        "lds r24, %[ucsrb]\n\t"
+        "andi r24, %[noudrie]\n\t"
+        "sts %[ucsrb], r24\n\t"
+        "rjmp 2f\n"
+        "1:\n\t"
+        "ldi r31, 0\n\t"
+        "subi r30, lo8(-(tx_buf))\n\t"
+        "sbci r31, hi8(-(tx_buf))\n\t"
+        "ld r24, Z\n\t"
+        "sts %[udr], r24\n\t"
+        "lds r24, tx_tail\n\t"
+        "inc r24\n\t"
+        "sts tx_tail, r24\n"
+        "2:\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t" ::[ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)),
+        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [noudrie] "M"(0xFF ^ _BV(UDRIE0)));
 }
 
 uint16_t uart_read(uint8_t *dst, uint16_t max)
@@ -61,19 +124,15 @@ uint16_t uart_read(uint8_t *dst, uint16_t max)
 
 uint16_t uart_tx_free(void)
 {
-    uint16_t head, tail;
-    uint8_t s = SREG;
-    cli();
-    head = tx_head;
-    tail = tx_tail;
-    SREG = s;
-    return (uint16_t)(UART_TX_SIZE - 1 - ((head - tail) & (UART_TX_SIZE - 1)));
+    /* one-byte indices: each read is atomic, the interrupt only advances the tail */
+    uint8_t used = (uint8_t)(tx_head - tx_tail);
+    return (uint16_t)(UART_TX_SIZE - 1 - used);
 }
 
 void uart_write(const uint8_t *data, uint16_t len)
 {
     while (len--) {
-        uint16_t next = (tx_head + 1) & (UART_TX_SIZE - 1);
+        uint8_t next = (uint8_t)(tx_head + 1);
         if (next == tx_tail)
             break; /* the caller checked the room; never block */
         tx_buf[tx_head] = *data++;
