@@ -19,6 +19,10 @@ what the harness measured:
   own limit, a few seconds of device time each) at 1x, on a clean line and with `--faults corrupt=0.001,drop=0.001`:
   record exact or not, the host's retransmissions, the longest main-loop turn; the line's
   own limit beside it.
+- a print's mix: one module at 60-100 % of the advertised rate, the others at 3/4 and 1/2
+  of it and the extruder at 1/10, so the steps fall apart (each its own compare B): the
+  same figures, with the ticks that overran (computed after their start: their steps
+  keep their times) and the harness's clock slips (its step log is then off by a tick).
 - heaters off after the host's silence, in each device state (idle heating, moving,
   faulted after an UNDERRUN, waiting for a heater): the time from the host's last byte to
   the heater pin going low, minus the watchdog time (500 ms).
@@ -155,12 +159,13 @@ def _advertised_rate() -> int:
     return int(m.group(1))
 
 
-def _rate_batch(rate: int, n: int = 40, ticks: int = 1000) -> SegmentBatch:
-    """``n`` segments at ``rate`` steps/s on all four axes, back and forth; the last one
-    brakes to rest from the same rate (half the distance)."""
-    d = rate * ticks // CLOCK_HZ
+def _rate_batch(rate: int | list[int], n: int = 40, ticks: int = 1000) -> SegmentBatch:
+    """``n`` segments at ``rate`` steps/s on all four axes (or one rate per axis), back
+    and forth; the last one brakes to rest from the same rate (half the distance)."""
+    rates = np.array(rate if isinstance(rate, list) else [rate] * 4)
+    d = rates * ticks // CLOCK_HZ
     sign = np.where((np.arange(n) // 4) % 2 == 0, 1, -1)
-    deltas = np.outer(sign, [d, d, d, d])
+    deltas = np.outer(sign, d)
     deltas[-1] //= 2
     ramps = np.full(n, RAMP_CONSTANT, dtype=np.int16)
     ramps[-1] = RAMP_TO_REST
@@ -271,6 +276,31 @@ def main() -> int:
             }
         )
     fig["step_timing"] = sweep
+
+    # a print's mix: one module at a share of the advertised rate, the others at 3/4 and
+    # 1/2 of it, the extruder at 1/10: the steps fall apart, each its own compare B
+    mix = []
+    for share in (0.6, 0.8, 1.0) if not args.quick else (1.0,):
+        rates_mix = [int(top * share * f) for f in (1.0, 0.75, 0.5, 0.1)]
+        log = Path(tempfile.mkdtemp()) / "steps.txt"
+        batch = _rate_batch(rates_mix, n=200)
+        s, _, ok, _ = _stream("avr", batch, profile=True, step_log=log)
+        err = _step_error(log, batch)
+        isr_cycles = s["isr_profiled_mean_cycles"] * s["isr_profiled_count"]
+        isr_cycles += s.get("compare_b_outside_cycles", 0)
+        mix.append(
+            {
+                "steps_per_s_per_axis": rates_mix,
+                "step_err_vs_ideal_worst_us": err["worst_us"],
+                "step_err_vs_ideal_p99_us": err["p99_us"],
+                "isr_load_pct_of_motion": round(100 * isr_cycles / (batch.ticks.sum() * 160), 1),
+                "overruns": s["overruns"],
+                "late_pulses": s["late_pulses"],
+                "harness_clock_slips": s.get("motion_clock_slips"),
+                "record_exact": ok,
+            }
+        )
+    fig["step_timing_print_mix"] = mix
 
     # streaming at 1x over 250000 baud: segments of ever shorter duration (3-4 s of
     # device time each), clean and with 1e-3 corruption and drop per byte
