@@ -7,7 +7,8 @@ run the same under a virtual clock in tests and a real clock on a port.
 - ACK carries the next sequence number expected (cumulative); NAK carries the
   same and asks for everything from it again (go-back-N).
 - The retransmission timeout follows RFC 6298 (SRTT, RTTVAR, Karn's rule: no
-  samples from retransmitted frames) with exponential backoff, floor and ceiling.
+  samples from retransmitted frames) with exponential backoff, floor and ceiling; its
+  timer restarts at every acknowledgement that releases frames (RFC 6298 5.3).
 """
 
 from __future__ import annotations
@@ -110,6 +111,10 @@ class Sender:
         self.acked_clean = 0  # frames acknowledged that had been sent once
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
+        # when an acknowledgement last released frames: the timer restarts there (RFC 6298
+        # 5.3), so frames that wait in a busy receiver's buffer behind others it is still
+        # working through do not time out while it acknowledges them one by one
+        self._advanced_at = -1e9
 
     @property
     def base(self) -> int:
@@ -158,6 +163,7 @@ class Sender:
             self._items_out -= last.items
             clean += not last.retransmitted
         self.acked_clean += clean
+        self._advanced_at = now
         if last is not None and not last.retransmitted:
             self.rto.sample(now - last.sent_at)
         else:
@@ -191,7 +197,12 @@ class Sender:
             return -1.0
         if not self.outstanding:
             return None
-        return self.outstanding[0].sent_at + self._timeout()
+        return self._timer_start() + self._timeout()
+
+    def _timer_start(self) -> float:
+        """The oldest outstanding frame's send time, or the last acknowledgement that released
+        frames if that came later (the timer restarts on progress)."""
+        return max(self.outstanding[0].sent_at, self._advanced_at)
 
     def _timeout(self) -> float:
         """The retransmission timeout: the calm floor at least while no queue items wait
@@ -205,7 +216,7 @@ class Sender:
         if (
             self.outstanding
             and not self._resend
-            and now >= self.outstanding[0].sent_at + self._timeout()
+            and now >= self._timer_start() + self._timeout()
         ):
             self.timeouts += 1
             self.rto.back_off()
