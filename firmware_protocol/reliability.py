@@ -108,6 +108,7 @@ class Sender:
         self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
         self.retransmits = 0
         self.timeouts = 0
+        self.go_backs = 0  # resends of the window (a timeout or a NAK): losses seen
         self.acked_clean = 0  # frames acknowledged that had been sent once
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
@@ -182,6 +183,7 @@ class Sender:
         self._go_back(now)
 
     def _go_back(self, now: float) -> None:
+        self.go_backs += 1
         self._resend = True
         self._went_back = (self.base, now)
 
