@@ -32,6 +32,7 @@ from cdprhost.link.tuning import (
     RTO_FLOOR_S,
     RTO_MAX_BACKOFF,
     SLICE_S,
+    STALE_REPORT_S,
     START_WINDOW,
 )
 from firmware_protocol.endpoint import Endpoint
@@ -82,6 +83,7 @@ class LinkCore:
             rto_ceiling=min(0.25, self.timeout_s / 4),
             byte_time=10.0 / baud if baud else 0.0,
             rto_fast=RTO_FAST,
+            stale_after=STALE_REPORT_S,
         )
         self.ctx = SegmentContext()
         self.max_payload: int = max_payload
