@@ -47,6 +47,8 @@ class Endpoint:
     start when a frame has left the wire rather than when it was queued; it switches
     itself off when an acknowledgement proves the wire faster (USB CDC, a pty), and
     ``rto_fast`` (floor, max backoff) then replaces the retransmission timing.
+    ``stale_after`` (seconds, None: off): a report from the peer that acknowledges nothing
+    new that long after the oldest frame left resends it once (:meth:`Sender.on_report`).
     """
 
     def __init__(
@@ -63,11 +65,13 @@ class Endpoint:
         byte_time: float = 0.0,
         window_bytes: int | None = None,
         rto_fast: tuple[float, int] | None = None,
+        stale_after: float | None = None,
     ):
         self._window = window
         self.window_bytes = window_bytes
         self._rto_args = (rto_initial, rto_floor, rto_ceiling, rto_max_backoff)
         self._rto_fast = rto_fast  # (floor, max backoff) once the wire proves faster
+        self._stale_after = stale_after  # Sender.stale_after
         self._calm_floor = 0.0  # the slow floor, for frames without queue items, once fast
         self.nak_holdoff = nak_holdoff
         self.accept = accept
@@ -85,6 +89,7 @@ class Endpoint:
         """Start sequence numbers from 0 on both directions (after HELLO)."""
         self.sender = Sender(self._window, RtoEstimator(*self._rto_args), self.window_bytes)
         self.sender.calm_floor = self._calm_floor
+        self.sender.stale_after = self._stale_after
         self.receiver = Receiver()
         self._ack_due = False
         self._nak_due = False
@@ -144,7 +149,7 @@ class Endpoint:
                 self.counters.naks_received += 1
                 self.sender.on_nak(frame.ack, now)
             else:
-                self.sender.on_ack(frame.ack, now)
+                self.sender.on_report(frame.ack, now)
             if frame.kind != Kind.DATA:
                 if frame.payload:
                     out.append(Incoming("flow", frame.payload, frame.ack))

@@ -7,7 +7,8 @@ run the same under a virtual clock in tests and a real clock on a port.
 - ACK carries the next sequence number expected (cumulative); NAK carries the
   same and asks for everything from it again (go-back-N).
 - The retransmission timeout follows RFC 6298 (SRTT, RTTVAR, Karn's rule: no
-  samples from retransmitted frames) with exponential backoff, floor and ceiling.
+  samples from retransmitted frames) with exponential backoff, floor and ceiling; its
+  timer restarts at every acknowledgement that releases frames (RFC 6298 5.3).
 """
 
 from __future__ import annotations
@@ -97,6 +98,9 @@ class Sender:
         # is resent before this: nothing waits on them, and on a fast path (3 ms floor) a
         # scheduling hiccup of either side would count as a loss on a clean idle link
         self.calm_floor = 0.0
+        # a report that acknowledges nothing new this long after the oldest frame left (and
+        # after the last progress) resends it once, before its timeout (None: never)
+        self.stale_after: float | None = None
         self.next_seq = 0
         self.outstanding: deque[_Outstanding] = deque()
         self.backlog: deque[_Queued] = deque()
@@ -107,9 +111,15 @@ class Sender:
         self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
         self.retransmits = 0
         self.timeouts = 0
+        self.go_backs = 0  # resends of the window (a timeout or a NAK): losses seen
+        self.early_resends = 0  # go-backs on a stale report (stale_after)
         self.acked_clean = 0  # frames acknowledged that had been sent once
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
+        # when an acknowledgement last released frames: the timer restarts there (RFC 6298
+        # 5.3), so frames that wait in a busy receiver's buffer behind others it is still
+        # working through do not time out while it acknowledges them one by one
+        self._advanced_at = -1e9
 
     @property
     def base(self) -> int:
@@ -158,11 +168,27 @@ class Sender:
             self._items_out -= last.items
             clean += not last.retransmitted
         self.acked_clean += clean
+        self._advanced_at = now
         if last is not None and not last.retransmitted:
             self.rto.sample(now - last.sent_at)
         else:
             self.rto.reset_backoff()
         return n
+
+    def on_report(self, ack: int, now: float) -> None:
+        """An ACK or DATA frame from the peer: release frames before ``ack``. If it releases
+        none although the oldest outstanding frame left ``stale_after`` ago (and nothing was
+        released since) and queue items are in flight, that frame was lost with nothing
+        behind it to show the gap: resend from it now, once per frame (it is then left to
+        the timeout and its backoff)."""
+        if self.on_ack(ack, now) or self.stale_after is None or self._resend:
+            return
+        if not self._items_out or self.outstanding[0].seq != ack:
+            return  # keep-alives and status requests wait for their timeout (calm_floor)
+        oldest = self.outstanding[0]
+        if not oldest.retransmitted and now - self._timer_start() >= self.stale_after:
+            self.early_resends += 1
+            self._go_back(now)
 
     def on_nak(self, ack: int, now: float) -> None:
         """Release frames before ``ack``, then resend from ``ack`` unless that was just done."""
@@ -176,6 +202,7 @@ class Sender:
         self._go_back(now)
 
     def _go_back(self, now: float) -> None:
+        self.go_backs += 1
         self._resend = True
         self._went_back = (self.base, now)
 
@@ -191,7 +218,12 @@ class Sender:
             return -1.0
         if not self.outstanding:
             return None
-        return self.outstanding[0].sent_at + self._timeout()
+        return self._timer_start() + self._timeout()
+
+    def _timer_start(self) -> float:
+        """The oldest outstanding frame's send time, or the last acknowledgement that released
+        frames if that came later (the timer restarts on progress)."""
+        return max(self.outstanding[0].sent_at, self._advanced_at)
 
     def _timeout(self) -> float:
         """The retransmission timeout: the calm floor at least while no queue items wait
@@ -202,11 +234,7 @@ class Sender:
     def frames_to_send(self, now: float) -> list[tuple[int, bytes]]:
         """Retransmissions that are due (timeout or NAK) and new frames the window allows."""
         out: list[tuple[int, bytes]] = []
-        if (
-            self.outstanding
-            and not self._resend
-            and now >= self.outstanding[0].sent_at + self._timeout()
-        ):
+        if self.outstanding and not self._resend and now >= self._timer_start() + self._timeout():
             self.timeouts += 1
             self.rto.back_off()
             self._go_back(now)

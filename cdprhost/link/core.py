@@ -22,6 +22,9 @@ from cdprhost.link.errors import DeviceSilent, LinkTimeout
 from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker
 from cdprhost.link.tuning import (
+    FRAME_LOSS_SHARE,
+    LOSS_MEMORY_BYTES,
+    LOSS_PRIOR_BYTES,
     MAX_WINDOW,
     MIN_PAYLOAD,
     MIN_WINDOW,
@@ -29,10 +32,11 @@ from cdprhost.link.tuning import (
     RTO_FLOOR_S,
     RTO_MAX_BACKOFF,
     SLICE_S,
+    STALE_REPORT_S,
     START_WINDOW,
 )
 from firmware_protocol.endpoint import Endpoint
-from firmware_protocol.framing import MAX_PAYLOAD, Kind, encode_frame
+from firmware_protocol.framing import MAX_PAYLOAD, OVERHEAD, Kind, encode_frame
 from firmware_protocol.message_codec import encode_message
 from firmware_protocol.messages import GetStatus, Message
 from firmware_protocol.segments import SegmentContext
@@ -79,6 +83,7 @@ class LinkCore:
             rto_ceiling=min(0.25, self.timeout_s / 4),
             byte_time=10.0 / baud if baud else 0.0,
             rto_fast=RTO_FAST,
+            stale_after=STALE_REPORT_S,
         )
         self.ctx = SegmentContext()
         self.max_payload: int = max_payload
@@ -95,6 +100,10 @@ class LinkCore:
         self.garbage_since_valid = 0
         self._last_retx = 0
         self._acked_clean = 0
+        # the line's loss rate: go-backs per byte sent, both counts halved now and then
+        self._loss_events = 0.0
+        self._loss_bytes = 0.0
+        self._seen = (0, 0)  # (go-backs, bytes sent) at the last adaptation
         self.pumping = False  # a pump slice runs (the keep-alive thread then leaves it be)
 
     # ------------------------------------------------------------------ locking
@@ -121,6 +130,7 @@ class LinkCore:
         self.ep.reset_session()
         self.ep.sender.window = min(START_WINDOW, self.max_window)
         self._last_retx = self._acked_clean = 0
+        self._seen = (0, self.ep.counters.bytes_sent)
         self.ctx = SegmentContext()
 
     def credit(self) -> int:
@@ -220,7 +230,8 @@ class LinkCore:
         sender = ep.sender
         clean, self._acked_clean = sender.acked_clean - self._acked_clean, sender.acked_clean
         if retx > self._last_retx:
-            self.payload_limit = max(MIN_PAYLOAD, int(self.payload_limit * 0.7))
+            floor = min(self.max_payload, self.payload_floor())
+            self.payload_limit = max(floor, int(self.payload_limit * 0.7))
             sender.window = max(MIN_WINDOW, sender.window // 2)
             log.debug(
                 "%s: %d retransmissions; payload %d, window %d",
@@ -233,6 +244,20 @@ class LinkCore:
             self.payload_limit = min(self.max_payload, self.payload_limit + 2 * clean)
             sender.window = min(self.max_window, sender.window + clean)
         self._last_retx = retx
+
+    def payload_floor(self) -> int:
+        """The shortest payload worth sending on this line: a frame of it is lost with about
+        FRAME_LOSS_SHARE probability at the measured rate of go-backs per byte sent (at
+        least MIN_PAYLOAD)."""
+        events, sent = self.ep.sender.go_backs, self.ep.counters.bytes_sent
+        self._loss_events += events - self._seen[0]
+        self._loss_bytes += sent - self._seen[1]
+        self._seen = (events, sent)
+        while self._loss_bytes > LOSS_MEMORY_BYTES:
+            self._loss_events /= 2
+            self._loss_bytes /= 2
+        rate = (self._loss_events + 0.5) / (self._loss_bytes + LOSS_PRIOR_BYTES)
+        return max(MIN_PAYLOAD, int(FRAME_LOSS_SHARE / rate) - OVERHEAD)
 
     def wait(
         self,

@@ -6,6 +6,15 @@ from __future__ import annotations
 SLICE_S = 0.02
 MIN_PAYLOAD = 24
 START_PAYLOAD = 64  # frames start small and grow while the line is clean
+# The payload floor follows the line's measured loss: frames as long as a frame is lost with
+# about this probability. A device checks one frame a main-loop turn and answers each with
+# an ACK, so short frames cost it time per segment: with 24-byte payloads on a line that
+# loses 0.2 % of its bytes the AVR took about one frame (5 segments) every 5 ms, no more
+# than it executed at 1000 segments/s, and never caught up after a loss. A heavily damaged
+# line (1 % + 1 %) still gets the short frames that get through.
+FRAME_LOSS_SHARE = 0.22
+LOSS_PRIOR_BYTES = 2500  # the estimate starts as 0.5 losses in this many bytes
+LOSS_MEMORY_BYTES = 20000  # past this the counts are halved: the estimate follows the line
 MAX_WINDOW = 127
 START_WINDOW = 8
 MIN_WINDOW = 8
@@ -23,6 +32,13 @@ RTO_MAX_BACKOFF = 8
 # a stall of the stream: 3 ms and no backoff (the 1 %+1 % pty benchmark underran at 5x
 # with the UART timing; it completes with this).
 RTO_FAST = (0.003, 1)
+# A device report (an ACK with FLOW) that still does not acknowledge the oldest frame this
+# long after it left the wire, and after the last acknowledgement that released frames,
+# shows it lost with nothing behind it (a gap would have drawn a NAK): it is resent then,
+# once, instead of at its timeout. Longer than a main-loop turn of the AVR (up to about
+# 15 ms: a report sent at the end of a turn that began before the frame had arrived does
+# not acknowledge it yet).
+STALE_REPORT_S = 0.02
 # Heater lease of a 2.1 device (PROTOCOL.md 3.3): renewed every quarter of it by the calls
 # of the code that drives the machine, never by the keep-alive thread.
 HEATER_LEASE_S = 10.0

@@ -43,6 +43,8 @@ static uint32_t went_back_at;
 static uint8_t have_srtt;
 static uint32_t srtt, rttvar, rto_base;
 static uint8_t backoff;
+/* when an acknowledgement last released reports: the timer restarts there (RFC 6298 5.3) */
+static uint32_t advanced_at;
 
 static uint8_t urgent_len;
 static uint8_t urgent_buf[REPORT_MAX];
@@ -70,6 +72,7 @@ void link_reset_session(void)
     backoff = 1;
     went_back_at = link_now - T_MS(10000);
     last_nak_at = went_back_at;
+    advanced_at = went_back_at;
 }
 
 uint8_t link_expected(void)
@@ -152,6 +155,7 @@ static void on_ack(uint8_t ack, uint32_t now)
     first = (uint8_t)((first + n) % REPORT_SLOTS);
     n_out -= n;
     base_seq += n;
+    advanced_at = now;
 }
 
 static uint8_t send_ack(uint32_t now);
@@ -241,7 +245,11 @@ void link_poll(uint32_t now)
         frame_send(KIND_URGENT, 0, expected, urgent_buf, urgent_len);
         urgent_len = 0;
     }
-    if (n_out && !resend && now - slots[first].sent_at >= rto()) {
+    /* the oldest report's time, or the last progress if that came later */
+    uint32_t since = slots[first].sent_at;
+    if ((int32_t)(advanced_at - since) > 0)
+        since = advanced_at;
+    if (n_out && !resend && now - since >= rto()) {
         if (backoff < 64)
             backoff *= 2;
         resend = 1;

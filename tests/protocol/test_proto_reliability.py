@@ -122,6 +122,38 @@ def test_retransmission_on_timeout_uses_karn_rule():
     assert s.rto.srtt is None  # no sample from a retransmitted frame
 
 
+def test_the_timer_restarts_at_each_acknowledgement_that_releases_frames():
+    """A receiver working through a backlog acknowledges one frame after another: the
+    frames behind are not resent while it does (RFC 6298 5.3)."""
+    s = Sender(window=4, rto=RtoEstimator(initial=0.03, floor=0.03, ceiling=1.0))
+    for i in range(3):
+        s.queue(bytes([i]), items=1)
+    s.frames_to_send(0.0)
+    s.on_ack(1, 0.025)
+    rto = s.rto.rto
+    assert s.next_deadline() == pytest.approx(0.025 + rto)
+    assert s.frames_to_send(rto + 0.001) == []  # frame 1 left at 0: due without the restart
+    assert [seq for seq, _ in s.frames_to_send(0.026 + rto)] == [1, 2] and s.timeouts == 1
+
+
+def test_a_stale_report_resends_the_last_frame_once_before_its_timeout():
+    s = Sender(window=4, rto=RtoEstimator(initial=0.1, floor=0.1, ceiling=1.0))
+    s.stale_after = 0.02
+    s.queue(b"segments", items=3, ticks=300)
+    s.frames_to_send(0.0)
+    s.on_report(0, 0.015)  # too soon: the frame may still wait for the peer's next turn
+    assert s.frames_to_send(0.015) == []
+    s.on_report(0, 0.021)
+    assert s.frames_to_send(0.021) == [(0, b"segments")] and s.timeouts == 0
+    s.on_report(0, 0.05)  # once per frame: the resent one waits for its timeout
+    assert s.frames_to_send(0.05) == [] and s.early_resends == 1
+    s.on_report(1, 0.06)
+    s.queue(b"status")  # no queue items in flight: only the timeout resends it
+    s.frames_to_send(0.06)
+    s.on_report(1, 0.09)
+    assert s.frames_to_send(0.09) == []
+
+
 def test_items_after_an_ack_point():
     s = Sender(window=4)
     for items in (3, 0, 5, 2):
