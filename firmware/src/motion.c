@@ -12,6 +12,7 @@
 
 #include "config.h"
 #include "motion.h"
+#include "mul16.h"
 #include "protocol_gen.h"
 #include "step_rate.h"
 
@@ -119,29 +120,6 @@ static struct fx40 fx40_of(float k)
     f.lo = (uint16_t)v;
     f.hi = (uint32_t)(v >> 16);
     return f;
-}
-
-/* a b, 16 x 16 -> 32 bits, inline (libgcc's call costs more than the four multiplies) */
-static inline __attribute__((always_inline)) uint32_t mul16x16(uint16_t a, uint16_t b)
-{
-    uint32_t r;
-    __asm__("mul %A1, %A2\n\t"
-            "movw %A0, r0\n\t"
-            "mul %B1, %B2\n\t"
-            "movw %C0, r0\n\t"
-            "mul %A1, %B2\n\t"
-            "add %B0, r0\n\t"
-            "adc %C0, r1\n\t"
-            "clr __zero_reg__\n\t"
-            "adc %D0, __zero_reg__\n\t"
-            "mul %B1, %A2\n\t"
-            "add %B0, r0\n\t"
-            "adc %C0, r1\n\t"
-            "clr __zero_reg__\n\t"
-            "adc %D0, __zero_reg__"
-            : "=&r"(r)
-            : "r"(a), "r"(b));
-    return r;
 }
 
 /* the same for n >= 2^16 (a long segment): 64-bit arithmetic, out of the common path */

@@ -4,6 +4,7 @@
 
 #include "board_ramps14.h"
 #include "step_events.h"
+#include "step_pins.h"
 
 struct event *stepper_next;
 
@@ -24,18 +25,7 @@ ISR(TIMER1_COMPB_vect, ISR_NAKED)
         "lds r30, stepper_next\n\t"
         "lds r31, stepper_next+1\n\t"
         "ld r24, Z+\n\t" /* this event's axes */
-        "sbrc r24, 0\n\t"
-        "sbi %[pf], %[xb]\n\t"
-        "sbrc r24, 1\n\t"
-        "sbi %[pf], %[yb]\n\t"
-        "sbrc r24, 3\n\t"
-        "sbi %[pa], %[eb]\n\t"
-        "sbrs r24, 2\n\t"
-        "rjmp 1f\n\t"
-        "lds r24, %[pl]\n\t"
-        "ori r24, %[zm]\n\t"
-        "sts %[pl], r24\n"
-        "1:\n\t"
+        STEP_PULSE_ASM("1")
         "push r25\n\t"
         "push r26\n\t"
         "push r27\n\t"
@@ -93,8 +83,7 @@ ISR(TIMER1_COMPB_vect, ISR_NAKED)
         "pop r24\n\t"
         "reti\n\t"
         :
-        : [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),
-          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
+        : STEP_PULSE_ASM_OPERANDS,
           [nzm] "n"(0xFF & ~_BV(Z_STEP_BIT)), [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)),
           [nocieb] "n"(0xFF & ~_BV(OCIE1B)), [ocrl] "n"(_SFR_MEM_ADDR(OCR1BL)),
           [tcntl] "n"(_SFR_MEM_ADDR(TCNT1L)), [tol] "n"(LATE_TOLERANCE_CYCLES));

@@ -81,4 +81,24 @@ static inline uint8_t limits_pressed(void)
     return m;
 }
 
+/* Assembly that raises the step pins of the axis mask in r24 (clobbers r24: the Z pin
+ * is on PORTL, outside the bit-addressable ports), for the interrupts written in
+ * assembly; its operands are STEP_PULSE_ASM_OPERANDS. */
+#define STEP_PULSE_ASM(label)                                                              \
+    "sbrc r24, 0\n\t"                                                                      \
+    "sbi %[pf], %[xb]\n\t"                                                                 \
+    "sbrc r24, 1\n\t"                                                                      \
+    "sbi %[pf], %[yb]\n\t"                                                                 \
+    "sbrc r24, 3\n\t"                                                                      \
+    "sbi %[pa], %[eb]\n\t"                                                                 \
+    "sbrs r24, 2\n\t"                                                                      \
+    "rjmp " label "f\n\t"                                                                  \
+    "lds r24, %[pl]\n\t"                                                                   \
+    "ori r24, %[zm]\n\t"                                                                   \
+    "sts %[pl], r24\n" label ":\n\t"
+#define STEP_PULSE_ASM_OPERANDS                                                            \
+    [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)),                          \
+        [pl] "n"(_SFR_MEM_ADDR(PORTL)), [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT),        \
+        [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT))
+
 #endif

@@ -954,18 +954,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
         "lds r31, stepper_next+1\n\t"
         "ld r24, Z\n\t"
         "sts prepulsed, r24\n\t"
-        "sbrc r24, 0\n\t"
-        "sbi %[pf], %[xb]\n\t"
-        "sbrc r24, 1\n\t"
-        "sbi %[pf], %[yb]\n\t"
-        "sbrc r24, 3\n\t"
-        "sbi %[pa], %[eb]\n\t"
-        "sbrs r24, 2\n\t"
-        "rjmp 2f\n\t"
-        "lds r24, %[pl]\n\t"
-        "ori r24, %[zm]\n\t"
-        "sts %[pl], r24\n"
-        "2:\n\t"
+        STEP_PULSE_ASM("2")
         "pop r31\n\t"
         "pop r30\n"
         "1:\n\t"
@@ -974,9 +963,7 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
         "pop r24\n\t"
         "jmp __vector_tick\n\t"
         :
-        : [pf] "I"(_SFR_IO_ADDR(PORTF)), [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),
-          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [eb] "I"(E_STEP_BIT), [zm] "M"(_BV(Z_STEP_BIT)),
-          [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), [ocieb] "I"(OCIE1B));
+        : STEP_PULSE_ASM_OPERANDS, [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), [ocieb] "I"(OCIE1B));
 }
 
 void __vector_tick(void)
