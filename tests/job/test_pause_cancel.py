@@ -27,13 +27,15 @@ def _part(tmp_path, layers=6):
     return path
 
 
-def _run_with(tmp_path, on_state):
+def _run_with(tmp_path, on_state, speedup=None):
+    """The part printed on an embedded device (virtual time as fast as the CPU allows,
+    or paced to ``speedup`` times real time when a watcher thread must see a phase)."""
     profile = load_profile("paper-prototype")
     holder = {}
     job = None
 
     def factory():
-        holder["link"] = open_embedded()
+        holder["link"] = open_embedded(speedup=speedup)
         return holder["link"]
 
     def on_event(e):
@@ -156,7 +158,9 @@ def test_cancel_during_homing_does_not_wait_for_it(tmp_path):
             marks["watcher"] = threading.Thread(target=cancel_once_homing, args=(job,))
             marks["watcher"].start()
 
-    job, result, record = _run_with(tmp_path, on_state)
+    # paced: unpaced, the 2 s of homing can pass in the few ms a loaded machine keeps
+    # the watcher thread from running (seen in CI), and the program starts
+    job, result, record = _run_with(tmp_path, on_state, speedup=10)
     assert result.status == "cancelled"
     assert record == []  # nothing of the program moved
     status = job.link.request_status()
