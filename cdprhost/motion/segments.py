@@ -30,8 +30,9 @@ from firmware_protocol.segments import SegmentBatch, peak_step_rates, ramp_codes
 
 DEFAULT_CLOCK_HZ = 1_000_000
 # the shortest segment planned: a 2.1 device announces the shortest it takes (CAPS; the
-# AVR firmware 10 ticks of 10 us), shorter ones are merged into the next
-MIN_SEGMENT_S = 200e-6
+# AVR firmware 40 units of 10 us, its step tick), shorter ones are merged into the next.
+# Every device gets at least this, so both devices are sent the same plan.
+MIN_SEGMENT_S = 400e-6
 #: passes of merging segments whose rounded steps exceed the device's step rate
 RATE_MERGE_PASSES = 6
 #: phases shorter than this (mm) are merged into a neighbour instead of making a segment

@@ -12,25 +12,26 @@
 /* Time. Segment and dwell durations, the device clock and every timer are in
  * units of the protocol clock: CLOCK_HZ (10 us), as in the Python device model,
  * so the host plans the same segments for both. The step interrupt runs on its
- * own grid of TICK_UNITS units (200 us, 5 kHz) and makes the last tick of each
+ * own grid of TICK_UNITS units (400 us, 2.5 kHz) and makes the last tick of each
  * timed item as long as it needs to be, so every segment and dwell lasts exactly
  * its duration; each step inside a tick is issued at its own time on the
  * segment's profile (stepper.c). Homing ticks are HOME_TICK_UNITS long: one
  * homing step each, 4000 steps/s. */
 #define CLOCK_HZ 100000UL
 #define UNIT_CYCLES (F_CPU / CLOCK_HZ)                  /* 160 */
-#define TICK_UNITS 20
-#define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 3200 */
+#define TICK_UNITS 40
+#define TICK_CYCLES (UNIT_CYCLES * TICK_UNITS)          /* 6400 */
 #define HOME_TICK_UNITS 25
-/* Every step costs the interrupt about 140 cycles (placed, sorted, issued by its
- * own compare B), so the rate the firmware advertises is what four axes at once
- * can take with the interrupt under 70 % of the CPU: 10000 steps/s each (63 %,
- * bench/firmware.py; 12000 measured 69 % with late pulses). The host plans for
- * 90 % of it. */
+/* Every step costs the interrupts about 140 cycles (placed, sorted, issued by its
+ * own compare B), a tick about 1,200 more, so the rate the firmware advertises is
+ * what a print's mix (one module at the rate, the others slower and out of step) takes
+ * with the interrupts under 70 % of the CPU and no tick overrun: 10000 steps/s on any
+ * one axis (60 %, four axes in step 50 %, bench/firmware.py; at 12500 ticks overran).
+ * The host plans for 90 % of it. */
 #define MAX_STEP_RATE 10000UL /* steps/s, any one axis */
 
-/* CAPS (protocol 2.1). The shortest segment: one whole tick (a shorter one would make
- * the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
+/* CAPS (protocol 2.1). The shortest segment: one whole tick, 400 us (a shorter one would
+ * make the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
  * rate sustained at 250000 baud on a clean line (bench/firmware.py's stream: 2000/s,
  * 0.5 ms segments, exact). A pulse later than the tolerance against its place in the
  * firmware's schedule counts as late (HEALTH). */

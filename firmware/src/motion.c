@@ -199,7 +199,7 @@ static struct {
  * An entry is valid while its gen is the shape's (0: never). */
 #define MEMO_N 8
 static struct {
-    uint16_t v_lo, a_lo, cps8;
+    uint16_t v_lo, a_lo, period;
     int32_t v_hi, a_hi;
     uint8_t last_n, est_low, gen;
 } memo[MEMO_N];
@@ -245,7 +245,7 @@ static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32
     times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
     times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
     /* a steady segment moves v_hi every tick: the interrupt's step rate, now */
-    x->cps8 = accel ? 0 : step_cycles8((uint32_t)x->v_hi, TICK_CYCLES);
+    x->period = accel ? 0 : step_period((uint32_t)x->v_hi, TICK_CYCLES);
     if (n < MEMO_N) {
         memo[n].v_lo = x->v_lo;
         memo[n].v_hi = x->v_hi;
@@ -253,7 +253,7 @@ static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32
         memo[n].a_hi = x->a_hi;
         memo[n].last_n = (uint8_t)x->last_n;
         memo[n].est_low = x->est_low;
-        memo[n].cps8 = x->cps8;
+        memo[n].period = x->period;
         memo[n].gen = shape_gen;
     }
 }
@@ -277,7 +277,7 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
         uint32_t n = *np;
         *delta = (dir & bit) ? -(int32_t)n : (int32_t)n;
         x->acc = 1UL << 23;
-        x->cps8 = 0;
+        x->period = 0;
         if (!n) {
             x->v_hi = x->a_hi = 0;
             x->v_lo = x->a_lo = 0;
@@ -293,7 +293,7 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             x->a_hi = memo[n].a_hi;
             x->last_n = memo[n].last_n;
             x->est_low = memo[n].est_low;
-            x->cps8 = memo[n].cps8;
+            x->period = memo[n].period;
         } else {
             axis_constants(x, n, p->accel);
         }

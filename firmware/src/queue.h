@@ -72,9 +72,9 @@ struct axis_plan {
     uint32_t acc;    /* 12 */
     uint32_t last_n; /* N minus the estimated count before the last tick */
     uint8_t est_low;
-    /* cycles x 8 between steps (step_rate.h; 0: slower than fits): a steady
+    /* cycles x 4 between steps (step_rate.h; 0: slower than fits): a steady
      * segment's from its plan, an accelerating one's from its last tick with steps */
-    uint16_t cps8;
+    uint16_t period;
 };
 
 struct plan {

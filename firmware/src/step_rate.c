@@ -13,11 +13,11 @@
 static const uint16_t recip_table[128] PROGMEM = {
     R16(128), R16(144), R16(160), R16(176), R16(192), R16(208), R16(224), R16(240)};
 
-/* Cycles per step times 8 for an axis that moves `dist` steps (Q8.24) in `span`
- * cycles, span 2^27 / dist, from the table (no division in the interrupt); 0 when
- * that is 2^16 or more (slower than one step per 8192 cycles). The distance is taken
- * to 12 fraction bits: steps faster than that are at least 0.38 a tick. */
-uint16_t step_cycles8(uint32_t dist, uint16_t span)
+/* Cycles per step times 4 for an axis that moves `dist` steps (Q8.24) in `span`
+ * cycles, span 2^26 / dist, from the table (no division in the interrupt); 0 when
+ * that is 2^16 or more (slower than one step per 16384 cycles). The distance is taken
+ * to 12 fraction bits: steps faster than that are at least 0.39 a tick. */
+uint16_t step_period(uint32_t dist, uint16_t span)
 {
     /* d = dist / 2^12, from its bytes (no 32-bit shift loops) */
     uint16_t hi = (uint16_t)(dist >> 16);
@@ -36,11 +36,11 @@ uint16_t step_cycles8(uint32_t dist, uint16_t span)
         d <<= 1;
         s++;
     }
-    /* span 2^15 / (d 2^-s) = span 2^(7 + s) / m = span r 2^(s - 15), r = 2^22 / m:
-     * the product's bytes 1..3 (a byte move) shifted right 7 - s more */
+    /* span 2^14 / (d 2^-s) = span 2^(6 + s) / m = span r 2^(s - 16), r = 2^22 / m:
+     * the product's bytes 1..3 (a byte move) shifted right 8 - s more */
     uint32_t p = mul16x16(span, pgm_read_word(&recip_table[(uint8_t)(d >> 8) - 128]));
     __uint24 q = (__uint24)(p >> 8);
-    for (uint8_t k = (uint8_t)(7 - s); k; k--)
+    for (uint8_t k = (uint8_t)(8 - s); k; k--)
         q >>= 1;
     return q >> 16 ? 0 : (uint16_t)q;
 }

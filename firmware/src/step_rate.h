@@ -3,9 +3,11 @@
 #define STEP_RATE_H
 #include <stdint.h>
 
-/* Cycles x 8 between the steps of an axis that moves `dist` steps (Q8.24) in `span`
- * cycles (span 2^27 / dist, to 0.4 %); 0 when that is 2^16 or more (slower than one
- * step per 8192 cycles). */
-uint16_t step_cycles8(uint32_t dist, uint16_t span);
+/* The cycles between the steps of an axis that moves `dist` steps (Q8.24) in `span`
+ * cycles, times TIME_SCALE (4: span 2^26 / dist, to 0.4 %), the unit of the time
+ * wheel (step_wheel.h); 0 when that is 2^16 or more (slower than one step per 16384
+ * cycles, 977 steps/s). */
+#define TIME_SCALE 4
+uint16_t step_period(uint32_t dist, uint16_t span);
 
 #endif

@@ -58,28 +58,14 @@ uint8_t wheel_take(struct out *o)
     return lost;
 }
 
-/* One step slower than 1953 steps/s (cycles x 8 per step >= 2^16: one step a tick at
- * most), at x / dist of the tick, x = 1 - frac: the fraction to 1/64 by halving
- * (no division), in 16 bits. */
-void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last)
+/* One step slower than 977 steps/s (cycles x 4 per step >= 2^16: under one step in
+ * the longest tick), at x / dist of the tick, x = 1 - frac: the fraction to 1/64 by
+ * halving (no division), in 16 bits. */
+/* x / d for x <= d, in `bits` bits (1 - 2^-bits stands for 1), by halving */
+static uint8_t ratio(uint16_t x, uint16_t d, uint8_t bits)
 {
-    uint32_t x32 = 0x1000000UL - frac;
-    if (x32 > dist)
-        x32 = dist; /* the crossing is within the tick (rounding aside) */
-    if (!(uint16_t)(dist >> 16)) { /* under 1/256 step a tick: scale up (byte moves) */
-        dist <<= 8;
-        x32 <<= 8;
-    }
-    uint16_t d, x;
-    if ((uint8_t)(dist >> 24)) {
-        d = (uint16_t)(dist >> 16);
-        x = (uint16_t)(x32 >> 16);
-    } else {
-        d = (uint16_t)(dist >> 8);
-        x = (uint16_t)(x32 >> 8);
-    }
     uint8_t f = 0;
-    for (uint8_t i = 0; i < 6; i++) {
+    for (; bits; bits--) {
         d >>= 1;
         f <<= 1;
         if (x >= d) {
@@ -87,8 +73,82 @@ void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_
             f |= 1;
         }
     }
-    uint8_t slot = (uint8_t)(mul16x16((uint16_t)(2 * f + 1), span) >> 12); /* f + 1/2 */
+    return f;
+}
+
+void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last,
+                int32_t a)
+{
+    uint32_t x32 = 0x1000000UL - frac;
+    if (x32 > dist)
+        x32 = dist; /* the crossing is within the tick (rounding aside) */
+    /* the bend g = a / (2 dist), at most 1 */
+    uint8_t speeding = a > 0;
+    uint32_t y32 = (uint32_t)(speeding ? a : -a) >> 1;
+    if (y32 > dist)
+        y32 = dist;
+    if (!(uint16_t)(dist >> 16)) { /* under 1/256 step a tick: scale up (byte moves) */
+        dist <<= 8;
+        x32 <<= 8;
+        y32 <<= 8;
+    }
+    uint16_t d, x, y;
+    if ((uint8_t)(dist >> 24)) {
+        d = (uint16_t)(dist >> 16);
+        x = (uint16_t)(x32 >> 16);
+        y = (uint16_t)(y32 >> 16);
+    } else {
+        d = (uint16_t)(dist >> 8);
+        x = (uint16_t)(x32 >> 8);
+        y = (uint16_t)(y32 >> 8);
+    }
+    /* the crossing at f / 128 of the tick at the tick's mean rate; a changing rate
+     * moves it by g f (128 - f) / 128 (the quadratic's first-order root) */
+    uint8_t f = ratio(x, d, 7);
+    if (y) {
+        uint8_t g = ratio(y, d, 6); /* g, Q0.6 */
+        uint8_t bend = (uint8_t)(mul16x16(mul8x8(f, (uint8_t)(128 - f)), g) >> 13);
+        f = speeding ? (uint8_t)(f + bend) : (uint8_t)(f - bend);
+    }
+    /* (f + 1/2) / 128 of the span, in slots of 64 cycles */
+    _Static_assert(SLOT_CYCLES == 64, "a slot is span >> 14 of (2 f + 1) span");
+    uint8_t slot = (uint8_t)(mul16x16((uint16_t)(2 * f + 1), span) >> 14);
     wheel_add(slot > last ? last : slot, bit);
+}
+
+/* A tick of S = TICK_CYCLES x TIME_SCALE in which the axis moves v steps and its rate
+ * changes by a: the distance after t is v t / S - (a / 2) (t / S) (1 - t / S), so a
+ * crossing that the mean rate puts at t0 comes at t0 + g t0 (S - t0) / S, g = a / (2 v)
+ * = a c / (2 S) (to first order; |g| <= 1 keeps the steps in order). In fixed point:
+ * h = |a| c / 2^28 (a taken to Q.12) = g S / 8, and the shift g t0 (S - t0) / S =
+ * (t0 (S - t0) / 2^16) (h BEND_K / 2^16) / 2^8. */
+#define BEND_S ((uint32_t)TICK_CYCLES * TIME_SCALE)
+#define BEND_K ((uint16_t)((1ULL << 43) / ((uint64_t)BEND_S * BEND_S)))
+_Static_assert(BEND_S < 65536UL && BEND_K > 1000, "the bend's fixed point");
+
+void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t last,
+                      int32_t a)
+{
+    uint8_t speeding = a > 0;
+    uint32_t am = (uint32_t)(speeding ? a : -a) >> 12;
+    uint16_t h = am >> 16 ? 0xFFFFu : (uint16_t)am;
+    uint32_t hc = mul16x16(h, c) >> 16;
+    if (hc > BEND_S / 8)
+        hc = BEND_S / 8; /* g = 1 */
+    uint16_t m = (uint16_t)(mul16x16((uint16_t)hc, BEND_K) >> 16);
+    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
+    uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
+    do {
+        uint16_t u = t < BEND_S ? (uint16_t)(BEND_S - t) : 0;
+        uint16_t p = (uint16_t)(mul16x16(t, u) >> 16);
+        uint16_t shift = (uint16_t)(mul16x16(p, m) >> 8);
+        uint16_t tb = speeding ? t + shift : t - shift;
+        uint8_t slot = (uint8_t)(tb >> 8);
+        if (slot > last)
+            slot = last;
+        wheel_add(slot, bit);
+        t += c;
+    } while (--n);
 }
 
 /* Steps of axis k over a tick of `span` cycles in which it moves `dist` (Q8.24),
@@ -97,14 +157,14 @@ uint8_t place_axis(uint8_t k, uint8_t n, uint32_t frac, uint32_t dist, uint16_t 
                    uint8_t last)
 {
     uint8_t lost = 0;
-    uint16_t c = step_cycles8(dist, span);
+    uint16_t c = step_period(dist, span);
     uint8_t bit = bit_of[k];
     if (n > AX_MAX) {
         lost = (uint8_t)(n - AX_MAX); /* never at the advertised rate */
         n = AX_MAX;
     }
     if (!c)
-        place_slow(bit, frac, dist, span, last);
+        place_slow(bit, frac, dist, span, last, 0);
     else
         place_steps(bit, n, (uint16_t)(frac >> 8), c, last);
     return lost;

@@ -13,14 +13,16 @@
 
 #include "config.h"
 #include "mul16.h"
+#include "step_rate.h" /* TIME_SCALE */
 
 #define PULSE_CYCLES 34 /* >= 2 us high */
 
 /* A tick's output: its step events in time order, each the axes pulsed together and
  * the cycle (from the tick's compare match) at which the step is due on the
  * segment's profile. The layout is fixed: compare B's assembly addresses it. */
-#define EV_MAX 24 /* events a tick holds (axes stepping within a slot share one) */
-#define AX_MAX 16 /* steps of one axis a tick holds (80000 steps/s in a 200 us tick) */
+#define EV_MAX 40 /* events a tick holds (axes stepping within a slot share one): four
+                   * axes apart at the advertised rate in the longest tick (790 us) */
+#define AX_MAX 16 /* steps of one axis a tick holds (40000 steps/s in a 400 us tick) */
 struct event {
     uint8_t mask; /* axes pulsed together; 0 ends a tick's list */
     uint16_t at;  /* cycles from the tick's compare match */
@@ -34,15 +36,18 @@ struct out {
     uint32_t seq;
 };
 /* The time wheel of the tick being computed: slot s holds the axes that step in
- * cycles [32 s, 32 s + 32) of the tick (a step goes out at its slot's middle, within
- * 1 us of its time); occ marks the slots in use, a bit each. */
-#define SLOT_CYCLES 32
+ * cycles [64 s, 64 s + 64) of the tick (a step goes out at its slot's middle, within
+ * 2 us of its time); occ marks the slots in use, a bit each. Times on the wheel are
+ * cycles x TIME_SCALE in 16 bits (a slot is their high byte), which covers the
+ * longest tick (2 TICK_CYCLES - 1 unit). */
+#define SLOT_CYCLES (256 / TIME_SCALE)
 #define SLOTS (2 * TICK_CYCLES / SLOT_CYCLES)
 extern uint8_t wheel[SLOTS];
 extern uint8_t occ[(SLOTS + 7) / 8];
 extern uint8_t occ_lo, occ_hi; /* the bytes of occ in use */
 extern const uint8_t bit_of[8];
-_Static_assert(SLOTS <= 255 && 2 * TICK_CYCLES * 8 < 65536UL, "slots and times x8 fit their types");
+_Static_assert(SLOTS <= 255 && 2UL * TICK_CYCLES * TIME_SCALE < 65536UL,
+               "slots and scaled times fit their types");
 
 
 static inline __attribute__((always_inline)) void wheel_add(uint8_t slot, uint8_t bit)
@@ -62,24 +67,31 @@ static inline __attribute__((always_inline)) void wheel_add(uint8_t slot, uint8_
 /* The latest cycle of a tick of u units a step may be placed at: its pulse (high and
  * low) ends before the next tick's first. */
 #define LAST_AT(u) ((uint16_t)((u) * UNIT_CYCLES - 2 * PULSE_CYCLES - 8))
-#define LAST_SLOT(u) ((uint8_t)(LAST_AT(u) / SLOT_CYCLES - 1))
+#define LAST_SLOT(u) ((uint8_t)((LAST_AT(u) - SLOT_CYCLES / 2) / SLOT_CYCLES))
 
 /* The tick's events from its wheel, in time order (and the wheel emptied); returns
  * the steps that found no room (never at the advertised rate). */
 uint8_t wheel_take(struct out *o);
-/* One step of an axis slower than one step a tick (see step_wheel.c). */
-void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last);
+/* One step of an axis slower than one step a tick, its rate changing by `a` (Q7.24
+ * steps a tick, each tick; 0: steady) over the tick (see step_wheel.c). */
+void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last,
+                int32_t a);
+/* As place_steps over a whole tick (TICK_CYCLES) in which the axis's rate changes by
+ * `a` (Q7.24 steps a tick, each tick): each step where the tick's quadratic puts it
+ * (see step_wheel.c). */
+void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t last,
+                      int32_t a);
 
-/* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x 8
- * per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the tick's
- * start; step j (1..n) falls where the distance crosses j - f16, at (j - f16) c / 8
- * cycles. No step is placed after slot `last`. */
+/* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x
+ * TIME_SCALE per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the
+ * tick's start; step j (1..n) falls where the distance crosses j - f16, at
+ * (j - f16) c / TIME_SCALE cycles. No step is placed after slot `last`. */
 static inline __attribute__((always_inline)) void place_steps(uint8_t bit, uint8_t n,
                                                               uint16_t f16, uint16_t c,
                                                               uint8_t last)
 {
     /* the distance to the first crossing, Q0.16 (1 - 2^-16 stands for 1); its time
-     * (cycles x 8) is the high half of x c, its slot the high byte of the time */
+     * (cycles x TIME_SCALE) is the high half of x c, its slot the high byte of it */
     uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
     uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
     do {

@@ -500,9 +500,9 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
                 moved += moved < 0 ? (int32_t)lost : -(int32_t)lost;
             }
             uint32_t frac = x->acc & 0xFFFFFFUL;
-            if (x->cps8)
+            if (x->period)
                 /* at the rate of the axis's last tick with steps (a steady segment's) */
-                place_steps(bit_of[k], n, (uint16_t)(frac >> 8), x->cps8,
+                place_steps(bit_of[k], n, (uint16_t)(frac >> 8), x->period,
                             LAST_SLOT(p->last_units));
             else
                 /* no rate known yet: over the distance left, from the last crossing to
@@ -570,18 +570,20 @@ static void __attribute__((noinline)) seg_tick(void)
         any = 1;
         /* the tick moved the axis v_hi (Q8.24, after the acceleration's add): a steady
          * segment's rate was found with its plan, an accelerating one's changes */
-        uint16_t c = x->cps8;
+        uint16_t c = x->period;
         if (accel)
-            x->cps8 = c = step_cycles8((uint32_t)x->v_hi, TICK_CYCLES);
+            x->period = c = step_period((uint32_t)x->v_hi, TICK_CYCLES);
         if (n > AX_MAX) {
             stepper_lost_steps += (uint16_t)(n - AX_MAX); /* never at the advertised rate */
             n = AX_MAX;
         }
-        if (c)
-            place_steps(*bit, n, f16, c, LAST_SLOT(TICK_UNITS));
-        else
+        if (!c)
             place_slow(*bit, (uint32_t)f16 << 8, (uint32_t)x->v_hi, TICK_CYCLES,
-                       LAST_SLOT(TICK_UNITS));
+                       LAST_SLOT(TICK_UNITS), accel ? x->a_hi : 0);
+        else if (accel)
+            place_steps_bent(*bit, n, f16, c, LAST_SLOT(TICK_UNITS), x->a_hi);
+        else
+            place_steps(*bit, n, f16, c, LAST_SLOT(TICK_UNITS));
     }
     if (any)
         lost_count(wheel_take(o));

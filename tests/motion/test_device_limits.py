@@ -68,23 +68,23 @@ def _first_segments(path, profile, model, limits, n=40_000):
 
 def test_rounded_slivers_are_merged_under_the_device_rate(fixture_gcode):
     """The planner keeps speeds under 90 % of the rate, but a short piece can round to
-    more steps than its time allows (2 steps in 110 us); with the device's limits such
+    more steps than its time allows (5 steps in 480 us); with the device's limits such
     a segment is merged into its neighbour, keeping the steps and the time."""
     from cdprhost.motion.segments import SegmentLimits, peak_rates
 
     profile = load_profile("paper-prototype")
     model = MachineModel.from_profile(profile)
     rate = 10_000
-    capped = caps_for_device(profile, rate, 200e-6)
-    assert capped.segments == SegmentLimits(200e-6, rate)
-    plain = _first_segments(fixture_gcode, capped.profile, model, SegmentLimits(200e-6, None))
+    capped = caps_for_device(profile, rate, 400e-6)  # the AVR's tick
+    assert capped.segments == SegmentLimits(400e-6, rate)
+    plain = _first_segments(fixture_gcode, capped.profile, model, SegmentLimits(400e-6, None))
     kept = _first_segments(fixture_gcode, capped.profile, model, capped.segments)
     over = np.concatenate([peak_rates(b, 100_000) for b in plain]) > rate
     assert over.any()  # the file has slivers over the rate without the limit
     for a, b in zip(plain, kept):
         assert peak_rates(b, 100_000).max() <= rate
         assert peak_step_rates(to_wire(b), 100_000).max() <= rate  # what the feed checks
-        assert b.ticks.min() >= 20
+        assert b.ticks.min() >= 40
         assert int(a.ticks.sum()) == int(b.ticks.sum())  # the same time
         np.testing.assert_array_equal(a.steps_abs[-1], b.steps_abs[-1])  # the same motion
         assert len(b) < len(a) or not (peak_rates(a, 100_000) > rate).any()
