@@ -77,14 +77,14 @@ static uint8_t ratio(uint16_t x, uint16_t d, uint8_t bits)
 }
 
 void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last,
-                int32_t a)
+                int16_t a)
 {
     uint32_t x32 = 0x1000000UL - frac;
     if (x32 > dist)
         x32 = dist; /* the crossing is within the tick (rounding aside) */
     /* the bend g = a / (2 dist), at most 1 */
     uint8_t speeding = a > 0;
-    uint32_t y32 = (uint32_t)(speeding ? a : -a) >> 1;
+    uint32_t y32 = (uint32_t)(uint16_t)(speeding ? a : -a) << 11;
     if (y32 > dist)
         y32 = dist;
     if (!(uint16_t)(dist >> 16)) { /* under 1/256 step a tick: scale up (byte moves) */
@@ -116,30 +116,33 @@ void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_
     wheel_add(slot > last ? last : slot, bit);
 }
 
-/* A tick of S = TICK_CYCLES x TIME_SCALE in which the axis moves v steps and its rate
- * changes by a: the distance after t is v t / S - (a / 2) (t / S) (1 - t / S), so a
- * crossing that the mean rate puts at t0 comes at t0 + g t0 (S - t0) / S, g = a / (2 v)
- * = a c / (2 S) (to first order; |g| <= 1 keeps the steps in order). In fixed point:
- * h = |a| c / 2^28 (a taken to Q.12) = g S / 8, and the shift g t0 (S - t0) / S =
- * (t0 (S - t0) / 2^16) (h BEND_K / 2^16) / 2^8. */
-#define BEND_S ((uint32_t)TICK_CYCLES * TIME_SCALE)
-#define BEND_K ((uint16_t)((1ULL << 43) / ((uint64_t)BEND_S * BEND_S)))
-_Static_assert(BEND_S < 65536UL && BEND_K > 1000, "the bend's fixed point");
+/* A tick of S (cycles x TIME_SCALE) in which the axis moves v steps and its rate
+ * changes by a_S (the second difference of its position at ticks of S): the distance
+ * after t is v t / S - (a_S / 2) (t / S) (1 - t / S), so a crossing that the mean rate
+ * puts at t0 comes at t0 + g t0 (S - t0) / S, g = a_S / (2 v) (to first order; |g| <= 1
+ * keeps the steps in order). With c = S / v and a_S = a (S / T)^2, a the bend of whole
+ * ticks of T = BEND_T, the shift is a c t0 (S - t0) / (2 T^2) whatever S is. In fixed
+ * point: h = |a| c / 2^16 (a in Q.12) = g T^2 / (8 S), and the shift =
+ * (t0 (S - t0) / 2^16) (h BEND_K / 2^16) / 2^8, BEND_K = 2^43 / T^2. */
+#define BEND_T ((uint32_t)TICK_CYCLES * TIME_SCALE)
+#define BEND_K ((uint16_t)((1ULL << 43) / ((uint64_t)BEND_T * BEND_T)))
+_Static_assert(BEND_T < 65536UL && BEND_K > 1000, "the bend's fixed point");
 
 void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t last,
-                      int32_t a)
+                      int16_t a, uint16_t span)
 {
     uint8_t speeding = a > 0;
-    uint32_t am = (uint32_t)(speeding ? a : -a) >> 12;
-    uint16_t h = am >> 16 ? 0xFFFFu : (uint16_t)am;
-    uint32_t hc = mul16x16(h, c) >> 16;
-    if (hc > BEND_S / 8)
-        hc = BEND_S / 8; /* g = 1 */
+    uint16_t s = (uint16_t)(span * TIME_SCALE);
+    uint32_t hc = mul16x16((uint16_t)(speeding ? a : -a), c) >> 16;
+    /* g <= 1: h <= T^2 / (8 S), T / 8 for a whole tick, T / 16 for a longer last one */
+    uint16_t hmax = s == BEND_T ? BEND_T / 8 : BEND_T / 16;
+    if (hc > hmax)
+        hc = hmax;
     uint16_t m = (uint16_t)(mul16x16((uint16_t)hc, BEND_K) >> 16);
     uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
     uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
     do {
-        uint16_t u = t < BEND_S ? (uint16_t)(BEND_S - t) : 0;
+        uint16_t u = t < s ? (uint16_t)(s - t) : 0;
         uint16_t p = (uint16_t)(mul16x16(t, u) >> 16);
         uint16_t shift = (uint16_t)(mul16x16(p, m) >> 8);
         uint16_t tb = speeding ? t + shift : t - shift;
@@ -152,9 +155,12 @@ void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t 
 }
 
 /* Steps of axis k over a tick of `span` cycles in which it moves `dist` (Q8.24),
- * starting `frac` (Q0.24) past its last step boundary. */
+ * starting `frac` (Q0.24) past its last step boundary, its rate changing by `a`. */
+#define TICK_SLOTS (TICK_CYCLES / SLOT_CYCLES)
+#define SQUARE_Q8 ((uint16_t)((256UL * 65536UL) / (TICK_SLOTS * TICK_SLOTS)))
+_Static_assert(TICK_CYCLES % SLOT_CYCLES == 0 && SQUARE_Q8 > 1000, "a tick's span squared");
 uint8_t place_axis(uint8_t k, uint8_t n, uint32_t frac, uint32_t dist, uint16_t span,
-                   uint8_t last)
+                   uint8_t last, int16_t a)
 {
     uint8_t lost = 0;
     uint16_t c = step_period(dist, span);
@@ -163,9 +169,16 @@ uint8_t place_axis(uint8_t k, uint8_t n, uint32_t frac, uint32_t dist, uint16_t 
         lost = (uint8_t)(n - AX_MAX); /* never at the advertised rate */
         n = AX_MAX;
     }
-    if (!c)
-        place_slow(bit, frac, dist, span, last, 0);
-    else
+    if (!c) {
+        /* the bend at this tick's span: a (span / TICK_CYCLES)^2, the square in Q8 */
+        uint8_t r = (uint8_t)(span / SLOT_CYCLES);
+        uint16_t q = (uint16_t)(mul16x16(mul8x8(r, r), SQUARE_Q8) >> 16);
+        int16_t as = (int16_t)(mul16x16((uint16_t)(a < 0 ? -a : a), q) >> 8);
+        place_slow(bit, frac, dist, span, last, a < 0 ? -as : as);
+    } else if (a) {
+        place_steps_bent(bit, n, (uint16_t)(frac >> 8), c, last, a, span);
+    } else {
         place_steps(bit, n, (uint16_t)(frac >> 8), c, last);
+    }
     return lost;
 }

@@ -72,15 +72,23 @@ static inline __attribute__((always_inline)) void wheel_add(uint8_t slot, uint8_
 /* The tick's events from its wheel, in time order (and the wheel emptied); returns
  * the steps that found no room (never at the advertised rate). */
 uint8_t wheel_take(struct out *o);
-/* One step of an axis slower than one step a tick, its rate changing by `a` (Q7.24
- * steps a tick, each tick; 0: steady) over the tick (see step_wheel.c). */
+/* How much an axis's rate changes from one whole tick to the next (a segment's
+ * acceleration): Q3.12 steps a tick, each tick, from the DDA's a (Q7.24); 0: steady. */
+static inline __attribute__((always_inline)) int16_t bend_of(int32_t a)
+{
+    int32_t b = a >> 12;
+    return b > 0x7FFF ? 0x7FFF : b < -0x7FFF ? -0x7FFF : (int16_t)b;
+}
+
+/* One step of an axis slower than one step a tick whose rate changes by `a` (bend_of,
+ * scaled to this tick's span) over it (see step_wheel.c). */
 void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_t last,
-                int32_t a);
-/* As place_steps over a whole tick (TICK_CYCLES) in which the axis's rate changes by
- * `a` (Q7.24 steps a tick, each tick): each step where the tick's quadratic puts it
- * (see step_wheel.c). */
+                int16_t a);
+/* As place_steps over a tick of `span` cycles in which the axis's rate changes by `a`
+ * (bend_of, per whole tick): each step where the tick's quadratic puts it (see
+ * step_wheel.c). */
 void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t last,
-                      int32_t a);
+                      int16_t a, uint16_t span);
 
 /* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x
  * TIME_SCALE per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the
@@ -105,9 +113,10 @@ static inline __attribute__((always_inline)) void place_steps(uint8_t bit, uint8
 
 
 /* Steps of axis k over a tick of `span` cycles in which it moves `dist` (Q8.24),
- * starting `frac` (Q0.24) past its last step boundary; returns the steps over AX_MAX
- * that were not placed (never at the advertised rate). */
+ * starting `frac` (Q0.24) past its last step boundary, its rate changing by `a`
+ * (bend_of, per whole tick); returns the steps over AX_MAX that were not placed (never
+ * at the advertised rate). */
 uint8_t place_axis(uint8_t k, uint8_t n, uint32_t frac, uint32_t dist, uint16_t span,
-                   uint8_t last);
+                   uint8_t last, int16_t a);
 
 #endif

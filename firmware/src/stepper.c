@@ -500,7 +500,11 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
                 moved += moved < 0 ? (int32_t)lost : -(int32_t)lost;
             }
             uint32_t frac = x->acc & 0xFFFFFFUL;
-            if (x->period)
+            if (p->accel)
+                /* the mean rate over what is left, bent by the segment's acceleration */
+                lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
+                           LAST_SLOT(p->last_units), bend_of(x->a_hi)));
+            else if (x->period)
                 /* at the rate of the axis's last tick with steps (a steady segment's) */
                 place_steps(bit_of[k], n, (uint16_t)(frac >> 8), x->period,
                             LAST_SLOT(p->last_units));
@@ -508,7 +512,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
                 /* no rate known yet: over the distance left, from the last crossing to
                  * N + 1/2, which the accumulator (N p + 1/2) reaches at the end */
                 lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
-                           LAST_SLOT(p->last_units)));
+                           LAST_SLOT(p->last_units), 0));
         }
         *pos += moved;
     }
@@ -579,9 +583,10 @@ static void __attribute__((noinline)) seg_tick(void)
         }
         if (!c)
             place_slow(*bit, (uint32_t)f16 << 8, (uint32_t)x->v_hi, TICK_CYCLES,
-                       LAST_SLOT(TICK_UNITS), accel ? x->a_hi : 0);
+                       LAST_SLOT(TICK_UNITS), accel ? bend_of(x->a_hi) : 0);
         else if (accel)
-            place_steps_bent(*bit, n, f16, c, LAST_SLOT(TICK_UNITS), x->a_hi);
+            place_steps_bent(*bit, n, f16, c, LAST_SLOT(TICK_UNITS), bend_of(x->a_hi),
+                             TICK_CYCLES);
         else
             place_steps(*bit, n, f16, c, LAST_SLOT(TICK_UNITS));
     }

@@ -1,6 +1,7 @@
 """Every step edge of the AVR firmware at its exact time on the segment's profile
 (PROTOCOL.md 5.1), within the late tolerance the device announces, at the step rate it
-announces, with reversals and a last segment braking to rest."""
+announces, with reversals, segments speeding up and slowing down, and a last segment
+braking to rest."""
 
 from __future__ import annotations
 
@@ -14,7 +15,13 @@ import numpy as np
 import pytest
 
 from cdprhost.link import open_link
-from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch, step_times
+from firmware_protocol.segments import (
+    RAMP_CONSTANT,
+    RAMP_FROM_REST,
+    RAMP_TO_REST,
+    SegmentBatch,
+    step_times,
+)
 from firmware_protocol.streams import expected_record
 
 pytestmark = pytest.mark.usefixtures("avr_built")
@@ -35,10 +42,29 @@ def _batch(rates: list[int], n: int = 24, ticks: int = 1000) -> SegmentBatch:
     return SegmentBatch(np.full(n, ticks), deltas, ramps)
 
 
-#: four axes in step at the advertised rate; a print's mix (the modules at different
-#: rates, their steps apart, the extruder slow) at 60 % of it, where the step
-#: interrupts take about 70 % of the CPU (bench/firmware.py)
-MIXES = {"in step": (1.0, 1.0, 1.0, 1.0), "a print's mix": (0.6, 0.45, 0.3, 0.06)}
+def _ramps_batch(rates: list[int], n: int = 25, ticks: int = 2000) -> SegmentBatch:
+    """From rest up to the rates, speeding up part way (ramp code 64: from half the mean
+    speed to 1.5 times it), steady, slowing down part way (192), back to rest; reversing
+    after each rest. Inside every tick of the ramps the rate changes, so a step placed at
+    the tick's mean rate would be up to a tenth of a tick off."""
+    d = np.array(rates) * ticks // CLOCK_HZ
+    codes = np.resize([RAMP_FROM_REST, 64, RAMP_CONSTANT, 192, RAMP_TO_REST], n)
+    share = np.select([codes == RAMP_CONSTANT, (codes == 64) | (codes == 192)], [1.0, 0.6], 0.5)
+    sign = np.where((np.arange(n) // 5) % 2 == 0, 1, -1)
+    deltas = (sign * share)[:, None] * d[None, :]
+    return SegmentBatch(np.full(n, ticks), deltas.astype(np.int64), codes.astype(np.int16))
+
+
+#: at the advertised rate: four axes in step, and a print's mix (one module at the rate,
+#: the others slower with their steps apart, the extruder slow), where the step
+#: interrupts take about 60 % of the CPU (bench/firmware.py); the mix speeding up and
+#: slowing down
+IN_STEP, PRINT_MIX = (1.0, 1.0, 1.0, 1.0), (1.0, 0.75, 0.5, 0.1)
+CASES = {
+    "in step": (IN_STEP, _batch),
+    "a print's mix": (PRINT_MIX, _batch),
+    "speeding up and slowing down": (PRINT_MIX, _ramps_batch),
+}
 
 
 def _ideal_us(batch: SegmentBatch, axis: int) -> np.ndarray:
@@ -50,8 +76,8 @@ def _ideal_us(batch: SegmentBatch, axis: int) -> np.ndarray:
     return np.concatenate(parts) * 1e6 / CLOCK_HZ
 
 
-@pytest.mark.parametrize("mix", sorted(MIXES))
-def test_steps_are_on_time(tmp_path, mix):
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_steps_are_on_time(tmp_path, case):
     log, record = tmp_path / "steps.txt", tmp_path / "record.jsonl"
     env = {**os.environ, "CDPR_SIM_STEP_LOG": str(log)}
     cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--firmware", "avr"]
@@ -65,7 +91,8 @@ def test_steps_are_on_time(tmp_path, mix):
         try:
             assert link.identity is not None and link.caps is not None
             rate, tolerance = link.identity.max_step_rate, link.caps.late_tolerance_us
-            batch = _batch([int(rate * f) for f in MIXES[mix]])
+            mix, build = CASES[case]
+            batch = build([int(rate * f) for f in mix])
             link.queue_segments(batch)
             link.wait_idle(120)
             link.request_status()
@@ -83,6 +110,8 @@ def test_steps_are_on_time(tmp_path, mix):
         want = _ideal_us(batch, axis)
         assert got.shape == want.shape, (axis, got.shape, want.shape)
         err = got - want
-        assert np.abs(err).max() <= tolerance, (axis, float(np.abs(err).max()))
+        # the issue's bound: 10 us up to 10000 steps/s, the announced tolerance beyond
+        bound = 10.0 if rate <= 10_000 else tolerance
+        assert np.abs(err).max() <= bound, (axis, float(np.abs(err).max()))
         assert np.percentile(np.abs(err), 99) <= 10.0, (axis, float(np.percentile(np.abs(err), 99)))
     assert health is not None and health.late_pulses == 0
