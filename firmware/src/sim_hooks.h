@@ -27,13 +27,20 @@ static inline void sim_boot(void)
 
 /* The harness keeps the wall clock in the mailbox: the link's timers
  * (retransmission, announcements, host watchdog) then run in real time whatever
- * the simulation's speed, as the Python model's do. */
+ * the simulation's speed, as the Python model's do. The harness writes it between
+ * any two instructions (masking interrupts does not stop it), so a read of its four
+ * bytes can straddle an update: a carry into the third byte read half old, half new
+ * is a jump of 0.66 s, which once stored as a frame's time put the host watchdog's
+ * "now - last frame" below zero (a huge unsigned) and stopped a healthy stream. Read
+ * until two reads agree. */
 static inline uint32_t sim_link_clock(uint32_t t)
 {
     if (sim_mailbox.link_valid) {
-        cli();
-        t = sim_mailbox.link_clock;
-        sei();
+        uint32_t again;
+        do {
+            t = sim_mailbox.link_clock;
+            again = sim_mailbox.link_clock;
+        } while (t != again);
     }
     return t;
 }
