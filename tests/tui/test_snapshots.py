@@ -194,6 +194,9 @@ def test_console_screen(snap_compare, workdir, size):
         await wait_for(pilot, lambda s: any(c.kind == "reply" for c in s.console))
         await pilot.press(*"G4", "enter")
         await wait_for(pilot, lambda s: s.console[-1].text.startswith("G4 is not"))
+        # the state holds the line before the screen has written it (a loaded machine)
+        await wait_for(pilot, lambda s: pilot.app.screen.last_written is s.console[-1])
+        await pilot.pause()
 
     assert snap_compare(app, terminal_size=size, run_before=run_before)
 

@@ -68,6 +68,11 @@ class ConsoleScreen(AppScreen):
         )
         super().on_mount()
 
+    @property
+    def last_written(self) -> ConsoleLine | None:
+        """The last console line written to the log (None: none yet)."""
+        return self._written
+
     def render_state(self, state: UiState) -> None:
         lines = state.console
         log = self.query_one(RichLog)
