@@ -344,6 +344,9 @@ def main() -> int:
                 "device_s": s.get("sim_seconds"),
                 "host_retransmits": s["host_retransmits"],
                 "host_timeouts": s["host_timeouts"],
+                # real time: the most simavr fell behind the wall clock (it then runs
+                # flat out to catch up, faster than a board would)
+                "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
             }
         fig["streaming_30_s"] = sustained
     seg = stream[0]["payload_bytes_per_segment"]

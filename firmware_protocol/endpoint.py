@@ -139,8 +139,13 @@ class Endpoint:
                 self.byte_time
                 and self.sender.outstanding
                 and frame.ack != self.sender.base
+                and not self.sender.outstanding[0].retransmitted
                 and self.sender.outstanding[0].sent_at > now
             ):
+                # (a resent frame proves nothing: the acknowledgement can be the first
+                # copy's, and the copy's end on the wire is in the future. Taken as
+                # proof, it put a 250000-baud UART on the fast timing: a 3 ms timeout
+                # without backoff that stormed the AVR with go-backs.)
                 self.byte_time = (
                     0.0  # acknowledged before it could have left: the wire is faster (USB, pty)
                 )

@@ -179,14 +179,18 @@ class Sender:
         """An ACK or DATA frame from the peer: release frames before ``ack``. If it releases
         none although the oldest outstanding frame left ``stale_after`` ago (and nothing was
         released since) and queue items are in flight, that frame was lost with nothing
-        behind it to show the gap: resend from it now, once per frame (it is then left to
-        the timeout and its backoff)."""
+        behind it to show the gap: resend from it now. A frame already resent waits twice
+        as long: the peer is alive (it reports) and still without it, so its copies were
+        lost too, and the timeout, backed off by then, would let the peer's queue run dry
+        (at most one resend per 40 ms this way; a peer that stops reporting is left to the
+        timeout and its backoff)."""
         if self.on_ack(ack, now) or self.stale_after is None or self._resend:
             return
         if not self._items_out or self.outstanding[0].seq != ack:
             return  # keep-alives and status requests wait for their timeout (calm_floor)
         oldest = self.outstanding[0]
-        if not oldest.retransmitted and now - self._timer_start() >= self.stale_after:
+        wait = 2 * self.stale_after if oldest.retransmitted else self.stale_after
+        if now - self._timer_start() >= wait:
             self.early_resends += 1
             self._go_back(now)
 

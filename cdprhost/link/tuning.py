@@ -35,9 +35,9 @@ RTO_FAST = (0.003, 1)
 # A device report (an ACK with FLOW) that still does not acknowledge the oldest frame this
 # long after it left the wire, and after the last acknowledgement that released frames,
 # shows it lost with nothing behind it (a gap would have drawn a NAK): it is resent then,
-# once, instead of at its timeout. Longer than a main-loop turn of the AVR (up to about
-# 15 ms: a report sent at the end of a turn that began before the frame had arrived does
-# not acknowledge it yet).
+# instead of at its timeout (a frame already resent: after twice this). Longer than a
+# main-loop turn of the AVR (up to about 15 ms: a report sent at the end of a turn that
+# began before the frame had arrived does not acknowledge it yet).
 STALE_REPORT_S = 0.02
 # Heater lease of a 2.1 device (PROTOCOL.md 3.3): renewed every quarter of it by the calls
 # of the code that drives the machine, never by the keep-alive thread.

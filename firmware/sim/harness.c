@@ -464,9 +464,14 @@ static double wall_seconds(void)
     return (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
 }
 
+/* the most the simulation fell behind the wall clock (s): it then runs flat out until
+ * it has caught up, faster than the device would */
+static double behind_max;
 static void pace(void)
 {
     double ahead = sim_seconds() / speedup - wall_seconds();
+    if (-ahead > behind_max)
+        behind_max = -ahead;
     if (ahead > 0.0005) {
         struct timespec d = {(time_t)ahead, (long)((ahead - floor(ahead)) * 1e9)};
         nanosleep(&d, NULL);
@@ -594,7 +599,7 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -604,7 +609,7 @@ static void write_stats(void)
             step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
             step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
-            (unsigned long long)b_count);
+            (unsigned long long)b_count, behind_max * 1000.0);
     fclose(f);
 }
 

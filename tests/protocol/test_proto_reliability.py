@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from firmware_protocol.device.faults import FaultSpec, FaultyChannel
 from firmware_protocol.endpoint import Endpoint
+from firmware_protocol.framing import Kind, encode_frame
 from firmware_protocol.reliability import Receiver, RtoEstimator, Sender
 
 
@@ -136,7 +137,7 @@ def test_the_timer_restarts_at_each_acknowledgement_that_releases_frames():
     assert [seq for seq, _ in s.frames_to_send(0.026 + rto)] == [1, 2] and s.timeouts == 1
 
 
-def test_a_stale_report_resends_the_last_frame_once_before_its_timeout():
+def test_a_stale_report_resends_the_last_frame_before_its_timeout():
     s = Sender(window=4, rto=RtoEstimator(initial=0.1, floor=0.1, ceiling=1.0))
     s.stale_after = 0.02
     s.queue(b"segments", items=3, ticks=300)
@@ -145,13 +146,16 @@ def test_a_stale_report_resends_the_last_frame_once_before_its_timeout():
     assert s.frames_to_send(0.015) == []
     s.on_report(0, 0.021)
     assert s.frames_to_send(0.021) == [(0, b"segments")] and s.timeouts == 0
-    s.on_report(0, 0.05)  # once per frame: the resent one waits for its timeout
+    s.on_report(0, 0.05)  # a resent frame waits twice as long (40 ms)
     assert s.frames_to_send(0.05) == [] and s.early_resends == 1
-    s.on_report(1, 0.06)
+    s.on_report(0, 0.062)  # the peer still reports without it: its copy was lost too
+    assert s.frames_to_send(0.062) == [(0, b"segments")] and s.timeouts == 0
+    assert s.early_resends == 2
+    s.on_report(1, 0.07)
     s.queue(b"status")  # no queue items in flight: only the timeout resends it
-    s.frames_to_send(0.06)
-    s.on_report(1, 0.09)
-    assert s.frames_to_send(0.09) == []
+    s.frames_to_send(0.07)
+    s.on_report(1, 0.1)
+    assert s.frames_to_send(0.1) == []
 
 
 def test_items_after_an_ack_point():
@@ -188,3 +192,25 @@ def test_a_status_request_ahead_of_segments_keeps_the_fast_timeout():
     s.queue(b"segments", items=3, ticks=100)
     assert [seq for seq, _ in s.frames_to_send(0.0)] == [0, 1]
     assert [seq for seq, _ in s.frames_to_send(0.004)] == [0, 1]  # segments wait behind it
+
+
+def test_only_an_unresent_frame_acknowledged_too_early_proves_a_fast_wire():
+    """On a 250000-baud line the acknowledgement of a frame's first copy can arrive while
+    its resent copy still waits for the wire: no proof that the wire beats its baud (taken
+    as one, it put the AVR's UART on the 3 ms timing without backoff, and go-backs stormed
+    it). A frame acknowledged before its only copy can have left is proof (USB, a pty)."""
+    byte_time = 10 / 250_000
+    a = Endpoint(byte_time=byte_time, rto_floor=0.025, rto_fast=(0.003, 1))
+    a.send(b"x" * 100)
+    a.send(b"y" * 100)
+    a.flush(0.0)  # both on the wire until about 8.6 ms
+    a.feed(encode_frame(Kind.NAK, 0, 0, b""), 0.009)  # the first lost: both go again
+    assert len(a.flush(0.009)) == 2  # the first copy's end now about 13 ms
+    a.feed(encode_frame(Kind.ACK, 0, 1, b""), 0.010)  # its first copy got through after all
+    assert a.byte_time == byte_time and a.sender.rto.floor == 0.025
+
+    b = Endpoint(byte_time=byte_time, rto_floor=0.025, rto_fast=(0.003, 1))
+    b.send(b"x" * 100)
+    b.flush(0.0)  # on the wire until about 4.4 ms
+    b.feed(encode_frame(Kind.ACK, 0, 1, b""), 0.001)
+    assert b.byte_time == 0.0 and b.sender.rto.floor == 0.003
