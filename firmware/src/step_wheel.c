@@ -139,17 +139,12 @@ void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t 
     if (hc > hmax)
         hc = hmax;
     uint16_t m = (uint16_t)(mul16x16((uint16_t)hc, BEND_K) >> 16);
-    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
-    uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
+    uint16_t t = first_step_at(f16, c);
     do {
         uint16_t u = t < s ? (uint16_t)(s - t) : 0;
         uint16_t p = (uint16_t)(mul16x16(t, u) >> 16);
         uint16_t shift = (uint16_t)(mul16x16(p, m) >> 8);
-        uint16_t tb = speeding ? t + shift : t - shift;
-        uint8_t slot = (uint8_t)(tb >> 8);
-        if (slot > last)
-            slot = last;
-        wheel_add(slot, bit);
+        wheel_put(speeding ? t + shift : t - shift, last, bit);
         t += c;
     } while (--n);
 }

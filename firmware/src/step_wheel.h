@@ -90,6 +90,23 @@ void place_slow(uint8_t bit, uint32_t frac, uint32_t dist, uint16_t span, uint8_
 void place_steps_bent(uint8_t bit, uint8_t n, uint16_t f16, uint16_t c, uint8_t last,
                       int16_t a, uint16_t span);
 
+/* The time (cycles x TIME_SCALE) of the first step of an axis that moves at c (cycles x
+ * TIME_SCALE per step) and is `f16` (Q0.16) past its last step boundary: the distance to
+ * the first crossing (1 - 2^-16 stands for 1) times c, the high half of the product */
+static inline __attribute__((always_inline)) uint16_t first_step_at(uint16_t f16, uint16_t c)
+{
+    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
+    return (uint16_t)(mul16x16(x, c) >> 16);
+}
+
+/* A step at time t (cycles x TIME_SCALE; its slot is the high byte), no later than slot
+ * `last` */
+static inline __attribute__((always_inline)) void wheel_put(uint16_t t, uint8_t last, uint8_t bit)
+{
+    uint8_t slot = (uint8_t)(t >> 8);
+    wheel_add(slot > last ? last : slot, bit);
+}
+
 /* Place n (>= 1) steps of axis `bit` on the wheel: the axis moves at c = cycles x
  * TIME_SCALE per step (< 2^16) and is `f16` (Q0.16) past its last step boundary at the
  * tick's start; step j (1..n) falls where the distance crosses j - f16, at
@@ -98,15 +115,9 @@ static inline __attribute__((always_inline)) void place_steps(uint8_t bit, uint8
                                                               uint16_t f16, uint16_t c,
                                                               uint8_t last)
 {
-    /* the distance to the first crossing, Q0.16 (1 - 2^-16 stands for 1); its time
-     * (cycles x TIME_SCALE) is the high half of x c, its slot the high byte of it */
-    uint16_t x = f16 ? (uint16_t)-f16 : 0xFFFF;
-    uint16_t t = (uint16_t)(mul16x16(x, c) >> 16);
+    uint16_t t = first_step_at(f16, c);
     do {
-        uint8_t slot = (uint8_t)(t >> 8);
-        if (slot > last)
-            slot = last;
-        wheel_add(slot, bit);
+        wheel_put(t, last, bit);
         t += c;
     } while (--n);
 }
