@@ -168,7 +168,8 @@ uint8_t place_axis(uint8_t k, uint8_t n, uint32_t frac, uint32_t dist, uint16_t 
         /* the bend at this tick's span: a (span / TICK_CYCLES)^2, the square in Q8 */
         uint8_t r = (uint8_t)(span / SLOT_CYCLES);
         uint16_t q = (uint16_t)(mul16x16(mul8x8(r, r), SQUARE_Q8) >> 16);
-        int16_t as = (int16_t)(mul16x16((uint16_t)(a < 0 ? -a : a), q) >> 8);
+        uint32_t m = mul16x16((uint16_t)(a < 0 ? -a : a), q) >> 8;
+        int16_t as = m > 0x7FFF ? 0x7FFF : (int16_t)m; /* (past g = 1 anyway) */
         place_slow(bit, frac, dist, span, last, a < 0 ? -as : as);
     } else if (a) {
         place_steps_bent(bit, n, (uint16_t)(frac >> 8), c, last, a, span);
