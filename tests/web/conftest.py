@@ -44,7 +44,7 @@ def chromium_path() -> str | None:
     return "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None
 
 
-def part(layers: int = 6, side: float = 30.0) -> str:
+def part(layers: int = 6, side: float = 20.0) -> str:
     return small_part(layers=layers, side=side)
 
 
@@ -84,7 +84,8 @@ class WebServer:
                 "POST", "/api/files/local", body, {"X-Api-Key": self.key, "Content-Type": kind}
             )
             reply = conn.getresponse()
-            reply.read()
+            text = reply.read()
+            assert reply.status < 300 or reply.status == 409, text
             return reply.status
         finally:
             conn.close()
@@ -145,8 +146,9 @@ def browser() -> Iterator[Any]:
 
 @pytest.fixture
 def page(browser) -> Iterator[Any]:
-    """A fresh page (its own storage) at desktop size; dialogs (cancel's confirm) accepted."""
-    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    """A fresh page (its own storage) at desktop size; dialogs (cancel's confirm) accepted.
+    bypass_csp: Playwright's waits evaluate their expressions, which the page's policy forbids."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800}, bypass_csp=True)
     pg = context.new_page()
     pg.on("dialog", lambda d: d.accept())
     pg.set_default_timeout(20_000)
