@@ -127,8 +127,8 @@ def test_upload_by_drop_start_and_the_buttons_pause_resume_cancel(web_server, pa
 
 
 def test_a_stored_file_starts_from_the_list_and_the_e_stop_keeps_the_motors(web_server, page):
-    server = web_server(speedup=2.0)
-    server.upload("listed.gcode", part(layers=12))
+    server = web_server(speedup=10.0)
+    server.upload("listed.gcode", part(layers=30))
     unlock(page, server)
     page.click("#files button[data-path='listed.gcode']")
     server.wait_state("printing")
@@ -142,9 +142,9 @@ def test_a_stored_file_starts_from_the_list_and_the_e_stop_keeps_the_motors(web_
 
 
 def test_the_temperature_graph_and_the_layer_view_follow_the_print(web_server, page):
-    server = web_server(speedup=3.0)
+    server = web_server(speedup=10.0)
     unlock(page, server)
-    assert server.upload("layers.gcode", part(layers=8), start=True) == 201
+    assert server.upload("layers.gcode", part(layers=30), start=True) == 201
     page.wait_for_function("window.cdpr.doc.graph.length >= 2")
     first_graph = page.evaluate("[window.cdpr.graphDraws, window.cdpr.doc.graph.length]")
     page.wait_for_function("window.cdpr.layer !== null")
@@ -164,7 +164,7 @@ def test_the_temperature_graph_and_the_layer_view_follow_the_print(web_server, p
 
 
 def test_on_a_phone_nothing_scrolls_sideways(web_server, browser):
-    server = web_server(speedup=3.0)
+    server = web_server(speedup=10.0)
     context = browser.new_context(
         viewport={"width": 390, "height": 844},
         device_scale_factor=2,
@@ -181,7 +181,7 @@ def test_on_a_phone_nothing_scrolls_sideways(web_server, browser):
         pg.fill("#key", server.key)
         pg.click("#key-form button[type=submit]")
         name = "a_very_long_file_name_that_a_slicer_would_make_for_a_part_" + "x" * 60 + ".gcode"
-        assert server.upload(name, part(layers=6), start=True) == 201
+        assert server.upload(name, part(layers=20), start=True) == 201
         pg.wait_for_function("window.cdpr.layer !== null && window.cdpr.doc.graph.length > 1")
         pg.wait_for_function("document.getElementById('files').textContent.includes('very_long')")
         assert pg.evaluate(wide) <= 0

@@ -151,7 +151,7 @@
     drawGraph(doc.graph || []);
     renderHistory(doc);
     if (lastState !== doc.state || lastFile !== doc.file) {
-      if (lastState !== null && !running) loadFiles();
+      if (lastState !== null) loadFiles();  // a job started or ended: a slicer may have sent it
       lastState = doc.state;
       lastFile = doc.file;
     }
