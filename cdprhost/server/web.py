@@ -58,6 +58,8 @@ SAMPLE_S = 0.1  # how often the hub looks at the printer while a browser watches
 THROTTLE_S = 0.5  # at most one update per this, except a state change (sent at once)
 KEEPALIVE_S = 15.0
 HISTORY = 20
+IDLE_SAMPLE_S = 0.5  # ... while no browser watches (the history still sees each job end)
+PRIVATE = ("key", "resume_of")  # history fields the page is not sent
 
 
 class WebFront:
@@ -149,11 +151,14 @@ class Hub:
             return
         if self.history and self.history[0].get("key") == (after["file"], after["elapsed_s"]):
             return
-        self.history.appendleft({**record, "key": (after["file"], after["elapsed_s"])})
+        entry = {**record, "key": (after["file"], after["elapsed_s"]), "resume": None}
+        if self._status is not None and self._status.file is not None:
+            entry["resume_of"] = self._status.file
+        self.history.appendleft(entry)
 
     def _publish(self, now: float) -> None:
         assert self.doc is not None
-        history = [{k: v for k, v in h.items() if k != "key"} for h in self.history]
+        history = [{k: v for k, v in h.items() if k not in PRIVATE} for h in self.history]
         doc = {**self.doc, "history": history, "camera": self.camera, "now": round(time.time(), 1)}
         self.version += 1
         self.data = (
@@ -166,12 +171,37 @@ class Hub:
             self._changed = asyncio.Event()
 
     async def _run(self) -> None:
+        """From the first browser on: often while one watches, seldom otherwise (the history
+        keeps the jobs that end while nobody watches)."""
         try:
-            while self.clients > 0:
+            while True:
                 self.sample(time.monotonic())
-                await asyncio.sleep(SAMPLE_S)
+                await self._find_resume_points()
+                await asyncio.sleep(SAMPLE_S if self.clients > 0 else IDLE_SAMPLE_S)
         finally:
             self._task = None
+
+    async def _find_resume_points(self) -> None:
+        """The resume point each ended job saved (read in a worker thread: hashing the file)."""
+        for record in list(self.history):
+            if "resume_of" not in record:
+                continue
+            path = record.pop("resume_of")
+            record["resume"] = await asyncio.to_thread(self.resume_point, path)
+            self._pending = True
+
+    def resume_point(self, path: Path) -> str | None:
+        """Blocking: "line N (layer L)" of the point saved for ``path``, or None."""
+        from cdprhost.job.resume import find_resume_point
+
+        folder = (getattr(self.printer, "job_options", None) or {}).get("resume_dir")
+        try:
+            point = find_resume_point(path, folder)
+        except (OSError, ValueError, CdprError):
+            return None
+        if point is None:
+            return None
+        return f"line {point.last_line} (layer {point.last_layer})"
 
     # ------------------------------------------------------------- clients
     async def stream(self) -> AsyncIterator[bytes]:

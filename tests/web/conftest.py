@@ -56,7 +56,7 @@ class WebServer:
     printer: HeadlessPrinter
     thread: ServerThread
     links: list[Any]
-    #: wall-clock time (epoch s) each job state was first reached, from the printer's events
+    #: wall-clock time (epoch s) each job state was last entered, from the printer's events
     reached: dict[str, float] = field(default_factory=dict)
 
     def device(self) -> Any:
@@ -73,6 +73,20 @@ class WebServer:
                 return self.state()
             time.sleep(0.02)
         raise AssertionError(f"the job did not reach {states} within {timeout:g} s: {self.state()}")
+
+    def job_command(self, command: dict[str, str]) -> int:
+        import http.client
+        import json
+
+        conn = http.client.HTTPConnection("127.0.0.1", self.thread.port, timeout=60)
+        try:
+            headers = {"X-Api-Key": self.key, "Content-Type": "application/json"}
+            conn.request("POST", "/api/job", json.dumps(command), headers)
+            reply = conn.getresponse()
+            reply.read()
+            return reply.status
+        finally:
+            conn.close()
 
     def upload(self, name: str, text: str, start: bool = False) -> int:
         import http.client
@@ -108,7 +122,7 @@ def web_server(tmp_path, monkeypatch) -> Iterator[Callable[..., WebServer]]:
 
         def on_event(event: Event) -> None:
             if isinstance(event, StateChanged):
-                reached.setdefault(event.state.value, time.time())
+                reached[event.state.value] = time.time()
 
         printer = HeadlessPrinter(load_profile(PROFILE), open_device, on_event=on_event)
         keys = KeyFile()

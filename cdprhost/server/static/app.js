@@ -166,7 +166,7 @@
       const span = document.createElement("span");
       span.textContent = h.file + ": " + h.result + (h.layers ? " at layer " + (h.layer + 1) + "/" + h.layers : "");
       const small = document.createElement("small");
-      small.textContent = [h.reason, h.resume_file ? "resume point: line " + h.last_line : ""].filter(Boolean).join("; ");
+      small.textContent = [h.reason, h.resume ? "resume point: " + h.resume : ""].filter(Boolean).join("; ");
       span.append(small);
       li.append(span);
       return li;
