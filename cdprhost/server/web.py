@@ -103,12 +103,17 @@ class WebFront:
 class Hub:
     """The state document, sampled once for every browser watching, and the job history."""
 
-    def __init__(self, printer: Printer, relative: Callable[[Path | None], str | None]):
+    def __init__(
+        self,
+        printer: Printer,
+        relative: Callable[[Path | None], str | None],
+        camera: bool = False,
+    ):
         self.printer = printer
         self.relative = relative
         profile = getattr(printer, "profile", None)
         self.bed_origin = tuple(profile.build_volume.bed_origin) if profile is not None else None
-        self.camera = getattr(printer, "camera_snapshot", None) is not None
+        self.camera = camera
         self.history: deque[dict[str, Any]] = deque(maxlen=HISTORY)
         self.doc: dict[str, Any] | None = None
         self.data = b""
@@ -248,10 +253,13 @@ def _invalid(what: str, exc: Exception) -> JSONResponse:
     return _refused(400, f"{what}: the body is not JSON")
 
 
-def add_routes(app: FastAPI, api: Any) -> Hub:
-    """The page's routes on ``app`` (behind the key gate); ``api``: :class:`~.app.Api`."""
+def add_routes(
+    app: FastAPI, api: Any, camera: Callable[[], tuple[bytes, str]] | None = None
+) -> Hub:
+    """The page's routes on ``app`` (behind the key gate); ``api``: :class:`~.app.Api`;
+    ``camera``: a snapshot source (e.g. :class:`~.web_camera.CameraSnapshot`), or None."""
     printer: Printer = api.printer
-    hub = Hub(printer, api.relative)
+    hub = Hub(printer, api.relative, camera is not None)
     profile = getattr(printer, "profile", None)
 
     def read_items(path: Path) -> Any:
@@ -324,12 +332,11 @@ def add_routes(app: FastAPI, api: Any) -> Hub:
         return JSONResponse({"done": done})
 
     @app.get("/api/web/camera")
-    async def camera() -> Response:
-        snapshot = getattr(printer, "camera_snapshot", None)
-        if snapshot is None:
-            return _refused(404, "no camera is configured")
+    async def camera_snapshot() -> Response:
+        if camera is None:
+            return _refused(404, "no camera is configured (serve --camera)")
         try:
-            image, kind = await run_in_threadpool(snapshot)
+            image, kind = await run_in_threadpool(camera)
         except (CdprError, OSError, RuntimeError, ValueError) as exc:  # said; nothing else touched
             return _refused(503, f"the camera did not answer: {exc}")
         return Response(image, media_type=kind, headers={"cache-control": "no-store"})

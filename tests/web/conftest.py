@@ -111,7 +111,7 @@ def web_server(tmp_path, monkeypatch) -> Iterator[Callable[..., WebServer]]:
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
     made: list[WebServer] = []
 
-    def make(speedup: float | None = 4.0) -> WebServer:
+    def make(speedup: float | None = 4.0, camera: Any = None) -> WebServer:
         links: list[Any] = []
         reached: dict[str, float] = {}
 
@@ -127,7 +127,7 @@ def web_server(tmp_path, monkeypatch) -> Iterator[Callable[..., WebServer]]:
         printer = HeadlessPrinter(load_profile(PROFILE), open_device, on_event=on_event)
         keys = KeyFile()
         uploads = UploadFolder(tmp_path / f"uploads{len(made)}")
-        app = create_app(printer, uploads, keys.current, max_upload_bytes=5_000_000)
+        app = create_app(printer, uploads, keys.current, max_upload_bytes=5_000_000, camera=camera)
         thread = ServerThread(app, "127.0.0.1", 0)
         thread.start()
         made.append(WebServer(thread.url, keys.key, uploads.root, printer, thread, links, reached))

@@ -220,3 +220,25 @@ def test_the_page_weighs_under_300_kb(web_server, page):
     page.wait_for_function("window.cdpr.layer !== null")
     assert any(u.endswith("/static/app.js") for u in sizes)
     assert sum(sizes.values()) <= 300_000, sizes
+
+
+def test_a_configured_camera_gives_a_snapshot_in_the_page(web_server, page, tmp_path):
+    import cv2
+    import numpy as np
+
+    from cdprhost.server.web_camera import CameraSnapshot
+
+    picture = np.zeros((120, 160, 3), np.uint8)
+    picture[30:90, 40:120] = (0, 200, 255)
+    cv2.imwrite(str(tmp_path / "camera.png"), picture)
+    server = web_server(camera=CameraSnapshot(str(tmp_path / "camera.png")))
+    unlock(page, server)
+    page.wait_for_selector("#camera-card", state="visible")
+    page.click("#snap")
+    page.wait_for_function("document.getElementById('camera').naturalWidth === 160")
+
+
+def test_without_a_camera_the_page_shows_no_camera(web_server, page):
+    server = web_server()
+    unlock(page, server)
+    assert not page.is_visible("#camera-card")

@@ -122,3 +122,21 @@ def test_a_layer_document_is_compact_and_clamped(tmp_path):
     assert all(isinstance(v, int) for v in doc["xy"])
     box = doc["box"]
     assert box[2] - box[0] > 19 and box[3] - box[1] > 19  # the 20 mm square
+
+
+def test_a_camera_that_gives_no_picture_is_said_and_without_one_404(web_server, tmp_path):
+    from cdprhost.server.web_camera import CameraSnapshot
+
+    class Dead:
+        def read(self):
+            return False, None
+
+        def release(self):
+            pass
+
+    server = web_server(camera=CameraSnapshot("0", open_capture=lambda spec: Dead()))
+    status, _, text = request(server, "GET", "/api/web/camera")
+    assert status == 503 and "no picture" in json.loads(text)["error"]
+    assert request(server, "GET", "/api/web/camera", key=False)[0] == 401
+    plain = web_server()
+    assert request(plain, "GET", "/api/web/camera")[0] == 404
