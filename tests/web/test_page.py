@@ -115,7 +115,8 @@ def test_upload_by_drop_start_and_the_buttons_pause_resume_cancel(web_server, pa
     unlock(page, server)
     page.check("#upload-start")
     drop_file(page, "dropped.gcode", part(layers=12))
-    server.wait_state("heating", "printing")
+    server.wait_state("heating", "printing")  # started by the drop
+    server.wait_state("printing")  # heated: pausing now stops the motion itself
     assert (server.uploads / "dropped.gcode").is_file()
     assert server.printer.status().file.name == "dropped.gcode"
     page.wait_for_function(
@@ -124,9 +125,17 @@ def test_upload_by_drop_start_and_the_buttons_pause_resume_cancel(web_server, pa
     )
     page.click("#pause")
     server.wait_state("paused")
+    machine = server.device()
+    held = machine.segments_done
+    time.sleep(0.3)
+    assert machine.segments_done == held  # the device stands still while paused
     page.wait_for_function("!document.getElementById('resume').disabled")
     page.click("#resume")
     server.wait_state("printing", "heating")
+    end = time.monotonic() + 20
+    while machine.segments_done == held and time.monotonic() < end:
+        time.sleep(0.05)
+    assert machine.segments_done > held  # and moves on once resumed
     page.wait_for_function("!document.getElementById('pause').disabled")
     page.click("#cancel")  # its confirm() is accepted
     server.wait_state("cancelled")
