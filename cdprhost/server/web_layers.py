@@ -21,7 +21,7 @@ import numpy as np
 from cdprhost.gcode.items import MoveChunk, MoveKind
 
 SCALE = 20  # coordinates sent as integers of 1/20 mm
-MAX_MOVES = 20_000  # a layer with more extrusions is thinned (every n-th kept) for the view
+MAX_MOVES = 5_000  # a layer with more extrusions is thinned (every n-th kept): <= ~150 kB
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from tests.conftest import FIXTURE_GCODE
 from tests.web.conftest import part, unlock
 
 sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
@@ -212,7 +213,10 @@ def test_on_a_phone_nothing_scrolls_sideways(web_server, browser):
 
 
 def test_the_page_weighs_under_300_kb(web_server, page):
-    server = web_server(speedup=3.0)
+    """Everything the page loads (assets, file list, the layer view of a real sliced part)."""
+    if not FIXTURE_GCODE.is_file():
+        pytest.skip(f"{FIXTURE_GCODE} is missing (the shared reference material)")
+    server = web_server(speedup=50.0)
     sizes: dict[str, int] = {}
 
     def count(response: Any) -> None:
@@ -225,9 +229,11 @@ def test_the_page_weighs_under_300_kb(web_server, page):
 
     page.on("response", count)
     unlock(page, server)
-    assert server.upload("weigh.gcode", part(layers=6), start=True) == 201
-    page.wait_for_function("window.cdpr.layer !== null")
-    assert any(u.endswith("/static/app.js") for u in sizes)
+    assert server.upload("real.gcode", FIXTURE_GCODE.read_text(), start=True) == 201
+    page.wait_for_function("window.cdpr.layer !== null && window.cdpr.layer.xy.length > 1000")
+    page.wait_for_timeout(300)  # the response events of the page's last requests are handled
+    assert any(u.endswith("/static/app.js") for u in sizes), sizes
+    assert any("/api/web/layer" in u for u in sizes), sizes
     assert sum(sizes.values()) <= 300_000, sizes
 
 

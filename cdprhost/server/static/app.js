@@ -132,7 +132,7 @@
     $("file").textContent = doc.file || "no job";
     $("progress").textContent = doc.progress === null ? "-" : doc.progress.toFixed(1) + " %";
     $("bar").style.width = (doc.progress || 0) + "%";
-    $("layer").textContent = doc.layers ? (doc.layer + 1) + " / " + doc.layers : "-";
+    $("layer").textContent = doc.layers ? Math.max(1, doc.layer + 1) + " / " + doc.layers : "-";
     $("eta").textContent = fmtTime(doc.eta_s);
     $("elapsed").textContent = fmtTime(doc.elapsed_s);
     $("who").textContent = doc.started_by || "-";
@@ -208,11 +208,12 @@
 
   async function askLayer(doc) {
     if (!doc.file || !doc.layers) return;
-    const want = doc.file + "#" + doc.layer;
+    const n = Math.max(0, doc.layer);
+    const want = doc.file + "#" + n;
     if (layerAsked === want) return;
     layerAsked = want;
     try {
-      const layer = await api("GET", "/api/web/layer?n=" + doc.layer);
+      const layer = await api("GET", "/api/web/layer?n=" + n);
       if (layerAsked === want) { cdpr.layer = layer; drawLayer(); }
     } catch (e) {
       if (layerAsked === want) layerAsked = null;
