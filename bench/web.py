@@ -1,6 +1,8 @@
 """Web page (issue 33): status latency in the browser, the server's CPU with browsers watching.
 
     python bench/web.py [--browsers 3] [--window 20] [--speedup 1] [--shots /tmp/web-shots]
+    python bench/web.py --gcode ../shared/fixtures/part-prusaslicer.gcode --speedup 20 \
+        --window 5 --shots /tmp/web-shots      # screenshots of a real sliced part
 
 A print server on 127.0.0.1 with the embedded simulated device paced at ``--speedup`` x real
 time (1: a print at 1x), a small part printing; Debian's chromium (headless, Playwright)
@@ -72,6 +74,9 @@ def main() -> None:
     parser.add_argument("--speedup", type=float, default=1.0)
     parser.add_argument("--pauses", type=int, default=3)
     parser.add_argument("--shots", default="/tmp/web-shots")
+    parser.add_argument(
+        "--gcode", help="print this file (default: a square part without heating waits)"
+    )
     args = parser.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-web-"))
     os.environ["XDG_CONFIG_HOME"] = str(tmp / "cfg")
@@ -105,14 +110,16 @@ def main() -> None:
     tid = server.thread.native_id
     assert tid is not None
     layers = int(3 * (args.window * 2 + 30) * args.speedup) // 2 + 4  # ~2.7 s a layer at 1x
-    body, kind = multipart([("print", "true")], ("bench_part.gcode", part(layers).encode()))
+    data = Path(args.gcode).read_bytes() if args.gcode else part(layers).encode()
+    name = Path(args.gcode).name if args.gcode else "bench_part.gcode"
+    body, kind = multipart([("print", "true")], (name, data))
     pw = sync_playwright().start()
     browser = pw.chromium.launch(
         executable_path=shutil.which("chromium") or "/usr/bin/chromium", headless=True, args=ARGS
     )
     try:
         assert post(server.port, keys.key, "/api/files/local", body, kind) == 201
-        for _ in range(600):
+        for _ in range(6000):  # bounded: 300 s (a sliced file heats first)
             if printer.status().job.state.value == "printing":
                 break
             time.sleep(0.05)
