@@ -73,6 +73,13 @@ def test_without_the_key_nothing_of_the_printer_shows_and_every_action_is_refuse
     assert all(s == 401 for _, s in api), api
     assert page.evaluate(FETCH_ALL, [API_ROUTES, None]) == [401] * len(API_ROUTES)
     assert page.evaluate(FETCH_ALL, [API_ROUTES, "0" * 32]) == [403] * len(API_ROUTES)
+    upload = """async (key) => { const form = new FormData();
+      form.append("file", new File(["G28\\n"], "sneaky.gcode")); form.append("print", "true");
+      const headers = key ? {"X-Api-Key": key} : {};
+      return (await fetch("/api/files/local", {method: "POST", headers, body: form})).status; }"""
+    assert page.evaluate(upload, None) == 401
+    assert page.evaluate(upload, "0" * 32) == 403
+    assert not (server.uploads / "sneaky.gcode").exists()
     assert server.links == []  # the device was never even opened
     # a wrong key entered in the page: refused, still nothing shown
     page.fill("#key", "0" * 32)
