@@ -178,10 +178,17 @@ class Hub:
     async def _run(self) -> None:
         """From the first browser on: often while one watches, seldom otherwise (the history
         keeps the jobs that end while nobody watches)."""
+        failing = False
         try:
             while True:
-                self.sample(time.monotonic())
-                await self._find_resume_points()
+                try:
+                    self.sample(time.monotonic())
+                    await self._find_resume_points()
+                    failing = False
+                except Exception:  # a printer that fails to answer: said once, sampled again
+                    if not failing:
+                        log.exception("the web page's state could not be read")
+                    failing = True
                 await asyncio.sleep(SAMPLE_S if self.clients > 0 else IDLE_SAMPLE_S)
         finally:
             self._task = None
