@@ -146,7 +146,7 @@
     $("pause").disabled = !["heating", "printing"].includes(doc.state);
     $("resume").disabled = doc.state !== "paused";
     $("cancel").disabled = !running;
-    for (const b of document.querySelectorAll("#controls [data-jog], #home, #heaters-off")) b.disabled = doc.busy;
+    for (const b of document.querySelectorAll("#controls [data-jog], #home, #heaters-off, #files button")) b.disabled = doc.busy;
     $("camera-card").hidden = !doc.camera;
     drawGraph(doc.graph || []);
     renderHistory(doc);
@@ -262,6 +262,7 @@
       span.append(small);
       const b = document.createElement("button");
       b.type = "button"; b.textContent = "Print"; b.dataset.path = f.path;
+      b.disabled = Boolean(cdpr.doc && cdpr.doc.busy);
       b.addEventListener("click", () => act("print " + f.path, "POST", "/api/web/start", { path: f.path }));
       li.append(span, b);
       return li;
