@@ -41,6 +41,7 @@ from cdprhost.server.uploads import (
     check_filename,
     check_folder,
 )
+from cdprhost.server.web import WebFront, add_routes
 
 log = logging.getLogger(__name__)
 
@@ -155,9 +156,10 @@ def create_app(
     api_key: Callable[[], str],
     *,
     max_upload_bytes: int,
-) -> KeyGuard:
+    camera: Callable[[], tuple[bytes, str]] | None = None,
+) -> WebFront:
     """The ASGI application: the routes behind the key gate (``api_key()``: the key in force,
-    e.g. :meth:`cdprhost.server.apikey.KeyFile.current`)."""
+    e.g. :meth:`cdprhost.server.apikey.KeyFile.current`); ``camera``: the web page's snapshot."""
     uploads.ensure()
     api = Api(printer, uploads)
     app = FastAPI(docs_url=None, redoc_url=None, openapi_url=None)
@@ -277,4 +279,5 @@ def create_app(
             headers={"Location": reply["files"]["local"]["refs"]["resource"]},
         )
 
-    return KeyGuard(app, api_key, max_upload_bytes)
+    add_routes(app, api, camera)  # the web page's routes (behind the key) and, in front, its page
+    return WebFront(KeyGuard(app, api_key, max_upload_bytes))

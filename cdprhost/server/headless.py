@@ -219,6 +219,16 @@ class HeadlessPrinter:
         job = self._job
         return bool(job is not None and not job.finished and jobcontrol.emergency_stop(job))
 
+    def run_idle(self, fn: Callable[[HostLink], Any]) -> Any:
+        """Blocking: ``fn(link)`` on the device while no job runs (the web page's heaters off,
+        home, jog and idle e-stop); Refused while a job runs or when the device does not answer."""
+        with self._lock:
+            self._refuse_if_busy()
+            try:
+                return fn(self._job_link())
+            except (CdprError, LinkError, OSError) as exc:
+                raise Refused(f"{exc}; nothing done") from None
+
     def uploaded(self, path: Path) -> None:
         log.info("stored upload %s", path)
 

@@ -57,6 +57,11 @@ def add_server_arguments(p: argparse.ArgumentParser, *, default_listen: bool) ->
         metavar="MB",
         help=f"largest upload accepted, MB (default {DEFAULT_MAX_UPLOAD_MB:g}; larger: 413)",
     )
+    p.add_argument(
+        "--camera",
+        metavar="0|FILE|URL",
+        help="a camera for the web page's snapshot (a device index, a file or a URL)",
+    )
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -105,7 +110,18 @@ def start_api(args: argparse.Namespace, printer: Any) -> Any:
         raise InputError(
             f"cannot use the upload folder: {exc.strerror or exc}", source=str(uploads.root)
         ) from None
-    app = create_app(printer, uploads, keys.current, max_upload_bytes=int(args.max_upload_mb * 1e6))
+    camera = None
+    if getattr(args, "camera", None):
+        from cdprhost.server.web_camera import CameraSnapshot
+
+        camera = CameraSnapshot(args.camera)
+    app = create_app(
+        printer,
+        uploads,
+        keys.current,
+        max_upload_bytes=int(args.max_upload_mb * 1e6),
+        camera=camera,
+    )
     host, port = args.listen
     server = ServerThread(app, host, port)
     if not is_loopback(host):
