@@ -1,5 +1,6 @@
-"""`cdprhost calibrate plan | identify | camera | wizard | demo`: kinematic calibration from
-motion capture or one camera (`camera`: :mod:`cdprhost.cli.camera_calibration`; `wizard`:
+"""`cdprhost calibrate plan | identify | camera | boards | wizard | demo`: kinematic calibration from
+motion capture or one camera (`camera`: :mod:`cdprhost.cli.camera_calibration`; `boards`:
+printable boards, :mod:`cdprhost.cli.board_printing`; `wizard`:
 :mod:`cdprhost.cli.calibration_wizard`; `demo`: a session folder from the simulated
 world, to try the others)."""
 
@@ -97,9 +98,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_verification_arguments(ident)
     ident.set_defaults(func=run_identify)
 
-    from cdprhost.cli import camera_calibration
+    from cdprhost.cli import board_printing, camera_calibration
 
     camera_calibration.register(cal_sub)
+    board_printing.register(cal_sub)
 
     wiz = cal_sub.add_parser(
         "wizard", help="guided calibration: move to planned poses, record takes, identify"
