@@ -23,6 +23,7 @@ import numpy as np
 from cdprhost.calibration.camera.boards import CharucoBoard
 
 MM_PER_INCH = 25.4
+CAMERA_FILE = "camera.toml"
 EDGE_MM = 10.0  # kept free at every paper edge: many printers cannot print the outer 5 mm
 QUIET_MM = 6.0  # white between the board and anything else printed
 TITLE_MM = 12.0  # two lines of text above the board
@@ -206,9 +207,14 @@ def config_block(tables: dict[str, dict[str, Any]]) -> str:
         "offset_sigma_mm": "how well that offset is known (mm per coordinate)",
     }
     lines = [
-        "# The boards printed by `cdprhost calibrate boards`: paste into session.toml's",
-        "# [camera] section (docs/camera-session.md). Sizes are as printed; measure a",
-        "# printed square with calipers and correct square_mm if the printer scaled it.",
+        "# The boards printed by `cdprhost calibrate boards`: the [camera] section of a",
+        "# session.toml (docs/camera-session.md), also usable as the wizard's --camera-config.",
+        "# Sizes are as printed; measure a printed square with calipers and correct",
+        "# square_mm and marker_mm if the printer scaled the page.",
+        "",
+        "[camera]",
+        f"{'intrinsics = ' + _toml_value(CAMERA_FILE):<40}# from `cdprhost calibrate camera`, or:",
+        f"{'# calibration_views = ' + _toml_value('intrinsics'):<40}# a folder of pictures",
     ]
     for name, table in tables.items():
         lines += ["", f"[camera.{name}]"]
