@@ -18,6 +18,7 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cdprhost.cli.options import output_folder
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import atomic_open, write_text_atomic
 
@@ -66,6 +67,7 @@ def register(cal_sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     )
     boards.add_argument(
         "--out",
+        type=output_folder,
         metavar="DIR",
         help="folder to write the sheets and boards.toml to (made if missing)",
     )
@@ -169,7 +171,7 @@ def run_boards(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise InputError("--out DIR is needed (the folder to write the sheets to)")
-    from cdprhost.calibration.camera.printable import PAPERS, DoesNotFit, config_block, sheet_layout
+    from cdprhost.calibration.camera.printable import PAPERS, config_block, sheet_layout
 
     boards = load_boards(args.config, args.which)
     paper = PAPERS[args.paper]
@@ -177,7 +179,7 @@ def run_boards(args: argparse.Namespace) -> int:
     for item in boards:
         try:
             layouts.append(sheet_layout(item.board, paper))
-        except DoesNotFit as exc:
+        except ValueError as exc:  # DoesNotFit, or squares too small
             raise InputError(f"the {item.name} board: {exc}") from None
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -30,6 +30,7 @@ TITLE_MM = 12.0  # two lines of text above the board
 SCALE_MM = 16.0  # the scale bar and its label below the board
 SCALE_BAR_HEIGHT_MM = 3.0
 MIN_SCALE_BAR_MM = 50.0
+MIN_SQUARE_MM = 4.0  # smaller markers blur into the paper on office printers
 MAX_SCALE_BAR_MM = 150.0
 DEFAULT_TEXEL_DPI = 600.0  # the board image's resolution in a PDF (the viewer scales it)
 
@@ -107,6 +108,11 @@ def needed_area_mm(board: CharucoBoard) -> tuple[float, float]:
 def sheet_layout(board: CharucoBoard, paper: Paper) -> SheetLayout:
     """The board centred on ``paper`` (portrait when it fits, else landscape), the title
     above it and a scale bar below; :class:`DoesNotFit` when neither way fits."""
+    if board.square_mm < MIN_SQUARE_MM:
+        raise ValueError(
+            f"squares of {board.square_mm:g} mm are too small to print and detect reliably "
+            f"(at least {MIN_SQUARE_MM:g} mm)"
+        )
     need_w, need_h = needed_area_mm(board)
     for landscape in (False, True):
         page_w, page_h = (
