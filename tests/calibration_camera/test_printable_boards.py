@@ -78,17 +78,27 @@ def test_pdf_raster_has_every_corner_at_the_stated_size(sheets, name):
 def test_pdf_page_and_scale_bar_are_their_stated_size(sheets, name):
     paper, out = sheets
     layout = sheet_layout(_boards()[name], PAPERS[paper])
-    image = _raster(out / f"{name}-board-{paper}.pdf", DPI)
-    ppmm = DPI / MM_PER_INCH
+    dpi = 600  # PDFium fills thin shapes without antialiasing, to whole pixels: finer pixels
+    image = _raster(out / f"{name}-board-{paper}.pdf", dpi)
+    ppmm = dpi / MM_PER_INCH
     page_w, page_h = layout.page_mm
     assert abs(image.shape[1] - page_w * ppmm) <= 1 and abs(image.shape[0] - page_h * ppmm) <= 1
     bar = layout.scale_bar
     row = int(round((page_h - bar.y - bar.height / 2) * ppmm))
-    dark = np.flatnonzero(image[row] < 128)
-    length_mm = (dark[-1] - dark[0] + 1) / ppmm
-    assert abs(length_mm / layout.scale_bar_mm - 1) < 1e-3
+    left, right = _dark_extent_px(image[row].astype(float))
+    assert abs((right - left) / ppmm / layout.scale_bar_mm - 1) < 1e-3
     # nothing else on that row: the bar is where the layout says
-    assert dark[0] / ppmm == pytest.approx(bar.x, abs=0.2)
+    assert left / ppmm == pytest.approx(bar.x, abs=0.2)
+
+
+def _dark_extent_px(row: np.ndarray) -> tuple[float, float]:
+    """Where a row's ink begins and ends, to a fraction of a pixel: the half-grey crossing
+    interpolated between the pixel centres on either side of the outermost dark pixels."""
+    dark = np.flatnonzero(row < 128)
+    i0, i1 = int(dark[0]), int(dark[-1])
+    left = i0 - 0.5 + (row[i0 - 1] - 128) / (row[i0 - 1] - row[i0])
+    right = i1 + 0.5 + (row[i1] - 128) / (row[i1] - row[i1 + 1])
+    return left, right
 
 
 def test_png_is_at_the_stated_dpi_with_every_corner(tmp_path):
