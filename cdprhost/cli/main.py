@@ -9,6 +9,7 @@ the TUI). ``tests/cli/test_startup.py`` keeps the table and the modules in step.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 from types import ModuleType
@@ -82,11 +83,16 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from cdprhost.cli.options import check_outputs, output_paths
     from cdprhost.errors import CdprError
+    from cdprhost.fileio.atomic import data_to_stdout, is_stdout
     from cdprhost.logs import configure_logging
 
     configure_logging(args.verbose)
     try:
         check_outputs(args)  # a folder or an unwritable place: said before any work
+        if any(is_stdout(p) for p in output_paths(args)):
+            # the data goes to stdout alone (`--json - | jq`); what the command says, to stderr
+            with data_to_stdout(sys.stdout), contextlib.redirect_stdout(sys.stderr):
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except CdprError as exc:
         print(f"cdprhost {args.command}: error: {exc}", file=sys.stderr)

@@ -88,12 +88,26 @@ def is_special(path: str | os.PathLike[str]) -> bool:
     return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
+_stdout_stream: list[IO[str]] = []  # set by data_to_stdout: where "-" goes meanwhile
+
+
+@contextlib.contextmanager
+def data_to_stdout(stream: IO[str]) -> Iterator[None]:
+    """Within: outputs naming stdout go to ``stream`` even when ``sys.stdout`` is
+    redirected (a command whose data goes to stdout sends its messages to stderr)."""
+    _stdout_stream.append(stream)
+    try:
+        yield
+    finally:
+        _stdout_stream.pop()
+
+
 @contextlib.contextmanager
 def _in_place(path: str | os.PathLike[str], mode: str) -> Iterator[IO[Any]]:
     binary = "b" in mode
     if is_stdout(path):
-        stream: Any = sys.stdout
-        sys.stdout.flush()
+        stream: Any = _stdout_stream[-1] if _stdout_stream else sys.stdout
+        stream.flush()
         out = stream.buffer if binary and hasattr(stream, "buffer") else stream
         yield out
         out.flush()

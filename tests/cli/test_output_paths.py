@@ -6,6 +6,7 @@ are bounded; ``fk`` refuses slider positions outside their travel."""
 
 from __future__ import annotations
 
+import json
 import os
 import stat
 import subprocess
@@ -164,3 +165,12 @@ def test_sizes_a_user_types_are_bounded(argv, tmp_path, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert any(word in err for word in ("outside", "at most", "must be"))
+
+
+def test_json_to_stdout_is_the_only_thing_on_stdout(capsys):
+    example = Path(__file__).resolve().parents[2] / "examples" / "example.gcode"
+    assert main(["check", str(example), "--profile", "paper-prototype", "--json", "-"]) == 0
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # nothing but the report: `--json - | jq` works
+    assert report["ok"] is True
+    assert captured.err.strip()  # the human report went to stderr
