@@ -6,8 +6,8 @@
 - ``-``, or any path that is the process's standard output (``/dev/stdout``,
   ``/proc/self/fd/1``), is written to ``sys.stdout``, never replaced.
 - Any other file that is not a regular file (a FIFO, a terminal, ``/dev/null``), and any
-  path under ``/dev`` or ``/proc`` (``/dev/stderr`` redirected to a file is appended to,
-  as the shell opened it), is written in place.
+  name of an open file (``/dev/stderr``, ``/dev/fd/N``, ``/proc/...``: one redirected to a
+  regular file is appended to, as the shell opened it), is written in place.
 
 New files get the permissions the user's umask gives (``0666 & ~umask``), as ``open``
 would, not the private 0600 of a temporary file.
@@ -28,7 +28,8 @@ from typing import IO, Any
 
 STALE_S = 600.0  # a temporary file this old was left by a writer that was killed
 STDOUT = "-"
-_DEVICE_TREES = ("/dev/", "/proc/")
+# names of a process's open files: whatever they lead to was opened by someone else
+_OPEN_FILE_NAMES = ("/proc/", "/dev/fd/", "/dev/stdout", "/dev/stderr", "/dev/stdin")
 _umask_lock = threading.Lock()
 
 
@@ -75,11 +76,11 @@ def is_stdout(path: str | os.PathLike[str]) -> bool:
 
 def is_special(path: str | os.PathLike[str]) -> bool:
     """Written in place, never replaced: stdout, an existing file that is neither a
-    regular file nor a folder (FIFO, device, socket), or anything under /dev or /proc."""
+    regular file nor a folder (FIFO, device, socket), or a name of an open file
+    (``/dev/stderr``, ``/dev/fd/N``, anything under ``/proc``)."""
     if is_stdout(path):
         return True
-    text = os.path.abspath(os.fspath(path))
-    if text.startswith(_DEVICE_TREES):
+    if os.path.abspath(os.fspath(path)).startswith(_OPEN_FILE_NAMES):
         return True
     try:
         mode = os.stat(path).st_mode
@@ -115,7 +116,7 @@ def _in_place(path: str | os.PathLike[str], mode: str) -> Iterator[IO[Any]]:
     regular = False
     with contextlib.suppress(OSError):
         regular = stat.S_ISREG(os.stat(path).st_mode)
-    # a regular file behind /dev or /proc is one the shell opened (2>> log): append to it
+    # a regular file behind /dev/stderr or /proc/... is one the shell opened: append to it
     open_mode = ("a" if regular else "w") + ("b" if binary else "")
     text_options: dict[str, Any] = {} if binary else {"encoding": "utf-8", "newline": ""}
     with open(path, open_mode, **text_options) as fh:

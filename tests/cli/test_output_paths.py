@@ -174,3 +174,12 @@ def test_json_to_stdout_is_the_only_thing_on_stdout(capsys):
     report = json.loads(captured.out)  # nothing but the report: `--json - | jq` works
     assert report["ok"] is True
     assert captured.err.strip()  # the human report went to stderr
+
+
+def test_a_regular_file_under_dev_is_still_replaced_whole(tmp_path):
+    """Only names of open files (/dev/stderr, /dev/fd/N, /proc/...) are written in place."""
+    from cdprhost.fileio.atomic import is_special
+
+    assert is_special("/dev/stderr") and is_special("/dev/fd/2") and is_special("/dev/null")
+    assert not is_special("/dev/shm/cdprhost-report.json")
+    assert not is_special(tmp_path / "report.json")
