@@ -232,6 +232,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer rates and shorter streams")
     args = ap.parse_args()
+    missing = avr_device.toolchain_missing()
+    if missing:  # one line saying what to install, not a traceback
+        raise SystemExit(f"bench/firmware.py: {missing}")
     avr_device.build()
     fig: dict[str, Any] = {
         "command": "python bench/firmware.py" + (" --quick" if args.quick else "")

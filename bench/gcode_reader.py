@@ -21,8 +21,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_inputs import gcode_fixture
+
 REPO = Path(__file__).resolve().parents[1]
-FIXTURE = REPO.parent / "shared" / "fixtures" / "part-prusaslicer.gcode"
 
 
 def timed(fn, repeats: int) -> tuple[float, float]:
@@ -82,12 +83,13 @@ def available(module: str) -> bool:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--file", default=str(FIXTURE))
+    ap.add_argument("--file", help="G-code to read (default: the team's fixture, else the example)")
     ap.add_argument(
         "--times", type=int, default=10, help="concatenation factor of the long file (default 10)"
     )
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
+    args.file = str(gcode_fixture(Path(args.file) if args.file else None))
     text = Path(args.file).read_text(encoding="utf-8")
     n_lines = text.count("\n")
     with tempfile.TemporaryDirectory() as tmp:

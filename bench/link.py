@@ -37,15 +37,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from bench_inputs import gcode_fixture
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-FIXTURE = (
-    Path(os.environ.get("CDPRHOST_SHARED", REPO.parent / "shared"))
-    / "fixtures"
-    / ("part-prusaslicer.gcode")
-)
 PROFILE = "paper-prototype"
 CLEAN_LADDER = (100, 200, 350, 500, 700, 1000, 1400, 2000)
 LOSSY_LADDER = (5, 20, 50, 100, 200, 350, 500)
@@ -361,9 +357,10 @@ def main() -> None:
     )
     summary: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
-        six = first_layers(FIXTURE, Path(tmp), 6)
-        one = first_layers(FIXTURE, Path(tmp), 1)
-        whole = six if args.quick else FIXTURE
+        fixture = gcode_fixture()
+        six = first_layers(fixture, Path(tmp), 6)
+        one = first_layers(fixture, Path(tmp), 1)
+        whole = six if args.quick else fixture
         what = "first 6 layers" if args.quick else "whole fixture"
         refs: dict[Path, list[dict]] = {}
 

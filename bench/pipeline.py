@@ -27,8 +27,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_inputs import gcode_fixture
+
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_FIXTURE = REPO.parent / "shared" / "fixtures" / "part-prusaslicer.gcode"
 
 
 def count_lines(path: Path) -> int:
@@ -217,7 +218,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--fixture", type=Path, default=DEFAULT_FIXTURE)
+    ap.add_argument(
+        "--fixture", type=Path, help="default: the team's fixture, else examples/example.gcode"
+    )
     ap.add_argument("--repeat", type=int, default=10, help="copies of the fixture in the big file")
     ap.add_argument("--profile", default="paper-simulation")
     ap.add_argument("--pygcode-lines", type=int, default=150_000)
@@ -231,9 +234,18 @@ def main() -> None:
         child(args.child[0], args.child[1], args.profile)
         return
 
+    import importlib.util
+
     from cdprhost.kinematics import MachineModel
     from cdprhost.profile import load_profile
 
+    missing = [m for m in ("gcodeparser", "pygcode") if importlib.util.find_spec(m) is None]
+    if missing:  # they are the baselines every figure is a ratio to
+        raise SystemExit(
+            f"bench/pipeline.py needs its baselines {' and '.join(missing)}: "
+            "pip install -e '.[bench]'"
+        )
+    args.fixture = gcode_fixture(args.fixture)
     profile = load_profile(args.profile)
     model = MachineModel.from_profile(profile)
     with tempfile.TemporaryDirectory() as tmp:

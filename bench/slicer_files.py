@@ -25,8 +25,9 @@ import sys
 import tempfile
 from pathlib import Path
 
+from bench_inputs import gcode_fixture
+
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_FIXTURE = REPO.parent / "shared" / "fixtures" / "part-prusaslicer.gcode"
 CORPUS = REPO / "tests" / "gcode" / "data" / "thirdparty"
 
 _CHILD = r"""
@@ -97,9 +98,12 @@ def absurd_files(folder: Path) -> list[Path]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--fixture", type=Path, default=DEFAULT_FIXTURE)
+    ap.add_argument(
+        "--fixture", type=Path, help="default: the team's fixture, else examples/example.gcode"
+    )
     ap.add_argument("--profile", default="paper-prototype")
     args = ap.parse_args()
+    args.fixture = gcode_fixture(args.fixture)
     base = run(args.fixture, args.profile)
     base_per_k = base["seconds"] / lines_of(args.fixture) * 1000
     print(

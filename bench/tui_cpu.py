@@ -30,8 +30,9 @@ import threading
 import time
 from pathlib import Path
 
+from bench_inputs import gcode_fixture
+
 ROOT = Path(__file__).resolve().parents[1]
-FIXTURE = ROOT.parent / "shared" / "fixtures" / "part-prusaslicer.gcode"
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -87,7 +88,9 @@ class Terminal:
         needle = text.encode()
         while needle not in self.output:
             if time.monotonic() > deadline:
-                raise TimeoutError(f"the screen never showed {text!r}")
+                raise SystemExit(f"the screen never showed {text!r} in {timeout:g} s")
+            if os.waitpid(self.pid, os.WNOHANG)[0]:
+                raise SystemExit(f"the TUI ended before showing {text!r}")
             time.sleep(0.2)
 
     def keys(self, *keys: str) -> None:
@@ -129,7 +132,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--size", default="200x60")
-    ap.add_argument("--file", type=Path, default=FIXTURE)
+    ap.add_argument(
+        "--file", type=Path, help="default: the team's fixture, else examples/example.gcode"
+    )
     ap.add_argument(
         "--warmup",
         type=float,
@@ -137,6 +142,7 @@ def main() -> None:
         help="seconds after the start before measuring (the fixture heats first: at 1x about a minute)",
     )
     args = ap.parse_args()
+    args.file = gcode_fixture(args.file)
     cols, rows = (int(v) for v in args.size.split("x"))
     cdprhost = [sys.executable, "-m", "cdprhost"]
 

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cdprhost.cli.numbers import bounded_int
+from cdprhost.cli.options import output_file, output_folder
 from cdprhost.errors import InputError, JobFailed
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -48,18 +50,26 @@ def register(cal_sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     cam.add_argument(
         "--views",
         dest="n_views",
-        type=int,
+        type=bounded_int(3, 500),
         default=20,
         metavar="N",
         help="live: views to take (default 20)",
     )
-    cam.add_argument("--save-views", metavar="DIR", help="live: also store the views taken")
     cam.add_argument(
-        "--sim-camera", default="1920x1080", metavar="WxH", help="--camera sim: picture size"
+        "--save-views", type=output_folder, metavar="DIR", help="live: also store the views taken"
+    )
+    cam.add_argument(
+        "--sim-camera",
+        type=sim_camera_size,
+        default="1920x1080",
+        metavar="WxH",
+        help="--camera sim: picture size (320x240 to 3840x2160; default 1920x1080)",
     )
     cam.add_argument("--board", metavar="SPEC", help=BOARD_HELP)
-    cam.add_argument("--out", required=True, metavar="camera.toml", help="intrinsics to write")
-    cam.add_argument("--json", metavar="R", help="machine-readable report")
+    cam.add_argument(
+        "--out", type=output_file, required=True, metavar="camera.toml", help="intrinsics to write"
+    )
+    cam.add_argument("--json", type=output_file, metavar="R", help="machine-readable report")
     cam.add_argument(
         "--force",
         action="store_true",
@@ -273,13 +283,19 @@ def add_wizard_arguments(wiz: argparse.ArgumentParser) -> None:
         help="the camera's intrinsics (from `cdprhost calibrate camera`)",
     )
     wiz.add_argument(
-        "--frames", type=int, default=5, metavar="N", help="pictures per take (default 5)"
+        "--frames",
+        type=bounded_int(1, 1000),
+        default=5,
+        metavar="N",
+        help="pictures per take (1-1000; default 5)",
     )
     wiz.add_argument(
         "--sim-camera",
+        type=sim_camera_size,
         default="1920x1080",
         metavar="WxH",
-        help="simulated camera: picture size (default 1920x1080; smaller sizes get bigger boards)",
+        help="simulated camera: picture size (320x240 to 3840x2160; default 1920x1080; smaller "
+        "sizes get bigger boards)",
     )
 
 
@@ -322,12 +338,38 @@ class CameraWizard:
         return keep
 
 
+SIM_CAMERA_MIN = (320, 240)
+SIM_CAMERA_MAX = (3840, 2160)  # 4K UHD: rendering costs memory and time by the pixel
+
+
+def sim_camera_problem(size_text: str) -> str | None:
+    """Why ``--sim-camera`` cannot be used, or None."""
+    m = re.fullmatch(r"\s*(\d{1,6})\s*[xX]\s*(\d{1,6})\s*", size_text)
+    (w0, h0), (w1, h1) = SIM_CAMERA_MIN, SIM_CAMERA_MAX
+    if not m:
+        return f"expected WxH (e.g. 1920x1080), got {size_text!r}"
+    w, h = int(m[1]), int(m[2])
+    if not (w0 <= w <= w1 and h0 <= h <= h1):
+        return f"{w}x{h} is outside {w0}x{h0} to {w1}x{h1} (a simulated picture that size)"
+    return None
+
+
+def sim_camera_size(text: str) -> str:
+    """An argparse ``type`` for ``--sim-camera WxH`` (bounded before anything is drawn)."""
+    problem = sim_camera_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
+    return text
+
+
 def sim_rig(size_text: str) -> Any:
     from cdprhost.sim.camera.scene import rig_for_size
 
+    problem = sim_camera_problem(size_text)
+    if problem:
+        raise InputError(f"--sim-camera: {problem}")
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", size_text)
-    if not m or int(m[1]) < 320 or int(m[2]) < 240:
-        raise InputError(f"--sim-camera: expected WxH of at least 320x240, got {size_text!r}")
+    assert m is not None
     return rig_for_size((int(m[1]), int(m[2])))
 
 

@@ -9,6 +9,7 @@ the TUI). ``tests/cli/test_startup.py`` keeps the table and the modules in step.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 from types import ModuleType
@@ -80,21 +81,55 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return 2
+    from cdprhost.cli.options import check_outputs, output_paths
     from cdprhost.errors import CdprError
+    from cdprhost.fileio.atomic import data_to_stdout, is_stdout
     from cdprhost.logs import configure_logging
 
     configure_logging(args.verbose)
     try:
+        check_outputs(args)  # a folder or an unwritable place: said before any work
+        if any(is_stdout(p) for p in output_paths(args)):
+            # the data goes to stdout alone (`--json - | jq`); what the command says, to stderr
+            with data_to_stdout(sys.stdout), contextlib.redirect_stdout(sys.stderr):
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except CdprError as exc:
         print(f"cdprhost {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print(f"cdprhost {args.command}: interrupted", file=sys.stderr)
-        return 130
     except BrokenPipeError:  # e.g. `cdprhost profile show P | head`: the reader left, not an error
         sys.stderr.close()
         return 0
+    except OSError as exc:
+        where = _output_named(exc, output_paths(args))
+        if where is None:
+            raise
+        print(
+            f"cdprhost {args.command}: error: {where}: cannot write: {exc.strerror}",
+            file=sys.stderr,
+        )
+        return 2
+    except KeyboardInterrupt:
+        print(f"cdprhost {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _output_named(exc: OSError, outputs: list[str]) -> str | None:
+    """The output path an OSError is about (the file, its folder or its temporary file
+    beside it), or None when it is about something else (a device, an input)."""
+    import os
+
+    names = [os.fspath(n) for n in (exc.filename, exc.filename2) if n is not None]
+    for out in outputs:
+        real = os.path.realpath(out)
+        folder, base = os.path.split(real)
+        for name in names:
+            path = os.path.realpath(name)
+            if path in (real, folder) or path.startswith(real + os.sep):
+                return out
+            if os.path.dirname(path) == folder and os.path.basename(path).startswith(f".{base}."):
+                return out
+    return None
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -142,3 +142,42 @@ def existing_gcode(text: str) -> Any:
         reason = "is a folder, not a G-code file" if path.is_dir() else "G-code file not found"
         raise InputError(reason, source=str(path))
     return path
+
+
+class OutputPath(str):
+    """A path a command writes to (an argparse ``type``: :func:`output_file`,
+    :func:`output_folder`). Still a ``str``; ``cdprhost.cli.main`` checks every one before
+    the command runs, so a folder or an unwritable place is one line and exit 2 before
+    any work is done or reported. ``-`` is standard output (files only)."""
+
+    folder = False
+
+
+class OutputFolder(OutputPath):
+    folder = True
+
+
+def output_file(text: str) -> OutputPath:
+    return OutputPath(text)
+
+
+def output_folder(text: str) -> OutputPath:
+    return OutputFolder(text)
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """InputError (one line) naming the first output option that cannot be written."""
+    from cdprhost.errors import InputError
+    from cdprhost.fileio.atomic import output_problem
+
+    for dest, value in vars(args).items():
+        if isinstance(value, OutputPath):
+            problem = output_problem(value, folder=value.folder)
+            if problem:
+                flag = "--" + dest.replace("_", "-")
+                raise InputError(f"{flag} {value}: {problem}")
+
+
+def output_paths(args: argparse.Namespace) -> list[str]:
+    """Every output path of ``args`` (to recognise an OSError writing one)."""
+    return [str(v) for v in vars(args).values() if isinstance(v, OutputPath)]

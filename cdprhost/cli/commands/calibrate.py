@@ -1,5 +1,6 @@
-"""`cdprhost calibrate plan | identify | camera | wizard | demo`: kinematic calibration from
-motion capture or one camera (`camera`: :mod:`cdprhost.cli.camera_calibration`; `wizard`:
+"""`cdprhost calibrate plan | identify | camera | boards | wizard | demo`: kinematic calibration from
+motion capture or one camera (`camera`: :mod:`cdprhost.cli.camera_calibration`; `boards`:
+printable boards, :mod:`cdprhost.cli.board_printing`; `wizard`:
 :mod:`cdprhost.cli.calibration_wizard`; `demo`: a session folder from the simulated
 world, to try the others)."""
 
@@ -15,8 +16,8 @@ from cdprhost.calibration.identification import calibrated_profile, identify_ses
 from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.cli.calibration_wizard import refuse_unless_written, run_wizard
 from cdprhost.cli.json_report import write_json
-from cdprhost.cli.numbers import bounded_float
-from cdprhost.cli.options import add_device_arguments
+from cdprhost.cli.numbers import bounded_float, bounded_int
+from cdprhost.cli.options import add_device_arguments, output_file, output_folder
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
@@ -56,14 +57,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=8,
         help="random restarts of the exchange (default 8)",
     )
-    plan.add_argument("--seed", type=int, default=0)
+    plan.add_argument("--seed", type=bounded_int(0, 2**32 - 1), default=0)
     plan.add_argument(
         "--out",
+        type=output_file,
         required=True,
         metavar="poses.csv",
         help="poses in visiting order with role and approach",
     )
-    plan.add_argument("--json", metavar="R", help="machine-readable report")
+    plan.add_argument("--json", type=output_file, metavar="R", help="machine-readable report")
     plan.set_defaults(func=run_plan)
 
     ident = cal_sub.add_parser("identify", help="identify the 12 parameters from a session folder")
@@ -71,8 +73,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "session", metavar="SESSION", help="session folder (session.toml, poses.csv, takes/)"
     )
     add_profile_argument(ident)
-    ident.add_argument("--out", required=True, metavar="calibrated.toml", help="calibrated profile")
-    ident.add_argument("--json", metavar="R", help="machine-readable report")
+    ident.add_argument(
+        "--out",
+        type=output_file,
+        required=True,
+        metavar="calibrated.toml",
+        help="calibrated profile",
+    )
+    ident.add_argument("--json", type=output_file, metavar="R", help="machine-readable report")
     ident.add_argument(
         "--noise-floor",
         type=bounded_float(0.0, 10.0),
@@ -97,9 +105,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     _add_verification_arguments(ident)
     ident.set_defaults(func=run_identify)
 
-    from cdprhost.cli import camera_calibration
+    from cdprhost.cli import board_printing, camera_calibration
 
     camera_calibration.register(cal_sub)
+    board_printing.register(cal_sub)
 
     wiz = cal_sub.add_parser(
         "wizard", help="guided calibration: move to planned poses, record takes, identify"
@@ -155,21 +164,27 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="embedded device: folder of its virtual motion capture",
     )
     wiz.add_argument(
-        "--speedup", type=float, help="embedded device: pace virtual time at X times real time"
+        "--speedup",
+        type=bounded_float(0.0, 1e6),
+        help="embedded device: pace virtual time at X times real time",
     )
     wiz.add_argument(
         "--feed",
-        type=float,
+        type=bounded_float(0.0, 1000.0),
         default=40.0,
         metavar="MM_S",
         help="travel speed between poses (default 40)",
     )
     wiz.add_argument(
-        "--settle", type=float, default=0.5, metavar="S", help="rest before a take (default 0.5 s)"
+        "--settle",
+        type=bounded_float(0.0, 600.0, lo_open=False),
+        default=0.5,
+        metavar="S",
+        help="rest before a take (default 0.5 s)",
     )
     wiz.add_argument(
         "--take-timeout",
-        type=float,
+        type=bounded_float(0.0, 86400.0),
         default=600.0,
         metavar="S",
         help="wait for a take at most S seconds",
@@ -182,9 +197,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="mocap noise per coordinate that averaging cannot remove (default: none)",
     )
     wiz.add_argument(
-        "--out", metavar="calibrated.toml", help="also write the calibrated profile here"
+        "--out",
+        type=output_file,
+        metavar="calibrated.toml",
+        help="also write the calibrated profile here",
     )
-    wiz.add_argument("--json", metavar="R", help="machine-readable report")
+    wiz.add_argument("--json", type=output_file, metavar="R", help="machine-readable report")
     wiz.set_defaults(func=run_wizard)
 
     demo = cal_sub.add_parser(
@@ -193,7 +211,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "diagnose and the wizard without a machine",
     )
     add_profile_argument(demo)
-    demo.add_argument("--out", required=True, metavar="DIR", help="the session folder to write")
+    demo.add_argument(
+        "--out",
+        type=output_folder,
+        required=True,
+        metavar="DIR",
+        help="the session folder to write",
+    )
     demo.add_argument(
         "--effect",
         default="cable_elasticity",
@@ -206,7 +230,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     demo.add_argument(
         "--check-poses", type=_non_negative, default=3, metavar="M", help="check poses (default 3)"
     )
-    demo.add_argument("--seed", type=int, default=1)
+    demo.add_argument("--seed", type=bounded_int(0, 2**32 - 1), default=1)
     demo.set_defaults(func=run_demo)
 
 
@@ -227,11 +251,23 @@ def _add_verification_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+MAX_POSES = 1000  # planning and identification cost grows with the poses: a typo stops here
+
+
 def _at_least_4(text: str) -> int:
-    n = int(text)
+    n = _whole(text)
     if n < 4:
         raise argparse.ArgumentTypeError("at least 4 poses are needed to identify 12 parameters")
+    if n > MAX_POSES:
+        raise argparse.ArgumentTypeError(f"{n} poses: at most {MAX_POSES}")
     return n
+
+
+def _whole(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
 
 
 def _positive_mm(text: str) -> float:
@@ -245,9 +281,11 @@ def _positive_mm(text: str) -> float:
 
 
 def _non_negative(text: str) -> int:
-    n = int(text)
+    n = _whole(text)
     if n < 0:
         raise argparse.ArgumentTypeError("must be >= 0")
+    if n > MAX_POSES:
+        raise argparse.ArgumentTypeError(f"{n}: at most {MAX_POSES}")
     return n
 
 

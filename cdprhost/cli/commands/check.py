@@ -10,6 +10,7 @@ from cdprhost.cli.options import (
     add_placement_arguments,
     existing_gcode,
     non_negative_int,
+    output_file,
     setup_from_args,
 )
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
@@ -22,7 +23,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("gcode", metavar="FILE.gcode", help="sliced G-code file")
     add_profile_argument(p)
-    p.add_argument("--json", metavar="R", help="write the report as JSON to R")
+    p.add_argument("--json", type=output_file, metavar="R", help="write the report as JSON to R")
     p.add_argument(
         "--max-rows",
         type=non_negative_int,

@@ -7,6 +7,8 @@ import json
 import sys
 from dataclasses import replace
 
+from cdprhost.cli.numbers import bounded_int
+from cdprhost.cli.options import output_file
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.diagnosis.augment import augmented_profile
 from cdprhost.diagnosis.report import to_json, to_text
@@ -32,18 +34,24 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="calibration session folder (session.toml, poses.csv, takes/)",
     )
     add_profile_argument(p)
-    p.add_argument("--json", metavar="R", help="write the machine-readable report here")
+    p.add_argument(
+        "--json", type=output_file, metavar="R", help="write the machine-readable report here"
+    )
     p.add_argument(
         "--out",
+        type=output_file,
         metavar="augmented.toml",
         help="write the profile with the final model (geometry + effects)",
     )
     p.add_argument(
-        "--plot", metavar="gap.png", help="write the per-pose held-out error figure (PNG)"
+        "--plot",
+        type=output_file,
+        metavar="gap.png",
+        help="write the per-pose held-out error figure (PNG)",
     )
     p.add_argument(
         "--folds",
-        type=int,
+        type=bounded_int(2, 100),
         default=DiagnosisSettings.folds,
         metavar="K",
         help="grouped K-fold by pose for held-out errors (default %(default)s)",

@@ -6,6 +6,7 @@ import argparse
 
 import numpy as np
 
+from cdprhost.cli.options import output_file
 from cdprhost.cli.profile_arg import add_profile_argument, load_model
 from cdprhost.errors import InputError
 from cdprhost.fileio.csv_arrays import data_row_numbers, read_columns, write_columns
@@ -24,7 +25,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="header x,y,z (base frame, mm), a path in order",
     )
     ik.add_argument(
-        "--out", required=True, metavar="targets.csv", help="header x,y,z,s1,s2,s3,n1,n2,n3"
+        "--out",
+        type=output_file,
+        required=True,
+        metavar="targets.csv",
+        help="header x,y,z,s1,s2,s3,n1,n2,n3",
     )
     ik.set_defaults(func=run_ik)
     fk = sub.add_parser(
@@ -34,7 +39,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     fk.add_argument(
         "--in", dest="inp", required=True, metavar="targets.csv", help="header s1,s2,s3 (mm)"
     )
-    fk.add_argument("--out", required=True, metavar="points.csv", help="header s1,s2,s3,x,y,z")
+    fk.add_argument(
+        "--out", type=output_file, required=True, metavar="points.csv", help="header s1,s2,s3,x,y,z"
+    )
     fk.set_defaults(func=run_fk)
 
 
@@ -71,6 +78,7 @@ def run_ik(args: argparse.Namespace) -> int:
 def run_fk(args: argparse.Namespace) -> int:
     _, model = load_model(args.profile)
     sliders = read_columns(args.inp, ("s1", "s2", "s3"))
+    _refuse_outside_travel(args.inp, sliders, np.asarray(model.limits.travel, dtype=float))
     points = model.fk(sliders)
     bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
     if bad.size:
@@ -88,3 +96,29 @@ def run_fk(args: argparse.Namespace) -> int:
         args.out, ("s1", "s2", "s3", "x", "y", "z"), [*sliders.T, *points.T], ["%.10f"] * 6
     )
     return 0
+
+
+def _refuse_outside_travel(source: str, sliders: np.ndarray, travel: np.ndarray) -> None:
+    """InputError naming every row (up to 20) whose slider lies outside its travel, as
+    ``ik`` names the points outside the workspace; nothing is written."""
+    lo, hi = travel[:, 0], travel[:, 1]
+    outside = (sliders < lo) | (sliders > hi)
+    bad = np.flatnonzero(outside.any(axis=1))
+    if not bad.size:
+        return
+    rows = data_row_numbers(source)
+    lines = []
+    for i in bad[:20]:
+        k = int(np.flatnonzero(outside[i])[0])
+        by = lo[k] - sliders[i, k] if sliders[i, k] < lo[k] else sliders[i, k] - hi[k]
+        lines.append(
+            f"row {rows[i]}: s{k + 1} = {sliders[i, k]:g} mm is outside its travel "
+            f"[{lo[k]:g}, {hi[k]:g}] mm by {by:.4g} mm"
+        )
+    if bad.size > 20:
+        lines.append(f"... and {bad.size - 20} more")
+    raise InputError(
+        f"{bad.size} row(s) outside the sliders' travel; nothing written",
+        source=source,
+        problems=lines,
+    )

@@ -26,6 +26,7 @@ from cdprhost.cli.options import (
     add_device_arguments,
     add_placement_arguments,
     existing_gcode,
+    output_file,
     setup_from_args,
 )
 from cdprhost.cli.profile_arg import add_profile_argument
@@ -52,7 +53,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         default=None,
         help="embedded device: run at most X times real time (default: as fast as the host can)",
     )
-    p.add_argument("--json", metavar="R", help="write the job summary as JSON to R")
+    p.add_argument(
+        "--json", type=output_file, metavar="R", help="write the job summary as JSON to R"
+    )
     p.add_argument(
         "--resume",
         action="store_true",

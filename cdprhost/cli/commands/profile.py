@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 
+from cdprhost.cli.options import output_file
 from cdprhost.profile import load_profile, profile_to_toml
 from cdprhost.profile.loader import resolve_profile_path
 
@@ -30,7 +31,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     export.add_argument(
         "--to", required=True, choices=("prusaslicer", "cura", "orca"), help="the slicer"
     )
-    export.add_argument("--out", required=True, metavar="FILE", help="where to write it")
+    export.add_argument(
+        "--out", type=output_file, required=True, metavar="FILE", help="where to write it"
+    )
     export.set_defaults(func=run_export)
     firmware = psub.add_parser(
         "export-firmware",
@@ -39,7 +42,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     firmware.add_argument("profile", metavar="P")
     firmware.add_argument("--to", required=True, choices=("klipper",), help="the firmware")
-    firmware.add_argument("--out", required=True, metavar="FILE", help="where to write it")
+    firmware.add_argument(
+        "--out", type=output_file, required=True, metavar="FILE", help="where to write it"
+    )
     firmware.set_defaults(func=run_export_firmware)
 
 

@@ -7,6 +7,7 @@ import signal
 import sys
 
 from cdprhost.cli.numbers import bounded_float, bounded_int
+from cdprhost.cli.options import output_file
 from cdprhost.errors import InputError
 from cdprhost.sim.virtual_mocap import make_observer
 from firmware_protocol.device.config import MAX_SPEEDUP, SimConfig
@@ -35,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     )
     p.add_argument(
         "--record",
+        type=output_file,
         metavar="FILE",
         help="JSON lines, one per executed segment, streamed as they execute (flushed on exit)",
     )
