@@ -23,7 +23,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -31,12 +30,15 @@ from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
 
 from cdprhost.server import shapes
+from cdprhost.server.filepos import FilePosition
 from cdprhost.server.guard import BodyTooLarge, KeyGuard
+from cdprhost.server.hosts import HostNames
 from cdprhost.server.printer import Printer, Refused, busy_reason
 from cdprhost.server.uploads import (
     BadName,
     Entry,
     NotGcode,
+    UnsafeStaging,
     UploadFolder,
     check_filename,
     check_folder,
@@ -90,25 +92,8 @@ class Api:
         self.printer = printer
         self.uploads = uploads
         self.selected: Path | None = None
-        self._offsets: tuple[tuple[str, int, int], np.ndarray] | None = None
+        self.filepos = FilePosition()
         self.lock = asyncio.Lock()  # one upload-and-start decision at a time
-
-    def filepos(self, path: Path | None, line: int) -> int | None:
-        """Blocking (the first time per file): the byte offset where G-code ``line`` (1-based)
-        starts, OctoPrint's ``progress.filepos``."""
-        if path is None or line < 1:
-            return None
-        try:
-            st = path.stat()
-            key = (str(path), st.st_mtime_ns, st.st_size)
-            if self._offsets is None or self._offsets[0] != key:
-                data = np.fromfile(path, dtype=np.uint8)
-                starts = np.concatenate(([0], np.flatnonzero(data == 10) + 1))
-                self._offsets = (key, starts.astype(np.int64))
-        except OSError:
-            return None
-        starts = self._offsets[1]
-        return int(starts[min(line, len(starts)) - 1])
 
     def relative(self, path: Path | None) -> str | None:
         if path is None:
@@ -127,7 +112,11 @@ class Api:
             raise Refused(f"{name} is printing now: upload it under another name")
         if start and status.busy:
             raise Refused(busy_reason(status))
-        staged = self.uploads.stage(name)
+        try:
+            staged = self.uploads.stage(name)
+        except UnsafeStaging as exc:
+            log.warning("upload refused: %s", exc)
+            raise Refused(f"{exc}; nothing stored") from None
         try:
             with open(staged, "wb") as out:
                 shutil.copyfileobj(upload.file, out, COPY_CHUNK)
@@ -155,9 +144,11 @@ def create_app(
     api_key: Callable[[], str],
     *,
     max_upload_bytes: int,
+    hosts: HostNames | None = None,
 ) -> KeyGuard:
     """The ASGI application: the routes behind the key gate (``api_key()``: the key in force,
-    e.g. :meth:`cdprhost.server.apikey.KeyFile.current`)."""
+    e.g. :meth:`cdprhost.server.apikey.KeyFile.current`; ``hosts``: the names answered to,
+    by default the loopback names)."""
     uploads.ensure()
     api = Api(printer, uploads)
     app = FastAPI(docs_url=None, redoc_url=None, openapi_url=None)
@@ -274,7 +265,7 @@ def create_app(
         return JSONResponse(
             reply,
             status_code=201,
-            headers={"Location": reply["files"]["local"]["refs"]["resource"]},
+            headers={"Location": reply["files"]["local"]["refs"]["resource"]},  # percent-encoded
         )
 
-    return KeyGuard(app, api_key, max_upload_bytes)
+    return KeyGuard(app, api_key, max_upload_bytes, hosts)

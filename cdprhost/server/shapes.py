@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from cdprhost import __version__
 from cdprhost.job.state import JobState
@@ -110,7 +111,8 @@ def job(
 
 
 def refs(base_url: str, relative: str) -> dict[str, str]:
-    return {"resource": f"{base_url}/api/files/local/{relative}"}
+    """The file's URL, its path percent-encoded (UTF-8): ASCII, so it can be a header."""
+    return {"resource": f"{base_url}/api/files/local/{quote(relative, safe='/')}"}
 
 
 def entry(e: Entry, base_url: str) -> dict[str, Any]:

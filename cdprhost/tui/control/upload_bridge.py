@@ -42,7 +42,9 @@ class TuiPrinter:
             raise Refused("the terminal UI is closing; nothing done") from None
 
     def _say(self, text: str, title: str = "upload API") -> None:  # UI thread
-        self.app.notify(text, title=title)
+        # the text holds what a client sent (its User-Agent, file names): shown as it is,
+        # never read as markup (``[/]`` in a User-Agent would stop the TUI)
+        self.app.notify(text, title=title, markup=False)
         self.app.controller.say(ConsoleLine("notice", f"{title}: {text}", self.app.wall_clock()))
 
     def announce(self, text: str, wait_s: float = 30.0) -> None:
