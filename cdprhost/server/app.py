@@ -10,6 +10,7 @@ but it brings a second validation style and its server is tied to its framework.
 
 Routes (every one behind the API key, see :mod:`cdprhost.server.guard`):
 ``GET /api/version``, ``GET /api/server``, ``GET /api/job``, ``POST /api/job``,
+``GET /api/printer``, ``GET /api/settings``,
 ``GET /api/files``, ``GET /api/files/local``, ``GET /api/files/local/{path}``,
 ``POST /api/files/local``.
 """
@@ -173,6 +174,29 @@ def create_app(
         status = printer.status()
         filepos = await run_in_threadpool(api.filepos, status.file, status.job.line)
         return shapes.job(status, api.relative(status.file), filepos=filepos)
+
+    @app.get("/api/printer")
+    async def get_printer(
+        exclude: str = "", history: bool = False, limit: int | None = None
+    ) -> Response:
+        status = printer.status()
+        if not status.connected and not status.busy:
+            return error(409, "Printer is not operational: no device connected")
+        if limit is not None and not 0 <= limit <= 10_000:
+            return error(400, f"limit: {limit} is not 0..10000")
+        parts = frozenset(p.strip() for p in exclude.split(",") if p.strip())
+        unknown = parts - {"temperature", "sd", "state"}
+        if unknown:
+            return error(400, f"exclude: {', '.join(sorted(unknown))}: not a part of the reply")
+        temps = None
+        if "temperature" not in parts:
+            temps = await run_in_threadpool(printer.temperatures)
+        count = (limit if limit is not None else 300) if history else None
+        return JSONResponse(shapes.printer(status, temps, parts, count))
+
+    @app.get("/api/settings")
+    async def get_settings() -> dict[str, Any]:
+        return shapes.settings()
 
     @app.post("/api/job")
     async def post_job(request: Request) -> Response:
