@@ -29,6 +29,7 @@ from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
+from starlette.requests import ClientDisconnect
 
 from cdprhost.server import shapes
 from cdprhost.server.filepos import FilePosition
@@ -153,6 +154,14 @@ def create_app(
     uploads.ensure()
     api = Api(printer, uploads)
     app = FastAPI(docs_url=None, redoc_url=None, openapi_url=None)
+
+    @app.exception_handler(ClientDisconnect)
+    async def gone(request: Request, exc: ClientDisconnect) -> Response:
+        # the client left mid-body, or was cut off (too slow): nothing was stored
+        log.info(
+            "%s went away during %s %s", client_name(request), request.method, request.url.path
+        )
+        return error(400, "the client went away before its request was complete")
 
     @app.exception_handler(BodyTooLarge)
     async def too_large(request: Request, exc: BodyTooLarge) -> Response:
