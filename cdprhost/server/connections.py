@@ -90,6 +90,14 @@ def limited_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
                 watch.cancel()
             super().connection_lost(exc)
 
+        def handle_websocket_upgrade(self, event: Any) -> None:
+            # the connection becomes a WebSocket (its own protocol, its own life): not ours
+            registry.open.pop(self, None)
+            watch = getattr(self, "_watch", None)
+            if watch is not None:
+                watch.cancel()
+            super().handle_websocket_upgrade(event)
+
         def data_received(self, data: bytes) -> None:
             self._window_bytes += len(data)
             super().data_received(data)
