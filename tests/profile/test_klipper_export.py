@@ -177,10 +177,7 @@ def test_a_sliced_file_runs_in_klippers_batch_mode(tmp_path):
     checkout whose ``out/klipper.dict`` is built (atmega2560), ``CDPRHOST_KLIPPER_PYTHON``
     a Python with its packages. The head of a PrusaSlicer file (start G-code, G28, heating,
     the first layers' extrusion) runs to its end with no error and no unknown command."""
-    klipper = os.environ.get("CDPRHOST_KLIPPER")
-    python = os.environ.get("CDPRHOST_KLIPPER_PYTHON", sys.executable)
-    if not klipper or not (Path(klipper) / "out" / "klipper.dict").is_file():
-        pytest.skip("Klipper is not here (set CDPRHOST_KLIPPER to a built checkout)")
+    klipper, python = _klipper_here()
     out = tmp_path / "printer.cfg"
     assert _export("paper-prototype", out).returncode == 0
     head = tmp_path / "head.gcode"
@@ -189,8 +186,8 @@ def test_a_sliced_file_runs_in_klippers_batch_mode(tmp_path):
     assert "G28" in head.read_text() and " E" in head.read_text()
     log = tmp_path / "klippy.log"
     run = subprocess.run(
-        [python, str(Path(klipper) / "klippy" / "klippy.py"), str(out), "-i", str(head)]
-        + ["-o", os.devnull, "-d", str(Path(klipper) / "out" / "klipper.dict"), "-l", str(log)],
+        [python, str(klipper / "klippy" / "klippy.py"), str(out), "-i", str(head)]
+        + ["-o", os.devnull, "-d", str(klipper / "out" / "klipper.dict"), "-l", str(log)],
         capture_output=True,
         text=True,
         timeout=600,
@@ -201,3 +198,60 @@ def test_a_sliced_file_runs_in_klippers_batch_mode(tmp_path):
     refusals = re.findall(r"Unknown command.*|Extrude (?:when|below|exceeds).*|Move exceed.*", text)
     assert refusals == [], refusals[:5]
     assert "Exiting (print time" in text
+
+
+def _klipper_here() -> tuple[Path, str]:
+    klipper = os.environ.get("CDPRHOST_KLIPPER")
+    if not klipper or not (Path(klipper) / "out" / "klipper.dict").is_file():
+        pytest.skip("Klipper is not here (set CDPRHOST_KLIPPER to a built checkout)")
+    return Path(klipper), os.environ.get("CDPRHOST_KLIPPER_PYTHON", sys.executable)
+
+
+def _batch_steps(klipper: Path, python: str, cfg: Path, gcode: Path, tmp: Path) -> list[int]:
+    """The step position of each stepper (oid order) after Klipper ran ``gcode``: its
+    queue_step and set_next_step_dir commands summed."""
+    dictionary = str(klipper / "out" / "klipper.dict")
+    serial = tmp / "out.serial"
+    subprocess.run(
+        [python, str(klipper / "klippy" / "klippy.py"), str(cfg), "-i", str(gcode)]
+        + ["-o", str(serial), "-d", dictionary, "-l", str(tmp / "klippy.log")],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    dump = subprocess.run(
+        [python, str(klipper / "klippy" / "parsedump.py"), dictionary, str(serial)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=300,
+    ).stdout
+    pos = [0] * 4
+    sign = [1] * 4
+    for line in dump.splitlines():
+        fields = dict(kv.split("=", 1) for kv in line.split()[1:] if "=" in kv)
+        if line.startswith("set_next_step_dir"):
+            sign[int(fields["oid"])] = 1 if fields["dir"] == "1" else -1
+        elif line.startswith("queue_step"):
+            pos[int(fields["oid"])] += sign[int(fields["oid"])] * int(fields["count"])
+    return pos
+
+
+def test_klipper_itself_steps_as_our_kinematics(tmp_path):
+    """Klipper's batch mode, G28 then one move to each of a few workspace points: the steps it
+    emits are ours, to the step (the config's G28 declares the same home)."""
+    klipper, python = _klipper_here()
+    out = tmp_path / "printer.cfg"
+    assert _export("paper-prototype", out).returncode == 0
+    profile = load_profile("paper-prototype")
+    model = MachineModel.from_profile(profile)
+    origin = np.asarray(profile.build_volume.bed_origin)
+    grid = workspace_grid(model)
+    points = grid[np.random.default_rng(7).choice(len(grid), 4, replace=False)]
+    for point in points:
+        g = point - origin
+        gcode = tmp_path / "move.gcode"
+        gcode.write_text(f"G28\nG1 X{g[0]:.6f} Y{g[1]:.6f} Z{g[2]:.6f} F3000\nM400\n")
+        theirs = _batch_steps(klipper, python, out, gcode, tmp_path)[:3]
+        ours = np.rint(model.ik(point[None])[0] * model.steps_per_mm).astype(int)
+        assert list(ours) == theirs, (point, ours, theirs)
