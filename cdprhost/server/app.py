@@ -10,6 +10,7 @@ but it brings a second validation style and its server is tied to its framework.
 
 Routes (every one behind the API key, see :mod:`cdprhost.server.guard`):
 ``GET /api/version``, ``GET /api/server``, ``GET /api/job``, ``POST /api/job``,
+``GET /api/printer``, ``GET /api/settings``,
 ``GET /api/files``, ``GET /api/files/local``, ``GET /api/files/local/{path}``,
 ``POST /api/files/local``.
 """
@@ -23,20 +24,23 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
 from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse, Response
 from pydantic import BaseModel, ConfigDict, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.datastructures import UploadFile
+from starlette.requests import ClientDisconnect
 
 from cdprhost.server import shapes
+from cdprhost.server.filepos import FilePosition
 from cdprhost.server.guard import BodyTooLarge, KeyGuard
+from cdprhost.server.hosts import HostNames
 from cdprhost.server.printer import Printer, Refused, busy_reason
 from cdprhost.server.uploads import (
     BadName,
     Entry,
     NotGcode,
+    UnsafeStaging,
     UploadFolder,
     check_filename,
     check_folder,
@@ -91,25 +95,8 @@ class Api:
         self.printer = printer
         self.uploads = uploads
         self.selected: Path | None = None
-        self._offsets: tuple[tuple[str, int, int], np.ndarray] | None = None
+        self.filepos = FilePosition()
         self.lock = asyncio.Lock()  # one upload-and-start decision at a time
-
-    def filepos(self, path: Path | None, line: int) -> int | None:
-        """Blocking (the first time per file): the byte offset where G-code ``line`` (1-based)
-        starts, OctoPrint's ``progress.filepos``."""
-        if path is None or line < 1:
-            return None
-        try:
-            st = path.stat()
-            key = (str(path), st.st_mtime_ns, st.st_size)
-            if self._offsets is None or self._offsets[0] != key:
-                data = np.fromfile(path, dtype=np.uint8)
-                starts = np.concatenate(([0], np.flatnonzero(data == 10) + 1))
-                self._offsets = (key, starts.astype(np.int64))
-        except OSError:
-            return None
-        starts = self._offsets[1]
-        return int(starts[min(line, len(starts)) - 1])
 
     def relative(self, path: Path | None) -> str | None:
         if path is None:
@@ -128,7 +115,11 @@ class Api:
             raise Refused(f"{name} is printing now: upload it under another name")
         if start and status.busy:
             raise Refused(busy_reason(status))
-        staged = self.uploads.stage(name)
+        try:
+            staged = self.uploads.stage(name)
+        except UnsafeStaging as exc:
+            log.warning("upload refused: %s", exc)
+            raise Refused(f"{exc}; nothing stored") from None
         try:
             with open(staged, "wb") as out:
                 shutil.copyfileobj(upload.file, out, COPY_CHUNK)
@@ -156,13 +147,23 @@ def create_app(
     api_key: Callable[[], str],
     *,
     max_upload_bytes: int,
+    hosts: HostNames | None = None,
     camera: Callable[[], tuple[bytes, str]] | None = None,
 ) -> WebFront:
     """The ASGI application: the routes behind the key gate (``api_key()``: the key in force,
-    e.g. :meth:`cdprhost.server.apikey.KeyFile.current`); ``camera``: the web page's snapshot."""
+    e.g. :meth:`cdprhost.server.apikey.KeyFile.current`; ``hosts``: the names answered to,
+    by default the loopback names; ``camera``: the web page's snapshot)."""
     uploads.ensure()
     api = Api(printer, uploads)
     app = FastAPI(docs_url=None, redoc_url=None, openapi_url=None)
+
+    @app.exception_handler(ClientDisconnect)
+    async def gone(request: Request, exc: ClientDisconnect) -> Response:
+        # the client left mid-body, or was cut off (too slow): nothing was stored
+        log.info(
+            "%s went away during %s %s", client_name(request), request.method, request.url.path
+        )
+        return error(400, "the client went away before its request was complete")
 
     @app.exception_handler(BodyTooLarge)
     async def too_large(request: Request, exc: BodyTooLarge) -> Response:
@@ -184,6 +185,29 @@ def create_app(
         status = printer.status()
         filepos = await run_in_threadpool(api.filepos, status.file, status.job.line)
         return shapes.job(status, api.relative(status.file), filepos=filepos)
+
+    @app.get("/api/printer")
+    async def get_printer(
+        exclude: str = "", history: bool = False, limit: int | None = None
+    ) -> Response:
+        status = printer.status()
+        if not status.connected and not status.busy:
+            return error(409, "Printer is not operational: no device connected")
+        if limit is not None and not 0 <= limit <= 10_000:
+            return error(400, f"limit: {limit} is not 0..10000")
+        parts = frozenset(p.strip() for p in exclude.split(",") if p.strip())
+        unknown = parts - {"temperature", "sd", "state"}
+        if unknown:
+            return error(400, f"exclude: {', '.join(sorted(unknown))}: not a part of the reply")
+        temps = None
+        if "temperature" not in parts:
+            temps = await run_in_threadpool(printer.temperatures)
+        count = (limit if limit is not None else 300) if history else None
+        return JSONResponse(shapes.printer(status, temps, parts, count))
+
+    @app.get("/api/settings")
+    async def get_settings() -> dict[str, Any]:
+        return shapes.settings()
 
     @app.post("/api/job")
     async def post_job(request: Request) -> Response:
@@ -276,8 +300,8 @@ def create_app(
         return JSONResponse(
             reply,
             status_code=201,
-            headers={"Location": reply["files"]["local"]["refs"]["resource"]},
+            headers={"Location": reply["files"]["local"]["refs"]["resource"]},  # percent-encoded
         )
 
     add_routes(app, api, camera)  # the web page's routes (behind the key) and, in front, its page
-    return WebFront(KeyGuard(app, api_key, max_upload_bytes))
+    return WebFront(KeyGuard(app, api_key, max_upload_bytes, hosts))

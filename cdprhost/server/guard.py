@@ -1,9 +1,11 @@
-"""The gate in front of every route: the API key, and the cap on a request's size.
+"""The gate in front of every route: the Host name, the API key, and the cap on a request's size.
 
 A plain ASGI middleware, so it runs before any route and before a byte of the body is read:
-a request without the right key is answered 401 (no key, or an empty one) or 403 (a wrong
+a request whose ``Host`` is not a name of this server (:mod:`cdprhost.server.hosts`) is
+answered 400 and closed; a request without the right key is answered 401 (no key, or an empty one) or 403 (a wrong
 key) and nothing behind it runs. A body announced larger than the cap is answered 413 at
-once; a body that grows past it while it streams (chunked) is cut and answered 413.
+once; a body that grows past it while it streams (chunked) is cut: answered 413, and the
+connection closed (nothing more of it is read).
 No CORS headers are ever added: a browser page on another origin cannot read a reply.
 """
 
@@ -15,6 +17,7 @@ from typing import Any
 from urllib.parse import parse_qs
 
 from cdprhost.server.apikey import key_matches
+from cdprhost.server.hosts import HostNames
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -40,6 +43,13 @@ def given_key(scope: Scope) -> str | None:
     return values[0].strip() if values else None
 
 
+def given_host(scope: Scope) -> str | None:
+    for name, value in scope.get("headers", ()):
+        if name == b"host":
+            return str(value.decode("latin-1"))
+    return None
+
+
 async def send_error(send: Send, status: int, text: str) -> None:
     body = json.dumps({"error": text}).encode()
     await send(
@@ -57,11 +67,19 @@ async def send_error(send: Send, status: int, text: str) -> None:
 
 
 class KeyGuard:
-    def __init__(self, app: ASGIApp, key: Callable[[], str], max_body_bytes: int):
-        """``key`` returns the key in force (read per request: a rotation applies at once)."""
+    def __init__(
+        self,
+        app: ASGIApp,
+        key: Callable[[], str],
+        max_body_bytes: int,
+        hosts: HostNames | None = None,
+    ):
+        """``key`` returns the key in force (read per request: a rotation applies at once);
+        ``hosts``: the names answered to (default: the loopback names)."""
         self.app = app
         self.key = key
         self.max_body_bytes = max_body_bytes
+        self.hosts = hosts or HostNames.for_listen("127.0.0.1")
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -70,8 +88,18 @@ class KeyGuard:
                 return
             await self.app(scope, receive, send)
             return
-        given = given_key(scope)
         length = _content_length(scope)
+        host = given_host(scope)
+        if not self.hosts.allows(host):
+            shown = "".join(c for c in (host or "") if c.isprintable())[:80]
+            await send_error(
+                send,
+                400,
+                f"Host {shown!r} is not a name of this server (a page on another site?); "
+                "start the server with --allow-host NAME to answer to that name",
+            )
+            return
+        given = given_key(scope)
         if not given or not key_matches(self.key(), given):
             # a small body is read and dropped first, so that the client reads the refusal
             # instead of a connection reset; a large one is not read at all
@@ -90,13 +118,17 @@ class KeyGuard:
     async def _capped(self, scope: Scope, receive: Receive, send: Send) -> None:
         seen = 0
         started = False
+        over = False
 
         async def counted_receive() -> Message:
-            nonlocal seen
+            nonlocal seen, over
+            if over:  # never read on past the cap, whatever the route does
+                raise BodyTooLarge
             message = await receive()
             if message["type"] == "http.request":
                 seen += len(message.get("body", b""))
                 if seen > self.max_body_bytes:
+                    over = True
                     raise BodyTooLarge
             return message
 
@@ -104,6 +136,9 @@ class KeyGuard:
             nonlocal started
             if message["type"] == "http.response.start":
                 started = True
+                if over:  # the rest of the body is not read: the connection ends here
+                    headers = [(k, v) for k, v in message.get("headers", ()) if k != b"connection"]
+                    message = {**message, "headers": [*headers, (b"connection", b"close")]}
             await send(message)
 
         try:

@@ -21,7 +21,15 @@ from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.before_start import before_start
 from cdprhost.job.resume import log_path_for
 from cdprhost.job.runner import PrintJob, PrintOptions
-from cdprhost.job.state import Event, IllegalTransition, JobSnapshot, JobState, reduce
+from cdprhost.job.state import (
+    Event,
+    IllegalTransition,
+    JobSnapshot,
+    JobState,
+    Temperatures,
+    reduce,
+    temperatures_of,
+)
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import HostLink, LinkError
 from cdprhost.link.errors import DeviceFault
@@ -37,6 +45,8 @@ from cdprhost.server.printer import (
 )
 
 log = logging.getLogger(__name__)
+
+TEMPERATURE_MAX_AGE_S = 1.0  # a reading younger than this answers again (apps poll often)
 
 
 class HeadlessPrinter:
@@ -65,6 +75,7 @@ class HeadlessPrinter:
         self._worker: threading.Thread | None = None
         self._closing = False
         self._listeners: list[Callable[[Event], None]] = [on_event] if on_event else []
+        self._idle_temps: tuple[float, Temperatures] | None = None  # (monotonic s, reading)
 
     # ------------------------------------------------------------ status
     def status(self) -> PrinterStatus:
@@ -231,6 +242,37 @@ class HeadlessPrinter:
 
     def uploaded(self, path: Path) -> None:
         log.info("stored upload %s", path)
+
+    def temperatures(self) -> Temperatures | None:
+        """The running job's newest reading; without a job, the device's (asked at most once
+        a second; never while a start holds the link)."""
+        status = self._status
+        if status.busy:
+            return status.job.temperatures
+        now = time.monotonic()
+        cached = self._idle_temps
+        if cached is not None and now - cached[0] < TEMPERATURE_MAX_AGE_S:
+            return cached[1]
+        if not self._lock.acquire(blocking=False):
+            return cached[1] if cached else status.job.temperatures
+        try:
+            link = self._link
+            if link is None or self._status.busy:
+                return status.job.temperatures
+            try:
+                reading = temperatures_of(
+                    link.request_status(timeout=self.profile.serial.timeout_s)
+                )
+            except DeviceFault as exc:  # a faulted device still reports its heaters
+                log.debug("status while faulted: %s", exc)
+                return cached[1] if cached else None
+            except (LinkError, OSError) as exc:
+                log.warning("temperature reading: %s", exc)
+                return None
+            self._idle_temps = (now, reading)
+            return reading
+        finally:
+            self._lock.release()
 
     # ---------------------------------------------------------- shutdown
     def wait_idle(self, timeout_s: float) -> bool:

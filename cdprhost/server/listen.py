@@ -12,12 +12,16 @@ import ipaddress
 import logging
 import socket
 import threading
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from cdprhost.errors import InputError
 
+if TYPE_CHECKING:
+    from cdprhost.server.connections import ConnectionLimits
+
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 5000
+LISTEN_QUEUE = 4096  # the kernel caps it (net.core.somaxconn)
 LOOPBACK_NAMES = ("localhost", "localhost.localdomain", "ip6-localhost")
 
 log = logging.getLogger(__name__)
@@ -81,10 +85,15 @@ def bind(host: str, port: int) -> socket.socket:
 
 
 class ServerThread:
-    """uvicorn serving ``app`` on a bound socket from a daemon thread."""
+    """uvicorn serving ``app`` on a bound socket from a daemon thread, within ``limits``
+    (connections, header and body timeouts: :mod:`cdprhost.server.connections`)."""
 
-    def __init__(self, app: Any, host: str, port: int):
+    def __init__(self, app: Any, host: str, port: int, limits: ConnectionLimits | None = None):
         import uvicorn
+
+        from cdprhost.server.connections import ConnectionLimits, limited_protocol
+
+        limits = limits or ConnectionLimits()
 
         self.sock = bind(host, port)
         self.host = host
@@ -95,6 +104,8 @@ class ServerThread:
             access_log=False,
             server_header=False,
             lifespan="off",
+            http=limited_protocol(limits),
+            backlog=limits.backlog,
             timeout_graceful_shutdown=3,
         )
         self.server = uvicorn.Server(config)
@@ -121,6 +132,10 @@ class ServerThread:
             threading.Event().wait(0.02)
         if not self.server.started:
             raise InputError(f"the upload API did not start on {self.url}: {self.error}")
+        # the kernel's queue of connections not yet accepted: long, so that a crowd of idle
+        # clients does not make a newcomer's handshake wait for a retry (asyncio set it to
+        # the accept batch, which the limits keep short)
+        self.sock.listen(LISTEN_QUEUE)
 
     def stop(self, timeout_s: float = 5.0) -> None:
         self.server.should_exit = True

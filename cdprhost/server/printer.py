@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
-from cdprhost.job.state import JobSnapshot, JobState
+from cdprhost.job.state import JobSnapshot, JobState, Temperatures
 
 
 class Refused(Exception):
@@ -60,6 +60,10 @@ class Printer(Protocol):
 
     def uploaded(self, path: Path) -> None:
         """A file was stored in the upload folder (the TUI lists it)."""
+
+    def temperatures(self) -> Temperatures | None:
+        """Blocking (at most a device's status round trip): the newest heater reading, from
+        the running job or asked of the device; None when there is none (not connected)."""
 
 
 def preflight_refusal(total: int, line: int | None, rule: str, detail: str) -> str:

@@ -14,6 +14,7 @@ import os
 import re
 import secrets
 import shutil
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,12 +23,18 @@ from cdprhost.job.resume import state_dir
 GCODE_SUFFIXES = (".gcode", ".gco", ".g", ".gc", ".nc")
 _PART = re.compile(r"[\w .,()\[\]+@#=~-]+")
 MAX_PART = 200
+MAX_PART_BYTES = 255  # a file name's limit on ext4, btrfs, xfs, APFS (UTF-8 bytes)
 MAX_DEPTH = 8
 STAGING = ".incoming"
 
 
 class BadName(ValueError):
     """A file or folder name the server refuses (400), with the reason."""
+
+
+class UnsafeStaging(OSError):
+    """The staging folder is not a plain folder of ours (a link, a file): nothing is written
+    through it (409, the reason said)."""
 
 
 class NotGcode(ValueError):
@@ -52,6 +59,8 @@ def check_part(part: str, what: str) -> str:
         raise BadName(f"{what}: {part!r}: names may not start with a dot")
     if len(part) > MAX_PART:
         raise BadName(f"{what}: name longer than {MAX_PART} characters")
+    if len(part.encode("utf-8", "surrogatepass")) > MAX_PART_BYTES:
+        raise BadName(f"{what}: name longer than {MAX_PART_BYTES} bytes (UTF-8)")
     if not _PART.fullmatch(part) or part != part.strip() or part.endswith("."):
         raise BadName(
             f"{what}: {part!r}: use letters, digits, spaces and _ . , - + ( ) [ ] @ # = ~ only"
@@ -106,8 +115,11 @@ class UploadFolder:
         self.clean_staging()
 
     def clean_staging(self) -> None:
-        """Drop what an interrupted upload left in the staging folder."""
-        shutil.rmtree(self.root / STAGING, ignore_errors=True)
+        """Drop what an interrupted upload left in the staging folder (a link planted in its
+        place is left alone: :meth:`stage` refuses it)."""
+        staging = self.root / STAGING
+        if not staging.is_symlink():
+            shutil.rmtree(staging, ignore_errors=True)
 
     def target(self, folder: tuple[str, ...], name: str) -> Path:
         path = self.root.joinpath(*folder, name)
@@ -123,8 +135,13 @@ class UploadFolder:
 
     def stage(self, name: str) -> Path:
         """A fresh path to write an upload to (in a hidden folder of its own, same name)."""
-        folder = self.root / STAGING / secrets.token_hex(8)
-        folder.mkdir(parents=True, mode=0o700)
+        staging = self.root / STAGING
+        with contextlib.suppress(FileExistsError):
+            staging.mkdir(mode=0o700)
+        _plain_folder(staging)
+        folder = staging / secrets.token_hex(8)
+        folder.mkdir(mode=0o700)  # no parents: nothing is made through a link
+        _plain_folder(folder)
         return folder / name
 
     def commit(self, staged: Path, target: Path) -> Path:
@@ -134,6 +151,8 @@ class UploadFolder:
         return target
 
     def discard(self, staged: Path) -> None:
+        if staged.parent.is_symlink() or staged.parent.parent.is_symlink():
+            return  # never unlink through a planted link
         with contextlib.suppress(OSError):
             staged.unlink()
         with contextlib.suppress(OSError):
@@ -163,3 +182,15 @@ class UploadFolder:
         name = check_filename(parts[-1])
         path = self.target(folder, name)
         return path if path.is_file() else None
+
+
+def _plain_folder(path: Path) -> None:
+    """Raise :class:`UnsafeStaging` unless ``path`` itself (not what it points to) is a folder
+    owned by this process's user."""
+    st = os.lstat(path)
+    if stat.S_ISLNK(st.st_mode):
+        raise UnsafeStaging(f"{path} is a link: uploads are never staged through one (remove it)")
+    if not stat.S_ISDIR(st.st_mode):
+        raise UnsafeStaging(f"{path} is not a folder (remove it)")
+    if st.st_uid != os.getuid():
+        raise UnsafeStaging(f"{path} belongs to another user (remove it)")

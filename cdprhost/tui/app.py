@@ -244,7 +244,9 @@ class CdprApp(App[int]):
             if isinstance(self.screen, PrintScreen):
                 self.screen.show_failure()
             else:
-                self.notify(f"print failed: {job.reason}", severity="error", timeout=10)
+                self.notify(
+                    f"print failed: {job.reason}", severity="error", timeout=10, markup=False
+                )
 
     # ------------------------------------------------------------ actions
     async def action_quit(self) -> None:

@@ -22,6 +22,7 @@ import pytest
 from cdprhost.profile import load_profile
 from cdprhost.server.apikey import KeyFile, read_key
 from cdprhost.server.app import create_app
+from cdprhost.server.connections import ConnectionLimits
 from cdprhost.server.headless import HeadlessPrinter
 from cdprhost.server.listen import ServerThread
 from cdprhost.server.uploads import UploadFolder
@@ -140,17 +141,28 @@ def multipart(
     return out, f"multipart/form-data; boundary={boundary}"
 
 
+NOFILE_EXEC = (
+    "import os, resource, sys; "
+    "hard = resource.getrlimit(resource.RLIMIT_NOFILE)[1]; "
+    "resource.setrlimit(resource.RLIMIT_NOFILE, (int(sys.argv[1]), hard)); "
+    "os.execv(sys.executable, [sys.executable, *sys.argv[2:]])"
+)
+
+
 class ServeProcess:
     """``cdprhost serve`` in its own process on 127.0.0.1 (ephemeral port): url, key, and a
     bounded wait for its job state."""
 
-    def __init__(self, tmp: Path, *args: str):
+    def __init__(self, tmp: Path, *args: str, nofile: int | None = None):
+        """``nofile``: the server's soft limit of open descriptors."""
         self.env = {
             **os.environ,
             "XDG_CONFIG_HOME": str(tmp / "cfg"),
             "CDPRHOST_STATE": str(tmp / "state"),
         }
         cmd = [sys.executable, "-m", "cdprhost", "serve", "-p", PROFILE, "--listen", "127.0.0.1:0"]
+        if nofile is not None:  # set in the child, then the server exec'd in its place
+            cmd = [sys.executable, "-c", NOFILE_EXEC, str(nofile), *cmd[1:]]
         self.proc = subprocess.Popen([*cmd, *args], env=self.env, stderr=subprocess.PIPE, text=True)
         assert self.proc.stderr is not None
         lines = []
@@ -194,8 +206,8 @@ def printed_to_the_end(job: dict[str, Any]) -> bool:
 def serve(tmp_path) -> Iterator[Callable[..., ServeProcess]]:
     made: list[ServeProcess] = []
 
-    def start(*args: str) -> ServeProcess:
-        made.append(ServeProcess(tmp_path / f"serve{len(made)}", *args))
+    def start(*args: str, nofile: int | None = None) -> ServeProcess:
+        made.append(ServeProcess(tmp_path / f"serve{len(made)}", *args, nofile=nofile))
         return made[-1]
 
     yield start
@@ -215,7 +227,13 @@ def config_home(tmp_path, monkeypatch) -> Path:
 def make_server(tmp_path, config_home) -> Iterator[Callable[..., Server]]:
     made: list[Server] = []
 
-    def make(speedup: float | None = None, max_upload_bytes: int = 2_000_000) -> Server:
+    def make(
+        speedup: float | None = None,
+        max_upload_bytes: int = 2_000_000,
+        limits: ConnectionLimits | None = None,
+        printer: Any = None,
+    ) -> Server:
+        """``printer``: a stand-in for the headless printer (None: the real one)."""
         profile = load_profile(PROFILE)
         links: list[Any] = []
 
@@ -224,11 +242,11 @@ def make_server(tmp_path, config_home) -> Iterator[Callable[..., Server]]:
             links.append(link)
             return link
 
-        printer = HeadlessPrinter(profile, open_device)
+        printer = printer or HeadlessPrinter(profile, open_device)
         keys = KeyFile()
         uploads = UploadFolder(tmp_path / f"uploads{len(made)}")
         app = create_app(printer, uploads, keys.current, max_upload_bytes=max_upload_bytes)
-        thread = ServerThread(app, "127.0.0.1", 0)
+        thread = ServerThread(app, "127.0.0.1", 0, limits)
         thread.start()
         server = Server(thread.url, thread.port, keys.key, uploads.root, printer, thread, links)
         made.append(server)

@@ -91,7 +91,8 @@ def test_loopback_or_not():
 
 def test_serve_prints_an_upload_and_sigterm_stops_the_print_safely(serve):
     server = serve("--speedup", "10")
-    assert "API key (made now" in server.banner  # printed once, at first use
+    assert "API key made now" in server.banner  # said once, at first use ...
+    assert server.key and server.key not in server.banner  # ... and never printed
     body, ctype = multipart([("print", "true")], ("long.gcode", small_part(40).encode()))
     headers = {"X-Api-Key": server.key, "Content-Type": ctype}
     req = urllib.request.Request(server.url + "/api/files/local", body, headers)
@@ -101,6 +102,7 @@ def test_serve_prints_an_upload_and_sigterm_stops_the_print_safely(serve):
     code, rest = server.stop(signal.SIGTERM)
     assert code == 0, rest
     assert "SIGTERM: stopping" in rest and "job cancelled" in rest
+    assert server.key not in rest  # nor anywhere in its log
     assert (server.uploads / "long.gcode").is_file()
 
 
@@ -127,7 +129,7 @@ def test_a_listen_address_beyond_loopback_is_warned_about(
 
     monkeypatch.setattr(listen, "is_loopback", lambda host: False)
     args = argparse.Namespace(
-        uploads=str(tmp_path / "up"), max_upload_mb=1.0, listen=("127.0.0.1", 0)
+        uploads=str(tmp_path / "up"), max_upload_mb=1.0, listen=("127.0.0.1", 0), allow_host=[]
     )
     server = serve_cmd.start_api(args, printer=None)
     try:

@@ -62,6 +62,14 @@ def add_server_arguments(p: argparse.ArgumentParser, *, default_listen: bool) ->
         metavar="0|FILE|URL",
         help="a camera for the web page's snapshot (a device index, a file or a URL)",
     )
+    p.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="answer requests whose Host is NAME too (repeatable); by default only the listen "
+        "address, and this machine's names when it listens on every address (DNS rebinding)",
+    )
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -93,14 +101,14 @@ def start_api(args: argparse.Namespace, printer: Any) -> Any:
     """Key, upload folder, app and server thread (started); says where, once."""
     from cdprhost.server.apikey import KeyFile
     from cdprhost.server.app import create_app
+    from cdprhost.server.hosts import HostNames
     from cdprhost.server.listen import ServerThread, exposure_warning, is_loopback
     from cdprhost.server.uploads import UploadFolder
 
     keys = KeyFile()
-    if keys.created:
+    if keys.created:  # the key itself is never printed here: logs are read by others
         print(
-            f"API key (made now, stored in {keys.path}, mode 600; `cdprhost api-key` shows it "
-            f"again): {keys.key}",
+            f"API key made now and stored in {keys.path} (mode 600); `cdprhost api-key` prints it",
             file=sys.stderr,
         )
     uploads = UploadFolder(args.uploads)
@@ -115,14 +123,15 @@ def start_api(args: argparse.Namespace, printer: Any) -> Any:
         from cdprhost.server.web_camera import CameraSnapshot
 
         camera = CameraSnapshot(args.camera)
+    host, port = args.listen
     app = create_app(
         printer,
         uploads,
         keys.current,
         max_upload_bytes=int(args.max_upload_mb * 1e6),
+        hosts=HostNames.for_listen(host, args.allow_host),
         camera=camera,
     )
-    host, port = args.listen
     server = ServerThread(app, host, port)
     if not is_loopback(host):
         print(exposure_warning(host, server.port), file=sys.stderr)

@@ -337,7 +337,9 @@ class PrintFlow(ControllerBase):
                 self.app.notify(f"cannot resume: {fault}", severity="error", timeout=10)
                 return
             if resume is None:
-                self.app.notify(f"no resume point saved for {Path(path).name}", severity="warning")
+                self.app.notify(
+                    f"no resume point saved for {Path(path).name}", severity="warning", markup=False
+                )
                 return
             if resume.problem:
                 self.app.notify(f"cannot resume: {resume.problem}", severity="error", timeout=10)

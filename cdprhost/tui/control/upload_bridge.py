@@ -20,11 +20,11 @@ from typing import Any
 
 from cdprhost.errors import CdprError
 from cdprhost.job.before_start import before_start
-from cdprhost.job.state import JobState
+from cdprhost.job.state import JobState, Temperatures
 from cdprhost.link import LinkError
 from cdprhost.server.printer import PrinterStatus, Refused, busy_reason, preflight_refusal
 from cdprhost.tui.control.views import ConsoleLine, PreflightView
-from cdprhost.tui.state import FileView
+from cdprhost.tui.state import FileView, UiState
 
 
 class TuiPrinter:
@@ -42,7 +42,9 @@ class TuiPrinter:
             raise Refused("the terminal UI is closing; nothing done") from None
 
     def _say(self, text: str, title: str = "upload API") -> None:  # UI thread
-        self.app.notify(text, title=title)
+        # the text holds what a client sent (its User-Agent, file names): shown as it is,
+        # never read as markup (``[/]`` in a User-Agent would stop the TUI)
+        self.app.notify(text, title=title, markup=False)
         self.app.controller.say(ConsoleLine("notice", f"{title}: {text}", self.app.wall_clock()))
 
     def announce(self, text: str, wait_s: float = 30.0) -> None:
@@ -176,6 +178,16 @@ class TuiPrinter:
         self.app.controller.cancel()
         self._say("cancel asked")
         return ""
+
+    def temperatures(self) -> Temperatures | None:
+        """The TUI's newest reading: the job's, else the one it polls while no job runs."""
+        state: UiState = self.app.state
+        if state.job.temperatures is not None and (state.job_active or not state.device):
+            return state.job.temperatures
+        device = state.device
+        if device is None or device.hotend is None or device.bed is None:
+            return state.job.temperatures
+        return Temperatures(device.hotend, device.bed, device.hotend_target, device.bed_target)
 
     def uploaded(self, path: Path) -> None:
         recent = self.app.recent_files.add(str(path))

@@ -6,6 +6,7 @@ import contextlib
 from collections.abc import Iterable
 from pathlib import Path
 
+from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
@@ -74,7 +75,7 @@ class FilePickerScreen(ModalScreen[str | None]):
                 with Vertical(id="picker-recent"):
                     yield Label("Recent", classes="section-title")
                     yield OptionList(
-                        *(Option(self._recent_label(p), id=p) for p in self.recent),
+                        *(Option(Text(self._recent_label(p)), id=p) for p in self.recent),
                         id="recent-list",
                         compact=True,
                     )
