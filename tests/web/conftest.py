@@ -139,7 +139,7 @@ def web_server(tmp_path, monkeypatch) -> Iterator[Callable[..., WebServer]]:
         s.thread.stop()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
     sync_api = pytest.importorskip(
         "playwright.sync_api", reason="playwright is not installed (pip install -e '.[test]')"
