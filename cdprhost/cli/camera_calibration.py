@@ -23,8 +23,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from cdprhost.calibration.camera.intrinsics import IntrinsicsResult
 
 BOARD_HELP = (
-    "the board: SXxSY,SQUARE_MM,MARKER_MM[,DICTIONARY[,FIRST_MARKER_ID]] "
-    "(e.g. 9x6,25,18,DICT_5X5_250,150), or a TOML file with the board's table "
+    "the board: SXxSY,SQUARE_MM,MARKER_MM[,DICTIONARY[,FIRST_MARKER_ID]][,legacy] "
+    "(e.g. 9x6,25,18,DICT_5X5_250,150; legacy: OpenCV's layout before 4.6), or a TOML file with the board's table "
     "(a session.toml: its [camera.calibration_board])"
 )
 
@@ -75,8 +75,10 @@ def parse_board(text: str) -> CharucoBoard:
     path = Path(text)
     if path.suffix.lower() == ".toml" or path.is_file():
         return _board_from_toml(path)
+    legacy = re.search(r",\s*legacy\s*$", text, re.IGNORECASE)
+    spec = text[: legacy.start()] if legacy else text
     m = re.fullmatch(
-        r"\s*(\d+)\s*[xX]\s*(\d+)\s*,([^,]+),([^,]+)(?:,([A-Za-z0-9_]+))?(?:,(\d+))?\s*", text
+        r"\s*(\d+)\s*[xX]\s*(\d+)\s*,([^,]+),([^,]+)(?:,([A-Za-z0-9_]+))?(?:,(\d+))?\s*", spec
     )
     if not m:
         raise InputError(f"--board: cannot read {text!r}; expected {BOARD_HELP}")
@@ -87,6 +89,7 @@ def parse_board(text: str) -> CharucoBoard:
             float(m[4]),
             m[5] or "DICT_5X5_250",
             int(m[6] or 0),
+            legacy_pattern=bool(legacy),
         )
     except ValueError as exc:
         raise InputError(f"--board {text!r}: {exc}") from None
