@@ -337,10 +337,19 @@ def fit_session(
     # the vector shared by every B: board orientation error x offset, offset as printed
     lever = skew(rot_eff @ offset)
     off_sigma = setup.effector.offset_sigma_mm or DEFAULT_OFFSET_SIGMA_MM
-    common = lever @ cov_eff_rot @ lever.T + off_sigma**2 * np.eye(3)
-    frame = frame_covariance(
-        cam_r, cam_t, camera_pose_covariance(ref_ids, ref_obj, ref_px, ref_board, v, cam_r, cam_t)
-    )
+    common = off_sigma**2 * np.eye(3)
+    frame = np.zeros((6, 6))
+    if q_fit is None:
+        common = common + lever @ cov_eff_rot @ lever.T
+        frame = frame_covariance(
+            cam_r,
+            cam_t,
+            camera_pose_covariance(ref_ids, ref_obj, ref_px, ref_board, v, cam_r, cam_t),
+        )
+    # else: the bundle adjustment estimated the camera pose and the board orientation with
+    # the 12 parameters; what their uncertainty does to the workspace is already in
+    # ``geometry_covariance_extra`` (a rigid frame error or a constant shift of every B is
+    # a direction of the parameters): adding it again counted it twice
     v_std = np.asarray(intrinsics.std, float).copy()
     out_intr = Intrinsics.from_vector(
         v, intrinsics.image_size, v_std, intrinsics.rms_reprojection_px
