@@ -243,8 +243,10 @@ def _fit_notes(fit: SessionFit) -> tuple[str, ...]:
             + f" (corner noise {fit.pixel_sigma:.3f} px)"
         )
     common = float(np.sqrt(np.trace(fit.common_covariance)))
-    notes.append(
-        f"every B shares one unknown vector of {common:.3g} mm RMS (effector-board orientation "
-        "x offset): identification cannot see it; the trust gate counts it"
-    )
+    if common > 0:
+        notes.append(
+            f"every B shares one unknown vector of {common:.3g} mm RMS (effector-board "
+            "orientation x offset, offset as printed): identification cannot see it; the "
+            "trust gate counts it"
+        )
     return tuple(notes)

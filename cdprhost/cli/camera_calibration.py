@@ -194,6 +194,8 @@ def result_json(result: IntrinsicsResult, names: tuple[str, ...]) -> dict[str, A
             "corner_cells": c.corner_cells,
             "max_tilt_deg": c.max_tilt_deg,
             "tilt_axes": c.tilt_axes,
+            "region": c.region,
+            "region_sd_px": c.region_sd_px if math.isfinite(c.region_sd_px) else None,
         },
         "views": len(names),
         "views_used": [names[i] for i in result.views_used],
@@ -219,6 +221,11 @@ def result_text(result: IntrinsicsResult, names: tuple[str, ...]) -> str:
         f"coverage: corners reach {c.cell_fraction:.0%} of the image's cells, "
         f"{c.corner_cells}/4 of its corners; tilt up to {c.max_tilt_deg:.0f} deg "
         f"about {c.tilt_axes} axis(es)"
+        + (
+            f"; lens known to {c.region_sd_px:.3f} px in {c.region}"
+            if math.isfinite(c.region_sd_px)
+            else ""
+        )
     )
     lines += [f"  view {names[i]} not used: {why}" for i, why in result.views_dropped]
     return "\n".join(lines)
