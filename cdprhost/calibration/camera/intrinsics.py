@@ -215,8 +215,10 @@ def calibrate_intrinsics(
         fit_k3=fit_k3,
     )
     rms = fit.rms_px
-    intr = Intrinsics.from_vector(fit.vector, (int(w), int(h)), fit.std, rms)
-    intr = Intrinsics(intr.matrix, intr.distortion, intr.image_size, intr.std, rms, fit.bow_mm)
+    intr = replace(
+        Intrinsics.from_vector(fit.vector, (int(w), int(h)), fit.std, rms),
+        board_bow_mm=fit.bow_mm,
+    )
     per_view = fit.per_view_px
     rvecs = list(fit.rvecs)
     normals = np.array([cv2.Rodrigues(r)[0][:, 2] for r in rvecs])
