@@ -8,7 +8,8 @@ the fit poses only, so that check poses still test it), and every take's frames 
 judged by the statistical take test (settling, drift, spread, missing frames). A take whose
 boards are not seen well enough in enough frames is refused naming the board and the
 frames; calibration views of poor coverage refuse the session (their reason and the views
-to add).
+to add). A take's drift is tested against the camera's own frame noise (anisotropic:
+depth is worst; :mod:`~.camera.take_drift`), not against the few frames' scatter.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
-from cdprhost.calibration.camera.session_fit import SessionFit, fit_session
+from cdprhost.calibration.camera.session_fit import SessionFit, TakeDetections, fit_session
+from cdprhost.calibration.camera.take_drift import CameraDrift, camera_drift
 from cdprhost.calibration.camera_takes import read_camera_session, skipped_text
 from cdprhost.calibration.registration import RigidTransform
 from cdprhost.calibration.session import RejectedTake, Session, SessionMeasurements
@@ -27,6 +29,9 @@ from cdprhost.kinematics.machine import MachineModel
 #: A camera take has a few frames, not hundreds: the fewest it may have (unless
 #: ``[camera.acceptance] min_frames`` says otherwise).
 CAMERA_MIN_FRAMES = 3
+#: The mocap drift limit handed to the generic take test (whose drift test a camera take
+#: has already passed on the camera's noise): a drift no take reaches.
+NO_DRIFT_LIMIT = 1e9
 
 _IDENTITY = RigidTransform(np.eye(3), np.zeros(3), np.zeros(()), np.zeros((), dtype=int))
 
@@ -86,6 +91,7 @@ def measure_camera_session(
     ]
     series: list[TakeSeries] = []
     rows: list[int] = []
+    drifts: dict[int, CameraDrift] = {}
     for i, take in enumerate(data.takes):
         if take is None:
             continue
@@ -103,6 +109,22 @@ def measure_camera_session(
                 )
             )
             continue
+        drift = camera_drift(fit.frame_positions[i], take.detections.times, _frame_noise(fit, i))
+        if drift.p < lim.drift_alpha and drift.total_mm > lim.max_drift_mm:
+            d = drift.drift_mm
+            rejected.append(
+                RejectedTake(
+                    int(p.pose[i]),
+                    p.take[i],
+                    "drift",
+                    f"effector crept {drift.total_mm:.3f} mm over {drift.duration_s:.2f} s "
+                    f"(dx {d[0]:+.3f}, dy {d[1]:+.3f}, dz {d[2]:+.3f} mm; p = {drift.p:.1e} "
+                    f"against the camera's frame noise; limits: p < {lim.drift_alpha:g} and "
+                    f"> {lim.max_drift_mm:g} mm)",
+                )
+            )
+            continue
+        drifts[i] = drift
         series.append(
             TakeSeries(
                 fit.frame_positions[i],
@@ -115,7 +137,11 @@ def measure_camera_session(
             )
         )
         rows.append(i)
-    judged = judge_takes(series, lim)
+    # the drift was judged above on the camera's noise: the frames' own scatter (a few
+    # frames) is not asked again
+    judged = judge_takes(
+        series, lim.model_copy(update={"max_drift_mm": NO_DRIFT_LIMIT, "motion_alpha": 0.0})
+    )
     keep: list[int] = []
     results: list[TakeMeasurement] = []
     for i, r in zip(rows, judged):
@@ -126,12 +152,17 @@ def measure_camera_session(
             results.append(r)
     rejected.sort(key=lambda r: r.pose)
     k = np.asarray(keep, dtype=int)
-    cov = _pose_covariances(fit, k, results, lim)
+    cov = _pose_covariances(fit, k, [drifts[i] for i in keep], lim)
     refusals: tuple[str, ...] = ()
-    if data.calibration is not None and not data.calibration.ok:
+    calibration = data.calibration
+    seen = _boards_seen_px(data.detections())
+    if calibration is not None and len(seen):
+        # the lens must be known where this session's boards are seen, not everywhere
+        calibration = calibration.judged_for(seen, "where this session's boards are seen")
+    if calibration is not None and not calibration.ok:
         refusals = tuple(
             f"the calibration views ({camera.calibration_views}): {text}"
-            for text in data.calibration.problems
+            for text in calibration.problems
         )
     return SessionMeasurements(
         p.pose[k],
@@ -172,17 +203,34 @@ def _frame_reasons(take: object) -> list[str]:
     return out
 
 
+def _boards_seen_px(takes: list[TakeDetections]) -> np.ndarray:
+    """(N, 2) px: every corner of either board in the first frame of every take."""
+    pts = [
+        d.corners_px
+        for t in takes
+        for d in (t.reference[:1] + t.effector[:1])
+        if d is not None and len(d)
+    ]
+    return np.concatenate(pts) if pts else np.zeros((0, 2))
+
+
+def _frame_noise(fit: SessionFit, row: int) -> np.ndarray:
+    """One frame's covariance at pose ``row`` (NaN when the fit has none)."""
+    cov = fit.frame_noise_covariances
+    return cov[row] if row < len(cov) else np.full((3, 3), np.nan)
+
+
 def _pose_covariances(
-    fit: SessionFit, rows: np.ndarray, takes: list[TakeMeasurement], lim: AcceptanceLimits
+    fit: SessionFit, rows: np.ndarray, drifts: list[CameraDrift], lim: AcceptanceLimits
 ) -> np.ndarray:
     """Each kept pose's covariance: its corners' noise through the pose solution (the frames'
     own scatter is not used: a few frames give a poor standard error, and the corners'
     noise already counts them), plus the motion of a take whose drift is significant
-    (drift / sqrt(12) per coordinate)."""
+    against the camera's noise (drift / sqrt(12) per coordinate)."""
     cov = np.array(fit.covariances[rows]).reshape(-1, 3, 3)
-    for j, t in enumerate(takes):
-        if float(t.stats.drift_p) < lim.motion_alpha:
-            cov[j] = cov[j] + np.diag(np.asarray(t.stats.drift_mm) ** 2 / 12.0)
+    for j, d in enumerate(drifts):
+        if d.p < lim.motion_alpha:
+            cov[j] = cov[j] + np.diag(np.asarray(d.drift_mm) ** 2 / 12.0)
     return cov
 
 
@@ -195,8 +243,10 @@ def _fit_notes(fit: SessionFit) -> tuple[str, ...]:
             + f" (corner noise {fit.pixel_sigma:.3f} px)"
         )
     common = float(np.sqrt(np.trace(fit.common_covariance)))
-    notes.append(
-        f"every B shares one unknown vector of {common:.3g} mm RMS (effector-board orientation "
-        "x offset): identification cannot see it; the trust gate counts it"
-    )
+    if common > 0:
+        notes.append(
+            f"every B shares one unknown vector of {common:.3g} mm RMS (effector-board "
+            "orientation x offset, offset as printed): identification cannot see it; the "
+            "trust gate counts it"
+        )
     return tuple(notes)

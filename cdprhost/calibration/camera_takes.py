@@ -21,7 +21,12 @@ import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CameraSetup, CharucoBoard
-from cdprhost.calibration.camera.detection import BoardDetection, DetectorSettings, detect_board
+from cdprhost.calibration.camera.detection import (
+    BoardDetection,
+    DetectorSettings,
+    detect_board,
+    explain_missing_board,
+)
 from cdprhost.calibration.camera.intrinsics import (
     Intrinsics,
     IntrinsicsResult,
@@ -30,6 +35,10 @@ from cdprhost.calibration.camera.intrinsics import (
 from cdprhost.calibration.camera.session_fit import TakeDetections
 from cdprhost.calibration.camera_config import CameraConfig, load_intrinsics
 from cdprhost.errors import InputError
+
+#: Calibration views without the board that are examined for why (decoding every marker
+#: and trying the other layouts costs a few detections each).
+EXPLAINED_VIEWS = 3
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -155,17 +164,21 @@ def calibrate_from_views(
     """Intrinsics from a folder (or video) of calibration views; the frames' names."""
     detections: list[BoardDetection | None] = []
     names: list[str] = []
+    missing: dict[int, str] = {}
     size: tuple[int, int] | None = None
     for frame in read_frames(folder, size):
         h, w = frame.image.shape[:2]
         size = size or (w, h)
         _check_size(frame.image, size, f"{folder}/{frame.name}")
-        detections.append(detect_board(frame.image, board, settings))
+        found = detect_board(frame.image, board, settings)
+        if found is None and len(missing) < EXPLAINED_VIEWS:
+            missing[len(detections)] = explain_missing_board(frame.image, board, settings)
+        detections.append(found)
         names.append(frame.name)
     if size is None:  # pragma: no cover - read_frames raises first
         raise InputError("no calibration views", source=str(folder))
     try:
-        result = calibrate_intrinsics(detections, board, size)
+        result = calibrate_intrinsics(detections, board, size, missing=missing)
     except ValueError as exc:
         raise InputError(str(exc), source=str(folder)) from None
     return result, tuple(names)

@@ -25,8 +25,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from cdprhost.calibration.camera.intrinsics import IntrinsicsResult
 
 BOARD_HELP = (
-    "the board: SXxSY,SQUARE_MM,MARKER_MM[,DICTIONARY[,FIRST_MARKER_ID]] "
-    "(e.g. 9x6,25,18,DICT_5X5_250,150), or a TOML file with the board's table "
+    "the board: SXxSY,SQUARE_MM,MARKER_MM[,DICTIONARY[,FIRST_MARKER_ID]][,legacy] "
+    "(e.g. 9x6,25,18,DICT_5X5_250,150; legacy: OpenCV's layout before 4.6), or a TOML file with the board's table "
     "(a session.toml: its [camera.calibration_board])"
 )
 
@@ -85,8 +85,10 @@ def parse_board(text: str) -> CharucoBoard:
     path = Path(text)
     if path.suffix.lower() == ".toml" or path.is_file():
         return _board_from_toml(path)
+    legacy = re.search(r",\s*legacy\s*$", text, re.IGNORECASE)
+    spec = text[: legacy.start()] if legacy else text
     m = re.fullmatch(
-        r"\s*(\d+)\s*[xX]\s*(\d+)\s*,([^,]+),([^,]+)(?:,([A-Za-z0-9_]+))?(?:,(\d+))?\s*", text
+        r"\s*(\d+)\s*[xX]\s*(\d+)\s*,([^,]+),([^,]+)(?:,([A-Za-z0-9_]+))?(?:,(\d+))?\s*", spec
     )
     if not m:
         raise InputError(f"--board: cannot read {text!r}; expected {BOARD_HELP}")
@@ -97,6 +99,7 @@ def parse_board(text: str) -> CharucoBoard:
             float(m[4]),
             m[5] or "DICT_5X5_250",
             int(m[6] or 0),
+            legacy_pattern=bool(legacy),
         )
     except ValueError as exc:
         raise InputError(f"--board {text!r}: {exc}") from None
@@ -201,6 +204,8 @@ def result_json(result: IntrinsicsResult, names: tuple[str, ...]) -> dict[str, A
             "corner_cells": c.corner_cells,
             "max_tilt_deg": c.max_tilt_deg,
             "tilt_axes": c.tilt_axes,
+            "region": c.region,
+            "region_sd_px": c.region_sd_px if math.isfinite(c.region_sd_px) else None,
         },
         "views": len(names),
         "views_used": [names[i] for i in result.views_used],
@@ -226,6 +231,11 @@ def result_text(result: IntrinsicsResult, names: tuple[str, ...]) -> str:
         f"coverage: corners reach {c.cell_fraction:.0%} of the image's cells, "
         f"{c.corner_cells}/4 of its corners; tilt up to {c.max_tilt_deg:.0f} deg "
         f"about {c.tilt_axes} axis(es)"
+        + (
+            f"; lens known to {c.region_sd_px:.3f} px in {c.region}"
+            if math.isfinite(c.region_sd_px)
+            else ""
+        )
     )
     lines += [f"  view {names[i]} not used: {why}" for i, why in result.views_dropped]
     return "\n".join(lines)

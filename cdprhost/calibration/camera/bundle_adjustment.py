@@ -21,7 +21,16 @@ from cdprhost.kinematics.machine import MachineModel
 
 #: Prior std of each refinable intrinsic when the calibration gives none, and the factor on
 #: the calibration's own std (calibrateCamera's are optimistic: they see only corner noise).
-PRIOR_FLOOR = {"f": 0.005, "cx": 8.0, "cy": 8.0, "k1": 0.03, "k2": 0.05}  # f: relative
+PRIOR_FLOOR = {
+    "f": 0.005,  # relative
+    "cx": 8.0,
+    "cy": 8.0,
+    "k1": 0.03,
+    "k2": 0.05,
+    "p1": 0.0005,
+    "p2": 0.0005,
+    "k3": 0.05,
+}
 
 
 PRIOR_FACTOR = 3.0

@@ -6,13 +6,17 @@ Pure: the image comes in as a numpy array (grey or BGR); nothing is read or writ
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CharucoBoard
+
+#: A detection with more of its corners failing the chessboard-corner test is checked
+#: against the other layout (legacy or not).
+MAX_LAYOUT_MISFIT = 0.1
 
 
 @dataclass(frozen=True)
@@ -46,13 +50,29 @@ class BoardDetection:
 
 
 def detect_board(
-    image: np.ndarray, board: CharucoBoard, settings: DetectorSettings | None = None
+    image: np.ndarray,
+    board: CharucoBoard,
+    settings: DetectorSettings | None = None,
+    *,
+    check_layout: bool = True,
 ) -> BoardDetection | None:
     """The board's corners in ``image`` (uint8 grey or BGR), or None when fewer than
-    ``settings.min_markers`` markers (or no corner) are found."""
+    ``settings.min_markers`` markers (or no corner) are found, or when the corners fit
+    the other layout (legacy or not) clearly better: every corner one square off."""
     cfg = settings or DetectorSettings()
     grey = _grey(image)
-    corners, ids, markers, _ = _detector(board, cfg).detectBoard(grey)
+    detector = _detector(board, cfg)
+    corners, ids, markers, marker_ids = detector.detectBoard(grey)
+    if markers is not None and marker_ids is not None and len(markers) >= 3:
+        # a marker elsewhere in the room that decodes as one of the board's ids (a blob in
+        # leaves, another board) throws the corners' interpolation off: drop the markers
+        # that do not sit where the board's layout puts them, and interpolate again
+        keep = markers_on_board(np.asarray(markers, float), marker_ids, board)
+        if not keep.all():
+            kept = tuple(m for m, k in zip(markers, keep) if k)
+            corners, ids, markers, _ = detector.detectBoard(
+                grey, markerCorners=kept, markerIds=np.asarray(marker_ids)[keep]
+            )
     n_markers = 0 if markers is None else len(markers)
     if ids is None or corners is None or len(ids) == 0 or n_markers < cfg.min_markers:
         return None
@@ -68,6 +88,16 @@ def detect_board(
     ids, px = ids[keep], px[keep]
     if ids.size == 0:
         return None
+    misfit = layout_misfit(grey, board, ids, px)
+    if check_layout and misfit > MAX_LAYOUT_MISFIT:
+        other = replace(board, legacy_pattern=not board.legacy_pattern)
+        alt = detect_board(grey, other, cfg, check_layout=False)
+        if (
+            alt is not None
+            and len(alt) >= 0.8 * ids.size
+            and layout_misfit(grey, other, alt.ids, alt.corners_px) < 0.5 * misfit
+        ):
+            return None
     order = np.argsort(ids)
     return BoardDetection(ids[order], px[order], n_markers, sharpness(grey, px), (w, h))
 
@@ -98,6 +128,148 @@ def _detector(board: CharucoBoard, cfg: DetectorSettings) -> Any:
         charuco.tryRefineMarkers = True
         _DETECTORS[key] = cv2.aruco.CharucoDetector(board.cv_board, charuco, params)
     return _DETECTORS[key]
+
+
+def layout_misfit(
+    grey: np.ndarray, board: CharucoBoard, ids: np.ndarray, corners_px: np.ndarray
+) -> float:
+    """The fraction of the corners that are not chessboard corners where the layout says.
+    A board printed in another layout (OpenCV's legacy pattern) decodes the same markers
+    and yields its corners labelled one square off: the row or column of them on the
+    board's edge then sits where no inner corner is. An inner corner has like colours in
+    opposite quadrants and unlike ones in neighbouring quadrants (sampled in the white rim
+    around the markers, through the corners' homography)."""
+    if len(ids) < 6:
+        return 0.0
+    xy = board.corners_mm[ids, :2]
+    hom, _ = cv2.findHomography(xy, corners_px, 0)
+    if hom is None:
+        return 0.0
+    d = 0.25 * (board.square_mm - board.marker_mm)  # the middle of a marker's white rim
+    offsets = np.array([[d, d], [-d, -d], [d, -d], [-d, d]])
+    pts = (xy[:, None, :] + offsets[None]).reshape(-1, 2)
+    q = np.c_[pts, np.ones(len(pts))] @ hom.T
+    uv = (q[:, :2] / q[:, 2:]).reshape(-1, 4, 2)
+    h, w = grey.shape[:2]
+    inside = np.all(np.isfinite(uv) & (uv >= 0) & (uv <= [w - 1, h - 1]), axis=(1, 2))
+    if inside.sum() < 6:
+        return 0.0
+    uv = uv[inside]
+    img = grey.astype(np.float32)
+    vals = img[np.round(uv[..., 1]).astype(int), np.round(uv[..., 0]).astype(int)]
+    same = np.abs(vals[:, 0] - vals[:, 1]) + np.abs(vals[:, 2] - vals[:, 3])
+    unlike = np.abs(vals[:, :2].mean(axis=1) - vals[:, 2:].mean(axis=1))
+    return float(np.mean(unlike <= same))
+
+
+def explain_missing_board(
+    image: np.ndarray, board: CharucoBoard, settings: DetectorSettings | None = None
+) -> str:
+    """Why ``board`` is not found in ``image``: which markers decode, and whether they fit
+    another layout (OpenCV's legacy pattern, the sizes swapped, another first marker id)."""
+    cfg = settings or DetectorSettings()
+    grey = _grey(image)
+    params = _detector(board, cfg).getDetectorParameters()
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board.dictionary))
+    _corners, ids, _ = cv2.aruco.ArucoDetector(dictionary, params).detectMarkers(grey)
+    found = np.zeros(0, int) if ids is None else np.asarray(ids, int).ravel()
+    if found.size == 0:
+        return f"board not found: no {board.dictionary} marker decoded"
+    own = np.isin(found, board.marker_ids)
+    text = (
+        f"board not found: {found.size} {board.dictionary} marker(s) decoded (ids "
+        f"{_id_list(found)}), {int(own.sum())} of them the board's ({board.marker_ids[0]}-"
+        f"{board.marker_ids[-1]})"
+    )
+    hints = []
+    sx, sy = board.squares
+    variants = [
+        (board.squares, not board.legacy_pattern, "the legacy layout (OpenCV before 4.6)"),
+        ((sy, sx), board.legacy_pattern, f"a {sy}x{sx} board (the sizes swapped)"),
+        ((sy, sx), not board.legacy_pattern, f"a {sy}x{sx} board in the legacy layout"),
+    ]
+    if not own.any():
+        start = int(found.min())
+        variants.append((board.squares, board.legacy_pattern, f"first_marker_id {start}"))
+    for squares, legacy, name in variants:
+        first = int(found.min()) if "first_marker_id" in name else board.first_marker_id
+        try:
+            other = CharucoBoard(
+                squares, board.square_mm, board.marker_mm, board.dictionary, first, legacy
+            )
+        except ValueError:
+            continue
+        d = detect_board(grey, other, cfg)
+        if d is not None and len(d) >= 6:
+            hints.append(f"{name}: {len(d)} corners found with it")
+    if hints:
+        text += (
+            "; the markers fit "
+            + " and ".join(hints)
+            + " (say legacy_pattern = true in the board's table, or ',legacy' in --board)"
+        )
+    return text
+
+
+def _id_list(ids: np.ndarray, most: int = 8) -> str:
+    u = np.unique(ids)
+    shown = ", ".join(str(int(i)) for i in u[:most])
+    return shown + (f", ... ({u.size} distinct)" if u.size > most else "")
+
+
+def markers_on_board(
+    markers: np.ndarray, marker_ids: np.ndarray, board: CharucoBoard, tolerance: float = 0.5
+) -> np.ndarray:
+    """Mask of the decoded ``markers`` ((N, 1, 4, 2) or (N, 4, 2) px, ids (N,)) that sit
+    where the board's layout puts them: a homography from each marker's own four corners
+    is a hypothesis, the one most other markers agree with (centre within ``tolerance`` x
+    their size, then within it of the homography of all that agree) wins. A marker that is
+    not the board's, or a second marker with an id already placed, is an impostor."""
+    px = np.asarray(markers, float).reshape(-1, 4, 2)
+    ids = np.asarray(marker_ids, int).ravel()
+    n = len(ids)
+    objs = np.asarray(board.cv_board.getObjPoints(), float)[:, :, :2]
+    rows = ids - board.first_marker_id
+    known = (rows >= 0) & (rows < len(objs))
+    keep = known.copy()
+    if known.sum() < 3:
+        return keep
+    obj = np.where(known[:, None, None], objs[np.clip(rows, 0, len(objs) - 1)], 0.0)
+    centre_obj = obj.mean(axis=1)
+    centre_px = px.mean(axis=1)
+    size = np.sqrt(np.abs(_area(px))) + 1e-9
+
+    def agree(hom: np.ndarray) -> np.ndarray:
+        q = np.c_[centre_obj, np.ones(n)] @ hom.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            err = np.linalg.norm(q[:, :2] / q[:, 2:] - centre_px, axis=1) / size
+        return known & np.isfinite(err) & (err <= tolerance)
+
+    best = np.zeros(n, bool)
+    for i in np.flatnonzero(known):
+        hom = cv2.getPerspectiveTransform(obj[i].astype(np.float32), px[i].astype(np.float32))
+        inl = agree(hom)
+        if inl.sum() > best.sum():
+            best = inl
+    for _ in range(2):
+        if best.sum() < 2:
+            break
+        hom, _mask = cv2.findHomography(obj[best].reshape(-1, 2), px[best].reshape(-1, 2), 0)
+        if hom is None:
+            break
+        best = agree(hom)
+    if best.sum() < 2:
+        return keep
+    # one marker per id: a second one with the same id (both agreeing) is ambiguous
+    _, first = np.unique(ids[best], return_index=True)
+    out = np.zeros(n, bool)
+    out[np.flatnonzero(best)[first]] = True
+    return out
+
+
+def _area(quads: np.ndarray) -> np.ndarray:
+    x, y = quads[..., 0], quads[..., 1]
+    return 0.5 * np.sum(x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y, axis=-1)
 
 
 def square_px(corners_px: np.ndarray) -> float:

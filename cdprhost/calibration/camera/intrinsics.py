@@ -1,27 +1,37 @@
 """Camera intrinsics: the pinhole matrix and OpenCV's 5-term distortion, with uncertainty.
 
-:func:`calibrate_intrinsics` solves them from ChArUco views (``cv2.calibrateCameraExtended``
-on sub-pixel corners), reports the reprojection error and each parameter's standard
-deviation, and refuses views that cannot pin them down (:class:`Coverage`): corners must
-reach the image's edges and corners, and the board must be seen tilted in more than one
+:func:`calibrate_intrinsics` solves them from ChArUco views (``cv2.calibrateCamera`` on
+sub-pixel corners for a start, then :func:`~.bowed_fit.refine_intrinsics`: the printed
+board's bow fitted with the lens, and the tangential and k3 terms only where the views
+observe them), reports the reprojection error and each parameter's standard
+deviation, and refuses views that cannot pin them down (:class:`Coverage`): the predicted
+reprojection uncertainty must be small where the machine's boards are seen (the middle of
+the image unless a session says where), and the board must be seen tilted in more than one
 direction (a set of face-on views leaves the focal length and the depth traded off).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CharucoBoard
+from cdprhost.calibration.camera.bowed_fit import refine_intrinsics
 from cdprhost.calibration.camera.detection import BoardDetection
+from cdprhost.calibration.camera.reprojection_uncertainty import middle_region, reprojection_sd
 
 #: Fewest views calibrateCamera is given, and fewest for a trusted result.
 MIN_VIEWS, MIN_GOOD_VIEWS = 3, 8
-#: The image is divided in GRID x GRID cells for the coverage check.
+#: The image is divided in GRID x GRID cells for the coverage figures and advice.
 GRID = 4
+#: Largest predicted reprojection uncertainty (px) where the machine's boards are seen.
+MAX_REGION_SD_PX = 0.15
+#: Points of the region the uncertainty is evaluated at (at most).
+MAX_REGION_POINTS = 300
 
 #: Order of :attr:`Intrinsics.std` and of the refinable parameters.
 PARAMETER_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
@@ -38,6 +48,8 @@ class Intrinsics:
     image_size: tuple[int, int]
     std: np.ndarray = field(default_factory=lambda: np.full(9, np.nan))
     rms_reprojection_px: float | None = None
+    #: the calibration board's fitted bow (mm, middle against edges), when calibrated here
+    board_bow_mm: float | None = None
 
     @property
     def vector(self) -> np.ndarray:
@@ -89,9 +101,11 @@ class Intrinsics:
 
 @dataclass(frozen=True)
 class Coverage:
-    """Do the views pin the intrinsics down? ``ok``; ``reason`` (why not); ``advice`` (which
-    views to add); the measured figures: fraction of the image's 4x4 cells (and of its four
-    corner cells) that corners reached, and the spread of board tilts (degrees)."""
+    """Do the views pin the intrinsics down where the machine's boards are seen? ``ok``;
+    ``reason`` (why not); ``advice`` (which views to add); the measured figures: fraction
+    of the image's 4x4 cells (and of its four corner cells) that corners reached, the
+    spread of board tilts (degrees), and the largest predicted reprojection uncertainty
+    (px) over the region that matters (``region_sd_px``; NaN when not computed)."""
 
     ok: bool
     reason: str
@@ -100,6 +114,8 @@ class Coverage:
     corner_cells: int
     max_tilt_deg: float
     tilt_axes: int  # distinct tilt directions seen (0, 1 or 2)
+    region_sd_px: float = float("nan")
+    region: str = "the middle of the image"
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,6 +129,25 @@ class IntrinsicsResult:
     coverage: Coverage
     views_used: tuple[int, ...]
     views_dropped: tuple[tuple[int, str], ...] = ()
+    covariance: np.ndarray | None = None  # (9, 9) of ``intrinsics.vector``
+    normals: np.ndarray | None = None  # (V, 3) board z axes of the views used (camera)
+    detections: tuple[BoardDetection, ...] = ()  # of the views used
+
+    def judged_for(self, region_px: np.ndarray, region: str) -> IntrinsicsResult:
+        """The same calibration with its coverage judged over ``region_px`` (N, 2): where
+        the machine's boards are seen (``region`` names it)."""
+        if self.covariance is None or self.normals is None:
+            return self
+        coverage = judge_coverage(
+            list(self.detections),
+            self.normals,
+            self.intrinsics.image_size,
+            vector=self.intrinsics.vector,
+            covariance=self.covariance,
+            region_px=region_px,
+            region=region,
+        )
+        return replace(self, coverage=coverage)
 
     @property
     def ok(self) -> bool:
@@ -128,11 +163,15 @@ def calibrate_intrinsics(
     board: CharucoBoard,
     image_size: tuple[int, int],
     *,
-    min_corners: int = 8,
-    fit_k3: bool = False,
+    min_corners: int = 6,
+    fit_k3: bool | None = None,
+    missing: Mapping[int, str] | None = None,
 ) -> IntrinsicsResult:
     """Intrinsics from ChArUco views of ``board`` (None = board not found in that view;
-    views with fewer than ``min_corners`` corners are dropped, with the reason). Raises
+    views with fewer than ``min_corners`` corners are dropped, with the reason: a view
+    that shows part of the board counts). ``fit_k3`` None: k3 is fitted when the views
+    observe it (as p1, p2 are); True/False: always/never. ``missing``: why the board is
+    not found in some views (by index; default "board not found"). Raises
     ValueError when fewer than 3 views are usable; a result whose ``coverage.ok`` is False
     must be refused by the caller (exit 1) with ``problems``."""
     used: list[int] = []
@@ -140,7 +179,7 @@ def calibrate_intrinsics(
     obj, img = [], []
     for i, d in enumerate(detections):
         if d is None:
-            dropped.append((i, "board not found"))
+            dropped.append((i, (missing or {}).get(i, "board not found")))
         elif len(d) < min_corners:
             dropped.append((i, f"only {len(d)} corners (need {min_corners})"))
         elif tuple(d.image_size) != tuple(image_size):
@@ -157,27 +196,46 @@ def calibrate_intrinsics(
     w, h = image_size
     f0 = 0.9 * max(w, h)
     k0 = np.array([[f0, 0, (w - 1) / 2], [0, f0, (h - 1) / 2], [0, 0, 1]])
-    flags = cv2.CALIB_USE_INTRINSIC_GUESS | (0 if fit_k3 else cv2.CALIB_FIX_K3)
-    crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-10)
-    rms, k, dist, rvecs, _, std_i, _, per_view = cv2.calibrateCameraExtended(
+    # a start: OpenCV's flat-board fit with the radial terms only
+    flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
+    crit = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-10)
+    _rms, k, dist, rvecs, tvecs = cv2.calibrateCamera(
         obj, img, (w, h), k0, np.zeros(5), flags=flags, criteria=crit
     )
-    std = np.asarray(std_i, float).ravel()[:9]
-    if not fit_k3:
-        std[8] = 0.0
-    intr = Intrinsics(
-        np.asarray(k, float),
-        np.asarray(dist, float).ravel()[:5],
-        (int(w), int(h)),
-        std,
-        float(rms),
+    start = np.concatenate(
+        [[k[0, 0], k[1, 1], k[0, 2], k[1, 2]], np.asarray(dist, float).ravel()[:5]]
     )
+    fit = refine_intrinsics(
+        obj,
+        img,
+        start,
+        np.asarray(rvecs, float).reshape(-1, 3),
+        np.asarray(tvecs, float).reshape(-1, 3),
+        board.corners_mm,
+        fit_k3=fit_k3,
+    )
+    rms = fit.rms_px
+    intr = replace(
+        Intrinsics.from_vector(fit.vector, (int(w), int(h)), fit.std, rms),
+        board_bow_mm=fit.bow_mm,
+    )
+    per_view = fit.per_view_px
+    rvecs = list(fit.rvecs)
     normals = np.array([cv2.Rodrigues(r)[0][:, 2] for r in rvecs])
+    seen = tuple(d for d in (detections[i] for i in used) if d is not None)
     coverage = judge_coverage(
-        [d for d in (detections[i] for i in used) if d is not None], normals, (w, h)
+        list(seen), normals, (w, h), vector=fit.vector, covariance=fit.covariance
     )
     return IntrinsicsResult(
-        intr, float(rms), np.asarray(per_view, float).ravel(), coverage, tuple(used), tuple(dropped)
+        intr,
+        float(rms),
+        np.asarray(per_view, float).ravel(),
+        coverage,
+        tuple(used),
+        tuple(dropped),
+        fit.covariance,
+        normals,
+        seen,
     )
 
 
@@ -186,12 +244,20 @@ def judge_coverage(
     normals: np.ndarray,
     image_size: tuple[int, int],
     *,
-    min_cell_fraction: float = 0.75,
+    vector: np.ndarray | None = None,
+    covariance: np.ndarray | None = None,
+    region_px: np.ndarray | None = None,
+    region: str = "the middle of the image",
+    max_region_sd_px: float = MAX_REGION_SD_PX,
     min_tilt_deg: float = 20.0,
     axis_tilt_deg: float = 12.0,
 ) -> Coverage:
-    """Do corners reach the image (a 4 x 4 grid of cells, all four corner cells) and is the
-    board tilted enough, about both image axes? ``normals`` (V, 3) board z axes in the
+    """Do the views pin the lens down where it matters, and is the board tilted enough,
+    about both image axes? The first is the predicted reprojection uncertainty
+    (:func:`~.reprojection_uncertainty.reprojection_sd`, from ``vector`` and its
+    ``covariance``) over ``region_px`` (where the machine's boards are seen; default the
+    middle of the image): at most ``max_region_sd_px``. An image corner no view reached
+    matters only if the boards are seen there. ``normals`` (V, 3) board z axes in the
     camera frame."""
     w, h = image_size
     hit = np.zeros((GRID, GRID), bool)
@@ -220,18 +286,34 @@ def judge_coverage(
     if len(detections) < MIN_GOOD_VIEWS:
         reasons.append(f"only {len(detections)} usable views (need {MIN_GOOD_VIEWS})")
         advice.append(f"take at least {MIN_GOOD_VIEWS - len(detections)} more views")
-    if fraction < min_cell_fraction or missing:
-        empty = [f"row {r + 1} col {c + 1}" for r, c in zip(*np.nonzero(~hit))]
-        reasons.append(
-            f"corners cover {fraction:.0%} of the image's {GRID}x{GRID} cells (need {min_cell_fraction:.0%}"
-            + (f", and every corner of the image; missing: {', '.join(missing)}" if missing else "")
-            + ")"
-        )
-        advice.append(
-            "add views with the board near "
-            + (", ".join(missing) if missing else "the empty cells")
-            + f" (empty cells: {', '.join(empty[:8])}{' ...' if len(empty) > 8 else ''})"
-        )
+    region_sd = float("nan")
+    if vector is not None and covariance is not None:
+        pts = middle_region((w, h)) if region_px is None else np.asarray(region_px, float)
+        pts = pts.reshape(-1, 2)
+        if len(pts) > MAX_REGION_POINTS:
+            pts = pts[np.linspace(0, len(pts) - 1, MAX_REGION_POINTS).astype(int)]
+        sd = reprojection_sd(vector, covariance, pts)
+        region_sd = float(sd.max(initial=0.0))
+        if region_sd > max_region_sd_px:
+            cells = np.clip((pts / np.array([w, h]) * GRID).astype(int), 0, GRID - 1)
+            worst: dict[tuple[int, int], float] = {}
+            for (cx, cy), s in zip(cells, sd):
+                if s > max_region_sd_px:
+                    key = (int(cy), int(cx))
+                    worst[key] = max(worst.get(key, 0.0), float(s))
+            names = [
+                corner_names.get(rc, f"row {rc[0] + 1} col {rc[1] + 1}")
+                for rc in sorted(worst, key=lambda k: -worst[k])
+            ]
+            reasons.append(
+                f"the lens is known to {region_sd:.2f} px where the machine's boards are seen "
+                f"({region}; need {max_region_sd_px:g} px)"
+            )
+            advice.append(
+                "add views with the board near "
+                + ", ".join(names[:6])
+                + (" ..." if len(names) > 6 else "")
+            )
     if max_tilt < min_tilt_deg or axes < 2:
         reasons.append(
             f"the board is tilted at most {max_tilt:.0f} deg (need {min_tilt_deg:g}), about the "
@@ -243,10 +325,14 @@ def judge_coverage(
     ok = not reasons
     return Coverage(
         ok,
-        "; ".join(reasons) if reasons else "views cover the image and tilt enough",
+        "; ".join(reasons)
+        if reasons
+        else f"views pin the lens down where the boards are seen ({region}) and tilt enough",
         "; ".join(advice),
         fraction,
         4 - len(missing),
         max_tilt,
         axes,
+        region_sd,
+        region,
     )

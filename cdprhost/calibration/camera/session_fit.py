@@ -42,7 +42,7 @@ from cdprhost.calibration.camera.bundle_adjustment import (
     fit_camera_only,
 )
 from cdprhost.calibration.camera.detection import BoardDetection
-from cdprhost.calibration.camera.intrinsics import Intrinsics
+from cdprhost.calibration.camera.intrinsics import PARAMETER_NAMES, Intrinsics
 from cdprhost.calibration.camera.pose import solve_board_pose
 from cdprhost.calibration.camera.pose_covariance import (
     MIN_PIXEL_SIGMA,
@@ -56,6 +56,23 @@ from cdprhost.kinematics.machine import MachineModel
 
 #: Intrinsics the bundle adjustment may refine (indices into PARAMETER_NAMES).
 REFINABLE = ("f", "cx", "cy", "k1", "k2")
+#: ... and those it refines only when the calibration fitted them (a term the calibration
+#: views did not observe is held at zero, std 0).
+REFINABLE_WHEN_FITTED = ("p1", "p2", "k3")
+
+
+def default_refine(intrinsics: Intrinsics) -> tuple[str, ...]:
+    """:data:`REFINABLE` and the terms of :data:`REFINABLE_WHEN_FITTED` the calibration
+    fitted (a finite, non-zero std)."""
+    std = np.asarray(intrinsics.std, float)
+    fitted = tuple(
+        n
+        for n in REFINABLE_WHEN_FITTED
+        if np.isfinite(s := std[PARAMETER_NAMES.index(n)]) and s > 0
+    )
+    return REFINABLE + fitted
+
+
 #: Std of the effector board's offset per coordinate (mm) when the set-up states none.
 DEFAULT_OFFSET_SIGMA_MM = 0.0
 
@@ -112,6 +129,11 @@ class SessionFit:
     # mm) with which the reference board's pose puts every B in a slightly wrong frame
     frame_covariance: np.ndarray = field(default_factory=lambda: np.zeros((6, 6)))
     extra: dict[str, float] = field(default_factory=dict)
+    # (K, 3, 3) the covariance of one frame's B about its take's mean: the frame-to-frame
+    # corner noise (``frame_pixel_sigma``, px, pooled over the session) through the pose's
+    # solution; what a take's drift test measures its frames against (NaN: no position)
+    frame_noise_covariances: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    frame_pixel_sigma: float = float("nan")
 
     @property
     def usable(self) -> np.ndarray:
@@ -182,7 +204,7 @@ def fit_session(
 ) -> SessionFit:
     """The session-level fit (module doc). With ``sliders`` (K, 3) commanded and ``model``
     (the profile's), the bundle adjustment refines the intrinsics named in ``refine``
-    (default :data:`REFINABLE`) jointly with the 12 parameters; without them, the
+    (default :func:`default_refine`) jointly with the 12 parameters; without them, the
     camera-only positions. ``fit_rows`` (K,) bool: the poses that enter the bundle
     adjustment (default all; check poses are left out so that they test it). Raises ValueError when the reference board is never seen well
     enough (naming the frames) or no pose has a usable frame."""
@@ -266,7 +288,7 @@ def fit_session(
             board_pts,
             offset,
             intrinsics,
-            refine if refine is not None else REFINABLE,
+            refine if refine is not None else default_refine(intrinsics),
             cam_r,
             cam_t,
             eff_rv,
@@ -294,6 +316,12 @@ def fit_session(
         j = jacs[k]
         assert j is not None
         covariances[k] = sigma_px**2 * np.linalg.inv(j.T @ j)
+    frame_sigma = _frame_pixel_sigma(takes, good, eff_means)
+    frame_noise = np.full((k_poses, 3, 3), np.nan)
+    for k in idx:
+        j = jacs[k]
+        assert j is not None
+        frame_noise[k] = frame_sigma**2 * np.linalg.inv(j.T @ j)
     frame_pos = []
     for kk, take in enumerate(takes):
         fp = np.full((len(take.effector), 3), np.nan)
@@ -309,10 +337,19 @@ def fit_session(
     # the vector shared by every B: board orientation error x offset, offset as printed
     lever = skew(rot_eff @ offset)
     off_sigma = setup.effector.offset_sigma_mm or DEFAULT_OFFSET_SIGMA_MM
-    common = lever @ cov_eff_rot @ lever.T + off_sigma**2 * np.eye(3)
-    frame = frame_covariance(
-        cam_r, cam_t, camera_pose_covariance(ref_ids, ref_obj, ref_px, ref_board, v, cam_r, cam_t)
-    )
+    common = off_sigma**2 * np.eye(3)
+    frame = np.zeros((6, 6))
+    if q_fit is None:
+        common = common + lever @ cov_eff_rot @ lever.T
+        frame = frame_covariance(
+            cam_r,
+            cam_t,
+            camera_pose_covariance(ref_ids, ref_obj, ref_px, ref_board, v, cam_r, cam_t),
+        )
+    # else: the bundle adjustment estimated the camera pose and the board orientation with
+    # the 12 parameters; what their uncertainty does to the workspace is already in
+    # ``geometry_covariance_extra`` (a rigid frame error or a constant shift of every B is
+    # a direction of the parameters): adding it again counted it twice
     v_std = np.asarray(intrinsics.std, float).copy()
     out_intr = Intrinsics.from_vector(
         v, intrinsics.image_size, v_std, intrinsics.rms_reprojection_px
@@ -336,7 +373,40 @@ def fit_session(
         tuple(notes),
         q_fit,
         frame,
+        frame_noise_covariances=frame_noise,
+        frame_pixel_sigma=frame_sigma,
     )
+
+
+def _frame_pixel_sigma(
+    takes: list[TakeDetections],
+    good: list[list[int]],
+    eff_means: list[tuple[np.ndarray, np.ndarray] | None],
+) -> float:
+    """The effector corners' frame-to-frame noise (px per coordinate), pooled over the
+    session: each usable frame's corners about their take's mean (n frames leave n - 1
+    degrees of freedom per corner coordinate)."""
+    ss, dof = 0.0, 0.0
+    for take, g, m in zip(takes, good, eff_means):
+        if m is None:
+            continue
+        ids, mean_px = m
+        lookup = {int(i): row for row, i in enumerate(ids)}
+        dets = [d for i in g if (d := take.effector[i]) is not None]
+        counts = np.zeros(len(ids))
+        sq = np.zeros(len(ids))
+        for d in dets:
+            rows = np.array([lookup.get(int(i), -1) for i in d.ids])
+            sel = rows >= 0
+            diff = d.corners_px[sel] - mean_px[rows[sel]]
+            np.add.at(sq, rows[sel], np.sum(diff**2, axis=1))
+            np.add.at(counts, rows[sel], 1.0)
+        seen = counts >= 2
+        ss += float(np.sum(sq[seen]))
+        dof += float(np.sum(2.0 * (counts[seen] - 1.0)))
+    if dof < 1:
+        return float("nan")
+    return max(float(np.sqrt(ss / dof)), MIN_PIXEL_SIGMA / 10)
 
 
 def _rough_origin(

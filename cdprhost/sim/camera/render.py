@@ -71,16 +71,36 @@ def board_texture(layout: CharucoBoard, px_per_square: int, margin_squares: floa
 
 @dataclass(frozen=True, eq=False)
 class PlacedBoard:
-    """A board in the base frame: ``p_base = origin + rotation @ p_board``."""
+    """A board in the base frame: ``p_base = origin + rotation @ p_board``.
+
+    ``bow_mm`` (along x, along y): how far the middle of the printed chessboard stands
+    out of the plane through its edges toward the printed face's side (paper glued on a
+    board is never flat): ``z = -(bx (1 - u^2) + by (1 - v^2))`` with ``u, v`` the position
+    over the chessboard's half-width and half-height from its middle."""
 
     layout: CharucoBoard
     rotation: np.ndarray
     origin: np.ndarray
     margin_squares: float = 0.5
+    bow_mm: tuple[float, float] = (0.0, 0.0)
+
+    def surface_z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The printed face's height (board frame z, mm) at board coordinates ``x, y``."""
+        return board_bow_z(self.layout, x, y, self.bow_mm)
 
     def outline(self) -> np.ndarray:
         """The four corners of the printed sheet (with its margin), base frame (4, 3)."""
         return self.origin + sheet_outline(self.layout, self.margin_squares) @ self.rotation.T
+
+
+def board_bow_z(
+    layout: CharucoBoard, x: np.ndarray, y: np.ndarray, bow_mm: tuple[float, float]
+) -> np.ndarray:
+    """Height of a bowed sheet (see :class:`PlacedBoard`) at board coordinates (mm)."""
+    w, h = layout.size_mm
+    u = (np.asarray(x, float) - w / 2) / (w / 2)
+    v = (np.asarray(y, float) - h / 2) / (h / 2)
+    return -(bow_mm[0] * (1.0 - u**2) + bow_mm[1] * (1.0 - v**2))
 
 
 def _cubic_weights(x: np.ndarray, n: int) -> np.ndarray:
@@ -196,8 +216,15 @@ class Renderer:
         denom = rays[..., 0] * n[0] + rays[..., 1] * n[1] + n[2]
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = float(n @ t) / denom
-        pts = np.stack([rays[..., 0] * lam, rays[..., 1] * lam, lam], axis=-1) - t
-        local = pts @ rot  # R^T (X - t): board coordinates (mm)
+            pts = np.stack([rays[..., 0] * lam, rays[..., 1] * lam, lam], axis=-1) - t
+            local = pts @ rot  # R^T (X - t): board coordinates (mm)
+            if any(board.bow_mm):
+                # the ray meets the bowed face where its local z is the surface's height:
+                # z = lam * denom - n.t, so lam = (n.t + z(x, y)) / denom, to a fixed point
+                for _ in range(4):
+                    lam = (float(n @ t) + board.surface_z(local[..., 0], local[..., 1])) / denom
+                    pts = np.stack([rays[..., 0] * lam, rays[..., 1] * lam, lam], axis=-1) - t
+                    local = pts @ rot
         tex = self._texels(board)
         cols_mm, rows_mm = tex.extent_mm
         bx = local[..., 0] + tex.margin_mm

@@ -40,7 +40,7 @@ from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.sim.camera.imaging import Imaging, decode
 from cdprhost.sim.camera.scene import CALIBRATION_BOARD, CameraRig
-from cdprhost.sim.camera.views import render_views
+from cdprhost.sim.camera.views import Coverage, render_views
 
 VIEWS_DIR = "intrinsics"
 IntrinsicsSource = Literal["calibrated", "truth", "views"]
@@ -86,13 +86,27 @@ def true_intrinsics(rig: CameraRig) -> Intrinsics:
 
 
 def calibrated_intrinsics(
-    rig: CameraRig, n_views: int = 18, seed: int = 0, supersample: int = 2
+    rig: CameraRig,
+    n_views: int = 18,
+    seed: int = 0,
+    supersample: int = 2,
+    *,
+    views_kind: Coverage = "good",
+    bow_mm: tuple[float, float] = (0.0, 0.0),
 ) -> IntrinsicsResult:
     """What a user's calibration of the rig's camera gives: rendered views of the
-    calibration board, detected and calibrated by the product's own code."""
+    calibration board (``views_kind``, the sheet bowed by ``bow_mm``), detected and
+    calibrated by the product's own code."""
     cam = rig.camera
     views = render_views(
-        cam, rig.imaging, CALIBRATION_BOARD, n_views, seed=seed, supersample=supersample
+        cam,
+        rig.imaging,
+        CALIBRATION_BOARD,
+        n_views,
+        views_kind,
+        seed=seed,
+        supersample=supersample,
+        bow_mm=bow_mm,
     )
     detections = [detect_board(decode(v), CALIBRATION_BOARD) for v in views]
     return calibrate_intrinsics(detections, CALIBRATION_BOARD, cam.image_size)
@@ -102,15 +116,24 @@ def write_views(
     folder: str | os.PathLike[str],
     rig: CameraRig,
     n_views: int = 18,
-    coverage: Literal["good", "poor"] = "good",
+    coverage: Coverage = "good",
     seed: int = 0,
     supersample: int = 2,
+    *,
+    bow_mm: tuple[float, float] = (0.0, 0.0),
 ) -> Path:
     """A folder of calibration views (``view_01.jpg``, ...)."""
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
     views = render_views(
-        rig.camera, rig.imaging, CALIBRATION_BOARD, n_views, coverage, seed, supersample
+        rig.camera,
+        rig.imaging,
+        CALIBRATION_BOARD,
+        n_views,
+        coverage,
+        seed,
+        supersample,
+        bow_mm=bow_mm,
     )
     for i, data in enumerate(views, start=1):
         (out / f"view_{i:02d}{rig.imaging.extension}").write_bytes(data)
@@ -150,16 +173,23 @@ def write_camera_session(
     take_kind: Literal["images", "video"] = "images",
     intrinsics: IntrinsicsSource | Intrinsics = "calibrated",
     n_views: int = 18,
+    views_kind: Coverage = "good",
+    bow_mm: tuple[float, float] = (0.0, 0.0),
     profile_name: str = "paper-simulation",
     roles: Sequence[str] | None = None,
     jitter_mm: float = 0.003,
     take_imaging: Mapping[int, Imaging] | None = None,
     occluders: Mapping[int, Sequence[np.ndarray]] | None = None,
+    take_creep_mm: Mapping[int, Sequence[float]] | None = None,
     supersample: int = 2,
     seed: int = 0,
 ) -> CameraSession:
     """A camera session folder for ``poses`` (visiting order) on the ``truth`` machine.
-    ``take_imaging``/``occluders`` are keyed by pose number (from 1)."""
+    ``views_kind``/``bow_mm``: the calibration views (``"printed"``: a user's bowed sheet,
+    see :mod:`.views`).
+    ``take_imaging``/``occluders``/``take_creep_mm`` are keyed by pose number (from 1);
+    a creeping take's effector moves steadily by that vector (mm) from its first frame
+    to its last."""
     root = Path(directory)
     (root / "takes").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -174,10 +204,20 @@ def write_camera_session(
     if isinstance(intrinsics, Intrinsics):  # a calibration made before (benchmarks)
         used, intrinsics = intrinsics, "calibrated"
     elif intrinsics == "calibrated":
-        calibration = calibrated_intrinsics(rig, n_views, seed, supersample)
+        calibration = calibrated_intrinsics(
+            rig, n_views, seed, supersample, views_kind=views_kind, bow_mm=bow_mm
+        )
         used = calibration.intrinsics
     if intrinsics == "views":
-        write_views(root / VIEWS_DIR, rig, n_views, seed=seed, supersample=supersample)
+        write_views(
+            root / VIEWS_DIR,
+            rig,
+            n_views,
+            views_kind,
+            seed=seed,
+            supersample=supersample,
+            bow_mm=bow_mm,
+        )
     else:
         write_text_atomic(root / CAMERA_FILE, intrinsics_toml(used))
     config = SessionConfig.model_validate(
@@ -198,9 +238,13 @@ def write_camera_session(
                 rig.camera, rig.setup, rig.effector_rotation, (take_imaging or {})[number]
             )
         hide = (occluders or {}).get(number, ())
+        creep = np.asarray((take_creep_mm or {}).get(number, (0.0, 0.0, 0.0)), float)
+        ramp = np.linspace(-0.5, 0.5, frames_per_take) if frames_per_take > 1 else np.zeros(1)
         frames = [
-            take_rig.frame(renderer, actual[i] + rng.normal(0.0, jitter_mm, 3), rng, hide)
-            for _ in range(frames_per_take)
+            take_rig.frame(
+                renderer, actual[i] + r * creep + rng.normal(0.0, jitter_mm, 3), rng, hide
+            )
+            for r in ramp
         ]
         if take_kind == "video":
             rel = f"takes/pose_{number:04d}.avi"
