@@ -160,6 +160,7 @@ class PrinterService:
         self._key = ""
         self._lockfile: Any = None
         self._listener: socket.socket | None = None
+        self._forward: logging.Handler | None = None
 
     # ------------------------------------------------------------ lifetime
     def bind(self) -> None:
@@ -186,7 +187,8 @@ class PrinterService:
             self.files.pid.write_text(f"{os.getpid()}\n")
         finally:
             os.umask(old)
-        logging.getLogger("cdprhost").addHandler(_Forward(self))
+        self._forward = _Forward(self)
+        logging.getLogger("cdprhost").addHandler(self._forward)
 
     def serve(self) -> None:
         """Accept clients until idle (no job, no client for ``idle_s``) or stopped."""
@@ -219,6 +221,9 @@ class PrinterService:
 
     def close(self) -> None:
         """Stop listening, remove the socket, key and pid (only while still ours)."""
+        if self._forward is not None:
+            logging.getLogger("cdprhost").removeHandler(self._forward)
+            self._forward = None
         if self._listener is not None:
             with contextlib.suppress(OSError):
                 self._listener.close()

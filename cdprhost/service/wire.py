@@ -156,25 +156,26 @@ def encode(message: BaseModel) -> bytes:
     return message.model_dump_json().encode() + b"\n"
 
 
-def _decode(adapter: TypeAdapter[Any], line: bytes) -> Any:
+def _decode(adapter: TypeAdapter[Any], line: bytes, tag: str) -> Any:
     if len(line) > MAX_LINE:
         raise WireError(f"a line of {len(line)} bytes (at most {MAX_LINE})")
     try:
         return adapter.validate_json(line)
     except ValidationError as exc:
         first = exc.errors()[0]
-        where = ".".join(str(p) for p in first["loc"]) or "message"
+        where = ".".join(str(p) for p in first["loc"])
+        where = where or (tag if first["type"].startswith("union_tag") else "message")
         raise WireError(f"{where}: {first['msg']}") from None
 
 
 def decode_request(line: bytes) -> Any:
     """A client's message, or WireError naming the field and the reason."""
-    return _decode(_REQUEST, line)
+    return _decode(_REQUEST, line, "op")
 
 
 def decode_reply(line: bytes) -> Any:
     """A service's message, or WireError naming the field and the reason."""
-    return _decode(_SERVICE, line)
+    return _decode(_SERVICE, line, "msg")
 
 
 # ------------------------------------------------------------ job events
