@@ -159,7 +159,19 @@ def attach(port: str | None, who: str, *, replay: bool, start: bool = True) -> S
             time.sleep(0.02)
             if files.key.exists():
                 sock = _connect(files)
-    client = ServiceClient(sock, files)
+    return _hello(ServiceClient(sock, files), who, replay)
+
+
+def connect(files: ServiceFiles, who: str, *, replay: bool = True) -> ServiceClient:
+    """A client of the running service ``files`` names (a second front end of a private
+    service, the upload server); ServiceError when none listens."""
+    sock = _connect(files)
+    if sock is None:
+        raise ServiceError(f"no printer service listens at {files.socket}")
+    return _hello(ServiceClient(sock, files), who, replay)
+
+
+def _hello(client: ServiceClient, who: str, replay: bool) -> ServiceClient:
     try:
         client.hello(who, replay=replay)
     except BaseException:

@@ -92,10 +92,21 @@ def device_name(port: str) -> str:
     return "dev-" + hashlib.sha256(f"{state}\0{real}".encode()).hexdigest()[:16]
 
 
+#: a Unix socket's path is at most this long (Linux: 108 bytes with its terminating NUL)
+MAX_SOCKET_PATH = 107
+
+
 def files_for_port(port: str | None) -> ServiceFiles:
     """The shared service of ``port``; ``None`` (the embedded device): a private one."""
     name = device_name(port) if port is not None else f"sim-{os.getpid()}-{secrets.token_hex(4)}"
-    return ServiceFiles(private_dir(), name)
+    files = ServiceFiles(private_dir(), name)
+    if len(os.fsencode(files.socket)) > MAX_SOCKET_PATH:
+        raise InputError(
+            f"the folder is too deep for a socket ({MAX_SOCKET_PATH} bytes at most); "
+            "set CDPRHOST_RUN to a shorter one",
+            source=str(files.folder),
+        )
+    return files
 
 
 def write_key(path: Path) -> str:

@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 
 #: messages a client may fall behind by before it is dropped (a stopped front end)
 MAX_BACKLOG = 20_000
+#: the kernel's share of a client's backlog (bytes); the rest waits in its queue
+SEND_BUFFER = 64 * 1024
 HELLO_TIMEOUT_S = 5.0
 #: how long a new service waits for the front end that started it
 FIRST_CLIENT_S = 60.0
@@ -61,6 +63,8 @@ class _Client:
         self._sender.daemon = True
 
     def start(self) -> None:
+        with contextlib.suppress(OSError):
+            self.conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
         self._sender.start()
         name = f"client-{self.number}-in"
         threading.Thread(target=self._read_loop, name=name, daemon=True).start()
@@ -71,18 +75,24 @@ class _Client:
             return
         if self.out.qsize() >= MAX_BACKLOG:
             log.warning("client %d (%s) stopped reading: disconnected", self.number, self.who)
-            self.close()
+            self.close(now=True)
             return
         self.out.put(wire.encode(message))
 
-    def close(self) -> None:
+    def close(self, now: bool = False) -> None:
+        """Hang up once what is queued is sent (``now``: at once, for a client too far
+        behind to be worth waiting for)."""
         if self.closed.is_set():
             return
         self.closed.set()
         self.out.put(None)
+        if now:
+            self._hang_up()
+        self.service.forget(self)
+
+    def _hang_up(self) -> None:
         with contextlib.suppress(OSError):
             self.conn.shutdown(socket.SHUT_RDWR)
-        self.service.forget(self)
 
     def _send_loop(self) -> None:
         try:
@@ -94,7 +104,8 @@ class _Client:
         except OSError:
             pass
         finally:
-            self.close()
+            self.close(now=True)
+            self._hang_up()
             with contextlib.suppress(OSError):
                 self.conn.close()
 

@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "print", help="print a G-code file (embedded simulated device unless --port is given)"
     )
     p.add_argument("gcode", metavar="FILE.gcode", nargs="?")
-    add_profile_argument(p)
+    add_profile_argument(p, required=False)  # required to print; --attach needs none
     add_device_arguments(p)
     p.add_argument(
         "--speedup",
@@ -98,6 +98,8 @@ def _check_options(args: argparse.Namespace) -> None:
         return
     if args.gcode is None:
         raise InputError("give the G-code file to print (or --attach to watch a print)")
+    if args.profile is None:
+        raise InputError("give the machine profile", source="--profile")
     if args.resume and args.resume_from_layer is not None:
         raise InputError("give --resume or --resume-from-layer, not both", source="--resume")
     if args.sim_faults:
