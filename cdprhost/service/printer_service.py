@@ -69,15 +69,16 @@ class _Client:
         name = f"client-{self.number}-in"
         threading.Thread(target=self._read_loop, name=name, daemon=True).start()
 
-    def send(self, message: BaseModel) -> None:
-        """Queue a message; never blocks. A client too far behind is dropped."""
+    def send(self, message: BaseModel | bytes) -> None:
+        """Queue a message (or its encoded line); never blocks. A client too far behind is
+        dropped."""
         if self.closed.is_set():
             return
         if self.out.qsize() >= MAX_BACKLOG:
             log.warning("client %d (%s) stopped reading: disconnected", self.number, self.who)
             self.close(now=True)
             return
-        self.out.put(wire.encode(message))
+        self.out.put(message if isinstance(message, bytes) else wire.encode(message))
 
     def close(self, now: bool = False) -> None:
         """Hang up once what is queued is sent (``now``: at once, for a client too far
@@ -312,10 +313,11 @@ class PrinterService:
                 log.info("client %d (%s) left", client.number, client.who)
 
     def broadcast(self, message: BaseModel) -> None:
+        line = wire.encode(message)  # once, whoever listens
         with self._lock:
             clients = list(self._clients)
         for client in clients:
-            client.send(message)
+            client.send(line)
 
     def handle(self, client: _Client, request: Any) -> None:
         if isinstance(request, wire.Start):
@@ -389,12 +391,12 @@ class PrinterService:
         return ""
 
     def _on_event(self, event: Event) -> None:
-        with self._lock:
+        """The job thread's only call into the service: record, queue, return."""
+        line = wire.encode(wire.EventMsg(event=wire.event_to_json(event)))
+        with self._lock:  # queue puts only: the order every client sees is the journal's
             self._journal.add(event)
-            clients = list(self._clients)
-        message = wire.EventMsg(event=wire.event_to_json(event))
-        for client in clients:
-            client.send(message)
+            for client in list(self._clients):
+                client.send(line)
 
     def _run_job(self, job: PrintJob, spec: wire.StartJob) -> None:
         handler = None
