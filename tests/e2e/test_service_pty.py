@@ -6,6 +6,7 @@ hand; these are shortened: an accelerated device, a small part.)"""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -18,6 +19,7 @@ from tests.e2e.processes import (
     SimDeviceProcess,
     printing_point,
     service_pid,
+    signal_service,
     square_part,
     start_print,
 )
@@ -29,8 +31,6 @@ pytestmark = [
 
 
 def _attach(port: str, state, report) -> subprocess.CompletedProcess[str]:
-    import os
-
     env = {**os.environ, "CDPRHOST_STATE": str(state)}
     return subprocess.run(
         [*PYTHON, "print", "--attach", "--port", port, "--json", str(report)],
@@ -80,3 +80,26 @@ def test_attach_without_a_print_says_so(tmp_path):
         watched = _attach(dev.path, state, tmp_path / "r.json")
     assert watched.returncode == 1 and "no printer service runs" in watched.stderr
     assert "Traceback" not in watched.stderr
+
+
+def test_a_signal_to_the_service_cancels_like_the_operator(tmp_path):
+    """SIGTERM to the service (a shutdown of the print PC): stop, park, heaters off; its
+    front end reports the cancel."""
+    state = tmp_path / "state"
+    gcode = square_part(tmp_path / "part.gcode", layers=30)
+    report = tmp_path / "result.json"
+    with SimDeviceProcess(tmp_path, "--speedup", "1") as dev:
+        front = start_print(gcode, dev.path, state, "--json", str(report))
+        printing_point(gcode, state)
+        signal_service(dev.path, state, signal.SIGTERM)
+        out, err = front.communicate(timeout=120)
+        assert front.returncode == 1, out + err
+        result = json.loads(report.read_text())
+        assert result["status"] == "cancelled" and result["reason"] == "SIGTERM", result
+        link = open_link(dev.path)
+        try:
+            st = link.request_status()
+        finally:
+            link.close()
+        assert not st.faulted and not st.busy and st.hotend_target_c == 0
+        assert not dev.stderr_has("host watchdog")

@@ -173,8 +173,7 @@ def run(args: argparse.Namespace) -> int:
     )
     client = attach(args.port, "print", replay=False)
     try:
-        client.send(wire.Start(job=spec))
-        outcome = _follow(client, starter=True)
+        outcome = _follow(client, starter=True, start=wire.Start(job=spec))
     finally:
         client.close()
     return _finish(outcome, args, log_path)
@@ -208,11 +207,16 @@ def _finish(outcome: dict[str, Any], args: argparse.Namespace, log_path: Path | 
     return int(result.exit_code)
 
 
-def _follow(client: ServiceClient, *, starter: bool) -> dict[str, Any]:
-    """Show the job's events until its result; the starter also answers a pause and turns
-    signals into a cancel (then an e-stop). A watcher leaves on a signal: the print goes on."""
+def _follow(
+    client: ServiceClient, *, starter: bool, start: wire.Start | None = None
+) -> dict[str, Any]:
+    """Send ``start`` (once a signal can cancel it), then show the job's events until its
+    result; the starter also answers a pause and turns signals into a cancel (then an
+    e-stop). A watcher leaves on a signal: the print goes on."""
     outcome: dict[str, Any] = {}
     with ProgressView() as view, stop_signals(_on_signal(client, view, outcome, starter)):
+        if start is not None:
+            client.send(start)
         while "result" not in outcome and "error" not in outcome:
             if outcome.get("detached"):
                 outcome["error"] = "stopped watching; the print goes on in the printer service"
