@@ -83,8 +83,9 @@ class ServiceClient:
 
     def send(self, message: BaseModel) -> int:
         """Send a command (its ``id`` is filled in when it has one); the id."""
-        number = next(self._ids)
-        if "id" in type(message).model_fields:
+        number = 0
+        if "id" in type(message).model_fields:  # commands are numbered 1, 2, ... (hello: none)
+            number = next(self._ids)
             message = message.model_copy(update={"id": number})
         with self._write:
             try:

@@ -370,9 +370,10 @@ class PrinterService:
                 job = self._job
                 name = job.gcode.name if job is not None else "?"
                 state = job.state.value if job is not None else "?"
+                watch = f"--attach --port {self.port}" if self.port else "--attach --port PORT"
                 return (
                     f"a print is running on {self.port or 'this device'} ({name}, {state}); "
-                    "`cdprhost print FILE --port PORT --attach` watches it"
+                    f"`cdprhost print {watch}` watches it"
                 )
             self._journal = Journal()
             self._result = None

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from cdprhost.cli.main import main
 from cdprhost.job.state import JobSnapshot, JobState, reduce
 from cdprhost.profile import load_profile
 from cdprhost.service import printer_service, wire
@@ -177,3 +178,23 @@ def test_one_print_at_a_time(run_dir, monkeypatch, tmp_path):
     finally:
         first.close()
         second.close()
+
+
+def test_print_says_why_when_a_print_already_runs(run_dir, monkeypatch, tmp_path, capsys):
+    from cdprhost.cli.commands import print_cmd
+
+    serve_in_thread(monkeypatch)
+    first = attach(None, "first", replay=False)
+    first.send(_start(tmp_path, speedup=2.0))
+    _follow(first, until=lambda s: s.state is JobState.PRINTING)
+    # the next `print` finds this service (as it would a device's) and is refused
+    monkeypatch.setattr(
+        print_cmd, "attach", lambda *a, **k: connect(first.files, "print", replay=False)
+    )
+    try:
+        code = main(["print", str(tmp_path / "part.gcode"), "--profile", "paper-prototype"])
+        err = capsys.readouterr().err
+        assert code == 1 and "a print is running" in err and "--attach" in err
+    finally:
+        first.send(wire.Cancel())
+        first.close()
