@@ -157,6 +157,8 @@ def attach(port: str | None, who: str, *, replay: bool, start: bool = True) -> S
             code = proc.poll()
             if code is not None and code != 0:
                 raise ServiceError(f"the printer service failed to start (its log: {files.log})")
+            if code == 0 and not files.key.exists():  # another held the device, then left
+                proc = spawn(files, port, SHARED_IDLE_S if port is not None else PRIVATE_IDLE_S)
             time.sleep(0.02)
             if files.key.exists():
                 sock = _connect(files)
