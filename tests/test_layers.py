@@ -28,6 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("cdprhost.link",),
     ("cdprhost.machine", "cdprhost.sim"),
     ("cdprhost.job",),
+    ("cdprhost.service",),  # the printer service: job, link and device in one process
     ("cdprhost.server",),  # the print server (slicer upload API): the TUI runs it
     ("cdprhost.tui",),
     ("cdprhost.cli",),  # `cdprhost tui` starts the terminal UI

@@ -122,7 +122,8 @@ class ProgressView:
             and pct != self._last_plain
         ):
             self._last_plain = pct
-            elapsed = time.monotonic() - self._t0
+            now = time.monotonic()  # the service's clock too (one monotonic clock a machine)
+            elapsed = s.elapsed_s(now) if s.started_at is not None else now - self._t0
             print(
                 f"{s.state.value:<9} {pct:3d}%  layer {layer}  line {s.line}  elapsed {_fmt_s(elapsed)}  "
                 f"ETA {_fmt_s(s.eta_s)} (device time)",

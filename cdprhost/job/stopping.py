@@ -24,9 +24,9 @@ from __future__ import annotations
 
 import logging
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -45,7 +45,52 @@ from cdprhost.motion.stop import (
 from firmware_protocol.messages import EstopFlag, Flag
 
 if TYPE_CHECKING:
-    from cdprhost.job.streamer import Streamer
+    from cdprhost.job.segment_map import SegmentMap
+    from cdprhost.kinematics.machine import MachineModel
+    from cdprhost.link import HostLink
+    from cdprhost.profile.models import MachineProfile
+
+
+class StreamContextView(Protocol):
+    """What the stops read of the job's context (``streamer.StreamContext``)."""
+
+    @property
+    def profile(self) -> MachineProfile: ...
+
+    @property
+    def model(self) -> MachineModel: ...
+
+    @property
+    def requests(self) -> Any: ...
+
+    @property
+    def emit(self) -> Callable[[Any], None]: ...
+
+
+class Stream(Protocol):
+    """What the stops need of the stream they serve (:class:`cdprhost.job.streamer.Streamer`,
+    which holds its :class:`StopControl`: it imports this module, never the reverse)."""
+
+    link: HostLink
+    clock_hz: int
+    index_base: int
+    heat_item: int
+    home_items: tuple[int, int]
+    pending: deque[Any]
+    source: Iterator[Any]
+    map: SegmentMap
+
+    @property
+    def ctx(self) -> StreamContextView: ...
+
+    def set_state(self, state: JobState, reason: str = "") -> None: ...
+
+    def wait_for_resume(self) -> None: ...
+
+    def drain(self, final: bool = True) -> None: ...
+
+    def service(self, force_status: bool = False) -> None: ...
+
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +133,7 @@ class StopRecord:
 class StopControl:
     """The streamer's stops (composition: it holds the streamer it serves)."""
 
-    def __init__(self, streamer: Streamer):
+    def __init__(self, streamer: Stream):
         self.s = streamer
         self.last: LastSent | None = None
         self.parked = False

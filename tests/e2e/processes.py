@@ -96,6 +96,30 @@ def printing_point(gcode: Path, state: Path, segments: int = 20) -> object:
     return wait_until(ready, 120, "a resume point written while printing")
 
 
+def service_pid(port: str, state: Path) -> int:
+    """The pid of the printer service that drives ``port`` for ``cdprhost print`` processes
+    started with this ``state`` folder (they name their service by it)."""
+    from cdprhost.service.paths import files_for_port
+
+    saved = os.environ.get("CDPRHOST_STATE")
+    os.environ["CDPRHOST_STATE"] = str(state)
+    try:
+        files = files_for_port(port)
+    finally:
+        if saved is None:
+            del os.environ["CDPRHOST_STATE"]
+        else:
+            os.environ["CDPRHOST_STATE"] = saved
+    return wait_until(files.read_pid, 30, "the printer service's pid file")  # type: ignore[return-value]
+
+
+def signal_service(port: str, state: Path, sig: int) -> int:
+    """Send ``sig`` to the printer service of ``port``; its pid."""
+    pid = service_pid(port, state)
+    os.kill(pid, sig)
+    return pid
+
+
 def start_print(gcode: Path, port: str, state: Path, *extra: str) -> subprocess.Popen[str]:
     """``cdprhost print`` in its own process (so the test can kill or stop it)."""
     env = {**os.environ, "CDPRHOST_STATE": str(state)}

@@ -1,13 +1,16 @@
 """Fail-safe behaviour with `cdprhost print` and `cdprhost sim-device` as separate processes
 on a real pty: a killed host, a stopped host, a failed connect, an unwritable log.
 
-The host is killed or stopped once its resume point shows motion executed (the point
-is written while printing). Waits poll conditions with generous deadlines.
+The host is the printer service `cdprhost print` starts (the job and the link live there;
+the print command is only its front end): it is killed or stopped once its resume point
+shows motion executed (the point is written while printing). Waits poll conditions with
+generous deadlines.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import signal
 import sys
 
@@ -20,6 +23,7 @@ from firmware_protocol.messages import ErrorCode, Flag
 from tests.e2e.processes import (
     SimDeviceProcess,
     printing_point,
+    signal_service,
     square_part,
     start_print,
     wait_until,
@@ -39,12 +43,14 @@ def _printing_point(gcode, state) -> ResumePoint:
 
 
 def _kill_mid_print(tmp_path, dev, gcode, state, *extra):
-    """Kill the host once it is printing; the resume point it left (read after the kill:
-    the host may have saved a newer one between the poll and the kill)."""
+    """Kill the host (the printer service) once it is printing; the resume point it left
+    (read after the kill: the host may have saved a newer one between the poll and the
+    kill). Its front end then says the service went away."""
     host = start_print(gcode, dev.path, state, *extra)
     _printing_point(gcode, state)
-    host.kill()
-    host.wait(20)
+    signal_service(dev.path, state, signal.SIGKILL)
+    out, err = host.communicate(timeout=60)
+    assert host.returncode == 1 and "printer service went away" in err, out + err
     return ResumePoint.load(resume_path_for(gcode, state / "jobs"))
 
 
@@ -110,11 +116,14 @@ def test_stopped_host_trips_the_device_watchdog(tmp_path):
     gcode = square_part(tmp_path / "part.gcode")
     with SimDeviceProcess(tmp_path, "--speedup", SPEEDUP) as dev:
         host = start_print(gcode, dev.path, state)
+        pid = None
         try:
             _printing_point(gcode, state)
-            host.send_signal(signal.SIGSTOP)
+            pid = signal_service(dev.path, state, signal.SIGSTOP)
             wait_until(lambda: dev.stderr_has("host watchdog"), 60, "the device's watchdog")
         finally:
+            if pid is not None:
+                os.kill(pid, signal.SIGKILL)
             host.kill()
             host.wait(20)
         link = open_link(dev.path)

@@ -20,6 +20,7 @@ from cdprhost.profile import load_profile
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.messages import ErrorCode
 from tests.e2e.processes import square_part
+from tests.service.inprocess import serve_in_thread
 
 
 def run_job(path, tmp_path, *, on_link=None, options=None, on_event=None, faults=None):
@@ -110,6 +111,7 @@ def test_a_job_log_that_fills_up_stops_at_a_rest_point_with_heaters_off(
             return super().write(text)
 
     monkeypatch.setattr(job_log, "open", lambda *a, **k: Full(), raising=False)
+    serve_in_thread(monkeypatch)  # the job runs in the printer service: here, to reach it
     report = tmp_path / "job.json"
     state = tmp_path / "state"
     monkeypatch.setenv("CDPRHOST_STATE", str(state))

@@ -16,7 +16,6 @@ import dataclasses
 import json
 import queue
 import sys
-import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -32,20 +31,23 @@ from cdprhost.cli.options import (
 from cdprhost.cli.profile_arg import add_profile_argument
 from cdprhost.cli.progress_view import ProgressView
 from cdprhost.cli.signals import stop_signals
-from cdprhost.errors import InputError
+from cdprhost.errors import InputError, JobFailed
 from cdprhost.fileio.atomic import write_text_atomic
 from cdprhost.job.resume import find_resume_point, log_path_for, resume_question, resume_setup
 from cdprhost.job.state import JobState, StateChanged
+from cdprhost.service import wire
+from cdprhost.service.client import ServiceClient, attach
 
 MAX_SPEEDUP = 100_000.0
+START_ID = 1  # the start is the first command a print sends
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "print", help="print a G-code file (embedded simulated device unless --port is given)"
     )
-    p.add_argument("gcode", metavar="FILE.gcode")
-    add_profile_argument(p)
+    p.add_argument("gcode", metavar="FILE.gcode", nargs="?")
+    add_profile_argument(p, required=False)  # required to print; --attach needs none
     add_device_arguments(p)
     p.add_argument(
         "--speedup",
@@ -67,6 +69,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="N",
         help="restart the print at layer N (1-based, as shown)",
     )
+    p.add_argument(
+        "--attach",
+        action="store_true",
+        help="watch the print running on --port (its printer service) instead of starting one; "
+        "Ctrl-C stops watching, never the print",
+    )
     p.add_argument("--yes", "-y", action="store_true", help="do not ask for confirmation (resume)")
     p.add_argument(
         "--log",
@@ -83,6 +91,18 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 
 def _check_options(args: argparse.Namespace) -> None:
+    if args.attach:
+        if not args.port:
+            raise InputError(
+                "--attach watches the print on a device: give its --port (a print on the "
+                "embedded device belongs to the command that started it)",
+                source="--attach",
+            )
+        return
+    if args.gcode is None:
+        raise InputError("give the G-code file to print (or --attach to watch a print)")
+    if args.profile is None:
+        raise InputError("give the machine profile", source="--profile")
     if args.resume and args.resume_from_layer is not None:
         raise InputError("give --resume or --resume-from-layer, not both", source="--resume")
     if args.sim_faults:
@@ -94,16 +114,6 @@ def _check_options(args: argparse.Namespace) -> None:
             raise InputError(str(exc), source="--sim-faults") from None
 
 
-def _link_factory(args: argparse.Namespace, profile: Any) -> Any:
-    from cdprhost.link import open_link
-    from cdprhost.sim.embedded import open_embedded
-
-    baud = args.baud or profile.serial.baud
-    if args.port:
-        return lambda: open_link(args.port, baud=baud, timeout_s=profile.serial.timeout_s)
-    return lambda: open_embedded(speedup=args.speedup, faults=args.sim_faults)
-
-
 def _confirm(question: str) -> bool:
     if not sys.stdin.isatty():
         return False
@@ -111,11 +121,11 @@ def _confirm(question: str) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cdprhost.job.runner import PrintJob, PrintOptions
-    from cdprhost.logs import attach_log_file, detach_log_file
     from cdprhost.profile import load_profile
 
     _check_options(args)
+    if args.attach:
+        return _watch(args)
     gcode = existing_gcode(args.gcode)
     profile = load_profile(args.profile)
     saved = find_resume_point(gcode)
@@ -148,82 +158,146 @@ def run(args: argparse.Namespace) -> int:
     log_path = Path(args.log) if args.log else log_path_for(gcode)
     if args.sim_faults is not None and args.port:
         raise InputError("--sim-faults: only for the embedded device (without --port)")
-    options = PrintOptions(
-        setup=setup_from_args(args), resume_from_layer=layer, resume=point, log_path=log_path
-    )
     if not args.log:
         with contextlib.suppress(OSError):  # a new state folder: the .log goes there too
             log_path.parent.mkdir(parents=True, exist_ok=True)
-    handler = attach_log_file(log_path.with_suffix(".log"), quiet=True) if not args.log else None
-    events: queue.Queue[Any] = queue.Queue()
-    job = PrintJob(gcode, profile, _link_factory(args, profile), options, on_event=events.put)
-    outcome: dict[str, Any] = {}
-
-    def work() -> None:
-        try:
-            outcome["result"] = job.run()
-        except BaseException as exc:  # noqa: BLE001 - re-raised in the main thread
-            outcome["error"] = exc
-        finally:
-            events.put(None)
-
-    worker = threading.Thread(target=work, name="print-job", daemon=True)
+    spec = wire.StartJob(
+        gcode=str(gcode.resolve()),
+        profile=profile.model_dump(mode="json"),
+        port=args.port,
+        baud=args.baud,
+        speedup=args.speedup,
+        sim_faults=args.sim_faults,
+        setup=setup_from_args(args).to_json(),
+        resume=point is not None,
+        resume_from_layer=layer,
+        log_path=str(log_path if log_path.is_absolute() else log_path.absolute()),
+        job_log_file=not args.log,
+    )
+    client = attach(args.port, "print", replay=False)
     try:
-        with ProgressView() as view, stop_signals(_on_signal(job, view, outcome)):
-            worker.start()
-            while True:
-                try:
-                    event = events.get(timeout=0.5)
-                except queue.Empty:
-                    continue
-                if event is None:
-                    break
-                if isinstance(event, StateChanged) and event.state is JobState.REFUSED:
-                    event = dataclasses.replace(event, reason="")  # the report says why
-                view.update(event)
-                if (
-                    isinstance(event, StateChanged)
-                    and event.state is JobState.PAUSED
-                    and "asked" not in outcome
-                ):
-                    outcome["asked"] = True
-                    _ask_after_pause(job, event.reason)
-                    outcome.pop("asked")
-        worker.join()
+        outcome = _follow(client, starter=True, start=wire.Start(job=spec))
     finally:
-        detach_log_file(handler)
+        client.close()
+    return _finish(outcome, args, log_path)
+
+
+def _watch(args: argparse.Namespace) -> int:
+    """``--attach``: the running (or last) print on ``--port``, to its end."""
+    client = attach(args.port, "print --attach", replay=True, start=False)
+    try:
+        if client.welcome is not None and client.welcome.job == "none":
+            print(f"no print has run on {args.port} since its service started", file=sys.stderr)
+            return 1
+        outcome = _follow(client, starter=False)
+    finally:
+        client.close()
     if "error" in outcome:
-        raise outcome["error"]
-    result = outcome["result"]
+        print(outcome["error"], file=sys.stderr)
+        return 1
+    return _finish(outcome, args, None)
+
+
+def _finish(outcome: dict[str, Any], args: argparse.Namespace, log_path: Path | None) -> int:
+    from cdprhost.job.options import PrintResult
+
+    if "error" in outcome:
+        raise JobFailed(outcome["error"])
+    result = PrintResult(**outcome["result"])
     _report(result, args, log_path)
     if result.status == "refused" and any(v.get("rule") == "syntax" for v in result.violations):
         return 2
     return int(result.exit_code)
 
 
-def _on_signal(job: Any, view: ProgressView, outcome: dict[str, Any]) -> Callable[[str], None]:
-    """The first signal cancels (stop, park, heaters off); the next one e-stops."""
+def _follow(
+    client: ServiceClient, *, starter: bool, start: wire.Start | None = None
+) -> dict[str, Any]:
+    """Send ``start`` (once a signal can cancel it), then show the job's events until its
+    result; the starter also answers a pause and turns signals into a cancel (then an
+    e-stop). A watcher leaves on a signal: the print goes on."""
+    outcome: dict[str, Any] = {}
+    with ProgressView() as view, stop_signals(_on_signal(client, view, outcome, starter)):
+        if start is not None:
+            client.send(start)
+        while "result" not in outcome and "error" not in outcome:
+            if outcome.get("detached"):
+                outcome["error"] = "stopped watching; the print goes on in the printer service"
+                break
+            try:
+                message = client.inbox.get(timeout=0.5)
+            except queue.Empty:
+                continue
+            if message is None:
+                outcome["error"] = (
+                    f"the printer service went away ({client.gone or 'no reason'}); "
+                    f"its log: {client.files.log}"
+                )
+                break
+            _take(message, client, view, outcome, starter)
+    return outcome
+
+
+def _take(
+    message: Any, client: ServiceClient, view: ProgressView, outcome: dict[str, Any], starter: bool
+) -> None:
+    if isinstance(message, wire.EventMsg):
+        event = wire.event_from_json(message.event)
+        if isinstance(event, StateChanged) and event.state is JobState.REFUSED:
+            event = dataclasses.replace(event, reason="")  # the report says why
+        view.update(event)
+        if (
+            starter
+            and isinstance(event, StateChanged)
+            and event.state is JobState.PAUSED
+            and "asked" not in outcome
+        ):
+            outcome["asked"] = True
+            _ask_after_pause(client, event.reason)
+            outcome.pop("asked")
+    elif isinstance(message, wire.ResultMsg):
+        if message.result is not None:
+            outcome["result"] = message.result
+        else:
+            outcome["error"] = message.error
+    elif isinstance(message, wire.Reply) and not message.ok:
+        if message.id == START_ID:  # the start was refused
+            outcome["error"] = message.error
+        else:
+            view.say(message.error)
+    elif isinstance(message, wire.LogMsg):
+        view.say(f"cdprhost: {message.level} {message.text}")
+
+
+def _on_signal(
+    client: ServiceClient, view: ProgressView, outcome: dict[str, Any], starter: bool
+) -> Callable[[str], None]:
+    """The starter: the first signal cancels (stop, park, heaters off); the next e-stops.
+    A watcher (``--attach``) stops watching."""
     seen: list[str] = []
 
     def on_signal(name: str) -> None:
         seen.append(name)
+        if not starter:
+            outcome["detached"] = True
+            return
         outcome["interrupted"] = name
         if len(seen) == 1:
             view.say(f"{name}: cancelling (stop, park, heaters off); again to stop at once")
-            job.request_cancel(name)
+            client.command(wire.Cancel(reason=name))
         else:
             view.say(f"{name}: emergency stop")
-            threading.Thread(target=job.emergency_stop, name="estop", daemon=True).start()
+            client.command(wire.Estop())
         if "asked" in outcome:  # leave the question: the answer is given
             raise KeyboardInterrupt
 
     return on_signal
 
 
-def _ask_after_pause(job: Any, reason: str) -> None:
+def _ask_after_pause(client: ServiceClient, reason: str) -> None:
     if not sys.stdin.isatty():
         print(f"paused ({reason}) without a terminal to ask: cancelling", file=sys.stderr)
-        job.request_cancel()
+        client.command(wire.Cancel())
         return
     while True:
         try:
@@ -232,14 +306,14 @@ def _ask_after_pause(job: Any, reason: str) -> None:
         except (EOFError, KeyboardInterrupt):
             answer = "c"
         if answer in ("r", "resume"):
-            job.request_resume()
+            client.command(wire.Resume())
             return
         if answer in ("c", "cancel"):
-            job.request_cancel()
+            client.command(wire.Cancel())
             return
 
 
-def _report(result: Any, args: argparse.Namespace, log_path: Path) -> None:
+def _report(result: Any, args: argparse.Namespace, log_path: Path | None) -> None:
     print(f"status: {result.status}")
     reason = result.reason
     if result.status == "refused":
@@ -272,7 +346,8 @@ def _report(result: Any, args: argparse.Namespace, log_path: Path) -> None:
             else "the embedded simulated device (no --port: nothing physical moved)"
         )
         print(f"ran on {where}")
-        print(f"job log: {log_path} (JSON lines)")
+        if log_path is not None:
+            print(f"job log: {log_path} (JSON lines)")
     if result.resume_file:
         print(
             f"resume point saved: {result.resume_file} (continue with --resume, or restart with "

@@ -15,24 +15,22 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from cdprhost.tui.control.backend import EMBEDDED, Backend, JobHandle
 from cdprhost.tui.control.console import ConsoleError, parse_command
+from cdprhost.tui.control.host import ControllerHost
 from cdprhost.tui.control.jog import check_jog, jog_target
 from cdprhost.tui.control.live_console import status_lines, temperature_line
 from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView
 from cdprhost.tui.state import CONSOLE_LINES, ConnectionView, UiState
-
-if TYPE_CHECKING:  # pragma: no cover
-    from cdprhost.tui.app import CdprApp
 
 TEMPERATURE_HISTORY = 600
 JOB_HEALTH_EVERY_S = 5.0  # while a job runs its own events carry the link health
 
 
 class ControllerBase:
-    def __init__(self, app: CdprApp, backend: Backend):
+    def __init__(self, app: ControllerHost, backend: Backend):
         self.app = app
         self.backend = backend
         self._job: JobHandle | None = None

@@ -1,0 +1,106 @@
+"""The printer service's wire and journal: what a client sends is validated with the
+field named; every job event crosses intact; a late client's replay folds to the state
+that every event folds to."""
+
+from __future__ import annotations
+
+import pytest
+
+from cdprhost.job.runner import PrintJob, PrintOptions
+from cdprhost.job.state import (
+    Failure,
+    JobSnapshot,
+    JobState,
+    LinkHealth,
+    Notice,
+    Planned,
+    Progress,
+    StateChanged,
+    Temperatures,
+    reduce,
+)
+from cdprhost.profile import load_profile
+from cdprhost.service import wire
+from cdprhost.service.journal import Journal
+from cdprhost.sim.embedded import open_embedded
+from tests.e2e.processes import square_part
+
+
+@pytest.mark.parametrize(
+    ("line", "where"),
+    [
+        (b'{"op": "hello", "v": 1}', "hello.key"),
+        (b'{"op": "launch"}', "op"),
+        (b'{"op": "cancel", "reason": 5}', "cancel.reason"),
+        (b'{"op": "pause", "extra": 1}', "pause.extra"),
+        (
+            b'{"op": "start", "job": {"gcode": "", "profile": {}, "log_path": "x"}}',
+            "start.job.gcode",
+        ),
+        (b"not json", "message"),
+    ],
+)
+def test_a_bad_request_is_refused_naming_the_field(line, where):
+    with pytest.raises(wire.WireError) as err:
+        wire.decode_request(line)
+    assert str(err.value).startswith(where), err.value
+
+
+def test_an_overlong_line_is_refused_before_parsing():
+    with pytest.raises(wire.WireError, match="bytes"):
+        wire.decode_request(b"{" + b" " * wire.MAX_LINE + b"}")
+
+
+EVENTS = [
+    StateChanged(JobState.PREFLIGHT, "part.gcode"),
+    Planned(12, 400, 93.5, 812.0, segments=9, done_s=1.5),
+    Progress(10, 44, 2, 3.25, (1.0, 2.0, 3.0), (4.0, 5.0, 6.0), (7.0, 8.0, 9.0), (1, 2, 3, 4)),
+    Temperatures(200.5, 60.0, 210.0, 60.0, 0.4),
+    LinkHealth(3, 1, 2),
+    Failure("link lost", 44, 2, (1.0, 2.0, 3.0), "/x/part.resume.json"),
+    Notice("heaters on"),
+]
+
+
+@pytest.mark.parametrize("event", EVENTS, ids=lambda e: type(e).__name__)
+def test_every_event_crosses_the_wire_intact(event):
+    line = wire.encode(wire.EventMsg(event=wire.event_to_json(event)))
+    message = wire.decode_reply(line)
+    assert wire.event_from_json(message.event) == event
+
+
+def test_an_unknown_event_is_refused():
+    with pytest.raises(wire.WireError, match="unknown event"):
+        wire.event_from_json({"type": "Explosion"})
+    with pytest.raises(wire.WireError, match="unknown state"):
+        wire.event_from_json({"type": "StateChanged", "state": "flying"})
+
+
+def test_a_late_clients_replay_folds_to_the_same_state(tmp_path):
+    """A real job's events: folding the journal's replay gives the snapshot that folding
+    every event gives (but the device times temperatures are drawn against)."""
+    events: list = []
+    job = PrintJob(
+        square_part(tmp_path / "part.gcode", layers=3),
+        load_profile("paper-prototype"),
+        open_embedded,
+        PrintOptions(resume_dir=tmp_path),
+        on_event=events.append,
+    )
+    assert job.run().status == "completed"
+    journal = Journal()
+    full = JobSnapshot()
+    for event in events:
+        journal.add(event)
+        full = reduce(full, event)
+    replayed = JobSnapshot()
+    for event in journal.replay():
+        replayed = reduce(replayed, wire.event_from_json(wire.event_to_json(event)))
+    assert journal.count == len(events) > len(journal.replay())
+    assert replayed.state is JobState.DONE and replayed.segments_done > 0
+    assert [t[1:] for t in replayed.temperature_history] == [
+        t[1:] for t in full.temperature_history
+    ]
+    assert replayed.__class__(**{**replayed.__dict__, "temperature_history": ()}) == (
+        full.__class__(**{**full.__dict__, "temperature_history": ()})
+    )
