@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import functools
 import json
 import queue
 import sys
@@ -110,7 +111,7 @@ def _confirm(question: str) -> bool:
 def run(args: argparse.Namespace) -> int:
     from cdprhost.job.runner import PrintJob, PrintOptions
     from cdprhost.logs import attach_log_file, detach_log_file
-    from cdprhost.profile import load_profile
+    from cdprhost.profile import load_profile, record_device
 
     _check_options(args)
     gcode = existing_gcode(args.gcode)
@@ -148,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
     options = PrintOptions(
         setup=setup_from_args(args), resume_from_layer=layer, resume=point, log_path=log_path
     )
+    if args.port:  # a real board: what it announces is kept beside the profile for estimates
+        options.record_device = functools.partial(record_device, args.profile)
     if not args.log:
         with contextlib.suppress(OSError):  # a new state folder: the .log goes there too
             log_path.parent.mkdir(parents=True, exist_ok=True)
