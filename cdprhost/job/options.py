@@ -45,6 +45,7 @@ class PrintResult:
     reason: str = ""
     resume_file: str | None = None
     notices: list[str] = field(default_factory=list)
+    board: str = ""  # how much the board slows the print against the profile, and why
     bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
 
     @property

@@ -19,14 +19,12 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pydantic import ValidationError
-
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.board import announced_record
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
@@ -309,13 +307,14 @@ class PrintJob:
         if report.board is not None and report.board.message:
             self._emit(Notice(report.board.message))
             result.notices.append(report.board.message)
+            result.board = report.board.message
 
     def _replan_for(
         self, ident: Identity | None, caps: AnnouncedCaps | None, result: PrintResult
     ) -> None:
         """Once connected: the estimate again when the board announced other limits than the
         profile's record (the progress display and ETA follow), and the record kept."""
-        announced = _announced(ident, caps)
+        announced = announced_record(ident, caps)
         if announced is None or announced.same_limits(self.profile.device):
             return
         if self.options.record_device is not None:
@@ -552,19 +551,3 @@ class PrintJob:
         except OSError as exc:
             log.warning("resume point %s not written: %s", path, exc.strerror or exc)
             result.resume_file = str(path) if path.exists() else None
-
-
-def _announced(ident: Identity | None, caps: AnnouncedCaps | None) -> DeviceRecord | None:
-    """What the connected board announced, as the profile records it (None: nothing usable)."""
-    if ident is None:
-        return None
-    try:
-        return DeviceRecord(
-            max_step_rate=ident.max_step_rate,
-            min_segment_s=None if caps is None else caps.min_segment_ticks / ident.clock_hz,
-            firmware=f"{ident.firmware_name} {ident.firmware_version}".strip(),
-            recorded=datetime.now(UTC).isoformat(timespec="seconds"),
-        )
-    except ValidationError as exc:
-        log.warning("the board announced limits the profile cannot record: %s", exc)
-        return None

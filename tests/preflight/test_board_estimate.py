@@ -89,7 +89,8 @@ def test_the_estimate_on_the_recorded_board_is_within_1_percent_of_the_print(tmp
     result, planned = _print(tmp_path, _on(load_profile("paper-prototype"), AVR), AVR)
     assert len(planned) == 1  # the record was right: no second estimate
     assert result.estimated_time_s == pytest.approx(result.print_time_s, rel=0.01)
-    assert any("the board's 10,000 steps/s limits" in n for n in result.notices)
+    assert result.board.startswith("the board's 10,000 steps/s limits module")
+    assert result.board in result.notices
 
 
 def test_once_connected_the_estimate_follows_the_board_and_is_recorded(tmp_path):
@@ -101,6 +102,7 @@ def test_once_connected_the_estimate_follows_the_board_and_is_recorded(tmp_path)
     assert planned[0].estimated_time_s < 0.95 * result.print_time_s
     assert planned[1].estimated_time_s == pytest.approx(result.print_time_s, rel=0.01)
     assert result.estimated_time_s == planned[1].estimated_time_s
+    assert "the board's 10,000 steps/s limits" in result.board
     assert [r.same_limits(AVR) for r in kept] == [True]
 
 
@@ -125,3 +127,19 @@ def test_check_says_what_the_recorded_board_costs(tmp_path, monkeypatch, capsys,
     line = next(t for t in out.splitlines() if t.startswith("board: "))
     assert "the board's 10,000 steps/s limits module" in line and f"+{pct} %" in line
     assert "the profile's [device] record" in line
+
+
+def test_the_tui_estimates_for_the_connected_board(tmp_path):
+    from cdprhost.tui.control.live import EMBEDDED, LiveBackend
+
+    path = square_part(tmp_path / "part.gcode", layers=2)
+    cfg = SimConfig(max_step_rate=AVR.max_step_rate, min_segment_ticks=40)
+    backend = LiveBackend("paper-prototype", speedup=None, sim_options={"config": cfg})
+    free = backend.preflight(str(path)).estimated_time_s  # not connected: the profile's limits
+    backend.connect(EMBEDDED, 250_000)
+    try:
+        board = backend.preflight(str(path)).estimated_time_s
+    finally:
+        backend.disconnect()
+    slowed = preflight(path, _on(load_profile("paper-prototype"), AVR)).estimated_time_s
+    assert board == pytest.approx(slowed) and board > 1.05 * free

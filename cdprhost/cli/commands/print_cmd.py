@@ -256,6 +256,8 @@ def _report(result: Any, args: argparse.Namespace, log_path: Path) -> None:
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
             f"(estimated {result.estimated_time_s:.1f} s)"
         )
+        if result.board:
+            print(f"  ({result.board})")
         print(
             f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}"
         )
