@@ -27,9 +27,11 @@ PAPER_TRUTH_OUTLETS = np.array(
 
 @pytest.fixture(autouse=True, scope="session")
 def _isolated_state(tmp_path_factory):
-    """Job logs and resume points of every test (and the CLIs they start) go to a temporary
-    folder, never to the user's ~/.local/state."""
+    """Job logs, resume points and boards' records of every test (and the CLIs they start)
+    go to temporary folders, never to the user's ~/.local/state or ~/.config."""
     os.environ["CDPRHOST_STATE"] = str(tmp_path_factory.mktemp("state"))
+    # what a board announced is kept beside the profile: never in the user's folder
+    os.environ["CDPRHOST_PROFILES"] = str(tmp_path_factory.mktemp("profiles"))
 
 
 @pytest.fixture(scope="session")

@@ -3,6 +3,7 @@ the contract's ``print --json`` fields)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -10,6 +11,7 @@ from typing import Any
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.resume import ResumePoint
 from cdprhost.motion.prepared import Setup
+from cdprhost.profile.device_record import DeviceRecord
 
 
 @dataclass
@@ -24,6 +26,9 @@ class PrintOptions:
     resume_layer_s: float = 0.5  # ... and at each new layer, at most this often
     batch_moves: int = 1024  # planner chunk: small enough to keep the device queue fed
     clear_fault: bool = True  # a device fault is cleared at start (False: refused; ask first)
+    # what the board announced, when it differs from the profile's record: kept by this
+    # (the front end writes it beside the profile; None: not kept)
+    record_device: Callable[[DeviceRecord], object] | None = None
 
 
 @dataclass
@@ -40,6 +45,7 @@ class PrintResult:
     reason: str = ""
     resume_file: str | None = None
     notices: list[str] = field(default_factory=list)
+    board: str = ""  # how much the board slows the print against the profile, and why
     bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
 
     @property

@@ -24,6 +24,7 @@ from typing import Any
 
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.board import announced_record
 from cdprhost.job.exact import refine_point
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
@@ -41,13 +42,16 @@ from cdprhost.job.stopping import Stop, StopRecord
 from cdprhost.job.streamer import Requests, StreamContext, Streamer
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
+from cdprhost.link.events import DeviceCaps as AnnouncedCaps
+from cdprhost.link.events import Identity
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import estop_flags, heaters_off
-from cdprhost.motion.device_limits import caps_for_device
+from cdprhost.motion.device_limits import caps_for_device, same_plan
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.motion.segments import DEFAULT_LIMITS
 from cdprhost.preflight.run import preflight_prepared
+from cdprhost.profile.device_record import DeviceRecord
 from cdprhost.profile.models import MachineProfile
 
 log = logging.getLogger(__name__)
@@ -233,10 +237,7 @@ class PrintJob:
         try:
             self._sha256 = file_sha256(self.gcode)
             prepared = self._prepare()
-            resumed = self.plan.start != "file"
-            items = self._items() if resumed else prepared.items()
-            report = preflight_prepared(prepared, self._unless_cancelled(items))
-            planned = self._planned(prepared, report, resumed)
+            report, planned = self._estimate(prepared)
         except _CancelledEarly:
             return self._cancelled_early()
         except GcodeError as exc:
@@ -261,6 +262,7 @@ class PrintJob:
                 reason=violations_reason(report),
             )
         result = PrintResult("failed", estimated_time_s=report.estimated_time_s)
+        self._say_board(report, result)
         if self.requests.has("cancel", "estop"):
             return self._cancelled_early()
         if self.log.problem:  # nothing has moved: say so and stop here
@@ -290,11 +292,55 @@ class PrintJob:
         self._set(JobState.CANCELLED, "cancelled before anything moved")
         return PrintResult("cancelled", reason=self.requests.cancel_reason)
 
-    def _planned(self, prepared: Prepared, report: Any, resumed: bool) -> Planned:
+    def _estimate(
+        self, prepared: Prepared, device: DeviceRecord | None = None
+    ) -> tuple[Any, Planned]:
+        """Preflight and the totals to show, on the board's limits: ``device`` as it
+        announced them, or else the profile's record."""
+        resumed = self.plan.start != "file"
+        items = self._items() if resumed else prepared.items()
+        report = preflight_prepared(prepared, self._unless_cancelled(items), device=device)
+        return report, self._planned(prepared, report, resumed, device)
+
+    def _say_board(self, report: Any, result: PrintResult) -> None:
+        """A notice when the board slows the print against the profile's own limits."""
+        if report.board is not None and report.board.message:
+            self._emit(Notice(report.board.message))
+            result.notices.append(report.board.message)
+            result.board = report.board.message
+
+    def _replan_for(
+        self, ident: Identity | None, caps: AnnouncedCaps | None, result: PrintResult
+    ) -> None:
+        """Once connected: the estimate again when the board announced other limits than the
+        profile's record (the progress display and ETA follow), and the record kept."""
+        announced = announced_record(ident, caps)
+        if announced is None or announced.same_limits(self.profile.device):
+            return
+        if self.options.record_device is not None:
+            try:
+                self.options.record_device(announced)
+            except (CdprError, OSError) as exc:  # the print goes on; the next estimate guesses
+                log.warning("the board's limits were not recorded: %s", exc)
+        record = self.profile.device
+        if same_plan(
+            self.profile, announced.max_step_rate, record.max_step_rate if record else None
+        ):
+            return
+        report, planned = self._estimate(self._prepare(), announced)
+        self._emit(planned)
+        result.estimated_time_s = report.estimated_time_s
+        self._say_board(report, result)
+
+    def _planned(
+        self, prepared: Prepared, report: Any, resumed: bool, device: DeviceRecord | None = None
+    ) -> Planned:
         """Totals to show; a resumed job counts its progress from where the file restarts."""
         layers, done = report.layers, 0.0
         if resumed:  # the whole file once more, for its totals
-            whole = preflight_prepared(prepared, self._unless_cancelled(prepared.items()))
+            whole = preflight_prepared(
+                prepared, self._unless_cancelled(prepared.items()), device=device
+            )
             layers = whole.layers
             done = max(0.0, whole.estimated_time_s - report.estimated_time_s)
         return Planned(
@@ -320,6 +366,7 @@ class PrintJob:
             for text in [*check.notices, *([caps.notice] if caps.notice else [])]:
                 self._emit(Notice(text))
                 result.notices.append(text)
+            self._replan_for(ident, dev_caps, result)
             self._refine_resume(link, check.found, result)
             self._t0 = link.request_status().motion_time_s
             writer = ResumeWriter(

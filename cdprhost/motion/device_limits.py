@@ -12,6 +12,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
+from cdprhost.motion.moves import MIN_MOVE_MM
 from cdprhost.motion.segments import DEFAULT_LIMITS, MIN_SEGMENT_S, SegmentLimits
 from cdprhost.profile.models import MachineProfile
 
@@ -66,3 +69,64 @@ def caps_for_device(
     )
     slowed = profile.model_copy(update={"motion": motion, "extruder": extruder})
     return DeviceCaps(slowed, notice, segments)
+
+
+#: the axes a board's step rate can limit, in the order :func:`busiest_axis` numbers them
+AXES = ("module 1", "module 2", "module 3", "the extruder")
+#: an axis is named as limiting when it carries at least this share of the time lost
+NAMED_SHARE = 0.1
+
+
+def busiest_axis(
+    start: np.ndarray,
+    end: np.ndarray,
+    extrusion: np.ndarray,
+    outlets: np.ndarray,
+    steps_per_mm: np.ndarray,
+    e_steps_per_mm: float,
+) -> np.ndarray:
+    """(n,) index into :data:`AXES` of the axis that needs the most steps per mm of path in
+    the middle of each straight move ``start`` -> ``end`` (machine frame, mm; ``extrusion``
+    mm of filament): the one a step-rate cap holds back. Extrude-only moves: the extruder."""
+    delta = end - start
+    dist = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+    kin = dist > MIN_MOVE_MM
+    unit = delta / np.where(kin, dist, 1.0)[:, None]
+    cable = 0.5 * (start + end)[:, None, :] - outlets[None, :, :]  # (n, 3 cables, xyz)
+    cable /= np.sqrt(np.einsum("nkj,nkj->nk", cable, cable))[:, :, None]
+    rates = np.empty((delta.shape[0], 4))
+    rates[:, :3] = np.abs(np.einsum("nkj,nj->nk", cable, unit)) * steps_per_mm
+    rates[:, 3] = np.abs(extrusion) / np.where(kin, dist, 1.0) * e_steps_per_mm
+    rates[~kin, :3] = 0.0
+    return np.asarray(np.argmax(rates, axis=1))
+
+
+def slowed_axes(lost_s: np.ndarray) -> list[tuple[str, float]]:
+    """The axes that carry at least :data:`NAMED_SHARE` of the time lost (``lost_s``: s per
+    axis of :data:`AXES`), with their share, the largest first."""
+    total = float(np.clip(lost_s, 0.0, None).sum())
+    if total <= 0.0:
+        return []
+    order = np.argsort(-lost_s, kind="stable")
+    return [(AXES[k], float(lost_s[k]) / total) for k in order if lost_s[k] >= NAMED_SHARE * total]
+
+
+def slowdown_message(
+    max_step_rate: int, axes: list[tuple[str, float]], board_s: float, free_s: float
+) -> str:
+    """e.g. "the board's 10,000 steps/s limits module 2: +31 % (978 s instead of 747 s)"."""
+    if len(axes) == 1:
+        names = axes[0][0]
+    else:
+        names = ", ".join(f"{name} ({100.0 * share:.0f} %)" for name, share in axes)
+    pct = 100.0 * (board_s - free_s) / free_s if free_s > 0 else 0.0
+    return (
+        f"the board's {max_step_rate:,} steps/s limits {names or 'no axis'}: {pct:+.0f} % "
+        f"({board_s:.0f} s instead of {free_s:.0f} s at the profile's own limits)"
+    )
+
+
+def same_plan(profile: MachineProfile, a: int | None, b: int | None) -> bool:
+    """Boards announcing step rates ``a`` and ``b`` (None: unknown) get the same plan
+    (their estimates agree) from ``profile``."""
+    return caps_for_device(profile, a).profile == caps_for_device(profile, b).profile

@@ -43,6 +43,7 @@ def render_text(report: PreflightReport, *, max_rows: int = 20) -> str:
         f"estimated time {format_duration(report.estimated_time_s)} ({report.estimated_time_s:.1f} s), "
         f"{report.moves_slowed_by_modules} moves slowed by module limits"
     )
+    lines.extend(_board(report))
     s = report.slicer
     if s is not None and (s.filament_mm is not None or s.time_s is not None):
         parts = []
@@ -159,3 +160,14 @@ def start_block_hint(report: PreflightReport) -> str | None:
         "  if the file was sliced for another printer, --retarget replaces its start and end "
         "blocks by this machine's and centres the part"
     )
+
+
+def _board(report: PreflightReport) -> list[str]:
+    """The board the estimate is for, and what it costs when it slows the print."""
+    b = report.board
+    if b is None:
+        return []
+    where = "as it announced" if b.source == "device" else "the profile's [device] record"
+    if b.message:
+        return [f"board: {b.message} ({where})"]
+    return [f"board: {b.max_step_rate:,} steps/s ({where}) does not slow this print"]

@@ -98,6 +98,24 @@ class Box(BaseModel):
     max: tuple[float, float, float]
 
 
+class BoardReport(BaseModel):
+    """The board the estimate is for: its step rate, and what it costs against the
+    profile's own limits."""
+
+    max_step_rate: int
+    min_segment_s: float | None = None
+    source: str = Field(
+        description="'profile': the profile's [device] record; 'device': as connected"
+    )
+    time_at_profile_limits_s: float = Field(description="the estimate without the board's limit")
+    slowed_axes: dict[str, float] = Field(
+        default_factory=dict, description="axis -> its share of the time the board costs"
+    )
+    message: str = Field(
+        default="", description="how much the board slows the print and why; empty: not at all"
+    )
+
+
 class PreflightReport(BaseModel):
     source: str
     profile: str
@@ -120,7 +138,8 @@ class PreflightReport(BaseModel):
     filament_fed_mm: float = Field(
         default=0.0, description="what the extruder feeds, after the flow factor (M221)"
     )
-    estimated_time_s: float
+    estimated_time_s: float = Field(description="on the board's limits when it is known")
+    board: BoardReport | None = None
     moves_slowed_by_modules: int
     moves_sampled_densely: int
     motion_box_machine: Box | None = Field(

@@ -3,7 +3,11 @@
 One pass over the reader's items: every move's whole path against the workspace
 (from the home point to the first move as well), extrusion sanity, heater
 targets, unknown commands; the planner runs alongside for the time estimate and
-the moves the module limits slow down. Parse errors (`GcodeError`, exit 2)
+the moves the module limits slow down. The estimate is for the board: its announced
+step rate (the profile's ``[device]`` record, or what a connected device announced)
+caps the speeds as the print job will; when it does, a second planner at the
+profile's own limits runs too, and the report says by how much the board slows the
+print and which axes it holds back. Parse errors (`GcodeError`, exit 2)
 propagate unchanged.
 """
 
@@ -33,6 +37,12 @@ from cdprhost.gcode.placement import PartExtent
 from cdprhost.gcode.slicer_header import read_slicer_figures
 from cdprhost.gcode.summary import ProgramSummary
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.device_limits import (
+    busiest_axis,
+    caps_for_device,
+    slowdown_message,
+    slowed_axes,
+)
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.prepared import Prepared, Setup, prepare
 from cdprhost.motion.program import MarkedMoves, ProgramPlanner
@@ -45,6 +55,7 @@ from cdprhost.preflight.extrusion import (
 )
 from cdprhost.preflight.placement import placement_report
 from cdprhost.preflight.report import (
+    BoardReport,
     BoxAccumulator,
     NoteLog,
     PreflightReport,
@@ -54,6 +65,7 @@ from cdprhost.preflight.report import (
     WarningLog,
 )
 from cdprhost.preflight.workspace import PathChecker
+from cdprhost.profile.device_record import DeviceRecord
 from cdprhost.profile.models import MachineProfile
 
 
@@ -68,16 +80,32 @@ class Preflight:
         source: str = "<program>",
         limits: ExtrusionLimits | None = None,
         strict: bool = False,
+        device: DeviceRecord | None = None,
         **planner_options: Any,
     ):
+        """``device``: the limits a connected board announced (default: the profile's
+        ``[device]`` record; neither: the profile's own limits)."""
         self.profile = profile
         self.strict = strict
         self.model = model or MachineModel.from_profile(profile)
         self.source = source
         self.limits = limits or ExtrusionLimits.from_profile(profile)
+        self.device = device or profile.device
+        self.device_source = "device" if device is not None else "profile"
+        plan_profile = profile
+        self.free: ProgramPlanner | None = None  # at the profile's limits, when the board slows it
+        if self.device is not None:
+            caps = caps_for_device(profile, self.device.max_step_rate, self.device.min_segment_s)
+            if caps.notice is not None:
+                plan_profile = caps.profile
+                self.free = ProgramPlanner(
+                    profile, self.model, chord=False, marked=True, **planner_options
+                )
         self.planner = ProgramPlanner(
-            profile, self.model, chord=False, marked=True, **planner_options
+            plan_profile, self.model, chord=False, marked=True, **planner_options
         )
+        self.axis_time = np.zeros(4)  # s of planned moves per busiest axis (the board's plan)
+        self.free_axis_time = np.zeros(4)  # the same at the profile's own limits
         self.checker = PathChecker(self.model)
         self.violations = ViolationLog()
         self.notes = NoteLog()
@@ -140,6 +168,8 @@ class Preflight:
             case _:
                 pass
         self._planned(self.planner.command(item))
+        if self.free is not None:
+            self._free_planned(self.free.command(item))
 
     def _unexpected(self, line: int, word: str, kind: str, text: str, detail: str) -> None:
         """Unknown commands and ignored parameters: warnings, or errors with ``strict``."""
@@ -157,6 +187,8 @@ class Preflight:
         if len(block):
             self._check_block(block)
         self._planned(outputs)
+        if self.free is not None:
+            self._free_planned(self.free.moves(chunk)[1])
 
     def _check_block(self, block: MoveBlock) -> None:
         for f in self.checker.check(block):
@@ -184,6 +216,8 @@ class Preflight:
             if not isinstance(marked, MarkedMoves):  # a command: checked when it was added
                 continue
             out = marked.planned
+            if self.free is not None:
+                self.axis_time += self._axis_time(out)
             self.slowed += int(np.count_nonzero(out.module_limited))
             flow = volumetric_flow(out, self.limits)
             if flow.size:
@@ -197,6 +231,43 @@ class Preflight:
                     f"{self.limits.max_flow_mm3_s:g} mm^3/s by {flow[i] - self.limits.max_flow_mm3_s:.3g}",
                 )
 
+    def _axis_time(self, planned: Any) -> np.ndarray:
+        """(4,) s of ``planned``'s moves by the axis each needs most steps/s on."""
+        moves = planned.moves
+        axis = busiest_axis(
+            moves.start,
+            moves.end,
+            moves.e_end - moves.e_start,
+            self.model.geometry.outlets,
+            np.asarray(self.profile.drive.steps_per_mm),
+            self.profile.extruder.steps_per_mm,
+        )
+        return np.bincount(axis, weights=planned.duration, minlength=4)
+
+    def _free_planned(self, outputs: list[Any]) -> None:
+        for marked in outputs:
+            if isinstance(marked, MarkedMoves):
+                self.free_axis_time += self._axis_time(marked.planned)
+
+    def _board(self) -> BoardReport | None:
+        """The board the estimate is for, and what it costs (after both planners finished)."""
+        if self.device is None:
+            return None
+        board_s = self.planner.time
+        free_s = board_s if self.free is None else self.free.time
+        axes = slowed_axes(self.axis_time - self.free_axis_time) if self.free else []
+        slows = board_s > free_s * (1.0 + 1e-3)
+        return BoardReport(
+            max_step_rate=self.device.max_step_rate,
+            min_segment_s=self.device.min_segment_s,
+            source=self.device_source,
+            time_at_profile_limits_s=round(free_s, 3),
+            slowed_axes={name: round(share, 3) for name, share in axes},
+            message=slowdown_message(self.device.max_step_rate, axes, board_s, free_s)
+            if slows
+            else "",
+        )
+
     def report(self) -> PreflightReport:
         """The report; raises `GcodeError` (bad input) for a program without moves."""
         if self.summary.moves == 0:
@@ -207,6 +278,8 @@ class Preflight:
             )
             raise GcodeError(self.source, 0, 0, f"no moves, nothing to print: {what}")
         self._planned(self.planner.finish())
+        if self.free is not None:
+            self._free_planned(self.free.finish())
         origin = self.planner.origin
         return PreflightReport(
             source=self.source,
@@ -226,6 +299,7 @@ class Preflight:
             filament_mm=round(self.summary.filament_mm, 4),
             filament_fed_mm=round(self.summary.filament_fed_mm, 4),
             estimated_time_s=round(self.planner.time, 3),
+            board=self._board(),
             moves_slowed_by_modules=self.slowed,
             moves_sampled_densely=self.checker.sampled_moves,
             motion_box_machine=self.motion_box.box(),

@@ -19,6 +19,7 @@ from pydantic import ValidationError
 
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic
+from cdprhost.profile.device_record import DeviceRecord, read_sidecar, sidecar_path, write_sidecar
 from cdprhost.profile.models import MachineProfile
 
 SHIPPED_DIR = Path(__file__).resolve().parents[2] / "profiles"
@@ -103,7 +104,31 @@ def profile_from_dict(
 
 
 def load_profile(ref: str | os.PathLike[str]) -> MachineProfile:
+    """The profile ``ref`` names, with the board's record from its sidecar when there is
+    one (it takes precedence over the profile's own ``[device]`` table)."""
     path = resolve_profile_path(ref)
+    profile = _load_file(path)
+    record = read_sidecar(device_record_path(path))
+    return profile if record is None else profile.model_copy(update={"device": record})
+
+
+def device_record_path(profile_path: str | os.PathLike[str]) -> Path:
+    """Where cdprhost keeps what the board announced for the profile at ``profile_path``
+    (a sidecar: the profile itself is never rewritten)."""
+    return sidecar_path(Path(profile_path), SHIPPED_DIR, user_profile_dir())
+
+
+def record_device(profile_ref: str | os.PathLike[str], record: DeviceRecord) -> Path | None:
+    """Keep ``record`` (what the board announced) for the profile ``profile_ref``; the path
+    written, or None when the sidecar already holds the same limits."""
+    path = device_record_path(resolve_profile_path(profile_ref))
+    if record.same_limits(read_sidecar(path)):
+        return None
+    write_sidecar(path, record)
+    return path
+
+
+def _load_file(path: Path) -> MachineProfile:
     try:
         raw = path.read_bytes()
     except OSError as exc:

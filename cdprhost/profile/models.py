@@ -11,6 +11,8 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from cdprhost.profile.device_record import DeviceRecord
+
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -264,6 +266,9 @@ class MachineProfile(_Strict):
     effects: dict[str, dict[str, Any]] = Field(default_factory=dict)
     calibration: dict[str, Any] = Field(
         default_factory=dict, description="provenance of a calibrated profile"
+    )
+    device: DeviceRecord | None = Field(
+        default=None, description="the board it drives: plan and estimate for its limits"
     )
 
     @model_validator(mode="after")

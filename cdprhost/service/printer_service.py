@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import logging
 import os
 import queue
@@ -365,6 +366,10 @@ class PrinterService:
             resume=point,
             log_path=spec.log_path,
         )
+        if spec.port is not None and spec.profile_ref is not None:
+            from cdprhost.profile import record_device
+
+            options.record_device = functools.partial(record_device, spec.profile_ref)
         with self._lock:
             if self.job_running:
                 job = self._job

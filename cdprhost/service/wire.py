@@ -71,6 +71,8 @@ class StartJob(_Msg):
     resume_from_layer: int | None = Field(default=None, ge=0)  # 0-based
     log_path: str = Field(min_length=1, max_length=4096)
     job_log_file: bool = True  # also the .log beside the JSON-lines log
+    # where the board's announced limits are recorded (a real board: a profile name or path)
+    profile_ref: str | None = Field(default=None, max_length=4096)
 
 
 class Start(_Msg):

@@ -173,6 +173,8 @@ def run(args: argparse.Namespace) -> int:
         resume_from_layer=layer,
         log_path=str(log_path if log_path.is_absolute() else log_path.absolute()),
         job_log_file=not args.log,
+        # a real board: what it announces is kept beside the profile for later estimates
+        profile_ref=_profile_ref(args.profile) if args.port else None,
     )
     client = attach(args.port, "print", replay=False)
     try:
@@ -180,6 +182,12 @@ def run(args: argparse.Namespace) -> int:
     finally:
         client.close()
     return _finish(outcome, args, log_path)
+
+
+def _profile_ref(profile: str) -> str:
+    """The profile as the service (another working folder) can find it again."""
+    path = Path(profile)
+    return str(path.resolve()) if path.is_file() else profile
 
 
 def _watch(args: argparse.Namespace) -> int:
@@ -330,6 +338,8 @@ def _report(result: Any, args: argparse.Namespace, log_path: Path | None) -> Non
             f"segments: {result.segments}  retransmits: {result.retransmits}  print time: {result.print_time_s:.1f} s "
             f"(estimated {result.estimated_time_s:.1f} s)"
         )
+        if result.board:
+            print(f"  ({result.board})")
         print(
             f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}"
         )

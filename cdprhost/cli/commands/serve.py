@@ -8,6 +8,7 @@ print is stopped safely first (the job's safe-stop path), then the link is close
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import threading
 from typing import Any
@@ -158,7 +159,7 @@ def _say_event(event: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cdprhost.profile import load_profile
+    from cdprhost.profile import load_profile, record_device
     from cdprhost.server.headless import HeadlessPrinter
 
     profile = load_profile(args.profile)
@@ -176,10 +177,13 @@ def run(args: argparse.Namespace) -> int:
         def open_device() -> Any:
             return open_embedded(speedup=args.speedup or None)
 
+    # a real board: what it announces is kept beside the profile for the next estimates
+    recorder = {"record_device": functools.partial(record_device, args.profile)}
     printer = HeadlessPrinter(
         profile,
         open_device,
         setup=setup_from_args(args),
+        job_options=recorder if args.port else None,
         on_event=_say_event,
         clear_fault=args.clear_fault,
     )

@@ -264,8 +264,15 @@ class LiveBackend:
         bed = self.profile.build_volume.bed_origin
         tap = ToolpathTap((float(bed[0]), float(bed[1]), float(bed[2])))
         prepared = prepare(path, self.profile, self.model, self.setup)
-        report = preflight_prepared(prepared, tap.tap(prepared.items()))
+        report = preflight_prepared(prepared, tap.tap(prepared.items()), device=self._board())
         return preflight_view(report, path, tap.result())
+
+    def _board(self) -> Any:
+        """What the connected device announced (None: not connected): the estimate is for it."""
+        from cdprhost.job.board import announced_record
+
+        link = self._link
+        return None if link is None else announced_record(link.identity, link.caps)
 
     def toggle_center(self) -> bool:
         """Centre the part on the build volume (``--center``), or stop centring; returns
