@@ -69,6 +69,8 @@ class BootCause(IntEnum):
     POWER_ON = 0
     WATCHDOG = 1
     SOFT_RESET = 2
+    EXTERNAL_RESET = 3  # the RESET pin: a button, or the DTR auto-reset of opening the port
+    BROWN_OUT = 4
 
 
 class EstopFlag(IntFlag):

@@ -154,8 +154,9 @@ int main(void)
     LED_DDR |= _BV(LED_BIT);
     heater_init();
     watchdog_start();
-    /* after a watchdog or soft reset the motors that were enabled stay enabled: the
-     * effector hangs on them (positions are unknown: the host re-homes) */
+    /* after any reset that kept the RAM (watchdog, RESET pin, soft) the motors that were
+     * enabled stay enabled, as .init3 drove them: the effector hangs on them (positions
+     * are unknown: the host re-homes) */
     stepper_init(watchdog_prev_enabled());
     uart_init();
     static const struct link_upper upper = {proto_accept, proto_urgent, proto_flow,
