@@ -74,7 +74,10 @@ class BootCause(IntEnum):
 
 
 class EstopFlag(IntFlag):
-    """``EmergencyStop.flags``: what the stop leaves on (0: everything off)."""
+    """``EmergencyStop.flags``: the heaters go off unless KEEP_HEATERS; the motors stay
+    enabled (a cable robot must not drop its effector) unless RELEASE_MOTORS asks for it.
+    KEEP_MOTORS is what every stop does now; it is still accepted."""
 
     KEEP_HEATERS = 0x01
     KEEP_MOTORS = 0x02
+    RELEASE_MOTORS = 0x04

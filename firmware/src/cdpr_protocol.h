@@ -78,6 +78,7 @@
 #define CDPR_BOOT_BROWN_OUT 0x04
 #define CDPR_ESTOP_KEEP_HEATERS 0x01
 #define CDPR_ESTOP_KEEP_MOTORS 0x02
+#define CDPR_ESTOP_RELEASE_MOTORS 0x04
 
 /* opcodes and largest encoded size of each message (opcode included) */
 #define CDPR_SEGMENT_MAX_LEN 27
@@ -161,10 +162,10 @@ typedef struct cdpr_hello {
 
 /* EmergencyStop: class U, opcode 0x06 */
 typedef struct cdpr_emergency_stop {
-    uint8_t flags; /* EstopFlag: 0x01 keep heaters, 0x02 keep motors */
+    uint8_t flags; /* EstopFlag: 0x01 keep heaters, 0x02 keep motors (the default), 0x04 release motors */
 } cdpr_emergency_stop_t;
 #define CDPR_EMERGENCY_STOP_FLAGS_MIN (0)
-#define CDPR_EMERGENCY_STOP_FLAGS_MAX (3)
+#define CDPR_EMERGENCY_STOP_FLAGS_MAX (7)
 
 /* Configure: class I, opcode 0x07 */
 typedef struct cdpr_configure {

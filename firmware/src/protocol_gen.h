@@ -66,6 +66,7 @@
 #define BOOT_BROWN_OUT CDPR_BOOT_BROWN_OUT
 #define ESTOP_KEEP_HEATERS CDPR_ESTOP_KEEP_HEATERS
 #define ESTOP_KEEP_MOTORS CDPR_ESTOP_KEEP_MOTORS
+#define ESTOP_RELEASE_MOTORS CDPR_ESTOP_RELEASE_MOTORS
 
 /* Host-to-device messages: opcode, queue slot, field descriptors. A descriptor
  * is {type (0 u8, 1 u16, 2 u32, 3 i16, 4 i32), count, mask, lo, hi}: the
@@ -119,7 +120,7 @@
 #define NFIELDS_EMERGENCY_STOP 1
 #define NVALUES_EMERGENCY_STOP 1
 #define FIELDS_EMERGENCY_STOP \
-    {0, 1, -1, 0L, 3UL} /* flags */, \
+    {0, 1, -1, 0L, 7UL} /* flags */, \
 
 #define OP_CONFIGURE CDPR_OP_CONFIGURE
 #define QUEUED_CONFIGURE 0

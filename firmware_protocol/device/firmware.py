@@ -384,7 +384,7 @@ class SimDevice:
                         self.device_time(now),
                         ErrorCode.ESTOP,
                         keep_heaters=bool(msg.flags & EstopFlag.KEEP_HEATERS),
-                        keep_motors=bool(msg.flags & EstopFlag.KEEP_MOTORS),
+                        keep_motors=not msg.flags & EstopFlag.RELEASE_MOTORS,
                     )
                 )
                 mc.estopped = True
