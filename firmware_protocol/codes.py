@@ -33,6 +33,7 @@ class ErrorCode(IntEnum):
     PLANNER_LATE = 13  # segment preparation missed its start (not a step-rate excess)
     HEATER_LEASE = 14  # the host's heater lease ran out with a heater on
     AUTOTUNE_FAILED = 15  # PID autotune gave up (value: AutotuneFailure)
+    STACK_OVERFLOW = 16  # the canary word below the stack was overwritten
 
 
 #: faults a host must not clear on its own (the heater or its sensor needs a look first);

@@ -3,7 +3,7 @@
  *   cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE]
  *            [--time-limit SIM_SECONDS] [--exit-on-hangup]
  *            [--heater-fail-after SIM_SECONDS] [--boot-physical STEPS]
- *            [--travel-steps STEPS] [--bootloader HEX]
+ *            [--travel-steps STEPS] [--bootloader HEX] [--smash-canary-after S]
  *
  * With --bootloader the chip boots as a Mega 2560 does: the hex (Debian's
  * arduino-core-avr stk500boot_v2_mega2560.hex) at the boot section 0x3E000 and the
@@ -112,6 +112,7 @@ static int en_watch;             /* from a reset to the host's first byte after 
 static unsigned en_released_mask; /* enable pins seen high inside the last such window */
 static unsigned en_high_mask;     /* enable pins high now */
 static avr_flashaddr_t boot_pc;
+static double smash_canary_after = -1.0; /* overwrite the stack canary then (sim seconds) */
 
 static struct thermal thermal[2];
 static int heater_level[2];
@@ -692,6 +693,12 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
             avr->data[mailbox_addr + MB_LINK_CLOCK + i] = (uint8_t)(u >> (8 * i));
         avr->data[mailbox_addr + MB_LINK_VALID] = 1;
     }
+    if (smash_canary_after >= 0 && mailbox_addr && sim_seconds() >= smash_canary_after) {
+        unsigned at = mailbox_u16(MB_CANARY_AT); /* what an overflowing stack would do */
+        avr->data[at] = 0;
+        avr->data[at + 1] = 0;
+        smash_canary_after = -1.0;
+    }
     check_lost_interrupts();
     redrive_switches();
     if (heater_level[0] || heater_level[1])
@@ -743,7 +750,8 @@ static void usage(void)
 {
     fprintf(stderr, "usage: cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE] "
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
-                    "[--boot-physical STEPS] [--travel-steps STEPS] [--bootloader HEX]\n");
+                    "[--boot-physical STEPS] [--travel-steps STEPS] [--bootloader HEX] "
+                    "[--smash-canary-after S]\n");
     exit(2);
 }
 
@@ -760,6 +768,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--boot-physical") && i + 1 < argc) boot_physical = atoll(argv[++i]);
         else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
         else if (!strcmp(a, "--bootloader") && i + 1 < argc) bootloader = argv[++i];
+        else if (!strcmp(a, "--smash-canary-after") && i + 1 < argc) smash_canary_after = atof(argv[++i]);
         else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
         else if (a[0] == '-') usage();
         else elf = a;

@@ -165,7 +165,7 @@ int main(void)
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
-    uint8_t turns = 0;
+    uint8_t turns = 0, canary_reported = 0;
     for (;;) {
         uint32_t now = sched_clock();
         watchdog_kick(now);
@@ -192,6 +192,10 @@ int main(void)
         uint32_t items, segs;
         stepper_counts(&items, &segs);
         watchdog_save(items, segs, st.enabled_mask);
+        if (!watchdog_canary_ok() && !canary_reported) {
+            canary_reported = 1; /* once: the state below it may be damaged */
+            machine_fail(ERR_STACK_OVERFLOW, items, segs, 0xFF, 0);
+        }
         SIM_STATS(stepper_isr_max_cycles, stepper_lost_steps, stepper_plan_stalls,
                   stepper_overruns, stepper_late_pulses, stepper_latency_max, mc.last_error);
         if (SIM_HOOKS && !++turns) /* the stack's high-water mark, now and then (~1 KB scan) */

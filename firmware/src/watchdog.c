@@ -38,6 +38,7 @@
 
 #define SAVED_MAGIC 0xC0DEu
 #define STACK_PAINT 0xC5
+#define CANARY 0xC0A7u /* at _end, the first byte above the static data */
 #define CHECK_SEED 0x5A5Au
 #define WDT_MARK 0xD06Bu /* the watchdog's interrupt came: its reset follows */
 
@@ -140,8 +141,18 @@ static void __attribute__((used, noinline)) early_boot(void)
     /* paint the gap between the static data and the stack: watchdog_stack_free() counts
      * what the stack never reached (the C runtime clears .bss after this, below _end) */
     extern uint8_t _end;
-    for (uint8_t *q = &_end; q < (uint8_t *)SP - 8; q++)
+    volatile uint8_t *canary = &_end;
+    canary[0] = (uint8_t)CANARY;
+    canary[1] = (uint8_t)(CANARY >> 8);
+    for (uint8_t *q = &_end + 2; q < (uint8_t *)SP - 8; q++)
         *q = STACK_PAINT;
+}
+
+uint8_t watchdog_canary_ok(void)
+{
+    extern uint8_t _end;
+    const volatile uint8_t *canary = &_end;
+    return canary[0] == (uint8_t)CANARY && canary[1] == (uint8_t)(CANARY >> 8);
 }
 
 /* r25 first (the bootloader's copy of MCUSR), before any compiled code can use it; the
@@ -156,10 +167,10 @@ void early_init(void)
 uint16_t watchdog_stack_free(void)
 {
     extern uint8_t _end;
-    const uint8_t *q = &_end;
+    const uint8_t *q = &_end + 2;
     while (q < (const uint8_t *)RAMEND && *q == STACK_PAINT)
         q++;
-    return (uint16_t)(q - &_end);
+    return (uint16_t)(q - (&_end + 2));
 }
 
 uint8_t watchdog_boot_cause(void) { return boot_cause; }
