@@ -226,36 +226,6 @@ static void set_endstop(int k)
     }
 }
 
-/* Step timing against the firmware's schedule: phase k of a tick is due PHASE_BASE +
- * k * PHASE_CYCLES cycles after the tick's compare match (stepper.c). The error of each
- * rising edge against the latest due time before it, in cycles (a pulse later than a
- * whole phase would count against the next phase); its spread is the timing figure. */
-#define TIMER1_COMPA_VECTOR 17
-#define PHASE_BASE 80
-#define PHASE_CYCLES 200
-static uint64_t tick_match_cycle;
-static int64_t step_err_min = INT64_MAX, step_err_max = INT64_MIN;
-
-static void compa_pending_cb(struct avr_irq_t *irq, uint32_t value, void *param)
-{
-    (void)irq; (void)param;
-    if (value)
-        tick_match_cycle = avr->cycle;
-}
-
-static void note_step_timing(uint64_t now)
-{
-    if (!tick_match_cycle)
-        return;
-    int64_t off = (int64_t)(now - tick_match_cycle) - PHASE_BASE;
-    int64_t k = off <= 0 ? 0 : off / PHASE_CYCLES; /* pulses are late, never early */
-    int64_t err = off - k * PHASE_CYCLES;
-    if (err < step_err_min)
-        step_err_min = err;
-    if (err > step_err_max)
-        step_err_max = err;
-}
-
 /* CDPR_SIM_STEP_LOG=FILE: every rising step edge as "axis cycles", the cycles counted on
  * the motion clock (cycles of motion since boot: the record's t times 16e6), so the
  * benchmark can set each edge against the step's ideal time on its segment's profile. */
@@ -282,7 +252,6 @@ static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         last_dir_change[k] = 0;
         last_rise[k] = now;
         rise_at[k] = now;
-        note_step_timing(now);
         log_step(k, now);
         phys[k] += dir_level[k] ? 1 : -1;
         steps_total++;
@@ -732,15 +701,14 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, late, latency,
             loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
-            step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
-            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
+            stack_free,
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
             (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask);
     fclose(f);
@@ -831,9 +799,6 @@ int main(int argc, char **argv)
         watch(STEP_PINS[k].port, STEP_PINS[k].bit, step_cb, k);
         watch(DIR_PINS[k].port, DIR_PINS[k].bit, dir_cb, k);
     }
-    avr_irq_t *compa = avr_get_interrupt_irq(avr, TIMER1_COMPA_VECTOR);
-    if (compa)
-        avr_irq_register_notify(compa + AVR_INT_IRQ_PENDING, compa_pending_cb, NULL);
     for (int k = 0; k < 3; k++) {
         endstop_irq[k] = pin_irq(ENDSTOP_PINS[k].port, ENDSTOP_PINS[k].bit);
         limit_irq[k] = pin_irq(LIMIT_PINS[k].port, LIMIT_PINS[k].bit);

@@ -136,7 +136,7 @@
 #define CDPR_OP_FLOW 0x47
 #define CDPR_FLOW_MAX_LEN 25
 #define CDPR_OP_HEALTH 0x48
-#define CDPR_HEALTH_MAX_LEN 21
+#define CDPR_HEALTH_MAX_LEN 36
 #define CDPR_OP_CAPS 0x49
 #define CDPR_CAPS_MAX_LEN 14
 
@@ -525,6 +525,9 @@ typedef struct cdpr_health {
     uint32_t late_worst_us; /* the worst lateness of a pulse against its ideal time */
     uint32_t rx_overruns; /* received bytes lost (receive ring full or UART overrun), wraps */
     uint32_t loop_worst_us; /* the longest main-loop turn */
+    uint32_t lost_steps; /* step pulses a tick had no room for, wraps */
+    uint32_t tick_overruns; /* step ticks whose computation overran the next boundary, wraps */
+    uint32_t plan_stalls; /* step ticks that waited for a segment's plan, wraps */
 } cdpr_health_t;
 #define CDPR_HEALTH_LATE_PULSES_MIN (0)
 #define CDPR_HEALTH_LATE_PULSES_MAX (4294967295UL)
@@ -534,6 +537,12 @@ typedef struct cdpr_health {
 #define CDPR_HEALTH_RX_OVERRUNS_MAX (4294967295UL)
 #define CDPR_HEALTH_LOOP_WORST_US_MIN (0)
 #define CDPR_HEALTH_LOOP_WORST_US_MAX (4294967295UL)
+#define CDPR_HEALTH_LOST_STEPS_MIN (0)
+#define CDPR_HEALTH_LOST_STEPS_MAX (4294967295UL)
+#define CDPR_HEALTH_TICK_OVERRUNS_MIN (0)
+#define CDPR_HEALTH_TICK_OVERRUNS_MAX (4294967295UL)
+#define CDPR_HEALTH_PLAN_STALLS_MIN (0)
+#define CDPR_HEALTH_PLAN_STALLS_MAX (4294967295UL)
 
 /* Caps: class D, opcode 0x49 */
 typedef struct cdpr_caps {

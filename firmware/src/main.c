@@ -36,6 +36,9 @@ static void health_read(struct health *out)
     cli();
     out->late_pulses = stepper_late_tolerance;
     out->late_worst_us = (stepper_late_worst + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
+    out->lost_steps = stepper_lost_steps;
+    out->tick_overruns = stepper_overruns;
+    out->plan_stalls = stepper_plan_stalls;
     SREG = s;
     out->rx_overruns = uart_rx_overruns();
     out->loop_worst_us = loop_worst_us;

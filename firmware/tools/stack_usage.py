@@ -26,7 +26,7 @@ from functools import cache
 from pathlib import Path
 
 FIRMWARE = Path(__file__).resolve().parents[1]
-MARGIN = 96  # bytes that must stay free below the static data at the worst case
+MARGIN = 64  # bytes that must stay free below the static data at the worst case
 RET = 3  # a call's return address on the ATmega2560 (22-bit program counter)
 RAMEND = 0x21FF
 CANARY = 2  # the canary word at _end (src/watchdog.c)
