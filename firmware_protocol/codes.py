@@ -33,6 +33,7 @@ class ErrorCode(IntEnum):
     PLANNER_LATE = 13  # segment preparation missed its start (not a step-rate excess)
     HEATER_LEASE = 14  # the host's heater lease ran out with a heater on
     AUTOTUNE_FAILED = 15  # PID autotune gave up (value: AutotuneFailure)
+    STACK_OVERFLOW = 16  # the canary word below the stack was overwritten
 
 
 #: faults a host must not clear on its own (the heater or its sensor needs a look first);
@@ -69,10 +70,15 @@ class BootCause(IntEnum):
     POWER_ON = 0
     WATCHDOG = 1
     SOFT_RESET = 2
+    EXTERNAL_RESET = 3  # the RESET pin: a button, or the DTR auto-reset of opening the port
+    BROWN_OUT = 4
 
 
 class EstopFlag(IntFlag):
-    """``EmergencyStop.flags``: what the stop leaves on (0: everything off)."""
+    """``EmergencyStop.flags``: the heaters go off unless KEEP_HEATERS; the motors stay
+    enabled (a cable robot must not drop its effector) unless RELEASE_MOTORS asks for it.
+    KEEP_MOTORS is what every stop does now; it is still accepted."""
 
     KEEP_HEATERS = 0x01
     KEEP_MOTORS = 0x02
+    RELEASE_MOTORS = 0x04

@@ -219,6 +219,9 @@ class Health(Message):
     late_worst_us: int
     rx_overruns: int
     loop_worst_us: int
+    lost_steps: int = 0
+    tick_overruns: int = 0
+    plan_stalls: int = 0
     OPCODE: ClassVar[int] = 0x48
     CLASS: ClassVar[str] = "D"
     FIELDS: ClassVar[tuple[Field, ...]] = (
@@ -226,6 +229,9 @@ class Health(Message):
         F("late_worst_us", "u32", "the worst lateness of a pulse against its ideal time"),
         F("rx_overruns", "u32", "received bytes lost (receive ring full or UART overrun), wraps"),
         F("loop_worst_us", "u32", "the longest main-loop turn"),
+        F("lost_steps", "u32", "step pulses a tick had no room for, wraps"),
+        F("tick_overruns", "u32", "step ticks whose computation overran the next boundary, wraps"),
+        F("plan_stalls", "u32", "step ticks that waited for a segment's plan, wraps"),
     )
 
 

@@ -146,7 +146,12 @@ class EmergencyStop(Message):
     OPCODE: ClassVar[int] = 0x06
     CLASS: ClassVar[str] = "U"
     FIELDS: ClassVar[tuple[Field, ...]] = (
-        F("flags", "u8", "EstopFlag: 0x01 keep heaters, 0x02 keep motors", hi=0x03),
+        F(
+            "flags",
+            "u8",
+            "EstopFlag: 0x01 keep heaters, 0x02 keep motors (the default), 0x04 release motors",
+            hi=0x07,
+        ),
     )
 
 

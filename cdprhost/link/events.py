@@ -90,10 +90,21 @@ class DeviceHealth:
     late_worst_us: int = 0
     rx_overruns: int = 0
     loop_worst_us: int = 0
+    lost_steps: int = 0  # pulses a tick had no room for
+    tick_overruns: int = 0  # step ticks that overran their boundary
+    plan_stalls: int = 0  # step ticks that waited for a plan
 
     @classmethod
     def from_message(cls, m: Health) -> DeviceHealth:
-        return cls(m.late_pulses, m.late_worst_us, m.rx_overruns, m.loop_worst_us)
+        return cls(
+            m.late_pulses,
+            m.late_worst_us,
+            m.rx_overruns,
+            m.loop_worst_us,
+            m.lost_steps,
+            m.tick_overruns,
+            m.plan_stalls,
+        )
 
 
 @dataclass(frozen=True)

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import logging
 import select
 import time
 
 import serial
 
 from cdprhost.link.errors import LinkError, PortBusy, PortNotFound, PortVanished
+
+log = logging.getLogger(__name__)
 
 READ_SLICE_S = 0.02
 
@@ -124,6 +127,31 @@ def open_serial(port: str, baud: int = 250_000, *, write_timeout_s: float = 2.0)
         ser.open()
     except (serial.SerialException, OSError, ValueError) as exc:
         raise _open_error(port, exc) from None
+    if keep_dtr_across_close(ser) and not port.startswith("/dev/pts/"):  # a pty has no DTR
+        log.warning(
+            "%s: opening the port raised DTR, which resets an Arduino Mega (auto-reset): "
+            "it restarts through its bootloader (about 1 s); DTR now stays up across closes",
+            port,
+        )
     with contextlib.suppress(serial.SerialException, OSError):
         ser.reset_input_buffer()
     return SerialTransport(ser, port)
+
+
+def keep_dtr_across_close(ser: serial.SerialBase) -> bool:
+    """Clear the tty's HUPCL so that closing the port leaves DTR asserted: the next open
+    then makes no DTR edge and does not reset a board with auto-reset (only the first
+    open after plugging it in does). True when HUPCL was set, that is when this open
+    raised DTR (the kernel does it before pyserial can stop it) and reset such a board."""
+    try:
+        import termios
+
+        fd = ser.fileno()
+        attrs = termios.tcgetattr(fd)
+        if not attrs[2] & termios.HUPCL:
+            return False
+        attrs[2] &= ~termios.HUPCL
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+        return True
+    except (ImportError, AttributeError, OSError, ValueError, serial.SerialException):
+        return False  # not a tty (a URL port, another OS): nothing to keep

@@ -24,6 +24,7 @@ from cdprhost.link.events import (
     error_text,
 )
 from cdprhost.link.flow import FlowReport
+from firmware_protocol.codes import BootCause
 from firmware_protocol.endpoint import Incoming
 from firmware_protocol.message_codec import decode_messages
 from firmware_protocol.messages import (
@@ -173,11 +174,23 @@ class DeviceTracker:
         seg = msg.prev_segments_done if exact else self.progress.segments_done
         item = msg.prev_items_done if exact else self.progress.items_done
         self.set_progress(item, seg, 0, Flag.FAULT)
-        log.warning("%s: device reset (boot id %#010x)", self.name, msg.boot_id)
+        cause = boot_cause_text(msg.cause)
+        log.warning("%s: device reset (%s, boot id %#010x)", self.name, cause, msg.boot_id)
         self.failure = DeviceReset(
-            f"{self.name}: the device reset (boot id {self.identity.boot_id:#010x} -> {msg.boot_id:#010x}); "
+            f"{self.name}: the device reset ({cause}; boot id {self.identity.boot_id:#010x} -> {msg.boot_id:#010x}); "
             f"last executed segment {seg}{'' if exact else ' (last reported; the device kept no record)'}",
             last_segment=seg,
             last_item=item,
             exact=exact,
         )
+
+
+def boot_cause_text(cause: int) -> str:
+    """BOOT's cause in words (a DTR auto-reset at connect is an external reset)."""
+    try:
+        name = BootCause(cause).name
+    except ValueError:
+        return f"cause {cause}"
+    return {
+        "EXTERNAL_RESET": "external reset: the RESET pin, e.g. the DTR auto-reset of opening the port",
+    }.get(name, name.lower().replace("_", "-"))

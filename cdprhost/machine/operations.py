@@ -211,8 +211,9 @@ class Machine:
         return st
 
     def emergency_stop(self, timeout_s: float = 1.0, flags: int = 0) -> bool:
-        """Stop now, bypassing the queue: motion, heaters and motors off on the device
-        (``flags``, firmware_protocol.messages.EstopFlag, keep heaters or motors on)."""
+        """Stop now, bypassing the queue: motion and heaters off on the device, the motors
+        kept enabled (the effector hangs on them); ``flags``
+        (firmware_protocol.messages.EstopFlag) keep the heaters or release the motors."""
         return self.link.emergency_stop(timeout=timeout_s, flags=flags)
 
     # ------------------------------------------- the wizard's device interface

@@ -28,6 +28,10 @@ FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
 ELF = FIRMWARE_DIR / "build" / "cdpr-sim.elf"  # the simulator target (mailbox hooks)
 BOARD_ELF = FIRMWARE_DIR / "build" / "cdpr.elf"  # the board target, the one flashed
 HARNESS = FIRMWARE_DIR / "build" / "cdpr-sim"
+# the Mega 2560's stock bootloader (Debian's arduino-core-avr), for `harness_command(bootloader=...)`
+BOOTLOADER_HEX = Path(
+    "/usr/share/arduino/hardware/arduino/avr/bootloaders/stk500v2/stk500boot_v2_mega2560.hex"
+)
 INSTALL_HINT = (
     "the AVR toolchain or simavr is missing: install it with "
     "`apt-get install -y gcc-avr avr-libc simavr libsimavr-dev libelf-dev pkg-config`"
@@ -74,6 +78,7 @@ def harness_command(
     time_limit: float | None = None,
     heater_fail_after: float | None = None,
     exit_on_hangup: bool = False,
+    bootloader: Path | None = None,
 ) -> list[str]:
     cmd = [str(HARNESS), str(ELF), "--speedup", f"{speedup:g}"]
     if record:
@@ -86,6 +91,8 @@ def harness_command(
         cmd += ["--heater-fail-after", f"{heater_fail_after:g}"]
     if exit_on_hangup:
         cmd.append("--exit-on-hangup")
+    if bootloader is not None:
+        cmd += ["--bootloader", str(bootloader)]
     return cmd
 
 

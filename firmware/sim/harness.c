@@ -3,7 +3,17 @@
  *   cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE]
  *            [--time-limit SIM_SECONDS] [--exit-on-hangup]
  *            [--heater-fail-after SIM_SECONDS] [--boot-physical STEPS]
- *            [--travel-steps STEPS]
+ *            [--travel-steps STEPS] [--bootloader HEX] [--smash-canary-after S]
+ *
+ * With --bootloader the chip boots as a Mega 2560 does: the hex (Debian's
+ * arduino-core-avr stk500boot_v2_mega2560.hex) at the boot section 0x3E000 and the
+ * fuses a Mega ships with (low 0xFF, high 0xD8: BOOTRST, 4 K words; extended 0xFD), so
+ * every reset runs the bootloader before the application. Signals ask for resets the
+ * pty cannot carry: SIGUSR1 pulls the RESET pin (the DTR auto-reset of opening the port;
+ * SRAM is kept, MCUSR gets EXTRF), SIGUSR2 resets it as its watchdog does after a hang
+ * (MCUSR gets WDRF; simavr 1.6's own watchdog did not reset this chip when Timer1 was
+ * stopped, so the harness applies the reset). The stats count the resets and, per enable pin, whether it
+ * went high (driver off) between a reset and the host's first byte after it.
  *
  * The first line on stdout is the pty path. Single-threaded: a cycle timer polls
  * the pty every POLL_US of simulated time, feeds received bytes to UART0 only
@@ -95,6 +105,15 @@ static uint16_t b_sp;
 static uint32_t trace_pc[8192];
 static size_t trace_len;
 
+/* resets and the enable pins across them */
+static volatile sig_atomic_t reset_request, watchdog_request;
+static unsigned resets;
+static int en_watch;             /* from a reset to the host's first byte after it */
+static unsigned en_released_mask; /* enable pins seen high inside the last such window */
+static unsigned en_high_mask;     /* enable pins high now */
+static avr_flashaddr_t boot_pc;
+static double smash_canary_after = -1.0; /* overwrite the stack canary then (sim seconds) */
+
 static struct thermal thermal[2];
 static int heater_level[2];
 static double heater_fail_after = -1.0;
@@ -102,6 +121,8 @@ static double heater_fail_after = -1.0;
 static double sim_seconds(void) { return (double)avr->cycle / (double)F_CPU; }
 
 static void on_signal(int sig) { (void)sig; stop_flag = 1; }
+static void on_reset_signal(int sig) { (void)sig; reset_request = 1; }
+static void on_watchdog_signal(int sig) { (void)sig; watchdog_request = 1; }
 
 static uint32_t mailbox_u32(unsigned off)
 {
@@ -205,36 +226,6 @@ static void set_endstop(int k)
     }
 }
 
-/* Step timing against the firmware's schedule: phase k of a tick is due PHASE_BASE +
- * k * PHASE_CYCLES cycles after the tick's compare match (stepper.c). The error of each
- * rising edge against the latest due time before it, in cycles (a pulse later than a
- * whole phase would count against the next phase); its spread is the timing figure. */
-#define TIMER1_COMPA_VECTOR 17
-#define PHASE_BASE 80
-#define PHASE_CYCLES 200
-static uint64_t tick_match_cycle;
-static int64_t step_err_min = INT64_MAX, step_err_max = INT64_MIN;
-
-static void compa_pending_cb(struct avr_irq_t *irq, uint32_t value, void *param)
-{
-    (void)irq; (void)param;
-    if (value)
-        tick_match_cycle = avr->cycle;
-}
-
-static void note_step_timing(uint64_t now)
-{
-    if (!tick_match_cycle)
-        return;
-    int64_t off = (int64_t)(now - tick_match_cycle) - PHASE_BASE;
-    int64_t k = off <= 0 ? 0 : off / PHASE_CYCLES; /* pulses are late, never early */
-    int64_t err = off - k * PHASE_CYCLES;
-    if (err < step_err_min)
-        step_err_min = err;
-    if (err > step_err_max)
-        step_err_max = err;
-}
-
 /* CDPR_SIM_STEP_LOG=FILE: every rising step edge as "axis cycles", the cycles counted on
  * the motion clock (cycles of motion since boot: the record's t times 16e6), so the
  * benchmark can set each edge against the step's ideal time on its segment's profile. */
@@ -261,7 +252,6 @@ static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         last_dir_change[k] = 0;
         last_rise[k] = now;
         rise_at[k] = now;
-        note_step_timing(now);
         log_step(k, now);
         phys[k] += dir_level[k] ? 1 : -1;
         steps_total++;
@@ -418,6 +408,19 @@ static void heater_cb(struct avr_irq_t *irq, uint32_t value, void *param)
     heater_level[h] = (int)value;
 }
 
+static void en_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq;
+    unsigned bit = 1u << (int)(intptr_t)param;
+    if (value & 1) {
+        en_high_mask |= bit;
+        if (en_watch)
+            en_released_mask |= bit;
+    } else {
+        en_high_mask &= ~bit;
+    }
+}
+
 static avr_irq_t *pin_irq(char port, int bit)
 {
     return avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ(port), bit);
@@ -491,6 +494,7 @@ static void poll_pty(void)
                 slave = -1;
             }
             host_seen = 1;
+            en_watch = 0;
             last_host_byte_wall = wall_seconds();
         } else if (n < 0 && errno == EIO && exit_on_hangup && host_seen) {
             stop_flag = 1;
@@ -546,9 +550,101 @@ static void update_thermal(void)
     }
 }
 
+/* The chip reset (by its watchdog, or by us): the firmware's mailbox is found again once
+ * it announces it, motion has stopped, the enable pins are watched until the host's
+ * next byte. */
+static void after_reset(const char *why)
+{
+    fprintf(stderr, "cdpr-sim: reset (%s) at %.6f s, pc 0x%x\n", why, sim_seconds(), avr->pc);
+    resets++;
+    mailbox_addr = 0;
+    en_released_mask = 0;
+    if (motion_level) {
+        motion_units += units_since(motion_since);
+        motion_level = 0;
+    }
+    en_watch = 1;
+}
+
+/* RESET pulled low and released, or the watchdog's reset: SRAM keeps its content (as
+ * on the chip), the registers and I/O start over, MCUSR says which (EXTRF 0x02, WDRF
+ * 0x08); bytes in flight are lost. */
+static void chip_reset(uint8_t mcusr, const char *why)
+{
+    size_t lo = 0x200, n = (size_t)avr->ramend + 1 - lo;
+    uint8_t *keep = malloc(n);
+    avr_cycle_count_t cycle = avr->cycle; /* simavr's reset zeroes it: the clocks go on */
+    if (!keep) { perror("malloc"); exit(2); }
+    memcpy(keep, avr->data + lo, n);
+    avr_reset(avr);
+    memcpy(avr->data + lo, keep, n);
+    free(keep);
+    avr->cycle = cycle;
+    avr->data[0x54] = mcusr;
+    in_pos = in_len = 0;
+    xon = 1;
+    after_reset(why);
+}
+
+/* Intel hex into flash; 0 on success */
+static int load_hex(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    if (!f) { perror(path); return -1; }
+    char line[600];
+    uint32_t base = 0;
+    int bad = 0;
+    while (!bad && fgets(line, sizeof line, f)) {
+        unsigned len, addr, type;
+        if (line[0] != ':' || sscanf(line + 1, "%2x%4x%2x", &len, &addr, &type) != 3) continue;
+        if (type == 1) break;
+        if (type == 2 || type == 4) {
+            unsigned hi;
+            sscanf(line + 9, "%4x", &hi);
+            base = type == 2 ? (uint32_t)hi << 4 : (uint32_t)hi << 16;
+            continue;
+        }
+        if (type != 0) continue;
+        for (unsigned i = 0; i < len; i++) {
+            unsigned b;
+            uint32_t at = base + addr + i;
+            if (sscanf(line + 9 + 2 * i, "%2x", &b) != 1 || at > avr->flashend) { bad = 1; break; }
+            avr->flash[at] = (uint8_t)b;
+        }
+    }
+    fclose(f);
+    return bad ? -1 : 0;
+}
+
 static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)param; (void)when;
+    if (reset_request) {
+        reset_request = 0;
+        chip_reset(0x02, "RESET pin");
+    }
+    /* a hang of the main loop (sent into an endless loop: the interrupts go on, the
+     * watchdog is fed no more), then the watchdog's two time-outs a poll apart: its
+     * interrupt when the firmware enabled it (WDIE), then the reset */
+    static int watchdog_stage;
+    if (watchdog_stage == 2) {
+        watchdog_stage = 0;
+        chip_reset(0x08, "watchdog");
+    } else if (watchdog_stage == 1) {
+        avr_int_vector_t *v = vector_no(12);
+        if (v && (avr->data[0x60] & 0x40))
+            avr_raise_interrupt(avr, v);
+        watchdog_stage = 2;
+    } else if (watchdog_request && avr->sreg[S_I]) { /* not inside an interrupt */
+        watchdog_request = 0;
+        /* the first "rjmp .-2" of the application (avr-libc's __stop_program) */
+        for (uint32_t a = 0; a + 1 < 0x3E000; a += 2)
+            if (avr->flash[a] == 0xFF && avr->flash[a + 1] == 0xCF) {
+                avr->pc = a;
+                break;
+            }
+        watchdog_stage = 1;
+    }
     if (!mailbox_addr) {
         uint32_t addr = avr->data[0x4A] | (uint32_t)avr->data[0x4B] << 8; /* GPIOR1, GPIOR2 */
         if (addr && avr->data[addr] == 'C' && avr->data[addr + 3] == 'R') {
@@ -565,6 +661,12 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         for (int i = 0; i < 4; i++)
             avr->data[mailbox_addr + MB_LINK_CLOCK + i] = (uint8_t)(u >> (8 * i));
         avr->data[mailbox_addr + MB_LINK_VALID] = 1;
+    }
+    if (smash_canary_after >= 0 && mailbox_addr && sim_seconds() >= smash_canary_after) {
+        unsigned at = mailbox_u16(MB_CANARY_AT); /* what an overflowing stack would do */
+        avr->data[at] = 0;
+        avr->data[at + 1] = 0;
+        smash_canary_after = -1.0;
     }
     check_lost_interrupts();
     redrive_switches();
@@ -599,17 +701,16 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"step_err_min_us\":%.4f,\"step_err_max_us\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
             min_low_gap == UINT64_MAX ? -1.0 : (double)min_low_gap / 16.0,
             min_dir_setup == UINT64_MAX ? -1.0 : (double)min_dir_setup / 16.0, isr_max, lost, stalls, overruns, late, latency,
             loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
-            step_err_min == INT64_MAX ? 0.0 : (double)step_err_min / 16.0,
-            step_err_max == INT64_MIN ? 0.0 : (double)step_err_max / 16.0, stack_free,
+            stack_free,
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
-            (unsigned long long)b_count, behind_max * 1000.0);
+            (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask);
     fclose(f);
 }
 
@@ -617,13 +718,14 @@ static void usage(void)
 {
     fprintf(stderr, "usage: cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE] "
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
-                    "[--boot-physical STEPS] [--travel-steps STEPS]\n");
+                    "[--boot-physical STEPS] [--travel-steps STEPS] [--bootloader HEX] "
+                    "[--smash-canary-after S]\n");
     exit(2);
 }
 
 int main(int argc, char **argv)
 {
-    const char *elf = NULL;
+    const char *elf = NULL, *bootloader = NULL;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         if (!strcmp(a, "--speedup") && i + 1 < argc) speedup = atof(argv[++i]);
@@ -633,6 +735,8 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--heater-fail-after") && i + 1 < argc) heater_fail_after = atof(argv[++i]);
         else if (!strcmp(a, "--boot-physical") && i + 1 < argc) boot_physical = atoll(argv[++i]);
         else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
+        else if (!strcmp(a, "--bootloader") && i + 1 < argc) bootloader = argv[++i];
+        else if (!strcmp(a, "--smash-canary-after") && i + 1 < argc) smash_canary_after = atof(argv[++i]);
         else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
         else if (a[0] == '-') usage();
         else elf = a;
@@ -662,6 +766,18 @@ int main(int argc, char **argv)
     }
     avr_init(avr);
     avr_load_firmware(avr, &fw);
+    if (bootloader) {
+        if (load_hex(bootloader)) {
+            fprintf(stderr, "cdpr-sim: cannot load the bootloader %s\n", bootloader);
+            return 2;
+        }
+        avr->fuse[AVR_FUSE_LOW] = 0xFF;
+        avr->fuse[AVR_FUSE_HIGH] = 0xD8;
+        avr->fuse[AVR_FUSE_EXT] = 0xFD;
+        boot_pc = avr->reset_pc = 0x3E000;
+        avr->pc = avr->reset_pc;
+    }
+    avr->data[0x54] = 0x01; /* MCUSR: PORF, a power-on */
     avr->frequency = F_CPU;
     avr->vcc = avr->avcc = avr->aref = 5000;
     avr->log = getenv("CDPR_SIM_DEBUG") ? LOG_TRACE : LOG_ERROR;
@@ -683,9 +799,6 @@ int main(int argc, char **argv)
         watch(STEP_PINS[k].port, STEP_PINS[k].bit, step_cb, k);
         watch(DIR_PINS[k].port, DIR_PINS[k].bit, dir_cb, k);
     }
-    avr_irq_t *compa = avr_get_interrupt_irq(avr, TIMER1_COMPA_VECTOR);
-    if (compa)
-        avr_irq_register_notify(compa + AVR_INT_IRQ_PENDING, compa_pending_cb, NULL);
     for (int k = 0; k < 3; k++) {
         endstop_irq[k] = pin_irq(ENDSTOP_PINS[k].port, ENDSTOP_PINS[k].bit);
         limit_irq[k] = pin_irq(LIMIT_PINS[k].port, LIMIT_PINS[k].bit);
@@ -695,6 +808,9 @@ int main(int argc, char **argv)
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
     watch(HEATER_PINS[0].port, HEATER_PINS[0].bit, heater_cb, 0);
     watch(HEATER_PINS[1].port, HEATER_PINS[1].bit, heater_cb, 1);
+    for (int k = 0; k < 4; k++)
+        watch(EN_PINS[k].port, EN_PINS[k].bit, en_cb, k);
+    en_watch = 1;
     /* The endstop pins are also INT3/INT5 inputs. simavr polls a low level on
      * an INT pin every cycle (level-triggered mode, the reset default) even
      * with the interrupt disabled, and starts another poller on every low
@@ -728,6 +844,10 @@ int main(int argc, char **argv)
     sa.sa_handler = on_signal;
     sigaction(SIGTERM, &sa, NULL);
     sigaction(SIGINT, &sa, NULL);
+    sa.sa_handler = on_reset_signal;
+    sigaction(SIGUSR1, &sa, NULL);
+    sa.sa_handler = on_watchdog_signal;
+    sigaction(SIGUSR2, &sa, NULL);
     signal(SIGPIPE, SIG_IGN);
 
     clock_gettime(CLOCK_MONOTONIC, &wall0);
@@ -759,12 +879,16 @@ int main(int argc, char **argv)
                 cli_start = 0;
             }
         }
+        if (avr->pc == boot_pc && prev_pc != boot_pc && avr->cycle > 16) {
+            if (mailbox_addr) /* the chip reset itself (its watchdog) */
+                after_reset("by itself");
+        }
         if (debug) {
             if (avr->pc == 0 && prev_pc != 0)
                 fprintf(stderr, "cdpr-sim: reset at %.6f s, from pc 0x%x, sp 0x%x\n", sim_seconds(),
                         prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
-            prev_pc = avr->pc;
         }
+        prev_pc = avr->pc;
         if (profile_all && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
             pc_hist[avr->pc]++; /* every instruction: where the CPU's time goes */
         if (profile_isr) {

@@ -22,7 +22,8 @@
 #define MB_LATE_PULSES 49   /* u16 */
 #define MB_STACK_FREE 51    /* u16 */
 #define MB_MOTION_TICKS 53  /* u32: the motion clock at the end of segment MB_SEQ */
-#define MB_SIZE 57
+#define MB_CANARY_AT 57     /* u16: the stack canary's address */
+#define MB_SIZE 59
 
 /* what the next MARK_EDGE toggle means (MB_EDGE) */
 #define EDGE_SEG_END 0x01      /* a segment's last tick ended: MB_SEQ names it */

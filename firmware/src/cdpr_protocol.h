@@ -66,6 +66,7 @@
 #define CDPR_ERR_PLANNER_LATE 0x0D
 #define CDPR_ERR_HEATER_LEASE 0x0E
 #define CDPR_ERR_AUTOTUNE_FAILED 0x0F
+#define CDPR_ERR_STACK_OVERFLOW 0x10
 #define CDPR_EVT_HOMED 0x01
 #define CDPR_EVT_HEATER_REACHED 0x02
 #define CDPR_EVT_FAULT_CLEARED 0x03
@@ -74,8 +75,11 @@
 #define CDPR_BOOT_POWER_ON 0x00
 #define CDPR_BOOT_WATCHDOG 0x01
 #define CDPR_BOOT_SOFT_RESET 0x02
+#define CDPR_BOOT_EXTERNAL_RESET 0x03
+#define CDPR_BOOT_BROWN_OUT 0x04
 #define CDPR_ESTOP_KEEP_HEATERS 0x01
 #define CDPR_ESTOP_KEEP_MOTORS 0x02
+#define CDPR_ESTOP_RELEASE_MOTORS 0x04
 
 /* opcodes and largest encoded size of each message (opcode included) */
 #define CDPR_SEGMENT_MAX_LEN 27
@@ -132,7 +136,7 @@
 #define CDPR_OP_FLOW 0x47
 #define CDPR_FLOW_MAX_LEN 25
 #define CDPR_OP_HEALTH 0x48
-#define CDPR_HEALTH_MAX_LEN 21
+#define CDPR_HEALTH_MAX_LEN 36
 #define CDPR_OP_CAPS 0x49
 #define CDPR_CAPS_MAX_LEN 14
 
@@ -159,10 +163,10 @@ typedef struct cdpr_hello {
 
 /* EmergencyStop: class U, opcode 0x06 */
 typedef struct cdpr_emergency_stop {
-    uint8_t flags; /* EstopFlag: 0x01 keep heaters, 0x02 keep motors */
+    uint8_t flags; /* EstopFlag: 0x01 keep heaters, 0x02 keep motors (the default), 0x04 release motors */
 } cdpr_emergency_stop_t;
 #define CDPR_EMERGENCY_STOP_FLAGS_MIN (0)
-#define CDPR_EMERGENCY_STOP_FLAGS_MAX (3)
+#define CDPR_EMERGENCY_STOP_FLAGS_MAX (7)
 
 /* Configure: class I, opcode 0x07 */
 typedef struct cdpr_configure {
@@ -521,6 +525,9 @@ typedef struct cdpr_health {
     uint32_t late_worst_us; /* the worst lateness of a pulse against its ideal time */
     uint32_t rx_overruns; /* received bytes lost (receive ring full or UART overrun), wraps */
     uint32_t loop_worst_us; /* the longest main-loop turn */
+    uint32_t lost_steps; /* step pulses a tick had no room for, wraps */
+    uint32_t tick_overruns; /* step ticks whose computation overran the next boundary, wraps */
+    uint32_t plan_stalls; /* step ticks that waited for a segment's plan, wraps */
 } cdpr_health_t;
 #define CDPR_HEALTH_LATE_PULSES_MIN (0)
 #define CDPR_HEALTH_LATE_PULSES_MAX (4294967295UL)
@@ -530,6 +537,12 @@ typedef struct cdpr_health {
 #define CDPR_HEALTH_RX_OVERRUNS_MAX (4294967295UL)
 #define CDPR_HEALTH_LOOP_WORST_US_MIN (0)
 #define CDPR_HEALTH_LOOP_WORST_US_MAX (4294967295UL)
+#define CDPR_HEALTH_LOST_STEPS_MIN (0)
+#define CDPR_HEALTH_LOST_STEPS_MAX (4294967295UL)
+#define CDPR_HEALTH_TICK_OVERRUNS_MIN (0)
+#define CDPR_HEALTH_TICK_OVERRUNS_MAX (4294967295UL)
+#define CDPR_HEALTH_PLAN_STALLS_MIN (0)
+#define CDPR_HEALTH_PLAN_STALLS_MAX (4294967295UL)
 
 /* Caps: class D, opcode 0x49 */
 typedef struct cdpr_caps {

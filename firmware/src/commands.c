@@ -477,7 +477,8 @@ void proto_urgent(const uint8_t *payload, uint8_t len)
         report_ident(nonce, 1);
     } else { /* OP_EMERGENCY_STOP */
         if (!mc.estopped) {
-            machine_stop(ERR_ESTOP, v[0] & ESTOP_KEEP_HEATERS, v[0] & ESTOP_KEEP_MOTORS, 0);
+            /* the motors stay enabled unless the host asks to release them */
+            machine_stop(ERR_ESTOP, v[0] & ESTOP_KEEP_HEATERS, !(v[0] & ESTOP_RELEASE_MOTORS), 0);
             mc.estopped = 1;
         }
         report_estop_ack();

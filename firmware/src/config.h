@@ -59,7 +59,7 @@
 
 /* Device-to-host report slots (window + backlog), bytes per report. */
 #define REPORT_SLOTS 8
-#define REPORT_MAX 112 /* STATUS and HEALTH in one payload */
+#define REPORT_MAX 114 /* STATUS and HEALTH in one payload: 91 + 23 at most (HEALTH's counters are 16-bit) */
 
 
 /* Host watchdog: no valid frame for this long while a session is open and the
@@ -80,7 +80,7 @@
 #define WATCH_MIN_RISE_DC 20
 #define REACHED_BAND_DC 10
 /* The heater duties the control loop sets expire after this many step ticks
- * (100 us each: 0.3 s, three control periods) unless the loop refreshes them. */
+ * (400 us each: 750 ticks, 0.3 s, three control periods) unless the loop refreshes them. */
 #define HEATER_LEASE_TICKS (30000UL / TICK_UNITS)
 
 #endif

@@ -23,12 +23,6 @@ static uint16_t fill;
 static uint16_t held;
 static uint8_t drop_held;
 
-void deframer_reset(void)
-{
-    fill = 0;
-    held = 0;
-}
-
 const uint8_t *deframer_first(uint8_t *len)
 {
     if (!held)

@@ -27,7 +27,6 @@ struct frame_upper {
 };
 void deframer_attach(const struct frame_upper *upper);
 
-void deframer_reset(void);
 void deframer_receive(void); /* the UART's received bytes, as many as there is room for */
 void deframer_run(void);
 /* The oldest held frame's payload (0: none held); valid until deframer_pop(). */

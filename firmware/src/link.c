@@ -48,6 +48,10 @@ static uint32_t advanced_at;
 
 static uint8_t urgent_len;
 static uint8_t urgent_buf[REPORT_MAX];
+/* an error report that found every slot taken by other error reports: sent as soon as a
+ * slot frees (errors_unsent counts it), so a burst of errors loses none */
+static uint8_t held_len;
+static uint8_t held_error[CDPR_ERROR_MAX_LEN];
 
 static uint32_t rto(void)
 {
@@ -58,7 +62,7 @@ static uint32_t rto(void)
 
 void link_reset_session(void)
 {
-    first = n_out = n_back = errors_unsent = 0;
+    first = n_out = n_back = errors_unsent = held_len = 0;
     base_seq = next_seq = 0;
     expected = 0;
     ack_due = nak_due = resend = 0;
@@ -75,19 +79,20 @@ void link_reset_session(void)
     advanced_at = went_back_at;
 }
 
-uint8_t link_expected(void)
+/* The newest unsent report that is not an error, removed (the newer ones move down
+ * one slot, keeping their order); 0 when every unsent report is an error. */
+static uint8_t evict_one(void)
 {
-    return expected;
-}
-
-uint8_t link_backlog(void)
-{
-    return n_out + n_back;
-}
-
-uint8_t link_report_room(void)
-{
-    return (uint8_t)(REPORT_SLOTS - n_out - n_back);
+    for (int8_t i = (int8_t)n_back - 1; i >= 0; i--) {
+        if (slots[(first + n_out + (uint8_t)i) % REPORT_SLOTS].important)
+            continue;
+        for (uint8_t j = (uint8_t)i; j + 1 < n_back; j++)
+            slots[(first + n_out + j) % REPORT_SLOTS] =
+                slots[(first + n_out + j + 1) % REPORT_SLOTS];
+        n_back--;
+        return 1;
+    }
+    return 0;
 }
 
 uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important)
@@ -97,11 +102,16 @@ uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important)
     if (n_out + n_back >= REPORT_SLOTS) {
         if (!important)
             return 0;
-        /* an error report replaces the newest unsent report */
-        if (!n_back)
-            return 0;
-        n_back--;
-        errors_unsent -= slots[(first + n_out + n_back) % REPORT_SLOTS].important;
+        /* an error report takes the place of the newest unsent report that is not one;
+         * with none, it waits in held_error */
+        if (!evict_one()) {
+            if (held_len || len > sizeof held_error)
+                return 0; /* more errors in one burst than REPORT_SLOTS + 1 */
+            memcpy(held_error, payload, len);
+            held_len = len;
+            errors_unsent++;
+            return 1;
+        }
     }
     struct slot *s = &slots[(first + n_out + n_back) % REPORT_SLOTS];
     memcpy(s->data, payload, len);
@@ -239,6 +249,12 @@ static uint8_t send_ack(uint32_t now)
 
 void link_poll(uint32_t now)
 {
+    if (held_len && n_out + n_back < REPORT_SLOTS) {
+        uint8_t n = held_len;
+        held_len = 0;
+        errors_unsent--;
+        link_send(held_error, n, 1);
+    }
     if (urgent_len) {
         if (uart_tx_free() < FRAME_SIZE(urgent_len))
             return;

@@ -18,11 +18,8 @@ extern struct link_counters link_counters;
 void link_reset_session(void);
 void link_poll(uint32_t now);                 /* send what is due */
 uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important); /* 0: dropped */
-uint8_t link_report_room(void);               /* free report slots */
 void link_send_urgent(const uint8_t *payload, uint8_t len);
 void link_request_ack(void);
-uint8_t link_expected(void);
-uint8_t link_backlog(void);
 
 /* What the link hands up, registered by the layer above (the transport never calls up
  * into command execution by name: main.c wires it). */

@@ -124,7 +124,8 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)
 {
     uint8_t off = machine_thermal(code) || code == ERR_ESTOP || code == ERR_WATCHDOG ||
-                  code == ERR_HEATER_LEASE || code == ERR_AUTOTUNE_FAILED;
+                  code == ERR_HEATER_LEASE || code == ERR_AUTOTUNE_FAILED ||
+                  code == ERR_STACK_OVERFLOW;
     machine_shutdown(code, item, segment, axis, value, off ? SD_HEATERS_OFF : 0);
 }
 

@@ -27,6 +27,7 @@ struct sim_mailbox {
     uint16_t late_pulses; /* step pulses issued after their tick ended (never lost) */
     uint16_t stack_free;  /* bytes of the painted gap below the stack never written */
     uint32_t motion_ticks; /* motion clock (units) at the end of segment `seq` */
+    uint16_t canary_at;    /* the stack canary's address (the end of static RAM) */
 };
 extern volatile struct sim_mailbox sim_mailbox;
 
@@ -51,6 +52,7 @@ MB_CHECK(edge, MB_EDGE);
 MB_CHECK(late_pulses, MB_LATE_PULSES);
 MB_CHECK(stack_free, MB_STACK_FREE);
 MB_CHECK(motion_ticks, MB_MOTION_TICKS);
+MB_CHECK(canary_at, MB_CANARY_AT);
 _Static_assert(sizeof(struct sim_mailbox) == MB_SIZE, "mailbox size");
 #undef MB_CHECK
 

@@ -36,6 +36,9 @@ static void health_read(struct health *out)
     cli();
     out->late_pulses = stepper_late_tolerance;
     out->late_worst_us = (stepper_late_worst + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
+    out->lost_steps = stepper_lost_steps;
+    out->tick_overruns = stepper_overruns;
+    out->plan_stalls = stepper_plan_stalls;
     SREG = s;
     out->rx_overruns = uart_rx_overruns();
     out->loop_worst_us = loop_worst_us;
@@ -154,8 +157,9 @@ int main(void)
     LED_DDR |= _BV(LED_BIT);
     heater_init();
     watchdog_start();
-    /* after a watchdog or soft reset the motors that were enabled stay enabled: the
-     * effector hangs on them (positions are unknown: the host re-homes) */
+    /* after any reset that kept the RAM (watchdog, RESET pin, soft) the motors that were
+     * enabled stay enabled, as .init3 drove them: the effector hangs on them (positions
+     * are unknown: the host re-homes) */
     stepper_init(watchdog_prev_enabled());
     uart_init();
     static const struct link_upper upper = {proto_accept, proto_urgent, proto_flow,
@@ -164,7 +168,7 @@ int main(void)
     link_reset_session();
     sei();
     uint32_t last = sched_clock();
-    uint8_t turns = 0;
+    uint8_t turns = 0, canary_reported = 0;
     for (;;) {
         uint32_t now = sched_clock();
         watchdog_kick(now);
@@ -191,6 +195,10 @@ int main(void)
         uint32_t items, segs;
         stepper_counts(&items, &segs);
         watchdog_save(items, segs, st.enabled_mask);
+        if (!watchdog_canary_ok() && !canary_reported) {
+            canary_reported = 1; /* once: the state below it may be damaged */
+            machine_fail(ERR_STACK_OVERFLOW, items, segs, 0xFF, 0);
+        }
         SIM_STATS(stepper_isr_max_cycles, stepper_lost_steps, stepper_plan_stalls,
                   stepper_overruns, stepper_late_pulses, stepper_latency_max, mc.last_error);
         if (SIM_HOOKS && !++turns) /* the stack's high-water mark, now and then (~1 KB scan) */

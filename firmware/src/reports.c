@@ -104,6 +104,9 @@ void report_status(void)
         wr_uv(&w, hl.late_worst_us);
         wr_uv(&w, hl.rx_overruns);
         wr_uv(&w, hl.loop_worst_us);
+        wr_uv(&w, hl.lost_steps);
+        wr_uv(&w, hl.tick_overruns);
+        wr_uv(&w, hl.plan_stalls);
     }
     send(&w, 0);
 }

@@ -15,6 +15,7 @@ void report_caps(void);
 /* What HEALTH reports (2.1), gathered by the main loop. */
 struct health {
     uint32_t late_pulses, late_worst_us, rx_overruns, loop_worst_us;
+    uint32_t lost_steps, tick_overruns, plan_stalls;
 };
 /* The source of HEALTH's figures, registered by main.c (which gathers them). */
 void reports_attach_health(void (*read)(struct health *out));

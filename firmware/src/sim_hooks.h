@@ -23,6 +23,8 @@ static inline void sim_boot(void)
     sim_mailbox.magic[2] = 'P';
     sim_mailbox.magic[3] = 'R';
     sim_mailbox.version = 1;
+    extern uint8_t _end;
+    sim_mailbox.canary_at = (uint16_t)&_end;
 }
 
 /* The harness keeps the wall clock in the mailbox: the link's timers

@@ -106,18 +106,20 @@ void stepper_init(uint8_t hold_mask)
     X_MAX_DDR &= (uint8_t)~_BV(X_MAX_BIT); X_MAX_PORT |= _BV(X_MAX_BIT);
     Y_MAX_DDR &= (uint8_t)~_BV(Y_MAX_BIT); Y_MAX_PORT |= _BV(Y_MAX_BIT);
     Z_MAX_DDR &= (uint8_t)~_BV(Z_MAX_BIT); Z_MAX_PORT |= _BV(Z_MAX_BIT);
-    MARK_EDGE_DDR |= _BV(MARK_EDGE_BIT);
-    MARK_POS_DDR |= _BV(MARK_POS_BIT);
-    MARK_ABORT_DDR |= _BV(MARK_ABORT_BIT);
+    if (SIM_HOOKS) { /* the simulator's markers: the board build leaves D4, D6, D13 alone */
+        MARK_EDGE_DDR |= _BV(MARK_EDGE_BIT);
+        MARK_POS_DDR |= _BV(MARK_POS_BIT);
+        MARK_ABORT_DDR |= _BV(MARK_ABORT_BIT);
+    }
     FAN_DDR |= _BV(FAN_BIT);
     st.current = 0xFF;
     st.at_rest = 1;
     st.running = 1;
     st.seg_next = 1;
     outs[0].units = outs[1].units = TICK_UNITS;
-    /* Timer1: CTC on OCR1A, no prescaler; compare C toggles OC1C (MARK_EDGE)
-     * when OCR1C is set to match one cycle into the next tick */
-    TCCR1A = _BV(COM1C0);
+    /* Timer1: CTC on OCR1A, no prescaler; in the simulator build compare C toggles OC1C
+     * (MARK_EDGE) when OCR1C is set to match one cycle into the next tick */
+    TCCR1A = SIM_HOOKS ? _BV(COM1C0) : 0;
     TCCR1B = _BV(WGM12) | _BV(CS10);
     OCR1A = TICK_CYCLES - 1;
     OCR1C = EDGE_NEVER;
@@ -831,7 +833,7 @@ static void __attribute__((noinline)) tick_chores(void)
 {
     struct out *e = emit;
     uint8_t f = e->flags;
-    if (f & (OUT_POS | OUT_ABORT)) {
+    if (SIM_HOOKS && (f & (OUT_POS | OUT_ABORT))) {
         /* positions were set (at rest); a segment was abandoned (before the
          * edge that ends it) */
         if (f & OUT_ABORT)

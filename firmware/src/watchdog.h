@@ -13,6 +13,8 @@ uint8_t watchdog_prev_enabled(void);
 uint32_t watchdog_prev_items(void);
 uint32_t watchdog_prev_segments(void);
 uint32_t watchdog_boot_id(void);
+/* The canary word at the end of static RAM is intact (the stack never reached it). */
+uint8_t watchdog_canary_ok(void);
 /* Bytes between the static data and the deepest the stack has reached so far. */
 uint16_t watchdog_stack_free(void);
 /* keep the counters where a watchdog reset finds them */

@@ -240,7 +240,7 @@ class SimDevice:
 
     def health(self) -> Health:
         """The model issues every pulse at its exact time and reads without limit."""
-        return Health(late_pulses=0, late_worst_us=0, rx_overruns=0, loop_worst_us=0)
+        return Health(late_pulses=0, late_worst_us=0, rx_overruns=0, loop_worst_us=0)  # all exact
 
     def caps(self) -> Caps:
         c = self.config
@@ -384,7 +384,7 @@ class SimDevice:
                         self.device_time(now),
                         ErrorCode.ESTOP,
                         keep_heaters=bool(msg.flags & EstopFlag.KEEP_HEATERS),
-                        keep_motors=bool(msg.flags & EstopFlag.KEEP_MOTORS),
+                        keep_motors=not msg.flags & EstopFlag.RELEASE_MOTORS,
                     )
                 )
                 mc.estopped = True

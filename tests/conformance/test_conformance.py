@@ -159,7 +159,8 @@ def test_estop_acknowledged_and_latched(device_factory, host_factory):
     h.wait_for(lambda: h.of(Error, code=ErrorCode.ESTOP), what="ESTOP error")
     st = h.status()
     assert st.flags & Flag.ESTOP and st.flags & Flag.FAULT
-    assert st.enabled_mask == 0 and st.hotend_target_dc == 0
+    # a plain e-stop keeps the motors enabled (the effector hangs on them), heaters off
+    assert st.enabled_mask == 0xF and st.hotend_target_dc == 0
     assert dev.stop() == 0
     rows = _record(dev)
     assert rows and rows[-1].get("error") == "estop"
@@ -176,6 +177,18 @@ def test_estop_can_keep_heaters_and_motors(device_factory, host_factory):
     h.wait_for(lambda: h.of(Error, code=ErrorCode.ESTOP), what="ESTOP error")
     st = h.status()
     assert st.flags & Flag.ESTOP and st.enabled_mask == 0xF and st.hotend_target_dc == 500
+
+
+def test_estop_releases_the_motors_only_when_asked(device_factory, host_factory):
+    dev = device_factory()
+    h = host_factory(dev.path)
+    h.hello()
+    h.send(Enable(0xF), SetHeater(0, 500))
+    h.wait_for(lambda: h.status().enabled_mask == 0xF, what="motors enabled")
+    h.urgent_send(EmergencyStop(EstopFlag.KEEP_HEATERS | EstopFlag.RELEASE_MOTORS))
+    h.wait_for(lambda: h.of(Error, code=ErrorCode.ESTOP), what="ESTOP error")
+    st = h.status()
+    assert st.flags & Flag.ESTOP and st.enabled_mask == 0 and st.hotend_target_dc == 500
 
 
 def test_homing_reports_positions(device_factory, host_factory):

@@ -22,7 +22,7 @@ HELP = (
     ("M114", "position (G-code and machine frame) and steps"),
     ("M115", "device identity"),
     ("M17 / M18 / M84", "drivers on / off"),
-    ("M112", "emergency stop: motion, heaters and drivers off at once"),
+    ("M112", "emergency stop: motion and heaters off at once; drivers stay on (M18 releases)"),
     ("M999", "clear the stop (after M112 or a device fault)"),
     ("help", "this list"),
 )

@@ -268,7 +268,12 @@ class ControllerBase:
         self.device_op("homing", self.backend.home)
 
     def motors_off(self) -> None:
-        self.device_op("motors off", self.backend.motors_off)
+        """Its own action, confirmed: the e-stop keeps the motors (the effector hangs on
+        them), releasing them lets it drop."""
+        self.app.confirm(
+            "Release the motors? The effector hangs on them: support it first.",
+            lambda: self.device_op("motors off", self.backend.motors_off),
+        )
 
     def set_heaters(self, hotend_c: float, bed_c: float) -> None:
         self.device_op("heaters", lambda: self.backend.set_heaters(hotend_c, bed_c))
@@ -325,7 +330,10 @@ class ControllerBase:
 
         def done(answered: Any) -> None:
             if answered:
-                text = "EMERGENCY STOP: the device confirmed; motion stopped, heaters off"
+                text = (
+                    "EMERGENCY STOP: the device confirmed; motion stopped, heaters off, "
+                    "motors held (releasing them is its own action)"
+                )
             else:
                 text = (
                     "EMERGENCY STOP sent but the device did not confirm: check the machine "
