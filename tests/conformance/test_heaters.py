@@ -155,3 +155,26 @@ def test_a_thermistor_that_opens_or_shorts_is_caught_at_once(
     assert 2.0 <= t_err <= 3.0
     st = h.status()
     assert st.hotend_target_dc == 0 and st.flags & Flag.FAULT
+
+
+def test_the_plant_has_its_dead_time_its_noise_and_a_real_heat_up():
+    """The model alone (no device): at full power nothing reaches the thermistor for the
+    dead time (6 s), then it heats; 200 C in 60-90 s (an E3D V6 class hotend); the
+    reading's noise about 0.3 C."""
+    heater = Heater(HOTEND_MODEL)
+    heater.set_target(250.0, 0.0)
+    t, reached_200 = 0.0, None
+    readings = []
+    while reached_200 is None:
+        t = round(t + 0.1, 1)
+        heater.advance(t)
+        if t < HOTEND_MODEL.plant.dead_time_s - 0.2:
+            assert heater.temp == pytest.approx(HOTEND_MODEL.ambient_c), t
+            readings.append(heater.reading)
+        if heater.reading >= 200.0:
+            reached_200 = t
+        assert t < 300
+    assert 60.0 <= reached_200 <= 90.0
+    mean = sum(readings) / len(readings)
+    sd = math.sqrt(sum((r - mean) ** 2 for r in readings) / len(readings))
+    assert 0.2 <= sd <= 0.4
