@@ -27,6 +27,11 @@ what the harness measured:
 - heaters off after the host's silence, in each device state (idle heating, moving,
   faulted after an UNDERRUN, waiting for a heater): the time from the host's last byte to
   the heater pin going low, minus the watchdog time (500 ms).
+- heaters on the shared plant (firmware_protocol/device/thermal_plant.py): a cold relay
+  autotune of the hotend at 210 C, 3 cycles, on each device (the Python device at 50x,
+  the AVR as fast as simavr runs): its gains, the relay period 2 kp / ki, the device
+  seconds it took, and the AVR's gains against the Python device's (`--heaters` runs
+  only these rows).
 
 Real-time runs depend on the machine's load (simavr must keep up with 1x); the step
 timing and ISR figures are in simulated time and do not.
@@ -228,14 +233,60 @@ def _heaters_off_latency(state: str, watchdog_ms: int = 500) -> float:
     return round(dev.stats()["heater_on_silence_max_s"] - watchdog_ms / 1000, 4)
 
 
+def _autotune(kind: str) -> dict[str, Any]:
+    """A cold relay autotune of the hotend at 210 C, 3 cycles: gains, period, device time."""
+    from firmware_protocol.messages import Autotune, Error, Event, EventCode
+    from tests.conformance.device import RawHost, start
+
+    dev = start(kind, Path(tempfile.mkdtemp()), "--speedup", "50")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        t0 = h.status().clock / CLOCK_HZ
+        h.send(Autotune(0, 2100, 3))
+        ev = h.wait_for(
+            lambda: h.of(Event, code=EventCode.AUTOTUNE_DONE) or h.of(Error),
+            timeout=1800,
+            what="AUTOTUNE_DONE",
+        )
+        device_s = h.status().clock / CLOCK_HZ - t0
+    finally:
+        h.close()
+        dev.stop()
+    if not isinstance(ev, Event):
+        return {"error": str(ev)}
+    kp, ki, kd = (v / 1000 for v in ev.values[1:])
+    return {
+        "kp": kp,
+        "ki": ki,
+        "kd": kd,
+        "period_s": round(2 * kp / ki, 1),
+        "device_s": round(device_s, 1),
+    }
+
+
+def _heaters() -> dict[str, Any]:
+    out = {kind: _autotune(kind) for kind in ("python", "avr")}
+    py, avr = out["python"], out["avr"]
+    if "kp" in py and "kp" in avr:
+        out["avr_vs_python_pct"] = {
+            k: round(100 * (avr[k] - py[k]) / py[k], 1) for k in ("kp", "ki", "kd", "period_s")
+        }
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer rates and shorter streams")
+    ap.add_argument("--heaters", action="store_true", help="only the heater rows")
     args = ap.parse_args()
     missing = avr_device.toolchain_missing()
     if missing:  # one line saying what to install, not a traceback
         raise SystemExit(f"bench/firmware.py: {missing}")
     avr_device.build()
+    if args.heaters:
+        print(json.dumps({"command": "python bench/firmware.py --heaters"} | _heaters(), indent=1))
+        return 0
     fig: dict[str, Any] = {
         "command": "python bench/firmware.py" + (" --quick" if args.quick else "")
     }
@@ -360,6 +411,7 @@ def main() -> int:
         state: _heaters_off_latency(state)
         for state in ("idle, heating", "moving", "faulted (underrun)", "waiting (WAIT_HEATER)")
     }
+    fig["heaters_autotune_210_c"] = _heaters()
     print(json.dumps(fig, indent=1))
     return 0
 

@@ -79,6 +79,9 @@ def harness_command(
     heater_fail_after: float | None = None,
     exit_on_hangup: bool = False,
     bootloader: Path | None = None,
+    thermistor_open_after: float | None = None,
+    thermistor_short_after: float | None = None,
+    hotend_start_c: float | None = None,
 ) -> list[str]:
     cmd = [str(HARNESS), str(ELF), "--speedup", f"{speedup:g}"]
     if record:
@@ -89,6 +92,12 @@ def harness_command(
         cmd += ["--time-limit", f"{time_limit:g}"]
     if heater_fail_after is not None:
         cmd += ["--heater-fail-after", f"{heater_fail_after:g}"]
+    if thermistor_open_after is not None:
+        cmd += ["--thermistor-open-after", f"{thermistor_open_after:g}"]
+    if thermistor_short_after is not None:
+        cmd += ["--thermistor-short-after", f"{thermistor_short_after:g}"]
+    if hotend_start_c is not None:
+        cmd += ["--hotend-start-c", f"{hotend_start_c:g}"]
     if exit_on_hangup:
         cmd.append("--exit-on-hangup")
     if bootloader is not None:
@@ -143,6 +152,9 @@ def run(args: argparse.Namespace, faults: FaultSpec) -> int:
             speedup=args.speedup,
             record=args.record,
             heater_fail_after=faults.heater_fail_after,
+            thermistor_open_after=faults.thermistor_open_after,
+            thermistor_short_after=faults.thermistor_short_after,
+            hotend_start_c=faults.hotend_start_c,
             stats=os.environ.get(STATS_ENV),
         ),
         stdout=subprocess.PIPE,

@@ -3,6 +3,8 @@
  *   cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE]
  *            [--time-limit SIM_SECONDS] [--exit-on-hangup]
  *            [--heater-fail-after SIM_SECONDS] [--boot-physical STEPS]
+ *            [--thermistor-open-after SIM_SECONDS] [--thermistor-short-after SIM_SECONDS]
+ *            [--hotend-start-c C]
  *            [--travel-steps STEPS] [--bootloader HEX] [--smash-canary-after S]
  *
  * With --bootloader the chip boots as a Mega 2560 does: the hex (Debian's
@@ -117,6 +119,9 @@ static double smash_canary_after = -1.0; /* overwrite the stack canary then (sim
 static struct thermal thermal[2];
 static int heater_level[2];
 static double heater_fail_after = -1.0;
+static double sensor_fault_after = -1.0; /* the hotend's thermistor opens or shorts then */
+static int sensor_fault = SENSOR_OK;
+static double hotend_start_c = -1000.0; /* the hotend's temperature at power-on (warm start) */
 
 static double sim_seconds(void) { return (double)avr->cycle / (double)F_CPU; }
 
@@ -543,6 +548,8 @@ static void update_thermal(void)
     double t = sim_seconds();
     if (heater_fail_after >= 0 && t >= heater_fail_after)
         thermal[0].element_ok = 0;
+    if (sensor_fault_after >= 0 && t >= sensor_fault_after)
+        thermal[0].sensor = sensor_fault;
     for (int h = 0; h < 2; h++) {
         thermal_advance(&thermal[h], t);
         avr_raise_irq(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_ADC0 + adc_slot[h]),
@@ -718,6 +725,7 @@ static void usage(void)
 {
     fprintf(stderr, "usage: cdpr-sim FIRMWARE.elf [--speedup X] [--record FILE] [--stats FILE] "
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
+                    "[--thermistor-open-after S] [--thermistor-short-after S] [--hotend-start-c C] "
                     "[--boot-physical STEPS] [--travel-steps STEPS] [--bootloader HEX] "
                     "[--smash-canary-after S]\n");
     exit(2);
@@ -733,6 +741,9 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--stats") && i + 1 < argc) stats_path = argv[++i];
         else if (!strcmp(a, "--time-limit") && i + 1 < argc) time_limit = atof(argv[++i]);
         else if (!strcmp(a, "--heater-fail-after") && i + 1 < argc) heater_fail_after = atof(argv[++i]);
+        else if (!strcmp(a, "--hotend-start-c") && i + 1 < argc) hotend_start_c = atof(argv[++i]);
+        else if (!strcmp(a, "--thermistor-open-after") && i + 1 < argc) { sensor_fault_after = atof(argv[++i]); sensor_fault = SENSOR_OPEN; }
+        else if (!strcmp(a, "--thermistor-short-after") && i + 1 < argc) { sensor_fault_after = atof(argv[++i]); sensor_fault = SENSOR_SHORT; }
         else if (!strcmp(a, "--boot-physical") && i + 1 < argc) boot_physical = atoll(argv[++i]);
         else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
         else if (!strcmp(a, "--bootloader") && i + 1 < argc) bootloader = argv[++i];
@@ -818,8 +829,10 @@ int main(int argc, char **argv)
     for (uint8_t i = 0; i < 8; i++)
         avr_extint_set_strict_lvl_trig(avr, i, 0);
     map_adc_channels();
-    thermal_init(&thermal[0], 30.0, 300.0);
-    thermal_init(&thermal[1], 90.0, 100.0);
+    thermal_init(&thermal[0], 0);
+    thermal_init(&thermal[1], 1);
+    if (hotend_start_c > -273.0)
+        thermal[0].temp = hotend_start_c;
     for (int k = 0; k < 3; k++)
         set_endstop(k);
 

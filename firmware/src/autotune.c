@@ -1,7 +1,7 @@
 /* AUTOTUNE: Marlin's M303 relay autotune (Astrom-Hagglund), as the Python model's
  * RelayTune does. The heater runs at full power below the target and off above it;
  * every switch back to heating after the first one closes a cycle with its period
- * and its swing (peak to peak / 2). After `cycles` of them the classic
+ * and its swing (peak to peak / 2); each state holds for at least 5 s. After `cycles` of them the classic
  * Ziegler-Nichols gains from their means: Ku = 4 d / (pi a) with d = 255 / 2 the
  * relay's half swing, kp = 0.6 Ku, ki = 2 kp / Tu, kd = kp Tu / 8 (Marlin's units:
  * output 0..255, error in C, time in s). They are applied (as SET_PID would), the
@@ -25,6 +25,9 @@
 
 #define TUNE_TIMEOUT_TICKS (20UL * 60UL * CLOCK_HZ) /* 20 min */
 #define TUNE_OVERSHOOT_DC 200                        /* 20 C over the target */
+/* each relay state holds at least 5 s, so that the thermistor's noise around the
+ * target cannot chatter it (Marlin's M303 waits as long; RELAY_MIN_HOLD_S in Python) */
+#define RELAY_MIN_HOLD_TICKS (5UL * CLOCK_HZ)
 
 enum { AT_IDLE, AT_RUN, AT_DONE, AT_FAILED };
 enum { FAIL_TIMEOUT = 1, FAIL_OVERSHOOT = 2, FAIL_NO_OSCILLATION = 3 };
@@ -35,7 +38,7 @@ static struct {
     uint8_t failure;
     int16_t target, hi, lo;
     uint32_t item;             /* the AUTOTUNE item's number */
-    uint32_t t0, t_on;
+    uint32_t t0, t_on, t_switch;
     uint32_t period_sum;       /* clock ticks */
     int32_t swing_sum;         /* 0.1 C, peak to peak */
 } tu;
@@ -63,8 +66,11 @@ uint8_t autotune_relay(int16_t temp_dc, uint32_t now)
         tu.hi = temp_dc;
     if (temp_dc < tu.lo)
         tu.lo = temp_dc;
-    if (tu.heating && temp_dc > tu.target) {
+    if (now - tu.t_switch < RELAY_MIN_HOLD_TICKS) {
+        /* hold */
+    } else if (tu.heating && temp_dc > tu.target) {
         tu.heating = 0;
+        tu.t_switch = now;
     } else if (!tu.heating && temp_dc < tu.target) {
         tu.heating = 1;
         if (tu.counting) { /* a whole cycle since the last switch-on */
@@ -73,7 +79,7 @@ uint8_t autotune_relay(int16_t temp_dc, uint32_t now)
             tu.n++;
         }
         tu.counting = 1;
-        tu.t_on = now;
+        tu.t_on = tu.t_switch = now;
         tu.hi = tu.lo = temp_dc;
         if (tu.n >= tu.cycles) {
             if (tu.swing_sum <= 0 || !tu.period_sum) {
@@ -129,7 +135,7 @@ void autotune_poll(uint32_t now)
         tu.heating = 1;
         tu.hi = INT16_MIN;
         tu.lo = INT16_MAX;
-        tu.t0 = tu.t_on = now;
+        tu.t0 = tu.t_on = tu.t_switch = now;
         tu.period_sum = 0;
         tu.swing_sum = 0;
         heater_set_target(tu.id, (uint16_t)tu.target, now);

@@ -72,11 +72,18 @@
 #define BED_MAX_DC 1200
 #define HOTEND_CUTOFF_DC 3000 /* OVERTEMP above this, whatever the target */
 #define BED_CUTOFF_DC 1300
-#define MINTEMP_DC 50         /* below 5.0 C with a target: sensor open */
-#define HOTEND_WATCH_MS 20000UL
+#define MINTEMP_DC 50         /* below 5.0 C with a target: sensor open (Marlin's MINTEMP) */
+/* Thermal protection, Marlin's defaults (Configuration_adv.h): heating must rise
+ * WATCH_MIN_RISE_DC within each watch period (WATCH_TEMP_PERIOD 40 s / WATCH_BED_TEMP_PERIOD
+ * 60 s, WATCH_*_INCREASE 2 C); once the target was reached, a temperature more than the
+ * hysteresis below it for the runaway period is a runaway (THERMAL_PROTECTION_PERIOD
+ * 40 s / HYSTERESIS 4 C, the bed's 20 s / 2 C). The Python device model holds the same. */
+#define HOTEND_WATCH_MS 40000UL
 #define BED_WATCH_MS 60000UL
-#define HOTEND_HYSTERESIS_DC 150
-#define BED_HYSTERESIS_DC 100
+#define HOTEND_RUNAWAY_MS 40000UL
+#define BED_RUNAWAY_MS 20000UL
+#define HOTEND_HYSTERESIS_DC 40
+#define BED_HYSTERESIS_DC 20
 #define WATCH_MIN_RISE_DC 20
 #define REACHED_BAND_DC 10
 /* The heater duties the control loop sets expire after this many step ticks

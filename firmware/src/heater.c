@@ -1,7 +1,8 @@
-/* Thermal protection in Marlin's manner: while heating, the temperature must
- * rise WATCH_MIN_RISE_DC within each watch period (else the heater or its
- * thermistor has failed); once the target was reached, a temperature more than
- * the hysteresis below it for a whole watch period is a runaway. A reading
+/* Thermal protection in Marlin's manner (config.h: its default figures): while
+ * heating, the temperature must rise WATCH_MIN_RISE_DC within each watch period
+ * (else the heater or its thermistor has failed); once the target was reached, a
+ * temperature more than the hysteresis below it for a whole runaway period is a
+ * runaway. A reading
  * below MINTEMP_DC with a target set (open thermistor) or above the cut-off
  * (shorted thermistor, stuck MOSFET) is a fault whatever the target. */
 #include <avr/interrupt.h>
@@ -26,15 +27,19 @@ static uint32_t next_control;
 
 static const uint8_t channel[2] = {HOTEND_ADC_CHANNEL, BED_ADC_CHANNEL};
 static const uint32_t watch_ticks[2] = {MS_TO_CLOCK(HOTEND_WATCH_MS), MS_TO_CLOCK(BED_WATCH_MS)};
+static const uint32_t runaway_ticks[2] = {MS_TO_CLOCK(HOTEND_RUNAWAY_MS), MS_TO_CLOCK(BED_RUNAWAY_MS)};
 static const int16_t hysteresis[2] = {HOTEND_HYSTERESIS_DC, BED_HYSTERESIS_DC};
 static const int16_t cutoff[2] = {HOTEND_CUTOFF_DC, BED_CUTOFF_DC};
-/* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS (defaults; SET_PID) */
-static const float kp0[2] = {2.0f, 6.0f};
-static const float ki0[2] = {0.02f, 0.02f};
-static const float kd0[2] = {8.0f, 20.0f};
-static float kp[2] = {2.0f, 6.0f};
-static float ki[2] = {0.02f, 0.02f};
-static float kd[2] = {8.0f, 20.0f};
+/* PID gains per 0.1 C, output 0..255, period HEATER_PERIOD_MS (defaults; SET_PID): what
+ * a relay autotune finds on the simulated plant, hotend at 210 C (Marlin's units kp 10.8,
+ * ki 0.80, kd 36.7) and bed at 60 C (71.7, 5.73, 224.4); the Python model's
+ * default_gains are the same */
+static const float kp0[2] = {1.08f, 7.17f};
+static const float ki0[2] = {0.0080f, 0.0573f};
+static const float kd0[2] = {36.7f, 224.4f};
+static float kp[2] = {1.08f, 7.17f};
+static float ki[2] = {0.0080f, 0.0573f};
+static float kd[2] = {36.7f, 224.4f};
 
 /* SET_PID gains x1000 in Marlin's units (output 0..255, error in C, time in s): per
  * 0.1 C and a 100 ms period, Kp / 10, Ki / 100 (the sum of errors times 0.1 s / 10)
@@ -133,7 +138,7 @@ static void protect(uint8_t id, uint32_t now)
         if (!h->below) {
             h->below = 1;
             h->below_since = now;
-        } else if (now - h->below_since >= watch_ticks[id]) {
+        } else if (now - h->below_since >= runaway_ticks[id]) {
             h->fault = ERR_THERMAL_RUNAWAY;
         }
     } else {

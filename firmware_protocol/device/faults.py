@@ -5,7 +5,11 @@ probabilities), ``dup`` (probability a written chunk, normally one frame, is sen
 twice), ``latency_ms`` and ``jitter_ms`` (delivery delay, uniform jitter on top;
 order is preserved as on a real wire), ``reset_after`` / ``stall_after`` (the
 device resets / stops answering after N executed segments), ``heater_fail_after``
-(device seconds after which the hotend element is disconnected), ``seed``.
+(device seconds after which the hotend element is disconnected),
+``thermistor_open_after`` / ``thermistor_short_after`` (device seconds after which the
+hotend's thermistor opens / shorts), ``hotend_start_c`` (the hotend's temperature at
+power-on: a printer still warm from a print; not a fault, but the same kind of
+scenario for both simulated devices), ``seed``.
 """
 
 from __future__ import annotations
@@ -32,6 +36,9 @@ class FaultSpec:
     reset_after: int | None = None
     stall_after: int | None = None
     heater_fail_after: float | None = None
+    thermistor_open_after: float | None = None
+    thermistor_short_after: float | None = None
+    hotend_start_c: float | None = None
     seed: int = 0
 
     @property

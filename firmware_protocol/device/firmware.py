@@ -119,6 +119,12 @@ class SimDevice:
             self.machine.halt_at = self.faults.stall_after
         if self.faults.heater_fail_after is not None:
             self.machine.heater_fail_at = self.faults.heater_fail_after
+        for kind in ("open", "short"):
+            after = getattr(self.faults, f"thermistor_{kind}_after")
+            if after is not None:
+                self.machine.sensor_fault = (after, kind)
+        if self.faults.hotend_start_c is not None:
+            self.machine.heaters[0].warm_start(self.faults.hotend_start_c)
         self.endpoint = Endpoint(
             window=cfg.window,
             accept=self._accept,
@@ -224,9 +230,9 @@ class SimDevice:
             motion_ticks=mc.motion_ticks & U32,
             clock=mc.clock(T),
             steps=(steps[0], steps[1], steps[2], steps[3]),
-            hotend_dc=round(h.temp * 10),
+            hotend_dc=round(h.reading * 10),
             hotend_target_dc=round(h.target * 10),
-            bed_dc=round(b.temp * 10),
+            bed_dc=round(b.reading * 10),
             bed_target_dc=round(b.target * 10),
             fan=mc.fan,
             enabled_mask=mc.enabled_mask,
@@ -309,6 +315,8 @@ class SimDevice:
             cands.append(now + 0.5 / sp)
         if mc.heater_fail_at is not None and mc.heater_fail_at / sp > now:
             cands.append(mc.heater_fail_at / sp)
+        if mc.sensor_fault is not None and mc.sensor_fault[0] / sp > now:
+            cands.append(mc.sensor_fault[0] / sp)
         if self.observer is not None and not mc.settled and cur is None:
             cands.append((mc.t_free + cfg.settle_s) / sp)
         if not self.synced:

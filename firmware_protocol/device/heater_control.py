@@ -17,6 +17,9 @@ PWM_MAX = 255.0
 RELAY_D = PWM_MAX / 2  # half the relay's output swing (0 <-> 255)
 TUNE_TIMEOUT_S = 20 * 60.0
 TUNE_OVERSHOOT_C = 20.0
+#: the relay holds each state at least this long, so that the thermistor's noise around
+#: the target cannot chatter it (Marlin's M303 waits 5 s likewise)
+RELAY_MIN_HOLD_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -27,7 +30,7 @@ class PidGains:
 
     @classmethod
     def from_wire(cls, kp: int, ki: int, kd: int) -> PidGains | None:
-        """Thousandths on the wire; all three 0: the device's own (bang-bang) control."""
+        """Thousandths on the wire; all three 0: the device's own default gains."""
         if not (kp or ki or kd):
             return None
         return cls(kp / 1000.0, ki / 1000.0, kd / 1000.0)
@@ -63,7 +66,8 @@ class Pid:
 class RelayTune:
     """Marlin's M303: full power below the target, off above it; after the first rise
     each cycle (a switch back to heating) yields the swing and the period; after
-    ``cycles`` of them the classic Ziegler-Nichols gains from their means."""
+    ``cycles`` of them the classic Ziegler-Nichols gains from their means. Each state holds
+    for at least ``RELAY_MIN_HOLD_S``."""
 
     def __init__(self, target: float, cycles: int, t0: float):
         self.target = target
@@ -94,7 +98,10 @@ class RelayTune:
             return 0.0
         self.hi = max(self.hi, temp)
         self.lo = min(self.lo, temp)
-        if self.heating and temp > self.target:
+        last = self.t_on if self.heating else (self.t_off if self.t_off is not None else t)
+        if t - last < RELAY_MIN_HOLD_S:
+            pass
+        elif self.heating and temp > self.target:
             self.heating = False
             self.t_off = t
         elif not self.heating and temp < self.target:

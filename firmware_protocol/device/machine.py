@@ -122,6 +122,7 @@ class DeviceMachine:
         self.halt_at: int | None = None
         self.halted = False
         self.heater_fail_at: float | None = None
+        self.sensor_fault: tuple[float, str] | None = None  # (device time, open / short)
         self.overflow_rejects = 0
 
     # ------------------------------------------------------------------ state
@@ -296,6 +297,8 @@ class DeviceMachine:
         reports: list[Message] = []
         if self.heater_fail_at is not None and self.heater_fail_at <= T:
             self.heaters[HOTEND].element_ok = False
+        if self.sensor_fault is not None and self.sensor_fault[0] <= T:
+            self.heaters[HOTEND].sensor = self.sensor_fault[1]
         queue = self.queue
         while not self.halted and not self.fault:
             cur = self.current
@@ -306,7 +309,7 @@ class DeviceMachine:
                     if self.fault or (
                         h.tune is not None
                         if cur.kind == TUNE
-                        else h.target > 0 and abs(h.temp - h.target) > cur.arg[1] / 10.0
+                        else h.target > 0 and abs(h.reading - h.target) > cur.arg[1] / 10.0
                     ):
                         break
                     self.cur_end = T

@@ -203,20 +203,6 @@ def test_homing_reports_positions(device_factory, host_factory):
     assert st.motion_ticks == 200_000  # 8000 steps from the switch at 4000 steps/s
 
 
-def test_heater_failure_is_a_thermal_runaway(device_factory, host_factory):
-    """The element fails (device time 1 s): heating at full power without rising is a runaway."""
-    dev = device_factory("--faults", "heater_fail_after=1", "--speedup", "4")
-    h = host_factory(dev.path)
-    h.hello()
-    h.send(SetHeater(0, 2000))
-    err = h.wait_for(
-        lambda: h.of(Error, code=ErrorCode.THERMAL_RUNAWAY), timeout=90, what="THERMAL_RUNAWAY"
-    )
-    assert err.axis == 0
-    st = h.status()
-    assert st.hotend_target_dc == 0
-
-
 def test_silent_host_turns_heaters_off_within_the_watchdog(device_factory, host_factory, kind):
     """No frame for the watchdog time: heaters off, motors held, ERROR WATCHDOG.
 

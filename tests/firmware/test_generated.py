@@ -18,7 +18,9 @@ def _tool(name: str):
     return mod
 
 
-@pytest.mark.parametrize("name", ["gen_protocol_header", "gen_thermistor_table"])
+@pytest.mark.parametrize(
+    "name", ["gen_protocol_header", "gen_thermistor_table", "gen_thermal_plant"]
+)
 def test_checked_in_header_is_current(name):
     tool = _tool(name)
     assert tool.OUT.read_text() if hasattr(tool, "OUT") else tool.HEADER.read_text()

@@ -73,9 +73,10 @@ def test_host_silence_after_an_underrun_turns_the_heater_off(avr_built, tmp_path
 
 
 def test_thermal_fault_latches_and_a_second_fault_is_reported(avr_built, tmp_path):
-    # the hotend element fails at once: heating at full power does not raise the
-    # temperature, THERMAL_RUNAWAY after the 20 s watch period (device time, 4x)
-    dev = start("avr", tmp_path, "--speedup", "4", "--faults", "heater_fail_after=0")
+    # the hotend's thermistor opens at device time 8 s, after the underrun: a reading
+    # below MINTEMP with a target set is THERMAL_RUNAWAY (the element failing instead
+    # would take the 40 s watch period: tests/conformance/test_heaters.py times that)
+    dev = start("avr", tmp_path, "--speedup", "4", "--faults", "thermistor_open_after=8")
     h = RawHost(dev.path)
     try:
         h.hello()

@@ -32,7 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         metavar="SPEC",
         default=None,
         help="corrupt=P,drop=P,dup=P,latency_ms=MS,jitter_ms=MS,reset_after=N,stall_after=N,"
-        "heater_fail_after=S,seed=N",
+        "heater_fail_after=S,thermistor_open_after=S,thermistor_short_after=S,hotend_start_c=C,"
+        "seed=N",
     )
     p.add_argument(
         "--record",
