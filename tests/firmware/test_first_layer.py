@@ -69,7 +69,9 @@ def test_first_layer_on_the_avr_equals_the_python_device(tmp_path, monkeypatch):
     py_job, py_rows, _ = _print_on("python", gcode, tmp_path)
     avr_job, avr_rows, harness = _print_on("avr", gcode, tmp_path)
     assert py_job["status"] == avr_job["status"] == "completed"
-    assert py_job["notices"] == avr_job["notices"]  # both slowed the same way, if at all
+    # both slowed the same way, if at all (the second print finds the board already recorded
+    # by the first, so it names the board before connecting: the order may differ)
+    assert sorted(py_job["notices"]) == sorted(avr_job["notices"])
     assert len(py_rows) > 4000  # the whole first layer, not a prefix
     assert avr_rows == py_rows  # seq, step totals and device-clock time of every segment
     # no timer interrupt lost for good, no pulse dropped
