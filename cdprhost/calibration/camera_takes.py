@@ -189,7 +189,7 @@ def session_intrinsics(
 ) -> tuple[Intrinsics, IntrinsicsResult | None]:
     """The session's intrinsics: its camera.toml, or a calibration from its views (whose
     coverage verdict the caller must honour: the result is returned with it)."""
-    from cdprhost.calibration.session import contained_path
+    from cdprhost.calibration.config_input import contained_path
 
     rel = camera.intrinsics or camera.calibration_views or ""
     key = "intrinsics" if camera.intrinsics else "calibration_views"

@@ -115,7 +115,7 @@ def load_boards(config: str | None, which: list[str] | None) -> list[BoardToPrin
         EffectorBoardConfig,
         ReferenceBoardConfig,
     )
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     if config is None:
         source, data = f"(sample {SAMPLE})", tomllib.loads(sample_text())

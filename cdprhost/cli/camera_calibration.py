@@ -109,7 +109,7 @@ def _board_from_toml(path: Path) -> CharucoBoard:
     from pydantic import ValidationError
 
     from cdprhost.calibration.camera_config import BoardConfig
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     data = read_toml(path)
     table: Any = data.get("camera", {}).get("calibration_board") if "camera" in data else data
@@ -125,7 +125,8 @@ def _board_from_toml(path: Path) -> CharucoBoard:
 
 
 def _views_and_board(args: argparse.Namespace) -> tuple[Path, CharucoBoard]:
-    from cdprhost.calibration.session import SESSION_FILE, contained_path, load_session_config
+    from cdprhost.calibration.config_input import contained_path
+    from cdprhost.calibration.session import SESSION_FILE, load_session_config
 
     views = Path(args.views)
     if (views / SESSION_FILE).is_file():
@@ -388,7 +389,7 @@ def camera_table(path: Path) -> Any:
     from pydantic import ValidationError
 
     from cdprhost.calibration.camera_config import CameraConfig
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     data = read_toml(path)
     if "camera" not in data:
