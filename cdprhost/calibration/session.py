@@ -28,7 +28,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
-from cdprhost.calibration.camera_config import CameraConfig
+from cdprhost.calibration.camera.config import CameraConfig
 from cdprhost.calibration.config_input import contained_path, read_toml, validation_problems
 from cdprhost.calibration.fitting import Observations
 from cdprhost.calibration.pose_noise import PoseNoise, camera_noise, pose_noise
@@ -278,7 +278,7 @@ class SessionMeasurements:
     takes: tuple[TakeMeasurement, ...]
     rejected: tuple[RejectedTake, ...]
     declared_noise_mm: float | None = None
-    # a camera session's noise (camera-session.md, :mod:`.camera_session`): each pose's full
+    # a camera session's noise (camera-session.md, :mod:`.camera.session`): each pose's full
     # covariance (K, 3, 3), the common vector's (3, 3), the parameters' part (12, 12); what
     # refuses the session whatever the fit (calibration views of poor coverage); notes
     covariance: np.ndarray | None = None

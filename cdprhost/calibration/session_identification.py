@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from cdprhost.calibration.camera_session import measure_camera_session
+from cdprhost.calibration.camera.session import measure_camera_session
 from cdprhost.calibration.identification import Identification, identify_verified
 from cdprhost.calibration.session import Session, SessionMeasurements, load_session
 from cdprhost.calibration.trust import DEFAULT_TRUST, TrustLimits
@@ -69,7 +69,7 @@ def measure_any(
 ) -> SessionMeasurements:
     """A session's measurements: motion-capture takes, or a camera session's pictures (with
     ``refine``, the camera refined against ``base``'s commanded motion,
-    :mod:`.camera_session`)."""
+    :mod:`.camera.session`)."""
     if session.config.camera is not None:
         return measure_camera_session(session, base, refine=refine)
     return session.measure()

@@ -110,7 +110,7 @@ def load_boards(config: str | None, which: list[str] | None) -> list[BoardToPrin
 
     from pydantic import ValidationError
 
-    from cdprhost.calibration.camera_config import (
+    from cdprhost.calibration.camera.config import (
         BoardConfig,
         EffectorBoardConfig,
         ReferenceBoardConfig,
