@@ -35,8 +35,9 @@ from scipy import stats
 
 from cdprhost.calibration.acceptance import AcceptanceLimits, judge
 from cdprhost.calibration.augmentation import predicted_workspace
-from cdprhost.calibration.identification import identify, identify_session, identify_verified
+from cdprhost.calibration.identification import identify, identify_verified
 from cdprhost.calibration.planning import TABLE1_POSES, plan_poses
+from cdprhost.calibration.session_identification import identify_session
 from cdprhost.calibration.take_statistics import TakeStatistics, take_statistics
 from cdprhost.kinematics import MachineModel
 from cdprhost.kinematics.grid import workspace_grid

@@ -35,10 +35,10 @@ import numpy as np
 from cdprhost.calibration.camera.detection import detect_board
 from cdprhost.calibration.camera.positions import effector_positions
 from cdprhost.calibration.camera.session_fit import fit_session
-from cdprhost.calibration.camera_takes import read_camera_session
-from cdprhost.calibration.identification import identify_session
+from cdprhost.calibration.camera.takes import read_camera_session
 from cdprhost.calibration.planning import candidate_poses, plan_poses
 from cdprhost.calibration.session import load_session
+from cdprhost.calibration.session_identification import identify_session
 from cdprhost.kinematics import MachineModel
 from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.profile import load_profile

@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdprhost.calibration.identification import identify_session
 from cdprhost.calibration.planning import candidate_poses, plan_poses
+from cdprhost.calibration.session_identification import identify_session
 from cdprhost.kinematics import MachineModel
 from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.profile import load_profile

@@ -134,3 +134,93 @@ def test_contract_catches_an_upward_import(tmp_path):
     ((line, target),) = imports_of(probe)
     assert line == 2
     assert RANK[unit(target)] > RANK["cdprhost.kinematics"]
+
+
+# --- no import circle inside a package ------------------------------------------------
+
+# Packages whose modules must form no circle among themselves (lazy imports included).
+ACYCLIC = ("cdprhost.calibration",)
+
+
+def module_of(target: str, modules: set[str]) -> str | None:
+    """The module a dotted import reaches (``from pkg.mod import name`` reaches pkg.mod)."""
+    parts = target.split(".")
+    for n in range(len(parts), 0, -1):
+        name = ".".join(parts[:n])
+        if name in modules:
+            return name
+    return None
+
+
+def import_graph(package: str) -> dict[str, set[str]]:
+    """module -> the modules of ``package`` it imports, read from the source."""
+    base = ROOT.joinpath(*package.split("."))
+    files = {module_name(p): p for p in sorted(base.rglob("*.py"))}
+    graph: dict[str, set[str]] = {m: set() for m in files}
+    for mod, path in files.items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets: list[str] = []
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [node.module, *(f"{node.module}.{a.name}" for a in node.names)]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            for t in targets:
+                hit = module_of(t, set(files))
+                if hit is not None and hit != mod:
+                    graph[mod].add(hit)
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected groups of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_circle_inside_a_package():
+    for package in ACYCLIC:
+        graph = import_graph(package)
+        found = circles(graph)
+        text = [
+            " <-> ".join(group)
+            + "\n"
+            + "\n".join(f"    {m} imports {sorted(graph[m] & set(group))}" for m in group)
+            for group in found
+        ]
+        assert not found, f"import circles inside {package}:\n" + "\n".join(text)
+
+
+def test_circle_checker_sees_a_lazy_circle():
+    """The checker itself: a circle closed by an import inside a function is found."""
+    graph = {"p.a": {"p.b"}, "p.b": {"p.c"}, "p.c": {"p.a"}, "p.d": {"p.a"}}
+    assert circles(graph) == [["p.a", "p.b", "p.c"]]
+    assert circles({"p.a": {"p.b"}, "p.b": set()}) == []

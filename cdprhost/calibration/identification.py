@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
-import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,7 +22,6 @@ from scipy import stats
 
 from cdprhost.calibration.fitting import GEOMETRY_NAMES, CableModelFit, Observations
 from cdprhost.calibration.pose_noise import PoseNoise
-from cdprhost.calibration.session import Session, SessionMeasurements, load_session
 from cdprhost.calibration.trust import (
     DEFAULT_TRUST,
     TrustLimits,
@@ -32,7 +30,7 @@ from cdprhost.calibration.trust import (
     variance_factor,
 )
 from cdprhost.calibration.verification import DEFAULT_ALPHA, Verification, verify_checks
-from cdprhost.errors import InputError, JobFailed
+from cdprhost.errors import JobFailed
 from cdprhost.jsonsafe import json_safe
 from cdprhost.kinematics.geometry import CableGeometry
 from cdprhost.kinematics.grid import workspace_grid
@@ -436,60 +434,3 @@ def calibrated_profile(
             "the identified geometry is not a valid profile; no profile written:\n"
             + "\n".join(f"  - {p}" for p in problems)
         ) from None
-
-
-def identify_session(
-    directory: str | os.PathLike[str] | Session,
-    base: MachineModel,
-    *,
-    noise_floor_mm: float | None = None,
-    limits: TrustLimits = DEFAULT_TRUST,
-    refine: bool = True,
-    alpha: float = DEFAULT_ALPHA,
-) -> Identification:
-    """Measure every take of a session folder and identify (refused takes are listed, not
-    used): verify on the check poses, then refine on all poses (:func:`identify_verified`).
-
-    Each pose's noise is its take's standard error (:mod:`.pose_noise`); ``noise_floor_mm``
-    adds a part no take shows (default: ``noise_mm`` of session.toml, if declared)."""
-    session = directory if isinstance(directory, Session) else load_session(directory)
-    meas = measure_any(session, base)
-    if len(meas) == 0:
-        raise InputError(
-            "no usable take in the session",
-            source=str(session.directory),
-            problems=[str(r) for r in meas.rejected],
-        )
-    noise = meas.noise(base.steps_per_mm, floor_mm=noise_floor_mm)
-    notes = (
-        tuple(session.warnings) + ((noise.note,) if noise.extra_mm > 0 else ()) + tuple(meas.notes)
-    )
-    result = identify_verified(
-        meas.observations(noise),
-        base,
-        meas.roles,
-        refine=refine,
-        alpha=alpha,
-        rejected=tuple(str(r) for r in meas.rejected),
-        limits=limits,
-        noise=noise,
-        pose_numbers=meas.pose,
-        notes=notes,
-    )
-    if meas.refusals and result.trust is not None:
-        trust = dataclasses.replace(result.trust, refusals=result.trust.refusals + meas.refusals)
-        result = dataclasses.replace(result, trust=trust)
-    return result
-
-
-def measure_any(
-    session: Session, base: MachineModel, *, refine: bool = True
-) -> SessionMeasurements:
-    """A session's measurements: motion-capture takes, or a camera session's pictures (with
-    ``refine``, the camera refined against ``base``'s commanded motion,
-    :mod:`.camera_session`)."""
-    if session.config.camera is not None:
-        from cdprhost.calibration.camera_session import measure_camera_session
-
-        return measure_camera_session(session, base, refine=refine)
-    return session.measure()

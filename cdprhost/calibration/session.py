@@ -21,16 +21,15 @@ import csv
 import io
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
-from pathlib import Path, PurePosixPath, PureWindowsPath
-from typing import Any
+from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
-from cdprhost.calibration.camera_config import CameraConfig
+from cdprhost.calibration.camera.config import CameraConfig
+from cdprhost.calibration.config_input import contained_path, read_toml, validation_problems
 from cdprhost.calibration.fitting import Observations
 from cdprhost.calibration.pose_noise import PoseNoise, camera_noise, pose_noise
 from cdprhost.calibration.readers import read_take
@@ -124,29 +123,6 @@ class SessionConfig(BaseModel):
     @property
     def acceptance(self) -> AcceptanceLimits:
         return self.mocap.acceptance if self.mocap is not None else self.camera.acceptance  # type: ignore[union-attr]
-
-
-def validation_problems(exc: ValidationError, prefix: str = "") -> list[str]:
-    """One line per problem: the key's dotted place (under ``prefix``) and what is wrong."""
-    out = []
-    for err in exc.errors():
-        loc = ".".join(str(p) for p in (prefix, *err["loc"]) if p != "") or "(top level)"
-        msg = {"missing": "missing required key", "extra_forbidden": "unknown key"}.get(
-            err["type"], err["msg"].removeprefix("Value error, ")
-        )
-        out.append(f"{loc}: {msg}")
-    return out
-
-
-def read_toml(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """A TOML file's tables; InputError naming the file when unreadable or not TOML."""
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", source=str(path)) from None
 
 
 def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
@@ -275,26 +251,6 @@ def read_poses(path: str | os.PathLike[str]) -> PoseTable:
     return parse_poses(text, str(path))[1]
 
 
-def contained_path(root: Path, relative: str) -> Path | str:
-    """``relative`` resolved inside ``root``, or the reason it is refused: an absolute path
-    (POSIX or Windows), a ``..`` escape, or a link that leads outside. Backslashes (folders
-    assembled on Windows) count as separators."""
-    text = relative.replace("\\", "/")
-    if "\x00" in text:
-        return "contains a NUL character"
-    if PurePosixPath(text).is_absolute() or PureWindowsPath(relative).anchor:
-        return (
-            f"{relative!r} is an absolute path: take paths must be relative to the session folder"
-        )
-    if ".." in PurePosixPath(text).parts:
-        return f"{relative!r} leads outside the session folder ('..')"
-    base = root.resolve()
-    target = (base / text).resolve()
-    if not target.is_relative_to(base):
-        return f"{relative!r} resolves to {target}, outside the session folder"
-    return target
-
-
 @dataclass(frozen=True, eq=False)
 class RejectedTake:
     pose: int
@@ -322,7 +278,7 @@ class SessionMeasurements:
     takes: tuple[TakeMeasurement, ...]
     rejected: tuple[RejectedTake, ...]
     declared_noise_mm: float | None = None
-    # a camera session's noise (camera-session.md, :mod:`.camera_session`): each pose's full
+    # a camera session's noise (camera-session.md, :mod:`.camera.session`): each pose's full
     # covariance (K, 3, 3), the common vector's (3, 3), the parameters' part (12, 12); what
     # refuses the session whatever the fit (calibration views of poor coverage); notes
     covariance: np.ndarray | None = None

@@ -18,8 +18,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from cdprhost.calibration.config_input import validation_problems
 from cdprhost.calibration.readers import read_take
-from cdprhost.calibration.session import validation_problems
 from cdprhost.calibration.takes import MocapConfig
 from cdprhost.errors import InputError
 

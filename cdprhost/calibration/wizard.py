@@ -28,14 +28,15 @@ from typing import Protocol
 import numpy as np
 
 from cdprhost.calibration.augmentation import extend_plan, extra_poses
+from cdprhost.calibration.camera.config import CameraConfig, intrinsics_toml
 from cdprhost.calibration.camera.intrinsics import Intrinsics
-from cdprhost.calibration.camera_config import CameraConfig, intrinsics_toml
-from cdprhost.calibration.camera_takes import judge_camera_take, session_intrinsics
-from cdprhost.calibration.identification import Identification, calibrated_profile, identify_session
+from cdprhost.calibration.camera.takes import judge_camera_take, session_intrinsics
+from cdprhost.calibration.identification import Identification, calibrated_profile
 from cdprhost.calibration.plan_files import plan_csv, read_plan_csv
 from cdprhost.calibration.planning import plan_poses
 from cdprhost.calibration.readers import read_take
 from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SessionConfig, read_poses
+from cdprhost.calibration.session_identification import identify_session
 from cdprhost.calibration.session_writer import SessionWriter
 from cdprhost.calibration.take_sources import FolderWatcher, NumberedTakes
 from cdprhost.calibration.take_statistics import TakeStatistics

@@ -110,12 +110,12 @@ def load_boards(config: str | None, which: list[str] | None) -> list[BoardToPrin
 
     from pydantic import ValidationError
 
-    from cdprhost.calibration.camera_config import (
+    from cdprhost.calibration.camera.config import (
         BoardConfig,
         EffectorBoardConfig,
         ReferenceBoardConfig,
     )
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     if config is None:
         source, data = f"(sample {SAMPLE})", tomllib.loads(sample_text())

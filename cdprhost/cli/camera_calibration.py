@@ -108,8 +108,8 @@ def parse_board(text: str) -> CharucoBoard:
 def _board_from_toml(path: Path) -> CharucoBoard:
     from pydantic import ValidationError
 
-    from cdprhost.calibration.camera_config import BoardConfig
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.camera.config import BoardConfig
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     data = read_toml(path)
     table: Any = data.get("camera", {}).get("calibration_board") if "camera" in data else data
@@ -125,7 +125,8 @@ def _board_from_toml(path: Path) -> CharucoBoard:
 
 
 def _views_and_board(args: argparse.Namespace) -> tuple[Path, CharucoBoard]:
-    from cdprhost.calibration.session import SESSION_FILE, contained_path, load_session_config
+    from cdprhost.calibration.config_input import contained_path
+    from cdprhost.calibration.session import SESSION_FILE, load_session_config
 
     views = Path(args.views)
     if (views / SESSION_FILE).is_file():
@@ -153,8 +154,8 @@ def _views_and_board(args: argparse.Namespace) -> tuple[Path, CharucoBoard]:
 def _calibrate_live(args: argparse.Namespace) -> tuple[IntrinsicsResult, tuple[str, ...]]:
     import cv2
 
+    from cdprhost.calibration.camera.capture import collect_views, open_capture
     from cdprhost.calibration.camera.intrinsics import calibrate_intrinsics
-    from cdprhost.calibration.camera_capture import collect_views, open_capture
 
     if not args.board and args.camera.strip().lower() != "sim":
         raise InputError("--board is needed with --camera")
@@ -242,8 +243,8 @@ def result_text(result: IntrinsicsResult, names: tuple[str, ...]) -> str:
 
 
 def run_camera(args: argparse.Namespace) -> int:
-    from cdprhost.calibration.camera_config import intrinsics_toml
-    from cdprhost.calibration.camera_takes import calibrate_from_views
+    from cdprhost.calibration.camera.config import intrinsics_toml
+    from cdprhost.calibration.camera.takes import calibrate_from_views
     from cdprhost.cli.json_report import write_json
     from cdprhost.fileio.atomic import write_text_atomic
 
@@ -320,7 +321,7 @@ class CameraWizard:
     observer: Any = None
 
     def takes(self, session: Path, frames: int, log: Callable[[str], None]) -> Any:
-        from cdprhost.calibration.camera_capture import CameraTakes
+        from cdprhost.calibration.camera.capture import CameraTakes
 
         return CameraTakes(
             self.capture,
@@ -333,7 +334,7 @@ class CameraWizard:
 
     def candidates(self, takes: Any, model: Any, needed: int) -> Any:
         """The planner's candidate poses the camera can measure (after the first look)."""
-        from cdprhost.calibration.camera_visibility import visible_mask
+        from cdprhost.calibration.camera.visibility import visible_mask
         from cdprhost.calibration.planning import candidate_poses
 
         view = takes.first_look()
@@ -387,8 +388,8 @@ def camera_table(path: Path) -> Any:
     """The ``[camera]`` table of a TOML file (a session.toml or just that table)."""
     from pydantic import ValidationError
 
-    from cdprhost.calibration.camera_config import CameraConfig
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.camera.config import CameraConfig
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     data = read_toml(path)
     if "camera" not in data:
@@ -403,8 +404,8 @@ def camera_table(path: Path) -> Any:
 
 def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> CameraWizard:
     """The capture, the [camera] configuration and the intrinsics of `wizard --camera`."""
-    from cdprhost.calibration.camera_config import load_intrinsics
-    from cdprhost.calibration.camera_takes import session_intrinsics
+    from cdprhost.calibration.camera.config import load_intrinsics
+    from cdprhost.calibration.camera.takes import session_intrinsics
     from cdprhost.calibration.session import SESSION_FILE, load_session_config
 
     sim = args.camera.strip().lower() == "sim"
@@ -424,7 +425,7 @@ def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> Ca
         truth = MachineModel.from_profile(load_profile(args.sim_truth)) if args.sim_truth else model
         capture = observer = VirtualCamera(truth, rig)
     else:
-        from cdprhost.calibration.camera_capture import open_capture
+        from cdprhost.calibration.camera.capture import open_capture
 
         capture = open_capture(args.camera)
     if (session / SESSION_FILE).is_file():

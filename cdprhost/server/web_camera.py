@@ -2,7 +2,7 @@
 
 The camera is named as the calibration wizard names it (``serve --camera 0|FILE|URL``:
 a device index, a video or image file, or a stream URL; opened by
-:func:`cdprhost.calibration.camera_capture.open_capture`). It is opened for each snapshot
+:func:`cdprhost.calibration.camera.capture.open_capture`). It is opened for each snapshot
 and released at once, so it stays free for the calibration wizard between snapshots.
 """
 
@@ -33,7 +33,7 @@ class CameraSnapshot:
 
         opener = self._open
         if opener is None:
-            from cdprhost.calibration.camera_capture import open_capture
+            from cdprhost.calibration.camera.capture import open_capture
 
             opener = open_capture
         with self._lock:

@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 
 from cdprhost.calibration.camera.boards import CharucoBoard
+from cdprhost.calibration.camera.config import CameraConfig
 from cdprhost.calibration.camera.detection import detect_board
 from cdprhost.calibration.camera.printable import (
     MM_PER_INCH,
@@ -24,7 +25,6 @@ from cdprhost.calibration.camera.printable import (
     board_rectangles,
     sheet_layout,
 )
-from cdprhost.calibration.camera_config import CameraConfig
 from cdprhost.cli.board_printing import load_boards, sample_text
 from cdprhost.cli.main import main
 

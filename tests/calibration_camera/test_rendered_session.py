@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.calibration.identification import identify_session
 from cdprhost.calibration.planning import candidate_poses, plan_poses
+from cdprhost.calibration.session_identification import identify_session
 from cdprhost.kinematics.grid import workspace_grid
 from cdprhost.sim.camera.imaging import Imaging
 from cdprhost.sim.camera.scene import standard_rig

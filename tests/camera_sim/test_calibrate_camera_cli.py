@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from cdprhost.calibration.camera_config import load_intrinsics
+from cdprhost.calibration.camera.config import load_intrinsics
 from cdprhost.cli.main import main
 from cdprhost.sim.camera.scene import rig_for_size
 from cdprhost.sim.camera.session import camera_config, true_intrinsics, write_views

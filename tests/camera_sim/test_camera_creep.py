@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from cdprhost.calibration.identification import measure_any
 from cdprhost.calibration.planning import candidate_poses, plan_poses
 from cdprhost.calibration.session import load_session
+from cdprhost.calibration.session_identification import measure_any
 from cdprhost.sim.camera.scene import rig_for_size
 from cdprhost.sim.camera.session import write_camera_session
 from tests.calibration.conftest import paper_truth_geometry

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from cdprhost.calibration.camera_config import intrinsics_toml, load_intrinsics
-from cdprhost.calibration.camera_takes import image_files, natural_key, read_frames
+from cdprhost.calibration.camera.config import intrinsics_toml, load_intrinsics
+from cdprhost.calibration.camera.takes import image_files, natural_key, read_frames
 from cdprhost.calibration.session import load_session, load_session_config
 from cdprhost.errors import InputError
 from cdprhost.sim.camera.scene import rig_for_size

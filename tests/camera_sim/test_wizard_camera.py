@@ -9,8 +9,8 @@ import json
 import numpy as np
 import pytest
 
-from cdprhost.calibration.camera_capture import CameraTakes
-from cdprhost.calibration.camera_visibility import visible_mask
+from cdprhost.calibration.camera.capture import CameraTakes
+from cdprhost.calibration.camera.visibility import visible_mask
 from cdprhost.calibration.planning import candidate_poses
 from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
 from cdprhost.cli.main import main
@@ -146,7 +146,7 @@ def _wizard(tmp_path, *extra):
 def test_a_real_camera_needs_its_boards_and_intrinsics(rig, tmp_path, capsys):
     import cv2
 
-    from cdprhost.calibration.camera_config import intrinsics_toml
+    from cdprhost.calibration.camera.config import intrinsics_toml
     from cdprhost.calibration.session import SessionConfig
     from cdprhost.calibration.session_writer import session_toml
 

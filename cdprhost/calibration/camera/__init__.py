@@ -1,5 +1,8 @@
-"""Calibration with one camera and printed ChArUco boards (camera-session.md): the pure
-estimation core. Images come in as numpy arrays; nothing here reads or writes files.
+"""The camera source: calibration with one camera and printed ChArUco boards
+(camera-session.md). Everything camera lives here; like the motion-capture source it ends
+in the same observations (each pose's B with its covariance) that identification takes.
+
+The pure estimation core (images come in as numpy arrays):
 
 - :mod:`.boards`: boards and their placement;
 - :mod:`.detection`: corners of a board in an image;
@@ -9,10 +12,18 @@ estimation core. Images come in as numpy arrays; nothing here reads or writes fi
 - :mod:`.reprojection_uncertainty`: how well the intrinsics place a point, where it matters;
 - :mod:`.projection`: the camera model, vectorised;
 - :mod:`.pose`: one board's pose (PnP) with covariance;
+- :mod:`.pose_covariance`: the covariance of a board pose from its corners;
 - :mod:`.positions`: per-frame effector positions (the baseline);
-- :mod:`.session_fit`: the session-level fit (one camera pose, one board orientation,
-  intrinsics refined with the robot's motion) and each pose's B with its covariance;
-- :mod:`.take_drift`: a camera take's drift tested on the camera's own frame noise.
+- :mod:`.bundle_adjustment`, :mod:`.session_fit`: the session-level fit (one camera pose,
+  one board orientation, intrinsics refined with the robot's motion) and each pose's B
+  with its covariance;
+- :mod:`.take_drift`: a camera take's drift tested on the camera's own frame noise;
+- :mod:`.visibility`: which board corners a camera placement can see.
+
+The shell around it (files, devices): :mod:`.config` (the ``[camera]`` table and
+camera.toml), :mod:`.printable` (boards to print), :mod:`.capture` (frames from a device),
+:mod:`.takes` (a session's pictures read and detected) and :mod:`.session` (a camera
+session measured into the session's measurements).
 """
 
 from cdprhost.calibration.camera.boards import (

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from cdprhost.calibration import plan_files, planning, report
-from cdprhost.calibration.identification import calibrated_profile, identify_session
+from cdprhost.calibration.identification import calibrated_profile
+from cdprhost.calibration.session_identification import identify_session
 from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.cli.calibration_wizard import refuse_unless_written, run_wizard
 from cdprhost.cli.json_report import write_json

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CharucoBoard
-from cdprhost.calibration.camera_visibility import sheet_outline
+from cdprhost.calibration.camera.visibility import sheet_outline
 from cdprhost.sim.camera.optics import PinholeCamera
 
 PAPER = 0.85  # reflectance of white paper

@@ -26,7 +26,7 @@ from cdprhost.calibration.camera.boards import (
     rotation_matrix,
 )
 from cdprhost.calibration.camera.intrinsics import Intrinsics
-from cdprhost.calibration.camera_visibility import CameraView, visible_mask
+from cdprhost.calibration.camera.visibility import CameraView, visible_mask
 from cdprhost.sim.camera.imaging import Imaging, encode, expose, occlude
 from cdprhost.sim.camera.optics import PinholeCamera
 from cdprhost.sim.camera.render import PlacedBoard, Renderer
@@ -106,7 +106,7 @@ class CameraRig:
 
     def visible(self, b_points: ArrayLike, **limits: float) -> np.ndarray:
         """Per point (N,): the camera can measure ``B`` there
-        (:func:`~cdprhost.calibration.camera_visibility.visible_mask`)."""
+        (:func:`~cdprhost.calibration.camera.visibility.visible_mask`)."""
         return visible_mask(np.asarray(b_points, dtype=float), self.view(), self.setup, **limits)
 
 

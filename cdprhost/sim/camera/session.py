@@ -25,13 +25,13 @@ import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CharucoBoard
+from cdprhost.calibration.camera.config import CAMERA_FILE, CameraConfig, intrinsics_toml
 from cdprhost.calibration.camera.detection import detect_board
 from cdprhost.calibration.camera.intrinsics import (
     Intrinsics,
     IntrinsicsResult,
     calibrate_intrinsics,
 )
-from cdprhost.calibration.camera_config import CAMERA_FILE, CameraConfig, intrinsics_toml
 from cdprhost.calibration.commanding import commanded_path
 from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SESSION_FILE, SessionConfig
 from cdprhost.calibration.session_writer import session_toml

@@ -154,7 +154,7 @@ class CameraFileModel(_Strict):
 
 def load_intrinsics(path: str | os.PathLike[str]) -> Intrinsics:
     """camera.toml -> Intrinsics; errors name the file and the key."""
-    from cdprhost.calibration.session import read_toml, validation_problems
+    from cdprhost.calibration.config_input import read_toml, validation_problems
 
     src = str(path)
     data = read_toml(path)

@@ -1,7 +1,7 @@
 """A camera session measured: pictures -> the session-level fit -> each pose's B with its
 covariance, judged take by take like motion-capture takes (camera-session.md).
 
-The boards are found in every frame (:func:`~.camera_takes.read_camera_session`), the
+The boards are found in every frame (:func:`~.camera.takes.read_camera_session`), the
 session-level fit (:func:`~.camera.session_fit.fit_session`) solves one camera and one
 board orientation with the intrinsics refined against the robot's commanded motion (on
 the fit poses only, so that check poses still test it), and every take's frames are then
@@ -19,7 +19,7 @@ import numpy as np
 from cdprhost.calibration.acceptance import AcceptanceLimits
 from cdprhost.calibration.camera.session_fit import SessionFit, TakeDetections, fit_session
 from cdprhost.calibration.camera.take_drift import CameraDrift, camera_drift
-from cdprhost.calibration.camera_takes import read_camera_session, skipped_text
+from cdprhost.calibration.camera.takes import read_camera_session, skipped_text
 from cdprhost.calibration.registration import RigidTransform
 from cdprhost.calibration.session import RejectedTake, Session, SessionMeasurements
 from cdprhost.calibration.takes import TakeMeasurement, TakeRejected, TakeSeries, judge_takes

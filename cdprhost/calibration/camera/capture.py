@@ -7,7 +7,7 @@ stale frames, captures ``frames`` pictures into a take folder and logs each boar
 status (corners found, sharpness, reprojection error). :meth:`CameraTakes.first_look`
 is the check before the first move: both boards must be seen, and the picture gives the
 camera's pose and the effector board's orientation for pose planning
-(:mod:`.camera_visibility`).
+(:mod:`.camera.visibility`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from cdprhost.calibration.camera.boards import CameraSetup, CharucoBoard
 from cdprhost.calibration.camera.detection import BoardDetection, detect_board
 from cdprhost.calibration.camera.intrinsics import Intrinsics
 from cdprhost.calibration.camera.pose import BoardPose, solve_board_pose
-from cdprhost.calibration.camera_visibility import CameraView, view_from_poses
+from cdprhost.calibration.camera.visibility import CameraView, view_from_poses
 from cdprhost.errors import InputError
 
 

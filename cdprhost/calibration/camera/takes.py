@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from cdprhost.calibration.camera.boards import CameraSetup, CharucoBoard
+from cdprhost.calibration.camera.config import CameraConfig, load_intrinsics
 from cdprhost.calibration.camera.detection import (
     BoardDetection,
     DetectorSettings,
@@ -33,7 +34,6 @@ from cdprhost.calibration.camera.intrinsics import (
     calibrate_intrinsics,
 )
 from cdprhost.calibration.camera.session_fit import TakeDetections
-from cdprhost.calibration.camera_config import CameraConfig, load_intrinsics
 from cdprhost.errors import InputError
 
 #: Calibration views without the board that are examined for why (decoding every marker
@@ -189,7 +189,7 @@ def session_intrinsics(
 ) -> tuple[Intrinsics, IntrinsicsResult | None]:
     """The session's intrinsics: its camera.toml, or a calibration from its views (whose
     coverage verdict the caller must honour: the result is returned with it)."""
-    from cdprhost.calibration.session import contained_path
+    from cdprhost.calibration.config_input import contained_path
 
     rel = camera.intrinsics or camera.calibration_views or ""
     key = "intrinsics" if camera.intrinsics else "calibration_views"
