@@ -19,6 +19,14 @@ MAX_WINDOW = 127
 START_WINDOW = 8
 MIN_WINDOW = 8
 CLOCK_SYNC_S = 0.06  # clock samples this far apart before streaming
+# The handshake on a noisy line: a HELLO and its IDENT both get through only about one
+# time in three at 1 % corruption + 1 % drop per byte, so HELLO is resent, first after
+# HELLO_FIRST_S, then each time HELLO_BACKOFF times later (up to an eighth of the link
+# timeout), for as long as the line answers anything and at most HANDSHAKE_S (HostLink's
+# ``handshake_s``); a line silent for the link timeout ends it at once.
+HELLO_FIRST_S = 0.05
+HELLO_BACKOFF = 1.5
+HANDSHAKE_S = 30.0
 STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a lossy line
 # The retransmission timeout never goes below this, and doubles on consecutive timeouts
 # (back to 1x on the next acknowledgement), as Klipper's host does: a device whose main
