@@ -20,6 +20,7 @@ Run: python bench/lossy_link.py [--only handshake|stream|clean|frozen] [--seeds 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -181,12 +182,23 @@ def clean_print(gcode: Path) -> None:
 
 
 def frozen(seconds: float = 2.0) -> None:
-    from cdprhost.link import open_link
+    """A link streaming to a 1x device whose process is then stopped (SIGSTOP) mid-stream."""
+    import threading
+
+    from cdprhost.link import LinkError, open_link
+    from firmware_protocol.streams import demo_stream
 
     dev, port = start_device("--speedup", "1")
     link = open_link(port)
+
+    def stream() -> None:
+        with contextlib.suppress(LinkError, OSError):  # stopped: the link is declared lost
+            link.queue_segments(demo_stream(20000, seed=1))
+
+    worker = threading.Thread(target=stream, daemon=True)
     try:
-        time.sleep(0.5)
+        worker.start()
+        time.sleep(1.5)
         before = link.counters.retransmits
         dev.send_signal(signal.SIGSTOP)
         t0 = time.monotonic()
@@ -195,13 +207,14 @@ def frozen(seconds: float = 2.0) -> None:
             time.sleep(0.05)
             marks.append(link.counters.retransmits - before)
         print(
-            f"  device stopped: {marks[-1]} retransmissions in the first {seconds:g} s "
+            f"  device stopped mid-stream: {marks[-1]} retransmissions in the first {seconds:g} s "
             f"(after 0.5 s: {marks[9]}, 1 s: {marks[19]})",
             flush=True,
         )
     finally:
-        link.close()
         stop_device(dev)
+        worker.join(10)
+        link.close()
 
 
 def main() -> None:

@@ -70,6 +70,7 @@ class _Outstanding:
     items: int
     sent_at: float
     retransmitted: bool = False
+    first_sent: float = 0.0
 
 
 @dataclass
@@ -109,11 +110,24 @@ class Sender:
         self._bytes_out = 0
         self._items_out = 0  # queue items in the outstanding frames
         self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
+        # every DATA frame leaves this many times back to back (2 on a line that loses about
+        # half of its frames: a copy lost to noise is then usually made good by the other
+        # at once, instead of by a NAK or a timeout one round later; the receiver discards
+        # the copy it does not need as a duplicate and acknowledges it again)
+        self.copies = 1
+        # back off (and resend only the oldest frame, a probe) only while the peer is
+        # silent: a timeout while it is heard is a frame or an acknowledgement lost to
+        # noise, and a longer wait only stalls the stream (False: back off at every timeout)
+        self.silent_backoff = False
+        self._heard_at = -1e9  # when a valid frame from the peer last arrived
+        self.extra_copies = 0  # copies sent beyond the first
         self.retransmits = 0
         self.timeouts = 0
         self.go_backs = 0  # resends of the window (a timeout or a NAK): losses seen
         self.early_resends = 0  # go-backs on a stale report (stale_after)
         self.acked_clean = 0  # frames acknowledged that had been sent once
+        self.acked_bytes = 0  # payload bytes of the frames acknowledged, each counted once
+        self.acked_frames = 0
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
         # when an acknowledgement last released frames: the timer restarts there (RFC 6298
@@ -166,8 +180,10 @@ class Sender:
             last = self.outstanding.popleft()
             self._bytes_out -= len(last.payload)
             self._items_out -= last.items
+            self.acked_bytes += len(last.payload)
             clean += not last.retransmitted
         self.acked_clean += clean
+        self.acked_frames += n
         self._advanced_at = now
         if last is not None and not last.retransmitted:
             self.rto.sample(now - last.sent_at)
@@ -193,6 +209,10 @@ class Sender:
         if now - self._timer_start() >= wait:
             self.early_resends += 1
             self._go_back(now)
+
+    def heard(self, now: float) -> None:
+        """A valid frame from the peer arrived (it is alive)."""
+        self._heard_at = now
 
     def on_nak(self, ack: int, now: float) -> None:
         """Release frames before ``ack``, then resend from ``ack`` unless that was just done."""
@@ -238,26 +258,37 @@ class Sender:
     def frames_to_send(self, now: float) -> list[tuple[int, bytes]]:
         """Retransmissions that are due (timeout or NAK) and new frames the window allows."""
         out: list[tuple[int, bytes]] = []
+        probe = False
         if self.outstanding and not self._resend and now >= self._timer_start() + self._timeout():
             self.timeouts += 1
-            self.rto.back_off()
+            silent = self._heard_at < self.outstanding[0].sent_at  # nothing since it last left
+            if silent or not self.silent_backoff:
+                self.rto.back_off()
+                probe = self.silent_backoff
             self._go_back(now)
+        if self._resend and probe:  # a silent peer: the oldest frame alone asks if it is back
+            self._resend = False
+            o = self.outstanding[0]
+            o.sent_at, o.retransmitted = now, True
+            self.retransmits += 1
+            out += [(o.seq, o.payload)] * self.copies
         if self._resend:
             self._resend = False
             for o in self.outstanding:
                 o.sent_at = now
                 o.retransmitted = True
                 self.retransmits += 1
-                out.append((o.seq, o.payload))
+                out += [(o.seq, o.payload)] * self.copies
         while self.backlog and self._room_for(len(self.backlog[0].payload)):
             q = self.backlog.popleft()
             self._cum[self.next_seq] = (q.cum_items, q.cum_ticks)
-            o = _Outstanding(self.next_seq, q.payload, q.items, now)
+            o = _Outstanding(self.next_seq, q.payload, q.items, now, first_sent=now)
             self.next_seq = (self.next_seq + 1) % SEQ_MOD
             self.outstanding.append(o)
             self._bytes_out += len(q.payload)
             self._items_out += q.items
-            out.append((o.seq, o.payload))
+            out += [(o.seq, o.payload)] * self.copies
+        self.extra_copies += len(out) - len(out) // self.copies
         return out
 
     def _room_for(self, size: int) -> bool:
