@@ -122,15 +122,20 @@ class Endpoint:
 
     # ------------------------------------------------------------------ receive
 
-    def feed(self, data: bytes, now: float) -> list[Incoming]:
-        """Deframe ``data`` and :meth:`process` the frames."""
+    def feed(self, data: bytes, now: float, sent_after: float | None = None) -> list[Incoming]:
+        """Deframe ``data`` and :meth:`process` the frames (``sent_after``: see there)."""
         self.counters.bytes_received += len(data)
         if data:  # the peer is alive: even a damaged frame says so
             self.sender.heard(now)
-        return self.process(self.deframer.feed(data), now)
+        return self.process(self.deframer.feed(data), now, sent_after)
 
-    def process(self, frames: list[Frame], now: float) -> list[Incoming]:
-        """Handle already deframed frames: acks, naks, in-order delivery."""
+    def process(
+        self, frames: list[Frame], now: float, sent_after: float | None = None
+    ) -> list[Incoming]:
+        """Handle already deframed frames: acks, naks, in-order delivery. ``sent_after``:
+        the earliest the peer can have sent them, if the caller knows (bytes that waited in
+        a buffer): a report is stale only if it was sent long enough after a frame left
+        (:meth:`Sender.on_report`), not merely read that late."""
         out: list[Incoming] = []
         if self.deframer.rejected:
             for kind, seq in self.deframer.rejected:
@@ -162,7 +167,7 @@ class Endpoint:
                 self.counters.naks_received += 1
                 self.sender.on_nak(frame.ack, now)
             else:
-                self.sender.on_report(frame.ack, now)
+                self.sender.on_report(frame.ack, now, sent_after)
             if frame.kind != Kind.DATA:
                 if frame.payload:
                     out.append(Incoming("flow", frame.payload, frame.ack))

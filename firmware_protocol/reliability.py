@@ -191,7 +191,7 @@ class Sender:
             self.rto.reset_backoff()
         return n
 
-    def on_report(self, ack: int, now: float) -> None:
+    def on_report(self, ack: int, now: float, sent_after: float | None = None) -> None:
         """An ACK or DATA frame from the peer: release frames before ``ack``. If it releases
         none although the oldest outstanding frame left ``stale_after`` ago (and nothing was
         released since) and queue items are in flight, that frame was lost with nothing
@@ -206,7 +206,11 @@ class Sender:
             return  # keep-alives and status requests wait for their timeout (calm_floor)
         oldest = self.outstanding[0]
         wait = 2 * self.stale_after if oldest.retransmitted else self.stale_after
-        if now - self._timer_start() >= wait:
+        # judged by when the report can have been sent at the earliest (``sent_after``, if
+        # known): a report that waited in a buffer while this side was busy was written
+        # before the frame arrived, and resending then was a spurious retransmission
+        sent = now if sent_after is None else min(now, sent_after)
+        if sent - self._timer_start() >= wait:
             self.early_resends += 1
             self._go_back(now)
 

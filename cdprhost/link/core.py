@@ -98,6 +98,8 @@ class LinkCore:
         self.last_rx = now
         self.last_tx = now
         self.last_pump = now
+        self._read_end = now
+        self.sent_after = now
         self._waiting_since: float | None = None
         self.garbage_since_valid = 0
         self._last_retx = 0
@@ -155,7 +157,12 @@ class LinkCore:
             self.last_tx = self.t.now()
 
     def read(self, timeout: float) -> bytes:
-        return self.t.read(timeout)
+        """Bytes from the port; :attr:`sent_after` is then the earliest the device can have
+        sent them (when the read before this one returned: what it left had not arrived)."""
+        self.sent_after = self._read_end
+        data = self.t.read(timeout)
+        self._read_end = self.t.now()
+        return data
 
     def keepalive_interval(self) -> float:
         return min(self.watchdog_ms / 4000.0, self.timeout_s / 4)
@@ -168,7 +175,7 @@ class LinkCore:
         """Hand received bytes to the endpoint and the tracker."""
         ep = self.ep
         before = ep.deframer.frames
-        for inc in ep.feed(data, now):
+        for inc in ep.feed(data, now, sent_after=self.sent_after):
             self.dev.handle(inc, now)
         if ep.deframer.frames > before:
             self.last_rx = now

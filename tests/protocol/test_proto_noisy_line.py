@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.framing import Kind, encode_frame
+from firmware_protocol.reliability import RtoEstimator, Sender
 
 
 def fast_endpoint() -> Endpoint:
@@ -111,3 +112,17 @@ def test_two_copies_of_each_frame_deliver_once():
     got = [inc.payload for inc in b.feed(b"".join(frames[1:]), 0.001) if inc.kind == "data"]
     assert got == [bytes([i]) * 5 for i in range(3)]  # the first copy of frame 0 was lost
     assert b.counters.duplicates == 2
+
+
+def test_a_report_that_only_waited_in_a_buffer_is_not_stale():
+    """A report read 30 ms after a frame left, but written before that frame can have
+    arrived (it waited in the port's buffer while the host was busy), says nothing about
+    the frame: no resend. One written 20 ms after it left does."""
+    s = Sender(window=4, rto=RtoEstimator(initial=0.1, floor=0.1, ceiling=1.0))
+    s.stale_after = 0.02
+    s.queue(b"segments", items=3, ticks=300)
+    s.frames_to_send(0.0)
+    s.on_report(0, 0.030, sent_after=0.001)
+    assert s.frames_to_send(0.030) == [] and s.early_resends == 0
+    s.on_report(0, 0.031, sent_after=0.021)
+    assert s.frames_to_send(0.031) == [(0, b"segments")] and s.early_resends == 1
