@@ -19,6 +19,7 @@ from dataclasses import dataclass
 SEQ_MOD = 256
 MAX_WINDOW = 127
 MAX_BACKOFF = 4
+SILENT_S = 0.15  # a peer that sent no byte for this long is silent (Sender.silent_backoff)
 
 
 class RtoEstimator:
@@ -115,9 +116,10 @@ class Sender:
         # at once, instead of by a NAK or a timeout one round later; the receiver discards
         # the copy it does not need as a duplicate and acknowledges it again)
         self.copies = 1
-        # back off (and resend only the oldest frame, a probe) only while the peer is
-        # silent: a timeout while it is heard is a frame or an acknowledgement lost to
-        # noise, and a longer wait only stalls the stream (False: back off at every timeout)
+        # back off only while the peer is silent (no byte for SILENT_S), and resend only the
+        # oldest frame, a probe, while nothing came since it left: a timeout while the peer
+        # is heard is a frame or an acknowledgement lost to noise, and a longer wait only
+        # stalls the stream (False: back off at every timeout, resend the whole window)
         self.silent_backoff = False
         self._heard_at = -1e9  # when a valid frame from the peer last arrived
         self.extra_copies = 0  # copies sent beyond the first
@@ -265,10 +267,15 @@ class Sender:
         probe = False
         if self.outstanding and not self._resend and now >= self._timer_start() + self._timeout():
             self.timeouts += 1
-            silent = self._heard_at < self.outstanding[0].sent_at  # nothing since it last left
-            if silent or not self.silent_backoff:
+            if not self.silent_backoff:
                 self.rto.back_off()
-                probe = self.silent_backoff
+            else:
+                # nothing since the oldest frame last left: ask with that frame alone; nothing
+                # at all for SILENT_S (longer than a device's reports are apart, about a
+                # quarter of a second at 1x): the device is silent, and the timeout doubles
+                probe = self._heard_at < self.outstanding[0].sent_at
+                if now - self._heard_at >= SILENT_S:
+                    self.rto.back_off()
             self._go_back(now)
         if self._resend and probe:  # a silent peer: the oldest frame alone asks if it is back
             self._resend = False

@@ -42,7 +42,8 @@ RTO_FLOOR_S = 0.025
 RTO_MAX_BACKOFF = 8
 # When acknowledgements prove the path faster than the configured baud (a pty, native
 # USB: no slow UART behind it), the same 25 ms floor and doubling, but the timeout backs
-# off (and resends only the oldest frame) only while the device is silent: on a noisy
+# off only while the device is silent (no byte for 150 ms), and resends only the oldest
+# frame while nothing came since it left (firmware_protocol.reliability): on a noisy
 # path a timeout while the device is heard is a frame or an ACK lost to noise, and
 # waiting longer would stall the stream. (It was 3 ms without backoff: a clean pty under
 # load retransmitted on every scheduling hiccup, and a frozen device drew a window's worth

@@ -48,9 +48,10 @@ def test_a_silent_peer_gets_one_probe_per_backed_off_timeout():
         a.send(bytes([i]) * 20, items=4)
     assert len(a.flush(0.001)) == 20  # nothing heard after this: the peer froze
     counts = resends_in(a, 2.0)
-    # 25, 50, 100, 200, 250 ms ... : about ten timeouts, each resending only the oldest
+    # every 25 ms for the first 0.15 s (a device's reports can be that far apart), then
+    # 50, 100, 200, 250 ms ...: about fifteen timeouts, each resending only the oldest
     # frame (it was a window of 20 frames every 3 ms: 139 retransmissions in 1.5 s)
-    assert counts[-1] <= 12
+    assert counts[-1] <= 16
     assert a.sender.timeouts == counts[-1]
     assert a.sender.rto.rto > 0.1
 
