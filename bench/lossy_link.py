@@ -176,7 +176,8 @@ def clean_print(gcode: Path) -> None:
     result, _rows, wall = print_over_pty(gcode, 1, "")
     print(
         f"  {gcode.name} at 1x, clean pty: {result.get('status')} segments "
-        f"{result.get('segments')} retransmits {result.get('retransmits')} wall {wall:.0f} s",
+        f"{result.get('segments')} retransmits {result.get('retransmits')} wall {wall:.0f} s"
+        + ("" if result.get("status") == "completed" else f"  ({result.get('reason')})"),
         flush=True,
     )
 

@@ -50,6 +50,8 @@ class Endpoint:
     off only while the peer is silent (:attr:`Sender.silent_backoff`).
     ``stale_after`` (seconds, None: off): a report from the peer that acknowledges nothing
     new that long after the oldest frame left resends it once (:meth:`Sender.on_report`).
+    ``renak``: a gap still open when the NAK holdoff ends is NAKed again (the host; the
+    devices NAK once per holdoff as frames arrive, the AVR and the model alike).
     """
 
     def __init__(
@@ -67,6 +69,7 @@ class Endpoint:
         window_bytes: int | None = None,
         rto_fast: tuple[float, int] | None = None,
         stale_after: float | None = None,
+        renak: bool = False,
     ):
         self._window = window
         self.window_bytes = window_bytes
@@ -76,6 +79,7 @@ class Endpoint:
         self._calm_floor = 0.0  # the slow floor, for frames without queue items, once fast
         self._silent_backoff = False  # Sender.silent_backoff, once fast
         self.nak_holdoff = nak_holdoff
+        self.renak = renak  # a gap still open when the holdoff ends is NAKed again
         self.accept = accept
         self.flow = flow
         self.byte_time = (
@@ -188,15 +192,15 @@ class Endpoint:
         return out
 
     def _want_nak(self, now: float) -> None:
-        """A gap (or a damaged frame where the expected one should be): NAK now, or, within
-        the holdoff of a NAK for the same number, once the holdoff ends. The gap is still
+        """A gap (or a damaged frame where the expected one should be): NAK now, or (with
+        ``renak``), within the holdoff of a NAK for the same number, once the holdoff ends. The gap is still
         open then (frames behind it keep coming, the one it lacks does not) and the first
         NAK or the go-back it asked for may have been lost too: waiting for the peer's
         timeout would stall the stream on a noisy line."""
         expected, when = self._last_nak
         if expected != self.receiver.expected or now - when >= self.nak_holdoff:
             self._nak_due = True
-        else:
+        elif self.renak:
             self._nak_later = when + self.nak_holdoff
 
     # ------------------------------------------------------------------ send

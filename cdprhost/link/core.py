@@ -86,6 +86,7 @@ class LinkCore:
             byte_time=10.0 / baud if baud else 0.0,
             rto_fast=RTO_FAST,
             stale_after=STALE_REPORT_S,
+            renak=True,
         )
         self.ctx = SegmentContext()
         self.max_payload: int = max_payload

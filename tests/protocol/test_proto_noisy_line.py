@@ -73,7 +73,7 @@ def test_a_peer_that_is_heard_gets_the_whole_window_again_without_backoff():
 
 
 def test_a_gap_that_stays_open_draws_another_nak_after_the_holdoff():
-    b = Endpoint(window=8, nak_holdoff=0.01)
+    b = Endpoint(window=8, nak_holdoff=0.01, renak=True)
     a = Endpoint(window=8)
     for i in range(4):
         a.send(bytes([i]))
@@ -89,7 +89,7 @@ def test_a_gap_that_stays_open_draws_another_nak_after_the_holdoff():
 
 
 def test_a_nak_held_back_is_dropped_when_the_gap_closed_meanwhile():
-    b = Endpoint(window=8, nak_holdoff=0.01)
+    b = Endpoint(window=8, nak_holdoff=0.01, renak=True)
     a = Endpoint(window=8)
     for i in range(3):
         a.send(bytes([i]))
