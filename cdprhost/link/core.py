@@ -22,6 +22,7 @@ from cdprhost.link.errors import DeviceSilent, LinkTimeout
 from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker
 from cdprhost.link.tuning import (
+    CLEAN_RTO_FLOOR_S,
     COPY_LOSS,
     FRAME_LOSS_CEILING,
     FRAME_LOSS_SHARE,
@@ -261,6 +262,12 @@ class LinkCore:
             self.payload_limit = max(self.payload_limit, grown)
             sender.window = min(self.max_window, sender.window + clean)
         self._last_retx = retx
+        if ep.byte_time == 0.0 and sender.silent_backoff:  # the fast path (a pty, USB)
+            # no damaged byte and no NAK yet: nothing is lost on this path, and a timeout
+            # could only be a scheduling delay of either process (the device model under
+            # load): the longer floor; at the first sign of noise, the 25 ms one
+            noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
+            sender.rto.floor = RTO_FLOOR_S if noisy else CLEAN_RTO_FLOOR_S
         # (hysteresis: with two copies far fewer frames are lost, and so the measured rate)
         frame_loss = rate * (self.payload_limit + OVERHEAD)
         if frame_loss > COPY_LOSS:

@@ -29,3 +29,22 @@ def test_frames_stay_short_on_a_one_percent_line():
     late = sizes[len(sizes) // 3 :]
     assert max(late) <= 64 and link._core.payload_limit <= 48
     assert link.counters.retransmits > 50  # the faults did bite
+
+
+def _fast(link):
+    """As on a pty: an acknowledgement proved the path faster than its baud."""
+    link._core.ep._fast_path()
+    link.request_status()
+    return link._core.ep.sender.rto.floor
+
+
+def test_a_clean_fast_path_keeps_a_longer_floor_and_a_noisy_one_the_25_ms_floor():
+    clean = open_embedded(baud=None)
+    noisy = open_embedded(faults="corrupt=0.01,drop=0.01,seed=1", baud=None)
+    try:
+        # a pty loses nothing: a 25 ms timeout there is a scheduling delay (spurious)
+        assert _fast(clean) == 0.15
+        assert _fast(noisy) == 0.025
+    finally:
+        clean.close()
+        noisy.close()
