@@ -11,6 +11,7 @@ def test_frames_stay_short_on_a_one_percent_line():
     # eight. The loss rate was counted per byte sent (go-backs resend whole windows, so it
     # read far too low) and its floor raised the limit to full frames at the first loss.
     link = open_embedded(faults="corrupt=0.01,drop=0.01,seed=3", baud=None)
+    _fast(link)  # as on a pty (a UART keeps its old rule: the AVR's frames)
     sizes: list[int] = []
     write = link._core.t.write
 
