@@ -109,8 +109,7 @@ class LinkCore:
         # the line's loss rate: go-backs per byte sent, both counts halved now and then
         self._loss_events = 0.0
         self._loss_bytes = 0.0
-        self._seen = (0, 0)  # (go-backs, bytes counted) at the last adaptation
-        self._seen_delivered = False  # bytes counted: delivered (fast path) or sent
+        self._seen = (0, 0)  # (go-backs, bytes delivered) at the last adaptation
         self.pumping = False  # a pump slice runs (the keep-alive thread then leaves it be)
 
     # ------------------------------------------------------------------ locking
@@ -137,8 +136,7 @@ class LinkCore:
         self.ep.reset_session()
         self.ep.sender.window = min(START_WINDOW, self.max_window)
         self._last_retx = self._acked_clean = 0
-        self._seen_delivered = self.fast_path()
-        self._seen = (0, 0 if self._seen_delivered else self.ep.counters.bytes_sent)
+        self._seen = (0, 0)
         self.ctx = SegmentContext()
 
     def credit(self) -> int:
@@ -236,29 +234,20 @@ class LinkCore:
     def _adapt(self) -> None:
         """On a retransmission: shorter frames, half the window; every frame acknowledged
         without one grows them back (2 bytes, 1 frame): a noisy line settles on short frames
-        that get through, a clean one on full ones. A frame once sent keeps its size (its
-        retransmissions are byte-identical), so frames start small and grow.
-
-        On a fast path (a pty, USB: :meth:`fast_path`) the loss rate is counted per byte
-        delivered (:meth:`loss_rate`), frames never grow past the length that rate lets
-        through about half the time (FRAME_LOSS_CEILING) nor jump up to the floor, and they
-        go twice while a quarter of them is lost (COPY_LOSS). On a UART (the AVR at 250000
-        baud) the old rule stays: losses per byte sent, and a floor that can lengthen the
-        frames (short frames cost the AVR a main-loop turn each)."""
+        that get through, a clean one on full ones. Frames never grow past the length the
+        measured loss rate lets through about half the time (FRAME_LOSS_CEILING). A frame
+        once sent keeps its size (its retransmissions are byte-identical), so frames start
+        small and grow."""
         ep = self.ep
         retx = ep.retransmits
         sender = ep.sender
         clean, self._acked_clean = sender.acked_clean - self._acked_clean, sender.acked_clean
-        fast = self.fast_path()
-        rate = self.loss_rate(delivered=fast) if fast or retx > self._last_retx else 0.0
+        rate = self.loss_rate()
         if retx > self._last_retx:
             floor = min(self.max_payload, self._payload_for(FRAME_LOSS_SHARE, rate))
-            if fast:  # shorter, down to the floor, never longer
-                self.payload_limit = max(
-                    min(floor, self.payload_limit), int(self.payload_limit * 0.7)
-                )
-            else:
-                self.payload_limit = max(floor, int(self.payload_limit * 0.7))
+            # shorter, down to the floor (never longer: a floor above the limit, early on
+            # when little was measured, raised a noisy line's frames to full length)
+            self.payload_limit = max(min(floor, self.payload_limit), int(self.payload_limit * 0.7))
             sender.window = max(MIN_WINDOW, sender.window // 2)
             log.debug(
                 "%s: %d retransmissions; payload %d, window %d",
@@ -268,18 +257,17 @@ class LinkCore:
                 sender.window,
             )
         elif clean:
-            ceiling = self._payload_for(FRAME_LOSS_CEILING, rate) if fast else self.max_payload
+            ceiling = self._payload_for(FRAME_LOSS_CEILING, rate)
             grown = min(self.max_payload, ceiling, self.payload_limit + 2 * clean)
             self.payload_limit = max(self.payload_limit, grown)
             sender.window = min(self.max_window, sender.window + clean)
         self._last_retx = retx
-        if not fast:
-            return
-        # no damaged byte and no NAK yet: nothing is lost on this path, and a timeout could
-        # only be a scheduling delay of either process (the device model under load): the
-        # longer floor; at the first sign of noise, the 25 ms one
-        noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
-        sender.rto.floor = RTO_FLOOR_S if noisy else CLEAN_RTO_FLOOR_S
+        if ep.byte_time == 0.0 and sender.silent_backoff:  # the fast path (a pty, USB)
+            # no damaged byte and no NAK yet: nothing is lost on this path, and a timeout
+            # could only be a scheduling delay of either process (the device model under
+            # load): the longer floor; at the first sign of noise, the 25 ms one
+            noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
+            sender.rto.floor = RTO_FLOOR_S if noisy else CLEAN_RTO_FLOOR_S
         # (hysteresis: with two copies far fewer frames are lost, and so the measured rate)
         frame_loss = rate * (self.payload_limit + OVERHEAD)
         if frame_loss > COPY_LOSS:
@@ -287,30 +275,19 @@ class LinkCore:
         elif frame_loss < COPY_LOSS / 3:
             sender.copies = 1
 
-    def fast_path(self) -> bool:
-        """Acknowledgements proved the path faster than its baud (a pty, native USB)."""
-        return self.ep.byte_time == 0.0 and self.ep.sender.silent_backoff
-
-    def loss_rate(self, delivered: bool = True) -> float:
-        """The line's loss rate: losses (go-backs) per byte, both counts halved now and then
-        so the estimate follows the line. Per byte delivered (each frame acknowledged counts
-        its bytes once, each go-back one frame lost); ``delivered`` False: per byte sent, as
-        on a UART. (Per byte sent it reads far too low on a noisy line: a go-back resends
-        the whole window, so the bytes sent grow much faster than the losses, and frames
-        stayed long that almost never got through whole.)"""
+    def loss_rate(self) -> float:
+        """The line's loss rate: losses (go-backs) per byte that got through, both counts
+        halved now and then so the estimate follows the line. Each frame acknowledged counts
+        its bytes once, each go-back one frame lost. (Per byte *sent* it was far too low on
+        a noisy line: a go-back resends the whole window, so the bytes sent grow much faster
+        than the losses, and frames stayed long that almost never got through whole.)"""
         sender = self.ep.sender
         events = sender.go_backs
-        if delivered:
-            count = sender.acked_bytes + sender.acked_frames * OVERHEAD
-        else:
-            count = self.ep.counters.bytes_sent
-        if delivered != self._seen_delivered:  # the fast path just engaged: a new count
-            self._seen, self._seen_delivered = (self._seen[0], count), delivered
+        delivered = sender.acked_bytes + sender.acked_frames * OVERHEAD
         lost = events - self._seen[0]
         self._loss_events += lost
-        extra = lost * (self.payload_limit + OVERHEAD) if delivered else 0
-        self._loss_bytes += count - self._seen[1] + extra
-        self._seen = (events, count)
+        self._loss_bytes += delivered - self._seen[1] + lost * (self.payload_limit + OVERHEAD)
+        self._seen = (events, delivered)
         while self._loss_bytes > LOSS_MEMORY_BYTES:
             self._loss_events /= 2
             self._loss_bytes /= 2
@@ -324,7 +301,7 @@ class LinkCore:
 
     def payload_floor(self) -> int:
         """The shortest payload worth sending on this line (FRAME_LOSS_SHARE)."""
-        return self._payload_for(FRAME_LOSS_SHARE, self.loss_rate(self.fast_path()))
+        return self._payload_for(FRAME_LOSS_SHARE, self.loss_rate())
 
     def wait(
         self,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 SLICE_S = 0.02
 MIN_PAYLOAD = 24
-START_PAYLOAD = 64  # frames start small and grow while the line is clean
+START_PAYLOAD = 32  # frames start small and grow while the line is clean
 # The payload floor follows the line's measured loss: frames as long as a frame is lost with
 # about this probability. A device checks one frame a main-loop turn and answers each with
 # an ACK, so short frames cost it time per segment: with 24-byte payloads on a line that
