@@ -46,9 +46,12 @@ class Endpoint:
     ``byte_time`` (seconds per byte on the wire, 0 if unknown) lets the RTT samples
     start when a frame has left the wire rather than when it was queued; it switches
     itself off when an acknowledgement proves the wire faster (USB CDC, a pty), and
-    ``rto_fast`` (floor, max backoff) then replaces the retransmission timing.
+    ``rto_fast`` (floor, max backoff) then replaces the retransmission timing, backing
+    off only while the peer is silent (:attr:`Sender.silent_backoff`).
     ``stale_after`` (seconds, None: off): a report from the peer that acknowledges nothing
     new that long after the oldest frame left resends it once (:meth:`Sender.on_report`).
+    ``renak``: a gap still open when the NAK holdoff ends is NAKed again (the host; the
+    devices NAK once per holdoff as frames arrive, the AVR and the model alike).
     """
 
     def __init__(
@@ -66,6 +69,7 @@ class Endpoint:
         window_bytes: int | None = None,
         rto_fast: tuple[float, int] | None = None,
         stale_after: float | None = None,
+        renak: bool = False,
     ):
         self._window = window
         self.window_bytes = window_bytes
@@ -73,7 +77,9 @@ class Endpoint:
         self._rto_fast = rto_fast  # (floor, max backoff) once the wire proves faster
         self._stale_after = stale_after  # Sender.stale_after
         self._calm_floor = 0.0  # the slow floor, for frames without queue items, once fast
+        self._silent_backoff = False  # Sender.silent_backoff, once fast
         self.nak_holdoff = nak_holdoff
+        self.renak = renak  # a gap still open when the holdoff ends is NAKed again
         self.accept = accept
         self.flow = flow
         self.byte_time = (
@@ -89,10 +95,12 @@ class Endpoint:
         """Start sequence numbers from 0 on both directions (after HELLO)."""
         self.sender = Sender(self._window, RtoEstimator(*self._rto_args), self.window_bytes)
         self.sender.calm_floor = self._calm_floor
+        self.sender.silent_backoff = self._silent_backoff
         self.sender.stale_after = self._stale_after
         self.receiver = Receiver()
         self._ack_due = False
         self._nak_due = False
+        self._nak_later: float | None = None  # a NAK held back by the holdoff: due then
         self._last_nak = (-1, -1e9)
 
     def _fast_path(self) -> None:
@@ -103,6 +111,7 @@ class Endpoint:
         initial, calm, ceiling, _ = self._rto_args
         self._calm_floor = self.sender.calm_floor = max(self._calm_floor, calm)
         self._rto_args = (initial, floor, ceiling, backoff)
+        self._silent_backoff = self.sender.silent_backoff = True
         rto = self.sender.rto
         rto.floor, rto.max_backoff = floor, max(1, backoff)
         rto.reset_backoff()
@@ -117,13 +126,20 @@ class Endpoint:
 
     # ------------------------------------------------------------------ receive
 
-    def feed(self, data: bytes, now: float) -> list[Incoming]:
-        """Deframe ``data`` and :meth:`process` the frames."""
+    def feed(self, data: bytes, now: float, sent_after: float | None = None) -> list[Incoming]:
+        """Deframe ``data`` and :meth:`process` the frames (``sent_after``: see there)."""
         self.counters.bytes_received += len(data)
-        return self.process(self.deframer.feed(data), now)
+        if data:  # the peer is alive: even a damaged frame says so
+            self.sender.heard(now)
+        return self.process(self.deframer.feed(data), now, sent_after)
 
-    def process(self, frames: list[Frame], now: float) -> list[Incoming]:
-        """Handle already deframed frames: acks, naks, in-order delivery."""
+    def process(
+        self, frames: list[Frame], now: float, sent_after: float | None = None
+    ) -> list[Incoming]:
+        """Handle already deframed frames: acks, naks, in-order delivery. ``sent_after``:
+        the earliest the peer can have sent them, if the caller knows (bytes that waited in
+        a buffer): a report is stale only if it was sent long enough after a frame left
+        (:meth:`Sender.on_report`), not merely read that late."""
         out: list[Incoming] = []
         if self.deframer.rejected:
             for kind, seq in self.deframer.rejected:
@@ -132,6 +148,7 @@ class Endpoint:
             self.deframer.rejected.clear()
         for frame in frames:
             self.counters.frames_received += 1
+            self.sender.heard(now)
             if frame.kind == Kind.URGENT:
                 out.append(Incoming("urgent", frame.payload))
                 continue
@@ -154,7 +171,7 @@ class Endpoint:
                 self.counters.naks_received += 1
                 self.sender.on_nak(frame.ack, now)
             else:
-                self.sender.on_report(frame.ack, now)
+                self.sender.on_report(frame.ack, now, sent_after)
             if frame.kind != Kind.DATA:
                 if frame.payload:
                     out.append(Incoming("flow", frame.payload, frame.ack))
@@ -175,9 +192,16 @@ class Endpoint:
         return out
 
     def _want_nak(self, now: float) -> None:
+        """A gap (or a damaged frame where the expected one should be): NAK now, or (with
+        ``renak``), within the holdoff of a NAK for the same number, once the holdoff ends. The gap is still
+        open then (frames behind it keep coming, the one it lacks does not) and the first
+        NAK or the go-back it asked for may have been lost too: waiting for the peer's
+        timeout would stall the stream on a noisy line."""
         expected, when = self._last_nak
         if expected != self.receiver.expected or now - when >= self.nak_holdoff:
             self._nak_due = True
+        elif self.renak:
+            self._nak_later = when + self.nak_holdoff
 
     # ------------------------------------------------------------------ send
 
@@ -197,10 +221,17 @@ class Endpoint:
     def next_deadline(self) -> float | None:
         if self._urgent or self._ack_due or self._nak_due:
             return -1.0
-        return self.sender.next_deadline()
+        deadline = self.sender.next_deadline()
+        if self._nak_later is not None:
+            deadline = self._nak_later if deadline is None else min(deadline, self._nak_later)
+        return deadline
 
     def flush(self, now: float) -> list[bytes]:
         expected = self.receiver.expected
+        if self._nak_later is not None and now >= self._nak_later:
+            self._nak_later = None
+            if self._last_nak[0] == expected:  # the gap is still open
+                self._nak_due = True
         frames = [encode_frame(Kind.URGENT, 0, expected, p) for p in self._urgent]
         self._urgent.clear()
         data = self.sender.frames_to_send(now)

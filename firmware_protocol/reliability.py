@@ -19,6 +19,7 @@ from dataclasses import dataclass
 SEQ_MOD = 256
 MAX_WINDOW = 127
 MAX_BACKOFF = 4
+SILENT_S = 0.15  # a peer that sent no byte for this long is silent (Sender.silent_backoff)
 
 
 class RtoEstimator:
@@ -70,6 +71,7 @@ class _Outstanding:
     items: int
     sent_at: float
     retransmitted: bool = False
+    first_sent: float = 0.0
 
 
 @dataclass
@@ -109,11 +111,25 @@ class Sender:
         self._bytes_out = 0
         self._items_out = 0  # queue items in the outstanding frames
         self._cum: dict[int, tuple[int, int]] = {}  # seq -> (cumulative items, ticks) through it
+        # every DATA frame leaves this many times back to back (2 on a line that loses about
+        # half of its frames: a copy lost to noise is then usually made good by the other
+        # at once, instead of by a NAK or a timeout one round later; the receiver discards
+        # the copy it does not need as a duplicate and acknowledges it again)
+        self.copies = 1
+        # back off only while the peer is silent (no byte for SILENT_S), and resend only the
+        # oldest frame, a probe, while nothing came since it left: a timeout while the peer
+        # is heard is a frame or an acknowledgement lost to noise, and a longer wait only
+        # stalls the stream (False: back off at every timeout, resend the whole window)
+        self.silent_backoff = False
+        self._heard_at = -1e9  # when a valid frame from the peer last arrived
+        self.extra_copies = 0  # copies sent beyond the first
         self.retransmits = 0
         self.timeouts = 0
         self.go_backs = 0  # resends of the window (a timeout or a NAK): losses seen
         self.early_resends = 0  # go-backs on a stale report (stale_after)
         self.acked_clean = 0  # frames acknowledged that had been sent once
+        self.acked_bytes = 0  # payload bytes of the frames acknowledged, each counted once
+        self.acked_frames = 0
         self._resend = False
         self._went_back: tuple[int, float] = (-1, -1e9)
         # when an acknowledgement last released frames: the timer restarts there (RFC 6298
@@ -166,8 +182,10 @@ class Sender:
             last = self.outstanding.popleft()
             self._bytes_out -= len(last.payload)
             self._items_out -= last.items
+            self.acked_bytes += len(last.payload)
             clean += not last.retransmitted
         self.acked_clean += clean
+        self.acked_frames += n
         self._advanced_at = now
         if last is not None and not last.retransmitted:
             self.rto.sample(now - last.sent_at)
@@ -175,7 +193,7 @@ class Sender:
             self.rto.reset_backoff()
         return n
 
-    def on_report(self, ack: int, now: float) -> None:
+    def on_report(self, ack: int, now: float, sent_after: float | None = None) -> None:
         """An ACK or DATA frame from the peer: release frames before ``ack``. If it releases
         none although the oldest outstanding frame left ``stale_after`` ago (and nothing was
         released since) and queue items are in flight, that frame was lost with nothing
@@ -190,9 +208,17 @@ class Sender:
             return  # keep-alives and status requests wait for their timeout (calm_floor)
         oldest = self.outstanding[0]
         wait = 2 * self.stale_after if oldest.retransmitted else self.stale_after
-        if now - self._timer_start() >= wait:
+        # judged by when the report can have been sent at the earliest (``sent_after``, if
+        # known): a report that waited in a buffer while this side was busy was written
+        # before the frame arrived, and resending then was a spurious retransmission
+        sent = now if sent_after is None else min(now, sent_after)
+        if sent - self._timer_start() >= wait:
             self.early_resends += 1
             self._go_back(now)
+
+    def heard(self, now: float) -> None:
+        """A valid frame from the peer arrived (it is alive)."""
+        self._heard_at = now
 
     def on_nak(self, ack: int, now: float) -> None:
         """Release frames before ``ack``, then resend from ``ack`` unless that was just done."""
@@ -238,26 +264,42 @@ class Sender:
     def frames_to_send(self, now: float) -> list[tuple[int, bytes]]:
         """Retransmissions that are due (timeout or NAK) and new frames the window allows."""
         out: list[tuple[int, bytes]] = []
+        probe = False
         if self.outstanding and not self._resend and now >= self._timer_start() + self._timeout():
             self.timeouts += 1
-            self.rto.back_off()
+            if not self.silent_backoff:
+                self.rto.back_off()
+            else:
+                # nothing since the oldest frame last left: ask with that frame alone; nothing
+                # at all for SILENT_S (longer than a device's reports are apart, about a
+                # quarter of a second at 1x): the device is silent, and the timeout doubles
+                probe = self._heard_at < self.outstanding[0].sent_at
+                if now - self._heard_at >= SILENT_S:
+                    self.rto.back_off()
             self._go_back(now)
+        if self._resend and probe:  # a silent peer: the oldest frame alone asks if it is back
+            self._resend = False
+            o = self.outstanding[0]
+            o.sent_at, o.retransmitted = now, True
+            self.retransmits += 1
+            out += [(o.seq, o.payload)] * self.copies
         if self._resend:
             self._resend = False
             for o in self.outstanding:
                 o.sent_at = now
                 o.retransmitted = True
                 self.retransmits += 1
-                out.append((o.seq, o.payload))
+                out += [(o.seq, o.payload)] * self.copies
         while self.backlog and self._room_for(len(self.backlog[0].payload)):
             q = self.backlog.popleft()
             self._cum[self.next_seq] = (q.cum_items, q.cum_ticks)
-            o = _Outstanding(self.next_seq, q.payload, q.items, now)
+            o = _Outstanding(self.next_seq, q.payload, q.items, now, first_sent=now)
             self.next_seq = (self.next_seq + 1) % SEQ_MOD
             self.outstanding.append(o)
             self._bytes_out += len(q.payload)
             self._items_out += q.items
-            out.append((o.seq, o.payload))
+            out += [(o.seq, o.payload)] * self.copies
+        self.extra_copies += len(out) - len(out) // self.copies
         return out
 
     def _room_for(self, size: int) -> bool:

@@ -22,6 +22,9 @@ from cdprhost.link.errors import DeviceSilent, LinkTimeout
 from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker
 from cdprhost.link.tuning import (
+    CLEAN_RTO_FLOOR_S,
+    COPY_LOSS,
+    FRAME_LOSS_CEILING,
     FRAME_LOSS_SHARE,
     LOSS_MEMORY_BYTES,
     LOSS_PRIOR_BYTES,
@@ -84,6 +87,7 @@ class LinkCore:
             byte_time=10.0 / baud if baud else 0.0,
             rto_fast=RTO_FAST,
             stale_after=STALE_REPORT_S,
+            renak=True,
         )
         self.ctx = SegmentContext()
         self.max_payload: int = max_payload
@@ -96,6 +100,8 @@ class LinkCore:
         self.last_rx = now
         self.last_tx = now
         self.last_pump = now
+        self._read_end = now
+        self.sent_after = now
         self._waiting_since: float | None = None
         self.garbage_since_valid = 0
         self._last_retx = 0
@@ -103,7 +109,7 @@ class LinkCore:
         # the line's loss rate: go-backs per byte sent, both counts halved now and then
         self._loss_events = 0.0
         self._loss_bytes = 0.0
-        self._seen = (0, 0)  # (go-backs, bytes sent) at the last adaptation
+        self._seen = (0, 0)  # (go-backs, bytes delivered) at the last adaptation
         self.pumping = False  # a pump slice runs (the keep-alive thread then leaves it be)
 
     # ------------------------------------------------------------------ locking
@@ -130,7 +136,7 @@ class LinkCore:
         self.ep.reset_session()
         self.ep.sender.window = min(START_WINDOW, self.max_window)
         self._last_retx = self._acked_clean = 0
-        self._seen = (0, self.ep.counters.bytes_sent)
+        self._seen = (0, 0)
         self.ctx = SegmentContext()
 
     def credit(self) -> int:
@@ -153,7 +159,12 @@ class LinkCore:
             self.last_tx = self.t.now()
 
     def read(self, timeout: float) -> bytes:
-        return self.t.read(timeout)
+        """Bytes from the port; :attr:`sent_after` is then the earliest the device can have
+        sent them (when the read before this one returned: what it left had not arrived)."""
+        self.sent_after = self._read_end
+        data = self.t.read(timeout)
+        self._read_end = self.t.now()
+        return data
 
     def keepalive_interval(self) -> float:
         return min(self.watchdog_ms / 4000.0, self.timeout_s / 4)
@@ -166,7 +177,7 @@ class LinkCore:
         """Hand received bytes to the endpoint and the tracker."""
         ep = self.ep
         before = ep.deframer.frames
-        for inc in ep.feed(data, now):
+        for inc in ep.feed(data, now, sent_after=self.sent_after):
             self.dev.handle(inc, now)
         if ep.deframer.frames > before:
             self.last_rx = now
@@ -223,15 +234,20 @@ class LinkCore:
     def _adapt(self) -> None:
         """On a retransmission: shorter frames, half the window; every frame acknowledged
         without one grows them back (2 bytes, 1 frame): a noisy line settles on short frames
-        that get through, a clean one on full ones. A frame once sent keeps its size (its
-        retransmissions are byte-identical), so frames start small and grow."""
+        that get through, a clean one on full ones. Frames never grow past the length the
+        measured loss rate lets through about half the time (FRAME_LOSS_CEILING). A frame
+        once sent keeps its size (its retransmissions are byte-identical), so frames start
+        small and grow."""
         ep = self.ep
         retx = ep.retransmits
         sender = ep.sender
         clean, self._acked_clean = sender.acked_clean - self._acked_clean, sender.acked_clean
+        rate = self.loss_rate()
         if retx > self._last_retx:
-            floor = min(self.max_payload, self.payload_floor())
-            self.payload_limit = max(floor, int(self.payload_limit * 0.7))
+            floor = min(self.max_payload, self._payload_for(FRAME_LOSS_SHARE, rate))
+            # shorter, down to the floor (never longer: a floor above the limit, early on
+            # when little was measured, raised a noisy line's frames to full length)
+            self.payload_limit = max(min(floor, self.payload_limit), int(self.payload_limit * 0.7))
             sender.window = max(MIN_WINDOW, sender.window // 2)
             log.debug(
                 "%s: %d retransmissions; payload %d, window %d",
@@ -241,23 +257,51 @@ class LinkCore:
                 sender.window,
             )
         elif clean:
-            self.payload_limit = min(self.max_payload, self.payload_limit + 2 * clean)
+            ceiling = self._payload_for(FRAME_LOSS_CEILING, rate)
+            grown = min(self.max_payload, ceiling, self.payload_limit + 2 * clean)
+            self.payload_limit = max(self.payload_limit, grown)
             sender.window = min(self.max_window, sender.window + clean)
         self._last_retx = retx
+        if ep.byte_time == 0.0 and sender.silent_backoff:  # the fast path (a pty, USB)
+            # no damaged byte and no NAK yet: nothing is lost on this path, and a timeout
+            # could only be a scheduling delay of either process (the device model under
+            # load): the longer floor; at the first sign of noise, the 25 ms one
+            noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
+            sender.rto.floor = RTO_FLOOR_S if noisy else CLEAN_RTO_FLOOR_S
+        # (hysteresis: with two copies far fewer frames are lost, and so the measured rate)
+        frame_loss = rate * (self.payload_limit + OVERHEAD)
+        if frame_loss > COPY_LOSS:
+            sender.copies = 2
+        elif frame_loss < COPY_LOSS / 3:
+            sender.copies = 1
 
-    def payload_floor(self) -> int:
-        """The shortest payload worth sending on this line: a frame of it is lost with about
-        FRAME_LOSS_SHARE probability at the measured rate of go-backs per byte sent (at
-        least MIN_PAYLOAD)."""
-        events, sent = self.ep.sender.go_backs, self.ep.counters.bytes_sent
-        self._loss_events += events - self._seen[0]
-        self._loss_bytes += sent - self._seen[1]
-        self._seen = (events, sent)
+    def loss_rate(self) -> float:
+        """The line's loss rate: losses (go-backs) per byte that got through, both counts
+        halved now and then so the estimate follows the line. Each frame acknowledged counts
+        its bytes once, each go-back one frame lost. (Per byte *sent* it was far too low on
+        a noisy line: a go-back resends the whole window, so the bytes sent grow much faster
+        than the losses, and frames stayed long that almost never got through whole.)"""
+        sender = self.ep.sender
+        events = sender.go_backs
+        delivered = sender.acked_bytes + sender.acked_frames * OVERHEAD
+        lost = events - self._seen[0]
+        self._loss_events += lost
+        self._loss_bytes += delivered - self._seen[1] + lost * (self.payload_limit + OVERHEAD)
+        self._seen = (events, delivered)
         while self._loss_bytes > LOSS_MEMORY_BYTES:
             self._loss_events /= 2
             self._loss_bytes /= 2
-        rate = (self._loss_events + 0.5) / (self._loss_bytes + LOSS_PRIOR_BYTES)
-        return max(MIN_PAYLOAD, int(FRAME_LOSS_SHARE / rate) - OVERHEAD)
+        return (self._loss_events + 0.5) / (self._loss_bytes + LOSS_PRIOR_BYTES)
+
+    @staticmethod
+    def _payload_for(share: float, rate: float) -> int:
+        """The payload of a frame lost with about probability ``share`` at ``rate`` losses
+        per byte (at least MIN_PAYLOAD)."""
+        return max(MIN_PAYLOAD, int(share / rate) - OVERHEAD)
+
+    def payload_floor(self) -> int:
+        """The shortest payload worth sending on this line (FRAME_LOSS_SHARE)."""
+        return self._payload_for(FRAME_LOSS_SHARE, self.loss_rate())
 
     def wait(
         self,

@@ -41,7 +41,13 @@ from cdprhost.link.flow import Watermarks
 from cdprhost.link.keepalive import KeepAlive
 from cdprhost.link.segment_feed import SegmentFeed
 from cdprhost.link.session_setup import SessionSetup
-from cdprhost.link.tuning import HEATER_LEASE_S, MAX_WINDOW, SLICE_S, STATUS_TIMEOUTS
+from cdprhost.link.tuning import (
+    HANDSHAKE_S,
+    HEATER_LEASE_S,
+    MAX_WINDOW,
+    SLICE_S,
+    STATUS_TIMEOUTS,
+)
 from firmware_protocol.framing import MAX_PAYLOAD
 from firmware_protocol.message_codec import encode_message, encode_messages
 from firmware_protocol.messages import (
@@ -80,6 +86,7 @@ class HostLink:
         watermarks: Watermarks | None = None,
         watchdog_ms: int = WATCHDOG_MS_DEFAULT,
         heater_lease_s: float = HEATER_LEASE_S,
+        handshake_s: float = HANDSHAKE_S,
     ):
         lo, hi = WATCHDOG_MS_RANGE
         self.device = device  # the SimDevice when embedded, else None
@@ -93,6 +100,9 @@ class HostLink:
             watchdog_ms=max(lo, min(hi, int(watchdog_ms))),
         )
         self._session = SessionSetup(self._core)
+        if not handshake_s > 0:  # NaN included
+            raise ValueError(f"handshake_s must be a positive number of seconds, not {handshake_s}")
+        self._session.limit_s = max(self._core.timeout_s, float(handshake_s))
         self._feed = SegmentFeed(self._core, self._session)
         self._t = transport
         self._dev = self._core.dev

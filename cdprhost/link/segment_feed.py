@@ -62,6 +62,11 @@ class SegmentFeed:
         if abs(rate - self.session.configured_rate) > 0.1 * self.session.configured_rate:
             self.session.configure()
         moving = bool(c.dev.flow.flags & Flag.MOVING)
+        if c.ep.sender.copies > 1:
+            # a line that loses half its frames: top up all the time rather than refill
+            # from the low watermark (a refill then takes many rounds, and a stall of
+            # either process meanwhile could let the device run dry)
+            c.flow.filling = True
         room = c.flow.room_ticks(self.ahead_ticks(), rate, moving, self.session.start_ticks)
         if room <= 0:
             return 0

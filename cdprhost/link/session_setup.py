@@ -16,7 +16,15 @@ from cdprhost.link.device_setup import DeviceSetup
 from cdprhost.link.errors import ProtocolMismatch
 from cdprhost.link.events import Identity
 from cdprhost.link.tracker import decode_one
-from cdprhost.link.tuning import CLOCK_SYNC_S, SLICE_S, START_PAYLOAD, STATUS_TIMEOUTS
+from cdprhost.link.tuning import (
+    CLOCK_SYNC_S,
+    HANDSHAKE_S,
+    HELLO_BACKOFF,
+    HELLO_FIRST_S,
+    SLICE_S,
+    START_PAYLOAD,
+    STATUS_TIMEOUTS,
+)
 from firmware_protocol.framing import Kind
 from firmware_protocol.messages import (
     MINOR_SAFETY,
@@ -42,9 +50,16 @@ class SessionSetup:
         self.configured_rate = 0.0
         self.start_ticks = 0
         self.setup = DeviceSetup()
+        # the longest a handshake may take while the line answers something (a noisy line
+        # damages HELLO and IDENT alike); a line silent for the link timeout ends it sooner
+        self.limit_s = max(core.timeout_s, HANDSHAKE_S)
 
     def handshake(self) -> Identity:
-        """HELLO with a fresh nonce until the device answers IDENT; check the protocol version;
+        """HELLO with a fresh nonce until the device answers IDENT, resent ever less often
+        (HELLO_FIRST_S growing by HELLO_BACKOFF up to an eighth of the link timeout) for as
+        long as the line answers (a byte within the link timeout; bytes that never held a
+        frame's header for that long are a wrong baud rate) and at most ``limit_s``; check
+        the protocol version;
         measure the device clock; configure the watchdog, start threshold and flow reports;
         send the machine set-up to a 2.1 device."""
         c = self.core
@@ -52,19 +67,34 @@ class SessionSetup:
             nonce = int.from_bytes(os.urandom(2), "little") or 1
             c.new_session()
             start = c.t.now()
+            dfr = c.ep.deframer
+            hello = c.urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))
+            heard = start  # when the line last carried a byte
             resend_at = start
+            interval = HELLO_FIRST_S
             rx_bytes = 0
             identity = None
             while identity is None:
                 now = c.t.now()
-                if now - start > c.timeout_s:
+                if now - heard > c.timeout_s or (
+                    now - start > c.timeout_s and not dfr.frames + dfr.bad_frames
+                ):  # silent, or bytes that never held a frame's header (a wrong baud rate)
                     raise c.silent_error(rx_bytes, "during the handshake")
+                if now - start > self.limit_s:
+                    raise c.silent_error(
+                        rx_bytes,
+                        f"during the handshake (the line answered, but no IDENT came through "
+                        f"within {self.limit_s:g} s)",
+                    )
                 if now >= resend_at:
-                    c.write([c.urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))])
-                    resend_at = now + max(0.05, c.timeout_s / 8)
+                    c.write([hello])
+                    resend_at = now + interval
+                    interval = min(interval * HELLO_BACKOFF, max(HELLO_FIRST_S, c.timeout_s / 8))
                 data = c.read(min(SLICE_S * 5, max(0.0, resend_at - now)))
                 rx_bytes += len(data)
-                frames = c.ep.deframer.feed(data)
+                if data.replace(hello, b""):  # (a loopback's echo of HELLO is no answer)
+                    heard = c.t.now()
+                frames = dfr.feed(data)
                 for k, fr in enumerate(frames):
                     if fr.kind != Kind.URGENT:
                         continue
@@ -138,7 +168,7 @@ class SessionSetup:
         start = c.t.now()
         first = True
         while not c.dev.clock.known:
-            if c.t.now() - start > c.timeout_s:
+            if c.t.now() - start > self.limit_s:  # (a silent device ends it sooner: the pump)
                 raise c.silent_error(0, "while reading the device clock")
             caps = (GetCaps(),) if first and self.minor >= MINOR_SAFETY else ()
             first = False

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 SLICE_S = 0.02
 MIN_PAYLOAD = 24
-START_PAYLOAD = 64  # frames start small and grow while the line is clean
+START_PAYLOAD = 32  # frames start small and grow while the line is clean
 # The payload floor follows the line's measured loss: frames as long as a frame is lost with
 # about this probability. A device checks one frame a main-loop turn and answers each with
 # an ACK, so short frames cost it time per segment: with 24-byte payloads on a line that
@@ -13,12 +13,25 @@ START_PAYLOAD = 64  # frames start small and grow while the line is clean
 # than it executed at 1000 segments/s, and never caught up after a loss. A heavily damaged
 # line (1 % + 1 %) still gets the short frames that get through.
 FRAME_LOSS_SHARE = 0.22
+# ... and frames grow on clean acknowledgements only up to a length lost about this often
+# (on a noisy line, frames grown long while small status frames went through cleanly
+# were never again shortened: a frame once sent keeps its size, and a window of 95-byte
+# frames at 1 % + 1 % went back and forth for seconds)
+FRAME_LOSS_CEILING = 0.5
 LOSS_PRIOR_BYTES = 2500  # the estimate starts as 0.5 losses in this many bytes
 LOSS_MEMORY_BYTES = 20000  # past this the counts are halved: the estimate follows the line
 MAX_WINDOW = 127
 START_WINDOW = 8
 MIN_WINDOW = 8
 CLOCK_SYNC_S = 0.06  # clock samples this far apart before streaming
+# The handshake on a noisy line: a HELLO and its IDENT both get through only about one
+# time in three at 1 % corruption + 1 % drop per byte, so HELLO is resent, first after
+# HELLO_FIRST_S, then each time HELLO_BACKOFF times later (up to an eighth of the link
+# timeout), for as long as the line answers anything and at most HANDSHAKE_S (HostLink's
+# ``handshake_s``); a line silent for the link timeout ends it at once.
+HELLO_FIRST_S = 0.05
+HELLO_BACKOFF = 1.5
+HANDSHAKE_S = 30.0
 STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a lossy line
 # The retransmission timeout never goes below this, and doubles on consecutive timeouts
 # (back to 1x on the next acknowledgement), as Klipper's host does: a device whose main
@@ -28,10 +41,24 @@ STATUS_TIMEOUTS = 3  # a status reply may take this many link timeouts on a loss
 RTO_FLOOR_S = 0.025
 RTO_MAX_BACKOFF = 8
 # When acknowledgements prove the path faster than the configured baud (a pty, native
-# USB: no slow UART behind it), a fast noisy path loses ACKs to noise and each timeout is
-# a stall of the stream: 3 ms and no backoff (the 1 %+1 % pty benchmark underran at 5x
-# with the UART timing; it completes with this).
-RTO_FAST = (0.003, 1)
+# USB: no slow UART behind it), the same 25 ms floor and doubling, but the timeout backs
+# off only while the device is silent (no byte for 150 ms), and resends only the oldest
+# frame while nothing came since it left (firmware_protocol.reliability): on a noisy
+# path a timeout while the device is heard is a frame or an ACK lost to noise, and
+# waiting longer would stall the stream. (It was 3 ms without backoff: a clean pty under
+# load retransmitted on every scheduling hiccup, and a frozen device drew a window's worth
+# of resends every 3 ms, 139 in 1.5 s.)
+RTO_FAST = (RTO_FLOOR_S, RTO_MAX_BACKOFF)
+# ... while that path has shown no damaged byte and no NAK, the floor is this instead: a
+# pty or USB loses nothing, and there a timeout is only a scheduling delay of the device
+# process or the host under load (a clean 1x print on a loaded machine timed out at 28 ms);
+# it still doubles on a silent device.
+CLEAN_RTO_FLOOR_S = 0.15
+# Every DATA frame is sent twice back to back once the measured loss rate loses more than
+# this share of frames of the current length (a 1 % + 1 % line: about half of 35-byte
+# frames), until it loses less than a third of it: the copy makes good most losses at
+# once, where go-back-N would need a round (a NAK or a timeout).
+COPY_LOSS = 0.25
 # A device report (an ACK with FLOW) that still does not acknowledge the oldest frame this
 # long after it left the wire, and after the last acknowledgement that released frames,
 # shows it lost with nothing behind it (a gap would have drawn a NAK): it is resent then,
