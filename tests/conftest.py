@@ -30,8 +30,14 @@ def _isolated_state(tmp_path_factory):
     """Job logs, resume points and boards' records of every test (and the CLIs they start)
     go to temporary folders, never to the user's ~/.local/state or ~/.config."""
     os.environ["CDPRHOST_STATE"] = str(tmp_path_factory.mktemp("state"))
-    # what a board announced is kept beside the profile: never in the user's folder
-    os.environ["CDPRHOST_PROFILES"] = str(tmp_path_factory.mktemp("profiles"))
+
+
+@pytest.fixture(autouse=True)
+def _isolated_profiles(tmp_path_factory, monkeypatch):
+    """What a board announced is kept beside the profile: never in the user's folder, and
+    never seen by another test (a print on a pty device records the board's limits, and a
+    later estimate in the same worker would plan on them)."""
+    monkeypatch.setenv("CDPRHOST_PROFILES", str(tmp_path_factory.mktemp("profiles")))
 
 
 @pytest.fixture(scope="session")
