@@ -11,6 +11,8 @@ import pytest
 pytest.importorskip("cdprhost.job.runner", reason="the print runner has not landed yet")
 
 
+from textual.widgets import Static
+
 from cdprhost.job.resume import find_resume_point, resume_path_for
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.live import LiveBackend
@@ -115,7 +117,11 @@ async def test_device_reset_mid_print_shows_the_stop_and_resume_point(part, tmp_
         await wait_for(pilot, lambda s: isinstance(app.screen, ConfirmScreen), timeout=30)
         text = await shown(pilot)
         assert f"at line {failure.last_line}" in text
-        assert "Is the part still on the bed and clear?" in text
+        # the stop reason names the reset's cause (watchdog), so the question wraps on screen:
+        # it is read whole from the dialog
+        question = str(app.screen.query_one("#question", Static).content)
+        assert f"at line {failure.last_line}" in question and "(watchdog;" in question
+        assert question.endswith("Is the part still on the bed and clear?")
         assert resume_path_for(part, tmp_path / "resume").read_text() == saved
         await pilot.press("y")  # a new job continues at that line
         state = await wait_for(pilot, lambda s: s.job_id == 2 and s.job.state.finished, timeout=120)
