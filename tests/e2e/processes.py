@@ -6,6 +6,7 @@ deadline; nothing asserts how long anything took.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import queue
@@ -118,6 +119,22 @@ def signal_service(port: str, state: Path, sig: int) -> int:
     pid = service_pid(port, state)
     os.kill(pid, sig)
     return pid
+
+
+def kill_and_wait(pid: int, timeout_s: float = 30.0) -> None:
+    """SIGKILL ``pid`` (not our child: a detached service) and wait until it has exited, so
+    that its ports and locks are closed (the signal only asks; the exit comes later)."""
+
+    def gone() -> bool:
+        try:
+            with open(f"/proc/{pid}/stat") as fh:
+                return fh.read().rsplit(")", 1)[1].split()[0] == "Z"  # a zombie holds no file
+        except (FileNotFoundError, ProcessLookupError):
+            return True
+
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signal.SIGKILL)
+    wait_until(gone, timeout_s, f"process {pid} to exit after SIGKILL")
 
 
 def start_print(gcode: Path, port: str, state: Path, *extra: str) -> subprocess.Popen[str]:

@@ -10,7 +10,6 @@ generous deadlines.
 from __future__ import annotations
 
 import json
-import os
 import signal
 import sys
 
@@ -22,6 +21,7 @@ from cdprhost.link import open_link
 from firmware_protocol.messages import ErrorCode, Flag
 from tests.e2e.processes import (
     SimDeviceProcess,
+    kill_and_wait,
     printing_point,
     signal_service,
     square_part,
@@ -123,7 +123,7 @@ def test_stopped_host_trips_the_device_watchdog(tmp_path):
             wait_until(lambda: dev.stderr_has("host watchdog"), 60, "the device's watchdog")
         finally:
             if pid is not None:
-                os.kill(pid, signal.SIGKILL)
+                kill_and_wait(pid)
             host.kill()
             host.wait(20)
         link = open_link(dev.path)
