@@ -30,16 +30,29 @@
 #define EXEC_UNITS 1000
 static uint16_t loop_worst_us;
 
+/* A counter the step interrupts write, read with them masked for its own few cycles
+ * only: one window around all of HEALTH's counters (and the arithmetic on them) kept
+ * compare B masked for over 100 cycles and made a step edge late by several us. */
+static uint16_t read_u16(const volatile uint16_t *p)
+{
+    uint8_t s = SREG;
+    cli();
+    uint16_t v = *p;
+    SREG = s;
+    return v;
+}
+
 static void health_read(struct health *out)
 {
     uint8_t s = SREG;
     cli();
-    out->late_pulses = stepper_late_tolerance;
-    out->late_worst_us = (stepper_late_worst + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
-    out->lost_steps = stepper_lost_steps;
-    out->tick_overruns = stepper_overruns;
-    out->plan_stalls = stepper_plan_stalls;
+    uint32_t late = stepper_late_tolerance;
     SREG = s;
+    out->late_pulses = late;
+    out->late_worst_us = (read_u16(&stepper_late_worst) + UNIT_CYCLES / 20) / (F_CPU / 1000000UL);
+    out->lost_steps = read_u16(&stepper_lost_steps);
+    out->tick_overruns = read_u16(&stepper_overruns);
+    out->plan_stalls = read_u16(&stepper_plan_stalls);
     out->rx_overruns = uart_rx_overruns();
     out->loop_worst_us = loop_worst_us;
 }
