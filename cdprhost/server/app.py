@@ -32,6 +32,7 @@ from starlette.datastructures import UploadFile
 from starlette.requests import ClientDisconnect
 
 from cdprhost.server import shapes
+from cdprhost.server.client_name import client_name
 from cdprhost.server.filepos import FilePosition
 from cdprhost.server.guard import BodyTooLarge, KeyGuard
 from cdprhost.server.hosts import HostNames
@@ -79,13 +80,6 @@ def flag(value: Any, name: str) -> bool:
     if text in FALSE:
         return False
     raise BadName(f"{name}: {str(value)[:40]!r} is not true or false")
-
-
-def client_name(request: Request) -> str:
-    """Who sent it, as the TUI and /api/job show it: the client's address and program."""
-    host = request.client.host if request.client else "?"
-    agent = "".join(c for c in request.headers.get("user-agent", "") if c.isprintable())[:60]
-    return f"{host} ({agent})" if agent else host
 
 
 class Api:

@@ -69,6 +69,14 @@ def file_info(path: Path | None, relative: str | None) -> dict[str, Any]:
     }
 
 
+def elapsed_s(status: PrinterStatus, now: float) -> int | None:
+    """Whole seconds the job has run (to its end once it ended); None without a job."""
+    if status.file is None or status.started_at is None:
+        return None
+    end = status.ended_at if status.job.state.finished and status.ended_at else now
+    return round(max(0.0, end - status.started_at))
+
+
 def job(
     status: PrinterStatus,
     relative: str | None,
@@ -78,10 +86,7 @@ def job(
     snap = status.job
     now = time.time() if now is None else now
     has_job = status.file is not None
-    print_time = None
-    if has_job and status.started_at is not None:
-        end = status.ended_at if snap.state.finished and status.ended_at else now
-        print_time = round(max(0.0, end - status.started_at))
+    print_time = elapsed_s(status, now)
     completion = None
     if has_job:
         completion = round(100.0 * snap.fraction, 2) if snap.state is not JobState.DONE else 100.0

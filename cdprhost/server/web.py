@@ -315,7 +315,7 @@ def add_routes(
             return _refused(400, str(exc))
         if path is None:
             return _refused(404, f"{body.path}: no such file")
-        from cdprhost.server.app import client_name
+        from cdprhost.server.client_name import client_name
 
         try:
             async with api.lock:

@@ -16,7 +16,7 @@ from typing import Any
 
 from cdprhost.job.state import JobSnapshot, JobState
 from cdprhost.server.printer import PrinterStatus
-from cdprhost.server.shapes import state_text
+from cdprhost.server.shapes import elapsed_s, state_text
 
 #: temperature readings sent with each update (the graph's span; one reading per second or so)
 GRAPH_POINTS = 90
@@ -64,10 +64,7 @@ def view(
     snap = status.job
     now = time.time() if now is None else now
     has_job = status.file is not None
-    elapsed = None
-    if has_job and status.started_at is not None:
-        end = status.ended_at if snap.state.finished and status.ended_at else now
-        elapsed = round(max(0.0, end - status.started_at))
+    elapsed = elapsed_s(status, now)
     failure = snap.failure
     return {
         "state": snap.state.value,
