@@ -1,7 +1,7 @@
 """The estimate for the board against the print it makes, on a device announcing a board's limits.
 
     python bench/board_estimate.py [--gcode examples/example.gcode] [--profile paper-prototype]
-                                   [--rate 10000] [--min-ticks 40]
+                                   [--rate 8000] [--min-ticks 40]
 
 Prints JSON figures:
 
@@ -13,7 +13,7 @@ Prints JSON figures:
   the device announced, as ``job_estimate_s``);
 - the errors of both estimates against the print, and the board's message.
 
-The AVR firmware announces 10,000 steps/s and 40 ticks (firmware/src/config.h); the print
+The AVR firmware announces 8,000 steps/s and 40 ticks (firmware/src/config.h); the print
 on the AVR itself runs in real time in simavr: `cdprhost sim-device --firmware avr`, then
 `cdprhost print FILE --profile P --port PTY` (which records the board beside the profile)
 and `cdprhost check FILE --profile P` (which then estimates for it).
@@ -38,7 +38,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--gcode", default="examples/example.gcode")
     ap.add_argument("--profile", default="paper-prototype")
-    ap.add_argument("--rate", type=int, default=10_000, help="steps/s the board announces")
+    ap.add_argument("--rate", type=int, default=8_000, help="steps/s the board announces")
     ap.add_argument("--min-ticks", type=int, default=40, help="its shortest segment, 10 us ticks")
     args = ap.parse_args()
     cfg = SimConfig(max_step_rate=args.rate, min_segment_ticks=args.min_ticks)

@@ -292,7 +292,7 @@ def main() -> int:
     }
     fig.update(_size())
 
-    demo = demo_stream(60 if args.quick else 200, seed=4)  # within 10000 steps/s
+    demo = demo_stream(60 if args.quick else 200, seed=4)  # within 8000 steps/s
     s, _, ok, _ = _stream("avr", demo, profile=True)
     fig["isr_worst_cycles"] = s["isr_profiled_max_cycles"]
     fig["isr_worst_us"] = round(s["isr_profiled_max_cycles"] / 16, 2)

@@ -233,14 +233,52 @@ static void set_endstop(int k)
 
 /* CDPR_SIM_STEP_LOG=FILE: every rising step edge as "axis cycles", the cycles counted on
  * the motion clock (cycles of motion since boot: the record's t times 16e6), so the
- * benchmark can set each edge against the step's ideal time on its segment's profile. */
+ * benchmark can set each edge against the step's ideal time on its segment's profile.
+ * An edge is written when its segment ends, timed back from that end on the firmware's
+ * own motion clock (a segment runs without a pause, so the cycles between an edge and
+ * its segment's end are the motion time between them). The edge clock of the markers
+ * alone went wrong until the segment's end whenever a start or stop marker was lost
+ * (an idle tick at rest whose markers a late computation missed: every edge of the next
+ * segment one 400 us tick off). Edges no segment end claims (homing) keep the marker
+ * clock, written when motion stops or the simulator exits. */
 static FILE *step_log;
 static uint64_t motion_now_cycles(uint64_t now);
 
+struct logged_edge {
+    uint64_t cycle;    /* the simulator's cycle of the rising edge */
+    uint64_t fallback; /* the marker clock's motion time then (cycles) */
+    int axis;
+};
+static struct logged_edge *edges_waiting;
+static size_t edges_n, edges_cap;
+
 static void log_step(int k, uint64_t now)
 {
-    if (step_log)
-        fprintf(step_log, "%d %llu\n", k, (unsigned long long)motion_now_cycles(now));
+    if (!step_log)
+        return;
+    if (edges_n == edges_cap) {
+        edges_cap = edges_cap ? 2 * edges_cap : 1024;
+        edges_waiting = realloc(edges_waiting, edges_cap * sizeof *edges_waiting);
+        if (!edges_waiting) {
+            fprintf(stderr, "cdpr-sim: out of memory for the step log\n");
+            exit(1);
+        }
+    }
+    edges_waiting[edges_n++] = (struct logged_edge){now, motion_now_cycles(now), k};
+}
+
+/* Write the waiting edges: timed back from a segment end at motion time end_cycles
+ * (the simulator's cycle end_at), or (end_at 0) on the marker clock. */
+static void write_edges(uint64_t end_cycles, uint64_t end_at)
+{
+    for (size_t i = 0; i < edges_n; i++) {
+        const struct logged_edge *e = &edges_waiting[i];
+        uint64_t back = end_at - e->cycle;
+        uint64_t t = end_at && e->cycle <= end_at && back <= end_cycles ? end_cycles - back
+                                                                         : e->fallback;
+        fprintf(step_log, "%d %llu\n", e->axis, (unsigned long long)t);
+    }
+    edges_n = 0;
 }
 
 static void step_cb(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -306,13 +344,11 @@ static const char *error_name(int code)
     return code > 0 && code <= 10 ? names[code] : "error";
 }
 
-static void record_segment(void)
+/* The firmware's motion clock at the segment's end (ticks); the edge clock must agree (a
+ * motion start or stop marker is lost when a tick's computation overran the boundary it
+ * was due at): a slip is counted and the edge clock set right. */
+static uint64_t segment_end_ticks(void)
 {
-    if (!record)
-        return;
-    /* the firmware's motion clock at the segment's end; the edge clock must agree (a
-     * motion start or stop marker is lost when a tick's computation overran the
-     * boundary it was due at): a slip is counted and the edge clock set right */
     uint32_t fw = mailbox_u32(MB_MOTION_TICKS);
     uint64_t ticks = motion_now();
     int64_t slip = (int64_t)(int32_t)(fw - (uint32_t)ticks);
@@ -321,6 +357,13 @@ static void record_segment(void)
         motion_units = (uint64_t)((int64_t)motion_units + slip);
         ticks = (uint64_t)((int64_t)ticks + slip);
     }
+    return ticks;
+}
+
+static void record_segment(uint64_t ticks)
+{
+    if (!record)
+        return;
     uint32_t seq = mailbox_u32(MB_SEQ);
     fprintf(record, "{\"seq\":%u,\"steps\":[%lld,%lld,%lld,%lld],\"t\":%.6f", seq,
             (long long)(phys[0] + offset[0]), (long long)(phys[1] + offset[1]),
@@ -361,11 +404,17 @@ static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         motion_since = avr->cycle;
         motion_level = 1;
     }
-    if (edge & EDGE_SEG_END)
-        record_segment();
+    if (edge & EDGE_SEG_END) {
+        uint64_t ticks = segment_end_ticks();
+        if (step_log)
+            write_edges(ticks * UNIT_CYCLES, avr->cycle);
+        record_segment(ticks);
+    }
     if ((edge & EDGE_MOTION_STOP) && motion_level) {
         motion_units += units_since(motion_since);
         motion_level = 0;
+        if (step_log)
+            write_edges(0, 0);
     }
 }
 
@@ -442,6 +491,36 @@ static avr_int_vector_t *vector_no(int n)
         if (avr->interrupts.vector[i] && avr->interrupts.vector[i]->vector == n)
             return avr->interrupts.vector[i];
     return NULL;
+}
+
+/* A write to TIMSK1 that enables a Timer1 interrupt whose flag is already up queues it,
+ * as silicon does (the flag is what requests the interrupt). simavr 1.6 queues an
+ * interrupt only when its flag rises while enabled, so the firmware's "clear the flag,
+ * set the compare, enable" raced a compare that matched in between: the step waited for
+ * the next poll or tick (400-500 us late; seen once in CI). */
+#define TIMSK1_ADDR 0x6F
+#define TIFR1_ADDR 0x36
+static unsigned enable_queued; /* interrupts queued by this hook (stats) */
+
+static void timsk1_write(struct avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    static const struct { int vec; uint8_t bit; } t1[3] = {{17, 0x02}, {18, 0x04}, {19, 0x08}};
+    (void)param;
+    uint8_t was = a->data[addr];
+    avr_core_watch_write(a, addr, v);
+    uint8_t tifr = a->data[TIFR1_ADDR];
+    for (int i = 0; i < 3; i++) {
+        if (!(v & t1[i].bit) || (was & t1[i].bit) || !(tifr & t1[i].bit))
+            continue;
+        avr_int_vector_t *vec = vector_no(t1[i].vec);
+        if (vec && !avr_is_interrupt_pending(a, vec)) {
+            avr_raise_interrupt(a, vec);
+            enable_queued++;
+            if (getenv("CDPR_SIM_TRACE_MOTION"))
+                fprintf(stderr, "queued vector %d on enable at %llu\n", t1[i].vec,
+                        (unsigned long long)a->cycle);
+        }
+    }
 }
 
 /* Timer1 compare A (vector 17) and B (18): flag, enable and I set, not queued. */
@@ -806,6 +885,7 @@ int main(int argc, char **argv)
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), xon_cb, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), xoff_cb, NULL);
 
+    avr_register_io_write(avr, TIMSK1_ADDR, timsk1_write, NULL);
     for (int k = 0; k < 4; k++) {
         watch(STEP_PINS[k].port, STEP_PINS[k].bit, step_cb, k);
         watch(DIR_PINS[k].port, DIR_PINS[k].bit, dir_cb, k);
@@ -960,8 +1040,10 @@ int main(int argc, char **argv)
     }
     if (record)
         fclose(record);
-    if (step_log)
+    if (step_log) {
+        write_edges(0, 0);
         fclose(step_log);
+    }
     write_stats();
     if (getenv("CDPR_SIM_PEEK")) { /* debugging: N uint16 at a data address, to a file */
         unsigned addr = 0, n = 0;
@@ -987,7 +1069,9 @@ int main(int argc, char **argv)
     }
     if (getenv("CDPR_SIM_DEBUG"))
         fprintf(stderr, "cdpr-sim: pc 0x%x I=%d TIMSK1=%02x TIFR1=%02x UCSR0B=%02x out_len=%zu in_len=%zu xon=%d polls=%lu\n", avr->pc, avr->sreg[S_I], avr->data[0x6F], avr->data[0x36], avr->data[0xC1], out_len, in_len - in_pos, xon, polls);
-    fprintf(stderr, "cdpr-sim: %.3f s simulated, %u lost interrupts repaired, %u unrepaired%s\n",
-            sim_seconds(), repairs, unrepaired, state == cpu_Crashed ? ", CPU CRASHED" : "");
+    fprintf(stderr,
+            "cdpr-sim: %.3f s simulated, %u interrupts queued on enable, %u lost interrupts "
+            "repaired, %u unrepaired%s\n",
+            sim_seconds(), enable_queued, repairs, unrepaired, state == cpu_Crashed ? ", CPU CRASHED" : "");
     return state == cpu_Crashed ? 3 : 0;
 }

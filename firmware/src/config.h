@@ -25,10 +25,15 @@
 /* Every step costs the interrupts about 140 cycles (placed, sorted, issued by its
  * own compare B), a tick about 1,200 more, so the rate the firmware advertises is
  * what a print's mix (one module at the rate, the others slower and out of step) takes
- * with the interrupts under 70 % of the CPU and no tick overrun: 10000 steps/s on any
- * one axis (60 %, four axes in step 50 %, bench/firmware.py; at 12500 ticks overran).
+ * with no tick overrun, also while it speeds up and slows down (an accelerating tick
+ * places each step on its bent profile, which costs more) and the host's bytes arrive:
+ * 8000 steps/s on any one axis. At 10000 a print's mix of ramps overran a tick at every
+ * start from rest (the interrupt ran up to its whole 6,400 cycles), a few more when
+ * the host's bytes came at the wrong moment, and now and then one tick was lost
+ * outright: every later edge 400 us late (tests/firmware/test_step_timing.py). At
+ * 8000: no overrun in 18 runs on a loaded machine, every edge within 9 us.
  * The host plans for 90 % of it. */
-#define MAX_STEP_RATE 10000UL /* steps/s, any one axis */
+#define MAX_STEP_RATE 8000UL /* steps/s, any one axis */
 
 /* CAPS (protocol 2.1). The shortest segment: one whole tick, 400 us (a shorter one would
  * make the step interrupt's period shorter than its own run time; BAD_VALUE). The segment

@@ -32,7 +32,7 @@ pytestmark = [
 
 SPEEDUP = {"python": "25", "avr": "4"}
 #: the Python device announces the firmware's rate, so the host plans the same segments
-EXTRA = {"python": ["--max-step-rate", "10000"], "avr": []}
+EXTRA = {"python": ["--max-step-rate", "8000"], "avr": []}
 
 
 def _print_on(kind: str, gcode: Path, tmp: Path) -> tuple[dict, list[dict], dict]:

@@ -76,9 +76,9 @@ def test_limit_switch_at_the_end_of_travel_stops_motion(avr_built, tmp_path):
     try:
         h.hello()
         _homed(h)
-        # 20000 steps at 5000 steps/s: through the travel (the homing switch is not
-        # read as pressed on the way) into the limit switch at physical 16400
-        h.send(Segment(ticks=400_000, deltas=(20_000, 0, 0, 0), ramp=TO_REST), Flush())
+        # 20000 steps braking from 6667 steps/s: through the travel (the homing switch is
+        # not read as pressed on the way) into the limit switch at physical 16400
+        h.send(Segment(ticks=600_000, deltas=(20_000, 0, 0, 0), ramp=TO_REST), Flush())
         hit = h.wait_for(lambda: errors(h, ErrorCode.ENDSTOP_HIT), timeout=60, what="hit")[0]
         assert hit.axis == 0 and 16_401 <= hit.value <= 16_401 + 40, hit
         assert 16_401 <= h.status().steps[0] <= 16_401 + 40
