@@ -92,6 +92,7 @@ def test_a_reset_after_a_killed_host_then_resume_continues_from_the_exact_segmen
     assert any("kept through the reset" in n for n in result["notices"]), result["notices"]
     same = compare(clean, first, resumed)
     assert same.prefix_equal and same.approach_found and same.last_equal, same
+    assert same.filament_equal, same
     # all but the rest of the cut move, re-planned from rest up to the layer's end
     assert same.tail_equal >= same.rest - 70, same
 
