@@ -76,10 +76,8 @@ def device_stop(
     if boot_id == point.boot_id and boot is None:
         done = found.segments_done
         return DeviceStop(done) if found.faulted and done > point.device_segment else None
-    if (
-        point.reason != SAVED_WHILE_PRINTING or not point.boot_id
-    ):  # the host's own last point: exact
-        return None
+    if point.reason != SAVED_WHILE_PRINTING or not point.boot_id:
+        return None  # the host's own last point of the job: exact as it is
     layer = point.suggested_layer or point.last_layer or 1
     restart = (
         f"the exact place is unknown; restart from the start of layer {layer} with "
@@ -87,21 +85,21 @@ def device_stop(
     )
     if boot is None:
         raise ExactPlaceUnknown(
-            f"--resume: the device has restarted since the print stopped (boot id {point.boot_id:#010x} "
-            f"-> {boot_id:#010x}) and its record of the last executed segment was not read "
-            f"(another program has connected since): {restart}"
+            f"--resume: the device has restarted since the print stopped (boot id "
+            f"{point.boot_id:#010x} -> {boot_id:#010x}) and its record of the last executed "
+            f"segment was not read (another program has connected since): {restart}"
         )
     if not boot.prev_valid:
         raise ExactPlaceUnknown(
-            f"--resume: the device restarted since the print stopped ({boot_cause_text(boot.cause)}) "
-            f"and kept no record of its last executed segment (a power loss clears it): "
-            f"{restart}"
+            f"--resume: the device restarted since the print stopped "
+            f"({boot_cause_text(boot.cause)}) and kept no record of its last executed segment "
+            f"(a power loss clears it): {restart}"
         )
     if boot.prev_segments_done < point.device_segment:
         raise ExactPlaceUnknown(
-            f"--resume: the device's record names segment {boot.prev_segments_done}, before the resume "
-            f"point's {point.device_segment}: it has restarted more than once since the print "
-            f"stopped, and the record is of a later boot: {restart}"
+            f"--resume: the device's record names segment {boot.prev_segments_done}, before "
+            f"the resume point's {point.device_segment}: it has restarted more than once since "
+            f"the print stopped, and the record is of a later boot: {restart}"
         )
     return DeviceStop(boot.prev_segments_done, boot_cause_text(boot.cause))
 
