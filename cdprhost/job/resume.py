@@ -33,6 +33,9 @@ from cdprhost.motion.prepared import Setup
 log = logging.getLogger(__name__)
 
 VERSION = 2
+#: the reason of the points a job saves while it prints (every few seconds): what a killed
+#: host leaves, maybe behind the device (the host's own last point of a job is exact)
+SAVED_WHILE_PRINTING = "printing"
 
 
 @dataclass(frozen=True)

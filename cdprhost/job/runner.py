@@ -25,7 +25,7 @@ from typing import Any
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.board import announced_record
-from cdprhost.job.exact import refine_point
+from cdprhost.job.exact import ExactPlaceUnknown, device_stop, refine_point, reset_notice
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
 from cdprhost.job.prefetch import Prefetch
@@ -366,6 +366,10 @@ class PrintJob:
             for text in [*check.notices, *([caps.notice] if caps.notice else [])]:
                 self._emit(Notice(text))
                 result.notices.append(text)
+            reset = reset_notice(link.boot)
+            for text in [reset] if reset else []:
+                self._emit(Notice(text))
+                result.notices.append(text)
             self._replan_for(ident, dev_caps, result)
             self._refine_resume(link, check.found, result)
             self._t0 = link.request_status().motion_time_s
@@ -390,7 +394,7 @@ class PrintJob:
             streamer.run(ahead)
             self._finish(streamer, result, JobState.DONE, "completed")
             remove_resume_point(self.gcode, self.options.resume_dir, self._sha256)
-        except DeviceNotReady as exc:
+        except (DeviceNotReady, ExactPlaceUnknown) as exc:
             self._set(JobState.REFUSED, str(exc))
             result.status, result.reason = "refused", str(exc)
         except Stop as stop:
@@ -409,14 +413,19 @@ class PrintJob:
                 self._give_up(link, streamer, result, why, exc)
 
     def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
-        """``--resume`` after a killed host: the device's own last segment, when it knows it."""
+        """``--resume`` after a killed host: the device's own last segment, when it knows it
+        (still faulted on the same boot, or kept through a reset and announced in BOOT);
+        refused (ExactPlaceUnknown, before anything moves) when the device restarted since
+        and kept no record."""
         point = self.options.resume
         if point is None or link.identity is None:
             return
+        stop = device_stop(point, found, link.identity.boot_id, link.boot)
+        if stop is None:
+            return
         exact = refine_point(
             point,
-            found,
-            link.identity.boot_id,
+            stop.segment,
             self._items,
             self._plan_profile,
             self.model,
@@ -424,12 +433,23 @@ class PrintJob:
             batch_moves=self.options.batch_moves,
             limits=self._segment_limits,
         )
+        kept = " (its record kept through the reset)" if stop.reset else ""
         if exact is None:
+            if stop.reset:
+                raise ExactPlaceUnknown(
+                    f"--resume: the device's record kept through the reset names segment "
+                    f"{stop.segment}, which is not on the program of the resume point: the "
+                    "exact place is unknown; restart from a layer with --resume-from-layer"
+                )
             return
-        text = (
-            f"the device executed {exact.device_segment - point.device_segment} segments after "
-            f"the resume point was saved: resuming at line {exact.last_line} instead"
-        )
+        if exact.device_segment == point.device_segment:
+            text = f"the resume point is the device's last executed segment{kept}"
+        else:
+            text = (
+                f"the device executed {exact.device_segment - point.device_segment} segments "
+                f"after the resume point was saved{kept}: resuming at line {exact.last_line} "
+                "instead"
+            )
         self._emit(Notice(text))
         result.notices.append(text)
         self.plan = PlanSpec("point", line=exact.last_line, point=exact.point, e_mm=exact.e_mm)

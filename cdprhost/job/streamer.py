@@ -24,7 +24,7 @@ import numpy as np
 
 from cdprhost.gcode import items as g
 from cdprhost.job.options import PrintResult
-from cdprhost.job.resume import ResumePoint, ResumeWriter
+from cdprhost.job.resume import SAVED_WHILE_PRINTING, ResumePoint, ResumeWriter
 from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
 from cdprhost.job.segment_map import SegmentInfo, SegmentMap
 from cdprhost.job.state import (
@@ -308,7 +308,7 @@ class Streamer:
             and info.line != INSERTED_LINE
             and writer.due(info.layer, info.number, now)
         ):
-            writer.save(self.point("printing", info), now, info.layer)
+            writer.save(self.point(SAVED_WHILE_PRINTING, info), now, info.layer)
         problem = self.ctx.log_problem()
         if problem:
             self.ctx.requests.stop_safely(problem)

@@ -54,6 +54,7 @@ from firmware_protocol.messages import (
     MINOR_SAFETY,
     WATCHDOG_MS_DEFAULT,
     WATCHDOG_MS_RANGE,
+    Boot,
     ClearFault,
     EmergencyStop,
     ErrorCode,
@@ -133,6 +134,12 @@ class HostLink:
         if identity is None:
             raise LinkError(f"{self._core.name}: no session (handshake first)")
         return identity
+
+    @property
+    def boot(self) -> Boot | None:
+        """The device's BOOT heard before this session (its reset cause and the counters it
+        kept through the reset), or None: no reset since its last session."""
+        return self._session.boot
 
     @property
     def caps(self) -> DeviceCaps | None:

@@ -43,6 +43,9 @@ class SerialTransport:
     def __init__(self, ser: serial.SerialBase, name: str):
         self._ser = ser
         self.name = name
+        # this open raised DTR on a real tty and so reset a board with auto-reset: the
+        # handshake then waits for its bootloader (session_setup.BOOTLOADER_WAIT_S)
+        self.reset_at_open = False
         fileno = getattr(ser, "fileno", None)
         try:
             self._fd: int | None = fileno() if fileno is not None else None
@@ -127,7 +130,8 @@ def open_serial(port: str, baud: int = 250_000, *, write_timeout_s: float = 2.0)
         ser.open()
     except (serial.SerialException, OSError, ValueError) as exc:
         raise _open_error(port, exc) from None
-    if keep_dtr_across_close(ser) and not port.startswith("/dev/pts/"):  # a pty has no DTR
+    reset = keep_dtr_across_close(ser) and not port.startswith("/dev/pts/")  # a pty: no DTR
+    if reset:
         log.warning(
             "%s: opening the port raised DTR, which resets an Arduino Mega (auto-reset): "
             "it restarts through its bootloader (about 1 s); DTR now stays up across closes",
@@ -135,7 +139,9 @@ def open_serial(port: str, baud: int = 250_000, *, write_timeout_s: float = 2.0)
         )
     with contextlib.suppress(serial.SerialException, OSError):
         ser.reset_input_buffer()
-    return SerialTransport(ser, port)
+    transport = SerialTransport(ser, port)
+    transport.reset_at_open = reset
+    return transport
 
 
 def keep_dtr_across_close(ser: serial.SerialBase) -> bool:

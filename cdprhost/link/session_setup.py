@@ -15,7 +15,7 @@ from cdprhost.link.core import LinkCore
 from cdprhost.link.device_setup import DeviceSetup
 from cdprhost.link.errors import ProtocolMismatch
 from cdprhost.link.events import Identity
-from cdprhost.link.tracker import decode_one
+from cdprhost.link.tracker import boot_cause_text, decode_one
 from cdprhost.link.tuning import (
     CLOCK_SYNC_S,
     HANDSHAKE_S,
@@ -41,6 +41,19 @@ from firmware_protocol.messages import (
 
 log = logging.getLogger("cdprhost.link.host_link")
 
+# Before its first HELLO the host listens a little longer than a device without a session
+# takes between its BOOT announcements (0.25 s): a device that has reset announces its
+# cause and the counters it kept (what an exact resume after a reset needs), and a device
+# in a session stays silent and gets its HELLO after the wait.
+BOOT_LISTEN_S = 0.3
+# When the open itself reset the board (DTR raised on a Mega's auto-reset, see
+# serial_port), up to this long for its BOOT: a byte that reaches the stk500v2 bootloader
+# during its wait (about 1 s after a reset) holds it in its programming loop until about
+# 5 s after the last byte (measured in simavr with Debian's stk500boot_v2_mega2560.hex),
+# so a HELLO sent then delays the firmware, and HELLOs resent with backoff would hold it
+# for good. The BOOT ends the wait early; the silence timeout starts after it.
+BOOTLOADER_WAIT_S = 3.0
+
 
 class SessionSetup:
     """Handshake and configuration of one link (its core)."""
@@ -50,12 +63,15 @@ class SessionSetup:
         self.configured_rate = 0.0
         self.start_ticks = 0
         self.setup = DeviceSetup()
+        self.boot: Boot | None = None  # the device's BOOT heard before this session, if any
         # the longest a handshake may take while the line answers something (a noisy line
         # damages HELLO and IDENT alike); a line silent for the link timeout ends it sooner
         self.limit_s = max(core.timeout_s, HANDSHAKE_S)
 
     def handshake(self) -> Identity:
-        """HELLO with a fresh nonce until the device answers IDENT, resent ever less often
+        """Listen first (``BOOT_LISTEN_S``, ``BOOTLOADER_WAIT_S`` after a reset at open) for the
+        BOOT of a device that has reset (kept in ``boot``), then
+        HELLO with a fresh nonce until the device answers IDENT, resent ever less often
         (HELLO_FIRST_S growing by HELLO_BACKOFF up to an eighth of the link timeout) for as
         long as the line answers (a byte within the link timeout; bytes that never held a
         frame's header for that long are a wrong baud rate) and at most ``limit_s``; check
@@ -66,12 +82,14 @@ class SessionSetup:
         with c.locked():
             nonce = int.from_bytes(os.urandom(2), "little") or 1
             c.new_session()
-            start = c.t.now()
+            listen = BOOTLOADER_WAIT_S if getattr(c.t, "reset_at_open", False) else BOOT_LISTEN_S
+            start = c.t.now() + listen  # the first HELLO: sooner when the device speaks first
             dfr = c.ep.deframer
             hello = c.urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))
-            heard = start  # when the line last carried a byte
+            heard = start  # when the line last carried a byte (or the first HELLO)
             resend_at = start
             interval = HELLO_FIRST_S
+            boots: list[Boot] = []
             rx_bytes = 0
             identity = None
             while identity is None:
@@ -88,12 +106,17 @@ class SessionSetup:
                     )
                 if now >= resend_at:
                     c.write([hello])
+                    start = min(start, now)
                     resend_at = now + interval
                     interval = min(interval * HELLO_BACKOFF, max(HELLO_FIRST_S, c.timeout_s / 8))
                 data = c.read(min(SLICE_S * 5, max(0.0, resend_at - now)))
                 rx_bytes += len(data)
                 if data.replace(hello, b""):  # (a loopback's echo of HELLO is no answer)
-                    heard = c.t.now()
+                    now = c.t.now()
+                    if now < start:  # still listening: a device that speaks gets HELLO now
+                        resend_at = now
+                    else:
+                        heard = now
                 frames = dfr.feed(data)
                 for k, fr in enumerate(frames):
                     if fr.kind != Kind.URGENT:
@@ -106,9 +129,15 @@ class SessionSetup:
                             c.dev.handle(inc, now)
                         identity = c.dev.identity
                         break
-                    if isinstance(msg, Boot) and msg.major != PROTOCOL_MAJOR:
-                        self._mismatch(msg.major, msg.minor)
+                    if isinstance(msg, Boot):
+                        if msg.major != PROTOCOL_MAJOR:
+                            self._mismatch(msg.major, msg.minor)
+                        boots.append(msg)
         assert identity is not None
+        # the announcement of this boot (an older one's, from before a reset, is stale)
+        self.boot = next((b for b in reversed(boots) if b.boot_id == identity.boot_id), None)
+        if self.boot is not None and self.boot.cause:
+            log.info("%s: the device has reset (%s)", c.name, boot_cause_text(self.boot.cause))
         log.info(
             "%s: session with %s %s (protocol %d.%d, queue %d, clock %d Hz)",
             c.name,

@@ -172,6 +172,8 @@ def run(args: argparse.Namespace, faults: FaultSpec) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    # SIGUSR1: an external reset (the DTR auto-reset a pty cannot carry), as the Python device
+    signal.signal(signal.SIGUSR1, lambda signum, frame: proc.send_signal(signal.SIGUSR1))
     lossy = faults.lossy or faults.latency_ms or faults.jitter_ms
     relay = Relay(path, faults) if lossy else None
     print(relay.path if relay else path, flush=True)

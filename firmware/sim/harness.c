@@ -636,12 +636,30 @@ static void update_thermal(void)
     }
 }
 
+/* UART0 without simavr's stdio echo and without its poll sleep (a usleep on every read of
+ * an empty UCSR0A: the stk500v2 bootloader polls it in its wait, which then took minutes
+ * of wall time instead of about 5 s); the INT pins without strict level triggering. */
+static void uart_and_extint_setup(void)
+{
+    uint32_t flags = 0;
+    avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
+    flags &= ~(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+    avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    /* The endstop pins are also INT3/INT5 inputs. simavr polls a low level on
+     * an INT pin every cycle (level-triggered mode, the reset default) even
+     * with the interrupt disabled, and starts another poller on every low
+     * write: that alone made the simulation run at a third of real time. */
+    for (uint8_t i = 0; i < 8; i++)
+        avr_extint_set_strict_lvl_trig(avr, i, 0);
+}
+
 /* The chip reset (by its watchdog, or by us): the firmware's mailbox is found again once
  * it announces it, motion has stopped, the enable pins are watched until the host's
  * next byte. */
 static void after_reset(const char *why)
 {
     fprintf(stderr, "cdpr-sim: reset (%s) at %.6f s, pc 0x%x\n", why, sim_seconds(), avr->pc);
+    uart_and_extint_setup(); /* simavr's reset brought back its defaults */
     resets++;
     mailbox_addr = 0;
     en_released_mask = 0;
@@ -876,10 +894,7 @@ int main(int argc, char **argv)
     dup2(saved_stdout, 1);
     close(saved_stdout);
 
-    uint32_t flags = 0;
-    avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('0'), &flags);
-    flags &= ~AVR_UART_FLAG_STDIO;
-    avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    uart_and_extint_setup();
     uart_in = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), uart_out_cb, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), xon_cb, NULL);
@@ -902,12 +917,6 @@ int main(int argc, char **argv)
     for (int k = 0; k < 4; k++)
         watch(EN_PINS[k].port, EN_PINS[k].bit, en_cb, k);
     en_watch = 1;
-    /* The endstop pins are also INT3/INT5 inputs. simavr polls a low level on
-     * an INT pin every cycle (level-triggered mode, the reset default) even
-     * with the interrupt disabled, and starts another poller on every low
-     * write: that alone made the simulation run at a third of real time. */
-    for (uint8_t i = 0; i < 8; i++)
-        avr_extint_set_strict_lvl_trig(avr, i, 0);
     map_adc_channels();
     thermal_init(&thermal[0], 0);
     thermal_init(&thermal[1], 1);

@@ -156,7 +156,8 @@ class SimDevice:
         return self.flow.flow_ticks
 
     def reboot(self, now: float, cause: int = BootCause.WATCHDOG) -> None:
-        """Simulated reset: the queue, positions and session are lost; the carriages stay put.
+        """Simulated reset: the queue, positions and session are lost; the carriages stay put,
+        their drivers held.
 
         The counters of the last boot survive (as in no-init RAM) and are announced.
         """
@@ -167,6 +168,10 @@ class SimDevice:
         self.boots += 1
         self._start_boot(cause, physical)
         self.machine.t_free = self.device_time(now)
+        # the drivers enabled before the reset stay enabled (the AVR's .init3 holds them
+        # from the record in RAM): a cable robot must not drop its effector
+        self.machine.enabled_mask = old.enabled_mask
+        self._notice(f"reset ({BootCause(cause).name.lower()}), boot id {self.boot_id:#010x}")
 
     def device_time(self, now: float) -> float:
         return now * self.config.speedup

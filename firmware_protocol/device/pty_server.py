@@ -15,6 +15,7 @@ import select
 import time
 import tty
 
+from firmware_protocol.codes import BootCause
 from firmware_protocol.device.faults import FaultSpec, FaultyChannel
 from firmware_protocol.device.firmware import SimDevice
 
@@ -34,6 +35,7 @@ class PtyServer:
         self.tx = FaultyChannel(spec, seed_offset=2)
         self._t0 = time.monotonic()
         self._stop = False
+        self._reset = False
         self._flushed = 0.0
         self.dropped_tx_bytes = 0
 
@@ -42,6 +44,11 @@ class PtyServer:
 
     def stop(self) -> None:
         self._stop = True
+
+    def request_reset(self) -> None:
+        """Pull the RESET pin at the next turn (safe from a signal handler): what opening the
+        port of a Mega with auto-reset does (SIGUSR1 of ``cdprhost sim-device``)."""
+        self._reset = True
 
     def _write(self, data: bytes) -> None:
         try:
@@ -57,6 +64,11 @@ class PtyServer:
     def serve_step(self, max_wait: float = IDLE_WAIT_S) -> None:
         """One turn of the loop: wait for input or the next deadline, then run the device."""
         now = self.now()
+        if self._reset:
+            self._reset = False
+            for frame in self.device.step(now, b""):  # executed up to the reset
+                self.tx.send(frame, now)
+            self.device.reboot(now, BootCause.EXTERNAL_RESET)
         times = [
             x
             for x in (

@@ -104,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    # SIGUSR1: an external reset (the DTR auto-reset a pty cannot carry), as the harness's
+    signal.signal(signal.SIGUSR1, lambda signum, frame: server.request_reset())
     print(server.path, flush=True)
     print(
         f"cdprhost sim-device: {device.config.firmware_name} {device.config.firmware_version} on {server.path} "
