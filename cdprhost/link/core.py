@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Protocol
 
-from cdprhost.link.errors import DeviceSilent, LinkTimeout
+from cdprhost.link.errors import DeviceFault, DeviceSilent, LinkError, LinkTimeout
 from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker
 from cdprhost.link.tuning import (
@@ -186,17 +186,30 @@ class LinkCore:
         else:
             self.garbage_since_valid += len(data)
 
-    def pump(self, max_wait: float = SLICE_S) -> None:
+    def fatal(self) -> LinkError | None:
+        """The failure that ended the session (reset, silence, port gone): None while the link
+        works, a device that stopped on a fault included (it still answers)."""
+        failure = self.dev.failure
+        return None if failure is None or isinstance(failure, DeviceFault) else failure
+
+    def pump(self, max_wait: float = SLICE_S, *, fault_ok: bool = False) -> None:
         """One slice: take what already arrived, write, wait for bytes (at most
-        ``max_wait``), handle them, check liveness. Raises the tracker's failure."""
-        if self.dev.failure is not None:
-            raise self.dev.failure
+        ``max_wait``), handle them, check liveness. Raises the tracker's failure (with
+        ``fault_ok``, only one that ended the session: a device stopped by a fault still
+        answers, and asking for its status is how its temperatures stay known)."""
+        self._raise_failure(fault_ok)
         self.pumping = True
         try:
             self._pump(max_wait)
         finally:
             self.pumping = False
             self.last_pump = self.t.now()
+        self._raise_failure(fault_ok)
+
+    def _raise_failure(self, fault_ok: bool) -> None:
+        failure = self.fatal() if fault_ok else self.dev.failure
+        if failure is not None:
+            raise failure
 
     def _pump(self, max_wait: float) -> None:
         ep = self.ep
@@ -220,8 +233,8 @@ class LinkCore:
             if self._waiting_since is None:
                 self._waiting_since = now
         self.write(ep.flush(now))
-        if self.dev.failure is not None:
-            raise self.dev.failure
+        if self.fatal() is not None:
+            return
         if (
             self._waiting_since is not None
             and now - self._waiting_since > self.timeout_s

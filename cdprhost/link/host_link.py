@@ -153,6 +153,31 @@ class HostLink:
     def progress(self) -> DeviceProgress:
         return self._dev.progress
 
+    @property
+    def fault(self) -> DeviceFault | None:
+        """The fault the device stopped on in this session (an e-stop, a device error) while
+        the link itself works; None when it runs or the link is lost (:attr:`lost`)."""
+        failure = self._dev.failure
+        return failure if isinstance(failure, DeviceFault) else None
+
+    @property
+    def lost(self) -> LinkError | None:
+        """What ended the session (a reset, a silent device, the port gone); None while the
+        device answers, stopped by a fault or not."""
+        return self._core.fatal()
+
+    @property
+    def state(self) -> str:
+        """What the link is: "connected" (the device answers and runs), "faulted" (it answers
+        and is stopped by a fault: :attr:`fault`), "lost" (:attr:`lost`) or "no session"."""
+        if self._core.fatal() is not None:
+            return "lost"
+        if self._dev.identity is None:
+            return "no session"
+        if self.fault is not None or self._dev.progress.fault:
+            return "faulted"
+        return "connected"
+
     def status(self) -> DeviceStatus | None:
         """The latest status report received (no I/O)."""
         return self._dev.status
@@ -226,10 +251,11 @@ class HostLink:
             core.send_immediate(HeaterLease(self.lease_ms))
             core.write(core.ep.flush(now))
 
-    def _pump(self, max_wait: float = SLICE_S) -> None:
-        """A pump from the caller's thread (renews the heater lease)."""
+    def _pump(self, max_wait: float = SLICE_S, *, fault_ok: bool = False) -> None:
+        """A pump from the caller's thread (renews the heater lease); ``fault_ok``: see
+        :meth:`LinkCore.pump`."""
         self._renew_lease()
-        self._core.pump(max_wait)
+        self._core.pump(max_wait, fault_ok=fault_ok)
 
     def _wait(self, done: Callable[[], bool], timeout: float | None, what: str) -> None:
         self._core.wait(done, timeout, what, pump=self._pump)
@@ -332,15 +358,16 @@ class HostLink:
 
     # ------------------------------------------------------------------ waiting and queries
 
-    def poll(self, timeout: float = 0.0) -> list[LinkEvent]:
+    def poll(self, timeout: float = 0.0, *, fault_ok: bool = False) -> list[LinkEvent]:
         """Pump for up to ``timeout`` seconds (at least once); return the events since the last
-        poll."""
+        poll. A device stopped by a fault raises its :class:`DeviceFault` unless ``fault_ok``
+        (a screen that watches it: its temperatures still come)."""
         core = self._core
         end = self._t.now() + timeout
         while True:
             core.let_others_in()
             with core.locked():
-                self._pump(min(SLICE_S * 5, max(0.0, end - self._t.now())))
+                self._pump(min(SLICE_S * 5, max(0.0, end - self._t.now())), fault_ok=fault_ok)
                 if self._t.now() >= end - 1e-9:
                     break
         with core.locked():
@@ -365,7 +392,11 @@ class HostLink:
         refreshing temperatures) cannot keep a wedged job's heaters on."""
         count = self._dev.status_count
         self._identity()
-        self._send_each((GetStatus(),), None, self._core.pump)  # a pump that renews nothing
+        fatal = self._core.fatal()
+        if fatal is not None:
+            raise fatal
+        # a pump that renews nothing; a device stopped by a fault answers too
+        self._send_each((GetStatus(),), None, lambda: self._core.pump(fault_ok=True))
         return count
 
     @property
@@ -374,10 +405,16 @@ class HostLink:
 
     def request_status(self, timeout: float | None = None) -> DeviceStatus:
         """Ask for a status report and wait for it (default: a few link timeouts, since on
-        a lossy line a reply may need several retransmissions)."""
+        a lossy line a reply may need several retransmissions). A device stopped by a fault
+        answers (its :attr:`fault` says which); a lost link raises."""
         count = self.ask_status()
         limit = timeout if timeout is not None else STATUS_TIMEOUTS * self.timeout_s
-        self._wait(lambda: self._dev.status_count > count, limit, "a status report")
+        self._core.wait(
+            lambda: self._dev.status_count > count,
+            limit,
+            "a status report",
+            pump=lambda: self._pump(fault_ok=True),
+        )
         st = self._dev.status
         assert st is not None
         return st
@@ -481,6 +518,7 @@ class HostLink:
                 )
                 raise dev.failure
             dev.failure = None
+            dev.forget_errors()
             self._core.items_sent = max(self._core.items_sent, dev.progress.items_done)
 
     def close(self) -> None:
