@@ -9,13 +9,15 @@ import numpy as np
 import pytest
 
 from cdprhost.job.runner import PrintJob, PrintOptions
-from cdprhost.link import DeviceFault
+from cdprhost.job.state import JobSnapshot, JobState, StateChanged
+from cdprhost.link import DeviceFault, PortVanished
 from cdprhost.machine import DeviceFaulted, Machine
 from cdprhost.machine.faults import describe_fault
 from cdprhost.profile import load_profile
 from cdprhost.sim.embedded import open_embedded
 from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.live import LiveBackend
+from cdprhost.tui.widgets.progress_panel import progress_lines, reason_after
 from firmware_protocol.messages import ErrorCode, EstopFlag, Flag
 
 PROFILE = load_profile("paper-prototype")
@@ -131,3 +133,50 @@ def test_a_watchdog_fault_is_named_once():
         assert text is not None and text.count("watchdog") == 1
     finally:
         link.close()
+
+
+def test_heating_is_shown_only_once_the_device_heats(tmp_path):
+    """The stream runs ahead: an M190 sent during the start G28 is not "waiting for bed"
+    while both targets are still 0."""
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text("G28\nM190 S40\nG1 X5 Y5 Z1 F3000\n")
+    holder = {}
+    targets_when_heating = []
+
+    def factory():
+        holder["link"] = open_embedded()
+        return holder["link"]
+
+    def seen(event):
+        if isinstance(event, StateChanged) and event.state is JobState.HEATING:
+            bed = holder["link"].device.machine.heaters[1]
+            targets_when_heating.append((bed.target, event.reason))
+
+    options = PrintOptions(resume_dir=tmp_path)
+    result = PrintJob(gcode, PROFILE, factory, options, on_event=seen).run()
+    holder["link"].close()
+    assert result.status == "completed"
+    assert targets_when_heating and all(t == 40.0 for t, _ in targets_when_heating)
+    assert "waiting for bed 40 C" in targets_when_heating[0][1]
+
+
+def test_a_finished_job_does_not_say_its_state_twice():
+    assert reason_after(JobState.CANCELLED, "cancelled") == ""
+    assert reason_after(JobState.CANCELLED, "cancelled: quit") == "quit"
+    assert reason_after(JobState.FAILED, "/dev/pts/0: emergency stop") == (
+        "/dev/pts/0: emergency stop"
+    )
+    head, _, _ = progress_lines(JobSnapshot(state=JobState.CANCELLED, reason="cancelled"), "")
+    assert head.plain.strip() == "CANCELLED"
+
+
+def test_a_link_failure_is_told_without_a_class_name(tmp_path):
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text("G28\nG1 X5 Y5 Z1 F3000\n")
+
+    def gone():
+        raise PortVanished("/dev/ttyACM0: the port went away")
+
+    result = PrintJob(gcode, PROFILE, gone, PrintOptions(resume_dir=tmp_path)).run()
+    assert result.status == "failed"
+    assert result.reason == "/dev/ttyACM0: the port went away"  # not "PortVanished: ..."
