@@ -63,6 +63,7 @@ from firmware_protocol.messages import (
     HeaterLease,
     Message,
     Segment,
+    SetHeater,
 )
 from firmware_protocol.segments import SegmentBatch
 
@@ -108,6 +109,9 @@ class HostLink:
         self._dev = self._core.dev
         self.lease_ms = max(lo, min(hi, round(heater_lease_s * 1000)))
         self._lease_sent = -1e9
+        # heater -> the last target (°C) this host sent over this link: a target found on the
+        # device is "from an earlier session" only when it is not one of these
+        self.heaters_set: dict[int, float] = {}
         self._keepalive = KeepAlive(self._core, getattr(transport, "wait_readable", None))
 
     # ------------------------------------------------------------------ properties
@@ -305,6 +309,8 @@ class HostLink:
                             core.segments_sent += 1
                             ticks = cmd.ticks
                         core.ep.send(payload, items=items, ticks=ticks)
+                        if isinstance(cmd, SetHeater):
+                            self.heaters_set[cmd.heater] = cmd.target_dc / 10
                         if items:
                             core.items_sent += 1
                         numbers.append(core.items_sent if items else 0)

@@ -22,7 +22,7 @@ from cdprhost.machine.faults import (
     fault_why,
 )
 from cdprhost.machine.operations import ALL_MODULES, Machine
-from firmware_protocol.messages import EstopFlag
+from firmware_protocol.messages import BED, HOTEND, EstopFlag
 
 __all__ = ["DeviceCheck", "DeviceNotReady", "describe_fault", "fault_clearable", "prepare_device"]
 
@@ -78,7 +78,12 @@ def prepare_device(machine: Machine, *, clear_fault: bool = True) -> DeviceCheck
             )
         link.clear_fault()
         st = machine.status()
-    if st.hotend_target_c > 0 or st.bed_target_c > 0:
+    mine = getattr(link, "heaters_set", {})  # set by this host since it connected: not earlier
+    earlier = [
+        t > 0 and heater not in mine
+        for heater, t in ((HOTEND, st.hotend_target_c), (BED, st.bed_target_c))
+    ]
+    if any(earlier):
         notices.append(
             f"heaters were on from an earlier session (hotend {st.hotend_target_c:g} C, "
             f"bed {st.bed_target_c:g} C)"
