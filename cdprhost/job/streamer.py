@@ -338,20 +338,46 @@ class Streamer:
     def _progress(self, info: SegmentInfo | None) -> None:
         if info is None:
             return
+        if self.stops.parked:  # lifted and parked: the effector is not on the program's path
+            self.progress_at_device()
+            return
+        self._emit_progress(info, info.point, info.steps)
+
+    def progress_at_device(self) -> None:
+        """Progress with the position the device's own step counters give (its latest status):
+        after a park the program's last segment is not where the effector is (the screen and
+        M114 must not show the nozzle on the part)."""
+        info = self.executed()
+        st = self.link.status()
+        if info is None or st is None or st.homed_mask & 0b111 != 0b111:
+            return
         model = self.ctx.model
-        p = np.asarray(info.point)[None, :]
-        t = tensions(p, model.geometry.outlets, model.statics)[0]
-        sliders = model.sliders_from_steps(np.asarray(info.steps[:3]))
+        here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+        if not np.all(np.isfinite(here)):
+            return
+        point = (float(here[0]), float(here[1]), float(here[2]))
+        steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
+        self._emit_progress(info, point, steps)
+
+    def _emit_progress(
+        self,
+        info: SegmentInfo,
+        point: tuple[float, float, float],
+        steps: tuple[int, int, int, int],
+    ) -> None:
+        model = self.ctx.model
+        t = tensions(np.asarray(point)[None, :], model.geometry.outlets, model.statics)[0]
+        sliders = model.sliders_from_steps(np.asarray(steps[:3]))
         self.ctx.emit(
             Progress(
                 info.number,
                 info.line,
                 info.layer,
                 info.t_end_s,
-                info.point,
+                point,
                 (float(sliders[0]), float(sliders[1]), float(sliders[2])),
                 (float(t[0]), float(t[1]), float(t[2])),
-                info.steps,
+                steps,
             )
         )
 

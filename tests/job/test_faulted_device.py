@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from cdprhost.job.runner import PrintJob, PrintOptions
-from cdprhost.job.state import JobSnapshot, JobState, StateChanged
+from cdprhost.job.state import JobSnapshot, JobState, Progress, StateChanged
 from cdprhost.link import DeviceFault, PortVanished
 from cdprhost.machine import DeviceFaulted, Machine
 from cdprhost.machine.faults import describe_fault
@@ -180,3 +180,33 @@ def test_a_link_failure_is_told_without_a_class_name(tmp_path):
     result = PrintJob(gcode, PROFILE, gone, PrintOptions(resume_dir=tmp_path)).run()
     assert result.status == "failed"
     assert result.reason == "/dev/ttyACM0: the port went away"  # not "PortVanished: ..."
+
+
+def test_paused_and_parked_the_position_shown_is_the_parked_one(tmp_path):
+    lines = ["G28", "M104 S200", "M109 S200", "G92 E0", "G1 Z0.3 F3000"]
+    lines += [f"G1 X{20 * (k % 2)} Y{k % 7} E{k * 0.1:.2f} F1800" for k in range(1, 120)]
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text("\n".join(lines) + "\n")
+    events = []
+    holder = {}
+
+    def factory():
+        holder["link"] = open_embedded()
+        return holder["link"]
+
+    def on_event(e):
+        events.append(e)
+        if isinstance(e, StateChanged) and e.state is JobState.HEATING:
+            holder["heated"] = True
+        if isinstance(e, StateChanged) and e.state is JobState.PRINTING and "heated" in holder:
+            job.request_pause()
+        if isinstance(e, StateChanged) and e.state is JobState.PAUSED:
+            job.request_cancel()
+
+    job = PrintJob(gcode, PROFILE, factory, PrintOptions(resume_dir=tmp_path), on_event=on_event)
+    job.run()
+    paused = next(i for i, e in enumerate(events) if getattr(e, "state", None) is JobState.PAUSED)
+    shown = [e for e in events[:paused] if isinstance(e, Progress)][-1]
+    park = PROFILE.gcode.park_xy_mm
+    assert shown.position[:2] == pytest.approx(park, abs=0.05)  # not the last printed move
+    assert shown.position[2] >= 0.3 + PROFILE.gcode.park_lift_mm - 0.05
