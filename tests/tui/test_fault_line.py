@@ -1,0 +1,40 @@
+"""The device's fault line wraps instead of hiding the resume offer it leads to (issue 32),
+at 80 and at 120 columns."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from cdprhost.tui.control.views import ResumeView
+from cdprhost.tui.state import FileView
+
+from .conftest import make_app, shown, wait_for
+
+FAULT = (
+    "the device is stopped by a fault (watchdog: its host stopped answering) after segment 67245"
+)
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 32)])
+async def test_the_fault_line_wraps_and_keeps_the_resume_offer(fake_backend, size, tmp_path):
+    app = make_app(fake_backend)
+    async with app.run_test(size=size) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        path = str(tmp_path / "cup.gcode")
+        resume = ResumeView(
+            path + ".resume.json", path, "device watchdog", 12, last_line=48213, exact=True
+        )
+        fake_backend.status = replace(fake_backend.status, fault=FAULT)  # polled again
+        await pilot.pause()
+        app.state = replace(
+            app.state,
+            device=fake_backend.status,
+            file=FileView(path=path, resume=resume),
+        )
+        text = " ".join((await shown(pilot)).split())  # the rows, joined
+        assert "after segment 67245" in text
+        assert "resume point line 48213" in text
+        assert "(device watchdog)" in text
+        assert "…" not in (await shown(pilot)).split("resume point")[0].splitlines()[-1]
