@@ -233,6 +233,30 @@ class HostLink:
         self._renew_lease()
         return identity
 
+    def recover(self) -> str | None:
+        """After the device went silent (frozen, its cable out and back in) and the session
+        was declared lost: try a new session on the same port. Returns what happened, in
+        words, once the device answers again (the link works again, the device faulted or
+        not: its watchdog may have stopped it meanwhile, :attr:`fault` and its status say
+        so); None while it stays silent (the failure stays). Other losses (a reset, the port
+        gone) are left to a new connect."""
+        core = self._core
+        lost = core.fatal()
+        if not isinstance(lost, DeviceSilent):
+            return None
+        try:
+            self.handshake()
+            faulted = self.request_status().faulted
+        except (LinkError, OSError) as exc:
+            with core.locked():
+                if core.fatal() is None:
+                    self._dev.failure = lost
+            log.debug("%s: still no answer: %s", core.name, exc)
+            return None
+        state = "stopped by a fault (M999 clears it)" if faulted else "ready"
+        log.warning("%s: the device answers again: new session, %s", core.name, state)
+        return f"link back: {core.name} answers again (new session; the device is {state})"
+
     def configure(self) -> None:
         self._session.configure()
 

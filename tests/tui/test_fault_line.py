@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import pytest
 
-from cdprhost.tui.control.views import ResumeView
+from cdprhost.tui.control.views import ConsoleLine, ResumeView
 from cdprhost.tui.state import FileView
 
 from .conftest import make_app, shown, wait_for
@@ -38,3 +38,17 @@ async def test_the_fault_line_wraps_and_keeps_the_resume_offer(fake_backend, siz
         assert "resume point line 48213" in text
         assert "(device watchdog)" in text
         assert "…" not in (await shown(pilot)).split("resume point")[0].splitlines()[-1]
+
+
+async def test_a_lost_link_is_asked_again_and_recovers_saying_so(fake_backend):
+    app = make_app(fake_backend)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        conn = app.state.connection
+        app.state = replace(app.state, connection=replace(conn, status="error", error="silent"))
+        fake_backend.log.append(
+            ConsoleLine("notice", "link back: simulator answers again (new session)", 0.0)
+        )
+        app.controller.refresh_device()  # the status timer's turn
+        state = await wait_for(pilot, lambda s: s.connected, what="the link back")
+        assert any("link back" in line.text for line in state.console)

@@ -27,6 +27,7 @@ from cdprhost.tui.state import CONSOLE_LINES, ConnectionView, UiState
 
 TEMPERATURE_HISTORY = 600
 JOB_HEALTH_EVERY_S = 5.0  # while a job runs its own events carry the link health
+RECONNECT_EVERY_S = 2.0  # a lost link asks the device again this often (it may come back)
 
 
 class ControllerBase:
@@ -39,6 +40,7 @@ class ControllerBase:
         self._quitting = ""  # why the app quits once the job has stopped ("quit", "SIGTERM")
         self._finished_id = 0  # the last job whose end was handled
         self._health_at = float("-inf")
+        self._reconnect_at = float("-inf")
         self._status_gen = 0  # a status asked before this job began or ended is not shown
 
     # ------------------------------------------------------------ plumbing
@@ -151,6 +153,12 @@ class ControllerBase:
             self.update(connection=replace(conn, health=health))
 
     def refresh_device(self) -> None:
+        if self.state.connection.status == "error" and not self.state.job_active:
+            now = self.app.clock()  # lost (a frozen device): ask again, it may come back
+            if now - self._reconnect_at >= RECONNECT_EVERY_S and self.backend.connected():
+                self._reconnect_at = now
+                self.recheck_link()
+            return
         if not self.state.connected or self.state.job_active:
             return
         gen = self._status_gen
@@ -191,6 +199,7 @@ class ControllerBase:
 
         def done(status: Any) -> None:
             self.update(connection=replace(self.state.connection, status="connected", error=""))
+            self.say(*self.backend.device_log())  # "link back: ..." after a recovery
             if status is not None:
                 self.device_seen(status)
             if then is not None:

@@ -215,6 +215,11 @@ class LiveBackend:
         link = self._link
         if link is None:
             return None
+        if link.lost is not None:  # a device that froze may be back: a new session, said
+            said = link.recover()
+            if said is None:
+                raise link.lost
+            self._log.append(ConsoleLine("notice", said, time.time()))
         # The embedded device lives on a virtual clock that only runs while the link is
         # pumped: keep it going between status requests (paced to the speed-up).
         pump = self.idle_pump_s * (self.speedup or 1.0) if self._embedded else 0.0
