@@ -52,3 +52,15 @@ async def test_a_lost_link_is_asked_again_and_recovers_saying_so(fake_backend):
         app.controller.refresh_device()  # the status timer's turn
         state = await wait_for(pilot, lambda s: s.connected, what="the link back")
         assert any("link back" in line.text for line in state.console)
+
+
+async def test_a_device_operation_on_a_lost_link_says_why_it_is_refused(fake_backend):
+    app = make_app(fake_backend)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_for(pilot, lambda s: s.connected)
+        conn = app.state.connection
+        app.state = replace(app.state, connection=replace(conn, status="error", error="silent"))
+        app.controller.home()  # jog screen h
+        await pilot.pause()
+        said = [line.text for line in app.state.console if line.kind == "error"]
+        assert said and "homing: refused, nothing sent: the link is lost (silent)" in said[-1]

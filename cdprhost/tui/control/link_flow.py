@@ -24,6 +24,7 @@ from cdprhost.tui.control.jog import check_jog, jog_target
 from cdprhost.tui.control.live_console import status_lines, temperature_line
 from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView
 from cdprhost.tui.state import CONSOLE_LINES, ConnectionView, UiState
+from cdprhost.tui.tabs import screen_key
 
 TEMPERATURE_HISTORY = 600
 JOB_HEALTH_EVERY_S = 5.0  # while a job runs its own events carry the link health
@@ -245,7 +246,11 @@ class ControllerBase:
     def device_op(
         self, label: str, work: Callable[[], Any], then: Callable[[], None] | None = None
     ) -> None:
-        if self.state.busy or self.state.job_active or not self.state.connected:
+        why = self._refused_now()
+        if why:  # said, never silently dropped ("jog h does nothing and says nothing")
+            text = f"{label}: refused, nothing sent: {why}"
+            self.say(ConsoleLine("error", text, self.app.wall_clock()))
+            self.app.notify(text, severity="warning", timeout=8)
             return
         self.update(busy=label)
 
@@ -262,6 +267,20 @@ class ControllerBase:
             self.report(exc)
 
         self.background("device", work, done, fail)
+
+    def _refused_now(self) -> str:
+        """Why a device operation cannot start now ("" when it can)."""
+        state, conn = self.state, self.state.connection
+        if state.job_active:
+            return "a print is running"
+        if state.busy:
+            return f"busy ({state.busy}): try again when it is done"
+        if conn.status == "error":
+            where = screen_key("connection")
+            return f"the link is lost ({conn.error}): it is asked again, or reconnect on {where}"
+        if not state.connected:
+            return f"not connected: connect on {screen_key('connection')}"
+        return ""
 
     def jog_go(self) -> None:
         check = self.state.jog
