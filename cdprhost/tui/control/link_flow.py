@@ -360,7 +360,8 @@ class ControllerBase:
             if answered:
                 text = (
                     "EMERGENCY STOP: the device confirmed; motion stopped, heaters off, "
-                    "motors held (releasing them is its own action)"
+                    "motors held (releasing them is its own action); M999 in the console "
+                    "clears the stop"
                 )
             else:
                 text = (
