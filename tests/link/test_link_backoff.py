@@ -44,3 +44,22 @@ def test_a_frozen_device_sees_few_resends_further_and_further_apart(floor, most)
     gaps = [b - a for a, b in zip(marks, marks[1:], strict=False)]
     assert gaps == sorted(gaps, key=lambda g: round(g, 2))  # never closer together
     assert marks[0] >= floor - 1e-9  # nothing before the floor
+
+
+def test_a_clean_fast_path_that_answers_late_is_not_retransmitted_to():
+    """A pty on a loaded machine: nothing is lost, answers come up to 100 ms late. Each
+    late answer cost resends (129 in 4000 segments: a report not yet acknowledging a frame
+    resent it after 20 ms); now a timeout there makes the link wait longer instead."""
+    from cdprhost.sim.embedded import open_embedded
+    from firmware_protocol.streams import demo_stream, expected_record
+
+    batch = demo_stream(4000, seed=3)
+    link = open_embedded(faults="latency_ms=2,jitter_ms=100,seed=9", baud=None)
+    try:
+        link._core.ep._fast_path()  # as a pty's first early acknowledgement does
+        link.queue_segments(batch)
+        link.wait_idle()
+        assert link.device.record == expected_record(batch)
+        assert link.counters.retransmits <= 8, link.counters
+    finally:
+        link.close()
