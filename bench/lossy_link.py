@@ -9,8 +9,9 @@ Each section starts ``cdprhost sim-device`` in its own process on a pty, as a us
    baseline, computed in the same run). ``--stream-file head`` is the fixture's start
    (heating, homing and the first ``--head-moves`` moves of layer 1) at ``--stream-speedup``
    (default 1x); ``two`` is its first two layers (default 10x).
-3. ``clean``: a print of ``--clean-file`` (default ``examples/example.gcode``) at 1x on a
-   clean pty: the host's retransmissions (target 0).
+3. ``clean``: a print of ``--clean-file`` (default ``examples/example.gcode``; with
+   ``--clean-layers N`` the fixture's first N layers) at ``--clean-speedup`` (default 1x) on
+   a clean pty: the host's retransmissions (target 0).
 4. ``frozen``: a link to a 1x device whose process is then stopped (SIGSTOP): the host's
    retransmissions in the first 2 s (target: about 10 at most, the 25 ms floor doubling).
 
@@ -172,10 +173,10 @@ def streams(gcode: Path, speedup: float, seeds: int) -> None:
     print(f"  {passed} of {seeds} exact at {speedup:g}x ({len(ref)} segments)")
 
 
-def clean_print(gcode: Path) -> None:
-    result, _rows, wall = print_over_pty(gcode, 1, "")
+def clean_print(gcode: Path, speedup: float = 1.0) -> None:
+    result, _rows, wall = print_over_pty(gcode, speedup, "")
     print(
-        f"  {gcode.name} at 1x, clean pty: {result.get('status')} segments "
+        f"  {gcode.name} at {speedup:g}x, clean pty: {result.get('status')} segments "
         f"{result.get('segments')} retransmits {result.get('retransmits')} wall {wall:.0f} s"
         + ("" if result.get("status") == "completed" else f"  ({result.get('reason')})"),
         flush=True,
@@ -227,6 +228,8 @@ def main() -> None:
     ap.add_argument("--stream-speedup", type=float)
     ap.add_argument("--head-moves", type=int, default=150)
     ap.add_argument("--clean-file", type=Path, default=REPO / "examples" / "example.gcode")
+    ap.add_argument("--clean-layers", type=int, help="the fixture's first N layers instead")
+    ap.add_argument("--clean-speedup", type=float, default=1.0)
     args = ap.parse_args()
     run = set(args.only or ("handshake", "stream", "clean", "frozen"))
     load = os.getloadavg()
@@ -245,8 +248,11 @@ def main() -> None:
             print(f"2. {path.name} at {speed:g}x with {LOSSY}, {args.seeds} seeds")
             streams(path, speed, args.seeds)
         if "clean" in run:
-            print("3. clean pty at 1x")
-            clean_print(args.clean_file)
+            print(f"3. clean pty at {args.clean_speedup:g}x")
+            clean = args.clean_file
+            if args.clean_layers:
+                clean = first_layers(FIXTURE, Path(tmp), args.clean_layers)
+            clean_print(clean, args.clean_speedup)
         if "frozen" in run:
             print("4. a frozen device")
             frozen()

@@ -15,7 +15,6 @@ from pathlib import Path
 
 from cdprhost.errors import CdprError
 from cdprhost.job.resume import ResumePoint, find_resume_point
-from cdprhost.link.errors import DeviceFault
 from cdprhost.link.host_link import HostLink
 from cdprhost.machine.prepare import describe_fault, fault_clearable
 from firmware_protocol.messages import THERMAL_ERRORS
@@ -53,10 +52,10 @@ def before_start(
         point = find_resume_point(gcode, resume_dir)
     except (OSError, CdprError):  # unreadable or malformed: no point to offer
         point = None
-    try:
-        st = link.request_status()
-    except DeviceFault as exc:  # faulted in this session (an e-stop): the link says which
-        code = int(exc.code or 0)
+    st = link.request_status()  # a device stopped by a fault answers too
+    exc = link.fault
+    if exc is not None and not st.faulted:  # faulted in this session (an e-stop), the
+        code = int(exc.code or 0)  # report older than the fault: the link says which
         return BeforeStart(
             f"the device is stopped by a fault ({exc})", code not in THERMAL_ERRORS, point
         )

@@ -272,7 +272,7 @@ class PrintJob:
             link = self.link_factory()
         except LinkError as exc:  # a failed connect never touches the resume point
             result.bad_input = exc.exit_code == 2
-            self._fail_early(result, f"{type(exc).__name__}: {exc}")
+            self._fail_early(result, str(exc) or "cannot connect to the device")
             return result
         except OSError as exc:
             self._fail_early(result, f"cannot open the device: {exc.strerror or exc}")
@@ -401,7 +401,8 @@ class PrintJob:
             assert streamer is not None
             self._stop_tail(streamer, result, stop.reason)
         except LinkError as exc:
-            self._give_up(link, streamer, result, f"{type(exc).__name__}: {exc}", exc)
+            # the operator reads it: the link's words (port, what happened), no class name
+            self._give_up(link, streamer, result, str(exc) or "the link failed", exc)
         except (CdprError, GcodeError) as exc:
             self._give_up(link, streamer, result, str(exc), exc)
         except Exception as exc:  # a bug: stopped like a cancel when the link allows, else e-stop

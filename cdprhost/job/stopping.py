@@ -91,6 +91,8 @@ class Stream(Protocol):
 
     def service(self, force_status: bool = False) -> None: ...
 
+    def progress_at_device(self) -> None: ...
+
 
 log = logging.getLogger(__name__)
 
@@ -353,6 +355,7 @@ class StopControl:
         self.parked_from = (np.asarray(machine.status().steps[:3], dtype=np.int64), here)
         machine.move_through(np.asarray(route, dtype=float))
         self.parked = True
+        self.s.progress_at_device()  # the position shown is the parked one
 
     def _resume(self) -> None:
         """Back onto the exact steps where extrusion stopped, unretract, re-send the plan from

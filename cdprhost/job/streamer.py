@@ -124,6 +124,10 @@ class Streamer:
         self.boot_id = link.identity.boot_id if link.identity else 0
         self.status: DeviceStatus | None = None
         self.heat_item = 0
+        # heater waits sent and not reached yet: (the SetHeater's item, the wait's, the
+        # reason); HEATING is shown once the device has set that target (the stream runs
+        # ahead: during a G28 before an M190 nothing heats yet)
+        self.heat_waits: deque[tuple[int, int, str]] = deque()
         self.home_items = (0, 0)  # the queue items of the last G28 (enable, home)
         self._at_rest = True
         self._last_progress = -1e9
@@ -187,9 +191,9 @@ class Streamer:
         if isinstance(item, g.SetTemperature) and item.wait and item.target_c > 0:
             self.heat_item = max(numbers)
             self.stops.wait_sent(item)
-            self.set_state(
-                JobState.HEATING, f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
-            )
+            why = f"line {item.line}: waiting for {item.heater} {item.target_c:g} C"
+            self.heat_waits.append((min(numbers), self.heat_item, why))
+            self._heating_now()
         else:
             self.stops.note(item)
         if self.ctx.requests.has("pause", "cancel", "stop") and self._at_rest:
@@ -207,6 +211,15 @@ class Streamer:
                     f"heater {m.heater} target {m.target_dc / 10:g} C is over the device's "
                     f"maximum {limits.get(m.heater, 0.0):g} C"
                 )
+
+    def _heating_now(self) -> None:
+        """HEATING once the device has executed the target of a heater wait still ahead."""
+        done = self.link.progress.items_done
+        waits = self.heat_waits
+        while waits and waits[0][1] <= done:  # reached and passed
+            waits.popleft()
+        if waits and waits[0][0] <= done and self.ctx.state() is JobState.PRINTING:
+            self.set_state(JobState.HEATING, waits[0][2])
 
     def set_state(self, state: JobState, reason: str = "") -> None:
         if state is not self.ctx.state():
@@ -295,6 +308,7 @@ class Streamer:
         if not force_status and now - self._last_status > STATUS_EVERY_S:
             self._last_status = now
             self._status_seen = link.ask_status()  # answered while streaming goes on
+        self._heating_now()
         if self.ctx.state() is JobState.HEATING and link.progress.items_done >= self.heat_item:
             self.set_state(JobState.PRINTING)
         info = self.map.lookup(link.progress.segments_done)
@@ -324,20 +338,46 @@ class Streamer:
     def _progress(self, info: SegmentInfo | None) -> None:
         if info is None:
             return
+        if self.stops.parked:  # lifted and parked: the effector is not on the program's path
+            self.progress_at_device()
+            return
+        self._emit_progress(info, info.point, info.steps)
+
+    def progress_at_device(self) -> None:
+        """Progress with the position the device's own step counters give (its latest status):
+        after a park the program's last segment is not where the effector is (the screen and
+        M114 must not show the nozzle on the part)."""
+        info = self.executed()
+        st = self.link.status()
+        if info is None or st is None or st.homed_mask & 0b111 != 0b111:
+            return
         model = self.ctx.model
-        p = np.asarray(info.point)[None, :]
-        t = tensions(p, model.geometry.outlets, model.statics)[0]
-        sliders = model.sliders_from_steps(np.asarray(info.steps[:3]))
+        here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+        if not np.all(np.isfinite(here)):
+            return
+        point = (float(here[0]), float(here[1]), float(here[2]))
+        steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
+        self._emit_progress(info, point, steps)
+
+    def _emit_progress(
+        self,
+        info: SegmentInfo,
+        point: tuple[float, float, float],
+        steps: tuple[int, int, int, int],
+    ) -> None:
+        model = self.ctx.model
+        t = tensions(np.asarray(point)[None, :], model.geometry.outlets, model.statics)[0]
+        sliders = model.sliders_from_steps(np.asarray(steps[:3]))
         self.ctx.emit(
             Progress(
                 info.number,
                 info.line,
                 info.layer,
                 info.t_end_s,
-                info.point,
+                point,
                 (float(sliders[0]), float(sliders[1]), float(sliders[2])),
                 (float(t[0]), float(t[1]), float(t[2])),
-                info.steps,
+                steps,
             )
         )
 

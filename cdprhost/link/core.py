@@ -18,10 +18,11 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Protocol
 
-from cdprhost.link.errors import DeviceSilent, LinkTimeout
+from cdprhost.link.errors import DeviceFault, DeviceSilent, LinkError, LinkTimeout
 from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker
 from cdprhost.link.tuning import (
+    CLEAN_RTO_FLOOR_MAX_S,
     CLEAN_RTO_FLOOR_S,
     COPY_LOSS,
     FRAME_LOSS_CEILING,
@@ -78,12 +79,15 @@ class LinkCore:
         self._lock = threading.RLock()
         self._waiters = 0
         self.max_window = max(1, min(MAX_WINDOW, window))
+        self._ceiling = min(0.25, self.timeout_s / 4)
+        self._clean_floor = CLEAN_RTO_FLOOR_S  # the clean fast path's floor, as learned
+        self._clean_timeouts = 0  # the sender's timeouts seen by the last adaptation
         self.ep = Endpoint(
             window=min(START_WINDOW, self.max_window),
             rto_initial=min(0.05, self.timeout_s / 4),
             rto_floor=RTO_FLOOR_S,
             rto_max_backoff=RTO_MAX_BACKOFF,
-            rto_ceiling=min(0.25, self.timeout_s / 4),
+            rto_ceiling=self._ceiling,
             byte_time=10.0 / baud if baud else 0.0,
             rto_fast=RTO_FAST,
             stale_after=STALE_REPORT_S,
@@ -136,6 +140,7 @@ class LinkCore:
         self.ep.reset_session()
         self.ep.sender.window = min(START_WINDOW, self.max_window)
         self._last_retx = self._acked_clean = 0
+        self._clean_timeouts = 0
         self._seen = (0, 0)
         self.ctx = SegmentContext()
 
@@ -186,17 +191,30 @@ class LinkCore:
         else:
             self.garbage_since_valid += len(data)
 
-    def pump(self, max_wait: float = SLICE_S) -> None:
+    def fatal(self) -> LinkError | None:
+        """The failure that ended the session (reset, silence, port gone): None while the link
+        works, a device that stopped on a fault included (it still answers)."""
+        failure = self.dev.failure
+        return None if failure is None or isinstance(failure, DeviceFault) else failure
+
+    def pump(self, max_wait: float = SLICE_S, *, fault_ok: bool = False) -> None:
         """One slice: take what already arrived, write, wait for bytes (at most
-        ``max_wait``), handle them, check liveness. Raises the tracker's failure."""
-        if self.dev.failure is not None:
-            raise self.dev.failure
+        ``max_wait``), handle them, check liveness. Raises the tracker's failure (with
+        ``fault_ok``, only one that ended the session: a device stopped by a fault still
+        answers, and asking for its status is how its temperatures stay known)."""
+        self._raise_failure(fault_ok)
         self.pumping = True
         try:
             self._pump(max_wait)
         finally:
             self.pumping = False
             self.last_pump = self.t.now()
+        self._raise_failure(fault_ok)
+
+    def _raise_failure(self, fault_ok: bool) -> None:
+        failure = self.fatal() if fault_ok else self.dev.failure
+        if failure is not None:
+            raise failure
 
     def _pump(self, max_wait: float) -> None:
         ep = self.ep
@@ -220,8 +238,8 @@ class LinkCore:
             if self._waiting_since is None:
                 self._waiting_since = now
         self.write(ep.flush(now))
-        if self.dev.failure is not None:
-            raise self.dev.failure
+        if self.fatal() is not None:
+            return
         if (
             self._waiting_since is not None
             and now - self._waiting_since > self.timeout_s
@@ -267,7 +285,17 @@ class LinkCore:
             # could only be a scheduling delay of either process (the device model under
             # load): the longer floor; at the first sign of noise, the 25 ms one
             noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
-            sender.rto.floor = RTO_FLOOR_S if noisy else CLEAN_RTO_FLOOR_S
+            if noisy:
+                sender.rto.floor, sender.rto.ceiling = RTO_FLOOR_S, self._ceiling
+                sender.stale_after = STALE_REPORT_S
+            else:  # a late answer, never a loss: wait longer from now on (CLEAN_RTO_FLOOR_MAX_S)
+                if sender.timeouts > self._clean_timeouts:
+                    most = min(CLEAN_RTO_FLOOR_MAX_S, self.timeout_s / 2)
+                    self._clean_floor = max(self._clean_floor, min(2 * self._clean_floor, most))
+                sender.rto.floor = self._clean_floor
+                sender.rto.ceiling = max(self._ceiling, self._clean_floor)
+                sender.stale_after = None
+            self._clean_timeouts = sender.timeouts
         # (hysteresis: with two copies far fewer frames are lost, and so the measured rate)
         frame_loss = rate * (self.payload_limit + OVERHEAD)
         if frame_loss > COPY_LOSS:

@@ -64,6 +64,7 @@ from firmware_protocol.messages import (
     HeaterLease,
     Message,
     Segment,
+    SetHeater,
 )
 from firmware_protocol.segments import SegmentBatch
 
@@ -109,6 +110,9 @@ class HostLink:
         self._dev = self._core.dev
         self.lease_ms = max(lo, min(hi, round(heater_lease_s * 1000)))
         self._lease_sent = -1e9
+        # heater -> the last target (°C) this host sent over this link: a target found on the
+        # device is "from an earlier session" only when it is not one of these
+        self.heaters_set: dict[int, float] = {}
         self._keepalive = KeepAlive(self._core, getattr(transport, "wait_readable", None))
 
     # ------------------------------------------------------------------ properties
@@ -159,6 +163,31 @@ class HostLink:
     @property
     def progress(self) -> DeviceProgress:
         return self._dev.progress
+
+    @property
+    def fault(self) -> DeviceFault | None:
+        """The fault the device stopped on in this session (an e-stop, a device error) while
+        the link itself works; None when it runs or the link is lost (:attr:`lost`)."""
+        failure = self._dev.failure
+        return failure if isinstance(failure, DeviceFault) else None
+
+    @property
+    def lost(self) -> LinkError | None:
+        """What ended the session (a reset, a silent device, the port gone); None while the
+        device answers, stopped by a fault or not."""
+        return self._core.fatal()
+
+    @property
+    def state(self) -> str:
+        """What the link is: "connected" (the device answers and runs), "faulted" (it answers
+        and is stopped by a fault: :attr:`fault`), "lost" (:attr:`lost`) or "no session"."""
+        if self._core.fatal() is not None:
+            return "lost"
+        if self._dev.identity is None:
+            return "no session"
+        if self.fault is not None or self._dev.progress.fault:
+            return "faulted"
+        return "connected"
 
     def status(self) -> DeviceStatus | None:
         """The latest status report received (no I/O)."""
@@ -211,6 +240,30 @@ class HostLink:
         self._renew_lease()
         return identity
 
+    def recover(self) -> str | None:
+        """After the device went silent (frozen, its cable out and back in) and the session
+        was declared lost: try a new session on the same port. Returns what happened, in
+        words, once the device answers again (the link works again, the device faulted or
+        not: its watchdog may have stopped it meanwhile, :attr:`fault` and its status say
+        so); None while it stays silent (the failure stays). Other losses (a reset, the port
+        gone) are left to a new connect."""
+        core = self._core
+        lost = core.fatal()
+        if not isinstance(lost, DeviceSilent):
+            return None
+        try:
+            self.handshake()
+            faulted = self.request_status().faulted
+        except (LinkError, OSError) as exc:
+            with core.locked():
+                if core.fatal() is None:
+                    self._dev.failure = lost
+            log.debug("%s: still no answer: %s", core.name, exc)
+            return None
+        state = "stopped by a fault (M999 clears it)" if faulted else "ready"
+        log.warning("%s: the device answers again: new session, %s", core.name, state)
+        return f"link back: {core.name} answers again (new session; the device is {state})"
+
     def configure(self) -> None:
         self._session.configure()
 
@@ -233,10 +286,11 @@ class HostLink:
             core.send_immediate(HeaterLease(self.lease_ms))
             core.write(core.ep.flush(now))
 
-    def _pump(self, max_wait: float = SLICE_S) -> None:
-        """A pump from the caller's thread (renews the heater lease)."""
+    def _pump(self, max_wait: float = SLICE_S, *, fault_ok: bool = False) -> None:
+        """A pump from the caller's thread (renews the heater lease); ``fault_ok``: see
+        :meth:`LinkCore.pump`."""
         self._renew_lease()
-        self._core.pump(max_wait)
+        self._core.pump(max_wait, fault_ok=fault_ok)
 
     def _wait(self, done: Callable[[], bool], timeout: float | None, what: str) -> None:
         self._core.wait(done, timeout, what, pump=self._pump)
@@ -286,6 +340,8 @@ class HostLink:
                             core.segments_sent += 1
                             ticks = cmd.ticks
                         core.ep.send(payload, items=items, ticks=ticks)
+                        if isinstance(cmd, SetHeater):
+                            self.heaters_set[cmd.heater] = cmd.target_dc / 10
                         if items:
                             core.items_sent += 1
                         numbers.append(core.items_sent if items else 0)
@@ -339,15 +395,16 @@ class HostLink:
 
     # ------------------------------------------------------------------ waiting and queries
 
-    def poll(self, timeout: float = 0.0) -> list[LinkEvent]:
+    def poll(self, timeout: float = 0.0, *, fault_ok: bool = False) -> list[LinkEvent]:
         """Pump for up to ``timeout`` seconds (at least once); return the events since the last
-        poll."""
+        poll. A device stopped by a fault raises its :class:`DeviceFault` unless ``fault_ok``
+        (a screen that watches it: its temperatures still come)."""
         core = self._core
         end = self._t.now() + timeout
         while True:
             core.let_others_in()
             with core.locked():
-                self._pump(min(SLICE_S * 5, max(0.0, end - self._t.now())))
+                self._pump(min(SLICE_S * 5, max(0.0, end - self._t.now())), fault_ok=fault_ok)
                 if self._t.now() >= end - 1e-9:
                     break
         with core.locked():
@@ -372,7 +429,11 @@ class HostLink:
         refreshing temperatures) cannot keep a wedged job's heaters on."""
         count = self._dev.status_count
         self._identity()
-        self._send_each((GetStatus(),), None, self._core.pump)  # a pump that renews nothing
+        fatal = self._core.fatal()
+        if fatal is not None:
+            raise fatal
+        # a pump that renews nothing; a device stopped by a fault answers too
+        self._send_each((GetStatus(),), None, lambda: self._core.pump(fault_ok=True))
         return count
 
     @property
@@ -381,10 +442,16 @@ class HostLink:
 
     def request_status(self, timeout: float | None = None) -> DeviceStatus:
         """Ask for a status report and wait for it (default: a few link timeouts, since on
-        a lossy line a reply may need several retransmissions)."""
+        a lossy line a reply may need several retransmissions). A device stopped by a fault
+        answers (its :attr:`fault` says which); a lost link raises."""
         count = self.ask_status()
         limit = timeout if timeout is not None else STATUS_TIMEOUTS * self.timeout_s
-        self._wait(lambda: self._dev.status_count > count, limit, "a status report")
+        self._core.wait(
+            lambda: self._dev.status_count > count,
+            limit,
+            "a status report",
+            pump=lambda: self._pump(fault_ok=True),
+        )
         st = self._dev.status
         assert st is not None
         return st
@@ -488,6 +555,7 @@ class HostLink:
                 )
                 raise dev.failure
             dev.failure = None
+            dev.forget_errors()
             self._core.items_sent = max(self._core.items_sent, dev.progress.items_done)
 
     def close(self) -> None:

@@ -53,7 +53,8 @@ class KeepAlive:
         interval = core.keepalive_interval()
         thread = self._stop
         stop = thread or threading.Event()
-        if core.pumping or core.dev.failure is not None:  # nothing to keep alive once failed
+        # nothing to keep alive once lost (a device stopped by a fault answers: kept)
+        if core.pumping or core.fatal() is not None:
             stop.wait(SLICE_S if core.pumping else interval / 2)
             return
         readable = False
@@ -61,7 +62,7 @@ class KeepAlive:
             readable = bool(self.wait_readable(interval / 2))
         else:
             stop.wait(interval / 2)
-        if core.dev.failure is not None or stop.is_set():
+        if core.fatal() is not None or stop.is_set():
             return
         recent = core.t.now() - core.last_pump
         if readable and thread is not None and core.pumping:
@@ -71,9 +72,9 @@ class KeepAlive:
             return
         try:
             with core.locked():
-                core.pump(0.0)
+                core.pump(0.0, fault_ok=True)
                 end = core.t.now() + min(interval / 2, 4 * core.ep.sender.rto.rto)
                 while not core.ep.sender.idle() and core.t.now() < end:
-                    core.pump(min(SLICE_S, max(0.0, end - core.t.now())))
+                    core.pump(min(SLICE_S, max(0.0, end - core.t.now())), fault_ok=True)
         except (LinkError, OSError):
             pass

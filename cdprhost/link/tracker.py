@@ -15,6 +15,7 @@ from cdprhost.link.clock_sync import ClockSync
 from cdprhost.link.errors import DeviceFault, DeviceReset, LinkError
 from cdprhost.link.events import (
     DeviceCaps,
+    DeviceErrorEvent,
     DeviceHealth,
     DeviceProgress,
     DeviceStatus,
@@ -99,6 +100,13 @@ class DeviceTracker:
             self.progress = p
             self.progress_dirty = True
 
+    def forget_errors(self) -> None:
+        """The fault was cleared: its error reports not taken yet are history, not news (a
+        job started after the clear would take them for a fault of its own)."""
+        kept = [e for e in self.events if not isinstance(e, DeviceErrorEvent)]
+        self.events.clear()
+        self.events.extend(kept)
+
     def take_events(self) -> list[LinkEvent]:
         out = list(self.events)
         self.events.clear()
@@ -160,6 +168,13 @@ class DeviceTracker:
                     log.info("%s: device fault cleared", self.name)
                     self.cleared = True
                     self.clearing = False
+                    p = self.progress  # the device said so: its flags until the next report
+                    self.set_progress(
+                        p.items_done,
+                        p.segments_done,
+                        p.queue_free,
+                        p.flags & ~(Flag.FAULT | Flag.ESTOP),
+                    )
                 elif msg.code == EventCode.CLEAR_REFUSED and msg.values:
                     self.refused = msg.values[0]
                 elif msg.code == EventCode.AUTOTUNE_DONE and len(msg.values) == 4:

@@ -19,6 +19,7 @@ from cdprhost.link.errors import LinkError
 from cdprhost.link.events import DeviceStatus
 from cdprhost.link.host_link import HostLink
 from cdprhost.machine.commands import enable_all, heater_messages, home_commands, motors_off
+from cdprhost.machine.faults import DeviceFaulted, describe_fault, fault_clearable, refusal
 from cdprhost.motion.direct import direct_path, state_at_steps
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.codes import ErrorCode
@@ -99,19 +100,36 @@ class Machine:
     def homed(self) -> bool:
         return self.status().homed_mask & ALL_MODULES == ALL_MODULES
 
+    def ready(self) -> DeviceStatus:
+        """The device's status, asked for now, when it can take a command; a device stopped
+        by a fault (an e-stop, its watchdog, an error) discards what it is sent, so every
+        operation asks here first and is refused (:class:`DeviceFaulted`, nothing sent) with
+        the fault and the way out. A lost link raises its own error."""
+        st = self.status()
+        fault = describe_fault(st)
+        link_fault = getattr(self.link, "fault", None)  # this session's, if the report lags
+        if fault is None and link_fault is not None:
+            fault = f"the device is stopped by a fault ({link_fault})"
+        if fault is not None:
+            raise DeviceFaulted(refusal(fault, fault_clearable(st)))
+        return st
+
     # ---------------------------------------------------------------- drivers
     def enable(self) -> DeviceStatus:
+        self.ready()
         self.link.send(enable_all())
         self.link.wait_idle(COMMAND_TIMEOUT_S)
         return self.status()
 
     def motors_off(self) -> DeviceStatus:
+        self.ready()
         self.link.send(motors_off())
         self.link.wait_idle(COMMAND_TIMEOUT_S)
         return self.status()
 
     def home(self, timeout_s: float = HOMING_TIMEOUT_S) -> DeviceStatus:
         """Enable every driver and drive the three modules to their endstops (docs/homing.md)."""
+        self.ready()
         self.link.send(*home_commands(self.model, self.profile.drive.home_mm))
         self.link.wait_idle(timeout_s)
         return self.status()
@@ -122,6 +140,7 @@ class Machine:
     ) -> DeviceStatus:
         """Set heater targets (None leaves a heater as it is; 0 switches it off); ``wait``
         holds the device's queue until each target set above 0 is reached."""
+        self.ready()
         self.link.send(*heater_messages(hotend_c, bed_c, wait=wait))
         if not wait:
             self.link.wait_idle(COMMAND_TIMEOUT_S)
@@ -144,7 +163,7 @@ class Machine:
         (limits, ramps, ends at rest); returns when the device has executed them and waited
         ``settle_s``. ``end_steps`` (module steps): end exactly there (the last point's own
         steps may differ by rounding or backlash; the last segment takes up the difference)."""
-        st = self.status()
+        st = self.ready()
         if st.homed_mask & ALL_MODULES != ALL_MODULES:
             if not home_if_needed:
                 raise NotHomed("the modules are not homed: home first")

@@ -7,8 +7,9 @@ link's latest status (no I/O) and, when that is older than ``every_s``, asks the
 for a new one without waiting (the reply arrives while anyone pumps the link, the poll
 included). Subscribers get a :class:`Reading` each time: the status and its age, marked
 stale past ``stale_s`` or when the link fails (a link that stopped answering, a closed
-port, a device fault such as an e-stop: the link takes no reports until it is cleared,
-so the last status is history, and ``error`` says why).
+port: the last status is history, and ``error`` says why). A device stopped by a fault
+(an e-stop, its watchdog) still answers: its readings stay fresh (the nozzle is seen
+cooling) and ``error`` names the fault.
 
 Thread-safe; never raises into its thread (a failing link only makes readings stale).
 """
@@ -68,27 +69,28 @@ class StatusPoll:
         """The latest status and its age (no I/O)."""
         st = self.link.status()
         flags = self.link.progress.flags
-        error = self._error or (
+        fault = (
             "the device is e-stopped"
             if flags & Flag.ESTOP
             else "the device reports a fault"
             if flags & Flag.FAULT
             else ""
         )
+        error = self._error or fault
         if st is None:
             return Reading(None, float("inf"), True, error)
         try:
             age = max(0.0, self.link.now() - st.received_at)
         except (LinkError, OSError):
             age = float("inf")
-        return Reading(st, age, age > self.stale_s or bool(error), error)
+        return Reading(st, age, age > self.stale_s or bool(self._error), error)
 
     def tick(self) -> Reading:
         """One poll: ask for a status when the latest is old, then tell the subscribers."""
         if self.reading().age_s > self.every_s or self._error:
             try:
                 self.link.ask_status()
-                self.link.poll(0.0)
+                self.link.poll(0.0, fault_ok=True)  # a faulted device answers too
                 self._error = ""
             except (LinkError, OSError) as exc:  # closed or failed: readings go stale
                 log.debug("status poll: %s", exc)

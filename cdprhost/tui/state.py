@@ -41,9 +41,9 @@ RATE_SAMPLES = 120
 CONSOLE_LINES = 500
 NOTICE_SHOWN_S = 15.0
 """A job's notice stays on its status line this long (the console keeps them all)."""
-STALE_AFTER_S = 5.0
+STALE_AFTER_S = 2.0
 """Temperatures older than this are marked stale (the job reports every 0.5 s, the idle
-status comes every second)."""
+status comes every second: two missed readings)."""
 
 
 @dataclass(frozen=True)
@@ -298,8 +298,9 @@ class TemperaturesShown:
 
 def shown_temperatures(state: UiState, now: float) -> TemperaturesShown:
     """The temperatures to show: the running job's readings, else the device's latest status;
-    either marked stale once older than ``STALE_AFTER_S`` (a finished job's readings are
-    never shown as current: the device is read again after a job)."""
+    either marked stale once older than ``STALE_AFTER_S``. A job that just ended shows its
+    last reading until the device answers again, stale only once it is that old (never
+    "STALE 0s")."""
     age = temperature_age(state, now)
     stale = round(age) if age is not None and age > STALE_AFTER_S else None
     job, dev = state.job, state.device
@@ -313,9 +314,7 @@ def shown_temperatures(state: UiState, now: float) -> TemperaturesShown:
         )
     if job.temperatures is not None:  # a job just ended: its last reading, until the device
         t = job.temperatures  # answers again (marked as old as it is)
-        return TemperaturesShown(
-            (t.hotend, t.bed), (t.hotend_target, t.bed_target), (), stale if stale else 0
-        )
+        return TemperaturesShown((t.hotend, t.bed), (t.hotend_target, t.bed_target), (), stale)
     return TemperaturesShown((None, None), (0.0, 0.0), (), None)
 
 

@@ -32,7 +32,8 @@ def test_reset_mid_print_fails_naming_the_line_then_resume_completes(
     )
     assert code == 1
     data = json.loads(report.read_text())
-    assert data["status"] == "failed" and "Reset" in data["reason"]
+    assert data["status"] == "failed" and "the device reset" in data["reason"]
+    assert "DeviceReset" not in data["reason"]  # the operator reads it: no class name
     assert data["segments"] <= 1500 and data["last_line"] > 0 and data["last_layer"] >= 1
     out = capsys.readouterr().out
     assert f"last line: {data['last_line']}" in out

@@ -65,9 +65,15 @@ def test_the_poll_keeps_temperatures_fresh_with_no_job():
         assert last.status is not None and not last.stale
         temps = temperatures_of(last.status, last.age_s)
         assert temps.hotend_target == 180.0 and temps.hotend > seen[0].status.hotend_c
-        link.emergency_stop()  # the link takes no reports until the fault is cleared
-        after = poll.tick()
-        assert after.stale and "e-stop" in after.error
+        link.emergency_stop()  # the device stops and still answers: readings stay fresh
+        first = poll.tick().status
+        for _ in range(5):
+            link.poll(0.3, fault_ok=True)
+            after = poll.tick()
+        assert not after.stale and "e-stop" in after.error
+        assert after.status.faulted and after.status.hotend_target_c == 0
+        assert after.status.received_at > first.received_at + 1.0  # read again and again
+        assert link.state == "faulted"
         link.clear_fault()
         for _ in range(3):
             poll.tick()

@@ -39,11 +39,14 @@ class _Core:
     def keepalive_interval(self) -> float:
         return 1.0
 
+    def fatal(self):
+        return self.dev.failure
+
     @contextlib.contextmanager
     def locked(self):
         yield
 
-    def pump(self, timeout: float) -> None:
+    def pump(self, timeout: float, *, fault_ok: bool = False) -> None:
         self.pumps.append(timeout)
 
 

@@ -24,9 +24,11 @@ from cdprhost.tui.control.jog import check_jog, jog_target
 from cdprhost.tui.control.live_console import status_lines, temperature_line
 from cdprhost.tui.control.views import ConsoleLine, DeviceStatusView
 from cdprhost.tui.state import CONSOLE_LINES, ConnectionView, UiState
+from cdprhost.tui.tabs import screen_key
 
 TEMPERATURE_HISTORY = 600
 JOB_HEALTH_EVERY_S = 5.0  # while a job runs its own events carry the link health
+RECONNECT_EVERY_S = 2.0  # a lost link asks the device again this often (it may come back)
 
 
 class ControllerBase:
@@ -39,6 +41,7 @@ class ControllerBase:
         self._quitting = ""  # why the app quits once the job has stopped ("quit", "SIGTERM")
         self._finished_id = 0  # the last job whose end was handled
         self._health_at = float("-inf")
+        self._reconnect_at = float("-inf")
         self._status_gen = 0  # a status asked before this job began or ended is not shown
 
     # ------------------------------------------------------------ plumbing
@@ -151,6 +154,12 @@ class ControllerBase:
             self.update(connection=replace(conn, health=health))
 
     def refresh_device(self) -> None:
+        if self.state.connection.status == "error" and not self.state.job_active:
+            now = self.app.clock()  # lost (a frozen device): ask again, it may come back
+            if now - self._reconnect_at >= RECONNECT_EVERY_S and self.backend.connected():
+                self._reconnect_at = now
+                self.recheck_link()
+            return
         if not self.state.connected or self.state.job_active:
             return
         gen = self._status_gen
@@ -191,6 +200,7 @@ class ControllerBase:
 
         def done(status: Any) -> None:
             self.update(connection=replace(self.state.connection, status="connected", error=""))
+            self.say(*self.backend.device_log())  # "link back: ..." after a recovery
             if status is not None:
                 self.device_seen(status)
             if then is not None:
@@ -236,7 +246,11 @@ class ControllerBase:
     def device_op(
         self, label: str, work: Callable[[], Any], then: Callable[[], None] | None = None
     ) -> None:
-        if self.state.busy or self.state.job_active or not self.state.connected:
+        why = self._refused_now()
+        if why:  # said, never silently dropped ("jog h does nothing and says nothing")
+            text = f"{label}: refused, nothing sent: {why}"
+            self.say(ConsoleLine("error", text, self.app.wall_clock()))
+            self.app.notify(text, severity="warning", timeout=8)
             return
         self.update(busy=label)
 
@@ -253,6 +267,20 @@ class ControllerBase:
             self.report(exc)
 
         self.background("device", work, done, fail)
+
+    def _refused_now(self) -> str:
+        """Why a device operation cannot start now ("" when it can)."""
+        state, conn = self.state, self.state.connection
+        if state.job_active:
+            return "a print is running"
+        if state.busy:
+            return f"busy ({state.busy}): try again when it is done"
+        if conn.status == "error":
+            where = screen_key("connection")
+            return f"the link is lost ({conn.error}): it is asked again, or reconnect on {where}"
+        if not state.connected:
+            return f"not connected: connect on {screen_key('connection')}"
+        return ""
 
     def jog_go(self) -> None:
         check = self.state.jog
@@ -332,7 +360,8 @@ class ControllerBase:
             if answered:
                 text = (
                     "EMERGENCY STOP: the device confirmed; motion stopped, heaters off, "
-                    "motors held (releasing them is its own action)"
+                    "motors held (releasing them is its own action); M999 in the console "
+                    "clears the stop"
                 )
             else:
                 text = (

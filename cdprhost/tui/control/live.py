@@ -198,9 +198,8 @@ class LiveBackend:
 
         for ev in events:
             if isinstance(ev, DeviceErrorEvent):
-                text = (
-                    f"device error {ev.name}: {ev.text}" if ev.text else f"device error {ev.name}"
-                )
+                # the text starts with the name ("estop at item 2"): said once
+                text = f"device error: {ev.text or ev.name}"
                 self._log.append(ConsoleLine("error", text, time.time()))
             elif isinstance(ev, DeviceEvent):
                 values = " ".join(str(v) for v in ev.values)
@@ -216,10 +215,15 @@ class LiveBackend:
         link = self._link
         if link is None:
             return None
+        if link.lost is not None:  # a device that froze may be back: a new session, said
+            said = link.recover()
+            if said is None:
+                raise link.lost
+            self._log.append(ConsoleLine("notice", said, time.time()))
         # The embedded device lives on a virtual clock that only runs while the link is
         # pumped: keep it going between status requests (paced to the speed-up).
         pump = self.idle_pump_s * (self.speedup or 1.0) if self._embedded else 0.0
-        self._note_events(link.poll(pump))
+        self._note_events(link.poll(pump, fault_ok=True))  # a faulted device answers too
         return self._status_view(link.request_status())
 
     def status_while_busy(self) -> DeviceStatusView | None:
@@ -403,9 +407,9 @@ class LiveBackend:
 
         out = run_console(line, machine, self._status_view, self._identity, JOG_SPEED_MM_S)
         try:
-            self._note_events(machine.link.poll(0.0))
+            self._note_events(machine.link.poll(0.0, fault_ok=True))
         except (LinkError, OSError) as exc:  # stopped (M112) or lost: said, not raised
-            out.append(ConsoleLine("device", f"{type(exc).__name__}: {exc}", time.time()))
+            out.append(ConsoleLine("device", str(exc) or "the link failed", time.time()))
         return out + self.device_log()
 
     # ------------------------------------------------------------ diagnose

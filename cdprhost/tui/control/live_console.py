@@ -66,7 +66,7 @@ def run_console(
     except NotHomed:
         out.append(_line("error", "the modules are not homed: G28 first"))
     except (CdprError, OSError) as exc:
-        out.append(_line("error", f"{type(exc).__name__}: {exc}"))
+        out.append(_line("error", str(exc) or "the device did not answer"))
     return out
 
 
@@ -116,7 +116,7 @@ def _execute(
                 view = status_view(m.status())
             return ["ok", temperature_line(view)]
         case "move":
-            here = status_view(m.status())
+            here = status_view(m.ready())  # a faulted device: refused before anything else
             if here.position is None:
                 raise NotHomed("not homed")
             target = np.asarray(here.position, dtype=float) - bed

@@ -240,7 +240,7 @@ class PrintScreen(AppScreen):
         )
         resume = resume_line(state, hint(app, self, "resume_failed"))
         line = self.query_one("#resume-line", Label)
-        show_text(line, resume)
+        show_text(line, resume, layout=True)  # wraps: the offer at its end stays seen
         if line.display != bool(resume.plain):
             line.display = bool(resume.plain)
         pre = state.file.preflight

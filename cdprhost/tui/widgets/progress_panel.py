@@ -103,6 +103,15 @@ def eta_text(
     return _fit(parts, width)
 
 
+def reason_after(state: JobState, reason: str) -> str:
+    """A job's reason as shown after its state's name, without saying the state twice
+    ("CANCELLED cancelled", "CANCELLED cancelled: quit" read "CANCELLED", "CANCELLED quit")."""
+    text = reason.strip()
+    if text.lower().startswith(state.value):
+        text = text[len(state.value) :].lstrip(" :;,-")
+    return text
+
+
 def progress_lines(
     snap: JobSnapshot,
     line_text: str,
@@ -119,8 +128,8 @@ def progress_lines(
     head.append(f" {state.value.upper()} ", style="reverse " + STATE_STYLE[state])
     if state in WAITING_FOR_REST and state is not snap.state:
         head.append(f" {WAITING_FOR_REST[state]}", style="italic")
-    elif snap.reason:
-        head.append(f" {snap.reason}", style="italic")
+    elif reason_after(state, snap.reason):
+        head.append(f" {reason_after(state, snap.reason)}", style="italic")
     elif notice:
         head.append(f" {notice}", style="dim italic")
     layers = f"{min(snap.layer + 1, snap.layers)}/{snap.layers}" if snap.layers else "-/-"

@@ -1,0 +1,65 @@
+"""The host backs off on a silent device (PROTOCOL.md section 2, issue 32): the 25 ms floor
+doubling to the ceiling, one probe frame at a time, about ten resends in the first 2 s of a
+frozen device (it was 139 in 1.5 s), fewer on a clean fast path (150 ms floor)."""
+
+from __future__ import annotations
+
+import pytest
+
+from cdprhost.link.tuning import CLEAN_RTO_FLOOR_S, RTO_FAST, RTO_FLOOR_S, RTO_MAX_BACKOFF
+from firmware_protocol.endpoint import Endpoint
+
+
+def _frozen(floor: float, seconds: float = 2.0) -> list[float]:
+    """When the host resends to a device that stopped answering with ten frames in flight."""
+    ep = Endpoint(
+        window=32,
+        rto_initial=0.05,  # as the link's (a quarter of its 2 s timeout, at most 50 ms)
+        rto_floor=RTO_FLOOR_S,
+        rto_ceiling=0.25,
+        rto_max_backoff=RTO_MAX_BACKOFF,
+        rto_fast=RTO_FAST,
+        stale_after=0.02,
+        renak=True,
+    )
+    ep._fast_path()  # a pty or USB: acknowledgements proved the path fast
+    ep.sender.rto.floor = floor
+    ep.sender.heard(-0.01)  # the last byte from the device came before the frames left
+    for _ in range(10):
+        ep.send(b"x" * 40, items=1)
+    ep.flush(0.0)
+    t, marks = 0.0, []
+    while t < seconds:
+        t += 0.001
+        n = ep.retransmits
+        ep.flush(t)
+        marks += [t] * (ep.retransmits - n)
+    return marks
+
+
+@pytest.mark.parametrize(("floor", "most"), [(RTO_FLOOR_S, 11), (CLEAN_RTO_FLOOR_S, 8)])
+def test_a_frozen_device_sees_few_resends_further_and_further_apart(floor, most):
+    marks = _frozen(floor)
+    assert 3 <= len(marks) <= most, marks
+    gaps = [b - a for a, b in zip(marks, marks[1:], strict=False)]
+    assert gaps == sorted(gaps, key=lambda g: round(g, 2))  # never closer together
+    assert marks[0] >= floor - 1e-9  # nothing before the floor
+
+
+def test_a_clean_fast_path_that_answers_late_is_not_retransmitted_to():
+    """A pty on a loaded machine: nothing is lost, answers come up to 100 ms late. Each
+    late answer cost resends (129 in 4000 segments: a report not yet acknowledging a frame
+    resent it after 20 ms); now a timeout there makes the link wait longer instead."""
+    from cdprhost.sim.embedded import open_embedded
+    from firmware_protocol.streams import demo_stream, expected_record
+
+    batch = demo_stream(4000, seed=3)
+    link = open_embedded(faults="latency_ms=2,jitter_ms=100,seed=9", baud=None)
+    try:
+        link._core.ep._fast_path()  # as a pty's first early acknowledgement does
+        link.queue_segments(batch)
+        link.wait_idle()
+        assert link.device.record == expected_record(batch)
+        assert link.counters.retransmits <= 8, link.counters
+    finally:
+        link.close()
