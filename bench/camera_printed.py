@@ -12,8 +12,8 @@ of 3 frames; the true machine off the nominal ``paper-simulation`` by U(-3, 3) m
 parameter (rng 100 + seed). Prints the workspace RMS against the truth, the gate's
 prediction, their ratio, the range one calibration's RMS falls in 8 times out of 10 with
 the error's effective degrees of freedom, where the observed RMS falls in that predicted
-distribution (quantile: uniform over many sessions when the gate is right) and the
-verdict. ``--reuse`` identifies sessions already rendered into ``--keep`` again.
+distribution (quantile: uniform over many sessions when the gate is right), how often
+one session's RMS lands within 1.5x of even an exact prediction, and the verdict. ``--reuse`` identifies sessions already rendered into ``--keep`` again.
 Rendering takes minutes per session.
 """
 
@@ -89,10 +89,13 @@ def run(kind: str, seed: int, folder: Path, reuse: bool = False) -> str:
     verdict = "trusted" if result.ok else "refused"
     spread = ""
     if result.trust is not None:
-        lo, hi = result.trust.likely_rms_mm
+        t = result.trust
+        lo, hi = t.likely_rms_mm
+        # how often even an exact prediction lands within 1.5x of one session's RMS
+        within = t.quantile_of(1.5 * pred) - t.quantile_of(pred / 1.5)
         spread = (
-            f", 80 % range {lo:.3f}-{hi:.3f} mm over {result.trust.effective_dof:.1f} dof, "
-            f"quantile {result.trust.quantile_of(rms):.2f}"
+            f", 80 % range {lo:.3f}-{hi:.3f} mm over {t.effective_dof:.1f} dof, "
+            f"quantile {t.quantile_of(rms):.2f}, P(within 1.5x) {within:.2f}"
         )
     return (
         f"{kind:8s} seed {seed}: workspace RMS {rms:.3f} mm, predicted {pred:.3f} mm, "
