@@ -264,6 +264,29 @@ def test_no_import_circle_between_the_parts_of_a_package():
             assert not found, f"import circles between the parts of {package}:\n" + "\n".join(text)
 
 
+def reach(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module ``start`` imports, directly or through others."""
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        for nxt in graph.get(todo.pop(), set()):
+            if nxt not in seen:
+                seen.add(nxt)
+                todo.append(nxt)
+    return seen
+
+
+def test_identification_and_the_gate_import_no_measurement_source():
+    """Sources produce observations; identification and the trust gate take them and
+    reach no source (motion capture, camera), not even through another module."""
+    graph = import_graph("cdprhost.calibration")
+    sources = ("cdprhost.calibration.mocap", "cdprhost.calibration.camera")
+    for module in ("identification", "trust", "verification", "measurements", "takes"):
+        name = f"cdprhost.calibration.{module}"
+        reached = sorted(m for m in reach(graph, name) if m.startswith(sources))
+        assert not reached, f"{name} reaches the source module(s) {reached}"
+
+
 def test_package_graph_sees_a_circle_through_a_sub_package(tmp_path, monkeypatch):
     """The checker itself: a module and a sub-package that import each other (no circle
     between single modules) are a circle between the package's parts."""
