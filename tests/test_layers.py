@@ -8,6 +8,7 @@ a lower layer; packages in the same layer may not import each other.
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -217,6 +218,88 @@ def test_no_import_circle_inside_a_package():
             for group in found
         ]
         assert not found, f"import circles inside {package}:\n" + "\n".join(text)
+
+
+def package_graph(package: str) -> dict[str, set[str]]:
+    """The import graph of ``package``'s direct children, each sub-package one node: child
+    -> the children it imports (anything inside a sub-package counts as the sub-package)."""
+    prefix = package + "."
+
+    def child(module: str) -> str:
+        return (
+            prefix + module[len(prefix) :].split(".", maxsplit=1)[0]
+            if module.startswith(prefix)
+            else module
+        )
+
+    graph: dict[str, set[str]] = {}
+    for mod, targets in import_graph(package).items():
+        if mod == package:
+            continue
+        node = graph.setdefault(child(mod), set())
+        node.update(child(t) for t in targets if t != package and child(t) != child(mod))
+    return graph
+
+
+def sub_packages(package: str) -> list[str]:
+    """``package`` and every package inside it."""
+    base = ROOT.joinpath(*package.split("."))
+    return sorted(module_name(p) for p in base.rglob("__init__.py"))
+
+
+def test_no_import_circle_between_the_parts_of_a_package():
+    """Inside each package (and each of its sub-packages), a sub-package counts as one node:
+    a source (``calibration.camera``) may use the modules beside it, but nothing it uses may
+    use it back (no ``calibration.session`` -> ``camera`` -> ``calibration.session``)."""
+    for top in ACYCLIC:
+        for package in sub_packages(top):
+            graph = package_graph(package)
+            found = circles(graph)
+            text = [
+                " <-> ".join(group)
+                + "\n"
+                + "\n".join(f"    {m} imports {sorted(graph[m] & set(group))}" for m in group)
+                for group in found
+            ]
+            assert not found, f"import circles between the parts of {package}:\n" + "\n".join(text)
+
+
+def reach(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module ``start`` imports, directly or through others."""
+    seen: set[str] = set()
+    todo = [start]
+    while todo:
+        for nxt in graph.get(todo.pop(), set()):
+            if nxt not in seen:
+                seen.add(nxt)
+                todo.append(nxt)
+    return seen
+
+
+def test_identification_and_the_gate_import_no_measurement_source():
+    """Sources produce observations; identification and the trust gate take them and
+    reach no source (motion capture, camera), not even through another module."""
+    graph = import_graph("cdprhost.calibration")
+    sources = ("cdprhost.calibration.mocap", "cdprhost.calibration.camera")
+    for module in ("identification", "trust", "verification", "measurements", "takes"):
+        name = f"cdprhost.calibration.{module}"
+        reached = sorted(m for m in reach(graph, name) if m.startswith(sources))
+        assert not reached, f"{name} reaches the source module(s) {reached}"
+
+
+def test_package_graph_sees_a_circle_through_a_sub_package(tmp_path, monkeypatch):
+    """The checker itself: a module and a sub-package that import each other (no circle
+    between single modules) are a circle between the package's parts."""
+    pkg = tmp_path / "p"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from p.sub.x import f\n")
+    (pkg / "sub" / "x.py").write_text("def f():\n    pass\n")
+    (pkg / "sub" / "y.py").write_text("def g():\n    from p.a import f\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert circles(import_graph("p")) == []
+    assert circles(package_graph("p")) == [["p.a", "p.sub"]]
 
 
 def test_circle_checker_sees_a_lazy_circle():

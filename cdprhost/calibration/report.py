@@ -116,6 +116,8 @@ def trust_text(r: Identification) -> str:
             f"RMS {_mm(r.predicted_workspace_rms_mm, 3)} mm, max {_mm(r.predicted_workspace_max_mm, 3)} mm"
         )
     ]
+    if r.trust is not None and r.trust.spread_text():
+        lines.append(r.trust.spread_text())
     if r.noise is not None:
         lines.append(
             f"pose noise: {r.noise.typical_mm:.3g} mm RMS per coordinate ({r.noise.source})"

@@ -2,26 +2,24 @@
 
 ``load_session(dir)`` validates both files into one typed :class:`Session` (settings with
 the acceptance thresholds, poses with their roles, take paths resolved inside the folder),
-which planning, identification, diagnosis and the wizard all consume. ``measure()`` turns
-every take into a base-frame effector point with its standard error, listing refused takes
-instead of using them, and the resulting :class:`SessionMeasurements` builds the
-observations (with each pose's noise, :mod:`.pose_noise`) for identification and diagnosis.
-:mod:`.session_writer` writes folders.
+which planning, identification, diagnosis and the wizard all consume. The session stands
+above the measurement sources: ``measure()`` turns every motion-capture take
+(:mod:`.mocap`) into a base-frame effector point with its standard error, listing refused
+takes instead of using them (a camera session is measured by :mod:`.camera.session`), and
+the resulting :class:`~.measurements.SessionMeasurements` builds the observations (with
+each pose's noise, :mod:`.pose_noise`) for identification and diagnosis. poses.csv is read
+by :mod:`.poses`; :mod:`.session_writer` writes folders.
 
 Beyond the spec, ``session.toml`` may hold ``[mocap.acceptance]`` (the take checks'
 thresholds, :class:`~cdprhost.calibration.acceptance.AcceptanceLimits`) and ``noise_mm``
 (under ``[mocap]`` or ``[session]``); other top-level tables and extra ``[session]`` keys
-are kept. poses.csv may carry extra columns in any order; ``role`` (``fit`` | ``check``,
-empty = fit) marks check poses, which identification predicts but does not fit.
+are kept.
 """
 
 from __future__ import annotations
 
-import csv
-import io
-import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,38 +28,16 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from cdprhost.calibration.acceptance import AcceptanceLimits
 from cdprhost.calibration.camera.config import CameraConfig
 from cdprhost.calibration.config_input import contained_path, read_toml, validation_problems
-from cdprhost.calibration.fitting import Observations
-from cdprhost.calibration.pose_noise import PoseNoise, camera_noise, pose_noise
-from cdprhost.calibration.readers import read_take
-from cdprhost.calibration.takes import (
-    MocapConfig,
-    TakeMeasurement,
-    TakeRejected,
-    TakeSeries,
-    judge_takes,
-    prepare_take,
-)
+from cdprhost.calibration.measurements import RejectedTake, SessionMeasurements
+from cdprhost.calibration.mocap.readers import read_take
+from cdprhost.calibration.mocap.takes import MocapConfig, prepare_take
+from cdprhost.calibration.poses import PoseTable, parse_poses, row_error
+from cdprhost.calibration.takes import TakeMeasurement, TakeRejected, TakeSeries, judge_takes
 from cdprhost.errors import InputError
 
 SESSION_FILE = "session.toml"
 POSES_FILE = "poses.csv"
 TAKES_DIR = "takes"
-POSE_COLUMNS = (
-    "pose",
-    "take",
-    "t_s",
-    "x_cmd",
-    "y_cmd",
-    "z_cmd",
-    "s1_cmd",
-    "s2_cmd",
-    "s3_cmd",
-    "dir1",
-    "dir2",
-    "dir3",
-)
-ROLES = ("fit", "check")
-_FLOAT_COLUMNS = ("t_s", "x_cmd", "y_cmd", "z_cmd", "s1_cmd", "s2_cmd", "s3_cmd")
 
 
 class SessionInfo(BaseModel):
@@ -134,196 +110,6 @@ def load_session_config(path: str | os.PathLike[str]) -> SessionConfig:
         raise InputError(
             "invalid session configuration", source=src, problems=validation_problems(exc)
         ) from None
-
-
-@dataclass(frozen=True, eq=False)
-class PoseTable:
-    """poses.csv as arrays, one row per pose; ``lines`` are the rows' file line numbers;
-    ``extra`` holds every other column, by header name, as text."""
-
-    pose: np.ndarray  # (K,) int
-    take: tuple[str, ...]
-    t_s: np.ndarray  # (K,)
-    commanded: np.ndarray  # (K, 3)
-    s_cmd: np.ndarray  # (K, 3)
-    dirs: np.ndarray  # (K, 3) int in {-1, 0, 1}
-    lines: np.ndarray  # (K,) int
-    roles: tuple[str, ...] = ()  # "fit" | "check" per row
-    extra: dict[str, tuple[str, ...]] = field(default_factory=dict)
-
-    def __len__(self) -> int:
-        return len(self.take)
-
-
-def _row_error(source: str, line: int, name: str, column: int, why: str) -> InputError:
-    return InputError(f"line {line}, column '{name}' (column {column + 1}): {why}", source=source)
-
-
-def parse_poses(text: str, source: str) -> tuple[list[str], PoseTable]:
-    """Header and validated rows of a poses.csv text."""
-    rows = list(csv.reader(io.StringIO(text)))
-    if not rows:
-        raise InputError(f"empty file: expected the header {','.join(POSE_COLUMNS)}", source=source)
-    header = [h.strip() for h in rows[0]]
-    missing = [c for c in POSE_COLUMNS if c not in header]
-    if missing:
-        raise InputError(f"line 1: header lacks column(s) {', '.join(missing)}", source=source)
-    col = {c: header.index(c) for c in header}
-    others = [h for h in header if h and h not in POSE_COLUMNS and h != "role"]
-    poses: list[int] = []
-    takes: list[str] = []
-    floats: list[list[float]] = []
-    dirs: list[list[int]] = []
-    lines: list[int] = []
-    roles: list[str] = []
-    extra: dict[str, list[str]] = {h: [] for h in others}
-    for n, row in enumerate(rows[1:], start=2):
-        if not any(c.strip() for c in row):
-            continue
-
-        def cell(name: str, row: list[str] = row) -> str:
-            return row[col[name]].strip() if col[name] < len(row) else ""
-
-        def fail(name: str, why: str, n: int = n) -> InputError:
-            return _row_error(source, n, name, col[name], why)
-
-        try:
-            pose = int(cell("pose"))
-        except ValueError:
-            raise fail("pose", f"not an integer: {cell('pose')!r}") from None
-        if pose < 1:
-            raise fail("pose", f"must be >= 1, got {pose}")
-        if pose in poses:
-            raise fail("pose", f"pose {pose} already given on line {lines[poses.index(pose)]}")
-        if not cell("take"):
-            raise fail("take", "empty: expected the take's path relative to the session folder")
-        vals = []
-        for name in _FLOAT_COLUMNS:
-            try:
-                v = float(cell(name))
-            except ValueError:
-                raise fail(name, f"not a number: {cell(name)!r}") from None
-            if not math.isfinite(v):
-                raise fail(name, f"not a finite number: {cell(name)!r}")
-            vals.append(v)
-        d = []
-        for name in ("dir1", "dir2", "dir3"):
-            try:
-                v = float(cell(name))
-            except ValueError:
-                v = math.nan
-            if v not in (-1.0, 0.0, 1.0):
-                raise fail(name, f"must be +1, -1 or 0, got {cell(name)!r}")
-            d.append(int(v))
-        role = (cell("role").lower() if "role" in col else "") or "fit"
-        if role not in ROLES:
-            raise fail("role", f"must be fit or check, got {role!r}")
-        poses.append(pose)
-        takes.append(cell("take"))
-        floats.append(vals)
-        dirs.append(d)
-        lines.append(n)
-        roles.append(role)
-        for h in others:
-            extra[h].append(cell(h))
-    f = np.asarray(floats, dtype=float).reshape(-1, 7)
-    table = PoseTable(
-        np.asarray(poses, dtype=int),
-        tuple(takes),
-        f[:, 0],
-        f[:, 1:4],
-        f[:, 4:7],
-        np.asarray(dirs, dtype=int).reshape(-1, 3),
-        np.asarray(lines, dtype=int),
-        tuple(roles),
-        {h: tuple(v) for h, v in extra.items()},
-    )
-    return header, table
-
-
-def read_poses(path: str | os.PathLike[str]) -> PoseTable:
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
-    except UnicodeDecodeError:
-        raise InputError("not UTF-8 text", source=str(path)) from None
-    return parse_poses(text, str(path))[1]
-
-
-@dataclass(frozen=True, eq=False)
-class RejectedTake:
-    pose: int
-    take: str
-    reason: str  # one of acceptance.REASONS
-    message: str
-
-    def __str__(self) -> str:
-        return f"pose {self.pose} ({self.take}): {self.reason}: {self.message}"
-
-
-@dataclass(frozen=True, eq=False)
-class SessionMeasurements:
-    """Accepted poses only (K of them), in poses.csv order; refused ones listed apart."""
-
-    pose: np.ndarray  # (K,)
-    roles: tuple[str, ...]
-    measured: np.ndarray  # (K, 3) base frame, mm
-    commanded: np.ndarray  # (K, 3)
-    s_cmd: np.ndarray  # (K, 3)
-    t_s: np.ndarray  # (K,)
-    dirs: np.ndarray  # (K, 3)
-    se: np.ndarray  # (K, 3) standard error of each take's centre
-    base_fit_rms_mm: np.ndarray  # (K,)
-    takes: tuple[TakeMeasurement, ...]
-    rejected: tuple[RejectedTake, ...]
-    declared_noise_mm: float | None = None
-    # a camera session's noise (camera-session.md, :mod:`.camera.session`): each pose's full
-    # covariance (K, 3, 3), the common vector's (3, 3), the parameters' part (12, 12); what
-    # refuses the session whatever the fit (calibration views of poor coverage); notes
-    covariance: np.ndarray | None = None
-    common_covariance: np.ndarray | None = None
-    parameter_covariance: np.ndarray | None = None
-    frame_covariance: np.ndarray | None = None
-    refusals: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
-
-    def __len__(self) -> int:
-        return int(self.measured.shape[0])
-
-    @property
-    def take_sigma_mm(self) -> np.ndarray:
-        """Each pose's noise from its take alone, (K,) mm per coordinate."""
-        return np.sqrt(np.mean(self.se**2, axis=1)) if len(self) else np.zeros(0)
-
-    def noise(
-        self, steps_per_mm: np.ndarray | float = 400.0, *, floor_mm: float | None = None
-    ) -> PoseNoise:
-        """The one noise model (:func:`~.pose_noise.pose_noise`); ``floor_mm`` overrides the
-        declared noise."""
-        if self.covariance is not None:
-            return camera_noise(
-                self.covariance,
-                self.take_sigma_mm,
-                self.declared_noise_mm if floor_mm is None else floor_mm,
-                self.common_covariance,
-                self.parameter_covariance,
-                self.frame_covariance,
-            )
-        return pose_noise(
-            self.take_sigma_mm,
-            declared_mm=self.declared_noise_mm if floor_mm is None else floor_mm,
-            sliders=self.s_cmd,
-            measured=self.measured,
-            steps_per_mm=steps_per_mm,
-        )
-
-    def observations(self, noise: PoseNoise | None = None) -> Observations:
-        """The observations of identification and diagnosis (the one builder)."""
-        n = noise or self.noise()
-        return Observations(
-            self.measured, self.s_cmd, self.t_s, self.dirs.astype(float), n.sigma_mm, n.covariance
-        )
 
 
 @dataclass(frozen=True)
@@ -423,7 +209,7 @@ def load_session(directory: str | os.PathLike[str]) -> Session:
     for take, line in zip(poses.take, poses.lines):
         where = contained_path(root, take)
         if isinstance(where, str):
-            raise _row_error(str(poses_path), int(line), "take", header.index("take"), where)
+            raise row_error(str(poses_path), int(line), "take", header.index("take"), where)
         paths.append(where)
     return Session(root, config, poses, tuple(paths))
 
@@ -435,3 +221,25 @@ def _read_text(path: Path) -> str:
         raise InputError(f"cannot read: {exc.strerror}", source=str(path)) from None
     except UnicodeDecodeError:
         raise InputError("not UTF-8 text", source=str(path)) from None
+
+
+def mocap_for_session(
+    session: str | os.PathLike[str],
+    config_path: str | os.PathLike[str] | None = None,
+    virtual: MocapConfig | None = None,
+) -> MocapConfig | None:
+    """The ``[mocap]`` configuration a wizard needs for ``session``: None when the folder
+    already has its ``session.toml`` (resuming), else the one in ``config_path`` (a TOML
+    file with the ``[mocap]`` table), else ``virtual`` (the simulator's); :class:`InputError`
+    when a new session has none (checked before anything is written)."""
+    if (Path(session) / SESSION_FILE).is_file():
+        return None
+    if config_path:
+        return load_session_config(config_path).motion_capture
+    if virtual is not None:
+        return virtual
+    raise InputError(
+        "a new session needs the motion-capture configuration: a TOML file with the [mocap] "
+        "table of session.toml (base markers, effector markers and offset)",
+        source=str(session),
+    )

@@ -13,7 +13,8 @@ import os
 
 from cdprhost.calibration.camera.session import measure_camera_session
 from cdprhost.calibration.identification import Identification, identify_verified
-from cdprhost.calibration.session import Session, SessionMeasurements, load_session
+from cdprhost.calibration.measurements import SessionMeasurements
+from cdprhost.calibration.session import Session, load_session
 from cdprhost.calibration.trust import DEFAULT_TRUST, TrustLimits
 from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.errors import InputError
@@ -70,6 +71,15 @@ def measure_any(
     """A session's measurements: motion-capture takes, or a camera session's pictures (with
     ``refine``, the camera refined against ``base``'s commanded motion,
     :mod:`.camera.session`)."""
-    if session.config.camera is not None:
-        return measure_camera_session(session, base, refine=refine)
+    camera = session.config.camera
+    if camera is not None:
+        return measure_camera_session(
+            session.directory,
+            camera,
+            session.poses,
+            session.take_paths,
+            base,
+            declared_noise_mm=session.config.declared_noise_mm,
+            refine=refine,
+        )
     return session.measure()

@@ -15,15 +15,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
-from cdprhost.calibration.readers import EXTENSIONS, Take, write_take
+from cdprhost.calibration.mocap.readers import EXTENSIONS, Take, write_take
+from cdprhost.calibration.poses import POSE_COLUMNS, parse_poses
 from cdprhost.calibration.session import (
-    POSE_COLUMNS,
     POSES_FILE,
     SESSION_FILE,
     TAKES_DIR,
     SessionConfig,
     load_session_config,
-    parse_poses,
 )
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import write_text_atomic

@@ -11,6 +11,15 @@ when the data can contradict that noise: residual degrees of freedom of the fit,
 poses that were predicted, not fitted. Their pooled chi-square per degree of freedom scales
 Sigma up (never down). With neither, the noise cannot be estimated and the gate refuses.
 
+The predicted RMS is that of the expected squared error; one calibration's error is one
+draw. Its mean squared workspace error is a sum of independent normal directions squared
+(the eigenvalues of the workspace-weighted covariance, :func:`error_spectrum`), and when
+one direction carries most of it (a camera session's frame shifted along the line of
+sight: about 1.3 to 3 effective degrees of freedom) a single calibration's RMS scatters by
+a factor of two either way around the prediction. The report states that spread: the
+effective degrees of freedom and the range the RMS of one calibration falls in 8 times
+out of 10 (:func:`rms_spread`, from draws of those directions).
+
 The gate refuses (unless forced) when the predicted error exceeds ``max_workspace_mm`` or
 the noise cannot be estimated; it warns above ``warn_workspace_mm``. The parameter
 combinations behind a large prediction are named: the generalised eigenvectors of the
@@ -67,6 +76,14 @@ class TrustReport:
     weak: tuple[WeakCombination, ...]
     refusals: tuple[str, ...]
     warnings: tuple[str, ...] = field(default=())
+    # the spread of one calibration's workspace RMS around the prediction (module doc)
+    effective_dof: float = float("nan")
+    likely_rms_mm: tuple[float, float] = (float("nan"), float("nan"))
+    spectrum_mm2: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    def quantile_of(self, rms_mm: float) -> float:
+        """Where an observed workspace RMS falls in the predicted distribution (0..1)."""
+        return rms_quantile(self.spectrum_mm2, rms_mm)
 
     @property
     def trusted(self) -> bool:
@@ -81,7 +98,19 @@ class TrustReport:
             "weak_combinations": [w.text() for w in self.weak],
             "refusals": list(self.refusals),
             "warnings": list(self.warnings),
+            "effective_dof": self.effective_dof,
+            "likely_workspace_rms_mm": list(self.likely_rms_mm),
         }
+
+    def spread_text(self) -> str:
+        """One line on how far one calibration's RMS may fall from the prediction."""
+        lo, hi = self.likely_rms_mm
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            return ""
+        return (
+            f"one calibration's workspace RMS falls between {lo:.3g} and {hi:.3g} mm 8 times "
+            f"out of 10 (its error has {self.effective_dof:.2g} effective degrees of freedom)"
+        )
 
 
 def workspace_sigma(
@@ -104,6 +133,88 @@ def frame_variance(frame_covariance: np.ndarray | None, grid: np.ndarray) -> np.
     jac[:, 2, 0], jac[:, 2, 1] = x[:, 1], -x[:, 0]
     jac[:, :, 3:] = np.eye(3)
     return np.asarray(np.einsum("nip,pq,niq->n", jac, np.asarray(frame_covariance, float), jac))
+
+
+def _psd_root(cov: np.ndarray) -> np.ndarray:
+    """L with L L^T = cov (negative eigenvalues of rounding clipped)."""
+    w, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    return np.asarray(v * np.sqrt(np.clip(w, 0.0, None)))
+
+
+def frame_metric(grid: np.ndarray) -> np.ndarray:
+    """Mean over the grid of the (3, 6) Jacobian of w x x + t, squared: (6, 6)."""
+    x = np.asarray(grid, float)
+    jac = np.zeros((x.shape[0], 3, 6))
+    jac[:, 0, 1], jac[:, 0, 2] = x[:, 2], -x[:, 1]
+    jac[:, 1, 0], jac[:, 1, 2] = -x[:, 2], x[:, 0]
+    jac[:, 2, 0], jac[:, 2, 1] = x[:, 1], -x[:, 0]
+    jac[:, :, 3:] = np.eye(3)
+    return np.asarray(np.einsum("nip,niq->pq", jac, jac) / x.shape[0])
+
+
+def error_spectrum(
+    geometry: CableGeometry,
+    covariance: np.ndarray,
+    grid: np.ndarray,
+    common_covariance: np.ndarray | None = None,
+    frame_covariance: np.ndarray | None = None,
+) -> np.ndarray:
+    """Variances of the independent normal directions whose squares add up to one
+    calibration's mean squared workspace error: the eigenvalues of L^T W L for the
+    parameters (``covariance`` = L L^T, W the workspace metric), of the common vector's
+    covariance, and of the frame error's against its metric. They sum to the predicted
+    RMS squared."""
+    parts = []
+    lp = _psd_root(np.asarray(covariance, float))
+    parts.append(np.linalg.eigvalsh(lp.T @ workspace_metric(geometry, grid) @ lp))
+    if common_covariance is not None:
+        parts.append(np.linalg.eigvalsh(np.asarray(common_covariance, float)))
+    if frame_covariance is not None:
+        lf = _psd_root(np.asarray(frame_covariance, float))
+        parts.append(np.linalg.eigvalsh(lf.T @ frame_metric(grid) @ lf))
+    lam = np.clip(np.concatenate(parts), 0.0, None)
+    return np.asarray(lam[lam > 0])
+
+
+#: Draws of the error's directions behind the spread's quantiles (fixed, so a report is
+#: the same every time; quantiles to about 1 %).
+SPREAD_DRAWS = 20000
+
+
+def _rms_draws(spectrum: np.ndarray) -> np.ndarray:
+    """One calibration's RMS, drawn SPREAD_DRAWS times: sqrt(sum lam z^2), sorted."""
+    lam = np.asarray(spectrum, float)
+    z = np.random.default_rng(0).standard_normal((SPREAD_DRAWS, lam.size))
+    return np.sort(np.sqrt((z**2) @ lam))
+
+
+def _finite_spectrum(spectrum: np.ndarray) -> bool:
+    lam = np.asarray(spectrum, float)
+    return bool(lam.size and np.all(np.isfinite(lam)) and lam.sum() > 0)
+
+
+def rms_spread(spectrum: np.ndarray, probs: tuple[float, float] = (0.1, 0.9)) -> tuple[float, ...]:
+    """The RMS one calibration stays below with probabilities ``probs`` (quantiles, mm)."""
+    if not _finite_spectrum(spectrum):
+        return tuple(float("nan") for _ in probs)
+    return tuple(float(v) for v in np.quantile(_rms_draws(spectrum), probs))
+
+
+def rms_quantile(spectrum: np.ndarray, rms_mm: float) -> float:
+    """Where an observed workspace RMS falls in the predicted distribution (0..1): over
+    many sessions these are uniform when the prediction is right."""
+    if not _finite_spectrum(spectrum):
+        return float("nan")
+    draws = _rms_draws(spectrum)
+    return float(np.searchsorted(draws, rms_mm) / draws.size)
+
+
+def effective_dof(spectrum: np.ndarray) -> float:
+    """(sum lam)^2 / sum lam^2: how many equal directions the error behaves like."""
+    if not _finite_spectrum(spectrum):
+        return float("nan")
+    lam = np.asarray(spectrum, float)
+    return float(lam.sum() ** 2 / np.sum(lam**2))
 
 
 def workspace_metric(geometry: CableGeometry, grid: np.ndarray) -> np.ndarray:
@@ -190,8 +301,13 @@ def trust_report(
             + frame_variance(frame_covariance, grid)
         )
         rms, worst = float(np.sqrt(np.mean(sigma**2))), float(np.max(sigma))
+        spectrum = error_spectrum(geometry, cov, grid, common_covariance, frame_covariance)
+        dof = effective_dof(spectrum)
+        lo, hi = rms_spread(spectrum)
     else:
         rms = worst = float("inf")
+        dof, lo, hi = float("nan"), float("inf"), float("inf")
+        spectrum = np.zeros(0)
     weak = weak_combinations(
         information / scale, workspace_metric(geometry, grid), limits.warn_workspace_mm
     )
@@ -222,4 +338,15 @@ def trust_report(
             f"residuals are {np.sqrt(factor):.2g}x the take noise (chi2/dof {factor:.3g} over {noise_dof} dof): "
             "uncertainties scaled up accordingly"
         )
-    return TrustReport(rms, worst, factor, noise_dof, weak, tuple(refusals), tuple(warnings))
+    return TrustReport(
+        rms,
+        worst,
+        factor,
+        noise_dof,
+        weak,
+        tuple(refusals),
+        tuple(warnings),
+        dof,
+        (lo, hi),
+        spectrum,
+    )

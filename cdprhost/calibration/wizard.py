@@ -32,21 +32,17 @@ from cdprhost.calibration.camera.config import CameraConfig, intrinsics_toml
 from cdprhost.calibration.camera.intrinsics import Intrinsics
 from cdprhost.calibration.camera.takes import judge_camera_take, session_intrinsics
 from cdprhost.calibration.identification import Identification, calibrated_profile
+from cdprhost.calibration.mocap.readers import read_take
+from cdprhost.calibration.mocap.takes import MocapConfig, prepare_take
 from cdprhost.calibration.plan_files import plan_csv, read_plan_csv
 from cdprhost.calibration.planning import plan_poses
-from cdprhost.calibration.readers import read_take
-from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SessionConfig, read_poses
+from cdprhost.calibration.poses import POSE_COLUMNS, read_poses
+from cdprhost.calibration.session import POSES_FILE, SessionConfig
 from cdprhost.calibration.session_identification import identify_session
 from cdprhost.calibration.session_writer import SessionWriter
 from cdprhost.calibration.take_sources import FolderWatcher, NumberedTakes
 from cdprhost.calibration.take_statistics import TakeStatistics
-from cdprhost.calibration.takes import (
-    MocapConfig,
-    TakeMeasurement,
-    TakeRejected,
-    judge_in_session,
-    prepare_take,
-)
+from cdprhost.calibration.takes import TakeMeasurement, TakeRejected, judge_in_session
 from cdprhost.calibration.trust import TrustLimits
 from cdprhost.calibration.verification import DEFAULT_ALPHA
 from cdprhost.calibration.wizard_state import (

@@ -20,7 +20,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import numpy as np
 
     from cdprhost.calibration.identification import Identification
-    from cdprhost.calibration.takes import MocapConfig
+    from cdprhost.calibration.mocap.takes import MocapConfig
     from cdprhost.kinematics import MachineModel
 
 
@@ -43,7 +43,7 @@ class PromptTakes:
 
 
 def _mocap_for(args: argparse.Namespace, session: Path) -> MocapConfig | None:
-    from cdprhost.calibration.session_setup import mocap_for_session
+    from cdprhost.calibration.session import mocap_for_session
     from cdprhost.sim.virtual_mocap import mocap_config
 
     if (session / "session.toml").is_file():

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.fitting import Observations
+from cdprhost.calibration.measurements import RejectedTake
 from cdprhost.calibration.pose_noise import PoseNoise
-from cdprhost.calibration.session import RejectedTake, load_session
+from cdprhost.calibration.session import load_session
 from cdprhost.calibration.session_identification import measure_any
 from cdprhost.diagnosis.workflow import Diagnosis, DiagnosisSettings, diagnose
 from cdprhost.errors import InputError

@@ -23,11 +23,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from cdprhost.calibration.commanding import commanded_path
-from cdprhost.calibration.readers import Take, write_take
-from cdprhost.calibration.registration import rotation_about_z
+from cdprhost.calibration.mocap.readers import Take, write_take
+from cdprhost.calibration.mocap.registration import rotation_about_z
+from cdprhost.calibration.mocap.takes import EffectorConfig, MocapConfig
 from cdprhost.calibration.session import SessionConfig
 from cdprhost.calibration.session_writer import SessionWriter
-from cdprhost.calibration.takes import EffectorConfig, MocapConfig
 from cdprhost.effects.base import MotionContext
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.sim.mocap_noise import MocapNoise, effector_motion, gap_mask, marker_noise, vary

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from cdprhost.calibration.readers import EXTENSIONS
+from cdprhost.calibration.mocap.readers import EXTENSIONS
 from cdprhost.calibration.session import SessionConfig
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel

@@ -125,7 +125,7 @@ def test_refused_takes_are_listed_as_pose_take_reason_message(tmp_path, sim_mode
         seed=6,
     )
     # re-write the third take with a creep of 0.5 mm over the take
-    from cdprhost.calibration.readers import read_take, write_take
+    from cdprhost.calibration.mocap.readers import read_take, write_take
     from cdprhost.sim.synthetic_session import synthesize_take
 
     take = read_take(tmp_path / "s" / "takes" / "pose_0003.csv")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cdprhost.calibration.readers import read_take
-from cdprhost.calibration.takes import measure_effector
+from cdprhost.calibration.mocap.readers import read_take
+from cdprhost.calibration.mocap.takes import measure_effector
 from cdprhost.errors import InputError
 from cdprhost.kinematics import MachineModel
 from cdprhost.profile import save_profile

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cdprhost.calibration.readers import Take
-from cdprhost.calibration.takes import EffectorConfig, MocapConfig
+from cdprhost.calibration.mocap.readers import Take
+from cdprhost.calibration.mocap.takes import EffectorConfig, MocapConfig
 from cdprhost.sim.synthetic_session import (
     DEFAULT_BASE_MARKERS,
     DEFAULT_EFFECTOR_MARKERS,

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cdprhost.calibration.readers import (
+from cdprhost.calibration.mocap.readers import (
     EXTENSIONS,
     FORMATS,
     Take,
@@ -19,8 +19,8 @@ from cdprhost.calibration.readers import (
     read_take,
     write_take,
 )
-from cdprhost.calibration.readers.writers import write_motive
-from cdprhost.calibration.takes import measure_effector
+from cdprhost.calibration.mocap.readers.writers import write_motive
+from cdprhost.calibration.mocap.takes import measure_effector
 from cdprhost.errors import InputError
 from cdprhost.sim.mocap_noise import MocapNoise
 from cdprhost.sim.synthetic_session import synthesize_take

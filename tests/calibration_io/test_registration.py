@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cdprhost.calibration.readers import Take
-from cdprhost.calibration.registration import (
+from cdprhost.calibration.mocap.readers import Take
+from cdprhost.calibration.mocap.registration import (
     is_degenerate,
     kabsch,
     register_frames,

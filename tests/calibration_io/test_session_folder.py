@@ -7,13 +7,9 @@ import shutil
 import numpy as np
 import pytest
 
-from cdprhost.calibration.readers import FORMATS
-from cdprhost.calibration.session import (
-    POSE_COLUMNS,
-    load_session,
-    load_session_config,
-    read_poses,
-)
+from cdprhost.calibration.mocap.readers import FORMATS
+from cdprhost.calibration.poses import POSE_COLUMNS, read_poses
+from cdprhost.calibration.session import load_session, load_session_config
 from cdprhost.calibration.session_writer import SessionWriter, session_toml
 from cdprhost.errors import InputError
 from cdprhost.sim.synthetic_session import (
@@ -96,7 +92,7 @@ def test_rejected_and_unreadable_takes_are_listed_not_used(tmp_path):
         tmp_path / "s", points, commanded, s_cmd, t_s, dirs, "p", n_frames=20, seed=3
     )
     bad = synthesize_take(points[1], n_frames=20, base_error_mm=3.0, rng=np.random.default_rng(0))
-    from cdprhost.calibration.readers import write_take
+    from cdprhost.calibration.mocap.readers import write_take
 
     write_take(root / "takes" / "pose_0002.csv", bad, "motive-csv")
     (root / "takes" / "pose_0004.csv").write_text("garbage\n")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from cdprhost.calibration.session_setup import markers_in_take, mocap_config, suggest_roles
+from cdprhost.calibration.mocap.setup import markers_in_take, mocap_config, suggest_roles
 from cdprhost.errors import InputError
 from tests.calibration_io.helpers import DATA
 

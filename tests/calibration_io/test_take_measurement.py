@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
-from cdprhost.calibration.readers import Take, read_take
-from cdprhost.calibration.registration import rotation_about_z
-from cdprhost.calibration.takes import TakeRejected, effector_centroid, measure_effector
+from cdprhost.calibration.mocap.readers import Take, read_take
+from cdprhost.calibration.mocap.registration import rotation_about_z
+from cdprhost.calibration.mocap.takes import effector_centroid, measure_effector
+from cdprhost.calibration.takes import TakeRejected
 from cdprhost.sim.mocap_noise import MocapNoise
 from cdprhost.sim.synthetic_session import motive_world_pose, synthesize_take
 from tests.calibration_io.helpers import mocap_config

@@ -14,14 +14,18 @@ depth is worst; :mod:`~.camera.take_drift`), not against the few frames' scatter
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from pathlib import Path
+
 import numpy as np
 
 from cdprhost.calibration.acceptance import AcceptanceLimits
+from cdprhost.calibration.camera.config import CameraConfig
 from cdprhost.calibration.camera.session_fit import SessionFit, TakeDetections, fit_session
 from cdprhost.calibration.camera.take_drift import CameraDrift, camera_drift
 from cdprhost.calibration.camera.takes import read_camera_session, skipped_text
-from cdprhost.calibration.registration import RigidTransform
-from cdprhost.calibration.session import RejectedTake, Session, SessionMeasurements
+from cdprhost.calibration.measurements import RejectedTake, SessionMeasurements
+from cdprhost.calibration.poses import PoseTable
 from cdprhost.calibration.takes import TakeMeasurement, TakeRejected, TakeSeries, judge_takes
 from cdprhost.errors import InputError
 from cdprhost.kinematics.machine import MachineModel
@@ -32,9 +36,6 @@ CAMERA_MIN_FRAMES = 3
 #: The mocap drift limit handed to the generic take test (whose drift test a camera take
 #: has already passed on the camera's noise): a drift no take reaches.
 NO_DRIFT_LIMIT = 1e9
-
-_IDENTITY = RigidTransform(np.eye(3), np.zeros(3), np.zeros(()), np.zeros((), dtype=int))
-
 
 #: Smallest drift over a camera take that matters (mm): a frame's B scatters by tenths of a
 #: millimetre, and a drift test on a few frames must not refuse takes for that.
@@ -50,22 +51,24 @@ def camera_limits(limits: AcceptanceLimits) -> AcceptanceLimits:
 
 
 def measure_camera_session(
-    session: Session,
+    directory: Path,
+    camera: CameraConfig,
+    poses: PoseTable,
+    take_paths: Sequence[Path],
     model: MachineModel | None,
     limits: AcceptanceLimits | None = None,
     *,
+    declared_noise_mm: float | None = None,
     refine: bool = True,
 ) -> SessionMeasurements:
-    """Every take of a camera session measured (refused ones listed, not used); with
-    ``model`` (the profile that commanded the poses) and ``refine``, the intrinsics are
-    refined against the robot's motion. Raises InputError when no frame shows the
-    reference board well enough (naming the frames)."""
-    camera = session.config.camera
-    if camera is None:
-        raise InputError("not a camera session (no [camera] in session.toml)")
-    lim = camera_limits(limits or session.config.acceptance)
-    data = read_camera_session(session.directory, camera, session.take_paths)
-    p = session.poses
+    """Every take of a camera session measured (refused ones listed, not used): the session
+    folder ``directory`` with its ``[camera]`` table, its poses.csv and the take folders of
+    its rows; with ``model`` (the profile that commanded the poses) and ``refine``, the
+    intrinsics are refined against the robot's motion. Raises InputError when no frame
+    shows the reference board well enough (naming the frames)."""
+    lim = camera_limits(limits or camera.acceptance)
+    data = read_camera_session(directory, camera, tuple(take_paths))
+    p = poses
     fit_rows = np.array([r != "check" for r in (p.roles or ("fit",) * len(p))])
     try:
         fit = fit_session(
@@ -83,7 +86,7 @@ def measure_camera_session(
             if t is not None
         )
         raise InputError(
-            f"{exc}" + (f" ({named})" if named else ""), source=str(session.directory)
+            f"{exc}" + (f" ({named})" if named else ""), source=str(directory)
         ) from None
     rejected: list[RejectedTake] = [
         RejectedTake(int(p.pose[i]), p.take[i], "unreadable", msg)
@@ -129,11 +132,10 @@ def measure_camera_session(
             TakeSeries(
                 fit.frame_positions[i],
                 take.detections.times,
-                _IDENTITY,
                 np.zeros(3),
                 0.0,
                 (),
-                str(session.take_path(i)),
+                str(take_paths[i] if take_paths else directory / p.take[i]),
             )
         )
         rows.append(i)
@@ -176,7 +178,7 @@ def measure_camera_session(
         np.zeros(len(keep)),
         tuple(results),
         tuple(rejected),
-        session.config.declared_noise_mm,
+        declared_noise_mm,
         covariance=cov,
         common_covariance=fit.common_covariance,
         parameter_covariance=fit.geometry_covariance_extra,

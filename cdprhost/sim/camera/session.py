@@ -33,7 +33,8 @@ from cdprhost.calibration.camera.intrinsics import (
     calibrate_intrinsics,
 )
 from cdprhost.calibration.commanding import commanded_path
-from cdprhost.calibration.session import POSE_COLUMNS, POSES_FILE, SESSION_FILE, SessionConfig
+from cdprhost.calibration.poses import POSE_COLUMNS
+from cdprhost.calibration.session import POSES_FILE, SESSION_FILE, SessionConfig
 from cdprhost.calibration.session_writer import session_toml
 from cdprhost.effects.base import MotionContext
 from cdprhost.fileio.atomic import write_text_atomic

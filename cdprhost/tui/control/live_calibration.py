@@ -125,7 +125,7 @@ class LiveCalibration:
     ) -> CalibrationView:
         """A new session (its markers from ``mocap_config``, a TOML file with the ``[mocap]``
         table, checked before anything is written) or the one in ``session_dir``."""
-        from cdprhost.calibration.session_setup import mocap_for_session
+        from cdprhost.calibration.session import mocap_for_session
         from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
         from cdprhost.machine import Machine
 

@@ -14,7 +14,7 @@ import re
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import (
+from cdprhost.calibration.mocap.readers.take import (
     Take,
     csv_rows,
     numeric_block,

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from cdprhost.calibration.readers.c3d_take import write_c3d
-from cdprhost.calibration.readers.motive import SUPPORTED_VERSIONS
-from cdprhost.calibration.readers.take import FORMATS, Take, unit_scale
+from cdprhost.calibration.mocap.readers.c3d_take import write_c3d
+from cdprhost.calibration.mocap.readers.motive import SUPPORTED_VERSIONS
+from cdprhost.calibration.mocap.readers.take import FORMATS, Take, unit_scale
 from cdprhost.fileio.atomic import write_text_atomic
 
 MOTIVE_UNITS = ("Meters", "Centimeters", "Millimeters")

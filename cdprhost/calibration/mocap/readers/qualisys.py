@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take, numeric_block, read_text, to_float
+from cdprhost.calibration.mocap.readers.take import Take, numeric_block, read_text, to_float
 from cdprhost.errors import InputError
 
 FORMAT = "qualisys-tsv"

@@ -1,11 +1,14 @@
-"""Starting a calibration session from scratch (no folder, no TOML), for screens and scripts.
+"""Starting a motion-capture session from scratch (no folder, no TOML), for screens and
+scripts.
 
 A screen asks the user for one take recorded with the motion-capture software
 (:func:`markers_in_take` lists its markers, :func:`suggest_roles` guesses which are on the
 base and which on the effector), for the base markers' positions in the base frame and the
 effector offset, builds the ``[mocap]`` configuration with :func:`mocap_config` (every
 problem listed at once, as lines a screen can show) and hands it to
-:class:`~cdprhost.calibration.wizard.CalibrationWizard`, which creates the folder.
+:class:`~cdprhost.calibration.wizard.CalibrationWizard`, which creates the folder
+(:func:`~cdprhost.calibration.session.mocap_for_session` picks the configuration a wizard
+starts or resumes with).
 """
 
 from __future__ import annotations
@@ -13,14 +16,13 @@ from __future__ import annotations
 import os
 import re
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
 
 from cdprhost.calibration.config_input import validation_problems
-from cdprhost.calibration.readers import read_take
-from cdprhost.calibration.takes import MocapConfig
+from cdprhost.calibration.mocap.readers import read_take
+from cdprhost.calibration.mocap.takes import MocapConfig
 from cdprhost.errors import InputError
 
 BASE_WORDS = ("base", "frame", "ground", "floor", "fixed")
@@ -69,27 +71,3 @@ def mocap_config(
         raise InputError(
             "invalid motion-capture configuration", problems=validation_problems(exc)
         ) from None
-
-
-def mocap_for_session(
-    session: str | os.PathLike[str],
-    config_path: str | os.PathLike[str] | None = None,
-    virtual: MocapConfig | None = None,
-) -> MocapConfig | None:
-    """The ``[mocap]`` configuration a wizard needs for ``session``: None when the folder
-    already has its ``session.toml`` (resuming), else the one in ``config_path`` (a TOML
-    file with the ``[mocap]`` table), else ``virtual`` (the simulator's); :class:`InputError`
-    when a new session has none (checked before anything is written)."""
-    from cdprhost.calibration.session import load_session_config
-
-    if (Path(session) / "session.toml").is_file():
-        return None
-    if config_path:
-        return load_session_config(config_path).motion_capture
-    if virtual is not None:
-        return virtual
-    raise InputError(
-        "a new session needs the motion-capture configuration: a TOML file with the [mocap] "
-        "table of session.toml (base markers, effector markers and offset)",
-        source=str(session),
-    )

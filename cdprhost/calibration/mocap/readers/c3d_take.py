@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take, unit_scale
+from cdprhost.calibration.mocap.readers.take import Take, unit_scale
 from cdprhost.errors import InputError
 from cdprhost.fileio.atomic import atomic_open
 

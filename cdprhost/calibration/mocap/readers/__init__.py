@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import os
 
-from cdprhost.calibration.readers.c3d_take import looks_like_c3d, read_c3d
-from cdprhost.calibration.readers.motive import looks_like_motive, read_motive
-from cdprhost.calibration.readers.qualisys import looks_like_qualisys, read_qualisys
-from cdprhost.calibration.readers.take import FORMATS, Take
-from cdprhost.calibration.readers.vicon import looks_like_vicon, read_vicon
-from cdprhost.calibration.readers.writers import EXTENSIONS, write_take
+from cdprhost.calibration.mocap.readers.c3d_take import looks_like_c3d, read_c3d
+from cdprhost.calibration.mocap.readers.motive import looks_like_motive, read_motive
+from cdprhost.calibration.mocap.readers.qualisys import looks_like_qualisys, read_qualisys
+from cdprhost.calibration.mocap.readers.take import FORMATS, Take
+from cdprhost.calibration.mocap.readers.vicon import looks_like_vicon, read_vicon
+from cdprhost.calibration.mocap.readers.writers import EXTENSIONS, write_take
 from cdprhost.errors import InputError
 
 __all__ = ["EXTENSIONS", "FORMATS", "Take", "detect_format", "read_take", "write_take"]

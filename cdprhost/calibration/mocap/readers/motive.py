@@ -16,7 +16,7 @@ import os
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import (
+from cdprhost.calibration.mocap.readers.take import (
     Take,
     csv_rows,
     numeric_block,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cdprhost.calibration.readers.take import Take
+from cdprhost.calibration.mocap.readers.take import Take
 
 # Relative size of the second singular value below which points count as collinear.
 COLLINEAR_TOL = 1e-9
