@@ -49,14 +49,23 @@ class LabFlow(ControllerBase):
         self.background("calibration", work, finished, fail, exclusive=True)
 
     def plan_calibration(
-        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+        self,
+        n_fit: int,
+        n_check: int,
+        session_dir: str | None,
+        mocap_config: str | None = None,
+        camera: str | None = None,
+        intrinsics: str | None = None,
     ) -> None:
+        """Plan the poses; with ``camera`` it takes the pictures instead of motion capture
+        (``intrinsics``: its camera.toml)."""
         calib = self.backend.calibration
         if calib is None:
             self._calibration(lambda: None, lambda _: None, "planning")
             return
+        extra = {"camera": camera, "intrinsics": intrinsics} if camera else {}
         self._calibration(
-            lambda: calib.plan(n_fit, n_check, session_dir, mocap_config),
+            lambda: calib.plan(n_fit, n_check, session_dir, mocap_config, **extra),
             lambda view: self.update(calibration=view),
             "planning",
             "planning poses",
