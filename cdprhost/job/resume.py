@@ -58,6 +58,9 @@ class ResumePoint:
     plan: dict[str, Any] = field(default_factory=dict)  # how the job built its program
     setup: dict[str, Any] = field(default_factory=dict)  # placement options (`Setup.to_json`)
     placement: tuple[float, float] | None = None  # the X/Y shift they gave (mm)
+    # the operator's overrides in effect (M220 / M221); a resume starts at 100 % and says so
+    speed_pct: float = 100.0
+    flow_pct: float = 100.0
     saved_at: str = ""
     version: int = VERSION
 

@@ -47,6 +47,7 @@ from cdprhost.link.events import Identity
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import estop_flags, heaters_off
 from cdprhost.motion.device_limits import caps_for_device, same_plan
+from cdprhost.motion.override import check_percent
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.motion.segments import DEFAULT_LIMITS
@@ -111,6 +112,27 @@ class PrintJob:
         if reason:
             self.requests.cancel_reason = self.requests.cancel_reason or reason
         self._request("cancel")
+
+    def request_speed(self, percent: float) -> None:
+        """M220 S<percent> while printing: the speeds of what is not sent yet (within about
+        the device's buffered second); ValueError outside 10-500 %."""
+        self._override("speed", percent)
+
+    def request_flow(self, percent: float) -> None:
+        """M221 S<percent> while printing: the extrusion of what is not sent yet."""
+        self._override("flow", percent)
+
+    def _override(self, what: str, percent: float) -> None:
+        factor = check_percent(what, percent)
+        self.requests.set_override(what, factor)
+        self.log.write("request", what=what, percent=round(factor * 100, 3))
+        if self._started and not self._done.is_set():
+            self._emit(
+                Notice(
+                    f"{what} {factor * 100:g} % requested (what the device holds already, "
+                    "about a second of motion, runs as sent)"
+                )
+            )
 
     def emergency_stop(self) -> bool:
         """ESTOP now (motors kept, heaters off unless the profile keeps them on failure); the
@@ -372,6 +394,7 @@ class PrintJob:
                 result.notices.append(text)
             self._replan_for(ident, dev_caps, result)
             self._refine_resume(link, check.found, result)
+            self._say_overrides_reset(result)
             self._t0 = link.request_status().motion_time_s
             writer = ResumeWriter(
                 resume_path_for(self.gcode, self.options.resume_dir, self._sha256),
@@ -412,6 +435,20 @@ class PrintJob:
                 self._stop_tail(streamer, result, why)
             else:
                 self._give_up(link, streamer, result, why, exc)
+
+    def _say_overrides_reset(self, result: PrintResult) -> None:
+        """A resumed print that ran with a speed or flow override starts again at 100 %."""
+        point = self.options.resume
+        if point is None or (point.speed_pct == 100 and point.flow_pct == 100):
+            return
+        speed, flow = self.requests.overrides()
+        text = (
+            f"the interrupted print ran at speed {point.speed_pct:g} %, flow "
+            f"{point.flow_pct:g} %; it resumes at speed {speed * 100:g} %, flow {flow * 100:g} % "
+            "(M220 / M221 set them again)"
+        )
+        self._emit(Notice(text))
+        result.notices.append(text)
 
     def _refine_resume(self, link: HostLink, found: DeviceStatus, result: PrintResult) -> None:
         """``--resume`` after a killed host: the device's own last segment, when it knows it
@@ -470,6 +507,8 @@ class PrintJob:
             e_offset=self._e_offset,
             setup=self.setup,
             placement=self._prepare().placement,
+            plan_profile=self._plan_profile,
+            limits=self._segment_limits,
         )
 
     # ------------------------------------------------------------- endings

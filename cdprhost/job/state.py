@@ -141,7 +141,18 @@ class Notice:
     text: str
 
 
-Event = StateChanged | Planned | Progress | Temperatures | LinkHealth | Failure | Notice
+@dataclass(frozen=True)
+class Overrides:
+    """The operator's speed and flow overrides (M220 / M221, percent) now applied to what is
+    sent; ``time_ratio``: the motion still planned takes this times its planned time (about
+    1 / speed, less where the limits cap it)."""
+
+    speed_pct: float = 100.0
+    flow_pct: float = 100.0
+    time_ratio: float = 1.0
+
+
+Event = StateChanged | Planned | Progress | Temperatures | LinkHealth | Failure | Notice | Overrides
 
 
 class IllegalTransition(RuntimeError):
@@ -176,6 +187,9 @@ class JobSnapshot:
     notices: tuple[str, ...] = ()
     started_at: float | None = None  # host monotonic clock: first HEATING or PRINTING
     ended_at: float | None = None  # ... and the end (DONE, CANCELLED, FAILED, REFUSED)
+    overrides: Overrides = field(default_factory=Overrides)
+    #: machine seconds run (planned time scaled by the overrides in effect as it ran)
+    machine_time_s: float = 0.0
 
     def elapsed_s(self, now: float) -> float:
         """Seconds since the job started printing (``now``: time.monotonic()); stops at its end."""
@@ -197,10 +211,11 @@ class JobSnapshot:
 
     @property
     def eta_s(self) -> float | None:
-        """Remaining planned device time (device time runs at the planned rate)."""
+        """Remaining device time: the planned time left, at the speed override in effect."""
         if not self.estimated_time_s:
             return None
-        return max(self.estimated_time_s - self.device_time_s, 0.0)
+        left = max(self.estimated_time_s - self.device_time_s, 0.0)
+        return left * self.overrides.time_ratio
 
 
 HISTORY = 600
@@ -231,8 +246,10 @@ def reduce(snap: JobSnapshot, event: Event) -> JobSnapshot:
             done_s=event.done_s,
         )
     if isinstance(event, Progress):
+        ran = max(event.device_time_s - snap.device_time_s, 0.0) * snap.overrides.time_ratio
         return replace(
             snap,
+            machine_time_s=snap.machine_time_s + ran,
             segments_done=event.segments_done,
             line=event.line,
             layer=event.layer,
@@ -254,4 +271,6 @@ def reduce(snap: JobSnapshot, event: Event) -> JobSnapshot:
         return replace(snap, failure=event)
     if isinstance(event, Notice):
         return replace(snap, notices=(*snap.notices[-49:], event.text))
+    if isinstance(event, Overrides):
+        return replace(snap, overrides=event)
     raise TypeError(f"unknown event {event!r}")

@@ -24,6 +24,7 @@ import numpy as np
 
 from cdprhost.gcode import items as g
 from cdprhost.job.options import PrintResult
+from cdprhost.job.overriding import Overriding
 from cdprhost.job.resume import SAVED_WHILE_PRINTING, ResumePoint, ResumeWriter
 from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
 from cdprhost.job.segment_map import SegmentInfo, SegmentMap
@@ -43,7 +44,7 @@ from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
 from cdprhost.machine.commands import device_messages
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.prepared import Setup
-from cdprhost.motion.segments import PlannedSegments
+from cdprhost.motion.segments import DEFAULT_LIMITS, PlannedSegments, SegmentLimits
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.messages import BED, HOTEND, Flag, SetHeater
 
@@ -63,6 +64,22 @@ class Requests:
     _lock: threading.Lock = field(default_factory=threading.Lock)
     stop_reason: str = ""
     cancel_reason: str = ""  # who cancelled (quit, a signal); "" = the operator
+    speed: float = 1.0  # the operator's override (M220): a factor, read at each feed
+    flow: float = 1.0  # ... and M221
+
+    def set_override(self, what: str, factor: float) -> None:
+        """The speed or flow override (a factor, checked by the caller)."""
+        with self._lock:
+            if what == "speed":
+                self.speed = factor
+            elif what == "flow":
+                self.flow = factor
+            else:
+                raise ValueError(f"unknown override {what!r}")
+
+    def overrides(self) -> tuple[float, float]:
+        with self._lock:
+            return self.speed, self.flow
 
     def add(self, what: str) -> None:
         with self._lock:
@@ -104,6 +121,8 @@ class StreamContext:
     e_offset: Callable[[], float] = lambda: 0.0
     setup: Setup = field(default_factory=Setup)  # placement options the program was built with
     placement: tuple[float, float] = (0.0, 0.0)  # the X/Y shift they gave (mm)
+    plan_profile: MachineProfile | None = None  # the profile planned on (capped to the board)
+    limits: SegmentLimits = DEFAULT_LIMITS  # the device's shortest segment and step rate
 
 
 class Streamer:
@@ -121,6 +140,9 @@ class Streamer:
         self.pending: deque[Any] = deque()  # plan items not sent yet, in order
         self.source: Iterator[Any] = iter(())
         self.stops = StopControl(self)
+        self.overriding = Overriding(
+            ctx.plan_profile or ctx.profile, ctx.model.geometry.outlets, self.clock_hz, ctx.limits
+        )
         self.boot_id = link.identity.boot_id if link.identity else 0
         self.status: DeviceStatus | None = None
         self.heat_item = 0
@@ -149,25 +171,42 @@ class Streamer:
         self.link.flush()
         self.drain()
 
-    def _segments(self, batch: PlannedSegments) -> None:
-        wire = to_wire(batch)
-        i, n = 0, len(batch)
+    def _segments(self, planned: PlannedSegments) -> None:
+        i, n = 0, len(planned)
         link = self.link
+        batch, wire, at = planned, to_wire(planned), 0  # what is sent: segment k is batch[k - at]
+        fresh = True
         while i < n:
             self.service()
             if self.ctx.requests.has("pause", "cancel", "stop"):
-                if i < n:  # the rest of the plan waits (a pause resumes it)
-                    self.pending.appendleft(batch.take(slice(i, n)))
+                if i < n:  # the rest of the plan waits (a pause resumes it), as planned
+                    self.pending.appendleft(planned.take(slice(i, n)))
                 self.stops.stop_here()
                 return
+            factors = self.ctx.requests.overrides()
+            ov = self.overriding
+            if (
+                factors != (ov.speed, ov.flow)
+                or ov.stale
+                or (fresh and not ov.plain(float(planned.v_start[0]), link.segments_sent))
+            ):
+                batch, _ = ov.apply(planned.take(slice(i, n)), factors, link.segments_sent)
+                wire, at = to_wire(batch), i
+                news = ov.event()
+                if news is not None:
+                    self.ctx.emit(news)
+            fresh = False
             before = link.segments_sent
-            j = link.feed(wire, i, max_wait=SERVICE_S)
+            j = at + link.feed(wire, i - at, max_wait=SERVICE_S)
             if j > i:
-                part = batch.take(slice(i, j))
+                part = batch.take(slice(i - at, j - at))
                 self.map.add(before + 1, part)
-                self.stops.sent(batch, j - 1, before + j - i)
-                self.stops.note(part)
-                self._at_rest = bool(batch.v_end[j - 1] <= 1e-9)
+                self.stops.sent(batch, j - at - 1, before + j - i)
+                self.overriding.fed(
+                    int(planned.steps_abs[j - 1, 3]), batch, j - at - 1, before + j - i
+                )
+                self.stops.note(planned.take(slice(i, j)))
+                self._at_rest = bool(batch.v_end[j - at - 1] <= 1e-9)
                 i = j
 
     def _command(self, item: Any) -> None:
@@ -438,4 +477,6 @@ class Streamer:
             plan=self.ctx.plan.to_json(),
             setup=self.ctx.setup.to_json(),
             placement=self.ctx.placement,
+            speed_pct=round(self.ctx.requests.overrides()[0] * 100, 3),
+            flow_pct=round(self.ctx.requests.overrides()[1] * 100, 3),
         )

@@ -338,6 +338,12 @@ class PrinterService:
             job.request_cancel(request.reason)
         elif isinstance(request, wire.Estop):
             threading.Thread(target=job.emergency_stop, name="estop", daemon=True).start()
+        elif isinstance(request, wire.Override):
+            try:
+                getattr(job, f"request_{request.what}")(request.percent)
+            except ValueError as exc:
+                client.send(wire.Reply(id=request.id, ok=False, error=str(exc)))
+                return
         client.send(wire.Reply(id=request.id, ok=True))
 
     # ------------------------------------------------------------ the job

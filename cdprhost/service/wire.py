@@ -7,6 +7,7 @@ replies to commands and the job's result. Every message a peer sends is validate
 client that sends one is dropped. Version 1:
 
 client -> service  ``hello`` ``start`` ``pause`` ``resume`` ``cancel`` ``estop`` ``bye``
+                   ``override`` (M220 / M221 of the running print)
 service -> client  ``welcome`` ``event`` ``reply`` ``result`` ``log``
 
 Job events are the dataclasses of :mod:`cdprhost.job.state`, written as their fields plus
@@ -26,11 +27,13 @@ from cdprhost.job.state import (
     JobState,
     LinkHealth,
     Notice,
+    Overrides,
     Planned,
     Progress,
     StateChanged,
     Temperatures,
 )
+from cdprhost.motion.override import MAX_PERCENT, MIN_PERCENT
 
 VERSION = 1
 #: the longest line either side accepts (a start request with its profile is about 10 kB)
@@ -106,8 +109,17 @@ class Bye(_Msg):
     op: Literal["bye"] = "bye"
 
 
+class Override(_Msg):
+    """The running print's speed (M220) or flow (M221) override, percent."""
+
+    op: Literal["override"] = "override"
+    id: int = 0
+    what: Literal["speed", "flow"]
+    percent: float = Field(ge=MIN_PERCENT, le=MAX_PERCENT, allow_inf_nan=False)
+
+
 Request = Annotated[
-    Hello | Start | Pause | Resume | Cancel | Estop | Bye, Field(discriminator="op")
+    Hello | Start | Pause | Resume | Cancel | Estop | Bye | Override, Field(discriminator="op")
 ]
 
 # ------------------------------------------------------------ service -> client
@@ -186,6 +198,7 @@ EVENT_TYPES: dict[str, type] = {
     cls.__name__: cls
     for cls in (StateChanged, Planned, Progress, Temperatures, LinkHealth, Failure, Notice)
 }
+EVENT_TYPES[Overrides.__name__] = Overrides
 
 
 def event_to_json(event: Event) -> dict[str, Any]:

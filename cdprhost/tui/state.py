@@ -85,7 +85,7 @@ class UiState:
     job_resumed_from: int | None = None  # 1-based layer a resumed job restarts at
     job_resume_line: int | None = None  # the line an exact resume continues at
     job_request: str = ""  # "pause" or "cancel" asked of the job and not yet taken up
-    rate_samples: tuple[tuple[float, float], ...] = ()  # (monotonic s, device time s) printing
+    rate_samples: tuple[tuple[float, float], ...] = ()  # (monotonic s, machine s) printing
     temps_at: float | None = None  # monotonic time of the newest temperature reading
     temp_samples: tuple[tuple[float, float, float], ...] = ()  # (monotonic s, hotend, bed)
     heat_rates: tuple[tuple[str, float], ...] = ()  # measured warm-up °C per wall s, by heater
@@ -186,7 +186,7 @@ def fold_job_events(
             if snap.state is JobState.HEATING:
                 rates = rates_measured(rates, heat, event)
         elif isinstance(event, Progress) and snap.state is JobState.PRINTING:
-            samples = (*samples[-(RATE_SAMPLES - 1) :], (now, snap.device_time_s))
+            samples = (*samples[-(RATE_SAMPLES - 1) :], (now, snap.machine_time_s))
     if snap is state.job:
         return state, problems
     return (

@@ -1,11 +1,15 @@
-"""`cdprhost diagnose SESSION --profile P [--json R] [--out augmented.toml] [--plot gap.png]`."""
+"""`cdprhost diagnose SESSION --profile P [--json R] [--out augmented.toml] [--plot gap.png]
+[--write [PROFILE]]`."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from dataclasses import replace
+from pathlib import Path
+from typing import Any
 
 from cdprhost.cli.numbers import bounded_int
 from cdprhost.cli.options import output_file
@@ -42,6 +46,15 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         type=output_file,
         metavar="augmented.toml",
         help="write the profile with the final model (geometry + effects)",
+    )
+    p.add_argument(
+        "--write",
+        nargs="?",
+        const="",
+        metavar="PROFILE",
+        help="write the improved profile over PROFILE (default: the --profile file; a shipped "
+        "profile goes to your profiles folder instead, said first), only when the diagnosis "
+        "names an effect that shrinks the held-out error; without it a terminal asks",
     )
     p.add_argument(
         "--plot",
@@ -113,4 +126,52 @@ def run(args: argparse.Namespace) -> int:
         from cdprhost.diagnosis.plot import save_gap_plot  # matplotlib only when asked
 
         save_gap_plot(result, args.plot)
+    _write_back(args, profile, result)
     return 0
+
+
+def _target(ref: str) -> Path:
+    """``--write``'s PROFILE: a file, or a name in the user's profiles folder."""
+    from cdprhost.profile.loader import user_profile_dir
+
+    path = Path(ref).expanduser()
+    if path.suffix == ".toml" or os.sep in ref:
+        return path
+    return user_profile_dir() / f"{ref}.toml"
+
+
+def _asked() -> bool:
+    """Interactive only: a terminal on both ends (scripts and pipes are never asked)."""
+    return sys.stdin.isatty() and sys.stdout.isatty()
+
+
+def _write_back(args: argparse.Namespace, profile: Any, result: Any) -> None:
+    """``--write``, or a question on a terminal: the improved profile, written atomically."""
+    from cdprhost.diagnosis.write_back import write_improved, write_plan
+    from cdprhost.profile.loader import resolve_profile_path
+
+    asked = args.write is None and not args.quiet and _asked()
+    if args.write is None and not asked:
+        return
+    plan = write_plan(
+        result, _target(args.write) if args.write else resolve_profile_path(args.profile)
+    )
+    if plan.refused:
+        if args.write is not None:
+            print(f"profile not written: {plan.refused}", file=sys.stderr)
+        return
+    if asked:
+        try:
+            answer = input(f"{plan.question()} [y/N] ")
+        except EOFError:
+            answer = ""
+        if answer.strip().lower() not in ("y", "yes"):
+            print("profile not written")
+            return
+    elif plan.note:
+        print(plan.note, file=sys.stderr)
+    try:
+        path = write_improved(profile, result, plan, session=str(args.session))
+    except OSError as exc:
+        raise InputError(f"cannot write {plan.path}: {exc.strerror or exc}") from None
+    print(f"wrote the improved profile to {path}")

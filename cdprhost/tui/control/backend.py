@@ -49,7 +49,13 @@ class CalibrationBackend(Protocol):
     """The calibration wizard as the UI drives it (all blocking)."""
 
     def plan(
-        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+        self,
+        n_fit: int,
+        n_check: int,
+        session_dir: str | None,
+        mocap_config: str | None = None,
+        camera: str | None = None,  # a camera takes pictures instead of motion capture
+        intrinsics: str | None = None,  # ... with these intrinsics (camera.toml)
     ) -> CalibrationView: ...
 
     def move_to(self, pose: PoseView) -> PoseView: ...

@@ -22,6 +22,7 @@ HELP = (
     ("M114", "position (G-code and machine frame) and steps"),
     ("M115", "device identity"),
     ("M17 / M18 / M84", "drivers on / off"),
+    ("M220 S / M221 S", "speed / flow override of the running print, percent (10-500)"),
     ("M112", "emergency stop: motion and heaters off at once; drivers stay on (M18 releases)"),
     ("M999", "clear the stop (after M112 or a device fault)"),
     ("help", "this list"),
@@ -31,6 +32,7 @@ HELP = (
 @dataclass(frozen=True)
 class ConsoleCommand:
     op: str  # home move heaters temps position identity enable motors_off estop clear help
+    # speed flow (overrides of the running print)
     text: str
     values: dict[str, float] = field(default_factory=dict)
     wait: bool = False
@@ -66,6 +68,11 @@ def parse_command(text: str) -> ConsoleCommand:
         if "F" in params:
             axes["f"] = float(params["F"])
         return ConsoleCommand("move", raw, axes)
+    if name in ("M220", "M221"):
+        if "S" not in params:
+            raise ConsoleError(f"{name} needs S (percent, 10-500)")
+        what = "speed" if name == "M220" else "flow"
+        return ConsoleCommand(what, raw, {"percent": float(params["S"])})
     if name in ("M104", "M109", "M140", "M190"):
         if "S" not in params:
             raise ConsoleError(f"{name} needs S (target °C)")

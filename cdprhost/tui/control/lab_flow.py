@@ -7,7 +7,7 @@ from dataclasses import replace
 from typing import Any
 
 from cdprhost.tui.control.link_flow import ControllerBase
-from cdprhost.tui.control.views import PoseView
+from cdprhost.tui.control.views import ConsoleLine, PoseView
 from cdprhost.tui.state import DiagnoseView
 
 
@@ -49,14 +49,23 @@ class LabFlow(ControllerBase):
         self.background("calibration", work, finished, fail, exclusive=True)
 
     def plan_calibration(
-        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+        self,
+        n_fit: int,
+        n_check: int,
+        session_dir: str | None,
+        mocap_config: str | None = None,
+        camera: str | None = None,
+        intrinsics: str | None = None,
     ) -> None:
+        """Plan the poses; with ``camera`` it takes the pictures instead of motion capture
+        (``intrinsics``: its camera.toml)."""
         calib = self.backend.calibration
         if calib is None:
             self._calibration(lambda: None, lambda _: None, "planning")
             return
+        extra = {"camera": camera, "intrinsics": intrinsics} if camera else {}
         self._calibration(
-            lambda: calib.plan(n_fit, n_check, session_dir, mocap_config),
+            lambda: calib.plan(n_fit, n_check, session_dir, mocap_config, **extra),
             lambda view: self.update(calibration=view),
             "planning",
             "planning poses",
@@ -135,3 +144,30 @@ class LabFlow(ControllerBase):
         self.background(
             "diagnose", lambda: self.backend.diagnose(session_dir), done, fail, exclusive=True
         )
+
+    def write_diagnosed_profile(self) -> None:
+        """Write the profile the last diagnosis improved, asked first (where, and whether a
+        shipped profile is kept); refused with the reason when it did not improve it."""
+        plan_of = getattr(self.backend, "diagnosed_write_plan", None)
+        if plan_of is None:
+            self.app.notify("this backend cannot write profiles", severity="warning")
+            return
+        plan = plan_of()
+        if plan.refused:
+            self.app.notify(f"profile not written: {plan.refused}", severity="warning")
+            return
+
+        def write() -> None:
+            def done(path: Any) -> None:
+                text = f"wrote the improved profile to {path}"
+                self.say(ConsoleLine("notice", text, self.app.wall_clock()))
+                self.app.notify(text, title="diagnose")
+
+            def fail(exc: BaseException) -> None:
+                text = f"profile not written: {exc.strerror if isinstance(exc, OSError) else exc}"
+                self.say(ConsoleLine("error", text, self.app.wall_clock()))
+                self.app.notify(text, title="diagnose", severity="error")
+
+            self.background("write profile", self.backend.write_diagnosed_profile, done, fail)  # type: ignore[attr-defined]
+
+        self.app.confirm(plan.question(), write)

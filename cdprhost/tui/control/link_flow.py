@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
+from cdprhost.motion.override import MAX_PERCENT, MIN_PERCENT
 from cdprhost.tui.control.backend import EMBEDDED, Backend, JobHandle
 from cdprhost.tui.control.console import ConsoleError, parse_command
 from cdprhost.tui.control.host import ControllerHost
@@ -37,6 +38,9 @@ class ControllerBase:
         self.backend = backend
         self._job: JobHandle | None = None
         self._job_lock = threading.Lock()
+        # the overrides asked of the running job (keys step from there, not from what the
+        # job has applied yet)
+        self._overrides_asked: tuple[JobHandle, dict[str, float]] | None = None
         self._job_ended = threading.Event()  # set when the running job's ``run`` returned
         self._quitting = ""  # why the app quits once the job has stopped ("quit", "SIGTERM")
         self._finished_id = 0  # the last job whose end was handled
@@ -405,6 +409,60 @@ class ControllerBase:
         if cmd.op == "estop":
             self.emergency_stop()
             return [ConsoleLine("reply", "emergency stop sent (bypasses the queue)", now)]
+        if cmd.op in ("speed", "flow"):
+            refused = self.override(cmd.op, cmd.values["percent"])
+            if refused:
+                return [ConsoleLine("error", refused, now)]
+            return [
+                ConsoleLine(
+                    "reply",
+                    f"ok {cmd.op} {cmd.values['percent']:g} %: from the motion not sent yet "
+                    "(about a second)",
+                    now,
+                )
+            ]
         return [
-            ConsoleLine("error", "a print is running: only M105 and M114 are answered now", now)
+            ConsoleLine(
+                "error",
+                "a print is running: only M105 and M114 are answered now, and the overrides "
+                "M220 / M221",
+                now,
+            )
         ]
+
+    def override(self, what: str, percent: float) -> str:
+        """The running job's speed or flow override (percent); the refusal, or ""."""
+        with self._job_lock:
+            job = self._job
+        request = getattr(job, f"request_{what}", None)
+        if job is None or request is None or not self.state.job_active:
+            return f"no print is running: nothing to set the {what} of"
+        try:
+            request(percent)
+        except ValueError as exc:
+            return str(exc)
+        asked = self._overrides_asked
+        if asked is None or asked[0] is not job:
+            asked = (job, {})
+            self._overrides_asked = asked
+        asked[1][what] = float(percent)
+        return ""
+
+    def override_step(self, what: str, step: float) -> None:
+        """A key on the print screen: the override up or down by ``step`` percent (within
+        10-500 %), from what was last asked of this job."""
+        with self._job_lock:
+            job = self._job
+        asked = self._overrides_asked
+        shown = self.state.job.overrides
+        now = shown.speed_pct if what == "speed" else shown.flow_pct
+        if asked is not None and asked[0] is job:
+            now = asked[1].get(what, now)
+        percent = min(max(now + step, MIN_PERCENT), MAX_PERCENT)
+        refused = self.override(what, percent)
+        stamp = self.app.wall_clock()
+        if refused:
+            self.say(ConsoleLine("error", refused, stamp))
+            self.app.notify(refused, severity="warning")
+        else:
+            self.say(ConsoleLine("notice", f"{what} override {percent:g} % asked", stamp))

@@ -23,6 +23,7 @@ from cdprhost.machine import Machine, NotHomed
 from cdprhost.machine.prepare import describe_fault, fault_clearable
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
+from cdprhost.tui.control.live_diagnosis import DiagnosedProfile
 from cdprhost.tui.control.views import (
     ConsoleLine,
     DeviceStatusView,
@@ -118,10 +119,13 @@ class LiveBackend:
 
         self.profile = load_profile(profile) if isinstance(profile, str) else profile
         self.profile_name = self.profile.name
+        # what names the profile's file (a path or a name): a diagnosis writes its improvement
+        self.profile_ref = profile if isinstance(profile, str) else self.profile.name
         self.model = MachineModel.from_profile(self.profile)
         self.speedup = speedup
         self.sim_options = dict(sim_options or {})
         self.diagnosis_settings = diagnosis_settings
+        self.diagnosed = DiagnosedProfile()
         self.job_options = dict(job_options or {})
         self.idle_pump_s = idle_pump_s
         self.setup: Setup = setup or Setup()  # placement, --retarget, cancelled objects
@@ -414,9 +418,19 @@ class LiveBackend:
 
     # ------------------------------------------------------------ diagnose
     def diagnose(self, session_dir: str) -> DiagnosisView:
-        from cdprhost.tui.control.live_diagnosis import run_diagnosis
+        from cdprhost.tui.control.live_diagnosis import run_diagnosis_kept
 
-        return run_diagnosis(session_dir, self.model, self.diagnosis_settings)
+        view, result = run_diagnosis_kept(session_dir, self.model, self.diagnosis_settings)
+        self.diagnosed.keep(session_dir, result)
+        return view
+
+    def diagnosed_write_plan(self) -> Any:
+        """Where the last diagnosis' improved profile would be written (a ``WritePlan``)."""
+        return self.diagnosed.plan(self.profile_ref)
+
+    def write_diagnosed_profile(self) -> str:
+        """Blocking: write the last diagnosis' improved profile; the path written."""
+        return self.diagnosed.write(self.profile, self.profile_ref)
 
     def close(self) -> None:
         self.disconnect()

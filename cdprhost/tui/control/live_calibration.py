@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from cdprhost.errors import CdprError, InputError
+from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.views import CalibrationView, IdentificationView, ParameterRow, PoseView
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -87,6 +88,7 @@ class LiveCalibration:
         self.mocap_dir = mocap_dir or (str(observer.directory) if observer is not None else None)
         self.wizard: Any = None
         self.source = _GivenTake()
+        self.camera = ""  # the camera that takes the pictures ("": motion capture takes)
         self.messages: list[str] = []
 
     # --------------------------------------------------------------- views
@@ -111,6 +113,7 @@ class LiveCalibration:
             tuple(sorted(plan.indices.items())),
             None,
             message,
+            camera=self.camera,
         )
 
     def _pose(self, index: int) -> PoseView:
@@ -121,23 +124,67 @@ class LiveCalibration:
 
     # ---------------------------------------------------------------- steps
     def plan(
-        self, n_fit: int, n_check: int, session_dir: str | None, mocap_config: str | None = None
+        self,
+        n_fit: int,
+        n_check: int,
+        session_dir: str | None,
+        mocap_config: str | None = None,
+        camera: str | None = None,
+        intrinsics: str | None = None,
     ) -> CalibrationView:
         """A new session (its markers from ``mocap_config``, a TOML file with the ``[mocap]``
-        table, checked before anything is written) or the one in ``session_dir``."""
+        table, checked before anything is written) or the one in ``session_dir``; with
+        ``camera`` (:mod:`~cdprhost.tui.control.live_camera`) the camera takes pictures
+        instead (``mocap_config``: its ``[camera]`` boards; ``intrinsics``: its camera.toml)."""
         from cdprhost.calibration.session import mocap_for_session
         from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
         from cdprhost.machine import Machine
 
         b = self.backend
         folder = session_dir or DEFAULT_SESSION
+        if camera:
+            from cdprhost.tui.control.live_camera import camera_setup
+
+            def watch(observer: Any) -> None:
+                """The simulated camera watches a new embedded simulated device."""
+                b.sim_options["observer"] = observer
+                b.connect(EMBEDDED, b.profile.serial.baud)
+
+            embedded = getattr(b.link, "device", None) is not None
+            setup = camera_setup(
+                camera,
+                Path(folder),
+                b.model,
+                watch=watch if embedded else None,
+                config_path=mocap_config,
+                intrinsics_path=intrinsics,
+                log=self._log,
+            )
+            takes = setup.takes(Path(folder), self._log)
+            device = Machine(b.link, b.profile, b.model, settle_s=0.5)
+            self.camera = camera
+            self.wizard = CalibrationWizard(
+                folder,
+                b.profile,
+                device,
+                takes,
+                mocap=None,
+                options=WizardOptions(n_poses=n_fit, n_check=n_check),
+                log=self._log,
+                profile_ref=b.profile_name,
+                camera=setup.config,
+                intrinsics=setup.intrinsics,
+                candidates=setup.candidates(takes, b.model, n_fit + n_check),
+            )
+            return self._view("planned", self.messages[-1] if self.messages else "")
+        self.camera = ""
+        device = Machine(b.link, b.profile, b.model, settle_s=0.5)
         virtual = None
         if b.sim_options.get("observer") is not None:
             from cdprhost.sim.virtual_mocap import mocap_config as virtual_config
 
             virtual = virtual_config(b.profile_name).mocap
         mocap = mocap_for_session(folder, mocap_config, virtual)
-        device = Machine(b.link, b.profile, b.model, settle_s=0.5)
         self.wizard = CalibrationWizard(
             folder,
             b.profile,
@@ -202,7 +249,7 @@ class LiveCalibration:
         from cdprhost.calibration.wizard import RecordTake
 
         self._require(RecordTake, pose.index)
-        self.source.path = Path(take_path)
+        self.source.path = Path(take_path)  # (a camera takes its pictures itself)
         before = len(self.messages)
         self.wizard.step()
         view = self._pose(pose.index)

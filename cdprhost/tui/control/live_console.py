@@ -82,6 +82,10 @@ def _execute(
     match cmd.op:
         case "help":
             return [f"{c:<18} {what}" for c, what in HELP]
+        case "speed" | "flow":
+            raise ConsoleError(
+                f"no print is running: {cmd.text.split()[0].upper()} sets a print's {cmd.op}"
+            )
         case "home":
             return ["ok homed", *status_lines(status_view(m.home()), bed)]
         case "enable":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -74,9 +75,50 @@ def diagnosis_view(report: dict[str, Any]) -> DiagnosisView:
 
 def run_diagnosis(session_dir: str, model: MachineModel, settings: Any = None) -> DiagnosisView:
     """Blocking: diagnose the session folder against ``model``."""
+    return run_diagnosis_kept(session_dir, model, settings)[0]
+
+
+def run_diagnosis_kept(
+    session_dir: str, model: MachineModel, settings: Any = None
+) -> tuple[DiagnosisView, Any]:
+    """:func:`run_diagnosis`, and the diagnosis itself (to write the improved profile)."""
     from cdprhost.diagnosis.report import to_json
     from cdprhost.diagnosis.session_input import diagnose_session
     from cdprhost.diagnosis.workflow import DiagnosisSettings
 
     result, _ = diagnose_session(session_dir, model, settings or DiagnosisSettings())
-    return diagnosis_view(to_json(result, session=session_dir))
+    return diagnosis_view(to_json(result, session=session_dir)), result
+
+
+class DiagnosedProfile:
+    """The last diagnosis of a session and the profile it can improve (the diagnose screen's
+    write-back: asked first, written atomically, never over a shipped profile)."""
+
+    def __init__(self) -> None:
+        self.session = ""
+        self.result: Any = None
+
+    def keep(self, session: str, result: Any) -> None:
+        self.session, self.result = session, result
+
+    def plan(self, profile_ref: str) -> Any:
+        """Where the improved profile would go (a ``WritePlan``; its ``refused`` says why not)."""
+        from cdprhost.diagnosis.write_back import WritePlan, write_plan
+        from cdprhost.errors import CdprError
+        from cdprhost.profile.loader import resolve_profile_path
+
+        if self.result is None:
+            return WritePlan(Path(""), refused="no diagnosis yet: run one first")
+        try:
+            path = resolve_profile_path(profile_ref)
+        except CdprError as exc:
+            return WritePlan(Path(""), refused=f"the profile's file is not known: {exc}")
+        return write_plan(self.result, path)
+
+    def write(self, profile: Any, profile_ref: str) -> str:
+        """Blocking: write it; the path written."""
+        from cdprhost.diagnosis.write_back import write_improved
+
+        return str(
+            write_improved(profile, self.result, self.plan(profile_ref), session=self.session)
+        )

@@ -212,6 +212,7 @@ class CalibrationView:
     indices: tuple[tuple[str, float], ...] = ()  # observability indices of the plan
     result: IdentificationView | None = None
     message: str = ""
+    camera: str = ""  # the camera taking the pictures ("": motion-capture take files)
 
 
 # ------------------------------------------------------------------- diagnosis

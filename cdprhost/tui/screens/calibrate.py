@@ -89,7 +89,9 @@ class CalibrateScreen(AppScreen):
     BINDINGS = [
         Binding("n", "plan", "Plan poses"),
         Binding("m", "move", "Move to next pose"),
-        Binding("k", "take", "Take file"),
+        Binding(
+            "k", "take", "Take", tooltip="The settled pose's take: a file, or the camera's pictures"
+        ),
         Binding("i", "identify", "Identify"),
         Binding("escape", "leave_input", "Back", show=False),
     ]
@@ -110,8 +112,19 @@ class CalibrateScreen(AppScreen):
             )
             yield Label(" markers ")
             yield Input(
-                placeholder="new session: a session.toml with its [mocap]", compact=True, id="mocap"
+                placeholder="new session: a session.toml with its [mocap] (or [camera])",
+                compact=True,
+                id="mocap",
             )
+        with Horizontal(id="camera-settings"):
+            yield Label("camera ")
+            yield Input(
+                placeholder="blank: motion capture takes; or a camera: 0, a URL, sim",
+                compact=True,
+                id="camera-source",
+            )
+            yield Label(" intrinsics ")
+            yield Input(placeholder="camera.toml", compact=True, id="camera-intrinsics")
         yield Label(id="calib-stage")
         yield DataTable(id="poses", cursor_type="row", zebra_stripes=True)
         with Horizontal(id="take-row"):
@@ -167,6 +180,9 @@ class CalibrateScreen(AppScreen):
             if cal.poses:
                 poses.move_cursor(row=min(cursor, len(cal.poses) - 1))
         waiting = self.app.controller.awaiting_take()
+        take_row = self.query_one("#take-row")
+        if take_row.display != (not cal.camera):
+            take_row.display = not cal.camera  # a camera needs no take file
         take_input = self.query_one("#take-input", Input)
         if waiting is not None and waiting.take and self._offered != (waiting.index, waiting.take):
             take_input.value = waiting.take  # offered by the virtual motion capture, once per pose
@@ -232,13 +248,22 @@ class CalibrateScreen(AppScreen):
             return
         session = self.query_one("#session-dir", Input).value.strip() or None
         markers = self.query_one("#mocap", Input).value.strip() or None
-        self.app.controller.plan_calibration(n_fit, n_check, session, markers)
+        camera = self.query_one("#camera-source", Input).value.strip() or None
+        if camera is None:
+            self.app.controller.plan_calibration(n_fit, n_check, session, markers)
+            return
+        intrinsics = self.query_one("#camera-intrinsics", Input).value.strip() or None
+        self.app.controller.plan_calibration(n_fit, n_check, session, markers, camera, intrinsics)
 
     def action_move(self) -> None:
         if self.check_action("move", ()):
             self.app.controller.move_to_pose()
 
     def action_take(self) -> None:
+        if self.app.state.calibration.camera:  # the camera takes the pictures itself
+            if self.check_action("take", ()):
+                self.app.controller.ingest_take("")
+            return
         self.query_one("#take-input", Input).focus()
 
     def action_identify(self) -> None:

@@ -53,6 +53,13 @@ class DiagnoseScreen(AppScreen):
     AUTO_FOCUS = "#candidates"
     BINDINGS = [
         Binding("e", "edit", "Session"),
+        Binding(
+            "w",
+            "write_profile",
+            "Write profile",
+            tooltip="The profile with the named effect added (asked first; a shipped profile "
+            "is never rewritten)",
+        ),
         Binding("escape", "leave_input", "Back", show=False),
     ]
 
@@ -102,6 +109,21 @@ class DiagnoseScreen(AppScreen):
             gap.show((), (), 0.0)
         else:
             gap.show(result.per_pose_before_mm, result.per_pose_after_mm, result.noise_floor_mm)
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        if action == "write_profile":
+            d = self.app.state.diagnose
+            return d.result is not None and d.result.verdict == "named" and not d.running
+        return True
+
+    def why_not(self, action: str) -> str:
+        if action == "write_profile":
+            return "only after a diagnosis that names an effect"
+        return super().why_not(action)
+
+    def action_write_profile(self) -> None:
+        if self.check_action("write_profile", ()):
+            self.app.controller.write_diagnosed_profile()
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.action_run()

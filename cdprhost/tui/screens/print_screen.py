@@ -122,6 +122,22 @@ def link_line(state: UiState) -> Text:
     return out
 
 
+def override_line(state: UiState, keys: str = "+/- speed · </> flow") -> Text:
+    """The running print's speed and flow overrides and the keys that change them (pure);
+    empty without a running print or while both are 100 %."""
+    o = state.job.overrides
+    if not state.job_active or (o.speed_pct == 100 and o.flow_pct == 100):
+        return Text("")
+    out = Text("speed ", style="bold")
+    out.append(f"{o.speed_pct:g} %", style="yellow" if o.speed_pct != 100 else "")
+    out.append(" · flow ", style="bold")
+    out.append(f"{o.flow_pct:g} %", style="yellow" if o.flow_pct != 100 else "")
+    if o.time_ratio != 1.0 and o.speed_pct != 100:
+        out.append(f" · motion left x{o.time_ratio:.2f}", style="dim")
+    out.append(f"   {keys}", style="dim")
+    return out
+
+
 PRINT_ACTIONS = {
     "start": "start_print",
     "pause": "pause_print",
@@ -151,6 +167,10 @@ class PrintScreen(AppScreen):
             show=False,  # offered on the resume line when the open file has a resume point
             tooltip="A stopped print, at its saved point (else its layer); the link is checked first",
         ),
+        Binding("plus", "override('speed', 10)", "Speed +10 %", show=False),
+        Binding("minus", "override('speed', -10)", "Speed -10 %", show=False),
+        Binding("greater_than_sign", "override('flow', 5)", "Flow +5 %", show=False),
+        Binding("less_than_sign", "override('flow', -5)", "Flow -5 %", show=False),
         Binding("v", "toggle_view", "Preview/violations", show=False),
         Binding("left_square_bracket", "layer(-1)", "Layer down", show=False),
         Binding("right_square_bracket", "layer(1)", "Layer up", show=False),
@@ -191,6 +211,7 @@ class PrintScreen(AppScreen):
                             (float(bed[0]), float(bed[1]), float(bed[2])), id="position"
                         )
                         yield Label(id="link-line")
+                        yield Label(id="override-line")
                     with Vertical(id="right-panels"):
                         yield TemperatureGraph(id="temperatures")
                         yield TensionBars(statics.t_min, statics.t_max, id="tensions")
@@ -230,6 +251,9 @@ class PrintScreen(AppScreen):
         self.query_one(PositionPanel).show(position, sliders, steps)
         self.query_one(TensionBars).show(tensions, title)
         show_text(self.query_one("#link-line", Label), link_line(state))
+        overrides = override_line(state)
+        show_text(self.query_one("#override-line", Label), overrides)
+        self.set_class(bool(overrides.plain), "-override")
         name = Text(state.file.path or "none", style="bold" if state.file.path else "dim")
         name.append(f"   {hint(app, self, 'open')}", style="dim")
         show_text(self.query_one("#file-name", Label), name)
@@ -365,6 +389,8 @@ class PrintScreen(AppScreen):
             return "a print is running: wait until it has ended"
         if action == "center" and not state.file.path:
             return "no file open"
+        if action == "override" and not state.job_active:
+            return "no print is running"
         return super().why_not(action)
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
@@ -374,6 +400,8 @@ class PrintScreen(AppScreen):
             return None if self.app.state.job_active else True
         if action == "center":
             return bool(self.app.state.file.path) and not self.app.state.job_active
+        if action == "override":
+            return self.app.state.job_active
         return True
 
     def action_center(self) -> None:
@@ -409,6 +437,10 @@ class PrintScreen(AppScreen):
 
     def action_start(self) -> None:
         self.app.action_start_print()
+
+    def action_override(self, what: str, step: float) -> None:
+        """M220 / M221 from the keys: the running print's speed or flow, up or down."""
+        self.app.controller.override_step(what, step)
 
     def action_pause(self) -> None:
         self.app.action_pause_print()
