@@ -20,7 +20,9 @@
  * The first line on stdout is the pty path. Single-threaded: a cycle timer polls
  * the pty every POLL_US of simulated time, feeds received bytes to UART0 only
  * while the UART signals XON, buffers the UART's output without limit, paces
- * simulated time to wall time (times the speed-up), updates the thermal model
+ * simulated time to wall time (times the speed-up), updates the thermal model (each
+ * heater's power read from its timer's PWM registers, pwm.c: the compare output's
+ * duty while connected, else the pin's port bit)
  * and watches for timer compare interrupts that simavr lost (flag, enable and
  * I set, vector not queued): it queues them again and counts every repair.
  * The executed-segment record is built from pin edges: step/dir give the
@@ -117,7 +119,7 @@ static avr_flashaddr_t boot_pc;
 static double smash_canary_after = -1.0; /* overwrite the stack canary then (sim seconds) */
 
 static struct thermal thermal[2];
-static int heater_level[2];
+static double heater_power[2]; /* 0..1, as last read */
 static double heater_fail_after = -1.0;
 static double sensor_fault_after = -1.0; /* the hotend's thermistor opens or shorts then */
 static int sensor_fault = SENSOR_OK;
@@ -402,15 +404,30 @@ static void note_heater_silence(void)
         heater_on_silence_max = gap;
 }
 
-static void heater_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+/* A heater's power now: its timer's compare output drives the pin with the duty
+ * OCR / 255 (phase-correct 8-bit PWM) while connected and the timer runs; else the
+ * pin's port bit does (the shutdown path drives it directly). The firmware changes a
+ * duty every control period (100 ms) at most, so reading it every poll is exact to
+ * POLL_US; the PWM's own cycle (2 ms, 33 ms) averages out in the plant's 10 ms bins
+ * and its seconds-long time constants. */
+static double read_heater_power(const struct heater_pwm *p)
 {
-    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
-    (void)irq;
-    int h = (int)(intptr_t)param;
-    if (heater_level[h] && !value)
-        note_heater_silence(); /* it was on until now */
-    thermal_switch(&thermal[h], sim_seconds(), (int)value);
-    heater_level[h] = (int)value;
+    const uint8_t *d = avr->data;
+    if (!(d[p->ddr] & (1u << p->bit)))
+        return 0.0;
+    if ((d[p->tccr_a] & p->com) && (d[p->tccr_b] & 7))
+        return (double)d[p->ocr] / 255.0;
+    return (d[p->port] >> p->bit) & 1 ? 1.0 : 0.0;
+}
+
+static void sample_heaters(void)
+{
+    for (int h = 0; h < 2; h++) {
+        double power = read_heater_power(&HEATER_PWM[h]);
+        if (power != heater_power[h])
+            thermal_switch(&thermal[h], sim_seconds(), power);
+        heater_power[h] = power;
+    }
 }
 
 static void en_cb(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -677,8 +694,9 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
     }
     check_lost_interrupts();
     redrive_switches();
-    if (heater_level[0] || heater_level[1])
-        note_heater_silence();
+    if (heater_power[0] > 0.0 || heater_power[1] > 0.0)
+        note_heater_silence(); /* on until now */
+    sample_heaters();
     update_thermal();
     pace();
     if (time_limit > 0 && sim_seconds() >= time_limit)
@@ -817,8 +835,6 @@ int main(int argc, char **argv)
     watch(MARK_EDGE.port, MARK_EDGE.bit, edge_cb, 0);
     watch(MARK_POS.port, MARK_POS.bit, pos_cb, 0);
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
-    watch(HEATER_PINS[0].port, HEATER_PINS[0].bit, heater_cb, 0);
-    watch(HEATER_PINS[1].port, HEATER_PINS[1].bit, heater_cb, 1);
     for (int k = 0; k < 4; k++)
         watch(EN_PINS[k].port, EN_PINS[k].bit, en_cb, k);
     en_watch = 1;
