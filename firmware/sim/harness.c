@@ -6,6 +6,7 @@
  *            [--thermistor-open-after SIM_SECONDS] [--thermistor-short-after SIM_SECONDS]
  *            [--hotend-start-c C]
  *            [--travel-steps STEPS] [--bootloader HEX] [--smash-canary-after S]
+ *            [--hang-main-after S]
  *
  * With --bootloader the chip boots as a Mega 2560 does: the hex (Debian's
  * arduino-core-avr stk500boot_v2_mega2560.hex) at the boot section 0x3E000 and the
@@ -120,6 +121,9 @@ static double smash_canary_after = -1.0; /* overwrite the stack canary then (sim
 
 static struct thermal thermal[2];
 static double heater_power[2]; /* 0..1, as last read */
+/* SIGUSR2's hang of the main loop: when it began (simulated s), and how long after it
+ * both heaters were off (the heater lease's work, before the watchdog's) */
+static double hang_at = -1.0, heaters_off_after_hang = -1.0, hang_after = -1.0;
 static double heater_fail_after = -1.0;
 static double sensor_fault_after = -1.0; /* the hotend's thermistor opens or shorts then */
 static int sensor_fault = SENSOR_OK;
@@ -428,6 +432,9 @@ static void sample_heaters(void)
             thermal_switch(&thermal[h], sim_seconds(), power);
         heater_power[h] = power;
     }
+    if (hang_at >= 0 && heaters_off_after_hang < 0 && heater_power[0] == 0.0 &&
+        heater_power[1] == 0.0)
+        heaters_off_after_hang = sim_seconds() - hang_at;
 }
 
 static void en_cb(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -640,6 +647,19 @@ static int load_hex(const char *path)
     return bad ? -1 : 0;
 }
 
+/* The main loop sent into the application's first "rjmp .-2" (avr-libc's
+ * __stop_program) with interrupts on: they go on, nothing feeds the watchdog. */
+static void hang_main_loop(void)
+{
+    for (uint32_t a = 0; a + 1 < 0x3E000; a += 2)
+        if (avr->flash[a] == 0xFF && avr->flash[a + 1] == 0xCF) {
+            avr->pc = a;
+            break;
+        }
+    hang_at = sim_seconds();
+    heaters_off_after_hang = -1.0;
+}
+
 static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)param; (void)when;
@@ -661,13 +681,14 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         watchdog_stage = 2;
     } else if (watchdog_request && avr->sreg[S_I]) { /* not inside an interrupt */
         watchdog_request = 0;
-        /* the first "rjmp .-2" of the application (avr-libc's __stop_program) */
-        for (uint32_t a = 0; a + 1 < 0x3E000; a += 2)
-            if (avr->flash[a] == 0xFF && avr->flash[a + 1] == 0xCF) {
-                avr->pc = a;
-                break;
-            }
+        hang_main_loop();
         watchdog_stage = 1;
+    }
+    /* --hang-main-after: the same hang, with no time-outs hurried: simavr's own
+     * watchdog follows in its time (1 s) */
+    if (hang_after >= 0 && sim_seconds() >= hang_after && avr->sreg[S_I]) {
+        hang_after = -1.0;
+        hang_main_loop();
     }
     if (!mailbox_addr) {
         uint32_t addr = avr->data[0x4A] | (uint32_t)avr->data[0x4B] << 8; /* GPIOR1, GPIOR2 */
@@ -726,7 +747,7 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u,\"heaters_off_after_hang_s\":%.4f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -735,7 +756,8 @@ static void write_stats(void)
             loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             stack_free,
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
-            (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask);
+            (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask,
+            heaters_off_after_hang);
     fclose(f);
 }
 
@@ -745,7 +767,7 @@ static void usage(void)
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
                     "[--thermistor-open-after S] [--thermistor-short-after S] [--hotend-start-c C] "
                     "[--boot-physical STEPS] [--travel-steps STEPS] [--bootloader HEX] "
-                    "[--smash-canary-after S]\n");
+                    "[--smash-canary-after S] [--hang-main-after S]\n");
     exit(2);
 }
 
@@ -766,6 +788,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
         else if (!strcmp(a, "--bootloader") && i + 1 < argc) bootloader = argv[++i];
         else if (!strcmp(a, "--smash-canary-after") && i + 1 < argc) smash_canary_after = atof(argv[++i]);
+        else if (!strcmp(a, "--hang-main-after") && i + 1 < argc) hang_after = atof(argv[++i]);
         else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
         else if (a[0] == '-') usage();
         else elf = a;
