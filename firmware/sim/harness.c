@@ -6,6 +6,7 @@
  *            [--thermistor-open-after SIM_SECONDS] [--thermistor-short-after SIM_SECONDS]
  *            [--hotend-start-c C]
  *            [--travel-steps STEPS] [--bootloader HEX] [--smash-canary-after S]
+ *            [--hang-main-after S]
  *
  * With --bootloader the chip boots as a Mega 2560 does: the hex (Debian's
  * arduino-core-avr stk500boot_v2_mega2560.hex) at the boot section 0x3E000 and the
@@ -20,7 +21,9 @@
  * The first line on stdout is the pty path. Single-threaded: a cycle timer polls
  * the pty every POLL_US of simulated time, feeds received bytes to UART0 only
  * while the UART signals XON, buffers the UART's output without limit, paces
- * simulated time to wall time (times the speed-up), updates the thermal model
+ * simulated time to wall time (times the speed-up), updates the thermal model (each
+ * heater's power read from its timer's PWM registers, pwm.c: the compare output's
+ * duty while connected, else the pin's port bit)
  * and watches for timer compare interrupts that simavr lost (flag, enable and
  * I set, vector not queued): it queues them again and counts every repair.
  * The executed-segment record is built from pin edges: step/dir give the
@@ -117,7 +120,10 @@ static avr_flashaddr_t boot_pc;
 static double smash_canary_after = -1.0; /* overwrite the stack canary then (sim seconds) */
 
 static struct thermal thermal[2];
-static int heater_level[2];
+static double heater_power[2]; /* 0..1, as last read */
+/* SIGUSR2's hang of the main loop: when it began (simulated s), and how long after it
+ * both heaters were off (the heater lease's work, before the watchdog's) */
+static double hang_at = -1.0, heaters_off_after_hang = -1.0, hang_after = -1.0;
 static double heater_fail_after = -1.0;
 static double sensor_fault_after = -1.0; /* the hotend's thermistor opens or shorts then */
 static int sensor_fault = SENSOR_OK;
@@ -451,15 +457,33 @@ static void note_heater_silence(void)
         heater_on_silence_max = gap;
 }
 
-static void heater_cb(struct avr_irq_t *irq, uint32_t value, void *param)
+/* A heater's power now: its timer's compare output drives the pin with the duty
+ * OCR / 255 (phase-correct 8-bit PWM) while connected and the timer runs; else the
+ * pin's port bit does (the shutdown path drives it directly). The firmware changes a
+ * duty every control period (100 ms) at most, so reading it every poll is exact to
+ * POLL_US; the PWM's own cycle (2 ms, 33 ms) averages out in the plant's 10 ms bins
+ * and its seconds-long time constants. */
+static double read_heater_power(const struct heater_pwm *p)
 {
-    value &= 1; /* a compare output also carries AVR_IOPORT_OUTPUT */
-    (void)irq;
-    int h = (int)(intptr_t)param;
-    if (heater_level[h] && !value)
-        note_heater_silence(); /* it was on until now */
-    thermal_switch(&thermal[h], sim_seconds(), (int)value);
-    heater_level[h] = (int)value;
+    const uint8_t *d = avr->data;
+    if (!(d[p->ddr] & (1u << p->bit)))
+        return 0.0;
+    if ((d[p->tccr_a] & p->com) && (d[p->tccr_b] & 7))
+        return (double)d[p->ocr] / 255.0;
+    return (d[p->port] >> p->bit) & 1 ? 1.0 : 0.0;
+}
+
+static void sample_heaters(void)
+{
+    for (int h = 0; h < 2; h++) {
+        double power = read_heater_power(&HEATER_PWM[h]);
+        if (power != heater_power[h])
+            thermal_switch(&thermal[h], sim_seconds(), power);
+        heater_power[h] = power;
+    }
+    if (hang_at >= 0 && heaters_off_after_hang < 0 && heater_power[0] == 0.0 &&
+        heater_power[1] == 0.0)
+        heaters_off_after_hang = sim_seconds() - hang_at;
 }
 
 static void en_cb(struct avr_irq_t *irq, uint32_t value, void *param)
@@ -720,6 +744,19 @@ static int load_hex(const char *path)
     return bad ? -1 : 0;
 }
 
+/* The main loop sent into the application's first "rjmp .-2" (avr-libc's
+ * __stop_program) with interrupts on: they go on, nothing feeds the watchdog. */
+static void hang_main_loop(void)
+{
+    for (uint32_t a = 0; a + 1 < 0x3E000; a += 2)
+        if (avr->flash[a] == 0xFF && avr->flash[a + 1] == 0xCF) {
+            avr->pc = a;
+            break;
+        }
+    hang_at = sim_seconds();
+    heaters_off_after_hang = -1.0;
+}
+
 static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)param; (void)when;
@@ -741,13 +778,14 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
         watchdog_stage = 2;
     } else if (watchdog_request && avr->sreg[S_I]) { /* not inside an interrupt */
         watchdog_request = 0;
-        /* the first "rjmp .-2" of the application (avr-libc's __stop_program) */
-        for (uint32_t a = 0; a + 1 < 0x3E000; a += 2)
-            if (avr->flash[a] == 0xFF && avr->flash[a + 1] == 0xCF) {
-                avr->pc = a;
-                break;
-            }
+        hang_main_loop();
         watchdog_stage = 1;
+    }
+    /* --hang-main-after: the same hang, with no time-outs hurried: simavr's own
+     * watchdog follows in its time (1 s) */
+    if (hang_after >= 0 && sim_seconds() >= hang_after && avr->sreg[S_I]) {
+        hang_after = -1.0;
+        hang_main_loop();
     }
     if (!mailbox_addr) {
         uint32_t addr = avr->data[0x4A] | (uint32_t)avr->data[0x4B] << 8; /* GPIOR1, GPIOR2 */
@@ -774,8 +812,9 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
     }
     check_lost_interrupts();
     redrive_switches();
-    if (heater_level[0] || heater_level[1])
-        note_heater_silence();
+    if (heater_power[0] > 0.0 || heater_power[1] > 0.0)
+        note_heater_silence(); /* on until now */
+    sample_heaters();
     update_thermal();
     pace();
     if (time_limit > 0 && sim_seconds() >= time_limit)
@@ -805,7 +844,7 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u,\"heaters_off_after_hang_s\":%.4f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -814,7 +853,8 @@ static void write_stats(void)
             loop_us, mailbox_addr ? mailbox_u32(MB_SEGMENTS_PARSED) : 0, (unsigned long long)isr_cycles_max, isr_count ? (double)isr_cycles_sum / (double)isr_count : 0.0, thermal[0].temp, thermal[1].temp, heater_on_silence_max,
             stack_free,
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
-            (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask);
+            (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask,
+            heaters_off_after_hang);
     fclose(f);
 }
 
@@ -824,7 +864,7 @@ static void usage(void)
                     "[--time-limit S] [--exit-on-hangup] [--heater-fail-after S] "
                     "[--thermistor-open-after S] [--thermistor-short-after S] [--hotend-start-c C] "
                     "[--boot-physical STEPS] [--travel-steps STEPS] [--bootloader HEX] "
-                    "[--smash-canary-after S]\n");
+                    "[--smash-canary-after S] [--hang-main-after S]\n");
     exit(2);
 }
 
@@ -845,6 +885,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--travel-steps") && i + 1 < argc) travel_steps = atoll(argv[++i]);
         else if (!strcmp(a, "--bootloader") && i + 1 < argc) bootloader = argv[++i];
         else if (!strcmp(a, "--smash-canary-after") && i + 1 < argc) smash_canary_after = atof(argv[++i]);
+        else if (!strcmp(a, "--hang-main-after") && i + 1 < argc) hang_after = atof(argv[++i]);
         else if (!strcmp(a, "--exit-on-hangup")) exit_on_hangup = 1;
         else if (a[0] == '-') usage();
         else elf = a;
@@ -912,8 +953,6 @@ int main(int argc, char **argv)
     watch(MARK_EDGE.port, MARK_EDGE.bit, edge_cb, 0);
     watch(MARK_POS.port, MARK_POS.bit, pos_cb, 0);
     watch(MARK_ABORT.port, MARK_ABORT.bit, abort_cb, 0);
-    watch(HEATER_PINS[0].port, HEATER_PINS[0].bit, heater_cb, 0);
-    watch(HEATER_PINS[1].port, HEATER_PINS[1].bit, heater_cb, 1);
     for (int k = 0; k < 4; k++)
         watch(EN_PINS[k].port, EN_PINS[k].bit, en_cb, k);
     en_watch = 1;

@@ -22,7 +22,7 @@ void thermal_init(struct thermal *th, int heater)
     th->bin_on = th->on_since = 0.0;
     th->noise = th->next_noise = 0.0;
     th->rng = heater ? 0x2545F491u : 0x9E3779B9u;
-    th->on = 0;
+    th->on = 0.0;
     th->element_ok = 1;
     th->sensor = SENSOR_OK;
 }
@@ -44,16 +44,14 @@ static double gauss(struct thermal *th)
     return sqrt(-2.0 * log(u)) * cos(6.283185307179586 * v);
 }
 
-void thermal_switch(struct thermal *th, double t, int on)
+void thermal_switch(struct thermal *th, double t, double power)
 {
-    if (on == th->on)
+    if (power == th->on)
         return;
     thermal_advance(th, t);
-    if (th->on)
-        th->bin_on += t - th->on_since;
-    else
-        th->on_since = t;
-    th->on = on;
+    th->bin_on += (t - th->on_since) * th->on;
+    th->on_since = t;
+    th->on = power;
 }
 
 /* Close every bin that ended by t: its duty enters the delay line, and the duty that
@@ -61,11 +59,8 @@ void thermal_switch(struct thermal *th, double t, int on)
 void thermal_advance(struct thermal *th, double t)
 {
     while (th->bin_end <= t) {
-        double on = th->bin_on;
-        if (th->on) {
-            on += th->bin_end - th->on_since;
-            th->on_since = th->bin_end;
-        }
+        double on = th->bin_on + (th->bin_end - th->on_since) * th->on;
+        th->on_since = th->bin_end;
         th->bin_on = 0.0;
         double duty = on / THERMAL_BIN_S, arrived = duty;
         if (th->delay_len) {

@@ -13,17 +13,19 @@ enum { SENSOR_OK, SENSOR_OPEN, SENSOR_SHORT };
 struct thermal {
     double tau, gain, ambient, temp, noise_c;
     double decay;               /* exp(-THERMAL_BIN_S / tau) */
-    double bin_end, bin_on, on_since;
+    double bin_end, bin_on, on_since; /* bin_on: energy (power x s) of the bin so far */
     double delay[THERMAL_DELAY_MAX]; /* the bins' duties on their way to the thermistor */
     int delay_len, delay_head;
     double noise, next_noise;
     uint32_t rng;
-    int on, element_ok, sensor;
+    double on; /* power 0..1 since on_since */
+    int element_ok, sensor;
 };
 
 /* heater 0: the hotend, 1: the bed */
 void thermal_init(struct thermal *th, int heater);
-void thermal_switch(struct thermal *th, double t, int on);
+/* the heater's power (0..1, a PWM duty) from time t */
+void thermal_switch(struct thermal *th, double t, double power);
 void thermal_advance(struct thermal *th, double t);
 unsigned thermal_millivolts(const struct thermal *th);
 

@@ -41,65 +41,65 @@ static struct {
     uint32_t t0, t_on, t_switch;
     uint32_t period_sum;       /* clock ticks */
     int32_t swing_sum;         /* 0.1 C, peak to peak */
-} tu;
+} tune;
 
 int8_t autotune_heater(void)
 {
-    return tu.state == AT_RUN ? (int8_t)tu.id : -1;
+    return tune.state == AT_RUN ? (int8_t)tune.id : -1;
 }
 
 uint8_t autotune_relay(int16_t temp_dc, uint32_t now)
 {
-    if (tu.state != AT_RUN)
+    if (tune.state != AT_RUN)
         return 0;
-    if (temp_dc > tu.target + TUNE_OVERSHOOT_DC) {
-        tu.failure = FAIL_OVERSHOOT;
-        tu.state = AT_FAILED;
-        return 0;
-    }
-    if (now - tu.t0 > TUNE_TIMEOUT_TICKS) {
-        tu.failure = FAIL_TIMEOUT;
-        tu.state = AT_FAILED;
+    if (temp_dc > tune.target + TUNE_OVERSHOOT_DC) {
+        tune.failure = FAIL_OVERSHOOT;
+        tune.state = AT_FAILED;
         return 0;
     }
-    if (temp_dc > tu.hi)
-        tu.hi = temp_dc;
-    if (temp_dc < tu.lo)
-        tu.lo = temp_dc;
-    if (now - tu.t_switch < RELAY_MIN_HOLD_TICKS) {
+    if (now - tune.t0 > TUNE_TIMEOUT_TICKS) {
+        tune.failure = FAIL_TIMEOUT;
+        tune.state = AT_FAILED;
+        return 0;
+    }
+    if (temp_dc > tune.hi)
+        tune.hi = temp_dc;
+    if (temp_dc < tune.lo)
+        tune.lo = temp_dc;
+    if (now - tune.t_switch < RELAY_MIN_HOLD_TICKS) {
         /* hold */
-    } else if (tu.heating && temp_dc > tu.target) {
-        tu.heating = 0;
-        tu.t_switch = now;
-    } else if (!tu.heating && temp_dc < tu.target) {
-        tu.heating = 1;
-        if (tu.counting) { /* a whole cycle since the last switch-on */
-            tu.period_sum += now - tu.t_on;
-            tu.swing_sum += tu.hi - tu.lo;
-            tu.n++;
+    } else if (tune.heating && temp_dc > tune.target) {
+        tune.heating = 0;
+        tune.t_switch = now;
+    } else if (!tune.heating && temp_dc < tune.target) {
+        tune.heating = 1;
+        if (tune.counting) { /* a whole cycle since the last switch-on */
+            tune.period_sum += now - tune.t_on;
+            tune.swing_sum += tune.hi - tune.lo;
+            tune.n++;
         }
-        tu.counting = 1;
-        tu.t_on = tu.t_switch = now;
-        tu.hi = tu.lo = temp_dc;
-        if (tu.n >= tu.cycles) {
-            if (tu.swing_sum <= 0 || !tu.period_sum) {
-                tu.failure = FAIL_NO_OSCILLATION;
-                tu.state = AT_FAILED;
+        tune.counting = 1;
+        tune.t_on = tune.t_switch = now;
+        tune.hi = tune.lo = temp_dc;
+        if (tune.n >= tune.cycles) {
+            if (tune.swing_sum <= 0 || !tune.period_sum) {
+                tune.failure = FAIL_NO_OSCILLATION;
+                tune.state = AT_FAILED;
             } else {
-                tu.state = AT_DONE;
+                tune.state = AT_DONE;
             }
             return 0;
         }
     }
-    return tu.heating ? 255 : 0;
+    return tune.heating ? 255 : 0;
 }
 
 void autotune_cancel(void)
 {
-    if (tu.state == AT_IDLE)
+    if (tune.state == AT_IDLE)
         return;
-    tu.state = AT_IDLE;
-    heater_set_target(tu.id, 0, 0);
+    tune.state = AT_IDLE;
+    heater_set_target(tune.id, 0, 0);
 }
 
 /* thousandths on the wire, within the EVENT's signed values */
@@ -116,42 +116,50 @@ void autotune_attach(const struct autotune_upper *u)
     upper = u;
 }
 
+/* The kind of the executing item and the progress counts (a frame of its own: the
+ * snapshot is not on the stack under a fault's shutdown path). */
+static uint8_t __attribute__((noinline)) executing(uint32_t *items, uint32_t *segs)
+{
+    struct stepper_progress done;
+    stepper_progress(&done);
+    *items = done.items_done;
+    *segs = done.segments_done;
+    return done.current;
+}
+
 void autotune_poll(uint32_t now)
 {
-    uint8_t s = SREG;
-    cli();
-    uint8_t current = st.current;
-    uint32_t items = st.items_done, segs = st.segments_done;
-    SREG = s;
-    if (current == IT_TUNE && tu.state == AT_IDLE && items + 1 != tu.item) {
+    uint32_t items, segs;
+    uint8_t current = executing(&items, &segs);
+    if (current == IT_TUNE && tune.state == AT_IDLE && items + 1 != tune.item) {
         /* the AUTOTUNE item at the tail began executing (it keeps its slot) */
         const struct item *it = queue_slot(queue_tail);
-        tu.state = AT_RUN;
-        tu.item = items + 1;
-        tu.id = it->u.tune.id & 1;
-        tu.cycles = it->u.tune.cycles;
-        tu.target = (int16_t)it->u.tune.target;
-        tu.n = tu.counting = tu.failure = 0;
-        tu.heating = 1;
-        tu.hi = INT16_MIN;
-        tu.lo = INT16_MAX;
-        tu.t0 = tu.t_on = tu.t_switch = now;
-        tu.period_sum = 0;
-        tu.swing_sum = 0;
-        heater_set_target(tu.id, (uint16_t)tu.target, now);
+        tune.state = AT_RUN;
+        tune.item = items + 1;
+        tune.id = it->u.tune.id & 1;
+        tune.cycles = it->u.tune.cycles;
+        tune.target = (int16_t)it->u.tune.target;
+        tune.n = tune.counting = tune.failure = 0;
+        tune.heating = 1;
+        tune.hi = INT16_MIN;
+        tune.lo = INT16_MAX;
+        tune.t0 = tune.t_on = tune.t_switch = now;
+        tune.period_sum = 0;
+        tune.swing_sum = 0;
+        heater_set_target(tune.id, (uint16_t)tune.target, now);
         return;
     }
-    if (tu.state == AT_DONE) {
-        float a = (float)tu.swing_sum / (20.0f * tu.n);                /* C */
-        float period = (float)tu.period_sum / ((float)CLOCK_HZ * tu.n); /* s */
+    if (tune.state == AT_DONE) {
+        float a = (float)tune.swing_sum / (20.0f * tune.n);                /* C */
+        float period = (float)tune.period_sum / ((float)CLOCK_HZ * tune.n); /* s */
         float kp = 0.6f * 4.0f * 127.5f / (3.14159265f * a);
-        int32_t v[4] = {tu.id, wire(kp), wire(2.0f * kp / period), wire(kp * period / 8.0f)};
+        int32_t v[4] = {tune.id, wire(kp), wire(2.0f * kp / period), wire(kp * period / 8.0f)};
         autotune_cancel();
-        heater_set_pid(tu.id, (uint32_t)v[1], (uint32_t)v[2], (uint32_t)v[3]);
-        upper->event(EVT_AUTOTUNE_DONE, tu.item, 4, v);
+        heater_set_pid(tune.id, (uint32_t)v[1], (uint32_t)v[2], (uint32_t)v[3]);
+        upper->event(EVT_AUTOTUNE_DONE, tune.item, 4, v);
         stepper_wait_ok = 1; /* the item completes: the queue goes on */
-    } else if (tu.state == AT_FAILED) {
+    } else if (tune.state == AT_FAILED) {
         autotune_cancel();
-        upper->fail(ERR_AUTOTUNE_FAILED, items, segs, tu.id, tu.failure);
+        upper->fail(ERR_AUTOTUNE_FAILED, items, segs, tune.id, tune.failure);
     }
 }

@@ -96,6 +96,17 @@
 #define FAN_PORT PORTH /* D9 */
 #define FAN_DDR DDRH
 #define FAN_BIT 6
+/* ...and the timer output compares on those pins (pwm.c): D10 is OC2A, D9 OC2B (timer
+ * 2, 8-bit), D8 OC4C (timer 4, 16-bit) */
+#define HOTEND_PWM_OCR OCR2A
+#define HOTEND_PWM_TCCR TCCR2A
+#define HOTEND_PWM_COM _BV(COM2A1)
+#define FAN_PWM_OCR OCR2B
+#define FAN_PWM_TCCR TCCR2A
+#define FAN_PWM_COM _BV(COM2B1)
+#define BED_PWM_OCR OCR4C
+#define BED_PWM_TCCR TCCR4A
+#define BED_PWM_COM _BV(COM4C1)
 
 /* thermistors: ADC channels (A13, A14), 4.7k pull-up to 5 V on the RAMPS */
 #define HOTEND_ADC_CHANNEL 13

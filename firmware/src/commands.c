@@ -149,32 +149,32 @@ static void push_item(void)
 /* a queue item has been numbered; discard it while faulted (the queue is empty) */
 static uint8_t discard_if_fault(void)
 {
-    if (!mc.fault)
+    if (!machine.fault)
         return 0;
-    stepper_flush(mc.items_received, mc.segments_received);
+    stepper_flush(machine.items_received, machine.segments_received);
     return 1;
 }
 
 static void bad_value(uint8_t op, int32_t value, uint32_t segment)
 {
-    machine_fail(ERR_BAD_VALUE, mc.items_received, segment, op, value);
+    machine_fail(ERR_BAD_VALUE, machine.items_received, segment, op, value);
 }
 
 static void enqueue_segment(const struct segment *s)
 {
-    mc.items_received++;
-    mc.segments_received++;
+    machine.items_received++;
+    machine.segments_received++;
     sim_segment_parsed();
     if (discard_if_fault())
         return;
     if (s->ticks < MIN_SEGMENT_TICKS) { /* CAPS min_segment_ticks */
-        bad_value(SEG_BASE, (int32_t)s->ticks, mc.segments_received);
+        bad_value(SEG_BASE, (int32_t)s->ticks, machine.segments_received);
         return;
     }
     uint32_t rate;
     int8_t axis = motion_rate_check(s, &rate);
     if (axis >= 0) {
-        machine_fail(ERR_STEP_RATE, mc.items_received, mc.segments_received, (uint8_t)axis,
+        machine_fail(ERR_STEP_RATE, machine.items_received, machine.segments_received, (uint8_t)axis,
                      (int32_t)rate);
         return;
     }
@@ -182,9 +182,9 @@ static void enqueue_segment(const struct segment *s)
     for (uint8_t k = 0; k < 4; k++) {
         /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic (no 64-bit library calls) */
         int32_t p;
-        if (__builtin_add_overflow(mc.tail_pos[k], s->deltas[k], &p) || p == INT32_MIN) {
+        if (__builtin_add_overflow(machine.tail_pos[k], s->deltas[k], &p) || p == INT32_MIN) {
             bad_value(SEG_BASE, s->deltas[k] > 0 ? SEG_MAX_DELTA : -SEG_MAX_DELTA,
-                      mc.segments_received);
+                      machine.segments_received);
             return;
         }
         tail[k] = p;
@@ -192,18 +192,18 @@ static void enqueue_segment(const struct segment *s)
     int32_t at;
     int8_t module = machine_limits_violation(tail, &at);
     if (module >= 0) { /* refused on receipt: nothing of it moves */
-        machine_fail(ERR_ENDSTOP_HIT, mc.items_received, mc.segments_received, (uint8_t)module,
+        machine_fail(ERR_ENDSTOP_HIT, machine.items_received, machine.segments_received, (uint8_t)module,
                      at);
         return;
     }
-    memcpy(mc.tail_pos, tail, sizeof tail);
+    memcpy(machine.tail_pos, tail, sizeof tail);
     motion_store(new_item(IT_SEG), s);
     push_item();
 }
 
 static void enqueue_command(uint8_t op, const uint32_t *v)
 {
-    mc.items_received++;
+    machine.items_received++;
     struct item *it;
     /* ranges that depend on this device (PROTOCOL.md section 8) */
     switch (op) {
@@ -234,7 +234,7 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
     case OP_SET_POSITION:
         it = new_item(IT_SETPOS);
         for (uint8_t k = 0; k < 4; k++)
-            mc.tail_pos[k] = it->u.pos[k] = (int32_t)v[k];
+            machine.tail_pos[k] = it->u.pos[k] = (int32_t)v[k];
         break;
     case OP_ENABLE:
         it = new_item(IT_ENABLE);
@@ -246,9 +246,9 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
         for (uint8_t k = 0; k < 3; k++) {
             it->u.pos[k] = (int32_t)v[1 + k];
             if (v[0] >> k & 1)
-                mc.tail_pos[k] = mc.home_at[k] = (int32_t)v[1 + k];
+                machine.tail_pos[k] = machine.home_at[k] = (int32_t)v[1 + k];
         }
-        mc.tail_homed |= (uint8_t)(v[0] & 7);
+        machine.tail_homed |= (uint8_t)(v[0] & 7);
         break;
     case OP_DWELL:
         it = new_item(IT_DWELL);
@@ -256,7 +256,7 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
         break;
     case OP_SET_HEATER:
         if (v[1] > heater_max_dc((uint8_t)v[0])) {
-            machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
+            machine_fail(ERR_HEATER_RANGE, machine.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
             return;
         }
         it = new_item(IT_HEATER);
@@ -270,7 +270,7 @@ static void enqueue_command(uint8_t op, const uint32_t *v)
         break;
     case OP_AUTOTUNE:
         if (v[1] > heater_max_dc((uint8_t)v[0])) {
-            machine_fail(ERR_HEATER_RANGE, mc.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
+            machine_fail(ERR_HEATER_RANGE, machine.items_received, 0, (uint8_t)v[0], (int32_t)v[1]);
             return;
         }
         it = new_item(IT_TUNE);
@@ -304,7 +304,7 @@ static void immediate(uint8_t op, const uint32_t *v)
         if (done == CLEAR_DONE) {
             report_event(EVT_FAULT_CLEARED, items, 0, 0);
         } else if (done == CLEAR_REFUSED) { /* a thermal fault: only a reset leaves it */
-            int32_t code = mc.latched;
+            int32_t code = machine.latched;
             report_event(EVT_CLEAR_REFUSED, items, 1, &code);
         }
         break;
@@ -314,28 +314,28 @@ static void immediate(uint8_t op, const uint32_t *v)
             bad_value(op, (int32_t)v[0], 0);
             break;
         }
-        mc.limit_lo[v[0]] = (int32_t)v[1];
-        mc.limit_hi[v[0]] = (int32_t)v[2];
-        mc.limits_set |= (uint8_t)(1 << v[0]);
+        machine.limit_lo[v[0]] = (int32_t)v[1];
+        machine.limit_hi[v[0]] = (int32_t)v[2];
+        machine.limits_set |= (uint8_t)(1 << v[0]);
         break;
     case OP_SET_PID:
         heater_set_pid((uint8_t)v[0], v[1], v[2], v[3]);
         break;
     case OP_HEATER_LEASE:
-        mc.lease_ms = (uint16_t)v[0];
-        mc.lease_at = link_now;
-        mc.lease_armed = 1;
+        machine.lease_ms = (uint16_t)v[0];
+        machine.lease_at = link_now;
+        machine.lease_armed = 1;
         break;
     case OP_GET_CAPS:
         report_caps();
         break;
     case OP_FLUSH:
-        mc.flush_item = mc.items_received;
+        machine.flush_item = machine.items_received;
         break;
     case OP_CONFIGURE:
-        mc.watchdog_ms = (uint16_t)v[0];
-        mc.start_ticks = v[1];
-        mc.flow_ticks = v[2];
+        machine.watchdog_ms = (uint16_t)v[0];
+        machine.start_ticks = v[1];
+        machine.flow_ticks = v[2];
         break;
     }
 }
@@ -368,22 +368,22 @@ uint8_t proto_pending_items(void)
 
 uint8_t proto_accept(const uint8_t *payload, uint8_t len)
 {
-    if (!mc.synced) {
+    if (!machine.synced) {
         session_boot_on_data();
         return PROTO_REFUSED;
     }
     struct seg_ctx work = pend.check;
     uint8_t queued, bad_op = 0, bad_at = 0, wrong;
     if (!check_payload(payload, len, &work, &queued, &bad_op, &bad_at, &wrong)) {
-        machine_fail(ERR_BAD_COMMAND, mc.items_received, mc.segments_received, bad_op, bad_at);
+        machine_fail(ERR_BAD_COMMAND, machine.items_received, machine.segments_received, bad_op, bad_at);
         return PROTO_DONE;
     }
     if (wrong) {
-        machine_fail(ERR_BAD_COMMAND, mc.items_received, 0, wrong, 0);
+        machine_fail(ERR_BAD_COMMAND, machine.items_received, 0, wrong, 0);
         return PROTO_DONE;
     }
-    if ((queued > machine_free() && !mc.fault) || pend.n == HELD_FRAMES) {
-        mc.overflow_rejects++;
+    if ((queued > machine_free() && !machine.fault) || pend.n == HELD_FRAMES) {
+        machine.overflow_rejects++;
         return PROTO_REFUSED;
     }
     pend.check = work;
@@ -466,20 +466,20 @@ void proto_urgent(const uint8_t *payload, uint8_t len)
         return; /* exactly one well-formed message */
     if (op == OP_HELLO) {
         uint16_t nonce = (uint16_t)v[0];
-        if (v[1] == PROTO_MAJOR && (!mc.synced || nonce != mc.nonce)) {
+        if (v[1] == PROTO_MAJOR && (!machine.synced || nonce != machine.nonce)) {
             link_reset_session();
             commands_reset_session();
             session_opened();
-            mc.synced = 1;
-            mc.nonce = nonce;
-            mc.host_minor = (uint8_t)(v[2] < PROTO_MINOR ? v[2] : PROTO_MINOR);
+            machine.synced = 1;
+            machine.nonce = nonce;
+            machine.host_minor = (uint8_t)(v[2] < PROTO_MINOR ? v[2] : PROTO_MINOR);
         }
         report_ident(nonce, 1);
     } else { /* OP_EMERGENCY_STOP */
-        if (!mc.estopped) {
+        if (!machine.estopped) {
             /* the motors stay enabled unless the host asks to release them */
             machine_stop(ERR_ESTOP, v[0] & ESTOP_KEEP_HEATERS, !(v[0] & ESTOP_RELEASE_MOTORS), 0);
-            mc.estopped = 1;
+            machine.estopped = 1;
         }
         report_estop_ack();
     }

@@ -12,7 +12,9 @@
 #include "board_ramps14.h"
 #include "config.h"
 #include "heater.h"
+#include "lease.h"
 #include "protocol_gen.h"
+#include "pwm.h"
 #include "sched.h"
 #include "stepper.h"
 #include "thermistor.h"
@@ -65,30 +67,20 @@ uint16_t heater_max_dc(uint8_t id)
 
 void heater_init(void)
 {
-    HOTEND_DDR |= _BV(HOTEND_BIT);
-    BED_DDR |= _BV(BED_BIT);
+    pwm_init();
     adc_init();
     for (uint8_t i = 0; i < 2; i++)
         heaters[i].temp_dc = 250;
 }
 
-/* Heaters and fan off now: the pins low directly (not through the interrupt's PWM,
- * which may not be running), the duties and targets zero, a target the interrupt
- * passed on but the main loop has not taken yet dropped. */
+/* Heaters and fan off now: the compare outputs disconnected and the pins driven low
+ * directly (whatever the timers and the lease do), no lease, the targets zero, a target
+ * the interrupt executed but the main loop has not taken yet dropped. */
 void heater_outputs_off(void)
 {
-    uint8_t s = SREG;
-    cli();
-    heater_duty[0] = heater_duty[1] = 0;
-    fan_duty = 0;
-    st.fan = 0;
-    heater_lease = 0;
-    HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
-    BED_PORT &= (uint8_t)~_BV(BED_BIT);
-    FAN_PORT &= (uint8_t)~_BV(FAN_BIT);
-    st.heater_target[0] = st.heater_target[1] = 0;
-    st.heater_target_changed = 0;
-    SREG = s;
+    pwm_all_off();
+    heater_lease_end();
+    stepper_drop_heater_targets();
     for (uint8_t i = 0; i < 2; i++) {
         heaters[i].target_dc = 0;
         heaters[i].state = HS_OFF;
@@ -106,7 +98,7 @@ void heater_set_target(uint8_t id, uint16_t target_dc, uint32_t now)
     h->watch_temp = h->temp_dc;
     h->watch_at = now + watch_ticks[id];
     if (!target_dc)
-        heater_duty[id] = 0;
+        pwm_set_heater(id, 0);
 }
 
 static void protect(uint8_t id, uint32_t now)
@@ -193,6 +185,7 @@ void heater_poll(uint32_t now)
     if ((int32_t)(now - next_control) < 0)
         return;
     next_control = now + MS_TO_CLOCK(HEATER_PERIOD_MS);
+    uint8_t duty[2];
     for (uint8_t i = 0; i < 2; i++) {
         struct heater *h = &heaters[i];
         if (adc_n[i]) {
@@ -202,12 +195,9 @@ void heater_poll(uint32_t now)
             adc_n[i] = 0;
         }
         protect(i, now);
-        heater_duty[i] = pid(i, now);
+        duty[i] = pid(i, now);
     }
-    /* the duties stand for HEATER_LEASE_TICKS step ticks: if this loop stops
-     * refreshing them, the interrupt switches the heaters off by itself */
-    uint8_t s = SREG;
-    cli();
-    heater_lease = HEATER_LEASE_TICKS;
-    SREG = s;
+    /* the duties stand for HEATER_LEASE_TICKS step ticks: if this loop stops renewing
+     * them, the step interrupt switches the heaters off by itself */
+    heater_lease_grant(duty);
 }

@@ -9,7 +9,7 @@
 #include "sched.h"
 #include "stepper.h"
 
-struct machine mc;
+struct machine machine;
 static const struct machine_upper *upper;
 
 void machine_attach(const struct machine_upper *u)
@@ -23,23 +23,33 @@ uint8_t machine_free(void)
     return (uint8_t)(queue_free() - upper->pending_items());
 }
 
+/* HOMED, ENABLED and WAITING from the interrupt's progress (in a frame of its own: the
+ * snapshot is not on the stack under machine_flags' callers' deeper calls). */
+static uint8_t __attribute__((noinline)) executed_flags(void)
+{
+    struct stepper_progress done;
+    stepper_progress(&done);
+    uint8_t f = 0;
+    if ((done.homed_mask & 7) == 7)
+        f |= FLAG_HOMED;
+    if (done.enabled_mask)
+        f |= FLAG_ENABLED;
+    if (done.current == IT_WAIT || done.current == IT_TUNE)
+        f |= FLAG_WAITING;
+    return f;
+}
+
 uint8_t machine_flags(void)
 {
-    uint8_t f = 0;
+    uint8_t f = executed_flags();
     if (stepper_moving())
         f |= FLAG_MOVING;
-    if (mc.fault)
+    if (machine.fault)
         f |= FLAG_FAULT;
-    if (mc.estopped)
+    if (machine.estopped)
         f |= FLAG_ESTOP;
-    if ((st.homed_mask & 7) == 7)
-        f |= FLAG_HOMED;
-    if (st.enabled_mask)
-        f |= FLAG_ENABLED;
     if (heaters[0].target_dc || heaters[1].target_dc)
         f |= FLAG_HEATING;
-    if (st.current == IT_WAIT || st.current == IT_TUNE)
-        f |= FLAG_WAITING;
     return f;
 }
 
@@ -56,36 +66,35 @@ static uint32_t duration(const struct item *it)
 void machine_account(void)
 {
     uint8_t tail = queue_tail;
-    while (mc.accounted != tail) {
-        const struct item *it = queue_slot(mc.accounted);
-        mc.queued_units -= duration(it);
-        mc.block_ends -= ends_block(it);
-        mc.accounted++;
+    while (machine.accounted != tail) {
+        const struct item *it = queue_slot(machine.accounted);
+        machine.queued_units -= duration(it);
+        machine.block_ends -= ends_block(it);
+        machine.accounted++;
     }
 }
 
 void machine_queued(const struct item *it)
 {
     machine_account(); /* before the slot can have been reused */
-    mc.queued_units += duration(it);
-    mc.block_ends += ends_block(it);
+    machine.queued_units += duration(it);
+    machine.block_ends += ends_block(it);
 }
 
 uint32_t machine_buffered_ticks(void)
 {
     machine_account();
     uint32_t executed = 0;
-    cli();
-    uint8_t timed = st.current == IT_SEG || st.current == IT_DWELL;
-    uint32_t left = stepper_ticks_left();
-    sei();
-    if (timed) {
+    struct stepper_progress done;
+    stepper_progress(&done);
+    uint32_t left = done.ticks_left;
+    if (done.current == IT_SEG || done.current == IT_DWELL) {
         /* the executing item (at tail) is still counted whole */
         uint32_t d = duration(queue_slot(queue_tail));
         uint32_t rest = left * TICK_UNITS;
         executed = rest < d ? d - rest : 0;
     }
-    return mc.queued_units - executed;
+    return machine.queued_units - executed;
 }
 
 uint8_t machine_thermal(uint8_t code)
@@ -108,16 +117,16 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
         heater_outputs_off();
     sim_last_error(code); /* before the abort marker names it */
     stepper_halt();
-    mc.fault = code; /* the newest; a thermal one stays latched whatever follows */
-    mc.last_error = code;
+    machine.fault = code; /* the newest; a thermal one stays latched whatever follows */
+    machine.last_error = code;
     if (machine_thermal(code))
-        mc.latched = code;
-    stepper_flush(mc.items_received, mc.segments_received);
+        machine.latched = code;
+    stepper_flush(machine.items_received, machine.segments_received);
     machine_account();
-    stepper_positions(mc.tail_pos);
+    stepper_positions(machine.tail_pos);
     if (how & SD_MOTORS_OFF)
         stepper_disable_all(); /* positions are no longer trustworthy */
-    mc.tail_homed = st.homed_mask;
+    machine.tail_homed = stepper_homed_mask();
     upper->report_error(code, item, segment, axis, value);
 }
 
@@ -140,21 +149,21 @@ void machine_stop(uint8_t code, uint8_t keep_heaters, uint8_t keep_motors, int32
 
 uint8_t machine_clear_fault(void)
 {
-    if (!mc.fault)
+    if (!machine.fault)
         return CLEAR_NOTHING;
-    if (mc.latched)
+    if (machine.latched)
         return CLEAR_REFUSED; /* latched until a reset, as Marlin and Klipper do */
-    mc.fault = 0;
-    mc.estopped = 0;
+    machine.fault = 0;
+    machine.estopped = 0;
     stepper_resume();
     return CLEAR_DONE;
 }
 
 int8_t machine_limits_violation(const int32_t *end, int32_t *pos)
 {
-    uint8_t check = mc.limits_set & mc.tail_homed;
+    uint8_t check = machine.limits_set & machine.tail_homed;
     for (uint8_t k = 0; k < 3; k++)
-        if ((check >> k & 1) && (end[k] < mc.limit_lo[k] || end[k] > mc.limit_hi[k])) {
+        if ((check >> k & 1) && (end[k] < machine.limit_lo[k] || end[k] > machine.limit_hi[k])) {
             *pos = end[k];
             return (int8_t)k;
         }
@@ -163,8 +172,8 @@ int8_t machine_limits_violation(const int32_t *end, int32_t *pos)
 
 void machine_session_defaults(void)
 {
-    mc.watchdog_ms = WATCHDOG_MS_DEFAULT;
-    mc.lease_armed = 0;
-    mc.start_ticks = MS_TO_CLOCK(DEV_START_MS);
-    mc.flow_ticks = MS_TO_CLOCK(DEV_FLOW_MS);
+    machine.watchdog_ms = WATCHDOG_MS_DEFAULT;
+    machine.lease_armed = 0;
+    machine.start_ticks = MS_TO_CLOCK(DEV_START_MS);
+    machine.flow_ticks = MS_TO_CLOCK(DEV_FLOW_MS);
 }

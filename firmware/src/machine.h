@@ -33,7 +33,7 @@ struct machine {
     uint8_t block_ends;    /* queued items that end a block */
     uint8_t accounted;     /* queue position up to which departures are counted */
 };
-extern struct machine mc;
+extern struct machine machine;
 
 uint8_t machine_flags(void);
 uint8_t machine_free(void);

@@ -24,15 +24,15 @@
 
 /* Clock units per main-loop turn spent executing the held frames (10 ms at most: it
  * ends sooner when they are done): a time, not a count of messages, so short segments
- * are executed as fast as they are checked (four messages a turn made the turn's other
- * work the rate's limit, and with 2 ms the turns' fixed work was; the plans are
- * prepared between the messages, the UART ring holds what arrives meanwhile). */
+ * are executed as fast as they are checked and the turn's fixed work does not limit
+ * the rate (the plans are prepared between the messages, the UART ring holds what
+ * arrives meanwhile). */
 #define EXEC_UNITS 1000
 static uint16_t loop_worst_us;
 
 /* A counter the step interrupts write, read with them masked for its own few cycles
- * only: one window around all of HEALTH's counters (and the arithmetic on them) kept
- * compare B masked for over 100 cycles and made a step edge late by several us. */
+ * only: compare B masked for longer (a window around all of HEALTH's counters would be
+ * over 100 cycles) makes a step edge late by several us. */
 static uint16_t read_u16(const volatile uint16_t *p)
 {
     uint8_t s = SREG;
@@ -69,16 +69,17 @@ void sched_update_link_time(void)
  * follows another (or a SET_HEATER) is never satisfied by the other one's state. */
 static void decide_wait(void)
 {
-    uint8_t s = SREG;
+    uint8_t s = SREG, id = 0;
+    uint16_t tolerance = 0;
     cli();
-    if (st.current == IT_WAIT) {
-        uint8_t id = st.wait_heater & 1;
+    uint8_t wait = stepper_waiting_for(&id, &tolerance);
+    if (wait != WAIT_NONE) {
         const struct heater *h = &heaters[id];
         int16_t diff = (int16_t)(h->temp_dc - (int16_t)h->target_dc);
         if (diff < 0)
             diff = (int16_t)-diff;
-        stepper_wait_ok = !(st.heater_target_changed >> id & 1) &&
-                          (!h->target_dc || (uint16_t)diff <= st.wait_tolerance);
+        stepper_wait_ok = wait == WAIT_HEATER &&
+                          (!h->target_dc || (uint16_t)diff <= tolerance);
     }
     SREG = s;
 }
@@ -87,21 +88,17 @@ static void take_interrupt_reports(uint32_t now)
 {
     static uint8_t thermal_reported[2];
     struct stepper_report r = {0};
-    uint8_t changed = 0;
     uint16_t targets[2] = {0, 0};
     /* The one-byte flags are read with interrupts on: the copy with them masked (long
      * enough to delay a step tick by several us) only when there is something to take. */
-    if (stepper_report.homed || stepper_report.error || st.heater_target_changed) {
+    if (stepper_report.homed || stepper_report.error) {
         cli();
         r = *(struct stepper_report *)&stepper_report;
         stepper_report.homed = 0;
         stepper_report.error = 0;
-        changed = st.heater_target_changed;
-        targets[0] = st.heater_target[0];
-        targets[1] = st.heater_target[1];
-        st.heater_target_changed = 0;
         sei();
     }
+    uint8_t changed = stepper_take_heater_targets(targets);
     for (uint8_t i = 0; i < 2; i++)
         if (changed >> i & 1)
             heater_set_target(i, targets[i], now);
@@ -115,7 +112,7 @@ static void take_interrupt_reports(uint32_t now)
          * switch) once homed */
         int32_t pos[4];
         stepper_positions(pos);
-        r.value = pos[r.axis] - ((st.homed_mask >> r.axis & 1) ? mc.home_at[r.axis] : 0);
+        r.value = pos[r.axis] - ((stepper_homed_mask() >> r.axis & 1) ? machine.home_at[r.axis] : 0);
     }
     if (r.error)
         machine_fail(r.error, r.item, r.segment, r.axis, r.value);
@@ -142,6 +139,15 @@ static void take_interrupt_reports(uint32_t now)
         }
     }
     decide_wait();
+}
+
+/* What a reset keeps (watchdog.c): the progress and the motors enabled. Its own frame:
+ * the snapshot is not on the stack under the main loop's deepest calls. */
+static void __attribute__((noinline)) save_progress(void)
+{
+    struct stepper_progress done;
+    stepper_progress(&done);
+    watchdog_save(done.items_done, done.segments_done, done.enabled_mask);
 }
 
 /* A plan between two pieces of a long job: with short segments the plans last only a
@@ -205,15 +211,15 @@ int main(void)
         session_poll(link_now);
         link_poll(link_now);
         motion_prepare_ahead(PLAN_SLOTS);
-        uint32_t items, segs;
-        stepper_counts(&items, &segs);
-        watchdog_save(items, segs, st.enabled_mask);
+        save_progress();
         if (!watchdog_canary_ok() && !canary_reported) {
             canary_reported = 1; /* once: the state below it may be damaged */
+            uint32_t items, segs;
+            stepper_counts(&items, &segs);
             machine_fail(ERR_STACK_OVERFLOW, items, segs, 0xFF, 0);
         }
         SIM_STATS(stepper_isr_max_cycles, stepper_lost_steps, stepper_plan_stalls,
-                  stepper_overruns, stepper_late_pulses, stepper_latency_max, mc.last_error);
+                  stepper_overruns, stepper_late_pulses, stepper_latency_max, machine.last_error);
         if (SIM_HOOKS && !++turns) /* the stack's high-water mark, now and then (~1 KB scan) */
             sim_stack_free(watchdog_stack_free());
     }

@@ -4,6 +4,7 @@
 #include "link.h"
 #include "machine.h"
 #include "protocol_gen.h"
+#include "pwm.h"
 #include "queue.h"
 #include "reports.h"
 #include "stepper.h"
@@ -30,7 +31,7 @@ static struct writer start(uint8_t op)
 
 static void send(struct writer *w, uint8_t important)
 {
-    if (!w->err && mc.synced)
+    if (!w->err && machine.synced)
         link_send(buf, w->pos, important);
 }
 
@@ -61,22 +62,16 @@ void report_event(uint8_t code, uint32_t item, uint8_t n, const int32_t *values)
 void report_status(void)
 {
     int32_t pos[4];
-    uint32_t items, segs, ticks;
-    uint8_t fan, en, homed;
+    struct stepper_progress done;
     stepper_positions(pos);
     uint32_t buffered = machine_buffered_ticks();
-    cli();
-    items = st.items_done;
-    segs = st.segments_done;
-    ticks = st.motion_ticks;
-    fan = st.fan;
-    en = st.enabled_mask;
-    homed = st.homed_mask;
-    sei();
+    stepper_progress(&done);
+    uint32_t items = done.items_done, segs = done.segments_done, ticks = done.motion_ticks;
+    uint8_t fan = pwm_fan(), en = done.enabled_mask, homed = done.homed_mask;
     struct writer w = start(CDPR_OP_STATUS);
-    wr_u8(&w, (uint8_t)(machine_flags() | (mc.synced ? FLAG_SYNCED : 0)));
+    wr_u8(&w, (uint8_t)(machine_flags() | (machine.synced ? FLAG_SYNCED : 0)));
     wr_uv(&w, machine_free());
-    wr_uv(&w, mc.items_received);
+    wr_uv(&w, machine.items_received);
     wr_uv(&w, items);
     wr_uv(&w, segs);
     wr_uv(&w, buffered);
@@ -91,12 +86,12 @@ void report_status(void)
     wr_u8(&w, fan);
     wr_u8(&w, en);
     wr_u8(&w, homed);
-    wr_u8(&w, mc.last_error);
+    wr_u8(&w, machine.last_error);
     wr_uv(&w, deframer_stats.bad_frames + deframer_stats.bad_headers);
     wr_uv(&w, link_counters.retransmits);
     wr_uv(&w, link_counters.naks_sent);
     wr_uv(&w, link_counters.duplicates);
-    if (mc.host_minor >= 1) { /* 2.1: HEALTH right after STATUS, in the same payload */
+    if (machine.host_minor >= 1) { /* 2.1: HEALTH right after STATUS, in the same payload */
         struct health hl;
         health_source(&hl);
         wr_u8(&w, CDPR_OP_HEALTH);
@@ -123,10 +118,7 @@ void report_caps(void)
 void report_ident(uint16_t nonce, uint8_t urgent)
 {
     uint32_t items, segs;
-    cli();
-    items = st.items_done;
-    segs = st.segments_done;
-    sei();
+    stepper_counts(&items, &segs);
     struct writer w = start(CDPR_OP_IDENT);
     wr_uv(&w, nonce);
     wr_u8(&w, PROTO_MAJOR);
@@ -144,11 +136,11 @@ void report_ident(uint16_t nonce, uint8_t urgent)
     wr_u8(&w, FAN_COUNT); /* fans */
     wr_uv(&w, heater_max_dc(0));
     wr_uv(&w, heater_max_dc(1));
-    wr_uv(&w, mc.watchdog_ms);
-    wr_uv(&w, mc.start_ticks);
-    wr_uv(&w, mc.items_received);
+    wr_uv(&w, machine.watchdog_ms);
+    wr_uv(&w, machine.start_ticks);
+    wr_uv(&w, machine.items_received);
     wr_uv(&w, items);
-    wr_uv(&w, mc.segments_received);
+    wr_uv(&w, machine.segments_received);
     wr_uv(&w, segs);
     wr_uv(&w, sched_clock());
     if (w.err)
@@ -175,9 +167,8 @@ void report_boot(void)
 void report_estop_ack(void)
 {
     struct writer w = start(CDPR_OP_ESTOP_ACK);
-    cli();
-    uint32_t items = st.items_done, segs = st.segments_done;
-    sei();
+    uint32_t items, segs;
+    stepper_counts(&items, &segs);
     wr_uv(&w, items);
     wr_uv(&w, segs);
     link_send_urgent(buf, w.pos);
@@ -187,9 +178,8 @@ uint8_t report_flow(uint8_t *out)
 {
     struct writer w = {out, 0, FLOW_MAX, 0};
     uint32_t buffered = machine_buffered_ticks();
-    cli();
-    uint32_t items = st.items_done, segs = st.segments_done;
-    sei();
+    uint32_t items, segs;
+    stepper_counts(&items, &segs);
     wr_u8(&w, CDPR_OP_FLOW);
     wr_u8(&w, machine_flags());
     wr_uv(&w, machine_free());

@@ -1,4 +1,4 @@
-/* The device clock in units of CLOCK_HZ, kept by the step timer's interrupt. */
+/* The device clock in units of CLOCK_HZ, advanced by the step interrupt tick by tick. */
 #ifndef SCHED_H
 #define SCHED_H
 #include <stdint.h>
@@ -14,6 +14,12 @@ static inline uint32_t sched_clock(void)
     uint32_t t = sched_clock_count;
     SREG = s;
     return t;
+}
+
+/* The step interrupt, at the start of each tick: the tick's length in clock units. */
+static inline __attribute__((always_inline)) void sched_clock_advance(uint8_t units)
+{
+    sched_clock_count += units;
 }
 
 /* Link time: the device clock divided by the simulation's speed-up (1 on a board),

@@ -24,7 +24,7 @@ void session_opened(void)
 {
     flow_valid = 0;
     machine_session_defaults();
-    mc.last_frame_at = link_now;
+    machine.last_frame_at = link_now;
 }
 
 static void announce_boot(uint32_t now)
@@ -41,19 +41,23 @@ void session_boot_on_data(void)
         announce_boot(now);
 }
 
-static uint32_t motion_executed(void)
+static uint32_t __attribute__((noinline)) motion_executed(void)
 {
-    cli();
-    uint32_t t = st.motion_ticks;
-    sei();
-    return t;
+    struct stepper_progress done;
+    stepper_progress(&done);
+    return done.motion_ticks;
+}
+
+static uint32_t __attribute__((noinline)) items_executed(void)
+{
+    struct stepper_progress done;
+    stepper_progress(&done);
+    return done.items_done;
 }
 
 uint8_t proto_flow(uint8_t *out)
 {
-    cli();
-    flow_items = st.items_done;
-    sei();
+    flow_items = items_executed();
     flow_flags = machine_flags();
     flow_free = machine_free();
     flow_motion = motion_executed();
@@ -64,7 +68,7 @@ uint8_t proto_flow(uint8_t *out)
 
 void proto_frame_seen(void)
 {
-    mc.last_frame_at = link_now;
+    machine.last_frame_at = link_now;
 }
 
 /* PROTOCOL 5.4: at rest with a segment at the head of the queue, start when the
@@ -75,11 +79,9 @@ uint8_t session_may_start(void)
     machine_account();
     if (queue_head == queue_tail)
         return 0;
-    cli();
-    uint32_t head_item = st.items_done + 1;
-    sei();
-    return mc.block_ends > 0 || mc.queued_units >= mc.start_ticks || queue_free() == 0 ||
-           head_item <= mc.flush_item;
+    uint32_t head_item = items_executed() + 1;
+    return machine.block_ends > 0 || machine.queued_units >= machine.start_ticks || queue_free() == 0 ||
+           head_item <= machine.flush_item;
 }
 
 /* Anything to do: motion executing or queued, a heater on (the watchdog guards it). */
@@ -90,7 +92,7 @@ static uint8_t active(void)
 
 void session_poll(uint32_t now)
 {
-    if (!mc.synced) {
+    if (!machine.synced) {
         if (!boot_sent_once || now - boot_sent_at >= MS_TO_CLOCK(DEV_BOOT_ANNOUNCE_MS))
             announce_boot(now);
         return;
@@ -100,26 +102,24 @@ void session_poll(uint32_t now)
      * valid frame for watchdog_ms while there is something to do: stop, heaters off,
      * motors held (a cable robot would drop its effector) */
     if (active() &&
-        now - mc.last_frame_at >= (uint32_t)mc.watchdog_ms * (CLOCK_HZ / 1000)) {
-        machine_stop(ERR_WATCHDOG, 0, 1, mc.watchdog_ms);
+        now - machine.last_frame_at >= (uint32_t)machine.watchdog_ms * (CLOCK_HZ / 1000)) {
+        machine_stop(ERR_WATCHDOG, 0, 1, machine.watchdog_ms);
         return;
     }
     /* heater lease (2.1): heater targets stand only while the host's job keeps renewing
      * them (a wedged host whose keep-alive thread still runs does not) */
-    if (mc.lease_armed && (heaters[0].target_dc || heaters[1].target_dc) &&
-        now - mc.lease_at >= MS_TO_CLOCK(mc.lease_ms)) {
-        machine_stop(ERR_HEATER_LEASE, 0, 1, mc.lease_ms);
+    if (machine.lease_armed && (heaters[0].target_dc || heaters[1].target_dc) &&
+        now - machine.lease_at >= MS_TO_CLOCK(machine.lease_ms)) {
+        machine_stop(ERR_HEATER_LEASE, 0, 1, machine.lease_ms);
         return;
     }
     /* unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of
      * the queue freed, or any other change after DEV_FLOW_INTERVAL_MS */
     uint8_t want = !flow_valid;
-    if (!want && mc.flow_ticks && motion_executed() - flow_motion >= mc.flow_ticks)
+    if (!want && machine.flow_ticks && motion_executed() - flow_motion >= machine.flow_ticks)
         want = 1;
     if (!want) {
-        cli();
-        uint32_t items = st.items_done;
-        sei();
+        uint32_t items = items_executed();
         uint8_t flags = machine_flags();
         if (items != flow_items || flags != flow_flags)
             want = flags != flow_flags || machine_free() >= flow_free + QUEUE_SIZE / 8 ||

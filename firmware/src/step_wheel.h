@@ -31,10 +31,14 @@ struct out {
     struct event ev[EV_MAX + 1]; /* offset 0, in time order */
     uint8_t n;
     uint8_t dir; /* axis bit set: negative */
-    uint8_t flags;
+    uint8_t flags; /* OUT_* */
     uint8_t units; /* length of the tick */
-    uint32_t seq;
+    uint32_t seq;  /* OUT_SEG_END: the number of the segment it ends */
 };
+#define OUT_MOTION 0x01  /* a tick of motion (a segment, a dwell, homing) */
+#define OUT_SEG_END 0x02 /* the tick ends a segment */
+#define OUT_POS 0x04     /* positions were set (SET_POSITION, HOME) */
+#define OUT_ABORT 0x08   /* a segment was abandoned */
 /* The time wheel of the tick being computed: slot s holds the axes that step in
  * cycles [64 s, 64 s + 64) of the tick (a step goes out at its slot's middle, within
  * 2 us of its time); occ marks the slots in use, a bit each. Times on the wheel are

@@ -3,31 +3,34 @@
 #define STEPPER_H
 #include <stdint.h>
 
-struct stepper_state {
-    int32_t pos[4];            /* logical step positions */
+/* What the interrupt has executed, one consistent snapshot (stepper_progress). */
+struct stepper_progress {
     uint32_t items_done, segments_done;
-    uint32_t seg_next;         /* the number the next executed segment has (PROTOCOL.md 4,
-                                  Numbering: refused and flushed segments keep theirs) */
     uint32_t motion_ticks;     /* executed durations, clock units */
+    uint32_t ticks_left;       /* ticks the executing segment or dwell has left */
+    uint8_t current;           /* kind of the executing timed item (IT_*), or 0xFF */
     uint8_t enabled_mask, homed_mask;
-    uint8_t at_rest;           /* the last executed motion ended at rest */
-    uint8_t running;           /* 0: fault / estop: execute nothing */
-    uint8_t current;           /* kind of the executing timed item, or 0xFF */
-    uint8_t fan;
-    uint16_t heater_target[2]; /* set by queued SET_HEATER items (0.1 C) */
-    uint8_t heater_target_changed;
-    uint8_t wait_heater;       /* WAIT item executing: heater id */
-    uint16_t wait_tolerance;
 };
-extern volatile struct stepper_state st;
+/* The one way the main loop reads the interrupt's progress: without masking it. */
+void stepper_progress(struct stepper_progress *out);
+/* Parts of it, for callers that keep a small stack frame (the shutdown path's). */
+void stepper_counts(uint32_t *items, uint32_t *segments);
+uint8_t stepper_homed_mask(void);
 
 /* set by the main loop */
 extern volatile uint8_t stepper_start_ok; /* the start rule allows leaving rest */
 extern volatile uint8_t stepper_wait_ok;  /* the waited-for heater is within tolerance */
-extern volatile uint8_t heater_duty[2], fan_duty;
-/* step ticks the heater duties stay valid; the heater loop refreshes it, the
- * interrupt counts it down and zeroes the duties at 0 */
-extern volatile uint16_t heater_lease;
+
+/* SET_HEATER items the interrupt executed since the last call: a mask of the heaters
+ * whose target changed, and their targets (0.1 C) in targets[]. */
+uint8_t stepper_take_heater_targets(uint16_t targets[2]);
+/* Forget the targets executed but not taken yet (the shutdown path). */
+void stepper_drop_heater_targets(void);
+/* The executing WAIT item: WAIT_NONE, or its heater and tolerance (0.1 C), and whether
+ * a SET_HEATER executed before it is still on its way to the heater (then it is not
+ * decided on the old target). Call with interrupts masked to act on the answer. */
+enum { WAIT_NONE, WAIT_HEATER, WAIT_TARGET_PENDING };
+uint8_t stepper_waiting_for(uint8_t *heater, uint16_t *tolerance);
 
 /* raised by the interrupt, taken by the main loop */
 struct stepper_report {
@@ -49,10 +52,6 @@ void stepper_resume(void);
 void stepper_flush(uint32_t items_received, uint32_t segments_received);
 void stepper_disable_all(void);
 uint8_t stepper_moving(void);
-/* items_done and segments_done, read with interrupts masked (the interrupt owns them). */
-void stepper_counts(uint32_t *items, uint32_t *segments);
-/* Ticks the executing segment or dwell has left (interrupts off). */
-uint32_t stepper_ticks_left(void);
 
 /* figures for the harness and the benchmark */
 extern volatile uint16_t stepper_isr_max_cycles;

@@ -198,13 +198,16 @@ void watchdog_start(void)
  * the record marked; the reset follows 1 s later (WDIE is cleared by the hardware). */
 ISR(WDT_vect)
 {
+    /* the timers' compare outputs disconnected (pwm.c), the pins driven low */
+    HOTEND_PWM_TCCR &= (uint8_t)~HOTEND_PWM_COM;
+    BED_PWM_TCCR &= (uint8_t)~BED_PWM_COM;
     HOTEND_PORT &= (uint8_t)~_BV(HOTEND_BIT);
     BED_PORT &= (uint8_t)~_BV(BED_BIT);
     wdt_mark = WDT_MARK;
 }
 
 /* Fed only while the scheduler's clock advances: a stopped step timer (whose
- * interrupt also runs the heaters' PWM and their lease) interrupts within 1 s (heaters
+ * interrupt also counts down the heater lease) interrupts within 1 s (heaters
  * off) and resets the board within 2 s; the first code after the reset drives the heater
  * gates low. */
 void watchdog_kick(uint32_t clock)

@@ -5,16 +5,21 @@
   last byte);
 - a thermal fault latches: CLEAR_FAULT is refused (EVENT CLEAR_REFUSED naming the code),
   and a thermal fault arriving while already faulted is reported too;
-- every fault is reported, a second one included.
+- every fault is reported, a second one included;
+- a hung main loop: the heater lease, counted down by the step interrupt, switches the
+  heaters' timer outputs off before the watchdog's interrupt would.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
 import time
 
 import pytest
 
+from cdprhost.sim import avr_device
 from firmware_protocol.messages import (
     ClearFault,
     Configure,
@@ -103,3 +108,37 @@ def test_thermal_fault_latches_and_a_second_fault_is_reported(avr_built, tmp_pat
     finally:
         h.close()
         dev.stop()
+
+
+HANG_AT_S = 4.0  # simulated seconds: after the heater is on at full power
+
+
+def test_a_hung_main_loop_loses_the_heater_lease_before_the_watchdog_fires(avr_built, tmp_path):
+    """The heaters run on timer outputs that go on by themselves: when the main loop
+    hangs (the harness sends it into an endless loop, interrupts still running, and
+    simavr's watchdog follows in its time), the step interrupt's lease switches them off
+    0.3 s after the control loop last renewed it (every 100 ms), well before the
+    watchdog's interrupt at 1 s."""
+    stats = tmp_path / "stats.json"
+    cmd = avr_device.harness_command(stats=str(stats))
+    proc = subprocess.Popen(
+        [*cmd, "--hang-main-after", str(HANG_AT_S)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None
+        h = RawHost(proc.stdout.readline().strip())
+        try:
+            h.hello()
+            h.send(SetHeater(0, 2000))  # far below: full power
+            h.wait_for(lambda: h.status().hotend_target_dc == 2000, what="target set")
+            assert h.status().clock < (HANG_AT_S - 1.0) * 100_000  # heating before the hang
+            end = time.monotonic() + HANG_AT_S + 3.0
+            while time.monotonic() < end:
+                h.pump(0.05)
+        finally:
+            h.close()
+    finally:
+        proc.terminate()
+        proc.wait(30)
+    off = json.loads(stats.read_text())["heaters_off_after_hang_s"]
+    assert 0.1 < off <= 0.35, off

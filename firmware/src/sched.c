@@ -1,0 +1,3 @@
+#include "sched.h"
+
+volatile uint32_t sched_clock_count;

@@ -1,0 +1,334 @@
+/* The step tick's timing: Timer1 in CTC mode, one compare match per tick.
+ *
+ * OCR1A is rewritten at the start of a tick whose length differs from the last one's
+ * (a segment's or dwell's last tick). Work is pipelined one tick deep: at a tick's
+ * start the interrupt sets the tick's directions and issues the steps due at once, all
+ * computed during the previous interrupt, and arms compare B (step_events.c) for the
+ * rest of the tick's events; then, with its own interrupt masked and the others allowed
+ * (so compare B keeps its time), it has stepper.c compute the next tick. It notes the
+ * ticks that overran their boundary (their steps keep their times) and hands a step due
+ * at the next tick's very start to this tick's compare B.
+ *
+ * Pulses are high for at least 2 us and a direction change leads the next pulse by at
+ * least 1 us (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208: 0.1 us /
+ * 20 ns). A pulse issued later than LATE_TOLERANCE_US after its time is counted
+ * (HEALTH late_pulses) and the worst lateness kept. */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+
+#include "board_ramps14.h"
+#include "config.h"
+#include "sim_hooks.h"
+#include "sim_markers.h"
+#include "step_events.h"
+#include "step_pins.h"
+#include "step_tick.h"
+#include "step_wheel.h"
+#include "stepper.h"
+
+volatile uint16_t stepper_isr_max_cycles;
+volatile uint16_t stepper_overruns, stepper_late_pulses;
+volatile uint8_t stepper_latency_max;
+volatile uint16_t stepper_late_worst;
+volatile uint32_t stepper_late_tolerance;
+volatile uint8_t tick_gen;
+static volatile uint8_t computing, tick_missed;
+static uint8_t handed_over; /* the next tick's first event went out with this one's */
+/* the axes of a pending compare B event that compare A's entry raised */
+static volatile uint8_t prepulsed __attribute__((used));
+
+static struct out ticks_out[2];
+struct out *this_tick = &ticks_out[0];
+struct out *next_tick = &ticks_out[1];
+uint8_t cur_dir = 0xFF;
+static uint8_t ocr_units = TICK_UNITS; /* the length of the tick in progress */
+
+void step_timer_init(void)
+{
+    ticks_out[0].units = ticks_out[1].units = TICK_UNITS;
+    /* Timer1: CTC on OCR1A, no prescaler; in the simulator build compare C toggles OC1C
+     * (MARK_EDGE) when OCR1C is set to match one cycle into the next tick */
+    TCCR1A = SIM_HOOKS ? _BV(COM1C0) : 0;
+    TCCR1B = _BV(WGM12) | _BV(CS10);
+    OCR1A = TICK_CYCLES - 1;
+    OCR1C = EDGE_NEVER;
+    TIMSK1 = _BV(OCIE1A);
+}
+
+static uint16_t late_cycles; /* cycles of earlier ticks handled in this interrupt */
+
+/* One step event now, from compare A (with interrupts off): its lateness noted as
+ * compare B notes it, pulses 2 us high. */
+static void __attribute__((noinline)) event_now(uint8_t m, uint16_t at, uint16_t now)
+{
+    pulse_on(m);
+    uint16_t l = (int16_t)(now - at) > 0 ? (uint16_t)(now - at) : 0;
+    if (l > stepper_late_worst)
+        stepper_late_worst = l;
+    if (l > LATE_TOLERANCE_CYCLES)
+        stepper_late_tolerance++;
+    __builtin_avr_delay_cycles(PULSE_CYCLES - 8);
+    pulse_off();
+}
+
+/* Events of the tick that just ended that compare B has not issued yet (the tick
+ * started so late that its events ran past its end): issued now, before the new
+ * tick's, 2 us high and 2 us low each, so no step is lost; each is counted late.
+ * With interrupts off. */
+static void __attribute__((noinline)) flush_events(void)
+{
+    /* lateness: from the event's time in the tick that ended (its period) to now */
+    uint16_t ended = (uint16_t)(ocr_units * UNIT_CYCLES);
+    const struct event *e = stepper_next;
+    if (prepulsed) {
+        /* raised by compare A's entry: held high, then ended */
+        uint16_t l = (uint16_t)(TCNT1 + ended - e->at);
+        if (l > stepper_late_worst)
+            stepper_late_worst = l;
+        if (l > LATE_TOLERANCE_CYCLES) {
+            stepper_late_pulses++;
+            stepper_late_tolerance++;
+        }
+        prepulsed = 0;
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        pulse_off();
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        e++;
+    }
+    for (; e->mask; e++) {
+        uint16_t l = (uint16_t)(TCNT1 + ended - e->at);
+        pulse_on(e->mask);
+        if (l > stepper_late_worst)
+            stepper_late_worst = l;
+        if (l > LATE_TOLERANCE_CYCLES) {
+            stepper_late_pulses++;
+            stepper_late_tolerance++;
+        }
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+        pulse_off();
+        __builtin_avr_delay_cycles(PULSE_CYCLES);
+    }
+    TIMSK1 &= (uint8_t)~_BV(OCIE1B);
+    TIFR1 = _BV(OCF1B);
+}
+
+/* Events due within this many cycles are issued by compare A itself (it holds the
+ * CPU until then); compare B is armed for the first one after. */
+#define A_EARLY 48
+
+/* The start of a tick, with interrupts off and as short as it can be: this tick's
+ * length, directions, the events due at once, compare B armed for the rest. */
+static void __attribute__((noinline)) tick_start(void)
+{
+    uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
+    if (TIMSK1 & _BV(OCIE1B))
+        flush_events(); /* compare B disables itself after a tick's last event */
+    struct out *e = next_tick;
+    next_tick = this_tick;
+    this_tick = e;
+    struct event *ev = e->ev;
+    if (handed_over) {
+        ev++; /* issued by the last tick's compare B, just before this tick began */
+        handed_over = 0;
+    }
+    if (e->dir != cur_dir) {
+        /* first, and in a tick without steps too: a reversal's first step, at the next
+         * tick's start, can then go out with this tick's compare B (hand_over_first) */
+        apply_dirs(e->dir);
+        cur_dir = e->dir;
+        __builtin_avr_delay_cycles(16);
+    }
+    uint16_t high_from = 0;
+    uint8_t first = 0;
+    if (ev->mask && !late_cycles) {
+        /* a first step due at once goes out before anything else (the bookkeeping
+         * below runs while its pulse is high) */
+        uint16_t at = ev->at;
+        if ((int16_t)(at - TCNT1) < A_EARLY) {
+            while ((int16_t)(TCNT1 - at) < 0)
+                ;
+            pulse_on(ev->mask);
+            high_from = TCNT1;
+            uint16_t l = (int16_t)(high_from - at) > 0 ? (uint16_t)(high_from - at) : 0;
+            if (l > stepper_late_worst)
+                stepper_late_worst = l;
+            if (l > LATE_TOLERANCE_CYCLES)
+                stepper_late_tolerance++;
+            ev++;
+            first = 1;
+        }
+    }
+    uint8_t units = e->units;
+    if (units != ocr_units) {
+        ocr_units = units;
+        uint16_t top = (uint16_t)(units * UNIT_CYCLES - 1);
+        OCR1A = top;
+        uint16_t now = TCNT1;
+        if ((uint16_t)(now + 8) > top) {
+            /* this (shorter) tick is over already: its compare match would be missed
+             * and the timer run on to 0xFFFF (a 4 ms hole). Wrap the period by hand,
+             * keeping the time base, and start the next tick at once (late). */
+            TCNT1 = (uint16_t)(now - top + 1);
+            tick_missed = 1;
+        }
+    }
+    if (entry > stepper_latency_max && !late_cycles)
+        stepper_latency_max = entry;
+    if (first) {
+        while ((uint16_t)(TCNT1 - high_from) < PULSE_CYCLES)
+            ;
+        pulse_off();
+        __builtin_avr_delay_cycles(PULSE_CYCLES); /* low before another pulse */
+    }
+    if (!ev->mask)
+        return;
+    for (; ev->mask; ev++) {
+        /* (a tick started late runs in its own timer period all the same: its later
+         * steps keep their time) */
+        uint16_t at = ev->at, now = TCNT1;
+        if ((int16_t)(at - now) <= 0) {
+            event_now(ev->mask, at, now);
+        } else if (at - now < A_EARLY) {
+            while ((int16_t)(TCNT1 - at) < 0)
+                ;
+            event_now(ev->mask, at, at);
+        } else {
+            break;
+        }
+        __builtin_avr_delay_cycles(PULSE_CYCLES); /* low before another pulse */
+    }
+    stepper_next = ev;
+    if (ev->mask) {
+        OCR1B = ev->at;
+        TIFR1 = _BV(OCF1B); /* a match earlier in this tick left its flag */
+        TIMSK1 |= _BV(OCIE1B);
+    }
+}
+
+/* Motion starts or stops at the next tick boundary: MARK_EDGE toggles there
+ * (armed just after the next tick's computation, before that boundary). */
+static void __attribute__((noinline)) motion_marker(void)
+{
+    markers_motion_change(this_tick, next_tick);
+}
+
+/* After a tick's computation: the interrupt's length so far, and whether the
+ * next tick has already begun (returns 1: start it now). */
+static uint8_t __attribute__((noinline)) tick_end(void)
+{
+    uint16_t used = TCNT1 + late_cycles;
+    if (tick_missed) {
+        tick_missed = 0;
+        stepper_overruns++;
+        used += (uint16_t)(ocr_units * UNIT_CYCLES);
+        late_cycles += (uint16_t)(ocr_units * UNIT_CYCLES);
+    } else {
+        late_cycles = 0;
+    }
+    if (used > stepper_isr_max_cycles)
+        stepper_isr_max_cycles = used;
+    return late_cycles != 0;
+}
+
+/* The computation runs with interrupts on, so compare B keeps its phases'
+ * time. Should it overrun into the next tick, that tick's interrupt only
+ * notes it and this one starts the tick at once (late), as silicon would
+ * (without masking compare A: simavr 1.6 never queues an interrupt that was
+ * enabled after its flag rose). Nothing lives across the calls, so the entry
+ * saves only what a call clobbers. */
+/* The tick's tail runs with interrupts off (~130 cycles to its return): a compare B
+ * event due in that time goes out first, unless it is so close to the tick's end
+ * that waiting for it would run the tail into the next tick. */
+#define TAIL_CYCLES 144
+static inline void tail_guard(void)
+{
+    uint16_t last = (uint16_t)(OCR1A - TAIL_CYCLES);
+    while (TIMSK1 & _BV(OCIE1B)) {
+        uint16_t b = OCR1B;
+        if ((uint16_t)(b - TCNT1) >= TAIL_CYCLES || b > last)
+            break;
+    }
+}
+
+/* A step due in the first cycles of the next tick goes out from this tick's compare
+ * B, HANDOVER_LEAD cycles before the boundary (its pulse rises about when the tick
+ * begins), rather than from compare A once its entry has run (~130 cycles, 8 us,
+ * late). Only when the next tick keeps the directions and this one ends on time. */
+#define HANDOVER_LEAD 8
+static void __attribute__((noinline)) hand_over_first(void)
+{
+    const struct event *f = next_tick->ev;
+    uint8_t n = this_tick->n;
+    if (!f->mask || f->at >= A_EARLY || next_tick->dir != cur_dir || n >= EV_MAX)
+        return;
+    uint16_t at = (uint16_t)(ocr_units * UNIT_CYCLES - 1 - HANDOVER_LEAD);
+    if ((int16_t)(at - TCNT1) < 24)
+        return; /* too close to arm compare B in time */
+    struct event *e = &this_tick->ev[n];
+    e->mask = f->mask;
+    e->at = at;
+    e[1].mask = 0;
+    this_tick->n = (uint8_t)(n + 1);
+    handed_over = 1;
+    if (!(TIMSK1 & _BV(OCIE1B))) {
+        stepper_next = e;
+        OCR1B = at;
+        TIFR1 = _BV(OCF1B);
+        TIMSK1 |= _BV(OCIE1B);
+    }
+}
+/* Compare A's entry, before the compiler's prologue (about 50 cycles): a compare B
+ * event still pending at the boundary (another interrupt held compare B past it, and
+ * compare A comes first) has its pulses raised at once; flush_events ends them. Then
+ * the tick proper, a signal handler entered as if from the vector. */
+void __vector_tick(void) __attribute__((signal, used));
+ISR(TIMER1_COMPA_vect, ISR_NAKED)
+{
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "lds r24, %[timsk]\n\t"
+        "sbrs r24, %[ocieb]\n\t"
+        "rjmp 1f\n\t"
+        "lds r24, computing\n\t"
+        "tst r24\n\t"
+        "brne 1f\n\t" /* an overrun: the interrupted tick flushes */
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r30, stepper_next\n\t"
+        "lds r31, stepper_next+1\n\t"
+        "ld r24, Z\n\t"
+        "sts prepulsed, r24\n\t"
+        STEP_PULSE_ASM("2")
+        "pop r31\n\t"
+        "pop r30\n"
+        "1:\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "jmp __vector_tick\n\t"
+        :
+        : STEP_PULSE_ASM_OPERANDS, [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), [ocieb] "I"(OCIE1B));
+}
+
+void __vector_tick(void)
+{
+    tick_gen++;
+    if (computing) {
+        tick_missed = 1;
+        return;
+    }
+    do {
+        tick_start();
+        computing = 1;
+        sei();
+        stepper_tick_chores();
+        stepper_compute();
+        tail_guard();
+        cli();
+        computing = 0;
+        motion_marker();
+    } while (tick_end());
+    hand_over_first();
+}
