@@ -32,6 +32,7 @@ from cdprhost.job.runner import PrintJob, PrintOptions
 from cdprhost.job.state import Event, JobState
 from cdprhost.logs import attach_log_file, detach_log_file
 from cdprhost.service import wire
+from cdprhost.service.device_session import DeviceSession, Opener
 from cdprhost.service.journal import Journal
 from cdprhost.service.paths import ServiceFiles, device_name, key_matches, write_key
 
@@ -156,6 +157,7 @@ class PrinterService:
         *,
         idle_s: float = 30.0,
         link_factory: Callable[[wire.StartJob, Any], Callable[[], Any]] | None = None,
+        device_opener: Opener | None = None,
     ):
         self.files = files
         self.port = port
@@ -174,6 +176,10 @@ class PrinterService:
         self._lockfile: Any = None
         self._listener: socket.socket | None = None
         self._forward: logging.Handler | None = None
+        self._job_info: wire.JobInfo | None = None
+        self.session = DeviceSession(
+            port, self.broadcast, lambda: self.job_running, opener=device_opener
+        )
 
     # ------------------------------------------------------------ lifetime
     def bind(self) -> None:
@@ -248,6 +254,7 @@ class PrinterService:
             clients = list(self._clients)
         for client in clients:
             client.close()
+        self.session.close()
         if self._lockfile is not None:
             if self.private:  # nobody else ever looks for it: leave nothing behind
                 for path in (self.files.lock, self.files.log):
@@ -298,6 +305,9 @@ class PrinterService:
                 )
             )
             if hello.replay:
+                if self._job_info is not None:
+                    info = self._job_info.model_copy(update={"state": state})
+                    client.send(info)
                 for event in self._journal.replay():
                     client.send(wire.EventMsg(event=wire.event_to_json(event)))
                 if self._result is not None:
@@ -308,6 +318,7 @@ class PrinterService:
 
     def forget(self, client: _Client) -> None:
         with self._lock:
+            self.session.release(client.number)
             if client in self._clients:
                 self._clients.discard(client)
                 self._idle_since = time.monotonic()
@@ -321,6 +332,12 @@ class PrinterService:
             client.send(line)
 
     def handle(self, client: _Client, request: Any) -> None:
+        if isinstance(request, wire.DeviceRequest):
+            self._device(client, request)
+            return
+        if isinstance(request, wire.Estop) and not self.job_running and self.session.open:
+            client.send(self.session.emergency_stop(request.id))
+            return
         if isinstance(request, wire.Start):
             error = self._start(client, request)
             if error:
@@ -339,6 +356,22 @@ class PrinterService:
         elif isinstance(request, wire.Estop):
             threading.Thread(target=job.emergency_stop, name="estop", daemon=True).start()
         client.send(wire.Reply(id=request.id, ok=True))
+
+    def _device(self, client: _Client, request: Any) -> None:
+        """A device-session request, in a thread of its own (a homing takes seconds; the
+        client's next line, an e-stop, is read meanwhile)."""
+
+        def work() -> None:
+            if isinstance(request, wire.Connect):
+                answer = self.session.connect(client.number, request)
+            elif isinstance(request, wire.Disconnect):
+                self.session.release(client.number)
+                answer = wire.Answer(id=request.id, ok=True)
+            else:
+                answer = self.session.run(request)
+            client.send(answer)
+
+        threading.Thread(target=work, name=f"device-{request.op}", daemon=True).start()
 
     # ------------------------------------------------------------ the job
     def _start(self, client: _Client, request: wire.Start) -> str:
@@ -365,6 +398,7 @@ class PrinterService:
             resume_from_layer=spec.resume_from_layer,
             resume=point,
             log_path=spec.log_path,
+            clear_fault=spec.clear_fault,
         )
         if spec.port is not None and spec.profile_ref is not None:
             from cdprhost.profile import record_device
@@ -382,10 +416,14 @@ class PrinterService:
                 )
             self._journal = Journal()
             self._result = None
+            opener = (
+                self.session.link_for_job if self.session.open else self.link_factory(spec, profile)
+            )
+            self._job_info = wire.JobInfo(gcode=spec.gcode, state="idle", started_at=time.time())
             job = PrintJob(
                 spec.gcode,
                 profile,
-                self.link_factory(spec, profile),
+                opener,
                 options,
                 on_event=self._on_event,
             )
@@ -418,7 +456,7 @@ class PrinterService:
             message = wire.ResultMsg(error=f"internal error: {type(exc).__name__}: {exc}")
         finally:
             link = job.link
-            if link is not None:
+            if link is not None and not self.session.holds(link):
                 with contextlib.suppress(Exception):
                     link.close()
             detach_log_file(handler)
@@ -428,6 +466,7 @@ class PrinterService:
             clients = list(self._clients)
         for client in clients:
             client.send(message)
+        self.session.after_job()
         if job.state is JobState.IDLE:
             log.info("the job ended before it began")
 

@@ -1,9 +1,12 @@
-"""`cdprhost tui [FILE.gcode] [--profile P] [--port DEV] [--center ...]`: the terminal UI."""
+"""`cdprhost tui [FILE.gcode] [--profile P] [--port DEV] [--center ...]`: the terminal UI, a
+client of the device's printer service (started when none runs): the print lives on when
+the UI stops, hangs or is killed, and a UI started later shows it."""
 
 from __future__ import annotations
 
 import argparse
 import os
+from typing import Any
 
 from cdprhost.cli.commands.serve import add_server_arguments
 from cdprhost.cli.options import add_device_arguments, add_placement_arguments, setup_from_args
@@ -35,6 +38,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         metavar="DIR",
         help="embedded device only: folder where the virtual motion capture writes its takes",
     )
+    parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="drive the device from this process instead of its printer service (the "
+        "calibration wizard needs it; a print then ends with the UI)",
+    )
     add_server_arguments(parser, default_listen=False)
     add_placement_arguments(parser, strict=False)
     parser.set_defaults(func=run)
@@ -56,13 +65,21 @@ def run(args: argparse.Namespace) -> int:
         )
     observer = make_observer(args.sim_truth, args.sim_mocap_dir)
     status_interval_s = 1.0
-    backend = LiveBackend(
-        args.profile,
-        speedup=args.speedup,
-        sim_options={"observer": observer} if observer else None,
-        idle_pump_s=0.8 * status_interval_s,
-        setup=setup_from_args(args),
-    )
+    backend: Any
+    # the printer service runs the prints, unless the device must live here: the virtual
+    # motion capture watches the embedded device, the upload bridge reads the link
+    if args.in_process or observer is not None or args.listen is not None:
+        backend = LiveBackend(
+            args.profile,
+            speedup=args.speedup,
+            sim_options={"observer": observer} if observer else None,
+            idle_pump_s=0.8 * status_interval_s,
+            setup=setup_from_args(args),
+        )
+    else:
+        from cdprhost.tui.control.service_backend import ServiceBackend
+
+        backend = ServiceBackend(args.profile, speedup=args.speedup, setup=setup_from_args(args))
     if args.gcode is not None and not os.path.isfile(args.gcode):
         raise InputError("G-code file not found", source=args.gcode)
     app = CdprApp(
