@@ -1,0 +1,112 @@
+"""A TUI's print lives in the printer service: a headless TUI in its own process prints on a
+pty sim-device and is killed or stopped (SIGSTOP) mid-print; the print goes on to the end
+(the service's JSON-lines log says so), and a new TUI attaches and shows it. (Accelerated
+device, a small part: the 1x runs under load are measured by hand.)"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from cdprhost.job.state import JobState
+from cdprhost.tui.control.service_backend import ServiceBackend
+from tests.e2e.processes import SimDeviceProcess, kill_and_wait, service_pid, square_part
+
+from .conftest import make_app, wait_for
+
+pytestmark = [
+    pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminals as on Linux"),
+    pytest.mark.timeout(300),
+]
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def state(monkeypatch, tmp_path):
+    folder = tmp_path / "state"
+    monkeypatch.setenv("CDPRHOST_STATE", str(folder))
+    return folder
+
+
+def _front(port: str, gcode: Path) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "tests.tui.service_front", port, str(gcode)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ),
+    )
+    assert proc.stdout is not None
+    line = proc.stdout.readline().strip()
+    if line != "printing":
+        proc.kill()
+        raise AssertionError(f"the TUI did not start printing: {line!r} {proc.stderr.read()}")
+    return proc
+
+
+def _job_log(state: Path) -> list[dict]:
+    logs = sorted((state / "jobs").glob("part-*.jsonl"))
+    assert len(logs) == 1, logs
+    return [json.loads(line) for line in logs[0].read_text().splitlines() if line.strip()]
+
+
+def _completed(state: Path) -> bool:
+    return any("completed" in json.dumps(r) for r in _job_log(state)[-5:])
+
+
+async def test_a_killed_tui_leaves_the_print_running_and_a_new_tui_shows_it(state, tmp_path):
+    gcode = square_part(tmp_path / "part.gcode", layers=8)
+    with SimDeviceProcess(tmp_path, "--speedup", "10") as dev:
+        front = _front(dev.path, gcode)
+        service = service_pid(dev.path, state)
+        front.kill()  # SIGKILL: no goodbye, no cancel
+        front.wait(20)
+        backend = ServiceBackend("paper-prototype")
+        app = make_app(backend, port=dev.path)
+        try:
+            async with app.run_test(size=(100, 32)) as pilot:
+                now = await wait_for(
+                    pilot, lambda s: s.job_path == str(gcode), timeout=60, what="the print"
+                )
+                assert now.job.state is not JobState.IDLE or now.job_id
+                end = await wait_for(
+                    pilot, lambda s: s.job.state.finished, timeout=240, what="its end"
+                )
+                assert end.job.state is JobState.DONE, end.job.reason
+                assert end.job.layer + 1 == 8
+        finally:
+            backend.close()
+        assert _completed(state)  # the job's JSON-lines log, written by the service
+        assert service_pid(dev.path, state) == service  # one service ran it all
+        assert not dev.stderr_has("host watchdog")
+        kill_and_wait(service)
+
+
+def test_a_stopped_tui_does_not_stop_the_print(state, tmp_path):
+    gcode = square_part(tmp_path / "part.gcode", layers=8)
+    with SimDeviceProcess(tmp_path, "--speedup", "10") as dev:
+        front = _front(dev.path, gcode)
+        service = service_pid(dev.path, state)
+        try:
+            front.send_signal(signal.SIGSTOP)
+            before = len(dev.records())
+            time.sleep(8.0)  # the service keeps streaming meanwhile
+            during = len(dev.records()) - before
+            front.send_signal(signal.SIGCONT)
+            out, err = front.communicate(timeout=240)
+        finally:
+            if front.poll() is None:
+                front.kill()
+        assert "end done" in out, out + err
+        assert during > 0  # the device moved while the UI was stopped
+        assert _completed(state)
+        assert not dev.stderr_has("host watchdog")
+        kill_and_wait(service)
