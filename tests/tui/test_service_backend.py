@@ -158,3 +158,19 @@ async def test_a_tui_attached_mid_print_shows_it_to_its_end(backend, tmp_path):
             assert state.job.layer + 1 == 6 and state.history and state.history[0].status == "done"
     finally:
         second.close()
+
+
+def test_the_in_process_backend_refuses_a_port_its_service_holds(run_dir, monkeypatch, tmp_path):
+    from cdprhost.errors import CdprError
+    from cdprhost.service.paths import files_for_port
+    from cdprhost.service.printer_service import PrinterService
+    from cdprhost.tui.control.live import LiveBackend
+
+    port = str(tmp_path / "ttyFAKE")
+    service = PrinterService(files_for_port(port), port, idle_s=0.5)
+    service.bind()
+    try:
+        with pytest.raises(CdprError, match="held by its printer service"):
+            LiveBackend("paper-prototype").connect(port, 250000)
+    finally:
+        service.close()
