@@ -3,7 +3,8 @@ holds it or a job needs it, the machine operations between prints, and the devic
 broadcast to every client.
 
 A front end ``connect``s (the service opens the link, or shares the one it has) and
-``disconnect``s or leaves (the link closes once nobody holds it and no job runs). While
+``disconnect``s or leaves (the link closes once nobody holds it and no job runs); a
+client that connects during a print started without a session shares the print's link. While
 it is open a poll thread reads the device about once a second (pumping the embedded
 device's virtual clock between reads) and hands the status and the link's counters to
 ``broadcast``. Operations (home, a move, heaters, drivers, clearing a fault) run one at a
@@ -103,10 +104,12 @@ class DeviceSession:
         job_active: Callable[[], bool],
         opener: Opener | None = None,
         poll_s: float = POLL_S,
+        job_link: Callable[[], Any] | None = None,
     ):
         self.port = port
         self.broadcast = broadcast
         self.job_active = job_active
+        self.job_link = job_link or (lambda: None)
         self.opener = opener or default_opener(port)
         self.poll_s = poll_s
         self._lock = threading.RLock()  # the session's fields
@@ -139,8 +142,11 @@ class DeviceSession:
             return wire.Answer(id=spec.id, ok=False, error=f"refused: connect: {exc}")
         with self._lock:
             if self._link is None:
+                # a print started without a session (``cdprhost print``) has the device open:
+                # the session takes that link over (kept after the print for the holders)
+                link = self.job_link() if self.job_active() else None
                 try:
-                    link = self.opener(spec, profile)
+                    link = link if link is not None else self.opener(spec, profile)
                 except (CdprError, OSError) as exc:
                     return wire.Answer(id=spec.id, ok=False, error=str(exc) or type(exc).__name__)
                 self._link, self._spec, self._profile = link, spec, profile

@@ -178,7 +178,11 @@ class PrinterService:
         self._forward: logging.Handler | None = None
         self._job_info: wire.JobInfo | None = None
         self.session = DeviceSession(
-            port, self.broadcast, lambda: self.job_running, opener=device_opener
+            port,
+            self.broadcast,
+            lambda: self.job_running,
+            opener=device_opener,
+            job_link=lambda: self._job.link if self._job is not None else None,
         )
 
     # ------------------------------------------------------------ lifetime

@@ -17,7 +17,14 @@ import pytest
 
 from cdprhost.job.state import JobState
 from cdprhost.tui.control.service_backend import ServiceBackend
-from tests.e2e.processes import SimDeviceProcess, kill_and_wait, service_pid, square_part
+from tests.e2e.processes import (
+    SimDeviceProcess,
+    kill_and_wait,
+    printing_point,
+    service_pid,
+    square_part,
+    start_print,
+)
 
 from .conftest import make_app, wait_for
 
@@ -109,4 +116,41 @@ def test_a_stopped_tui_does_not_stop_the_print(state, tmp_path):
         assert during > 0  # the device moved while the UI was stopped
         assert _completed(state)
         assert not dev.stderr_has("host watchdog")
+        kill_and_wait(service)
+
+
+async def test_a_tui_and_print_attach_see_the_same_print(state, tmp_path):
+    """``cdprhost print`` started it (the service's link, no device session); a TUI joins
+    (sharing that link) and both see the same end."""
+    gcode = square_part(tmp_path / "part.gcode", layers=6)
+    report = tmp_path / "report.json"
+    with SimDeviceProcess(tmp_path, "--speedup", "10") as dev:
+        cli = start_print(gcode, dev.path, state, "--json", str(report))
+        try:
+            printing_point(gcode, state)
+            service = service_pid(dev.path, state)
+            backend = ServiceBackend("paper-prototype")
+            app = make_app(backend, port=dev.path)
+            try:
+                async with app.run_test(size=(100, 32)) as pilot:
+                    await wait_for(
+                        pilot, lambda s: s.job_path == str(gcode), timeout=60, what="the print"
+                    )
+                    end = await wait_for(
+                        pilot, lambda s: s.job.state.finished, timeout=240, what="its end"
+                    )
+                    # after the print the UI holds the device: it answers
+                    await wait_for(
+                        pilot, lambda s: s.device is not None, timeout=30, what="the device"
+                    )
+            finally:
+                backend.close()
+            out, err = cli.communicate(timeout=120)
+        finally:
+            if cli.poll() is None:
+                cli.kill()
+        assert cli.returncode == 0, out + err
+        result = json.loads(report.read_text())
+        assert result["status"] == "completed" and end.job.state is JobState.DONE
+        assert end.job.layer + 1 == result["last_layer"] == 6
         kill_and_wait(service)
