@@ -88,6 +88,26 @@ def device_state(st: Any) -> wire.DeviceState:
     )
 
 
+def move_refusal(model: Any, st: Any, target: tuple[float, float, float]) -> str:
+    """Why the straight move from where the device is to ``target`` leaves the workspace
+    ("" when it does not; the path is sampled every millimetre)."""
+    import numpy as np
+
+    end = np.asarray(target, dtype=float)
+    if st.homed_mask & 0b111 != 0b111:
+        return ""  # the move itself refuses: not homed
+    here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+    points = end[None, :]
+    if np.all(np.isfinite(here)):
+        n = max(2, int(np.ceil(np.linalg.norm(end - here))) + 1)
+        points = here + np.linspace(0.0, 1.0, n)[:, None] * (end - here)
+    report = model.check(points)
+    if report.ok.all():
+        return ""
+    i = int(np.argmin(report.ok))
+    return f"{report.rule_name(i)}: {report.describe(i, model.limits)}"
+
+
 def identity_json(identity: Any) -> dict[str, Any]:
     out = {name: getattr(identity, name, None) for name in IDENTITY_FIELDS}
     out["protocol"] = list(out["protocol"] or ())
@@ -232,6 +252,8 @@ class DeviceSession:
             )
         try:
             with self._op:
+                if self._link is None:  # closed meanwhile
+                    raise CdprError("not connected: connect first")
                 status = self._carry_out(request)
         except NotHomed:
             return wire.Answer(
@@ -247,10 +269,9 @@ class DeviceSession:
     def _carry_out(self, request: Any) -> Any:
         from cdprhost.machine import Machine
 
-        if isinstance(request, wire.Status):
-            link = self._link
-            self._note(link, pump=self._pump())
-            return link.request_status()
+        if isinstance(request, wire.Status):  # (the poll thread pumps the embedded clock)
+            self._note(self._link)
+            return self._link.request_status()
         if isinstance(request, wire.ClearFault):
             self._link.clear_fault()
             return self._link.request_status()
@@ -258,8 +279,18 @@ class DeviceSession:
         if isinstance(request, wire.Home):
             return m.home()
         if isinstance(request, wire.MoveTo):
+            refused = move_refusal(self._model, m.status(), request.target)
+            if refused:
+                raise CdprError(f"refused, nothing moved: {refused}")
             return m.move_to(request.target, feed_mm_s=request.feed_mm_s)
         if isinstance(request, wire.Heaters):
+            heaters = self._profile.heaters
+            for name, value, top in (
+                ("hotend", request.hotend, heaters.hotend_max_c),
+                ("bed", request.bed, heaters.bed_max_c),
+            ):
+                if value is not None and value > top:
+                    raise CdprError(f"refused: {name} target {value:g} °C is above {top:g} °C")
             st = m.set_heaters(request.hotend, request.bed, wait=request.wait)
             if request.wait:
                 self._link.wait_idle(HEAT_WAIT_S)

@@ -366,13 +366,17 @@ class PrinterService:
         client's next line, an e-stop, is read meanwhile)."""
 
         def work() -> None:
-            if isinstance(request, wire.Connect):
-                answer = self.session.connect(client.number, request)
-            elif isinstance(request, wire.Disconnect):
-                self.session.release(client.number)
-                answer = wire.Answer(id=request.id, ok=True)
-            else:
-                answer = self.session.run(request)
+            try:
+                if isinstance(request, wire.Connect):
+                    answer = self.session.connect(client.number, request)
+                elif isinstance(request, wire.Disconnect):
+                    self.session.release(client.number)
+                    answer = wire.Answer(id=request.id, ok=True)
+                else:
+                    answer = self.session.run(request)
+            except Exception as exc:  # a bug: the client is answered, the service lives
+                log.exception("the device request %s broke", request.op)
+                answer = wire.Answer(id=request.id, ok=False, error=f"internal error: {exc}")
             client.send(answer)
 
         threading.Thread(target=work, name=f"device-{request.op}", daemon=True).start()

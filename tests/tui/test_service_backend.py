@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from cdprhost.errors import CdprError
 from cdprhost.job.state import JobSnapshot, JobState, reduce
 from cdprhost.service import client as service_client
 from cdprhost.service import wire
@@ -60,9 +61,13 @@ def test_the_device_between_prints_goes_through_the_service(backend):
     assert "not homed" in backend.console("G1 X10")[-1].text
     homed = backend.home()
     assert homed.homed and homed.motors_on and homed.position is not None
-    target = (homed.position[0] + 5.0, homed.position[1], homed.position[2] + 2.0)
+    target = (homed.position[0] + 2.0, homed.position[1], homed.position[2] - 5.0)
     moved = backend.jog_to(target)
     assert moved.position == pytest.approx(target, abs=0.05)
+    with pytest.raises(CdprError, match="refused, nothing moved"):  # checked by the service
+        backend.jog_to((homed.position[0] + 5000.0, homed.position[1], homed.position[2]))
+    with pytest.raises(CdprError, match="hotend target 900"):
+        backend.set_heaters(900.0, 0.0)
     heated = backend.set_heaters(40.0, 0.0)
     assert heated.hotend_target == 40.0 and heated.bed_target == 0.0
     replies = [line.text for line in backend.console("M114")]
@@ -155,13 +160,14 @@ async def test_a_tui_attached_mid_print_shows_it_to_its_end(backend, tmp_path):
             state = await wait_for(
                 pilot, lambda s: s.job.state is JobState.DONE, timeout=120, what="its end"
             )
-            assert state.job.layer + 1 == 6 and state.history and state.history[0].status == "done"
+            assert state.job.layer + 1 == 6
+            state = await wait_for(pilot, lambda s: s.history, timeout=30, what="its record")
+            assert state.history[0].status == "done" and state.history[0].file == str(gcode)
     finally:
         second.close()
 
 
 def test_the_in_process_backend_refuses_a_port_its_service_holds(run_dir, monkeypatch, tmp_path):
-    from cdprhost.errors import CdprError
     from cdprhost.service.paths import files_for_port
     from cdprhost.service.printer_service import PrinterService
     from cdprhost.tui.control.live import LiveBackend
