@@ -180,3 +180,10 @@ def test_the_in_process_backend_refuses_a_port_its_service_holds(run_dir, monkey
             LiveBackend("paper-prototype").connect(port, 250000)
     finally:
         service.close()
+
+
+def test_a_reconnect_is_not_undone_by_the_old_connection_closing(backend):
+    backend.connect(EMBEDDED, 250000)
+    backend.connect(EMBEDDED, 250000)  # the link screen's reconnect
+    time.sleep(1.0)  # the old connection's reader has seen its end by now
+    assert backend.connected() and backend.device_status() is not None

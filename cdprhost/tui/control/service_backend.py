@@ -244,8 +244,10 @@ class ServiceBackend:
     def _read_loop(self, client: service_client.ServiceClient) -> None:
         while True:
             message = client.inbox.get()
-            if client is not self._client and message is not None:
-                continue  # an old connection's last words
+            if client is not self._client:  # an old connection's last words
+                if message is None:
+                    return
+                continue
             if message is None:
                 with self._cond:
                     self.gone = client.gone or "it closed the connection"
