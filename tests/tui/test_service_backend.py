@@ -187,3 +187,12 @@ def test_a_reconnect_is_not_undone_by_the_old_connection_closing(backend):
     backend.connect(EMBEDDED, 250000)  # the link screen's reconnect
     time.sleep(1.0)  # the old connection's reader has seen its end by now
     assert backend.connected() and backend.device_status() is not None
+
+
+def test_a_device_that_stops_answering_is_said_once_not_every_second(backend):
+    for _ in range(3):  # as the service broadcasts it, once a second
+        backend._take(wire.DeviceMsg(connected=True, error="no word from the device"))
+    backend._take(wire.DeviceMsg(connected=True, status=None))
+    backend._take(wire.DeviceMsg(connected=True, error="no word from the device"))
+    said = [line.text for line in backend.device_log()]
+    assert said == ["the device does not answer: no word from the device"] * 2

@@ -202,6 +202,7 @@ class ServiceBackend:
         self._log: deque[ConsoleLine] = deque(maxlen=DEVICE_LOG)
         self._identity: tuple[tuple[str, str], ...] = ()
         self._health: wire.Health | None = None
+        self._said_error = ""
         self.gone = ""
 
     # ------------------------------------------------------------ the service
@@ -281,8 +282,9 @@ class ServiceBackend:
             self._device = (time.monotonic(), message)
             if message.health is not None:
                 self._health = message.health
-            if message.error:
+            if message.error and message.error != self._said_error:  # once, not every poll
                 self._say("error", f"the device does not answer: {message.error}")
+            self._said_error = message.error
         elif isinstance(message, wire.Note):
             self._say(message.kind, message.text)
         elif isinstance(message, wire.LogMsg):
