@@ -7,6 +7,8 @@ its key. Each client gets its own bounded outgoing queue and sender thread: a cl
 stops reading (a hung or stopped front end) loses its connection when its queue is full,
 and a client that goes away never touches the job. The job's events are kept compacted
 (:mod:`cdprhost.service.journal`), so a front end that attaches later sees the same state.
+Between prints a front end may hold the device (:mod:`cdprhost.service.device_session`):
+one link, the machine operations the TUI needs, the status broadcast to every client.
 The service exits once no job runs and no client has been connected for ``idle_s``.
 """
 
