@@ -6,6 +6,10 @@ print is the job's own (motors kept, heaters as the profile says on a failure: s
 the same flags. Heaters off, home and jog run only while no job runs, on the printer's idle
 link (``run_idle``); a jog moves at most ``MAX_JOG_MM`` per axis, slowly, only when homed and
 only to a point inside the build volume. A printer that does not offer a control refuses it.
+
+A printer that is a client of the printer service (:class:`~.service_printer.ServicePrinter`,
+``device``) has every control done by the service, on the device it owns (the same checks:
+:mod:`cdprhost.service.idle_device`).
 """
 
 from __future__ import annotations
@@ -17,8 +21,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from cdprhost.machine.commands import estop_flags
 from cdprhost.server.printer import Refused
+from cdprhost.service import idle_device
+from cdprhost.service.wire import MAX_JOG_MM
 
-MAX_JOG_MM = 10.0
 JOG_FEED_MM_S = 10.0
 
 
@@ -50,19 +55,17 @@ def jog_target(
 ) -> tuple[float, float, float]:
     """The point ``delta`` away from ``here`` (machine frame), checked against the workspace
     (build volume, slider travel, cable tensions); Refused outside it."""
-    from cdprhost.kinematics.workspace import check_workspace
-
-    target = np.asarray(here, dtype=float).reshape(3) + np.asarray(delta, dtype=float)
-    if not np.all(np.isfinite(target)):
-        raise Refused("the machine's position is unknown; nothing moved")
-    report = check_workspace(target[None, :], model.ik(target[None, :]), model.limits)
-    if not bool(report.ok[0]):
-        raise Refused(f"the jog would leave the workspace: {report.describe(0, model.limits)}")
-    return (float(target[0]), float(target[1]), float(target[2]))
+    try:
+        return idle_device.jog_target(model, here, delta)
+    except idle_device.NotDone as exc:
+        raise Refused(str(exc)) from None
 
 
 def act(printer: Any, control: Control) -> str:
     """Blocking: do ``control``; what was done, or :class:`Refused` with the reason."""
+    device = getattr(printer, "device", None)
+    if device is not None:  # the printer service does it (and refuses it during a print)
+        return str(device(control.action, control.dx, control.dy, control.dz))
     if control.action == "estop":
         return emergency_stop(printer)
     if printer.status().busy:

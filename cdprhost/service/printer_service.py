@@ -29,9 +29,10 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from cdprhost.job.runner import PrintJob, PrintOptions
-from cdprhost.job.state import Event, JobState
+from cdprhost.job.state import Event, JobState, Temperatures
 from cdprhost.logs import attach_log_file, detach_log_file
 from cdprhost.service import wire
+from cdprhost.service.idle_device import IdleDevice
 from cdprhost.service.journal import Journal
 from cdprhost.service.paths import ServiceFiles, device_name, key_matches, write_key
 
@@ -174,6 +175,8 @@ class PrinterService:
         self._lockfile: Any = None
         self._listener: socket.socket | None = None
         self._forward: logging.Handler | None = None
+        self._idle_device = IdleDevice()  # the device between jobs (the web page's commands)
+        self._info: wire.JobInfo | None = None  # the current or last job's file and starter
 
     # ------------------------------------------------------------ lifetime
     def bind(self) -> None:
@@ -248,6 +251,7 @@ class PrinterService:
             clients = list(self._clients)
         for client in clients:
             client.close()
+        self._idle_device.close()
         if self._lockfile is not None:
             if self.private:  # nobody else ever looks for it: leave nothing behind
                 for path in (self.files.lock, self.files.log):
@@ -298,6 +302,8 @@ class PrinterService:
                 )
             )
             if hello.replay:
+                if self._info is not None:
+                    client.send(self._info)
                 for event in self._journal.replay():
                     client.send(wire.EventMsg(event=wire.event_to_json(event)))
                 if self._result is not None:
@@ -325,6 +331,9 @@ class PrinterService:
             error = self._start(client, request)
             if error:
                 client.send(wire.Reply(id=request.id, ok=False, error=error))
+            return
+        if isinstance(request, wire.Device):
+            self._device(client, request)
             return
         job = self._job
         if job is None or job.finished:
@@ -365,6 +374,7 @@ class PrinterService:
             resume_from_layer=spec.resume_from_layer,
             resume=point,
             log_path=spec.log_path,
+            clear_fault=spec.clear_fault,
         )
         if spec.port is not None and spec.profile_ref is not None:
             from cdprhost.profile import record_device
@@ -390,11 +400,60 @@ class PrinterService:
                 on_event=self._on_event,
             )
             self._job = job
+            self._idle_device.close()  # the job opens the device itself
+            self._info = wire.JobInfo(
+                gcode=spec.gcode, started_by=spec.started_by or client.who, started_at=time.time()
+            )
+            info = wire.encode(self._info)
+            for other in list(self._clients):  # before the job's first event
+                other.send(info)
             client.send(wire.Reply(id=request.id, ok=True))
             thread = threading.Thread(target=self._run_job, args=(job, spec), name="print-job")
             self._job_thread = thread
             thread.start()
         return ""
+
+    def _device(self, client: _Client, request: wire.Device) -> None:
+        """The web page's device commands (:mod:`cdprhost.service.idle_device`), each in its
+        own thread: the e-stop of a running job is the job's; the rest waits for no job."""
+        spec = request.device
+        mine = self.port is None if spec.port is None else device_name(spec.port) == self.files.name
+        if not mine:
+            text = f"this service drives {self.port or 'the embedded device'}, not {spec.port}"
+            client.send(wire.Done(id=request.id, ok=False, text=text))
+            return
+
+        def run() -> None:
+            job = self._job
+            if job is not None and not job.finished:
+                client.send(self._during_job(job, request))
+                return
+            client.send(self._idle_device.act(request, busy=self._busy))
+
+        threading.Thread(target=run, name=f"device-{request.action}", daemon=True).start()
+
+    def _busy(self) -> str:
+        job = self._job
+        return "" if job is None or job.finished else f"a print is running ({job.state.value})"
+
+    def _during_job(self, job: PrintJob, request: wire.Device) -> wire.Done:
+        if request.action == "estop":
+            if not job.emergency_stop():
+                return wire.Done(
+                    id=request.id, ok=False, text="the device did not acknowledge the e-stop"
+                )
+            return wire.Done(id=request.id, ok=True, text="emergency stop (motors kept)")
+        if request.action == "temperatures":
+            with self._lock:
+                last = [e for e in self._journal.replay() if isinstance(e, Temperatures)][-1:]
+            reading = wire.event_to_json(last[0]) if last else None
+            if reading is not None:
+                reading.pop("type")
+            return wire.Done(id=request.id, ok=True, text="read", temperatures=reading)
+        what = request.action.replace("_", " ")
+        return wire.Done(
+            id=request.id, ok=False, text=f"a print is running: {what} refused; nothing done"
+        )
 
     def _on_event(self, event: Event) -> None:
         """The job thread's only call into the service: record, queue, return."""

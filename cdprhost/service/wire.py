@@ -16,6 +16,7 @@ Job events are the dataclasses of :mod:`cdprhost.job.state`, written as their fi
 from __future__ import annotations
 
 import dataclasses
+import typing
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
@@ -73,6 +74,9 @@ class StartJob(_Msg):
     job_log_file: bool = True  # also the .log beside the JSON-lines log
     # where the board's announced limits are recorded (a real board: a profile name or path)
     profile_ref: str | None = Field(default=None, max_length=4096)
+    # (the upload server) who started it, for every front end; False: a device fault refuses
+    started_by: str = Field(default="", max_length=200)
+    clear_fault: bool = True
 
 
 class Start(_Msg):
@@ -219,3 +223,65 @@ def event_from_json(data: dict[str, Any]) -> Event:
         return cls(**values)  # type: ignore[no-any-return]
     except TypeError as exc:
         raise WireError(f"event: {exc}") from None
+
+
+# ------------------------------------------------------------ the device while no job runs
+# (added for the upload server and its web page; additive: the messages above are unchanged
+# and the two unions are extended here, so a peer of the first version still understands
+# every message it knew.)
+#
+# client -> service  ``device``  (e-stop, heaters off, home, jog, a temperature reading)
+# service -> client  ``done``    (the reply to ``device``, with what was done or the reason)
+#                    ``job``     (the current job's file and who started it: a front end that
+#                                 attaches late names the job as the one that started it)
+
+
+class DeviceSpec(_Msg):
+    """The device to act on and the machine it drives (as in :class:`StartJob`)."""
+
+    profile: dict[str, Any]  # a MachineProfile as JSON; validated by the service
+    port: str | None = Field(default=None, max_length=4096)  # None: the embedded device
+    baud: int | None = Field(default=None, gt=0, le=10_000_000)
+    speedup: float | None = Field(default=None, ge=0.0, le=100_000.0)
+
+
+#: the farthest a jog moves on each axis (mm)
+MAX_JOG_MM = 10.0
+
+
+class Device(_Msg):
+    """A command to the device while no job runs (the e-stop also during a job: the job's)."""
+
+    op: Literal["device"] = "device"
+    id: int = 0
+    action: Literal["estop", "heaters_off", "home", "jog", "temperatures"]
+    dx: float = Field(default=0.0, ge=-MAX_JOG_MM, le=MAX_JOG_MM, allow_inf_nan=False)
+    dy: float = Field(default=0.0, ge=-MAX_JOG_MM, le=MAX_JOG_MM, allow_inf_nan=False)
+    dz: float = Field(default=0.0, ge=-MAX_JOG_MM, le=MAX_JOG_MM, allow_inf_nan=False)
+    device: DeviceSpec
+
+
+class Done(_Msg):
+    """The reply to :class:`Device`: ``ok`` with what was done (and a temperature reading,
+    the Temperatures event's fields), or the reason nothing was done."""
+
+    msg: Literal["done"] = "done"
+    id: int = 0
+    ok: bool
+    text: str = ""
+    temperatures: dict[str, Any] | None = None
+
+
+class JobInfo(_Msg):
+    """The current (or last) job: its file, who started it, when (epoch s)."""
+
+    msg: Literal["job"] = "job"
+    gcode: str = ""
+    started_by: str = ""
+    started_at: float | None = None
+
+
+_REQUESTS: Any = Annotated[typing.get_args(Request)[0] | Device, Field(discriminator="op")]
+_MESSAGES: Any = Annotated[typing.get_args(Reply_)[0] | Done | JobInfo, Field(discriminator="msg")]
+_REQUEST = TypeAdapter(_REQUESTS)
+_SERVICE = TypeAdapter(_MESSAGES)

@@ -1,0 +1,402 @@
+"""The printer of ``cdprhost serve``: a client of the printer service (:mod:`cdprhost.service`).
+
+Every job runs in the service's process, on the device the service owns; this server only
+sends commands and folds the service's event stream into the :class:`PrinterStatus` the API,
+the web page and its event stream report. So a server that hangs, crashes or is killed never
+touches a print, and a server started again attaches to the running service and shows the
+print it finds there (its file and who started it come with the replay). The page's device
+commands (e-stop, heaters off, home, jog, an idle temperature reading) are the service's
+``device`` command; pause, resume and cancel its own.
+
+A service is found or started for the device: ``--port``'s shared service (the one
+``cdprhost print --port`` and ``print --attach`` use), or for the embedded simulated device
+one service per state folder (so a restarted ``serve`` finds it again).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from cdprhost.errors import CdprError
+from cdprhost.gcode.errors import GcodeError
+from cdprhost.job.resume import log_path_for, state_dir
+from cdprhost.job.state import (
+    Event,
+    IllegalTransition,
+    JobSnapshot,
+    JobState,
+    Temperatures,
+    reduce,
+)
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.prepared import Setup, prepare
+from cdprhost.preflight.run import preflight_prepared
+from cdprhost.profile.models import MachineProfile
+from cdprhost.server.printer import PrinterStatus, Refused, busy_reason, preflight_refusal
+from cdprhost.service import wire
+from cdprhost.service.client import (
+    SHARED_IDLE_S,
+    START_TIMEOUT_S,
+    ServiceClient,
+    ServiceError,
+    connect,
+    spawn,
+)
+from cdprhost.service.paths import ServiceFiles, files_for_port, private_dir
+
+log = logging.getLogger(__name__)
+
+WHO = "serve"
+REPLY_TIMEOUT_S = 30.0  # a start's reply, a pause's; a device command's below
+DEVICE_TIMEOUT_S = 120.0  # homing a machine takes its time
+TEMPERATURE_MAX_AGE_S = 1.0  # an idle reading younger than this answers again (apps poll often)
+RECONNECT_S = 1.0
+
+
+def embedded_files() -> ServiceFiles:
+    """The service of the embedded simulated device for this state folder."""
+    state = str(state_dir().resolve())
+    return ServiceFiles(private_dir(), "sim-" + hashlib.sha256(state.encode()).hexdigest()[:16])
+
+
+def find_or_start(files: ServiceFiles, port: str | None) -> ServiceClient:
+    """A client of the service ``files`` names, started first when none listens."""
+    with contextlib.suppress(ServiceError):
+        return connect(files, WHO, replay=True)
+    proc = spawn(files, port, SHARED_IDLE_S)
+    end = time.monotonic() + START_TIMEOUT_S
+    while True:
+        if files.key.exists():
+            with contextlib.suppress(ServiceError):
+                return connect(files, WHO, replay=True)
+        code = proc.poll()
+        if code is not None and code != 0:
+            raise ServiceError(f"the printer service failed to start (its log: {files.log})")
+        if code == 0 and not files.key.exists():  # another held the device, then left
+            proc = spawn(files, port, SHARED_IDLE_S)
+        if time.monotonic() > end:
+            raise ServiceError(f"the printer service did not start (its log: {files.log})")
+        time.sleep(0.05)
+
+
+class _Waiter:
+    def __init__(self) -> None:
+        self.done = threading.Event()
+        self.reply: Any = None
+
+
+class ServicePrinter:
+    def __init__(
+        self,
+        profile: MachineProfile,
+        *,
+        port: str | None = None,
+        baud: int | None = None,
+        speedup: float | None = None,
+        setup: Setup | None = None,
+        clear_fault: bool = False,
+        profile_ref: str | None = None,
+        on_event: Callable[[Event], None] | None = None,
+        files: ServiceFiles | None = None,
+    ):
+        """``clear_fault``: a start clears a device fault (someone checked the machine); by
+        default a faulted device refuses the start (the job says why)."""
+        self.profile = profile
+        self.model = MachineModel.from_profile(profile)
+        self.setup = setup or Setup()
+        self.port = port
+        self.baud = baud
+        self.speedup = speedup
+        self.clear_fault = clear_fault
+        self.profile_ref = profile_ref
+        self.job_options: dict[str, Any] = {}
+        self.files = files or (files_for_port(port) if port is not None else embedded_files())
+        self._listeners = [on_event] if on_event else []
+        self._lock = threading.RLock()
+        self._status = PrinterStatus(connected=False)
+        self._client: ServiceClient | None = None
+        self._waiting: dict[int, _Waiter] = {}
+        self._ended = threading.Event()
+        self._ended.set()
+        self._closing = False
+        self._idle_temps: tuple[float, Temperatures] | None = None
+        self._device = wire.DeviceSpec(
+            profile=profile.model_dump(mode="json"), port=port, baud=baud, speedup=speedup
+        )
+
+    # ------------------------------------------------------------ the service
+    def connect(self) -> None:
+        """Find or start the service and ask the device once (a wrong port is said before
+        anything listens): CdprError (ServiceError, or the device's own) when it fails."""
+        self._attach()
+        threading.Thread(target=self._keep_attached, name="service-watch", daemon=True).start()
+        reply = self._device_command(wire.Device(action="temperatures", device=self._device))
+        if not reply.ok and not self._status.busy:
+            raise CdprError(f"the device does not answer: {reply.text}")
+        self._remember_temps(reply)
+
+    def _attach(self) -> None:
+        client = find_or_start(self.files, self.port)
+        with self._lock:
+            self._client = client
+            self._status = replace(self._status, connected=True)
+        if client.welcome is not None and client.welcome.job != "none":
+            log.info("attached to the printer service: its job is %s", client.welcome.job)
+        threading.Thread(target=self._read, args=(client,), name="service-in", daemon=True).start()
+
+    def _keep_attached(self) -> None:
+        """A service that went away (it never does while a client is attached, short of a
+        crash) is looked for again, and started again when the server still runs."""
+        while not self._closing:
+            time.sleep(RECONNECT_S)
+            if self._client is not None or self._closing:
+                continue
+            try:
+                self._attach()
+            except (ServiceError, CdprError, OSError) as exc:
+                log.warning("the printer service cannot be reached: %s", exc)
+
+    def _read(self, client: ServiceClient) -> None:
+        while True:
+            message = client.inbox.get()
+            if message is None:
+                break
+            self._take(message)
+        with self._lock:
+            if self._client is client:
+                self._client = None
+            waiting, self._waiting = self._waiting, {}
+            self._status = replace(self._status, connected=False)
+        for waiter in waiting.values():
+            waiter.done.set()  # no reply: the caller says the service went away
+        if not self._closing:
+            log.warning("the printer service went away: %s", client.gone or "no reason")
+
+    def _take(self, message: Any) -> None:
+        if isinstance(message, wire.EventMsg):
+            try:
+                self._on_event(wire.event_from_json(message.event))
+            except wire.WireError as exc:
+                log.warning("the printer service sent a bad event: %s", exc)
+        elif isinstance(message, wire.JobInfo):
+            with self._lock:  # a new job (or the one that runs, for a server attaching late)
+                self._status = PrinterStatus(
+                    connected=True,
+                    file=Path(message.gcode) if message.gcode else None,
+                    started_by=message.started_by,
+                    job=JobSnapshot(),
+                    started_at=message.started_at,
+                )
+                self._ended.clear()
+        elif isinstance(message, wire.ResultMsg):
+            with self._lock:
+                if not self._status.job.state.finished and message.error:
+                    log.warning("the print job broke in the service: %s", message.error)
+                self._ended.set()
+        elif isinstance(message, (wire.Reply, wire.Done)):
+            with self._lock:
+                waiter = self._waiting.pop(message.id, None)
+            if waiter is not None:
+                waiter.reply = message
+                waiter.done.set()
+        elif isinstance(message, wire.LogMsg):
+            log.info("printer service: %s %s", message.level, message.text)
+
+    def _on_event(self, event: Event) -> None:
+        with self._lock:
+            try:
+                job = reduce(self._status.job, event)
+            except IllegalTransition as exc:
+                log.warning("job event out of order: %s", exc)
+                return
+            ended = job.state.finished and not self._status.job.state.finished
+            self._status = replace(
+                self._status, job=job, ended_at=time.time() if ended else self._status.ended_at
+            )
+        for listener in self._listeners:
+            listener(event)
+
+    def _ask(self, message: Any, timeout_s: float = REPLY_TIMEOUT_S) -> Any:
+        """Send a command and wait for its reply; Refused when the service is gone."""
+        with self._lock:
+            client = self._client
+            if client is None:
+                raise Refused("the printer service cannot be reached; nothing done")
+            waiter = _Waiter()
+            try:
+                number = client.send(message)  # the reply cannot come before we listen
+            except ServiceError as exc:
+                raise Refused(f"{exc}; nothing done") from None
+            self._waiting[number] = waiter
+        if not waiter.done.wait(timeout_s) or waiter.reply is None:
+            with self._lock:
+                self._waiting.pop(number, None)
+            raise Refused("the printer service did not answer; nothing done")
+        return waiter.reply
+
+    def _device_command(self, request: wire.Device) -> wire.Done:
+        reply = self._ask(request, DEVICE_TIMEOUT_S)
+        assert isinstance(reply, wire.Done)
+        return reply
+
+    # ------------------------------------------------------------ Printer
+    def status(self) -> PrinterStatus:
+        return self._status
+
+    def check_start(self, path: Path) -> None:
+        self._refuse_if_busy()
+        try:
+            report = preflight_prepared(prepare(path, self.profile, self.model, self.setup))
+        except GcodeError as exc:
+            raise Refused(f"the file does not parse: {exc}; nothing started") from None
+        except (CdprError, OSError) as exc:
+            raise Refused(f"{exc}; nothing started") from None
+        if not report.ok:
+            v = report.violations[0]
+            raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+
+    def _refuse_if_busy(self) -> None:
+        if self._closing:
+            raise Refused("the server is shutting down; nothing started")
+        status = self._status
+        if status.busy:
+            raise Refused(busy_reason(status))
+
+    def start(self, path: Path, who: str) -> None:
+        self._refuse_if_busy()
+        log_path = log_path_for(path)
+        with contextlib.suppress(OSError):
+            log_path.parent.mkdir(parents=True, exist_ok=True)
+        spec = wire.StartJob(
+            gcode=str(path.resolve()),
+            profile=self._device.profile,
+            port=self.port,
+            baud=self.baud,
+            speedup=self.speedup,
+            setup=self.setup.to_json(),
+            log_path=str(log_path.absolute()),
+            profile_ref=self.profile_ref if self.port else None,
+            started_by=who[:200],
+            clear_fault=self.clear_fault,
+        )
+        reply = self._ask(wire.Start(job=spec))
+        if not reply.ok:
+            raise Refused(f"{reply.error}; nothing started")
+        log.info("print of %s started by %s", path.name, who)
+
+    def pause(self, action: str) -> None:
+        state = self._status.job.state
+        if not self._status.busy:
+            raise Refused(f"no print is running ({state.value}): nothing to {action}")
+        if action == "toggle":
+            action = "resume" if state is JobState.PAUSED else "pause"
+        if action == "pause":
+            if state not in (JobState.PRINTING, JobState.HEATING):
+                raise Refused(f"cannot pause while {state.value}")
+            self._command(wire.Pause())
+        elif action == "resume":
+            if state is not JobState.PAUSED:
+                raise Refused(f"cannot resume while {state.value}")
+            self._command(wire.Resume())
+        else:
+            raise ValueError(f"unknown pause action {action!r}")
+
+    def cancel(self, reason: str = "") -> None:
+        """Also while the job starts (preflight, connecting): it then ends before moving."""
+        status = self._status
+        if not status.busy:
+            raise Refused(f"no print is running ({status.job.state.value}): nothing to cancel")
+        if status.job.state is JobState.CANCELLING:
+            return
+        self._command(wire.Cancel(reason=reason))
+
+    def _command(self, message: Any) -> None:
+        reply = self._ask(message)
+        if not reply.ok:
+            raise Refused(reply.error)
+
+    def emergency_stop(self) -> bool:
+        """Stop now: the job's e-stop when one runs, else the device's (motors kept)."""
+        try:
+            return self.device("estop") is not None
+        except Refused as exc:
+            log.warning("emergency stop: %s", exc)
+            return False
+
+    def device(self, action: str, dx: float = 0.0, dy: float = 0.0, dz: float = 0.0) -> str:
+        """Blocking: a device command of the web page (e-stop, heaters off, home, jog) done
+        by the service; what was done, or Refused with the reason."""
+        request = wire.Device(action=action, dx=dx, dy=dy, dz=dz, device=self._device)  # type: ignore[arg-type]
+        reply = self._device_command(request)
+        if not reply.ok:
+            raise Refused(reply.text)
+        return reply.text
+
+    def uploaded(self, path: Path) -> None:
+        log.info("stored upload %s", path)
+
+    def temperatures(self) -> Temperatures | None:
+        """The running job's newest reading; without a job, the device's (asked of the
+        service at most once a second)."""
+        status = self._status
+        if status.busy:
+            return status.job.temperatures
+        now = time.monotonic()
+        cached = self._idle_temps
+        if cached is not None and now - cached[0] < TEMPERATURE_MAX_AGE_S:
+            return cached[1]
+        try:
+            reply = self._device_command(wire.Device(action="temperatures", device=self._device))
+        except Refused:
+            return cached[1] if cached else status.job.temperatures
+        return self._remember_temps(reply) or (cached[1] if cached else None)
+
+    def _remember_temps(self, reply: wire.Done) -> Temperatures | None:
+        if not reply.ok or reply.temperatures is None:
+            return None
+        try:
+            reading = Temperatures(**reply.temperatures)
+        except TypeError:
+            return None
+        self._idle_temps = (time.monotonic(), reading)
+        return reading
+
+    # ------------------------------------------------------------ the end
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Blocking: until no job runs (for tests and the CLI)."""
+        end = time.monotonic() + timeout_s
+        while self._status.busy and time.monotonic() < end:
+            time.sleep(0.05)
+        return not self._status.busy
+
+    def shutdown(self, reason: str = "server shutdown", timeout_s: float = 30.0) -> bool:
+        """Blocking: refuse new starts, cancel a running print (the service stops it
+        safely: stop, park, heaters off, resume point) and wait for its end, then leave the
+        service. True when no job was left running."""
+        self._closing = True
+        ended = True
+        if self._status.busy:
+            log.warning("stopping the running print (%s)", reason)
+            with contextlib.suppress(Refused):
+                self._command(wire.Cancel(reason=reason))
+            ended = self.wait_idle(timeout_s)
+            if not ended:
+                ended = self.emergency_stop() and self.wait_idle(10.0)
+        self.detach()
+        return ended
+
+    def detach(self) -> None:
+        """Leave the service (a print goes on)."""
+        self._closing = True
+        with self._lock:
+            client, self._client = self._client, None
+        if client is not None:
+            client.close()
