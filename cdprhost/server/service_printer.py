@@ -41,6 +41,7 @@ from cdprhost.motion.prepared import Setup, prepare
 from cdprhost.preflight.run import preflight_prepared
 from cdprhost.profile.models import MachineProfile
 from cdprhost.server.printer import PrinterStatus, Refused, busy_reason, preflight_refusal
+from cdprhost.service import client as service_client
 from cdprhost.service import wire
 from cdprhost.service.client import (
     SHARED_IDLE_S,
@@ -48,7 +49,6 @@ from cdprhost.service.client import (
     ServiceClient,
     ServiceError,
     connect,
-    spawn,
 )
 from cdprhost.service.paths import ServiceFiles, files_for_port, private_dir
 
@@ -71,7 +71,7 @@ def find_or_start(files: ServiceFiles, port: str | None) -> ServiceClient:
     """A client of the service ``files`` names, started first when none listens."""
     with contextlib.suppress(ServiceError):
         return connect(files, WHO, replay=True)
-    proc = spawn(files, port, SHARED_IDLE_S)
+    proc = service_client.spawn(files, port, SHARED_IDLE_S)
     end = time.monotonic() + START_TIMEOUT_S
     while True:
         if files.key.exists():
@@ -81,7 +81,7 @@ def find_or_start(files: ServiceFiles, port: str | None) -> ServiceClient:
         if code is not None and code != 0:
             raise ServiceError(f"the printer service failed to start (its log: {files.log})")
         if code == 0 and not files.key.exists():  # another held the device, then left
-            proc = spawn(files, port, SHARED_IDLE_S)
+            proc = service_client.spawn(files, port, SHARED_IDLE_S)
         if time.monotonic() > end:
             raise ServiceError(f"the printer service did not start (its log: {files.log})")
         time.sleep(0.05)
@@ -128,6 +128,7 @@ class ServicePrinter:
         self._ended.set()
         self._closing = False
         self._idle_temps: tuple[float, Temperatures] | None = None
+        self._mine: float | None = None  # the start time of the job this server started
         self._device = wire.DeviceSpec(
             profile=profile.model_dump(mode="json"), port=port, baud=baud, speedup=speedup
         )
@@ -290,6 +291,7 @@ class ServicePrinter:
         reply = self._ask(wire.Start(job=spec))
         if not reply.ok:
             raise Refused(f"{reply.error}; nothing started")
+        self._mine = self._status.started_at  # its JobInfo came before the reply
         log.info("print of %s started by %s", path.name, who)
 
     def pause(self, action: str) -> None:
@@ -378,12 +380,17 @@ class ServicePrinter:
         return not self._status.busy
 
     def shutdown(self, reason: str = "server shutdown", timeout_s: float = 30.0) -> bool:
-        """Blocking: refuse new starts, cancel a running print (the service stops it
-        safely: stop, park, heaters off, resume point) and wait for its end, then leave the
-        service. True when no job was left running."""
+        """Blocking: refuse new starts, cancel a running print this server started (the
+        service stops it safely: stop, park, heaters off, resume point) and wait for its
+        end, then leave the service. A print started by another front end (or by a server
+        before this one) goes on. True when no job of this server was left running."""
         self._closing = True
         ended = True
-        if self._status.busy:
+        status = self._status
+        if status.busy and (self._mine is None or status.started_at != self._mine):
+            name = status.file.name if status.file else "the print"
+            log.warning("%s goes on in the printer service (not started here)", name)
+        elif status.busy:
             log.warning("stopping the running print (%s)", reason)
             with contextlib.suppress(Refused):
                 self._command(wire.Cancel(reason=reason))
