@@ -109,6 +109,10 @@ def test_the_page_controls_are_done_by_the_service_on_its_device(tmp_path, run_d
         assert status == 409 and "home first" in text, text
         assert _control(server, "home") == (200, "homed")
         assert _control(server, "heaters_off") == (200, "heaters off")
+        req = urllib.request.Request(server.url + "/api/printer", headers={"X-Api-Key": server.key})
+        with urllib.request.urlopen(req, timeout=60) as resp:  # idle: read by the service
+            heaters = json.loads(resp.read())["temperature"]
+        assert heaters["tool0"]["target"] == 0 and heaters["tool0"]["actual"] > 0, heaters
     finally:
         server.proc.kill()
         server.proc.wait(30)

@@ -11,6 +11,7 @@ simulated device (one service per state folder).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import threading
 from typing import Any
@@ -174,6 +175,10 @@ def run(args: argparse.Namespace) -> int:
     from cdprhost.server.service_printer import ServicePrinter
 
     profile = load_profile(args.profile)
+    if args.port and not os.path.exists(args.port):  # said before a service is started for it
+        raise InputError(
+            "no such port (is the device plugged in? try `ls /dev/tty*`)", source=args.port
+        )
     printer = ServicePrinter(
         profile,
         port=args.port,
