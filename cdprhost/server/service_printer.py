@@ -263,6 +263,25 @@ class ServicePrinter:
         if not report.ok:
             v = report.violations[0]
             raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+        self._refuse_if_faulted()
+
+    def _refuse_if_faulted(self) -> None:
+        """A device stopped by a fault starts nothing unless ``clear_fault`` (and the fault
+        is one the host may clear): nobody at the machine has looked at it."""
+        self._refuse_if_busy()
+        reply = self._device_command(wire.Device(action="temperatures", device=self._device))
+        if not reply.ok:
+            raise Refused(f"the device does not answer: {reply.text}; nothing started")
+        self._remember_temps(reply)
+        if not reply.fault or (self.clear_fault and reply.clearable):
+            return
+        how = (
+            "check the machine, then restart `cdprhost serve --clear-fault` (or clear it in "
+            "`cdprhost tui`)"
+            if reply.clearable
+            else "it cannot be cleared from the host"
+        )
+        raise Refused(f"{reply.fault}: {how}; nothing started")
 
     def _refuse_if_busy(self) -> None:
         if self._closing:

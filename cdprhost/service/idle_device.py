@@ -22,7 +22,9 @@ from cdprhost.errors import CdprError
 from cdprhost.job.state import temperatures_of
 from cdprhost.link import LinkError
 from cdprhost.link.errors import DeviceFault
+from cdprhost.machine.prepare import describe_fault, fault_clearable
 from cdprhost.service import wire
+from firmware_protocol.messages import THERMAL_ERRORS
 
 log = logging.getLogger(__name__)
 
@@ -66,11 +68,30 @@ class IdleDevice:
     def __init__(self, opener: Any = open_device):
         self._open = opener
         self._link: Any = None
+        self._opened_as: tuple[str | None, int | None, float | None] | None = None
         self._lock = threading.Lock()
 
     def close(self) -> None:
         with self._lock:
             self._close()
+
+    def take(self, port: str | None, baud: int | None, speedup: float | None) -> Any:
+        """The session's link for a job on the same device opened the same way (the
+        session ends; the job owns the link now), else None (and the session is closed)."""
+        with self._lock:
+            link, same = self._link, self._opened_as == (port, baud, speedup)
+            if link is not None and same:
+                try:
+                    link.request_status()
+                except DeviceFault:  # alive, stopped by a fault: the job decides
+                    pass
+                except (LinkError, OSError):  # gone: the job opens the device again
+                    self._close()
+                    return None
+                self._link = None
+                return link
+            self._close()
+            return None
 
     def _close(self) -> None:
         link, self._link = self._link, None
@@ -90,6 +111,7 @@ class IdleDevice:
             except (LinkError, OSError):
                 self._close()
         self._link = self._open(spec, profile)
+        self._opened_as = (spec.port, spec.baud, spec.speedup)
         return self._link
 
     def act(self, request: wire.Device, busy: Any = lambda: "") -> wire.Done:
@@ -121,11 +143,25 @@ class IdleDevice:
         action = request.action
         if action == "temperatures":
             try:
-                reading = temperatures_of(link.request_status(timeout=profile.serial.timeout_s))
-            except DeviceFault as exc:  # a faulted device: said; the reading comes later
-                raise NotDone(str(exc)) from None
+                status = link.request_status(timeout=profile.serial.timeout_s)
+            except DeviceFault as exc:  # faulted in this session (an e-stop): no reading
+                code = int(exc.code or 0)
+                fault = f"the device is stopped by a fault ({exc})"
+                return wire.Done(
+                    id=request.id,
+                    ok=True,
+                    text="faulted",
+                    fault=fault,
+                    clearable=code not in THERMAL_ERRORS,
+                )
+            reading = dataclasses.asdict(temperatures_of(status))
             return wire.Done(
-                id=request.id, ok=True, text="read", temperatures=dataclasses.asdict(reading)
+                id=request.id,
+                ok=True,
+                text="read",
+                temperatures=reading,
+                fault=describe_fault(status) or "",
+                clearable=fault_clearable(status),
             )
         if action == "estop":
             if not link.emergency_stop(timeout=1.0, flags=estop_flags(profile)):

@@ -400,7 +400,11 @@ class PrinterService:
                 on_event=self._on_event,
             )
             self._job = job
-            self._idle_device.close()  # the job opens the device itself
+            # the device session of the page's commands, when it is this device: the job's
+            # (a homed machine stays homed, a board is not opened twice); else it is closed
+            kept = self._idle_device.take(spec.port, spec.baud, spec.speedup)
+            if kept is not None:
+                job.link_factory = _first(kept, job.link_factory)
             self._info = wire.JobInfo(
                 gcode=spec.gcode, started_by=spec.started_by or client.who, started_at=time.time()
             )
@@ -489,6 +493,16 @@ class PrinterService:
             client.send(message)
         if job.state is JobState.IDLE:
             log.info("the job ended before it began")
+
+
+def _first(link: Any, then: Callable[[], Any]) -> Callable[[], Any]:
+    """A link factory that gives ``link`` first (a session already open), then opens."""
+    given = [link]
+
+    def factory() -> Any:
+        return given.pop() if given else then()
+
+    return factory
 
 
 def default_link_factory(spec: wire.StartJob, profile: Any) -> Callable[[], Any]:

@@ -263,13 +263,16 @@ class Device(_Msg):
 
 class Done(_Msg):
     """The reply to :class:`Device`: ``ok`` with what was done (and a temperature reading,
-    the Temperatures event's fields), or the reason nothing was done."""
+    the Temperatures event's fields), or the reason nothing was done. A reading also says
+    the device's fault, explained ("" when none), and whether the host may clear it."""
 
     msg: Literal["done"] = "done"
     id: int = 0
     ok: bool
     text: str = ""
     temperatures: dict[str, Any] | None = None
+    fault: str = ""
+    clearable: bool = True
 
 
 class JobInfo(_Msg):

@@ -125,6 +125,14 @@ def test_the_page_controls_are_done_by_the_service_on_its_device(tmp_path, run_d
         assert _control(again, "estop") == (200, "emergency stop (motors kept)")
         status, text = _control(again, "home")  # the device is stopped by the e-stop: refused
         assert status == 409 and "stop" in text.lower(), text
+        body, ctype = multipart([("print", "true")], ("after.gcode", small_part(2).encode()))
+        headers = {"X-Api-Key": again.key, "Content-Type": ctype}
+        req = urllib.request.Request(again.url + "/api/files/local", body, headers)
+        with pytest.raises(urllib.error.HTTPError) as refused:  # nobody checked the machine
+            urllib.request.urlopen(req, timeout=120)
+        assert refused.value.code == 409
+        text = json.loads(refused.value.read())["error"]
+        assert "fault" in text and "--clear-fault" in text and "nothing started" in text
     finally:
         code, rest = again.stop()
     assert code == 0, rest

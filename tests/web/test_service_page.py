@@ -107,10 +107,14 @@ def test_a_print_started_by_the_page_runs_in_the_service_and_its_e_stop_is_the_j
     server, service = service_server()
     server.upload("listed.gcode", part(layers=30))
     unlock(page, server)
+    page.click("#home")
+    page.wait_for_function("document.getElementById('message').textContent === 'home: asked'")
+    homed = service._idle_device._link
     page.click("#files button[data-path='listed.gcode']")
     _wait(lambda: service.job_running and server.state() == "printing", "printing")
     page.wait_for_function(f"{STATE_TEXT}.startsWith('printing')")
     job = service._job
+    assert job.link is homed  # the job took the page's device session: one device, homed
     page.click("#estop")
     server.wait_state("failed")
     machine = job.link.device.machine
