@@ -20,8 +20,18 @@ from typing import Any
 
 import pytest
 
+from cdprhost.profile import load_profile
+from cdprhost.server.service_printer import ServicePrinter
 from tests.e2e.processes import PYTHON, SimDeviceProcess, service_pid
-from tests.server.conftest import ServeProcess, multipart, printed_to_the_end, small_part
+from tests.server.conftest import (
+    PROFILE,
+    ServeProcess,
+    multipart,
+    printed_to_the_end,
+    small_part,
+)
+from tests.server.test_job_control import _command, _upload
+from tests.service.inprocess import serve_in_thread
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -35,7 +45,9 @@ def run_dir(monkeypatch) -> Iterator[Path]:
     yield folder
     for pid_file in folder.glob("*.pid"):
         with contextlib.suppress(ValueError, OSError):
-            os.kill(int(pid_file.read_text()), signal.SIGKILL)
+            pid = int(pid_file.read_text())
+            if pid != os.getpid():  # (a service in a thread of this test: not a process)
+                os.kill(pid, signal.SIGKILL)
     with contextlib.suppress(OSError):
         for path in folder.iterdir():
             path.unlink()
@@ -188,3 +200,34 @@ def test_serve_and_print_attach_watch_one_print_and_see_the_same_state(tmp_path,
         assert final["job"]["file"]["name"] == "part.gcode"
         assert "pause" in (out + err).lower()  # the watcher saw the pause the server asked
         assert service_pid(dev.path, state)  # the service outlives both front ends
+
+
+def test_over_the_service_a_busy_printer_refuses_and_pause_resume_cancel_work(
+    make_server, run_dir, monkeypatch
+):
+    """The OctoPrint job routes on a server whose printer is a client of the service."""
+    services = serve_in_thread(monkeypatch, idle_s=30.0)
+    printer = ServicePrinter(load_profile(PROFILE), speedup=10.0)
+    printer.connect()
+    server = make_server(printer=printer)
+    try:
+        assert _upload(server, "first.gcode", layers=40).status == 201
+        server.wait_job(lambda j: j["state"] == "Printing")
+        assert services[0].job_running  # the print runs in the service
+        second = _upload(server, "second.gcode")
+        assert second.status == 409 and "first.gcode" in second.json()["error"]
+        assert _command(server, command="pause", action="pause").status == 204
+        server.wait_job(lambda j: j["state"] == "Paused")
+        assert _command(server, command="start").status == 409  # a paused job is still a job
+        assert _command(server, command="pause", action="resume").status == 204
+        job = server.wait_job(lambda j: j["state"] == "Printing" and j["progress"]["filepos"])
+        text, pos = small_part(layers=40).encode(), job["progress"]["filepos"]
+        assert 0 < pos < len(text) and text[pos - 1 : pos] == b"\n"
+        assert _command(server, command="cancel").status == 204
+        job = server.wait_job(lambda j: j["state"] == "Operational")
+        assert job["progress"]["completion"] < 100
+        assert printer.status().job.state.value == "cancelled"
+        assert _command(server, command="cancel").status == 409  # nothing left to cancel
+    finally:
+        for service in services:
+            service.shutdown_job("test over")
