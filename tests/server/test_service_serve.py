@@ -22,6 +22,7 @@ import pytest
 
 from cdprhost.profile import load_profile
 from cdprhost.server.service_printer import ServicePrinter
+from cdprhost.service import wire
 from tests.e2e.processes import PYTHON, SimDeviceProcess, service_pid
 from tests.server.conftest import (
     PROFILE,
@@ -231,3 +232,21 @@ def test_over_the_service_a_busy_printer_refuses_and_pause_resume_cancel_work(
     finally:
         for service in services:
             service.shutdown_job("test over")
+
+
+def test_the_device_command_is_checked_on_the_wire_and_the_first_messages_still_read():
+    spec = {"profile": {}, "port": None}
+    jog = wire.decode_request(
+        json.dumps({"op": "device", "action": "jog", "dx": 5, "device": spec}).encode()
+    )
+    assert isinstance(jog, wire.Device) and jog.dx == 5.0
+    with pytest.raises(wire.WireError, match="dx"):  # farther than a cautious jog
+        wire.decode_request(
+            json.dumps({"op": "device", "action": "jog", "dx": 11, "device": spec}).encode()
+        )
+    with pytest.raises(wire.WireError, match="action"):
+        wire.decode_request(json.dumps({"op": "device", "action": "melt", "device": spec}).encode())
+    assert isinstance(wire.decode_request(b'{"op": "pause", "id": 3}'), wire.Pause)
+    assert isinstance(wire.decode_reply(b'{"msg": "job", "gcode": "/x.gcode"}'), wire.JobInfo)
+    done = wire.decode_reply(b'{"msg": "done", "id": 2, "ok": false, "text": "home first"}')
+    assert isinstance(done, wire.Done) and not done.ok and done.fault == ""
