@@ -146,8 +146,15 @@ class ServicePrinter:
 
     def _attach(self) -> None:
         client = find_or_start(self.files, self.port)
+        fresh = client.welcome is None or client.welcome.job == "none"
         with self._lock:
             self._client = client
+            if fresh and self._status.busy:  # a new service: the job we showed died with the old
+                reason = "the printer service went away during the print"
+                log.warning("%s (started again)", reason)
+                job = replace(self._status.job, state=JobState.FAILED, reason=reason)
+                self._status = replace(self._status, job=job, ended_at=time.time())
+                self._ended.set()
             self._status = replace(self._status, connected=True)
         if client.welcome is not None and client.welcome.job != "none":
             log.info("attached to the printer service: its job is %s", client.welcome.job)

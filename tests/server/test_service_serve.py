@@ -250,3 +250,29 @@ def test_the_device_command_is_checked_on_the_wire_and_the_first_messages_still_
     assert isinstance(wire.decode_reply(b'{"msg": "job", "gcode": "/x.gcode"}'), wire.JobInfo)
     done = wire.decode_reply(b'{"msg": "done", "id": 2, "ok": false, "text": "home first"}')
     assert isinstance(done, wire.Done) and not done.ok and done.fault == ""
+
+
+def test_a_service_that_dies_mid_print_is_said_and_the_server_prints_again(tmp_path, run_dir):
+    from cdprhost.server.service_printer import embedded_files
+
+    server = ServeProcess(tmp_path / "srv", "--speedup", "10")
+    try:
+        _upload_and_print(server, "doomed.gcode", small_part(30))
+        server.wait_job(lambda j: j["state"] == "Printing")
+        saved = os.environ.get("CDPRHOST_STATE")
+        os.environ["CDPRHOST_STATE"] = str(tmp_path / "srv" / "state")
+        try:
+            pid = embedded_files().read_pid()
+        finally:
+            if saved is not None:
+                os.environ["CDPRHOST_STATE"] = saved
+        assert pid is not None
+        os.kill(pid, signal.SIGKILL)  # the service, not the server
+        failed = server.wait_job(lambda j: "went away" in j.get("error", ""), timeout=60)
+        assert failed["job"]["file"]["name"] == "doomed.gcode"
+        _upload_and_print(server, "next.gcode", small_part(2))  # a new service prints it
+        done = server.wait_job(printed_to_the_end)
+        assert done["job"]["file"]["name"] == "next.gcode"
+    finally:
+        code, rest = server.stop()
+    assert code == 0, rest
