@@ -276,3 +276,55 @@ def test_a_service_that_dies_mid_print_is_said_and_the_server_prints_again(tmp_p
     finally:
         code, rest = server.stop()
     assert code == 0, rest
+
+
+def test_a_stopped_server_never_holds_the_print_and_shows_its_end_once_continued(tmp_path, run_dir):
+    server = ServeProcess(tmp_path / "srv", "--speedup", "20")
+    try:
+        _upload_and_print(server, "held.gcode", small_part(12))
+        server.wait_job(lambda j: j["state"] == "Printing")
+        from cdprhost.server.service_printer import embedded_files
+
+        saved = os.environ.get("CDPRHOST_STATE")
+        os.environ["CDPRHOST_STATE"] = str(tmp_path / "srv" / "state")
+        try:
+            files = embedded_files()
+        finally:
+            if saved is not None:
+                os.environ["CDPRHOST_STATE"] = saved
+        server.proc.send_signal(signal.SIGSTOP)  # a hung front end: reads nothing
+        try:
+            logs = tmp_path / "srv" / "state"
+            ended = wait_for_log_end(logs, "held-*.jsonl", timeout=240)
+        finally:
+            server.proc.send_signal(signal.SIGCONT)
+        assert ended == "done"  # the service printed to the end meanwhile
+        done = server.wait_job(printed_to_the_end, timeout=60)
+        assert done["job"]["file"]["name"] == "held.gcode"
+        assert files.read_pid() is not None
+    finally:
+        code, rest = server.stop()
+    assert code == 0, rest
+
+
+def wait_for_log_end(folder: Path, pattern: str, timeout: float) -> str:
+    """The last state the job's JSON-lines log records once the job has ended (bounded)."""
+    import time
+
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        for path in folder.rglob(pattern):
+            try:
+                records = _records(path)
+            except json.JSONDecodeError:  # a line being written: read again
+                continue
+            states = [
+                r["state"]
+                for r in records
+                if r.get("event") == "StateChanged"
+                and r.get("state") in ("done", "failed", "cancelled")
+            ]
+            if states:
+                return str(states[-1])
+        time.sleep(0.2)
+    raise AssertionError(f"no job ended in {folder} within {timeout:g} s")
