@@ -88,6 +88,26 @@ def device_state(st: Any) -> wire.DeviceState:
     )
 
 
+def read_state(link: Any) -> wire.DeviceState:
+    """The device's status now; a device stopped by a fault (the link raises it) still
+    answers, with the fault in words and its last report's figures."""
+    from cdprhost.link.errors import DeviceFault
+    from firmware_protocol.messages import THERMAL_ERRORS
+
+    try:
+        return device_state(link.request_status())
+    except DeviceFault as exc:
+        st = link.status()
+        if st is None:
+            raise
+        state = device_state(st)
+        if state.fault:
+            return state
+        fault = f"the device is stopped by a fault ({exc})"
+        clearable = int(exc.code or 0) not in THERMAL_ERRORS
+        return state.model_copy(update={"fault": fault, "clearable": clearable})
+
+
 def move_refusal(model: Any, st: Any, target: tuple[float, float, float]) -> str:
     """Why the straight move from where the device is to ``target`` leaves the workspace
     ("" when it does not; the path is sampled every millimetre)."""
@@ -180,12 +200,17 @@ class DeviceSession:
             id=spec.id, ok=True, identity=identity_json(link.identity), status=status
         )
 
-    def release(self, holder: int, job_ended: bool = False) -> None:
-        """``holder`` lets go (disconnected or left); the link closes when nobody holds it
-        and no job runs (``job_ended``: the job's own thread says it is over)."""
+    def release(self, holder: int, job_ended: bool = False, closing: bool = False) -> None:
+        """``holder`` lets go (disconnected or left); a port's link closes when nobody holds
+        it and no job runs (``job_ended``: the job's own thread says it is over). The
+        embedded simulated device lives in the link, so its link stays open until the
+        service closes (``closing``): a front end started again finds the machine as it
+        was (homed, hot)."""
         with self._lock:
             self._holders.discard(holder)
             if self._holders or (self.job_active() and not job_ended):
+                return
+            if self.port is None and not closing:
                 return
             link, self._link = self._link, None
             self._stop.set()
@@ -204,7 +229,7 @@ class DeviceSession:
     def close(self) -> None:
         with self._lock:
             self._holders.clear()
-        self.release(-1)
+        self.release(-1, closing=True)
 
     # ------------------------------------------------------------ the job
     def link_for_job(self) -> Any:
@@ -262,7 +287,7 @@ class DeviceSession:
         except (CdprError, LinkError, OSError) as exc:
             return wire.Answer(id=request.id, ok=False, error=str(exc) or type(exc).__name__)
         self._note(self._link)
-        state = device_state(status)
+        state = status if isinstance(status, wire.DeviceState) else device_state(status)
         self._last = state
         return wire.Answer(id=request.id, ok=True, status=state)
 
@@ -271,7 +296,7 @@ class DeviceSession:
 
         if isinstance(request, wire.Status):  # (the poll thread pumps the embedded clock)
             self._note(self._link)
-            return self._link.request_status()
+            return read_state(self._link)
         if isinstance(request, wire.ClearFault):
             self._link.clear_fault()
             return self._link.request_status()
@@ -324,8 +349,13 @@ class DeviceSession:
 
     def _note(self, link: Any, pump: float = 0.0) -> None:
         from cdprhost.link import DeviceErrorEvent, DeviceEvent
+        from cdprhost.link.errors import DeviceFault
 
-        for ev in link.poll(pump):
+        try:
+            events = link.poll(pump)
+        except DeviceFault:  # stopped by a fault: the status says it (read_state)
+            return
+        for ev in events:
             if isinstance(ev, DeviceErrorEvent):
                 text = f"device error {ev.name}" + (f": {ev.text}" if ev.text else "")
                 self.broadcast(wire.Note(kind="error", text=text))
@@ -335,7 +365,7 @@ class DeviceSession:
 
     def _status_now(self) -> wire.DeviceState | None:
         with contextlib.suppress(Exception), self._op:
-            self._last = device_state(self._link.request_status())
+            self._last = read_state(self._link)
         return self._last
 
     def _start_poll(self) -> None:
@@ -367,9 +397,10 @@ class DeviceSession:
             if self._op.acquire(blocking=False):
                 try:
                     self._note(link, pump=self._pump())
-                    st = link.request_status()
+                    self._last = read_state(link)
                 finally:
                     self._op.release()
+                return wire.DeviceMsg(connected=True, status=self._last, health=health)
             else:  # an operation holds the device: ask, and read the latest if recent
                 time.sleep(self.poll_s)
                 link.ask_status()

@@ -178,7 +178,7 @@ class PrinterService:
         self._lockfile: Any = None
         self._listener: socket.socket | None = None
         self._forward: logging.Handler | None = None
-        self._job_info: wire.JobInfo | None = None
+        self._job_info: wire.JobInfo | None = None  # the current or last job's file and starter
         self.session = DeviceSession(
             port,
             self.broadcast,
@@ -262,10 +262,6 @@ class PrinterService:
             client.close()
         self.session.close()
         if self._lockfile is not None:
-            if self.private:  # nobody else ever looks for it: leave nothing behind
-                for path in (self.files.lock, self.files.log):
-                    with contextlib.suppress(OSError):
-                        path.unlink()
             self._lockfile.close()
             self._lockfile = None
 
@@ -278,11 +274,6 @@ class PrinterService:
         if thread is not None:
             thread.join(30.0)
         self.stop()
-
-    @property
-    def private(self) -> bool:
-        """The service of one embedded device, started for one front end."""
-        return self.port is None
 
     @property
     def job_running(self) -> bool:
@@ -312,8 +303,7 @@ class PrinterService:
             )
             if hello.replay:
                 if self._job_info is not None:
-                    info = self._job_info.model_copy(update={"state": state})
-                    client.send(info)
+                    client.send(self._job_info.model_copy(update={"state": state}))
                 for event in self._journal.replay():
                     client.send(wire.EventMsg(event=wire.event_to_json(event)))
                 if self._result is not None:
@@ -429,7 +419,6 @@ class PrinterService:
             opener = (
                 self.session.link_for_job if self.session.open else self.link_factory(spec, profile)
             )
-            self._job_info = wire.JobInfo(gcode=spec.gcode, state="idle", started_at=time.time())
             job = PrintJob(
                 spec.gcode,
                 profile,
@@ -438,6 +427,15 @@ class PrinterService:
                 on_event=self._on_event,
             )
             self._job = job
+            self._job_info = wire.JobInfo(
+                gcode=spec.gcode,
+                state="idle",
+                started_by=spec.started_by or client.who,
+                started_at=time.time(),
+            )
+            info = wire.encode(self._job_info)
+            for other in list(self._clients):  # before the job's first event
+                other.send(info)
             client.send(wire.Reply(id=request.id, ok=True))
             thread = threading.Thread(target=self._run_job, args=(job, spec), name="print-job")
             self._job_thread = thread

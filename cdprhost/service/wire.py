@@ -48,8 +48,19 @@ class WireError(ValueError):
     """A line that is not a valid message of this wire version."""
 
 
+class UnknownMessage(WireError):
+    """A service's message of a kind this client does not know (a newer service): skipped."""
+
+
 class _Msg(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _Out(BaseModel):
+    """A message of the service: a client ignores fields (and, :class:`UnknownMessage`,
+    whole messages) a newer service of the same version added."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
 
 
 # ------------------------------------------------------------ client -> service
@@ -81,6 +92,7 @@ class StartJob(_Msg):
     # where the board's announced limits are recorded (a real board: a profile name or path)
     profile_ref: str | None = Field(default=None, max_length=4096)
     clear_fault: bool = True  # a device fault is cleared at start (False: refused)
+    started_by: str = Field(default="", max_length=200)  # who (the upload server's client)
 
 
 class Start(_Msg):
@@ -193,7 +205,7 @@ Request = Annotated[
 # ------------------------------------------------------------ service -> client
 
 
-class Welcome(_Msg):
+class Welcome(_Out):
     msg: Literal["welcome"] = "welcome"
     v: int
     pid: int
@@ -202,19 +214,19 @@ class Welcome(_Msg):
     job: str = "none"  # the current or last job's state ("none": no job yet)
 
 
-class EventMsg(_Msg):
+class EventMsg(_Out):
     msg: Literal["event"] = "event"
     event: dict[str, Any]
 
 
-class Reply(_Msg):
+class Reply(_Out):
     msg: Literal["reply"] = "reply"
     id: int = 0
     ok: bool
     error: str = ""
 
 
-class ResultMsg(_Msg):
+class ResultMsg(_Out):
     """The job's end: ``result`` (PrintResult fields) or ``error`` (the job itself broke)."""
 
     msg: Literal["result"] = "result"
@@ -222,7 +234,7 @@ class ResultMsg(_Msg):
     error: str = ""
 
 
-class LogMsg(_Msg):
+class LogMsg(_Out):
     msg: Literal["log"] = "log"
     level: str
     text: str
@@ -231,7 +243,7 @@ class LogMsg(_Msg):
 # ------------------------------------------------------------ service -> client: device session
 
 
-class DeviceState(_Msg):
+class DeviceState(_Out):
     """The device's status report as a front end shows it (steps, temperatures, drivers,
     homing, and its fault in words)."""
 
@@ -247,13 +259,13 @@ class DeviceState(_Msg):
     clearable: bool = True  # a host may clear the fault (a thermal one: no)
 
 
-class Health(_Msg):
+class Health(_Out):
     retransmits: int = 0
     bad_frames: int = 0
     naks: int = 0
 
 
-class Answer(_Msg):
+class Answer(_Out):
     """The answer to a device-session request (``id``): ``ok`` or ``error``; the device's
     identity (to ``connect``), its status after the operation, an e-stop's confirmation."""
 
@@ -266,7 +278,7 @@ class Answer(_Msg):
     confirmed: bool = False
 
 
-class DeviceMsg(_Msg):
+class DeviceMsg(_Out):
     """To every client holding the device, about once a second between prints: its status
     (None: it did not answer, ``error`` says why) and the link's counters."""
 
@@ -277,7 +289,7 @@ class DeviceMsg(_Msg):
     error: str = ""
 
 
-class Note(_Msg):
+class Note(_Out):
     """What the device said unasked (an error, a reset), or the service about the device."""
 
     msg: Literal["note"] = "note"
@@ -285,13 +297,16 @@ class Note(_Msg):
     text: str
 
 
-class JobInfo(_Msg):
-    """Before a replay: which file the current (or last) job prints."""
+class JobInfo(_Out):
+    """The current (or last) job: its file, its state, who started it and when (wall
+    clock, ``time.time()``). Sent to every client when a job starts (before its first
+    event) and before a replay."""
 
     msg: Literal["job"] = "job"
-    gcode: str
-    state: str
-    started_at: float = 0.0  # wall clock (time.time())
+    gcode: str = ""
+    state: str = "idle"
+    started_by: str = ""
+    started_at: float = 0.0
 
 
 Reply_ = Annotated[
@@ -315,6 +330,8 @@ def _decode(adapter: TypeAdapter[Any], line: bytes, tag: str) -> Any:
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"])
+        if tag == "msg" and first["type"] == "union_tag_invalid":
+            raise UnknownMessage(f"msg: unknown message {first.get('input')!r}") from None
         where = where or (tag if first["type"].startswith("union_tag") else "message")
         raise WireError(f"{where}: {first['msg']}") from None
 
