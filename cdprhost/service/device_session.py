@@ -289,6 +289,8 @@ class DeviceSession:
         self._note(self._link)
         state = status if isinstance(status, wire.DeviceState) else device_state(status)
         self._last = state
+        if not isinstance(request, wire.Status):  # every client sees what one of them did
+            self.broadcast(wire.DeviceMsg(connected=True, status=state))
         return wire.Answer(id=request.id, ok=True, status=state)
 
     def _carry_out(self, request: Any) -> Any:

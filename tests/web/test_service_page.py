@@ -121,3 +121,56 @@ def test_a_print_started_by_the_page_runs_in_the_service_and_its_e_stop_is_the_j
     assert machine.estopped and machine.enabled_mask  # motors kept: the effector does not drop
     page.wait_for_function(f"{STATE_TEXT}.startsWith('failed')")
     assert Path(server.printer.status().file or "").name == "listed.gcode"
+
+
+def test_under_tui_listen_the_ui_and_the_page_are_two_clients_of_one_service(service_server, page):
+    """What `cdprhost tui --listen` builds (cli/commands/tui.py): the UI's ServiceBackend
+    and the page's ServicePrinter on the same service; the page's home, jog and e-stop
+    reach the device the UI sees, and a print started by the page is one the UI adopts."""
+    from cdprhost.job.state import JobSnapshot, JobState, reduce
+    from cdprhost.tui.control.backend import EMBEDDED
+    from cdprhost.tui.control.service_backend import ServiceBackend
+
+    server, service = service_server()
+    ui = ServiceBackend(PROFILE, speedup=10.0)
+    try:
+        ui.connect(EMBEDDED, 250000)
+        assert len(service._clients) == 2  # the page's printer and the UI: one service
+        server.upload("both.gcode", part(layers=30))
+        unlock(page, server)
+        page.click("#home")
+        page.wait_for_function("document.getElementById('message').textContent === 'home: asked'")
+        assert _idle_machine(service).homed_mask == 0b111
+        seen = _wait(
+            lambda: (st := ui.device_status()) is not None and st.homed and st,
+            "the page's homing seen by the UI",
+            timeout=10.0,
+        )
+        assert seen.position is not None
+        page.select_option("#jog-step", "5")
+        page.click("[data-jog='1,0,0']")
+        page.wait_for_function("document.getElementById('message').textContent === 'jog: asked'")
+        moved = _wait(
+            lambda: (st := ui.device_status()) is not None and st.position != seen.position and st,
+            "the page's jog seen by the UI",
+        )
+        assert moved.position[0] == pytest.approx(seen.position[0] + 5.0, abs=0.05)
+        page.click("#files button[data-path='both.gcode']")
+        events: list = []
+        found = _wait(lambda: ui.running_job(events.append), "the page's print offered to the UI")
+        path, _, _ = found
+        assert Path(path).name == "both.gcode"
+        page.click("#estop")
+        server.wait_state("failed")
+        machine = service._job.link.device.machine
+        assert machine.estopped and machine.enabled_mask  # motors kept
+
+        def folded() -> JobSnapshot:
+            snap = JobSnapshot()
+            for event in events:
+                snap = reduce(snap, event)
+            return snap
+
+        _wait(lambda: folded().state is JobState.FAILED, "the page's e-stop seen by the UI")
+    finally:
+        ui.close()

@@ -66,9 +66,10 @@ def run(args: argparse.Namespace) -> int:
     observer = make_observer(args.sim_truth, args.sim_mocap_dir)
     status_interval_s = 1.0
     backend: Any
-    # the printer service runs the prints, unless the device must live here: the virtual
-    # motion capture watches the embedded device, the upload bridge reads the link
-    if args.in_process or observer is not None or args.listen is not None:
+    # the printer service runs the prints, unless the device must live here (the virtual
+    # motion capture watches the embedded device)
+    in_process = args.in_process or observer is not None
+    if in_process:
         backend = LiveBackend(
             args.profile,
             speedup=args.speedup,
@@ -92,12 +93,45 @@ def run(args: argparse.Namespace) -> int:
     if args.listen is None:
         return int(app.run() or 0)
     from cdprhost.cli.commands.serve import start_api
-    from cdprhost.tui.control.upload_bridge import TuiPrinter
 
-    bridge = TuiPrinter(app)
-    server = start_api(args, bridge)  # the TUI's own quit stops a running print safely
-    bridge.announce(f"listening on {server.url} (slicer uploads; key: `cdprhost api-key`)")
+    if in_process:  # the page reads the UI's own link
+        from cdprhost.tui.control.upload_bridge import TuiPrinter
+
+        bridge = TuiPrinter(app)
+        server = start_api(args, bridge)  # the TUI's own quit stops a running print safely
+        bridge.announce(f"listening on {server.url} (slicer uploads; key: `cdprhost api-key`)")
+        try:
+            return int(app.run() or 0)
+        finally:
+            server.stop()
+    return _run_with_page(args, app)
+
+
+def _run_with_page(args: argparse.Namespace, app: Any) -> int:
+    """The UI and the web page as two clients of the device's printer service: the page
+    has the layer view and every control it has under ``serve``, and a print started from
+    either goes on when the UI quits."""
+    from cdprhost.cli.commands.serve import start_api
+    from cdprhost.errors import CdprError
+    from cdprhost.profile import load_profile
+    from cdprhost.server.service_printer import ServicePrinter
+
+    printer = ServicePrinter(
+        load_profile(args.profile),
+        port=args.port,
+        baud=args.baud,
+        speedup=None if args.port else (args.speedup or None),
+        setup=setup_from_args(args),
+        clear_fault=False,  # a faulted device is cleared at the machine (the UI), not by a page
+    )
+    try:
+        printer.connect()  # finds or starts the service the UI attaches to
+    except CdprError as exc:
+        printer.detach()
+        raise InputError(str(exc), source=args.port) from None
+    server = start_api(args, printer)
     try:
         return int(app.run() or 0)
     finally:
         server.stop()
+        printer.detach()  # a print goes on in the service

@@ -158,6 +158,8 @@ class ControllerBase:
     def refresh_device(self) -> None:
         if not self.state.connected or self.state.job_active:
             return
+        if self.adopt_running_job():  # started meanwhile by another front end (the page)
+            return
         gen = self._status_gen
         if self.state.busy:  # homing, a jog, a heater wait: temperatures stay fresh
             self.background(

@@ -278,6 +278,7 @@ class ServiceBackend:
                 job.finish(message)
                 self._job = None
             self._replayed.clear()
+            self._job_info = None  # over: nothing left to adopt
         elif isinstance(message, wire.DeviceMsg):
             self._device = (time.monotonic(), message)
             if message.health is not None:
