@@ -154,3 +154,34 @@ async def test_a_tui_and_print_attach_see_the_same_print(state, tmp_path):
         assert result["status"] == "completed" and end.job.state is JobState.DONE
         assert end.job.layer + 1 == result["last_layer"] == 6
         kill_and_wait(service)
+
+
+async def test_a_killed_tui_on_the_embedded_device_leaves_its_print_to_a_new_tui(state, tmp_path):
+    """No port: the embedded simulated device's service is one per state folder, found by
+    a new TUI as a port's is (the rule `print`, `tui` and `serve` share)."""
+    from cdprhost.tui.control.backend import EMBEDDED
+
+    gcode = square_part(tmp_path / "part.gcode", layers=8)
+    front = _front(EMBEDDED, gcode)
+    service = service_pid(None, state)
+    try:
+        front.kill()  # SIGKILL: no goodbye, no cancel
+        front.wait(20)
+        backend = ServiceBackend("paper-prototype")
+        app = make_app(backend, port=EMBEDDED)
+        try:
+            async with app.run_test(size=(100, 32)) as pilot:
+                await wait_for(
+                    pilot, lambda s: s.job_path == str(gcode), timeout=60, what="the print"
+                )
+                end = await wait_for(
+                    pilot, lambda s: s.job.state.finished, timeout=240, what="its end"
+                )
+                assert end.job.state is JobState.DONE, end.job.reason
+                assert end.job.layer + 1 == 8
+        finally:
+            backend.close()
+        assert _completed(state)
+        assert service_pid(None, state) == service
+    finally:
+        kill_and_wait(service)
