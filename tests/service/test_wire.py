@@ -143,3 +143,23 @@ def test_the_device_session_messages_cross_the_wire():
         assert wire.decode_reply(wire.encode(message)) == message
     for request in (wire.MoveTo(id=2, target=(1.0, 2.0, 3.0)), wire.Heaters(id=1, bed=60.0)):
         assert wire.decode_request(wire.encode(request)) == request
+
+
+def test_a_client_skips_a_message_it_does_not_know_and_reads_on():
+    import socket
+    import threading
+    from pathlib import Path
+
+    from cdprhost.service.client import ServiceClient
+    from cdprhost.service.paths import ServiceFiles
+
+    ours, theirs = socket.socketpair()
+    client = ServiceClient(ours, ServiceFiles(Path("/nonexistent"), "x"))
+    threading.Thread(target=client._read_loop, daemon=True).start()
+    theirs.sendall(b'{"msg": "speed", "percent": 120}\n')  # a newer service's message
+    theirs.sendall(b'{"msg": "note", "text": "still here", "since": 2}\n')
+    theirs.close()
+    first = client.inbox.get(timeout=5)
+    assert isinstance(first, wire.Note) and first.text == "still here"
+    assert client.inbox.get(timeout=5) is None  # then the end, not a broken stream
+    ours.close()
