@@ -196,3 +196,26 @@ def test_a_device_that_stops_answering_is_said_once_not_every_second(backend):
     backend._take(wire.DeviceMsg(connected=True, error="no word from the device"))
     said = [line.text for line in backend.device_log()]
     assert said == ["the device does not answer: no word from the device"] * 2
+
+
+async def test_a_print_started_by_another_front_end_is_shown_by_the_ui(backend, tmp_path):
+    """`tui --listen`: the page (another client) starts a print; the UI, idle and connected,
+    shows it at its next status refresh and follows it to the end."""
+    app = make_app(backend, port=EMBEDDED, status_interval_s=0.2)
+    other = ServiceBackend("paper-prototype", speedup=SPEEDUP)
+    try:
+        async with app.run_test(size=(100, 32)) as pilot:
+            await wait_for(pilot, lambda s: s.connected, timeout=60, what="the UI connected")
+            other.connect(EMBEDDED, 250000)  # the same state folder: the same service
+            gcode = square_part(tmp_path / "part.gcode", layers=6)
+            job = other.make_job(str(gcode), lambda _event: None)
+            threading.Thread(target=job.run, daemon=True).start()
+            state = await wait_for(
+                pilot, lambda s: s.job_path == str(gcode), timeout=30, what="the other's print"
+            )
+            state = await wait_for(
+                pilot, lambda s: s.job.state is JobState.DONE, timeout=120, what="its end"
+            )
+            assert state.job.layer + 1 == 6
+    finally:
+        other.close()
