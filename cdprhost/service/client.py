@@ -187,7 +187,7 @@ def attach(
 
 
 def connect(files: ServiceFiles, who: str, *, replay: bool = True) -> ServiceClient:
-    """A client of the running service ``files`` names (a second front end of a private
+    """A client of the running service ``files`` names (a second front end of a given
     service, the upload server); ServiceError when none listens."""
     sock = _connect(files)
     if sock is None:

@@ -210,7 +210,7 @@ class Welcome(_Out):
     v: int
     pid: int
     name: str
-    port: str | None = None  # the device this service owns (None: embedded, private)
+    port: str | None = None  # the device this service owns (None: the embedded one)
     job: str = "none"  # the current or last job's state ("none": no job yet)
 
 

@@ -4,7 +4,7 @@ only draws. A TUI that hangs, is stopped or is killed never touches a print, and
 started while a print runs shows it (the service replays its events).
 
 ``connect`` attaches to the service of the chosen port (starting it when none runs; the
-embedded simulated device gets a private service) and holds its device session. One
+embedded simulated device has one service per state folder) and holds its device session. One
 reader thread sorts what the service sends: the running job's events to its sink, answers
 to the request that waits for them, the device's status and notes to the screens. Files
 (preflight, resume points, centring) and diagnosis are computed here, as before, by a
