@@ -43,6 +43,7 @@ from cdprhost.tui.control.views import (
 
 ALL_MODULES = 0b111
 FRESH_S = 2.0  # a broadcast status younger than this answers ``device_status``
+STATUS_TIMEOUT_S = 15.0
 CALIBRATION_REFUSED = (
     "calibration needs the device in the UI's process: quit, then `cdprhost tui --in-process` "
     "(no print may run: the printer service holds the port)"
@@ -232,8 +233,12 @@ class ServiceBackend:
         return answer
 
     def operate(self, message: Any) -> wire.DeviceState | None:
-        """A device operation: the device's status after it, or CdprError with the reason."""
-        answer = self.ask(message)
+        """A device operation: the device's status after it, or CdprError with the reason
+        (a status unanswered in ``STATUS_TIMEOUT_S`` too: the UI never waits forever)."""
+        timeout = STATUS_TIMEOUT_S if isinstance(message, wire.Status) else None
+        answer = self.ask(message, timeout_s=timeout)
+        if answer is None:
+            raise CdprError("the printer service did not answer a status request")
         if not answer.ok:
             if "not homed" in answer.error:
                 raise NotHomed(answer.error)
