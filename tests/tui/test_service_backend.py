@@ -206,10 +206,13 @@ async def test_a_print_started_by_another_front_end_is_shown_by_the_ui(backend, 
     try:
         async with app.run_test(size=(100, 32)) as pilot:
             await wait_for(pilot, lambda s: s.connected, timeout=60, what="the UI connected")
-            other.connect(EMBEDDED, 250000)  # the same state folder: the same service
             gcode = square_part(tmp_path / "part.gcode", layers=6)
-            job = other.make_job(str(gcode), lambda _event: None)
-            threading.Thread(target=job.run, daemon=True).start()
+
+            def start_elsewhere() -> None:  # off the UI's event loop (blocking calls)
+                other.connect(EMBEDDED, 250000)  # the same state folder: the same service
+                other.make_job(str(gcode), lambda _event: None).run()
+
+            threading.Thread(target=start_elsewhere, daemon=True).start()
             state = await wait_for(
                 pilot, lambda s: s.job_path == str(gcode), timeout=30, what="the other's print"
             )
