@@ -77,6 +77,12 @@ def main() -> None:
     parser.add_argument(
         "--gcode", help="print this file (default: a square part without heating waits)"
     )
+    parser.add_argument(
+        "--service",
+        action="store_true",
+        help="as `cdprhost serve` runs: the print in a printer service process, the server "
+        "its client (latency then counted from the server's receipt of the event)",
+    )
     args = parser.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-web-"))
     os.environ["XDG_CONFIG_HOME"] = str(tmp / "cfg")
@@ -99,10 +105,20 @@ def main() -> None:
         if isinstance(event, StateChanged):
             reached.append((event.state.value, time.time()))
 
-    printer = HeadlessPrinter(
-        load_profile("paper-prototype"), lambda: open_embedded(speedup=args.speedup),
-        on_event=on_event,
-    )  # fmt: skip
+    printer: Any
+    if args.service:
+        from cdprhost.server.service_printer import ServicePrinter
+
+        os.environ["CDPRHOST_RUN"] = tempfile.mkdtemp(prefix="bw-", dir="/tmp")
+        printer = ServicePrinter(
+            load_profile("paper-prototype"), speedup=args.speedup, on_event=on_event
+        )
+        printer.connect()
+    else:
+        printer = HeadlessPrinter(
+            load_profile("paper-prototype"), lambda: open_embedded(speedup=args.speedup),
+            on_event=on_event,
+        )  # fmt: skip
     keys = KeyFile()
     app = create_app(printer, UploadFolder(tmp / "up"), keys.current, max_upload_bytes=10**8)
     server = ServerThread(app, "127.0.0.1", 0)
@@ -175,8 +191,10 @@ def main() -> None:
         pw.stop()
         printer.shutdown("bench over", timeout_s=30)
         server.stop()
+    where = " (the print in a printer service)" if args.service else ""
     print(
-        f"server thread CPU, print at {args.speedup:g}x, no browser: {100 * base:.2f} % of a core"
+        f"server thread CPU{where}, print at {args.speedup:g}x, no browser: "
+        f"{100 * base:.2f} % of a core"
     )
     print(f"  with {args.browsers} browsers watching: {100 * watched:.2f} % of a core "
           f"(+{100 * (watched - base):.2f} points; ratio {watched / max(base, 1e-4):.1f}x)")  # fmt: skip

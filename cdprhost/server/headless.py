@@ -1,4 +1,6 @@
-"""The printer of ``cdprhost serve``: print jobs run here, one at a time, on one link.
+"""A printer that runs print jobs in this process, one at a time, on one link (the in-process
+tests and benches; ``cdprhost serve`` runs its jobs in the printer service instead:
+:mod:`cdprhost.server.service_printer`).
 
 The link is opened at the first start and kept (the simulated device keeps its state between
 jobs like a real one); a job finds it dead and it is opened again. Job events are folded into

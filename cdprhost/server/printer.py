@@ -1,9 +1,11 @@
-"""What the server asks of the machine: one small interface, two implementations.
+"""What the server asks of the machine: one small interface, three implementations.
 
 The HTTP layer (:mod:`cdprhost.server.app`) never touches a job or a link: it talks to a
-:class:`Printer`. :class:`cdprhost.server.headless.HeadlessPrinter` runs jobs itself (``cdprhost
-serve``); the terminal UI provides its own (``cdprhost tui --listen``), so that a print started
-from a slicer is the TUI's print, shown and stoppable there. Every refusal is a
+:class:`Printer`. :class:`cdprhost.server.service_printer.ServicePrinter` has the printer
+service run the jobs (``cdprhost serve``); :class:`cdprhost.server.headless.HeadlessPrinter`
+runs them itself (in-process tests); the terminal UI provides its own (``cdprhost tui
+--listen``), so that a print started from a slicer is the TUI's print, shown and stoppable
+there. Every refusal is a
 :class:`Refused` carrying the reason the client is told (409).
 """
 

@@ -33,6 +33,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from cdprhost.errors import CdprError
+from cdprhost.job.state import Temperatures
 from cdprhost.server import web_state
 from cdprhost.server.guard import ASGIApp, Receive, Scope, Send
 from cdprhost.server.printer import Printer, PrinterStatus, Refused
@@ -59,6 +60,7 @@ THROTTLE_S = 0.5  # at most one update per this, except a state change (sent at 
 KEEPALIVE_S = 15.0
 HISTORY = 20
 IDLE_SAMPLE_S = 0.5  # ... while no browser watches (the history still sees each job end)
+IDLE_TEMPS_S = 1.0  # with no job, the heaters are asked of the printer this often while watched
 PRIVATE = ("key", "resume_of")  # history fields the page is not sent
 
 
@@ -120,6 +122,9 @@ class Hub:
         self.version = 0
         self.clients = 0
         self._status: PrinterStatus | None = None
+        self.idle_temps: Temperatures | None = None  # asked of the printer with no job running
+        self._temps: Temperatures | None = None  # ... as the published document has them
+        self._temps_at = -IDLE_TEMPS_S
         self._published_at = 0.0
         self._pending = False
         self._changed: asyncio.Event | None = None
@@ -129,9 +134,13 @@ class Hub:
     def sample(self, now: float) -> bool:
         """Look at the printer once; True when a new document was published."""
         status = self.printer.status()
-        if status is not self._status and status != self._status:
+        temps = None if status.busy else self.idle_temps
+        if (status is not self._status and status != self._status) or temps != self._temps:
             self._status = status
-            doc = web_state.view(status, self.relative(status.file), self.bed_origin)
+            self._temps = temps
+            doc = web_state.view(
+                status, self.relative(status.file), self.bed_origin, idle_temps=temps
+            )
             urgent = web_state.urgent(self.doc, doc)
             self._record(self.doc, doc)
             self.doc = doc
@@ -182,6 +191,8 @@ class Hub:
         try:
             while True:
                 try:
+                    if self.clients > 0:
+                        await asyncio.to_thread(self.poll_temperatures, time.monotonic())
                     self.sample(time.monotonic())
                     await self._find_resume_points()
                     failing = False
@@ -192,6 +203,19 @@ class Hub:
                 await asyncio.sleep(SAMPLE_S if self.clients > 0 else IDLE_SAMPLE_S)
         finally:
             self._task = None
+
+    def poll_temperatures(self, now: float) -> None:
+        """Blocking: with no job running, the printer's heaters (at most every IDLE_TEMPS_S),
+        so a page watches the nozzle cool after a print or a fault."""
+        if now - self._temps_at < IDLE_TEMPS_S or self.printer.status().busy:
+            return
+        self._temps_at = now
+        try:
+            reading = self.printer.temperatures()
+        except Refused:
+            reading = None
+        if reading is not None:
+            self.idle_temps = reading
 
     async def _find_resume_points(self) -> None:
         """The resume point each ended job saved (read in a worker thread: hashing the file)."""

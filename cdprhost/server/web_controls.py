@@ -6,6 +6,11 @@ print is the job's own (motors kept, heaters as the profile says on a failure: s
 the same flags. Heaters off, home and jog run only while no job runs, on the printer's idle
 link (``run_idle``); a jog moves at most ``MAX_JOG_MM`` per axis, slowly, only when homed and
 only to a point inside the build volume. A printer that does not offer a control refuses it.
+
+A printer that is a client of the printer service (:class:`~.service_printer.ServicePrinter`,
+``device``) has every control done by the service's device session
+(:mod:`cdprhost.service.device_session`), the one the terminal UI drives too: the jog's
+target is checked here, then again by the session before anything moves.
 """
 
 from __future__ import annotations
@@ -18,8 +23,9 @@ from pydantic import BaseModel, ConfigDict, Field
 from cdprhost.machine.commands import estop_flags
 from cdprhost.server.printer import Refused
 
-MAX_JOG_MM = 10.0
 JOG_FEED_MM_S = 10.0
+#: the farthest a jog moves on each axis (mm)
+MAX_JOG_MM = 10.0
 
 
 class Control(BaseModel):
@@ -63,6 +69,9 @@ def jog_target(
 
 def act(printer: Any, control: Control) -> str:
     """Blocking: do ``control``; what was done, or :class:`Refused` with the reason."""
+    device = getattr(printer, "device", None)
+    if device is not None:  # the printer service does it (and refuses it during a print)
+        return str(device(control.action, control.dx, control.dy, control.dz))
     if control.action == "estop":
         return emergency_stop(printer)
     if printer.status().busy:

@@ -14,7 +14,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from cdprhost.job.state import JobSnapshot, JobState
+from cdprhost.job.state import JobSnapshot, JobState, Temperatures
 from cdprhost.server.printer import PrinterStatus
 from cdprhost.server.shapes import elapsed_s, state_text
 
@@ -26,8 +26,10 @@ def _r(value: float | None, digits: int = 1) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
-def temperatures(snap: JobSnapshot) -> dict[str, Any] | None:
-    t = snap.temperatures
+def temperatures(snap: JobSnapshot, idle: Temperatures | None = None) -> dict[str, Any] | None:
+    """The job's newest reading; ``idle``: a reading asked of the device with no job running
+    (it is newer than the last job's)."""
+    t = idle if idle is not None and not snap.state.active else snap.temperatures
     if t is None:
         return None
     return {
@@ -59,8 +61,10 @@ def view(
     relative: str | None,
     bed_origin: Sequence[float] | None = None,
     now: float | None = None,
+    idle_temps: Temperatures | None = None,
 ) -> dict[str, Any]:
-    """The page's document of ``status`` (``relative``: the file's name in the upload folder)."""
+    """The page's document of ``status`` (``relative``: the file's name in the upload folder;
+    ``idle_temps``: the device's reading while no job runs)."""
     snap = status.job
     now = time.time() if now is None else now
     has_job = status.file is not None
@@ -80,7 +84,7 @@ def view(
         "line": snap.line,
         "eta_s": round(snap.eta_s) if has_job and snap.eta_s is not None else None,
         "elapsed_s": elapsed,
-        "temps": temperatures(snap),
+        "temps": temperatures(snap, None if status.busy else idle_temps),
         "graph": graph(snap),
         "nozzle": nozzle(snap, bed_origin),
         "reason": snap.reason or None,

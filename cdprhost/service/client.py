@@ -2,8 +2,10 @@
 commands, receive its messages.
 
 :func:`attach` connects to the service of a device and starts one, detached in its own
-session, when none listens; the embedded simulated device gets a private service of its
-own. Messages arrive through a reader thread into :attr:`ServiceClient.inbox` (``None``
+session, when none listens. This is the one rule every front end (``print``, ``tui``,
+``serve``) follows: a device's port has one shared service; the embedded simulated device
+has one service per state folder (``$CDPRHOST_STATE``), so a front end started again (after
+a crash, a kill) finds the print another one started. Messages arrive through a reader thread into :attr:`ServiceClient.inbox` (``None``
 once the service has gone), so a front end waits on it with a timeout and stays free to
 handle its own signals and screen. This is the API the TUI, the upload server and a web
 page use alike.
@@ -13,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import logging
 import os
 import queue
 import socket
@@ -28,10 +31,11 @@ from cdprhost.errors import CdprError
 from cdprhost.service import wire
 from cdprhost.service.paths import ServiceFiles, files_for_port, read_key
 
+log = logging.getLogger(__name__)
+
 START_TIMEOUT_S = 60.0  # a loaded machine may take long to import numpy and friends
-#: a shared service stays this long after its last client and job; a private one less
+#: a service stays this long after its last client and job
 SHARED_IDLE_S = 30.0
-PRIVATE_IDLE_S = 1.0
 
 
 class ServiceError(CdprError):
@@ -74,7 +78,10 @@ class ServiceClient:
     def _read_loop(self) -> None:
         try:
             while True:
-                self.inbox.put(self._read())
+                try:
+                    self.inbox.put(self._read())
+                except wire.UnknownMessage as exc:  # a newer service's: not ours to read
+                    log.debug("skipped: %s", exc)
         except (ServiceError, wire.WireError) as exc:
             self.inbox.put(None)
             self.gone = str(exc)
@@ -141,32 +148,46 @@ def spawn(files: ServiceFiles, port: str | None, idle_s: float) -> subprocess.Po
         os.close(fd)
 
 
-def attach(port: str | None, who: str, *, replay: bool, start: bool = True) -> ServiceClient:
-    """A client of the service of ``port`` (None: a new private embedded one), started
-    first when none listens and ``start``; ServiceError when none can be reached."""
-    files = files_for_port(port)
-    sock = _connect(files) if port is not None else None
-    if sock is None:
-        if not start:
-            raise ServiceError(f"no printer service runs for {port}: no print to watch")
-        proc = spawn(files, port, SHARED_IDLE_S if port is not None else PRIVATE_IDLE_S)
-        end = time.monotonic() + START_TIMEOUT_S
-        while sock is None:
-            if time.monotonic() > end:
-                raise ServiceError(f"the printer service did not start (its log: {files.log})")
-            code = proc.poll()
-            if code is not None and code != 0:
-                raise ServiceError(f"the printer service failed to start (its log: {files.log})")
-            if code == 0 and not files.key.exists():  # another held the device, then left
-                proc = spawn(files, port, SHARED_IDLE_S if port is not None else PRIVATE_IDLE_S)
-            time.sleep(0.02)
-            if files.key.exists():
-                sock = _connect(files)
-    return _hello(ServiceClient(sock, files), who, replay)
+def embedded_files() -> ServiceFiles:
+    """The service of the embedded simulated device for this state folder."""
+    return files_for_port(None)
+
+
+def attach(
+    port: str | None,
+    who: str,
+    *,
+    replay: bool,
+    start: bool = True,
+    files: ServiceFiles | None = None,
+) -> ServiceClient:
+    """A client of the service of ``port`` (None: the embedded device's of this
+    state folder), started first when none listens and ``start``; ServiceError
+    when none can be reached."""
+    files = files or files_for_port(port)
+    with contextlib.suppress(ServiceError):
+        return connect(files, who, replay=replay)
+    if not start:
+        where = port or "the embedded device"
+        raise ServiceError(f"no printer service runs for {where}: no print to watch")
+    proc = spawn(files, port, SHARED_IDLE_S)
+    end = time.monotonic() + START_TIMEOUT_S
+    while True:
+        if files.key.exists():
+            with contextlib.suppress(ServiceError):
+                return connect(files, who, replay=replay)
+        code = proc.poll()
+        if code is not None and code != 0:
+            raise ServiceError(f"the printer service failed to start (its log: {files.log})")
+        if code == 0 and not files.key.exists():  # another held the device, then left
+            proc = spawn(files, port, SHARED_IDLE_S)
+        if time.monotonic() > end:
+            raise ServiceError(f"the printer service did not start (its log: {files.log})")
+        time.sleep(0.02)
 
 
 def connect(files: ServiceFiles, who: str, *, replay: bool = True) -> ServiceClient:
-    """A client of the running service ``files`` names (a second front end of a private
+    """A client of the running service ``files`` names (a second front end of a given
     service, the upload server); ServiceError when none listens."""
     sock = _connect(files)
     if sock is None:

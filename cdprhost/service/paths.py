@@ -96,9 +96,16 @@ def device_name(port: str) -> str:
 MAX_SOCKET_PATH = 107
 
 
+def embedded_name() -> str:
+    """The service name of the embedded simulated device: one per state folder."""
+    state = str(state_dir().resolve())
+    return "sim-" + hashlib.sha256(state.encode()).hexdigest()[:16]
+
+
 def files_for_port(port: str | None) -> ServiceFiles:
-    """The shared service of ``port``; ``None`` (the embedded device): a private one."""
-    name = device_name(port) if port is not None else f"sim-{os.getpid()}-{secrets.token_hex(4)}"
+    """The shared service of ``port``; ``None``: the embedded simulated device's of this
+    state folder (a front end started again finds the print another one started)."""
+    name = device_name(port) if port is not None else embedded_name()
     files = ServiceFiles(private_dir(), name)
     if len(os.fsencode(files.socket)) > MAX_SOCKET_PATH:
         raise InputError(

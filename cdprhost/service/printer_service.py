@@ -7,6 +7,8 @@ its key. Each client gets its own bounded outgoing queue and sender thread: a cl
 stops reading (a hung or stopped front end) loses its connection when its queue is full,
 and a client that goes away never touches the job. The job's events are kept compacted
 (:mod:`cdprhost.service.journal`), so a front end that attaches later sees the same state.
+Between prints a front end may hold the device (:mod:`cdprhost.service.device_session`):
+one link, the machine operations the TUI needs, the status broadcast to every client.
 The service exits once no job runs and no client has been connected for ``idle_s``.
 """
 
@@ -32,6 +34,7 @@ from cdprhost.job.runner import PrintJob, PrintOptions
 from cdprhost.job.state import Event, JobState
 from cdprhost.logs import attach_log_file, detach_log_file
 from cdprhost.service import wire
+from cdprhost.service.device_session import DeviceSession, Opener
 from cdprhost.service.journal import Journal
 from cdprhost.service.paths import ServiceFiles, device_name, key_matches, write_key
 
@@ -156,6 +159,7 @@ class PrinterService:
         *,
         idle_s: float = 30.0,
         link_factory: Callable[[wire.StartJob, Any], Callable[[], Any]] | None = None,
+        device_opener: Opener | None = None,
     ):
         self.files = files
         self.port = port
@@ -174,6 +178,14 @@ class PrinterService:
         self._lockfile: Any = None
         self._listener: socket.socket | None = None
         self._forward: logging.Handler | None = None
+        self._job_info: wire.JobInfo | None = None  # the current or last job's file and starter
+        self.session = DeviceSession(
+            port,
+            self.broadcast,
+            lambda: self.job_running,
+            opener=device_opener,
+            job_link=lambda: self._job.link if self._job is not None else None,
+        )
 
     # ------------------------------------------------------------ lifetime
     def bind(self) -> None:
@@ -248,11 +260,8 @@ class PrinterService:
             clients = list(self._clients)
         for client in clients:
             client.close()
+        self.session.close()
         if self._lockfile is not None:
-            if self.private:  # nobody else ever looks for it: leave nothing behind
-                for path in (self.files.lock, self.files.log):
-                    with contextlib.suppress(OSError):
-                        path.unlink()
             self._lockfile.close()
             self._lockfile = None
 
@@ -265,11 +274,6 @@ class PrinterService:
         if thread is not None:
             thread.join(30.0)
         self.stop()
-
-    @property
-    def private(self) -> bool:
-        """The service of one embedded device, started for one front end."""
-        return self.port is None
 
     @property
     def job_running(self) -> bool:
@@ -298,6 +302,8 @@ class PrinterService:
                 )
             )
             if hello.replay:
+                if self._job_info is not None:
+                    client.send(self._job_info.model_copy(update={"state": state}))
                 for event in self._journal.replay():
                     client.send(wire.EventMsg(event=wire.event_to_json(event)))
                 if self._result is not None:
@@ -308,6 +314,7 @@ class PrinterService:
 
     def forget(self, client: _Client) -> None:
         with self._lock:
+            self.session.release(client.number)
             if client in self._clients:
                 self._clients.discard(client)
                 self._idle_since = time.monotonic()
@@ -321,6 +328,12 @@ class PrinterService:
             client.send(line)
 
     def handle(self, client: _Client, request: Any) -> None:
+        if isinstance(request, wire.DeviceRequest):
+            self._device(client, request)
+            return
+        if isinstance(request, wire.Estop) and not self.job_running and self.session.open:
+            client.send(self.session.emergency_stop(request.id))
+            return
         if isinstance(request, wire.Start):
             error = self._start(client, request)
             if error:
@@ -345,6 +358,26 @@ class PrinterService:
                 client.send(wire.Reply(id=request.id, ok=False, error=str(exc)))
                 return
         client.send(wire.Reply(id=request.id, ok=True))
+
+    def _device(self, client: _Client, request: Any) -> None:
+        """A device-session request, in a thread of its own (a homing takes seconds; the
+        client's next line, an e-stop, is read meanwhile)."""
+
+        def work() -> None:
+            try:
+                if isinstance(request, wire.Connect):
+                    answer = self.session.connect(client.number, request)
+                elif isinstance(request, wire.Disconnect):
+                    self.session.release(client.number)
+                    answer = wire.Answer(id=request.id, ok=True)
+                else:
+                    answer = self.session.run(request)
+            except Exception as exc:  # a bug: the client is answered, the service lives
+                log.exception("the device request %s broke", request.op)
+                answer = wire.Answer(id=request.id, ok=False, error=f"internal error: {exc}")
+            client.send(answer)
+
+        threading.Thread(target=work, name=f"device-{request.op}", daemon=True).start()
 
     # ------------------------------------------------------------ the job
     def _start(self, client: _Client, request: wire.Start) -> str:
@@ -371,6 +404,7 @@ class PrinterService:
             resume_from_layer=spec.resume_from_layer,
             resume=point,
             log_path=spec.log_path,
+            clear_fault=spec.clear_fault,
         )
         if spec.port is not None and spec.profile_ref is not None:
             from cdprhost.profile import record_device
@@ -388,14 +422,26 @@ class PrinterService:
                 )
             self._journal = Journal()
             self._result = None
+            opener = (
+                self.session.link_for_job if self.session.open else self.link_factory(spec, profile)
+            )
             job = PrintJob(
                 spec.gcode,
                 profile,
-                self.link_factory(spec, profile),
+                opener,
                 options,
                 on_event=self._on_event,
             )
             self._job = job
+            self._job_info = wire.JobInfo(
+                gcode=spec.gcode,
+                state="idle",
+                started_by=spec.started_by or client.who,
+                started_at=time.time(),
+            )
+            info = wire.encode(self._job_info)
+            for other in list(self._clients):  # before the job's first event
+                other.send(info)
             client.send(wire.Reply(id=request.id, ok=True))
             thread = threading.Thread(target=self._run_job, args=(job, spec), name="print-job")
             self._job_thread = thread
@@ -424,7 +470,7 @@ class PrinterService:
             message = wire.ResultMsg(error=f"internal error: {type(exc).__name__}: {exc}")
         finally:
             link = job.link
-            if link is not None:
+            if link is not None and not self.session.holds(link):
                 with contextlib.suppress(Exception):
                     link.close()
             detach_log_file(handler)
@@ -434,6 +480,7 @@ class PrinterService:
             clients = list(self._clients)
         for client in clients:
             client.send(message)
+        self.session.after_job()
         if job.state is JobState.IDLE:
             log.info("the job ended before it began")
 

@@ -10,6 +10,13 @@ client -> service  ``hello`` ``start`` ``pause`` ``resume`` ``cancel`` ``estop``
                    ``override`` (M220 / M221 of the running print)
 service -> client  ``welcome`` ``event`` ``reply`` ``result`` ``log``
 
+and, added within version 1 (the device session, for a front end that drives the machine
+between prints: the TUI; see the section "device session" below):
+
+client -> service  ``connect`` ``disconnect`` ``status`` ``home`` ``move`` ``heaters``
+                   ``motors_off`` ``enable`` ``clear_fault`` (``estop`` without a print)
+service -> client  ``answer`` ``device`` ``note`` ``job``
+
 Job events are the dataclasses of :mod:`cdprhost.job.state`, written as their fields plus
 ``type`` (the class name), so every client folds them with the one reducer.
 """
@@ -44,8 +51,19 @@ class WireError(ValueError):
     """A line that is not a valid message of this wire version."""
 
 
+class UnknownMessage(WireError):
+    """A service's message of a kind this client does not know (a newer service): skipped."""
+
+
 class _Msg(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _Out(BaseModel):
+    """A message of the service: a client ignores fields (and, :class:`UnknownMessage`,
+    whole messages) a newer service of the same version added."""
+
+    model_config = ConfigDict(extra="ignore", frozen=True)
 
 
 # ------------------------------------------------------------ client -> service
@@ -76,6 +94,8 @@ class StartJob(_Msg):
     job_log_file: bool = True  # also the .log beside the JSON-lines log
     # where the board's announced limits are recorded (a real board: a profile name or path)
     profile_ref: str | None = Field(default=None, max_length=4096)
+    clear_fault: bool = True  # a device fault is cleared at start (False: refused)
+    started_by: str = Field(default="", max_length=200)  # who (the upload server's client)
 
 
 class Start(_Msg):
@@ -118,35 +138,107 @@ class Override(_Msg):
     percent: float = Field(ge=MIN_PERCENT, le=MAX_PERCENT, allow_inf_nan=False)
 
 
+# ------------------------------------------------------------ client -> service: device session
+# The machine between prints, on the link the service holds while a client asked for it.
+# Each is answered with an ``answer`` of the same id.
+
+
+class Connect(_Msg):
+    """Hold the service's device open for this client (the service's port, or its embedded
+    device at ``speedup``); answered with the device's identity and status."""
+
+    op: Literal["connect"] = "connect"
+    id: int = 0
+    profile: dict[str, Any]  # a MachineProfile as JSON; validated by the service
+    baud: int | None = Field(default=None, gt=0, le=10_000_000)
+    speedup: float | None = Field(default=None, ge=0.0, le=100_000.0)
+
+
+class Disconnect(_Msg):
+    op: Literal["disconnect"] = "disconnect"
+    id: int = 0
+
+
+class Status(_Msg):
+    op: Literal["status"] = "status"
+    id: int = 0
+
+
+class Home(_Msg):
+    op: Literal["home"] = "home"
+    id: int = 0
+
+
+class MoveTo(_Msg):
+    """A straight move to ``target`` (machine frame, mm); refused unless homed."""
+
+    op: Literal["move"] = "move"
+    id: int = 0
+    target: tuple[float, float, float]
+    feed_mm_s: float = Field(default=40.0, gt=0.0, le=1000.0)
+
+
+class Heaters(_Msg):
+    """Heater targets (None: as it is; 0: off); ``wait``: until reached."""
+
+    op: Literal["heaters"] = "heaters"
+    id: int = 0
+    hotend: float | None = Field(default=None, ge=0.0, le=1000.0)
+    bed: float | None = Field(default=None, ge=0.0, le=1000.0)
+    wait: bool = False
+
+
+class MotorsOff(_Msg):
+    op: Literal["motors_off"] = "motors_off"
+    id: int = 0
+
+
+class Enable(_Msg):
+    op: Literal["enable"] = "enable"
+    id: int = 0
+
+
+class ClearFault(_Msg):
+    """M999: leave the device's fault state (home again before moving)."""
+
+    op: Literal["clear_fault"] = "clear_fault"
+    id: int = 0
+
+
+DeviceRequest = (
+    Connect | Disconnect | Status | Home | MoveTo | Heaters | MotorsOff | Enable | ClearFault
+)
+
 Request = Annotated[
-    Hello | Start | Pause | Resume | Cancel | Estop | Bye | Override, Field(discriminator="op")
+    Hello | Start | Pause | Resume | Cancel | Estop | Bye | Override | DeviceRequest,
+    Field(discriminator="op"),
 ]
 
 # ------------------------------------------------------------ service -> client
 
 
-class Welcome(_Msg):
+class Welcome(_Out):
     msg: Literal["welcome"] = "welcome"
     v: int
     pid: int
     name: str
-    port: str | None = None  # the device this service owns (None: embedded, private)
+    port: str | None = None  # the device this service owns (None: the embedded one)
     job: str = "none"  # the current or last job's state ("none": no job yet)
 
 
-class EventMsg(_Msg):
+class EventMsg(_Out):
     msg: Literal["event"] = "event"
     event: dict[str, Any]
 
 
-class Reply(_Msg):
+class Reply(_Out):
     msg: Literal["reply"] = "reply"
     id: int = 0
     ok: bool
     error: str = ""
 
 
-class ResultMsg(_Msg):
+class ResultMsg(_Out):
     """The job's end: ``result`` (PrintResult fields) or ``error`` (the job itself broke)."""
 
     msg: Literal["result"] = "result"
@@ -154,13 +246,85 @@ class ResultMsg(_Msg):
     error: str = ""
 
 
-class LogMsg(_Msg):
+class LogMsg(_Out):
     msg: Literal["log"] = "log"
     level: str
     text: str
 
 
-Reply_ = Annotated[Welcome | EventMsg | Reply | ResultMsg | LogMsg, Field(discriminator="msg")]
+# ------------------------------------------------------------ service -> client: device session
+
+
+class DeviceState(_Out):
+    """The device's status report as a front end shows it (steps, temperatures, drivers,
+    homing, and its fault in words)."""
+
+    steps: tuple[int, int, int, int]
+    hotend_c: float
+    bed_c: float
+    hotend_target_c: float
+    bed_target_c: float
+    enabled_mask: int
+    homed_mask: int
+    queue_free: int
+    fault: str = ""  # "" when not faulted
+    clearable: bool = True  # a host may clear the fault (a thermal one: no)
+
+
+class Health(_Out):
+    retransmits: int = 0
+    bad_frames: int = 0
+    naks: int = 0
+
+
+class Answer(_Out):
+    """The answer to a device-session request (``id``): ``ok`` or ``error``; the device's
+    identity (to ``connect``), its status after the operation, an e-stop's confirmation."""
+
+    msg: Literal["answer"] = "answer"
+    id: int = 0
+    ok: bool
+    error: str = ""
+    identity: dict[str, Any] | None = None
+    status: DeviceState | None = None
+    confirmed: bool = False
+
+
+class DeviceMsg(_Out):
+    """To every client holding the device, about once a second between prints: its status
+    (None: it did not answer, ``error`` says why) and the link's counters."""
+
+    msg: Literal["device"] = "device"
+    connected: bool
+    status: DeviceState | None = None
+    health: Health | None = None
+    error: str = ""
+
+
+class Note(_Out):
+    """What the device said unasked (an error, a reset), or the service about the device."""
+
+    msg: Literal["note"] = "note"
+    kind: Literal["device", "error", "notice"] = "device"
+    text: str
+
+
+class JobInfo(_Out):
+    """The current (or last) job: its file, its state, who started it and when (wall
+    clock, ``time.time()``). Sent to every client when a job starts (before its first
+    event) and before a replay."""
+
+    msg: Literal["job"] = "job"
+    gcode: str = ""
+    state: str = "idle"
+    started_by: str = ""
+    started_at: float = 0.0
+
+
+Reply_ = Annotated[
+    Welcome | EventMsg | Reply | ResultMsg | LogMsg | Answer | DeviceMsg | Note | JobInfo,
+    Field(discriminator="msg"),
+]
 
 _REQUEST: TypeAdapter[Any] = TypeAdapter(Request)
 _SERVICE: TypeAdapter[Any] = TypeAdapter(Reply_)
@@ -178,6 +342,8 @@ def _decode(adapter: TypeAdapter[Any], line: bytes, tag: str) -> Any:
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"])
+        if tag == "msg" and first["type"] == "union_tag_invalid":
+            raise UnknownMessage(f"msg: unknown message {first.get('input')!r}") from None
         where = where or (tag if first["type"].startswith("union_tag") else "message")
         raise WireError(f"{where}: {first['msg']}") from None
 

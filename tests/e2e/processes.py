@@ -97,7 +97,7 @@ def printing_point(gcode: Path, state: Path, segments: int = 20) -> object:
     return wait_until(ready, 120, "a resume point written while printing")
 
 
-def service_pid(port: str, state: Path) -> int:
+def service_pid(port: str | None, state: Path) -> int:
     """The pid of the printer service that drives ``port`` for ``cdprhost print`` processes
     started with this ``state`` folder (they name their service by it)."""
     from cdprhost.service.paths import files_for_port

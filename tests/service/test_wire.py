@@ -104,3 +104,62 @@ def test_a_late_clients_replay_folds_to_the_same_state(tmp_path):
     assert replayed.__class__(**{**replayed.__dict__, "temperature_history": ()}) == (
         full.__class__(**{**full.__dict__, "temperature_history": ()})
     )
+
+
+@pytest.mark.parametrize(
+    ("line", "where"),
+    [
+        (b'{"op": "move", "id": 1, "target": [1, 2]}', "move.target"),
+        (b'{"op": "move", "id": 1, "target": [1, 2, 3], "feed_mm_s": -1}', "move.feed_mm_s"),
+        (b'{"op": "heaters", "id": 1, "hotend": -5}', "heaters.hotend"),
+        (b'{"op": "connect", "id": 1}', "connect.profile"),
+        (b'{"op": "home", "id": 1, "speed": 3}', "home.speed"),
+    ],
+)
+def test_a_bad_device_request_is_refused_naming_the_field(line, where):
+    with pytest.raises(wire.WireError, match=where.replace(".", r"\.")):
+        wire.decode_request(line)
+
+
+def test_the_device_session_messages_cross_the_wire():
+    state = wire.DeviceState(
+        steps=(1, 2, 3, 4),
+        hotend_c=20.5,
+        bed_c=21.0,
+        hotend_target_c=0.0,
+        bed_target_c=0.0,
+        enabled_mask=7,
+        homed_mask=7,
+        queue_free=128,
+        fault="the device is stopped by a fault (ESTOP)",
+        clearable=True,
+    )
+    for message in (
+        wire.Answer(id=3, ok=True, identity={"axes": 4}, status=state, confirmed=True),
+        wire.DeviceMsg(connected=True, status=state, health=wire.Health(retransmits=2)),
+        wire.Note(kind="error", text="device error X"),
+        wire.JobInfo(gcode="/a/part.gcode", state="printing", started_at=1.5),
+    ):
+        assert wire.decode_reply(wire.encode(message)) == message
+    for request in (wire.MoveTo(id=2, target=(1.0, 2.0, 3.0)), wire.Heaters(id=1, bed=60.0)):
+        assert wire.decode_request(wire.encode(request)) == request
+
+
+def test_a_client_skips_a_message_it_does_not_know_and_reads_on():
+    import socket
+    import threading
+    from pathlib import Path
+
+    from cdprhost.service.client import ServiceClient
+    from cdprhost.service.paths import ServiceFiles
+
+    ours, theirs = socket.socketpair()
+    client = ServiceClient(ours, ServiceFiles(Path("/nonexistent"), "x"))
+    threading.Thread(target=client._read_loop, daemon=True).start()
+    theirs.sendall(b'{"msg": "speed", "percent": 120}\n')  # a newer service's message
+    theirs.sendall(b'{"msg": "note", "text": "still here", "since": 2}\n')
+    theirs.close()
+    first = client.inbox.get(timeout=5)
+    assert isinstance(first, wire.Note) and first.text == "still here"
+    assert client.inbox.get(timeout=5) is None  # then the end, not a broken stream
+    ours.close()

@@ -1,14 +1,17 @@
 """`cdprhost serve --profile P [--port DEV] [--listen [HOST:]PORT]`: the headless print server.
 
-Answers the slicer upload API (the OctoPrint REST subset) until SIGTERM or SIGINT; a running
-print is stopped safely first (the job's safe-stop path), then the link is closed. Without
-``--port`` the prints run on the embedded simulated device.
+Answers the slicer upload API (the OctoPrint REST subset) and the web page until SIGTERM or
+SIGINT. Every print runs in the printer service (:mod:`cdprhost.service`), found or started
+for the device: a server that crashes or is killed leaves the print running, and a server
+started again shows it. SIGTERM or SIGINT cancel a running print safely first (the job's
+safe-stop path), a second one e-stops it. Without ``--port`` the prints run on the embedded
+simulated device (one service per state folder).
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
+import os
 import sys
 import threading
 from typing import Any
@@ -145,6 +148,14 @@ def start_api(args: argparse.Namespace, printer: Any) -> Any:
     return server
 
 
+def _profile_ref(profile: str) -> str:
+    """The profile as the service (another working folder) can find it again."""
+    from pathlib import Path
+
+    path = Path(profile)
+    return str(path.resolve()) if path.is_file() else profile
+
+
 def _say_event(event: Any) -> None:
     from cdprhost.job.state import Failure, Notice, StateChanged
 
@@ -159,40 +170,38 @@ def _say_event(event: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cdprhost.profile import load_profile, record_device
-    from cdprhost.server.headless import HeadlessPrinter
+    from cdprhost.errors import CdprError
+    from cdprhost.profile import load_profile
+    from cdprhost.server.service_printer import ServicePrinter
 
     profile = load_profile(args.profile)
-    if args.port:
-        from cdprhost.link import open_link
-
-        baud = args.baud or profile.serial.baud
-
-        def open_device() -> Any:
-            return open_link(args.port, baud=baud, timeout_s=profile.serial.timeout_s)
-
-    else:
-        from cdprhost.sim.embedded import open_embedded
-
-        def open_device() -> Any:
-            return open_embedded(speedup=args.speedup or None)
-
-    # a real board: what it announces is kept beside the profile for the next estimates
-    recorder = {"record_device": functools.partial(record_device, args.profile)}
-    printer = HeadlessPrinter(
+    if args.port and not os.path.exists(args.port):  # said before a service is started for it
+        raise InputError(
+            "no such port (is the device plugged in? try `ls /dev/tty*`)", source=args.port
+        )
+    printer = ServicePrinter(
         profile,
-        open_device,
+        port=args.port,
+        baud=args.baud,
+        speedup=None if args.port else (args.speedup or None),
         setup=setup_from_args(args),
-        job_options=recorder if args.port else None,
-        on_event=_say_event,
         clear_fault=args.clear_fault,
+        # a real board: what it announces is kept beside the profile for the next estimates
+        profile_ref=_profile_ref(args.profile) if args.port else None,
+        on_event=_say_event,
     )
     try:
-        printer.connect()
-    except OSError as exc:
-        raise InputError(
-            f"cannot open the device: {exc.strerror or exc}", source=args.port
-        ) from None
+        printer.connect()  # finds or starts the printer service; asks the device once
+    except CdprError as exc:
+        printer.detach()
+        raise InputError(str(exc), source=args.port) from None
+    status = printer.status()
+    if status.busy and status.file is not None:
+        who = f", started by {status.started_by}" if status.started_by else ""
+        print(
+            f"the printer service is printing {status.file.name}{who}: shown here",
+            file=sys.stderr,
+        )
     stop = threading.Event()
     caught: list[str] = []
 

@@ -2,8 +2,11 @@
 
 The app talks to one :class:`Backend`. Every method marked *blocking* is called
 from a Textual thread worker, never from the UI thread; non-blocking ones only
-read counters. :mod:`cdprhost.tui.control.live` implements it on the real link,
-print job, preflight, machine operations, calibration and diagnosis; the tests use fakes.
+read counters. :mod:`cdprhost.tui.control.service_backend` implements it as a client of
+the printer service (the print, the link and the machine in the service's process; what
+``cdprhost tui`` uses), :mod:`cdprhost.tui.control.live` in this process on the real link,
+print job, preflight, machine operations, calibration and diagnosis (``--in-process``);
+the tests use fakes.
 """
 
 from __future__ import annotations

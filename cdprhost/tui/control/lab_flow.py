@@ -21,7 +21,9 @@ class LabFlow(ControllerBase):
                 calibration=replace(
                     self.state.calibration,
                     stage="error",
-                    message="calibration wizard not available",
+                    message=getattr(
+                        self.backend, "calibration_refusal", "calibration wizard not available"
+                    ),
                 )
             )
             return

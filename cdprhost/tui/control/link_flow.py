@@ -112,7 +112,8 @@ class ControllerBase:
             )
             where = "the embedded simulated device (no hardware)" if simulated else port
             self.say(ConsoleLine("notice", f"connected to {where}", self.app.wall_clock()))
-            self.refresh_device()
+            if not self.adopt_running_job():
+                self.refresh_device()
             self.connected_again()
 
         def fail(exc: BaseException) -> None:
@@ -129,6 +130,10 @@ class ControllerBase:
 
     def connected_again(self) -> None:
         """Hook for the print flow: a new link (look for a resume point again)."""
+
+    def adopt_running_job(self) -> bool:
+        """Hook for the print flow: follow a print the device's service is running."""
+        return False
 
     def disconnect(self) -> None:
         conn = self.state.connection
@@ -165,6 +170,8 @@ class ControllerBase:
                 self.recheck_link()
             return
         if not self.state.connected or self.state.job_active:
+            return
+        if self.adopt_running_job():  # started meanwhile by another front end (the page)
             return
         gen = self._status_gen
         if self.state.busy:  # homing, a jog, a heater wait: temperatures stay fresh

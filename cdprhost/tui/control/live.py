@@ -101,6 +101,29 @@ def placement_note(report: Any) -> str:
     return " · ".join(out)
 
 
+def refuse_if_served(port: str) -> None:
+    """CdprError when a printer service holds ``port`` (this process must not open it)."""
+    import socket
+
+    from cdprhost.service.paths import files_for_port
+
+    files = files_for_port(port)
+    if not files.socket.exists():
+        return
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        sock.connect(str(files.socket))
+    except OSError:
+        return  # a socket left behind: nobody listens
+    finally:
+        sock.close()
+    pid = files.read_pid()
+    raise CdprError(
+        f"{port} is held by its printer service (pid {pid}): a print or another front end "
+        "uses it; start `cdprhost tui` without --in-process to join it, or wait until it ends"
+    )
+
+
 class LiveBackend:
     """``sim_options`` go to :func:`cdprhost.sim.embedded.open_embedded` (faults, observer, config)."""
 
@@ -171,6 +194,7 @@ class LiveBackend:
                     link.device.record
                 )  # directions of motion for the truth's backlash
         else:
+            refuse_if_served(port)
             link = open_link(port, baud, self.profile.serial.timeout_s)
         rows = identity_rows(link.identity, port, baud)
         with self._lock:

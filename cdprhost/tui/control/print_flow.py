@@ -119,6 +119,45 @@ class PrintFlow(ControllerBase):
         self.lookup_resume()
 
     # -------------------------------------------------------------------- jobs
+    def adopt_running_job(self) -> bool:
+        """A print already running in the printer service this UI attached to (started by
+        an earlier UI, ``cdprhost print`` or the upload server): shown and driven as if
+        started here, its events so far first. True when there is one."""
+        running = getattr(self.backend, "running_job", None)
+        if running is None or self.state.job_active:
+            return False
+        job_id = self.state.job_id + 1
+        sink = self.app.pump.sink(job_id)
+        found = running(sink)
+        if found is None:
+            return False
+        path, started_at, job = found
+        self._status_gen += 1
+        self.update(
+            job=JobSnapshot(),
+            job_id=job_id,
+            job_path=path,
+            job_started=started_at or self.app.wall_clock(),
+            job_ended=0.0,
+            notice_at=None,
+            job_resumed_from=None,
+            job_resume_line=None,
+            job_request="",
+            rate_samples=(),
+            temp_samples=(),
+            device=None,
+            jog=None,
+        )
+        if self.state.file.path != path:
+            self.open_file(path)
+        self.say(
+            ConsoleLine(
+                "notice", f"following the print already running: {path}", self.app.wall_clock()
+            )
+        )
+        self._run_job(job_id, sink, lambda: job)
+        return True
+
     def start(
         self,
         resume_from_layer: int | None = None,
@@ -159,13 +198,21 @@ class PrintFlow(ControllerBase):
             what = f"resume at layer {resume_from_layer + 1}"
         self.say(ConsoleLine("notice", f"{what}: {path}", self.app.wall_clock()))
         sink = self.app.pump.sink(job_id)
+        self._run_job(
+            job_id,
+            sink,
+            lambda: self.backend.make_job(
+                path, sink, resume_from_layer, exact is not None, clear_fault
+            ),
+        )
+
+    def _run_job(self, job_id: int, sink: Any, make: Any) -> None:
+        """Run the job ``make`` returns in a worker, to its end."""
         ended = self._job_ended = threading.Event()
 
         def work() -> Any:
             try:
-                job = self.backend.make_job(
-                    path, sink, resume_from_layer, exact is not None, clear_fault
-                )
+                job = make()
                 with self._job_lock:
                     self._job = job
                 return job.run()
