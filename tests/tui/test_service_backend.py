@@ -222,3 +222,27 @@ async def test_a_print_started_by_another_front_end_is_shown_by_the_ui(backend, 
             assert state.job.layer + 1 == 6
     finally:
         other.close()
+
+
+def test_a_speed_override_reaches_the_print_in_the_service(backend, tmp_path):
+    """M220 from the TUI goes over the wire to the job in the service, which applies it
+    (its Overrides event comes back); an out-of-range one is refused before anything is sent."""
+    from cdprhost.job.state import Overrides
+
+    backend.connect(EMBEDDED, 250000)
+    gcode = square_part(tmp_path / "part.gcode", layers=4)
+    events: list = []
+    job = backend.make_job(str(gcode), events.append)
+    runner = threading.Thread(target=job.run, daemon=True)
+    runner.start()
+    wait_until(lambda: _folded(list(events)).segments_done > 20, 60, "printing")
+    with pytest.raises(ValueError, match="out of range"):
+        job.request_speed(9999)
+    job.request_speed(200)
+    wait_until(
+        lambda: any(isinstance(e, Overrides) and e.speed_pct == 200 for e in list(events)),
+        60,
+        "the service's Overrides event",
+    )
+    runner.join(120)
+    assert _folded(events).state is JobState.DONE
