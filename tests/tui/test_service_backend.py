@@ -74,6 +74,8 @@ def test_the_device_between_prints_goes_through_the_service(backend):
     assert any(text.startswith("position X") for text in replies), replies
     assert any("firmware" in t for t in (line.text for line in backend.console("M115")))
     assert backend.emergency_stop()  # no print: the service's session stops the device
+    said = [line.text for line in backend.console("G1 X10")]  # faulted: refused, with M999
+    assert any("refused, nothing sent" in t and "M999" in t for t in said), said
     assert any("ok cleared" in line.text for line in backend.console("M999"))
     cleared = backend.device_status()
     assert cleared is not None and not cleared.fault and cleared.hotend_target == 0.0

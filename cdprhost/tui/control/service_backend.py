@@ -27,6 +27,7 @@ import numpy as np
 from cdprhost.errors import CdprError
 from cdprhost.job.state import Event, LinkHealth
 from cdprhost.machine import NotHomed
+from cdprhost.machine.faults import DeviceFaulted, refusal
 from cdprhost.motion.override import check_percent
 from cdprhost.profile import MachineProfile
 from cdprhost.service import client as service_client
@@ -165,6 +166,14 @@ class _RemoteMachine:
 
     def status(self) -> Any:
         return self.backend.operate(wire.Status())
+
+    def ready(self) -> Any:
+        """The device's status when it can take a command; a faulted device is refused
+        here, nothing sent, with the fault and the way out (as ``Machine.ready``)."""
+        state = self.status()
+        if state is not None and state.fault:
+            raise DeviceFaulted(refusal(state.fault, state.clearable))
+        return state
 
     def emergency_stop(self) -> bool:
         return self.backend.emergency_stop()
