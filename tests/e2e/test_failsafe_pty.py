@@ -18,6 +18,7 @@ import serial
 
 from cdprhost.job.resume import ResumePoint, resume_path_for
 from cdprhost.link import open_link
+from cdprhost.link.errors import PortBusy
 from firmware_protocol.messages import ErrorCode, Flag
 from tests.e2e.processes import (
     SimDeviceProcess,
@@ -111,6 +112,16 @@ def test_killed_host_then_resume_continues_exactly_where_the_device_stopped(tmp_
         assert not resume_path_for(gcode, state / "jobs").exists()  # completed: point removed
 
 
+def _open_when_free(port: str):
+    """A link on ``port``, or None while the killed service's hold on it is still being
+    released (seen once in about eight runs, also before the service had a device
+    session: the lock outlives the process's exit by a moment; fuser then finds no holder)."""
+    try:
+        return open_link(port)
+    except PortBusy:
+        return None
+
+
 def test_stopped_host_trips_the_device_watchdog(tmp_path):
     state = tmp_path / "state"
     gcode = square_part(tmp_path / "part.gcode")
@@ -126,7 +137,7 @@ def test_stopped_host_trips_the_device_watchdog(tmp_path):
                 kill_and_wait(pid)
             host.kill()
             host.wait(20)
-        link = open_link(dev.path)
+        link = wait_until(lambda: _open_when_free(dev.path), 10, "the port free again")
         st = link.request_status()
         link.close()
         assert st.faulted and st.last_error == ErrorCode.WATCHDOG
