@@ -77,9 +77,9 @@ def ideal_edges(steps: int, ticks: int, code: int, cycles_per_tick: int) -> np.n
     return step_times(steps, ticks, code) * float(cycles_per_tick)
 
 
-def device_edges(schedule: AxisSchedule) -> np.ndarray:
-    """The edges the device issues for ``schedule``, in whole cycles from the segment's
-    start: exactly the device's integer recurrence (int64, no rounding but the last)."""
+def device_times(schedule: AxisSchedule) -> np.ndarray:
+    """The edges' times before rounding (fixed point, from the segment's start): exactly
+    the device's integer recurrence (int64)."""
     if not schedule.chunks:
         return np.zeros(0, dtype=np.int64)
     times = []
@@ -88,8 +88,13 @@ def device_edges(schedule: AxisSchedule) -> np.ndarray:
         k = np.arange(c.count, dtype=np.int64)
         times.append(t + k * c.interval + c.add * (k * (k - 1) // 2))
         t = t + c.count * c.interval + c.add * (c.count * (c.count - 1) // 2)
-    fixed = np.concatenate(times)
-    return (fixed + HALF) >> FRAC_BITS
+    return np.concatenate(times)
+
+
+def device_edges(schedule: AxisSchedule) -> np.ndarray:
+    """The edges the device issues for ``schedule``, in whole cycles from the segment's
+    start (its fixed-point times rounded)."""
+    return (device_times(schedule) + HALF) >> FRAC_BITS
 
 
 def reciprocal_table(cycles_per_tick: int) -> np.ndarray:
@@ -259,3 +264,73 @@ def plan_schedules(
         ideal = ideal_edges(int(n[i, k]), int(batch.ticks[i]), int(batch.ramps[i]), cycles_per_tick)
         explicit[(int(i), int(k))] = fit_axis(ideal, tol_cycles)
     return explicit
+
+
+class ScheduleError(ValueError):
+    """A segment's schedules that a device must refuse."""
+
+
+def segment_schedules(
+    deltas: np.ndarray,
+    ticks: int,
+    code: int,
+    explicit: dict[int, AxisSchedule],
+    table: np.ndarray,
+) -> dict[int, AxisSchedule]:
+    """Every moving axis's schedule as the device runs it: the one the wire carried, else
+    its prediction. An axis the device cannot predict and the wire left out is refused."""
+    out: dict[int, AxisSchedule] = {}
+    for k, n in enumerate(int(d) for d in deltas):
+        if k in explicit:
+            out[k] = explicit[k]
+        elif n:
+            if not predictable(np.array(n), np.array(ticks), np.array(code)):
+                raise ScheduleError(f"axis {k}: {abs(n)} steps with no schedule to run them")
+            out[k] = predicted(n, ticks, table)
+    return out
+
+
+def shortest_interval(schedule: AxisSchedule) -> int:
+    """The shortest interval between two consecutive edges (fixed point; 0 for a single
+    edge), in O(chunks) as the device checks it on receipt: a chunk's intervals change
+    linearly, so the shortest is at one of its ends (its last one leads to the next
+    chunk's first edge; the last chunk's last interval leads nowhere)."""
+    shortest = 0
+    last = len(schedule.chunks) - 1
+    for i, c in enumerate(schedule.chunks):
+        used = c.count if i < last else c.count - 1  # intervals between its edges and on
+        if used < 1:
+            continue
+        ends = min(c.interval, c.interval + (used - 1) * c.add)
+        shortest = ends if not shortest else min(shortest, ends)
+    return shortest
+
+
+def check_segment(
+    deltas: np.ndarray,
+    ticks: int,
+    code: int,
+    explicit: dict[int, AxisSchedule],
+    cycles_per_tick: int,
+    tol_cycles: float,
+    table: np.ndarray,
+) -> float:
+    """What a device checks of a segment's schedules before it queues the segment: each
+    moving axis has one, its counts are ``|n|``, every edge lies inside the segment and
+    within ``tol_cycles`` of its ideal time. Returns the worst error in cycles; raises
+    :class:`ScheduleError` naming the axis and the reason."""
+    worst = 0.0
+    for k, sched in segment_schedules(deltas, ticks, code, explicit, table).items():
+        n = int(deltas[k])
+        if sched.count != abs(n):
+            raise ScheduleError(f"axis {k}: the schedule issues {sched.count} of {abs(n)} steps")
+        edges = device_edges(sched)
+        if edges[0] < 0 or edges[-1] >= ticks * cycles_per_tick:
+            raise ScheduleError(f"axis {k}: an edge falls outside the segment")
+        err = float(np.abs(edges - ideal_edges(n, ticks, code, cycles_per_tick)).max())
+        if err > tol_cycles:
+            raise ScheduleError(
+                f"axis {k}: an edge {err:.1f} cycles from its time (tolerance {tol_cycles:g})"
+            )
+        worst = max(worst, err)
+    return worst

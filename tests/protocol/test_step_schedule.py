@@ -12,8 +12,11 @@ from firmware_protocol.step_schedule import (
     FRAC_BITS,
     AxisSchedule,
     Chunk,
+    ScheduleError,
+    check_segment,
     cycles_per_tick,
     device_edges,
+    device_times,
     fit_axis,
     ideal_edges,
     plan_schedules,
@@ -22,6 +25,7 @@ from firmware_protocol.step_schedule import (
     predicted_error,
     reciprocal_table,
     schedule_error,
+    shortest_interval,
 )
 
 CPT = 160  # 16 MHz over the 100 kHz protocol clock
@@ -122,3 +126,36 @@ def test_tolerance_below_a_cycle_and_a_clock_that_does_not_divide_are_refused():
         fit_axis(ideal_edges(10, 1000, RAMP_CONSTANT, CPT), 0.5)
     with pytest.raises(ValueError, match="whole multiple"):
         cycles_per_tick(30_000)
+
+
+def test_a_device_runs_a_predicted_axis_and_refuses_what_it_cannot_run():
+    deltas = np.array([300, -20, 0, 3])
+    # the ramp's axes carry schedules; the constant one is predicted
+    ramp = {k: fit_axis(ideal_edges(int(d), 3000, 0, CPT), 16.0) for k, d in enumerate(deltas) if d}
+    assert check_segment(deltas, 3000, 0, ramp, CPT, 16.0, TABLE) <= 16.0
+    assert check_segment(deltas, 3000, RAMP_CONSTANT, {}, CPT, 16.0, TABLE) <= 1.0
+    partial = {0: ramp[0], 1: ramp[1]}
+    with pytest.raises(ScheduleError, match="axis 3: 3 steps with no schedule"):
+        check_segment(deltas, 3000, 0, partial, CPT, 16.0, TABLE)
+    # the constant segment's schedule sent for a ramp: the edges stray
+    wrong = dict(ramp)
+    wrong[0] = predicted(300, 3000, TABLE)
+    with pytest.raises(ScheduleError, match="axis 0: an edge .* cycles from its time"):
+        check_segment(deltas, 3000, 0, wrong, CPT, 16.0, TABLE)
+    short = dict(ramp)
+    short[1] = AxisSchedule(0, (Chunk(19, 1000 << FRAC_BITS, 0),))
+    with pytest.raises(ScheduleError, match="axis 1: the schedule issues 19 of 20 steps"):
+        check_segment(deltas, 3000, 0, short, CPT, 16.0, TABLE)
+    late = dict(ramp)
+    late[3] = AxisSchedule(3000 * CPT << FRAC_BITS, (Chunk(3, 1 << FRAC_BITS, 0),))
+    with pytest.raises(ScheduleError, match="axis 3: an edge falls outside the segment"):
+        check_segment(deltas, 3000, 0, late, CPT, 16.0, TABLE)
+
+
+@settings(max_examples=100, deadline=None)
+@given(segments())
+def test_the_shortest_interval_is_the_shortest_gap_between_edges(seg):
+    steps, ticks, code = seg
+    sched = fit_axis(ideal_edges(steps, ticks, code, CPT), 16.0)
+    gaps = np.diff(device_times(sched))
+    assert shortest_interval(sched) == (gaps.min() if len(gaps) else 0)
