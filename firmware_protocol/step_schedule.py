@@ -155,17 +155,29 @@ def predicted_error(
     return np.asarray(np.maximum(np.abs(first_err), np.abs(last_err)) + 0.5, dtype=np.float64)
 
 
+_K = np.arange(1, MAX_COUNT + 2, dtype=np.float64)  # step indices 1.. (a chunk's and the next)
+_TRI = _K * (_K - 1) / 2.0
+
+
 def _fit(offsets: np.ndarray, n_fit: int) -> tuple[int, int]:
     """Fixed-point ``interval, add`` whose recurrence from 0 best meets ``offsets[k-1]``
-    (cycles, k = 1..n_fit) at step k: least squares on ``k I + k (k - 1) / 2 a``."""
+    (cycles, k = 1..n_fit) at step k: least squares on ``k I + k (k - 1) / 2 a``, by its
+    normal equations (the sums of powers of k in closed form)."""
     if n_fit <= 0:
         return 0, 0
-    k = np.arange(1, n_fit + 1, dtype=np.float64)
     y = offsets[:n_fit]
     if n_fit == 1:
         return int(round(y[0] * ONE)), 0
-    basis = np.stack([k, k * (k - 1) / 2.0], axis=1)
-    (i_fit, a_fit), *_ = np.linalg.lstsq(basis, y, rcond=None)
+    m = float(n_fit)
+    s2 = m * (m + 1) * (2 * m + 1) / 6
+    s3 = (m * (m + 1) / 2) ** 2
+    s4 = m * (m + 1) * (2 * m + 1) * (3 * m * m + 3 * m - 1) / 30
+    a11, a12, a22 = s2, (s3 - s2) / 2, (s4 - 2 * s3 + s2) / 4
+    b1 = float(np.dot(_K[:n_fit], y))
+    b2 = float(np.dot(_TRI[:n_fit], y))
+    det = a11 * a22 - a12 * a12
+    i_fit = (b1 * a22 - b2 * a12) / det
+    a_fit = (a11 * b2 - a12 * b1) / det
     return int(round(i_fit * ONE)), int(round(a_fit * ONE))
 
 
@@ -187,10 +199,13 @@ def _chunk_at(t0: int, ideal: np.ndarray, start: int, count: int) -> Chunk:
     return Chunk(count, max(interval, 1), add)
 
 
-def _longest_chunk(t0: int, ideal: np.ndarray, start: int, tol_cycles: float) -> Chunk:
+def _longest_chunk(
+    t0: int, ideal: np.ndarray, start: int, tol_cycles: float, hint: int = 1
+) -> Chunk:
     """The longest chunk from edge ``start`` (placed at ``t0``) that keeps its edges within
-    ``tol_cycles``: grown by doubling, then bisected. A count of 1 always fits: its edge is
-    the one the last chunk placed, and the next is fitted exactly."""
+    ``tol_cycles``: from ``hint`` (the last chunk's count: along a ramp they change slowly)
+    grown by doubling, or bisected below it. A count of 1 always fits: its edge is the one
+    the last chunk placed, and the next is fitted exactly."""
     limit = min(len(ideal) - start, MAX_COUNT)
 
     def ok(count: int) -> tuple[bool, Chunk]:
@@ -198,7 +213,7 @@ def _longest_chunk(t0: int, ideal: np.ndarray, start: int, tol_cycles: float) ->
         return _chunk_error(t0, ideal, start, count, chunk) <= tol_cycles, chunk
 
     lo, best = 1, ok(1)[1]
-    hi = 2
+    hi = max(2, min(hint, limit))
     while hi <= limit:
         fits, chunk = ok(hi)
         if not fits:
@@ -230,7 +245,7 @@ def fit_axis(ideal: np.ndarray, tol_cycles: float) -> AxisSchedule:
     t = lead
     start = 0
     while start < n:
-        best = _longest_chunk(t, ideal, start, tol_cycles)
+        best = _longest_chunk(t, ideal, start, tol_cycles, chunks[-1].count if chunks else 1)
         chunks.append(best)
         t = t + best.count * best.interval + best.add * (best.count * (best.count - 1) // 2)
         start += best.count

@@ -56,10 +56,10 @@ def test_the_pieces_step_where_the_segment_would_have():
 
 
 def test_a_long_ramp_from_rest_is_cut_until_every_block_fits():
-    # from rest to 100,000 steps/s over 2,730 steps: 33 chunks at 1 us in one piece
+    # from rest to 100,000 steps/s over 5,000 steps: 47 chunks at 1 us in one piece
     batch = SegmentBatch(
-        np.array([5461, 2000]),
-        np.array([[0, 0, 0, 2730], [10, 0, 0, 1000]]),
+        np.array([10_000, 2000]),
+        np.array([[0, 0, 0, 5000], [10, 0, 0, 1000]]),
         np.array([RAMP_FROM_REST, RAMP_TO_REST], dtype=np.int16),
     )
     cut, explicit = fit_for_blocks(batch, CPT, 16.0, TABLE)
