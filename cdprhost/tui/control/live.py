@@ -23,6 +23,7 @@ from cdprhost.machine import Machine, NotHomed
 from cdprhost.machine.prepare import describe_fault, fault_clearable
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
+from cdprhost.tui.control.live_calibration import LiveCalibration
 from cdprhost.tui.control.live_diagnosis import DiagnosedProfile
 from cdprhost.tui.control.views import (
     ConsoleLine,
@@ -185,8 +186,6 @@ class LiveBackend:
         self._identity: tuple[tuple[str, str], ...] = ()
         self._lock = threading.RLock()
         self._log: deque[ConsoleLine] = deque(maxlen=DEVICE_LOG)
-        from cdprhost.tui.control.live_calibration import LiveCalibration
-
         self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ---------------------------------------------------------------- link
