@@ -166,7 +166,7 @@ class LiveCalibration:
         b = self.backend
         folder = session_dir or DEFAULT_SESSION
         if camera:
-            from cdprhost.tui.control.live_camera import camera_setup
+            from cdprhost.tui.control.live_camera import FRAMES, camera_setup
 
             def watch(observer: Any) -> None:
                 """The simulated camera watches a new embedded simulated device."""
@@ -183,7 +183,7 @@ class LiveCalibration:
                 intrinsics_path=intrinsics,
                 log=self._log,
             )
-            takes = setup.takes(Path(folder), self._log)
+            takes = setup.takes(Path(folder), FRAMES, self._log)
             device = Machine(b.link, b.profile, b.model, settle_s=0.5)
             self.camera = camera
             self.wizard = CalibrationWizard(
