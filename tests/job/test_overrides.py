@@ -77,7 +77,7 @@ def test_an_override_out_of_range_is_refused_and_changes_nothing(tmp_path, perce
         job.request_speed(percent)
     with pytest.raises(ValueError, match="out of range"):
         job.request_flow(percent)
-    assert job.requests.overrides() == (1.0, 1.0)
+    assert job.overrides.factors() == (1.0, 1.0)
 
 
 def test_the_resume_point_records_the_overrides_and_a_resume_says_it_starts_at_100(tmp_path):
