@@ -28,6 +28,7 @@ from cdprhost.job.board import announced_record
 from cdprhost.job.exact import ExactPlaceUnknown, device_stop, refine_point, reset_notice
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
+from cdprhost.job.overriding import OverrideRequests, requested_text, resumed_text
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
     ResumeWriter,
@@ -47,7 +48,6 @@ from cdprhost.link.events import Identity
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import estop_flags, heaters_off
 from cdprhost.motion.device_limits import caps_for_device, same_plan
-from cdprhost.motion.override import check_percent
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.motion.segments import DEFAULT_LIMITS
@@ -83,6 +83,7 @@ class PrintJob:
         self.on_event = on_event or (lambda e: None)
         self.log = JobLog(self.options.log_path)
         self.requests = Requests()
+        self.overrides = OverrideRequests()  # M220 / M221
         self._state = JobState.IDLE
         self._done = threading.Event()  # run() has returned
         self._started = False
@@ -123,16 +124,10 @@ class PrintJob:
         self._override("flow", percent)
 
     def _override(self, what: str, percent: float) -> None:
-        factor = check_percent(what, percent)
-        self.requests.set_override(what, factor)
+        factor = self.overrides.set(what, percent)
         self.log.write("request", what=what, percent=round(factor * 100, 3))
         if self._started and not self._done.is_set():
-            self._emit(
-                Notice(
-                    f"{what} {factor * 100:g} % requested (what the device holds already, "
-                    "about a second of motion, runs as sent)"
-                )
-            )
+            self._emit(Notice(requested_text(what, factor)))
 
     def emergency_stop(self) -> bool:
         """ESTOP now (motors kept, heaters off unless the profile keeps them on failure); the
@@ -439,14 +434,11 @@ class PrintJob:
     def _say_overrides_reset(self, result: PrintResult) -> None:
         """A resumed print that ran with a speed or flow override starts again at 100 %."""
         point = self.options.resume
-        if point is None or (point.speed_pct == 100 and point.flow_pct == 100):
+        if point is None:
             return
-        speed, flow = self.requests.overrides()
-        text = (
-            f"the interrupted print ran at speed {point.speed_pct:g} %, flow "
-            f"{point.flow_pct:g} %; it resumes at speed {speed * 100:g} %, flow {flow * 100:g} % "
-            "(M220 / M221 set them again)"
-        )
+        text = resumed_text((point.speed_pct, point.flow_pct), self.overrides.factors())
+        if text is None:
+            return
         self._emit(Notice(text))
         result.notices.append(text)
 
@@ -502,6 +494,7 @@ class PrintJob:
             emit=self._emit,
             state=lambda: self._state,
             requests=self.requests,
+            overrides=self.overrides,
             log_problem=lambda: self.log.problem,
             idle_timeout_s=self.options.idle_timeout_s,
             e_offset=self._e_offset,

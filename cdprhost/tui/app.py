@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual import events
 from textual.app import App, SystemCommand
@@ -52,6 +52,9 @@ from cdprhost.tui.screens.jog import JogScreen
 from cdprhost.tui.screens.print_screen import PrintScreen
 from cdprhost.tui.state import CONSOLE_LINES, UiState, fold_job_events, shown_job_state
 from cdprhost.tui.tabs import TAB_OF, TABS, screen_key
+
+if TYPE_CHECKING:  # pragma: no cover
+    from cdprhost.tui.screens.host import ScreenHost
 
 ESTOP_KEY = "f9"
 ESTOP_ARM_S = 3.0
@@ -447,3 +450,9 @@ class CdprApp(App[int]):
             )
         yield SystemCommand("Keys", "Every key of this screen (?)", self.action_help)
         yield from super().get_system_commands(screen)
+
+
+if TYPE_CHECKING:  # pragma: no cover - the type checker holds the app to what screens ask
+
+    def _screen_host(app: CdprApp) -> ScreenHost:
+        return app

@@ -23,6 +23,7 @@ from cdprhost.machine import Machine, NotHomed
 from cdprhost.machine.prepare import describe_fault, fault_clearable
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
+from cdprhost.tui.control.live_calibration import LiveCalibration
 from cdprhost.tui.control.live_diagnosis import DiagnosedProfile
 from cdprhost.tui.control.views import (
     ConsoleLine,
@@ -43,6 +44,33 @@ DEVICE_RECORD_KEEP = 4096
 the newest, enough for an observer's motion directions (its window is 4096). Without a cap
 its record grew by 64 bytes a segment for as long as the UI ran (65 KB per print of the
 memory bench's small part; 32 MB for a print of half a million segments)."""
+
+
+def device_status_view(model: Any, st: Any, fault: str, clearable: bool) -> DeviceStatusView:
+    """A status report of the device as the screens show it (the position by ``model``'s
+    forward kinematics, once homed). ``st`` is the link's status or the printer service's
+    (the same fields); ``fault`` in words ("" when none) and whether a host may clear it."""
+    steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
+    s = model.sliders_from_steps(np.asarray(steps[:3]))
+    homed = st.homed_mask & ALL_MODULES == ALL_MODULES
+    position = None
+    if homed:
+        p = model.fk(s[None, :])[0]
+        position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
+    return DeviceStatusView(
+        steps,
+        (float(s[0]), float(s[1]), float(s[2])),
+        position,
+        st.hotend_c,
+        st.bed_c,
+        st.hotend_target_c,
+        st.bed_target_c,
+        bool(st.enabled_mask),
+        homed,
+        st.queue_free,
+        fault,
+        clearable,
+    )
 
 
 def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str], ...]:
@@ -158,8 +186,6 @@ class LiveBackend:
         self._identity: tuple[tuple[str, str], ...] = ()
         self._lock = threading.RLock()
         self._log: deque[ConsoleLine] = deque(maxlen=DEVICE_LOG)
-        from cdprhost.tui.control.live_calibration import LiveCalibration
-
         self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ---------------------------------------------------------------- link
@@ -265,27 +291,7 @@ class LiveBackend:
         return self._status_view(st)
 
     def _status_view(self, st: Any) -> DeviceStatusView:
-        steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
-        s = self.model.sliders_from_steps(np.asarray(steps[:3]))
-        homed = st.homed_mask & ALL_MODULES == ALL_MODULES
-        position = None
-        if homed:
-            p = self.model.fk(s[None, :])[0]
-            position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
-        return DeviceStatusView(
-            steps,
-            (float(s[0]), float(s[1]), float(s[2])),
-            position,
-            st.hotend_c,
-            st.bed_c,
-            st.hotend_target_c,
-            st.bed_target_c,
-            bool(st.enabled_mask),
-            homed,
-            st.queue_free,
-            describe_fault(st) or "",
-            fault_clearable(st),
-        )
+        return device_status_view(self.model, st, describe_fault(st) or "", fault_clearable(st))
 
     # --------------------------------------------------------------- print
     def preflight(self, path: str) -> PreflightView:

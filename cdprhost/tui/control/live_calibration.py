@@ -10,16 +10,21 @@ mocap folder is offered.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from cdprhost.errors import CdprError, InputError
+from cdprhost.kinematics import MachineModel
+from cdprhost.profile import MachineProfile
 from cdprhost.tui.control.backend import EMBEDDED
-from cdprhost.tui.control.views import CalibrationView, IdentificationView, ParameterRow, PoseView
-
-if TYPE_CHECKING:  # pragma: no cover
-    from cdprhost.tui.control.live import LiveBackend
+from cdprhost.tui.control.views import (
+    CalibrationView,
+    DeviceStatusView,
+    IdentificationView,
+    ParameterRow,
+    PoseView,
+)
 
 DEFAULT_SESSION = "calibration-session"
 
@@ -81,8 +86,26 @@ def identification_view(result: Any, profile_path: str = "") -> IdentificationVi
     )
 
 
+class CalibrationDevice(Protocol):
+    """What the wizard needs of the backend that holds the link (``live.LiveBackend``): the
+    machine, the link to move it, its status, and the simulated device's options (a
+    simulated camera watches a new embedded device)."""
+
+    profile: MachineProfile
+    profile_name: str
+    model: MachineModel
+    sim_options: dict[str, Any]
+
+    @property
+    def link(self) -> Any: ...
+
+    def connect(self, port: str, baud: int) -> tuple[tuple[str, str], ...]: ...
+
+    def device_status(self) -> DeviceStatusView | None: ...
+
+
 class LiveCalibration:
-    def __init__(self, backend: LiveBackend, *, mocap_dir: str | None = None):
+    def __init__(self, backend: CalibrationDevice, *, mocap_dir: str | None = None):
         self.backend = backend
         observer = backend.sim_options.get("observer")
         self.mocap_dir = mocap_dir or (str(observer.directory) if observer is not None else None)
@@ -143,7 +166,7 @@ class LiveCalibration:
         b = self.backend
         folder = session_dir or DEFAULT_SESSION
         if camera:
-            from cdprhost.tui.control.live_camera import camera_setup
+            from cdprhost.tui.control.live_camera import FRAMES, camera_setup
 
             def watch(observer: Any) -> None:
                 """The simulated camera watches a new embedded simulated device."""
@@ -160,7 +183,7 @@ class LiveCalibration:
                 intrinsics_path=intrinsics,
                 log=self._log,
             )
-            takes = setup.takes(Path(folder), self._log)
+            takes = setup.takes(Path(folder), FRAMES, self._log)
             device = Machine(b.link, b.profile, b.model, settle_s=0.5)
             self.camera = camera
             self.wizard = CalibrationWizard(

@@ -22,8 +22,6 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
-import numpy as np
-
 from cdprhost.errors import CdprError
 from cdprhost.job.state import Event, LinkHealth
 from cdprhost.machine import NotHomed
@@ -33,7 +31,13 @@ from cdprhost.profile import MachineProfile
 from cdprhost.service import client as service_client
 from cdprhost.service import wire
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink
-from cdprhost.tui.control.live import DEVICE_LOG, JOG_SPEED_MM_S, LiveBackend, identity_rows
+from cdprhost.tui.control.live import (
+    DEVICE_LOG,
+    JOG_SPEED_MM_S,
+    LiveBackend,
+    device_status_view,
+    identity_rows,
+)
 from cdprhost.tui.control.views import (
     ConsoleLine,
     DeviceStatusView,
@@ -43,7 +47,6 @@ from cdprhost.tui.control.views import (
     ResumeView,
 )
 
-ALL_MODULES = 0b111
 FRESH_S = 2.0  # a broadcast status younger than this answers ``device_status``
 STATUS_TIMEOUT_S = 15.0
 CALIBRATION_REFUSED = (
@@ -54,26 +57,7 @@ CALIBRATION_REFUSED = (
 
 def status_view(model: Any, st: wire.DeviceState) -> DeviceStatusView:
     """The service's status of the device as the screens show it (position by the model)."""
-    s = model.sliders_from_steps(np.asarray(st.steps[:3]))
-    homed = st.homed_mask & ALL_MODULES == ALL_MODULES
-    position = None
-    if homed:
-        p = model.fk(s[None, :])[0]
-        position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
-    return DeviceStatusView(
-        st.steps,
-        (float(s[0]), float(s[1]), float(s[2])),
-        position,
-        st.hotend_c,
-        st.bed_c,
-        st.hotend_target_c,
-        st.bed_target_c,
-        bool(st.enabled_mask),
-        homed,
-        st.queue_free,
-        st.fault,
-        st.clearable,
-    )
+    return device_status_view(model, st, st.fault, st.clearable)
 
 
 class ServiceJob:
