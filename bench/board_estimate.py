@@ -17,6 +17,18 @@ The AVR firmware announces 8,000 steps/s and 40 ticks (firmware/src/config.h); t
 on the AVR itself runs in real time in simavr: `cdprhost sim-device --firmware avr`, then
 `cdprhost print FILE --profile P --port PTY` (which records the board beside the profile)
 and `cdprhost check FILE --profile P` (which then estimates for it).
+
+Measured (issue 29, before the step engine; 8,000 steps/s and 40 ticks announced):
+
+| the cup, paper-prototype | device time |
+|---|---|
+| on the AVR in simavr (`sim-device --firmware avr`, `print --port`; 33 min of real time) | 1147.42 s |
+| on the Python device at the same limits (this script's `printed_s`) | 1147.42 s |
+| `check` and `print` with the board's record (`estimate_s`) | 1145.42 s (-0.17 %) |
+| planned with no step-rate cap (`estimate_profile_limits_s`) | 744.59 s (the board: +54 %) |
+
+The estimate's 2.00 s are the `G28` at the start: the homing run (8,000 steps at the
+homing rate of 4,000 steps/s) counts in the device's motion time and not in the plan.
 """
 
 from __future__ import annotations
