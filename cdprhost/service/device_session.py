@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from pydantic import BaseModel, ValidationError
 
 from cdprhost.errors import CdprError
@@ -111,16 +112,26 @@ def read_state(link: Any) -> wire.DeviceState:
 def move_refusal(model: Any, st: Any, target: tuple[float, float, float]) -> str:
     """Why the straight move from where the device is to ``target`` leaves the workspace
     ("" when it does not; the path is sampled every millimetre)."""
-    import numpy as np
-
-    end = np.asarray(target, dtype=float)
     if st.homed_mask & 0b111 != 0b111:
         return ""  # the move itself refuses: not homed
-    here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
-    points = end[None, :]
-    if np.all(np.isfinite(here)):
-        n = max(2, int(np.ceil(np.linalg.norm(end - here))) + 1)
-        points = here + np.linspace(0.0, 1.0, n)[:, None] * (end - here)
+    return path_refusal(model, st, [target])
+
+
+def path_refusal(model: Any, st: Any, targets: Any) -> str:
+    """Why the straight moves from where the device is (when homed and known) through
+    ``targets`` in order leave the workspace ("" when they do not; sampled every mm)."""
+    ends = np.asarray(targets, dtype=float).reshape(-1, 3)
+    legs = [ends[:1]]
+    start = ends[0]
+    if st.homed_mask & 0b111 == 0b111:
+        here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+        if np.all(np.isfinite(here)):
+            start = here
+    for end in ends:
+        n = max(2, int(np.ceil(np.linalg.norm(end - start))) + 1)
+        legs.append(start + np.linspace(0.0, 1.0, n)[:, None] * (end - start))
+        start = end
+    points = np.concatenate(legs)
     report = model.check(points)
     if report.ok.all():
         return ""
@@ -162,6 +173,7 @@ class DeviceSession:
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
         self._last: wire.DeviceState | None = None
+        self._camera: Any = None  # the simulated camera on the embedded device (observe)
 
     # ------------------------------------------------------------ holding
     @property
@@ -287,11 +299,12 @@ class DeviceSession:
         except (CdprError, LinkError, OSError) as exc:
             return wire.Answer(id=request.id, ok=False, error=str(exc) or type(exc).__name__)
         self._note(self._link)
+        status, extra = status if isinstance(status, tuple) else (status, {})
         state = status if isinstance(status, wire.DeviceState) else device_state(status)
         self._last = state
         if not isinstance(request, wire.Status):  # every client sees what one of them did
             self.broadcast(wire.DeviceMsg(connected=True, status=state))
-        return wire.Answer(id=request.id, ok=True, status=state)
+        return wire.Answer(id=request.id, ok=True, status=state, **extra)
 
     def _carry_out(self, request: Any) -> Any:
         from cdprhost.machine import Machine
@@ -327,7 +340,38 @@ class DeviceSession:
             return m.motors_off()
         if isinstance(request, wire.Enable):
             return m.enable()
+        if isinstance(request, wire.Visit | wire.Observe | wire.Capture):
+            return self._calibration(request)
         raise CdprError(f"{request.op}: not a device operation")
+
+    def _calibration(self, request: Any) -> tuple[Any, dict[str, Any]]:
+        """The calibration wizard's requests: a visit (refused on a faulted device, or
+        leaving the workspace, before anything moves), the embedded device's observer, the
+        simulated camera's pictures. The status after, and the answer's own fields."""
+        from cdprhost.machine import Machine
+        from cdprhost.service import sim_world
+
+        if isinstance(request, wire.Visit):
+            m = Machine(self._link, self._profile, self._model, settle_s=request.settle_s)
+            refused = path_refusal(self._model, m.ready(), request.points)
+            if refused:
+                raise CdprError(f"refused, nothing moved: {refused}")
+            _steps, device_time_s = m.visit(np.asarray(request.points, dtype=float))
+            return m.status(), {"device_time_s": device_time_s}
+        device = getattr(self._link, "device", None)
+        if isinstance(request, wire.Observe):
+            if self.port is not None or device is None:
+                raise CdprError(f"refused: {sim_world.NOT_EMBEDDED}")
+            observer = sim_world.make_observer(request, self._model)
+            sim_world.watch(device, observer)
+            self._camera = observer if request.camera is not None else None
+            return read_state(self._link), {}
+        camera = self._camera
+        if camera is None:
+            raise CdprError("no simulated camera watches the device: observe with a camera first")
+        return read_state(self._link), {
+            "files": sim_world.capture(camera, request.folder, request.frames)
+        }
 
     def emergency_stop(self, request_id: int) -> wire.Answer:
         """Stop now, not waiting for a running operation (the link is thread-safe)."""
