@@ -139,9 +139,12 @@ def path_refusal(model: Any, st: Any, targets: Any) -> str:
     return f"{report.rule_name(i)}: {report.describe(i, model.limits)}"
 
 
-def identity_json(identity: Any) -> dict[str, Any]:
+def identity_json(identity: Any, caps: Any = None) -> dict[str, Any]:
+    """The device's identity for the wire, with its CAPS' shortest segment when announced."""
     out = {name: getattr(identity, name, None) for name in IDENTITY_FIELDS}
     out["protocol"] = list(out["protocol"] or ())
+    if caps is not None:
+        out["min_segment_ticks"] = int(caps.min_segment_ticks)
     return out
 
 
@@ -209,7 +212,10 @@ class DeviceSession:
             link = self._link
         status = self._last if self.job_active() else self._status_now()
         return wire.Answer(
-            id=spec.id, ok=True, identity=identity_json(link.identity), status=status
+            id=spec.id,
+            ok=True,
+            identity=identity_json(link.identity, getattr(link, "caps", None)),
+            status=status,
         )
 
     def release(self, holder: int, job_ended: bool = False, closing: bool = False) -> None:

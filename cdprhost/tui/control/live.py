@@ -153,6 +153,7 @@ class LiveBackend:
         self.idle_pump_s = idle_pump_s
         self.setup: Setup = setup or Setup()  # placement, --retarget, cancelled objects
         self._link: Any = None
+        self.announced: Any = None  # a DeviceRecord a device announced elsewhere (its service)
         self._embedded = False
         self._where: tuple[str, int] | None = None
         self._identity: tuple[tuple[str, str], ...] = ()
@@ -304,7 +305,7 @@ class LiveBackend:
         from cdprhost.job.board import announced_record
 
         link = self._link
-        return None if link is None else announced_record(link.identity, link.caps)
+        return self.announced if link is None else announced_record(link.identity, link.caps)
 
     def toggle_center(self) -> bool:
         """Centre the part on the build volume (``--center``), or stop centring; returns

@@ -360,10 +360,12 @@ class ServiceBackend:
         if answer.status is not None:
             self._device = (time.monotonic(), wire.DeviceMsg(connected=True, status=answer.status))
         self._identity = identity_rows(SimpleNamespace(**answer.identity), port, baud)
+        self.local.announced = announced_board(answer.identity)
         return self._identity
 
     def disconnect(self) -> None:
         client, self._client = self._client, None
+        self.local.announced = None
         if client is None:
             return
         with contextlib.suppress(CdprError, OSError):
@@ -545,3 +547,17 @@ class ServiceBackend:
 
     def close(self) -> None:
         self.disconnect()
+
+
+def announced_board(identity: dict[str, Any]) -> Any:
+    """What the service's device announced (a DeviceRecord: its step rate and shortest
+    segment) for the preflight's estimate, as an in-process link gives it; None: nothing."""
+    from cdprhost.job.board import announced_record
+    from cdprhost.link.events import DeviceCaps
+
+    ticks = identity.get("min_segment_ticks")
+    caps = None if ticks is None else DeviceCaps(min_segment_ticks=int(ticks))
+    try:
+        return announced_record(cast("Any", SimpleNamespace(**identity)), caps)
+    except (TypeError, ValueError):  # an identity without the figures (another device)
+        return None
