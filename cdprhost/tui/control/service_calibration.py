@@ -12,7 +12,6 @@ handed over as a file.
 
 from __future__ import annotations
 
-import contextlib
 import shutil
 import tempfile
 from pathlib import Path
@@ -57,13 +56,12 @@ class ServiceWizardDevice:
 
 class ServiceCamera:
     """The simulated camera of the service's embedded device, with the part of
-    ``cv2.VideoCapture``'s interface the wizard uses; its pictures pass through a private
-    temporary folder (removed on ``release``)."""
+    ``cv2.VideoCapture``'s interface the wizard uses; each picture passes through a private
+    temporary folder, removed once read."""
 
     def __init__(self, service: Asker, size: tuple[int, int]):
         self.service = service
         answered(service, wire.Observe(camera=size))
-        self.folder = Path(tempfile.mkdtemp(prefix="cdpr-camera-"))
 
     def isOpened(self) -> bool:
         return True
@@ -71,17 +69,15 @@ class ServiceCamera:
     def read(self) -> tuple[bool, Any]:
         import cv2
 
-        answer = answered(self.service, wire.Capture(folder=str(self.folder), frames=1))
-        images = []
-        for name in answer.files:
-            path = Path(name)
-            if path.parent != self.folder:
-                raise CdprError(f"the printer service wrote a picture elsewhere: {name}")
-            images.append(cv2.imread(name, cv2.IMREAD_COLOR))
-            with contextlib.suppress(OSError):
-                path.unlink()
-        image = images[-1] if images else None
+        folder = Path(tempfile.mkdtemp(prefix="cdpr-camera-"))
+        try:
+            answer = answered(self.service, wire.Capture(folder=str(folder), frames=1))
+            if len(answer.files) != 1 or Path(answer.files[0]).parent != folder:
+                raise CdprError(f"the printer service wrote no picture into {folder}")
+            image = cv2.imread(answer.files[0], cv2.IMREAD_COLOR)
+        finally:
+            shutil.rmtree(folder, ignore_errors=True)
         return image is not None, image
 
     def release(self) -> None:
-        shutil.rmtree(self.folder, ignore_errors=True)
+        pass
