@@ -7,8 +7,8 @@ A front end ``connect``s (the service opens the link, or shares the one it has) 
 client that connects during a print started without a session shares the print's link. While
 it is open a poll thread reads the device about once a second (pumping the embedded
 device's virtual clock between reads) and hands the status and the link's counters to
-``broadcast``. Operations (home, a move, heaters, drivers, clearing a fault) run one at a
-time under one lock; the poll then only asks for a status and reads the latest, so
+``broadcast``. Operations (home, a move, heaters, drivers, clearing a fault, and the
+calibration wizard's visits and simulated observers) run one at a time under one lock; the poll then only asks for a status and reads the latest, so
 temperatures keep coming during a long homing. A job takes the same link
 (:meth:`DeviceSession.link_for_job`) and its own events carry the device's state; the poll
 waits meanwhile. An emergency stop never waits for the lock.
@@ -117,12 +117,13 @@ def move_refusal(model: Any, st: Any, target: tuple[float, float, float]) -> str
     return path_refusal(model, st, [target])
 
 
-def path_refusal(model: Any, st: Any, targets: Any) -> str:
-    """Why the straight moves from where the device is (when homed and known) through
-    ``targets`` in order leave the workspace ("" when they do not; sampled every mm)."""
+def path_refusal(model: Any, st: Any, targets: Any, home: Any = None) -> str:
+    """Why the straight moves from where the device is (when homed and known; else from
+    ``home``, where homing leaves it, when given) through ``targets`` in order leave the
+    workspace ("" when they do not; sampled every mm)."""
     ends = np.asarray(targets, dtype=float).reshape(-1, 3)
     legs = [ends[:1]]
-    start = ends[0]
+    start = ends[0] if home is None else np.asarray(home, dtype=float).reshape(3)
     if st.homed_mask & 0b111 == 0b111:
         here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
         if np.all(np.isfinite(here)):
@@ -359,7 +360,8 @@ class DeviceSession:
 
         if isinstance(request, wire.Visit):
             m = Machine(self._link, self._profile, self._model, settle_s=request.settle_s)
-            refused = path_refusal(self._model, m.ready(), request.points)
+            home = self._model.home_point(np.asarray(self._profile.drive.home_mm))
+            refused = path_refusal(self._model, m.ready(), request.points, home)
             if refused:
                 raise CdprError(f"refused, nothing moved: {refused}")
             _steps, device_time_s = m.visit(np.asarray(request.points, dtype=float))
