@@ -186,10 +186,8 @@ class _RemoteMachine:
 
 class ServiceBackend:
     """``attach``: how to reach a service (:func:`cdprhost.service.client.attach`; tests
-    give their own)."""
-
-    """``sim_mocap``: (truth profile, folder) of the virtual motion capture that watches the
-    embedded simulated device for the calibration wizard."""
+    give their own). ``sim_mocap``: (truth profile, folder) of the virtual motion capture
+    that watches the embedded simulated device for the calibration wizard."""
 
     def __init__(
         self,
