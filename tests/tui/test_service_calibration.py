@@ -7,46 +7,26 @@ refuses calibrate through the service, with the way out."""
 
 from __future__ import annotations
 
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
-import numpy as np
 import pytest
-import tomli_w
 from textual.widgets import Input
 
 from cdprhost.calibration.camera.config import intrinsics_toml
-from cdprhost.profile import save_profile
 from cdprhost.sim.camera.scene import rig_for_size
 from cdprhost.sim.camera.session import true_intrinsics
-from cdprhost.sim.virtual_mocap import mocap_config
 from cdprhost.tui.control.service_backend import ServiceBackend
 from tests.e2e.processes import SimDeviceProcess, wait_until
 from tests.service.inprocess import serve_in_thread
 
 from .conftest import make_app, wait_for
-
-PAPER_TRUTH = np.array([(-260.0, -150.111, 78.0), (260.0, -150.111, 78.0), (0.0, 300.222, 78.0)])
-
-
-@pytest.fixture
-def run_dir(monkeypatch, tmp_path):
-    """A short private run folder (a socket's path is at most 107 bytes) and state."""
-    folder = tempfile.mkdtemp(prefix="svc-", dir="/tmp")
-    monkeypatch.setenv("CDPRHOST_RUN", folder)
-    monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
-    yield folder
-    shutil.rmtree(folder, ignore_errors=True)
+from .wizard_steps import camera_first_pose, mocap_wizard, save_hidden_truth, write_markers
 
 
 @pytest.fixture
 def truth(sim_profile, tmp_path) -> Path:
-    path = tmp_path / "truth.toml"
-    lengths = np.linalg.norm(np.array([0.0, 0.0, 330.0]) - PAPER_TRUTH, axis=1)
-    save_profile(sim_profile.with_geometry(PAPER_TRUTH, lengths, name="hidden-truth"), path)
-    return path
+    return save_hidden_truth(sim_profile, tmp_path / "truth.toml")
 
 
 async def test_the_wizard_with_virtual_mocap_through_the_service(
@@ -59,44 +39,7 @@ async def test_the_wizard_with_virtual_mocap_through_the_service(
     try:
         async with app.run_test(size=(100, 32)) as pilot:
             await wait_for(pilot, lambda s: s.connected, timeout=30)
-            await pilot.press("f4")
-            screen = app.screen
-            screen.query_one("#check-poses", Input).value = "2"
-            screen.query_one("#session-dir", Input).value = str(tmp_path / "session")
-            await pilot.press("n")
-            state = await wait_for(
-                pilot, lambda s: s.calibration.stage in ("planned", "error"), timeout=60
-            )
-            assert state.calibration.stage == "planned", state.calibration.message
-            n = len(state.calibration.poses)
-            assert n == 6
-            for k in range(1, n + 1):
-                await pilot.press("m")
-                await wait_for(
-                    pilot,
-                    lambda s, k=k: (
-                        s.calibration.poses[k - 1].status == "settled"
-                        or s.calibration.stage == "error"
-                    ),
-                    timeout=60,
-                    what=f"pose {k} settled",
-                )
-                assert app.state.calibration.stage != "error", app.state.calibration.message
-                await pilot.pause()
-                take = screen.query_one("#take-input", Input)
-                assert take.value.endswith(f"take-{k:04d}.csv")  # written in the service
-                await pilot.press("k", "enter")
-                state = await wait_for(
-                    pilot,
-                    lambda s, k=k: s.calibration.poses[k - 1].status != "settled" and not s.busy,
-                    timeout=30,
-                )
-                pose = state.calibration.poses[k - 1]
-                assert pose.status == "take ok", pose.detail
-            await pilot.press("i")
-            state = await wait_for(
-                pilot, lambda s: s.calibration.stage in ("done", "error"), timeout=60
-            )
+            state = await mocap_wizard(pilot, tmp_path / "session")  # takes written in the service
             result = state.calibration.result
             assert result is not None, state.calibration.message
             assert result.rms_before_mm > 1.0 and result.rms_after_mm < 0.1
@@ -110,12 +53,7 @@ async def test_a_faulted_device_refuses_calibrate_through_the_service(
     run_dir, monkeypatch, tmp_path
 ):
     serve_in_thread(monkeypatch)
-    markers = tmp_path / "markers.toml"
-    table = mocap_config("paper-prototype").mocap.model_dump(mode="json", exclude_none=True)
-    markers.write_text(
-        tomli_w.dumps({"session": {"profile": "paper-prototype"}, "mocap": table}),
-        encoding="utf-8",
-    )
+    markers = write_markers(tmp_path / "markers.toml", "paper-prototype")
     backend = ServiceBackend("paper-prototype", speedup=None)
     app = make_app(backend)
     try:
@@ -157,33 +95,8 @@ async def test_the_camera_through_the_service_takes_pictures_of_the_settled_pose
     try:
         async with app.run_test(size=(110, 34)) as pilot:
             await wait_for(pilot, lambda s: s.connected, timeout=30)
-            await pilot.press("f4")
-            screen = app.screen
-            screen.query_one("#check-poses", Input).value = "0"
-            screen.query_one("#session-dir", Input).value = str(tmp_path / "session")
-            screen.query_one("#camera-source", Input).value = f"sim:{size[0]}x{size[1]}"
-            screen.query_one("#camera-intrinsics", Input).value = str(intrinsics)
-            await pilot.press("n")
-            state = await wait_for(
-                pilot, lambda s: s.calibration.stage in ("planned", "error"), timeout=120
-            )
-            assert state.calibration.stage == "planned", state.calibration.message
-            await pilot.press("m")
-            await wait_for(
-                pilot,
-                lambda s: (
-                    s.calibration.poses[0].status == "settled" or s.calibration.stage == "error"
-                ),
-                timeout=60,
-                what="pose 1 settled",
-            )
-            await pilot.press("k")  # the service's simulated camera takes the pictures
-            state = await wait_for(
-                pilot,
-                lambda s: s.calibration.poses[0].status != "settled" and not s.busy,
-                timeout=120,
-                what="pose 1 measured",
-            )
+            camera = f"sim:{size[0]}x{size[1]}"  # rendered in the service
+            state = await camera_first_pose(pilot, tmp_path / "session", camera, intrinsics)
             pose = state.calibration.poses[0]
             assert pose.status == "take ok", pose.detail
     finally:
@@ -200,12 +113,7 @@ def test_the_wizard_on_a_pty_device_through_the_services_process(
     motion capture writes the takes, named in the take field as an operator would."""
     monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
     mocap = tmp_path / "mocap"
-    markers = tmp_path / "markers.toml"
-    table = mocap_config(sim_profile.name).mocap.model_dump(mode="json", exclude_none=True)
-    markers.write_text(
-        tomli_w.dumps({"session": {"profile": sim_profile.name}, "mocap": table}),
-        encoding="utf-8",
-    )
+    markers = write_markers(tmp_path / "markers.toml", sim_profile.name)
     args = ("--speedup", "20", "--truth", str(truth), "--mocap-dir", str(mocap))
     with SimDeviceProcess(tmp_path, *args) as dev:
         backend = ServiceBackend(sim_profile)
