@@ -6,6 +6,8 @@ workspace, nothing moved."""
 
 from __future__ import annotations
 
+import time
+
 import cv2
 import numpy as np
 import pytest
@@ -130,3 +132,28 @@ def test_the_answer_carries_the_device_clock_and_the_pictures():
     answer = wire.Answer(id=2, ok=True, device_time_s=1.5, files=("/tmp/a.png",))
     again = wire.decode_reply(wire.encode(answer))
     assert again.device_time_s == 1.5 and again.files == ("/tmp/a.png",)
+
+
+def test_an_emergency_stop_ends_a_visit_under_way(profile):
+    """The e-stop does not wait for the visit's lock: the visit answers that the device
+    stopped during the move (a real-time device, so the homing is under way)."""
+    import threading
+
+    s = DeviceSession(None, lambda _: None, lambda: False)  # its poll pumps the clock 0.8 s
+    assert s.connect(1, wire.Connect(profile=profile.model_dump(mode="json"), speedup=1.0)).ok
+    try:
+        answers: list = []
+        visit = wire.Visit(points=(tuple(_poses(profile)[0]),))
+        worker = threading.Thread(target=lambda: answers.append(s.run(visit)))
+        worker.start()
+        time.sleep(2.0)  # (homing, then the move, at 1x)
+        assert s.emergency_stop(9).ok
+        worker.join(30)
+        assert answers and not answers[0].ok, answers
+        assert "emergency stop" in answers[0].error, answers[0].error
+        after = s.run(wire.Status()).status
+        model = MachineModel.from_profile(profile)
+        target = model.steps(model.ik(_poses(profile)[:1]))[0]
+        assert "estop" in after.fault and after.steps[:3] != tuple(int(v) for v in target)
+    finally:
+        s.close()
