@@ -181,6 +181,7 @@ class LiveBackend:
         self.idle_pump_s = idle_pump_s
         self.setup: Setup = setup or Setup()  # placement, --retarget, cancelled objects
         self._link: Any = None
+        self.announced: Any = None  # a DeviceRecord a device announced elsewhere (its service)
         self._embedded = False
         self._where: tuple[str, int] | None = None
         self._identity: tuple[tuple[str, str], ...] = ()
@@ -310,7 +311,7 @@ class LiveBackend:
         from cdprhost.job.board import announced_record
 
         link = self._link
-        return None if link is None else announced_record(link.identity, link.caps)
+        return self.announced if link is None else announced_record(link.identity, link.caps)
 
     def toggle_center(self) -> bool:
         """Centre the part on the build volume (``--center``), or stop centring; returns
@@ -445,6 +446,31 @@ class LiveBackend:
         except (LinkError, OSError) as exc:  # stopped (M112) or lost: said, not raised
             out.append(ConsoleLine("device", str(exc) or "the link failed", time.time()))
         return out + self.device_log()
+
+    # ---------------------------------------------------------- calibrate
+    def wizard_device(self, settle_s: float) -> Machine:
+        """The wizard's device (:class:`~cdprhost.tui.control.live_calibration.WizardHost`)."""
+        return Machine(self.link, self.profile, self.model, settle_s=settle_s)
+
+    def virtual_mocap(self) -> str | None:
+        """The virtual motion capture's folder (it watches from the connection on)."""
+        folder = getattr(self.sim_options.get("observer"), "directory", None)
+        return None if folder is None else str(folder)
+
+    def simulated_camera(self, size: tuple[int, int]) -> Any:
+        """The simulated camera watching a new embedded simulated device."""
+        from cdprhost.errors import InputError
+        from cdprhost.sim.camera.device import VirtualCamera
+        from cdprhost.sim.camera.scene import rig_for_size
+
+        if getattr(self._link, "device", None) is None:
+            raise InputError(
+                "camera sim watches the embedded simulated device: connect to it first"
+            )
+        camera = VirtualCamera(self.model, rig_for_size(size))
+        self.sim_options["observer"] = camera
+        self.connect(EMBEDDED, self.profile.serial.baud)
+        return camera
 
     # ------------------------------------------------------------ diagnose
     def diagnose(self, session_dir: str) -> DiagnosisView:

@@ -47,13 +47,14 @@ def camera_setup(
     session: Path,
     model: Any,
     *,
-    watch: Callable[[Any], None] | None = None,
+    sim_camera: Callable[[tuple[int, int]], Any] | None = None,
     config_path: str | None = None,
     intrinsics_path: str | None = None,
     log: Callable[[str], None] = lambda _: None,
 ) -> WizardCamera:
-    """The capture, [camera] configuration and intrinsics for ``source``; ``watch``: puts the
-    simulated camera on the embedded simulated device (None: no such device)."""
+    """The capture, [camera] configuration and intrinsics for ``source``; ``sim_camera``:
+    the simulated camera of a size, watching the embedded simulated device (None: no such
+    device)."""
     from cdprhost.calibration.camera.config import load_camera_config, load_intrinsics
     from cdprhost.calibration.camera.takes import session_intrinsics
     from cdprhost.calibration.session import SESSION_FILE, load_session_config
@@ -61,16 +62,14 @@ def camera_setup(
     size = sim_size(source)
     rig: Any = None
     if size is not None:
-        from cdprhost.sim.camera.device import VirtualCamera
         from cdprhost.sim.camera.scene import rig_for_size
 
-        if watch is None:
+        if sim_camera is None:
             raise InputError(
                 "camera sim watches the embedded simulated device: connect to it first"
             )
         rig = rig_for_size(size)
-        capture: Any = VirtualCamera(model, rig)
-        watch(capture)
+        capture: Any = sim_camera(size)
     else:
         from cdprhost.calibration.camera.capture import open_capture
 

@@ -8,8 +8,9 @@ embedded simulated device has one service per state folder) and holds its device
 reader thread sorts what the service sends: the running job's events to its sink, answers
 to the request that waits for them, the device's status and notes to the screens. Files
 (preflight, resume points, centring) and diagnosis are computed here, as before, by a
-:class:`~cdprhost.tui.control.live.LiveBackend` that never opens a link; calibration needs
-the device in this process and is not offered through the service.
+:class:`~cdprhost.tui.control.live.LiveBackend` that never opens a link; so is the
+calibration wizard, whose moves and simulated observers the service carries out
+(:mod:`~cdprhost.tui.control.service_calibration`).
 """
 
 from __future__ import annotations
@@ -49,10 +50,6 @@ from cdprhost.tui.control.views import (
 
 FRESH_S = 2.0  # a broadcast status younger than this answers ``device_status``
 STATUS_TIMEOUT_S = 15.0
-CALIBRATION_REFUSED = (
-    "calibration needs the device in the UI's process: quit, then `cdprhost tui --in-process` "
-    "(no print may run: the printer service holds the port)"
-)
 
 
 def status_view(model: Any, st: wire.DeviceState) -> DeviceStatusView:
@@ -173,10 +170,8 @@ class _RemoteMachine:
 
 class ServiceBackend:
     """``attach``: how to reach a service (:func:`cdprhost.service.client.attach`; tests
-    give their own)."""
-
-    calibration: CalibrationBackend | None = None
-    calibration_refusal = CALIBRATION_REFUSED
+    give their own). ``sim_mocap``: (truth profile, folder) of the virtual motion capture
+    that watches the embedded simulated device for the calibration wizard."""
 
     def __init__(
         self,
@@ -186,7 +181,10 @@ class ServiceBackend:
         diagnosis_settings: Any = None,
         setup: Any = None,
         attach: Any = None,
+        sim_mocap: tuple[str, str] | None = None,
     ):
+        from cdprhost.tui.control.live_calibration import LiveCalibration
+
         self.local = LiveBackend(
             profile, speedup=speedup, diagnosis_settings=diagnosis_settings, setup=setup
         )
@@ -209,6 +207,15 @@ class ServiceBackend:
         self._health: wire.Health | None = None
         self._said_error = ""
         self.gone = ""
+        self.sim_mocap = None
+        if sim_mocap is not None:  # the service's working folder is not this one
+            truth, folder = sim_mocap
+            named = not Path(truth).exists()  # a profile's name, else its file
+            self.sim_mocap = (
+                truth if named else str(Path(truth).resolve()),
+                str(Path(folder).resolve()),
+            )
+        self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ------------------------------------------------------------ the service
     def send(self, message: Any) -> int:
@@ -335,10 +342,12 @@ class ServiceBackend:
         if answer.status is not None:
             self._device = (time.monotonic(), wire.DeviceMsg(connected=True, status=answer.status))
         self._identity = identity_rows(SimpleNamespace(**answer.identity), port, baud)
+        self.local.announced = announced_board(answer.identity)
         return self._identity
 
     def disconnect(self) -> None:
         client, self._client = self._client, None
+        self.local.announced = None
         if client is None:
             return
         with contextlib.suppress(CdprError, OSError):
@@ -396,6 +405,43 @@ class ServiceBackend:
 
     def diagnose(self, session_dir: str) -> DiagnosisView:
         return self.local.diagnose(session_dir)
+
+    def diagnosed_write_plan(self) -> Any:
+        return self.local.diagnosed_write_plan()
+
+    def write_diagnosed_profile(self) -> str:
+        return self.local.write_diagnosed_profile()
+
+    # ------------------------------------------------------------ calibrate
+    def wizard_device(self, settle_s: float) -> Any:
+        """The wizard's device: its moves in the service's device session."""
+        from cdprhost.tui.control.service_calibration import ServiceWizardDevice
+
+        if not self.connected():
+            raise CdprError("not connected: pick a port on the link screen")
+        return ServiceWizardDevice(self, settle_s)
+
+    def virtual_mocap(self) -> str | None:
+        """The virtual motion capture's folder; it watches the service's embedded device
+        from now on (None: none, or not on the embedded device)."""
+        from cdprhost.tui.control.service_calibration import answered
+
+        if self.sim_mocap is None or self._where[0] != EMBEDDED:
+            return None
+        truth, folder = self.sim_mocap
+        answered(self, wire.Observe(truth=truth, mocap_dir=folder))
+        return folder
+
+    def simulated_camera(self, size: tuple[int, int]) -> Any:
+        """The simulated camera watching the service's embedded device."""
+        from cdprhost.errors import InputError
+        from cdprhost.tui.control.service_calibration import ServiceCamera
+
+        if not self.connected() or self._where[0] != EMBEDDED:
+            raise InputError(
+                "camera sim watches the embedded simulated device: connect to it first"
+            )
+        return ServiceCamera(self, size)
 
     # ------------------------------------------------------------ print
     def make_job(
@@ -483,3 +529,17 @@ class ServiceBackend:
 
     def close(self) -> None:
         self.disconnect()
+
+
+def announced_board(identity: dict[str, Any]) -> Any:
+    """What the service's device announced (a DeviceRecord: its step rate and shortest
+    segment) for the preflight's estimate, as an in-process link gives it; None: nothing."""
+    from cdprhost.job.board import announced_record
+    from cdprhost.link.events import DeviceCaps
+
+    ticks = identity.get("min_segment_ticks")
+    caps = None if ticks is None else DeviceCaps(min_segment_ticks=int(ticks))
+    try:
+        return announced_record(cast("Any", SimpleNamespace(**identity)), caps)
+    except (TypeError, ValueError):  # an identity without the figures (another device)
+        return None
