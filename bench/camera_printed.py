@@ -1,7 +1,7 @@
 """Issue 31's figures: workspace RMS and the trust gate's prediction on rendered camera
 sessions of the kinds a user meets, intrinsics included.
 
-Run: python bench/camera_printed.py [KIND ...] [--seeds 1] [--keep DIR]
+Run: python bench/camera_printed.py [KIND ...] [--seeds 1] [--first 1] [--keep DIR] [--reuse]
 
 KIND (default all): ``known`` (the true intrinsics), ``selfcal`` (self-calibrated by the
 reader from 18 good views), ``printed`` (self-calibrated from 20 views of a sheet bowed
@@ -13,7 +13,8 @@ parameter (rng 100 + seed). Prints the workspace RMS against the truth, the gate
 prediction, their ratio, the range one calibration's RMS falls in 8 times out of 10 with
 the error's effective degrees of freedom, where the observed RMS falls in that predicted
 distribution (quantile: uniform over many sessions when the gate is right), how often
-one session's RMS lands within 1.5x of even an exact prediction, and the verdict. ``--reuse`` identifies sessions already rendered into ``--keep`` again.
+one session's RMS lands within 1.5x of even an exact prediction, the verdict and the takes
+refused (with why). ``--reuse`` identifies sessions already rendered into ``--keep`` again.
 Rendering takes minutes per session.
 """
 
@@ -111,9 +112,11 @@ def run(kind: str, seed: int, folder: Path, reuse: bool = False) -> str:
             f", 80 % range {lo:.3f}-{hi:.3f} mm over {t.effective_dof:.1f} dof, "
             f"quantile {t.quantile_of(rms):.2f}, P(within 1.5x) {within:.2f}"
         )
+    refused = f"{len(result.rejected)} take(s) refused" + "".join(f"; {r}" for r in result.rejected)
     return (
         f"{kind:8s} seed {seed}: workspace RMS {rms:.3f} mm, predicted {pred:.3f} mm, "
-        f"ratio {pred / rms:.2f}{spread}, {verdict} ({time.perf_counter() - t0:.0f} s)"
+        f"ratio {pred / rms:.2f}{spread}, {verdict}, {refused} "
+        f"({time.perf_counter() - t0:.0f} s)"
     )
 
 
