@@ -105,14 +105,18 @@ def reference_record(gcode: Path) -> list[dict]:
     return list(holder["link"].device.record)
 
 
-def print_over_pty(gcode: Path, speedup: float, faults: str) -> tuple[dict, list[dict], float]:
+def print_over_pty(
+    gcode: Path, speedup: float, faults: str, why: list[str] | None = None
+) -> tuple[dict, list[dict], float]:
+    """A print over a pty; ``why`` collects the host's log lines on each retransmission."""
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         record = t / "record.jsonl"
         args = ["--speedup", f"{speedup:g}", "--record", str(record)]
         dev, port = start_device(*args, *(["--faults", faults] if faults else []))
         report = t / "report.json"
-        env = {**os.environ, "CDPRHOST_STATE": str(t / "state")}
+        # a printer service of its own (the print runs in it; its log is read below)
+        env = {**os.environ, "CDPRHOST_STATE": str(t / "state"), "CDPRHOST_RUN": str(t / "run")}
         t0 = time.monotonic()
         host = subprocess.run(
             [sys.executable, "-m", "cdprhost", "print", str(gcode), "--profile", PROFILE]
@@ -125,6 +129,9 @@ def print_over_pty(gcode: Path, speedup: float, faults: str) -> tuple[dict, list
         )
         wall = time.monotonic() - t0
         stop_device(dev)
+        if why is not None:  # the link logs each resend in the service's log (info)
+            for log in sorted((t / "run").glob("*.log")):
+                why += [x for x in log.read_text(errors="replace").splitlines() if "resent" in x]
         if report.exists():
             result = json.loads(report.read_text())
         else:
@@ -174,13 +181,16 @@ def streams(gcode: Path, speedup: float, seeds: int) -> None:
 
 
 def clean_print(gcode: Path, speedup: float = 1.0) -> None:
-    result, _rows, wall = print_over_pty(gcode, speedup, "")
+    why: list[str] = []
+    result, _rows, wall = print_over_pty(gcode, speedup, "", why)
     print(
         f"  {gcode.name} at {speedup:g}x, clean pty: {result.get('status')} segments "
         f"{result.get('segments')} retransmits {result.get('retransmits')} wall {wall:.0f} s"
         + ("" if result.get("status") == "completed" else f"  ({result.get('reason')})"),
         flush=True,
     )
+    for line in why:  # when and why the host resent (timeout, NAK, stale report)
+        print(f"    {line[:300]}")
 
 
 def frozen(seconds: float = 2.0) -> None:
