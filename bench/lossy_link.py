@@ -13,7 +13,8 @@ Each section starts ``cdprhost sim-device`` in its own process on a pty, as a us
    ``--clean-layers N`` the fixture's first N layers) at ``--clean-speedup`` (default 1x) on
    a clean pty: the host's retransmissions (target 0).
 4. ``frozen``: a link to a 1x device whose process is then stopped (SIGSTOP): the host's
-   retransmissions in the first 2 s (target: about 10 at most, the 25 ms floor doubling).
+   retransmissions in the first 2 s (target: about 10 at most, the 25 ms floor doubling),
+   and when the link declares the device lost (bounded: the link timeout of silence).
 
 Run: python bench/lossy_link.py [--only handshake|stream|clean|frozen] [--seeds 5] ...
 """
@@ -218,9 +219,17 @@ def frozen(seconds: float = 2.0) -> None:
         while time.monotonic() - t0 < seconds:
             time.sleep(0.05)
             marks.append(link.counters.retransmits - before)
+        while link.lost is None and time.monotonic() - t0 < 30:  # declared lost: when?
+            time.sleep(0.05)
+        lost = time.monotonic() - t0
         print(
             f"  device stopped mid-stream: {marks[-1]} retransmissions in the first {seconds:g} s "
-            f"(after 0.5 s: {marks[9]}, 1 s: {marks[19]})",
+            f"(after 0.5 s: {marks[9]}, 1 s: {marks[19]}); "
+            + (
+                f"the link declared it lost after {lost:.1f} s ({link.timeout_s:g} s timeout)"
+                if link.lost is not None
+                else "not declared lost within 30 s"
+            ),
             flush=True,
         )
     finally:
