@@ -195,7 +195,10 @@ class LinkCore:
             if n
         )
         srtt = s.rto.srtt
-        log.info(
+        ep = self.ep
+        noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
+        log.log(  # expected on a noisy line; on a clean one each is news
+            logging.DEBUG if noisy else logging.INFO,
             "%s: resent %d frame(s) (%s): rto %.0f ms (floor %.0f), srtt %s, last byte from "
             "the device %.0f ms ago, device holds %.2f s of motion",
             self.name,

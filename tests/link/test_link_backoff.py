@@ -86,3 +86,21 @@ def test_a_clean_path_waits_for_an_ack_up_to_a_quarter_second_late(jitter_ms, se
         assert link.counters.retransmits == before, link.counters
     finally:
         link.close()
+
+
+def test_each_resend_is_logged_with_its_cause(caplog):
+    """When and why the host resent: a timer that expired (the answers here come 150 ms
+    late, the first timeout is 50 ms), with the timing it went by; at INFO on a clean line,
+    where each resend is news (a noisy line's are DEBUG: expected)."""
+    import logging
+
+    from cdprhost.sim.embedded import open_embedded
+
+    with caplog.at_level(logging.INFO, logger="cdprhost.link.host_link"):
+        link = open_embedded(faults="latency_ms=150", baud=None)
+        link.close()
+    said = [r for r in caplog.records if "resent" in r.getMessage()]
+    assert said and link.counters.retransmits > 0
+    first = said[0]
+    assert first.levelno == logging.INFO
+    assert "timeout" in first.getMessage() and "last byte from the device" in first.getMessage()
