@@ -248,3 +248,20 @@ def test_a_speed_override_reaches_the_print_in_the_service(backend, tmp_path):
     )
     runner.join(120)
     assert _folded(events).state is JobState.DONE
+
+
+def test_the_uis_own_print_is_never_adopted_as_another_front_ends(backend, tmp_path):
+    """The service announces a print (JobInfo) to every client before its first event, the
+    starter included: a status tick of the UI that fell between its own start and its
+    first event took it for a print started elsewhere, followed it as a second job, and
+    the first never ended (seen as a print that stayed 'idle' on a loaded machine)."""
+    backend.connect(EMBEDDED, 250000)
+    gcode = square_part(tmp_path / "part.gcode", layers=3)
+    events: list = []
+    job = backend.make_job(str(gcode), events.append)
+    worker = threading.Thread(target=job.run, daemon=True)
+    worker.start()
+    wait_until(lambda: backend._job_info is not None, 60, "the service's JobInfo")
+    assert backend.running_job(lambda _e: None) is None  # this UI's own print
+    worker.join(120)
+    assert job.result is not None and _folded(events).state is JobState.DONE

@@ -84,6 +84,8 @@ class ServiceJob:
                     raise CdprError(refused.error)
             if self.backend.gone:
                 raise CdprError(f"the printer service went away ({self.backend.gone})")
+            if self.backend.let_go:  # the UI quits and leaves the print to the service
+                raise CdprError("this UI let go of the print; it goes on in the printer service")
         assert self.result is not None
         if self.result.result is None:
             raise CdprError(self.result.error or "the print job broke")
@@ -172,6 +174,8 @@ class ServiceBackend:
     """``attach``: how to reach a service (:func:`cdprhost.service.client.attach`; tests
     give their own). ``sim_mocap``: (truth profile, folder) of the virtual motion capture
     that watches the embedded simulated device for the calibration wizard."""
+
+    print_outlives_ui = True  # the print runs in the service: quitting the UI leaves it going
 
     def __init__(
         self,
@@ -354,6 +358,11 @@ class ServiceBackend:
             client.send(wire.Disconnect())
         client.close()
 
+    @property
+    def let_go(self) -> bool:
+        """This UI closed its connection to the service (a print there goes on)."""
+        return self._client is None
+
     def connected(self) -> bool:
         return self._client is not None and not self.gone
 
@@ -477,6 +486,8 @@ class ServiceBackend:
         (its events so far first): (file, started at, job); None when none runs."""
         info = self._job_info
         if info is None or info.state in ("none", "done", "failed", "cancelled", "refused"):
+            return None
+        if self._job is not None:  # this UI's own print, just started (its JobInfo came first)
             return None
         job = ServiceJob(self, on_event, None)
         for event in self._replayed:
