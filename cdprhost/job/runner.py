@@ -37,7 +37,7 @@ from cdprhost.job.resume import (
     resume_path_for,
     resume_setup,
 )
-from cdprhost.job.resume_items import PlanSpec, Restart
+from cdprhost.job.resume_items import PlanSpec
 from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
 from cdprhost.job.stopping import Stop, StopRecord
 from cdprhost.job.streamer import Requests, StreamContext, Streamer
@@ -90,7 +90,6 @@ class PrintJob:
         self.link: HostLink | None = None  # set once connected (the streamer holds it)
         self._streamer: Streamer | None = None
         self._sha256 = ""
-        self._restart: Restart | None = None
         self._prepared: Prepared | None = None
         self._t0 = 0.0  # the device's motion clock when streaming began
         self.plan = self._plan_spec()
@@ -232,13 +231,7 @@ class PrintJob:
     def _items(self, plan: PlanSpec | None = None) -> Iterable[Any]:
         items = self._prepare().items()
         z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
-        out = (plan or self.plan).apply(items, z_max=z_max)
-        if plan is None and isinstance(out, Restart):
-            self._restart = out
-        return out
-
-    def _e_offset(self) -> float:
-        return self._restart.e_offset if self._restart is not None else 0.0
+        return (plan or self.plan).apply(items, z_max=z_max)
 
     # ------------------------------------------------------------ the job
     def run(self) -> PrintResult:
@@ -497,7 +490,6 @@ class PrintJob:
             overrides=self.overrides,
             log_problem=lambda: self.log.problem,
             idle_timeout_s=self.options.idle_timeout_s,
-            e_offset=self._e_offset,
             setup=self.setup,
             placement=self._prepare().placement,
             plan_profile=self._plan_profile,

@@ -104,7 +104,6 @@ class StreamContext:
     overrides: OverrideRequests
     log_problem: Callable[[], str | None]
     idle_timeout_s: float = 30.0
-    e_offset: Callable[[], float] = lambda: 0.0
     setup: Setup = field(default_factory=Setup)  # placement options the program was built with
     placement: tuple[float, float] = (0.0, 0.0)  # the X/Y shift they gave (mm)
     plan_profile: MachineProfile | None = None  # the profile planned on (capped to the board)
@@ -442,7 +441,7 @@ class Streamer:
         if info is not None:
             p = np.asarray(info.point) - self._origin
             gcode_point = (float(p[0]), float(p[1]), float(p[2]))
-            e_mm = float(info.e_mm + self.ctx.e_offset())
+            e_mm = float(info.e_mm)
         layer = info.layer + 1 if info is not None else None
         return ResumePoint(
             gcode=self.ctx.gcode_path,
