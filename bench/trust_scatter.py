@@ -6,7 +6,7 @@ covariance is compared with the spread of the estimates themselves.
 Run: python bench/trust_scatter.py [KIND ...] [--seeds 8] [--first 1] [--synthetic]
      [--keep DIR] [--reuse] [--no-pixels]
      (--synthetic only: [--poses 15] [--frames 3] [--depth-spread Q] [--ref-noise X]
-     [--ref-squares XxY] [--f-floor REL]: the session designs compared in
+     [--ref-squares XxY] [--prior-floor NAME=VALUE]: the session designs compared in
      docs/camera-calibration-guide.md, "What narrows it, measured")
 
 Per session: the true workspace RMS, the prediction, their ratio; the chi-square factor;
@@ -401,14 +401,19 @@ def main() -> int:
         help="plan from the nearest and farthest Q of the visible candidates (--synthetic)",
     )
     ap.add_argument(
-        "--f-floor",
-        type=float,
-        metavar="REL",
-        help="diagnostic: the bundle adjustment's prior floor on the focal length (relative)",
+        "--prior-floor",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="diagnostic: a floor of the bundle adjustment's intrinsics prior (f relative, "
+        "cx/cy px, k1 ...)",
     )
     args = ap.parse_args()
-    if args.f_floor is not None:
-        PRIOR_FLOOR["f"] = args.f_floor
+    for item in args.prior_floor:
+        name, _, value = item.partition("=")
+        if name not in PRIOR_FLOOR:
+            ap.error(f"--prior-floor {item}: no prior named {name} ({', '.join(PRIOR_FLOOR)})")
+        PRIOR_FLOOR[name] = float(value)
     unknown = sorted(set(args.kinds) - set(KINDS))
     if unknown:
         ap.error(f"unknown kind(s) {', '.join(unknown)}; known: {', '.join(KINDS)}")
