@@ -5,6 +5,9 @@ covariance is compared with the spread of the estimates themselves.
 
 Run: python bench/trust_scatter.py [KIND ...] [--seeds 8] [--first 1] [--synthetic]
      [--keep DIR] [--reuse] [--no-pixels]
+     (--synthetic only: [--poses 15] [--frames 3] [--depth-spread Q] [--ref-noise X]
+     [--ref-squares XxY] [--prior-floor NAME=VALUE]: the session designs compared in
+     docs/camera-calibration-guide.md, "What narrows it, measured")
 
 Per session: the true workspace RMS, the prediction, their ratio; the chi-square factor;
 the corner noise the fit assumed (px, the effector corners averaged per take) and the
@@ -33,12 +36,14 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 from camera_printed import KINDS, render_session, rig_of, session_options, truth_and_nominal
 
+from cdprhost.calibration.camera.boards import CharucoBoard, ReferenceBoard
+from cdprhost.calibration.camera.bundle_adjustment import PRIOR_FLOOR
 from cdprhost.calibration.camera.detection import BoardDetection
 from cdprhost.calibration.camera.intrinsics import Intrinsics, calibrate_intrinsics
 from cdprhost.calibration.camera.session_fit import TakeDetections, fit_session
@@ -88,6 +93,7 @@ class Scatter:
     z2_rest: float  # mean squared whitened error over the other directions
     share_top: float  # the largest direction's share of the predicted mean squared error
     whitened: float  # mean squared whitened error over every direction (1 when right)
+    dof: float = float("nan")  # effective directions: (sum lam)^2 / sum lam^2
 
 
 def _psd_root(cov: np.ndarray) -> np.ndarray:
@@ -178,14 +184,48 @@ def synthetic_intrinsics(kind: str, rig: CameraRig, seed: int) -> Intrinsics:
     return calibrate_intrinsics(dets, board, cam.image_size).intrinsics
 
 
-def synthetic_identification(kind: str, seed: int) -> Identification:
+@dataclass(frozen=True)
+class Design:
+    """What a synthetic session varies (``--poses``, ``--frames``, ``--depth-spread``)."""
+
+    poses: int = 15
+    frames: int = 3
+    depth_spread: float = 0.0  # keep only the candidates this far out in depth (quantile)
+    ref_noise: float = 1.0  # the reference corners' static noise, x STATIC_PX
+    ref_squares: tuple[int, int] | None = None  # a reference board of 30 mm squares
+
+
+def design_rig(rig: CameraRig, design: Design) -> CameraRig:
+    """The rig with the design's reference board (centred where the spec's is)."""
+    if design.ref_squares is None:
+        return rig
+    sx, sy = design.ref_squares
+    board = CharucoBoard((sx, sy), 30.0, 22.0, "DICT_5X5_250", 0)
+    reference = ReferenceBoard(board, (-15.0 * sx, 15.0 * sy, 3.0))
+    return replace(rig, setup=replace(rig.setup, reference=reference))
+
+
+def depth_spread_candidates(cand: np.ndarray, rig: CameraRig, fraction: float) -> np.ndarray:
+    """The candidates whose depth along the camera axis lies in the nearest or the farthest
+    ``fraction`` of them (all when 0): a plan that sees the effector board at two depths."""
+    if fraction <= 0:
+        return cand
+    depth = (cand - rig.camera.position) @ rig.camera.rotation[2]
+    lo, hi = np.quantile(depth, [fraction, 1 - fraction])
+    return np.asarray(cand[(depth <= lo) | (depth >= hi)])
+
+
+def synthetic_identification(kind: str, seed: int, design: Design | None = None) -> Identification:
     """A session of ``kind`` and ``seed`` without pictures: the corners the true camera
     sees, with :data:`STATIC_PX` and :data:`FRAME_PX` noise, through the session fit and
     identification (as :func:`identify_session` does)."""
     truth, nominal = truth_and_nominal(seed)
     rig = rig_of(kind)
+    design = design or Design()
+    rig = design_rig(rig, design)
     cand = candidate_poses(nominal)
-    poses = plan_poses(nominal, 15, candidates=cand[rig.visible(cand)], seed=seed).poses
+    cand = depth_spread_candidates(cand[rig.visible(cand)], rig, design.depth_spread)
+    poses = plan_poses(nominal, design.poses, candidates=cand, seed=seed).poses
     s_cmd, dirs = commanded_path(nominal, poses)
     t_s = np.arange(1, len(poses) + 1) * 30.0
     actual = truth.fk(s_cmd, MotionContext(t_s=t_s, directions=dirs))
@@ -194,7 +234,7 @@ def synthetic_identification(kind: str, seed: int) -> Identification:
     size = rig.camera.image_size
     ref = rig.reference_board()
     ref_px = rig.camera.project(ref.origin + setup.reference.board.corners_mm @ ref.rotation.T)
-    ref_px = ref_px + rng.normal(0.0, STATIC_PX, ref_px.shape)
+    ref_px = ref_px + rng.normal(0.0, design.ref_noise * STATIC_PX, ref_px.shape)
     takes = []
     for b in actual:
         placed = rig.effector_board(b)
@@ -205,7 +245,7 @@ def synthetic_identification(kind: str, seed: int) -> Identification:
                 _detection(ref_px + rng.normal(0.0, FRAME_PX, ref_px.shape), size),
                 _detection(px + rng.normal(0.0, FRAME_PX, px.shape), size),
             )
-            for _ in range(3)
+            for _ in range(design.frames)
         ]
         takes.append(TakeDetections(tuple(f[0] for f in frames), tuple(f[1] for f in frames)))
     intr = synthetic_intrinsics(kind, rig, seed)
@@ -232,11 +272,17 @@ def synthetic_identification(kind: str, seed: int) -> Identification:
 
 
 def scatter(
-    kind: str, seed: int, folder: Path, reuse: bool, pixels: bool, synthetic: bool = False
+    kind: str,
+    seed: int,
+    folder: Path,
+    reuse: bool,
+    pixels: bool,
+    synthetic: bool = False,
+    design: Design | None = None,
 ) -> Scatter:
     truth, nominal = truth_and_nominal(seed)
     if synthetic:
-        result = synthetic_identification(kind, seed)
+        result = synthetic_identification(kind, seed, design)
         pixels = False
     else:
         directory = render_session(kind, seed, folder, reuse)
@@ -281,6 +327,7 @@ def scatter(
         float(np.mean(z[rest] ** 2)) if rest.size else float("nan"),
         float(lam[top] / lam.sum()),
         float(np.mean(z[keep] ** 2)),
+        float(lam[keep].sum() ** 2 / np.sum(lam[keep] ** 2)),
     )
 
 
@@ -291,7 +338,7 @@ def line(s: Scatter) -> str:
         f"{'trusted' if s.trusted else 'refused'}; chi2/dof {s.factor:.2f}; corners "
         f"assumed {s.pixel_sigma:.3f} px, actual {s.pixel_actual:.3f} px (reference "
         f"{s.ref_actual:.3f}); predicted MS poses {s.ms_poses:.4f} + camera "
-        f"{s.ms_camera:.4f} mm^2; top direction {100 * s.share_top:.0f} %, z {s.z_top:+.2f}, "
+        f"{s.ms_camera:.4f} mm^2; top direction {100 * s.share_top:.0f} % ({s.dof:.1f} dof), z {s.z_top:+.2f}, "
         f"others mean z^2 {s.z2_rest:.2f}, all {s.whitened:.2f}"
     )
 
@@ -304,8 +351,15 @@ def summary(kind: str, rows: list[Scatter]) -> str:
     rest = np.array([r.z2_rest for r in rows])
     whitened = np.array([r.whitened for r in rows])
     within = np.mean((ratio <= 1.5) & (ratio >= 1 / 1.5))
+    share = np.array([r.share_top for r in rows])
+    dof = np.array([r.dof for r in rows])
+    lo, hi = np.quantile(ratio, [0.1, 0.9])
     return (
-        f"{kind:8s} {len(rows)} sessions: sqrt(mean true^2 / mean predicted^2) "
+        f"{kind:8s} {len(rows)} sessions: true RMS {np.sqrt(true2.mean()):.3f} mm, predicted "
+        f"{np.sqrt(pred2.mean()):.3f} mm; top direction {100 * np.median(share):.0f} % of the "
+        f"predicted MS (median), effective dof median {np.median(dof):.1f}; ratio 10-90 % "
+        f"{lo:.2f}-{hi:.2f}, sd of log ratio {np.std(np.log(ratio)):.2f}\n"
+        f"{'':8s} sqrt(mean true^2 / mean predicted^2) "
         f"{np.sqrt(true2.mean() / pred2.mean()):.2f}; ratio predicted/true median "
         f"{np.median(ratio):.2f}, range {ratio.min():.2f}-{ratio.max():.2f}, within 1.5x "
         f"{100 * within:.0f} %; largest direction mean z^2 {np.mean(z**2):.2f} (mean z "
@@ -331,10 +385,42 @@ def main() -> int:
     ap.add_argument(
         "--no-pixels", action="store_true", help="skip the corner-noise check (a second fit)"
     )
+    ap.add_argument("--poses", type=int, default=15, help="planned poses (--synthetic)")
+    ap.add_argument("--frames", type=int, default=3, help="frames per take (--synthetic)")
+    ap.add_argument(
+        "--ref-noise", type=float, default=1.0, help="reference corners' noise x (--synthetic)"
+    )
+    ap.add_argument(
+        "--ref-squares", metavar="XxY", help="a reference board of 30 mm squares (--synthetic)"
+    )
+    ap.add_argument(
+        "--depth-spread",
+        type=float,
+        default=0.0,
+        metavar="Q",
+        help="plan from the nearest and farthest Q of the visible candidates (--synthetic)",
+    )
+    ap.add_argument(
+        "--prior-floor",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="diagnostic: a floor of the bundle adjustment's intrinsics prior (f relative, "
+        "cx/cy px, k1 ...)",
+    )
     args = ap.parse_args()
+    for item in args.prior_floor:
+        name, _, value = item.partition("=")
+        if name not in PRIOR_FLOOR:
+            ap.error(f"--prior-floor {item}: no prior named {name} ({', '.join(PRIOR_FLOOR)})")
+        PRIOR_FLOOR[name] = float(value)
     unknown = sorted(set(args.kinds) - set(KINDS))
     if unknown:
         ap.error(f"unknown kind(s) {', '.join(unknown)}; known: {', '.join(KINDS)}")
+    squares = None
+    if args.ref_squares:
+        sx, sy = (int(v) for v in args.ref_squares.split("x"))
+        squares = (sx, sy)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(args.keep) if args.keep else Path(tmp)
         rows: dict[str, list[Scatter]] = {}
@@ -347,6 +433,7 @@ def main() -> int:
                     args.reuse,
                     not args.no_pixels,
                     args.synthetic,
+                    Design(args.poses, args.frames, args.depth_spread, args.ref_noise, squares),
                 )
                 rows.setdefault(kind, []).append(s)
                 print(line(s), flush=True)
