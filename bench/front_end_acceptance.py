@@ -248,6 +248,13 @@ class Scenario:
 
         return self.wait(moving, self.args.timeout, "the print to move")
 
+    def ended_early(self) -> bool:
+        """The print ended before its scenario's signal (then there is nothing to try)."""
+        if self.finished():
+            self.say(f"the print ended ({self.job_state()}) before the signal")
+            return True
+        return False
+
     def finished(self) -> bool:
         return self.job_state() in ("done", "failed", "cancelled")
 
@@ -273,7 +280,7 @@ class Scenario:
         self.wait(self.finished, self.args.timeout, "the end of the print")
 
     def _sigstop(self, tui: PtyProgram) -> None:
-        if not self.past(self.args.mid_s):
+        if not self.past(self.args.mid_s) or self.ended_early():
             return
         before = self.executed()
         tui.proc.send_signal(signal.SIGSTOP)
@@ -286,7 +293,7 @@ class Scenario:
         self.wait(lambda: tui.shows("DONE"), 60, "DONE on the TUI's screen")
 
     def _kill(self, tui: PtyProgram) -> None:
-        if not self.past(self.args.mid_s):
+        if not self.past(self.args.mid_s) or self.ended_early():
             return
         tui.proc.kill()
         tui.proc.wait(30)
@@ -348,11 +355,13 @@ class Scenario:
         if health:
             self.out.retransmits = int(health[-1].get("retransmits", -1))
             self.out.naks = int(health[-1].get("naks", -1))
-        self.out.underruns = sum("UNDERRUN" in json.dumps(r).upper() for r in log)
+        failures = [r for r in log if r.get("event") == "Failure"]
+        self.out.underruns = sum("underrun" in str(r.get("reason", "")) for r in failures)
+        if failures:  # the cause first: what the waits saw follows from it
+            self.out.error = f"the print failed: {failures[-1].get('reason')}"
         self.out.segments = self.executed()
         err = (self.tmp / "device.err").read_text() if (self.tmp / "device.err").exists() else ""
         self.out.watchdog = "host watchdog" in err
-        self.out.underruns += err.upper().count("UNDERRUN")
 
     def _cleanup(self) -> None:
         for n, program in enumerate(self.tuis):
