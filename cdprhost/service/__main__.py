@@ -7,13 +7,11 @@ its stdout and stderr go to the service's log beside its socket.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 
 from cdprhost.logs import configure_logging
 from cdprhost.service.paths import ServiceFiles, private_dir
 from cdprhost.service.printer_service import PrinterService, ServiceBusy, install_signals
-from cdprhost.service.priority import raise_priority
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,9 +23,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.name.replace("-", "").isalnum():
         print(f"--name: not a service name: {args.name!r}", file=sys.stderr)
         return 2
-    priority = raise_priority()  # before any thread: they inherit it
     configure_logging(1)
-    logging.getLogger("cdprhost.service").info("priority: %s", priority)
     service = PrinterService(ServiceFiles(private_dir(), args.name), args.port, idle_s=args.idle_s)
     try:
         service.bind()
