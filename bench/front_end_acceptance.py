@@ -36,8 +36,10 @@ import tempfile
 import termios
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "cdprhost"]
@@ -50,7 +52,7 @@ def screen_text(raw: bytes) -> str:
     return ANSI.sub(" ", raw.decode("utf-8", "replace"))
 
 
-def _device_priority(step: int):
+def _device_priority(step: int) -> Callable[[], None]:
     """The simulated device stands for a board with a processor of its own: it runs ``step``
     nice values above the rest when allowed (as the super-user), so that the host's
     stream, not the device model, is what a loaded machine tests."""
@@ -75,7 +77,13 @@ class PtyProgram:
     it draws is read (so it never blocks on a full terminal) and the last ``keep`` bytes are
     kept for :meth:`shows`."""
 
-    def __init__(self, argv: list[str], env: dict[str, str], size=(120, 40), keep=400_000):
+    def __init__(
+        self,
+        argv: list[str],
+        env: dict[str, str],
+        size: tuple[int, int] = (120, 40),
+        keep: int = 400_000,
+    ):
         master, slave = pty.openpty()
         fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", size[1], size[0], 0, 0))
         self.proc = subprocess.Popen(
@@ -189,7 +197,7 @@ class Scenario:
         self.tuis.append(program)
         return program
 
-    def job_log(self) -> list[dict]:
+    def job_log(self) -> list[dict[str, Any]]:
         logs = sorted((self.state / "jobs").glob("*.jsonl"))
         if not logs:
             return []
@@ -208,7 +216,7 @@ class Scenario:
             return 0
         return sum(1 for line in self.record.read_text().splitlines() if line.strip())
 
-    def wait(self, cond, timeout: float, what: str) -> bool:
+    def wait(self, cond: Callable[[], object], timeout: float, what: str) -> bool:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if cond():
@@ -370,15 +378,16 @@ class Scenario:
             program.stop()
         from cdprhost.service.paths import files_for_port
 
-        saved = os.environ.get("CDPRHOST_STATE")
-        os.environ["CDPRHOST_STATE"] = str(self.state)
+        saved = {k: os.environ.get(k) for k in ("CDPRHOST_STATE", "CDPRHOST_RUN")}
+        os.environ.update({k: self.env[k] for k in saved})  # where this scenario's service is
         try:
             pid = files_for_port(self.port).read_pid() if self.port else None
         finally:
-            if saved is None:
-                os.environ.pop("CDPRHOST_STATE", None)
-            else:
-                os.environ["CDPRHOST_STATE"] = saved
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
         if pid:
             ui = self.tuis[0].proc.pid if self.tuis else None
             self.out.nice = (
