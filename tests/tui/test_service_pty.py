@@ -270,3 +270,34 @@ def test_sighup_to_a_tui_on_a_pty_leaves_its_print_running_to_the_end(state, tmp
         assert "SIGHUP: the terminal UI quits" in log and "goes on in the printer service" in log
         assert not any("cancel" in json.dumps(r) for r in _job_log(state))
         assert not dev.stderr_has("host watchdog")
+
+
+async def test_start_pressed_twice_before_the_print_shows_starts_one_print(state, tmp_path):
+    """s, y, s, y in quick succession: the second start comes before the service's first
+    event reaches the screen (the job still reads idle); it starts nothing, and the one print
+    is followed to its end (before: a second job took the first one's events and the first
+    waited forever)."""
+    gcode = square_part(tmp_path / "part.gcode", layers=4)
+    with SimDeviceProcess(tmp_path, "--speedup", "20") as dev:
+        backend = ServiceBackend("paper-prototype")
+        app = make_app(backend, port=dev.path, open_file=str(gcode))
+        try:
+            async with app.run_test(size=(100, 32)) as pilot:
+                await wait_for(
+                    pilot,
+                    lambda s: s.connected and s.file.preflight is not None,
+                    timeout=120,
+                    what="connected, the file checked",
+                )
+                for key in "sysy":
+                    await pilot.press(key)
+                first = app.state.job_id
+                end = await wait_for(
+                    pilot, lambda s: s.job.state.finished, timeout=240, what="its end"
+                )
+                assert end.job.state is JobState.DONE, end.job.reason
+                assert end.job_id == first == 1
+                assert end.job.layer + 1 == 4
+        finally:
+            backend.close()
+        kill_and_wait(service_pid(dev.path, state))

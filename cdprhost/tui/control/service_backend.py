@@ -487,8 +487,8 @@ class ServiceBackend:
         info = self._job_info
         if info is None or info.state in ("none", "done", "failed", "cancelled", "refused"):
             return None
-        if self._job is not None:  # this UI's own print, just started (its JobInfo came first)
-            return None
+        if self._job is not None and not self._job.ended.is_set():
+            return None  # this UI's own (its state reads idle until the first event arrives)
         job = ServiceJob(self, on_event, None)
         for event in self._replayed:
             job.feed(event)
