@@ -40,7 +40,8 @@ def measured(sim_model, tmp_path_factory):
 
 
 def test_only_the_creeping_and_the_shaking_takes_are_refused_and_why(measured):
-    assert [(r.pose, r.reason) for r in measured.rejected] == [(4, "drift"), (7, "spread")]
+    why = [r.message for r in measured.rejected]
+    assert [(r.pose, r.reason) for r in measured.rejected] == [(4, "drift"), (7, "spread")], why
     assert "against the camera's frame noise" in measured.rejected[0].message
     assert "camera's frame noise predicts" in measured.rejected[1].message
     assert len(measured) == 8
