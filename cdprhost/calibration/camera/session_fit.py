@@ -380,7 +380,7 @@ def fit_session(
 
 #: A take whose corners scatter (variance) more than this many times the session's median
 #: take is not pooled into the frame noise (a shaking or creeping effector).
-FRAME_NOISE_OUTLIER = 4.0
+FRAME_NOISE_OUTLIER = 10.0
 
 
 def _frame_pixel_sigma(
