@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from cdprhost.calibration.camera.take_drift import located_frames
+
 #: The least standard deviation in any direction, as a fraction of the longest axis's.
 ANISOTROPY_FLOOR = 0.1
 
@@ -57,10 +59,7 @@ class CameraScatter:
 def camera_scatter(points: np.ndarray, times: np.ndarray, frame_cov: np.ndarray) -> CameraScatter:
     """The scatter test of one take: ``points`` (F, 3) each frame's B (NaN: no position),
     ``times`` (F,) s, ``frame_cov`` (3, 3) the covariance of one frame's B."""
-    x = np.asarray(points, float).reshape(-1, 3)
-    t = np.asarray(times, float).ravel()
-    ok = np.isfinite(x).all(axis=1) & np.isfinite(t)
-    x, t = x[ok], t[ok]
+    x, t = located_frames(points, times)
     n = len(t)
     cov = np.asarray(frame_cov, float)
     tc = t - t.mean() if n else t
