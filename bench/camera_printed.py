@@ -1,7 +1,7 @@
 """Issue 31's figures: workspace RMS and the trust gate's prediction on rendered camera
 sessions of the kinds a user meets, intrinsics included.
 
-Run: python bench/camera_printed.py [KIND ...] [--seeds 1] [--keep DIR]
+Run: python bench/camera_printed.py [KIND ...] [--seeds 1] [--first 1] [--keep DIR] [--reuse]
 
 KIND (default all): ``known`` (the true intrinsics), ``selfcal`` (self-calibrated by the
 reader from 18 good views), ``printed`` (self-calibrated from 20 views of a sheet bowed
@@ -13,7 +13,8 @@ parameter (rng 100 + seed). Prints the workspace RMS against the truth, the gate
 prediction, their ratio, the range one calibration's RMS falls in 8 times out of 10 with
 the error's effective degrees of freedom, where the observed RMS falls in that predicted
 distribution (quantile: uniform over many sessions when the gate is right), how often
-one session's RMS lands within 1.5x of even an exact prediction, and the verdict. ``--reuse`` identifies sessions already rendered into ``--keep`` again.
+one session's RMS lands within 1.5x of even an exact prediction, the verdict and the takes
+refused (with why). ``--reuse`` identifies sessions already rendered into ``--keep`` again.
 Rendering takes minutes per session.
 """
 
@@ -27,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from cdprhost.calibration.planning import candidate_poses, plan_poses
+from cdprhost.calibration.session import POSES_FILE
 from cdprhost.calibration.session_identification import identify_session
 from cdprhost.kinematics import MachineModel
 from cdprhost.kinematics.grid import workspace_grid
@@ -59,28 +61,41 @@ def session_options(kind: str) -> dict[str, object]:
     return {"intrinsics": "views"}
 
 
-def run(kind: str, seed: int, folder: Path, reuse: bool = False) -> str:
+def truth_and_nominal(seed: int) -> tuple[MachineModel, MachineModel]:
+    """The true machine of a seed (off ``paper-simulation`` by U(-3, 3) mm per parameter)
+    and the nominal one."""
     nominal = MachineModel.from_profile(load_profile("paper-simulation"))
     truth = nominal.with_geometry(
         perturbed_geometry(nominal.geometry, np.random.default_rng(100 + seed))
     )
+    return truth, nominal
+
+
+def render_session(kind: str, seed: int, folder: Path, reuse: bool = False) -> Path:
+    """The session folder of ``kind`` and ``seed`` (rendered, or the one in ``folder`` with
+    ``reuse``)."""
+    if reuse and (folder / POSES_FILE).is_file():  # written last: the session is whole
+        return folder
+    truth, nominal = truth_and_nominal(seed)
     rig = rig_of(kind)
     cand = candidate_poses(nominal)
     poses = plan_poses(nominal, 15, candidates=cand[rig.visible(cand)], seed=seed).poses
+    return write_camera_session(
+        folder,
+        truth,
+        nominal,
+        poses,
+        rig=rig,
+        frames_per_take=3,
+        seed=seed,
+        **session_options(kind),  # type: ignore[arg-type]
+    ).directory
+
+
+def run(kind: str, seed: int, folder: Path, reuse: bool = False) -> str:
+    truth, nominal = truth_and_nominal(seed)
     t0 = time.perf_counter()
-    if reuse and (folder / "session.toml").is_file():
-        directory = folder
-    else:
-        directory = write_camera_session(
-            folder,
-            truth,
-            nominal,
-            poses,
-            rig=rig,
-            frames_per_take=3,
-            seed=seed,
-            **session_options(kind),  # type: ignore[arg-type]
-        ).directory
+    directory = render_session(kind, seed, folder, reuse)
     result = identify_session(directory, nominal)
     grid = workspace_grid(nominal)
     err = np.linalg.norm(achieved_points(truth, result.model, grid) - grid, axis=1)
@@ -97,9 +112,11 @@ def run(kind: str, seed: int, folder: Path, reuse: bool = False) -> str:
             f", 80 % range {lo:.3f}-{hi:.3f} mm over {t.effective_dof:.1f} dof, "
             f"quantile {t.quantile_of(rms):.2f}, P(within 1.5x) {within:.2f}"
         )
+    refused = f"{len(result.rejected)} take(s) refused" + "".join(f"; {r}" for r in result.rejected)
     return (
         f"{kind:8s} seed {seed}: workspace RMS {rms:.3f} mm, predicted {pred:.3f} mm, "
-        f"ratio {pred / rms:.2f}{spread}, {verdict} ({time.perf_counter() - t0:.0f} s)"
+        f"ratio {pred / rms:.2f}{spread}, {verdict}, {refused} "
+        f"({time.perf_counter() - t0:.0f} s)"
     )
 
 
@@ -109,6 +126,7 @@ def main() -> int:
     )
     ap.add_argument("kinds", nargs="*", default=list(KINDS), help=", ".join(KINDS))
     ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--first", type=int, default=1, help="first seed")
     ap.add_argument("--keep", metavar="DIR", help="keep the rendered sessions there")
     ap.add_argument(
         "--reuse", action="store_true", help="identify the sessions already in --keep again"
@@ -120,7 +138,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(args.keep) if args.keep else Path(tmp)
         for kind in args.kinds:
-            for seed in range(1, args.seeds + 1):
+            for seed in range(args.first, args.first + args.seeds):
                 print(run(kind, seed, root / f"{kind}_{seed}", args.reuse), flush=True)
     return 0
 

@@ -13,7 +13,8 @@ Each section starts ``cdprhost sim-device`` in its own process on a pty, as a us
    ``--clean-layers N`` the fixture's first N layers) at ``--clean-speedup`` (default 1x) on
    a clean pty: the host's retransmissions (target 0).
 4. ``frozen``: a link to a 1x device whose process is then stopped (SIGSTOP): the host's
-   retransmissions in the first 2 s (target: about 10 at most, the 25 ms floor doubling).
+   retransmissions in the first 2 s (target: about 10 at most, the 25 ms floor doubling),
+   and when the link declares the device lost (bounded: the link timeout of silence).
 
 Run: python bench/lossy_link.py [--only handshake|stream|clean|frozen] [--seeds 5] ...
 """
@@ -105,14 +106,18 @@ def reference_record(gcode: Path) -> list[dict]:
     return list(holder["link"].device.record)
 
 
-def print_over_pty(gcode: Path, speedup: float, faults: str) -> tuple[dict, list[dict], float]:
+def print_over_pty(
+    gcode: Path, speedup: float, faults: str, why: list[str] | None = None
+) -> tuple[dict, list[dict], float]:
+    """A print over a pty; ``why`` collects the host's log lines on each retransmission."""
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         record = t / "record.jsonl"
         args = ["--speedup", f"{speedup:g}", "--record", str(record)]
         dev, port = start_device(*args, *(["--faults", faults] if faults else []))
         report = t / "report.json"
-        env = {**os.environ, "CDPRHOST_STATE": str(t / "state")}
+        # a printer service of its own (the print runs in it; its log is read below)
+        env = {**os.environ, "CDPRHOST_STATE": str(t / "state"), "CDPRHOST_RUN": str(t / "run")}
         t0 = time.monotonic()
         host = subprocess.run(
             [sys.executable, "-m", "cdprhost", "print", str(gcode), "--profile", PROFILE]
@@ -125,6 +130,9 @@ def print_over_pty(gcode: Path, speedup: float, faults: str) -> tuple[dict, list
         )
         wall = time.monotonic() - t0
         stop_device(dev)
+        if why is not None:  # the link logs each resend in the service's log (info)
+            for log in sorted((t / "run").glob("*.log")):
+                why += [x for x in log.read_text(errors="replace").splitlines() if "resent" in x]
         if report.exists():
             result = json.loads(report.read_text())
         else:
@@ -174,13 +182,16 @@ def streams(gcode: Path, speedup: float, seeds: int) -> None:
 
 
 def clean_print(gcode: Path, speedup: float = 1.0) -> None:
-    result, _rows, wall = print_over_pty(gcode, speedup, "")
+    why: list[str] = []
+    result, _rows, wall = print_over_pty(gcode, speedup, "", why)
     print(
         f"  {gcode.name} at {speedup:g}x, clean pty: {result.get('status')} segments "
         f"{result.get('segments')} retransmits {result.get('retransmits')} wall {wall:.0f} s"
         + ("" if result.get("status") == "completed" else f"  ({result.get('reason')})"),
         flush=True,
     )
+    for line in why:  # when and why the host resent (timeout, NAK, stale report)
+        print(f"    {line[:300]}")
 
 
 def frozen(seconds: float = 2.0) -> None:
@@ -208,9 +219,17 @@ def frozen(seconds: float = 2.0) -> None:
         while time.monotonic() - t0 < seconds:
             time.sleep(0.05)
             marks.append(link.counters.retransmits - before)
+        while link.lost is None and time.monotonic() - t0 < 30:  # declared lost: when?
+            time.sleep(0.05)
+        lost = time.monotonic() - t0
         print(
             f"  device stopped mid-stream: {marks[-1]} retransmissions in the first {seconds:g} s "
-            f"(after 0.5 s: {marks[9]}, 1 s: {marks[19]})",
+            f"(after 0.5 s: {marks[9]}, 1 s: {marks[19]}); "
+            + (
+                f"the link declared it lost after {lost:.1f} s ({link.timeout_s:g} s timeout)"
+                if link.lost is not None
+                else "not declared lost within 30 s"
+            ),
             flush=True,
         )
     finally:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+from cdprhost.gcode.sample_parts import square_walls
 from cdprhost.job.runner import PrintJob
 from cdprhost.job.state import JobState, Progress
 from cdprhost.profile import load_profile
@@ -17,16 +18,8 @@ from cdprhost.sim.embedded import open_embedded
 
 
 def _part(folder: Path, layers: int = 12) -> Path:
-    lines = ["G28", "M104 S200", "M109 S200", "G92 E0"]
-    e = 0.0
-    for n in range(layers):
-        lines.append(f"G1 Z{0.3 * (n + 1):.2f} F3000")
-        for x, y in [(30, 0), (30, 30), (0, 30), (0, 0)] * 3:
-            e += 1.0
-            lines.append(f"G1 X{x} Y{y} E{e:.3f} F1800")
-        lines += [f"G1 E{e - 1:.3f} F2400", f"G1 E{e:.3f}"]
     path = folder / "part.gcode"
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text(square_walls(layers))
     return path
 
 

@@ -1,6 +1,6 @@
 """CPU of the terminal UI while it prints at 1x, against the CLI printing the same file.
 
-Run: python bench/tui_cpu.py [--seconds 60] [--size 200x60] [--file PATH]
+Run: python bench/tui_cpu.py [--seconds 60] [--size 200x60] [--file PATH] [--idle-only]
 
 Two ``cdprhost sim-device --speedup 1`` processes on pseudo-terminals stand in for the
 machine. The UI (``cdprhost tui --port PTY FILE``) runs in a pseudo-terminal of the given
@@ -12,12 +12,17 @@ baseline, measured in the same run: ``cdprhost print --port PTY FILE`` (the same
 job runner and link, no screen) over the same time. Reported: CPU as % of one core, and the
 UI's printing cost as a ratio of the CLI's.
 
-Target (issue 15): the UI process at <= 5 % of one core while printing at 1x.
+Target (issue 15): the UI process at <= 5 % of one core while printing at 1x; (issue 32)
+under 2 % connected and idle. ``--idle-only`` measures only that, ``--seconds`` long, and
+the printer service's CPU beside it (the UI is its client: the link and the device's status
+polls run there; ``--in-process``: the UI drives the device itself, no service). The run
+has a state and a service folder of its own.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import fcntl
 import os
 import pty
@@ -25,6 +30,7 @@ import signal
 import struct
 import subprocess
 import sys
+import tempfile
 import termios
 import threading
 import time
@@ -128,6 +134,37 @@ def measure(pid: int, seconds: float, windows: list[float] | None = None) -> flo
     return 100.0 * (cpu_seconds(pid) - c0) / (time.monotonic() - t0)
 
 
+def service_pid(port: str) -> int | None:
+    """The printer service of ``port`` in this run's folder (None: none runs)."""
+    sys.path.insert(0, str(ROOT))
+    from cdprhost.service.paths import files_for_port
+
+    pid = files_for_port(port).read_pid()
+    return pid if pid and Path(f"/proc/{pid}").exists() else None
+
+
+def stop_service(port: str) -> None:
+    pid = service_pid(port)
+    if pid is not None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+
+
+def idle_only(ui_pid: int, port: str, seconds: float, cols: int, rows: int) -> None:
+    """The UI connected and idle, and its printer service meanwhile."""
+    service = service_pid(port)
+    s0 = cpu_seconds(service) if service else 0.0
+    t0 = time.monotonic()
+    windows: list[float] = []
+    idle = measure(ui_pid, seconds, windows)
+    served = 100.0 * (cpu_seconds(service) - s0) / (time.monotonic() - t0) if service else None
+    print(f"terminal {cols}x{rows}, {seconds:g} s")
+    print(f"UI connected, idle:        {idle:5.1f} % of one core (target < 2 %)")
+    print("  per 10 s:                " + " ".join(f"{w:.1f}" for w in windows))
+    if served is not None:
+        print(f"its printer service:       {served:5.1f} % of one core")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0)
@@ -141,16 +178,27 @@ def main() -> None:
         default=75.0,
         help="seconds after the start before measuring (the fixture heats first: at 1x about a minute)",
     )
+    ap.add_argument("--idle-only", action="store_true", help="only the UI connected and idle")
+    ap.add_argument(
+        "--in-process", action="store_true", help="the UI drives the device (no printer service)"
+    )
     args = ap.parse_args()
     args.file = gcode_fixture(args.file)
     cols, rows = (int(v) for v in args.size.split("x"))
     cdprhost = [sys.executable, "-m", "cdprhost"]
+    work = Path(tempfile.mkdtemp(prefix="tui-cpu-"))  # the run's own state and service
+    os.environ["CDPRHOST_STATE"] = str(work / "state")
+    os.environ["CDPRHOST_RUN"] = str(work / "run")
 
     dev, port = sim_device()
-    ui = Terminal([*cdprhost, "tui", "--port", port, str(args.file)], cols, rows)
+    where = ["--in-process"] if args.in_process else []
+    ui = Terminal([*cdprhost, "tui", *where, "--port", port, str(args.file)], cols, rows)
     try:
         ui.wait_for("preflight ok", timeout=300)
         time.sleep(3)
+        if args.idle_only:
+            idle_only(ui.pid, port, args.seconds, cols, rows)
+            return
         idle = measure(ui.pid, args.seconds / 2)
         ui.keys("s", "y")
         ui.wait_for("PRINTING", timeout=120)
@@ -168,6 +216,7 @@ def main() -> None:
         ui.stop()
         dev.terminate()
         dev.wait()
+        stop_service(port)
 
     dev, port = sim_device()
     cli = subprocess.Popen(

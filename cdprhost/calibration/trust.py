@@ -18,7 +18,10 @@ one direction carries most of it (a camera session's frame shifted along the lin
 sight: about 1.3 to 3 effective degrees of freedom) a single calibration's RMS scatters by
 a factor of two either way around the prediction. The report states that spread: the
 effective degrees of freedom and the range the RMS of one calibration falls in 8 times
-out of 10 (:func:`rms_spread`, from draws of those directions).
+out of 10 (:func:`rms_spread`, from draws of those directions). The covariance itself is
+checked against the scatter of the estimates over many camera sessions
+(``bench/trust_scatter.py``): the error whitened by it has unit variance and the predicted
+RMS is the expected one, so a session far from it is such a draw, not a bias.
 
 The gate refuses (unless forced) when the predicted error exceeds ``max_workspace_mm`` or
 the noise cannot be estimated; it warns above ``warn_workspace_mm``. The parameter

@@ -151,7 +151,9 @@ def run_wizard(args: argparse.Namespace) -> int:
             camera=camera.config if camera else None,
             intrinsics=camera.intrinsics if camera else None,
             candidates=(
-                camera.candidates(takes, model, args.poses + args.check_poses) if camera else None
+                camera.candidates(takes, model, args.poses + args.check_poses, log)
+                if camera
+                else None
             ),
         )
         outcome = wiz.run()

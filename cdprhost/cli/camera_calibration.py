@@ -11,11 +11,14 @@ import argparse
 import math
 import re
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from cdprhost.calibration.camera.wizard_camera import (
+    WizardCamera,
+    picture_size,
+    picture_size_problem,
+)
 from cdprhost.cli.numbers import bounded_int
 from cdprhost.cli.options import output_file, output_folder
 from cdprhost.errors import InputError, JobFailed
@@ -310,64 +313,9 @@ def add_wizard_arguments(wiz: argparse.ArgumentParser) -> None:
     )
 
 
-@dataclass
-class CameraWizard:
-    """What `calibrate wizard --camera` adds: the capture, the [camera] configuration, the
-    intrinsics and (for the simulated camera) the device observer."""
-
-    capture: Any
-    config: Any  # CameraConfig
-    intrinsics: Any  # Intrinsics
-    observer: Any = None
-
-    def takes(self, session: Path, frames: int, log: Callable[[str], None]) -> Any:
-        from cdprhost.calibration.camera.capture import CameraTakes
-
-        return CameraTakes(
-            self.capture,
-            session / "captures",
-            self.config.setup(),
-            self.intrinsics,
-            frames,
-            log=log,
-        )
-
-    def candidates(self, takes: Any, model: Any, needed: int) -> Any:
-        """The planner's candidate poses the camera can measure (after the first look)."""
-        from cdprhost.calibration.camera.visibility import visible_mask
-        from cdprhost.calibration.planning import candidate_poses
-
-        view = takes.first_look()
-        cand = candidate_poses(model)
-        keep = cand[visible_mask(cand, view, self.config.setup())]
-        print(f"camera: {len(keep)} of {len(cand)} candidate poses are in good view", flush=True)
-        if len(keep) < needed:
-            raise InputError(
-                f"the camera sees the effector board well at only {len(keep)} candidate poses "
-                f"({needed} needed): move the camera back or tilt the effector board toward it"
-            )
-        return keep
-
-
-SIM_CAMERA_MIN = (320, 240)
-SIM_CAMERA_MAX = (3840, 2160)  # 4K UHD: rendering costs memory and time by the pixel
-
-
-def sim_camera_problem(size_text: str) -> str | None:
-    """Why ``--sim-camera`` cannot be used, or None."""
-    m = re.fullmatch(r"\s*(\d{1,6})\s*[xX]\s*(\d{1,6})\s*", size_text)
-    (w0, h0), (w1, h1) = SIM_CAMERA_MIN, SIM_CAMERA_MAX
-    if not m:
-        return f"expected WxH (e.g. 1920x1080), got {size_text!r}"
-    w, h = int(m[1]), int(m[2])
-    if not (w0 <= w <= w1 and h0 <= h <= h1):
-        return f"{w}x{h} is outside {w0}x{h0} to {w1}x{h1} (a simulated picture that size)"
-    return None
-
-
 def sim_camera_size(text: str) -> str:
     """An argparse ``type`` for ``--sim-camera WxH`` (bounded before anything is drawn)."""
-    problem = sim_camera_problem(text)
+    problem = picture_size_problem(text)
     if problem:
         raise argparse.ArgumentTypeError(problem)
     return text
@@ -376,35 +324,16 @@ def sim_camera_size(text: str) -> str:
 def sim_rig(size_text: str) -> Any:
     from cdprhost.sim.camera.scene import rig_for_size
 
-    problem = sim_camera_problem(size_text)
-    if problem:
+    problem = picture_size_problem(size_text)
+    size = picture_size(size_text)
+    if problem or size is None:
         raise InputError(f"--sim-camera: {problem}")
-    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", size_text)
-    assert m is not None
-    return rig_for_size((int(m[1]), int(m[2])))
+    return rig_for_size(size)
 
 
-def camera_table(path: Path) -> Any:
-    """The ``[camera]`` table of a TOML file (a session.toml or just that table)."""
-    from pydantic import ValidationError
-
-    from cdprhost.calibration.camera.config import CameraConfig
-    from cdprhost.calibration.config_input import read_toml, validation_problems
-
-    data = read_toml(path)
-    if "camera" not in data:
-        raise InputError("no [camera] table (the boards of camera-session.md)", source=str(path))
-    try:
-        return CameraConfig.model_validate(data["camera"])
-    except ValidationError as exc:
-        raise InputError(
-            "invalid [camera] table", source=str(path), problems=validation_problems(exc, "camera")
-        ) from None
-
-
-def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> CameraWizard:
+def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> WizardCamera:
     """The capture, the [camera] configuration and the intrinsics of `wizard --camera`."""
-    from cdprhost.calibration.camera.config import load_intrinsics
+    from cdprhost.calibration.camera.config import load_camera_config, load_intrinsics
     from cdprhost.calibration.camera.takes import session_intrinsics
     from cdprhost.calibration.session import SESSION_FILE, load_session_config
 
@@ -435,7 +364,7 @@ def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> Ca
                 "this session measures with motion capture, not a camera", source=str(session)
             )
     elif args.camera_config:
-        config = camera_table(Path(args.camera_config))
+        config = load_camera_config(args.camera_config)
     elif rig is not None:
         from cdprhost.sim.camera.session import camera_config
 
@@ -462,4 +391,4 @@ def camera_for_wizard(args: argparse.Namespace, session: Path, model: Any) -> Ca
             "a camera needs its intrinsics: give --camera-intrinsics camera.toml "
             "(from `cdprhost calibrate camera`)"
         )
-    return CameraWizard(capture, config, intrinsics, observer)
+    return WizardCamera(capture, config, intrinsics, observer)

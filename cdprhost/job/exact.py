@@ -25,7 +25,7 @@ import numpy as np
 
 from cdprhost.errors import CdprError
 from cdprhost.job.resume import SAVED_WHILE_PRINTING, ResumePoint
-from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec, Restart
+from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import DeviceStatus
 from cdprhost.link.tracker import boot_cause_text
@@ -127,7 +127,6 @@ def refine_point(
     if index < 0:
         return None
     program = items(PlanSpec.from_json(point.plan))
-    e_offset = 0.0
     count = 0
     origin = np.asarray(profile.build_volume.bed_origin, dtype=float)
     planned = segment_program(
@@ -136,8 +135,6 @@ def refine_point(
     for out in planned:
         if not isinstance(out, PlannedSegments):
             continue
-        if isinstance(program, Restart):
-            e_offset = program.e_offset
         if index >= count + len(out):
             count += len(out)
             continue
@@ -157,7 +154,7 @@ def refine_point(
             position=(float(p[0]), float(p[1]), float(p[2])),
             point=(float(g[0]), float(g[1]), float(g[2])),
             steps=(int(s[0]), int(s[1]), int(s[2]), int(s[3])),
-            e_mm=float(out.e[k]) + e_offset,
+            e_mm=float(out.e[k]),  # the file's absolute E (a restart keeps it)
             device_segment=done,
         )
     return None

@@ -1,4 +1,5 @@
-"""The streamer's part of the speed and flow overrides: what it sends instead of the plan.
+"""The speed and flow overrides: what the operator asks (M220 / M221, from any thread), and
+the streamer's part, what it sends instead of the plan.
 
 The streamer feeds the device from a planned batch a second or so at a time; before each
 feed it asks :meth:`Overriding.apply` for the rest of the batch as it is to be sent now. While
@@ -10,6 +11,7 @@ What the device already holds (at most the link's high watermark of motion, abou
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,8 +19,57 @@ import numpy as np
 
 from cdprhost.job.state import Overrides
 from cdprhost.motion.limits import Caps
-from cdprhost.motion.override import FlowEpoch, retime, scale_flow
+from cdprhost.motion.override import FlowEpoch, check_percent, retime, scale_flow
 from cdprhost.motion.segments import DEFAULT_LIMITS, PlannedSegments, SegmentLimits
+
+
+class OverrideRequests:
+    """The operator's speed (M220) and flow (M221) overrides as factors: set from any thread,
+    read by the streamer at each feed."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._speed = 1.0
+        self._flow = 1.0
+
+    def set(self, what: str, percent: float) -> float:
+        """``what`` (speed | flow) at ``percent``; the factor set (ValueError outside the
+        range :func:`~cdprhost.motion.override.check_percent` allows)."""
+        factor = check_percent(what, percent)
+        with self._lock:
+            if what == "speed":
+                self._speed = factor
+            elif what == "flow":
+                self._flow = factor
+            else:
+                raise ValueError(f"unknown override {what!r}")
+        return factor
+
+    def factors(self) -> tuple[float, float]:
+        """(speed, flow) now."""
+        with self._lock:
+            return self._speed, self._flow
+
+
+def requested_text(what: str, factor: float) -> str:
+    """What the operator is told when an override is asked while printing."""
+    return (
+        f"{what} {factor * 100:g} % requested (what the device holds already, about a second of "
+        "motion, runs as sent)"
+    )
+
+
+def resumed_text(ran: tuple[float, float], now: tuple[float, float]) -> str | None:
+    """What a resumed print says when the interrupted one ran with an override (``ran``: its
+    speed and flow in %; ``now``: the factors it resumes at): it starts again at what is set
+    now, not at what it ran with. None when it ran at 100 %."""
+    if ran == (100, 100):
+        return None
+    speed, flow = now
+    return (
+        f"the interrupted print ran at speed {ran[0]:g} %, flow {ran[1]:g} %; it resumes at "
+        f"speed {speed * 100:g} %, flow {flow * 100:g} % (M220 / M221 set them again)"
+    )
 
 
 @dataclass

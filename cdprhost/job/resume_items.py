@@ -7,9 +7,12 @@ matters: heater targets and fan are kept (waits included, so the hotend is hot
 again), one homing is kept (the effector's position after a failure is unknown),
 dwells and messages are dropped. Then the effector lifts straight up to clear the
 part, travels above the restart point, and lowers onto it (these inserted moves carry
-line 0: they are not in the file). The filament axis is re-zeroed at the restart so
-the extruder does not replay everything skipped; :attr:`Restart.e_offset` tells by
-how much.
+line 0: they are not in the file). The filament axis keeps the file's absolute E: the
+restart first tells the segmenter where the extruder stands (:class:`ExtruderAt`, the
+program's E there, :attr:`Restart.e_offset`), so the extruder does not replay what was
+skipped and every later segment's extruder steps are the whole print's (each rounds the
+same absolute E; re-zeroing E would round other numbers and move a step between
+neighbours).
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ import numpy as np
 
 from cdprhost.errors import InputError
 from cdprhost.gcode import items as g
-from cdprhost.gcode.stream import shift_e, travel
+from cdprhost.gcode.stream import travel
+from cdprhost.motion.program import ExtruderAt
 
 CLEARANCE_MM = 5.0
 INSERTED_LINE = 0  # the line of moves the host inserts (not in the file)
@@ -39,15 +43,17 @@ _KEPT_SETTINGS = (
 )
 
 
-def _cut(chunk: g.MoveChunk, i: int, point: np.ndarray | None, e_offset: float) -> g.MoveChunk:
-    """Moves ``i..`` of ``chunk``, the first starting at ``point`` (if given), E re-zeroed."""
+def _cut(chunk: g.MoveChunk, i: int, point: np.ndarray | None, e_at: float) -> g.MoveChunk:
+    """Moves ``i..`` of ``chunk``, the first starting at ``point`` (if given) with the
+    program's E there, ``e_at``."""
     rest = chunk.take(slice(i, None))
+    if point is None:
+        return rest
     start = rest.start.copy()
-    e_start = rest.e_start - e_offset
-    if point is not None:
-        start[0] = point
-        e_start[0] = 0.0
-    return replace(rest, start=start, e_start=e_start, e_end=rest.e_end - e_offset)
+    e_start = rest.e_start.copy()
+    start[0] = point
+    e_start[0] = e_at
+    return replace(rest, start=start, e_start=e_start)
 
 
 def _nearest_move(chunk: g.MoveChunk, line: int, point: np.ndarray) -> tuple[int, float] | None:
@@ -93,7 +99,7 @@ class Restart:
         self.e_mm = e_mm
         self.z_max = z_max
         self.travel_feedrate = travel_feedrate
-        self.e_offset = 0.0  # set when the restart is found
+        self.e_offset = 0.0  # the program's E at the restart; set when the restart is found
 
     def _where(self, item: g.MoveChunk) -> tuple[int, np.ndarray | None] | None:
         """Index of the first kept move in ``item`` and the point it starts from (None: its own
@@ -125,10 +131,7 @@ class Restart:
         last_point: np.ndarray | None = None
         for item in self._items:
             if started:
-                if isinstance(item, g.MoveChunk):
-                    yield shift_e(item, self.e_offset)
-                else:
-                    yield item
+                yield item
                 continue
             if isinstance(item, g.MoveChunk):
                 where = (0, None) if pending else self._where(item)
@@ -145,6 +148,7 @@ class Restart:
                     skipped_top = max(skipped_top, float(done[:, 2].max()))
                     last_point = done[-1]
                 first = item.start[i] if cut is None else cut
+                yield ExtruderAt(self.e_offset)
                 if last_point is not None:  # something was printed: go over it, not through it
                     layer = int(item.layer[i])
                     safe_z = min(max(skipped_top, float(first[2])) + CLEARANCE_MM, self.z_max)
@@ -154,7 +158,9 @@ class Restart:
                         np.array([first[0], first[1], safe_z]),
                         first,
                     ]
-                    yield travel(np.asarray(route), 0.0, INSERTED_LINE, layer, self.travel_feedrate)
+                    yield travel(
+                        np.asarray(route), self.e_offset, INSERTED_LINE, layer, self.travel_feedrate
+                    )
                 yield _cut(item, i, cut, self.e_offset)
                 started = True
             elif isinstance(item, _KEPT_SETTINGS):

@@ -28,6 +28,7 @@ from cdprhost.job.board import announced_record
 from cdprhost.job.exact import ExactPlaceUnknown, device_stop, refine_point, reset_notice
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
+from cdprhost.job.overriding import OverrideRequests, requested_text, resumed_text
 from cdprhost.job.prefetch import Prefetch
 from cdprhost.job.resume import (
     ResumeWriter,
@@ -36,7 +37,7 @@ from cdprhost.job.resume import (
     resume_path_for,
     resume_setup,
 )
-from cdprhost.job.resume_items import PlanSpec, Restart
+from cdprhost.job.resume_items import PlanSpec
 from cdprhost.job.state import Event, Failure, JobState, Notice, Planned, StateChanged
 from cdprhost.job.stopping import Stop, StopRecord
 from cdprhost.job.streamer import Requests, StreamContext, Streamer
@@ -47,7 +48,6 @@ from cdprhost.link.events import Identity
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.commands import estop_flags, heaters_off
 from cdprhost.motion.device_limits import caps_for_device, same_plan
-from cdprhost.motion.override import check_percent
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.motion.segments import DEFAULT_LIMITS
@@ -83,13 +83,13 @@ class PrintJob:
         self.on_event = on_event or (lambda e: None)
         self.log = JobLog(self.options.log_path)
         self.requests = Requests()
+        self.overrides = OverrideRequests()  # M220 / M221
         self._state = JobState.IDLE
         self._done = threading.Event()  # run() has returned
         self._started = False
         self.link: HostLink | None = None  # set once connected (the streamer holds it)
         self._streamer: Streamer | None = None
         self._sha256 = ""
-        self._restart: Restart | None = None
         self._prepared: Prepared | None = None
         self._t0 = 0.0  # the device's motion clock when streaming began
         self.plan = self._plan_spec()
@@ -123,16 +123,10 @@ class PrintJob:
         self._override("flow", percent)
 
     def _override(self, what: str, percent: float) -> None:
-        factor = check_percent(what, percent)
-        self.requests.set_override(what, factor)
+        factor = self.overrides.set(what, percent)
         self.log.write("request", what=what, percent=round(factor * 100, 3))
         if self._started and not self._done.is_set():
-            self._emit(
-                Notice(
-                    f"{what} {factor * 100:g} % requested (what the device holds already, "
-                    "about a second of motion, runs as sent)"
-                )
-            )
+            self._emit(Notice(requested_text(what, factor)))
 
     def emergency_stop(self) -> bool:
         """ESTOP now (motors kept, heaters off unless the profile keeps them on failure); the
@@ -237,13 +231,7 @@ class PrintJob:
     def _items(self, plan: PlanSpec | None = None) -> Iterable[Any]:
         items = self._prepare().items()
         z_max = self.profile.build_volume.z_max_mm - self.profile.build_volume.bed_origin[2]
-        out = (plan or self.plan).apply(items, z_max=z_max)
-        if plan is None and isinstance(out, Restart):
-            self._restart = out
-        return out
-
-    def _e_offset(self) -> float:
-        return self._restart.e_offset if self._restart is not None else 0.0
+        return (plan or self.plan).apply(items, z_max=z_max)
 
     # ------------------------------------------------------------ the job
     def run(self) -> PrintResult:
@@ -439,14 +427,11 @@ class PrintJob:
     def _say_overrides_reset(self, result: PrintResult) -> None:
         """A resumed print that ran with a speed or flow override starts again at 100 %."""
         point = self.options.resume
-        if point is None or (point.speed_pct == 100 and point.flow_pct == 100):
+        if point is None:
             return
-        speed, flow = self.requests.overrides()
-        text = (
-            f"the interrupted print ran at speed {point.speed_pct:g} %, flow "
-            f"{point.flow_pct:g} %; it resumes at speed {speed * 100:g} %, flow {flow * 100:g} % "
-            "(M220 / M221 set them again)"
-        )
+        text = resumed_text((point.speed_pct, point.flow_pct), self.overrides.factors())
+        if text is None:
+            return
         self._emit(Notice(text))
         result.notices.append(text)
 
@@ -502,9 +487,9 @@ class PrintJob:
             emit=self._emit,
             state=lambda: self._state,
             requests=self.requests,
+            overrides=self.overrides,
             log_problem=lambda: self.log.problem,
             idle_timeout_s=self.options.idle_timeout_s,
-            e_offset=self._e_offset,
             setup=self.setup,
             placement=self._prepare().placement,
             plan_profile=self._plan_profile,

@@ -24,7 +24,7 @@ import numpy as np
 
 from cdprhost.gcode import items as g
 from cdprhost.job.options import PrintResult
-from cdprhost.job.overriding import Overriding
+from cdprhost.job.overriding import OverrideRequests, Overriding
 from cdprhost.job.resume import SAVED_WHILE_PRINTING, ResumePoint, ResumeWriter
 from cdprhost.job.resume_items import INSERTED_LINE, PlanSpec
 from cdprhost.job.segment_map import SegmentInfo, SegmentMap
@@ -58,28 +58,13 @@ _END = object()
 
 @dataclass
 class Requests:
-    """Pause / resume / cancel from other threads, and a safe stop from the job itself."""
+    """Pause / resume / cancel from other threads, and a safe stop from the job itself (the
+    speed and flow overrides: :class:`~cdprhost.job.overriding.OverrideRequests`)."""
 
     _set: set[str] = field(default_factory=set)
     _lock: threading.Lock = field(default_factory=threading.Lock)
     stop_reason: str = ""
     cancel_reason: str = ""  # who cancelled (quit, a signal); "" = the operator
-    speed: float = 1.0  # the operator's override (M220): a factor, read at each feed
-    flow: float = 1.0  # ... and M221
-
-    def set_override(self, what: str, factor: float) -> None:
-        """The speed or flow override (a factor, checked by the caller)."""
-        with self._lock:
-            if what == "speed":
-                self.speed = factor
-            elif what == "flow":
-                self.flow = factor
-            else:
-                raise ValueError(f"unknown override {what!r}")
-
-    def overrides(self) -> tuple[float, float]:
-        with self._lock:
-            return self.speed, self.flow
 
     def add(self, what: str) -> None:
         with self._lock:
@@ -116,9 +101,9 @@ class StreamContext:
     emit: Callable[[Event], None]
     state: Callable[[], JobState]
     requests: Requests
+    overrides: OverrideRequests
     log_problem: Callable[[], str | None]
     idle_timeout_s: float = 30.0
-    e_offset: Callable[[], float] = lambda: 0.0
     setup: Setup = field(default_factory=Setup)  # placement options the program was built with
     placement: tuple[float, float] = (0.0, 0.0)  # the X/Y shift they gave (mm)
     plan_profile: MachineProfile | None = None  # the profile planned on (capped to the board)
@@ -183,7 +168,7 @@ class Streamer:
                     self.pending.appendleft(planned.take(slice(i, n)))
                 self.stops.stop_here()
                 return
-            factors = self.ctx.requests.overrides()
+            factors = self.ctx.overrides.factors()
             ov = self.overriding
             if (
                 factors != (ov.speed, ov.flow)
@@ -456,7 +441,7 @@ class Streamer:
         if info is not None:
             p = np.asarray(info.point) - self._origin
             gcode_point = (float(p[0]), float(p[1]), float(p[2]))
-            e_mm = float(info.e_mm + self.ctx.e_offset())
+            e_mm = float(info.e_mm)
         layer = info.layer + 1 if info is not None else None
         return ResumePoint(
             gcode=self.ctx.gcode_path,
@@ -477,6 +462,6 @@ class Streamer:
             plan=self.ctx.plan.to_json(),
             setup=self.ctx.setup.to_json(),
             placement=self.ctx.placement,
-            speed_pct=round(self.ctx.requests.overrides()[0] * 100, 3),
-            flow_pct=round(self.ctx.requests.overrides()[1] * 100, 3),
+            speed_pct=round(self.ctx.overrides.factors()[0] * 100, 3),
+            flow_pct=round(self.ctx.overrides.factors()[1] * 100, 3),
         )

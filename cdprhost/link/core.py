@@ -22,6 +22,7 @@ from cdprhost.link.errors import DeviceFault, DeviceSilent, LinkError, LinkTimeo
 from cdprhost.link.flow import TimeFlow, Watermarks
 from cdprhost.link.tracker import DeviceTracker
 from cdprhost.link.tuning import (
+    CLEAN_DRY_MARGIN_S,
     CLEAN_RTO_FLOOR_MAX_S,
     CLEAN_RTO_FLOOR_S,
     COPY_LOSS,
@@ -80,7 +81,8 @@ class LinkCore:
         self._waiters = 0
         self.max_window = max(1, min(MAX_WINDOW, window))
         self._ceiling = min(0.25, self.timeout_s / 4)
-        self._clean_floor = CLEAN_RTO_FLOOR_S  # the clean fast path's floor, as learned
+        # the clean fast path's floor, as learned (at most a quarter of the link timeout)
+        self._clean_floor = min(CLEAN_RTO_FLOOR_S, self.timeout_s / 4)
         self._clean_timeouts = 0  # the sender's timeouts seen by the last adaptation
         self.ep = Endpoint(
             window=min(START_WINDOW, self.max_window),
@@ -109,6 +111,7 @@ class LinkCore:
         self._waiting_since: float | None = None
         self.garbage_since_valid = 0
         self._last_retx = 0
+        self._told = (0, 0, 0, 0)  # (retransmits, timeouts, NAKs, stale resends) logged
         self._acked_clean = 0
         # the line's loss rate: go-backs per byte sent, both counts halved now and then
         self._loss_events = 0.0
@@ -140,6 +143,7 @@ class LinkCore:
         self.ep.reset_session()
         self.ep.sender.window = min(START_WINDOW, self.max_window)
         self._last_retx = self._acked_clean = 0
+        self._told = (0, 0, self.ep.counters.naks_received, 0)
         self._clean_timeouts = 0
         self._seen = (0, 0)
         self.ctx = SegmentContext()
@@ -152,6 +156,14 @@ class LinkCore:
     def clock_rate(self) -> float:
         return self.dev.clock.rate()
 
+    def held_s(self, now: float) -> float:
+        """Seconds of motion the device holds for certain: what its last report said it
+        buffered, less what it has executed since (frames not acknowledged yet not counted)."""
+        rate = self.clock_rate()
+        if rate <= 0:
+            return 0.0
+        return self.flow.ahead_ticks(self.dev.flow, now, rate, 0) / rate
+
     # ------------------------------------------------------------------ I/O
 
     def urgent_frame(self, msg: Message) -> bytes:
@@ -162,6 +174,42 @@ class LinkCore:
             self.t.write(f)
         if frames:
             self.last_tx = self.t.now()
+            if self.ep.retransmits != self._told[0]:
+                self._tell_retransmits()
+
+    def _tell_retransmits(self) -> None:
+        """Log when and why frames were resent: a timer that expired, a NAK from the device
+        (a gap it saw), or a report that acknowledged nothing new (stale, a lossy line)."""
+        s = self.ep.sender
+        now = self.t.now()
+        resent, timeouts, naks, stale = (
+            s.retransmits - self._told[0],
+            s.timeouts - self._told[1],
+            self.ep.counters.naks_received - self._told[2],
+            s.early_resends - self._told[3],
+        )
+        self._told = (s.retransmits, s.timeouts, self.ep.counters.naks_received, s.early_resends)
+        why = ", ".join(
+            f"{n} {what}"
+            for n, what in ((timeouts, "timeout"), (naks, "NAK"), (stale, "stale report"))
+            if n
+        )
+        srtt = s.rto.srtt
+        ep = self.ep
+        noisy = ep.bad_frames or ep.deframer.garbage_bytes or ep.counters.naks_received
+        log.log(  # expected on a noisy line; on a clean one each is news
+            logging.DEBUG if noisy else logging.INFO,
+            "%s: resent %d frame(s) (%s): rto %.0f ms (floor %.0f), srtt %s, last byte from "
+            "the device %.0f ms ago, device holds %.2f s of motion",
+            self.name,
+            resent,
+            why or "duplicate",
+            1000 * s.rto.rto,
+            1000 * s.rto.floor,
+            "-" if srtt is None else f"{1000 * srtt:.0f} ms",
+            1000 * (now - self.last_rx),
+            self.held_s(now),
+        )
 
     def read(self, timeout: float) -> bytes:
         """Bytes from the port; :attr:`sent_after` is then the earliest the device can have
@@ -289,11 +337,12 @@ class LinkCore:
                 sender.rto.floor, sender.rto.ceiling = RTO_FLOOR_S, self._ceiling
                 sender.stale_after = STALE_REPORT_S
             else:  # a late answer, never a loss: wait longer from now on (CLEAN_RTO_FLOOR_MAX_S)
+                most = min(CLEAN_RTO_FLOOR_MAX_S, self.timeout_s / 2)
                 if sender.timeouts > self._clean_timeouts:
-                    most = min(CLEAN_RTO_FLOOR_MAX_S, self.timeout_s / 2)
                     self._clean_floor = max(self._clean_floor, min(2 * self._clean_floor, most))
-                sender.rto.floor = self._clean_floor
-                sender.rto.ceiling = max(self._ceiling, self._clean_floor)
+                wait = max(self._clean_floor, min(self._until_dry(), most))
+                sender.rto.floor = wait
+                sender.rto.ceiling = max(self._ceiling, wait)
                 sender.stale_after = None
             self._clean_timeouts = sender.timeouts
         # (hysteresis: with two copies far fewer frames are lost, and so the measured rate)
@@ -302,6 +351,16 @@ class LinkCore:
             sender.copies = 2
         elif frame_loss < COPY_LOSS / 3:
             sender.copies = 1
+
+    def _until_dry(self) -> float:
+        """From the oldest frame in flight: how long the device can wait for it, what it holds
+        of motion less CLEAN_DRY_MARGIN_S (0 with no queue item in flight). On a clean path the
+        frame is late, not lost: while the device holds plenty, the host waits for its ACK."""
+        sender = self.ep.sender
+        if not sender.outstanding or not sender.unacked_items():
+            return 0.0
+        now = self.t.now()
+        return now - sender.outstanding[0].sent_at + self.held_s(now) - CLEAN_DRY_MARGIN_S
 
     def loss_rate(self) -> float:
         """The line's loss rate: losses (go-backs) per byte that got through, both counts

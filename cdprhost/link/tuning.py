@@ -49,11 +49,17 @@ RTO_MAX_BACKOFF = 8
 # load retransmitted on every scheduling hiccup, and a frozen device drew a window's worth
 # of resends every 3 ms, 139 in 1.5 s.)
 RTO_FAST = (RTO_FLOOR_S, RTO_MAX_BACKOFF)
-# ... while that path has shown no damaged byte and no NAK, the floor is this instead: a
-# pty or USB loses nothing, and there a timeout is only a scheduling delay of the device
-# process or the host under load (a clean 1x print on a loaded machine timed out at 28 ms);
-# it still doubles on a silent device.
-CLEAN_RTO_FLOOR_S = 0.15
+# ... while that path has shown no damaged byte and no NAK, the floor is this instead (at
+# most a quarter of the link timeout): a pty or USB loses nothing, and there a timeout is
+# only a scheduling delay of the device process or the host under load (a clean 1x print on
+# a loaded machine timed out at 28 ms; with a 150 ms floor, the cup at 1x on a machine at
+# load 4-8 still resent twice, each after the device had been silent 221 and 400 ms); it
+# still doubles on a silent device.
+CLEAN_RTO_FLOOR_S = 0.5
+# ... and longer while the device holds motion: a frame in flight is resent only once the
+# device would be left with this much (seconds) of motion (up to CLEAN_RTO_FLOOR_MAX_S
+# after the frame left): waiting costs nothing on a path that loses nothing.
+CLEAN_DRY_MARGIN_S = 0.25
 # ... and on that clean path every timeout doubles the floor for the rest of the session (up
 # to this, and to half the link timeout), the ceiling rising with it, and a device report
 # that does not acknowledge a frame yet resends nothing (STALE_REPORT_S is for a lossy line):

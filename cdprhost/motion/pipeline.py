@@ -17,7 +17,7 @@ from typing import Any
 
 from cdprhost.gcode.items import HomeCommand, MoveChunk
 from cdprhost.kinematics.machine import MachineModel
-from cdprhost.motion.program import MarkedMoves, ProgramPlanner, split_at_marks
+from cdprhost.motion.program import ExtruderAt, MarkedMoves, ProgramPlanner, split_at_marks
 from cdprhost.motion.segments import (
     DEFAULT_CLOCK_HZ,
     DEFAULT_LIMITS,
@@ -86,6 +86,9 @@ def segment_blocks(
                 match out:
                     case HomeCommand():
                         seg.home()
+                    case ExtruderAt(e_mm=e_mm):
+                        seg.extruder_at(e_mm)
+                        continue  # for the segmenter only: nothing to send
                     case _:
                         pass
                 yield out

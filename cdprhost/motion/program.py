@@ -43,7 +43,17 @@ from cdprhost.motion.trapezoid import PlannedMoves
 from cdprhost.profile.models import MachineProfile
 
 
-def flushes_motion(item: ProgramItem) -> bool:
+@dataclass(frozen=True, slots=True)
+class ExtruderAt:
+    """Not from a file: the extruder stands at the program's E ``e_mm`` (a restart part-way
+    keeps the file's absolute E, so every later segment's extruder steps round as the
+    whole print's do: ``round(e * spm)`` of the same ``e``). At rest; moves nothing."""
+
+    e_mm: float
+    line: int = 0
+
+
+def flushes_motion(item: ProgramItem | ExtruderAt) -> bool:
     """True for commands that must wait until the machine is at rest."""
     match item:
         case (
@@ -53,6 +63,7 @@ def flushes_motion(item: ProgramItem) -> bool:
             | WaitMoves()
             | FilamentChange()
             | PidAutotune()
+            | ExtruderAt()
         ):
             return True
         case SetTemperature(wait=wait):

@@ -7,7 +7,11 @@ equal pieces no longer than the move's chord step, so the effector stays within
 the chord tolerance of the G-code line. Step targets are computed absolutely at
 every segment end (``model.steps(model.ik(points))``, extruder ``round(e * spm)``)
 and deltas are their differences, so rounding never drifts. Durations are
-differences of rounded absolute times: ``round(t_end f) - round(t_start f)``.
+differences of rounded times since the move's start, ``round(t_end f) - round(t_start f)``
+with ``t`` counted from the move's start: a move's segments depend on the move alone, not
+on when the program reached it (so a program restarted part-way gives every move it
+shares with the whole print the same segments, tick for tick); each move's duration is
+rounded on its own (half a tick at most, not carried to the next).
 
 ``ramp`` is the start-speed fraction r = v_start / (v_start + v_end): over the
 normalised time tau in [0, 1] the segment covers p(tau) = 2 r tau + (1 - 2r) tau^2
@@ -241,7 +245,14 @@ def segment_moves_ends(
         move_first = np.append(0, ends[:-1] + 1)
         t_begin[move_first] = planned.t_start
         v_begin[move_first] = planned.v_start
-    ticks = np.rint(t_end * clock_hz).astype(np.int64) - np.rint(t_begin * clock_hz).astype(
+    # durations from the time since the move's start (see the module doc)
+    local_end = pc.t.copy()
+    local_end[ends] = planned.duration
+    local_begin = np.empty(n)
+    if n:
+        local_begin[1:] = local_end[:-1]
+        local_begin[move_first] = 0.0
+    ticks = np.rint(local_end * clock_hz).astype(np.int64) - np.rint(local_begin * clock_hz).astype(
         np.int64
     )
 
@@ -409,3 +420,10 @@ class Segmenter:
     def home(self) -> None:
         """After G28: sliders at their endstops, the extruder where it was."""
         self.state = SegmentState.at_home(self.model, self.home_sliders, int(self.state.steps[3]))
+
+    def extruder_at(self, e_mm: float) -> None:
+        """The extruder stands at program E ``e_mm``: its step count becomes that E's
+        rounding (no motion), so the next segments' deltas are those of the whole print."""
+        steps = self.state.steps.copy()
+        steps[3] = np.int64(np.rint(e_mm * self.e_steps_per_mm))
+        self.state = replace(self.state, steps=steps)

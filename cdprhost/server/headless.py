@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Any
 
 from cdprhost.errors import CdprError
-from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.before_start import before_start
 from cdprhost.job.resume import log_path_for
 from cdprhost.job.runner import PrintJob, PrintOptions
@@ -35,15 +34,15 @@ from cdprhost.job.state import (
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link import HostLink, LinkError
 from cdprhost.link.errors import DeviceFault
-from cdprhost.motion.prepared import Setup, prepare
-from cdprhost.preflight.run import preflight_prepared
+from cdprhost.motion.prepared import Setup
 from cdprhost.profile.models import MachineProfile
 from cdprhost.server import jobcontrol
 from cdprhost.server.printer import (
     PrinterStatus,
     Refused,
-    busy_reason,
-    preflight_refusal,
+    refuse_if_busy,
+    refuse_if_faulted,
+    refuse_unless_preflight_passes,
 )
 
 log = logging.getLogger(__name__)
@@ -100,42 +99,20 @@ class HeadlessPrinter:
     # ------------------------------------------------------------- start
     def check_start(self, path: Path) -> None:
         self._refuse_if_busy()
-        try:
-            report = preflight_prepared(prepare(path, self.profile, self.model, self.setup))
-        except GcodeError as exc:
-            raise Refused(f"the file does not parse: {exc}; nothing started") from None
-        except (CdprError, OSError) as exc:
-            raise Refused(f"{exc}; nothing started") from None
-        if not report.ok:
-            v = report.violations[0]
-            raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+        refuse_unless_preflight_passes(path, self.profile, self.model, self.setup)
         self._refuse_if_faulted(path)
 
     def _refuse_if_faulted(self, path: Path) -> None:
-        """A device stopped by a fault starts nothing unless ``clear_fault`` (and the fault
-        is one the host may clear): nobody at the machine has looked at it."""
         with self._lock:
             self._refuse_if_busy()
             try:
                 info = before_start(self._job_link(), path)
             except (LinkError, OSError) as exc:
                 raise Refused(f"the device does not answer: {exc}; nothing started") from None
-        if info.fault is None or (self.clear_fault and info.clearable):
-            return
-        how = (
-            "check the machine, then restart `cdprhost serve --clear-fault` (or clear it in "
-            "`cdprhost tui`)"
-            if info.clearable
-            else "it cannot be cleared from the host"
-        )
-        raise Refused(f"{info.fault}: {how}; nothing started")
+        refuse_if_faulted(info.fault, info.clearable, self.clear_fault)
 
     def _refuse_if_busy(self) -> None:
-        if self._closing:
-            raise Refused("the server is shutting down; nothing started")
-        status = self._status
-        if status.busy:
-            raise Refused(busy_reason(status))
+        refuse_if_busy(self._status, self._closing)
 
     def start(self, path: Path, who: str) -> None:
         with self._lock:

@@ -15,7 +15,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from cdprhost.errors import CdprError
+from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.state import JobSnapshot, JobState, Temperatures
+from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.prepared import Setup, prepare
+from cdprhost.preflight.run import preflight_prepared
+from cdprhost.profile.models import MachineProfile
 
 
 class Refused(Exception):
@@ -40,6 +46,45 @@ def busy_reason(status: PrinterStatus) -> str:
     name = status.file.name if status.file else "a file"
     who = f", started by {status.started_by}" if status.started_by else ""
     return f"the machine is busy: {status.job.state.value} {name}{who}; nothing started"
+
+
+def refuse_if_busy(status: PrinterStatus, closing: bool) -> None:
+    """Refuse a start while the server shuts down or a job runs (or is checked)."""
+    if closing:
+        raise Refused("the server is shutting down; nothing started")
+    if status.busy:
+        raise Refused(busy_reason(status))
+
+
+def refuse_unless_preflight_passes(
+    path: Path, profile: MachineProfile, model: MachineModel, setup: Setup
+) -> None:
+    """Refuse a file that does not parse, cannot be read or fails preflight (the first
+    violation named)."""
+    try:
+        report = preflight_prepared(prepare(path, profile, model, setup))
+    except GcodeError as exc:
+        raise Refused(f"the file does not parse: {exc}; nothing started") from None
+    except (CdprError, OSError) as exc:
+        raise Refused(f"{exc}; nothing started") from None
+    if not report.ok:
+        v = report.violations[0]
+        raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+
+
+def refuse_if_faulted(fault: str | None, clearable: bool, clear_fault: bool) -> None:
+    """A device stopped by a fault starts nothing unless the server clears faults
+    (``clear_fault``) and this one may be cleared from the host: nobody at the machine has
+    looked at it. The refusal names the fault and the way out."""
+    if not fault or (clear_fault and clearable):
+        return
+    how = (
+        "check the machine, then restart `cdprhost serve --clear-fault` (or clear it in "
+        "`cdprhost tui`)"
+        if clearable
+        else "it cannot be cleared from the host"
+    )
+    raise Refused(f"{fault}: {how}; nothing started")
 
 
 class Printer(Protocol):

@@ -31,7 +31,6 @@ from typing import Any
 import numpy as np
 
 from cdprhost.errors import CdprError
-from cdprhost.gcode.errors import GcodeError
 from cdprhost.job.resume import log_path_for
 from cdprhost.job.state import (
     Event,
@@ -42,10 +41,15 @@ from cdprhost.job.state import (
     reduce,
 )
 from cdprhost.kinematics.machine import MachineModel
-from cdprhost.motion.prepared import Setup, prepare
-from cdprhost.preflight.run import preflight_prepared
+from cdprhost.motion.prepared import Setup
 from cdprhost.profile.models import MachineProfile
-from cdprhost.server.printer import PrinterStatus, Refused, busy_reason, preflight_refusal
+from cdprhost.server.printer import (
+    PrinterStatus,
+    Refused,
+    refuse_if_busy,
+    refuse_if_faulted,
+    refuse_unless_preflight_passes,
+)
 from cdprhost.server.web_controls import JOG_FEED_MM_S, jog_target
 from cdprhost.service import wire
 from cdprhost.service.client import ServiceClient, ServiceError, attach
@@ -259,41 +263,20 @@ class ServicePrinter:
 
     def check_start(self, path: Path) -> None:
         self._refuse_if_busy()
-        try:
-            report = preflight_prepared(prepare(path, self.profile, self.model, self.setup))
-        except GcodeError as exc:
-            raise Refused(f"the file does not parse: {exc}; nothing started") from None
-        except (CdprError, OSError) as exc:
-            raise Refused(f"{exc}; nothing started") from None
-        if not report.ok:
-            v = report.violations[0]
-            raise Refused(preflight_refusal(report.violations_total, v.line, v.rule, v.detail))
+        refuse_unless_preflight_passes(path, self.profile, self.model, self.setup)
         self._refuse_if_faulted()
 
     def _refuse_if_faulted(self) -> None:
-        """A device stopped by a fault starts nothing unless ``clear_fault`` (and the fault
-        is one the host may clear): nobody at the machine has looked at it."""
         self._refuse_if_busy()
         try:
             state = self._operate(wire.Status())
         except Refused as exc:
             raise Refused(f"the device does not answer: {exc}; nothing started") from None
-        if state is None or not state.fault or (self.clear_fault and state.clearable):
-            return
-        how = (
-            "check the machine, then restart `cdprhost serve --clear-fault` (or clear it in "
-            "`cdprhost tui`)"
-            if state.clearable
-            else "it cannot be cleared from the host"
-        )
-        raise Refused(f"{state.fault}: {how}; nothing started")
+        if state is not None:
+            refuse_if_faulted(state.fault, state.clearable, self.clear_fault)
 
     def _refuse_if_busy(self) -> None:
-        if self._closing:
-            raise Refused("the server is shutting down; nothing started")
-        status = self._status
-        if status.busy:
-            raise Refused(busy_reason(status))
+        refuse_if_busy(self._status, self._closing)
 
     def start(self, path: Path, who: str) -> None:
         self._refuse_if_busy()

@@ -7,8 +7,8 @@ A front end ``connect``s (the service opens the link, or shares the one it has) 
 client that connects during a print started without a session shares the print's link. While
 it is open a poll thread reads the device about once a second (pumping the embedded
 device's virtual clock between reads) and hands the status and the link's counters to
-``broadcast``. Operations (home, a move, heaters, drivers, clearing a fault) run one at a
-time under one lock; the poll then only asks for a status and reads the latest, so
+``broadcast``. Operations (home, a move, heaters, drivers, clearing a fault, and the
+calibration wizard's visits and simulated observers) run one at a time under one lock; the poll then only asks for a status and reads the latest, so
 temperatures keep coming during a long homing. A job takes the same link
 (:meth:`DeviceSession.link_for_job`) and its own events carry the device's state; the poll
 waits meanwhile. An emergency stop never waits for the lock.
@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 from pydantic import BaseModel, ValidationError
 
 from cdprhost.errors import CdprError
@@ -111,16 +112,27 @@ def read_state(link: Any) -> wire.DeviceState:
 def move_refusal(model: Any, st: Any, target: tuple[float, float, float]) -> str:
     """Why the straight move from where the device is to ``target`` leaves the workspace
     ("" when it does not; the path is sampled every millimetre)."""
-    import numpy as np
-
-    end = np.asarray(target, dtype=float)
     if st.homed_mask & 0b111 != 0b111:
         return ""  # the move itself refuses: not homed
-    here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
-    points = end[None, :]
-    if np.all(np.isfinite(here)):
-        n = max(2, int(np.ceil(np.linalg.norm(end - here))) + 1)
-        points = here + np.linspace(0.0, 1.0, n)[:, None] * (end - here)
+    return path_refusal(model, st, [target])
+
+
+def path_refusal(model: Any, st: Any, targets: Any, home: Any = None) -> str:
+    """Why the straight moves from where the device is (when homed and known; else from
+    ``home``, where homing leaves it, when given) through ``targets`` in order leave the
+    workspace ("" when they do not; sampled every mm)."""
+    ends = np.asarray(targets, dtype=float).reshape(-1, 3)
+    legs = [ends[:1]]
+    start = ends[0] if home is None else np.asarray(home, dtype=float).reshape(3)
+    if st.homed_mask & 0b111 == 0b111:
+        here = model.fk(model.sliders_from_steps(np.asarray(st.steps[:3]))[None, :])[0]
+        if np.all(np.isfinite(here)):
+            start = here
+    for end in ends:
+        n = max(2, int(np.ceil(np.linalg.norm(end - start))) + 1)
+        legs.append(start + np.linspace(0.0, 1.0, n)[:, None] * (end - start))
+        start = end
+    points = np.concatenate(legs)
     report = model.check(points)
     if report.ok.all():
         return ""
@@ -128,9 +140,12 @@ def move_refusal(model: Any, st: Any, target: tuple[float, float, float]) -> str
     return f"{report.rule_name(i)}: {report.describe(i, model.limits)}"
 
 
-def identity_json(identity: Any) -> dict[str, Any]:
+def identity_json(identity: Any, caps: Any = None) -> dict[str, Any]:
+    """The device's identity for the wire, with its CAPS' shortest segment when announced."""
     out = {name: getattr(identity, name, None) for name in IDENTITY_FIELDS}
     out["protocol"] = list(out["protocol"] or ())
+    if caps is not None:
+        out["min_segment_ticks"] = int(caps.min_segment_ticks)
     return out
 
 
@@ -162,6 +177,7 @@ class DeviceSession:
         self._stop = threading.Event()
         self._poller: threading.Thread | None = None
         self._last: wire.DeviceState | None = None
+        self._camera: Any = None  # the simulated camera on the embedded device (observe)
 
     # ------------------------------------------------------------ holding
     @property
@@ -197,7 +213,10 @@ class DeviceSession:
             link = self._link
         status = self._last if self.job_active() else self._status_now()
         return wire.Answer(
-            id=spec.id, ok=True, identity=identity_json(link.identity), status=status
+            id=spec.id,
+            ok=True,
+            identity=identity_json(link.identity, getattr(link, "caps", None)),
+            status=status,
         )
 
     def release(self, holder: int, job_ended: bool = False, closing: bool = False) -> None:
@@ -287,11 +306,12 @@ class DeviceSession:
         except (CdprError, LinkError, OSError) as exc:
             return wire.Answer(id=request.id, ok=False, error=str(exc) or type(exc).__name__)
         self._note(self._link)
+        status, extra = status if isinstance(status, tuple) else (status, {})
         state = status if isinstance(status, wire.DeviceState) else device_state(status)
         self._last = state
         if not isinstance(request, wire.Status):  # every client sees what one of them did
             self.broadcast(wire.DeviceMsg(connected=True, status=state))
-        return wire.Answer(id=request.id, ok=True, status=state)
+        return wire.Answer(id=request.id, ok=True, status=state, **extra)
 
     def _carry_out(self, request: Any) -> Any:
         from cdprhost.machine import Machine
@@ -327,7 +347,39 @@ class DeviceSession:
             return m.motors_off()
         if isinstance(request, wire.Enable):
             return m.enable()
+        if isinstance(request, wire.Visit | wire.Observe | wire.Capture):
+            return self._calibration(request)
         raise CdprError(f"{request.op}: not a device operation")
+
+    def _calibration(self, request: Any) -> tuple[Any, dict[str, Any]]:
+        """The calibration wizard's requests: a visit (refused on a faulted device, or
+        leaving the workspace, before anything moves), the embedded device's observer, the
+        simulated camera's pictures. The status after, and the answer's own fields."""
+        from cdprhost.machine import Machine
+        from cdprhost.service import sim_world
+
+        if isinstance(request, wire.Visit):
+            m = Machine(self._link, self._profile, self._model, settle_s=request.settle_s)
+            home = self._model.home_point(np.asarray(self._profile.drive.home_mm))
+            refused = path_refusal(self._model, m.ready(), request.points, home)
+            if refused:
+                raise CdprError(f"refused, nothing moved: {refused}")
+            _steps, device_time_s = m.visit(np.asarray(request.points, dtype=float))
+            return m.status(), {"device_time_s": device_time_s}
+        device = getattr(self._link, "device", None)
+        if isinstance(request, wire.Observe):
+            if self.port is not None or device is None:
+                raise CdprError(f"refused: {sim_world.NOT_EMBEDDED}")
+            observer = sim_world.make_observer(request, self._model)
+            sim_world.watch(device, observer)
+            self._camera = observer if request.camera is not None else None
+            return read_state(self._link), {}
+        camera = self._camera
+        if camera is None:
+            raise CdprError("no simulated camera watches the device: observe with a camera first")
+        return read_state(self._link), {
+            "files": sim_world.capture(camera, request.folder, request.frames)
+        }
 
     def emergency_stop(self, request_id: int) -> wire.Answer:
         """Stop now, not waiting for a running operation (the link is thread-safe)."""

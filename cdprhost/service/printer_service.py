@@ -19,7 +19,6 @@ import fcntl
 import functools
 import logging
 import os
-import queue
 import signal
 import socket
 import threading
@@ -34,107 +33,19 @@ from cdprhost.job.runner import PrintJob, PrintOptions
 from cdprhost.job.state import Event, JobState
 from cdprhost.logs import attach_log_file, detach_log_file
 from cdprhost.service import wire
+from cdprhost.service.clients import Client
 from cdprhost.service.device_session import DeviceSession, Opener
 from cdprhost.service.journal import Journal
 from cdprhost.service.paths import ServiceFiles, device_name, key_matches, write_key
 
 log = logging.getLogger(__name__)
 
-#: messages a client may fall behind by before it is dropped (a stopped front end)
-MAX_BACKLOG = 20_000
-#: the kernel's share of a client's backlog (bytes); the rest waits in its queue
-SEND_BUFFER = 64 * 1024
-HELLO_TIMEOUT_S = 5.0
 #: how long a new service waits for the front end that started it
 FIRST_CLIENT_S = 60.0
 
 
 class ServiceBusy(RuntimeError):
     """Another service already owns this device (its lock is held)."""
-
-
-class _Client:
-    """One connected front end: a reader (in its own thread) and a bounded sender."""
-
-    def __init__(self, conn: socket.socket, service: PrinterService, number: int):
-        self.conn = conn
-        self.service = service
-        self.number = number
-        self.who = "?"
-        self.out: queue.Queue[bytes | None] = queue.Queue()
-        self.closed = threading.Event()
-        self._sender = threading.Thread(target=self._send_loop, name=f"client-{number}-out")
-        self._sender.daemon = True
-
-    def start(self) -> None:
-        with contextlib.suppress(OSError):
-            self.conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
-        self._sender.start()
-        name = f"client-{self.number}-in"
-        threading.Thread(target=self._read_loop, name=name, daemon=True).start()
-
-    def send(self, message: BaseModel | bytes) -> None:
-        """Queue a message (or its encoded line); never blocks. A client too far behind is
-        dropped."""
-        if self.closed.is_set():
-            return
-        if self.out.qsize() >= MAX_BACKLOG:
-            log.warning("client %d (%s) stopped reading: disconnected", self.number, self.who)
-            self.close(now=True)
-            return
-        self.out.put(message if isinstance(message, bytes) else wire.encode(message))
-
-    def close(self, now: bool = False) -> None:
-        """Hang up once what is queued is sent (``now``: at once, for a client too far
-        behind to be worth waiting for)."""
-        if self.closed.is_set():
-            return
-        self.closed.set()
-        self.out.put(None)
-        if now:
-            self._hang_up()
-        self.service.forget(self)
-
-    def _hang_up(self) -> None:
-        with contextlib.suppress(OSError):
-            self.conn.shutdown(socket.SHUT_RDWR)
-
-    def _send_loop(self) -> None:
-        try:
-            while True:
-                data = self.out.get()
-                if data is None:
-                    break
-                self.conn.sendall(data)
-        except OSError:
-            pass
-        finally:
-            self.close(now=True)
-            self._hang_up()
-            with contextlib.suppress(OSError):
-                self.conn.close()
-
-    def _read_loop(self) -> None:
-        try:
-            reader = self.conn.makefile("rb")
-            self.conn.settimeout(HELLO_TIMEOUT_S)
-            first = reader.readline(wire.MAX_LINE + 1)
-            hello = wire.decode_request(first) if first else None
-            if not isinstance(hello, wire.Hello) or not self.service.admit(self, hello):
-                return
-            self.conn.settimeout(None)
-            for line in iter(lambda: reader.readline(wire.MAX_LINE + 1), b""):
-                request = wire.decode_request(line)
-                if isinstance(request, wire.Bye):
-                    break
-                self.service.handle(self, request)
-        except wire.WireError as exc:
-            self.send(wire.Reply(ok=False, error=f"refused: {exc}"))
-            log.warning("client %d sent a bad message: %s", self.number, exc)
-        except OSError:
-            pass
-        finally:
-            self.close()
 
 
 class _Forward(logging.Handler):
@@ -166,7 +77,7 @@ class PrinterService:
         self.idle_s = idle_s
         self.link_factory = link_factory or default_link_factory
         self._lock = threading.RLock()
-        self._clients: set[_Client] = set()
+        self._clients: set[Client] = set()
         self._count = 0
         self._journal = Journal()
         self._job: PrintJob | None = None
@@ -228,7 +139,7 @@ class PrinterService:
                     continue
                 with self._lock:
                     self._count += 1
-                    client = _Client(conn, self, self._count)
+                    client = Client(conn, self, self._count)
                 client.start()
         finally:
             self.close()
@@ -281,7 +192,7 @@ class PrinterService:
         return thread is not None and thread.is_alive()
 
     # ------------------------------------------------------------ clients
-    def admit(self, client: _Client, hello: wire.Hello) -> bool:
+    def admit(self, client: Client, hello: wire.Hello) -> bool:
         if hello.v != wire.VERSION:
             client.send(
                 wire.Reply(
@@ -312,7 +223,7 @@ class PrinterService:
         log.info("client %d (%s) attached", client.number, client.who)
         return True
 
-    def forget(self, client: _Client) -> None:
+    def forget(self, client: Client) -> None:
         with self._lock:
             self.session.release(client.number)
             if client in self._clients:
@@ -327,7 +238,7 @@ class PrinterService:
         for client in clients:
             client.send(line)
 
-    def handle(self, client: _Client, request: Any) -> None:
+    def handle(self, client: Client, request: Any) -> None:
         if isinstance(request, wire.DeviceRequest):
             self._device(client, request)
             return
@@ -359,7 +270,7 @@ class PrinterService:
                 return
         client.send(wire.Reply(id=request.id, ok=True))
 
-    def _device(self, client: _Client, request: Any) -> None:
+    def _device(self, client: Client, request: Any) -> None:
         """A device-session request, in a thread of its own (a homing takes seconds; the
         client's next line, an e-stop, is read meanwhile)."""
 
@@ -380,7 +291,7 @@ class PrinterService:
         threading.Thread(target=work, name=f"device-{request.op}", daemon=True).start()
 
     # ------------------------------------------------------------ the job
-    def _start(self, client: _Client, request: wire.Start) -> str:
+    def _start(self, client: Client, request: wire.Start) -> str:
         from cdprhost.job.resume import find_resume_point
         from cdprhost.motion.prepared import Setup
         from cdprhost.profile.models import MachineProfile

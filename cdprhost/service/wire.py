@@ -17,6 +17,10 @@ client -> service  ``connect`` ``disconnect`` ``status`` ``home`` ``move`` ``hea
                    ``motors_off`` ``enable`` ``clear_fault`` (``estop`` without a print)
 service -> client  ``answer`` ``device`` ``note`` ``job``
 
+and, added within version 1 (the calibration wizard's device, see "calibration" below):
+
+client -> service  ``visit`` ``observe`` ``capture``
+
 Job events are the dataclasses of :mod:`cdprhost.job.state`, written as their fields plus
 ``type`` (the class name), so every client folds them with the one reducer.
 """
@@ -205,8 +209,66 @@ class ClearFault(_Msg):
     id: int = 0
 
 
+# ------------------------------------------------------------ client -> service: calibration
+# What the calibration wizard asks of the device (its fitting stays with the client), in the
+# device session like the operations above: refused while a print runs or the device is
+# faulted. ``observe`` and ``capture`` are the simulated world of the embedded device.
+
+Coordinate = Annotated[float, Field(ge=-1e5, le=1e5, allow_inf_nan=False)]
+Point = tuple[Coordinate, Coordinate, Coordinate]
+
+
+class Visit(_Msg):
+    """The wizard's move (``Machine.visit``): through ``points`` (machine frame, mm, in
+    order), homing first when needed, then ``settle_s`` at rest; answered with the settled
+    status and the device's clock then (``device_time_s``)."""
+
+    op: Literal["visit"] = "visit"
+    id: int = 0
+    points: tuple[Point, ...] = Field(min_length=1, max_length=64)
+    settle_s: float = Field(default=0.5, ge=0.0, le=30.0, allow_inf_nan=False)
+
+
+class Observe(_Msg):
+    """What watches the embedded simulated device (a pty sim-device has its own ``--truth``
+    and ``--mocap-dir``): the virtual motion capture of the hidden true machine ``truth`` (a
+    profile name or an absolute path) writing a take into ``mocap_dir`` (absolute) at every
+    settle, or the simulated camera of the nominal machine taking pictures of ``camera``
+    (width, height) pixels (as the Calibrate screen's ``sim:WxH`` allows); neither: nothing
+    watches."""
+
+    op: Literal["observe"] = "observe"
+    id: int = 0
+    truth: str | None = Field(default=None, min_length=1, max_length=4096)
+    mocap_dir: str | None = Field(default=None, min_length=1, max_length=4096)
+    camera: (
+        tuple[Annotated[int, Field(ge=320, le=3840)], Annotated[int, Field(ge=240, le=2160)]] | None
+    ) = None
+
+
+class Capture(_Msg):
+    """The simulated camera's pictures now, each written as a PNG file into ``folder`` (an
+    absolute path); answered with the files (``files``), the client's to read and remove."""
+
+    op: Literal["capture"] = "capture"
+    id: int = 0
+    folder: str = Field(min_length=1, max_length=4096)
+    frames: int = Field(default=1, ge=1, le=16)
+
+
 DeviceRequest = (
-    Connect | Disconnect | Status | Home | MoveTo | Heaters | MotorsOff | Enable | ClearFault
+    Connect
+    | Disconnect
+    | Status
+    | Home
+    | MoveTo
+    | Heaters
+    | MotorsOff
+    | Enable
+    | ClearFault
+    | Visit
+    | Observe
+    | Capture
 )
 
 Request = Annotated[
@@ -288,6 +350,8 @@ class Answer(_Out):
     identity: dict[str, Any] | None = None
     status: DeviceState | None = None
     confirmed: bool = False
+    device_time_s: float | None = None  # to ``visit``: the device's clock once settled
+    files: tuple[str, ...] = ()  # to ``capture``: the pictures written
 
 
 class DeviceMsg(_Out):

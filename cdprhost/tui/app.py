@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import signal
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from textual import events
 from textual.app import App, SystemCommand
@@ -53,11 +54,21 @@ from cdprhost.tui.screens.print_screen import PrintScreen
 from cdprhost.tui.state import CONSOLE_LINES, UiState, fold_job_events, shown_job_state
 from cdprhost.tui.tabs import TAB_OF, TABS, screen_key
 
+if TYPE_CHECKING:  # pragma: no cover
+    from cdprhost.tui.screens.host import ScreenHost
+
 ESTOP_KEY = "f9"
 ESTOP_ARM_S = 3.0
 """The emergency stop is a double press of its key within this many seconds: fast to do on
 purpose, hard to do by accident (a dialog would cost a look and a second key anyway)."""
 STOP_SIGNALS = ("SIGTERM", "SIGHUP", "SIGINT")
+QUIT_LEAVING = (
+    "A print is running in the printer service. Quit and leave it printing (`cdprhost tui` "
+    "shows it again), cancel it (stop, park, heaters off, resume point saved) and quit when the "
+    "machine is at rest, or stay (No)?"
+)
+
+log = logging.getLogger(__name__)
 
 
 class EventsReady(Message):
@@ -190,16 +201,46 @@ class CdprApp(App[int]):
         if not self.is_headless:
             self._catch_stop_signals()
 
+    @property
+    def print_outlives_ui(self) -> bool:
+        """The print runs in the printer service (the default backend): it goes on when this
+        process ends. In-process (``--in-process``) it dies with the process."""
+        return bool(getattr(self.backend, "print_outlives_ui", False))
+
     def _catch_stop_signals(self) -> None:
-        """SIGTERM, SIGHUP, SIGINT stop the machine like the quit key (no question asked)."""
+        """SIGTERM, SIGHUP, SIGINT: with the print in the service, the UI leaves and the print
+        goes on (a closed terminal or a dropped ssh never stops it); in-process, they stop
+        the machine like the quit key (no question asked)."""
         loop = asyncio.get_running_loop()
         for name in STOP_SIGNALS:
             with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
-                loop.add_signal_handler(getattr(signal, name), self.controller.stop_and_quit, name)
+                loop.add_signal_handler(getattr(signal, name), self.on_stop_signal, name)
+
+    def on_stop_signal(self, name: str) -> None:
+        if self.print_outlives_ui:
+            self.leave(name)
+        else:
+            self.controller.stop_and_quit(name)
+
+    def leave(self, why: str) -> None:
+        """Quit without touching the print: it goes on in the printer service (said in the
+        log; a new ``cdprhost tui`` attaches to it)."""
+        what = "a print started there"
+        if self.state.job_active:
+            what = f"the print of {self.state.job_path or 'the file'}"
+        log.warning(
+            "%s: the terminal UI quits; %s goes on in the printer service (`cdprhost tui` "
+            "shows it again)",
+            why,
+            what,
+        )
+        self.exit(0)
 
     def on_unmount(self) -> None:
-        """The link closes last: a job still running is stopped (and waited for) first."""
-        self.controller.stop_before_close()
+        """The link closes last: in-process, a job still running is stopped (and waited for)
+        first; a print in the service is left to it (the UI only lets go of the device)."""
+        if not self.print_outlives_ui:
+            self.controller.stop_before_close()
         with contextlib.suppress(Exception):  # closing must not mask the exit
             self.backend.close()
         self._unroute_logging()
@@ -256,11 +297,24 @@ class CdprApp(App[int]):
         if not self.state.job_active:
             self.exit(0)
             return
+        if self.print_outlives_ui:
+            self.push_screen(
+                ConfirmScreen(QUIT_LEAVING, other="Cancel the print", yes="Leave it printing"),
+                self._quit_chosen,
+            )
+            return
         self.confirm(
             "A print is running. Stop it (like a cancel: stop, park, heaters off, resume point "
             "saved) and quit when the machine is at rest?",
             self.controller.stop_and_quit,
         )
+
+    def _quit_chosen(self, choice: bool | str | None) -> None:
+        if choice is True:
+            self.leave("quit")
+        elif choice == "other":  # cancelled like a cancel, then the exit once at rest
+            self.controller.stop_and_quit("quit")
+        # else: stay
 
     def action_emergency_stop(self) -> None:
         """First press arms, a second within ``ESTOP_ARM_S`` stops."""
@@ -447,3 +501,9 @@ class CdprApp(App[int]):
             )
         yield SystemCommand("Keys", "Every key of this screen (?)", self.action_help)
         yield from super().get_system_commands(screen)
+
+
+if TYPE_CHECKING:  # pragma: no cover - the type checker holds the app to what screens ask
+
+    def _screen_host(app: CdprApp) -> ScreenHost:
+        return app

@@ -1,7 +1,8 @@
 """Camera takes judged on the camera's own noise: on a rendered session no sound take is
 refused as creep (a frame's B scatters several times more along the line of sight than
-across it, and a few frames cannot show that), and a take whose effector creeps 1.5 mm
-is still refused as drift, naming the camera's noise."""
+across it, and a few frames cannot show that), a take whose effector creeps 1.5 mm is
+still refused as drift, naming the camera's noise, and one whose effector shakes by 0.3 mm
+(far below the motion-capture spread cap of 1 mm) as spread."""
 
 from __future__ import annotations
 
@@ -32,12 +33,15 @@ def measured(sim_model, tmp_path_factory):
         intrinsics="truth",
         frames_per_take=4,
         take_creep_mm={4: (1.2, -0.6, 0.7)},
+        take_shake_mm={7: 0.3},
         seed=3,
     )
     return measure_any(load_session(s.directory), sim_model)
 
 
-def test_only_the_creeping_take_is_refused_and_as_drift(measured):
-    assert [(r.pose, r.reason) for r in measured.rejected] == [(4, "drift")]
+def test_only_the_creeping_and_the_shaking_takes_are_refused_and_why(measured):
+    why = [r.message for r in measured.rejected]
+    assert [(r.pose, r.reason) for r in measured.rejected] == [(4, "drift"), (7, "spread")], why
     assert "against the camera's frame noise" in measured.rejected[0].message
-    assert len(measured) == 9
+    assert "camera's frame noise predicts" in measured.rejected[1].message
+    assert len(measured) == 8

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cdprhost.gcode.sample_parts import square_walls
 from cdprhost.job.resume import ResumePoint
 from cdprhost.job.runner import PrintJob, PrintOptions
 from cdprhost.job.state import JobSnapshot, JobState, Overrides, Planned, Progress, reduce
@@ -15,16 +16,8 @@ from cdprhost.sim.embedded import open_embedded
 
 
 def _part(tmp_path, layers=8):
-    lines = ["G28", "M104 S200", "M109 S200", "G92 E0"]
-    e = 0.0
-    for n in range(layers):
-        lines.append(f"G1 Z{0.3 * (n + 1):.2f} F3000")
-        for x, y in [(30, 0), (30, 30), (0, 30), (0, 0)] * 3:
-            e += 1.0
-            lines.append(f"G1 X{x} Y{y} E{e:.3f} F1800")
-        lines += [f"G1 E{e - 1:.3f} F2400", f"G1 E{e:.3f}"]
     path = tmp_path / "part.gcode"
-    path.write_text("\n".join(lines) + "\n")
+    path.write_text(square_walls(layers))
     return path
 
 
@@ -84,7 +77,7 @@ def test_an_override_out_of_range_is_refused_and_changes_nothing(tmp_path, perce
         job.request_speed(percent)
     with pytest.raises(ValueError, match="out of range"):
         job.request_flow(percent)
-    assert job.requests.overrides() == (1.0, 1.0)
+    assert job.overrides.factors() == (1.0, 1.0)
 
 
 def test_the_resume_point_records_the_overrides_and_a_resume_says_it_starts_at_100(tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from cdprhost.link.tuning import CLEAN_RTO_FLOOR_S
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.streams import demo_stream
 
@@ -44,7 +45,7 @@ def test_a_clean_fast_path_keeps_a_longer_floor_and_a_noisy_one_the_25_ms_floor(
     noisy = open_embedded(faults="corrupt=0.01,drop=0.01,seed=1", baud=None)
     try:
         # a pty loses nothing: a 25 ms timeout there is a scheduling delay (spurious)
-        assert _fast(clean) == 0.15
+        assert _fast(clean) == CLEAN_RTO_FLOOR_S  # 0.5 s (a quarter of the 2 s link timeout)
         assert _fast(noisy) == 0.025
     finally:
         clean.close()

@@ -228,7 +228,9 @@ def test_fixture_pipeline_is_consistent(fixture_gcode, sim_profile, sim_model):
         elif type(out).__name__ == "HomeCommand":
             steps[:3] = 0
     assert totals.moves == 122769
-    assert abs(ticks / DEFAULT_CLOCK_HZ - totals.planned_time_s) < 1e-3
+    # each move's duration is rounded on its own (so a move's segments do not depend on when
+    # the program reached it): within half a tick per move, 4.3 ms over these 122,769 moves
+    assert abs(ticks / DEFAULT_CLOCK_HZ - totals.planned_time_s) < 0.1e-6 * totals.moves
     np.testing.assert_array_equal(
         last.steps_abs[-1, :3], sim_model.steps(sim_model.ik(last.point[-1:]))[0]
     )

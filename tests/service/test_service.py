@@ -17,7 +17,7 @@ import pytest
 from cdprhost.cli.main import main
 from cdprhost.job.state import JobSnapshot, JobState, reduce
 from cdprhost.profile import load_profile
-from cdprhost.service import printer_service, wire
+from cdprhost.service import clients, wire
 from cdprhost.service.client import ServiceClient, attach, connect
 from tests.e2e.processes import square_part, wait_until
 from tests.service.inprocess import serve_in_thread
@@ -138,7 +138,7 @@ def test_a_front_end_that_leaves_never_stops_the_print(run_dir, monkeypatch, tmp
 def test_a_front_end_that_stops_reading_is_dropped_and_the_print_goes_on(
     run_dir, monkeypatch, tmp_path
 ):
-    monkeypatch.setattr(printer_service, "MAX_BACKLOG", 50)
+    monkeypatch.setattr(clients, "MAX_BACKLOG", 50)
     serve_in_thread(monkeypatch)
     first = attach(None, "first", replay=False)
     stuck = socket.socket(socket.AF_UNIX)  # says hello, then never reads again

@@ -110,3 +110,16 @@ def sim_device(*options: str):
             except subprocess.TimeoutExpired:
                 dev.kill()
                 dev.wait()
+
+
+@pytest.fixture
+def run_dir(monkeypatch, tmp_path):
+    """A short private run folder for printer services (a socket's path is at most 107
+    bytes) and a state folder of the test's own."""
+    import shutil
+
+    folder = tempfile.mkdtemp(prefix="svc-", dir="/tmp")
+    monkeypatch.setenv("CDPRHOST_RUN", folder)
+    monkeypatch.setenv("CDPRHOST_STATE", str(tmp_path / "state"))
+    yield folder
+    shutil.rmtree(folder, ignore_errors=True)

@@ -39,11 +39,12 @@ def test_port_profile_and_virtual_mocap_options(captured, tmp_path):
         and app._port == "loop://"
         and app._baud == 115200
     )
-    assert (
-        main(["tui", "--sim-truth", "paper-simulation", "--sim-mocap-dir", str(tmp_path / "mocap")])
-        == 0
-    )
+    mocap = ["--sim-truth", "paper-simulation", "--sim-mocap-dir", str(tmp_path / "mocap")]
+    assert main(["tui", *mocap]) == 0  # the virtual motion capture watches the service's device
+    assert captured[-1].backend.sim_mocap == ("paper-simulation", str(tmp_path / "mocap"))
+    assert main(["tui", "--in-process", *mocap]) == 0  # ... or the device in this process
     assert captured[-1].backend.sim_options["observer"] is not None
+    assert main(["tui", "--sim-truth", "no-such-truth", "--sim-mocap-dir", "x"]) == 2
 
 
 def test_a_file_to_open_on_start(captured, tmp_path, capsys):

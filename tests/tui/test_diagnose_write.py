@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import shutil
 
+import pytest
 from textual.widgets import Input
 
 from cdprhost.diagnosis.workflow import FAST
 from cdprhost.profile import load_profile
 from cdprhost.profile.loader import SHIPPED_DIR
 from cdprhost.tui.control.live import LiveBackend
+from cdprhost.tui.control.service_backend import ServiceBackend
 from cdprhost.tui.screens.dialogs import ConfirmScreen
 from tests.diagnosis.sessions import write_hidden_session
 
@@ -27,10 +29,12 @@ async def _diagnose(pilot, app, session) -> None:
     assert state.diagnose.error == "" and state.diagnose.result.verdict == "named"
 
 
-async def test_w_writes_the_improved_profile_after_asking(tmp_path):
+@pytest.mark.parametrize("backend_class", [LiveBackend, ServiceBackend])
+async def test_w_writes_the_improved_profile_after_asking(tmp_path, backend_class):
+    """The same with the device in the UI's process and from a TUI on the printer service."""
     profile = tmp_path / "mine.toml"
     shutil.copy(SHIPPED_DIR / "paper-simulation.toml", profile)
-    backend = LiveBackend(str(profile), speedup=None, diagnosis_settings=FAST)
+    backend = backend_class(str(profile), speedup=None, diagnosis_settings=FAST)
     write_hidden_session(tmp_path / "session", backend.model, "drive_scale", seed=3)
     app = make_app(backend, connect_on_start=False)
     async with app.run_test(size=(100, 32)) as pilot:

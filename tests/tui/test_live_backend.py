@@ -11,7 +11,6 @@ from textual.widgets import DataTable, Input
 from cdprhost.calibration.commanding import commanded_path
 from cdprhost.diagnosis.workflow import FAST
 from cdprhost.effects.base import MotionContext
-from cdprhost.profile import save_profile
 from cdprhost.sim.scenarios import hidden_truth, measurement_tour, session_times
 from cdprhost.sim.synthetic_session import write_synthetic_session
 from cdprhost.sim.virtual_mocap import make_observer
@@ -21,8 +20,7 @@ from cdprhost.tui.control.live_diagnosis import diagnosis_view, parameter_rows
 from firmware_protocol.device.thermal_plant import HOTEND_PLANT
 
 from .conftest import make_app, shown, wait_for
-
-PAPER_TRUTH = np.array([(-260.0, -150.111, 78.0), (260.0, -150.111, 78.0), (0.0, 300.222, 78.0)])
+from .wizard_steps import mocap_wizard, save_hidden_truth
 
 
 @pytest.fixture
@@ -137,57 +135,19 @@ async def test_diagnose_screen_on_a_session_with_a_hidden_effect(tmp_path):
 
 
 async def test_calibration_wizard_screen_with_virtual_mocap(sim_profile, tmp_path):
-    truth = tmp_path / "truth.toml"
-    lengths = np.linalg.norm(np.array([0.0, 0.0, 330.0]) - PAPER_TRUTH, axis=1)
-    save_profile(sim_profile.with_geometry(PAPER_TRUTH, lengths, name="hidden-truth"), truth)
-    observer = make_observer(truth, tmp_path / "mocap")
+    observer = make_observer(
+        save_hidden_truth(sim_profile, tmp_path / "truth.toml"), tmp_path / "mocap"
+    )
     backend = LiveBackend(sim_profile, speedup=None, sim_options={"observer": observer})
     app = make_app(backend)
     async with app.run_test(size=(100, 32)) as pilot:
         await wait_for(pilot, lambda s: s.connected, timeout=20)
-        await pilot.press("f4")
-        screen = app.screen
-        screen.query_one("#check-poses", Input).value = "2"
-        screen.query_one("#session-dir", Input).value = str(tmp_path / "session")
-        await pilot.press("n")
-        state = await wait_for(
-            pilot, lambda s: s.calibration.stage in ("planned", "error"), timeout=60
-        )
-        assert state.calibration.stage == "planned", state.calibration.message
-        n = len(state.calibration.poses)
-        assert n == 6 and sum(p.role == "check" for p in state.calibration.poses) == 2
-        for k in range(1, n + 1):
-            await pilot.press("m")
-            await wait_for(
-                pilot,
-                lambda s, k=k: (
-                    s.calibration.poses[k - 1].status in ("settled", "error")
-                    or s.calibration.stage == "error"
-                ),
-                timeout=60,
-                what=f"pose {k} settled",
-            )
-            await pilot.pause()
-            take = screen.query_one("#take-input", Input)
-            assert take.value.endswith(f"take-{k:04d}.csv")  # offered by the virtual motion capture
-            await pilot.press("k", "enter")
-            state = await wait_for(
-                pilot,
-                lambda s, k=k: s.calibration.poses[k - 1].status != "settled" and not s.busy,
-                timeout=30,
-            )
-            assert state.calibration.poses[k - 1].status == "take ok", state.calibration.poses[
-                k - 1
-            ].detail
-        await pilot.press("i")
-        state = await wait_for(
-            pilot, lambda s: s.calibration.stage in ("done", "error"), timeout=60
-        )
+        state = await mocap_wizard(pilot, tmp_path / "session")
         result = state.calibration.result
         assert result is not None, state.calibration.message
         assert result.rms_before_mm > 1.0 and result.rms_after_mm < 0.1
         assert result.check_after_mm < 0.5 < result.check_before_mm  # the check poses confirm it
-        assert screen.query_one("#parameters", DataTable).row_count == 12
+        assert app.screen.query_one("#parameters", DataTable).row_count == 12
         assert (tmp_path / "session" / "calibrated.toml").is_file()
         assert result.profile_path.endswith("calibrated.toml")
         assert result.trusted is True  # the trust gate's verdict, shown

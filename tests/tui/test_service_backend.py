@@ -248,3 +248,22 @@ def test_a_speed_override_reaches_the_print_in_the_service(backend, tmp_path):
     )
     runner.join(120)
     assert _folded(events).state is JobState.DONE
+
+
+def test_a_print_this_ui_started_is_not_adopted_a_second_time(backend, tmp_path):
+    """The UI's status refresh looks for a print running in the service (started elsewhere)
+    while the state of its own, just started, still reads idle (its first event on the way;
+    seconds on a loaded machine): its own print is not adopted again. Before, a second
+    follower took the print's events and end, and the first waited forever."""
+    backend.connect(EMBEDDED, 250000)
+    gcode = square_part(tmp_path / "part.gcode", layers=3)
+    events: list = []
+    job = backend.make_job(str(gcode), events.append)
+    result: dict = {}
+    runner = threading.Thread(target=lambda: result.update(job.run()), daemon=True)
+    runner.start()
+    wait_until(lambda: events, 60, "the print's first event")
+    assert backend.running_job(lambda _event: None) is None  # it is this UI's own
+    runner.join(120)
+    assert result.get("status") == "completed", result
+    assert _folded(events).state is JobState.DONE

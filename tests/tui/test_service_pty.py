@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -185,3 +186,118 @@ async def test_a_killed_tui_on_the_embedded_device_leaves_its_print_to_a_new_tui
         assert service_pid(None, state) == service
     finally:
         kill_and_wait(service)
+
+
+class _PtyTui:
+    """``cdprhost tui`` on a pseudo-terminal of its own, as in a terminal window: keys are
+    typed into it, what it draws is read (and dropped) as it comes, and a SIGHUP is what it
+    gets when the window closes or the ssh session drops."""
+
+    def __init__(self, port: str, gcode: Path, state: Path):
+        import pty
+
+        master, slave = pty.openpty()
+        env = {**os.environ, "CDPRHOST_STATE": str(state), "TERM": "xterm-256color"}
+        env.pop("TEXTUAL", None)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "cdprhost", "tui", "--port", port, str(gcode)]
+            + ["--profile", "paper-prototype"],
+            stdin=slave,
+            stdout=slave,
+            stderr=slave,
+            cwd=ROOT,
+            env=env,
+            start_new_session=True,
+        )
+        os.close(slave)
+        self.master = master
+        self.screen = bytearray()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        while True:
+            try:
+                data = os.read(self.master, 65536)
+            except OSError:
+                return
+            if not data:
+                return
+            self.screen += data[-4096:]
+
+    def type(self, keys: str) -> None:
+        os.write(self.master, keys.encode())
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(20)
+        os.close(self.master)
+
+
+def test_sighup_to_a_tui_on_a_pty_leaves_its_print_running_to_the_end(state, tmp_path):
+    """The terminal closes mid-print (SIGHUP): the TUI quits, says in its log that the print
+    goes on in the service, and the print completes (before: stopped like a cancel)."""
+    from cdprhost.job.resume import resume_path_for
+
+    gcode = square_part(tmp_path / "part.gcode", layers=10)
+    with SimDeviceProcess(tmp_path, "--speedup", "10") as dev:
+        tui = _PtyTui(dev.path, gcode, state)
+        service = None
+        try:
+            point = resume_path_for(gcode, state / "jobs")
+            deadline = time.monotonic() + 120
+            while not point.exists():  # s, then y to the question, once the file is checked
+                assert time.monotonic() < deadline, "the TUI did not start the print"
+                assert tui.proc.poll() is None, tui.screen.decode(errors="replace")[-500:]
+                tui.type("s")
+                time.sleep(1.0)
+                tui.type("y")
+                time.sleep(2.0)
+            printing_point(gcode, state)
+            service = service_pid(dev.path, state)
+            tui.proc.send_signal(signal.SIGHUP)
+            assert tui.proc.wait(30) == 0
+            deadline = time.monotonic() + 240
+            while not _completed(state):
+                assert time.monotonic() < deadline, _job_log(state)[-3:]
+                time.sleep(0.5)
+        finally:
+            tui.close()
+            if service is not None:
+                kill_and_wait(service)
+        log = (state / "tui" / "tui.log").read_text()
+        assert "SIGHUP: the terminal UI quits" in log and "goes on in the printer service" in log
+        assert not any("cancel" in json.dumps(r) for r in _job_log(state))
+        assert not dev.stderr_has("host watchdog")
+
+
+async def test_start_pressed_twice_before_the_print_shows_starts_one_print(state, tmp_path):
+    """s, y, s, y in quick succession: the second start comes before the service's first
+    event reaches the screen (the job still reads idle); it starts nothing, and the one print
+    is followed to its end (before: a second job took the first one's events and the first
+    waited forever)."""
+    gcode = square_part(tmp_path / "part.gcode", layers=4)
+    with SimDeviceProcess(tmp_path, "--speedup", "20") as dev:
+        backend = ServiceBackend("paper-prototype")
+        app = make_app(backend, port=dev.path, open_file=str(gcode))
+        try:
+            async with app.run_test(size=(100, 32)) as pilot:
+                await wait_for(
+                    pilot,
+                    lambda s: s.connected and s.file.preflight is not None,
+                    timeout=120,
+                    what="connected, the file checked",
+                )
+                for key in "sysy":
+                    await pilot.press(key)
+                first = app.state.job_id
+                end = await wait_for(
+                    pilot, lambda s: s.job.state.finished, timeout=240, what="its end"
+                )
+                assert end.job.state is JobState.DONE, end.job.reason
+                assert end.job_id == first == 1
+                assert end.job.layer + 1 == 4
+        finally:
+            backend.close()
+        kill_and_wait(service_pid(dev.path, state))

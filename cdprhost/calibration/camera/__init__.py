@@ -18,6 +18,7 @@ The pure estimation core (images come in as numpy arrays):
   one board orientation, intrinsics refined with the robot's motion) and each pose's B
   with its covariance;
 - :mod:`.take_drift`: a camera take's drift tested on the camera's own frame noise;
+- :mod:`.take_scatter`: its frames' scatter tested on the same noise;
 - :mod:`.visibility`: which board corners a camera placement can see.
 
 The shell around it (files, devices): :mod:`.config` (the ``[camera]`` table and

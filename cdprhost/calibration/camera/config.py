@@ -168,6 +168,23 @@ def load_intrinsics(path: str | os.PathLike[str]) -> Intrinsics:
         ) from None
 
 
+def load_camera_config(path: str | os.PathLike[str]) -> CameraConfig:
+    """The ``[camera]`` table of a TOML file (a session.toml or just that table): the boards;
+    errors name the file and the key."""
+    from cdprhost.calibration.config_input import read_toml, validation_problems
+
+    src = str(path)
+    data = read_toml(path)
+    if "camera" not in data:
+        raise InputError("no [camera] table (the boards of camera-session.md)", source=src)
+    try:
+        return CameraConfig.model_validate(data["camera"])
+    except ValidationError as exc:
+        raise InputError(
+            "invalid [camera] table", source=src, problems=validation_problems(exc, "camera")
+        ) from None
+
+
 def intrinsics_toml(intrinsics: Intrinsics, extra: dict[str, Any] | None = None) -> str:
     """camera.toml text for ``intrinsics`` (``std`` where known; ``extra`` keys in [camera])."""
     import tomli_w

@@ -9,7 +9,8 @@ judged by the statistical take test (settling, drift, spread, missing frames). A
 boards are not seen well enough in enough frames is refused naming the board and the
 frames; calibration views of poor coverage refuse the session (their reason and the views
 to add). A take's drift is tested against the camera's own frame noise (anisotropic:
-depth is worst; :mod:`~.camera.take_drift`), not against the few frames' scatter.
+depth is worst; :mod:`~.camera.take_drift`), not against the few frames' scatter, and
+so is their scatter (:mod:`~.camera.take_scatter`), not against the motion-capture cap.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from cdprhost.calibration.acceptance import AcceptanceLimits
 from cdprhost.calibration.camera.config import CameraConfig
 from cdprhost.calibration.camera.session_fit import SessionFit, TakeDetections, fit_session
 from cdprhost.calibration.camera.take_drift import CameraDrift, camera_drift
+from cdprhost.calibration.camera.take_scatter import camera_scatter
 from cdprhost.calibration.camera.takes import read_camera_session, skipped_text
 from cdprhost.calibration.measurements import RejectedTake, SessionMeasurements
 from cdprhost.calibration.poses import PoseTable
@@ -36,10 +38,17 @@ CAMERA_MIN_FRAMES = 3
 #: The mocap drift limit handed to the generic take test (whose drift test a camera take
 #: has already passed on the camera's noise): a drift no take reaches.
 NO_DRIFT_LIMIT = 1e9
+#: Likewise the mocap spread cap (a camera take's scatter is tested on the camera's noise),
+#: unless ``[camera.acceptance] max_spread_mm`` sets one.
+NO_SPREAD_LIMIT = 1e9
 
 #: Smallest drift over a camera take that matters (mm): a frame's B scatters by tenths of a
 #: millimetre, and a drift test on a few frames must not refuse takes for that.
 CAMERA_MAX_DRIFT_MM = 0.5
+#: Smallest scatter of a camera take's frames about their line that matters (mm RMS): the
+#: frame-noise model leaves out micrometre effects (the effector's own jitter), so a take
+#: whose frames lie within tens of micrometres is never refused, however improbable.
+CAMERA_MIN_SPREAD_MM = 0.05
 
 
 def camera_limits(limits: AcceptanceLimits) -> AcceptanceLimits:
@@ -112,6 +121,23 @@ def measure_camera_session(
                 )
             )
             continue
+        scatter = camera_scatter(
+            fit.frame_positions[i], take.detections.times, _frame_noise(fit, i)
+        )
+        if scatter.p < lim.drift_alpha and scatter.rms_mm > CAMERA_MIN_SPREAD_MM:
+            rejected.append(
+                RejectedTake(
+                    int(p.pose[i]),
+                    p.take[i],
+                    "spread",
+                    f"frames scatter {scatter.rms_mm:.3f} mm RMS about their line where the "
+                    f"camera's frame noise predicts {scatter.expected_rms_mm:.3f} mm "
+                    f"({scatter.ratio:.1f}x; p = {scatter.p:.1e}; limits: p < {lim.drift_alpha:g} and "
+                    f"> {CAMERA_MIN_SPREAD_MM:g} mm): "
+                    "the effector is shaking or the board moved between frames",
+                )
+            )
+            continue
         drift = camera_drift(fit.frame_positions[i], take.detections.times, _frame_noise(fit, i))
         if drift.p < lim.drift_alpha and drift.total_mm > lim.max_drift_mm:
             d = drift.drift_mm
@@ -139,11 +165,9 @@ def measure_camera_session(
             )
         )
         rows.append(i)
-    # the drift was judged above on the camera's noise: the frames' own scatter (a few
-    # frames) is not asked again
-    judged = judge_takes(
-        series, lim.model_copy(update={"max_drift_mm": NO_DRIFT_LIMIT, "motion_alpha": 0.0})
-    )
+    # drift and scatter were judged above on the camera's noise: the frames' own scatter
+    # (a few frames) and the motion-capture caps are not asked again
+    judged = judge_takes(series, _generic_limits(lim))
     keep: list[int] = []
     results: list[TakeMeasurement] = []
     for i, r in zip(rows, judged):
@@ -186,6 +210,16 @@ def measure_camera_session(
         refusals=refusals,
         notes=_fit_notes(fit),
     )
+
+
+def _generic_limits(lim: AcceptanceLimits) -> AcceptanceLimits:
+    """The limits handed to the source-neutral take test once drift and scatter have been
+    judged on the camera's noise: no drift limit, and the spread cap only if the session
+    sets one."""
+    update: dict[str, float] = {"max_drift_mm": NO_DRIFT_LIMIT, "motion_alpha": 0.0}
+    if "max_spread_mm" not in lim.model_fields_set:
+        update["max_spread_mm"] = NO_SPREAD_LIMIT
+    return lim.model_copy(update=update)
 
 
 def _frame_reasons(take: object) -> list[str]:

@@ -130,7 +130,7 @@ class SessionFit:
     frame_covariance: np.ndarray = field(default_factory=lambda: np.zeros((6, 6)))
     extra: dict[str, float] = field(default_factory=dict)
     # (K, 3, 3) the covariance of one frame's B about its take's mean: the frame-to-frame
-    # corner noise (``frame_pixel_sigma``, px, pooled over the session) through the pose's
+    # corner noise (``frame_pixel_sigma``, px, pooled over the session's ordinary takes) through the pose's
     # solution; what a take's drift test measures its frames against (NaN: no position)
     frame_noise_covariances: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     frame_pixel_sigma: float = float("nan")
@@ -378,6 +378,11 @@ def fit_session(
     )
 
 
+#: A take whose corners scatter (variance) more than this many times the session's median
+#: take is not pooled into the frame noise (a shaking or creeping effector).
+FRAME_NOISE_OUTLIER = 10.0
+
+
 def _frame_pixel_sigma(
     takes: list[TakeDetections],
     good: list[list[int]],
@@ -385,8 +390,12 @@ def _frame_pixel_sigma(
 ) -> float:
     """The effector corners' frame-to-frame noise (px per coordinate), pooled over the
     session: each usable frame's corners about their take's mean (n frames leave n - 1
-    degrees of freedom per corner coordinate)."""
+    degrees of freedom per corner coordinate). With at least three takes, a take whose own
+    variance is over :data:`FRAME_NOISE_OUTLIER` times the takes' median is left out: its
+    effector shook or crept, and must not inflate the noise every take (its own included)
+    is judged against."""
     ss, dof = 0.0, 0.0
+    per_take: list[tuple[float, float]] = []
     for take, g, m in zip(takes, good, eff_means):
         if m is None:
             continue
@@ -402,10 +411,18 @@ def _frame_pixel_sigma(
             np.add.at(sq, rows[sel], np.sum(diff**2, axis=1))
             np.add.at(counts, rows[sel], 1.0)
         seen = counts >= 2
-        ss += float(np.sum(sq[seen]))
-        dof += float(np.sum(2.0 * (counts[seen] - 1.0)))
+        take_ss = float(np.sum(sq[seen]))
+        take_dof = float(np.sum(2.0 * (counts[seen] - 1.0)))
+        ss += take_ss
+        dof += take_dof
+        if take_dof >= 1:
+            per_take.append((take_ss, take_dof))
     if dof < 1:
         return float("nan")
+    if len(per_take) >= 3:
+        t_ss, t_dof = np.array(per_take).T
+        keep = t_ss / t_dof <= FRAME_NOISE_OUTLIER * float(np.median(t_ss / t_dof))
+        ss, dof = float(np.sum(t_ss[keep])), float(np.sum(t_dof[keep]))
     return max(float(np.sqrt(ss / dof)), MIN_PIXEL_SIGMA / 10)
 
 

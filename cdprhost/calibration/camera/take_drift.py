@@ -34,13 +34,19 @@ class CameraDrift:
         return float(np.linalg.norm(self.drift_mm))
 
 
-def camera_drift(points: np.ndarray, times: np.ndarray, frame_cov: np.ndarray) -> CameraDrift:
-    """The drift test of one take: ``points`` (F, 3) each frame's B (NaN: no position),
-    ``times`` (F,) s, ``frame_cov`` (3, 3) the covariance of one frame's B."""
+def located_frames(points: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The frames of a take with a position and a time: ``points`` (F, 3) each frame's B
+    (NaN: no position) and ``times`` (F,) s, as (n, 3) and (n,) arrays."""
     x = np.asarray(points, float).reshape(-1, 3)
     t = np.asarray(times, float).ravel()
     ok = np.isfinite(x).all(axis=1) & np.isfinite(t)
-    x, t = x[ok], t[ok]
+    return x[ok], t[ok]
+
+
+def camera_drift(points: np.ndarray, times: np.ndarray, frame_cov: np.ndarray) -> CameraDrift:
+    """The drift test of one take: ``points`` (F, 3) each frame's B (NaN: no position),
+    ``times`` (F,) s, ``frame_cov`` (3, 3) the covariance of one frame's B."""
+    x, t = located_frames(points, times)
     n = len(t)
     cov = np.asarray(frame_cov, float)
     if n < 3 or not np.isfinite(cov).all():

@@ -41,8 +41,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser.add_argument(
         "--in-process",
         action="store_true",
-        help="drive the device from this process instead of its printer service (the "
-        "calibration wizard needs it; a print then ends with the UI)",
+        help="drive the device from this process instead of its printer service (a print "
+        "then ends with the UI)",
     )
     add_server_arguments(parser, default_listen=False)
     add_placement_arguments(parser, strict=False)
@@ -63,13 +63,13 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             "--sim-truth/--sim-mocap-dir apply to the embedded simulated device, not to --port"
         )
-    observer = make_observer(args.sim_truth, args.sim_mocap_dir)
     status_interval_s = 1.0
     backend: Any
-    # the printer service runs the prints, unless the device must live here (the virtual
-    # motion capture watches the embedded device)
-    in_process = args.in_process or observer is not None
+    # the printer service runs the prints and the device (the virtual motion capture then
+    # watches the service's embedded device), unless asked to drive it from here
+    in_process = args.in_process
     if in_process:
+        observer = make_observer(args.sim_truth, args.sim_mocap_dir)
         backend = LiveBackend(
             args.profile,
             speedup=args.speedup,
@@ -80,7 +80,15 @@ def run(args: argparse.Namespace) -> int:
     else:
         from cdprhost.tui.control.service_backend import ServiceBackend
 
-        backend = ServiceBackend(args.profile, speedup=args.speedup, setup=setup_from_args(args))
+        sim_mocap = None
+        if args.sim_truth is not None:
+            from cdprhost.profile import load_profile
+
+            load_profile(args.sim_truth)  # a truth that does not load is said now, not later
+            sim_mocap = (args.sim_truth, args.sim_mocap_dir)
+        backend = ServiceBackend(
+            args.profile, speedup=args.speedup, setup=setup_from_args(args), sim_mocap=sim_mocap
+        )
     if args.gcode is not None and not os.path.isfile(args.gcode):
         raise InputError("G-code file not found", source=args.gcode)
     app = CdprApp(

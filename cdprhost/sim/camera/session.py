@@ -182,15 +182,17 @@ def write_camera_session(
     take_imaging: Mapping[int, Imaging] | None = None,
     occluders: Mapping[int, Sequence[np.ndarray]] | None = None,
     take_creep_mm: Mapping[int, Sequence[float]] | None = None,
+    take_shake_mm: Mapping[int, float] | None = None,
     supersample: int = 2,
     seed: int = 0,
 ) -> CameraSession:
     """A camera session folder for ``poses`` (visiting order) on the ``truth`` machine.
     ``views_kind``/``bow_mm``: the calibration views (``"printed"``: a user's bowed sheet,
     see :mod:`.views`).
-    ``take_imaging``/``occluders``/``take_creep_mm`` are keyed by pose number (from 1);
-    a creeping take's effector moves steadily by that vector (mm) from its first frame
-    to its last."""
+    ``take_imaging``/``occluders``/``take_creep_mm``/``take_shake_mm`` are keyed by pose
+    number (from 1); a creeping take's effector moves steadily by that vector (mm) from its
+    first frame to its last; a shaking take's effector is displaced in every frame by an
+    independent random vector of that RMS (mm) per coordinate."""
     root = Path(directory)
     (root / "takes").mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -241,9 +243,16 @@ def write_camera_session(
         hide = (occluders or {}).get(number, ())
         creep = np.asarray((take_creep_mm or {}).get(number, (0.0, 0.0, 0.0)), float)
         ramp = np.linspace(-0.5, 0.5, frames_per_take) if frames_per_take > 1 else np.zeros(1)
+        shake = float((take_shake_mm or {}).get(number, 0.0))
         frames = [
             take_rig.frame(
-                renderer, actual[i] + r * creep + rng.normal(0.0, jitter_mm, 3), rng, hide
+                renderer,
+                actual[i]
+                + r * creep
+                + rng.normal(0.0, jitter_mm, 3)
+                + (rng.normal(0.0, shake, 3) if shake > 0 else 0.0),
+                rng,
+                hide,
             )
             for r in ramp
         ]

@@ -23,6 +23,7 @@ from cdprhost.machine import Machine, NotHomed
 from cdprhost.machine.prepare import describe_fault, fault_clearable
 from cdprhost.profile import MachineProfile, load_profile
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink, JobHandle
+from cdprhost.tui.control.live_calibration import LiveCalibration
 from cdprhost.tui.control.live_diagnosis import DiagnosedProfile
 from cdprhost.tui.control.views import (
     ConsoleLine,
@@ -43,6 +44,33 @@ DEVICE_RECORD_KEEP = 4096
 the newest, enough for an observer's motion directions (its window is 4096). Without a cap
 its record grew by 64 bytes a segment for as long as the UI ran (65 KB per print of the
 memory bench's small part; 32 MB for a print of half a million segments)."""
+
+
+def device_status_view(model: Any, st: Any, fault: str, clearable: bool) -> DeviceStatusView:
+    """A status report of the device as the screens show it (the position by ``model``'s
+    forward kinematics, once homed). ``st`` is the link's status or the printer service's
+    (the same fields); ``fault`` in words ("" when none) and whether a host may clear it."""
+    steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
+    s = model.sliders_from_steps(np.asarray(steps[:3]))
+    homed = st.homed_mask & ALL_MODULES == ALL_MODULES
+    position = None
+    if homed:
+        p = model.fk(s[None, :])[0]
+        position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
+    return DeviceStatusView(
+        steps,
+        (float(s[0]), float(s[1]), float(s[2])),
+        position,
+        st.hotend_c,
+        st.bed_c,
+        st.hotend_target_c,
+        st.bed_target_c,
+        bool(st.enabled_mask),
+        homed,
+        st.queue_free,
+        fault,
+        clearable,
+    )
 
 
 def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str], ...]:
@@ -153,13 +181,12 @@ class LiveBackend:
         self.idle_pump_s = idle_pump_s
         self.setup: Setup = setup or Setup()  # placement, --retarget, cancelled objects
         self._link: Any = None
+        self.announced: Any = None  # a DeviceRecord a device announced elsewhere (its service)
         self._embedded = False
         self._where: tuple[str, int] | None = None
         self._identity: tuple[tuple[str, str], ...] = ()
         self._lock = threading.RLock()
         self._log: deque[ConsoleLine] = deque(maxlen=DEVICE_LOG)
-        from cdprhost.tui.control.live_calibration import LiveCalibration
-
         self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ---------------------------------------------------------------- link
@@ -265,27 +292,7 @@ class LiveBackend:
         return self._status_view(st)
 
     def _status_view(self, st: Any) -> DeviceStatusView:
-        steps = (int(st.steps[0]), int(st.steps[1]), int(st.steps[2]), int(st.steps[3]))
-        s = self.model.sliders_from_steps(np.asarray(steps[:3]))
-        homed = st.homed_mask & ALL_MODULES == ALL_MODULES
-        position = None
-        if homed:
-            p = self.model.fk(s[None, :])[0]
-            position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
-        return DeviceStatusView(
-            steps,
-            (float(s[0]), float(s[1]), float(s[2])),
-            position,
-            st.hotend_c,
-            st.bed_c,
-            st.hotend_target_c,
-            st.bed_target_c,
-            bool(st.enabled_mask),
-            homed,
-            st.queue_free,
-            describe_fault(st) or "",
-            fault_clearable(st),
-        )
+        return device_status_view(self.model, st, describe_fault(st) or "", fault_clearable(st))
 
     # --------------------------------------------------------------- print
     def preflight(self, path: str) -> PreflightView:
@@ -304,7 +311,7 @@ class LiveBackend:
         from cdprhost.job.board import announced_record
 
         link = self._link
-        return None if link is None else announced_record(link.identity, link.caps)
+        return self.announced if link is None else announced_record(link.identity, link.caps)
 
     def toggle_center(self) -> bool:
         """Centre the part on the build volume (``--center``), or stop centring; returns
@@ -439,6 +446,31 @@ class LiveBackend:
         except (LinkError, OSError) as exc:  # stopped (M112) or lost: said, not raised
             out.append(ConsoleLine("device", str(exc) or "the link failed", time.time()))
         return out + self.device_log()
+
+    # ---------------------------------------------------------- calibrate
+    def wizard_device(self, settle_s: float) -> Machine:
+        """The wizard's device (:class:`~cdprhost.tui.control.live_calibration.WizardHost`)."""
+        return Machine(self.link, self.profile, self.model, settle_s=settle_s)
+
+    def virtual_mocap(self) -> str | None:
+        """The virtual motion capture's folder (it watches from the connection on)."""
+        folder = getattr(self.sim_options.get("observer"), "directory", None)
+        return None if folder is None else str(folder)
+
+    def simulated_camera(self, size: tuple[int, int]) -> Any:
+        """The simulated camera watching a new embedded simulated device."""
+        from cdprhost.errors import InputError
+        from cdprhost.sim.camera.device import VirtualCamera
+        from cdprhost.sim.camera.scene import rig_for_size
+
+        if getattr(self._link, "device", None) is None:
+            raise InputError(
+                "camera sim watches the embedded simulated device: connect to it first"
+            )
+        camera = VirtualCamera(self.model, rig_for_size(size))
+        self.sim_options["observer"] = camera
+        self.connect(EMBEDDED, self.profile.serial.baud)
+        return camera
 
     # ------------------------------------------------------------ diagnose
     def diagnose(self, session_dir: str) -> DiagnosisView:

@@ -4,24 +4,47 @@ The wizard's own state machine decides what comes next; this adapter lets the
 screen trigger each step (move, ingest a take, identify) and reports the
 outcome as views. The take of a pose is the file the user names; with the
 embedded simulated device and virtual motion capture the newest take in the
-mocap folder is offered.
+mocap folder is offered. The device is its host's (:class:`WizardHost`): the machine in this
+process (``--in-process``), or the printer service's device session; the wizard's planning,
+judging and fitting run here either way.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from cdprhost.errors import CdprError, InputError
-from cdprhost.tui.control.backend import EMBEDDED
+from cdprhost.kinematics import MachineModel
+from cdprhost.profile import MachineProfile
 from cdprhost.tui.control.views import CalibrationView, IdentificationView, ParameterRow, PoseView
 
-if TYPE_CHECKING:  # pragma: no cover
-    from cdprhost.tui.control.live import LiveBackend
-
 DEFAULT_SESSION = "calibration-session"
+SETTLE_S = 0.5  # at rest this long after each move before a take
+
+
+class WizardHost(Protocol):
+    """What the wizard needs of the UI's backend."""
+
+    profile: MachineProfile
+    model: MachineModel
+    profile_name: str
+
+    def wizard_device(self, settle_s: float) -> Any:
+        """The connected machine as the wizard's device (``visit``)."""
+        ...
+
+    def virtual_mocap(self) -> str | None:
+        """The folder of the virtual motion capture's takes, which watches the embedded
+        simulated device from now on (None: none watches)."""
+        ...
+
+    def simulated_camera(self, size: tuple[int, int]) -> Any:
+        """The simulated camera (a capture) of ``size`` pixels, watching the embedded
+        simulated device; InputError when the UI is not connected to it."""
+        ...
 
 
 class _GivenTake:
@@ -82,10 +105,12 @@ def identification_view(result: Any, profile_path: str = "") -> IdentificationVi
 
 
 class LiveCalibration:
-    def __init__(self, backend: LiveBackend, *, mocap_dir: str | None = None):
+    """``mocap_dir``: where the takes to offer appear (default: the virtual motion capture's)."""
+
+    def __init__(self, backend: WizardHost, *, mocap_dir: str | None = None):
         self.backend = backend
-        observer = backend.sim_options.get("observer")
-        self.mocap_dir = mocap_dir or (str(observer.directory) if observer is not None else None)
+        self.given_mocap_dir = mocap_dir
+        self.mocap_dir = mocap_dir
         self.wizard: Any = None
         self.source = _GivenTake()
         self.camera = ""  # the camera that takes the pictures ("": motion capture takes)
@@ -138,30 +163,23 @@ class LiveCalibration:
         instead (``mocap_config``: its ``[camera]`` boards; ``intrinsics``: its camera.toml)."""
         from cdprhost.calibration.session import mocap_for_session
         from cdprhost.calibration.wizard import CalibrationWizard, WizardOptions
-        from cdprhost.machine import Machine
 
         b = self.backend
         folder = session_dir or DEFAULT_SESSION
         if camera:
-            from cdprhost.tui.control.live_camera import camera_setup
+            from cdprhost.tui.control.live_camera import FRAMES, camera_setup
 
-            def watch(observer: Any) -> None:
-                """The simulated camera watches a new embedded simulated device."""
-                b.sim_options["observer"] = observer
-                b.connect(EMBEDDED, b.profile.serial.baud)
-
-            embedded = getattr(b.link, "device", None) is not None
             setup = camera_setup(
                 camera,
                 Path(folder),
                 b.model,
-                watch=watch if embedded else None,
+                sim_camera=b.simulated_camera,
                 config_path=mocap_config,
                 intrinsics_path=intrinsics,
                 log=self._log,
             )
-            takes = setup.takes(Path(folder), self._log)
-            device = Machine(b.link, b.profile, b.model, settle_s=0.5)
+            takes = setup.takes(Path(folder), FRAMES, self._log)
+            device = b.wizard_device(SETTLE_S)
             self.camera = camera
             self.wizard = CalibrationWizard(
                 folder,
@@ -178,9 +196,11 @@ class LiveCalibration:
             )
             return self._view("planned", self.messages[-1] if self.messages else "")
         self.camera = ""
-        device = Machine(b.link, b.profile, b.model, settle_s=0.5)
+        device = b.wizard_device(SETTLE_S)
+        virtual_dir = b.virtual_mocap()
+        self.mocap_dir = self.given_mocap_dir or virtual_dir
         virtual = None
-        if b.sim_options.get("observer") is not None:
+        if virtual_dir is not None:
             from cdprhost.sim.virtual_mocap import mocap_config as virtual_config
 
             virtual = virtual_config(b.profile_name).mocap
@@ -211,7 +231,6 @@ class LiveCalibration:
         from cdprhost.calibration.wizard import MoveTo
 
         self._require(MoveTo, pose.index)
-        self._sync_device()
         seen = self._takes()
         self.wizard.step()
         new = sorted(set(self._takes()) - set(seen), key=lambda p: p.stat().st_mtime)
@@ -224,21 +243,6 @@ class LiveCalibration:
             "settled: record a take",
             take=str(new[-1]) if new else "",
         )
-
-    def _sync_device(self) -> None:
-        """Start the wizard's planner from where the device really is (the user may have jogged)."""
-        from cdprhost.motion.segments import SegmentState
-
-        b, device = self.backend, self.wizard.device
-        status = b.device_status()
-        if status is None or not status.homed or status.position is None:
-            return
-        device.state = SegmentState(
-            np.asarray(status.steps, dtype=np.int64),
-            np.asarray(status.position, dtype=float),
-            np.ones(3),
-        )
-        device.homed = True
 
     def _takes(self) -> list[Path]:
         if not self.mocap_dir or not Path(self.mocap_dir).is_dir():

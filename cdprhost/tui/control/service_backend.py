@@ -8,8 +8,9 @@ embedded simulated device has one service per state folder) and holds its device
 reader thread sorts what the service sends: the running job's events to its sink, answers
 to the request that waits for them, the device's status and notes to the screens. Files
 (preflight, resume points, centring) and diagnosis are computed here, as before, by a
-:class:`~cdprhost.tui.control.live.LiveBackend` that never opens a link; calibration needs
-the device in this process and is not offered through the service.
+:class:`~cdprhost.tui.control.live.LiveBackend` that never opens a link; so is the
+calibration wizard, whose moves and simulated observers the service carries out
+(:mod:`~cdprhost.tui.control.service_calibration`).
 """
 
 from __future__ import annotations
@@ -22,8 +23,6 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
 
-import numpy as np
-
 from cdprhost.errors import CdprError
 from cdprhost.job.state import Event, LinkHealth
 from cdprhost.machine import NotHomed
@@ -33,7 +32,13 @@ from cdprhost.profile import MachineProfile
 from cdprhost.service import client as service_client
 from cdprhost.service import wire
 from cdprhost.tui.control.backend import EMBEDDED, CalibrationBackend, EventSink
-from cdprhost.tui.control.live import DEVICE_LOG, JOG_SPEED_MM_S, LiveBackend, identity_rows
+from cdprhost.tui.control.live import (
+    DEVICE_LOG,
+    JOG_SPEED_MM_S,
+    LiveBackend,
+    device_status_view,
+    identity_rows,
+)
 from cdprhost.tui.control.views import (
     ConsoleLine,
     DeviceStatusView,
@@ -43,37 +48,13 @@ from cdprhost.tui.control.views import (
     ResumeView,
 )
 
-ALL_MODULES = 0b111
 FRESH_S = 2.0  # a broadcast status younger than this answers ``device_status``
 STATUS_TIMEOUT_S = 15.0
-CALIBRATION_REFUSED = (
-    "calibration needs the device in the UI's process: quit, then `cdprhost tui --in-process` "
-    "(no print may run: the printer service holds the port)"
-)
 
 
 def status_view(model: Any, st: wire.DeviceState) -> DeviceStatusView:
     """The service's status of the device as the screens show it (position by the model)."""
-    s = model.sliders_from_steps(np.asarray(st.steps[:3]))
-    homed = st.homed_mask & ALL_MODULES == ALL_MODULES
-    position = None
-    if homed:
-        p = model.fk(s[None, :])[0]
-        position = (float(p[0]), float(p[1]), float(p[2])) if np.all(np.isfinite(p)) else None
-    return DeviceStatusView(
-        st.steps,
-        (float(s[0]), float(s[1]), float(s[2])),
-        position,
-        st.hotend_c,
-        st.bed_c,
-        st.hotend_target_c,
-        st.bed_target_c,
-        bool(st.enabled_mask),
-        homed,
-        st.queue_free,
-        st.fault,
-        st.clearable,
-    )
+    return device_status_view(model, st, st.fault, st.clearable)
 
 
 class ServiceJob:
@@ -103,6 +84,8 @@ class ServiceJob:
                     raise CdprError(refused.error)
             if self.backend.gone:
                 raise CdprError(f"the printer service went away ({self.backend.gone})")
+            if self.backend.let_go:  # the UI quits and leaves the print to the service
+                raise CdprError("this UI let go of the print; it goes on in the printer service")
         assert self.result is not None
         if self.result.result is None:
             raise CdprError(self.result.error or "the print job broke")
@@ -189,10 +172,10 @@ class _RemoteMachine:
 
 class ServiceBackend:
     """``attach``: how to reach a service (:func:`cdprhost.service.client.attach`; tests
-    give their own)."""
+    give their own). ``sim_mocap``: (truth profile, folder) of the virtual motion capture
+    that watches the embedded simulated device for the calibration wizard."""
 
-    calibration: CalibrationBackend | None = None
-    calibration_refusal = CALIBRATION_REFUSED
+    print_outlives_ui = True  # the print runs in the service: quitting the UI leaves it going
 
     def __init__(
         self,
@@ -202,7 +185,10 @@ class ServiceBackend:
         diagnosis_settings: Any = None,
         setup: Any = None,
         attach: Any = None,
+        sim_mocap: tuple[str, str] | None = None,
     ):
+        from cdprhost.tui.control.live_calibration import LiveCalibration
+
         self.local = LiveBackend(
             profile, speedup=speedup, diagnosis_settings=diagnosis_settings, setup=setup
         )
@@ -225,6 +211,15 @@ class ServiceBackend:
         self._health: wire.Health | None = None
         self._said_error = ""
         self.gone = ""
+        self.sim_mocap = None
+        if sim_mocap is not None:  # the service's working folder is not this one
+            truth, folder = sim_mocap
+            named = not Path(truth).exists()  # a profile's name, else its file
+            self.sim_mocap = (
+                truth if named else str(Path(truth).resolve()),
+                str(Path(folder).resolve()),
+            )
+        self.calibration: CalibrationBackend | None = LiveCalibration(self)
 
     # ------------------------------------------------------------ the service
     def send(self, message: Any) -> int:
@@ -351,15 +346,22 @@ class ServiceBackend:
         if answer.status is not None:
             self._device = (time.monotonic(), wire.DeviceMsg(connected=True, status=answer.status))
         self._identity = identity_rows(SimpleNamespace(**answer.identity), port, baud)
+        self.local.announced = announced_board(answer.identity)
         return self._identity
 
     def disconnect(self) -> None:
         client, self._client = self._client, None
+        self.local.announced = None
         if client is None:
             return
         with contextlib.suppress(CdprError, OSError):
             client.send(wire.Disconnect())
         client.close()
+
+    @property
+    def let_go(self) -> bool:
+        """This UI closed its connection to the service (a print there goes on)."""
+        return self._client is None
 
     def connected(self) -> bool:
         return self._client is not None and not self.gone
@@ -413,6 +415,43 @@ class ServiceBackend:
     def diagnose(self, session_dir: str) -> DiagnosisView:
         return self.local.diagnose(session_dir)
 
+    def diagnosed_write_plan(self) -> Any:
+        return self.local.diagnosed_write_plan()
+
+    def write_diagnosed_profile(self) -> str:
+        return self.local.write_diagnosed_profile()
+
+    # ------------------------------------------------------------ calibrate
+    def wizard_device(self, settle_s: float) -> Any:
+        """The wizard's device: its moves in the service's device session."""
+        from cdprhost.tui.control.service_calibration import ServiceWizardDevice
+
+        if not self.connected():
+            raise CdprError("not connected: pick a port on the link screen")
+        return ServiceWizardDevice(self, settle_s)
+
+    def virtual_mocap(self) -> str | None:
+        """The virtual motion capture's folder; it watches the service's embedded device
+        from now on (None: none, or not on the embedded device)."""
+        from cdprhost.tui.control.service_calibration import answered
+
+        if self.sim_mocap is None or self._where[0] != EMBEDDED:
+            return None
+        truth, folder = self.sim_mocap
+        answered(self, wire.Observe(truth=truth, mocap_dir=folder))
+        return folder
+
+    def simulated_camera(self, size: tuple[int, int]) -> Any:
+        """The simulated camera watching the service's embedded device."""
+        from cdprhost.errors import InputError
+        from cdprhost.tui.control.service_calibration import ServiceCamera
+
+        if not self.connected() or self._where[0] != EMBEDDED:
+            raise InputError(
+                "camera sim watches the embedded simulated device: connect to it first"
+            )
+        return ServiceCamera(self, size)
+
     # ------------------------------------------------------------ print
     def make_job(
         self,
@@ -448,6 +487,8 @@ class ServiceBackend:
         info = self._job_info
         if info is None or info.state in ("none", "done", "failed", "cancelled", "refused"):
             return None
+        if self._job is not None and not self._job.ended.is_set():
+            return None  # this UI's own (its state reads idle until the first event arrives)
         job = ServiceJob(self, on_event, None)
         for event in self._replayed:
             job.feed(event)
@@ -499,3 +540,17 @@ class ServiceBackend:
 
     def close(self) -> None:
         self.disconnect()
+
+
+def announced_board(identity: dict[str, Any]) -> Any:
+    """What the service's device announced (a DeviceRecord: its step rate and shortest
+    segment) for the preflight's estimate, as an in-process link gives it; None: nothing."""
+    from cdprhost.job.board import announced_record
+    from cdprhost.link.events import DeviceCaps
+
+    ticks = identity.get("min_segment_ticks")
+    caps = None if ticks is None else DeviceCaps(min_segment_ticks=int(ticks))
+    try:
+        return announced_record(cast("Any", SimpleNamespace(**identity)), caps)
+    except (TypeError, ValueError):  # an identity without the figures (another device)
+        return None

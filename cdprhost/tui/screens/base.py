@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from textual.app import ComposeResult
+from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.screen import Screen
 
@@ -15,7 +15,10 @@ from cdprhost.tui.widgets.key_bar import KeyBar
 from cdprhost.tui.widgets.nav_bar import NavBar
 
 if TYPE_CHECKING:  # pragma: no cover
-    from cdprhost.tui.app import CdprApp
+    from cdprhost.tui.screens.host import ScreenHost
+
+    class HostApp(App[int], ScreenHost):
+        """A Textual app that is a screen host (``tui/app.py``'s ``CdprApp``)."""
 
 
 class AppScreen(Screen[None]):
@@ -26,7 +29,7 @@ class AppScreen(Screen[None]):
     TICK_S = 1.0
 
     if TYPE_CHECKING:  # pragma: no cover - the app these screens run in
-        app: CdprApp
+        app: HostApp
 
     def compose(self) -> ComposeResult:
         yield NavBar(id="nav")
