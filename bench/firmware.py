@@ -55,6 +55,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import firmware_rates as rates_bench
+from step_schedule import print_like
+
 from cdprhost.link import LinkError, open_link
 from cdprhost.sim import avr_device
 from firmware_protocol.framing import OVERHEAD
@@ -275,10 +278,228 @@ def _heaters() -> dict[str, Any]:
     return out
 
 
+def _announced() -> tuple[int, int]:
+    """What the default build announces: IDENT max_step_rate and CAPS min_segment_ticks."""
+    with rates_bench.harness(rates_bench.default_build(), profile=False) as (link, _):
+        assert link.identity is not None
+        caps = link.caps
+        return link.identity.max_step_rate, caps.min_segment_ticks if caps else 1
+
+
+def _rate_search(speedup: float = 4.0) -> dict[str, Any]:
+    """Per configuration, the highest R with every edge within 10 us of its ideal time,
+    p99 within 5 us, no overrun, no lost or late step, the record exact (firmware_rates.py:
+    constant-speed segments on a build announcing up to 200,000 steps/s); the step
+    interrupts' load there; then the print's mix speeding up from rest to its R and back."""
+    build = rates_bench.variant(max(rates_bench.CEILINGS.values()))
+    idle = rates_bench.idle_isr_share(build)
+    out: dict[str, Any] = {
+        "build": f"firmware/build/rate-{build.max_step_rate}",
+        "isr_idle_share_pct": round(100 * idle, 1),
+    }
+    rows = []
+    for config in rates_bench.CONFIGS:
+        r = rates_bench.highest_rate(build, config, speedup=speedup)
+        at = r.pop("at", None)
+        if at is not None:
+            r["isr_load_pct_of_motion"] = rates_bench.isr_load_pct(at, idle)
+            r["steps_per_s_per_axis"] = at["steps_per_s"]
+        rows.append(r)
+    out["highest_rate"] = rows
+    mix_rate = rows[-1].get("rate")
+    if mix_rate:
+        ramp = rates_bench.run_batch(
+            build,
+            rates_bench.ramp_batch(rates_bench.rates_of("a print's mix", mix_rate)),
+            speedup=speedup,
+        )
+        out["print_mix_with_ramps_at_its_rate"] = {
+            "rate": mix_rate,
+            "passed": ramp["passed"],
+            "worst_us": ramp["worst_us"],
+            "p99_us": ramp["p99_us"],
+            "isr_load_pct_of_motion": rates_bench.isr_load_pct(ramp, idle),
+            "fail_reason": rates_bench.fail_reason(ramp),
+        }
+    return out
+
+
+def _print_like_batch(rate: int, ticks: int, seconds: float, limit: int) -> SegmentBatch:
+    """bench/step_schedule.py's print-like stream (every joint speed varying along a curve,
+    the deltas differ segment to segment), the busiest module at ``rate``; the first and
+    last segment (from and to rest: their peak is twice their mean) at half their steps,
+    and no segment over the device's ``limit`` steps/s."""
+    b = print_like(seconds, rate=float(rate), ticks=ticks)
+    deltas = b.deltas.copy()
+    deltas[[0, -1]] = np.trunc(deltas[[0, -1]] / 2).astype(np.int64)
+    most = limit * ticks // CLOCK_HZ
+    deltas = np.clip(deltas, -most, most)
+    return SegmentBatch(b.ticks, deltas, b.ramps)
+
+
+def _print_like_streams(rate: int, limit: int, seconds: float = 30.0) -> dict[str, Any]:
+    """The issue's streaming measure with print-like segments, at 1x over 250000 baud:
+    2000 segments/s clean and 1000/s with 1e-3 corruption and drop, ``seconds`` of device
+    time each, the busiest module at ``rate`` steps/s."""
+    out: dict[str, Any] = {"busiest_module_steps_per_s": rate}
+    for name, ticks, faults in (
+        ("clean_2000_per_s", 50, None),
+        ("faults_1000_per_s", 100, "corrupt=0.001,drop=0.001"),
+    ):
+        batch = _print_like_batch(rate, ticks, seconds, limit)
+        s, _, ok, _ = _stream("avr", batch, faults=faults)
+        out[name] = {
+            "record_exact": ok,
+            "segments": len(batch),
+            "distinct_delta_rows_pct": round(
+                100 * len(np.unique(batch.deltas, axis=0)) / len(batch), 1
+            ),
+            "device_s": s.get("sim_seconds"),
+            "host_retransmits": s["host_retransmits"],
+            "host_timeouts": s["host_timeouts"],
+            "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
+        }
+    return out
+
+
+def _cup(rate: int, min_ticks: int) -> dict[str, Any]:
+    """The cup's print time on the board's announced limits against the profile's own
+    (bench/board_estimate.py: the Python device announcing the AVR's limits)."""
+    script = Path(__file__).resolve().parent / "board_estimate.py"
+    cmd = [sys.executable, str(script), "--rate", str(rate), "--min-ticks", str(min_ticks)]
+    out = subprocess.run(
+        cmd, capture_output=True, text=True, check=True, cwd=Path(__file__).resolve().parents[1]
+    ).stdout
+    fig = json.loads(out)
+    plain = fig["estimate_profile_limits_s"]
+    return {
+        "board": fig["board"],
+        "printed_on_board_limits_s": fig["printed_s"],
+        "planned_without_cap_s": plain,
+        "board_slower_pct": round(100 * (fig["printed_s"] - plain) / plain, 2),
+        "estimate_with_board_s": fig["estimate_s"],
+        "estimate_error_pct": fig["estimate_error_pct"],
+        "board_message": fig["board_message"],
+    }
+
+
+def _stack_free() -> int | None:
+    """The static worst-case stack's free bytes (firmware/tools/stack_usage.py)."""
+    tool = avr_device.FIRMWARE_DIR / "tools" / "stack_usage.py"
+    out = subprocess.run(
+        [sys.executable, str(tool)], capture_output=True, text=True, check=False
+    ).stdout
+    m = re.search(r"(-?\d+) B free", out)
+    return int(m.group(1)) if m else None
+
+
+def _acceptance() -> list[tuple[str, str, str, bool | None]]:
+    """The issue's acceptance rows: (what, the issue's figure, measured, passed)."""
+    rows: list[tuple[str, str, str, bool | None]] = []
+    for config, rate in (
+        ("a print's mix", 30_000),
+        ("three modules out of step, extruder running", 33_000),
+        ("one module alone", 100_000),
+    ):
+        rates = rates_bench.rates_of(config, rate)
+        p = rates_bench.run_batch(
+            rates_bench.variant(max(rates)), rates_bench.constant_batch(rates)
+        )
+        got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
+        if not p["passed"]:
+            got += f"; {rates_bench.fail_reason(p)}"
+        rows.append(
+            (f"{config} at R = {rate:,}", "worst <= 10 us, p99 <= 5 us, clean", got, p["passed"])
+        )
+    rate, min_ticks = _announced()
+    cup = _cup(rate, min_ticks)
+    rows.append(
+        (
+            f"cup on the AVR's limits ({rate}/s, {min_ticks} ticks) vs no cap",
+            "<= +1 %",
+            f"{cup['board_slower_pct']:+.2f} %",
+            cup["board_slower_pct"] <= 1.0,
+        )
+    )
+    rows.append(
+        (
+            "check/print estimate vs the print on the board's limits",
+            "within 1 %",
+            f"{cup['estimate_error_pct']:+.2f} %",
+            abs(cup["estimate_error_pct"]) <= 1.0,
+        )
+    )
+    rows.append(
+        (
+            "the cup printed on the AVR in simavr equals the Python device's",
+            "equal",
+            "not run (about 30 min of real time; bench/board_estimate.py's note)",
+            None,
+        )
+    )
+    streams = _print_like_streams(int(0.9 * rate), rate)
+    for name, what in (
+        ("clean_2000_per_s", "2,000 segments/s clean, 30 s"),
+        ("faults_1000_per_s", "1,000 segments/s, 1e-3 corruption and drop, 30 s"),
+    ):
+        r = streams[name]
+        rows.append(
+            (
+                f"{what}, print-like at {streams['busiest_module_steps_per_s']}/s",
+                "record exact",
+                f"exact {r['record_exact']}, {r['host_retransmits']} retx",
+                bool(r["record_exact"]),
+            )
+        )
+    offs = {
+        state: _heaters_off_latency(state)
+        for state in ("idle, heating", "moving", "faulted (underrun)", "waiting (WAIT_HEATER)")
+    }
+    worst = max(offs.values())
+    rows.append(
+        (
+            "heaters off after the watchdog (worst of 4 states)",
+            "<= 0.1 s",
+            f"{worst:.3f} s",
+            worst <= 0.1,
+        )
+    )
+    size, free = _size(), _stack_free()
+    rows.append(
+        (
+            "flash, RAM, static worst-case stack",
+            ">= 64 B stack free",
+            f"flash {size['flash_bytes']} B, RAM {size['ram_static_bytes']} B, stack {free} B free",
+            free is not None and free >= 64,
+        )
+    )
+    return rows
+
+
+def _print_acceptance(rows: list[tuple[str, str, str, bool | None]]) -> None:
+    print("python bench/firmware.py --acceptance")
+    print("| acceptance row | issue | measured | |")
+    print("|---|---|---|---|")
+    for what, want, got, ok in rows:
+        mark = "n/a" if ok is None else ("pass" if ok else "FAIL")
+        print(f"| {what} | {want} | {got} | {mark} |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer rates and shorter streams")
     ap.add_argument("--heaters", action="store_true", help="only the heater rows")
+    ap.add_argument("--rates", action="store_true", help="only the highest-rate search")
+    ap.add_argument(
+        "--acceptance", action="store_true", help="only issue 29's acceptance rows, as a table"
+    )
+    ap.add_argument(
+        "--stream-rate",
+        type=int,
+        default=None,
+        help="the busiest module's steps/s in the print-like streams (default: 90 %% of the "
+        "rate the firmware announces, as the host plans)",
+    )
     args = ap.parse_args()
     missing = avr_device.toolchain_missing()
     if missing:  # one line saying what to install, not a traceback
@@ -286,6 +507,14 @@ def main() -> int:
     avr_device.build()
     if args.heaters:
         print(json.dumps({"command": "python bench/firmware.py --heaters"} | _heaters(), indent=1))
+        return 0
+    if args.acceptance:
+        _print_acceptance(_acceptance())
+        return 0
+    if args.rates:
+        print(
+            json.dumps({"command": "python bench/firmware.py --rates"} | _rate_search(), indent=1)
+        )
         return 0
     fig: dict[str, Any] = {
         "command": "python bench/firmware.py" + (" --quick" if args.quick else "")
@@ -403,6 +632,11 @@ def main() -> int:
                 "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
             }
         fig["streaming_30_s"] = sustained
+    # the same with print-like segments (varied deltas), at the rate the host plans for
+    rate, min_ticks = _announced()
+    fig["streaming_print_like"] = _print_like_streams(
+        args.stream_rate or int(0.9 * rate), rate, seconds=5.0 if args.quick else 30.0
+    )
     seg = stream[0]["payload_bytes_per_segment"]
     per_seg = seg * (1 + OVERHEAD / 120)  # frames of the 120-byte max_payload the AVR asks for
     fig["segments_per_s_line_limit_250000_baud"] = round(BAUD / 10 / per_seg)
@@ -412,6 +646,8 @@ def main() -> int:
         for state in ("idle, heating", "moving", "faulted (underrun)", "waiting (WAIT_HEATER)")
     }
     fig["heaters_autotune_210_c"] = _heaters()
+    fig["rate_search"] = _rate_search()
+    fig["cup_on_announced_limits"] = _cup(rate, min_ticks)
     print(json.dumps(fig, indent=1))
     return 0
 
