@@ -192,7 +192,9 @@ def _stats(tmp: Path) -> dict[str, Any]:
     stats = tmp / "stats.json"
     s: dict[str, Any] = json.loads(stats.read_text()) if stats.exists() else {}
     # the step interrupts' cycles: compare A (compare B nested in it included) and
-    # compare B on its own
+    # compare B on its own, as the harness profiles them (CDPR_SIM_PROFILE_ISR: Timer1's
+    # vectors 17 and 18); a step engine on other vectors needs the harness's profile to
+    # follow, and this is the one place that reads it
     s["isr_cycles"] = s.get("isr_profiled_mean_cycles", 0.0) * s.get("isr_profiled_count", 0)
     s["isr_cycles"] += s.get("compare_b_outside_cycles", 0)
     return s
