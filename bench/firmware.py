@@ -69,8 +69,8 @@ machine shared with four other sessions, 2 cores):
 | one module alone | 39,500 | 6.2 / 3.0 us | 73 % | 40,000: overrun (16 steps a tick) |
 | three modules in step | 18,500 | 6.3 / 4.9 us | 54 % | 19,000: overrun |
 | three out of step, extruder 0.1 R | 11,000-11,500 | 7.5 / 4.9 us | 57-66 % | 11,500-12,000: edge 12.5-14.8 us or p99 5.4 us |
-| a print's mix | 11,000 | 7.6 / 4.8 us | 56 % | 11,500: p99 5.2 us (overruns from 14,000) |
-| the mix with ramps from rest to 11,000 and back | fails | 13.0 / 5.0 us | 60 % | 5 overruns |
+| a print's mix | 10,500-11,000 | 7.6 / 4.9 us | 55-56 % | 11,000-11,500: edge 12.5 us or p99 5.2 us (overruns from 14,000) |
+| the mix with ramps from rest to that R and back | fails | 5.7-13.0 / 4.1-5.0 us | 60 % | 5 overruns |
 
 The step interrupts take 7.9 % of the CPU with nothing moving (`--rates`, 15-20 s).
 Print-like streams at 7,200 steps/s (4.1 payload bytes a segment, 97 % of segments
