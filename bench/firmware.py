@@ -1,6 +1,9 @@
 """Figures of the AVR firmware: flash/RAM/stack, ISR load, step timing, streaming, watchdog.
 
-    python bench/firmware.py [--quick]
+    python bench/firmware.py [--quick] [--stream-rate STEPS_PER_S]
+    python bench/firmware.py --rates        # only the highest-rate search (about 20 s)
+    python bench/firmware.py --acceptance   # only issue 29's acceptance rows, as a table
+    python bench/firmware.py --heaters      # only the heater rows
 
 Builds the firmware and the simavr harness, reads `avr-size`, then streams through the
 harness (a real HostLink over the harness's pty at 250000 baud, in real time) and reports
@@ -33,6 +36,55 @@ what the harness measured:
   seconds it took, and the AVR's gains against the Python device's (`--heaters` runs
   only these rows).
 
+- the highest step rate per configuration (issue 29; bench/firmware_rates.py), in
+  simulated time: one module alone; three modules in step; three out of step with the
+  extruder running (R, 0.997 R, 0.993 R, at least a step a segment apart, the extruder at
+  0.1 R: their edges drift across each other); a print's mix (R, 0.75 R, 0.5 R, 0.1 R).
+  For each, R is bisected to 500 steps/s and confirmed on 3 runs: every edge within
+  10 us of its ideal time, p99 within 5 us, every edge there, no overrun, no lost or late
+  step, no clock slip, the record exact. A point is 30 constant-speed segments of 10 ms
+  (300 ms of device time) on a build announcing 200,000 steps/s (the MAX_STEP_RATE
+  override: `make -C firmware BUILD=build/rate-200000 EXTRA_CFLAGS=-DMAX_STEP_RATE=200000UL
+  sim`, beside the default build the tests use). Reported: R, its worst and p99 edge
+  error, the step interrupts' share of the motion's cycles (the idle ticks outside
+  motion taken out at the share measured with nothing moving), the lowest rate that
+  failed and why; then the print's mix speeding up from rest to its R and back.
+- streaming with print-like segments: bench/step_schedule.py's stream (joint speeds
+  varying along a curve: 97 % of segments differ from the one before), back and forth
+  within the travel, the busiest module at 90 % of the announced rate (the host's plan;
+  `--stream-rate` for another): 500..2000 segments/s clean for 3 s each, then the issue's
+  2000/s clean and 1000/s with the faults for 30 s of device time.
+- the cup (`examples/example.gcode`, `paper-prototype`) on the limits the firmware
+  announces (IDENT, CAPS) against the profile's own: bench/board_estimate.py (the Python
+  device announcing them; the AVR's own print of it takes half an hour of real time).
+- `--acceptance`: exactly the issue's acceptance rows (the rates at their figures on a
+  build announcing them, the cup, the estimate, the 30 s streams, heaters off, flash,
+  RAM and stack), pass or fail, as a table for the closing note.
+
+Baseline (issue 29, today's firmware: a 400 us tick DDA announcing 8,000 steps/s; the
+machine shared with four other sessions, 2 cores):
+
+| configuration | highest R (steps/s) | worst / p99 edge at R | ISR load at R | first fail |
+|---|---|---|---|---|
+| one module alone | 39,500 | 6.2 / 3.0 us | 73 % | 40,000: overrun (16 steps a tick) |
+| three modules in step | 18,500 | 6.3 / 4.9 us | 54 % | 19,000: overrun |
+| three out of step, extruder 0.1 R | 11,000-11,500 | 7.5 / 4.9 us | 57-66 % | 11,500-12,000: edge 12.5-14.8 us or p99 5.4 us |
+| a print's mix | 10,500-11,000 | 7.6 / 4.9 us | 55-56 % | 11,000-11,500: edge 12.5 us or p99 5.2 us (overruns from 14,000) |
+| the mix with ramps from rest to that R and back | fails | 5.7-13.0 / 4.1-5.0 us | 60 % | 5 overruns |
+
+The step interrupts take 7.9 % of the CPU with nothing moving (`--rates`, 15-20 s).
+Print-like streams at 7,200 steps/s (4.1 payload bytes a segment, 97 % of segments
+differ from the one before): exact at 500, 1,000 and 1,250 segments/s; 1,538/s and
+2,000/s underrun (at 1.1 s and at 0.3 s of device time, the latter in every run, also
+with the simulator on time); 1,000/s with the faults underran at 6-11 s. At 2,000/s the
+limit is the CPU, not the line: with the busiest module at 2,000 steps/s (3.8 bytes a
+segment) the stream is exact, at 4,000 (3.6 bytes) it underruns at 0.6 s. The older
+repeating stream (1.1 bytes a segment) is exact at 2,000/s for 30 s. The cup on the
+announced limits: 1147.4 s against 744.6 s without a cap (+54 %); the estimate with the
+board's record 1145.4 s (-0.17 %). `--acceptance` today: the three rate rows, the cup's
++1 % and both 30 s print-like streams fail; the estimate (-0.17 %), heaters off
+(0.005 s) and the stack (79 B free, flash 42,262 B, RAM 7,585 B) pass.
+
 Real-time runs depend on the machine's load (simavr must keep up with 1x); the step
 timing and ISR figures are in simulated time and do not.
 """
@@ -54,6 +106,9 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import firmware_rates as rates_bench
+from step_schedule import print_like
 
 from cdprhost.link import LinkError, open_link
 from cdprhost.sim import avr_device
@@ -275,10 +330,254 @@ def _heaters() -> dict[str, Any]:
     return out
 
 
+def _announced() -> tuple[int, int]:
+    """What the default build announces: IDENT max_step_rate and CAPS min_segment_ticks."""
+    with rates_bench.harness(rates_bench.default_build(), profile=False) as (link, _):
+        assert link.identity is not None
+        caps = link.caps
+        return link.identity.max_step_rate, caps.min_segment_ticks if caps else 1
+
+
+def _rate_search(speedup: float = 4.0) -> dict[str, Any]:
+    """Per configuration, the highest R with every edge within 10 us of its ideal time,
+    p99 within 5 us, no overrun, no lost or late step, the record exact (firmware_rates.py:
+    constant-speed segments on a build announcing up to 200,000 steps/s); the step
+    interrupts' load there; then the print's mix speeding up from rest to its R and back."""
+    build = rates_bench.variant(max(rates_bench.CEILINGS.values()))
+    idle = rates_bench.idle_isr_share(build)
+    out: dict[str, Any] = {
+        "build": f"firmware/build/rate-{build.max_step_rate}",
+        "isr_idle_share_pct": round(100 * idle, 1),
+    }
+    rows = []
+    for config in rates_bench.CONFIGS:
+        r = rates_bench.highest_rate(build, config, speedup=speedup)
+        at = r.pop("at", None)
+        if at is not None:
+            r["isr_load_pct_of_motion"] = rates_bench.isr_load_pct(at, idle)
+            r["steps_per_s_per_axis"] = at["steps_per_s"]
+        rows.append(r)
+    out["highest_rate"] = rows
+    mix_rate = rows[-1].get("rate")
+    if mix_rate:
+        ramp = rates_bench.run_batch(
+            build,
+            rates_bench.ramp_batch(rates_bench.rates_of("a print's mix", mix_rate)),
+            speedup=speedup,
+        )
+        out["print_mix_with_ramps_at_its_rate"] = {
+            "rate": mix_rate,
+            "passed": ramp["passed"],
+            "worst_us": ramp["worst_us"],
+            "p99_us": ramp["p99_us"],
+            "isr_load_pct_of_motion": rates_bench.isr_load_pct(ramp, idle),
+            "fail_reason": rates_bench.fail_reason(ramp),
+        }
+    return out
+
+
+def _print_like_batch(rate: int, ticks: int, seconds: float, limit: int) -> SegmentBatch:
+    """bench/step_schedule.py's print-like stream (every joint speed varying along a curve,
+    the deltas differ segment to segment), the busiest module at ``rate``, back and forth:
+    each block of at most 6,000 steps on the busiest module is followed by its mirror
+    (the same segments backwards, reversed), so the modules stay inside their travel; no
+    segment over the device's ``limit`` steps/s; the first and last segment (from and to
+    rest: their peak is twice their mean) at half their steps."""
+    b = print_like(seconds, rate=float(rate), ticks=ticks)
+    most = limit * ticks // CLOCK_HZ
+    deltas = np.clip(b.deltas, -most, most)
+    block = max(1, min(len(deltas) // 2, int(6_000 * CLOCK_HZ / (rate * ticks))))
+    out = []
+    for i in range(0, len(deltas), 2 * block):
+        part = deltas[i : i + block]
+        out += [part, -part[::-1]]
+    deltas = np.concatenate(out)[: len(deltas)]
+    deltas[[0, -1]] = np.trunc(deltas[[0, -1]] / 2).astype(np.int64)
+    return SegmentBatch(b.ticks, deltas, b.ramps)
+
+
+def _print_like_streams(
+    rate: int, limit: int, seconds: float = 30.0, ladder: bool = False
+) -> dict[str, Any]:
+    """The issue's streaming measure with print-like segments, at 1x over 250000 baud:
+    2000 segments/s clean and 1000/s with 1e-3 corruption and drop, ``seconds`` of device
+    time each, the busiest module at ``rate`` steps/s; with ``ladder``, first 500..2000
+    segments/s clean, 3 s each (where the record stops being exact)."""
+    out: dict[str, Any] = {"busiest_module_steps_per_s": rate}
+    if ladder:
+        steps = []
+        for ticks in (200, 100, 80, 65, 50):
+            s, _, ok, _ = _stream("avr", _print_like_batch(rate, ticks, 3.0, limit))
+            steps.append(
+                {
+                    "segments_per_s": CLOCK_HZ // ticks,
+                    "record_exact": ok,
+                    "device_s": s.get("sim_seconds"),
+                    "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
+                }
+            )
+        out["ladder_clean_3_s"] = steps
+    for name, ticks, faults in (
+        ("clean_2000_per_s", 50, None),
+        ("faults_1000_per_s", 100, "corrupt=0.001,drop=0.001"),
+    ):
+        batch = _print_like_batch(rate, ticks, seconds, limit)
+        s, _, ok, _ = _stream("avr", batch, faults=faults)
+        payload, _ = encode_segments(batch, SegmentContext())
+        out[name] = {
+            "record_exact": ok,
+            "segments": len(batch),
+            "payload_bytes_per_segment": round(len(payload) / len(batch), 2),
+            # segments whose deltas differ from the one before (a repeat costs a byte)
+            "deltas_differ_pct": round(
+                100 * float(np.any(np.diff(batch.deltas, axis=0) != 0, axis=1).mean()), 1
+            ),
+            "device_s": s.get("sim_seconds"),
+            "host_retransmits": s["host_retransmits"],
+            "host_timeouts": s["host_timeouts"],
+            "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
+        }
+    return out
+
+
+def _cup(rate: int, min_ticks: int) -> dict[str, Any]:
+    """The cup's print time on the board's announced limits against the profile's own
+    (bench/board_estimate.py: the Python device announcing the AVR's limits)."""
+    script = Path(__file__).resolve().parent / "board_estimate.py"
+    cmd = [sys.executable, str(script), "--rate", str(rate), "--min-ticks", str(min_ticks)]
+    out = subprocess.run(
+        cmd, capture_output=True, text=True, check=True, cwd=Path(__file__).resolve().parents[1]
+    ).stdout
+    fig = json.loads(out)
+    plain = fig["estimate_profile_limits_s"]
+    return {
+        "board": fig["board"],
+        "printed_on_board_limits_s": fig["printed_s"],
+        "planned_without_cap_s": plain,
+        "board_slower_pct": round(100 * (fig["printed_s"] - plain) / plain, 2),
+        "estimate_with_board_s": fig["estimate_s"],
+        "estimate_error_pct": fig["estimate_error_pct"],
+        "board_message": fig["board_message"],
+    }
+
+
+def _stack_free() -> int | None:
+    """The static worst-case stack's free bytes (firmware/tools/stack_usage.py)."""
+    tool = avr_device.FIRMWARE_DIR / "tools" / "stack_usage.py"
+    out = subprocess.run(
+        [sys.executable, str(tool)], capture_output=True, text=True, check=False
+    ).stdout
+    m = re.search(r"(-?\d+) B free", out)
+    return int(m.group(1)) if m else None
+
+
+def _acceptance() -> list[tuple[str, str, str, bool | None]]:
+    """The issue's acceptance rows: (what, the issue's figure, measured, passed)."""
+    rows: list[tuple[str, str, str, bool | None]] = []
+    for config, rate in (
+        ("a print's mix", 30_000),
+        ("three modules out of step, extruder running", 33_000),
+        ("one module alone", 100_000),
+    ):
+        rates = rates_bench.rates_of(config, rate)
+        p = rates_bench.run_batch(
+            rates_bench.variant(max(rates)), rates_bench.constant_batch(rates)
+        )
+        got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
+        if not p["passed"]:
+            got += f"; {rates_bench.fail_reason(p)}"
+        rows.append(
+            (f"{config} at R = {rate:,}", "worst <= 10 us, p99 <= 5 us, clean", got, p["passed"])
+        )
+    rate, min_ticks = _announced()
+    cup = _cup(rate, min_ticks)
+    rows.append(
+        (
+            f"cup on the AVR's limits ({rate}/s, {min_ticks} ticks) vs no cap",
+            "<= +1 %",
+            f"{cup['board_slower_pct']:+.2f} %",
+            cup["board_slower_pct"] <= 1.0,
+        )
+    )
+    rows.append(
+        (
+            "check/print estimate vs the print on the board's limits",
+            "within 1 %",
+            f"{cup['estimate_error_pct']:+.2f} %",
+            abs(cup["estimate_error_pct"]) <= 1.0,
+        )
+    )
+    rows.append(
+        (
+            "the cup printed on the AVR in simavr equals the Python device's",
+            "equal",
+            "not run (about 30 min of real time; bench/board_estimate.py's note)",
+            None,
+        )
+    )
+    streams = _print_like_streams(int(0.9 * rate), rate)
+    for name, what in (
+        ("clean_2000_per_s", "2,000 segments/s clean, 30 s"),
+        ("faults_1000_per_s", "1,000 segments/s, 1e-3 corruption and drop, 30 s"),
+    ):
+        r = streams[name]
+        rows.append(
+            (
+                f"{what}, print-like at {streams['busiest_module_steps_per_s']}/s",
+                "record exact",
+                f"exact {r['record_exact']}, {r['host_retransmits']} retx",
+                bool(r["record_exact"]),
+            )
+        )
+    offs = {
+        state: _heaters_off_latency(state)
+        for state in ("idle, heating", "moving", "faulted (underrun)", "waiting (WAIT_HEATER)")
+    }
+    worst = max(offs.values())
+    rows.append(
+        (
+            "heaters off after the watchdog (worst of 4 states)",
+            "<= 0.1 s",
+            f"{worst:.3f} s",
+            worst <= 0.1,
+        )
+    )
+    size, free = _size(), _stack_free()
+    rows.append(
+        (
+            "flash, RAM, static worst-case stack",
+            ">= 64 B stack free",
+            f"flash {size['flash_bytes']} B, RAM {size['ram_static_bytes']} B, stack {free} B free",
+            free is not None and free >= 64,
+        )
+    )
+    return rows
+
+
+def _print_acceptance(rows: list[tuple[str, str, str, bool | None]]) -> None:
+    print("python bench/firmware.py --acceptance")
+    print("| acceptance row | issue | measured | |")
+    print("|---|---|---|---|")
+    for what, want, got, ok in rows:
+        mark = "n/a" if ok is None else ("pass" if ok else "FAIL")
+        print(f"| {what} | {want} | {got} | {mark} |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer rates and shorter streams")
     ap.add_argument("--heaters", action="store_true", help="only the heater rows")
+    ap.add_argument("--rates", action="store_true", help="only the highest-rate search")
+    ap.add_argument(
+        "--acceptance", action="store_true", help="only issue 29's acceptance rows, as a table"
+    )
+    ap.add_argument(
+        "--stream-rate",
+        type=int,
+        default=None,
+        help="the busiest module's steps/s in the print-like streams (default: 90 %% of the "
+        "rate the firmware announces, as the host plans)",
+    )
     args = ap.parse_args()
     missing = avr_device.toolchain_missing()
     if missing:  # one line saying what to install, not a traceback
@@ -286,6 +585,14 @@ def main() -> int:
     avr_device.build()
     if args.heaters:
         print(json.dumps({"command": "python bench/firmware.py --heaters"} | _heaters(), indent=1))
+        return 0
+    if args.acceptance:
+        _print_acceptance(_acceptance())
+        return 0
+    if args.rates:
+        print(
+            json.dumps({"command": "python bench/firmware.py --rates"} | _rate_search(), indent=1)
+        )
         return 0
     fig: dict[str, Any] = {
         "command": "python bench/firmware.py" + (" --quick" if args.quick else "")
@@ -305,7 +612,12 @@ def main() -> int:
     sweep = []
     top = _advertised_rate()
     fig["advertised_max_step_rate"] = top
-    rates = [top] if args.quick else sorted({2_500, 5_000, 7_500, 10_000, top})
+    # rates over the advertised one are refused by the host (no edge logged)
+    rates = (
+        [top]
+        if args.quick
+        else sorted({r for r in (2_500, 5_000, 7_500, 10_000) if r < top} | {top})
+    )
     for rate in rates:
         log = Path(tempfile.mkdtemp()) / "steps.txt"
         batch = _rate_batch(rate, n=200)
@@ -403,6 +715,14 @@ def main() -> int:
                 "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
             }
         fig["streaming_30_s"] = sustained
+    # the same with print-like segments (varied deltas), at the rate the host plans for
+    rate, min_ticks = _announced()
+    fig["streaming_print_like"] = _print_like_streams(
+        args.stream_rate or int(0.9 * rate),
+        rate,
+        seconds=5.0 if args.quick else 30.0,
+        ladder=not args.quick,
+    )
     seg = stream[0]["payload_bytes_per_segment"]
     per_seg = seg * (1 + OVERHEAD / 120)  # frames of the 120-byte max_payload the AVR asks for
     fig["segments_per_s_line_limit_250000_baud"] = round(BAUD / 10 / per_seg)
@@ -412,6 +732,8 @@ def main() -> int:
         for state in ("idle, heating", "moving", "faulted (underrun)", "waiting (WAIT_HEATER)")
     }
     fig["heaters_autotune_210_c"] = _heaters()
+    fig["rate_search"] = _rate_search()
+    fig["cup_on_announced_limits"] = _cup(rate, min_ticks)
     print(json.dumps(fig, indent=1))
     return 0
 

@@ -32,8 +32,11 @@
  * the host's bytes came at the wrong moment, and now and then one tick was lost
  * outright: every later edge 400 us late (tests/firmware/test_step_timing.py). At
  * 8000: no overrun in 18 runs on a loaded machine, every edge within 9 us.
- * The host plans for 90 % of it. */
+ * The host plans for 90 % of it. A build may set another (bench/firmware.py's rate search:
+ * make BUILD=build/rate-N EXTRA_CFLAGS=-DMAX_STEP_RATE=NUL, N a multiple of 200). */
+#ifndef MAX_STEP_RATE
 #define MAX_STEP_RATE 8000UL /* steps/s, any one axis */
+#endif
 
 /* CAPS (protocol 2.1). The shortest segment: one whole tick, 400 us (a shorter one would
  * make the step interrupt's period shorter than its own run time; BAD_VALUE). The segment

@@ -10,6 +10,7 @@ import pytest
 from cdprhost.link import DeviceFault, open_link
 from firmware_protocol.framing import Kind, encode_frame
 from firmware_protocol.messages import (
+    Boot,
     ClearFault,
     Configure,
     Dwell,
@@ -63,6 +64,26 @@ def test_handshake_and_duplicate_hello(device_factory, host_factory):
     h.wait_for(lambda: h.flows and h.flows[-1].items_done == 2, what="the second dwell done")
     st = h.status()
     assert st.flags & Flag.SYNCED and st.queue_free == 128 and st.items_received == 2
+
+
+def test_a_hello_of_another_major_gets_an_ident_and_opens_no_session(device_factory, host_factory):
+    dev = device_factory()
+    h = host_factory(dev.path)
+
+    def answered():
+        # sent again until answered, as a host does (a booting device may miss one)
+        h.urgent_send(Hello(0x2222, major=3))
+        h.pump(0.2)
+        return next((m for m in h.urgent if isinstance(m, Ident) and m.nonce == 0x2222), None)
+
+    ident = h.wait_for(answered, what="IDENT to a HELLO of major 3")
+    assert ident.major == 2  # the host then refuses it, naming both versions
+    # still no session: the device goes on announcing its boot, as before any HELLO
+    h.urgent.clear()
+    h.wait_for(lambda: any(isinstance(m, Boot) for m in h.urgent), what="BOOT after it")
+    ident = h.hello(0x2222)  # a HELLO of its own major then opens one
+    h.send(Dwell(10))
+    h.wait_for(lambda: h.flows and h.flows[-1].items_done == 1, what="the dwell done")
 
 
 @pytest.mark.parametrize("faults", [None, "corrupt=0.002,drop=0.002,dup=0.002,seed=3"])

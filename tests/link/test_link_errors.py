@@ -9,6 +9,7 @@ import time
 import pytest
 import serial
 
+import cdprhost.link.session_setup as session_setup
 import firmware_protocol.device.firmware as firmware
 from cdprhost.cli.main import main
 from cdprhost.link import (
@@ -19,8 +20,10 @@ from cdprhost.link import (
     ProtocolMismatch,
     open_link,
 )
+from cdprhost.link.host_link import HostLink
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.firmware import SimDevice
+from firmware_protocol.device.harness import VirtualBench
 from firmware_protocol.device.pty_server import PtyServer
 from firmware_protocol.messages import PROTOCOL_MINOR
 from firmware_protocol.streams import demo_stream
@@ -104,6 +107,18 @@ def test_protocol_major_mismatch(monkeypatch):
         open_embedded()
     assert exc.value.device_version == (3, PROTOCOL_MINOR)
     assert exc.value.host_version == (2, PROTOCOL_MINOR)
+
+
+def test_a_host_of_a_newer_major_is_refused_and_the_device_opens_no_session(monkeypatch):
+    # the other direction of the test above: the host speaks a major the device does not
+    monkeypatch.setattr(session_setup, "PROTOCOL_MAJOR", 3)
+    device = SimDevice()
+    link = HostLink(VirtualBench(device), device=device)
+    with pytest.raises(ProtocolMismatch, match="protocol 2") as exc:
+        link.handshake()
+    assert exc.value.host_version == (3, PROTOCOL_MINOR)
+    assert exc.value.device_version == (2, PROTOCOL_MINOR)
+    assert not device.synced  # it answered with IDENT and took nothing further
 
 
 def test_sim_device_cli_rejects_bad_options(capsys):

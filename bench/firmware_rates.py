@@ -1,0 +1,339 @@
+"""The AVR firmware's highest step rate per configuration, in simulated time (issue 29).
+
+Used by bench/firmware.py (`--rates`, `--acceptance`). A configuration is a rate per axis
+as shares of R: one module alone, three modules in step, three modules out of step with
+the extruder running, a print's mix. Each point streams constant-speed segments of
+10 ms (back and forth, the last braking to rest) to a firmware build announcing at
+least R (``MAX_STEP_RATE`` raised by a build override into ``firmware/build/rate-N``,
+so the default build the tests use is not touched), and judges it on the harness's
+figures (firmware/sim/harness.c): every rising step edge against its ideal time on the
+segment's profile (PROTOCOL.md 5.1), worst within 10 us and p99 within 5 us, as many
+edges as the segments ask, no tick overrun, no lost or late step (HEALTH), no clock
+slip, the record exact. The search bisects R between a rate that passes and one that
+fails, to ``RESOLUTION`` steps/s.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from cdprhost.link import HostLink, LinkError, open_link
+from cdprhost.sim import avr_device
+from firmware_protocol.segments import (
+    RAMP_CONSTANT,
+    RAMP_FROM_REST,
+    RAMP_TO_REST,
+    SegmentBatch,
+    step_times,
+)
+from firmware_protocol.streams import expected_record
+
+CLOCK_HZ = 100_000
+CYCLES_PER_UNIT = 160  # 16 MHz / 100 kHz: the step log is in cycles of the motion clock
+WORST_US, P99_US = 10.0, 5.0  # the issue's edge limits
+RESOLUTION = 500  # steps/s: where the search stops
+SEGMENT_TICKS = 1000  # 10 ms constant-speed segments
+SEGMENTS = 30  # 300 ms of device time a point
+
+#: rate of each axis (three modules, extruder) as a share of R; the out-of-step modules
+#: differ by a step or two a segment, so their edges drift across each other
+CONFIGS: dict[str, tuple[float, float, float, float]] = {
+    "one module alone": (1.0, 0.0, 0.0, 0.0),
+    "three modules in step": (1.0, 1.0, 1.0, 0.0),
+    "three modules out of step, extruder running": (1.0, 0.997, 0.993, 0.1),
+    "a print's mix": (1.0, 0.75, 0.5, 0.1),
+}
+#: where each search starts looking (steps/s): the top a point may reach
+CEILINGS = {
+    "one module alone": 200_000,
+    "three modules in step": 80_000,
+    "three modules out of step, extruder running": 80_000,
+    "a print's mix": 80_000,
+}
+
+
+@dataclass(frozen=True)
+class Build:
+    """A firmware build for the simulator: the ELF and the harness that runs it."""
+
+    max_step_rate: int | None  # None: the default build (config.h's rate)
+    elf: Path
+    harness: Path
+
+
+def variant(max_step_rate: int) -> Build:
+    """The simulator build announcing ``max_step_rate`` (rounded up to a multiple of 200,
+    as motion.c's rate check needs), in its own build directory."""
+    rate = -(-max_step_rate // 200) * 200
+    build = f"build/rate-{rate}"
+    proc = subprocess.run(
+        ["make", "-s", "-C", str(avr_device.FIRMWARE_DIR), f"BUILD={build}"]
+        + [f"EXTRA_CFLAGS=-DMAX_STEP_RATE={rate}UL", "sim"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if proc.returncode:
+        raise SystemExit(f"building the firmware with MAX_STEP_RATE={rate} failed:\n{proc.stderr}")
+    out = avr_device.FIRMWARE_DIR / build
+    return Build(rate, out / "cdpr-sim.elf", out / "cdpr-sim")
+
+
+def default_build() -> Build:
+    return Build(None, avr_device.ELF, avr_device.HARNESS)
+
+
+#: the out-of-step modules at least a step a segment apart (steps/s), whatever R
+APART = CLOCK_HZ // SEGMENT_TICKS
+
+
+def rates_of(config: str, rate: float) -> list[int]:
+    """Steps/s of each axis for ``config`` at R = ``rate``."""
+    out = [round(rate * share) for share in CONFIGS[config]]
+    if "out of step" in config:
+        out[1] = min(out[1], out[0] - APART)
+        out[2] = min(out[2], out[1] - APART)
+    return out
+
+
+def constant_batch(rates: list[int], n: int = SEGMENTS, ticks: int = SEGMENT_TICKS) -> SegmentBatch:
+    """``n`` constant-speed segments at ``rates`` (steps/s per axis), reversing every fourth
+    segment, the last braking to rest from the same rate (half the distance)."""
+    d = np.array(rates, dtype=np.int64) * ticks // CLOCK_HZ
+    sign = np.where((np.arange(n) // 4) % 2 == 0, 1, -1)
+    deltas = np.outer(sign, d)
+    deltas[-1] //= 2
+    ramps = np.full(n, RAMP_CONSTANT, dtype=np.int16)
+    ramps[-1] = RAMP_TO_REST
+    return SegmentBatch(np.full(n, ticks), deltas, ramps)
+
+
+def ramp_batch(
+    rates: list[int], cycles: int = 5, steady: int = 3, ticks: int = SEGMENT_TICKS
+) -> SegmentBatch:
+    """From rest up to ``rates`` in one segment (its end speed twice its mean), ``steady``
+    segments at the rates, back to rest in one; ``cycles`` times, reversing each time."""
+    d = np.array(rates, dtype=np.int64) * ticks // CLOCK_HZ
+    one = [RAMP_FROM_REST] + [RAMP_CONSTANT] * steady + [RAMP_TO_REST]
+    codes = np.array(one * cycles, dtype=np.int16)
+    share = np.where(codes == RAMP_CONSTANT, 2, 1)  # halves: the ramps cover half the way
+    sign = np.repeat(np.where(np.arange(cycles) % 2 == 0, 1, -1), len(one))
+    deltas = (sign * share)[:, None] * (d[None, :] // 2)
+    return SegmentBatch(np.full(len(codes), ticks), deltas, codes)
+
+
+def ideal_edges_us(batch: SegmentBatch, axis: int) -> np.ndarray:
+    """The exact time (us of motion) of every step of ``axis`` on its segments' profiles."""
+    starts = np.concatenate([[0], np.cumsum(batch.ticks)[:-1]])
+    parts = [
+        starts[i] + step_times(int(batch.deltas[i, axis]), int(batch.ticks[i]), int(batch.ramps[i]))
+        for i in range(len(batch))
+    ]
+    return np.concatenate(parts) * 1e6 / CLOCK_HZ if parts else np.zeros(0)
+
+
+def edge_errors(edges: np.ndarray, batch: SegmentBatch) -> tuple[np.ndarray, int]:
+    """|error| (us) of every logged rising edge (rows ``axis cycles``) against its ideal
+    time, and the edges missing or extra against the steps the segments ask for."""
+    errs, miscount = [], 0
+    for axis in range(4):
+        got = edges[edges[:, 0] == axis, 1] / (CYCLES_PER_UNIT / 10) if len(edges) else np.zeros(0)
+        want = ideal_edges_us(batch, axis)
+        miscount += abs(len(got) - len(want))
+        m = min(len(got), len(want))
+        errs.append(np.abs(got[:m] - want[:m]))
+    e = np.concatenate(errs)
+    return (e if len(e) else np.zeros(1)), miscount
+
+
+@contextmanager
+def harness(
+    build: Build, *, speedup: float = 4.0, profile: bool = True
+) -> Iterator[tuple[HostLink, Path]]:
+    """The harness running ``build`` and a link to it; the folder of its record
+    (record.jsonl), step log (steps.txt) and figures (stats.json, written on exit)."""
+    tmp = Path(tempfile.mkdtemp())
+    env = dict(os.environ, CDPR_SIM_STEP_LOG=str(tmp / "steps.txt"))
+    if profile:
+        env["CDPR_SIM_PROFILE_ISR"] = "1"
+    cmd = [str(build.harness), str(build.elf), "--speedup", f"{speedup:g}"]
+    cmd += ["--record", str(tmp / "record.jsonl"), "--stats", str(tmp / "stats.json")]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env
+    )
+    assert proc.stdout is not None
+    try:
+        link = open_link(proc.stdout.readline().strip())
+        try:
+            yield link, tmp
+        finally:
+            link.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(60)
+
+
+def _stats(tmp: Path) -> dict[str, Any]:
+    stats = tmp / "stats.json"
+    s: dict[str, Any] = json.loads(stats.read_text()) if stats.exists() else {}
+    # the step interrupts' cycles: compare A (compare B nested in it included) and
+    # compare B on its own, as the harness profiles them (CDPR_SIM_PROFILE_ISR: Timer1's
+    # vectors 17 and 18); a step engine on other vectors needs the harness's profile to
+    # follow, and this is the one place that reads it
+    s["isr_cycles"] = s.get("isr_profiled_mean_cycles", 0.0) * s.get("isr_profiled_count", 0)
+    s["isr_cycles"] += s.get("compare_b_outside_cycles", 0)
+    return s
+
+
+def run_batch(
+    build: Build, batch: SegmentBatch, *, speedup: float = 4.0, profile: bool = True
+) -> dict[str, Any]:
+    """Stream ``batch`` to the harness running ``build`` and judge it: the figures of one
+    point (``passed`` against the issue's limits)."""
+    refused = ""
+    with harness(build, speedup=speedup, profile=profile) as (link, tmp):
+        try:
+            link.queue_segments(batch)
+            link.wait_idle(300)
+        except LinkError as e:  # an underrun, a refused segment: this rate failed
+            refused = str(e)[:200]
+    record, log = tmp / "record.jsonl", tmp / "steps.txt"
+    rows = [json.loads(x) for x in record.read_text().splitlines() if x.strip()]
+    s = _stats(tmp)
+    edges = np.loadtxt(log, dtype=np.int64, ndmin=2) if log.stat().st_size else np.zeros((0, 2))
+    err, miscount = edge_errors(edges, batch)
+    out = {
+        "steps_per_s": [int(x) for x in np.abs(batch.deltas[0]) * CLOCK_HZ // batch.ticks[0]],
+        "worst_us": round(float(err.max()), 2),
+        "p99_us": round(float(np.percentile(err, 99)), 2),
+        "edges_missing_or_extra": miscount,
+        "overruns": s.get("overruns", -1),
+        "lost_steps": s.get("lost_steps", -1),
+        "late_pulses": s.get("late_pulses", -1),
+        "clock_slips": s.get("motion_clock_slips", -1),
+        "record_exact": not refused and rows == expected_record(batch),
+        "isr_cycles": s["isr_cycles"],
+        "run_cycles": s.get("cycles", 0),
+        "motion_cycles": int(batch.ticks.sum()) * CYCLES_PER_UNIT,
+    }
+    if refused:
+        out["refused"] = refused
+    out["passed"] = passes(out)
+    return out
+
+
+def passes(point: dict[str, Any]) -> bool:
+    """The issue's limits: every edge within 10 us, p99 within 5 us, all edges there, no
+    overrun, lost or late step, no clock slip, the record exact."""
+    return bool(
+        point["record_exact"]
+        and point["worst_us"] <= WORST_US
+        and point["p99_us"] <= P99_US
+        and point["edges_missing_or_extra"] == 0
+        and point["overruns"] == 0
+        and point["lost_steps"] == 0
+        and point["late_pulses"] == 0
+        and point["clock_slips"] == 0
+    )
+
+
+def isr_load_pct(point: dict[str, Any], idle_share: float) -> float:
+    """The step interrupts' share of the motion's cycles (%), the idle ticks outside
+    motion (at ``idle_share`` of their cycles) taken out."""
+    idle = max(point["run_cycles"] - point["motion_cycles"], 0) * idle_share
+    return round(100 * max(point["isr_cycles"] - idle, 0) / point["motion_cycles"], 1)
+
+
+def idle_isr_share(build: Build, seconds: float = 0.5) -> float:
+    """The step interrupts' share of the CPU with nothing moving (a session open,
+    ``seconds`` of wall time)."""
+    with harness(build) as (_link, tmp):
+        time.sleep(seconds)
+    s = _stats(tmp)
+    return float(s["isr_cycles"]) / max(int(s.get("cycles", 0)), 1)
+
+
+def highest_rate(
+    build: Build,
+    config: str,
+    *,
+    lo: int = 1_000,
+    hi: int | None = None,
+    repeats: int = 3,
+    speedup: float = 4.0,
+) -> dict[str, Any]:
+    """The highest R (a multiple of RESOLUTION) at which ``config`` passes: bisected
+    between ``lo`` and ``hi`` on one run a point, then confirmed on ``repeats`` runs
+    (stepping down while one of them fails: a host byte arriving with a step makes a
+    run differ from the next). Its figures are the worst of its runs; ``fail`` is the
+    lowest rate seen failing and why."""
+    hi = hi or CEILINGS[config]
+    runs: dict[int, list[dict[str, Any]]] = {}
+
+    def run(r: int) -> dict[str, Any]:
+        p = run_batch(build, constant_batch(rates_of(config, r)), speedup=speedup)
+        runs.setdefault(r, []).append(p)
+        return p
+
+    def passed(r: int) -> bool:
+        return all(p["passed"] for p in runs.get(r) or [run(r)])
+
+    top = hi
+    if passed(hi):
+        lo = hi
+    elif passed(lo):
+        while hi - lo > RESOLUTION:
+            mid = max((lo + hi) // 2 // RESOLUTION * RESOLUTION, lo + RESOLUTION)
+            lo, hi = (mid, hi) if passed(mid) else (lo, mid)
+        while lo > RESOLUTION:
+            while passed(lo) and len(runs[lo]) < repeats:
+                run(lo)
+            if passed(lo):
+                break
+            lo -= RESOLUTION
+    at = runs.get(lo, [])
+    failed = sorted(r for r, ps in runs.items() if not all(p["passed"] for p in ps))
+    out: dict[str, Any] = {"config": config, "rate": lo if at and passed(lo) else None}
+    if at:
+        out["worst_us"] = max(p["worst_us"] for p in at)
+        out["p99_us"] = max(p["p99_us"] for p in at)
+        out["runs_at_rate"] = len(at)
+        out["at"] = at[0]
+    if failed:
+        f = failed[0]
+        out["lowest_fail"] = f
+        out["fail_reason"] = fail_reason(next(p for p in runs[f] if not p["passed"]))
+    out["points_run"] = sum(len(ps) for ps in runs.values())
+    out["ceiling"] = top
+    return out
+
+
+def fail_reason(point: dict[str, Any]) -> str:
+    """The first limit a failed point broke, in a few words."""
+    if point.get("refused"):
+        return "refused: " + point["refused"][:80]
+    for key in ("overruns", "lost_steps", "late_pulses", "clock_slips", "edges_missing_or_extra"):
+        if point[key]:
+            return f"{key} {point[key]}"
+    if point["worst_us"] > WORST_US:
+        return f"worst edge {point['worst_us']} us"
+    if point["p99_us"] > P99_US:
+        return f"p99 {point['p99_us']} us"
+    if not point["record_exact"]:
+        return "record not exact"
+    return ""
