@@ -31,7 +31,7 @@ from itertools import chain
 
 import numpy as np
 
-from firmware_protocol.segments import RAMP_CONSTANT, SegmentBatch, step_times
+from firmware_protocol.segments import RAMP_CONSTANT, SegmentBatch, ramp_share, step_times
 
 CPU_HZ = 16_000_000
 FRAC_BITS = 8
@@ -76,6 +76,21 @@ def cycles_per_tick(clock_hz: int, cpu_hz: int = CPU_HZ) -> int:
 def ideal_edges(steps: int, ticks: int, code: int, cycles_per_tick: int) -> np.ndarray:
     """Each step's ideal time on the segment's profile, in cycles from its start (float)."""
     return step_times(steps, ticks, code) * float(cycles_per_tick)
+
+
+def _ideal_edges_many(
+    steps: np.ndarray, ticks: np.ndarray, codes: np.ndarray, cycles_per_tick: int
+) -> np.ndarray:
+    """:func:`ideal_edges` of several axes (``steps`` > 0), one after another: the same
+    arithmetic element for element, so the same floats."""
+    steps = np.asarray(steps, dtype=np.int64)
+    starts = np.cumsum(steps) - steps
+    j = np.arange(int(steps.sum()), dtype=np.int64) - np.repeat(starts - 1, steps)
+    x = (j - 0.5) / np.repeat(steps, steps)
+    r = np.repeat(ramp_share(codes), steps)
+    tau = x / (r + np.sqrt(r * r + (1.0 - 2.0 * r) * x))
+    edges = tau * np.repeat(np.asarray(ticks, dtype=np.int64), steps) * float(cycles_per_tick)
+    return np.asarray(edges, dtype=np.float64)
 
 
 def device_times(schedule: AxisSchedule) -> np.ndarray:
@@ -167,7 +182,7 @@ def predicted_error(
 # that one round usually settles a chunk; :func:`_seek` replays the search over what has
 # been tried, so the result is that of trying one count at a time.
 
-_ROUND_EDGES = 4096  # edges a round tries, shared among the axes still fitting
+_ROUND_EDGES = 2048  # edges a round tries, shared among the axes still fitting
 _AXIS_EDGES = 64  # but at least this many an axis
 
 
@@ -191,7 +206,11 @@ _TRI = np.arange(MAX_COUNT + 1, dtype=np.int64) * np.arange(-1, MAX_COUNT, dtype
 
 
 def _try_counts(
-    ideal: np.ndarray, axes: np.ndarray, tried: list[int], counts: np.ndarray, tol_cycles: float
+    ideal: np.ndarray,
+    axes: np.ndarray,
+    tried: list[int] | np.ndarray,
+    counts: np.ndarray,
+    tol_cycles: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Candidate chunks of several axes: row 0 of ``axes`` is each axis's next edge in the
     flat ``ideal``, row 1 how many edges remain in the axis from there, row 2 that edge's
@@ -288,6 +307,119 @@ def _seek(
     return lo, []
 
 
+_FEW_AXES = 24  # more axes than this still fitting: their searches are replayed in numpy too
+_GROWN = 2  # a round tries the next two doublings of a growing search
+_LEVELS = 2  # and two levels of each bisection it may come to
+
+
+def _subtree(lo: np.ndarray, hi: np.ndarray, levels: int) -> list[np.ndarray]:
+    """The counts (0: none) a bisection of each ``(lo, hi)`` tries in its next ``levels``."""
+    out = []
+    spans = [(lo, hi)]
+    for _ in range(levels):
+        below = []
+        for a, b in spans:
+            mid = (a + b) >> 1
+            out.append(np.where(b - a > 1, mid, 0))
+            below += [(a, mid), (mid, b)]
+        spans = below
+    return out
+
+
+def _advance_many(
+    ideal: np.ndarray,
+    firsts: list[int],
+    lengths: list[int],
+    t: list[int],
+    start: list[int],
+    hint: list[int],
+    chunks: list[list[Chunk]],
+    tol_cycles: float,
+) -> None:
+    """The searches of many axes advanced in numpy, their replay too, while more than
+    ``_FEW_AXES`` are still fitting (``t``, ``start``, ``hint`` and ``chunks`` are brought
+    up to date: the rest goes on from there). Each round every axis tries a count of 1 if
+    its chunk is new (the chunk it keeps if nothing longer fits), the next doublings of its
+    search and a few levels of the bisections it may come to; then each search is replayed
+    as far as what it tried reaches."""
+    first = np.array(firsts, dtype=np.int64)
+    n = np.array(lengths, dtype=np.int64)
+    s = np.array(start, dtype=np.int64)
+    tt = np.array(t, dtype=np.int64)
+    h = np.array(hint, dtype=np.int64)
+    lo = np.ones(len(n), dtype=np.int64)
+    hi = np.maximum(2, np.minimum(h, np.minimum(n - s, MAX_COUNT)))
+    growing = np.ones(len(n), dtype=bool)
+    fresh = np.ones(len(n), dtype=bool)  # the chunk's count of 1 not tried yet
+    best = np.zeros((2, len(n)), dtype=np.int64)  # interval, add of the count lo
+    found: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    while np.count_nonzero(s < n) > _FEW_AXES:
+        idx = np.flatnonzero(s < n)
+        limit = np.minimum(n[idx] - s[idx], MAX_COUNT)
+        a, b, g = lo[idx], hi[idx], growing[idx]
+        top = np.minimum(b, limit + 1)
+        cols = [np.where(fresh[idx], 1, 0)]
+        cols += [np.where(g & (b << j <= limit), b << j, 0) for j in range(_GROWN)]
+        cols += _subtree(a, np.where(g, top, b), _LEVELS)
+        cols += _subtree(np.where(g, b, 0), np.where(g, np.minimum(2 * b, limit + 1), 0), _LEVELS)
+        cand = np.stack(cols, axis=1)
+        rows, slots = np.nonzero(cand)
+        lanes = idx[rows]
+        ok, steps, adds = _try_counts(
+            ideal,
+            np.array([first[lanes] + s[lanes], n[lanes] - s[lanes], tt[lanes]]),
+            np.ones(len(rows), dtype=np.int64),
+            cand[rows, slots],
+            tol_cycles,
+        )
+        fits = np.zeros(cand.shape, dtype=bool)
+        fits[rows, slots] = ok
+        step = np.zeros(cand.shape, dtype=np.int64)
+        step[rows, slots] = steps
+        add = np.zeros(cand.shape, dtype=np.int64)
+        add[rows, slots] = adds
+        bi, ba = best[0, idx], best[1, idx]
+        f = fresh[idx]
+        bi[f], ba[f] = step[f, 0], add[f, 0]
+        stuck = np.zeros(len(idx), dtype=bool)
+        every = np.arange(len(idx))
+        while True:
+            over = g & (b > limit)  # grown past the axis: bisect up to its end
+            b[over], g[over] = limit[over] + 1, False
+            want = np.where(g, b, (a + b) >> 1)
+            match = cand == want[:, None]
+            slot = match.argmax(axis=1)
+            live = ~stuck & (g | (b - a > 1))
+            stuck |= live & ~match[every, slot]
+            go = np.flatnonzero(live & ~stuck)
+            if not len(go):
+                break
+            yes = fits[go, slot[go]]
+            up, down = go[yes], go[~yes]
+            a[up] = want[up]
+            bi[up], ba[up] = step[up, slot[up]], add[up, slot[up]]
+            b[up[g[up]]] *= 2
+            g[down] = False
+            b[down] = want[down]
+        lo[idx], hi[idx], growing[idx], fresh[idx] = a, b, g, False
+        best[0, idx], best[1, idx] = bi, ba
+        done = ~g & (b - a <= 1)
+        if not done.any():
+            continue
+        d = idx[done]
+        count, di, da = a[done], bi[done], ba[done]
+        found.append((d, count, di, da))
+        tt[d] += count * di + da * (count * (count - 1) // 2)
+        s[d] += count
+        h[d] = count
+        lo[d], growing[d], fresh[d] = 1, True, True
+        hi[d] = np.maximum(2, np.minimum(count, np.minimum(n[d] - s[d], MAX_COUNT)))
+    for d, count, di, da in found:
+        for i, c, step_i, add_i in zip(d.tolist(), count.tolist(), di.tolist(), da.tolist()):
+            chunks[i].append(Chunk(c, step_i, add_i))
+    t[:], start[:], hint[:] = tt.tolist(), s.tolist(), h.tolist()
+
+
 def _fit_axes(ideal: np.ndarray, lengths: list[int], tol_cycles: float) -> list[AxisSchedule]:
     """The schedules of several axes, whose ideal edges lie one after another in ``ideal``
     (``lengths`` of them each), every search advanced together."""
@@ -299,8 +431,10 @@ def _fit_axes(ideal: np.ndarray, lengths: list[int], tol_cycles: float) -> list[
     start = [0] * len(lengths)
     t = list(leads)
     hint = [1] * len(lengths)
+    if sum(1 for n in lengths if n) > _FEW_AXES:
+        _advance_many(ideal, firsts, lengths, t, start, hint, chunks, tol_cycles)
     tried: list[dict[int, tuple[bool, int, int]]] = [{} for _ in lengths]
-    active = [i for i, n in enumerate(lengths) if n]
+    active = [i for i, n in enumerate(lengths) if start[i] < n]
     while active:
         budget = max(_AXIS_EDGES, _ROUND_EDGES // len(active))
         asked: list[int] = []
@@ -378,12 +512,10 @@ def plan_schedules(
     where = list(zip(*(a.tolist() for a in np.nonzero((n != 0) & ~ok))))
     if not where:
         return {}
-    ideals = [
-        ideal_edges(int(n[i, k]), int(batch.ticks[i]), int(batch.ramps[i]), cycles_per_tick)
-        for i, k in where
-    ]
-    fitted = _fit_axes(np.concatenate(ideals), [len(x) for x in ideals], tol_cycles)
-    return dict(zip(where, fitted))
+    i, k = np.array(where).T
+    lengths = np.abs(n[i, k])
+    ideal = _ideal_edges_many(lengths, batch.ticks[i], batch.ramps[i], cycles_per_tick)
+    return dict(zip(where, _fit_axes(ideal, lengths.tolist(), tol_cycles)))
 
 
 class ScheduleError(ValueError):
