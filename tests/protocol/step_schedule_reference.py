@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
     HALF,
@@ -14,6 +15,10 @@ from firmware_protocol.step_schedule import (
     ONE,
     AxisSchedule,
     Chunk,
+    ideal_edges,
+    predictable,
+    predicted_error,
+    reciprocal_table,
 )
 
 _K = np.arange(1, MAX_COUNT + 2, dtype=np.float64)
@@ -97,3 +102,22 @@ def reference_fit_axis(ideal: np.ndarray, tol_cycles: float) -> AxisSchedule:
         t = t + best.count * best.interval + best.add * (best.count * (best.count - 1) // 2)
         start += best.count
     return AxisSchedule(lead, tuple(chunks))
+
+
+def reference_plan_schedules(
+    batch: SegmentBatch, cycles_per_tick: int, tol_cycles: float, table: np.ndarray | None = None
+) -> dict[tuple[int, int], AxisSchedule]:
+    """The first ``plan_schedules``: the same check of the predictions, then each axis the
+    wire must carry fitted on its own by :func:`reference_fit_axis`."""
+    if table is None:
+        table = reciprocal_table(cycles_per_tick)
+    n = batch.deltas
+    codes = np.broadcast_to(batch.ramps[:, None], n.shape)
+    ticks = np.broadcast_to(batch.ticks[:, None], n.shape)
+    ok = predictable(n, ticks, codes)
+    ok[ok] = predicted_error(n[ok], ticks[ok], table, cycles_per_tick) <= tol_cycles
+    explicit = {}
+    for i, k in zip(*np.nonzero((n != 0) & ~ok)):
+        ideal = ideal_edges(int(n[i, k]), int(batch.ticks[i]), int(batch.ramps[i]), cycles_per_tick)
+        explicit[(int(i), int(k))] = reference_fit_axis(ideal, tol_cycles)
+    return explicit
