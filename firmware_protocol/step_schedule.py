@@ -179,8 +179,11 @@ def predicted_error(
 # search may try next, and all of them are fitted and checked together in one pass of
 # numpy over their edges (:func:`_try_counts`). An axis names several counts a round (the
 # whole range a short search can still reach, or a few levels of a long bisection), so
-# that one round usually settles a chunk; :func:`_seek` replays the search over what has
-# been tried, so the result is that of trying one count at a time.
+# that one round usually settles a chunk, and a batch takes about as many rounds as its
+# longest axis has chunks. Each search is then replayed over what it has tried, so the
+# result is that of trying one count at a time: in Python for a few axes (:func:`_seek`),
+# in numpy for many (:func:`_advance_many`), where a Python loop over the axes would cost
+# more than the numpy.
 
 _ROUND_EDGES = 2048  # edges a round tries, shared among the axes still fitting
 _AXIS_EDGES = 64  # but at least this many an axis
