@@ -511,7 +511,8 @@ def plan_schedules(
     codes = np.broadcast_to(batch.ramps[:, None], n.shape)
     ticks = np.broadcast_to(batch.ticks[:, None], n.shape)
     ok = predictable(n, ticks, codes)
-    ok[ok] = predicted_error(n[ok], ticks[ok], table, cycles_per_tick) <= tol_cycles
+    if ok.any():  # (a batch of ramps has nothing to check)
+        ok[ok] = predicted_error(n[ok], ticks[ok], table, cycles_per_tick) <= tol_cycles
     where = list(zip(*(a.tolist() for a in np.nonzero((n != 0) & ~ok))))
     if not where:
         return {}
