@@ -1,6 +1,7 @@
 """Step schedules (firmware_protocol/step_schedule.py) on real and print-like streams.
 
     python bench/step_schedule.py [--tol-us 1.0] [--cup FILE.npz] [--seconds 2]
+        [--cup-segments 2000] [--repeats 3]
 
 For the design note docs/step-engine.md: per axis and segment, the chunks a schedule
 needs for every edge within ``--tol-us`` of its profile, the worst edge error, and the
@@ -17,6 +18,14 @@ Streams:
 - ``cup``: the wire segments of ``examples/example.gcode`` on ``paper-prototype`` at the
   profile's own limits, if ``--cup`` names an npz of them (``ticks``, ``deltas``,
   ``ramps``; the capture is in the note).
+
+``fitter`` (each stream; the cup's first ``--cup-segments``): the host's planning time,
+CPU seconds (``time.process_time``, the best of ``--repeats``: the machine may be shared),
+of ``plan_schedules`` over the whole batch and of each ramp segment planned alone, per ramp
+segment (a segment with a ramp code: its moving axes are fitted), against the first fitter
+(``tests/protocol/step_schedule_reference.py``: the first ``plan_schedules``, one count
+tried at a time) on the same segments in the same run: ``old_over_new`` is the speed-up;
+the chunks both found are counted, and the schedules that are the same.
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ from firmware_protocol.step_schedule import (
     schedule_error,
 )
 from firmware_protocol.varint import encode_uvarint, zigzag
+from tests.protocol.step_schedule_reference import reference_plan_schedules
 
 CLOCK_HZ = 100_000
 
@@ -142,6 +152,50 @@ def analyse(batch: SegmentBatch, tol_us: float, whole_limit: int) -> dict[str, f
     }
 
 
+def _best(run, repeats: int) -> float:
+    spent = []
+    for _ in range(repeats):
+        t0 = time.process_time()
+        run()
+        spent.append(time.process_time() - t0)
+    return min(spent)
+
+
+def fitter_time(batch: SegmentBatch, tol_us: float, repeats: int) -> dict[str, float]:
+    """The fitter's time per ramp segment, planned as one batch and one segment at a time,
+    against the first fitter on the same axes (its time is the baseline)."""
+    cpt = cycles_per_tick(CLOCK_HZ)
+    tol = tol_us * 16.0
+    table = reciprocal_table(cpt)
+    ramps = np.flatnonzero(batch.ramps >= 0)
+    alone = [batch[i : i + 1] for i in ramps]
+    new = plan_schedules(batch, cpt, tol, table)
+    keys = sorted(new)
+    old = reference_plan_schedules(batch, cpt, tol, table)
+    t_new = _best(lambda: plan_schedules(batch, cpt, tol, table), repeats)
+    t_old = _best(lambda: reference_plan_schedules(batch, cpt, tol, table), repeats)
+    a_new = _best(lambda: [plan_schedules(b, cpt, tol, table) for b in alone], repeats)
+    a_old = _best(lambda: [reference_plan_schedules(b, cpt, tol, table) for b in alone], repeats)
+    per = 1e3 / max(len(ramps), 1)
+    return {
+        "segments": len(batch),
+        "ramp_segments": len(ramps),
+        "axes_fitted": len(keys),
+        "chunks_new": sum(len(s.chunks) for s in new.values()),
+        "chunks_old": sum(len(s.chunks) for s in old.values()),
+        "schedules_identical": sum(new[k] == old.get(k) for k in keys),
+        "axes_fitted_old": len(old),
+        "batch_ms": round(1e3 * t_new, 2),
+        "batch_ms_old": round(1e3 * t_old, 2),
+        "batch_ms_per_ramp_segment": round(per * t_new, 3),
+        "batch_ms_per_ramp_segment_old": round(per * t_old, 3),
+        "batch_old_over_new": round(t_old / max(t_new, 1e-9), 1),
+        "alone_ms_per_ramp_segment": round(per * a_new, 3),
+        "alone_ms_per_ramp_segment_old": round(per * a_old, 3),
+        "alone_old_over_new": round(a_old / max(a_new, 1e-9), 1),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tol-us", type=float, default=1.0)
@@ -150,16 +204,23 @@ def main() -> None:
     ap.add_argument(
         "--whole-limit", type=int, default=2000, help="segments measured for option A's bytes"
     )
+    ap.add_argument(
+        "--cup-segments", type=int, default=2000, help="the cup's segments the fitter is timed on"
+    )
+    ap.add_argument("--repeats", type=int, default=3, help="timings: the best of this many")
     args = ap.parse_args()
-    out = {
+    stream = print_like(args.seconds)
+    out: dict[str, object] = {
         "tol_us": args.tol_us,
-        "print_like": analyse(print_like(args.seconds), args.tol_us, args.whole_limit),
+        "print_like": analyse(stream, args.tol_us, args.whole_limit),
     }
+    fitter = {"print_like": fitter_time(stream, args.tol_us, args.repeats)}
     if args.cup is not None:
         z = np.load(args.cup)
-        out["cup"] = analyse(
-            SegmentBatch(z["ticks"], z["deltas"], z["ramps"]), args.tol_us, args.whole_limit
-        )
+        cup = SegmentBatch(z["ticks"], z["deltas"], z["ramps"])
+        out["cup"] = analyse(cup, args.tol_us, args.whole_limit)
+        fitter["cup"] = fitter_time(cup[: args.cup_segments], args.tol_us, args.repeats)
+    out["fitter"] = fitter
     print(json.dumps(out, indent=1))
 
 
