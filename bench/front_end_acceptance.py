@@ -23,17 +23,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import fcntl
 import json
 import os
-import pty
-import re
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
-import termios
 import threading
 import time
 from collections.abc import Callable
@@ -42,14 +37,12 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.tui.pty_terminal import PtyTerminal, tui_argv  # noqa: E402
+
 CLI = [sys.executable, "-m", "cdprhost"]
 SCENARIOS = ("busy", "sigstop", "kill", "watch")
-ANSI = re.compile(r"\x1b(\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(\x07|\x1b\\)|[PX^_][^\x1b]*\x1b\\|.)")
-
-
-def screen_text(raw: bytes) -> str:
-    """What a terminal shows of ``raw``, roughly: the text runs without escape sequences."""
-    return ANSI.sub(" ", raw.decode("utf-8", "replace"))
 
 
 def _device_priority(step: int) -> Callable[[], None]:
@@ -70,68 +63,6 @@ def nice_of(pid: int) -> int | None:
         return os.getpriority(os.PRIO_PROCESS, pid)
     except OSError:
         return None
-
-
-class PtyProgram:
-    """A program on a pseudo-terminal of ``cols`` x ``rows`` (its controlling terminal); what
-    it draws is read (so it never blocks on a full terminal) and the last ``keep`` bytes are
-    kept for :meth:`shows`."""
-
-    def __init__(
-        self,
-        argv: list[str],
-        env: dict[str, str],
-        size: tuple[int, int] = (120, 40),
-        keep: int = 400_000,
-    ):
-        master, slave = pty.openpty()
-        fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", size[1], size[0], 0, 0))
-        self.proc = subprocess.Popen(
-            argv,
-            stdin=slave,
-            stdout=slave,
-            stderr=slave,
-            env={**env, "TERM": "xterm-256color", "COLUMNS": str(size[0]), "LINES": str(size[1])},
-            cwd=ROOT,
-            start_new_session=True,
-            preexec_fn=lambda: fcntl.ioctl(0, termios.TIOCSCTTY, 0),  # noqa: PLW1509
-        )
-        os.close(slave)
-        self.master = master
-        self.keep = keep
-        self.tail = b""
-        self.total = 0
-        self.lock = threading.Lock()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        while True:
-            try:
-                chunk = os.read(self.master, 65536)
-            except OSError:
-                return
-            if not chunk:
-                return
-            with self.lock:
-                self.total += len(chunk)
-                self.tail = (self.tail + chunk)[-self.keep :]
-
-    def press(self, keys: str) -> None:
-        with contextlib.suppress(OSError):
-            os.write(self.master, keys.encode())
-
-    def shows(self, text: str, since: int = 0) -> bool:
-        """Whether ``text`` was drawn (in the kept tail, after byte ``since`` of the output)."""
-        with self.lock:
-            start = max(0, len(self.tail) - (self.total - since))
-            return text in screen_text(self.tail[start:])
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(30)
-        with contextlib.suppress(OSError):
-            os.close(self.master)
 
 
 @dataclass
@@ -170,7 +101,7 @@ class Scenario:
         self.record = self.tmp / "record.jsonl"
         self.device: subprocess.Popen[str] | None = None
         self.port = ""
-        self.tuis: list[PtyProgram] = []
+        self.tuis: list[PtyTerminal] = []
 
     def say(self, text: str) -> None:
         line = f"{time.monotonic() - self.t0:7.1f} s  {self.name:8s} {text}"
@@ -191,9 +122,9 @@ class Scenario:
         assert self.device.stdout is not None
         self.port = self.device.stdout.readline().strip()
 
-    def tui(self, *extra: str) -> PtyProgram:
-        argv = [*CLI, "tui", "--profile", "paper-prototype", "--port", self.port, *extra]
-        program = PtyProgram(argv, self.env, size=self.args.size)
+    def tui(self, *extra: str) -> PtyTerminal:
+        argv = tui_argv("--profile", "paper-prototype", "--port", self.port, *extra)
+        program = PtyTerminal(argv, size=self.args.size, env=self.env)
         self.tuis.append(program)
         return program
 
@@ -226,7 +157,7 @@ class Scenario:
         self.say(f"timed out waiting for {what}")
         return False
 
-    def start_print(self, tui: PtyProgram) -> bool:
+    def start_print(self, tui: PtyTerminal) -> bool:
         """s, then y in the confirmation, until the service's job log says it prints (the
         TUI connects and preflights first: a key before that only warns)."""
         end = time.monotonic() + self.args.start_timeout
@@ -237,9 +168,9 @@ class Scenario:
             if tui.proc.poll() is not None:
                 self.out.error = f"the TUI exited {tui.proc.returncode} before printing"
                 return False
-            tui.press("s")
+            tui.type("s")
             time.sleep(1.5)
-            tui.press("y")
+            tui.type("y")
             time.sleep(3.0)
         self.out.error = "the print did not start from the TUI"
         return False
@@ -284,10 +215,10 @@ class Scenario:
             self._collect()
         return self.out
 
-    def _busy(self, tui: PtyProgram) -> None:
+    def _busy(self, tui: PtyTerminal) -> None:
         self.wait(self.finished, self.args.timeout, "the end of the print")
 
-    def _sigstop(self, tui: PtyProgram) -> None:
+    def _sigstop(self, tui: PtyTerminal) -> None:
         if not self.past(self.args.mid_s) or self.ended_early():
             return
         before = self.executed()
@@ -300,7 +231,7 @@ class Scenario:
         self.wait(self.finished, self.args.timeout, "the end of the print")
         self.wait(lambda: tui.shows("DONE"), 60, "DONE on the TUI's screen")
 
-    def _kill(self, tui: PtyProgram) -> None:
+    def _kill(self, tui: PtyTerminal) -> None:
         if not self.past(self.args.mid_s) or self.ended_early():
             return
         tui.proc.kill()
@@ -319,7 +250,7 @@ class Scenario:
         if self.wait(lambda: again.shows("DONE"), 120, "DONE on the new TUI's screen"):
             self.out.screen += ", then DONE"
 
-    def _watch(self, tui: PtyProgram) -> None:
+    def _watch(self, tui: PtyTerminal) -> None:
         report = self.tmp / "watch.json"
         watcher = subprocess.Popen(
             [*CLI, "print", "--attach", "--port", self.port, "--json", str(report)],
@@ -373,8 +304,7 @@ class Scenario:
 
     def _cleanup(self) -> None:
         for n, program in enumerate(self.tuis):
-            with program.lock:
-                (self.tmp / f"tui{n}.screen.txt").write_text(screen_text(program.tail))
+            (self.tmp / f"tui{n}.screen.txt").write_text(program.screen())
             program.stop()
         from cdprhost.service.paths import files_for_port
 

@@ -23,22 +23,21 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import fcntl
 import os
-import pty
 import signal
-import struct
 import subprocess
 import sys
 import tempfile
-import termios
-import threading
 import time
 from pathlib import Path
 
 from bench_inputs import gcode_fixture
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.tui.pty_terminal import PtyTerminal, tui_argv  # noqa: E402
+
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -65,60 +64,10 @@ def sim_device() -> tuple[subprocess.Popen[str], str]:
     return dev, dev.stdout.readline().strip()
 
 
-class Terminal:
-    """A program in a pseudo-terminal of ``cols`` x ``rows``; its output is kept (last 1 MB)."""
-
-    def __init__(self, argv: list[str], cols: int, rows: int):
-        self.pid, self.fd = pty.fork()
-        if self.pid == 0:  # the child: the program
-            os.environ["TERM"] = "xterm-256color"
-            os.execvp(argv[0], argv)
-        fcntl.ioctl(self.fd, termios.TIOCSWINSZ, struct.pack("HHHH", rows, cols, 0, 0))
-        self.output = bytearray()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        while True:
-            try:
-                data = os.read(self.fd, 65536)
-            except OSError:
-                return
-            if not data:
-                return
-            self.output += data
-            del self.output[:-1_000_000]
-
-    def wait_for(self, text: str, timeout: float) -> None:
-        deadline = time.monotonic() + timeout
-        needle = text.encode()
-        while needle not in self.output:
-            if time.monotonic() > deadline:
-                raise SystemExit(f"the screen never showed {text!r} in {timeout:g} s")
-            if os.waitpid(self.pid, os.WNOHANG)[0]:
-                raise SystemExit(f"the TUI ended before showing {text!r}")
-            time.sleep(0.2)
-
-    def keys(self, *keys: str) -> None:
-        for k in keys:
-            os.write(self.fd, k.encode())
-            time.sleep(0.5)
-
-    def stop(self) -> None:
-        with_timeout_kill(self.pid)
-
-
-def with_timeout_kill(pid: int) -> None:
-    try:
-        os.kill(pid, signal.SIGTERM)
-        for _ in range(50):
-            if os.waitpid(pid, os.WNOHANG)[0]:
-                return
-            time.sleep(0.1)
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
-    except (ProcessLookupError, ChildProcessError):
-        pass
+def shown(ui: PtyTerminal, text: str, timeout: float) -> None:
+    why = ui.wait_for(text, timeout)
+    if why:
+        raise SystemExit(why)
 
 
 def measure(pid: int, seconds: float, windows: list[float] | None = None) -> float:
@@ -136,7 +85,6 @@ def measure(pid: int, seconds: float, windows: list[float] | None = None) -> flo
 
 def service_pid(port: str) -> int | None:
     """The printer service of ``port`` in this run's folder (None: none runs)."""
-    sys.path.insert(0, str(ROOT))
     from cdprhost.service.paths import files_for_port
 
     pid = files_for_port(port).read_pid()
@@ -192,28 +140,30 @@ def main() -> None:
 
     dev, port = sim_device()
     where = ["--in-process"] if args.in_process else []
-    ui = Terminal([*cdprhost, "tui", *where, "--port", port, str(args.file)], cols, rows)
+    ui = PtyTerminal(
+        tui_argv(*where, "--port", port, str(args.file)), size=(cols, rows), keep=1_000_000
+    )
     try:
-        ui.wait_for("preflight ok", timeout=300)
+        shown(ui, "preflight ok", timeout=300)
         time.sleep(3)
         if args.idle_only:
             idle_only(ui.pid, port, args.seconds, cols, rows)
             return
         idle = measure(ui.pid, args.seconds / 2)
-        ui.keys("s", "y")
-        ui.wait_for("PRINTING", timeout=120)
+        ui.type("sy", pause_s=0.5)
+        shown(ui, "PRINTING", timeout=120)
         time.sleep(args.warmup)  # past heating: the machine moves
         windows: list[float] = []
         main0 = main_thread_seconds(ui.pid)
-        mark = len(ui.output)
+        mark = ui.total
         printing = measure(ui.pid, args.seconds, windows)
         ui_loop = 100.0 * (main_thread_seconds(ui.pid) - main0) / args.seconds
         for word in ("FAILED", "DONE", "CANCELLED"):  # it printed all along
-            if word.encode() in ui.output[mark:]:
+            if ui.shows(word, since=mark):
                 raise SystemExit(f"the print ended while measuring ({word}): nothing measured")
-        ui.keys("\x11", "y")  # ctrl+q, yes: cancel and quit
+        ui.type("\x11y", pause_s=0.5)  # ctrl+q, yes: cancel and quit
     finally:
-        ui.stop()
+        ui.stop(grace_s=5.0)
         dev.terminate()
         dev.wait()
         stop_service(port)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import logging
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +32,24 @@ def _isolated_state(tmp_path_factory):
     """Job logs, resume points and boards' records of every test (and the CLIs they start)
     go to temporary folders, never to the user's ~/.local/state or ~/.config."""
     os.environ["CDPRHOST_STATE"] = str(tmp_path_factory.mktemp("state"))
+
+
+@pytest.fixture(autouse=True)
+def _threads_and_log_handlers_end_with_their_test():
+    """What a test leaves running ends with it: the stderr log handler a CLI it ran set up
+    (on the test's captured stderr, closed with the test), then the printer services it ran
+    in threads of this process (tests/service/inprocess.py), their prints cancelled and
+    their threads joined. Before, such a thread logged an e-stop after the test, into a
+    closed capture ("Logging error ... EstopFlag")."""
+    cdprhost_log = logging.getLogger("cdprhost")
+    before = set(cdprhost_log.handlers)
+    yield
+    for handler in set(cdprhost_log.handlers) - before:
+        if getattr(handler, "_cdprhost_stderr", False):
+            cdprhost_log.removeHandler(handler)
+    inprocess = sys.modules.get("tests.service.inprocess")
+    if inprocess is not None:
+        inprocess.end_services()
 
 
 @pytest.fixture(autouse=True)

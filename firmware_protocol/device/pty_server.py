@@ -3,6 +3,9 @@
 The slave side is put in raw mode and kept open by this process, so a host can
 close and reopen the path at will (the device keeps running, and its output is
 dropped like a UART's when nobody listens: the host flushes stale input on open).
+What a host leaves unread is counted (:attr:`PtyServer.dropped_tx_bytes`) and said through
+the device's notices (on ``cdprhost sim-device``'s stderr): when dropping begins, when the
+host reads again (how much it lost meanwhile), and the total at :meth:`PtyServer.close`.
 Faults (corruption, drops, duplication, latency, jitter) apply in both directions.
 """
 
@@ -37,7 +40,8 @@ class PtyServer:
         self._stop = False
         self._reset = False
         self._flushed = 0.0
-        self.dropped_tx_bytes = 0
+        self.dropped_tx_bytes = 0  # device output the host did not read, in all
+        self._dropping = 0  # of it, since the host last took a whole write
 
     def now(self) -> float:
         return time.monotonic() - self._t0
@@ -50,7 +54,9 @@ class PtyServer:
         port of a Mega with auto-reset does (SIGUSR1 of ``cdprhost sim-device``)."""
         self._reset = True
 
-    def _write(self, data: bytes) -> None:
+    def write(self, data: bytes) -> int:
+        """Hand ``data`` to the host; the bytes the pty took (the rest is dropped, counted
+        and said: a host that does not read loses device output, never silently)."""
         try:
             n = os.write(self.master, data)
         except BlockingIOError:
@@ -59,7 +65,23 @@ class PtyServer:
             if exc.errno != errno.EIO:
                 raise
             n = 0
-        self.dropped_tx_bytes += len(data) - n
+        lost = len(data) - n
+        if lost:
+            if not self._dropping:
+                self._notice("the host does not read the port: device output is dropped")
+            self._dropping += lost
+            self.dropped_tx_bytes += lost
+        elif self._dropping:
+            self._notice(
+                f"the host reads the port again: {self._dropping} bytes of device output "
+                f"were dropped meanwhile ({self.dropped_tx_bytes} in all)"
+            )
+            self._dropping = 0
+        return n
+
+    def _notice(self, text: str) -> None:
+        if self.device.on_notice is not None:
+            self.device.on_notice(text)
 
     def serve_step(self, max_wait: float = IDLE_WAIT_S) -> None:
         """One turn of the loop: wait for input or the next deadline, then run the device."""
@@ -98,7 +120,7 @@ class PtyServer:
                 self.tx.send(frame, now)
         out = self.tx.receive(now)
         if out:
-            self._write(out)
+            self.write(out)
         if now - self._flushed >= RECORD_FLUSH_S:
             self._flushed = now
             self.device.record.flush()
@@ -108,6 +130,8 @@ class PtyServer:
             self.serve_step()
 
     def close(self) -> None:
+        if self.dropped_tx_bytes:
+            self._notice(f"{self.dropped_tx_bytes} bytes of device output dropped in all")
         for fd in (self.master, self.slave):
             with contextlib.suppress(OSError):
                 os.close(fd)

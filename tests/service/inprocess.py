@@ -20,9 +20,23 @@ class _Thread:
         self.service = service
         self.thread = threading.Thread(target=service.serve, name="test-service", daemon=True)
         self.thread.start()
+        _RUNNING.append(self)
 
     def poll(self) -> int | None:
         return None if self.thread.is_alive() else 0
+
+
+_RUNNING: list[_Thread] = []  # the services started here that may still run
+
+
+def end_services(timeout_s: float = 30.0) -> None:
+    """End every service started here (its print cancelled as the operator would, its
+    threads joined): a test's service must not go on printing, and logging, after the test
+    (an e-stop logged to a closed capture, "Logging error ... EstopFlag", once)."""
+    while _RUNNING:
+        started = _RUNNING.pop()
+        started.service.shutdown_job("the test ended")  # joins the job's thread, then stops
+        started.thread.join(timeout_s)
 
 
 def serve_in_thread(monkeypatch: pytest.MonkeyPatch, idle_s: float = 0.5) -> list[Any]:

@@ -198,3 +198,21 @@ def test_print_says_why_when_a_print_already_runs(run_dir, monkeypatch, tmp_path
     finally:
         first.send(wire.Cancel())
         first.close()
+
+
+def test_a_service_in_a_thread_ends_with_its_test(run_dir, monkeypatch, tmp_path):
+    """What the tests' teardown does (tests/conftest.py): the print a test left running is
+    cancelled and the service's threads are joined, so nothing of it logs after the test."""
+    from tests.service import inprocess
+
+    started = serve_in_thread(monkeypatch)
+    client = attach(None, "left", replay=False)
+    client.send(_start(tmp_path, speedup=2.0))
+    _follow(client, until=lambda s: s.state is JobState.PRINTING)
+    client.close()  # the test goes away with the print running
+    service = started[0]
+    threads = [t for t in inprocess._RUNNING if t.service is service]
+    assert service.job_running and threads[0].thread.is_alive()
+    inprocess.end_services()
+    assert not service.job_running and not threads[0].thread.is_alive()
+    assert inprocess._RUNNING == []

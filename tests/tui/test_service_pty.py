@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -28,6 +27,7 @@ from tests.e2e.processes import (
 )
 
 from .conftest import make_app, wait_for
+from .pty_terminal import PtyTerminal, tui_argv
 
 pytestmark = [
     pytest.mark.skipif(sys.platform != "linux", reason="pseudo-terminals as on Linux"),
@@ -188,53 +188,6 @@ async def test_a_killed_tui_on_the_embedded_device_leaves_its_print_to_a_new_tui
         kill_and_wait(service)
 
 
-class _PtyTui:
-    """``cdprhost tui`` on a pseudo-terminal of its own, as in a terminal window: keys are
-    typed into it, what it draws is read (and dropped) as it comes, and a SIGHUP is what it
-    gets when the window closes or the ssh session drops."""
-
-    def __init__(self, port: str, gcode: Path, state: Path):
-        import pty
-
-        master, slave = pty.openpty()
-        env = {**os.environ, "CDPRHOST_STATE": str(state), "TERM": "xterm-256color"}
-        env.pop("TEXTUAL", None)
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "cdprhost", "tui", "--port", port, str(gcode)]
-            + ["--profile", "paper-prototype"],
-            stdin=slave,
-            stdout=slave,
-            stderr=slave,
-            cwd=ROOT,
-            env=env,
-            start_new_session=True,
-        )
-        os.close(slave)
-        self.master = master
-        self.screen = bytearray()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        while True:
-            try:
-                data = os.read(self.master, 65536)
-            except OSError:
-                return
-            if not data:
-                return
-            self.screen += data[-4096:]
-
-    def type(self, keys: str) -> None:
-        os.write(self.master, keys.encode())
-
-    def close(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(20)
-        os.close(self.master)
-
-
 def test_sighup_to_a_tui_on_a_pty_leaves_its_print_running_to_the_end(state, tmp_path):
     """The terminal closes mid-print (SIGHUP): the TUI quits, says in its log that the print
     goes on in the service, and the print completes (before: stopped like a cancel)."""
@@ -242,14 +195,17 @@ def test_sighup_to_a_tui_on_a_pty_leaves_its_print_running_to_the_end(state, tmp
 
     gcode = square_part(tmp_path / "part.gcode", layers=10)
     with SimDeviceProcess(tmp_path, "--speedup", "10") as dev:
-        tui = _PtyTui(dev.path, gcode, state)
+        env = {**os.environ, "CDPRHOST_STATE": str(state)}
+        env.pop("TEXTUAL", None)
+        argv = tui_argv("--port", dev.path, str(gcode), "--profile", "paper-prototype")
+        tui = PtyTerminal(argv, size=(120, 40), env=env)
         service = None
         try:
             point = resume_path_for(gcode, state / "jobs")
             deadline = time.monotonic() + 120
             while not point.exists():  # s, then y to the question, once the file is checked
                 assert time.monotonic() < deadline, "the TUI did not start the print"
-                assert tui.proc.poll() is None, tui.screen.decode(errors="replace")[-500:]
+                assert tui.proc.poll() is None, tui.screen()[-500:]
                 tui.type("s")
                 time.sleep(1.0)
                 tui.type("y")
@@ -263,7 +219,7 @@ def test_sighup_to_a_tui_on_a_pty_leaves_its_print_running_to_the_end(state, tmp
                 assert time.monotonic() < deadline, _job_log(state)[-3:]
                 time.sleep(0.5)
         finally:
-            tui.close()
+            tui.stop()
             if service is not None:
                 kill_and_wait(service)
         log = (state / "tui" / "tui.log").read_text()

@@ -6,10 +6,12 @@ Update after an intended change with ``pytest tests/tui/test_snapshots.py
 
 from __future__ import annotations
 
+import inspect
 import threading
 import time
 
 import pytest
+from textual.widgets import Input
 
 from cdprhost.tui.control.views import ConsoleLine, JobRecord
 
@@ -34,6 +36,26 @@ def workdir(tmp_path, monkeypatch):
     yield tmp_path
     monkeypatch.undo()
     time.tzset()
+
+
+@pytest.fixture
+def snap_compare(snap_compare):
+    """The plugin's ``snap_compare``, with every text field's cursor held steady before the
+    picture: a blinking cursor is a clock on screen (shown or not by whether half a second
+    passed since the last key, as it may under load: a console snapshot failed so once)."""
+
+    def compare(app, *, run_before=None, **kw):
+        async def steady(pilot):
+            if run_before is not None:
+                result = run_before(pilot)
+                if inspect.isawaitable(result):
+                    await result
+            for field in pilot.app.screen.query(Input):
+                field.cursor_blink = False  # the cursor stays as it is just after a key
+
+        return snap_compare(app, run_before=steady, **kw)
+
+    return compare
 
 
 def app_for(backend, workdir):

@@ -26,8 +26,6 @@ from typing import Any, cast
 from cdprhost.errors import CdprError
 from cdprhost.job.state import Event, LinkHealth
 from cdprhost.machine import NotHomed
-from cdprhost.machine.faults import DeviceFaulted, refusal
-from cdprhost.motion.override import check_percent
 from cdprhost.profile import MachineProfile
 from cdprhost.service import client as service_client
 from cdprhost.service import wire
@@ -39,6 +37,7 @@ from cdprhost.tui.control.live import (
     device_status_view,
     identity_rows,
 )
+from cdprhost.tui.control.service_proxies import RemoteMachine, ServiceJob
 from cdprhost.tui.control.views import (
     ConsoleLine,
     DeviceStatusView,
@@ -55,119 +54,6 @@ STATUS_TIMEOUT_S = 15.0
 def status_view(model: Any, st: wire.DeviceState) -> DeviceStatusView:
     """The service's status of the device as the screens show it (position by the model)."""
     return device_status_view(model, st, st.fault, st.clearable)
-
-
-class ServiceJob:
-    """A print in the service, as the controller drives a job: ``run`` blocks until the
-    service sends its result; the requests are sent at once."""
-
-    def __init__(self, backend: ServiceBackend, on_event: EventSink, start: wire.Start | None):
-        self.backend = backend
-        self.on_event = on_event
-        self.start = start
-        self.result: wire.ResultMsg | None = None
-        self.ended = threading.Event()
-
-    def feed(self, event: Event) -> None:
-        self.on_event(event)
-
-    def finish(self, result: wire.ResultMsg) -> None:
-        self.result = result
-        self.ended.set()
-
-    def run(self) -> Any:
-        start_id = self.backend.send(self.start) if self.start is not None else None
-        while not self.ended.wait(0.2):
-            if start_id is not None:
-                refused = self.backend.answer_now(start_id)
-                if refused is not None and not refused.ok:
-                    raise CdprError(refused.error)
-            if self.backend.gone:
-                raise CdprError(f"the printer service went away ({self.backend.gone})")
-            if self.backend.let_go:  # the UI quits and leaves the print to the service
-                raise CdprError("this UI let go of the print; it goes on in the printer service")
-        assert self.result is not None
-        if self.result.result is None:
-            raise CdprError(self.result.error or "the print job broke")
-        return self.result.result
-
-    def request_pause(self) -> None:
-        self.backend.command(wire.Pause())
-
-    def request_resume(self) -> None:
-        self.backend.command(wire.Resume())
-
-    def request_cancel(self) -> None:
-        self.backend.command(wire.Cancel(reason="cancelled at the terminal UI"))
-
-    def request_speed(self, percent: float) -> None:
-        """M220 S<percent> for the print in the service; ValueError outside 10-500 %."""
-        check_percent("speed", percent)
-        self.backend.command(wire.Override(what="speed", percent=percent))
-
-    def request_flow(self, percent: float) -> None:
-        """M221 S<percent> for the print in the service."""
-        check_percent("flow", percent)
-        self.backend.command(wire.Override(what="flow", percent=percent))
-
-    def emergency_stop(self) -> bool:
-        answer = self.backend.ask(wire.Estop(), timeout_s=5.0)
-        return bool(answer is not None and answer.ok)
-
-
-class _RemoteLink:
-    """What the console asks of a machine's link, through the service."""
-
-    def __init__(self, backend: ServiceBackend):
-        self.backend = backend
-
-    def clear_fault(self) -> None:
-        self.backend.operate(wire.ClearFault())
-
-    def wait_idle(self, timeout_s: float) -> None:
-        """The service waited already (``heaters`` with ``wait``)."""
-
-
-class _RemoteMachine:
-    """The machine operations the console uses, carried out by the service; each answers
-    the device's status (a :class:`wire.DeviceState`)."""
-
-    def __init__(self, backend: ServiceBackend):
-        self.backend = backend
-        self.profile = backend.profile
-        self.model = backend.model
-        self.link = _RemoteLink(backend)
-
-    def home(self) -> Any:
-        return self.backend.operate(wire.Home())
-
-    def enable(self) -> Any:
-        return self.backend.operate(wire.Enable())
-
-    def motors_off(self) -> Any:
-        return self.backend.operate(wire.MotorsOff())
-
-    def status(self) -> Any:
-        return self.backend.operate(wire.Status())
-
-    def ready(self) -> Any:
-        """The device's status when it can take a command; a faulted device is refused
-        here, nothing sent, with the fault and the way out (as ``Machine.ready``)."""
-        state = self.status()
-        if state is not None and state.fault:
-            raise DeviceFaulted(refusal(state.fault, state.clearable))
-        return state
-
-    def emergency_stop(self) -> bool:
-        return self.backend.emergency_stop()
-
-    def set_heaters(
-        self, hotend_c: float | None = None, bed_c: float | None = None, *, wait: bool = False
-    ) -> Any:
-        return self.backend.operate(wire.Heaters(hotend=hotend_c, bed=bed_c, wait=wait))
-
-    def move_to(self, target: tuple[float, float, float], feed_mm_s: float) -> Any:
-        return self.backend.operate(wire.MoveTo(target=target, feed_mm_s=feed_mm_s))
 
 
 class ServiceBackend:
@@ -532,7 +418,7 @@ class ServiceBackend:
                 ConsoleLine("sent", line, time.time()),
                 ConsoleLine("error", "not connected: pick a port on the link screen"),
             ]
-        machine = cast("Any", _RemoteMachine(self))
+        machine = cast("Any", RemoteMachine(self))
         out = run_console(
             line, machine, lambda st: status_view(self.model, st), self._identity, JOG_SPEED_MM_S
         )
