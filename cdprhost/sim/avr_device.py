@@ -117,6 +117,9 @@ class Relay:
         tty.setraw(self.dev)
         self.to_dev = FaultyChannel(faults, seed_offset=1)
         self.to_host = FaultyChannel(faults, seed_offset=2)
+        # What a pty did not take yet, per destination: kept and written first next time
+        # (a pty holds a few kB; a host or harness that reads late must not lose bytes).
+        self.pending: dict[int, bytearray] = {self.dev: bytearray(), self.master: bytearray()}
         self.t0 = time.monotonic()
 
     def step(self, wait: float = 0.005) -> None:
@@ -127,10 +130,11 @@ class Relay:
                 with contextlib.suppress(BlockingIOError, OSError):
                     chan.send(os.read(fd, 65536), now)
         for fd, chan in ((self.dev, self.to_dev), (self.master, self.to_host)):
-            data = chan.receive(now)
-            if data:
+            pending = self.pending[fd]
+            pending += chan.receive(now)
+            if pending:
                 with contextlib.suppress(BlockingIOError, OSError):
-                    os.write(fd, data)
+                    del pending[: os.write(fd, pending)]
 
     def close(self) -> None:
         for fd in (self.master, self.slave, self.dev):
