@@ -27,6 +27,7 @@
 #include "sim_hooks.h"
 #include "sim_markers.h"
 #include "step_pins.h"
+#include "step_engine.h"
 #include "step_events.h"
 #include "step_rate.h"
 #include "step_tick.h"
@@ -222,7 +223,9 @@ static void seg_positions(const struct seg_snapshot *sn, int32_t *out)
         int32_t d = sn->delta[k];
         uint32_t n = (uint32_t)(d < 0 ? -d : d);
         uint32_t est = motion_steps_due((float)n, sn->ka, sn->kb, sn->done_ticks);
-        int32_t issued = (int32_t)est + (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
+        int32_t issued = (int32_t)est;
+        if (!STEP_ENGINE || sn->kb != 0.0f) /* the DDA's own count: its byte corrects */
+            issued += (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
         out[k] += d < 0 ? -issued : issued;
     }
 }
@@ -251,6 +254,8 @@ void stepper_halt(void)
     stepper.current = 0xFF;
     stepper.at_rest = 1;
     stepper.running = 0;
+    if (STEP_ENGINE)
+        step_engine_stop();
     SREG = s;
     if (sn.running) {
         int32_t pos[4];
@@ -272,6 +277,8 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     uint8_t s = SREG;
     cli();
     queue_tail = queue_head;
+    if (STEP_ENGINE)
+        step_engine_stop();
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
     motion_plans_reset();
@@ -320,6 +327,29 @@ static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backin
     }
 }
 
+/* A steady segment's steps: one chunk an axis, from the segment's start (the tick
+ * being computed), the first edge half an interval in (PROTOCOL.md 5.1). */
+static void __attribute__((noinline, unused)) seg_chunks(const struct plan *p)
+{
+#if STEP_ENGINE
+    struct step_chunk c;
+    const struct axis_plan *x = p->ax;
+    const int32_t *d = p->delta;
+    for (uint8_t k = 0; k < 4; k++, x++, d++) {
+        int32_t n = *d;
+        if (!n)
+            continue;
+        c.neg = n < 0;
+        c.count = (uint16_t)(n < 0 ? -n : n);
+        c.interval = x->interval;
+        c.t = step_clock_next_tick + (c.interval >> 1);
+        step_engine_push(k, &c);
+    }
+#else
+    (void)p;
+#endif
+}
+
 /* Start queue items until a timed one runs (or nothing may start); at most a
  * few instantaneous items per tick, so a queue of them cannot stretch a tick. */
 static void __attribute__((noinline)) dispatch(void)
@@ -349,6 +379,8 @@ static void __attribute__((noinline)) dispatch(void)
             }
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
+            if (STEP_ENGINE && !p->accel)
+                seg_chunks(p);
             return;
         }
         case IT_DWELL:
@@ -477,7 +509,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
         int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
         uint32_t rem = x->last_n - (int32_t)off;
         int32_t moved = *d;
-        if (rem) {
+        if (rem && (p->accel || !STEP_ENGINE)) {
             uint8_t n = rem > AX_MAX ? AX_MAX : (uint8_t)rem;
             if (rem > AX_MAX) {
                 /* more than a tick holds (never at the advertised rate): the position
@@ -541,6 +573,8 @@ static void __attribute__((noinline)) seg_tick(void)
         return;
     }
     uint8_t moving = p->moving, accel = p->accel, any = 0;
+    if (STEP_ENGINE && !accel)
+        return; /* a steady segment's steps are the step engine's chunks */
     struct axis_plan *x = p->ax;
     const uint8_t *bit = bit_of;
     for (uint8_t m = moving; m; m >>= 1, x++, bit++) {
