@@ -42,10 +42,10 @@ TICKS = 1000  # 10 ms segments
 DEFAULT = ["100000,0,0,0", "30000,22500,15000,3000", "33000,32901,32769,3300"]
 
 
-def build(max_rate: int) -> None:
-    flags = f"-DSTEP_ENGINE=1 -DMAX_STEP_RATE={max_rate}UL"
-    cmd = ["make", "-s", "-C", str(FIRMWARE), "BUILD=build-engine", f"EXTRA_CFLAGS={flags}"]
-    subprocess.run([*cmd, "all", "sim"], check=True)
+def build(max_rate: int, extra: str = "") -> None:
+    flags = f"-DSTEP_ENGINE=1 -DMAX_STEP_RATE={max_rate}UL {extra}".strip()
+    cmd = ["make", "-s", "-B", "-C", str(FIRMWARE), "BUILD=build-engine", f"EXTRA_CFLAGS={flags}"]
+    subprocess.run([*cmd, "all", "sim"], check=True)  # -B: the options change, not the files
 
 
 def steady_batch(rates: list[int], n: int) -> SegmentBatch:
@@ -118,8 +118,9 @@ def main() -> int:
     ap.add_argument("rates", nargs="*", default=DEFAULT, help="X,Y,Z,E steps/s")
     ap.add_argument("--segments", type=int, default=20)
     ap.add_argument("--max-rate", type=int, default=200_000, help="MAX_STEP_RATE of the build")
+    ap.add_argument("--cflags", default="", help="more build options, e.g. -DSTEP_PARTNERS=1")
     args = ap.parse_args()
-    build(args.max_rate)
+    build(args.max_rate, args.cflags)
     for r in args.rates:
         print(json.dumps(run([int(x) for x in r.split(",")], args.segments)), flush=True)
     return 0
