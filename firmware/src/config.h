@@ -44,11 +44,6 @@
 #ifndef STEP_ENGINE
 #define STEP_ENGINE 0
 #endif
-/* With the step engine: an edge's interrupt raises the other Timer3 steppers' pins due
- * with it (step_engine.c, PARTNERS); off until the extruder is served with them. */
-#ifndef STEP_PARTNERS
-#define STEP_PARTNERS 0
-#endif
 
 
 /* CAPS (protocol 2.1). The shortest segment: one whole tick, 400 us (a shorter one would

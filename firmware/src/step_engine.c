@@ -32,9 +32,10 @@ static struct step_axis axes[4];
 
 uint32_t step_clock_next_tick;
 volatile uint16_t step_engine_late;
-/* The steppers (bit k: X, Y, Z, E) whose armed compare is the assembly's next edge
- * (running, not slow): another one's interrupt may raise their pin (PARTNER below) */
-uint8_t step_fast3;
+/* The steppers whose armed compare is the assembly's next edge (running, not slow), at
+ * their flags' bits in TIFR3 (X, Y, Z: bits 1-3) and E at bit 4: another one's interrupt
+ * may raise their pin (RAISE_PENDING below) */
+uint8_t step_fast;
 
 /* cycles from a compare match to the pulse's rising edge in the interrupt (its response,
  * the vector's jump, the prologue): the compare is set that much early */
@@ -198,9 +199,9 @@ static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct ste
     /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles */
     a->slow = a->wraps || (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
     if (a->running && !a->slow)
-        step_fast3 |= (uint8_t)(1 << k);
+        step_fast |= (uint8_t)(2 << k);
     else
-        step_fast3 &= (uint8_t)~(1 << k);
+        step_fast &= (uint8_t)~(2 << k);
 }
 
 /* The edge of stepper k in C: the assembly's rare cases (a timer period to let pass, an
@@ -263,57 +264,26 @@ STEP_C(__vector_end_e, 3, 1)
  * T rounded to a cycle less ISR_LEAD, or just ahead of now if that has passed already,
  * pin low (>= 2 us later). PIN_ON / PIN_OFF raise and lower the step pin, DIR_POS /
  * DIR_NEG set the direction pin (r25 free in each). */
-#define STR_(x) #x
-#define STR(x) STR_(x)
 
 /* Edges due together (axes in step, or a mix's coincidences): the interrupt that fires
- * raises the pin of every other Timer3 stepper whose armed edge (step_fast3) is due
- * within PARTNER_AHEAD cycles after its own compare or overdue by up to PARTNER_BACK,
- * right after its own; that stepper's interrupt, pending or due within 5 us, then finds
- * its pin high already (the raise is idempotent), does its bookkeeping and lowers it.
- * Its edge is at most about 3 us early instead of one interrupt (about 6 us) late per
- * stepper served before it. r24: the partners' mask; r27:r26 this compare less
- * PARTNER_BACK; r25, r28 scratch.
- * A build option (STEP_PARTNERS, config.h), off: it serves three Timer3 steppers in step
- * within 3.5 us (p99, 13.5 without), but costs about 36 cycles an edge whenever another
- * stepper runs, and in a print's mix the extruder (Timer5, served last) then waits
- * behind Z every other edge: p99 9.6 us instead of 6.4 (firmware/README.md). */
-#define PARTNER_BACK 128
-#define PARTNER_AHEAD 64
-#define PARTNER(bit, ocr_addr, raise)                                                      \
-    "sbrs r24, " #bit "\n\t"                                                                 \
-    "rjmp 21f\n\t"                                                                         \
-    "lds r25, " #ocr_addr "\n\t"                                                           \
-    "sub r25, r26\n\t"                                                                     \
-    "lds r28, " #ocr_addr "+1\n\t"                                                         \
-    "sbc r28, r27\n\t"                                                                     \
-    "tst r28\n\t"                                                                          \
-    "brne 21f\n\t"                                                                         \
-    "cpi r25, " STR(PARTNER_BACK + PARTNER_AHEAD) "\n\t"                                   \
-    "brsh 21f\n\t" raise                                                                   \
-    "21:\n\t"
-#if !STEP_PARTNERS
-#define PARTNERS(others, p1, p2) ""
-#else
-#define PARTNERS(others, p1, p2)                                                           \
-    "lds r24, step_fast3\n\t"                                                              \
-    "andi r24, " #others "\n\t"                                                            \
-    "breq 20f\n\t"                                                                         \
-    "push r28\n\t"                                                                         \
-    "lds r26, %[oc]\n\t"                                                                   \
-    "lds r27, %[oc]+1\n\t"                                                                 \
-    "subi r26, lo8(" STR(PARTNER_BACK) ")\n\t"                                             \
-    "sbci r27, hi8(" STR(PARTNER_BACK) ")\n\t" p1 p2                                       \
-    "pop r28\n"                                                                           \
-    "20:\n\t"
-#endif
-#define RAISE_X "sbi %[pf], %[xb]\n\t"
-#define RAISE_Y "sbi %[pf], %[yb]\n\t"
-#define RAISE_Z "lds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n\t"
-/* OCR3A, OCR3B, OCR3C (iom2560.h) */
-#define PARTNER_X PARTNER(0, 0x98, RAISE_X)
-#define PARTNER_Y PARTNER(1, 0x9A, RAISE_Y)
-#define PARTNER_Z PARTNER(2, 0x9C, RAISE_Z)
+ * reads the other steppers' compare flags right after raising its own pin, and raises
+ * the pin of each one whose flag is up and whose armed compare is an edge (step_fast);
+ * that stepper's interrupt, pending, then finds its pin high already (the raise is
+ * idempotent), does its bookkeeping and lowers it. An edge due with another is then
+ * about 1 us late instead of one interrupt (about 6 us) per stepper served before it;
+ * about 10 cycles an edge. r24: the pending steppers (bits as step_fast), r25 scratch. */
+#define TIFR3_IO "0x18" /* iom2560.h: TIFR3, TIFR5 (OCF3A..C bits 1..3, OCF5A bit 1) */
+#define TIFR5_IO "0x1A"
+#define PENDING_T3 "in r24, " TIFR3_IO "\n\t"
+#define PENDING_T3_T5 PENDING_T3 "sbic " TIFR5_IO ", 1\n\tori r24, 0x10\n\t"
+#define RAISE_PENDING(read, raises)                                                        \
+    read "lds r25, step_fast\n\t"                                                          \
+    "and r24, r25\n\t"                                                                     \
+    "breq 20f\n\t" raises "20:\n\t"
+#define IF_X "sbrc r24, 1\n\tsbi %[pf], %[xb]\n\t"
+#define IF_Y "sbrc r24, 2\n\tsbi %[pf], %[yb]\n\t"
+#define IF_Z "sbrs r24, 3\n\trjmp 21f\n\tlds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n21:\n\t"
+#define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
 
 #define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners) \
     __asm__ volatile(                                                                      \
@@ -350,9 +320,9 @@ STEP_C(__vector_end_e, 3, 1)
         "brne 11f\n\t"                                                                     \
         "ldi r24, 0\n\t"                                                                   \
         "sts %[run], r24\n\t"                                                              \
-        "lds r24, step_fast3\n\t"                                                          \
-        "andi r24, lo8(~%[bit])\n\t"                                                       \
-        "sts step_fast3, r24\n\t"                                                          \
+        "lds r24, step_fast\n\t"                                                           \
+        "andi r24, lo8(~(%[bit] << 1))\n\t"                                                \
+        "sts step_fast, r24\n\t"                                                          \
         "lds r24, %[msk]\n\t"                                                              \
         "andi r24, lo8(~%[mbit])\n\t"                                                      \
         "sts %[msk], r24\n\t"                                                              \
@@ -462,13 +432,13 @@ ISR(TIMER3_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[0], OCR3A, TCNT3, TIMSK3, _BV(OCIE3A), "sbi %[pf], %[xb]\n\t", "cbi %[pf], %[xb]\n\t",
              "sbi %[pf], %[xd]\n\t", "cbi %[pf], %[xd]\n\t", 1, "__vector_step_x",
-             "__vector_end_x", PARTNERS(6, PARTNER_Y, PARTNER_Z));
+             "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, IF_Y IF_Z IF_E));
 }
 ISR(TIMER3_COMPB_vect, ISR_NAKED)
 {
     STEP_ASM(axes[1], OCR3B, TCNT3, TIMSK3, _BV(OCIE3B), "sbi %[pf], %[yb]\n\t", "cbi %[pf], %[yb]\n\t",
              "sbi %[pf], %[yd]\n\t", "cbi %[pf], %[yd]\n\t", 2, "__vector_step_y",
-             "__vector_end_y", PARTNERS(5, PARTNER_X, PARTNER_Z));
+             "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, IF_X IF_Z IF_E));
 }
 ISR(TIMER3_COMPC_vect, ISR_NAKED)
 {
@@ -476,13 +446,13 @@ ISR(TIMER3_COMPC_vect, ISR_NAKED)
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zb])\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
-             "__vector_step_z", "__vector_end_z", PARTNERS(3, PARTNER_X, PARTNER_Y));
+             "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, IF_X IF_Y IF_E));
 }
 ISR(TIMER5_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[3], OCR5A, TCNT5, TIMSK5, _BV(OCIE5A), "sbi %[pa], %[eb]\n\t", "cbi %[pa], %[eb]\n\t",
              "sbi %[pa], %[ed]\n\t", "cbi %[pa], %[ed]\n\t", 8, "__vector_step_e",
-             "__vector_end_e", "");
+             "__vector_end_e", RAISE_PENDING(PENDING_T3, IF_X IF_Y IF_Z));
 }
 _Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
                "the assembly sets a direction pin high for positive steps");
@@ -544,7 +514,7 @@ void step_engine_stop(void)
     cli();
     TIMSK3 = 0;
     TIMSK5 = 0;
-    step_fast3 = 0;
+    step_fast = 0;
     for (uint8_t k = 0; k < 4; k++) {
         axes[k].running = 0;
         axes[k].next_ready = 0;
