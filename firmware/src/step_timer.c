@@ -369,4 +369,7 @@ void __vector_tick(void)
             motion_marker();
     } while (tick_end());
     hand_over_first();
+    if (STEP_ENGINE)
+        sei(); /* the epilogue (about 40 cycles of pops) need not hold the steppers' edges:
+                * the next tick is not due before it ends */
 }
