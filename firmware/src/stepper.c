@@ -78,6 +78,9 @@ static uint32_t ticks_left;   /* SEG, DWELL: ticks left */
 static uint8_t last_units;    /* DWELL: length of the last tick */
 static uint8_t settle_ticks;  /* ticks to wait after positions were set */
 static uint8_t abort_pending; /* a segment was abandoned: mark it */
+/* the step engine's chunks of the plan at plan_tail are out already (seg_last_tick put
+ * them out with the segment before it) */
+static uint8_t chunks_ahead;
 static uint32_t abort_seq;
 
 void stepper_init(uint8_t hold_mask)
@@ -256,6 +259,7 @@ void stepper_halt(void)
     stepper.running = 0;
     if (STEP_ENGINE)
         step_engine_stop();
+    chunks_ahead = 0;
     SREG = s;
     if (sn.running) {
         int32_t pos[4];
@@ -279,6 +283,7 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     queue_tail = queue_head;
     if (STEP_ENGINE)
         step_engine_stop();
+    chunks_ahead = 0;
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
     motion_plans_reset();
@@ -327,9 +332,9 @@ static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backin
     }
 }
 
-/* A steady segment's steps: one chunk an axis, from the segment's start (the tick
- * being computed), the first edge half an interval in (PROTOCOL.md 5.1). */
-static void __attribute__((noinline, unused)) seg_chunks(const struct plan *p)
+/* A steady segment's steps: one chunk an axis, from the segment's start `start` (Q24.8
+ * on the steppers' clock), the first edge half an interval in (PROTOCOL.md 5.1). */
+static void __attribute__((noinline, unused)) seg_chunks(const struct plan *p, uint32_t start)
 {
 #if STEP_ENGINE
     struct step_chunk c;
@@ -342,11 +347,12 @@ static void __attribute__((noinline, unused)) seg_chunks(const struct plan *p)
         c.neg = n < 0;
         c.count = (uint16_t)(n < 0 ? -n : n);
         c.interval = x->interval;
-        c.t = step_clock_next_tick + (c.interval >> 1);
+        c.t = start + (c.interval >> 1);
         step_engine_push(k, &c);
     }
 #else
     (void)p;
+    (void)start;
 #endif
 }
 
@@ -379,8 +385,12 @@ static void __attribute__((noinline)) dispatch(void)
             }
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
-            if (STEP_ENGINE && !p->accel)
-                seg_chunks(p);
+            if (STEP_ENGINE && !p->accel) {
+                if (chunks_ahead)
+                    chunks_ahead = 0;
+                else
+                    seg_chunks(p, step_clock_next_tick);
+            }
             return;
         }
         case IT_DWELL:
@@ -493,6 +503,23 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
     return n;
 }
 
+/* With the step engine: the next segment's chunks put out with this one's last tick
+ * (its start is this tick's end), a tick before dispatch would, so each stepper takes
+ * them at its last edge of this segment without stopping, and the boundary's work is
+ * spread over two ticks. Only a steady segment that dispatch would start as it is (its
+ * plan ready, its axes enabled, nothing to wait for); else dispatch does it. */
+static void chunks_early(const struct plan *p, uint8_t tail)
+{
+    if (!STEP_ENGINE || settle_ticks || queue_slot(tail)->kind != IT_SEG || plan_tail == plan_head)
+        return;
+    const struct plan *n = &plans[plan_tail & (PLAN_SLOTS - 1)];
+    if (n->index != tail || n->accel || (stepper.enabled_mask | n->moving) != stepper.enabled_mask)
+        return;
+    seg_chunks(n, step_clock_next_tick +
+                      ((uint32_t)(uint16_t)(p->last_units * UNIT_CYCLES) << STEP_FRAC_BITS));
+    chunks_ahead = 1;
+}
+
 /* The segment's last tick: each axis issues what is left (the exact total). */
 static void __attribute__((noinline)) seg_last_tick(struct plan *p)
 {
@@ -545,6 +572,8 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     uint8_t tail = ++queue_tail;
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
+    else if (STEP_ENGINE && !p->at_rest)
+        chunks_early(p, tail);
 }
 
 /* A limit switch stops the segment: ENDSTOP_HIT (the main loop adds the position). */
