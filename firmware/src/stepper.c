@@ -259,7 +259,8 @@ void stepper_halt(void)
     stepper.running = 0;
     if (STEP_ENGINE)
         step_engine_stop();
-    chunks_ahead = 0;
+    if (STEP_ENGINE)
+        chunks_ahead = 0;
     SREG = s;
     if (sn.running) {
         int32_t pos[4];
@@ -283,7 +284,8 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     queue_tail = queue_head;
     if (STEP_ENGINE)
         step_engine_stop();
-    chunks_ahead = 0;
+    if (STEP_ENGINE)
+        chunks_ahead = 0;
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
     motion_plans_reset();
