@@ -508,8 +508,10 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
 /* With the step engine: the next segment's chunks put out with this one's last tick
  * (its start is this tick's end), a tick before dispatch would, so each stepper takes
  * them at its last edge of this segment without stopping, and the boundary's work is
- * spread over two ticks. Only a steady segment that dispatch would start as it is (its
- * plan ready, its axes enabled, nothing to wait for); else dispatch does it. */
+ * spread over two ticks. Only a steady segment after a steady one, that dispatch would
+ * start as it is (its plan ready, its axes enabled, nothing to wait for); else dispatch
+ * does it (after a ramp, whose last steps the tick's wheel issues, an early start of the
+ * steppers put the ramp's last step 135 us late). */
 static void chunks_early(const struct plan *p, uint8_t tail)
 {
     if (!STEP_ENGINE || settle_ticks || queue_slot(tail)->kind != IT_SEG || plan_tail == plan_head)
@@ -574,7 +576,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     uint8_t tail = ++queue_tail;
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
-    else if (STEP_ENGINE && !p->at_rest)
+    else if (STEP_ENGINE && !p->at_rest && !p->accel)
         chunks_early(p, tail);
 }
 
