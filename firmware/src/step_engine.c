@@ -43,7 +43,31 @@ uint8_t step_fast;
 /* an edge armed closer to now than this is set this far ahead (late) */
 #define ARM_MARGIN 24
 
-#define OCR_OF(t) ((uint16_t)((((t) + (1UL << (STEP_FRAC_BITS - 1))) >> STEP_FRAC_BITS) - ISR_LEAD))
+#define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
+
+/* Q24.8 <-> whole cycles by moving bytes (avr-gcc -Os makes a loop of a 32-bit shift by
+ * 8, about 60 cycles: start_axis runs with interrupts off) */
+static inline __attribute__((always_inline)) uint32_t cycles_of(uint32_t q)
+{
+    union { uint32_t u; uint8_t b[4]; } x = {q}, y;
+    y.b[0] = x.b[1];
+    y.b[1] = x.b[2];
+    y.b[2] = x.b[3];
+    y.b[3] = 0;
+    return y.u;
+}
+static inline __attribute__((always_inline)) uint32_t q_of(uint16_t cycles)
+{
+    union { uint32_t u; uint8_t b[4]; } y;
+    y.b[0] = 0;
+    y.b[1] = (uint8_t)cycles;
+    y.b[2] = (uint8_t)(cycles >> 8);
+    y.b[3] = 0;
+    return y.u;
+}
+_Static_assert(STEP_FRAC_BITS == 8, "cycles_of and q_of move whole bytes");
+/* bit k (a variable shift is a loop too) */
+static const uint8_t bit_of_k[4] = {1, 2, 4, 8};
 
 void step_engine_start_timers(uint8_t timer1_b)
 {
@@ -92,9 +116,9 @@ static inline __attribute__((always_inline)) void set_dir(uint8_t k, uint8_t neg
         break;
     }
     if (neg)
-        cur_dir |= (uint8_t)(1 << k);
+        cur_dir |= bit_of_k[k];
     else
-        cur_dir &= (uint8_t)~(1 << k);
+        cur_dir &= (uint8_t)~bit_of_k[k];
 }
 
 static inline __attribute__((always_inline)) volatile uint16_t *ocr_of(uint8_t k)
@@ -176,7 +200,7 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
         a->t = a->next_t;
         a->interval = a->next_interval;
         a->count = a->next_count;
-        if ((uint8_t)(cur_dir >> k & 1) != a->next_neg)
+        if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next_neg)
             set_dir(k, a->next_neg);
         a->next_ready = 0;
         return 1;
@@ -188,7 +212,7 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
     a->t = c->t;
     a->interval = c->interval;
     a->count = c->count;
-    if ((uint8_t)(cur_dir >> k & 1) != c->neg)
+    if ((uint8_t)!!(cur_dir & bit_of_k[k]) != c->neg)
         set_dir(k, c->neg);
     a->tail = (uint8_t)(tail + 1);
     return 1;
@@ -199,9 +223,9 @@ static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct ste
     /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles */
     a->slow = a->wraps || (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
     if (a->running && !a->slow)
-        step_fast |= (uint8_t)(2 << k);
+        step_fast |= (uint8_t)(bit_of_k[k] << 1);
     else
-        step_fast &= (uint8_t)~(2 << k);
+        step_fast &= (uint8_t)~(bit_of_k[k] << 1);
 }
 
 /* The edge of stepper k in C: the assembly's rare cases (a timer period to let pass, an
@@ -225,12 +249,12 @@ static inline __attribute__((always_inline)) void step_event(uint8_t k, uint8_t 
         }
         if (--a->count) {
             a->t = was + a->interval;
-            arm(k, a, (uint32_t)((a->t - was) >> STEP_FRAC_BITS) & 0xFFFFFFUL);
+            arm(k, a, cycles_of(a->t - was));
             goto done;
         }
     }
     if (take(k, a)) {
-        arm(k, a, (uint32_t)((a->t - was) >> STEP_FRAC_BITS) & 0xFFFFFFUL);
+        arm(k, a, cycles_of(a->t - was));
     } else {
         a->running = 0;
         irq_off(k);
@@ -462,15 +486,15 @@ _Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
  * timer period has passed since it started */
 static uint32_t now_q(uint8_t k, uint32_t tick_start)
 {
-    uint16_t since = (uint16_t)(*tcnt_of(k) - (uint16_t)(tick_start >> STEP_FRAC_BITS));
-    return tick_start + ((uint32_t)since << STEP_FRAC_BITS);
+    uint16_t since = (uint16_t)(*tcnt_of(k) - (uint16_t)cycles_of(tick_start));
+    return tick_start + q_of(since);
 }
 
 static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
 {
     take(k, a);
     uint32_t now = now_q(k, step_clock_this_tick);
-    uint32_t ahead = (uint32_t)((a->t - now) >> STEP_FRAC_BITS) & 0xFFFFFFUL;
+    uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
     arm(k, a, ahead);
