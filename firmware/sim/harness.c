@@ -526,22 +526,32 @@ static avr_int_vector_t *vector_no(int n)
 #define TIFR1_ADDR 0x36
 static unsigned enable_queued; /* interrupts queued by this hook (stats) */
 
-static void timsk1_write(struct avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
+/* The same for the step engine's timers (step_engine.c): Timer3's compares A-C (vectors
+ * 32-34) and Timer5's A (47), whose interrupts a stepper's slow path masks while it
+ * works and enables again. */
+struct timer_irqs {
+    uint8_t tifr;
+    struct { int vec; uint8_t bit; } v[3];
+};
+static const struct timer_irqs timer1_irqs = {TIFR1_ADDR, {{17, 0x02}, {18, 0x04}, {19, 0x08}}};
+static const struct timer_irqs timer3_irqs = {0x38, {{32, 0x02}, {33, 0x04}, {34, 0x08}}};
+static const struct timer_irqs timer5_irqs = {0x3A, {{47, 0x02}, {0, 0}, {0, 0}}};
+
+static void timsk_write(struct avr_t *a, avr_io_addr_t addr, uint8_t v, void *param)
 {
-    static const struct { int vec; uint8_t bit; } t1[3] = {{17, 0x02}, {18, 0x04}, {19, 0x08}};
-    (void)param;
+    const struct timer_irqs *t = param;
     uint8_t was = a->data[addr];
     avr_core_watch_write(a, addr, v);
-    uint8_t tifr = a->data[TIFR1_ADDR];
+    uint8_t tifr = a->data[t->tifr];
     for (int i = 0; i < 3; i++) {
-        if (!(v & t1[i].bit) || (was & t1[i].bit) || !(tifr & t1[i].bit))
+        if (!t->v[i].bit || !(v & t->v[i].bit) || (was & t->v[i].bit) || !(tifr & t->v[i].bit))
             continue;
-        avr_int_vector_t *vec = vector_no(t1[i].vec);
+        avr_int_vector_t *vec = vector_no(t->v[i].vec);
         if (vec && !avr_is_interrupt_pending(a, vec)) {
             avr_raise_interrupt(a, vec);
             enable_queued++;
             if (getenv("CDPR_SIM_TRACE_MOTION"))
-                fprintf(stderr, "queued vector %d on enable at %llu\n", t1[i].vec,
+                fprintf(stderr, "queued vector %d on enable at %llu\n", t->v[i].vec,
                         (unsigned long long)a->cycle);
         }
     }
@@ -941,7 +951,9 @@ int main(int argc, char **argv)
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), xon_cb, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), xoff_cb, NULL);
 
-    avr_register_io_write(avr, TIMSK1_ADDR, timsk1_write, NULL);
+    avr_register_io_write(avr, TIMSK1_ADDR, timsk_write, (void *)&timer1_irqs);
+    avr_register_io_write(avr, 0x71, timsk_write, (void *)&timer3_irqs); /* TIMSK3 */
+    avr_register_io_write(avr, 0x73, timsk_write, (void *)&timer5_irqs); /* TIMSK5 */
     for (int k = 0; k < 4; k++) {
         watch(STEP_PINS[k].port, STEP_PINS[k].bit, step_cb, k);
         watch(DIR_PINS[k].port, DIR_PINS[k].bit, dir_cb, k);

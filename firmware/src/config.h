@@ -38,6 +38,15 @@
 #define MAX_STEP_RATE 8000UL /* steps/s, any one axis */
 #endif
 
+/* The step engine of issue 29 (step_engine.h), stage 1: a steady segment's steps from
+ * one timer compare per edge, per stepper (1), instead of the tick's time wheel (0).
+ * Built with 1 only for the measurements of stage 1 (firmware/tools/engine_rates.py)
+ * until it holds the issue's rates within the tolerance (firmware/README.md). */
+#ifndef STEP_ENGINE
+#define STEP_ENGINE 0
+#endif
+
+
 /* CAPS (protocol 2.1). The shortest segment: one whole tick, 400 us (a shorter one would
  * make the step interrupt's period shorter than its own run time; BAD_VALUE). The segment
  * rate sustained at 250000 baud on a clean line (bench/firmware.py's stream: 2000/s,
@@ -49,8 +58,12 @@
 
 /* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */
 #define QUEUE_SIZE 128
-/* Segments prepared ahead of the step interrupt (DDA constants, 72 bytes each). */
-#define PLAN_SLOTS 8
+/* Segments prepared ahead of the step interrupt (DDA constants, 142 bytes each). */
+#ifndef PLAN_SLOTS
+/* 4 with the step engine: its steppers' state (about 160 bytes) would leave the stack
+ * less than its margin otherwise (tools/stack_usage.py) */
+#define PLAN_SLOTS (STEP_ENGINE ? 4 : 8)
+#endif
 
 /* Unacknowledged host payload bytes the device can hold (IDENT rx_window): the
  * host never has more in flight, so the UART's receive ring (uart.h) holds them

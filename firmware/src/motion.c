@@ -15,6 +15,7 @@
 #include "mul16.h"
 #include "protocol_gen.h"
 #include "step_rate.h"
+#include "step_recip.h"
 
 struct plan plans[PLAN_SLOTS];
 volatile uint8_t plan_head, plan_tail;
@@ -244,6 +245,8 @@ static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32
     x->est_low = (uint8_t)before;
     times_fx40(n, &shape.v0, &x->v_lo, &x->v_hi);
     times_fx40(n, &shape.a, &x->a_lo, &x->a_hi);
+    if (STEP_ENGINE && !accel)
+        x->interval = step_interval(n, shape.units);
     /* a steady segment moves v_hi every tick: the interrupt's step rate, now */
     x->period = accel ? 0 : step_period((uint32_t)x->v_hi, TICK_CYCLES);
     if (n < MEMO_N) {

@@ -68,7 +68,11 @@ struct axis_plan {
     uint16_t v_lo;   /* 0 */
     int32_t v_hi;    /* 2 */
     uint16_t a_lo;   /* 6 */
-    int32_t a_hi;    /* 8 */
+    union {
+        int32_t a_hi;      /* 8 */
+        uint32_t interval; /* a steady segment's (a = 0): Q24.8 cycles between its steps
+                            * for the step engine's chunk (step_recip.h) */
+    };
     uint32_t acc;    /* 12 */
     uint32_t last_n; /* N minus the estimated count before the last tick */
     uint8_t est_low;

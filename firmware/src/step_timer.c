@@ -20,6 +20,7 @@
 #include "config.h"
 #include "sim_hooks.h"
 #include "sim_markers.h"
+#include "step_engine.h"
 #include "step_events.h"
 #include "step_pins.h"
 #include "step_tick.h"
@@ -32,6 +33,9 @@ volatile uint8_t stepper_latency_max;
 volatile uint16_t stepper_late_worst;
 volatile uint32_t stepper_late_tolerance;
 volatile uint8_t tick_gen;
+#if STEP_ENGINE
+uint32_t step_clock_this_tick; /* the start of the tick in progress, Q24.8 (step_engine.h) */
+#endif
 static volatile uint8_t computing, tick_missed;
 static uint8_t handed_over; /* the next tick's first event went out with this one's */
 /* the axes of a pending compare B event that compare A's entry raised */
@@ -49,9 +53,14 @@ void step_timer_init(void)
     /* Timer1: CTC on OCR1A, no prescaler; in the simulator build compare C toggles OC1C
      * (MARK_EDGE) when OCR1C is set to match one cycle into the next tick */
     TCCR1A = SIM_HOOKS ? _BV(COM1C0) : 0;
-    TCCR1B = _BV(WGM12) | _BV(CS10);
+    TCCR1B = 0;
+    TCNT1 = 0;
     OCR1A = TICK_CYCLES - 1;
     OCR1C = EDGE_NEVER;
+    if (STEP_ENGINE)
+        step_engine_start_timers(_BV(WGM12) | _BV(CS10));
+    else
+        TCCR1B = _BV(WGM12) | _BV(CS10);
     TIMSK1 = _BV(OCIE1A);
 }
 
@@ -126,6 +135,10 @@ static void __attribute__((noinline)) tick_start(void)
     struct out *e = next_tick;
     next_tick = this_tick;
     this_tick = e;
+#if STEP_ENGINE
+    step_clock_this_tick = step_clock_next_tick;
+    step_clock_next_tick += (uint32_t)(uint16_t)(e->units * UNIT_CYCLES) << STEP_FRAC_BITS;
+#endif
     struct event *ev = e->ev;
     if (handed_over) {
         ev++; /* issued by the last tick's compare B, just before this tick began */
@@ -281,7 +294,13 @@ static void __attribute__((noinline)) hand_over_first(void)
  * event still pending at the boundary (another interrupt held compare B past it, and
  * compare A comes first) has its pulses raised at once; flush_events ends them. Then
  * the tick proper, a signal handler entered as if from the vector. */
+#if STEP_ENGINE
+/* interrupts on from its first instruction: the steppers' edges do not wait for its
+ * prologue (compare A cannot come again before the tick's end) */
+void __vector_tick(void) __attribute__((interrupt, used));
+#else
 void __vector_tick(void) __attribute__((signal, used));
+#endif
 ISR(TIMER1_COMPA_vect, ISR_NAKED)
 {
     __asm__ volatile(
@@ -312,6 +331,13 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
         : STEP_PULSE_ASM_OPERANDS, [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), [ocieb] "I"(OCIE1B));
 }
 
+/* The tick that starts now issues no step and keeps the directions, and no step of the
+ * tick that ends is pending (tick_start then touches no pin). */
+static inline __attribute__((always_inline)) uint8_t quiet_start(void)
+{
+    return !next_tick->ev[0].mask && next_tick->dir == cur_dir && !(TIMSK1 & _BV(OCIE1B));
+}
+
 void __vector_tick(void)
 {
     tick_gen++;
@@ -320,15 +346,30 @@ void __vector_tick(void)
         return;
     }
     do {
-        tick_start();
-        computing = 1;
-        sei();
+        if (STEP_ENGINE && quiet_start()) {
+            /* nothing at this tick's start is due at an exact time (the steps are the
+             * step engine's): the steppers' interrupts may come first */
+            computing = 1;
+            sei();
+            tick_start();
+        } else {
+            cli();
+            tick_start();
+            computing = 1;
+            sei();
+        }
         stepper_tick_chores();
         stepper_compute();
         tail_guard();
+        if (STEP_ENGINE)
+            motion_marker(); /* computing: a compare A now only notes itself */
         cli();
         computing = 0;
-        motion_marker();
+        if (!STEP_ENGINE)
+            motion_marker();
     } while (tick_end());
     hand_over_first();
+    if (STEP_ENGINE)
+        sei(); /* the epilogue (about 40 cycles of pops) need not hold the steppers' edges:
+                * the next tick is not due before it ends */
 }

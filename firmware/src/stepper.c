@@ -27,6 +27,7 @@
 #include "sim_hooks.h"
 #include "sim_markers.h"
 #include "step_pins.h"
+#include "step_engine.h"
 #include "step_events.h"
 #include "step_rate.h"
 #include "step_tick.h"
@@ -77,6 +78,9 @@ static uint32_t ticks_left;   /* SEG, DWELL: ticks left */
 static uint8_t last_units;    /* DWELL: length of the last tick */
 static uint8_t settle_ticks;  /* ticks to wait after positions were set */
 static uint8_t abort_pending; /* a segment was abandoned: mark it */
+/* the step engine's chunks of the plan at plan_tail are out already (seg_last_tick put
+ * them out with the segment before it) */
+static uint8_t chunks_ahead;
 static uint32_t abort_seq;
 
 void stepper_init(uint8_t hold_mask)
@@ -222,7 +226,9 @@ static void seg_positions(const struct seg_snapshot *sn, int32_t *out)
         int32_t d = sn->delta[k];
         uint32_t n = (uint32_t)(d < 0 ? -d : d);
         uint32_t est = motion_steps_due((float)n, sn->ka, sn->kb, sn->done_ticks);
-        int32_t issued = (int32_t)est + (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
+        int32_t issued = (int32_t)est;
+        if (!STEP_ENGINE || sn->kb != 0.0f) /* the DDA's own count: its byte corrects */
+            issued += (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
         out[k] += d < 0 ? -issued : issued;
     }
 }
@@ -251,6 +257,10 @@ void stepper_halt(void)
     stepper.current = 0xFF;
     stepper.at_rest = 1;
     stepper.running = 0;
+    if (STEP_ENGINE)
+        step_engine_stop();
+    if (STEP_ENGINE)
+        chunks_ahead = 0;
     SREG = s;
     if (sn.running) {
         int32_t pos[4];
@@ -272,6 +282,10 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     uint8_t s = SREG;
     cli();
     queue_tail = queue_head;
+    if (STEP_ENGINE)
+        step_engine_stop();
+    if (STEP_ENGINE)
+        chunks_ahead = 0;
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
     motion_plans_reset();
@@ -320,6 +334,30 @@ static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backin
     }
 }
 
+/* A steady segment's steps: one chunk an axis, from the segment's start `start` (Q24.8
+ * on the steppers' clock), the first edge half an interval in (PROTOCOL.md 5.1). */
+static void __attribute__((noinline, unused)) seg_chunks(const struct plan *p, uint32_t start)
+{
+#if STEP_ENGINE
+    struct step_chunk c;
+    const struct axis_plan *x = p->ax;
+    const int32_t *d = p->delta;
+    for (uint8_t k = 0; k < 4; k++, x++, d++) {
+        int32_t n = *d;
+        if (!n)
+            continue;
+        c.neg = n < 0;
+        c.count = (uint16_t)(n < 0 ? -n : n);
+        c.interval = x->interval;
+        c.t = start + (c.interval >> 1);
+        step_engine_push(k, &c);
+    }
+#else
+    (void)p;
+    (void)start;
+#endif
+}
+
 /* Start queue items until a timed one runs (or nothing may start); at most a
  * few instantaneous items per tick, so a queue of them cannot stretch a tick. */
 static void __attribute__((noinline)) dispatch(void)
@@ -349,6 +387,12 @@ static void __attribute__((noinline)) dispatch(void)
             }
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
+            if (STEP_ENGINE && !p->accel) {
+                if (chunks_ahead)
+                    chunks_ahead = 0;
+                else
+                    seg_chunks(p, step_clock_next_tick);
+            }
             return;
         }
         case IT_DWELL:
@@ -461,6 +505,25 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
     return n;
 }
 
+/* With the step engine: the next segment's chunks put out with this one's last tick
+ * (its start is this tick's end), a tick before dispatch would, so each stepper takes
+ * them at its last edge of this segment without stopping, and the boundary's work is
+ * spread over two ticks. Only a steady segment after a steady one, that dispatch would
+ * start as it is (its plan ready, its axes enabled, nothing to wait for); else dispatch
+ * does it (after a ramp, whose last steps the tick's wheel issues, an early start of the
+ * steppers put the ramp's last step 135 us late). */
+static void chunks_early(const struct plan *p, uint8_t tail)
+{
+    if (!STEP_ENGINE || settle_ticks || queue_slot(tail)->kind != IT_SEG || plan_tail == plan_head)
+        return;
+    const struct plan *n = &plans[plan_tail & (PLAN_SLOTS - 1)];
+    if (n->index != tail || n->accel || (stepper.enabled_mask | n->moving) != stepper.enabled_mask)
+        return;
+    seg_chunks(n, step_clock_next_tick +
+                      ((uint32_t)(uint16_t)(p->last_units * UNIT_CYCLES) << STEP_FRAC_BITS));
+    chunks_ahead = 1;
+}
+
 /* The segment's last tick: each axis issues what is left (the exact total). */
 static void __attribute__((noinline)) seg_last_tick(struct plan *p)
 {
@@ -477,7 +540,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
         int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
         uint32_t rem = x->last_n - (int32_t)off;
         int32_t moved = *d;
-        if (rem) {
+        if (rem && (p->accel || !STEP_ENGINE)) {
             uint8_t n = rem > AX_MAX ? AX_MAX : (uint8_t)rem;
             if (rem > AX_MAX) {
                 /* more than a tick holds (never at the advertised rate): the position
@@ -513,6 +576,8 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     uint8_t tail = ++queue_tail;
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
+    else if (STEP_ENGINE && !p->at_rest && !p->accel)
+        chunks_early(p, tail);
 }
 
 /* A limit switch stops the segment: ENDSTOP_HIT (the main loop adds the position). */
@@ -541,6 +606,8 @@ static void __attribute__((noinline)) seg_tick(void)
         return;
     }
     uint8_t moving = p->moving, accel = p->accel, any = 0;
+    if (STEP_ENGINE && !accel)
+        return; /* a steady segment's steps are the step engine's chunks */
     struct axis_plan *x = p->ax;
     const uint8_t *bit = bit_of;
     for (uint8_t m = moving; m; m >>= 1, x++, bit++) {

@@ -1,0 +1,550 @@
+/* The step engine (step_engine.h): the steppers' compare interrupts and their chunk
+ * rings. */
+#include <avr/interrupt.h>
+#include <avr/io.h>
+
+#include "board_ramps14.h"
+#include "config.h"
+#include "step_engine.h"
+#include "step_tick.h"
+
+#if STEP_ENGINE /* config.h: off, its RAM is not spent */
+
+/* A stepper's running state and its queued chunks. */
+struct step_axis {
+    uint32_t t;        /* the armed edge, Q24.8 */
+    uint32_t interval; /* Q24.8 */
+    uint16_t count;    /* edges of the running chunk left, the armed one included */
+    uint8_t wraps;     /* whole timer periods to let pass before the armed compare */
+    uint8_t slow;      /* the armed event is not the assembly's: wraps left, or an
+                        * interval of 32,768 cycles or more (under 489 steps/s) */
+    uint8_t running;   /* its compare interrupt is on */
+    /* The chunk after the running one, where the assembly takes it at the running one's
+     * last edge (the ring's are C's): a segment's, put here a tick before it starts. */
+    volatile uint8_t next_ready;
+    uint32_t next_t, next_interval;
+    uint16_t next_count;
+    uint8_t next_neg;
+    volatile uint8_t head, tail;
+    struct step_chunk ring[CHUNK_SLOTS];
+};
+static struct step_axis axes[4];
+
+uint32_t step_clock_next_tick;
+volatile uint16_t step_engine_late;
+/* The steppers whose armed compare is the assembly's next edge (running, not slow), at
+ * their flags' bits in TIFR3 (X, Y, Z: bits 1-3) and E at bit 4: another one's interrupt
+ * may raise their pin (RAISE_PENDING below) */
+uint8_t step_fast;
+
+/* cycles from a compare match to the pulse's rising edge in the interrupt (its response,
+ * the vector's jump, the prologue): the compare is set that much early */
+#define ISR_LEAD 11
+/* an edge armed closer to now than this is set this far ahead (late) */
+#define ARM_MARGIN 24
+
+#define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
+
+/* Q24.8 <-> whole cycles by moving bytes (avr-gcc -Os makes a loop of a 32-bit shift by
+ * 8, about 60 cycles: start_axis runs with interrupts off) */
+static inline __attribute__((always_inline)) uint32_t cycles_of(uint32_t q)
+{
+    union { uint32_t u; uint8_t b[4]; } x = {q}, y;
+    y.b[0] = x.b[1];
+    y.b[1] = x.b[2];
+    y.b[2] = x.b[3];
+    y.b[3] = 0;
+    return y.u;
+}
+static inline __attribute__((always_inline)) uint32_t q_of(uint16_t cycles)
+{
+    union { uint32_t u; uint8_t b[4]; } y;
+    y.b[0] = 0;
+    y.b[1] = (uint8_t)cycles;
+    y.b[2] = (uint8_t)(cycles >> 8);
+    y.b[3] = 0;
+    return y.u;
+}
+_Static_assert(STEP_FRAC_BITS == 8, "cycles_of and q_of move whole bytes");
+/* bit k (a variable shift is a loop too) */
+static const uint8_t bit_of_k[4] = {1, 2, 4, 8};
+
+void step_engine_start_timers(uint8_t timer1_b)
+{
+    TCCR3A = 0;
+    TCCR5A = 0;
+    TCCR3B = 0;
+    TCCR5B = 0;
+    TCNT3 = 0;
+    TCNT5 = 0;
+    /* Timer5, Timer3 and Timer1 started two cycles apart: Timer3's count leads Timer1's
+     * by 2 and Timer5's by 4 (Timer5's is set right below) */
+    __asm__ volatile("sts %[t5], %[cs]\n\t"
+                     "sts %[t3], %[cs]\n\t"
+                     "sts %[t1], %[b1]\n\t"
+                     :
+                     : [t5] "n"(_SFR_MEM_ADDR(TCCR5B)), [t3] "n"(_SFR_MEM_ADDR(TCCR3B)),
+                       [t1] "n"(_SFR_MEM_ADDR(TCCR1B)), [cs] "r"((uint8_t)_BV(CS30)),
+                       [b1] "r"(timer1_b));
+    /* Timer1's first tick ends at its first compare match, TICK_CYCLES in */
+    step_clock_this_tick = 2UL << STEP_FRAC_BITS;
+    step_clock_next_tick = (TICK_CYCLES + 2UL) << STEP_FRAC_BITS;
+    TIMSK3 = 0;
+    TIMSK5 = 0;
+}
+
+/* The compare registers and enables of each stepper */
+#define X_OCR OCR3A
+#define Y_OCR OCR3B
+#define Z_OCR OCR3C
+#define E_OCR OCR5A
+
+static inline __attribute__((always_inline)) void set_dir(uint8_t k, uint8_t neg)
+{
+    switch (k) {
+    case 0:
+        if (neg ^ X_DIR_INVERT) X_DIR_PORT &= (uint8_t)~_BV(X_DIR_BIT); else X_DIR_PORT |= _BV(X_DIR_BIT);
+        break;
+    case 1:
+        if (neg ^ Y_DIR_INVERT) Y_DIR_PORT &= (uint8_t)~_BV(Y_DIR_BIT); else Y_DIR_PORT |= _BV(Y_DIR_BIT);
+        break;
+    case 2:
+        if (neg ^ Z_DIR_INVERT) Z_DIR_PORT &= (uint8_t)~_BV(Z_DIR_BIT); else Z_DIR_PORT |= _BV(Z_DIR_BIT);
+        break;
+    default:
+        if (neg ^ E_DIR_INVERT) E_DIR_PORT &= (uint8_t)~_BV(E_DIR_BIT); else E_DIR_PORT |= _BV(E_DIR_BIT);
+        break;
+    }
+    if (neg)
+        cur_dir |= bit_of_k[k];
+    else
+        cur_dir &= (uint8_t)~bit_of_k[k];
+}
+
+static inline __attribute__((always_inline)) volatile uint16_t *ocr_of(uint8_t k)
+{
+    return k == 0 ? &X_OCR : k == 1 ? &Y_OCR : k == 2 ? &Z_OCR : &E_OCR;
+}
+static inline __attribute__((always_inline)) volatile uint16_t *tcnt_of(uint8_t k)
+{
+    return k == 3 ? &TCNT5 : &TCNT3;
+}
+/* Serve the Timer3 steppers whose pending compare a write of TIFR3 cleared (`lost`: the
+ * flags up before it and down after). The hardware clears only the flags written with a
+ * 1, but simavr 1.6 (avr_timer_write_pending) clears every flag of the timer: the edge
+ * then came a whole timer period (4.1 ms) late. A lost wrap pass is counted here; a lost
+ * edge is armed again just ahead of now (late, counted). */
+static void __attribute__((noinline)) relost(uint8_t lost)
+{
+    for (uint8_t j = 0; j < 3; j++) {
+        if (!(lost & (uint8_t)(_BV(OCF3A) << j)))
+            continue;
+        struct step_axis *a = &axes[j];
+        if (a->wraps) {
+            a->wraps--;
+        } else {
+            *ocr_of(j) = (uint16_t)(TCNT3 + ARM_MARGIN);
+            step_engine_late++;
+        }
+    }
+}
+
+static inline __attribute__((always_inline)) void irq_on(uint8_t k)
+{
+    if (k == 3) {
+        TIFR5 = _BV(OCF5A);
+        TIMSK5 |= _BV(OCIE5A);
+    } else {
+        uint8_t f = (uint8_t)(_BV(OCF3A) << k);
+        uint8_t up = (uint8_t)(TIFR3 & TIMSK3 & (uint8_t)~f); /* the others' pending */
+        TIFR3 = f; /* a match of k's compare while it was off */
+        TIMSK3 |= f; /* OCIE3A..C are bits 1..3 like OCF3A..C */
+        uint8_t lost = (uint8_t)(up & ~TIFR3);
+        if (lost)
+            relost(lost);
+    }
+}
+static inline __attribute__((always_inline)) void irq_off(uint8_t k)
+{
+    if (k == 3)
+        TIMSK5 &= (uint8_t)~_BV(OCIE5A);
+    else
+        TIMSK3 &= (uint8_t)~(_BV(OCIE3A) << k);
+}
+_Static_assert(OCIE3A == OCF3A && OCIE3B == OCIE3A + 1 && OCIE3C == OCIE3A + 2, "Timer3's bits");
+
+/* Arm stepper k's compare for its edge at t, `ahead` cycles (24 bits) from now:
+ * whole timer periods first, then the compare. */
+static inline __attribute__((always_inline)) void arm(uint8_t k, struct step_axis *a,
+                                                       uint32_t ahead)
+{
+    uint16_t ocr = OCR_OF(a->t);
+    if (ahead >= 0x10000UL) {
+        a->wraps = (uint8_t)((ahead - ISR_LEAD - 1) >> 16);
+        *ocr_of(k) = ocr;
+        return;
+    }
+    a->wraps = 0;
+    uint16_t now = *tcnt_of(k);
+    if (ahead < 0x8000UL && (int16_t)(ocr - now) < ARM_MARGIN) {
+        ocr = (uint16_t)(now + ARM_MARGIN); /* late */
+        step_engine_late++;
+    }
+    *ocr_of(k) = ocr;
+}
+
+/* Take the next chunk of stepper k, at its time; returns 0 when there is none. */
+static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step_axis *a)
+{
+    if (a->next_ready) {
+        a->t = a->next_t;
+        a->interval = a->next_interval;
+        a->count = a->next_count;
+        if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next_neg)
+            set_dir(k, a->next_neg);
+        a->next_ready = 0;
+        return 1;
+    }
+    uint8_t tail = a->tail;
+    if (tail == a->head)
+        return 0;
+    const struct step_chunk *c = &a->ring[tail & (CHUNK_SLOTS - 1)];
+    a->t = c->t;
+    a->interval = c->interval;
+    a->count = c->count;
+    if ((uint8_t)!!(cur_dir & bit_of_k[k]) != c->neg)
+        set_dir(k, c->neg);
+    a->tail = (uint8_t)(tail + 1);
+    return 1;
+}
+
+static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
+{
+    /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles */
+    a->slow = a->wraps || (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
+    if (a->running && !a->slow)
+        step_fast |= (uint8_t)(bit_of_k[k] << 1);
+    else
+        step_fast &= (uint8_t)~(bit_of_k[k] << 1);
+}
+
+/* The edge of stepper k in C: the assembly's rare cases (a timer period to let pass, an
+ * interval of 65,536 cycles or more) and a chunk's end with no chunk waiting for the
+ * assembly (`raised`: its pin is high already). */
+static inline __attribute__((always_inline)) void step_event(uint8_t k, uint8_t raised)
+{
+    struct step_axis *a = &axes[k];
+    uint32_t was = a->t;
+    if (!raised) {
+        if (a->wraps) {
+            if (!--a->wraps)
+                set_slow(k, a);
+            return;
+        }
+        switch (k) {
+        case 0: X_STEP_PORT |= _BV(X_STEP_BIT); break;
+        case 1: Y_STEP_PORT |= _BV(Y_STEP_BIT); break;
+        case 2: Z_STEP_PORT |= _BV(Z_STEP_BIT); break;
+        default: E_STEP_PORT |= _BV(E_STEP_BIT); break;
+        }
+        if (--a->count) {
+            a->t = was + a->interval;
+            arm(k, a, cycles_of(a->t - was));
+            goto done;
+        }
+    }
+    if (take(k, a)) {
+        arm(k, a, cycles_of(a->t - was));
+    } else {
+        a->running = 0;
+        irq_off(k);
+    }
+done:
+    set_slow(k, a);
+    switch (k) {
+    case 0: X_STEP_PORT &= (uint8_t)~_BV(X_STEP_BIT); break;
+    case 1: Y_STEP_PORT &= (uint8_t)~_BV(Y_STEP_BIT); break;
+    case 2: Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT); break;
+    default: E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT); break;
+    }
+}
+
+/* The rare cases in C, entered from the assembly as if from the vector. */
+#define STEP_C(name, k, raised)                                                            \
+    void name(void) __attribute__((signal, used));                                         \
+    void name(void) { step_event(k, raised); }
+STEP_C(__vector_step_x, 0, 0)
+STEP_C(__vector_step_y, 1, 0)
+STEP_C(__vector_step_z, 2, 0)
+STEP_C(__vector_step_e, 3, 0)
+STEP_C(__vector_end_x, 0, 1)
+STEP_C(__vector_end_y, 1, 1)
+STEP_C(__vector_end_z, 2, 1)
+STEP_C(__vector_end_e, 3, 1)
+
+/* The common case in assembly (about 90 cycles with the interrupt's entry and exit; the
+ * compiler's C saves 20 registers): pin high, count down, T += I (32 bits), or at the
+ * chunk's end the waiting chunk (its time, interval, count and direction), the compare at
+ * T rounded to a cycle less ISR_LEAD, or just ahead of now if that has passed already,
+ * pin low (>= 2 us later). PIN_ON / PIN_OFF raise and lower the step pin, DIR_POS /
+ * DIR_NEG set the direction pin (r25 free in each). */
+
+/* Edges due together (axes in step, or a mix's coincidences): the interrupt that fires
+ * reads the other steppers' compare flags right after raising its own pin, and raises
+ * the pin of each one whose flag is up and whose armed compare is an edge (step_fast);
+ * that stepper's interrupt, pending, then finds its pin high already (the raise is
+ * idempotent), does its bookkeeping and lowers it. An edge due with another is then
+ * about 1 us late instead of one interrupt (about 6 us) per stepper served before it;
+ * about 10 cycles an edge. r24: the pending steppers (bits as step_fast), r25 scratch. */
+#define TIFR3_IO "0x18" /* iom2560.h: TIFR3, TIFR5 (OCF3A..C bits 1..3, OCF5A bit 1) */
+#define TIFR5_IO "0x1A"
+#define PENDING_T3 "in r24, " TIFR3_IO "\n\t"
+#define PENDING_T3_T5 PENDING_T3 "sbic " TIFR5_IO ", 1\n\tori r24, 0x10\n\t"
+#define RAISE_PENDING(read, raises)                                                        \
+    read "lds r25, step_fast\n\t"                                                          \
+    "and r24, r25\n\t"                                                                     \
+    "breq 20f\n\t" raises "20:\n\t"
+#define IF_X "sbrc r24, 1\n\tsbi %[pf], %[xb]\n\t"
+#define IF_Y "sbrc r24, 2\n\tsbi %[pf], %[yb]\n\t"
+#define IF_Z "sbrs r24, 3\n\trjmp 21f\n\tlds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n21:\n\t"
+#define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
+
+#define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners) \
+    __asm__ volatile(                                                                      \
+        "push r24\n\t"                                                                     \
+        "in r24, __SREG__\n\t"                                                             \
+        "push r24\n\t"                                                                     \
+        "lds r24, %[slow]\n\t"                                                             \
+        "tst r24\n\t"                                                                      \
+        "breq 1f\n\t"                                                                      \
+        "pop r24\n\t"                                                                      \
+        "out __SREG__, r24\n\t"                                                            \
+        "pop r24\n\t"                                                                      \
+        "jmp " slow_fn "\n"                                                                \
+        "1:\n\t"                                                                           \
+        "push r25\n\t" pin_on                                                              \
+        "push r26\n\t"                                                                     \
+        "push r27\n\t" partners \
+        "lds r24, %[cnt]\n\t"                                                              \
+        "lds r25, %[cnt]+1\n\t"                                                            \
+        "sbiw r24, 1\n\t"                                                                  \
+        "sts %[cnt]+1, r25\n\t"                                                            \
+        "sts %[cnt], r24\n\t"                                                              \
+        "breq 9f\n\t"                                                                      \
+        "rjmp 2f\n"                                                                         \
+        "9:\n\t"                                                                           \
+        /* the chunk's last edge: the waiting chunk; none and none in the ring: the    \
+         * stepper stops; else C takes the ring's */                                       \
+        "lds r24, %[rdy]\n\t"                                                              \
+        "tst r24\n\t"                                                                      \
+        "brne 6f\n\t"                                                                      \
+        "lds r24, %[head]\n\t"                                                             \
+        "lds r25, %[tail]\n\t"                                                             \
+        "cp r24, r25\n\t"                                                                  \
+        "brne 11f\n\t"                                                                     \
+        "ldi r24, 0\n\t"                                                                   \
+        "sts %[run], r24\n\t"                                                              \
+        "lds r24, step_fast\n\t"                                                           \
+        "andi r24, lo8(~(%[bit] << 1))\n\t"                                                \
+        "sts step_fast, r24\n\t"                                                          \
+        "lds r24, %[msk]\n\t"                                                              \
+        "andi r24, lo8(~%[mbit])\n\t"                                                      \
+        "sts %[msk], r24\n\t"                                                              \
+        "rjmp 10f\n"                                                                        \
+        "11:\n\t"                                                                          \
+        "pop r27\n\t"                                                                      \
+        "pop r26\n\t"                                                                      \
+        "pop r25\n\t"                                                                      \
+        "pop r24\n\t"                                                                      \
+        "out __SREG__, r24\n\t"                                                            \
+        "pop r24\n\t"                                                                      \
+        "jmp " end_fn "\n"                                                                 \
+        "6:\n\t"                                                                           \
+        "clr r24\n\t"                                                                      \
+        "sts %[rdy], r24\n\t"                                                              \
+        "lds r24, %[ncnt]\n\t"                                                             \
+        "sts %[cnt], r24\n\t"                                                              \
+        "lds r24, %[ncnt]+1\n\t"                                                           \
+        "sts %[cnt]+1, r24\n\t"                                                            \
+        "lds r24, %[ni]\n\t"                                                               \
+        "sts %[i], r24\n\t"                                                                \
+        "lds r24, %[ni]+1\n\t"                                                             \
+        "sts %[i]+1, r24\n\t"                                                              \
+        "lds r24, %[ni]+2\n\t"                                                             \
+        "sts %[i]+2, r24\n\t"                                                              \
+        "lds r24, %[ni]+3\n\t"                                                             \
+        "sts %[i]+3, r24\n\t"                                                              \
+        "lds r24, %[nt]+3\n\t"                                                             \
+        "sts %[t]+3, r24\n\t"                                                              \
+        "lds r27, %[nt]+2\n\t"                                                             \
+        "sts %[t]+2, r27\n\t"                                                              \
+        "lds r26, %[nt]+1\n\t"                                                             \
+        "sts %[t]+1, r26\n\t"                                                              \
+        "lds r24, %[nt]\n\t"                                                               \
+        "sts %[t], r24\n\t"                                                                \
+        "bst r24, 7\n\t"                                                                   \
+        /* the direction: the pin, and cur_dir's bit (step_tick.h) */                      \
+        "lds r24, %[nneg]\n\t"                                                             \
+        "tst r24\n\t"                                                                      \
+        "brne 7f\n\t" dir_pos                                                              \
+        "lds r24, cur_dir\n\t"                                                             \
+        "andi r24, lo8(~%[bit])\n\t"                                                       \
+        "rjmp 8f\n"                                                                        \
+        "7:\n\t" dir_neg                                                                   \
+        "lds r24, cur_dir\n\t"                                                             \
+        "ori r24, %[bit]\n"                                                                \
+        "8:\n\t"                                                                           \
+        "sts cur_dir, r24\n\t"                                                             \
+        "rjmp 5f\n"                                                                        \
+        "2:\n\t"                                                                           \
+        "lds r24, %[t]\n\t"                                                                \
+        "lds r25, %[i]\n\t"                                                                \
+        "add r24, r25\n\t"                                                                 \
+        "sts %[t], r24\n\t"                                                                \
+        "bst r24, 7\n\t"                                                                   \
+        "lds r26, %[t]+1\n\t"                                                              \
+        "lds r25, %[i]+1\n\t"                                                              \
+        "adc r26, r25\n\t"                                                                 \
+        "sts %[t]+1, r26\n\t"                                                              \
+        "lds r27, %[t]+2\n\t"                                                              \
+        "lds r25, %[i]+2\n\t"                                                              \
+        "adc r27, r25\n\t"                                                                 \
+        "sts %[t]+2, r27\n\t"                                                              \
+        "lds r24, %[t]+3\n\t"                                                              \
+        "lds r25, %[i]+3\n\t"                                                              \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[t]+3, r24\n"                                                                \
+        "5:\n\t"                                                                           \
+        "subi r26, lo8(%[lead])\n\t"                                                       \
+        "sbci r27, hi8(%[lead])\n\t"                                                       \
+        "brtc 3f\n\t"                                                                      \
+        "adiw r26, 1\n"                                                                    \
+        "3:\n\t"                                                                           \
+        "lds r24, %[tc]\n\t"                                                               \
+        "lds r25, %[tc]+1\n\t"                                                             \
+        "adiw r24, %[margin]\n\t"                                                          \
+        "cp r24, r26\n\t"                                                                  \
+        "cpc r25, r27\n\t"                                                                 \
+        "brmi 4f\n\t"                                                                      \
+        "movw r26, r24\n"                                                                  \
+        "4:\n\t"                                                                           \
+        "sts %[oc]+1, r27\n\t"                                                             \
+        "sts %[oc], r26\n"                                                                  \
+        "10:\n\t"                                                                          \
+        "pop r27\n\t"                                                                      \
+        "pop r26\n\t" pin_off                                                              \
+        "pop r25\n\t"                                                                      \
+        "pop r24\n\t"                                                                      \
+        "out __SREG__, r24\n\t"                                                            \
+        "pop r24\n\t"                                                                      \
+        "reti\n\t"                                                                         \
+        :                                                                                  \
+        : [slow] "i"(&(a).slow), [cnt] "i"(&(a).count), [t] "i"(&(a).t),                   \
+          [i] "i"(&(a).interval), [rdy] "i"(&(a).next_ready), [nt] "i"(&(a).next_t),       \
+          [ni] "i"(&(a).next_interval), [ncnt] "i"(&(a).next_count),                       \
+          [nneg] "i"(&(a).next_neg), [bit] "M"(dbit), [lead] "n"(ISR_LEAD),                 \
+          [head] "i"(&(a).head), [tail] "i"(&(a).tail), [run] "i"(&(a).running),           \
+          [msk] "n"(_SFR_MEM_ADDR(timsk)), [mbit] "M"(mask_bit),                               \
+          [margin] "n"(ARM_MARGIN), [tc] "n"(_SFR_MEM_ADDR(tcnt)),                         \
+          [oc] "n"(_SFR_MEM_ADDR(ocr)), [pf] "I"(_SFR_IO_ADDR(PORTF)),                     \
+          [pa] "I"(_SFR_IO_ADDR(PORTA)), [pl] "n"(_SFR_MEM_ADDR(PORTL)),                   \
+          [xb] "I"(X_STEP_BIT), [yb] "I"(Y_STEP_BIT), [zb] "M"(_BV(Z_STEP_BIT)),           \
+          [eb] "I"(E_STEP_BIT), [xd] "I"(X_DIR_BIT), [yd] "I"(Y_DIR_BIT),                  \
+          [zd] "M"(_BV(Z_DIR_BIT)), [ed] "I"(E_DIR_BIT))
+
+ISR(TIMER3_COMPA_vect, ISR_NAKED)
+{
+    STEP_ASM(axes[0], OCR3A, TCNT3, TIMSK3, _BV(OCIE3A), "sbi %[pf], %[xb]\n\t", "cbi %[pf], %[xb]\n\t",
+             "sbi %[pf], %[xd]\n\t", "cbi %[pf], %[xd]\n\t", 1, "__vector_step_x",
+             "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, IF_Y IF_Z IF_E));
+}
+ISR(TIMER3_COMPB_vect, ISR_NAKED)
+{
+    STEP_ASM(axes[1], OCR3B, TCNT3, TIMSK3, _BV(OCIE3B), "sbi %[pf], %[yb]\n\t", "cbi %[pf], %[yb]\n\t",
+             "sbi %[pf], %[yd]\n\t", "cbi %[pf], %[yd]\n\t", 2, "__vector_step_y",
+             "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, IF_X IF_Z IF_E));
+}
+ISR(TIMER3_COMPC_vect, ISR_NAKED)
+{
+    STEP_ASM(axes[2], OCR3C, TCNT3, TIMSK3, _BV(OCIE3C), "lds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n\t",
+             "lds r25, %[pl]\n\tandi r25, lo8(~%[zb])\n\tsts %[pl], r25\n\t",
+             "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
+             "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
+             "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, IF_X IF_Y IF_E));
+}
+ISR(TIMER5_COMPA_vect, ISR_NAKED)
+{
+    STEP_ASM(axes[3], OCR5A, TCNT5, TIMSK5, _BV(OCIE5A), "sbi %[pa], %[eb]\n\t", "cbi %[pa], %[eb]\n\t",
+             "sbi %[pa], %[ed]\n\t", "cbi %[pa], %[ed]\n\t", 8, "__vector_step_e",
+             "__vector_end_e", RAISE_PENDING(PENDING_T3, IF_X IF_Y IF_Z));
+}
+_Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
+               "the assembly sets a direction pin high for positive steps");
+/* (the assembly assumes the RAMPS step ports: X and Y on PORTF, Z on PORTL, E on PORTA) */
+
+/* now on the steppers' clock (Q24.8), from the tick in progress: less than a
+ * timer period has passed since it started */
+static uint32_t now_q(uint8_t k, uint32_t tick_start)
+{
+    uint16_t since = (uint16_t)(*tcnt_of(k) - (uint16_t)cycles_of(tick_start));
+    return tick_start + q_of(since);
+}
+
+static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
+{
+    take(k, a);
+    uint32_t now = now_q(k, step_clock_this_tick);
+    uint32_t ahead = cycles_of(a->t - now);
+    if (ahead & 0x800000UL)
+        ahead = 0; /* past already: at once (late) */
+    arm(k, a, ahead);
+    a->running = 1;
+    set_slow(k, a);
+    irq_on(k);
+}
+
+uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
+{
+    struct step_axis *a = &axes[k];
+    uint8_t s = SREG;
+    cli();
+    if (a->running && !a->next_ready && a->head == a->tail && c->interval < 0x800000UL) {
+        /* the assembly takes it at the running chunk's end (which is less than a timer
+         * period before it: the segments follow each other) */
+        a->next_t = c->t;
+        a->next_interval = c->interval;
+        a->next_count = c->count;
+        a->next_neg = c->neg;
+        a->next_ready = 1;
+        SREG = s;
+        return 1;
+    }
+    SREG = s;
+    uint8_t head = a->head;
+    if ((uint8_t)(head - a->tail) >= CHUNK_SLOTS)
+        return 0;
+    a->ring[head & (CHUNK_SLOTS - 1)] = *c;
+    cli();
+    a->head = (uint8_t)(head + 1);
+    if (!a->running)
+        start_axis(k, a);
+    SREG = s;
+    return 1;
+}
+
+void step_engine_stop(void)
+{
+    uint8_t s = SREG;
+    cli();
+    TIMSK3 = 0;
+    TIMSK5 = 0;
+    step_fast = 0;
+    for (uint8_t k = 0; k < 4; k++) {
+        axes[k].running = 0;
+        axes[k].next_ready = 0;
+        axes[k].tail = axes[k].head;
+        axes[k].count = 0;
+    }
+    SREG = s;
+}
+#endif

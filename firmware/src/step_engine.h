@@ -1,0 +1,54 @@
+/* The step engine: one timer compare event per step edge, per stepper.
+ *
+ * Each stepper has its own output-compare channel on a 16-bit timer clocked at the CPU's
+ * 16 MHz: the modules X, Y, Z on Timer3 A, B, C, the extruder on Timer5 A; Timer3 and
+ * Timer5 run in step (started together) and the step tick's boundaries (Timer1) are
+ * known on their time base. A stepper runs chunks: `count` edges, the first at `t`, each
+ * next one `interval` later (times fixed point, STEP_FRAC_BITS fraction bits of a cycle,
+ * modulo 2^24 cycles), so its interrupt only adds: edge at T; T += I; if --count == 0
+ * take the next chunk from the stepper's ring. The tick's computation (stepper.c) puts
+ * a constant-speed segment's axis in one chunk at the segment's start, its interval
+ * predicted from the reciprocal table (step_recip.h), which the host mirrors.
+ *
+ * Stage 1 of docs/step-engine.md section 6 (built only with STEP_ENGINE=1, config.h;
+ * figures in firmware/README.md, `python firmware/tools/engine_rates.py`): the common
+ * edge in assembly, a chunk's rare cases in C; the 400 us tick still runs beside it as
+ * the segment clock (queue items, markers, the record) and steps the ramps from its time
+ * wheel. */
+#ifndef STEP_ENGINE_H
+#define STEP_ENGINE_H
+#include <stdint.h>
+
+#define STEP_FRAC_BITS 8
+#define CHUNK_SLOTS 2 /* a power of two: the chunks of a stepper queued ahead for C (the
+                       * assembly's next chunk has a slot of its own) */
+
+struct step_chunk {
+    uint32_t t;        /* the first edge, Q24.8 cycles on the steppers' time base */
+    uint32_t interval; /* Q24.8 cycles between edges */
+    uint16_t count;    /* edges, >= 1 */
+    uint8_t neg;       /* the direction: 1 toward negative steps */
+};
+
+/* The steppers' clock: Timer3's count extended to 24 bits, Q24.8 (the start of the tick
+ * being computed, for the tick's computation). */
+extern uint32_t step_clock_next_tick;
+extern uint32_t step_clock_this_tick; /* the start of the tick in progress */
+
+/* Timers 3 and 5 started in step with Timer1's ticks (called by step_timer_init with
+ * interrupts off, Timer1 stopped and zeroed; it starts Timer1 too). */
+void step_engine_start_timers(uint8_t timer1_b);
+
+/* Queue a chunk for stepper k (interrupts on or off); it runs after the chunks before
+ * it. Returns 0 when the stepper's ring is full (never: a segment is one chunk an axis
+ * and a tick computes one ahead). */
+uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
+
+/* Stop every stepper now and forget their chunks (halt, flush). */
+void step_engine_stop(void);
+
+
+/* edges armed after their time had passed (late by more than the arming margin) */
+extern volatile uint16_t step_engine_late;
+
+#endif
