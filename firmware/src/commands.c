@@ -472,7 +472,7 @@ void proto_urgent(const uint8_t *payload, uint8_t len)
             session_opened();
             machine.synced = 1;
             machine.nonce = nonce;
-            machine.host_minor = (uint8_t)(v[2] < PROTO_MINOR ? v[2] : PROTO_MINOR);
+            machine.host_minor = (uint8_t)v[2] > PROTO_MINOR ? PROTO_MINOR : (uint8_t)v[2];
         }
         report_ident(nonce, 1);
     } else { /* OP_EMERGENCY_STOP */

@@ -38,7 +38,7 @@ void __attribute__((optimize("O2"))) segment_decode_full(struct reader *r, struc
                                                          struct segment *out)
 {
     uint8_t op = r->buf[r->pos++]; /* the caller saw it */
-    if (op & SEG_F_RESERVED) {
+    if (op & (SEG_F_RESERVED | SEG_F_SCHEDULE)) { /* schedule blocks: not decoded yet */
         r->err = 1;
         return;
     }

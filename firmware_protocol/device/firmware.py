@@ -136,7 +136,7 @@ class SimDevice:
         self.synced = False
         self.nonce: int | None = None
         self.session_minor = 0  # min(host minor, device minor) of the session
-        self.ctx = SegmentContext()
+        self.ctx = SegmentContext(cycles_per_tick=self.config.cycles_per_tick)
         self._boot_sent = -math.inf
         self._open_session_state(-math.inf)
 
@@ -203,6 +203,7 @@ class SimDevice:
             axes=4,
             queue_capacity=mc.capacity,
             clock_hz=c.clock_hz,
+            cpu_hz=c.cpu_hz,
             max_step_rate=c.max_step_rate,
             max_payload=c.max_payload,
             rx_window=c.rx_window,
@@ -255,7 +256,13 @@ class SimDevice:
 
     def caps(self) -> Caps:
         c = self.config
-        return Caps(c.min_segment_ticks, c.segment_rate, c.late_tolerance_us)
+        return Caps(
+            c.min_segment_ticks,
+            c.segment_rate,
+            c.late_tolerance_us,
+            c.schedule_tolerance_cycles,
+            c.min_step_interval_cycles,
+        )
 
     # ------------------------------------------------------------------ main loop
 
@@ -383,7 +390,7 @@ class SimDevice:
         if isinstance(msg, Hello):
             if msg.major == PROTOCOL_MAJOR and (not self.synced or msg.nonce != self.nonce):
                 self.endpoint.reset_session()
-                self.ctx = SegmentContext()
+                self.ctx = SegmentContext(cycles_per_tick=self.config.cycles_per_tick)
                 self.synced = True
                 self.nonce = msg.nonce
                 self.session_minor = min(msg.minor, PROTOCOL_MINOR)
