@@ -171,6 +171,11 @@ static void enqueue_segment(const struct segment *s)
         bad_value(SEG_BASE, (int32_t)s->ticks, machine.segments_received);
         return;
     }
+    if (s->sched.mask && s->sched.axis >= 0) { /* its schedule block, read with it */
+        machine_fail(ERR_BAD_VALUE, machine.items_received, machine.segments_received,
+                     (uint8_t)s->sched.axis, s->sched.value);
+        return;
+    }
     uint32_t rate;
     int8_t axis = motion_rate_check(s, &rate);
     if (axis >= 0) {

@@ -23,6 +23,7 @@ from firmware_protocol.device.heater_control import PidGains
 from firmware_protocol.device.machine import DeviceMachine, Observer
 from firmware_protocol.device.queue_items import BadValue, item_of
 from firmware_protocol.device.record import SegmentRecord
+from firmware_protocol.device.schedules import schedule_refusal
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
@@ -506,6 +507,19 @@ class SimDevice:
         mc.segments_received += seg > 0  # a refused segment keeps its number too
         if isinstance(item, BadValue):
             return self._bad_value(n, msg.OPCODE, item.value, T)
+        if isinstance(msg, Segment) and not mc.fault:
+            refused = schedule_refusal(
+                msg.ticks,
+                msg.deltas,
+                msg.ramp,
+                dict(msg.schedules),
+                cycles_per_tick=cfg.cycles_per_tick,
+                tol_cycles=cfg.schedule_tolerance_cycles,
+                min_interval_cycles=cfg.min_step_interval_cycles,
+                table=self.ctx.table,
+            )
+            if refused is not None:  # before any of it moves
+                return [mc.fail(ErrorCode.BAD_VALUE, n, seg, T, *refused)]
         return mc.enqueue(item, T)
 
     def close(self) -> None:
