@@ -34,10 +34,14 @@ SEGMENT_MAX_BYTES = 27
 #: ramps (schedules fitted in Python, milliseconds each) sent per turn of the feed, which
 #: holds the link's lock meanwhile: the keep-alive and the reports wait that long
 RAMPS_PER_TURN = 16
-#: the ramps' fits may take this share of the wall-clock time the motion sent lasts (at a
-#: high speed-up of a simulated device, few ramps get their block: the rest run on the
-#: device's own stepping, PROTOCOL.md 5.5)
-FIT_SHARE = 0.2
+#: the ramps' fits may take this share of the host's time since the feed began, and at
+#: most FIT_TURN_S in one turn (a fast stream of a simulated device gets few blocks for its
+#: ramps: the rest run on the device's own stepping, PROTOCOL.md 5.5), until the fitter is
+#: fast enough for every ramp (docs/step-engine.md section 7)
+FIT_SHARE = 0.1
+FIT_TURN_S = 0.05
+#: a ramp's fit, before one was timed (four axes, about 5 ms in Python: bench/step_schedule.py)
+RAMP_FIT_S = 0.005
 
 
 def wire_schedules(
@@ -65,8 +69,10 @@ def wire_schedules(
         part = plan_schedules(some, ctx.cycles_per_tick, tol_cycles, ctx.table)
         planned.update({(int(steady[j]), k): sched for (j, k), sched in part.items()})
     start = time.perf_counter()
-    for i in np.flatnonzero(ramp).tolist():
-        if fit_budget_s is not None and time.perf_counter() - start > fit_budget_s:
+    for fits, i in enumerate(np.flatnonzero(ramp).tolist()):
+        spent = time.perf_counter() - start
+        each = spent / fits if fits else RAMP_FIT_S  # what one more is likely to take
+        if fit_budget_s is not None and spent + each > fit_budget_s:
             break
         part = plan_schedules(batch[i : i + 1], ctx.cycles_per_tick, tol_cycles, ctx.table)
         planned.update({(i, k): sched for (_, k), sched in part.items()})
@@ -112,6 +118,8 @@ class SegmentFeed:
         # the caller's keep-alive of its heater lease: a feed that plans schedule blocks
         # for many ramps (the fit runs in Python, milliseconds a ramp) is the job at work
         self.renew = renew or (lambda: None)
+        self._began = time.perf_counter()
+        self._fit_s = 0.0  # host time spent planning schedule blocks
 
     def ahead_ticks(self) -> float:
         """Device ticks of motion held ahead of the device's now (estimated; see flow.py)."""
@@ -161,10 +169,12 @@ class SegmentFeed:
         caps = c.dev.caps or DeviceCaps()
         # a block goes only where its segment fits the frames the line carries now (they
         # shrink on a lossy line: a long frame would rarely get through)
-        budget = FIT_SHARE * float(sub.ticks.sum()) / max(c.clock_rate(), 1.0)
+        now = time.perf_counter()
+        budget = min(FIT_TURN_S, FIT_SHARE * (now - self._began) - self._fit_s)
         blocks = wire_schedules(
             sub, c.ctx, caps.schedule_tolerance_cycles, c.payload_limit, fit_budget_s=budget
         )
+        self._fit_s += time.perf_counter() - now
         data, offsets = encode_segments(sub, c.ctx, blocks)
         n = j - i
         pos = 0
