@@ -25,6 +25,7 @@ class Ident(Message):
     axes: int
     queue_capacity: int
     clock_hz: int
+    cpu_hz: int
     max_step_rate: int
     max_payload: int
     rx_window: int
@@ -51,6 +52,7 @@ class Ident(Message):
         F("axes", "u8", "4: three modules and the extruder", lo=4, hi=4),
         F("queue_capacity", "u16", "move-queue slots", lo=1),
         F("clock_hz", "u32", "unit of segment, dwell and clock ticks", lo=1000),
+        F("cpu_hz", "u32", "3.0: unit of step schedules, a multiple of clock_hz", lo=1000),
         F("max_step_rate", "u32", "steps/s on any one axis", lo=1),
         F("max_payload", "u8", "largest DATA payload it accepts", lo=48, hi=248),
         F("rx_window", "u16", "bytes of unacknowledged frames it can buffer", lo=64),
@@ -237,15 +239,30 @@ class Health(Message):
 
 @dataclass(frozen=True)
 class Caps(Message):
-    """Protocol 2.1: the answer to ``GET_CAPS``."""
+    """Protocol 2.1: the answer to ``GET_CAPS``; 3.0 adds the schedule's tolerance and
+    shortest interval (cycles of ``cpu_hz``)."""
 
     min_segment_ticks: int
     segment_rate: int
     late_tolerance_us: int
+    schedule_tolerance_cycles: int
+    min_step_interval_cycles: int
     OPCODE: ClassVar[int] = 0x49
     CLASS: ClassVar[str] = "D"
     FIELDS: ClassVar[tuple[Field, ...]] = (
         F("min_segment_ticks", "u32", "shortest segment it takes (shorter: BAD_VALUE)", lo=1),
         F("segment_rate", "u32", "segments/s it sustains (0: not stated)"),
         F("late_tolerance_us", "u16", "a pulse later than this counts as late"),
+        F(
+            "schedule_tolerance_cycles",
+            "u16",
+            "3.0: a step schedule's edges lie within this of their ideal time",
+            lo=1,
+        ),
+        F(
+            "min_step_interval_cycles",
+            "u32",
+            "3.0: shortest interval of a schedule it runs (shorter: BAD_VALUE)",
+            lo=1,
+        ),
     )

@@ -19,18 +19,26 @@ from firmware_protocol.message_base import (
     Message,
 )
 from firmware_protocol.segments import SEG_BASE
+from firmware_protocol.step_schedule import AxisSchedule
 
 
 @dataclass(frozen=True)
 class Segment(Message):
-    """One timed move segment (see segments.py); ``ramp`` -1 is constant speed."""
+    """One timed move segment (see segments.py); ``ramp`` -1 is constant speed;
+    ``schedules`` (3.0) the ``(axis, schedule)`` pairs of its block, in axis order (none:
+    the device predicts every moving axis)."""
 
     ticks: int
     deltas: tuple[int, int, int, int]
     ramp: int = -1
+    schedules: tuple[tuple[int, AxisSchedule], ...] = ()
     OPCODE: ClassVar[int] = SEG_BASE
     CLASS: ClassVar[str] = "Q"
     QUEUED: ClassVar[bool] = True
+
+    def __repr__(self) -> str:  # a segment without a block reads as in 2.x
+        more = f", schedules={self.schedules!r}" if self.schedules else ""
+        return f"Segment(ticks={self.ticks}, deltas={self.deltas}, ramp={self.ramp}{more})"
 
 
 # host -> device, immediate

@@ -8,11 +8,11 @@ from typing import ClassVar
 
 from firmware_protocol.fields import Field
 
-PROTOCOL_MAJOR = 2
-PROTOCOL_MINOR = 1
+PROTOCOL_MAJOR = 3
+PROTOCOL_MINOR = 0
 # the first minor version with soft limits, PID gains and autotune, the heater lease,
-# CAPS and HEALTH (a host sends those commands only to a device that announces it)
-MINOR_SAFETY = 1
+# CAPS and HEALTH (2.1; every 3.x has them, so 0 in this major)
+MINOR_SAFETY = 0
 
 HOTEND, BED = 0, 1
 MAX_EVENT_VALUES = 4

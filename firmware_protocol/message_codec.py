@@ -131,7 +131,7 @@ def encode_messages(messages: list[Message] | tuple[Message, ...], ctx: SegmentC
     out = bytearray()
     for msg in messages:
         if isinstance(msg, Segment):
-            out += encode_one_segment(msg.ticks, msg.deltas, msg.ramp, ctx)
+            out += encode_one_segment(msg.ticks, msg.deltas, msg.ramp, ctx, dict(msg.schedules))
         else:
             out += _encode_fields(msg)
     return bytes(out)
@@ -156,8 +156,8 @@ def decode_messages(payload: bytes, ctx: SegmentContext) -> list[Message]:
         while pos < len(payload):
             op = payload[pos]
             if op >= SEG_BASE:
-                ticks, deltas, ramp, nxt = decode_segment(payload, pos, work)
-                out.append(Segment(ticks, deltas, ramp))
+                ticks, deltas, ramp, scheds, nxt = decode_segment(payload, pos, work)
+                out.append(Segment(ticks, deltas, ramp, tuple(sorted(scheds.items()))))
                 pos = nxt
                 continue
             cls = _BY_OPCODE.get(op)

@@ -77,7 +77,11 @@ def _check(sched: AxisSchedule, steps: int, axis: int) -> None:
         raise ScheduleBlockError(f"axis {axis}: first edge {sched.lead} before the segment")
     for c in chunks:
         if not 1 <= c.count <= MAX_COUNT:
-            raise ScheduleBlockError(f"axis {axis}: chunk count {c.count} outside 1..{MAX_COUNT}")
+            raise ScheduleBlockError(
+                f"axis {axis}: chunk count {c.count} outside 1..{MAX_COUNT}"
+                f" (its chunks count {sum(x.count for x in chunks[1:])} further steps"
+                f" of {abs(steps)})"
+            )
         if not 1 <= c.interval <= MAX_INTERVAL:
             raise ScheduleBlockError(f"axis {axis}: interval {c.interval} out of range")
 
@@ -122,13 +126,36 @@ def decode_block(
     Raises :class:`ScheduleBlockError` for anything a device must refuse: a truncated or
     overlong field, reserved mask bits, an axis without steps, counts that leave the first
     chunk nothing, an interval or first edge out of range."""
+    schedules, pos = parse_block(buf, pos, deltas, ticks, table)
+    check_block(schedules, deltas)
+    return schedules, pos
+
+
+def parse_block(
+    buf: bytes, pos: int, deltas: Sequence[int], ticks: int, table: np.ndarray
+) -> tuple[dict[int, AxisSchedule], int]:
+    """The block at ``buf[pos]`` as its bytes say, checked only for its form (what makes a
+    payload malformed: a truncated or overlong field, reserved mask bits, too many
+    chunks); :func:`check_block` checks it against its segment (a device's ``BAD_VALUE``).
+    The first chunk's count is what the others leave of ``|n|``, whatever that is."""
     try:
-        return _decode(buf, pos, deltas, ticks, table)
+        return _parse(buf, pos, deltas, ticks, table)
     except VarintError as exc:
         raise ScheduleBlockError(str(exc)) from exc
 
 
-def _decode(
+def check_block(schedules: Mapping[int, AxisSchedule], deltas: Sequence[int]) -> None:
+    """A parsed block against its segment: each axis has steps, its chunks are within
+    their limits and count ``|n|``, its first edge is not before the segment. Raises
+    :class:`ScheduleBlockError` naming the axis."""
+    for axis, sched in schedules.items():
+        steps = abs(int(deltas[axis]))
+        if steps == 0:
+            raise ScheduleBlockError(f"axis {axis} has a schedule but no steps")
+        _check(sched, steps, axis)
+
+
+def _parse(
     buf: bytes, pos: int, deltas: Sequence[int], ticks: int, table: np.ndarray
 ) -> tuple[dict[int, AxisSchedule], int]:
     if pos >= len(buf):
@@ -142,8 +169,6 @@ def _decode(
         if not mask >> axis & 1:
             continue
         steps = abs(int(deltas[axis]))
-        if steps == 0:
-            raise ScheduleBlockError(f"axis {axis} has a schedule but no steps")
         lead_c, pos = decode_sbounded(buf, pos, 32)
         int_c, pos = decode_sbounded(buf, pos, 32)
         add, pos = decode_sbounded(buf, pos, 32)
@@ -158,12 +183,7 @@ def _decode(
             c_add, pos = decode_sbounded(buf, pos, 32)
             rest.append(Chunk(count, interval + d_int, c_add))
         first_count = steps - sum(c.count for c in rest)
-        if first_count < 1:
-            raise ScheduleBlockError(
-                f"axis {axis}: its further chunks count {steps - first_count} steps of {steps},"
-                " none left for the first"
-            )
-        sched = AxisSchedule((interval >> 1) + lead_c, (Chunk(first_count, interval, add), *rest))
-        _check(sched, steps, axis)
-        out[axis] = sched
+        out[axis] = AxisSchedule(
+            (interval >> 1) + lead_c, (Chunk(first_count, interval, add), *rest)
+        )
     return out, pos

@@ -8,11 +8,18 @@ joint-space path is the straight line between the endpoints and the speed change
 linearly from ``2 r n / D`` (start) to ``(2 - 2 r) n / D`` (end). ``r = code / 255``
 for codes 0..255; ``RAMP_CONSTANT`` (no ramp byte on the wire) is ``r = 1/2``.
 Code 0 starts from rest; code 255 ends at rest.
+
+Protocol 3.0: a segment may carry a schedule block after its ramp byte (flag
+``F_SCHEDULE``): the step schedules of the axes the device cannot predict
+(:mod:`firmware_protocol.schedule_block`, :mod:`firmware_protocol.step_schedule`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -25,6 +32,9 @@ from firmware_protocol.varint import (
     zigzag,
     zigzag_array,
 )
+
+if TYPE_CHECKING:
+    from firmware_protocol.step_schedule import AxisSchedule
 
 AXES = 4
 RAMP_CONSTANT = -1
@@ -39,7 +49,9 @@ F_DURATION = 0x02  # a duration varint follows the opcode; else the previous dur
 F_PREDICTED = 0x04  # coded deltas are differences from the previous segment's deltas
 F_SLIDERS = 0x08  # three slider svarints present; else coded values are 0
 F_EXTRUDER = 0x10  # extruder svarint present; else coded value is 0
-F_RESERVED = 0x60
+F_SCHEDULE = 0x20  # 3.0: a schedule block follows the ramp byte
+F_RESERVED = 0x40
+CYCLES_PER_TICK = 160  # cpu_hz / clock_hz of the AVR (16 MHz, 100 kHz): the default
 
 
 @dataclass(frozen=True)
@@ -161,15 +173,46 @@ def steps_done(deltas: ArrayLike, code: int, tau: float) -> np.ndarray:
 # ------------------------------------------------------------------ wire codec
 
 
+@lru_cache(maxsize=8)
+def _table(cycles_per_tick: int) -> np.ndarray:
+    from firmware_protocol.step_schedule import reciprocal_table
+
+    table = reciprocal_table(cycles_per_tick)
+    table.setflags(write=False)
+    return table
+
+
 @dataclass
 class SegmentContext:
-    """Coder state shared by consecutive segments of one session (reset by HELLO)."""
+    """Coder state shared by consecutive segments of one session (reset by HELLO), and
+    the device's ``cpu_hz / clock_hz`` (IDENT), which its schedule blocks are coded
+    against (the reciprocal table's prediction)."""
 
     prev_ticks: int = 0
     prev_deltas: tuple[int, int, int, int] = (0, 0, 0, 0)
+    cycles_per_tick: int = CYCLES_PER_TICK
 
     def copy(self) -> SegmentContext:
-        return SegmentContext(self.prev_ticks, self.prev_deltas)
+        return SegmentContext(self.prev_ticks, self.prev_deltas, self.cycles_per_tick)
+
+    @property
+    def table(self) -> np.ndarray:
+        """The device's table of reciprocals (step_schedule.reciprocal_table)."""
+        return _table(self.cycles_per_tick)
+
+
+Schedules = Mapping[int, "AxisSchedule"]
+
+
+def encode_block_for(
+    ticks: int, deltas: tuple[int, ...], schedules: Schedules, ctx: SegmentContext
+) -> bytes:
+    """The schedule block of one segment (empty when it carries none)."""
+    if not schedules:
+        return b""
+    from firmware_protocol.schedule_block import encode_block
+
+    return encode_block(deltas, ticks, schedules, ctx.table)
 
 
 def _coded_cost(z: np.ndarray) -> np.ndarray:
@@ -179,12 +222,44 @@ def _coded_cost(z: np.ndarray) -> np.ndarray:
     return sliders + np.where(z[:, 3] != 0, lens[:, 3], 0)
 
 
-def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np.ndarray]:
+def encode_segments(
+    batch: SegmentBatch,
+    ctx: SegmentContext,
+    schedules: Mapping[tuple[int, int], AxisSchedule] | None = None,
+) -> tuple[bytes, np.ndarray]:
     """Encode a batch; returns ``(data, offsets)`` with segment i at ``data[offsets[i]:offsets[i+1]]``.
 
     Chooses per segment the shorter of plain and predicted deltas, omits a duration
-    equal to the previous one, and advances ``ctx``.
+    equal to the previous one, and advances ``ctx``. ``schedules`` by ``(segment, axis)``
+    (:func:`step_schedule.plan_schedules`): each segment that has one carries its block.
     """
+    data, offsets = _encode_plain(batch, ctx)
+    if not schedules:
+        return data, offsets
+    by_segment: dict[int, dict[int, AxisSchedule]] = {}
+    for (i, k), sched in schedules.items():
+        by_segment.setdefault(int(i), {})[int(k)] = sched
+    rows = sorted(by_segment)
+    blocks = [
+        encode_block_for(
+            int(batch.ticks[i]), tuple(int(v) for v in batch.deltas[i]), by_segment[i], ctx
+        )
+        for i in rows
+    ]
+    out = np.frombuffer(data, dtype=np.uint8).copy()
+    idx = np.asarray(rows, dtype=np.int64)
+    out[offsets[idx]] |= F_SCHEDULE
+    lens = np.zeros(len(batch), dtype=np.int64)
+    lens[idx] = [len(b) for b in blocks]
+    where = np.repeat(offsets[idx + 1], lens[idx])
+    out = np.insert(out, where, np.frombuffer(b"".join(blocks), dtype=np.uint8))
+    shifted = offsets.copy()
+    shifted[1:] += np.cumsum(lens)
+    return out.tobytes(), shifted
+
+
+def _encode_plain(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np.ndarray]:
+    """The segments without their blocks."""
     n = len(batch)
     if n == 0:
         return b"", np.zeros(1, dtype=np.int64)
@@ -235,9 +310,14 @@ def encode_segments(batch: SegmentBatch, ctx: SegmentContext) -> tuple[bytes, np
 
 
 def encode_one_segment(
-    ticks: int, deltas: tuple[int, int, int, int], ramp: int, ctx: SegmentContext
+    ticks: int,
+    deltas: tuple[int, int, int, int],
+    ramp: int,
+    ctx: SegmentContext,
+    schedules: Schedules | None = None,
 ) -> bytes:
-    """One segment, scalar (the vectorised :func:`encode_segments` makes the same bytes)."""
+    """One segment, scalar (the vectorised :func:`encode_segments` makes the same bytes);
+    ``schedules`` by axis: its block."""
     if not 1 <= ticks <= MAX_TICKS or any(abs(d) > MAX_DELTA for d in deltas):
         raise ValueError(f"segment out of range: {ticks} ticks, deltas {deltas}")
     if not RAMP_CONSTANT <= ramp <= RAMP_TO_REST:
@@ -267,6 +347,9 @@ def encode_one_segment(
     if ramp != RAMP_CONSTANT:
         op |= F_RAMP
         out.append(ramp)
+    if schedules:
+        op |= F_SCHEDULE
+        out += encode_block_for(ticks, deltas, schedules, ctx)
     ctx.prev_ticks = ticks
     ctx.prev_deltas = (deltas[0], deltas[1], deltas[2], deltas[3])
     return bytes((op,)) + bytes(out)
@@ -297,11 +380,14 @@ def _u32(buf: bytes, pos: int) -> tuple[int, int]:
 
 def decode_segment(
     buf: bytes, pos: int, ctx: SegmentContext
-) -> tuple[int, tuple[int, int, int, int], int, int]:
-    """Decode the segment whose opcode is at ``buf[pos]``; returns ``(ticks, deltas, ramp, next_pos)``.
+) -> tuple[int, tuple[int, int, int, int], int, dict[int, AxisSchedule], int]:
+    """Decode the segment whose opcode is at ``buf[pos]``; returns ``(ticks, deltas, ramp,
+    schedules, next_pos)``, ``schedules`` by axis (empty without a block).
 
     Every field is bounded as on the wire: the duration is a u32 of 1 or more, each coded
-    delta an i32, and a predicted delta (coded + previous) must stay within i32."""
+    delta an i32, and a predicted delta (coded + previous) must stay within i32. A block
+    is checked for its form only (:func:`schedule_block.parse_block`); what it says of
+    its segment is the device's check (``BAD_VALUE``, not a malformed payload)."""
     op = buf[pos]
     pos += 1
     if op & F_RESERVED:
@@ -339,6 +425,14 @@ def decode_segment(
     else:
         ramp = RAMP_CONSTANT
     deltas = (c0, c1, c2, c3)
+    schedules: dict[int, AxisSchedule] = {}
+    if op & F_SCHEDULE:
+        from firmware_protocol.schedule_block import ScheduleBlockError, parse_block
+
+        try:
+            schedules, pos = parse_block(buf, pos, deltas, ticks, ctx.table)
+        except ScheduleBlockError as exc:
+            raise SegmentDecodeError(f"schedule block: {exc}") from None
     ctx.prev_ticks = ticks
     ctx.prev_deltas = deltas
-    return ticks, deltas, ramp, pos
+    return ticks, deltas, ramp, schedules, pos

@@ -146,7 +146,7 @@ class LinkCore:
         self._told = (0, 0, self.ep.counters.naks_received, 0)
         self._clean_timeouts = 0
         self._seen = (0, 0)
-        self.ctx = SegmentContext()
+        self.ctx = SegmentContext(cycles_per_tick=self.ctx.cycles_per_tick)
 
     def credit(self) -> int:
         """Queue slots the host may still fill (PROTOCOL.md section 6)."""

@@ -38,6 +38,7 @@ class Identity:
     hotend_max_c: float = 0.0
     bed_max_c: float = 0.0
     watchdog_ms: int = 2000
+    cpu_hz: int = 16_000_000  # 3.0: the unit of step schedules
 
     @classmethod
     def from_message(cls, m: Ident) -> Identity:
@@ -57,6 +58,7 @@ class Identity:
             m.hotend_max_dc / 10,
             m.bed_max_dc / 10,
             m.watchdog_ms,
+            m.cpu_hz,
         )
 
 
@@ -109,15 +111,24 @@ class DeviceHealth:
 
 @dataclass(frozen=True)
 class DeviceCaps:
-    """What a 2.1 device announced in CAPS."""
+    """What a device announced in CAPS (2.1; 3.0 adds the schedule's tolerance and its
+    shortest interval, in cycles of ``Identity.cpu_hz``)."""
 
     min_segment_ticks: int = 1
     segment_rate: int = 0
     late_tolerance_us: int = 0
+    schedule_tolerance_cycles: int = 16
+    min_step_interval_cycles: int = 1
 
     @classmethod
     def from_message(cls, m: Caps) -> DeviceCaps:
-        return cls(m.min_segment_ticks, m.segment_rate, m.late_tolerance_us)
+        return cls(
+            m.min_segment_ticks,
+            m.segment_rate,
+            m.late_tolerance_us,
+            m.schedule_tolerance_cycles,
+            m.min_step_interval_cycles,
+        )
 
 
 @dataclass(frozen=True)

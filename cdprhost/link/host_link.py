@@ -105,7 +105,7 @@ class HostLink:
         if not handshake_s > 0:  # NaN included
             raise ValueError(f"handshake_s must be a positive number of seconds, not {handshake_s}")
         self._session.limit_s = max(self._core.timeout_s, float(handshake_s))
-        self._feed = SegmentFeed(self._core, self._session)
+        self._feed = SegmentFeed(self._core, self._session, self._renew_lease)
         self._t = transport
         self._dev = self._core.dev
         self.lease_ms = max(lo, min(hi, round(heater_lease_s * 1000)))

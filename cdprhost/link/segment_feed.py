@@ -8,15 +8,94 @@ new configuration when the measured clock rate has moved) for nothing else.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
 
 from cdprhost.link.core import LinkCore
 from cdprhost.link.errors import StepRateError
-from cdprhost.link.events import Identity
+from cdprhost.link.events import DeviceCaps, Identity
 from firmware_protocol.messages import Flag
-from firmware_protocol.segments import SegmentBatch, encode_segments, peak_step_rates
+from firmware_protocol.schedule_block import MAX_CHUNKS
+from firmware_protocol.segments import (
+    RAMP_CONSTANT,
+    SegmentBatch,
+    SegmentContext,
+    encode_block_for,
+    encode_segments,
+    peak_step_rates,
+)
+from firmware_protocol.step_schedule import AxisSchedule, plan_schedules, predictable
+
+#: a segment without its block takes at most this many bytes (PROTOCOL.md 5.2)
+SEGMENT_MAX_BYTES = 27
+#: ramps (schedules fitted in Python, milliseconds each) sent per turn of the feed, which
+#: holds the link's lock meanwhile: the keep-alive and the reports wait that long
+RAMPS_PER_TURN = 16
+#: the ramps' fits may take this share of the host's time since the feed began, and at
+#: most FIT_TURN_S in one turn (a fast stream of a simulated device gets few blocks for its
+#: ramps: the rest run on the device's own stepping, PROTOCOL.md 5.5), until the fitter is
+#: fast enough for every ramp (docs/step-engine.md section 7)
+FIT_SHARE = 0.1
+FIT_TURN_S = 0.05
+#: a ramp's fit, before one was timed (four axes, about 5 ms in Python: bench/step_schedule.py)
+RAMP_FIT_S = 0.005
+
+
+def wire_schedules(
+    batch: SegmentBatch,
+    ctx: SegmentContext,
+    tol_cycles: float,
+    max_payload: int,
+    fit_budget_s: float | None = None,
+) -> dict[tuple[int, int], AxisSchedule]:
+    """The schedule blocks ``batch`` carries (PROTOCOL.md 5.5), by ``(segment, axis)``:
+    every moving axis whose prediction the device cannot make or that strays past
+    ``tol_cycles`` (:func:`plan_schedules`), as long as its segment with the block fits
+    ``max_payload`` bytes and the axis fits ``MAX_CHUNKS``. An axis the device predicts
+    always keeps its block (the device refuses a prediction that strays); an unpredictable
+    axis whose block does not fit is left to the device's own stepping of the profile
+    (3.0's fallback, until segments are cut where their blocks are too long:
+    docs/step-engine.md section 7). ``fit_budget_s``: host time the ramps' fits may take
+    (they run in Python, milliseconds a ramp); the ramps after it go without a block too.
+    """
+    ramp = batch.ramps != RAMP_CONSTANT
+    steady = np.flatnonzero(~ramp)
+    planned: dict[tuple[int, int], AxisSchedule] = {}
+    if steady.size:  # checked in closed form, a fit only where the prediction strays
+        some = SegmentBatch(batch.ticks[steady], batch.deltas[steady], batch.ramps[steady])
+        part = plan_schedules(some, ctx.cycles_per_tick, tol_cycles, ctx.table)
+        planned.update({(int(steady[j]), k): sched for (j, k), sched in part.items()})
+    start = time.perf_counter()
+    for fits, i in enumerate(np.flatnonzero(ramp).tolist()):
+        spent = time.perf_counter() - start
+        each = spent / fits if fits else RAMP_FIT_S  # what one more is likely to take
+        if fit_budget_s is not None and spent + each > fit_budget_s:
+            break
+        part = plan_schedules(batch[i : i + 1], ctx.cycles_per_tick, tol_cycles, ctx.table)
+        planned.update({(i, k): sched for (_, k), sched in part.items()})
+    if not planned:
+        return planned
+    budget = max_payload - SEGMENT_MAX_BYTES
+    by_segment: dict[int, list[int]] = {}
+    for i, k in planned:
+        by_segment.setdefault(i, []).append(k)
+    out: dict[tuple[int, int], AxisSchedule] = {}
+    for i, axes in by_segment.items():
+        ticks, deltas = int(batch.ticks[i]), tuple(int(v) for v in batch.deltas[i])
+        ok = predictable(np.asarray(deltas), np.array(ticks), np.array(int(batch.ramps[i])))
+        kept: dict[int, AxisSchedule] = {}
+        for k in sorted(axes, key=lambda k: (not ok[k], k)):
+            sched = planned[(i, k)]
+            if len(sched.chunks) > MAX_CHUNKS:
+                continue
+            trial = {**kept, k: sched}
+            if ok[k] or len(encode_block_for(ticks, deltas, trial, ctx)) <= budget:
+                kept = trial  # a prediction that strays always has its (one-chunk) block
+        out.update({(i, k): s for k, s in kept.items()})
+    return out
 
 
 class SessionConfig(Protocol):
@@ -31,9 +110,16 @@ class SessionConfig(Protocol):
 class SegmentFeed:
     """The segment stream of one link (its core): ``feed``, ``queue_segments``."""
 
-    def __init__(self, core: LinkCore, session: SessionConfig):
+    def __init__(
+        self, core: LinkCore, session: SessionConfig, renew: Callable[[], None] | None = None
+    ):
         self.core = core
         self.session = session
+        # the caller's keep-alive of its heater lease: a feed that plans schedule blocks
+        # for many ramps (the fit runs in Python, milliseconds a ramp) is the job at work
+        self.renew = renew or (lambda: None)
+        self._began = time.perf_counter()
+        self._fit_s = 0.0  # host time spent planning schedule blocks
 
     def ahead_ticks(self) -> float:
         """Device ticks of motion held ahead of the device's now (estimated; see flow.py)."""
@@ -80,7 +166,16 @@ class SegmentFeed:
     def _send_segments(self, batch: SegmentBatch, i: int, j: int) -> None:
         c = self.core
         sub = batch[i:j]
-        data, offsets = encode_segments(sub, c.ctx)
+        caps = c.dev.caps or DeviceCaps()
+        # a block goes only where its segment fits the frames the line carries now (they
+        # shrink on a lossy line: a long frame would rarely get through)
+        now = time.perf_counter()
+        budget = min(FIT_TURN_S, FIT_SHARE * (now - self._began) - self._fit_s)
+        blocks = wire_schedules(
+            sub, c.ctx, caps.schedule_tolerance_cycles, c.payload_limit, fit_budget_s=budget
+        )
+        self._fit_s += time.perf_counter() - now
+        data, offsets = encode_segments(sub, c.ctx, blocks)
         n = j - i
         pos = 0
         limit = c.payload_limit
@@ -139,11 +234,14 @@ class SegmentFeed:
         i = start
         while i < n:
             c.let_others_in()
+            self.renew()
             with c.locked():
                 if c.dev.failure is not None:
                     raise c.dev.failure
                 k = self._sendable(batch.ticks[i:n])
                 if k > 0:
+                    ramps = np.cumsum(batch.ramps[i : i + k] != RAMP_CONSTANT)
+                    k = max(1, int(np.searchsorted(ramps, RAMPS_PER_TURN, side="right")))
                     self._send_segments(batch, i, i + k)
                     i += k
                     continue

@@ -171,6 +171,14 @@ class SessionSetup:
         c = self.core
         if msg.major != PROTOCOL_MAJOR:
             self._mismatch(msg.major, msg.minor)
+        if msg.cpu_hz % msg.clock_hz:
+            raise ProtocolMismatch(
+                f"{c.name}: the device's cpu_hz {msg.cpu_hz} is not a multiple of its "
+                f"clock_hz {msg.clock_hz} (PROTOCOL.md 5.5)",
+                device_version=(msg.major, msg.minor),
+                host_version=(PROTOCOL_MAJOR, PROTOCOL_MINOR),
+            )
+        c.ctx.cycles_per_tick = msg.cpu_hz // msg.clock_hz  # the blocks' prediction
         c.max_payload = min(c.max_payload, msg.max_payload)
         c.payload_limit = min(c.max_payload, START_PAYLOAD)
         c.ep.sender.window_bytes = msg.rx_window

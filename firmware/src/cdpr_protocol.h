@@ -4,8 +4,8 @@
 #define CDPR_PROTOCOL_H
 #include <stdint.h>
 
-#define CDPR_PROTOCOL_MAJOR 2
-#define CDPR_PROTOCOL_MINOR 1
+#define CDPR_PROTOCOL_MAJOR 3
+#define CDPR_PROTOCOL_MINOR 0
 
 /* frames */
 #define CDPR_SYNC 0xA5
@@ -28,9 +28,20 @@
 #define CDPR_SEG_F_PREDICTED 0x04
 #define CDPR_SEG_F_SLIDERS 0x08
 #define CDPR_SEG_F_EXTRUDER 0x10
-#define CDPR_SEG_F_RESERVED 0x60
+#define CDPR_SEG_F_SCHEDULE 0x20
+#define CDPR_SEG_F_RESERVED 0x40
 #define CDPR_SEG_MAX_DELTA 2147483647L
 #define CDPR_RAMP_TO_REST 255
+
+/* step schedules (3.0, PROTOCOL.md 5.5): fixed point of a cpu_hz cycle */
+#define CDPR_SCHED_AXES 4
+#define CDPR_SCHED_MAX_CHUNKS 32
+#define CDPR_SCHED_FRAC_BITS 8
+#define CDPR_SCHED_MAX_COUNT 65535UL
+#define CDPR_SCHED_MAX_INTERVAL 2147483647L
+#define CDPR_SCHED_PREDICT_MAX_STEPS 1024
+#define CDPR_SCHED_PREDICT_MAX_TICKS 65535UL
+#define CDPR_SCHED_RECIP_BITS 16
 
 /* limits */
 #define CDPR_MAX_TEXT 32
@@ -122,7 +133,7 @@
 #define CDPR_OP_AUTOTUNE 0x17
 #define CDPR_AUTOTUNE_MAX_LEN 6
 #define CDPR_OP_IDENT 0x41
-#define CDPR_IDENT_MAX_LEN 136
+#define CDPR_IDENT_MAX_LEN 141
 #define CDPR_OP_STATUS 0x42
 #define CDPR_STATUS_MAX_LEN 91
 #define CDPR_OP_EVENT 0x43
@@ -138,7 +149,7 @@
 #define CDPR_OP_HEALTH 0x48
 #define CDPR_HEALTH_MAX_LEN 36
 #define CDPR_OP_CAPS 0x49
-#define CDPR_CAPS_MAX_LEN 14
+#define CDPR_CAPS_MAX_LEN 22
 
 /* Identify: class I, opcode 0x01 */
 
@@ -304,6 +315,7 @@ typedef struct cdpr_ident {
     uint8_t axes; /* 4: three modules and the extruder */
     uint16_t queue_capacity; /* move-queue slots */
     uint32_t clock_hz; /* unit of segment, dwell and clock ticks */
+    uint32_t cpu_hz; /* 3.0: unit of step schedules, a multiple of clock_hz */
     uint32_t max_step_rate; /* steps/s on any one axis */
     uint8_t max_payload; /* largest DATA payload it accepts */
     uint16_t rx_window; /* bytes of unacknowledged frames it can buffer */
@@ -333,6 +345,8 @@ typedef struct cdpr_ident {
 #define CDPR_IDENT_QUEUE_CAPACITY_MAX (65535UL)
 #define CDPR_IDENT_CLOCK_HZ_MIN (1000)
 #define CDPR_IDENT_CLOCK_HZ_MAX (4294967295UL)
+#define CDPR_IDENT_CPU_HZ_MIN (1000)
+#define CDPR_IDENT_CPU_HZ_MAX (4294967295UL)
 #define CDPR_IDENT_MAX_STEP_RATE_MIN (1)
 #define CDPR_IDENT_MAX_STEP_RATE_MAX (4294967295UL)
 #define CDPR_IDENT_MAX_PAYLOAD_MIN (48)
@@ -549,6 +563,8 @@ typedef struct cdpr_caps {
     uint32_t min_segment_ticks; /* shortest segment it takes (shorter: BAD_VALUE) */
     uint32_t segment_rate; /* segments/s it sustains (0: not stated) */
     uint16_t late_tolerance_us; /* a pulse later than this counts as late */
+    uint16_t schedule_tolerance_cycles; /* 3.0: a step schedule's edges lie within this of their ideal time */
+    uint32_t min_step_interval_cycles; /* 3.0: shortest interval of a schedule it runs (shorter: BAD_VALUE) */
 } cdpr_caps_t;
 #define CDPR_CAPS_MIN_SEGMENT_TICKS_MIN (1)
 #define CDPR_CAPS_MIN_SEGMENT_TICKS_MAX (4294967295UL)
@@ -556,5 +572,9 @@ typedef struct cdpr_caps {
 #define CDPR_CAPS_SEGMENT_RATE_MAX (4294967295UL)
 #define CDPR_CAPS_LATE_TOLERANCE_US_MIN (0)
 #define CDPR_CAPS_LATE_TOLERANCE_US_MAX (65535UL)
+#define CDPR_CAPS_SCHEDULE_TOLERANCE_CYCLES_MIN (1)
+#define CDPR_CAPS_SCHEDULE_TOLERANCE_CYCLES_MAX (65535UL)
+#define CDPR_CAPS_MIN_STEP_INTERVAL_CYCLES_MIN (1)
+#define CDPR_CAPS_MIN_STEP_INTERVAL_CYCLES_MAX (4294967295UL)
 
 #endif /* CDPR_PROTOCOL_H */

@@ -171,6 +171,11 @@ static void enqueue_segment(const struct segment *s)
         bad_value(SEG_BASE, (int32_t)s->ticks, machine.segments_received);
         return;
     }
+    if (s->sched.mask && s->sched.axis >= 0) { /* its schedule block, read with it */
+        machine_fail(ERR_BAD_VALUE, machine.items_received, machine.segments_received,
+                     (uint8_t)s->sched.axis, s->sched.value);
+        return;
+    }
     uint32_t rate;
     int8_t axis = motion_rate_check(s, &rate);
     if (axis >= 0) {
@@ -472,7 +477,7 @@ void proto_urgent(const uint8_t *payload, uint8_t len)
             session_opened();
             machine.synced = 1;
             machine.nonce = nonce;
-            machine.host_minor = (uint8_t)(v[2] < PROTO_MINOR ? v[2] : PROTO_MINOR);
+            machine.host_minor = (uint8_t)v[2] > PROTO_MINOR ? PROTO_MINOR : (uint8_t)v[2];
         }
         report_ident(nonce, 1);
     } else { /* OP_EMERGENCY_STOP */

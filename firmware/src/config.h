@@ -56,6 +56,16 @@
 #define SEGMENT_RATE 2000UL
 #define LATE_TOLERANCE_US 25
 
+/* Step schedules (protocol 3.0, PROTOCOL.md 5.5), in cycles of CPU_HZ (IDENT cpu_hz):
+ * a schedule block's edges lie within SCHEDULE_TOLERANCE_CYCLES of their ideal time
+ * (1 us, docs/step-engine.md section 2), and none of its intervals is shorter than
+ * MIN_STEP_INTERVAL_CYCLES: the period of MAX_STEP_RATE less what a schedule within its
+ * tolerance may take off it (an edge early by the tolerance after one late by it, and
+ * the rounding of both); a shorter one is BAD_VALUE. */
+#define CPU_HZ F_CPU
+#define SCHEDULE_TOLERANCE_CYCLES 16
+#define MIN_STEP_INTERVAL_CYCLES (CPU_HZ / MAX_STEP_RATE - 2 * SCHEDULE_TOLERANCE_CYCLES - 1)
+
 /* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */
 #define QUEUE_SIZE 128
 /* Segments prepared ahead of the step interrupt (DDA constants, 142 bytes each). */

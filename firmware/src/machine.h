@@ -8,7 +8,7 @@ struct machine {
     uint32_t items_received, segments_received;
     uint8_t fault, last_error, estopped;
     uint8_t latched;        /* a thermal fault: only a reset clears it */
-    uint8_t host_minor;     /* min(HELLO minor, ours): 2.1 reports (HEALTH) when >= 1 */
+    uint8_t host_minor;     /* min(HELLO minor, ours) */
     /* soft travel limits (SET_LIMITS, kept until reset) and the modules homed once
      * everything queued has run (a queued HOME counts) */
     uint8_t limits_set, tail_homed;

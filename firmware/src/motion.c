@@ -50,6 +50,8 @@ int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
     else
         f = (uint16_t)(s->ramp * 2 > 510 - s->ramp * 2 ? s->ramp * 2 : 510 - s->ramp * 2);
     for (uint8_t k = 0; k < 4; k++) {
+        if (s->sched.mask >> k & 1)
+            continue; /* its schedule block decides (schedule_block.h) */
         int32_t d = s->deltas[k];
         uint32_t n = (uint32_t)(d < 0 ? -(int64_t)d : d);
         /* 100 n F < 2^32 when n < 2^16 (a fast segment of a print); else 64 bits */

@@ -91,7 +91,7 @@ void report_status(void)
     wr_uv(&w, link_counters.retransmits);
     wr_uv(&w, link_counters.naks_sent);
     wr_uv(&w, link_counters.duplicates);
-    if (machine.host_minor >= 1) { /* 2.1: HEALTH right after STATUS, in the same payload */
+    { /* HEALTH right after STATUS, in the same payload (every 3.x session) */
         struct health hl;
         health_source(&hl);
         wr_u8(&w, CDPR_OP_HEALTH);
@@ -112,6 +112,8 @@ void report_caps(void)
     wr_uv(&w, MIN_SEGMENT_TICKS);
     wr_uv(&w, SEGMENT_RATE);
     wr_uv(&w, LATE_TOLERANCE_US);
+    wr_uv(&w, SCHEDULE_TOLERANCE_CYCLES);
+    wr_uv(&w, MIN_STEP_INTERVAL_CYCLES);
     send(&w, 0);
 }
 
@@ -129,6 +131,7 @@ void report_ident(uint16_t nonce, uint8_t urgent)
     wr_u8(&w, AXES);
     wr_uv(&w, QUEUE_SIZE);
     wr_uv(&w, CLOCK_HZ);
+    wr_uv(&w, CPU_HZ);
     wr_uv(&w, MAX_STEP_RATE);
     wr_u8(&w, DEV_MAX_PAYLOAD);
     wr_uv(&w, RX_WINDOW);

@@ -32,6 +32,12 @@ static inline __attribute__((always_inline)) int32_t axis_delta(struct reader *r
     return d;
 }
 
+/* |d| of a delta within -(2^31 - 1)..2^31 - 1 */
+static inline uint32_t magnitude(int32_t d)
+{
+    return (uint32_t)(d < 0 ? -d : d);
+}
+
 /* Called twice for every segment (checked on arrival, decoded again to execute),
  * thousands of times a second: straight-line code, no arrays, optimized for speed. */
 void __attribute__((optimize("O2"))) segment_decode_full(struct reader *r, struct seg_ctx *ctx,
@@ -73,6 +79,11 @@ void __attribute__((optimize("O2"))) segment_decode_full(struct reader *r, struc
             r->err = 1;
         else
             ramp = r->buf[r->pos++];
+    }
+    out->sched.mask = 0;
+    if ((op & SEG_F_SCHEDULE) && !r->err) {
+        uint32_t steps[4] = {magnitude(d0), magnitude(d1), magnitude(d2), magnitude(d3)};
+        sched_parse(r, ticks, steps, &out->sched, 0);
     }
     if (r->err)
         return;

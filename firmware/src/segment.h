@@ -3,6 +3,7 @@
 #define SEGMENT_H
 #include <stdint.h>
 #include "protocol_gen.h"
+#include "schedule_block.h"
 #include "wire.h"
 
 struct seg_ctx {
@@ -13,7 +14,8 @@ struct seg_ctx {
 struct segment {
     uint32_t ticks;
     int32_t deltas[4];
-    int16_t ramp; /* -1: constant speed */
+    int16_t ramp;                /* -1: constant speed */
+    struct sched_verdict sched; /* its schedule block's axes and verdict (mask 0: none) */
 };
 
 /* Decode the segment whose opcode is at r->pos; sets r->err on any bad field. */
@@ -36,6 +38,7 @@ static inline __attribute__((always_inline)) void segment_decode(struct reader *
     r->pos++;
     out->ticks = ctx->prev_ticks;
     out->ramp = SEG_RAMP_CONSTANT;
+    out->sched.mask = 0;
     if (op & SEG_F_PREDICTED) {
         for (uint8_t k = 0; k < 4; k++)
             out->deltas[k] = ctx->prev_deltas[k];

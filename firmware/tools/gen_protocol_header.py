@@ -2,13 +2,14 @@
 
 ``firmware_protocol`` stays the single source of truth: ``src/cdpr_protocol.h`` is
 exactly what ``python -m firmware_protocol.c_header`` emits from the message table
-(opcodes, codes, limits, field ranges), and ``src/protocol_gen.h`` adds what this
+(opcodes, codes, limits, field ranges), ``src/cdpr_reciprocals.h`` the step schedules'
+table of reciprocals (``step_schedule.reciprocal_table``, in flash), and ``src/protocol_gen.h`` adds what this
 firmware's table-driven decoder and its behaviour take from the same definitions:
 one field descriptor per field of every host-to-device message, and the device
 behaviour the Python model defines (SimConfig defaults). Usage::
 
-    python firmware/tools/gen_protocol_header.py            # rewrite both headers
-    python firmware/tools/gen_protocol_header.py --check    # exit 1 when either is stale
+    python firmware/tools/gen_protocol_header.py            # rewrite the headers
+    python firmware/tools/gen_protocol_header.py --check    # exit 1 when one is stale
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from firmware_protocol.device.config import SimConfig
 SRC = Path(__file__).resolve().parents[1] / "src"
 HEADER = SRC / "protocol_gen.h"
 CDPR_HEADER = SRC / "cdpr_protocol.h"
+RECIP_HEADER = SRC / "cdpr_reciprocals.h"
 # field types of the descriptors (wire.h reads them)
 TYPE_CODE = {"u8": 0, "u16": 1, "u32": 2, "i16": 3, "i32": 4}
 
@@ -82,7 +84,8 @@ def render() -> str:
         "#define SEG_RAMP_TO_REST CDPR_RAMP_TO_REST",
         f"#define SEG_RAMP_CONSTANT ({segments.RAMP_CONSTANT})",
     ]
-    for flag in ("F_RAMP", "F_DURATION", "F_PREDICTED", "F_SLIDERS", "F_EXTRUDER", "F_RESERVED"):
+    flags = ("F_RAMP", "F_DURATION", "F_PREDICTED", "F_SLIDERS", "F_EXTRUDER", "F_SCHEDULE")
+    for flag in (*flags, "F_RESERVED"):
         out.append(f"#define SEG_{flag} CDPR_SEG_{flag}")
     out += ["", "/* frame kinds, status flags, codes */"]
     out += [f"#define KIND_{k.name} CDPR_KIND_{k.name}" for k in framing.Kind]
@@ -129,6 +132,8 @@ def render() -> str:
         f"#define DEV_OVERTRAVEL_STEPS {cfg.overtravel_steps}L",
         f"#define DEV_HOTEND_MAX_DC {round(cfg.hotend.max_c * 10)}",
         f"#define DEV_BED_MAX_DC {round(cfg.bed.max_c * 10)}",
+        f"#define DEV_CPU_HZ {cfg.cpu_hz}UL",
+        f"#define DEV_SCHEDULE_TOLERANCE_CYCLES {cfg.schedule_tolerance_cycles}",
         "",
         "#endif",
         "",
@@ -137,7 +142,11 @@ def render() -> str:
 
 
 def outputs() -> dict[Path, str]:
-    return {CDPR_HEADER: c_header.header(), HEADER: render()}
+    return {
+        CDPR_HEADER: c_header.header(),
+        HEADER: render(),
+        RECIP_HEADER: c_header.reciprocal_table_header(SimConfig().cycles_per_tick),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -28,6 +28,7 @@ class SimConfig:
     queue_capacity: int = 128  # slots at 1x
     scale_queue: bool = True  # scale the slots with the speed-up
     clock_hz: int = 100_000  # unit of segment and dwell durations
+    cpu_hz: int = 16_000_000  # unit of step schedules (the AVR's clock: 160 cycles a tick)
     max_step_rate: int = 100_000  # steps/s, any one axis
     max_payload: int = MAX_PAYLOAD
     rx_window: int = 4096  # bytes of unacknowledged host frames it buffers (a pty holds 4 KB)
@@ -46,6 +47,7 @@ class SimConfig:
     min_segment_ticks: int = 1  # CAPS: every segment of 1 tick or more runs exactly
     segment_rate: int = 0  # CAPS: segments/s sustained (0: not stated)
     late_tolerance_us: int = 0  # CAPS: every pulse is issued at its exact time
+    schedule_tolerance_cycles: int = 16  # CAPS: a schedule's edges within 1 us of ideal
     speedup: float = 1.0  # device time = link time * speedup
     hotend: HeaterModel = field(default=HOTEND_MODEL)
     bed: HeaterModel = field(default=BED_MODEL)
@@ -56,8 +58,21 @@ class SimConfig:
             raise ValueError(
                 f"speedup must be a number in (0, {MAX_SPEEDUP:g}], got {self.speedup}"
             )
+        if self.cpu_hz % self.clock_hz:
+            raise ValueError(f"cpu_hz {self.cpu_hz} is not a multiple of clock_hz {self.clock_hz}")
         if not 1 <= self.queue_capacity <= MAX_QUEUE:
             raise ValueError(f"queue_capacity must be 1..{MAX_QUEUE}")
+
+    @property
+    def cycles_per_tick(self) -> int:
+        return self.cpu_hz // self.clock_hz
+
+    @property
+    def min_step_interval_cycles(self) -> int:
+        """CAPS: the shortest schedule interval it runs, in whole cycles: the period of
+        ``max_step_rate`` less what a schedule within its tolerance may take off it (an
+        edge early by the tolerance after one late by it, and the rounding of both)."""
+        return max(1, self.cpu_hz // self.max_step_rate - 2 * self.schedule_tolerance_cycles - 1)
 
     @property
     def slots(self) -> int:

@@ -23,6 +23,7 @@ from firmware_protocol.device.heater_control import PidGains
 from firmware_protocol.device.machine import DeviceMachine, Observer
 from firmware_protocol.device.queue_items import BadValue, item_of
 from firmware_protocol.device.record import SegmentRecord
+from firmware_protocol.device.schedules import schedule_refusal
 from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
@@ -136,7 +137,7 @@ class SimDevice:
         self.synced = False
         self.nonce: int | None = None
         self.session_minor = 0  # min(host minor, device minor) of the session
-        self.ctx = SegmentContext()
+        self.ctx = SegmentContext(cycles_per_tick=self.config.cycles_per_tick)
         self._boot_sent = -math.inf
         self._open_session_state(-math.inf)
 
@@ -203,6 +204,7 @@ class SimDevice:
             axes=4,
             queue_capacity=mc.capacity,
             clock_hz=c.clock_hz,
+            cpu_hz=c.cpu_hz,
             max_step_rate=c.max_step_rate,
             max_payload=c.max_payload,
             rx_window=c.rx_window,
@@ -255,7 +257,13 @@ class SimDevice:
 
     def caps(self) -> Caps:
         c = self.config
-        return Caps(c.min_segment_ticks, c.segment_rate, c.late_tolerance_us)
+        return Caps(
+            c.min_segment_ticks,
+            c.segment_rate,
+            c.late_tolerance_us,
+            c.schedule_tolerance_cycles,
+            c.min_step_interval_cycles,
+        )
 
     # ------------------------------------------------------------------ main loop
 
@@ -383,7 +391,7 @@ class SimDevice:
         if isinstance(msg, Hello):
             if msg.major == PROTOCOL_MAJOR and (not self.synced or msg.nonce != self.nonce):
                 self.endpoint.reset_session()
-                self.ctx = SegmentContext()
+                self.ctx = SegmentContext(cycles_per_tick=self.config.cycles_per_tick)
                 self.synced = True
                 self.nonce = msg.nonce
                 self.session_minor = min(msg.minor, PROTOCOL_MINOR)
@@ -499,6 +507,19 @@ class SimDevice:
         mc.segments_received += seg > 0  # a refused segment keeps its number too
         if isinstance(item, BadValue):
             return self._bad_value(n, msg.OPCODE, item.value, T)
+        if isinstance(msg, Segment) and not mc.fault:
+            refused = schedule_refusal(
+                msg.ticks,
+                msg.deltas,
+                msg.ramp,
+                dict(msg.schedules),
+                cycles_per_tick=cfg.cycles_per_tick,
+                tol_cycles=cfg.schedule_tolerance_cycles,
+                min_interval_cycles=cfg.min_step_interval_cycles,
+                table=self.ctx.table,
+            )
+            if refused is not None:  # before any of it moves
+                return [mc.fail(ErrorCode.BAD_VALUE, n, seg, T, *refused)]
         return mc.enqueue(item, T)
 
     def close(self) -> None:

@@ -195,6 +195,7 @@ class DeviceMachine:
                 limits=self.limits,
                 clock_hz=self.clock_hz,
                 max_step_rate=self.cfg.max_step_rate,
+                scheduled=item.arg[0] if item.arg else 0,
             )
             if refused is not None:  # before any of it moves
                 return [self.fail(refused[0], item.item, item.seg, T, *refused[1:])]

@@ -28,7 +28,8 @@ U32 = 0xFFFF_FFFF
 class Item(NamedTuple):
     """One queue slot (a tuple: cheap to make, nothing for the garbage collector to follow).
 
-    ``arg``: SETPOS the four positions; ENABLE (mask,); HOME (mask, positions);
+    ``arg``: SEG (the mask of the axes its schedule block carries,) or ();
+    SETPOS the four positions; ENABLE (mask,); HOME (mask, positions);
     HEATER/FAN/WAIT (index, value); TUNE (heater, target_dc, cycles)."""
 
     kind: int
@@ -81,7 +82,17 @@ def item_of(
     if isinstance(msg, Segment):
         if msg.ticks < min_ticks:
             return BadValue(msg.ticks)
-        return make_item(SEG, n, T, seg=seg, ticks=msg.ticks, deltas=msg.deltas, ramp=msg.ramp)
+        scheduled = sum(1 << axis for axis, _ in msg.schedules)
+        return make_item(
+            SEG,
+            n,
+            T,
+            seg=seg,
+            ticks=msg.ticks,
+            deltas=msg.deltas,
+            ramp=msg.ramp,
+            arg=(scheduled,) if scheduled else (),
+        )
     if isinstance(msg, Dwell):
         if msg.ticks > DWELL_MAX_S * clock_hz:
             return BadValue(msg.ticks)

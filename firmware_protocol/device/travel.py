@@ -58,13 +58,18 @@ def segment_refusal(
     limits: SoftLimits,
     clock_hz: int,
     max_step_rate: int,
+    scheduled: int = 0,
 ) -> tuple[int, int, int] | None:
     """Why the device refuses a segment on receipt, as (ErrorCode, axis, value): a step rate
     over the limit, an end position outside i32, a homed module leaving its soft limits.
-    ``tail``: where everything queued before it leaves the axes. None: accepted."""
+    ``tail``: where everything queued before it leaves the axes; ``scheduled``: the mask of
+    the axes its schedule block carries (their schedule was checked instead of the rate,
+    PROTOCOL.md 5.5). None: accepted."""
     r = float(ramp_share(ramp))
     factor = max(2 * r, 2 - 2 * r) * clock_hz / ticks
     for axis, d in enumerate(deltas):
+        if scheduled >> axis & 1:
+            continue
         rate = abs(d) * factor
         if rate > max_step_rate * (1 + 1e-9):
             return ErrorCode.STEP_RATE, axis, int(rate)

@@ -10,6 +10,7 @@ import pytest
 from cdprhost.link import DeviceFault, open_link
 from firmware_protocol.framing import Kind, encode_frame
 from firmware_protocol.messages import (
+    PROTOCOL_MAJOR,
     Boot,
     ClearFault,
     Configure,
@@ -49,7 +50,8 @@ def test_handshake_and_duplicate_hello(device_factory, host_factory):
     dev = device_factory()
     h = host_factory(dev.path)
     ident = h.hello(0x4321)
-    assert ident.major == 2 and ident.axes == 4 and ident.heaters == 2
+    assert ident.major == PROTOCOL_MAJOR and ident.axes == 4 and ident.heaters == 2
+    assert ident.cpu_hz == 16_000_000  # 3.0: 160 cycles a tick, the reciprocal table's
     # the same clock and queue on both, so the host plans the same segments for both
     assert ident.clock_hz == 100_000 and ident.queue_capacity == 128
     assert ident.max_step_rate >= 8_000  # the host plans for 90 % of it (device_limits.py)
@@ -72,12 +74,12 @@ def test_a_hello_of_another_major_gets_an_ident_and_opens_no_session(device_fact
 
     def answered():
         # sent again until answered, as a host does (a booting device may miss one)
-        h.urgent_send(Hello(0x2222, major=3))
+        h.urgent_send(Hello(0x2222, major=PROTOCOL_MAJOR - 1))  # a 2.x host
         h.pump(0.2)
         return next((m for m in h.urgent if isinstance(m, Ident) and m.nonce == 0x2222), None)
 
-    ident = h.wait_for(answered, what="IDENT to a HELLO of major 3")
-    assert ident.major == 2  # the host then refuses it, naming both versions
+    ident = h.wait_for(answered, what="IDENT to a HELLO of the previous major")
+    assert ident.major == PROTOCOL_MAJOR  # the host then refuses it, naming both versions
     # still no session: the device goes on announcing its boot, as before any HELLO
     h.urgent.clear()
     h.wait_for(lambda: any(isinstance(m, Boot) for m in h.urgent), what="BOOT after it")

@@ -44,6 +44,7 @@ class ScriptedDevice:
                     axes=4,
                     queue_capacity=self.capacity,
                     clock_hz=100_000,
+                    cpu_hz=16_000_000,
                     max_step_rate=100_000,
                     max_payload=248,
                     rx_window=4096,

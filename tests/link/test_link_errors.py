@@ -102,22 +102,24 @@ def test_port_vanishing_mid_session():
 
 
 def test_protocol_major_mismatch(monkeypatch):
-    monkeypatch.setattr(firmware, "PROTOCOL_MAJOR", 3)
-    with pytest.raises(ProtocolMismatch, match=f"protocol 3.{PROTOCOL_MINOR}") as exc:
+    # a 3.x host and a 2.x device (schedule blocks are 3.0's): the host refuses it
+    monkeypatch.setattr(firmware, "PROTOCOL_MAJOR", 2)
+    with pytest.raises(ProtocolMismatch, match=f"protocol 2.{PROTOCOL_MINOR}") as exc:
         open_embedded()
-    assert exc.value.device_version == (3, PROTOCOL_MINOR)
-    assert exc.value.host_version == (2, PROTOCOL_MINOR)
+    assert exc.value.device_version == (2, PROTOCOL_MINOR)
+    assert exc.value.host_version == (3, PROTOCOL_MINOR)
 
 
 def test_a_host_of_a_newer_major_is_refused_and_the_device_opens_no_session(monkeypatch):
     # the other direction of the test above: the host speaks a major the device does not
-    monkeypatch.setattr(session_setup, "PROTOCOL_MAJOR", 3)
+    # (a 2.x host and a 3.0 device)
+    monkeypatch.setattr(session_setup, "PROTOCOL_MAJOR", 2)
     device = SimDevice()
     link = HostLink(VirtualBench(device), device=device)
-    with pytest.raises(ProtocolMismatch, match="protocol 2") as exc:
+    with pytest.raises(ProtocolMismatch, match="protocol 3") as exc:
         link.handshake()
-    assert exc.value.host_version == (3, PROTOCOL_MINOR)
-    assert exc.value.device_version == (2, PROTOCOL_MINOR)
+    assert exc.value.host_version == (2, PROTOCOL_MINOR)
+    assert exc.value.device_version == (3, PROTOCOL_MINOR)
     assert not device.synced  # it answered with IDENT and took nothing further
 
 

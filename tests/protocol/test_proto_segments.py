@@ -40,7 +40,7 @@ def batches(max_n=40, max_delta=2**31 - 1):
 def decode_all(data: bytes, n: int, ctx: SegmentContext):
     pos, out = 0, []
     for _ in range(n):
-        ticks, deltas, ramp, pos = decode_segment(data, pos, ctx)
+        ticks, deltas, ramp, _, pos = decode_segment(data, pos, ctx)
         out.append((ticks, deltas, ramp))
     assert pos == len(data)
     return out

@@ -87,13 +87,13 @@ def test_what_the_block_refuses():
     with pytest.raises(ScheduleBlockError, match="at least one"):
         decode_block(b"\x00", 0, deltas, 1000, TABLE)
     with pytest.raises(ScheduleBlockError, match="axis 1 has a schedule but no steps"):
-        decode_block(b"\x03" + good[1:], 0, deltas, 1000, TABLE)
+        decode_block(b"\x03" + good[1:] + good[1:], 0, deltas, 1000, TABLE)
     with pytest.raises(ScheduleBlockError, match="truncated"):
         decode_block(good[:-1], 0, deltas, 1000, TABLE)
     # a further chunk that takes every step leaves the first none
     greedy = AxisSchedule(0, (Chunk(1, 100_000, 0), Chunk(10, 100_000, 0)))
     data = bytearray(encode_block([11, 0, 0, 0], 1000, {0: greedy}, TABLE))
-    with pytest.raises(ScheduleBlockError, match="count 10 steps of 10, none left"):
+    with pytest.raises(ScheduleBlockError, match="count 10 further steps of 10"):
         decode_block(bytes(data), 0, deltas, 1000, TABLE)
 
 

@@ -1,0 +1,131 @@
+#include <stdint.h>
+
+#include "cdpr_reciprocals.h"
+#include "mul16.h"
+#include "schedule_block.h"
+#include <avr/pgmspace.h>
+
+_Static_assert(CDPR_RECIP_CYCLES_PER_TICK == F_CPU / CLOCK_HZ,
+               "the table of reciprocals is for another cpu_hz / clock_hz");
+
+/* The device's prediction of an axis's interval (PROTOCOL.md 5.5), where it makes one:
+ * (D q[n] + 2^15) >> 16 with D 16 bits and q 32, as two 16 x 16 products (the low half's
+ * carry taken into the high); else 0. */
+static uint32_t guess_interval(uint32_t ticks, uint32_t n)
+{
+    if (n < 1 || n > CDPR_SCHED_PREDICT_MAX_STEPS || ticks > CDPR_SCHED_PREDICT_MAX_TICKS)
+        return 0;
+    uint32_t q = pgm_read_dword(&cdpr_reciprocals[n]);
+    uint16_t d = (uint16_t)ticks;
+    uint32_t low = mul16x16(d, (uint16_t)q) + 0x8000UL;
+    return mul16x16(d, (uint16_t)(q >> 16)) + (low >> 16);
+}
+
+static int32_t rd_i32(struct reader *r)
+{
+    return unzigzag(rd_bounded(r, 32));
+}
+
+/* base + delta, or 0 outside 1..2^31 - 1 (refused) */
+static int32_t interval_of(int64_t base, int32_t delta)
+{
+    int64_t v = base + delta;
+    return v < 1 || v > INT32_MAX ? 0 : (int32_t)v;
+}
+
+/* The shortest of the `used` intervals a chunk sets (fixed point): they change linearly,
+ * so it is at one end. */
+static int32_t chunk_shortest(int32_t interval, int32_t add, int32_t used)
+{
+    if (add >= 0)
+        return interval;
+    int64_t end = (int64_t)interval + (int64_t)(used - 1) * add;
+    return end < 0 ? 0 : (int32_t)end;
+}
+
+/* The first refusal of an axis wins: later ones leave the verdict as it is. */
+static void refuse(struct sched_verdict *v, uint8_t axis, int32_t value)
+{
+    if (v->axis < 0) {
+        v->axis = (int8_t)axis;
+        v->value = value;
+    }
+}
+
+void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCHED_AXES],
+                 struct sched_verdict *verdict, struct sched_block *out)
+{
+    const int32_t shortest_allowed = (int32_t)MIN_STEP_INTERVAL_CYCLES << CDPR_SCHED_FRAC_BITS;
+    uint8_t mask = rd_u8(r);
+    if (r->err || !mask || mask >> CDPR_SCHED_AXES) {
+        r->err = 1;
+        return;
+    }
+    verdict->mask = mask;
+    verdict->axis = -1;
+    uint8_t used = 0;
+    for (uint8_t k = 0; k < CDPR_SCHED_AXES; k++) {
+        if (!(mask >> k & 1))
+            continue;
+        int32_t lead_c = rd_i32(r);
+        int32_t interval = interval_of(guess_interval(ticks, steps[k]), rd_i32(r));
+        int32_t add = rd_i32(r);
+        uint8_t more = rd_u8(r);
+        if (r->err || more >= CDPR_SCHED_MAX_CHUNKS ||
+            (out && used + 1 + more > out->capacity)) {
+            r->err = 1;
+            return;
+        }
+        if (!steps[k])
+            refuse(verdict, k, 0);
+        int64_t lead64 = (int64_t)(interval >> 1) + lead_c; /* >= -2^31 */
+        int32_t lead = lead64 > INT32_MAX ? INT32_MAX : (int32_t)lead64;
+        int32_t left = (int32_t)steps[k]; /* |n| <= 2^31 - 1 */
+        int32_t shortest = 0;
+        for (uint8_t i = 1; i <= more; i++) {
+            int32_t count = (int32_t)rd_bounded(r, 16);
+            int32_t c_int = interval_of(interval, rd_i32(r));
+            int32_t c_add = rd_i32(r);
+            if (r->err)
+                return;
+            left -= count;
+            if (count < 1)
+                refuse(verdict, k, count);
+            if (c_int < 1)
+                refuse(verdict, k, c_int);
+            int32_t n_int = i < more ? count : count - 1; /* the last leads nowhere */
+            int32_t s = n_int >= 1 ? chunk_shortest(c_int, c_add, n_int) : 0;
+            if (s && (!shortest || s < shortest))
+                shortest = s;
+            if (out) {
+                struct sched_chunk *c = &out->chunk[used + i];
+                c->count = (uint16_t)count;
+                c->interval = (uint32_t)c_int;
+                c->add = c_add;
+            }
+        }
+        /* the first chunk takes what the others leave of |n| */
+        if (steps[k] && (left < 1 || left > (int32_t)CDPR_SCHED_MAX_COUNT))
+            refuse(verdict, k, left);
+        if (interval < 1)
+            refuse(verdict, k, interval);
+        if (lead < 0)
+            refuse(verdict, k, lead);
+        int32_t n_int = more ? left : left - 1;
+        int32_t s = n_int >= 1 ? chunk_shortest(interval, add, n_int) : 0;
+        if (s && (!shortest || s < shortest))
+            shortest = s;
+        if (shortest && shortest < shortest_allowed)
+            refuse(verdict, k, shortest >> CDPR_SCHED_FRAC_BITS);
+        if (out) {
+            out->mask = mask;
+            out->lead[k] = (uint32_t)lead;
+            out->first[k] = used;
+            out->chunks[k] = (uint8_t)(1 + more);
+            out->chunk[used].count = (uint16_t)left;
+            out->chunk[used].interval = (uint32_t)interval;
+            out->chunk[used].add = add;
+        }
+        used = (uint8_t)(used + 1 + more);
+    }
+}

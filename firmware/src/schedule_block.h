@@ -1,0 +1,51 @@
+/* A segment's schedule block (protocol 3.0, PROTOCOL.md 5.5): the step schedules of the
+ * axes the device cannot predict, each a first edge and chunks (count, interval, add) in
+ * fixed point of a CPU cycle (CDPR_SCHED_FRAC_BITS).
+ *
+ * sched_parse reads a block once, as its segment is read: its form (a malformed block is
+ * r->err: BAD_COMMAND) and, in the same pass, what it says of its segment (the result:
+ * BAD_VALUE when the segment is queued): the counts add up to |n| (the first chunk takes
+ * what the others leave, at least 1), every count 1..65535, every interval 1..2^31 - 1,
+ * the first edge not before the segment, no interval under MIN_STEP_INTERVAL_CYCLES.
+ * It keeps O(1) state and no copy of the block; a caller that wants the chunks (the step
+ * engine) passes a struct sched_block to fill. Today's DDA keeps its own edges within
+ * the same tolerance of the same ideal edges, so nothing else reads them yet. */
+#ifndef SCHEDULE_BLOCK_H
+#define SCHEDULE_BLOCK_H
+#include <stdint.h>
+#include "config.h"
+#include "protocol_gen.h"
+#include "wire.h"
+
+struct sched_chunk {
+    uint16_t count;
+    uint32_t interval; /* fixed point */
+    int32_t add;
+};
+
+/* One block's chunks for the step engine; `capacity` entries in `chunk`, filled in axis
+ * order (`first[k]`, `chunks[k]` for axis k). */
+struct sched_block {
+    uint8_t mask;
+    uint32_t lead[CDPR_SCHED_AXES]; /* first edge, fixed point, from the segment's start */
+    uint8_t first[CDPR_SCHED_AXES];
+    uint8_t chunks[CDPR_SCHED_AXES];
+    uint8_t capacity;
+    struct sched_chunk *chunk;
+};
+
+/* What a block says of its segment: `axis` -1 when it runs, else the axis refused and
+ * `value` why (the first chunk's count, an out-of-range count, interval or first edge,
+ * the shortest interval in cycles). */
+struct sched_verdict {
+    uint8_t mask; /* axes it carries */
+    int8_t axis;
+    int32_t value;
+};
+
+/* The block at r->pos for a segment of `ticks` ticks and |n| `steps`; sets r->err when it
+ * is malformed (or when `out` has no room for its chunks). `out` may be NULL. */
+void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCHED_AXES],
+                 struct sched_verdict *verdict, struct sched_block *out);
+
+#endif
