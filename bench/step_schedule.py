@@ -41,6 +41,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from firmware_protocol.schedule_block import encode_block
+from firmware_protocol.schedule_fit import fit_axis, plan_schedules
 from firmware_protocol.segments import (
     RAMP_FROM_REST,
     RAMP_TO_REST,
@@ -52,9 +53,7 @@ from firmware_protocol.step_schedule import (
     FRAC_BITS,
     AxisSchedule,
     cycles_per_tick,
-    fit_axis,
     ideal_edges,
-    plan_schedules,
     predicted_error,
     reciprocal_table,
     schedule_error,

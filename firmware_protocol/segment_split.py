@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from firmware_protocol.schedule_block import MAX_CHUNKS
+from firmware_protocol.schedule_fit import plan_schedules
 from firmware_protocol.segments import (
     RAMP_CONSTANT,
     RAMP_FROM_REST,
@@ -24,7 +25,7 @@ from firmware_protocol.segments import (
     ramp_share,
     steps_done,
 )
-from firmware_protocol.step_schedule import AxisSchedule, plan_schedules, reciprocal_table
+from firmware_protocol.step_schedule import AxisSchedule, reciprocal_table
 
 Piece = tuple[int, tuple[int, int, int, int], int]  # ticks, deltas, ramp code
 
@@ -80,7 +81,7 @@ def fit_for_blocks(
 ) -> tuple[SegmentBatch, dict[tuple[int, int], AxisSchedule]]:
     """``batch`` with every segment whose schedules a block cannot carry cut in halves
     (again, until they can), and the explicit schedules of the result by ``(segment,
-    axis)``, as :func:`step_schedule.plan_schedules` gives them."""
+    axis)``, as :func:`schedule_fit.plan_schedules` gives them."""
     if table is None:
         table = reciprocal_table(cycles_per_tick)
     explicit = plan_schedules(batch, cycles_per_tick, tol_cycles, table)

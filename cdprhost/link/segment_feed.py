@@ -19,6 +19,7 @@ from cdprhost.link.errors import StepRateError
 from cdprhost.link.events import DeviceCaps, Identity
 from firmware_protocol.messages import Flag
 from firmware_protocol.schedule_block import MAX_CHUNKS
+from firmware_protocol.schedule_fit import plan_schedules
 from firmware_protocol.segments import (
     RAMP_CONSTANT,
     SegmentBatch,
@@ -27,7 +28,7 @@ from firmware_protocol.segments import (
     encode_segments,
     peak_step_rates,
 )
-from firmware_protocol.step_schedule import AxisSchedule, plan_schedules, predictable
+from firmware_protocol.step_schedule import AxisSchedule, predictable
 
 #: a segment without its block takes at most this many bytes (PROTOCOL.md 5.2)
 SEGMENT_MAX_BYTES = 27

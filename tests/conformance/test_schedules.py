@@ -9,14 +9,9 @@ import pytest
 
 from firmware_protocol.messages import Caps, Error, ErrorCode, Flag, Flush, GetCaps, Segment
 from firmware_protocol.schedule_block import encode_block
+from firmware_protocol.schedule_fit import fit_axis
 from firmware_protocol.segments import F_SCHEDULE, encode_one_segment
-from firmware_protocol.step_schedule import (
-    FRAC_BITS,
-    AxisSchedule,
-    Chunk,
-    fit_axis,
-    ideal_edges,
-)
+from firmware_protocol.step_schedule import FRAC_BITS, AxisSchedule, Chunk, ideal_edges
 
 pytestmark = pytest.mark.timeout(300)
 

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from firmware_protocol.device.schedules import schedule_refusal
+from firmware_protocol.schedule_fit import fit_axis
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
     AxisSchedule,
     Chunk,
-    fit_axis,
     ideal_edges,
     predicted,
     reciprocal_table,

@@ -13,13 +13,8 @@ from firmware_protocol.schedule_block import (
     decode_block,
     encode_block,
 )
-from firmware_protocol.step_schedule import (
-    AxisSchedule,
-    Chunk,
-    fit_axis,
-    ideal_edges,
-    reciprocal_table,
-)
+from firmware_protocol.schedule_fit import fit_axis
+from firmware_protocol.step_schedule import AxisSchedule, Chunk, ideal_edges, reciprocal_table
 
 CPT = 160
 TABLE = reciprocal_table(CPT)

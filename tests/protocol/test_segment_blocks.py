@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from cdprhost.link.segment_feed import SEGMENT_MAX_BYTES, wire_schedules
 from firmware_protocol.message_codec import MessageError, decode_messages, encode_messages
 from firmware_protocol.messages import Segment
+from firmware_protocol.schedule_fit import plan_schedules
 from firmware_protocol.segments import (
     F_SCHEDULE,
     SegmentBatch,
@@ -19,13 +20,7 @@ from firmware_protocol.segments import (
     encode_one_segment,
     encode_segments,
 )
-from firmware_protocol.step_schedule import (
-    AxisSchedule,
-    Chunk,
-    device_edges,
-    ideal_edges,
-    plan_schedules,
-)
+from firmware_protocol.step_schedule import AxisSchedule, Chunk, device_edges, ideal_edges
 
 CPT = 160
 

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_protocol import step_schedule
+from firmware_protocol import schedule_fit, step_schedule
+from firmware_protocol.schedule_fit import fit_axis, plan_schedules
 from firmware_protocol.segments import RAMP_CONSTANT, SegmentBatch
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
@@ -21,9 +22,7 @@ from firmware_protocol.step_schedule import (
     cycles_per_tick,
     device_edges,
     device_times,
-    fit_axis,
     ideal_edges,
-    plan_schedules,
     predictable,
     predicted,
     predicted_error,
@@ -260,7 +259,7 @@ def test_a_long_ramp_from_rest_takes_no_more_chunks_than_the_first_fitter_took()
 def test_the_searches_replayed_in_numpy_find_what_they_find_one_axis_at_a_time(batch, tol):
     # many axes fitting at once replay their searches in numpy (down to a few, which go on
     # one by one): forced here from the first round, whatever the batch's size
-    with patch.object(step_schedule, "_FEW_AXES", 0):
+    with patch.object(schedule_fit, "_FEW_AXES", 0):
         explicit = plan_schedules(batch, CPT, tol, TABLE)
     for (i, k), sched in explicit.items():
         ideal = ideal_edges(int(batch.deltas[i, k]), int(batch.ticks[i]), int(batch.ramps[i]), CPT)
@@ -275,7 +274,7 @@ def test_a_batch_of_many_ramps_takes_no_more_chunks_than_each_axis_alone_took():
     codes = rng.integers(0, 256, m).astype(np.int16)
     deltas = (rng.uniform(-0.6, 0.6, (m, 4)) * ticks[:, None]).astype(np.int64)
     explicit = plan_schedules(SegmentBatch(ticks, deltas, codes), CPT, 16.0, TABLE)
-    assert len(explicit) == int((deltas != 0).sum()) > step_schedule._FEW_AXES
+    assert len(explicit) == int((deltas != 0).sum()) > schedule_fit._FEW_AXES
     for i in range(m):
         mine = {k: s for (j, k), s in explicit.items() if j == i}
         assert check_segment(deltas[i], int(ticks[i]), int(codes[i]), mine, CPT, 16.0, TABLE) <= 16
@@ -288,6 +287,6 @@ def test_the_ideal_edges_of_a_batch_are_those_of_each_axis_to_the_last_bit():
     steps = np.array([1, 7, 300, 2])
     ticks = np.array([40, 1000, 60_000, 3])
     codes = np.array([-1, 0, 128, 255])
-    many = step_schedule._ideal_edges_many(steps, ticks, codes, CPT)
+    many = step_schedule.ideal_edges_many(steps, ticks, codes, CPT)
     alone = [ideal_edges(int(n), int(d), int(c), CPT) for n, d, c in zip(steps, ticks, codes)]
     assert np.array_equal(many, np.concatenate(alone))
