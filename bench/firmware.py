@@ -338,15 +338,17 @@ def _announced() -> tuple[int, int]:
         return link.identity.max_step_rate, caps.min_segment_ticks if caps else 1
 
 
-def _rate_search(speedup: float = 4.0) -> dict[str, Any]:
+def _rate_search(cflags: str = "", speedup: float = 4.0) -> dict[str, Any]:
     """Per configuration, the highest R with every edge within 10 us of its ideal time,
     p99 within 5 us, no overrun, no lost or late step, the record exact (firmware_rates.py:
-    constant-speed segments on a build announcing up to 200,000 steps/s); the step
+    constant-speed segments on a build announcing up to 200,000 steps/s, with the build
+    options ``cflags``: "" the default engine, ``ENGINE_CFLAGS`` the step engine); the step
     interrupts' load there; then the print's mix speeding up from rest to its R and back."""
-    build = rates_bench.variant(max(rates_bench.CEILINGS.values()))
+    build = rates_bench.variant(max(rates_bench.CEILINGS.values()), cflags)
     idle = rates_bench.idle_isr_share(build)
     out: dict[str, Any] = {
-        "build": f"firmware/build/rate-{build.max_step_rate}",
+        "engine": build.engine,
+        "build": f"firmware/{build.elf.parent.relative_to(avr_device.FIRMWARE_DIR)}",
         "isr_idle_share_pct": round(100 * idle, 1),
     }
     rows = []
@@ -374,6 +376,44 @@ def _rate_search(speedup: float = 4.0) -> dict[str, Any]:
             "fail_reason": rates_bench.fail_reason(ramp),
         }
     return out
+
+
+def _engines(args: argparse.Namespace) -> list[str]:
+    """The build options of each engine to measure: the default engine (the baseline)
+    first, then the step engine (``--engine``) and ``--cflags``'s build."""
+    out = [""]
+    if args.engine:
+        out.append(rates_bench.ENGINE_CFLAGS)
+    if args.cflags:
+        out.append(args.cflags)
+    return list(dict.fromkeys(out))
+
+
+def _rates_table(searches: list[dict[str, Any]]) -> list[str]:
+    """The rate searches of one run as one markdown table, engine beside engine."""
+    head = ("configuration", "engine", "highest R (steps/s)", "worst / p99 edge at R")
+    head += ("ISR load at R", "first fail")
+    lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    for i, config in enumerate(rates_bench.CONFIGS):
+        for search in searches:
+            r = search["highest_rate"][i]
+            rate = f"{r['rate']:,}" if r.get("rate") else "none"
+            edge = f"{r['worst_us']} / {r['p99_us']} us" if "worst_us" in r else ""
+            load = f"{r['isr_load_pct_of_motion']} %" if "isr_load_pct_of_motion" in r else ""
+            fail = f"{r['lowest_fail']:,}: {r['fail_reason']}" if "lowest_fail" in r else "none"
+            lines.append(f"| {config} | {search['engine']} | {rate} | {edge} | {load} | {fail} |")
+    for search in searches:
+        ramp = search.get("print_mix_with_ramps_at_its_rate")
+        if ramp:
+            verdict = "passes" if ramp["passed"] else f"fails: {ramp['fail_reason']}"
+            lines.append(
+                f"| the mix with ramps from rest to {ramp['rate']:,} and back | "
+                f"{search['engine']} | {verdict} | {ramp['worst_us']} / {ramp['p99_us']} us"
+                f" | {ramp['isr_load_pct_of_motion']} % | |"
+            )
+    idle = ", ".join(f"{s['engine']} {s['isr_idle_share_pct']} %" for s in searches)
+    lines += ["", f"The step interrupts' share of the CPU with nothing moving: {idle}."]
+    return lines
 
 
 def _print_like_batch(rate: int, ticks: int, seconds: float, limit: int) -> SegmentBatch:
@@ -471,8 +511,9 @@ def _stack_free() -> int | None:
     return int(m.group(1)) if m else None
 
 
-def _acceptance() -> list[tuple[str, str, str, bool | None]]:
-    """The issue's acceptance rows: (what, the issue's figure, measured, passed)."""
+def _acceptance(engines: tuple[str, ...] = ("",)) -> list[tuple[str, str, str, bool | None]]:
+    """The issue's acceptance rows: (what, the issue's figure, measured, passed); the rate
+    rows for each engine of ``engines`` (build options: "" the default engine)."""
     rows: list[tuple[str, str, str, bool | None]] = []
     for config, rate in (
         ("a print's mix", 30_000),
@@ -480,15 +521,14 @@ def _acceptance() -> list[tuple[str, str, str, bool | None]]:
         ("one module alone", 100_000),
     ):
         rates = rates_bench.rates_of(config, rate)
-        p = rates_bench.run_batch(
-            rates_bench.variant(max(rates)), rates_bench.constant_batch(rates)
-        )
-        got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
-        if not p["passed"]:
-            got += f"; {rates_bench.fail_reason(p)}"
-        rows.append(
-            (f"{config} at R = {rate:,}", "worst <= 10 us, p99 <= 5 us, clean", got, p["passed"])
-        )
+        for cflags in engines:
+            build = rates_bench.variant(max(rates), cflags)
+            p = rates_bench.run_batch(build, rates_bench.constant_batch(rates))
+            got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
+            if not p["passed"]:
+                got += f"; {rates_bench.fail_reason(p)}"
+            what = f"{config} at R = {rate:,}" + (f" ({build.engine})" if len(engines) > 1 else "")
+            rows.append((what, "worst <= 10 us, p99 <= 5 us, clean", got, p["passed"]))
     rate, min_ticks = _announced()
     cup = _cup(rate, min_ticks)
     rows.append(
@@ -555,7 +595,6 @@ def _acceptance() -> list[tuple[str, str, str, bool | None]]:
 
 
 def _print_acceptance(rows: list[tuple[str, str, str, bool | None]]) -> None:
-    print("python bench/firmware.py --acceptance")
     print("| acceptance row | issue | measured | |")
     print("|---|---|---|---|")
     for what, want, got, ok in rows:
@@ -578,6 +617,18 @@ def main() -> int:
         help="the busiest module's steps/s in the print-like streams (default: 90 %% of the "
         "rate the firmware announces, as the host plans)",
     )
+    ap.add_argument(
+        "--engine",
+        action="store_true",
+        help="--rates/--acceptance: measure the step engine (STEP_ENGINE=1) beside the "
+        "default engine, in one table",
+    )
+    ap.add_argument(
+        "--cflags",
+        default="",
+        help="--rates/--acceptance: measure a build with these options too "
+        "(e.g. '-DSTEP_ENGINE=1 -DSTEP_PARTNERS=1')",
+    )
     args = ap.parse_args()
     missing = avr_device.toolchain_missing()
     if missing:  # one line saying what to install, not a traceback
@@ -586,13 +637,17 @@ def main() -> int:
     if args.heaters:
         print(json.dumps({"command": "python bench/firmware.py --heaters"} | _heaters(), indent=1))
         return 0
+    engines = _engines(args)
+    flags = " --engine" * args.engine + (f" --cflags '{args.cflags}'" if args.cflags else "")
     if args.acceptance:
-        _print_acceptance(_acceptance())
+        print(f"python bench/firmware.py --acceptance{flags}")
+        _print_acceptance(_acceptance(tuple(engines)))
         return 0
     if args.rates:
-        print(
-            json.dumps({"command": "python bench/firmware.py --rates"} | _rate_search(), indent=1)
-        )
+        searches = [_rate_search(cflags) for cflags in engines]
+        command = f"python bench/firmware.py --rates{flags}"
+        print(json.dumps({"command": command, "searches": searches}, indent=1))
+        print("\n".join([command, "", *_rates_table(searches)]))
         return 0
     fig: dict[str, Any] = {
         "command": "python bench/firmware.py" + (" --quick" if args.quick else "")
