@@ -131,14 +131,21 @@ def rates_of(config: str, rate: float) -> list[int]:
     return out
 
 
-def constant_batch(rates: list[int], n: int = SEGMENTS, ticks: int = SEGMENT_TICKS) -> SegmentBatch:
+def constant_batch(
+    rates: list[int], n: int = SEGMENTS, ticks: int = SEGMENT_TICKS, *, brake: bool = True
+) -> SegmentBatch:
     """``n`` constant-speed segments at ``rates`` (steps/s per axis), reversing every fourth
-    segment, the last braking to rest from the same rate (half the distance)."""
+    segment, the last braking to rest from the same rate (half the distance); without
+    ``brake``, the last at the rates too and a segment at rest after it (a stop: only
+    steady segments, which the step engine steps; it leaves ramps to the tick's DDA)."""
     d = np.array(rates, dtype=np.int64) * ticks // CLOCK_HZ
     sign = np.where((np.arange(n) // 4) % 2 == 0, 1, -1)
     deltas = np.outer(sign, d)
-    deltas[-1] //= 2
     ramps = np.full(n, RAMP_CONSTANT, dtype=np.int16)
+    if not brake:
+        deltas = np.vstack([deltas, np.zeros((1, len(d)), dtype=np.int64)])
+        return SegmentBatch(np.full(n + 1, ticks), deltas, np.append(ramps, RAMP_CONSTANT))
+    deltas[-1] //= 2
     ramps[-1] = RAMP_TO_REST
     return SegmentBatch(np.full(n, ticks), deltas, ramps)
 
@@ -301,17 +308,19 @@ def highest_rate(
     hi: int | None = None,
     repeats: int = 3,
     speedup: float = 4.0,
+    brake: bool = True,
 ) -> dict[str, Any]:
     """The highest R (a multiple of RESOLUTION) at which ``config`` passes: bisected
     between ``lo`` and ``hi`` on one run a point, then confirmed on ``repeats`` runs
     (stepping down while one of them fails: a host byte arriving with a step makes a
     run differ from the next). Its figures are the worst of its runs; ``fail`` is the
-    lowest rate seen failing and why."""
+    lowest rate seen failing and why. ``brake``: constant_batch's last segment."""
     hi = hi or CEILINGS[config]
     runs: dict[int, list[dict[str, Any]]] = {}
 
     def run(r: int) -> dict[str, Any]:
-        p = run_batch(build, constant_batch(rates_of(config, r)), speedup=speedup)
+        batch = constant_batch(rates_of(config, r), brake=brake)
+        p = run_batch(build, batch, speedup=speedup)
         runs.setdefault(r, []).append(p)
         return p
 

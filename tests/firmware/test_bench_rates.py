@@ -54,6 +54,16 @@ def test_ramps_reach_r_from_rest_and_end_at_rest(fr):
     assert batch.deltas.sum(axis=0).tolist() == [0, 0, 0, 0]  # back and forth
 
 
+def test_without_a_brake_the_points_are_steady_and_stop_at_rest(fr):
+    rates = [20_000, 15_000, 10_000, 2_000]
+    batch = fr.constant_batch(rates, n=6, brake=False)
+    assert set(batch.ramps.tolist()) == {RAMP_CONSTANT}  # the step engine's own segments
+    assert not batch.deltas[-1].any() and batch.deltas[-2].any()  # a stop, then rest
+    assert peak_step_rates(batch, 100_000)[:, 0].max() == 20_000
+    braked = fr.constant_batch(rates, n=6)
+    assert len(braked) == 6 and braked.ramps[-1] != RAMP_CONSTANT
+
+
 def test_edge_errors_count_missing_edges_and_measure_each_edge(fr):
     batch = fr.constant_batch([10_000, 0, 0, 0], n=2)
     ideal = fr.ideal_edges_us(batch, 0)
