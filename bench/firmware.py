@@ -4,6 +4,8 @@
     python bench/firmware.py --rates        # only the highest-rate search (about 20 s)
     python bench/firmware.py --acceptance   # only issue 29's acceptance rows, as a table
     python bench/firmware.py --heaters      # only the heater rows
+    python bench/firmware.py --rates --engine [--steady] [--lowest N] [--cflags OPTS]
+    python bench/firmware.py --acceptance --engine
 
 Builds the firmware and the simavr harness, reads `avr-size`, then streams through the
 harness (a real HostLink over the harness's pty at 250000 baud, in real time) and reports
@@ -84,6 +86,49 @@ announced limits: 1147.4 s against 744.6 s without a cap (+54 %); the estimate w
 board's record 1145.4 s (-0.17 %). `--acceptance` today: the three rate rows, the cup's
 +1 % and both 30 s print-like streams fail; the estimate (-0.17 %), heaters off
 (0.005 s) and the stack (79 B free, flash 42,262 B, RAM 7,585 B) pass.
+
+The step engine beside it (issue 29 Deliver 5; `--engine`: firmware/src/step_engine.c
+built with `-DSTEP_ENGINE=1 -DMAX_STEP_RATE=N` into firmware/build/engine-rate-N; the
+harness now profiles every step interrupt of either engine, Timer1 A/B, Timer3 A-C and
+Timer5 A, so the ISR load counts the engine's steps), 2026-11-29, 2 cores shared with
+three other sessions. `python bench/firmware.py --rates --engine`, the points braking
+to rest on a ramp as above:
+
+| configuration | engine | highest R (steps/s) | worst / p99 edge at R | ISR load at R | first fail |
+|---|---|---|---|---|---|
+| one module alone | default (tick DDA) | 39,500 | 5.98 / 3.04 us | 72.7 % | 40,000: overrun |
+| one module alone | step engine | 40,000 | 7.56 / 1.19 us | 39.7 % | 40,500: overrun |
+| three modules in step | default | 18,500 | 6.28 / 4.97 us | 53.8 % | 19,000: overrun |
+| three modules in step | step engine | 11,000 | 8.92 / 1.95 us | 37.4 % | 11,500: overrun |
+| three out of step, extruder 0.1 R | default | 10,500 | 8.16 / 4.48 us | 64.5 % | 11,000: edge 10.8 us |
+| three out of step, extruder 0.1 R | step engine | none | 12.62 / 12.36 us at 1,000 | 15.7 % | 1,000: edge 12.6 us |
+| a print's mix | default | 11,000 | 8.22 / 4.83 us | 56.2 % | 11,500: p99 5.16 us |
+| a print's mix | step engine | none | 18.75 / 13.62 us at 1,000 | 15.9 % | 1,000: edge 18.8 us |
+| the mix with ramps from rest to 11,000 and back | default | fails: 5 overruns | 8.08 / 5.05 us | 59.7 % | |
+
+The engine steps steady segments only: the braking segment runs on the tick's DDA, so
+one module stops at the DDA's 16 steps a tick, and its errors reach 2-4 ms at higher R
+(a print's mix at 30,000: 2,111 / 392 us, 15 overruns). Axes under about 1,000 steps/s
+are 12-19 us late on every edge (a constant offset: p99 = worst; the extruder at 100/s,
+Z at 500/s, Y at 750/s of R = 1,000), so the out-of-step and mix searches fail at their
+start. `--steady` ends each point with a stop (a segment at rest after full speed)
+instead: `--rates --engine --steady --lowest 10000`: one module 40,000 (DDA) against
+97,000 on the engine (6.32 / 3.88 us, 75.1 %; 97,500: an edge a timer period late,
+4.1 ms), three in step 40,000 (6.75 / 4.0 us, 87.8 %) against 27,500 (8.45 / 4.59 us,
+70.6 %), three out of step 11,000 (7.11 / 4.94 us, 64.5 %) against none (p99 5.11 us at
+10,000), the mix 18,500 (7.81 / 4.84 us, 75.5 %) against 16,000 (7.12 / 1.25 us,
+37.6 %); with ramps both fail (91 and 74 overruns). From 1,000 (`--steady`) the engine
+reaches 106,500 alone (7.61 / 3.35 us, 81.5 %) and 20,000 in step (then an edge 4.1 ms
+late). The searches bisect as if a failure at R meant one above it, which neither
+engine quite keeps (the mix on the engine passes at 30,000 with a stop: 9.81 / 4.79 us;
+three in step on the DDA failed at 18,500 once and passed at 40,000 in another run):
+read R as "passes here", not as the edge of a clean range. The issue's rate rows
+(`--acceptance --engine`, braking): the mix at 30,000, default 558 overruns, engine 15
+overruns (with a stop: passes, 9.81 / 4.79 us); three out of step at 33,000, default 578
+overruns, engine 72 (with a stop: 59 overruns, 24.97 / 5.56 us); one module at 100,000,
+default overruns, engine 4 overruns (with a stop: passes, 6.25 / 3.56 us). The step
+interrupts with nothing moving: 7.9 % of the CPU on the default build, 8.9 % on the
+engine's.
 
 Real-time runs depend on the machine's load (simavr must keep up with 1x); the step
 timing and ISR figures are in simulated time and do not.
@@ -338,20 +383,27 @@ def _announced() -> tuple[int, int]:
         return link.identity.max_step_rate, caps.min_segment_ticks if caps else 1
 
 
-def _rate_search(speedup: float = 4.0) -> dict[str, Any]:
+def _rate_search(
+    cflags: str = "", speedup: float = 4.0, brake: bool = True, lowest: int = 1_000
+) -> dict[str, Any]:
     """Per configuration, the highest R with every edge within 10 us of its ideal time,
     p99 within 5 us, no overrun, no lost or late step, the record exact (firmware_rates.py:
-    constant-speed segments on a build announcing up to 200,000 steps/s); the step
-    interrupts' load there; then the print's mix speeding up from rest to its R and back."""
-    build = rates_bench.variant(max(rates_bench.CEILINGS.values()))
+    constant-speed segments on a build announcing up to 200,000 steps/s, with the build
+    options ``cflags``: "" the default engine, ``ENGINE_CFLAGS`` the step engine); the step
+    interrupts' load there; then the print's mix speeding up from rest to its R and back.
+    Without ``brake`` the points stop (a segment at rest) instead of braking on a ramp;
+    ``lowest``: where the search starts (a configuration failing there has no R)."""
+    build = rates_bench.variant(max(rates_bench.CEILINGS.values()), cflags)
     idle = rates_bench.idle_isr_share(build)
     out: dict[str, Any] = {
-        "build": f"firmware/build/rate-{build.max_step_rate}",
+        "engine": build.engine,
+        "build": f"firmware/{build.elf.parent.relative_to(avr_device.FIRMWARE_DIR)}",
         "isr_idle_share_pct": round(100 * idle, 1),
+        "points_end": "braking on a ramp" if brake else "with a stop",
     }
     rows = []
     for config in rates_bench.CONFIGS:
-        r = rates_bench.highest_rate(build, config, speedup=speedup)
+        r = rates_bench.highest_rate(build, config, lo=lowest, speedup=speedup, brake=brake)
         at = r.pop("at", None)
         if at is not None:
             r["isr_load_pct_of_motion"] = rates_bench.isr_load_pct(at, idle)
@@ -374,6 +426,44 @@ def _rate_search(speedup: float = 4.0) -> dict[str, Any]:
             "fail_reason": rates_bench.fail_reason(ramp),
         }
     return out
+
+
+def _engines(args: argparse.Namespace) -> list[str]:
+    """The build options of each engine to measure: the default engine (the baseline)
+    first, then the step engine (``--engine``) and ``--cflags``'s build."""
+    out = [""]
+    if args.engine:
+        out.append(rates_bench.ENGINE_CFLAGS)
+    if args.cflags:
+        out.append(args.cflags)
+    return list(dict.fromkeys(out))
+
+
+def _rates_table(searches: list[dict[str, Any]]) -> list[str]:
+    """The rate searches of one run as one markdown table, engine beside engine."""
+    head = ("configuration", "engine", "highest R (steps/s)", "worst / p99 edge at R")
+    head += ("ISR load at R", "first fail")
+    lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    for i, config in enumerate(rates_bench.CONFIGS):
+        for search in searches:
+            r = search["highest_rate"][i]
+            rate = f"{r['rate']:,}" if r.get("rate") else "none"
+            edge = f"{r['worst_us']} / {r['p99_us']} us" if "worst_us" in r else ""
+            load = f"{r['isr_load_pct_of_motion']} %" if "isr_load_pct_of_motion" in r else ""
+            fail = f"{r['lowest_fail']:,}: {r['fail_reason']}" if "lowest_fail" in r else "none"
+            lines.append(f"| {config} | {search['engine']} | {rate} | {edge} | {load} | {fail} |")
+    for search in searches:
+        ramp = search.get("print_mix_with_ramps_at_its_rate")
+        if ramp:
+            verdict = "passes" if ramp["passed"] else f"fails: {ramp['fail_reason']}"
+            lines.append(
+                f"| the mix with ramps from rest to {ramp['rate']:,} and back | "
+                f"{search['engine']} | {verdict} | {ramp['worst_us']} / {ramp['p99_us']} us"
+                f" | {ramp['isr_load_pct_of_motion']} % | |"
+            )
+    idle = ", ".join(f"{s['engine']} {s['isr_idle_share_pct']} %" for s in searches)
+    lines += ["", f"The step interrupts' share of the CPU with nothing moving: {idle}."]
+    return lines
 
 
 def _print_like_batch(rate: int, ticks: int, seconds: float, limit: int) -> SegmentBatch:
@@ -471,8 +561,9 @@ def _stack_free() -> int | None:
     return int(m.group(1)) if m else None
 
 
-def _acceptance() -> list[tuple[str, str, str, bool | None]]:
-    """The issue's acceptance rows: (what, the issue's figure, measured, passed)."""
+def _acceptance(engines: tuple[str, ...] = ("",)) -> list[tuple[str, str, str, bool | None]]:
+    """The issue's acceptance rows: (what, the issue's figure, measured, passed); the rate
+    rows for each engine of ``engines`` (build options: "" the default engine)."""
     rows: list[tuple[str, str, str, bool | None]] = []
     for config, rate in (
         ("a print's mix", 30_000),
@@ -480,15 +571,14 @@ def _acceptance() -> list[tuple[str, str, str, bool | None]]:
         ("one module alone", 100_000),
     ):
         rates = rates_bench.rates_of(config, rate)
-        p = rates_bench.run_batch(
-            rates_bench.variant(max(rates)), rates_bench.constant_batch(rates)
-        )
-        got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
-        if not p["passed"]:
-            got += f"; {rates_bench.fail_reason(p)}"
-        rows.append(
-            (f"{config} at R = {rate:,}", "worst <= 10 us, p99 <= 5 us, clean", got, p["passed"])
-        )
+        for cflags in engines:
+            build = rates_bench.variant(max(rates), cflags)
+            p = rates_bench.run_batch(build, rates_bench.constant_batch(rates))
+            got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
+            if not p["passed"]:
+                got += f"; {rates_bench.fail_reason(p)}"
+            what = f"{config} at R = {rate:,}" + (f" ({build.engine})" if len(engines) > 1 else "")
+            rows.append((what, "worst <= 10 us, p99 <= 5 us, clean", got, p["passed"]))
     rate, min_ticks = _announced()
     cup = _cup(rate, min_ticks)
     rows.append(
@@ -555,7 +645,6 @@ def _acceptance() -> list[tuple[str, str, str, bool | None]]:
 
 
 def _print_acceptance(rows: list[tuple[str, str, str, bool | None]]) -> None:
-    print("python bench/firmware.py --acceptance")
     print("| acceptance row | issue | measured | |")
     print("|---|---|---|---|")
     for what, want, got, ok in rows:
@@ -578,6 +667,30 @@ def main() -> int:
         help="the busiest module's steps/s in the print-like streams (default: 90 %% of the "
         "rate the firmware announces, as the host plans)",
     )
+    ap.add_argument(
+        "--engine",
+        action="store_true",
+        help="--rates/--acceptance: measure the step engine (STEP_ENGINE=1) beside the "
+        "default engine, in one table",
+    )
+    ap.add_argument(
+        "--cflags",
+        default="",
+        help="--rates/--acceptance: measure a build with these options too "
+        "(e.g. '-DSTEP_ENGINE=1 -DSTEP_PARTNERS=1')",
+    )
+    ap.add_argument(
+        "--steady",
+        action="store_true",
+        help="--rates: the points end with a stop (a segment at rest) instead of braking on "
+        "a ramp (the step engine steps steady segments only; ramps run on the tick's DDA)",
+    )
+    ap.add_argument(
+        "--lowest",
+        type=int,
+        default=1_000,
+        help="--rates: the R each search starts from (steps/s; default 1000)",
+    )
     args = ap.parse_args()
     missing = avr_device.toolchain_missing()
     if missing:  # one line saying what to install, not a traceback
@@ -586,13 +699,21 @@ def main() -> int:
     if args.heaters:
         print(json.dumps({"command": "python bench/firmware.py --heaters"} | _heaters(), indent=1))
         return 0
+    engines = _engines(args)
+    flags = " --engine" * args.engine + " --steady" * args.steady
+    flags += f" --lowest {args.lowest}" if args.lowest != 1_000 else ""
+    flags += f" --cflags '{args.cflags}'" if args.cflags else ""
     if args.acceptance:
-        _print_acceptance(_acceptance())
+        print(f"python bench/firmware.py --acceptance{flags}")
+        _print_acceptance(_acceptance(tuple(engines)))
         return 0
     if args.rates:
-        print(
-            json.dumps({"command": "python bench/firmware.py --rates"} | _rate_search(), indent=1)
-        )
+        searches = [
+            _rate_search(cflags, brake=not args.steady, lowest=args.lowest) for cflags in engines
+        ]
+        command = f"python bench/firmware.py --rates{flags}"
+        print(json.dumps({"command": command, "searches": searches}, indent=1))
+        print("\n".join([command, "", *_rates_table(searches)]))
         return 0
     fig: dict[str, Any] = {
         "command": "python bench/firmware.py" + (" --quick" if args.quick else "")

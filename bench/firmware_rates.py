@@ -67,6 +67,10 @@ CEILINGS = {
 }
 
 
+#: the build options of the step engine (firmware/src/step_engine.c, docs/step-engine.md)
+ENGINE_CFLAGS = "-DSTEP_ENGINE=1"
+
+
 @dataclass(frozen=True)
 class Build:
     """A firmware build for the simulator: the ELF and the harness that runs it."""
@@ -74,24 +78,40 @@ class Build:
     max_step_rate: int | None  # None: the default build (config.h's rate)
     elf: Path
     harness: Path
+    cflags: str = ""  # build options beside MAX_STEP_RATE ("": the default engine)
+
+    @property
+    def engine(self) -> str:
+        """Which step engine the build steps with, for the tables."""
+        if not self.cflags:
+            return "default (tick DDA)"
+        return "step engine" if self.cflags == ENGINE_CFLAGS else f"with {self.cflags}"
 
 
-def variant(max_step_rate: int) -> Build:
+def variant(max_step_rate: int, cflags: str = "") -> Build:
     """The simulator build announcing ``max_step_rate`` (rounded up to a multiple of 200,
-    as motion.c's rate check needs), in its own build directory."""
+    as motion.c's rate check needs) with the build options ``cflags`` (``ENGINE_CFLAGS``:
+    the step engine), in its own build directory: ``build/rate-N`` for the default engine,
+    ``build/engine-rate-N`` for the step engine, ``build/custom-rate-N`` (rebuilt each time)
+    for other options."""
     rate = -(-max_step_rate // 200) * 200
-    build = f"build/rate-{rate}"
+    cflags = " ".join(cflags.split())
+    kind = {"": "", ENGINE_CFLAGS: "engine-"}.get(cflags, "custom-")
+    build = f"build/{kind}rate-{rate}"
+    flags = f"{cflags} -DMAX_STEP_RATE={rate}UL".strip()
+    # a custom directory's options change from run to run, its files do not: -B
+    rebuild = ["-B"] if kind == "custom-" else []
     proc = subprocess.run(
-        ["make", "-s", "-C", str(avr_device.FIRMWARE_DIR), f"BUILD={build}"]
-        + [f"EXTRA_CFLAGS=-DMAX_STEP_RATE={rate}UL", "sim"],
+        ["make", "-s", *rebuild, "-C", str(avr_device.FIRMWARE_DIR), f"BUILD={build}"]
+        + [f"EXTRA_CFLAGS={flags}", "sim"],
         capture_output=True,
         text=True,
         check=False,
     )
     if proc.returncode:
-        raise SystemExit(f"building the firmware with MAX_STEP_RATE={rate} failed:\n{proc.stderr}")
+        raise SystemExit(f"building the firmware with {flags} failed:\n{proc.stderr}")
     out = avr_device.FIRMWARE_DIR / build
-    return Build(rate, out / "cdpr-sim.elf", out / "cdpr-sim")
+    return Build(rate, out / "cdpr-sim.elf", out / "cdpr-sim", cflags)
 
 
 def default_build() -> Build:
@@ -111,14 +131,21 @@ def rates_of(config: str, rate: float) -> list[int]:
     return out
 
 
-def constant_batch(rates: list[int], n: int = SEGMENTS, ticks: int = SEGMENT_TICKS) -> SegmentBatch:
+def constant_batch(
+    rates: list[int], n: int = SEGMENTS, ticks: int = SEGMENT_TICKS, *, brake: bool = True
+) -> SegmentBatch:
     """``n`` constant-speed segments at ``rates`` (steps/s per axis), reversing every fourth
-    segment, the last braking to rest from the same rate (half the distance)."""
+    segment, the last braking to rest from the same rate (half the distance); without
+    ``brake``, the last at the rates too and a segment at rest after it (a stop: only
+    steady segments, which the step engine steps; it leaves ramps to the tick's DDA)."""
     d = np.array(rates, dtype=np.int64) * ticks // CLOCK_HZ
     sign = np.where((np.arange(n) // 4) % 2 == 0, 1, -1)
     deltas = np.outer(sign, d)
-    deltas[-1] //= 2
     ramps = np.full(n, RAMP_CONSTANT, dtype=np.int16)
+    if not brake:
+        deltas = np.vstack([deltas, np.zeros((1, len(d)), dtype=np.int64)])
+        return SegmentBatch(np.full(n + 1, ticks), deltas, np.append(ramps, RAMP_CONSTANT))
+    deltas[-1] //= 2
     ramps[-1] = RAMP_TO_REST
     return SegmentBatch(np.full(n, ticks), deltas, ramps)
 
@@ -191,13 +218,17 @@ def harness(
 def _stats(tmp: Path) -> dict[str, Any]:
     stats = tmp / "stats.json"
     s: dict[str, Any] = json.loads(stats.read_text()) if stats.exists() else {}
-    # the step interrupts' cycles: compare A (compare B nested in it included) and
-    # compare B on its own, as the harness profiles them (CDPR_SIM_PROFILE_ISR: Timer1's
-    # vectors 17 and 18); a step engine on other vectors needs the harness's profile to
-    # follow, and this is the one place that reads it
-    s["isr_cycles"] = s.get("isr_profiled_mean_cycles", 0.0) * s.get("isr_profiled_count", 0)
-    s["isr_cycles"] += s.get("compare_b_outside_cycles", 0)
+    # the step interrupts' cycles as the harness profiles them (CDPR_SIM_PROFILE_ISR):
+    # every step vector of either engine (Timer1 compare A/B, Timer3 compare A-C, Timer5
+    # compare A), from its vector to its RETI, nested ones counted once
+    s["isr_cycles"] = s.get("step_isr_cycles", 0)
     return s
+
+
+def axis_edge_counts(edges: np.ndarray, batch: SegmentBatch) -> list[str]:
+    """Per axis, ``logged/asked`` rising edges (rows ``axis cycles``)."""
+    got = [int((edges[:, 0] == axis).sum()) if len(edges) else 0 for axis in range(4)]
+    return [f"{g}/{len(ideal_edges_us(batch, axis))}" for axis, g in enumerate(got)]
 
 
 def run_batch(
@@ -222,6 +253,7 @@ def run_batch(
         "worst_us": round(float(err.max()), 2),
         "p99_us": round(float(np.percentile(err, 99)), 2),
         "edges_missing_or_extra": miscount,
+        "edges": axis_edge_counts(edges, batch),
         "overruns": s.get("overruns", -1),
         "lost_steps": s.get("lost_steps", -1),
         "late_pulses": s.get("late_pulses", -1),
@@ -276,17 +308,19 @@ def highest_rate(
     hi: int | None = None,
     repeats: int = 3,
     speedup: float = 4.0,
+    brake: bool = True,
 ) -> dict[str, Any]:
     """The highest R (a multiple of RESOLUTION) at which ``config`` passes: bisected
     between ``lo`` and ``hi`` on one run a point, then confirmed on ``repeats`` runs
     (stepping down while one of them fails: a host byte arriving with a step makes a
     run differ from the next). Its figures are the worst of its runs; ``fail`` is the
-    lowest rate seen failing and why."""
+    lowest rate seen failing and why. ``brake``: constant_batch's last segment."""
     hi = hi or CEILINGS[config]
     runs: dict[int, list[dict[str, Any]]] = {}
 
     def run(r: int) -> dict[str, Any]:
-        p = run_batch(build, constant_batch(rates_of(config, r)), speedup=speedup)
+        batch = constant_batch(rates_of(config, r), brake=brake)
+        p = run_batch(build, batch, speedup=speedup)
         runs.setdefault(r, []).append(p)
         return p
 

@@ -107,6 +107,13 @@ static uint16_t isr_sp;
 /* compare B interrupts outside compare A's (the steps it issues between ticks) */
 static uint64_t b_entry, b_cycles_sum, b_count;
 static uint16_t b_sp;
+/* every step interrupt either engine uses, from its vector to its own RETI, counted once
+ * when step interrupts nest (the outermost): Timer1 compare A (the tick) and B (the
+ * DDA's steps between ticks), Timer3 compare A-C and Timer5 compare A (step_engine.c);
+ * byte addresses of the ATmega2560's vectors, 4 bytes each */
+static const uint16_t step_vectors[] = {17 * 4, 18 * 4, 32 * 4, 33 * 4, 34 * 4, 47 * 4};
+static uint64_t step_entry, step_cycles_sum, step_cycles_max, step_count;
+static uint16_t step_sp;
 static uint32_t trace_pc[8192];
 static size_t trace_len;
 
@@ -854,7 +861,8 @@ static void write_stats(void)
             "\"unrepaired\":%u,\"segments_recorded\":%llu,\"steps\":%llu,"
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
-            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u,\"heaters_off_after_hang_s\":%.4f}\n",
+            "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u,\"heaters_off_after_hang_s\":%.4f,"
+            "\"step_isr_cycles\":%llu,\"step_isr_count\":%llu,\"step_isr_max_cycles\":%llu}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -864,7 +872,8 @@ static void write_stats(void)
             stack_free,
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
             (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask,
-            heaters_off_after_hang);
+            heaters_off_after_hang, (unsigned long long)step_cycles_sum,
+            (unsigned long long)step_count, (unsigned long long)step_cycles_max);
     fclose(f);
 }
 
@@ -1052,6 +1061,21 @@ int main(int argc, char **argv)
                 pc_hist[avr->pc]++;
             if (isr_entry && trace_len < sizeof trace_pc / sizeof trace_pc[0])
                 trace_pc[trace_len++] = avr->pc | (uint32_t)(avr->data[0x84] | avr->data[0x85] << 8) << 16 ;
+            int at_step_vector = 0;
+            for (size_t i = 0; i < sizeof step_vectors / sizeof step_vectors[0]; i++)
+                at_step_vector |= avr->pc == step_vectors[i];
+            if (at_step_vector && !step_entry) {
+                step_entry = avr->cycle;
+                step_sp = sp;
+            } else if (step_entry && sp == step_sp && avr->flash[avr->pc] == 0x18 &&
+                       avr->flash[avr->pc + 1] == 0x95) {
+                uint64_t c = avr->cycle - step_entry + 4;
+                if (c > step_cycles_max)
+                    step_cycles_max = c;
+                step_cycles_sum += c;
+                step_count++;
+                step_entry = 0;
+            }
             if (avr->pc == 0x48 && !isr_entry && !b_entry) {
                 b_entry = avr->cycle;
                 b_sp = sp;
