@@ -548,14 +548,12 @@ static void chunks_early(const struct plan *p, uint8_t tail, uint8_t ahead, uint
 }
 _Static_assert(AXES_AHEAD_TICKS * TICK_CYCLES + TICK_CYCLES < 0x10000UL, "to_end in 16 bits");
 
-/* The segment's last tick: each axis issues what is left (the exact total). */
-static void __attribute__((noinline)) seg_last_tick(struct plan *p)
+/* The last tick of a segment whose steps the tick's wheel places: each axis issues what
+ * is left (the exact total), and the positions move by what was issued. */
+static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
 {
     uint16_t span = (uint16_t)(p->last_units * UNIT_CYCLES);
-    struct stepper_state *s = (struct stepper_state *)&stepper; /* private to this interrupt here */
-    struct out *o = next_tick;
     struct axis_plan *x = p->ax;
-    int32_t *pos = s->pos;
     const int32_t *d = p->delta;
     for (uint8_t k = 0; k < 4; k++, x++, pos++, d++) {
         if (!(p->moving >> k & 1))
@@ -589,6 +587,24 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
                            LAST_SLOT(p->last_units), 0));
         }
         *pos += moved;
+    }
+}
+
+/* The segment's last tick: its last steps, its end. */
+static void __attribute__((noinline)) seg_last_tick(struct plan *p)
+{
+    struct stepper_state *s = (struct stepper_state *)&stepper; /* private to this interrupt here */
+    struct out *o = next_tick;
+    if (STEP_ENGINE && !p->accel) {
+        /* the step engine's chunks issue every step (the whole delta): no count to check,
+         * and this tick stays short (at 3 x 33K the steppers leave it a third of the CPU;
+         * the DDA path's bookkeeping, 500 instructions for nothing here, overran it) */
+        const int32_t *d = p->delta;
+        int32_t *pos = s->pos;
+        for (uint8_t k = 0; k < 4; k++)
+            pos[k] += d[k];
+    } else {
+        last_steps(p, s->pos);
     }
     lost_count(wheel_take(o));
     s->current = 0xFF;
