@@ -429,7 +429,7 @@ STEP_C(__vector_end_e, 3, 1)
         "movw r26, r24\n"                                                                  \
         "4:\n\t"                                                                           \
         "sts %[oc]+1, r27\n\t"                                                             \
-        "sts %[oc], r26\n"                                                                  \
+        "sts %[oc], r26\n\t" partners                                                                \
         "10:\n\t"                                                                          \
         "pop r27\n\t"                                                                      \
         "pop r26\n\t" pin_off                                                              \

@@ -616,8 +616,10 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     uint8_t tail = ++queue_tail;
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
-    else if (STEP_ENGINE && !p->at_rest && !p->accel)
+    else if (STEP_ENGINE && !p->at_rest && !p->accel && axes_ahead < 4)
         chunks_early(p, tail, 0, 0, 4);
+    else if (STEP_ENGINE && !p->at_rest && !p->accel)
+        chunks_ahead = 1; /* every axis went out during the segment */
 }
 
 /* A limit switch stops the segment: ENDSTOP_HIT (the main loop adds the position). */
