@@ -626,9 +626,16 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
 static void __attribute__((noinline)) limit_hit(const struct plan *p)
 {
     int8_t k = limits_check(p->moving, p->dir);
-    if (k >= 0)
-        raise_error(ERR_ENDSTOP_HIT, stepper.items_done + 1, stepper.segments_done + 1,
-                    (uint8_t)k, 0);
+    if (k < 0)
+        return;
+    raise_error(ERR_ENDSTOP_HIT, stepper.items_done + 1, stepper.segments_done + 1, (uint8_t)k,
+                0);
+    if (STEP_ENGINE) {
+        /* the step engine's chunks stop with the tick, not when the main loop halts: this
+         * segment's and the next one's, out during its last ticks (chunks_early) */
+        step_engine_stop();
+        chunks_ahead = axes_ahead = 0;
+    }
 }
 
 static void __attribute__((noinline)) seg_tick(void)
