@@ -290,18 +290,24 @@ STEP_C(__vector_end_e, 3, 1)
  * DIR_NEG set the direction pin (r25 free in each). */
 
 /* Edges due together (axes in step, or a mix's coincidences): the interrupt that fires
- * reads the other steppers' compare flags right after raising its own pin, and raises
- * the pin of each one whose flag is up and whose armed compare is an edge (step_fast);
- * that stepper's interrupt, pending, then finds its pin high already (the raise is
- * idempotent), does its bookkeeping and lowers it. An edge due with another is then
- * about 1 us late instead of one interrupt (about 6 us) per stepper served before it;
- * about 10 cycles an edge. r24: the pending steppers (bits as step_fast), r25 scratch. */
+ * reads the other steppers' compare flags right after raising its own pin, and again
+ * after arming its next compare (the ones that matched while it ran), and raises the pin
+ * of each one whose flag is up and whose armed compare is an edge (step_fast); that
+ * stepper's interrupt, pending, then finds its pin high already (the raise is
+ * idempotent), does its bookkeeping and lowers it. An edge due with another or during
+ * another's interrupt is then about 1 us late instead of up to one interrupt (about
+ * 6 us) per stepper served before it; 6 cycles a check when none is pending. The check
+ * at the end leaves out E (its flag is Timer5's: 2 cycles an edge less, and with them
+ * 3 x 33K + E 3.3K keeps the tick inside its 400 us). r24: the pending steppers (bits as
+ * step_fast), r25 scratch; `others`: the other steppers' bits. */
 #define TIFR3_IO "0x18" /* iom2560.h: TIFR3, TIFR5 (OCF3A..C bits 1..3, OCF5A bit 1) */
 #define TIFR5_IO "0x1A"
 #define PENDING_T3 "in r24, " TIFR3_IO "\n\t"
 #define PENDING_T3_T5 PENDING_T3 "sbic " TIFR5_IO ", 1\n\tori r24, 0x10\n\t"
-#define RAISE_PENDING(read, raises)                                                        \
-    read "lds r25, step_fast\n\t"                                                          \
+#define RAISE_PENDING(read, others, raises)                                                \
+    read "andi r24, " others "\n\t"                                                        \
+    "breq 20f\n\t" /* (the common case: none pending, 6 cycles) */                        \
+    "lds r25, step_fast\n\t"                                                               \
     "and r24, r25\n\t"                                                                     \
     "breq 20f\n\t" raises "20:\n\t"
 #define IF_X "sbrc r24, 1\n\tsbi %[pf], %[xb]\n\t"
@@ -309,7 +315,8 @@ STEP_C(__vector_end_e, 3, 1)
 #define IF_Z "sbrs r24, 3\n\trjmp 21f\n\tlds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n21:\n\t"
 #define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
 
-#define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners) \
+#define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners, \
+                 late_partners)                                                           \
     __asm__ volatile(                                                                      \
         "push r24\n\t"                                                                     \
         "in r24, __SREG__\n\t"                                                             \
@@ -429,7 +436,7 @@ STEP_C(__vector_end_e, 3, 1)
         "movw r26, r24\n"                                                                  \
         "4:\n\t"                                                                           \
         "sts %[oc]+1, r27\n\t"                                                             \
-        "sts %[oc], r26\n"                                                                  \
+        "sts %[oc], r26\n\t" late_partners                                                   \
         "10:\n\t"                                                                          \
         "pop r27\n\t"                                                                      \
         "pop r26\n\t" pin_off                                                              \
@@ -456,13 +463,15 @@ ISR(TIMER3_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[0], OCR3A, TCNT3, TIMSK3, _BV(OCIE3A), "sbi %[pf], %[xb]\n\t", "cbi %[pf], %[xb]\n\t",
              "sbi %[pf], %[xd]\n\t", "cbi %[pf], %[xd]\n\t", 1, "__vector_step_x",
-             "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, IF_Y IF_Z IF_E));
+             "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, "0x1C", IF_Y IF_Z IF_E),
+             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z));
 }
 ISR(TIMER3_COMPB_vect, ISR_NAKED)
 {
     STEP_ASM(axes[1], OCR3B, TCNT3, TIMSK3, _BV(OCIE3B), "sbi %[pf], %[yb]\n\t", "cbi %[pf], %[yb]\n\t",
              "sbi %[pf], %[yd]\n\t", "cbi %[pf], %[yd]\n\t", 2, "__vector_step_y",
-             "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, IF_X IF_Z IF_E));
+             "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, "0x1A", IF_X IF_Z IF_E),
+             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z));
 }
 ISR(TIMER3_COMPC_vect, ISR_NAKED)
 {
@@ -470,13 +479,15 @@ ISR(TIMER3_COMPC_vect, ISR_NAKED)
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zb])\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
-             "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, IF_X IF_Y IF_E));
+             "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, "0x16", IF_X IF_Y IF_E),
+             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y));
 }
 ISR(TIMER5_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[3], OCR5A, TCNT5, TIMSK5, _BV(OCIE5A), "sbi %[pa], %[eb]\n\t", "cbi %[pa], %[eb]\n\t",
              "sbi %[pa], %[ed]\n\t", "cbi %[pa], %[ed]\n\t", 8, "__vector_step_e",
-             "__vector_end_e", RAISE_PENDING(PENDING_T3, IF_X IF_Y IF_Z));
+             "__vector_end_e", RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z),
+             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z));
 }
 _Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
                "the assembly sets a direction pin high for positive steps");

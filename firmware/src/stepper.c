@@ -78,9 +78,11 @@ static uint32_t ticks_left;   /* SEG, DWELL: ticks left */
 static uint8_t last_units;    /* DWELL: length of the last tick */
 static uint8_t settle_ticks;  /* ticks to wait after positions were set */
 static uint8_t abort_pending; /* a segment was abandoned: mark it */
-/* the step engine's chunks of the plan at plan_tail are out already (seg_last_tick put
- * them out with the segment before it) */
+/* the step engine's chunks of the plan at plan_tail are out already (put out during the
+ * segment before it) */
 static uint8_t chunks_ahead;
+/* the next segment's axes (0..4) whose chunks went out during this segment's last ticks */
+static uint8_t axes_ahead;
 static uint32_t abort_seq;
 
 void stepper_init(uint8_t hold_mask)
@@ -260,7 +262,7 @@ void stepper_halt(void)
     if (STEP_ENGINE)
         step_engine_stop();
     if (STEP_ENGINE)
-        chunks_ahead = 0;
+        chunks_ahead = axes_ahead = 0;
     SREG = s;
     if (sn.running) {
         int32_t pos[4];
@@ -285,7 +287,7 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     if (STEP_ENGINE)
         step_engine_stop();
     if (STEP_ENGINE)
-        chunks_ahead = 0;
+        chunks_ahead = axes_ahead = 0;
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
     motion_plans_reset();
@@ -335,26 +337,35 @@ static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backin
 }
 
 /* A steady segment's steps: one chunk an axis, from the segment's start `start` (Q24.8
- * on the steppers' clock), the first edge half an interval in (PROTOCOL.md 5.1). */
-static void __attribute__((noinline, unused)) seg_chunks(const struct plan *p, uint32_t start)
+ * on the steppers' clock), the first edge half an interval in (PROTOCOL.md 5.1); the
+ * axes from `from` on, at most `most` moving ones. Returns the axis after the last one
+ * put out (4: all). */
+static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p, uint32_t start,
+                                                            uint8_t from, uint8_t most)
 {
 #if STEP_ENGINE
     struct step_chunk c;
-    const struct axis_plan *x = p->ax;
-    const int32_t *d = p->delta;
-    for (uint8_t k = 0; k < 4; k++, x++, d++) {
+    const struct axis_plan *x = p->ax + from;
+    const int32_t *d = p->delta + from;
+    uint8_t k = from;
+    for (; k < 4 && most; k++, x++, d++) {
         int32_t n = *d;
         if (!n)
             continue;
+        most--;
         c.neg = n < 0;
         c.count = (uint16_t)(n < 0 ? -n : n);
         c.interval = x->interval;
         c.t = start + (c.interval >> 1);
         step_engine_push(k, &c);
     }
+    return k;
 #else
     (void)p;
     (void)start;
+    (void)from;
+    (void)most;
+    return 4;
 #endif
 }
 
@@ -391,7 +402,8 @@ static void __attribute__((noinline)) dispatch(void)
                 if (chunks_ahead)
                     chunks_ahead = 0;
                 else
-                    seg_chunks(p, step_clock_next_tick);
+                    seg_chunks(p, step_clock_next_tick, 0, 4);
+                axes_ahead = 0;
             }
             return;
         }
@@ -505,33 +517,43 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
     return n;
 }
 
-/* With the step engine: the next segment's chunks put out with this one's last tick
- * (its start is this tick's end), a tick before dispatch would, so each stepper takes
- * them at its last edge of this segment without stopping, and the boundary's work is
- * spread over two ticks. Only a steady segment after a steady one, that dispatch would
- * start as it is (its plan ready, its axes enabled, nothing to wait for); else dispatch
- * does it (after a ramp, whose last steps the tick's wheel issues, an early start of the
- * steppers put the ramp's last step 135 us late). */
-static void chunks_early(const struct plan *p, uint8_t tail)
+/* With the step engine: the next segment's chunks put out during this one, one moving
+ * axis in each of its last AXES_AHEAD_TICKS ticks but the last, and what is left with
+ * the last (whose end is the next one's start), so each stepper takes its chunk at its
+ * last edge of this segment without stopping, and no tick does the whole boundary's work
+ * (with three steppers at 33K the steppers leave a tick about a third of the CPU, and
+ * the segment's end and the four chunks together overran it). Only a steady segment
+ * after a steady one, that dispatch would start as it is (its plan ready, its axes
+ * enabled, nothing to wait for); else dispatch does it (after a ramp, whose last steps
+ * the tick's wheel issues, an early start of the steppers put the ramp's last step
+ * 135 us late). `ahead`: the plans between the running one and the next (1 during the
+ * segment, 0 in its last tick, after plan_tail moved on); `ticks`: the whole ticks
+ * from the one being computed to the segment's last one, that one excluded; `most`: the
+ * moving axes to put out now. */
+#define AXES_AHEAD_TICKS 4
+static void chunks_early(const struct plan *p, uint8_t tail, uint8_t ahead, uint8_t ticks,
+                         uint8_t most)
 {
-    if (!STEP_ENGINE || settle_ticks || queue_slot(tail)->kind != IT_SEG || plan_tail == plan_head)
+    if (!STEP_ENGINE || settle_ticks || (uint8_t)(plan_head - plan_tail) <= ahead ||
+        queue_slot(tail)->kind != IT_SEG)
         return;
-    const struct plan *n = &plans[plan_tail & (PLAN_SLOTS - 1)];
+    const struct plan *n = &plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)];
     if (n->index != tail || n->accel || (stepper.enabled_mask | n->moving) != stepper.enabled_mask)
         return;
-    seg_chunks(n, step_clock_next_tick +
-                      ((uint32_t)(uint16_t)(p->last_units * UNIT_CYCLES) << STEP_FRAC_BITS));
-    chunks_ahead = 1;
+    uint16_t to_end = (uint16_t)(ticks * TICK_CYCLES + (uint16_t)(p->last_units * UNIT_CYCLES));
+    axes_ahead = seg_chunks(n, step_clock_next_tick + ((uint32_t)to_end << STEP_FRAC_BITS),
+                            axes_ahead, most);
+    if (!ahead)
+        chunks_ahead = 1;
 }
+_Static_assert(AXES_AHEAD_TICKS * TICK_CYCLES + TICK_CYCLES < 0x10000UL, "to_end in 16 bits");
 
-/* The segment's last tick: each axis issues what is left (the exact total). */
-static void __attribute__((noinline)) seg_last_tick(struct plan *p)
+/* The last tick of a segment whose steps the tick's wheel places: each axis issues what
+ * is left (the exact total), and the positions move by what was issued. */
+static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
 {
     uint16_t span = (uint16_t)(p->last_units * UNIT_CYCLES);
-    struct stepper_state *s = (struct stepper_state *)&stepper; /* private to this interrupt here */
-    struct out *o = next_tick;
     struct axis_plan *x = p->ax;
-    int32_t *pos = s->pos;
     const int32_t *d = p->delta;
     for (uint8_t k = 0; k < 4; k++, x++, pos++, d++) {
         if (!(p->moving >> k & 1))
@@ -566,6 +588,24 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
         }
         *pos += moved;
     }
+}
+
+/* The segment's last tick: its last steps, its end. */
+static void __attribute__((noinline)) seg_last_tick(struct plan *p)
+{
+    struct stepper_state *s = (struct stepper_state *)&stepper; /* private to this interrupt here */
+    struct out *o = next_tick;
+    if (STEP_ENGINE && !p->accel) {
+        /* the step engine's chunks issue every step (the whole delta): no count to check,
+         * and this tick stays short (at 3 x 33K the steppers leave it a third of the CPU;
+         * the DDA path's bookkeeping, 500 instructions for nothing here, overran it) */
+        const int32_t *d = p->delta;
+        int32_t *pos = s->pos;
+        for (uint8_t k = 0; k < 4; k++)
+            pos[k] += d[k];
+    } else {
+        last_steps(p, s->pos);
+    }
     lost_count(wheel_take(o));
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
@@ -576,17 +616,26 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     uint8_t tail = ++queue_tail;
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
+    else if (STEP_ENGINE && !p->at_rest && !p->accel && axes_ahead < 4)
+        chunks_early(p, tail, 0, 0, 4);
     else if (STEP_ENGINE && !p->at_rest && !p->accel)
-        chunks_early(p, tail);
+        chunks_ahead = 1; /* every axis went out during the segment */
 }
 
 /* A limit switch stops the segment: ENDSTOP_HIT (the main loop adds the position). */
 static void __attribute__((noinline)) limit_hit(const struct plan *p)
 {
     int8_t k = limits_check(p->moving, p->dir);
-    if (k >= 0)
-        raise_error(ERR_ENDSTOP_HIT, stepper.items_done + 1, stepper.segments_done + 1,
-                    (uint8_t)k, 0);
+    if (k < 0)
+        return;
+    raise_error(ERR_ENDSTOP_HIT, stepper.items_done + 1, stepper.segments_done + 1, (uint8_t)k,
+                0);
+    if (STEP_ENGINE) {
+        /* the step engine's chunks stop with the tick, not when the main loop halts: this
+         * segment's and the next one's, out during its last ticks (chunks_early) */
+        step_engine_stop();
+        chunks_ahead = axes_ahead = 0;
+    }
 }
 
 static void __attribute__((noinline)) seg_tick(void)
@@ -606,8 +655,13 @@ static void __attribute__((noinline)) seg_tick(void)
         return;
     }
     uint8_t moving = p->moving, accel = p->accel, any = 0;
-    if (STEP_ENGINE && !accel)
-        return; /* a steady segment's steps are the step engine's chunks */
+    if (STEP_ENGINE && !accel) {
+        /* a steady segment's steps are the step engine's chunks; its last ticks put out
+         * the next segment's */
+        if (ticks_left <= AXES_AHEAD_TICKS && !p->at_rest)
+            chunks_early(p, (uint8_t)(queue_tail + 1), 1, (uint8_t)ticks_left, 1);
+        return;
+    }
     struct axis_plan *x = p->ax;
     const uint8_t *bit = bit_of;
     for (uint8_t m = moving; m; m >>= 1, x++, bit++) {
