@@ -18,6 +18,7 @@ from cdprhost.tui.control.backend import EMBEDDED
 from cdprhost.tui.control.live import LiveBackend
 from cdprhost.tui.control.live_diagnosis import diagnosis_view, parameter_rows
 from firmware_protocol.device.thermal_plant import HOTEND_PLANT
+from firmware_protocol.messages import PROTOCOL_MAJOR
 
 from .conftest import make_app, shown, wait_for
 from .wizard_steps import mocap_wizard, save_hidden_truth
@@ -32,7 +33,9 @@ def live():
 
 def test_embedded_device_home_jog_heaters(live):
     rows = dict(live.connect(EMBEDDED, 250000))
-    assert rows["firmware"].startswith("cdpr-sim") and rows["protocol"].startswith("2.")
+    assert rows["firmware"].startswith("cdpr-sim") and rows["protocol"].startswith(
+        f"{PROTOCOL_MAJOR}."
+    )
     status = live.device_status()
     assert not status.homed and status.position is None  # position unknown until homed
     with pytest.raises(Exception, match="not homed"):
