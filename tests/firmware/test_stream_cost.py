@@ -1,0 +1,63 @@
+"""What the AVR does per received segment, kept cheap for 2,000 print-like segments/s
+(issue 29), still exact:
+
+- the step-rate check on receipt takes a 32-bit path for a short fast segment (the
+  print's); its boundary is the protocol's: a segment exactly at MAX_STEP_RATE (peak) is
+  taken, one step more is ERROR STEP_RATE naming the axis and its peak rate, constant
+  speed and ramped alike.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from firmware_protocol.messages import ErrorCode, Flush, Segment
+from tests.conformance.device import RawHost, start
+from tests.firmware.raw import errors
+
+pytestmark = [
+    pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals"),
+    pytest.mark.timeout(300),
+]
+
+CONSTANT, TO_REST = -1, 255
+
+
+def _record(dev) -> list[dict]:
+    return [json.loads(x) for x in dev.record.read_text().splitlines() if x.strip()]
+
+
+@pytest.mark.parametrize(
+    ("over", "axis", "rate"),
+    [
+        # 5 steps in 0.5 ms at constant speed: 10,000 steps/s
+        (Segment(ticks=50, deltas=(0, 0, 0, 5), ramp=CONSTANT), 3, 10_000),
+        # 5 steps in 1 ms braking to rest: a peak of twice the mean, 10,000 steps/s
+        (Segment(ticks=100, deltas=(0, 0, -5, 0), ramp=TO_REST), 2, 10_000),
+    ],
+)
+def test_the_rate_check_boundary_on_short_segments(avr_built, tmp_path, over, axis, rate):
+    dev = start("avr", tmp_path, "--speedup", "4")
+    h = RawHost(dev.path)
+    try:
+        ident = h.hello()
+        assert ident.max_step_rate == 8_000  # the figures below are for this rate
+        h.send(
+            # 4 steps in 0.5 ms: 8,000 steps/s on every axis, exactly the rate
+            Segment(ticks=50, deltas=(4, -4, 4, -4), ramp=CONSTANT),
+            # 4 steps in 1 ms to rest: a peak of 8,000 steps/s
+            Segment(ticks=100, deltas=(-4, 4, -4, 4), ramp=TO_REST),
+            Flush(),
+        )
+        h.wait_for(lambda: h.status().segments_done == 2, timeout=30, what="both segments")
+        assert not errors(h, ErrorCode.STEP_RATE)
+        h.send(over, Flush())
+        err = h.wait_for(lambda: errors(h, ErrorCode.STEP_RATE), what="STEP_RATE")[0]
+        assert (err.axis, err.value, err.segment) == (axis, rate, 3)
+    finally:
+        h.close()
+        dev.stop()
+    assert [r["seq"] for r in _record(dev) if "error" not in r] == [1, 2]
