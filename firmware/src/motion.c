@@ -50,15 +50,19 @@ int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
     else
         f = (uint16_t)(s->ramp * 2 > 510 - s->ramp * 2 ? s->ramp * 2 : 510 - s->ramp * 2);
     /* A fast segment (short, near the rate: a print's at 2,000 segments/s): the exact
-     * test on the busiest axis in 32 bits (100 n F < 2^32 for n < 2^16, F <= 510), so
+     * test on the busiest axis in 32 bits (100 n F < 2^31 for n < 2^15, F <= 510), so
      * no axis is over without the per-axis 64-bit products below (about 1,300 cycles
      * a segment, a sixth of the CPU at 2,000 segments/s) */
-    if (most < (1UL << 16) && s->ticks <= 0xFFFFFFFFUL / RATE_K100) {
-        uint32_t n = abs32(s->deltas[0]);
-        for (uint8_t k = 1; k < 4; k++)
-            if (abs32(s->deltas[k]) > n)
-                n = abs32(s->deltas[k]);
-        if (mul16x16((uint16_t)n, f) * 100UL <= s->ticks * RATE_K100)
+    if (most < (1UL << 15) && s->ticks <= 0xFFFFFFFFUL / RATE_K100) {
+        uint16_t n = (uint16_t)s->deltas[0], m;
+        n = (int16_t)n < 0 ? (uint16_t)-n : n; /* |d| < 2^15 here */
+        for (uint8_t k = 1; k < 4; k++) {
+            m = (uint16_t)s->deltas[k];
+            m = (int16_t)m < 0 ? (uint16_t)-m : m;
+            if (m > n)
+                n = m;
+        }
+        if (mul16x16(n, (uint16_t)(f * 100U)) <= s->ticks * RATE_K100) /* 100 F <= 51,000 */
             return -1;
     }
     for (uint8_t k = 0; k < 4; k++) {

@@ -4,7 +4,11 @@
 - the step-rate check on receipt takes a 32-bit path for a short fast segment (the
   print's); its boundary is the protocol's: a segment exactly at MAX_STEP_RATE (peak) is
   taken, one step more is ERROR STEP_RATE naming the axis and its peak rate, constant
-  speed and ramped alike.
+  speed and ramped alike;
+- a DATA frame of segments only is decoded once, on receipt, into the queue slots its
+  items take (commands.c, stage_segments); a frame with anything else is checked and
+  decoded again when executed, from the coder context the staged frames before it
+  left: the record is exact either way, predicted deltas across the two included.
 """
 
 from __future__ import annotations
@@ -14,7 +18,9 @@ import os
 
 import pytest
 
-from firmware_protocol.messages import ErrorCode, Flush, Segment
+from firmware_protocol.messages import ErrorCode, Flush, Segment, SetFan
+from firmware_protocol.segments import SegmentBatch
+from firmware_protocol.streams import expected_record
 from tests.conformance.device import RawHost, start
 from tests.firmware.raw import errors
 
@@ -61,3 +67,36 @@ def test_the_rate_check_boundary_on_short_segments(avr_built, tmp_path, over, ax
         h.close()
         dev.stop()
     assert [r["seq"] for r in _record(dev) if "error" not in r] == [1, 2]
+
+
+def test_staged_and_checked_frames_keep_the_coder_context(avr_built, tmp_path):
+    # segments only (staged on receipt), then segments with a queued command (checked,
+    # decoded when executed): the second frame's first segments repeat or predict from
+    # the last of the first (opcode-only and predicted codings), so a context not handed
+    # on from the staged frame would decode them wrong
+    first = [Segment(ticks=100, deltas=(3 + k % 2, -2, 1, k % 3), ramp=CONSTANT) for k in range(12)]
+    second = [
+        Segment(ticks=100, deltas=(4, -2, 1, 2), ramp=CONSTANT),
+        Segment(ticks=100, deltas=(4, -2, 1, 2), ramp=CONSTANT),
+        Segment(ticks=100, deltas=(5, -3, 1, 2), ramp=CONSTANT),
+        Segment(ticks=200, deltas=(2, -1, 0, 1), ramp=TO_REST),
+    ]
+    segments = first + second
+    dev = start("avr", tmp_path, "--speedup", "4")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        h.send(*first)
+        h.send(*second[:2], SetFan(0, 0), *second[2:], Flush())
+        h.wait_for(
+            lambda: h.status().segments_done == len(segments), timeout=30, what="the segments"
+        )
+        assert not [m for m in h.reports if type(m).__name__ == "Error"]
+    finally:
+        h.close()
+        dev.stop()
+    batch = SegmentBatch(
+        [s.ticks for s in segments], [s.deltas for s in segments], [s.ramp for s in segments]
+    )
+    rows = [r for r in _record(dev) if "error" not in r]
+    assert rows == expected_record(batch)
