@@ -70,12 +70,13 @@ def stream(
     *,
     faults: str | None = None,
     env_extra: dict[str, str] | None = None,
+    speedup: float = 1.0,
 ) -> dict[str, Any]:
     """Stream ``batch`` at 1x to the harness running ``build`` (through a lossy relay
     with ``faults``): the harness's figures, the host's counters and the verdict."""
     tmp = Path(tempfile.mkdtemp())
     env = dict(os.environ, **(env_extra or {}))
-    cmd = [str(build.harness), str(build.elf), "--speedup", "1"]
+    cmd = [str(build.harness), str(build.elf), "--speedup", f"{speedup:g}"]
     cmd += ["--record", str(tmp / "record.jsonl"), "--stats", str(tmp / "stats.json")]
     proc = subprocess.Popen(
         cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env
@@ -190,6 +191,14 @@ def main() -> int:
     ap.add_argument("--ladder", action="store_true", help="500..2500 segments/s, 3 s each")
     ap.add_argument("--profile", action="store_true", help="where the instructions go")
     ap.add_argument("--ticks", type=int, default=50, help="--profile: segment length (units)")
+    ap.add_argument(
+        "--speedup",
+        type=float,
+        default=1.0,
+        help="device time against wall time (0.5: the host has twice the time, the "
+        "device's CPU the same: a run that passes at 0.5 and fails at 1 is limited by the "
+        "host or by simavr keeping up, not by the firmware)",
+    )
     ap.add_argument("--no-faults", action="store_true", help="the clean 2,000/s stream only")
     args = ap.parse_args()
     engines = [True] if args.only_engine else [False, True] if args.engine else [False]
@@ -206,7 +215,7 @@ def main() -> int:
                 fig["ladder_clean_3_s"] = []
                 for ticks in (200, 100, 80, 65, 50, 40):
                     batch = fw_bench._print_like_batch(args.rate, ticks, 3.0, args.limit)
-                    r = stream(build, batch)
+                    r = stream(build, batch, speedup=args.speedup)
                     r.pop("tmp")
                     fig["ladder_clean_3_s"].append(
                         {"segments_per_s": CLOCK_HZ // ticks, **line_figures(batch), **r}
@@ -216,7 +225,7 @@ def main() -> int:
                 runs.append(("faults_1000_per_s", 100, "corrupt=0.001,drop=0.001"))
             for row, ticks, faults in runs:
                 batch = fw_bench._print_like_batch(args.rate, ticks, args.seconds, args.limit)
-                r = stream(build, batch, faults=faults)
+                r = stream(build, batch, faults=faults, speedup=args.speedup)
                 r.pop("tmp")
                 deltas_differ = np.any(np.diff(batch.deltas, axis=0) != 0, axis=1).mean()
                 fig[row] = {

@@ -34,6 +34,31 @@ static inline uint32_t abs32(int32_t d)
     return (uint32_t)(d < 0 ? -d : d);
 }
 
+/* Each axis against the rate, in 64 bits where the figures need them: the axis over
+ * (its peak rate in *rate), or -1. Out of line: its frame would cost the fast tests. */
+static int8_t __attribute__((noinline)) rate_check_axes(const struct segment *s, uint16_t f,
+                                                         uint32_t *rate)
+{
+    for (uint8_t k = 0; k < 4; k++) {
+        if (s->sched.mask >> k & 1)
+            continue; /* its schedule block decides (schedule_block.h) */
+        int32_t d = s->deltas[k];
+        uint32_t n = (uint32_t)(d < 0 ? -(int64_t)d : d);
+        /* 100 n F < 2^32 when n < 2^16 (a fast segment of a print); else 64 bits */
+        uint8_t over;
+        if (n < (1UL << 16))
+            over = (uint64_t)(n * f * 100UL) > (uint64_t)s->ticks * RATE_K100;
+        else
+            over = (uint64_t)n * f * 100U > (uint64_t)s->ticks * RATE_K100;
+        if (over) {
+            float r = (float)n * (float)f * (float)CLOCK_HZ / (255.0f * (float)s->ticks);
+            *rate = r > 2147483647.0f ? 0x7FFFFFFFUL : (uint32_t)r;
+            return (int8_t)k;
+        }
+    }
+    return -1;
+}
+
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
 {
     /* 100 F <= 51000 <= FAST_K RATE_K100: no axis is over when FAST_K max|n| <= D
@@ -65,24 +90,7 @@ int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
         if (mul16x16(n, (uint16_t)(f * 100U)) <= s->ticks * RATE_K100) /* 100 F <= 51,000 */
             return -1;
     }
-    for (uint8_t k = 0; k < 4; k++) {
-        if (s->sched.mask >> k & 1)
-            continue; /* its schedule block decides (schedule_block.h) */
-        int32_t d = s->deltas[k];
-        uint32_t n = (uint32_t)(d < 0 ? -(int64_t)d : d);
-        /* 100 n F < 2^32 when n < 2^16 (a fast segment of a print); else 64 bits */
-        uint8_t over;
-        if (n < (1UL << 16))
-            over = (uint64_t)(n * f * 100UL) > (uint64_t)s->ticks * RATE_K100;
-        else
-            over = (uint64_t)n * f * 100U > (uint64_t)s->ticks * RATE_K100;
-        if (over) {
-            float r = (float)n * (float)f * (float)CLOCK_HZ / (255.0f * (float)s->ticks);
-            *rate = r > 2147483647.0f ? 0x7FFFFFFFUL : (uint32_t)r;
-            return (int8_t)k;
-        }
-    }
-    return -1;
+    return rate_check_axes(s, f, rate);
 }
 
 void motion_store(struct item *it, const struct segment *s)
