@@ -94,28 +94,29 @@ int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
 
 void motion_store(struct item *it, const struct segment *s)
 {
-    uint8_t any = 0;
-    it->kind = IT_SEG;
-    it->ticks = s->ticks;
-    it->flags = 0;
-    it->ramp = 0;
-    if (s->ramp >= 0) {
-        it->flags |= SEGF_RAMP;
-        it->ramp = (uint8_t)s->ramp;
-    }
     /* thousands of segments a second: no 64-bit negation (the decoder refuses
-     * INT32_MIN), no variable shifts */
-    uint8_t bit = 0x10;
+     * INT32_MIN), no variable shifts, the flags in a register (the item and the segment
+     * could alias: every |= would be a load and a store) */
+    uint8_t flags = 0, ramp = 0, bit = 0x10;
+    uint32_t any = 0;
+    if (s->ramp >= 0) {
+        flags = SEGF_RAMP;
+        ramp = (uint8_t)s->ramp;
+    }
     for (uint8_t k = 0; k < 4; k++, bit <<= 1) {
         int32_t d = s->deltas[k];
-        it->u.n[k] = abs32(d);
+        uint32_t n = abs32(d);
         if (d < 0)
-            it->flags |= bit;
-        if (d)
-            any = 1;
+            flags |= bit;
+        any |= n;
+        it->u.n[k] = n;
     }
     if (s->ramp == SEG_RAMP_TO_REST || !any)
-        it->flags |= SEGF_AT_REST;
+        flags |= SEGF_AT_REST;
+    it->kind = IT_SEG;
+    it->ticks = s->ticks;
+    it->flags = flags;
+    it->ramp = ramp;
 }
 
 uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units)
