@@ -155,29 +155,69 @@ def _symbols(elf: Path) -> tuple[list[int], list[str]]:
     return addrs, names
 
 
-def profile(build: rates_bench.Build, batch: SegmentBatch, top: int = 30) -> dict[str, Any]:
-    """One stream with every executed instruction counted by address (the harness's
-    CDPR_SIM_PROFILE_ALL), summed per function: the top ``top`` as a share of all
-    instructions and per segment."""
-    hist = Path(tempfile.mkdtemp()) / "pc.txt"
-    r = stream(build, batch, env_extra={"CDPR_SIM_PROFILE_ALL": "1", "CDPR_SIM_PC_HIST": str(hist)})
-    addrs, names = _symbols(build.elf)
+def _cycles_by_function(elf: Path, hist: Path) -> dict[str, int]:
+    """The harness's cycles per address (CDPR_SIM_PC_HIST) summed per function."""
+    addrs, names = _symbols(elf)
     per: dict[str, int] = defaultdict(int)
-    total = 0
     for line in hist.read_text().splitlines():
         pc, n = line.split()
-        a, c = int(pc, 16), int(n)
-        i = bisect.bisect_right(addrs, a) - 1
-        per[names[i] if i >= 0 else "?"] += c
-        total += c
+        i = bisect.bisect_right(addrs, int(pc, 16)) - 1
+        per[names[i] if i >= 0 else "?"] += int(n)
+    return per
+
+
+def _idle_session(build: rates_bench.Build, env_extra: dict[str, str], seconds: float) -> None:
+    """A session open on the harness running ``build`` for ``seconds``, nothing sent."""
+    cmd = [str(build.harness), str(build.elf), "--speedup", "1"]
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        env=dict(os.environ, **env_extra),
+    )
+    assert proc.stdout is not None
+    try:
+        link = open_link(proc.stdout.readline().strip())
+        time.sleep(seconds)
+        link.close()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(60)
+
+
+#: a function the main loop runs once a turn whatever it has to do (save_progress's copy
+#: of the interrupt's counters): the measure of how many turns a run took
+TURN_MARK = "stepper_progress"
+
+
+def profile(build: rates_bench.Build, batch: SegmentBatch, top: int = 30) -> dict[str, Any]:
+    """Where the cycles go per segment: one stream with the harness counting every
+    executed instruction's cycles by address (CDPR_SIM_PROFILE_ALL), summed per function,
+    less the main loop's turns. The turns are measured on an idle session first (every
+    function's cycles per turn, TURN_MARK counting the turns) and taken out at the
+    stream's count of turns: what is left is the work the segments cost (the stream's
+    first moments, before its first segment, count as turns). The top ``top`` functions
+    by that work, per segment."""
+    tmp = Path(tempfile.mkdtemp())
+    env = {"CDPR_SIM_PROFILE_ALL": "1", "CDPR_SIM_PC_HIST": str(tmp / "idle.txt")}
+    _idle_session(build, env, 2.0)
+    idle = _cycles_by_function(build.elf, tmp / "idle.txt")
+    env["CDPR_SIM_PC_HIST"] = str(tmp / "stream.txt")
+    r = stream(build, batch, env_extra=env)
+    load = _cycles_by_function(build.elf, tmp / "stream.txt")
+    turns = load.get(TURN_MARK, 0) / max(idle.get(TURN_MARK, 0), 1)  # in idle sessions
+    work = {k: v - turns * idle.get(k, 0) for k, v in load.items()}
+    total = sum(load.values())
     done = max(int(r["segments_done"]), 1)
-    rows = sorted(per.items(), key=lambda kv: -kv[1])[:top]
+    rows = sorted(work.items(), key=lambda kv: -kv[1])[:top]
     return {
         "run": {k: v for k, v in r.items() if k != "tmp"},
-        "cycles": total,
         "cycles_per_segment": round(total / done),
-        # name: % of all cycles, cycles per segment done
-        "functions": [f"{n}: {100 * c / total:.2f} %, {c / done:.1f}" for n, c in rows],
+        "turns_share_pct": round(100 * turns * sum(idle.values()) / total, 1),
+        "work_cycles_per_segment": round(sum(work.values()) / done),
+        # name: the segments' work in it, cycles per segment
+        "functions": [f"{n}: {c / done:.0f}" for n, c in rows],
     }
 
 
@@ -220,7 +260,7 @@ def main() -> int:
                     fig["ladder_clean_3_s"].append(
                         {"segments_per_s": CLOCK_HZ // ticks, **line_figures(batch), **r}
                     )
-            runs = [("clean_2000_per_s", 50, None)]
+            runs: list[tuple[str, int, str | None]] = [("clean_2000_per_s", 50, None)]
             if not args.no_faults:
                 runs.append(("faults_1000_per_s", 100, "corrupt=0.001,drop=0.001"))
             for row, ticks, faults in runs:

@@ -8,7 +8,10 @@
 - a DATA frame of segments only is decoded once, on receipt, into the queue slots its
   items take (commands.c, stage_segments); a frame with anything else is checked and
   decoded again when executed, from the coder context the staged frames before it
-  left: the record is exact either way, predicted deltas across the two included.
+  left: the record is exact either way, predicted deltas across the two included;
+- a segment whose deltas are plain one-byte codes takes the decoder's short path; a
+  longer code or a segment cut short by the frame's end takes the full one (the cut one
+  is BAD_COMMAND naming its opcode and offset, and nothing of its frame runs).
 """
 
 from __future__ import annotations
@@ -100,3 +103,51 @@ def test_staged_and_checked_frames_keep_the_coder_context(avr_built, tmp_path):
     )
     rows = [r for r in _record(dev) if "error" not in r]
     assert rows == expected_record(batch)
+
+
+# raw segment codings (PROTOCOL.md 4.1): opcode 0x80 | flags, the duration (LEB128) when
+# flagged, then each coded delta zigzagged (one byte for |delta| < 64)
+DURATION_100_MS = bytes([0x8A, 0x90, 0x4E])  # modules' deltas and a duration: 10,000 units
+
+
+def test_plain_one_byte_segments_and_the_full_decoder_agree(avr_built, tmp_path):
+    payload = (
+        DURATION_100_MS
+        + bytes([0x02, 0x02, 0x02])  # (1, 1, 1, 0)
+        + bytes([0x88, 0x81, 0x01, 0x02, 0x04])  # a two-byte code: (-65, 1, 2, 0)
+        + bytes([0x98, 0x03, 0x02, 0x02, 0x06])  # one byte each: (-2, 1, 1, 3)
+        + bytes([0x88, 0x7F, 0x7E, 0x00])  # the one-byte extremes: (-64, 63, 0, 0)
+        + bytes([0x80])  # a pause (no deltas): the motion ends at rest
+    )
+    deltas = [(1, 1, 1, 0), (-65, 1, 2, 0), (-2, 1, 1, 3), (-64, 63, 0, 0), (0, 0, 0, 0)]
+    dev = start("avr", tmp_path, "--speedup", "4")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        h.ep.send(payload, items=len(deltas))
+        h.send(Flush())
+        h.wait_for(lambda: h.status().segments_done == len(deltas), timeout=30, what="the run")
+        assert not [m for m in h.reports if type(m).__name__ == "Error"]
+    finally:
+        h.close()
+        dev.stop()
+    batch = SegmentBatch([10_000] * len(deltas), deltas, [CONSTANT] * len(deltas))
+    assert [r for r in _record(dev) if "error" not in r] == expected_record(batch)
+
+
+def test_a_segment_cut_short_is_bad_command_and_its_frame_does_not_run(avr_built, tmp_path):
+    # the second segment asks for four one-byte codes and the frame ends after three
+    payload = DURATION_100_MS + bytes([0x02, 0x02, 0x02, 0x98, 0x02, 0x02, 0x02])
+    dev = start("avr", tmp_path, "--speedup", "4")
+    h = RawHost(dev.path)
+    try:
+        h.hello()
+        h.ep.send(payload, items=2)
+        h.send(Flush())
+        err = h.wait_for(lambda: errors(h, ErrorCode.BAD_COMMAND), what="BAD_COMMAND")[0]
+        assert (err.axis, err.value) == (0x98, 6)
+        assert h.status().segments_done == 0
+    finally:
+        h.close()
+        dev.stop()
+    assert [r for r in _record(dev) if "error" not in r] == []
