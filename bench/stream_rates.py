@@ -21,6 +21,40 @@ A row's verdict: the record equals the segments asked for (no underrun, no refus
 segment); the host's retransmits and timeouts beside it; the line's payload bytes a
 segment and what 250000 baud leaves (``line_limit_per_s``: 25,000 B/s over the bytes a
 segment takes on the wire, frame overhead included).
+
+Figures (issue 29, 2026-11-29, 2 cores shared with three other sessions, load 3-5; the
+busiest module at 7,200 steps/s, the others at 0.75/0.5/0.1 of it: 16,500 steps/s in
+all). The line is not the limit: 4.12 payload bytes a segment (4.5 on the wire in 120-byte
+frames), 250000 baud carries 5,550 segments/s of them; protocol 3.0 needs no change.
+The firmware's CPU is: cycles a segment (``--profile``, simulated cycles, the main loop's
+idle turns taken out), before (b1a1f21) and after this bench's changes:
+
+| build, rate | before | after | where |
+|---|---|---|---|
+| default, 1,000/s (2 ticks a segment) | 13,690 | 11,150 | |
+| default, 1,818/s (1 tick) | 11,650 (underruns at 0.2 s) | 7,970 | 2,000/s leaves 8,000 |
+| step engine, 1,000/s | 13,030 | 10,270 | |
+| step engine, 1,818/s | 13,000 (underruns) | 9,200 (underruns) | |
+
+What went, a segment (default build): the check pass decoded every segment and the
+execution decoded it again (2 x 510: now once, on receipt, into its queue slot; the
+print's one-byte codes in ~100 cycles instead of the full decoder's 470); the step-rate
+check took the per-axis 64-bit path for every short fast segment (910 + 560 in libgcc's
+64-bit helpers: now 270). What is left at 1,818/s (default): the step interrupts ~3,700
+(last_steps 1,390, wheel_take 615, compare B 535, dispatch 185, the tick ~600: stepper.c,
+the steps' and ticks' cost, the same whatever the encoding), the plans 1,035
+(motion_prepare_some), queueing a segment ~1,400 (enqueue_segment 580, the rate check
+270, motion_store 260, the limits 120, the accounting 180), receiving it ~1,000 (staging
+and its decode 400, the UART's interrupts 330, CRC 210, the rest of the frame path).
+The step engine's build spends ~4,500 a segment in its interrupts (step_engine_push,
+seg_chunks, each axis's end-of-chunk and compare vectors).
+
+Clean ladders at 1x, 3 s each (`--ladder`; before -> after): default exact up to 1,250
+-> 2,000 segments/s; step engine up to 1,250 -> 1,666 (1,818: underrun at 0.8 s). The 30 s
+rows (`--engine`): default 2,000/s clean underruns at 2.2-3.1 s (the CPU at ~100 %;
+also at `--speedup 0.5`, so not the host or simavr), 1,000/s with 1e-3 corruption and
+drop exact for 30 s (968 resends, 42 timeouts; it underran at 4-11 s before); step
+engine 2,000/s underruns at 0.3 s, 1,000/s with the faults at 10.3 s.
 """
 
 from __future__ import annotations

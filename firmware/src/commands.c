@@ -3,7 +3,9 @@
  * every value, act. A DATA payload is parsed twice: first to check every field
  * and count queue items (a payload that does not decode is one BAD_COMMAND and
  * nothing of it runs; one with more queue items than free slots is left
- * unacknowledged), then to execute. */
+ * unacknowledged), then to execute. A payload of segments only (a print's stream)
+ * is decoded once instead, on receipt, into the queue slots its items will take
+ * (stage_segments), and executed from there. */
 #include <avr/interrupt.h>
 #include <avr/pgmspace.h>
 #include <stdint.h>
