@@ -394,7 +394,13 @@ static uint8_t stage_segments(const uint8_t *payload, uint8_t len, struct seg_ct
         return 0;
     struct reader r = {payload, 0, len, 0};
     struct segment s;
-    uint8_t room = machine_free(), n = 0;
+    /* the slots it may write reach back to the oldest completed item's: its departure is
+     * counted first (machine_account reads the slot), and the room ends there, not at
+     * queue_tail (an item completing meanwhile keeps its slot until it is counted) */
+    machine_account();
+    int16_t free = (int16_t)QUEUE_SIZE - (uint8_t)(queue_head - machine.accounted) -
+                   (int16_t)pend.items_total;
+    uint8_t room = free > 0 ? (uint8_t)free : 0, n = 0;
     uint8_t at = (uint8_t)(queue_head + pend.items_total);
     while (r.pos < len) {
         motion_prepare_ahead(1); /* a frame of short segments takes milliseconds */
