@@ -1027,6 +1027,8 @@ int main(int argc, char **argv)
     avr_flashaddr_t cli_pc = 0;
     avr_flashaddr_t prev_pc = 0;
     while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
+        avr_flashaddr_t run_pc = avr->pc;
+        avr_cycle_count_t run_cycle = avr->cycle;
         state = avr_run(avr);
         if (cli_log) { /* debugging: spans with interrupts masked, over 60 cycles */
             if (!avr->sreg[S_I]) {
@@ -1051,8 +1053,8 @@ int main(int argc, char **argv)
                         prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
         }
         prev_pc = avr->pc;
-        if (profile_all && avr->pc < sizeof pc_hist / sizeof pc_hist[0])
-            pc_hist[avr->pc]++; /* every instruction: where the CPU's time goes */
+        if (profile_all && run_pc < sizeof pc_hist / sizeof pc_hist[0])
+            pc_hist[run_pc] += (uint32_t)(avr->cycle - run_cycle); /* where the cycles go */
         if (profile_isr) {
             /* cycles from the step timer's vector to its own RETI (the one executed
              * with the stack pointer it entered with; nested interrupts included) */

@@ -162,8 +162,9 @@ uint8_t machine_clear_fault(void)
 int8_t machine_limits_violation(const int32_t *end, int32_t *pos)
 {
     uint8_t check = machine.limits_set & machine.tail_homed;
-    for (uint8_t k = 0; k < 3; k++)
-        if ((check >> k & 1) && (end[k] < machine.limit_lo[k] || end[k] > machine.limit_hi[k])) {
+    /* every segment on receipt: a moving bit, not -Os's shift loop */
+    for (uint8_t k = 0, bit = 1; check && k < 3; k++, bit <<= 1)
+        if ((check & bit) && (end[k] < machine.limit_lo[k] || end[k] > machine.limit_hi[k])) {
             *pos = end[k];
             return (int8_t)k;
         }
