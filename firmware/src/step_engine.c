@@ -2,9 +2,11 @@
  * rings. */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <stddef.h>
 
 #include "board_ramps14.h"
 #include "config.h"
+#include "schedule_block.h"
 #include "step_engine.h"
 #include "step_tick.h"
 
@@ -19,6 +21,11 @@ struct step_axis {
     uint8_t slow;      /* the armed event is not the assembly's: wraps left, or an
                         * interval of 32,768 cycles or more (under 489 steps/s) */
     uint8_t running;   /* its compare interrupt is on */
+    uint8_t has_add;   /* add is not 0: the interval changes at each edge */
+    int32_t add;
+    /* the running schedule block's chunks after the running one (C takes them) */
+    uint8_t nblk;
+    const struct sched_chunk *blk;
     /* The chunk after the running one, where the assembly takes it at the running one's
      * last edge (the ring's are C's): a segment's, put here a tick before it starts. */
     volatile uint8_t next_ready;
@@ -29,6 +36,11 @@ struct step_axis {
     struct step_chunk ring[CHUNK_SLOTS];
 };
 static struct step_axis axes[4];
+/* the assembly reaches has_add, add and nblk from running's address */
+_Static_assert(offsetof(struct step_axis, has_add) == offsetof(struct step_axis, running) + 1 &&
+                   offsetof(struct step_axis, add) == offsetof(struct step_axis, running) + 2 &&
+                   offsetof(struct step_axis, nblk) == offsetof(struct step_axis, running) + 6,
+               "the assembly's offsets");
 
 uint32_t step_clock_next_tick;
 volatile uint16_t step_engine_late;
@@ -42,6 +54,8 @@ uint8_t step_fast;
 #define ISR_LEAD 11
 /* an edge armed closer to now than this is set this far ahead (late) */
 #define ARM_MARGIN 24
+/* the same in C (its compare write lands later) */
+#define C_ARM_MARGIN 64
 
 #define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
 
@@ -187,19 +201,37 @@ static inline __attribute__((always_inline)) void arm(uint8_t k, struct step_axi
     a->wraps = 0;
     uint16_t now = *tcnt_of(k);
     if (ahead < 0x8000UL && (int16_t)(ocr - now) < ARM_MARGIN) {
-        ocr = (uint16_t)(now + ARM_MARGIN); /* late */
+        ocr = (uint16_t)(now + C_ARM_MARGIN); /* late */
         step_engine_late++;
     }
     *ocr_of(k) = ocr;
 }
 
-/* Take the next chunk of stepper k, at its time; returns 0 when there is none. */
+static inline __attribute__((always_inline)) void load(struct step_axis *a, uint32_t interval,
+                                                        int32_t add, uint16_t count)
+{
+    a->interval = interval;
+    a->add = add;
+    a->has_add = add != 0;
+    a->count = count;
+}
+
+/* Take the next chunk of stepper k, at its time (the running chunk's last edge is a->t);
+ * returns 0 when there is none. */
 static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step_axis *a)
 {
+    if (a->nblk) {
+        /* the block's next chunk: its first edge where the recurrence left off */
+        const struct sched_chunk *c = a->blk;
+        a->t += a->interval;
+        load(a, c->interval, c->add, c->count);
+        a->blk = c + 1;
+        a->nblk--;
+        return 1;
+    }
     if (a->next_ready) {
         a->t = a->next_t;
-        a->interval = a->next_interval;
-        a->count = a->next_count;
+        load(a, a->next_interval, 0, a->next_count);
         if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next_neg)
             set_dir(k, a->next_neg);
         a->next_ready = 0;
@@ -210,8 +242,9 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
         return 0;
     const struct step_chunk *c = &a->ring[tail & (CHUNK_SLOTS - 1)];
     a->t = c->t;
-    a->interval = c->interval;
-    a->count = c->count;
+    load(a, c->interval, c->add, c->count);
+    a->nblk = c->nblk;
+    a->blk = c->blk;
     if ((uint8_t)!!(cur_dir & bit_of_k[k]) != c->neg)
         set_dir(k, c->neg);
     a->tail = (uint8_t)(tail + 1);
@@ -220,8 +253,13 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
 
 static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
 {
-    /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles */
-    a->slow = a->wraps || (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
+    /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles
+     * (a ramp's growing ones: its last one too) */
+    uint32_t longest = a->interval;
+    if (a->has_add && a->add > 0 && a->count > 1)
+        longest += (uint32_t)a->add * (uint16_t)(a->count - 1);
+    a->slow = a->wraps || (uint8_t)(longest >> 24) || (longest & 0x800000UL) ||
+              (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
     if (a->running && !a->slow)
         step_fast |= (uint8_t)(bit_of_k[k] << 1);
     else
@@ -249,6 +287,8 @@ static inline __attribute__((always_inline)) void step_event(uint8_t k, uint8_t 
         }
         if (--a->count) {
             a->t = was + a->interval;
+            if (a->has_add)
+                a->interval += (uint32_t)a->add;
             arm(k, a, cycles_of(a->t - was));
             goto done;
         }
@@ -342,6 +382,9 @@ STEP_C(__vector_end_e, 3, 1)
         "9:\n\t"                                                                           \
         /* the chunk's last edge: the waiting chunk; none and none in the ring: the    \
          * stepper stops; else C takes the ring's */                                       \
+        "lds r24, %[run]+6\n\t" /* a block's next chunk: C */                              \
+        "tst r24\n\t"                                                                      \
+        "brne 11f\n\t"                                                                     \
         "lds r24, %[rdy]\n\t"                                                              \
         "tst r24\n\t"                                                                      \
         "brne 6f\n\t"                                                                      \
@@ -369,6 +412,7 @@ STEP_C(__vector_end_e, 3, 1)
         "6:\n\t"                                                                           \
         "clr r24\n\t"                                                                      \
         "sts %[rdy], r24\n\t"                                                              \
+        "sts %[run]+1, r24\n\t" /* a steady chunk */                                       \
         "lds r24, %[ncnt]\n\t"                                                             \
         "sts %[cnt], r24\n\t"                                                              \
         "lds r24, %[ncnt]+1\n\t"                                                           \
@@ -420,7 +464,27 @@ STEP_C(__vector_end_e, 3, 1)
         "lds r24, %[t]+3\n\t"                                                              \
         "lds r25, %[i]+3\n\t"                                                              \
         "adc r24, r25\n\t"                                                                 \
-        "sts %[t]+3, r24\n"                                                                \
+        "sts %[t]+3, r24\n\t"                                                             \
+        /* a ramp's chunk: I += add (no flag but T's bit 7 lives across: bst above) */     \
+        "lds r24, %[run]+1\n\t"                                                             \
+        "tst r24\n\t"                                                                      \
+        "breq 5f\n\t"                                                                      \
+        "lds r24, %[i]\n\t"                                                                \
+        "lds r25, %[run]+2\n\t"                                                               \
+        "add r24, r25\n\t"                                                                 \
+        "sts %[i], r24\n\t"                                                                \
+        "lds r24, %[i]+1\n\t"                                                              \
+        "lds r25, %[run]+3\n\t"                                                             \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+1, r24\n\t"                                                              \
+        "lds r24, %[i]+2\n\t"                                                              \
+        "lds r25, %[run]+4\n\t"                                                             \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+2, r24\n\t"                                                              \
+        "lds r24, %[i]+3\n\t"                                                              \
+        "lds r25, %[run]+5\n\t"                                                             \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+3, r24\n"                                                                \
         "5:\n\t"                                                                           \
         "subi r26, lo8(%[lead])\n\t"                                                       \
         "sbci r27, hi8(%[lead])\n\t"                                                       \
@@ -519,7 +583,8 @@ uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
     struct step_axis *a = &axes[k];
     uint8_t s = SREG;
     cli();
-    if (a->running && !a->next_ready && a->head == a->tail && c->interval < 0x800000UL) {
+    if (a->running && !a->next_ready && a->head == a->tail && c->interval < 0x800000UL &&
+        !c->add && !c->nblk) {
         /* the assembly takes it at the running chunk's end (which is less than a timer
          * period before it: the segments follow each other) */
         a->next_t = c->t;
@@ -555,7 +620,18 @@ void step_engine_stop(void)
         axes[k].next_ready = 0;
         axes[k].tail = axes[k].head;
         axes[k].count = 0;
+        axes[k].nblk = 0;
     }
     SREG = s;
+}
+
+uint8_t step_engine_idle(void)
+{
+    for (uint8_t k = 0; k < 4; k++) {
+        const struct step_axis *a = &axes[k];
+        if (a->running || a->next_ready || a->head != a->tail)
+            return 0;
+    }
+    return 1;
 }
 #endif

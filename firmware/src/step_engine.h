@@ -23,11 +23,17 @@
 #define CHUNK_SLOTS 2 /* a power of two: the chunks of a stepper queued ahead for C (the
                        * assembly's next chunk has a slot of its own) */
 
+struct sched_chunk;
 struct step_chunk {
     uint32_t t;        /* the first edge, Q24.8 cycles on the steppers' time base */
-    uint32_t interval; /* Q24.8 cycles between edges */
+    uint32_t interval; /* Q24.8 cycles between its first two edges */
+    int32_t add;       /* added to the interval at each edge (a ramp's; 0: steady) */
     uint16_t count;    /* edges, >= 1 */
     uint8_t neg;       /* the direction: 1 toward negative steps */
+    /* a schedule block's further chunks, run after this one (step_blocks.h): each starts
+     * where the one before left off */
+    uint8_t nblk;
+    const struct sched_chunk *blk;
 };
 
 /* The steppers' clock: Timer3's count extended to 24 bits, Q24.8 (the start of the tick
@@ -43,6 +49,9 @@ void step_engine_start_timers(uint8_t timer1_b);
  * it. Returns 0 when the stepper's ring is full (never: a segment is one chunk an axis
  * and a tick computes one ahead). */
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
+
+/* No stepper runs and none has a chunk waiting. */
+uint8_t step_engine_idle(void);
 
 /* Stop every stepper now and forget their chunks (halt, flush). */
 void step_engine_stop(void);

@@ -1,0 +1,59 @@
+/* The ring of the schedule blocks' chunks (step_blocks.h). */
+#include <avr/interrupt.h>
+
+#include "step_blocks.h"
+
+_Static_assert((BLOCK_CHUNKS & (BLOCK_CHUNKS - 1)) == 0 && BLOCK_CHUNKS <= 128,
+               "BLOCK_CHUNKS: a power of two, its counters modulo 256");
+_Static_assert(!STEP_ENGINE || BLOCK_MOST <= BLOCK_CHUNKS / 2, "two blocks of the most in the ring");
+
+#if STEP_ENGINE
+struct sched_chunk block_chunks[BLOCK_CHUNKS];
+#endif
+volatile uint8_t blocks_head, blocks_tail, blocks_stalled;
+#if STEP_ENGINE
+static struct sched_block sink;
+#endif
+
+struct sched_block *blocks_sink(void)
+{
+#if STEP_ENGINE
+    uint8_t head = blocks_head, tail = blocks_tail;
+    uint8_t at = head & (BLOCK_CHUNKS - 1);
+    if (at + BLOCK_MOST > BLOCK_CHUNKS)
+        head = (uint8_t)(head + (BLOCK_CHUNKS - at)); /* a block never wraps: skip the end */
+    if ((uint8_t)(head + BLOCK_MOST - tail) > BLOCK_CHUNKS) {
+        blocks_stalled = 1;
+        return 0;
+    }
+    blocks_stalled = 0;
+    blocks_head = head; /* the skipped end is freed with the block after it */
+    sink.chunk = &block_chunks[head & (BLOCK_CHUNKS - 1)];
+    sink.capacity = BLOCK_MOST;
+    sink.used = 0;
+    sink.mask = 0;
+    return &sink;
+#else
+    return 0;
+#endif
+}
+
+void blocks_commit(struct item *it)
+{
+#if STEP_ENGINE
+    uint8_t head = blocks_head;
+    it->blk_at = head & (BLOCK_CHUNKS - 1);
+    it->blk_mask = sink.mask;
+    head = (uint8_t)(head + sink.used);
+    it->blk_end = head;
+    blocks_head = head;
+#else
+    (void)it;
+#endif
+}
+
+void blocks_reset(void)
+{
+    blocks_tail = blocks_head;
+    blocks_stalled = 0;
+}
