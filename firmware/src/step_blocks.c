@@ -2,6 +2,7 @@
 #include <avr/interrupt.h>
 
 #include "step_blocks.h"
+#include "step_engine.h"
 
 _Static_assert((BLOCK_CHUNKS & (BLOCK_CHUNKS - 1)) == 0 && BLOCK_CHUNKS <= 128,
                "BLOCK_CHUNKS: a power of two, its counters modulo 256");
@@ -42,6 +43,15 @@ void blocks_commit(struct item *it)
 {
 #if STEP_ENGINE
     uint8_t head = blocks_head;
+    /* the chunks the engine's assembly may not run (step_chunk_slow) marked for C: bit 31
+     * of the interval (a block's intervals are under 2^31) */
+    struct sched_chunk *c = sink.chunk, *end = c + sink.used;
+    while (c < end) {
+        uint8_t n = (uint8_t)c->count; /* the axis's header */
+        for (c++; n; n--, c++)
+            if (step_chunk_slow(c->interval, c->add, c->count))
+                c->interval |= 0x80000000UL;
+    }
     it->blk_at = head & (BLOCK_CHUNKS - 1);
     it->blk_mask = sink.mask;
     head = (uint8_t)(head + sink.used);

@@ -21,9 +21,10 @@ struct step_axis {
     uint8_t slow;      /* the armed event is not the assembly's: wraps left, or an
                         * interval of 32,768 cycles or more (under 489 steps/s) */
     uint8_t running;   /* its compare interrupt is on */
-    uint8_t has_add;   /* add is not 0: the interval changes at each edge */
+    uint8_t spare;     /* (add is not 0: the stepper's bit k of GPIOR0, bit 4 + k its
+                        * waiting chunk's is or it has a block: see GPIOR0_IO) */
     int32_t add;
-    /* the running schedule block's chunks after the running one (C takes them) */
+    /* the running schedule block's chunks after the running one */
     uint8_t nblk;
     const struct sched_chunk *blk;
     /* The chunk after the running one, where the assembly takes it at the running one's
@@ -32,15 +33,30 @@ struct step_axis {
     uint32_t next_t, next_interval;
     uint16_t next_count;
     uint8_t next_neg;
+    int32_t next_add;
+    uint8_t next_nblk;
+    const struct sched_chunk *next_blk;
     volatile uint8_t head, tail;
     struct step_chunk ring[CHUNK_SLOTS];
 };
 static struct step_axis axes[4];
-/* the assembly reaches has_add, add and nblk from running's address */
-_Static_assert(offsetof(struct step_axis, has_add) == offsetof(struct step_axis, running) + 1 &&
+/* the assembly reaches add, nblk and blk from running's address */
+_Static_assert(offsetof(struct step_axis, spare) == offsetof(struct step_axis, running) + 1 &&
                    offsetof(struct step_axis, add) == offsetof(struct step_axis, running) + 2 &&
-                   offsetof(struct step_axis, nblk) == offsetof(struct step_axis, running) + 6,
+                   offsetof(struct step_axis, nblk) == offsetof(struct step_axis, running) + 6 &&
+                   offsetof(struct step_axis, blk) == offsetof(struct step_axis, running) + 7 &&
+                   offsetof(struct step_axis, next_add) == offsetof(struct step_axis, next_neg) + 1 &&
+                   offsetof(struct step_axis, next_nblk) == offsetof(struct step_axis, next_neg) + 5 &&
+                   offsetof(struct step_axis, next_blk) == offsetof(struct step_axis, next_neg) + 6,
                "the assembly's offsets");
+/* a block's chunk: count, interval, add (schedule_block.h), bit 31 of the interval set
+ * where the assembly may not run it (step_blocks.c) */
+_Static_assert(offsetof(struct sched_chunk, interval) == 2 && offsetof(struct sched_chunk, add) == 6 &&
+                   sizeof(struct sched_chunk) == 10,
+               "the assembly reads a block's chunks");
+/* GPIOR0 (sbic/sbi reach it): bit k, stepper k's running chunk has an add; bit 4 + k,
+ * its waiting chunk (next_*) has an add or further chunks (a block's) */
+#define GPIOR0_IO "0x1E"
 
 uint32_t step_clock_next_tick;
 volatile uint16_t step_engine_late;
@@ -82,6 +98,10 @@ static inline __attribute__((always_inline)) uint32_t q_of(uint16_t cycles)
 _Static_assert(STEP_FRAC_BITS == 8, "cycles_of and q_of move whole bytes");
 /* bit k (a variable shift is a loop too) */
 static const uint8_t bit_of_k[4] = {1, 2, 4, 8};
+static inline __attribute__((always_inline)) uint8_t has_add(uint8_t k)
+{
+    return GPIOR0 & bit_of_k[k];
+}
 
 void step_engine_start_timers(uint8_t timer1_b)
 {
@@ -207,12 +227,16 @@ static inline __attribute__((always_inline)) void arm(uint8_t k, struct step_axi
     *ocr_of(k) = ocr;
 }
 
-static inline __attribute__((always_inline)) void load(struct step_axis *a, uint32_t interval,
-                                                        int32_t add, uint16_t count)
+static inline __attribute__((always_inline)) void load(uint8_t k, struct step_axis *a,
+                                                        uint32_t interval, int32_t add,
+                                                        uint16_t count)
 {
-    a->interval = interval;
+    a->interval = interval & 0x7FFFFFFFUL; /* (a block's mark off) */
     a->add = add;
-    a->has_add = add != 0;
+    if (add)
+        GPIOR0 |= bit_of_k[k];
+    else
+        GPIOR0 &= (uint8_t)~bit_of_k[k];
     a->count = count;
 }
 
@@ -224,14 +248,16 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
         /* the block's next chunk: its first edge where the recurrence left off */
         const struct sched_chunk *c = a->blk;
         a->t += a->interval;
-        load(a, c->interval, c->add, c->count);
+        load(k, a, c->interval, c->add, c->count);
         a->blk = c + 1;
         a->nblk--;
         return 1;
     }
     if (a->next_ready) {
         a->t = a->next_t;
-        load(a, a->next_interval, 0, a->next_count);
+        load(k, a, a->next_interval, a->next_add, a->next_count);
+        a->nblk = a->next_nblk;
+        a->blk = a->next_blk;
         if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next_neg)
             set_dir(k, a->next_neg);
         a->next_ready = 0;
@@ -242,7 +268,7 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
         return 0;
     const struct step_chunk *c = &a->ring[tail & (CHUNK_SLOTS - 1)];
     a->t = c->t;
-    load(a, c->interval, c->add, c->count);
+    load(k, a, c->interval, c->add, c->count);
     a->nblk = c->nblk;
     a->blk = c->blk;
     if ((uint8_t)!!(cur_dir & bit_of_k[k]) != c->neg)
@@ -253,13 +279,7 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
 
 static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
 {
-    /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles
-     * (a ramp's growing ones: its last one too) */
-    uint32_t longest = a->interval;
-    if (a->has_add && a->add > 0 && a->count > 1)
-        longest += (uint32_t)a->add * (uint16_t)(a->count - 1);
-    a->slow = a->wraps || (uint8_t)(longest >> 24) || (longest & 0x800000UL) ||
-              (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
+    a->slow = a->wraps || step_chunk_slow(a->interval, has_add(k) ? a->add : 0, a->count);
     if (a->running && !a->slow)
         step_fast |= (uint8_t)(bit_of_k[k] << 1);
     else
@@ -287,7 +307,7 @@ static inline __attribute__((always_inline)) void step_event(uint8_t k, uint8_t 
         }
         if (--a->count) {
             a->t = was + a->interval;
-            if (a->has_add)
+            if (has_add(k))
                 a->interval += (uint32_t)a->add;
             arm(k, a, cycles_of(a->t - was));
             goto done;
@@ -356,7 +376,7 @@ STEP_C(__vector_end_e, 3, 1)
 #define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
 
 #define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners, \
-                 late_partners)                                                           \
+                 late_partners, kidx)                                                     \
     __asm__ volatile(                                                                      \
         "push r24\n\t"                                                                     \
         "in r24, __SREG__\n\t"                                                             \
@@ -382,9 +402,11 @@ STEP_C(__vector_end_e, 3, 1)
         "9:\n\t"                                                                           \
         /* the chunk's last edge: the waiting chunk; none and none in the ring: the    \
          * stepper stops; else C takes the ring's */                                       \
-        "lds r24, %[run]+6\n\t" /* a block's next chunk: C */                              \
+        "lds r24, %[run]+6\n\t" /* a block's next chunk */                                 \
         "tst r24\n\t"                                                                      \
-        "brne 11f\n\t"                                                                     \
+        "breq 44f\n\t"                                                                     \
+        "rjmp 40f\n"                                                                        \
+        "44:\n\t"                                                                          \
         "lds r24, %[rdy]\n\t"                                                              \
         "tst r24\n\t"                                                                      \
         "brne 6f\n\t"                                                                      \
@@ -412,7 +434,12 @@ STEP_C(__vector_end_e, 3, 1)
         "6:\n\t"                                                                           \
         "clr r24\n\t"                                                                      \
         "sts %[rdy], r24\n\t"                                                              \
-        "sts %[run]+1, r24\n\t" /* a steady chunk */                                       \
+        /* a steady chunk (add 0, no further chunks: nblk is 0 here); a ramp's first      \
+         * out of line */                                                                 \
+        "cbi " GPIOR0_IO ", " kidx "\n\t"                                                 \
+        "sbic " GPIOR0_IO ", 4+" kidx "\n\t"                                              \
+        "rjmp 46f\n"                                                                       \
+        "45:\n\t"                                                                          \
         "lds r24, %[ncnt]\n\t"                                                             \
         "sts %[cnt], r24\n\t"                                                              \
         "lds r24, %[ncnt]+1\n\t"                                                           \
@@ -465,26 +492,9 @@ STEP_C(__vector_end_e, 3, 1)
         "lds r25, %[i]+3\n\t"                                                              \
         "adc r24, r25\n\t"                                                                 \
         "sts %[t]+3, r24\n\t"                                                             \
-        /* a ramp's chunk: I += add (no flag but T's bit 7 lives across: bst above) */     \
-        "lds r24, %[run]+1\n\t"                                                             \
-        "tst r24\n\t"                                                                      \
-        "breq 5f\n\t"                                                                      \
-        "lds r24, %[i]\n\t"                                                                \
-        "lds r25, %[run]+2\n\t"                                                               \
-        "add r24, r25\n\t"                                                                 \
-        "sts %[i], r24\n\t"                                                                \
-        "lds r24, %[i]+1\n\t"                                                              \
-        "lds r25, %[run]+3\n\t"                                                             \
-        "adc r24, r25\n\t"                                                                 \
-        "sts %[i]+1, r24\n\t"                                                              \
-        "lds r24, %[i]+2\n\t"                                                              \
-        "lds r25, %[run]+4\n\t"                                                             \
-        "adc r24, r25\n\t"                                                                 \
-        "sts %[i]+2, r24\n\t"                                                              \
-        "lds r24, %[i]+3\n\t"                                                              \
-        "lds r25, %[run]+5\n\t"                                                             \
-        "adc r24, r25\n\t"                                                                 \
-        "sts %[i]+3, r24\n"                                                                \
+        /* a ramp's chunk: I += add, out of line (2 cycles an edge without) */            \
+        "sbic " GPIOR0_IO ", " kidx "\n\t"                                                \
+        "rjmp 30f\n"                                                                       \
         "5:\n\t"                                                                           \
         "subi r26, lo8(%[lead])\n\t"                                                       \
         "sbci r27, hi8(%[lead])\n\t"                                                       \
@@ -508,7 +518,117 @@ STEP_C(__vector_end_e, 3, 1)
         "pop r24\n\t"                                                                      \
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
-        "reti\n\t"                                                                         \
+        "reti\n"                                                                           \
+        "30:\n\t" /* I += add (the flags change; T's bit 7 lives in SREG's T) */           \
+        "lds r24, %[i]\n\t"                                                                \
+        "lds r25, %[run]+2\n\t"                                                            \
+        "add r24, r25\n\t"                                                                 \
+        "sts %[i], r24\n\t"                                                                \
+        "lds r24, %[i]+1\n\t"                                                              \
+        "lds r25, %[run]+3\n\t"                                                            \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+1, r24\n\t"                                                              \
+        "lds r24, %[i]+2\n\t"                                                              \
+        "lds r25, %[run]+4\n\t"                                                            \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+2, r24\n\t"                                                              \
+        "lds r24, %[i]+3\n\t"                                                              \
+        "lds r25, %[run]+5\n\t"                                                            \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+3, r24\n\t"                                                              \
+        "rjmp 5b\n"                                                                        \
+        "40:\n\t" /* a block's next chunk (r24: the chunks left): T += I, then its count, \
+                     * interval and add; one marked slow is C's */                        \
+        "push r30\n\t"                                                                     \
+        "push r31\n\t"                                                                     \
+        "lds r30, %[run]+7\n\t"                                                            \
+        "lds r31, %[run]+8\n\t"                                                            \
+        "ldd r25, Z+5\n\t"                                                                 \
+        "sbrc r25, 7\n\t"                                                                  \
+        "rjmp 41f\n\t"                                                                     \
+        "dec r24\n\t"                                                                      \
+        "sts %[run]+6, r24\n\t"                                                            \
+        "lds r24, %[t]\n\t"                                                                \
+        "lds r25, %[i]\n\t"                                                                \
+        "add r24, r25\n\t"                                                                 \
+        "sts %[t], r24\n\t"                                                                \
+        "bst r24, 7\n\t"                                                                   \
+        "lds r26, %[t]+1\n\t"                                                              \
+        "lds r25, %[i]+1\n\t"                                                              \
+        "adc r26, r25\n\t"                                                                 \
+        "sts %[t]+1, r26\n\t"                                                              \
+        "lds r27, %[t]+2\n\t"                                                              \
+        "lds r25, %[i]+2\n\t"                                                              \
+        "adc r27, r25\n\t"                                                                 \
+        "sts %[t]+2, r27\n\t"                                                              \
+        "lds r24, %[t]+3\n\t"                                                              \
+        "lds r25, %[i]+3\n\t"                                                              \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[t]+3, r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[cnt], r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[cnt]+1, r24\n\t"                                                            \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i], r24\n\t"                                                                \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i]+1, r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i]+2, r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i]+3, r24\n\t"                                                              \
+        "clr r25\n\t"                                                                      \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+2, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+3, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+4, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+5, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "sts %[run]+7, r30\n\t"                                                            \
+        "sts %[run]+8, r31\n\t"                                                            \
+        "pop r31\n\t"                                                                      \
+        "pop r30\n\t"                                                                      \
+        "cbi " GPIOR0_IO ", " kidx "\n\t"                                                 \
+        "tst r25\n\t"                                                                      \
+        "breq 43f\n\t"                                                                     \
+        "sbi " GPIOR0_IO ", " kidx "\n"                                                    \
+        "43:\n\t"                                                                          \
+        "rjmp 5b\n"                                                                        \
+        "41:\n\t"                                                                          \
+        "pop r31\n\t"                                                                      \
+        "pop r30\n\t"                                                                      \
+        "rjmp 11b\n"                                                                       \
+        "46:\n\t" /* the waiting chunk's add and block (a ramp's first chunk) */          \
+        "cbi " GPIOR0_IO ", 4+" kidx "\n\t"                                               \
+        "clr r25\n\t"                                                                      \
+        "lds r24, %[nneg]+1\n\t"                                                           \
+        "sts %[run]+2, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "lds r24, %[nneg]+2\n\t"                                                           \
+        "sts %[run]+3, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "lds r24, %[nneg]+3\n\t"                                                           \
+        "sts %[run]+4, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "lds r24, %[nneg]+4\n\t"                                                           \
+        "sts %[run]+5, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "breq 47f\n\t"                                                                     \
+        "sbi " GPIOR0_IO ", " kidx "\n"                                                    \
+        "47:\n\t"                                                                          \
+        "lds r24, %[nneg]+5\n\t"                                                           \
+        "sts %[run]+6, r24\n\t"                                                            \
+        "lds r24, %[nneg]+6\n\t"                                                           \
+        "sts %[run]+7, r24\n\t"                                                            \
+        "lds r24, %[nneg]+7\n\t"                                                           \
+        "sts %[run]+8, r24\n\t"                                                            \
+        "rjmp 45b\n\t"                                                                     \
         :                                                                                  \
         : [slow] "i"(&(a).slow), [cnt] "i"(&(a).count), [t] "i"(&(a).t),                   \
           [i] "i"(&(a).interval), [rdy] "i"(&(a).next_ready), [nt] "i"(&(a).next_t),       \
@@ -528,14 +648,14 @@ ISR(TIMER3_COMPA_vect, ISR_NAKED)
     STEP_ASM(axes[0], OCR3A, TCNT3, TIMSK3, _BV(OCIE3A), "sbi %[pf], %[xb]\n\t", "cbi %[pf], %[xb]\n\t",
              "sbi %[pf], %[xd]\n\t", "cbi %[pf], %[xd]\n\t", 1, "__vector_step_x",
              "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, "0x1C", IF_Y IF_Z IF_E),
-             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z));
+             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z), "0");
 }
 ISR(TIMER3_COMPB_vect, ISR_NAKED)
 {
     STEP_ASM(axes[1], OCR3B, TCNT3, TIMSK3, _BV(OCIE3B), "sbi %[pf], %[yb]\n\t", "cbi %[pf], %[yb]\n\t",
              "sbi %[pf], %[yd]\n\t", "cbi %[pf], %[yd]\n\t", 2, "__vector_step_y",
              "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, "0x1A", IF_X IF_Z IF_E),
-             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z));
+             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z), "1");
 }
 ISR(TIMER3_COMPC_vect, ISR_NAKED)
 {
@@ -544,14 +664,14 @@ ISR(TIMER3_COMPC_vect, ISR_NAKED)
              "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
              "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, "0x16", IF_X IF_Y IF_E),
-             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y));
+             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y), "2");
 }
 ISR(TIMER5_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[3], OCR5A, TCNT5, TIMSK5, _BV(OCIE5A), "sbi %[pa], %[eb]\n\t", "cbi %[pa], %[eb]\n\t",
              "sbi %[pa], %[ed]\n\t", "cbi %[pa], %[ed]\n\t", 8, "__vector_step_e",
              "__vector_end_e", RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z),
-             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z));
+             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z), "3");
 }
 _Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
                "the assembly sets a direction pin high for positive steps");
@@ -582,18 +702,27 @@ uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
 {
     struct step_axis *a = &axes[k];
     uint8_t s = SREG;
-    cli();
-    if (a->running && !a->next_ready && a->head == a->tail && c->interval < 0x800000UL &&
-        !c->add && !c->nblk) {
+    if (!a->next_ready && !step_chunk_slow(c->interval, c->add, c->count)) {
         /* the assembly takes it at the running chunk's end (which is less than a timer
-         * period before it: the segments follow each other) */
+         * period before it: the segments follow each other); written with interrupts on
+         * (the interrupt reads it only once it is ready) */
         a->next_t = c->t;
         a->next_interval = c->interval;
         a->next_count = c->count;
         a->next_neg = c->neg;
-        a->next_ready = 1;
-        SREG = s;
-        return 1;
+        a->next_add = c->add;
+        a->next_nblk = c->nblk;
+        a->next_blk = c->blk;
+        cli();
+        if (a->running && a->head == a->tail) {
+            if (c->add || c->nblk)
+                GPIOR0 |= (uint8_t)(bit_of_k[k] << 4);
+            else
+                GPIOR0 &= (uint8_t)~(bit_of_k[k] << 4);
+            a->next_ready = 1;
+            SREG = s;
+            return 1;
+        }
     }
     SREG = s;
     uint8_t head = a->head;
@@ -615,6 +744,7 @@ void step_engine_stop(void)
     TIMSK3 = 0;
     TIMSK5 = 0;
     step_fast = 0;
+    GPIOR0 = 0;
     for (uint8_t k = 0; k < 4; k++) {
         axes[k].running = 0;
         axes[k].next_ready = 0;

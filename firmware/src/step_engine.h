@@ -50,6 +50,23 @@ void step_engine_start_timers(uint8_t timer1_b);
  * and a tick computes one ahead). */
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
 
+/* Whether the assembly may not run a chunk (C does): its intervals, the last one too,
+ * of 2^15 cycles or more (its lateness test compares 16-bit times). */
+static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t count)
+{
+    uint32_t longest = interval;
+    if (add > 0 && count > 1) {
+        if ((uint32_t)add >= 0x800000UL)
+            return 1;
+        uint16_t n = (uint16_t)(count - 1);
+        uint32_t grow = (uint32_t)(add >> 8) * n; /* < 2^15 2^16 */
+        if (grow >= 0x8000UL)
+            return 1;
+        longest += (grow << 8) + (uint32_t)(uint8_t)add * n;
+    }
+    return longest >= 0x800000UL;
+}
+
 /* No stepper runs and none has a chunk waiting. */
 uint8_t step_engine_idle(void);
 

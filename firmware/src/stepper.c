@@ -380,7 +380,7 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
             c.blk = own + 2;
             own++;
             c.count = own->count;
-            c.interval = own->interval;
+            c.interval = own->interval & 0x7FFFFFFFUL; /* (the assembly's mark off) */
             c.add = own->add;
         } else {
             c.count = (uint16_t)(n < 0 ? -n : n);
