@@ -60,7 +60,7 @@ _Static_assert(offsetof(struct sched_chunk, interval) == 2 && offsetof(struct sc
 
 uint32_t step_clock_next_tick;
 volatile uint16_t step_engine_late;
-/* The steppers whose armed compare is the assembly's next edge (running, not slow), at
+/* The steppers whose armed compare is an edge (running, no timer period left to wait), at
  * their flags' bits in TIFR3 (X, Y, Z: bits 1-3) and E at bit 4: another one's interrupt
  * may raise their pin (RAISE_PENDING below) */
 uint8_t step_fast;
@@ -277,50 +277,39 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
     return 1;
 }
 
-static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
+/* the running chunk is the assembly's or C's (step_chunk_slow) */
+static inline __attribute__((always_inline)) uint8_t chunk_is_slow(uint8_t k,
+                                                                 const struct step_axis *a)
 {
-    a->slow = a->wraps || step_chunk_slow(a->interval, has_add(k) ? a->add : 0, a->count);
-    if (a->running && !a->slow)
+    return step_chunk_slow(a->interval, has_add(k) ? a->add : 0, a->count);
+}
+/* (interrupts off: step_fast is shared) */
+static inline __attribute__((always_inline)) void set_slow_as(uint8_t k, struct step_axis *a,
+                                                              uint8_t chunk_slow)
+{
+    a->slow = a->wraps || chunk_slow;
+    /* (a slow chunk's edge too: its interrupt finds the pin high, as the assembly's) */
+    if (a->running && !a->wraps)
         step_fast |= (uint8_t)(bit_of_k[k] << 1);
     else
         step_fast &= (uint8_t)~(bit_of_k[k] << 1);
 }
-
-/* The edge of stepper k in C: the assembly's rare cases (a timer period to let pass, an
- * interval of 65,536 cycles or more) and a chunk's end with no chunk waiting for the
- * assembly (`raised`: its pin is high already). */
-static inline __attribute__((always_inline)) void step_event(uint8_t k, uint8_t raised)
+static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
 {
-    struct step_axis *a = &axes[k];
-    uint32_t was = a->t;
-    if (!raised) {
-        if (a->wraps) {
-            if (!--a->wraps)
-                set_slow(k, a);
-            return;
-        }
-        switch (k) {
-        case 0: X_STEP_PORT |= _BV(X_STEP_BIT); break;
-        case 1: Y_STEP_PORT |= _BV(Y_STEP_BIT); break;
-        case 2: Z_STEP_PORT |= _BV(Z_STEP_BIT); break;
-        default: E_STEP_PORT |= _BV(E_STEP_BIT); break;
-        }
-        if (--a->count) {
-            a->t = was + a->interval;
-            if (has_add(k))
-                a->interval += (uint32_t)a->add;
-            arm(k, a, cycles_of(a->t - was));
-            goto done;
-        }
-    }
-    if (take(k, a)) {
-        arm(k, a, cycles_of(a->t - was));
-    } else {
-        a->running = 0;
-        irq_off(k);
-    }
-done:
-    set_slow(k, a);
+    set_slow_as(k, a, chunk_is_slow(k, a));
+}
+
+/* Stepper k in C, the assembly's rare cases: a whole timer period let pass (`mode`
+ * WRAP); an edge of a slow chunk (intervals of 2^15 cycles or more, under 489 steps/s:
+ * EDGE, its pin raised by the assembly) and a chunk's end with no chunk waiting for the
+ * assembly (END, its pin high and its count down). About 250 cycles with the compiler's
+ * entry and exit; the work runs with interrupts on (the other steppers' edges keep their
+ * time) until the shared bytes (cur_dir, step_fast, the pins, the compare) are touched,
+ * and returns with them off. Its own compare cannot come again meanwhile: it matched
+ * just now and is not rearmed before the end. */
+enum { WRAP, EDGE, END };
+static inline __attribute__((always_inline)) void lower_pin(uint8_t k)
+{
     switch (k) {
     case 0: X_STEP_PORT &= (uint8_t)~_BV(X_STEP_BIT); break;
     case 1: Y_STEP_PORT &= (uint8_t)~_BV(Y_STEP_BIT); break;
@@ -328,19 +317,128 @@ done:
     default: E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT); break;
     }
 }
+static inline __attribute__((always_inline)) void step_work(uint8_t k, uint8_t mode)
+{
+    struct step_axis *a = &axes[k];
+    if (mode == WRAP) {
+        if (!--a->wraps) {
+            uint8_t slow = chunk_is_slow(k, a);
+            cli();
+            set_slow_as(k, a, slow);
+        }
+        cli();
+        return;
+    }
+    uint32_t was = a->t;
+    if (mode == EDGE && --a->count) {
+        a->t = was + a->interval;
+        if (has_add(k))
+            a->interval += (uint32_t)a->add;
+    } else {
+        /* the chunk taken, or the stepper stopped, at once: a chunk pushed meanwhile
+         * (step_engine_push, from the tick) must find the stepper as it is */
+        cli();
+        if (!take(k, a)) {
+            a->running = 0;
+            irq_off(k);
+            set_slow_as(k, a, 0);
+            goto low;
+        }
+        sei();
+    }
+    {
+        uint8_t slow = chunk_is_slow(k, a);
+        cli();
+        arm(k, a, cycles_of(a->t - was));
+        set_slow_as(k, a, slow);
+    }
+low:
+    lower_pin(k);
+}
+#define STEP_WORK(name, k)                                                                 \
+    static void __attribute__((noinline)) name(uint8_t mode) { step_work(k, mode); }
+STEP_WORK(work_x, 0)
+STEP_WORK(work_y, 1)
+STEP_WORK(work_z, 2)
+STEP_WORK(work_e, 3)
+static void work_of(uint8_t k, uint8_t mode)
+{
+    switch (k) {
+    case 0: work_x(mode); break;
+    case 1: work_y(mode); break;
+    case 2: work_z(mode); break;
+    default: work_e(mode); break;
+    }
+}
 
-/* The rare cases in C, entered from the assembly as if from the vector. */
-#define STEP_C(name, k, raised)                                                            \
-    void name(void) __attribute__((signal, used));                                         \
-    void name(void) { step_event(k, raised); }
-STEP_C(__vector_step_x, 0, 0)
-STEP_C(__vector_step_y, 1, 0)
-STEP_C(__vector_step_z, 2, 0)
-STEP_C(__vector_step_e, 3, 0)
-STEP_C(__vector_end_x, 0, 1)
-STEP_C(__vector_end_y, 1, 1)
-STEP_C(__vector_end_z, 2, 1)
-STEP_C(__vector_end_e, 3, 1)
+/* One stepper's C at a time: a stepper whose C comes while another's runs leaves its
+ * work to that one (its mode + 1 in step_c_pending; its pin is high already, its next
+ * compare not yet armed, so it cannot come again) and returns at once, so the stack
+ * holds one C path however many steppers need one (tools/stack_usage.py). The entry in
+ * assembly decides with interrupts off (a few cycles); the C path it opens runs with
+ * them on from its first instruction. */
+uint8_t step_c_open;
+uint8_t step_c_pending[4];
+static inline __attribute__((always_inline)) void step_drain(uint8_t k, uint8_t mode)
+{
+    work_of(k, mode);
+    for (;;) { /* (interrupts off here) */
+        uint8_t j = 0;
+        while (j < 4 && !step_c_pending[j])
+            j++;
+        if (j == 4)
+            break;
+        uint8_t m = (uint8_t)(step_c_pending[j] - 1);
+        step_c_pending[j] = 0;
+        sei();
+        work_of(j, m);
+    }
+    step_c_open = 0;
+}
+
+/* The rare cases, entered from the assembly as if from the vector. */
+#define STEP_C(name, kk, md)                                                               \
+    void name##_c(void) __attribute__((interrupt, used));                                  \
+    void name##_c(void) { step_drain(kk, md); }                                           \
+    void name(void) __attribute__((naked, used));                                          \
+    void name(void)                                                                        \
+    {                                                                                      \
+        __asm__ volatile("push r24\n\t"                                                    \
+                         "in r24, __SREG__\n\t"                                            \
+                         "push r24\n\t"                                                    \
+                         "lds r24, step_c_open\n\t"                                        \
+                         "tst r24\n\t"                                                     \
+                         "breq 1f\n\t"                                                     \
+                         "ldi r24, %[m]\n\t"                                               \
+                         "sts step_c_pending+%[k], r24\n\t"                                \
+                         "pop r24\n\t"                                                     \
+                         "out __SREG__, r24\n\t"                                           \
+                         "pop r24\n\t"                                                     \
+                         "reti\n"                                                          \
+                         "1:\n\t"                                                          \
+                         "ldi r24, 1\n\t"                                                  \
+                         "sts step_c_open, r24\n\t"                                        \
+                         "pop r24\n\t"                                                     \
+                         "out __SREG__, r24\n\t"                                           \
+                         "pop r24\n\t"                                                     \
+                         "jmp " #name "_c\n\t"                                            \
+                         :                                                                 \
+                         : [m] "M"((md) + 1), [k] "M"(kk));                               \
+    }
+STEP_C(__vector_wrap_x, 0, WRAP)
+STEP_C(__vector_wrap_y, 1, WRAP)
+STEP_C(__vector_wrap_z, 2, WRAP)
+STEP_C(__vector_wrap_e, 3, WRAP)
+STEP_C(__vector_step_x, 0, EDGE)
+STEP_C(__vector_step_y, 1, EDGE)
+STEP_C(__vector_step_z, 2, EDGE)
+STEP_C(__vector_step_e, 3, EDGE)
+STEP_C(__vector_end_x, 0, END)
+STEP_C(__vector_end_y, 1, END)
+STEP_C(__vector_end_z, 2, END)
+STEP_C(__vector_end_e, 3, END)
+_Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axis, slow),
+               "the assembly reads wraps before slow");
 
 /* The common case in assembly (about 90 cycles with the interrupt's entry and exit; the
  * compiler's C saves 20 registers): pin high, count down, T += I (32 bits), or at the
@@ -376,7 +474,7 @@ STEP_C(__vector_end_e, 3, 1)
 #define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
 
 #define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners, \
-                 late_partners, kidx)                                                     \
+                 late_partners, kidx, wrap_fn)                                            \
     __asm__ volatile(                                                                      \
         "push r24\n\t"                                                                     \
         "in r24, __SREG__\n\t"                                                             \
@@ -384,10 +482,22 @@ STEP_C(__vector_end_e, 3, 1)
         "lds r24, %[slow]\n\t"                                                             \
         "tst r24\n\t"                                                                      \
         "breq 1f\n\t"                                                                      \
+        /* C's: a period to let pass, or a slow chunk's edge (its pin raised here, at  \
+         * its time) */                                                                   \
+        "lds r24, %[slow]-1\n\t"                                                           \
+        "tst r24\n\t"                                                                      \
+        "brne 51f\n\t"                                                                     \
+        "push r25\n\t" pin_on                                                              \
+        "pop r25\n\t"                                                                      \
         "pop r24\n\t"                                                                      \
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
         "jmp " slow_fn "\n"                                                                \
+        "51:\n\t"                                                                          \
+        "pop r24\n\t"                                                                      \
+        "out __SREG__, r24\n\t"                                                            \
+        "pop r24\n\t"                                                                      \
+        "jmp " wrap_fn "\n"                                                                \
         "1:\n\t"                                                                           \
         "push r25\n\t" pin_on                                                              \
         "push r26\n\t"                                                                     \
@@ -648,14 +758,14 @@ ISR(TIMER3_COMPA_vect, ISR_NAKED)
     STEP_ASM(axes[0], OCR3A, TCNT3, TIMSK3, _BV(OCIE3A), "sbi %[pf], %[xb]\n\t", "cbi %[pf], %[xb]\n\t",
              "sbi %[pf], %[xd]\n\t", "cbi %[pf], %[xd]\n\t", 1, "__vector_step_x",
              "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, "0x1C", IF_Y IF_Z IF_E),
-             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z), "0");
+             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z), "0", "__vector_wrap_x");
 }
 ISR(TIMER3_COMPB_vect, ISR_NAKED)
 {
     STEP_ASM(axes[1], OCR3B, TCNT3, TIMSK3, _BV(OCIE3B), "sbi %[pf], %[yb]\n\t", "cbi %[pf], %[yb]\n\t",
              "sbi %[pf], %[yd]\n\t", "cbi %[pf], %[yd]\n\t", 2, "__vector_step_y",
              "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, "0x1A", IF_X IF_Z IF_E),
-             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z), "1");
+             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z), "1", "__vector_wrap_y");
 }
 ISR(TIMER3_COMPC_vect, ISR_NAKED)
 {
@@ -664,14 +774,14 @@ ISR(TIMER3_COMPC_vect, ISR_NAKED)
              "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
              "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, "0x16", IF_X IF_Y IF_E),
-             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y), "2");
+             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y), "2", "__vector_wrap_z");
 }
 ISR(TIMER5_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[3], OCR5A, TCNT5, TIMSK5, _BV(OCIE5A), "sbi %[pa], %[eb]\n\t", "cbi %[pa], %[eb]\n\t",
              "sbi %[pa], %[ed]\n\t", "cbi %[pa], %[ed]\n\t", 8, "__vector_step_e",
              "__vector_end_e", RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z),
-             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z), "3");
+             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z), "3", "__vector_wrap_e");
 }
 _Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
                "the assembly sets a direction pin high for positive steps");
@@ -685,17 +795,25 @@ static uint32_t now_q(uint8_t k, uint32_t tick_start)
     return tick_start + q_of(since);
 }
 
+/* A stopped stepper's first chunk (its interrupt is off: only the shared bytes and the
+ * arming are masked) */
 static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
 {
+    uint8_t s = SREG;
+    cli();
     take(k, a);
+    SREG = s;
+    uint8_t slow = chunk_is_slow(k, a);
+    cli();
     uint32_t now = now_q(k, step_clock_this_tick);
     uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
     arm(k, a, ahead);
     a->running = 1;
-    set_slow(k, a);
+    set_slow_as(k, a, slow);
     irq_on(k);
+    SREG = s;
 }
 
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
@@ -731,9 +849,12 @@ uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
     a->ring[head & (CHUNK_SLOTS - 1)] = *c;
     cli();
     a->head = (uint8_t)(head + 1);
-    if (!a->running)
-        start_axis(k, a);
+    /* (a stepper's C stops it in one masked piece with the ring found empty: running
+     * read after the chunk is in is either still 1, and the chunk taken, or 0) */
+    uint8_t running = a->running;
     SREG = s;
+    if (!running)
+        start_axis(k, a);
     return 1;
 }
 
@@ -745,6 +866,11 @@ void step_engine_stop(void)
     TIMSK5 = 0;
     step_fast = 0;
     GPIOR0 = 0;
+    for (uint8_t k = 0; k < 4; k++) {
+        if (step_c_pending[k]) /* its pin raised, its work left (a C path running finds none) */
+            lower_pin(k);
+        step_c_pending[k] = 0;
+    }
     for (uint8_t k = 0; k < 4; k++) {
         axes[k].running = 0;
         axes[k].next_ready = 0;

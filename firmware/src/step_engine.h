@@ -19,6 +19,8 @@
 #define STEP_ENGINE_H
 #include <stdint.h>
 
+#include "mul16.h"
+
 #define STEP_FRAC_BITS 8
 #define CHUNK_SLOTS 2 /* a power of two: the chunks of a stepper queued ahead for C (the
                        * assembly's next chunk has a slot of its own) */
@@ -59,10 +61,10 @@ static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t c
         if ((uint32_t)add >= 0x800000UL)
             return 1;
         uint16_t n = (uint16_t)(count - 1);
-        uint32_t grow = (uint32_t)(add >> 8) * n; /* < 2^15 2^16 */
+        uint32_t grow = mul16x16((uint16_t)(add >> 8), n); /* < 2^15 2^16 */
         if (grow >= 0x8000UL)
             return 1;
-        longest += (grow << 8) + (uint32_t)(uint8_t)add * n;
+        longest += (grow << 8) + mul16x16((uint8_t)add, n);
     }
     return longest >= 0x800000UL;
 }
