@@ -629,7 +629,9 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
         "reti\n"                                                                           \
-        "30:\n\t" /* I += add (the flags change; T's bit 7 lives in SREG's T) */           \
+        "30:\n\t" /* I += add (the flags change; T's bit 7 lives in SREG's T); I's top     \
+                     * byte stays 0: an assembly chunk's intervals are all under 2^23     \
+                     * (step_chunk_slow), so the sum's is 0 whatever add's */             \
         "lds r24, %[i]\n\t"                                                                \
         "lds r25, %[run]+2\n\t"                                                            \
         "add r24, r25\n\t"                                                                 \
@@ -642,10 +644,6 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "lds r25, %[run]+4\n\t"                                                            \
         "adc r24, r25\n\t"                                                                 \
         "sts %[i]+2, r24\n\t"                                                              \
-        "lds r24, %[i]+3\n\t"                                                              \
-        "lds r25, %[run]+5\n\t"                                                            \
-        "adc r24, r25\n\t"                                                                 \
-        "sts %[i]+3, r24\n\t"                                                              \
         "rjmp 5b\n"                                                                        \
         "40:\n\t" /* a block's next chunk (r24: the chunks left): T += I, then its count, \
                      * interval and add; one marked slow is C's */                        \
