@@ -16,25 +16,27 @@ volatile uint8_t blocks_head, blocks_tail, blocks_stalled;
 static struct sched_block sink;
 #endif
 
-struct sched_block *blocks_sink(void)
+struct sched_block *blocks_sink(uint8_t bytes)
 {
 #if STEP_ENGINE
+    uint8_t most = bytes > DEV_MAX_PAYLOAD ? BLOCK_MOST : (uint8_t)BLOCK_ENTRIES(bytes);
     uint8_t head = blocks_head, tail = blocks_tail;
     uint8_t at = head & (BLOCK_CHUNKS - 1);
-    if (at + BLOCK_MOST > BLOCK_CHUNKS)
+    if (at + most > BLOCK_CHUNKS)
         head = (uint8_t)(head + (BLOCK_CHUNKS - at)); /* a block never wraps: skip the end */
-    if ((uint8_t)(head + BLOCK_MOST - tail) > BLOCK_CHUNKS) {
+    if ((uint8_t)(head + most - tail) > BLOCK_CHUNKS) {
         blocks_stalled = 1;
         return 0;
     }
     blocks_stalled = 0;
     blocks_head = head; /* the skipped end is freed with the block after it */
     sink.chunk = &block_chunks[head & (BLOCK_CHUNKS - 1)];
-    sink.capacity = BLOCK_MOST;
+    sink.capacity = most;
     sink.used = 0;
     sink.mask = 0;
     return &sink;
 #else
+    (void)bytes;
     return 0;
 #endif
 }

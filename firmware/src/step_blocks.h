@@ -23,16 +23,20 @@
 #else
 #define BLOCK_CHUNKS 1 /* the tick's DDA steps every axis: blocks are checked, not kept */
 #endif
-/* the most entries a block in one payload can take: a header and a first chunk of at
- * least 4 bytes an axis, 3 bytes each further chunk, after the segment's opcode and mask */
-#define BLOCK_MOST ((DEV_MAX_PAYLOAD - 2 - 4) / 3 + 2 * 4)
+/* the most entries a block in B bytes (from its segment's opcode) can take: a header and
+ * a first chunk of at least 4 bytes an axis (a axes), 3 bytes each further chunk, after
+ * the opcode and the mask: 2 a + (B - 2 - 4 a) / 3 <= (B + 6) / 3 */
+#define BLOCK_ENTRIES(bytes) (((bytes) + 6) / 3)
+#define BLOCK_MOST BLOCK_ENTRIES(DEV_MAX_PAYLOAD)
 
 extern struct sched_chunk block_chunks[BLOCK_CHUNKS];
 
-/* Room for one more block (main loop): returns the sink to read it into (its capacity
- * BLOCK_MOST entries), or 0 while the ring is too full (the steppers free it as they
- * go; meanwhile blocks_stalled is set, so a machine at rest starts: PROTOCOL.md 5.4). */
-struct sched_block *blocks_sink(void);
+/* Room for one more block (main loop), whose segment's opcode is `bytes` from its
+ * payload's end: returns the sink to read it into (its capacity the entries a block in
+ * those bytes can take, BLOCK_MOST at the most), or 0 while the ring is too full (the
+ * steppers free it as they go; meanwhile blocks_stalled is set, so a machine at rest
+ * starts: PROTOCOL.md 5.4). */
+struct sched_block *blocks_sink(uint8_t bytes);
 extern volatile uint8_t blocks_stalled;
 /* The block just read into the sink belongs to item `it` (queued): its entries are
  * kept until the item's segment is done. */

@@ -85,10 +85,17 @@ static uint8_t chunks_ahead;
 /* the next segment's axes (0..4) whose chunks went out during this segment's last ticks */
 static uint8_t axes_ahead;
 static uint32_t abort_seq;
-/* the ring of schedule chunks (step_blocks.h): the ends of the last two blocks whose
- * segments ended (bit 0, 1 of blk_held: one held), freed a segment later, when the
- * steppers are past them whatever the segments' lengths */
-static uint8_t blk_held, blk_ends[2];
+/* the ring of schedule chunks (step_blocks.h): the blocks of the segments that ended but
+ * whose end may not have come yet (their last tick is computed a tick ahead), oldest
+ * first: where each segment ends on the steppers' clock and the ring's head after its
+ * block. Freed once that time has passed (the steppers take a chunk at the last edge of
+ * the one before, so a segment's are all taken by its end). */
+#define BLK_HELD 4 /* a segment ends a tick at the most, an entry goes within two */
+static uint8_t blk_held;
+static struct {
+    uint32_t end;
+    uint8_t blk_end;
+} blk_fifo[BLK_HELD];
 
 void stepper_init(uint8_t hold_mask)
 {
@@ -623,29 +630,35 @@ static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
     }
 }
 
-/* A segment ends: the chunks of the block two segments back are behind the steppers
- * (this one's last tick is computed a tick ahead, the one before may have been a
- * single tick long), so they are freed; this one's are held. */
+/* A segment ends (its last tick, starting at step_clock_next_tick, is being computed):
+ * its block is held until the time its tick ends. */
 static void blocks_done(const struct plan *p)
 {
 #if !STEP_ENGINE
     (void)p;
 #else
-    if (!p->blk_mask)
-        return;
-    if (blk_held & 2)
-        blocks_release(blk_ends[1]);
-    blk_ends[1] = blk_ends[0];
-    blk_ends[0] = p->blk_end;
-    blk_held = (uint8_t)((blk_held << 1 | 1) & 3);
+    if (!p->blk_mask || blk_held == BLK_HELD)
+        return; /* (full: never; the next block's release frees it) */
+    blk_fifo[blk_held].end =
+        step_clock_next_tick + ((uint32_t)(uint16_t)(p->last_units * UNIT_CYCLES) << STEP_FRAC_BITS);
+    blk_fifo[blk_held].blk_end = p->blk_end;
+    blk_held++;
 #endif
 }
 
-/* The steppers stopped: every held block is behind them. */
-static void __attribute__((noinline)) blocks_idle(void)
+/* The held blocks whose segments' ends have passed (the tick in progress began after
+ * them) are freed; all of them once the steppers stopped. */
+static void __attribute__((noinline)) blocks_expire(uint8_t idle)
 {
-    blocks_release(blk_ends[0]);
-    blk_held = 0;
+    uint8_t n = 0;
+    while (n < blk_held && (idle || (int32_t)(step_clock_this_tick - blk_fifo[n].end) >= 0))
+        n++;
+    if (!n)
+        return;
+    blocks_release(blk_fifo[n - 1].blk_end);
+    for (uint8_t i = n; i < blk_held; i++)
+        blk_fifo[i - n] = blk_fifo[i];
+    blk_held = (uint8_t)(blk_held - n);
 }
 
 /* The segment's last tick: its last steps, its end. */
@@ -841,8 +854,8 @@ void __attribute__((noinline)) stepper_compute(void)
     o->dir = cur_dir;
     o->own = STEP_ENGINE ? 0 : 0x0F;
     o->units = TICK_UNITS;
-    if (STEP_ENGINE && blk_held && stepper.current != IT_SEG && step_engine_idle())
-        blocks_idle();
+    if (STEP_ENGINE && blk_held)
+        blocks_expire(stepper.current != IT_SEG && step_engine_idle());
     if (stepper.current == IT_SEG && stepper.running)
         seg_tick(); /* the common case first */
     else if (stepper.current != 0xFF || queue_head != queue_tail || abort_pending || settle_ticks)
