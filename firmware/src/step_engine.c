@@ -183,20 +183,43 @@ static void __attribute__((noinline)) relost(uint8_t lost)
     }
 }
 
-static inline __attribute__((always_inline)) void irq_on(uint8_t k)
+/* A stopped stepper's compare flag cleared (a match while it was off), before its new
+ * compare is written */
+static inline __attribute__((always_inline)) void irq_clear(uint8_t k)
 {
     if (k == 3) {
         TIFR5 = _BV(OCF5A);
-        TIMSK5 |= _BV(OCIE5A);
     } else {
         uint8_t f = (uint8_t)(_BV(OCF3A) << k);
         uint8_t up = (uint8_t)(TIFR3 & TIMSK3 & (uint8_t)~f); /* the others' pending */
-        TIFR3 = f; /* a match of k's compare while it was off */
-        TIMSK3 |= f; /* OCIE3A..C are bits 1..3 like OCF3A..C */
+        TIFR3 = f;
         uint8_t lost = (uint8_t)(up & ~TIFR3);
         if (lost)
             relost(lost);
     }
+}
+/* Its interrupt on, after the new compare was written: a match since then (its first
+ * timer period gone by, so close was it) is served here, as simavr 1.6 never raises an
+ * interrupt enabled after its flag rose; an edge that close is armed again just ahead
+ * (late). */
+static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_axis *a)
+{
+    uint8_t matched;
+    if (k == 3) {
+        TIMSK5 |= _BV(OCIE5A);
+        matched = TIFR5 & _BV(OCF5A);
+    } else {
+        uint8_t f = (uint8_t)(_BV(OCF3A) << k);
+        TIMSK3 |= f; /* OCIE3A..C are bits 1..3 like OCF3A..C */
+        matched = TIFR3 & f;
+    }
+    if (!matched)
+        return;
+    irq_clear(k);
+    if (a->wraps)
+        a->wraps--;
+    else
+        *ocr_of(k) = (uint16_t)(*tcnt_of(k) + ARM_MARGIN);
 }
 static inline __attribute__((always_inline)) void irq_off(uint8_t k)
 {
@@ -214,7 +237,12 @@ static inline __attribute__((always_inline)) void arm(uint8_t k, struct step_axi
 {
     uint16_t ocr = OCR_OF(a->t);
     if (ahead >= 0x10000UL) {
-        a->wraps = (uint8_t)((ahead - ISR_LEAD - 1) >> 16);
+        /* the matches before the right one, counted from now, not from the edge `ahead`
+         * is measured from: C's own time (under 2^15 cycles) may have taken the first
+         * one past (an interval just over 2^16 cycles then came a period late) */
+        uint16_t low = (uint16_t)(ocr - *tcnt_of(k)); /* the first match, 0: a period */
+        uint32_t first = low ? low : 0x10000UL;
+        a->wraps = (uint8_t)((ahead - ISR_LEAD - first + 0x8000UL) >> 16);
         *ocr_of(k) = ocr;
         return;
     }
@@ -807,10 +835,11 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
+    irq_clear(k);
     arm(k, a, ahead);
     a->running = 1;
     set_slow_as(k, a, slow);
-    irq_on(k);
+    irq_on(k, a);
     SREG = s;
 }
 

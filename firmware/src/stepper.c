@@ -437,6 +437,15 @@ static void __attribute__((noinline)) dispatch(void)
             }
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
+#if STEP_ENGINE
+            {
+                /* an axis the tick's DDA drives in the tick now ending (a ramp without
+                 * its block) that reverses: the DDA keeps it for this segment too (the
+                 * engine would set its direction pin now, under the DDA's last steps) */
+                uint8_t flip = this_tick->own & p->engine & (uint8_t)(p->dir ^ cur_dir);
+                p->engine &= (uint8_t)~flip;
+            }
+#endif
             if (STEP_ENGINE && PLAN_ENGINE(p)) {
                 if (chunks_ahead)
                     chunks_ahead = 0;
@@ -602,7 +611,7 @@ static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
         int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
         uint32_t rem = x->last_n - (int32_t)off;
         int32_t moved = *d;
-        if (rem && !(PLAN_ENGINE(p) >> k & 1) && (p->accel || !STEP_ENGINE)) {
+        if (rem && !(PLAN_ENGINE(p) >> k & 1)) {
             uint8_t n = rem > AX_MAX ? AX_MAX : (uint8_t)rem;
             if (rem > AX_MAX) {
                 /* more than a tick holds (never at the advertised rate): the position
