@@ -34,13 +34,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cdprhost.link import HostLink, LinkError, open_link
 from cdprhost.sim import avr_device
+from firmware_protocol.segment_split import split_segment
 from firmware_protocol.segments import (
     RAMP_CONSTANT,
     RAMP_FROM_REST,
     RAMP_TO_REST,
     SegmentBatch,
+    SegmentContext,
+    encode_block_for,
     step_times,
 )
+from firmware_protocol.step_schedule import predictable
 from firmware_protocol.streams import expected_record
 
 CLOCK_HZ = 100_000
@@ -164,6 +168,63 @@ def ramp_batch(
     return SegmentBatch(np.full(len(codes), ticks), deltas, codes)
 
 
+#: the device's longest payload (IDENT max_payload), a segment without its block at most
+#: SEGMENT_MAX_BYTES of it (PROTOCOL.md 5.2)
+MAX_PAYLOAD = 120
+SEGMENT_MAX_BYTES = 27
+#: frames acknowledged before a point's stream (the link's frames start short and grow by 2
+#: bytes with each clean one: at MAX_PAYLOAD after about 45)
+WARM_FRAMES = 48
+
+
+def cut_for_blocks(batch: SegmentBatch, payload: int = MAX_PAYLOAD) -> SegmentBatch:
+    """``batch`` with each ramp cut in halves along its own profile (segment_split) until
+    the schedule blocks of all its moving axes fit one payload with the segment, as the
+    host is to cut them (PROTOCOL.md 5.5): every axis of a ramp then steps from its block
+    (the step engine's), none on the device's own stepping (3.0's fallback)."""
+    from cdprhost.link.segment_feed import wire_schedules  # the host's choice of blocks
+
+    ctx = SegmentContext()
+    out: list[tuple[int, tuple[int, ...], int]] = []
+
+    def fits(t: int, d: tuple[int, ...], c: int) -> bool:
+        one = SegmentBatch(np.array([t]), np.array([d]), np.array([c], dtype=np.int16))
+        blocks = wire_schedules(one, ctx, 16, payload)
+        moving = [k for k in range(4) if d[k]]
+        return all((0, k) in blocks for k in moving if not predictable(d[k], t, c)) and (
+            len(encode_block_for(t, d, {k: s for (_, k), s in blocks.items()}, ctx))
+            <= payload - SEGMENT_MAX_BYTES
+        )
+
+    def add(t: int, d: tuple[int, ...], c: int) -> None:
+        if c == RAMP_CONSTANT or t < 2 * 40 or fits(t, d, c):
+            out.append((t, d, c))
+            return
+        a, b = split_segment(t, d, c, t // 2)
+        add(*a)
+        add(*b)
+
+    for i in range(len(batch)):
+        add(
+            int(batch.ticks[i]),
+            tuple(int(v) for v in batch.deltas[i]),
+            int(batch.ramps[i]),
+        )
+    return SegmentBatch(
+        np.array([p[0] for p in out]),
+        np.array([p[1] for p in out], dtype=np.int64),
+        np.array([p[2] for p in out], dtype=np.int16),
+    )
+
+
+def warm_link(link: HostLink, frames: int = WARM_FRAMES) -> None:
+    """Frames acknowledged clean before the stream, so its frames are full length (the
+    link starts them short and grows them on a clean line) and a ramp's block goes with
+    it, as in a print some seconds in."""
+    for _ in range(frames):
+        link.request_status()
+
+
 def ideal_edges_us(batch: SegmentBatch, axis: int) -> np.ndarray:
     """The exact time (us of motion) of every step of ``axis`` on its segments' profiles."""
     starts = np.concatenate([[0], np.cumsum(batch.ticks)[:-1]])
@@ -232,13 +293,26 @@ def axis_edge_counts(edges: np.ndarray, batch: SegmentBatch) -> list[str]:
 
 
 def run_batch(
-    build: Build, batch: SegmentBatch, *, speedup: float = 4.0, profile: bool = True
+    build: Build,
+    batch: SegmentBatch,
+    *,
+    speedup: float = 4.0,
+    profile: bool = True,
+    blocks: bool | None = None,
 ) -> dict[str, Any]:
     """Stream ``batch`` to the harness running ``build`` and judge it: the figures of one
-    point (``passed`` against the issue's limits)."""
+    point (``passed`` against the issue's limits). ``blocks`` (by default for the step
+    engine): the ramps cut until their blocks fit (cut_for_blocks) and the link's frames
+    grown first (warm_link), so every ramp axis steps from its block."""
+    if blocks is None:
+        blocks = bool(build.cflags)
+    if blocks:
+        batch = cut_for_blocks(batch)
     refused = ""
     with harness(build, speedup=speedup, profile=profile) as (link, tmp):
         try:
+            if blocks:
+                warm_link(link)
             link.queue_segments(batch)
             link.wait_idle(300)
         except LinkError as e:  # an underrun, a refused segment: this rate failed

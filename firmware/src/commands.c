@@ -25,6 +25,7 @@
 #include "segment.h"
 #include "session.h"
 #include "stepper.h"
+#include "step_blocks.h"
 
 struct field_desc {
     uint8_t type, count;
@@ -510,7 +511,11 @@ void proto_execute(uint16_t units)
             motion_prepare_ahead(1);
             uint8_t op = r->buf[r->pos];
             if (op >= SEG_BASE) {
+                if (STEP_ENGINE && (op & SEG_F_SCHEDULE) &&
+                    !(segment_sched_out = blocks_sink((uint8_t)(r->len - r->pos))))
+                    return; /* its block waits for room in the steppers' ring of chunks */
                 segment_decode(r, &ctx, &s); /* checked before: it decodes */
+                segment_sched_out = 0;
                 took_item();
                 enqueue_segment(&s, 0);
             } else {

@@ -66,8 +66,11 @@
 #define SCHEDULE_TOLERANCE_CYCLES 16
 #define MIN_STEP_INTERVAL_CYCLES (CPU_HZ / MAX_STEP_RATE - 2 * SCHEDULE_TOLERANCE_CYCLES - 1)
 
-/* Move queue slots (a power of two, at most 128); 23 bytes each (queue.h). */
-#define QUEUE_SIZE 128
+/* Move queue slots (a power of two, at most 128); 26 bytes each (queue.h). 64 with the
+ * step engine: its ring of schedule chunks (step_blocks.h, 1,280 bytes) takes the rest. */
+#ifndef QUEUE_SIZE
+#define QUEUE_SIZE (STEP_ENGINE ? 64 : 128)
+#endif
 /* Segments prepared ahead of the step interrupt (DDA constants, 142 bytes each). */
 #ifndef PLAN_SLOTS
 /* 4 with the step engine: its steppers' state (about 160 bytes) would leave the stack

@@ -16,6 +16,7 @@
 #include "protocol_gen.h"
 #include "step_rate.h"
 #include "step_recip.h"
+#include "step_blocks.h"
 
 struct plan plans[PLAN_SLOTS];
 volatile uint8_t plan_head, plan_tail;
@@ -117,6 +118,11 @@ void motion_store(struct item *it, const struct segment *s)
     it->ticks = s->ticks;
     it->flags = flags;
     it->ramp = ramp;
+#if STEP_ENGINE
+    it->blk_mask = 0;
+    if (s->sched.mask)
+        blocks_commit(it); /* read into the ring as the segment was decoded */
+#endif
 }
 
 uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units)
@@ -328,6 +334,15 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
         }
     }
     p->moving = moving;
+    /* the step engine's axes: a steady segment's (each one chunk, its interval predicted
+     * or from its block), a ramp's with a schedule block; the DDA steps the rest (an
+     * axis the host left without a block: PROTOCOL.md 5.5, 3.0's rule) */
+#if STEP_ENGINE
+    p->blk_mask = it->blk_mask & moving;
+    p->blk_at = it->blk_at;
+    p->blk_end = it->blk_end;
+    p->engine = p->accel ? p->blk_mask : moving;
+#endif
 }
 
 void motion_plans_reset(void)

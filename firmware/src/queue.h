@@ -23,6 +23,11 @@ struct item {
     uint8_t kind;
     uint8_t flags; /* SEG: SEGF_*, dir bits in the high nibble (1 = negative); HOME: mask */
     uint8_t ramp;
+    /* SEG with the step engine: the axes its schedule block carries, where the block
+     * lies in the ring of chunks and the ring's head after it (step_blocks.h) */
+#if STEP_ENGINE
+    uint8_t blk_mask, blk_at, blk_end;
+#endif
     uint32_t ticks; /* SEG, DWELL: duration in clock units */
     union {
         uint32_t n[4];  /* SEG: |delta| per axis */
@@ -88,6 +93,14 @@ struct plan {
     uint8_t accel;      /* some a != 0 */
     uint8_t last_units; /* length of the last tick in clock units */
     uint8_t at_rest;    /* SEGF_AT_REST of the item */
+    /* the step engine's axes (the others are the DDA's): a steady segment's moving axes,
+     * a ramp's axes with a schedule block; blk_mask, blk_at, blk_end: the item's */
+#if STEP_ENGINE
+    uint8_t engine, blk_mask, blk_at, blk_end;
+#define PLAN_ENGINE(p) ((p)->engine)
+#else
+#define PLAN_ENGINE(p) 0
+#endif
     uint32_t ticks;     /* interrupt ticks (the last one last_units long) */
     float ka, kb;       /* N p(i / Dt) = N (ka i + kb i^2): positions mid-segment */
     int32_t delta[4];   /* signed steps */

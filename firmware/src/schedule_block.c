@@ -72,7 +72,7 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
         int32_t add = rd_i32(r);
         uint8_t more = rd_u8(r);
         if (r->err || more >= CDPR_SCHED_MAX_CHUNKS ||
-            (out && used + 1 + more > out->capacity)) {
+            (out && used + 2 + more > out->capacity)) {
             r->err = 1;
             return;
         }
@@ -98,7 +98,7 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
             if (s && (!shortest || s < shortest))
                 shortest = s;
             if (out) {
-                struct sched_chunk *c = &out->chunk[used + i];
+                struct sched_chunk *c = &out->chunk[used + 1 + i];
                 c->count = (uint16_t)count;
                 c->interval = (uint32_t)c_int;
                 c->add = c_add;
@@ -122,10 +122,15 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
             out->lead[k] = (uint32_t)lead;
             out->first[k] = used;
             out->chunks[k] = (uint8_t)(1 + more);
-            out->chunk[used].count = (uint16_t)left;
-            out->chunk[used].interval = (uint32_t)interval;
-            out->chunk[used].add = add;
+            out->chunk[used].count = (uint16_t)(1 + more); /* the axis's header */
+            out->chunk[used].interval = (uint32_t)lead;
+            out->chunk[used].add = 0;
+            out->chunk[used + 1].count = (uint16_t)left;
+            out->chunk[used + 1].interval = (uint32_t)interval;
+            out->chunk[used + 1].add = add;
         }
-        used = (uint8_t)(used + 1 + more);
+        used = (uint8_t)(used + 2 + more);
+        if (out)
+            out->used = used;
     }
 }

@@ -24,13 +24,16 @@ struct sched_chunk {
 };
 
 /* One block's chunks for the step engine; `capacity` entries in `chunk`, filled in axis
- * order (`first[k]`, `chunks[k]` for axis k). */
+ * order: for each axis of `mask` a header (its count the axis's chunks, its interval the
+ * first edge, `lead`) and then its chunks (`first[k]` the header's index, `chunks[k]`
+ * the chunks after it); `used` the entries filled. */
 struct sched_block {
     uint8_t mask;
     uint32_t lead[CDPR_SCHED_AXES]; /* first edge, fixed point, from the segment's start */
     uint8_t first[CDPR_SCHED_AXES];
     uint8_t chunks[CDPR_SCHED_AXES];
     uint8_t capacity;
+    uint8_t used;
     struct sched_chunk *chunk;
 };
 

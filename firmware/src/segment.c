@@ -3,6 +3,8 @@
 #include "protocol_gen.h"
 #include "segment.h"
 
+struct sched_block *segment_sched_out;
+
 /* A coded delta: an i32 (zigzag u32, at most 5 bytes). Inline for the one-byte
  * case (a print's small corrections to the predicted deltas): the call and the
  * 32-bit zigzag cost more than the rest of the segment. */
@@ -83,7 +85,7 @@ void __attribute__((optimize("O2"))) segment_decode_full(struct reader *r, struc
     out->sched.mask = 0;
     if ((op & SEG_F_SCHEDULE) && !r->err) {
         uint32_t steps[4] = {magnitude(d0), magnitude(d1), magnitude(d2), magnitude(d3)};
-        sched_parse(r, ticks, steps, &out->sched, 0);
+        sched_parse(r, ticks, steps, &out->sched, segment_sched_out);
     }
     if (r->err)
         return;

@@ -18,6 +18,10 @@ struct segment {
     struct sched_verdict sched; /* its schedule block's axes and verdict (mask 0: none) */
 };
 
+/* Where segment_decode reads a schedule block's chunks (the step engine's ring while a
+ * segment is decoded to be queued, step_blocks.h); 0: checked only. */
+extern struct sched_block *segment_sched_out;
+
 /* Decode the segment whose opcode is at r->pos; sets r->err on any bad field. */
 void segment_decode_full(struct reader *r, struct seg_ctx *ctx, struct segment *out);
 

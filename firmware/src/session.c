@@ -11,6 +11,7 @@
 #include "reports.h"
 #include "sched.h"
 #include "session.h"
+#include "step_blocks.h"
 #include "stepper.h"
 
 static uint32_t boot_sent_at;
@@ -80,7 +81,7 @@ uint8_t session_may_start(void)
     if (queue_head == queue_tail)
         return 0;
     uint32_t head_item = items_executed() + 1;
-    return machine.block_ends > 0 || machine.queued_units >= machine.start_ticks || queue_free() == 0 ||
+    return machine.block_ends > 0 || machine.queued_units >= machine.start_ticks || queue_free() == 0 || blocks_stalled ||
            head_item <= machine.flush_item;
 }
 

@@ -2,9 +2,11 @@
  * rings. */
 #include <avr/interrupt.h>
 #include <avr/io.h>
+#include <stddef.h>
 
 #include "board_ramps14.h"
 #include "config.h"
+#include "schedule_block.h"
 #include "step_engine.h"
 #include "step_tick.h"
 
@@ -19,20 +21,46 @@ struct step_axis {
     uint8_t slow;      /* the armed event is not the assembly's: wraps left, or an
                         * interval of 32,768 cycles or more (under 489 steps/s) */
     uint8_t running;   /* its compare interrupt is on */
+    uint8_t spare;     /* (add is not 0: the stepper's bit k of GPIOR0, bit 4 + k its
+                        * waiting chunk's is or it has a block: see GPIOR0_IO) */
+    int32_t add;
+    /* the running schedule block's chunks after the running one */
+    uint8_t nblk;
+    const struct sched_chunk *blk;
     /* The chunk after the running one, where the assembly takes it at the running one's
      * last edge (the ring's are C's): a segment's, put here a tick before it starts. */
     volatile uint8_t next_ready;
     uint32_t next_t, next_interval;
     uint16_t next_count;
     uint8_t next_neg;
+    int32_t next_add;
+    uint8_t next_nblk;
+    const struct sched_chunk *next_blk;
     volatile uint8_t head, tail;
     struct step_chunk ring[CHUNK_SLOTS];
 };
 static struct step_axis axes[4];
+/* the assembly reaches add, nblk and blk from running's address */
+_Static_assert(offsetof(struct step_axis, spare) == offsetof(struct step_axis, running) + 1 &&
+                   offsetof(struct step_axis, add) == offsetof(struct step_axis, running) + 2 &&
+                   offsetof(struct step_axis, nblk) == offsetof(struct step_axis, running) + 6 &&
+                   offsetof(struct step_axis, blk) == offsetof(struct step_axis, running) + 7 &&
+                   offsetof(struct step_axis, next_add) == offsetof(struct step_axis, next_neg) + 1 &&
+                   offsetof(struct step_axis, next_nblk) == offsetof(struct step_axis, next_neg) + 5 &&
+                   offsetof(struct step_axis, next_blk) == offsetof(struct step_axis, next_neg) + 6,
+               "the assembly's offsets");
+/* a block's chunk: count, interval, add (schedule_block.h), bit 31 of the interval set
+ * where the assembly may not run it (step_blocks.c) */
+_Static_assert(offsetof(struct sched_chunk, interval) == 2 && offsetof(struct sched_chunk, add) == 6 &&
+                   sizeof(struct sched_chunk) == 10,
+               "the assembly reads a block's chunks");
+/* GPIOR0 (sbic/sbi reach it): bit k, stepper k's running chunk has an add; bit 4 + k,
+ * its waiting chunk (next_*) has an add or further chunks (a block's) */
+#define GPIOR0_IO "0x1E"
 
 uint32_t step_clock_next_tick;
 volatile uint16_t step_engine_late;
-/* The steppers whose armed compare is the assembly's next edge (running, not slow), at
+/* The steppers whose armed compare is an edge (running, no timer period left to wait), at
  * their flags' bits in TIFR3 (X, Y, Z: bits 1-3) and E at bit 4: another one's interrupt
  * may raise their pin (RAISE_PENDING below) */
 uint8_t step_fast;
@@ -42,6 +70,8 @@ uint8_t step_fast;
 #define ISR_LEAD 11
 /* an edge armed closer to now than this is set this far ahead (late) */
 #define ARM_MARGIN 24
+/* the same in C (its compare write lands later) */
+#define C_ARM_MARGIN 64
 
 #define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
 
@@ -68,6 +98,10 @@ static inline __attribute__((always_inline)) uint32_t q_of(uint16_t cycles)
 _Static_assert(STEP_FRAC_BITS == 8, "cycles_of and q_of move whole bytes");
 /* bit k (a variable shift is a loop too) */
 static const uint8_t bit_of_k[4] = {1, 2, 4, 8};
+static inline __attribute__((always_inline)) uint8_t has_add(uint8_t k)
+{
+    return GPIOR0 & bit_of_k[k];
+}
 
 void step_engine_start_timers(uint8_t timer1_b)
 {
@@ -149,20 +183,43 @@ static void __attribute__((noinline)) relost(uint8_t lost)
     }
 }
 
-static inline __attribute__((always_inline)) void irq_on(uint8_t k)
+/* A stopped stepper's compare flag cleared (a match while it was off), before its new
+ * compare is written */
+static inline __attribute__((always_inline)) void irq_clear(uint8_t k)
 {
     if (k == 3) {
         TIFR5 = _BV(OCF5A);
-        TIMSK5 |= _BV(OCIE5A);
     } else {
         uint8_t f = (uint8_t)(_BV(OCF3A) << k);
         uint8_t up = (uint8_t)(TIFR3 & TIMSK3 & (uint8_t)~f); /* the others' pending */
-        TIFR3 = f; /* a match of k's compare while it was off */
-        TIMSK3 |= f; /* OCIE3A..C are bits 1..3 like OCF3A..C */
+        TIFR3 = f;
         uint8_t lost = (uint8_t)(up & ~TIFR3);
         if (lost)
             relost(lost);
     }
+}
+/* Its interrupt on, after the new compare was written: a match since then (its first
+ * timer period gone by, so close was it) is served here, as simavr 1.6 never raises an
+ * interrupt enabled after its flag rose; an edge that close is armed again just ahead
+ * (late). */
+static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_axis *a)
+{
+    uint8_t matched;
+    if (k == 3) {
+        TIMSK5 |= _BV(OCIE5A);
+        matched = TIFR5 & _BV(OCF5A);
+    } else {
+        uint8_t f = (uint8_t)(_BV(OCF3A) << k);
+        TIMSK3 |= f; /* OCIE3A..C are bits 1..3 like OCF3A..C */
+        matched = TIFR3 & f;
+    }
+    if (!matched)
+        return;
+    irq_clear(k);
+    if (a->wraps)
+        a->wraps--;
+    else
+        *ocr_of(k) = (uint16_t)(*tcnt_of(k) + ARM_MARGIN);
 }
 static inline __attribute__((always_inline)) void irq_off(uint8_t k)
 {
@@ -180,26 +237,55 @@ static inline __attribute__((always_inline)) void arm(uint8_t k, struct step_axi
 {
     uint16_t ocr = OCR_OF(a->t);
     if (ahead >= 0x10000UL) {
-        a->wraps = (uint8_t)((ahead - ISR_LEAD - 1) >> 16);
+        /* the matches before the right one, counted from now, not from the edge `ahead`
+         * is measured from: C's own time (under 2^15 cycles) may have taken the first
+         * one past (an interval just over 2^16 cycles then came a period late) */
+        uint16_t low = (uint16_t)(ocr - *tcnt_of(k)); /* the first match, 0: a period */
+        uint32_t first = low ? low : 0x10000UL;
+        a->wraps = (uint8_t)((ahead - ISR_LEAD - first + 0x8000UL) >> 16);
         *ocr_of(k) = ocr;
         return;
     }
     a->wraps = 0;
     uint16_t now = *tcnt_of(k);
     if (ahead < 0x8000UL && (int16_t)(ocr - now) < ARM_MARGIN) {
-        ocr = (uint16_t)(now + ARM_MARGIN); /* late */
+        ocr = (uint16_t)(now + C_ARM_MARGIN); /* late */
         step_engine_late++;
     }
     *ocr_of(k) = ocr;
 }
 
-/* Take the next chunk of stepper k, at its time; returns 0 when there is none. */
+static inline __attribute__((always_inline)) void load(uint8_t k, struct step_axis *a,
+                                                        uint32_t interval, int32_t add,
+                                                        uint16_t count)
+{
+    a->interval = interval & 0x7FFFFFFFUL; /* (a block's mark off) */
+    a->add = add;
+    if (add)
+        GPIOR0 |= bit_of_k[k];
+    else
+        GPIOR0 &= (uint8_t)~bit_of_k[k];
+    a->count = count;
+}
+
+/* Take the next chunk of stepper k, at its time (the running chunk's last edge is a->t);
+ * returns 0 when there is none. */
 static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step_axis *a)
 {
+    if (a->nblk) {
+        /* the block's next chunk: its first edge where the recurrence left off */
+        const struct sched_chunk *c = a->blk;
+        a->t += a->interval;
+        load(k, a, c->interval, c->add, c->count);
+        a->blk = c + 1;
+        a->nblk--;
+        return 1;
+    }
     if (a->next_ready) {
         a->t = a->next_t;
-        a->interval = a->next_interval;
-        a->count = a->next_count;
+        load(k, a, a->next_interval, a->next_add, a->next_count);
+        a->nblk = a->next_nblk;
+        a->blk = a->next_blk;
         if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next_neg)
             set_dir(k, a->next_neg);
         a->next_ready = 0;
@@ -210,57 +296,48 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
         return 0;
     const struct step_chunk *c = &a->ring[tail & (CHUNK_SLOTS - 1)];
     a->t = c->t;
-    a->interval = c->interval;
-    a->count = c->count;
+    load(k, a, c->interval, c->add, c->count);
+    a->nblk = c->nblk;
+    a->blk = c->blk;
     if ((uint8_t)!!(cur_dir & bit_of_k[k]) != c->neg)
         set_dir(k, c->neg);
     a->tail = (uint8_t)(tail + 1);
     return 1;
 }
 
-static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
+/* the running chunk is the assembly's or C's (step_chunk_slow) */
+static inline __attribute__((always_inline)) uint8_t chunk_is_slow(uint8_t k,
+                                                                 const struct step_axis *a)
 {
-    /* the assembly's lateness test compares 16-bit times: intervals under 2^15 cycles */
-    a->slow = a->wraps || (uint8_t)(a->interval >> 24) || (a->interval & 0x800000UL);
-    if (a->running && !a->slow)
+    return step_chunk_slow(a->interval, has_add(k) ? a->add : 0, a->count);
+}
+/* (interrupts off: step_fast is shared) */
+static inline __attribute__((always_inline)) void set_slow_as(uint8_t k, struct step_axis *a,
+                                                              uint8_t chunk_slow)
+{
+    a->slow = a->wraps || chunk_slow;
+    /* (a slow chunk's edge too: its interrupt finds the pin high, as the assembly's) */
+    if (a->running && !a->wraps)
         step_fast |= (uint8_t)(bit_of_k[k] << 1);
     else
         step_fast &= (uint8_t)~(bit_of_k[k] << 1);
 }
-
-/* The edge of stepper k in C: the assembly's rare cases (a timer period to let pass, an
- * interval of 65,536 cycles or more) and a chunk's end with no chunk waiting for the
- * assembly (`raised`: its pin is high already). */
-static inline __attribute__((always_inline)) void step_event(uint8_t k, uint8_t raised)
+static inline __attribute__((always_inline)) void set_slow(uint8_t k, struct step_axis *a)
 {
-    struct step_axis *a = &axes[k];
-    uint32_t was = a->t;
-    if (!raised) {
-        if (a->wraps) {
-            if (!--a->wraps)
-                set_slow(k, a);
-            return;
-        }
-        switch (k) {
-        case 0: X_STEP_PORT |= _BV(X_STEP_BIT); break;
-        case 1: Y_STEP_PORT |= _BV(Y_STEP_BIT); break;
-        case 2: Z_STEP_PORT |= _BV(Z_STEP_BIT); break;
-        default: E_STEP_PORT |= _BV(E_STEP_BIT); break;
-        }
-        if (--a->count) {
-            a->t = was + a->interval;
-            arm(k, a, cycles_of(a->t - was));
-            goto done;
-        }
-    }
-    if (take(k, a)) {
-        arm(k, a, cycles_of(a->t - was));
-    } else {
-        a->running = 0;
-        irq_off(k);
-    }
-done:
-    set_slow(k, a);
+    set_slow_as(k, a, chunk_is_slow(k, a));
+}
+
+/* Stepper k in C, the assembly's rare cases: a whole timer period let pass (`mode`
+ * WRAP); an edge of a slow chunk (intervals of 2^15 cycles or more, under 489 steps/s:
+ * EDGE, its pin raised by the assembly) and a chunk's end with no chunk waiting for the
+ * assembly (END, its pin high and its count down). About 250 cycles with the compiler's
+ * entry and exit; the work runs with interrupts on (the other steppers' edges keep their
+ * time) until the shared bytes (cur_dir, step_fast, the pins, the compare) are touched,
+ * and returns with them off. Its own compare cannot come again meanwhile: it matched
+ * just now and is not rearmed before the end. */
+enum { WRAP, EDGE, END };
+static inline __attribute__((always_inline)) void lower_pin(uint8_t k)
+{
     switch (k) {
     case 0: X_STEP_PORT &= (uint8_t)~_BV(X_STEP_BIT); break;
     case 1: Y_STEP_PORT &= (uint8_t)~_BV(Y_STEP_BIT); break;
@@ -268,19 +345,128 @@ done:
     default: E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT); break;
     }
 }
+static inline __attribute__((always_inline)) void step_work(uint8_t k, uint8_t mode)
+{
+    struct step_axis *a = &axes[k];
+    if (mode == WRAP) {
+        if (!--a->wraps) {
+            uint8_t slow = chunk_is_slow(k, a);
+            cli();
+            set_slow_as(k, a, slow);
+        }
+        cli();
+        return;
+    }
+    uint32_t was = a->t;
+    if (mode == EDGE && --a->count) {
+        a->t = was + a->interval;
+        if (has_add(k))
+            a->interval += (uint32_t)a->add;
+    } else {
+        /* the chunk taken, or the stepper stopped, at once: a chunk pushed meanwhile
+         * (step_engine_push, from the tick) must find the stepper as it is */
+        cli();
+        if (!take(k, a)) {
+            a->running = 0;
+            irq_off(k);
+            set_slow_as(k, a, 0);
+            goto low;
+        }
+        sei();
+    }
+    {
+        uint8_t slow = chunk_is_slow(k, a);
+        cli();
+        arm(k, a, cycles_of(a->t - was));
+        set_slow_as(k, a, slow);
+    }
+low:
+    lower_pin(k);
+}
+#define STEP_WORK(name, k)                                                                 \
+    static void __attribute__((noinline)) name(uint8_t mode) { step_work(k, mode); }
+STEP_WORK(work_x, 0)
+STEP_WORK(work_y, 1)
+STEP_WORK(work_z, 2)
+STEP_WORK(work_e, 3)
+static void work_of(uint8_t k, uint8_t mode)
+{
+    switch (k) {
+    case 0: work_x(mode); break;
+    case 1: work_y(mode); break;
+    case 2: work_z(mode); break;
+    default: work_e(mode); break;
+    }
+}
 
-/* The rare cases in C, entered from the assembly as if from the vector. */
-#define STEP_C(name, k, raised)                                                            \
-    void name(void) __attribute__((signal, used));                                         \
-    void name(void) { step_event(k, raised); }
-STEP_C(__vector_step_x, 0, 0)
-STEP_C(__vector_step_y, 1, 0)
-STEP_C(__vector_step_z, 2, 0)
-STEP_C(__vector_step_e, 3, 0)
-STEP_C(__vector_end_x, 0, 1)
-STEP_C(__vector_end_y, 1, 1)
-STEP_C(__vector_end_z, 2, 1)
-STEP_C(__vector_end_e, 3, 1)
+/* One stepper's C at a time: a stepper whose C comes while another's runs leaves its
+ * work to that one (its mode + 1 in step_c_pending; its pin is high already, its next
+ * compare not yet armed, so it cannot come again) and returns at once, so the stack
+ * holds one C path however many steppers need one (tools/stack_usage.py). The entry in
+ * assembly decides with interrupts off (a few cycles); the C path it opens runs with
+ * them on from its first instruction. */
+uint8_t step_c_open;
+uint8_t step_c_pending[4];
+static inline __attribute__((always_inline)) void step_drain(uint8_t k, uint8_t mode)
+{
+    work_of(k, mode);
+    for (;;) { /* (interrupts off here) */
+        uint8_t j = 0;
+        while (j < 4 && !step_c_pending[j])
+            j++;
+        if (j == 4)
+            break;
+        uint8_t m = (uint8_t)(step_c_pending[j] - 1);
+        step_c_pending[j] = 0;
+        sei();
+        work_of(j, m);
+    }
+    step_c_open = 0;
+}
+
+/* The rare cases, entered from the assembly as if from the vector. */
+#define STEP_C(name, kk, md)                                                               \
+    void name##_c(void) __attribute__((interrupt, used));                                  \
+    void name##_c(void) { step_drain(kk, md); }                                           \
+    void name(void) __attribute__((naked, used));                                          \
+    void name(void)                                                                        \
+    {                                                                                      \
+        __asm__ volatile("push r24\n\t"                                                    \
+                         "in r24, __SREG__\n\t"                                            \
+                         "push r24\n\t"                                                    \
+                         "lds r24, step_c_open\n\t"                                        \
+                         "tst r24\n\t"                                                     \
+                         "breq 1f\n\t"                                                     \
+                         "ldi r24, %[m]\n\t"                                               \
+                         "sts step_c_pending+%[k], r24\n\t"                                \
+                         "pop r24\n\t"                                                     \
+                         "out __SREG__, r24\n\t"                                           \
+                         "pop r24\n\t"                                                     \
+                         "reti\n"                                                          \
+                         "1:\n\t"                                                          \
+                         "ldi r24, 1\n\t"                                                  \
+                         "sts step_c_open, r24\n\t"                                        \
+                         "pop r24\n\t"                                                     \
+                         "out __SREG__, r24\n\t"                                           \
+                         "pop r24\n\t"                                                     \
+                         "jmp " #name "_c\n\t"                                            \
+                         :                                                                 \
+                         : [m] "M"((md) + 1), [k] "M"(kk));                               \
+    }
+STEP_C(__vector_wrap_x, 0, WRAP)
+STEP_C(__vector_wrap_y, 1, WRAP)
+STEP_C(__vector_wrap_z, 2, WRAP)
+STEP_C(__vector_wrap_e, 3, WRAP)
+STEP_C(__vector_step_x, 0, EDGE)
+STEP_C(__vector_step_y, 1, EDGE)
+STEP_C(__vector_step_z, 2, EDGE)
+STEP_C(__vector_step_e, 3, EDGE)
+STEP_C(__vector_end_x, 0, END)
+STEP_C(__vector_end_y, 1, END)
+STEP_C(__vector_end_z, 2, END)
+STEP_C(__vector_end_e, 3, END)
+_Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axis, slow),
+               "the assembly reads wraps before slow");
 
 /* The common case in assembly (about 90 cycles with the interrupt's entry and exit; the
  * compiler's C saves 20 registers): pin high, count down, T += I (32 bits), or at the
@@ -316,7 +502,7 @@ STEP_C(__vector_end_e, 3, 1)
 #define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
 
 #define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners, \
-                 late_partners)                                                           \
+                 late_partners, kidx, wrap_fn)                                            \
     __asm__ volatile(                                                                      \
         "push r24\n\t"                                                                     \
         "in r24, __SREG__\n\t"                                                             \
@@ -324,10 +510,22 @@ STEP_C(__vector_end_e, 3, 1)
         "lds r24, %[slow]\n\t"                                                             \
         "tst r24\n\t"                                                                      \
         "breq 1f\n\t"                                                                      \
+        /* C's: a period to let pass, or a slow chunk's edge (its pin raised here, at  \
+         * its time) */                                                                   \
+        "lds r24, %[slow]-1\n\t"                                                           \
+        "tst r24\n\t"                                                                      \
+        "brne 51f\n\t"                                                                     \
+        "push r25\n\t" pin_on                                                              \
+        "pop r25\n\t"                                                                      \
         "pop r24\n\t"                                                                      \
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
         "jmp " slow_fn "\n"                                                                \
+        "51:\n\t"                                                                          \
+        "pop r24\n\t"                                                                      \
+        "out __SREG__, r24\n\t"                                                            \
+        "pop r24\n\t"                                                                      \
+        "jmp " wrap_fn "\n"                                                                \
         "1:\n\t"                                                                           \
         "push r25\n\t" pin_on                                                              \
         "push r26\n\t"                                                                     \
@@ -342,6 +540,11 @@ STEP_C(__vector_end_e, 3, 1)
         "9:\n\t"                                                                           \
         /* the chunk's last edge: the waiting chunk; none and none in the ring: the    \
          * stepper stops; else C takes the ring's */                                       \
+        "lds r24, %[run]+6\n\t" /* a block's next chunk */                                 \
+        "tst r24\n\t"                                                                      \
+        "breq 44f\n\t"                                                                     \
+        "rjmp 40f\n"                                                                        \
+        "44:\n\t"                                                                          \
         "lds r24, %[rdy]\n\t"                                                              \
         "tst r24\n\t"                                                                      \
         "brne 6f\n\t"                                                                      \
@@ -369,6 +572,12 @@ STEP_C(__vector_end_e, 3, 1)
         "6:\n\t"                                                                           \
         "clr r24\n\t"                                                                      \
         "sts %[rdy], r24\n\t"                                                              \
+        /* a steady chunk (add 0, no further chunks: nblk is 0 here); a ramp's first      \
+         * out of line */                                                                 \
+        "cbi " GPIOR0_IO ", " kidx "\n\t"                                                 \
+        "sbic " GPIOR0_IO ", 4+" kidx "\n\t"                                              \
+        "rjmp 46f\n"                                                                       \
+        "45:\n\t"                                                                          \
         "lds r24, %[ncnt]\n\t"                                                             \
         "sts %[cnt], r24\n\t"                                                              \
         "lds r24, %[ncnt]+1\n\t"                                                           \
@@ -420,7 +629,10 @@ STEP_C(__vector_end_e, 3, 1)
         "lds r24, %[t]+3\n\t"                                                              \
         "lds r25, %[i]+3\n\t"                                                              \
         "adc r24, r25\n\t"                                                                 \
-        "sts %[t]+3, r24\n"                                                                \
+        "sts %[t]+3, r24\n\t"                                                             \
+        /* a ramp's chunk: I += add, out of line (2 cycles an edge without) */            \
+        "sbic " GPIOR0_IO ", " kidx "\n\t"                                                \
+        "rjmp 30f\n"                                                                       \
         "5:\n\t"                                                                           \
         "subi r26, lo8(%[lead])\n\t"                                                       \
         "sbci r27, hi8(%[lead])\n\t"                                                       \
@@ -444,7 +656,115 @@ STEP_C(__vector_end_e, 3, 1)
         "pop r24\n\t"                                                                      \
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
-        "reti\n\t"                                                                         \
+        "reti\n"                                                                           \
+        "30:\n\t" /* I += add (the flags change; T's bit 7 lives in SREG's T); I's top     \
+                     * byte stays 0: an assembly chunk's intervals are all under 2^23     \
+                     * (step_chunk_slow), so the sum's is 0 whatever add's */             \
+        "lds r24, %[i]\n\t"                                                                \
+        "lds r25, %[run]+2\n\t"                                                            \
+        "add r24, r25\n\t"                                                                 \
+        "sts %[i], r24\n\t"                                                                \
+        "lds r24, %[i]+1\n\t"                                                              \
+        "lds r25, %[run]+3\n\t"                                                            \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+1, r24\n\t"                                                              \
+        "lds r24, %[i]+2\n\t"                                                              \
+        "lds r25, %[run]+4\n\t"                                                            \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[i]+2, r24\n\t"                                                              \
+        "rjmp 5b\n"                                                                        \
+        "40:\n\t" /* a block's next chunk (r24: the chunks left): T += I, then its count, \
+                     * interval and add; one marked slow is C's */                        \
+        "push r30\n\t"                                                                     \
+        "push r31\n\t"                                                                     \
+        "lds r30, %[run]+7\n\t"                                                            \
+        "lds r31, %[run]+8\n\t"                                                            \
+        "ldd r25, Z+5\n\t"                                                                 \
+        "sbrc r25, 7\n\t"                                                                  \
+        "rjmp 41f\n\t"                                                                     \
+        "dec r24\n\t"                                                                      \
+        "sts %[run]+6, r24\n\t"                                                            \
+        "lds r24, %[t]\n\t"                                                                \
+        "lds r25, %[i]\n\t"                                                                \
+        "add r24, r25\n\t"                                                                 \
+        "sts %[t], r24\n\t"                                                                \
+        "bst r24, 7\n\t"                                                                   \
+        "lds r26, %[t]+1\n\t"                                                              \
+        "lds r25, %[i]+1\n\t"                                                              \
+        "adc r26, r25\n\t"                                                                 \
+        "sts %[t]+1, r26\n\t"                                                              \
+        "lds r27, %[t]+2\n\t"                                                              \
+        "lds r25, %[i]+2\n\t"                                                              \
+        "adc r27, r25\n\t"                                                                 \
+        "sts %[t]+2, r27\n\t"                                                              \
+        "lds r24, %[t]+3\n\t"                                                              \
+        "lds r25, %[i]+3\n\t"                                                              \
+        "adc r24, r25\n\t"                                                                 \
+        "sts %[t]+3, r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[cnt], r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[cnt]+1, r24\n\t"                                                            \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i], r24\n\t"                                                                \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i]+1, r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i]+2, r24\n\t"                                                              \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[i]+3, r24\n\t"                                                              \
+        "clr r25\n\t"                                                                      \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+2, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+3, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+4, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "ld r24, Z+\n\t"                                                                   \
+        "sts %[run]+5, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "sts %[run]+7, r30\n\t"                                                            \
+        "sts %[run]+8, r31\n\t"                                                            \
+        "pop r31\n\t"                                                                      \
+        "pop r30\n\t"                                                                      \
+        "cbi " GPIOR0_IO ", " kidx "\n\t"                                                 \
+        "tst r25\n\t"                                                                      \
+        "breq 43f\n\t"                                                                     \
+        "sbi " GPIOR0_IO ", " kidx "\n"                                                    \
+        "43:\n\t"                                                                          \
+        "rjmp 5b\n"                                                                        \
+        "41:\n\t"                                                                          \
+        "pop r31\n\t"                                                                      \
+        "pop r30\n\t"                                                                      \
+        "rjmp 11b\n"                                                                       \
+        "46:\n\t" /* the waiting chunk's add and block (a ramp's first chunk) */          \
+        "cbi " GPIOR0_IO ", 4+" kidx "\n\t"                                               \
+        "clr r25\n\t"                                                                      \
+        "lds r24, %[nneg]+1\n\t"                                                           \
+        "sts %[run]+2, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "lds r24, %[nneg]+2\n\t"                                                           \
+        "sts %[run]+3, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "lds r24, %[nneg]+3\n\t"                                                           \
+        "sts %[run]+4, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "lds r24, %[nneg]+4\n\t"                                                           \
+        "sts %[run]+5, r24\n\t"                                                            \
+        "or r25, r24\n\t"                                                                  \
+        "breq 47f\n\t"                                                                     \
+        "sbi " GPIOR0_IO ", " kidx "\n"                                                    \
+        "47:\n\t"                                                                          \
+        "lds r24, %[nneg]+5\n\t"                                                           \
+        "sts %[run]+6, r24\n\t"                                                            \
+        "lds r24, %[nneg]+6\n\t"                                                           \
+        "sts %[run]+7, r24\n\t"                                                            \
+        "lds r24, %[nneg]+7\n\t"                                                           \
+        "sts %[run]+8, r24\n\t"                                                            \
+        "rjmp 45b\n\t"                                                                     \
         :                                                                                  \
         : [slow] "i"(&(a).slow), [cnt] "i"(&(a).count), [t] "i"(&(a).t),                   \
           [i] "i"(&(a).interval), [rdy] "i"(&(a).next_ready), [nt] "i"(&(a).next_t),       \
@@ -464,14 +784,14 @@ ISR(TIMER3_COMPA_vect, ISR_NAKED)
     STEP_ASM(axes[0], OCR3A, TCNT3, TIMSK3, _BV(OCIE3A), "sbi %[pf], %[xb]\n\t", "cbi %[pf], %[xb]\n\t",
              "sbi %[pf], %[xd]\n\t", "cbi %[pf], %[xd]\n\t", 1, "__vector_step_x",
              "__vector_end_x", RAISE_PENDING(PENDING_T3_T5, "0x1C", IF_Y IF_Z IF_E),
-             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z));
+             RAISE_PENDING(PENDING_T3, "0x0C", IF_Y IF_Z), "0", "__vector_wrap_x");
 }
 ISR(TIMER3_COMPB_vect, ISR_NAKED)
 {
     STEP_ASM(axes[1], OCR3B, TCNT3, TIMSK3, _BV(OCIE3B), "sbi %[pf], %[yb]\n\t", "cbi %[pf], %[yb]\n\t",
              "sbi %[pf], %[yd]\n\t", "cbi %[pf], %[yd]\n\t", 2, "__vector_step_y",
              "__vector_end_y", RAISE_PENDING(PENDING_T3_T5, "0x1A", IF_X IF_Z IF_E),
-             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z));
+             RAISE_PENDING(PENDING_T3, "0x0A", IF_X IF_Z), "1", "__vector_wrap_y");
 }
 ISR(TIMER3_COMPC_vect, ISR_NAKED)
 {
@@ -480,14 +800,14 @@ ISR(TIMER3_COMPC_vect, ISR_NAKED)
              "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
              "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, "0x16", IF_X IF_Y IF_E),
-             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y));
+             RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y), "2", "__vector_wrap_z");
 }
 ISR(TIMER5_COMPA_vect, ISR_NAKED)
 {
     STEP_ASM(axes[3], OCR5A, TCNT5, TIMSK5, _BV(OCIE5A), "sbi %[pa], %[eb]\n\t", "cbi %[pa], %[eb]\n\t",
              "sbi %[pa], %[ed]\n\t", "cbi %[pa], %[ed]\n\t", 8, "__vector_step_e",
              "__vector_end_e", RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z),
-             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z));
+             RAISE_PENDING(PENDING_T3, "0x0E", IF_X IF_Y IF_Z), "3", "__vector_wrap_e");
 }
 _Static_assert(!X_DIR_INVERT && !Y_DIR_INVERT && !Z_DIR_INVERT && !E_DIR_INVERT,
                "the assembly sets a direction pin high for positive steps");
@@ -501,34 +821,53 @@ static uint32_t now_q(uint8_t k, uint32_t tick_start)
     return tick_start + q_of(since);
 }
 
+/* A stopped stepper's first chunk (its interrupt is off: only the shared bytes and the
+ * arming are masked) */
 static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
 {
+    uint8_t s = SREG;
+    cli();
     take(k, a);
+    SREG = s;
+    uint8_t slow = chunk_is_slow(k, a);
+    cli();
     uint32_t now = now_q(k, step_clock_this_tick);
     uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
+    irq_clear(k);
     arm(k, a, ahead);
     a->running = 1;
-    set_slow(k, a);
-    irq_on(k);
+    set_slow_as(k, a, slow);
+    irq_on(k, a);
+    SREG = s;
 }
 
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
 {
     struct step_axis *a = &axes[k];
     uint8_t s = SREG;
-    cli();
-    if (a->running && !a->next_ready && a->head == a->tail && c->interval < 0x800000UL) {
+    if (!a->next_ready && !step_chunk_slow(c->interval, c->add, c->count)) {
         /* the assembly takes it at the running chunk's end (which is less than a timer
-         * period before it: the segments follow each other) */
+         * period before it: the segments follow each other); written with interrupts on
+         * (the interrupt reads it only once it is ready) */
         a->next_t = c->t;
         a->next_interval = c->interval;
         a->next_count = c->count;
         a->next_neg = c->neg;
-        a->next_ready = 1;
-        SREG = s;
-        return 1;
+        a->next_add = c->add;
+        a->next_nblk = c->nblk;
+        a->next_blk = c->blk;
+        cli();
+        if (a->running && a->head == a->tail) {
+            if (c->add || c->nblk)
+                GPIOR0 |= (uint8_t)(bit_of_k[k] << 4);
+            else
+                GPIOR0 &= (uint8_t)~(bit_of_k[k] << 4);
+            a->next_ready = 1;
+            SREG = s;
+            return 1;
+        }
     }
     SREG = s;
     uint8_t head = a->head;
@@ -537,9 +876,12 @@ uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
     a->ring[head & (CHUNK_SLOTS - 1)] = *c;
     cli();
     a->head = (uint8_t)(head + 1);
-    if (!a->running)
-        start_axis(k, a);
+    /* (a stepper's C stops it in one masked piece with the ring found empty: running
+     * read after the chunk is in is either still 1, and the chunk taken, or 0) */
+    uint8_t running = a->running;
     SREG = s;
+    if (!running)
+        start_axis(k, a);
     return 1;
 }
 
@@ -550,12 +892,29 @@ void step_engine_stop(void)
     TIMSK3 = 0;
     TIMSK5 = 0;
     step_fast = 0;
+    GPIOR0 = 0;
+    for (uint8_t k = 0; k < 4; k++) {
+        if (step_c_pending[k]) /* its pin raised, its work left (a C path running finds none) */
+            lower_pin(k);
+        step_c_pending[k] = 0;
+    }
     for (uint8_t k = 0; k < 4; k++) {
         axes[k].running = 0;
         axes[k].next_ready = 0;
         axes[k].tail = axes[k].head;
         axes[k].count = 0;
+        axes[k].nblk = 0;
     }
     SREG = s;
+}
+
+uint8_t step_engine_idle(void)
+{
+    for (uint8_t k = 0; k < 4; k++) {
+        const struct step_axis *a = &axes[k];
+        if (a->running || a->next_ready || a->head != a->tail)
+            return 0;
+    }
+    return 1;
 }
 #endif

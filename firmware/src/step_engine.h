@@ -19,15 +19,23 @@
 #define STEP_ENGINE_H
 #include <stdint.h>
 
+#include "mul16.h"
+
 #define STEP_FRAC_BITS 8
 #define CHUNK_SLOTS 2 /* a power of two: the chunks of a stepper queued ahead for C (the
                        * assembly's next chunk has a slot of its own) */
 
+struct sched_chunk;
 struct step_chunk {
     uint32_t t;        /* the first edge, Q24.8 cycles on the steppers' time base */
-    uint32_t interval; /* Q24.8 cycles between edges */
+    uint32_t interval; /* Q24.8 cycles between its first two edges */
+    int32_t add;       /* added to the interval at each edge (a ramp's; 0: steady) */
     uint16_t count;    /* edges, >= 1 */
     uint8_t neg;       /* the direction: 1 toward negative steps */
+    /* a schedule block's further chunks, run after this one (step_blocks.h): each starts
+     * where the one before left off */
+    uint8_t nblk;
+    const struct sched_chunk *blk;
 };
 
 /* The steppers' clock: Timer3's count extended to 24 bits, Q24.8 (the start of the tick
@@ -43,6 +51,26 @@ void step_engine_start_timers(uint8_t timer1_b);
  * it. Returns 0 when the stepper's ring is full (never: a segment is one chunk an axis
  * and a tick computes one ahead). */
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
+
+/* Whether the assembly may not run a chunk (C does): its intervals, the last one too,
+ * of 2^15 cycles or more (its lateness test compares 16-bit times). */
+static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t count)
+{
+    uint32_t longest = interval;
+    if (add > 0 && count > 1) {
+        if ((uint32_t)add >= 0x800000UL)
+            return 1;
+        uint16_t n = (uint16_t)(count - 1);
+        uint32_t grow = mul16x16((uint16_t)(add >> 8), n); /* < 2^15 2^16 */
+        if (grow >= 0x8000UL)
+            return 1;
+        longest += (grow << 8) + mul16x16((uint8_t)add, n);
+    }
+    return longest >= 0x800000UL;
+}
+
+/* No stepper runs and none has a chunk waiting. */
+uint8_t step_engine_idle(void);
 
 /* Stop every stepper now and forget their chunks (halt, flush). */
 void step_engine_stop(void);

@@ -50,6 +50,7 @@ static uint8_t ocr_units = TICK_UNITS; /* the length of the tick in progress */
 void step_timer_init(void)
 {
     ticks_out[0].units = ticks_out[1].units = TICK_UNITS;
+    ticks_out[0].own = ticks_out[1].own = STEP_ENGINE ? 0 : 0x0F;
     /* Timer1: CTC on OCR1A, no prescaler; in the simulator build compare C toggles OC1C
      * (MARK_EDGE) when OCR1C is set to match one cycle into the next tick */
     TCCR1A = SIM_HOOKS ? _BV(COM1C0) : 0;
@@ -144,13 +145,18 @@ static void __attribute__((noinline)) tick_start(void)
         ev++; /* issued by the last tick's compare B, just before this tick began */
         handed_over = 0;
     }
-    if (e->dir != cur_dir) {
+    /* (masked: the step engine's interrupts set their own axes' bits of cur_dir) */
+    uint8_t sreg = SREG;
+    cli();
+    uint8_t dir = (uint8_t)((e->dir & e->own) | (cur_dir & (uint8_t)~e->own));
+    if (dir != cur_dir) {
         /* first, and in a tick without steps too: a reversal's first step, at the next
          * tick's start, can then go out with this tick's compare B (hand_over_first) */
-        apply_dirs(e->dir);
-        cur_dir = e->dir;
+        apply_dirs(dir);
+        cur_dir = dir;
         __builtin_avr_delay_cycles(16);
     }
+    SREG = sreg;
     uint16_t high_from = 0;
     uint8_t first = 0;
     if (ev->mask && !late_cycles) {
@@ -272,7 +278,8 @@ static void __attribute__((noinline)) hand_over_first(void)
 {
     const struct event *f = next_tick->ev;
     uint8_t n = this_tick->n;
-    if (!f->mask || f->at >= A_EARLY || next_tick->dir != cur_dir || n >= EV_MAX)
+    if (!f->mask || f->at >= A_EARLY || ((next_tick->dir ^ cur_dir) & next_tick->own) ||
+        n >= EV_MAX)
         return;
     uint16_t at = (uint16_t)(ocr_units * UNIT_CYCLES - 1 - HANDOVER_LEAD);
     if ((int16_t)(at - TCNT1) < 24)
@@ -335,7 +342,8 @@ ISR(TIMER1_COMPA_vect, ISR_NAKED)
  * tick that ends is pending (tick_start then touches no pin). */
 static inline __attribute__((always_inline)) uint8_t quiet_start(void)
 {
-    return !next_tick->ev[0].mask && next_tick->dir == cur_dir && !(TIMSK1 & _BV(OCIE1B));
+    return !next_tick->ev[0].mask && !((next_tick->dir ^ cur_dir) & next_tick->own) &&
+           !(TIMSK1 & _BV(OCIE1B));
 }
 
 void __vector_tick(void)

@@ -31,6 +31,7 @@ struct out {
     struct event ev[EV_MAX + 1]; /* offset 0, in time order */
     uint8_t n;
     uint8_t dir; /* axis bit set: negative */
+    uint8_t own; /* the axes whose direction pins `dir` sets (the step engine sets its own) */
     uint8_t flags; /* OUT_* */
     uint8_t units; /* length of the tick */
     uint32_t seq;  /* OUT_SEG_END: the number of the segment it ends */

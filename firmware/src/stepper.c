@@ -27,6 +27,7 @@
 #include "sim_hooks.h"
 #include "sim_markers.h"
 #include "step_pins.h"
+#include "step_blocks.h"
 #include "step_engine.h"
 #include "step_events.h"
 #include "step_rate.h"
@@ -84,6 +85,17 @@ static uint8_t chunks_ahead;
 /* the next segment's axes (0..4) whose chunks went out during this segment's last ticks */
 static uint8_t axes_ahead;
 static uint32_t abort_seq;
+/* the ring of schedule chunks (step_blocks.h): the blocks of the segments that ended but
+ * whose end may not have come yet (their last tick is computed a tick ahead), oldest
+ * first: where each segment ends on the steppers' clock and the ring's head after its
+ * block. Freed once that time has passed (the steppers take a chunk at the last edge of
+ * the one before, so a segment's are all taken by its end). */
+#define BLK_HELD 4 /* a segment ends a tick at the most, an entry goes within two */
+static uint8_t blk_held;
+static struct {
+    uint32_t end;
+    uint8_t blk_end;
+} blk_fifo[BLK_HELD];
 
 void stepper_init(uint8_t hold_mask)
 {
@@ -199,6 +211,7 @@ struct seg_snapshot {
     uint32_t done_ticks;
     float ka, kb;
     int32_t delta[4];
+    uint8_t engine; /* the step engine's axes */
 };
 
 static void seg_snapshot(struct seg_snapshot *sn)
@@ -211,6 +224,7 @@ static void seg_snapshot(struct seg_snapshot *sn)
     sn->done_ticks = seg_plan->ticks - ticks_left;
     sn->ka = seg_plan->ka;
     sn->kb = seg_plan->kb;
+    sn->engine = PLAN_ENGINE(seg_plan);
     for (uint8_t k = 0; k < 4; k++) {
         sn->acc_int[k] = (uint8_t)(seg_plan->ax[k].acc >> 24);
         sn->delta[k] = seg_plan->delta[k];
@@ -229,7 +243,7 @@ static void seg_positions(const struct seg_snapshot *sn, int32_t *out)
         uint32_t n = (uint32_t)(d < 0 ? -d : d);
         uint32_t est = motion_steps_due((float)n, sn->ka, sn->kb, sn->done_ticks);
         int32_t issued = (int32_t)est;
-        if (!STEP_ENGINE || sn->kb != 0.0f) /* the DDA's own count: its byte corrects */
+        if (!(sn->engine >> k & 1)) /* the DDA's own count: its byte corrects */
             issued += (int8_t)(uint8_t)(sn->acc_int[k] - (uint8_t)est);
         out[k] += d < 0 ? -issued : issued;
     }
@@ -286,8 +300,11 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     queue_tail = queue_head;
     if (STEP_ENGINE)
         step_engine_stop();
-    if (STEP_ENGINE)
+    if (STEP_ENGINE) {
         chunks_ahead = axes_ahead = 0;
+        blocks_reset();
+        blk_held = 0;
+    }
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
     motion_plans_reset();
@@ -324,6 +341,7 @@ static void __attribute__((noinline)) set_pos_marker(void)
 static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backing)
 {
     next_tick->dir = (uint8_t)((cur_dir & 0x8) | backing);
+    next_tick->own = 0x0F;
     int32_t *pos = ((struct stepper_state *)&stepper)->pos; /* private to this interrupt here */
     for (uint8_t k = 0; k < 3; k++)
         if (stepping >> k & 1)
@@ -336,10 +354,11 @@ static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backin
     }
 }
 
-/* A steady segment's steps: one chunk an axis, from the segment's start `start` (Q24.8
- * on the steppers' clock), the first edge half an interval in (PROTOCOL.md 5.1); the
- * axes from `from` on, at most `most` moving ones. Returns the axis after the last one
- * put out (4: all). */
+/* The step engine's axes of a segment: from the segment's start `start` (Q24.8 on the
+ * steppers' clock), a steady axis one chunk (its first edge half an interval in,
+ * PROTOCOL.md 5.1), an axis with a schedule block its block's chunks (the first one
+ * here, the engine reads the others from the ring as it goes); the axes from `from` on,
+ * at most `most` moving ones. Returns the axis after the last one put out (4: all). */
 static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p, uint32_t start,
                                                             uint8_t from, uint8_t most)
 {
@@ -347,16 +366,36 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
     struct step_chunk c;
     const struct axis_plan *x = p->ax + from;
     const int32_t *d = p->delta + from;
-    uint8_t k = from;
-    for (; k < 4 && most; k++, x++, d++) {
+    const struct sched_chunk *h = &block_chunks[p->blk_at];
+    uint8_t blk = p->blk_mask;
+    for (uint8_t j = 0; j < from; j++, blk >>= 1)
+        if (blk & 1)
+            h += 1 + h->count; /* the axis's header and chunks */
+    uint8_t k = from, engine = PLAN_ENGINE(p) >> from;
+    for (; k < 4 && most; k++, x++, d++, blk >>= 1, engine >>= 1) {
         int32_t n = *d;
-        if (!n)
+        const struct sched_chunk *own = h;
+        if (blk & 1)
+            h += 1 + h->count;
+        if (!(engine & 1))
             continue;
         most--;
         c.neg = n < 0;
-        c.count = (uint16_t)(n < 0 ? -n : n);
-        c.interval = x->interval;
-        c.t = start + (c.interval >> 1);
+        if (blk & 1) {
+            c.t = start + own->interval; /* the header's: the first edge */
+            c.nblk = (uint8_t)(own->count - 1);
+            c.blk = own + 2;
+            own++;
+            c.count = own->count;
+            c.interval = own->interval & 0x7FFFFFFFUL; /* (the assembly's mark off) */
+            c.add = own->add;
+        } else {
+            c.count = (uint16_t)(n < 0 ? -n : n);
+            c.interval = x->interval;
+            c.t = start + (c.interval >> 1);
+            c.add = 0;
+            c.nblk = 0;
+        }
         step_engine_push(k, &c);
     }
     return k;
@@ -398,7 +437,16 @@ static void __attribute__((noinline)) dispatch(void)
             }
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
-            if (STEP_ENGINE && !p->accel) {
+#if STEP_ENGINE
+            {
+                /* an axis the tick's DDA drives in the tick now ending (a ramp without
+                 * its block) that reverses: the DDA keeps it for this segment too (the
+                 * engine would set its direction pin now, under the DDA's last steps) */
+                uint8_t flip = this_tick->own & p->engine & (uint8_t)(p->dir ^ cur_dir);
+                p->engine &= (uint8_t)~flip;
+            }
+#endif
+            if (STEP_ENGINE && PLAN_ENGINE(p)) {
                 if (chunks_ahead)
                     chunks_ahead = 0;
                 else
@@ -538,7 +586,8 @@ static void chunks_early(const struct plan *p, uint8_t tail, uint8_t ahead, uint
         queue_slot(tail)->kind != IT_SEG)
         return;
     const struct plan *n = &plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)];
-    if (n->index != tail || n->accel || (stepper.enabled_mask | n->moving) != stepper.enabled_mask)
+    if (n->index != tail || PLAN_ENGINE(n) != n->moving ||
+        (stepper.enabled_mask | n->moving) != stepper.enabled_mask)
         return;
     uint16_t to_end = (uint16_t)(ticks * TICK_CYCLES + (uint16_t)(p->last_units * UNIT_CYCLES));
     axes_ahead = seg_chunks(n, step_clock_next_tick + ((uint32_t)to_end << STEP_FRAC_BITS),
@@ -562,7 +611,7 @@ static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
         int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
         uint32_t rem = x->last_n - (int32_t)off;
         int32_t moved = *d;
-        if (rem && (p->accel || !STEP_ENGINE)) {
+        if (rem && !(PLAN_ENGINE(p) >> k & 1)) {
             uint8_t n = rem > AX_MAX ? AX_MAX : (uint8_t)rem;
             if (rem > AX_MAX) {
                 /* more than a tick holds (never at the advertised rate): the position
@@ -590,12 +639,43 @@ static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
     }
 }
 
+/* A segment ends (its last tick, starting at step_clock_next_tick, is being computed):
+ * its block is held until the time its tick ends. */
+static void blocks_done(const struct plan *p)
+{
+#if !STEP_ENGINE
+    (void)p;
+#else
+    if (!p->blk_mask || blk_held == BLK_HELD)
+        return; /* (full: never; the next block's release frees it) */
+    blk_fifo[blk_held].end =
+        step_clock_next_tick + ((uint32_t)(uint16_t)(p->last_units * UNIT_CYCLES) << STEP_FRAC_BITS);
+    blk_fifo[blk_held].blk_end = p->blk_end;
+    blk_held++;
+#endif
+}
+
+/* The held blocks whose segments' ends have passed (the tick in progress began after
+ * them) are freed; all of them once the steppers stopped. */
+static void __attribute__((noinline)) blocks_expire(uint8_t idle)
+{
+    uint8_t n = 0;
+    while (n < blk_held && (idle || (int32_t)(step_clock_this_tick - blk_fifo[n].end) >= 0))
+        n++;
+    if (!n)
+        return;
+    blocks_release(blk_fifo[n - 1].blk_end);
+    for (uint8_t i = n; i < blk_held; i++)
+        blk_fifo[i - n] = blk_fifo[i];
+    blk_held = (uint8_t)(blk_held - n);
+}
+
 /* The segment's last tick: its last steps, its end. */
 static void __attribute__((noinline)) seg_last_tick(struct plan *p)
 {
     struct stepper_state *s = (struct stepper_state *)&stepper; /* private to this interrupt here */
     struct out *o = next_tick;
-    if (STEP_ENGINE && !p->accel) {
+    if (STEP_ENGINE && PLAN_ENGINE(p) == p->moving) {
         /* the step engine's chunks issue every step (the whole delta): no count to check,
          * and this tick stays short (at 3 x 33K the steppers leave it a third of the CPU;
          * the DDA path's bookkeeping, 500 instructions for nothing here, overran it) */
@@ -607,6 +687,8 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
         last_steps(p, s->pos);
     }
     lost_count(wheel_take(o));
+    if (STEP_ENGINE)
+        blocks_done(p);
     s->current = 0xFF;
     o->flags |= OUT_SEG_END;
     o->seq = s->segments_done = s->seg_next++;
@@ -616,9 +698,9 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     uint8_t tail = ++queue_tail;
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
-    else if (STEP_ENGINE && !p->at_rest && !p->accel && axes_ahead < 4)
+    else if (STEP_ENGINE && !p->at_rest && PLAN_ENGINE(p) == p->moving && axes_ahead < 4)
         chunks_early(p, tail, 0, 0, 4);
-    else if (STEP_ENGINE && !p->at_rest && !p->accel)
+    else if (STEP_ENGINE && !p->at_rest && PLAN_ENGINE(p) == p->moving)
         chunks_ahead = 1; /* every axis went out during the segment */
 }
 
@@ -649,13 +731,15 @@ static void __attribute__((noinline)) seg_tick(void)
     }
     o->flags |= OUT_MOTION;
     o->dir = p->dir;
+    if (STEP_ENGINE)
+        o->own = p->moving & (uint8_t)~PLAN_ENGINE(p); /* the engine's axes set their own */
     if (--ticks_left == 0) {
         o->units = p->last_units;
         seg_last_tick(p);
         return;
     }
     uint8_t moving = p->moving, accel = p->accel, any = 0;
-    if (STEP_ENGINE && !accel) {
+    if (STEP_ENGINE && PLAN_ENGINE(p) == moving) {
         /* a steady segment's steps are the step engine's chunks; its last ticks put out
          * the next segment's */
         if (ticks_left <= AXES_AHEAD_TICKS && !p->at_rest)
@@ -664,7 +748,7 @@ static void __attribute__((noinline)) seg_tick(void)
     }
     struct axis_plan *x = p->ax;
     const uint8_t *bit = bit_of;
-    for (uint8_t m = moving; m; m >>= 1, x++, bit++) {
+    for (uint8_t m = moving & (uint8_t)~PLAN_ENGINE(p); m; m >>= 1, x++, bit++) {
         if (!(m & 1))
             continue;
         /* before the tick: how far past its last crossing the axis is (Q0.16, the
@@ -777,7 +861,10 @@ void __attribute__((noinline)) stepper_compute(void)
     o->ev[0].mask = 0;
     o->flags = 0;
     o->dir = cur_dir;
+    o->own = STEP_ENGINE ? 0 : 0x0F;
     o->units = TICK_UNITS;
+    if (STEP_ENGINE && blk_held)
+        blocks_expire(stepper.current != IT_SEG && step_engine_idle());
     if (stepper.current == IT_SEG && stepper.running)
         seg_tick(); /* the common case first */
     else if (stepper.current != 0xFF || queue_head != queue_tail || abort_pending || settle_ticks)

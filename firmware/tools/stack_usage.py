@@ -44,6 +44,10 @@ CFLAGS = [
 SIM_ONLY = {"sim_hooks.c"}
 # The targets of each function's indirect calls: the wiring of src/main.c (its tables of
 # upper-layer functions). A function with an indirect call missing here fails the run.
+#: vectors of which at most one has interrupts enabled at a time: the step engine's
+#: steppers (Timer3 compare A-C, Timer5 compare A), whose C paths run one at a time
+#: (src/step_engine.c, step_c_open: a second one leaves its work to the first)
+EXCLUSIVE = ({"__vector_32", "__vector_33", "__vector_34", "__vector_47"},)
 INDIRECT = {
     "deframer_run": ("link_frame_received", "link_frame_rejected", "prepare_one"),
     "link_frame_received": ("proto_accept", "proto_urgent", "proto_frame_seen"),
@@ -155,11 +159,26 @@ def analyse(elf: Path) -> dict[str, int | str]:
         """Interrupts enabled again somewhere inside it (another one may then nest)."""
         return any("\tsei" in ln for f in reachable(n) for ln in funcs[f][1])
 
-    worst_isr, worst_name = 0, ""
-    for n, d in isr_depth.items():
-        inner = max((v for k, v in isr_depth.items() if k != n), default=0) if nests(n) else 0
-        if d + inner > worst_isr:
-            worst_isr, worst_name = d + inner, n
+    # Each vector is on the stack at most once; every one that enables interrupts inside
+    # may have the others nested in it, one of each EXCLUSIVE group at a time: the worst
+    # case is all those that nest, one on top of them (any other, its whole depth).
+    nesting = {n for n in isr_depth if nests(n)}
+
+    def chain(top: str) -> tuple[int, list[str]]:
+        below = [n for n in nesting if n != top]
+        for group in EXCLUSIVE:
+            inside = [n for n in below if n in group]
+            if len(inside) > 1:
+                keep = max(inside, key=lambda n: isr_depth[n])
+                below = [n for n in below if n not in group or n == keep]
+        below.sort(key=lambda n: -isr_depth[n])
+        return sum(isr_depth[n] for n in below) + isr_depth[top], [*below, top]
+
+    worst_isr, worst_name, worst_chain = 0, "", []
+    for n in isr_depth:
+        d, names = chain(n)
+        if d > worst_isr:
+            worst_isr, worst_name, worst_chain = d, n, names
     end = next(
         int(ln.split()[0], 16) & 0xFFFF
         for ln in subprocess.run(
@@ -176,8 +195,8 @@ def analyse(elf: Path) -> dict[str, int | str]:
         "main": main,
         "main_path": " -> ".join(main_path),
         "interrupts": worst_isr,
-        "interrupt": worst_name
-        + (" (interrupts enabled inside: one nested)" if worst_name and nests(worst_name) else ""),
+        "interrupt": " > ".join(f"{n} {isr_depth[n]} B" for n in worst_chain)
+        + (" (nested, each enabling interrupts but the last)" if len(worst_chain) > 1 else ""),
         "interrupt_path": " -> ".join(isrs[worst_name][1]) if worst_name else "",
     }
 

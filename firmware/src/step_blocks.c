@@ -1,0 +1,71 @@
+/* The ring of the schedule blocks' chunks (step_blocks.h). */
+#include <avr/interrupt.h>
+
+#include "step_blocks.h"
+#include "step_engine.h"
+
+_Static_assert((BLOCK_CHUNKS & (BLOCK_CHUNKS - 1)) == 0 && BLOCK_CHUNKS <= 128,
+               "BLOCK_CHUNKS: a power of two, its counters modulo 256");
+_Static_assert(!STEP_ENGINE || BLOCK_MOST <= BLOCK_CHUNKS / 2, "two blocks of the most in the ring");
+
+#if STEP_ENGINE
+struct sched_chunk block_chunks[BLOCK_CHUNKS];
+#endif
+volatile uint8_t blocks_head, blocks_tail, blocks_stalled;
+#if STEP_ENGINE
+static struct sched_block sink;
+#endif
+
+struct sched_block *blocks_sink(uint8_t bytes)
+{
+#if STEP_ENGINE
+    uint8_t most = bytes > DEV_MAX_PAYLOAD ? BLOCK_MOST : (uint8_t)BLOCK_ENTRIES(bytes);
+    uint8_t head = blocks_head, tail = blocks_tail;
+    uint8_t at = head & (BLOCK_CHUNKS - 1);
+    if (at + most > BLOCK_CHUNKS)
+        head = (uint8_t)(head + (BLOCK_CHUNKS - at)); /* a block never wraps: skip the end */
+    if ((uint8_t)(head + most - tail) > BLOCK_CHUNKS) {
+        blocks_stalled = 1;
+        return 0;
+    }
+    blocks_stalled = 0;
+    blocks_head = head; /* the skipped end is freed with the block after it */
+    sink.chunk = &block_chunks[head & (BLOCK_CHUNKS - 1)];
+    sink.capacity = most;
+    sink.used = 0;
+    sink.mask = 0;
+    return &sink;
+#else
+    (void)bytes;
+    return 0;
+#endif
+}
+
+void blocks_commit(struct item *it)
+{
+#if STEP_ENGINE
+    uint8_t head = blocks_head;
+    /* the chunks the engine's assembly may not run (step_chunk_slow) marked for C: bit 31
+     * of the interval (a block's intervals are under 2^31) */
+    struct sched_chunk *c = sink.chunk, *end = c + sink.used;
+    while (c < end) {
+        uint8_t n = (uint8_t)c->count; /* the axis's header */
+        for (c++; n; n--, c++)
+            if (step_chunk_slow(c->interval, c->add, c->count))
+                c->interval |= 0x80000000UL;
+    }
+    it->blk_at = head & (BLOCK_CHUNKS - 1);
+    it->blk_mask = sink.mask;
+    head = (uint8_t)(head + sink.used);
+    it->blk_end = head;
+    blocks_head = head;
+#else
+    (void)it;
+#endif
+}
+
+void blocks_reset(void)
+{
+    blocks_tail = blocks_head;
+    blocks_stalled = 0;
+}
