@@ -279,11 +279,12 @@ void stepper_halt(void)
         chunks_ahead = axes_ahead = 0;
     SREG = s;
     if (sn.running) {
-        int32_t pos[4];
-        seg_positions(&sn, pos);
+        /* in place (seg_positions reads each axis's start before it writes it): the
+         * shutdown path is the stack's deepest, 16 B of a second array are its margin */
+        seg_positions(&sn, sn.pos);
         cli();
         for (uint8_t k = 0; k < 4; k++)
-            stepper.pos[k] = pos[k];
+            stepper.pos[k] = sn.pos[k];
         SREG = s;
     }
 }
