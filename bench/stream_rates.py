@@ -67,10 +67,12 @@ variable shift per axis, the positions in a loop of their own: the one loop spil
 pointers), the watchdog record's CRC-16 once a change (check_of 113 -> 80), and
 save_progress's copy of the counters only after a tick or a main-loop change (an idle
 turn's fifth). 30 s clean 2,000/s rows: 1x on the loaded machine, base 2.9 s then
-underrun, this 5.1-15.0 s (five runs: 12.0, 5.1, 6.0, 15.0, 12.3; simavr 20-375 ms
-behind the wall); ``--speedup 0.5`` exact for 30 s, twice, and so is the base (once, this
-day): at 2,000/s the firmware's CPU keeps up when the host and simavr do, and the 1x
-underruns follow the machine's load.
+underrun; this, seven runs: exact for 30 s twice (simavr 33 ms behind the wall at most in
+one, 1.96 s in the other) and underruns at 12.0, 5.1, 6.0, 15.0, 12.3 s (simavr 20-375 ms
+behind); 1,000/s with 1e-3 corruption and drop exact for 30 s (801 resends, 31
+timeouts). ``--speedup 0.5`` exact for 30 s, twice, and so is the base (once, this day):
+at 2,000/s the firmware's CPU keeps up when the host and simavr do, and the 1x underruns
+follow the machine's load.
 """
 
 from __future__ import annotations
