@@ -270,6 +270,29 @@ void stepper_positions(int32_t *out)
     seg_positions(&sn, out);
 }
 
+#if STEP_ENGINE
+/* A halt's engine axes (interrupts off, before the engine stops): the steps the engine
+ * issued, not the profile's estimate (which put a halted stream one step off). Every
+ * chunk out is a whole segment's delta: the running segment's engine axes, and the next
+ * segment's axes put out early (chunks_early); stepper.pos holds the ended segments',
+ * whose last edges may still be queued. The edges not raised yet are taken off. */
+static void engine_issued(struct seg_snapshot *sn)
+{
+    uint8_t ahead = sn->running ? 1 : 0;
+    const struct plan *n = &plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)];
+    for (uint8_t k = 0; k < 4; k++) {
+        int32_t out = 0;
+        if (sn->running && (sn->engine >> k & 1)) {
+            out += sn->delta[k];
+            sn->delta[k] = 0; /* counted here: seg_positions leaves it */
+        }
+        if (k < axes_ahead && (uint8_t)(plan_head - plan_tail) > ahead)
+            out += n->delta[k];
+        sn->pos[k] += out - step_engine_unissued(k);
+    }
+}
+#endif
+
 void stepper_halt(void)
 {
     struct seg_snapshot sn;
@@ -283,12 +306,15 @@ void stepper_halt(void)
     stepper.current = 0xFF;
     stepper.at_rest = 1;
     stepper.running = 0;
+#if STEP_ENGINE
+    engine_issued(&sn);
+#endif
     if (STEP_ENGINE)
         step_engine_stop();
     if (STEP_ENGINE)
         chunks_ahead = axes_ahead = 0;
     SREG = s;
-    if (sn.running) {
+    if (sn.running || STEP_ENGINE) { /* (the engine's edges counted even between segments) */
         /* in place (seg_positions reads each axis's start before it writes it): the
          * shutdown path is the stack's deepest, 16 B of a second array are its margin */
         seg_positions(&sn, sn.pos);

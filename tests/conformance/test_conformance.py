@@ -52,8 +52,10 @@ def test_handshake_and_duplicate_hello(device_factory, host_factory):
     ident = h.hello(0x4321)
     assert ident.major == PROTOCOL_MAJOR and ident.axes == 4 and ident.heaters == 2
     assert ident.cpu_hz == 16_000_000  # 3.0: 160 cycles a tick, the reciprocal table's
-    # the same clock and queue on both, so the host plans the same segments for both
-    assert ident.clock_hz == 100_000 and ident.queue_capacity == 128
+    # the same clock on both, so the host plans the same segments for both; the queue is
+    # each device's own (flow control only): the AVR built with the step engine trades
+    # half its 128 slots for the ring of schedule chunks (config.h QUEUE_SIZE)
+    assert ident.clock_hz == 100_000 and ident.queue_capacity in (64, 128)
     assert ident.max_step_rate >= 8_000  # the host plans for 90 % of it (device_limits.py)
     assert ident.watchdog_ms == 2000 and ident.rx_window >= 64
     h.send(Dwell(10))
@@ -65,7 +67,8 @@ def test_handshake_and_duplicate_hello(device_factory, host_factory):
     h.send(Dwell(10))
     h.wait_for(lambda: h.flows and h.flows[-1].items_done == 2, what="the second dwell done")
     st = h.status()
-    assert st.flags & Flag.SYNCED and st.queue_free == 128 and st.items_received == 2
+    assert st.flags & Flag.SYNCED and st.items_received == 2
+    assert st.queue_free == ident.queue_capacity  # every slot free again, as announced
 
 
 def test_a_hello_of_another_major_gets_an_ident_and_opens_no_session(device_factory, host_factory):
