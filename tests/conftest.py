@@ -32,6 +32,10 @@ def _isolated_state(tmp_path_factory):
     """Job logs, resume points and boards' records of every test (and the CLIs they start)
     go to temporary folders, never to the user's ~/.local/state or ~/.config."""
     os.environ["CDPRHOST_STATE"] = str(tmp_path_factory.mktemp("state"))
+    # the session's own profiles too: a session-scoped fixture loads its profile before
+    # any test's _isolated_profiles runs, and must not read a board's record left in the
+    # user's folder by a print outside the tests
+    os.environ["CDPRHOST_PROFILES"] = str(tmp_path_factory.mktemp("session-profiles"))
 
 
 @pytest.fixture(autouse=True)

@@ -59,6 +59,36 @@ class ConnectionLimits(BaseModel):
     backlog: int = Field(default_factory=default_backlog, ge=1)
 
 
+class BodyWindow:
+    """Whether a body keeps coming: at least ``min_bytes`` in every ``window_s`` of the time the
+    server waits on the client. Time it does not wait (the app busy, or not yet scheduled to
+    take what came, as on a loaded machine) pauses the window; it never restarts it, so a
+    trickle cannot hide behind a busy server."""
+
+    def __init__(self, window_s: float, min_bytes: int, now: float) -> None:
+        self.window_s, self.min_bytes = window_s, min_bytes
+        self.last_check, self.waited, self.bytes = now, 0.0, 0
+
+    def restart(self, now: float) -> None:
+        self.last_check, self.waited, self.bytes = now, 0.0, 0
+
+    def received(self, n: int) -> None:
+        self.bytes += n
+
+    def too_slow(self, now: float, waiting_on_client: bool) -> bool:
+        """Look at the window at ``now``: True when the client is too slow."""
+        elapsed, self.last_check = now - self.last_check, now
+        if not waiting_on_client:
+            return False
+        self.waited += elapsed
+        if self.waited < self.window_s:
+            return False
+        if self.bytes < self.min_bytes:
+            return True
+        self.waited, self.bytes = 0.0, 0
+        return False
+
+
 class _Registry:
     """The open connections of one server, oldest first (dicts keep insertion order)."""
 
@@ -75,8 +105,7 @@ def limited_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
             super().connection_made(transport)
             now = time.monotonic()
             self._waiting_since = now  # waiting for a request's headers since
-            self._window_start = now
-            self._window_bytes = 0
+            self._body = BodyWindow(limits.body_window_s, limits.min_body_bytes, now)
             if len(registry.open) >= limits.max_connections and not _evict_one(registry):
                 transport.close()
                 return
@@ -99,7 +128,7 @@ def limited_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
             super().handle_websocket_upgrade(event)
 
         def data_received(self, data: bytes) -> None:
-            self._window_bytes += len(data)
+            self._body.received(len(data))
             super().data_received(data)
 
         def on_response_complete(self) -> None:
@@ -128,14 +157,10 @@ def limited_protocol(limits: ConnectionLimits) -> type[H11Protocol]:
                 if now - self._waiting_since > limits.header_timeout_s:
                     self.transport.close()
                     return
-                self._window_start, self._window_bytes = now, 0
-            elif not self._reading_body():
-                self._window_start, self._window_bytes = now, 0
-            elif now - self._window_start >= limits.body_window_s:
-                if self._window_bytes < limits.min_body_bytes:
-                    self.transport.close()
-                    return
-                self._window_start, self._window_bytes = now, 0
+                self._body.restart(now)
+            elif self._body.too_slow(now, self._reading_body()):
+                self.transport.close()
+                return
             self._watch = self.loop.call_later(WATCH_PERIOD_S, self._check)
 
     return LimitedH11Protocol

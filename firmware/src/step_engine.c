@@ -475,6 +475,27 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
  * pin low (>= 2 us later). PIN_ON / PIN_OFF raise and lower the step pin, DIR_POS /
  * DIR_NEG set the direction pin (r25 free in each). */
 
+/* T += I in 32 bits (an edge's ideal time advanced by its interval), T's bit 7 kept in
+ * SREG's T flag, T's bytes 1 and 2 left in r26:r27 for the compare's value */
+#define T_PLUS_I                                                                           \
+    "lds r24, %[t]\n\t" \
+    "lds r25, %[i]\n\t" \
+    "add r24, r25\n\t" \
+    "sts %[t], r24\n\t" \
+    "bst r24, 7\n\t" \
+    "lds r26, %[t]+1\n\t" \
+    "lds r25, %[i]+1\n\t" \
+    "adc r26, r25\n\t" \
+    "sts %[t]+1, r26\n\t" \
+    "lds r27, %[t]+2\n\t" \
+    "lds r25, %[i]+2\n\t" \
+    "adc r27, r25\n\t" \
+    "sts %[t]+2, r27\n\t" \
+    "lds r24, %[t]+3\n\t" \
+    "lds r25, %[i]+3\n\t" \
+    "adc r24, r25\n\t" \
+    "sts %[t]+3, r24\n\t"
+
 /* Edges due together (axes in step, or a mix's coincidences): the interrupt that fires
  * reads the other steppers' compare flags right after raising its own pin, and again
  * after arming its next compare (the ones that matched while it ran), and raises the pin
@@ -613,23 +634,7 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "sts cur_dir, r24\n\t"                                                             \
         "rjmp 5f\n"                                                                        \
         "2:\n\t"                                                                           \
-        "lds r24, %[t]\n\t"                                                                \
-        "lds r25, %[i]\n\t"                                                                \
-        "add r24, r25\n\t"                                                                 \
-        "sts %[t], r24\n\t"                                                                \
-        "bst r24, 7\n\t"                                                                   \
-        "lds r26, %[t]+1\n\t"                                                              \
-        "lds r25, %[i]+1\n\t"                                                              \
-        "adc r26, r25\n\t"                                                                 \
-        "sts %[t]+1, r26\n\t"                                                              \
-        "lds r27, %[t]+2\n\t"                                                              \
-        "lds r25, %[i]+2\n\t"                                                              \
-        "adc r27, r25\n\t"                                                                 \
-        "sts %[t]+2, r27\n\t"                                                              \
-        "lds r24, %[t]+3\n\t"                                                              \
-        "lds r25, %[i]+3\n\t"                                                              \
-        "adc r24, r25\n\t"                                                                 \
-        "sts %[t]+3, r24\n\t"                                                             \
+        T_PLUS_I                                                                           \
         /* a ramp's chunk: I += add, out of line (2 cycles an edge without) */            \
         "sbic " GPIOR0_IO ", " kidx "\n\t"                                                \
         "rjmp 30f\n"                                                                       \
@@ -684,23 +689,7 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "rjmp 41f\n\t"                                                                     \
         "dec r24\n\t"                                                                      \
         "sts %[run]+6, r24\n\t"                                                            \
-        "lds r24, %[t]\n\t"                                                                \
-        "lds r25, %[i]\n\t"                                                                \
-        "add r24, r25\n\t"                                                                 \
-        "sts %[t], r24\n\t"                                                                \
-        "bst r24, 7\n\t"                                                                   \
-        "lds r26, %[t]+1\n\t"                                                              \
-        "lds r25, %[i]+1\n\t"                                                              \
-        "adc r26, r25\n\t"                                                                 \
-        "sts %[t]+1, r26\n\t"                                                              \
-        "lds r27, %[t]+2\n\t"                                                              \
-        "lds r25, %[i]+2\n\t"                                                              \
-        "adc r27, r25\n\t"                                                                 \
-        "sts %[t]+2, r27\n\t"                                                              \
-        "lds r24, %[t]+3\n\t"                                                              \
-        "lds r25, %[i]+3\n\t"                                                              \
-        "adc r24, r25\n\t"                                                                 \
-        "sts %[t]+3, r24\n\t"                                                              \
+        T_PLUS_I                                                                           \
         "ld r24, Z+\n\t"                                                                   \
         "sts %[cnt], r24\n\t"                                                              \
         "ld r24, Z+\n\t"                                                                   \
