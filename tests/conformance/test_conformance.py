@@ -91,6 +91,33 @@ def test_a_hello_of_another_major_gets_an_ident_and_opens_no_session(device_fact
     h.wait_for(lambda: h.flows and h.flows[-1].items_done == 1, what="the dwell done")
 
 
+def test_the_first_hello_since_a_boot_is_answered_after_a_whole_boot(device_factory, host_factory):
+    """A host whose flush at its open cut the periodic BOOT short sends HELLO at once (it
+    heard bytes); the session that opens ends the announcements. The record the boot kept
+    (an exact resume's last executed segment) still reaches it: BOOT before that IDENT.
+    A later session hears none (a BOOT at connect means no session since that boot)."""
+    dev = device_factory()
+    h = host_factory(dev.path)
+    h.wait_for(lambda: any(isinstance(m, Boot) for m in h.urgent), what="the device up")
+    h.urgent.clear()  # just after an announcement: the next one is 0.25 s away
+    h.urgent_send(Hello(0x5151))
+    ident = h.wait_for(
+        lambda: next((m for m in h.urgent if isinstance(m, Ident)), None), what="IDENT"
+    )
+    kinds = [type(m) for m in h.urgent]
+    assert Boot in kinds and kinds.index(Boot) < kinds.index(Ident), kinds
+    boot = next(m for m in h.urgent if isinstance(m, Boot))
+    assert boot.boot_id == ident.boot_id and boot.major == PROTOCOL_MAJOR
+    h.urgent.clear()
+    h.urgent_send(Hello(0x6262))  # another host: a new session of the same boot
+    h.wait_for(
+        lambda: any(isinstance(m, Ident) and m.nonce == 0x6262 for m in h.urgent),
+        what="IDENT to the second HELLO",
+    )
+    h.pump(0.3)  # longer than the announcements' period: none come in a session
+    assert not any(isinstance(m, Boot) for m in h.urgent), h.urgent
+
+
 @pytest.mark.parametrize("faults", [None, "corrupt=0.002,drop=0.002,dup=0.002,seed=3"])
 def test_stream_record_exact_with_and_without_line_faults(device_factory, faults):
     dev = device_factory(*(["--faults", faults] if faults else []), "--speedup", "2")
