@@ -59,6 +59,20 @@ resends, 42 timeouts) and underran at 5 s in another with simavr 380 ms behind t
 (4-11 s before); step engine 2,000/s underruns at 0.3 s, 1,000/s with the faults at
 6.5-10.3 s. Also: the soft-limit check's variable shift loop (machine.c, 119 -> 44 cycles
 without limits).
+
+Then (stream30, default build, 1,818/s, ``--profile --ticks 55 --seconds 4``, the turns
+now counted by watchdog_canary_ok, base 478e442 measured the same way): the segments'
+work 8,300 -> 8,030 cycles a segment; last_steps 1,391 -> 1,093 (its last slot once, no
+variable shift per axis, the positions in a loop of their own: the one loop spilled its
+pointers), the watchdog record's CRC-16 once a change (check_of 113 -> 80), and
+save_progress's copy of the counters only after a tick or a main-loop change (an idle
+turn's fifth). 30 s clean 2,000/s rows: 1x on the loaded machine, base 2.9 s then
+underrun; this, seven runs: exact for 30 s twice (simavr 33 ms behind the wall at most in
+one, 1.96 s in the other) and underruns at 12.0, 5.1, 6.0, 15.0, 12.3 s (simavr 20-375 ms
+behind); 1,000/s with 1e-3 corruption and drop exact for 30 s (801 resends, 31
+timeouts). ``--speedup 0.5`` exact for 30 s, twice, and so is the base (once, this day):
+at 2,000/s the firmware's CPU keeps up when the host and simavr do, and the 1x underruns
+follow the machine's load.
 """
 
 from __future__ import annotations
@@ -224,9 +238,9 @@ def _idle_session(build: rates_bench.Build, env_extra: dict[str, str], seconds: 
         proc.wait(60)
 
 
-#: a function the main loop runs once a turn whatever it has to do (save_progress's copy
-#: of the interrupt's counters): the measure of how many turns a run took
-TURN_MARK = "stepper_progress"
+#: a function the main loop runs once a turn whatever it has to do, at the same cost (the
+#: stack canary's check): the measure of how many turns a run took
+TURN_MARK = "watchdog_canary_ok"
 
 
 def profile(build: rates_bench.Build, batch: SegmentBatch, top: int = 30) -> dict[str, Any]:

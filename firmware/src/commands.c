@@ -559,6 +559,8 @@ void proto_urgent(const uint8_t *payload, uint8_t len)
         return; /* exactly one well-formed message */
     if (op == OP_HELLO) {
         uint16_t nonce = (uint16_t)v[0];
+        if (!machine.synced)
+            session_boot_before_ident();
         if (v[1] == PROTO_MAJOR && (!machine.synced || nonce != machine.nonce)) {
             link_reset_session();
             commands_reset_session();

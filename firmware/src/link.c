@@ -131,6 +131,14 @@ void link_send_urgent(const uint8_t *payload, uint8_t len)
     }
 }
 
+void link_flush_urgent(void)
+{
+    if (urgent_len && uart_tx_free() >= FRAME_SIZE(urgent_len)) {
+        frame_send(KIND_URGENT, 0, expected, urgent_buf, urgent_len);
+        urgent_len = 0;
+    }
+}
+
 void link_request_ack(void)
 {
     ack_due = 1;
@@ -255,12 +263,9 @@ void link_poll(uint32_t now)
         errors_unsent--;
         link_send(held_error, n, 1);
     }
-    if (urgent_len) {
-        if (uart_tx_free() < FRAME_SIZE(urgent_len))
-            return;
-        frame_send(KIND_URGENT, 0, expected, urgent_buf, urgent_len);
-        urgent_len = 0;
-    }
+    link_flush_urgent();
+    if (urgent_len)
+        return; /* no room for it yet: it goes first */
     /* the oldest report's time, or the last progress if that came later */
     uint32_t since = slots[first].sent_at;
     if ((int32_t)(advanced_at - since) > 0)

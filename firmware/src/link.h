@@ -19,6 +19,9 @@ void link_reset_session(void);
 void link_poll(uint32_t now);                 /* send what is due */
 uint8_t link_send(const uint8_t *payload, uint8_t len, uint8_t important); /* 0: dropped */
 void link_send_urgent(const uint8_t *payload, uint8_t len);
+/* The urgent message waiting, framed into the UART now when it has room (the next
+ * link_send_urgent would replace it). */
+void link_flush_urgent(void);
 void link_request_ack(void);
 
 /* What the link hands up, registered by the layer above (the transport never calls up

@@ -145,6 +145,16 @@ static void take_interrupt_reports(uint32_t now)
  * the snapshot is not on the stack under the main loop's deepest calls. */
 static void __attribute__((noinline)) save_progress(void)
 {
+    /* only after a tick or a main-loop change since the last copy (an idle turn spent a
+     * fifth of itself on the copy); a tick that comes after the mark is read is seen at
+     * the next turn */
+    static uint16_t saved_mark;
+    static uint8_t saved_once;
+    uint16_t mark = stepper_change_mark();
+    if (saved_once && mark == saved_mark)
+        return;
+    saved_mark = mark;
+    saved_once = 1;
     struct stepper_progress done;
     stepper_progress(&done);
     watchdog_save(done.items_done, done.segments_done, done.enabled_mask);

@@ -42,6 +42,17 @@ void session_boot_on_data(void)
         announce_boot(now);
 }
 
+/* The periodic announcement is not enough on its own: a host flushes its input when it
+ * opens the port, and a flush that cuts a BOOT short leaves it bytes but no BOOT, on
+ * which it sends HELLO at once; the session that HELLO opens ends the announcements, and
+ * the record the boot kept (an exact resume's last executed segment) would never be
+ * heard. So the first session's IDENT always comes after a whole BOOT. */
+void session_boot_before_ident(void)
+{
+    announce_boot(link_now);
+    link_flush_urgent(); /* out before the IDENT takes the urgent slot */
+}
+
 static uint32_t __attribute__((noinline)) motion_executed(void)
 {
     struct stepper_progress done;

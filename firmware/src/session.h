@@ -6,6 +6,8 @@
 
 void session_opened(void);
 void session_boot_on_data(void);
+/* A HELLO before any session since this boot: BOOT goes out ahead of its IDENT. */
+void session_boot_before_ident(void);
 void session_poll(uint32_t now);
 uint8_t session_may_start(void);
 uint8_t proto_flow(uint8_t *out); /* FLOW payload (struct link_upper.flow) */

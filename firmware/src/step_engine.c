@@ -897,6 +897,38 @@ void step_engine_stop(void)
     SREG = s;
 }
 
+/* The edges of a chunk and of the schedule block's chunks after it. */
+static uint32_t chunk_edges(uint16_t count, uint8_t nblk, const struct sched_chunk *blk)
+{
+    uint32_t n = count;
+    for (; nblk; nblk--, blk++)
+        n += blk->count;
+    return n;
+}
+
+int32_t step_engine_unissued(uint8_t k)
+{
+    const struct step_axis *a = &axes[k];
+    int32_t n = 0;
+    if (a->running) {
+        /* the armed edge is in count; an EDGE left to C has its pin raised already */
+        uint32_t left = chunk_edges(a->count, a->nblk, a->blk);
+        if (step_c_pending[k] == EDGE + 1 && left)
+            left--;
+        n = (cur_dir & bit_of_k[k]) ? -(int32_t)left : (int32_t)left;
+    }
+    if (a->next_ready) {
+        int32_t m = (int32_t)chunk_edges(a->next_count, a->next_nblk, a->next_blk);
+        n += a->next_neg ? -m : m;
+    }
+    for (uint8_t t = a->tail; t != a->head; t++) {
+        const struct step_chunk *c = &a->ring[t & (CHUNK_SLOTS - 1)];
+        int32_t m = (int32_t)chunk_edges(c->count, c->nblk, c->blk);
+        n += c->neg ? -m : m;
+    }
+    return n;
+}
+
 uint8_t step_engine_idle(void)
 {
     for (uint8_t k = 0; k < 4; k++) {

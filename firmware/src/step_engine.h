@@ -72,6 +72,11 @@ static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t c
 /* No stepper runs and none has a chunk waiting. */
 uint8_t step_engine_idle(void);
 
+/* Stepper k's edges queued and not raised yet (its running chunk's, the armed one
+ * included, and its waiting chunks'), signed by their direction: with interrupts off,
+ * before step_engine_stop, a halt's positions count the edges issued. */
+int32_t step_engine_unissued(uint8_t k);
+
 /* Stop every stepper now and forget their chunks (halt, flush). */
 void step_engine_stop(void);
 

@@ -73,6 +73,10 @@ static inline __attribute__((always_inline)) void lost_count(uint8_t lost)
         stepper_lost_steps += lost;
 }
 
+/* The main loop's own writes of what a reset keeps (the counts, the enabled drivers):
+ * stepper_init, stepper_flush, stepper_disable_all. */
+static uint8_t main_changes;
+
 /* the executing item */
 static struct plan *seg_plan; /* SEG: its plan */
 static uint32_t ticks_left;   /* SEG, DWELL: ticks left */
@@ -104,6 +108,7 @@ void stepper_init(uint8_t hold_mask)
     Z_STEP_DDR |= _BV(Z_STEP_BIT); Z_DIR_DDR |= _BV(Z_DIR_BIT); Z_EN_DDR |= _BV(Z_EN_BIT);
     E_STEP_DDR |= _BV(E_STEP_BIT); E_DIR_DDR |= _BV(E_DIR_BIT); E_EN_DDR |= _BV(E_EN_BIT);
     stepper.enabled_mask = hold_mask & 0x0F;
+    main_changes++;
     apply_enables(stepper.enabled_mask);
     X_MIN_DDR &= (uint8_t)~_BV(X_MIN_BIT); X_MIN_PORT |= _BV(X_MIN_BIT);
     Y_MIN_DDR &= (uint8_t)~_BV(Y_MIN_BIT); Y_MIN_PORT |= _BV(Y_MIN_BIT);
@@ -136,6 +141,11 @@ void stepper_progress(struct stepper_progress *out)
         out->enabled_mask = stepper.enabled_mask;
         out->homed_mask = stepper.homed_mask;
     } while (gen != tick_gen);
+}
+
+uint16_t stepper_change_mark(void)
+{
+    return (uint16_t)((uint16_t)tick_gen << 8 | main_changes);
 }
 
 void stepper_counts(uint32_t *items, uint32_t *segments)
@@ -260,6 +270,29 @@ void stepper_positions(int32_t *out)
     seg_positions(&sn, out);
 }
 
+#if STEP_ENGINE
+/* A halt's engine axes (interrupts off, before the engine stops): the steps the engine
+ * issued, not the profile's estimate (which put a halted stream one step off). Every
+ * chunk out is a whole segment's delta: the running segment's engine axes, and the next
+ * segment's axes put out early (chunks_early); stepper.pos holds the ended segments',
+ * whose last edges may still be queued. The edges not raised yet are taken off. */
+static void engine_issued(struct seg_snapshot *sn)
+{
+    uint8_t ahead = sn->running ? 1 : 0;
+    const struct plan *n = &plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)];
+    for (uint8_t k = 0; k < 4; k++) {
+        int32_t out = 0;
+        if (sn->running && (sn->engine >> k & 1)) {
+            out += sn->delta[k];
+            sn->delta[k] = 0; /* counted here: seg_positions leaves it */
+        }
+        if (k < axes_ahead && (uint8_t)(plan_head - plan_tail) > ahead)
+            out += n->delta[k];
+        sn->pos[k] += out - step_engine_unissued(k);
+    }
+}
+#endif
+
 void stepper_halt(void)
 {
     struct seg_snapshot sn;
@@ -273,12 +306,15 @@ void stepper_halt(void)
     stepper.current = 0xFF;
     stepper.at_rest = 1;
     stepper.running = 0;
+#if STEP_ENGINE
+    engine_issued(&sn);
+#endif
     if (STEP_ENGINE)
         step_engine_stop();
     if (STEP_ENGINE)
         chunks_ahead = axes_ahead = 0;
     SREG = s;
-    if (sn.running) {
+    if (sn.running || STEP_ENGINE) { /* (the engine's edges counted even between segments) */
         /* in place (seg_positions reads each axis's start before it writes it): the
          * shutdown path is the stack's deepest, 16 B of a second array are its margin */
         seg_positions(&sn, sn.pos);
@@ -308,6 +344,7 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received)
     }
     stepper.items_done = items_received;
     stepper.seg_next = segments_received + 1;
+    main_changes++;
     motion_plans_reset();
     SREG = s;
 }
@@ -318,6 +355,7 @@ void stepper_disable_all(void)
     cli();
     stepper.enabled_mask = 0;
     stepper.homed_mask = 0;
+    main_changes++;
     apply_enables(0);
     SREG = s;
 }
@@ -603,41 +641,44 @@ _Static_assert(AXES_AHEAD_TICKS * TICK_CYCLES + TICK_CYCLES < 0x10000UL, "to_end
 static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
 {
     uint16_t span = (uint16_t)(p->last_units * UNIT_CYCLES);
-    struct axis_plan *x = p->ax;
-    const int32_t *d = p->delta;
-    for (uint8_t k = 0; k < 4; k++, x++, pos++, d++) {
-        if (!(p->moving >> k & 1))
+    uint8_t last = LAST_SLOT(p->last_units); /* once, not per axis (a 6-bit shift loop) */
+    const struct axis_plan *x = p->ax;
+    /* the axes the wheel steps; the positions, every axis's, after them (two short loops
+     * keep their pointers in registers: one loop spilled them, 15 % of its time) */
+    for (uint8_t k = 0, m = p->moving & (uint8_t)~PLAN_ENGINE(p); m; k++, x++, m >>= 1) {
+        if (!(m & 1))
             continue;
         /* N minus what was issued: the estimate's difference to the DDA */
         int8_t off = (int8_t)(uint8_t)((uint8_t)(x->acc >> 24) - x->est_low);
         uint32_t rem = x->last_n - (int32_t)off;
-        int32_t moved = *d;
-        if (rem && !(PLAN_ENGINE(p) >> k & 1)) {
-            uint8_t n = rem > AX_MAX ? AX_MAX : (uint8_t)rem;
-            if (rem > AX_MAX) {
-                /* more than a tick holds (never at the advertised rate): the position
-                 * counts only the steps issued */
-                uint32_t lost = rem - AX_MAX;
-                stepper_lost_steps += (uint16_t)lost;
-                moved += moved < 0 ? (int32_t)lost : -(int32_t)lost;
-            }
-            uint32_t frac = x->acc & 0xFFFFFFUL;
-            if (p->accel)
-                /* the mean rate over what is left, bent by the segment's acceleration */
-                lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
-                           LAST_SLOT(p->last_units), bend_of(x->a_hi)));
-            else if (x->period)
-                /* at the rate of the axis's last tick with steps (a steady segment's) */
-                place_steps(bit_of[k], n, (uint16_t)(frac >> 8), x->period,
-                            LAST_SLOT(p->last_units));
-            else
-                /* no rate known yet: over the distance left, from the last crossing to
-                 * N + 1/2, which the accumulator (N p + 1/2) reaches at the end */
-                lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
-                           LAST_SLOT(p->last_units), 0));
+        if (!rem)
+            continue;
+        uint8_t n = (uint8_t)rem;
+        if (rem > AX_MAX) {
+            /* more than a tick holds (never at the advertised rate): the position counts
+             * only the steps issued */
+            uint32_t lost = rem - AX_MAX;
+            stepper_lost_steps += (uint16_t)lost;
+            pos[k] += p->delta[k] < 0 ? (int32_t)lost : -(int32_t)lost;
+            n = AX_MAX;
         }
-        *pos += moved;
+        uint32_t frac = x->acc & 0xFFFFFFUL;
+        if (p->accel)
+            /* the mean rate over what is left, bent by the segment's acceleration */
+            lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
+                                  last, bend_of(x->a_hi)));
+        else if (x->period)
+            /* at the rate of the axis's last tick with steps (a steady segment's) */
+            place_steps(bit_of[k], n, (uint16_t)(frac >> 8), x->period, last);
+        else
+            /* no rate known yet: over the distance left, from the last crossing to
+             * N + 1/2, which the accumulator (N p + 1/2) reaches at the end */
+            lost_count(place_axis(k, n, frac, ((uint32_t)n << 24) + 0x800000UL - frac, span,
+                                  last, 0));
     }
+    const int32_t *d = p->delta;
+    for (uint8_t k = 0; k < 4; k++)
+        pos[k] += d[k];
 }
 
 /* A segment ends (its last tick, starting at step_clock_next_tick, is being computed):

@@ -13,6 +13,10 @@ struct stepper_progress {
 };
 /* The one way the main loop reads the interrupt's progress: without masking it. */
 void stepper_progress(struct stepper_progress *out);
+/* Changes whenever what a reset keeps (items_done, segments_done, enabled_mask) may
+ * have changed: the tick interrupt's count with the main loop's own writes. Read it
+ * before stepper_progress: an unchanged mark means an unchanged progress. */
+uint16_t stepper_change_mark(void);
 /* Parts of it, for callers that keep a small stack frame (the shutdown path's). */
 void stepper_counts(uint32_t *items, uint32_t *segments);
 uint8_t stepper_homed_mask(void);

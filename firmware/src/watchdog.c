@@ -227,13 +227,14 @@ void watchdog_save(uint32_t items_done, uint32_t segments_done, uint8_t enabled_
     if (saved[1].items_done == items_done && saved[1].segments_done == segments_done &&
         saved[1].enabled_mask == enabled_mask)
         return; /* unchanged: both copies already hold it */
-    for (uint8_t i = 0; i < 2; i++) {
-        struct saved *s = &saved[i];
-        s->items_done = items_done;
-        s->segments_done = segments_done;
-        s->enabled_mask = enabled_mask;
-        s->check = check_of(s);
-    }
+    /* the first copy written and checked, then the second made from it: one CRC (both
+     * copies hold the same bytes; the first is whole before the second is touched) */
+    struct saved *s = &saved[0];
+    s->items_done = items_done;
+    s->segments_done = segments_done;
+    s->enabled_mask = enabled_mask;
+    s->check = check_of(s);
+    saved[1] = *s;
 }
 
 uint8_t watchdog_prev_valid(void) { return prev_valid; }

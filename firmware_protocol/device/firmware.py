@@ -389,6 +389,10 @@ class SimDevice:
             return
         msg = msgs[0]
         if isinstance(msg, Hello):
+            if not self.synced:
+                # the first session's IDENT comes after a whole BOOT: a host whose flush at
+                # its open cut an announcement short still hears what this boot kept
+                self._announce_boot(now)
             if msg.major == PROTOCOL_MAJOR and (not self.synced or msg.nonce != self.nonce):
                 self.endpoint.reset_session()
                 self.ctx = SegmentContext(cycles_per_tick=self.config.cycles_per_tick)

@@ -8,6 +8,7 @@ import importlib.util
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import pytest
 
 from cdprhost.sim import avr_device
@@ -91,3 +92,20 @@ def test_three_modules_out_of_step_at_33k_keep_the_tick(engine):
     assert r["record_exact"] and r["edges"][3] == "660/660", r
     assert r["overruns"] <= 1, r
     assert r["p99_us"] <= 5.0 and r["worst_us"] <= 10.0, r
+
+
+def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine):
+    # the halt's positions came from the profile's estimate at the end of the tick being
+    # computed, a tick ahead of the steppers, which the engine stops at once: 1-8 steps
+    # an axis more than were issued (a resume after a reset then started off the path)
+    fr = engine.firmware_rates
+    rates = [20_000, 15_000, 10_000, 2_000]
+    with fr.harness(engine._build, profile=False) as (link, tmp):
+        items = link.queue_segments(engine.steady_batch(rates, 40))
+        link.wait_items(items[10])
+        assert link.emergency_stop()
+        st = link.request_status()
+    edges = np.loadtxt(tmp / "steps.txt", dtype=np.int64, ndmin=2)
+    issued = [int((edges[:, 0] == k).sum()) for k in range(4)]
+    assert 0 < issued[0] < 40 * 200  # stopped mid-stream
+    assert list(st.steps) == issued
