@@ -37,16 +37,18 @@ static avr_timer_t *timer_named(avr_t *avr, char name)
 
 static avr_timer_t *watched[2];
 
-static int counting(const avr_timer_t *p)
+/* its clock on (a reset stops it and leaves tov_cycles as it was) in normal mode */
+static int counting(avr_t *avr, avr_timer_t *p)
 {
-    return p->tov_cycles > 1 && p->wgm_op_mode_kind == avr_timer_wgm_normal;
+    return p->tov_cycles > 1 && p->wgm_op_mode_kind == avr_timer_wgm_normal &&
+           avr_regbit_get_array(avr, p->cs, ARRAY_SIZE(p->cs)) != 0;
 }
 
 /* at `when`, a cycle of the timer's overflow: the compares simavr's callback dropped */
 static avr_cycle_count_t at_overflow(avr_t *avr, avr_cycle_count_t when, void *param)
 {
     avr_timer_t *p = param;
-    if (!counting(p))
+    if (!counting(avr, p))
         return 0; /* stopped or another mode: overflow_compares_poll starts it again */
     /* (simavr's own callback at the same `when` may have run before this one or not) */
     if (p->tov_base != when && p->tov_base + p->tov_cycles != when)
@@ -75,7 +77,7 @@ void overflow_compares_poll(avr_t *avr)
 {
     for (int i = 0; i < 2; i++) {
         avr_timer_t *p = watched[i];
-        if (!p || !counting(p) || avr_cycle_timer_status(avr, at_overflow, p))
+        if (!p || !counting(avr, p) || avr_cycle_timer_status(avr, at_overflow, p))
             continue;
         /* the next overflow (its base is the last one's cycle: between two instructions
          * the next one is still ahead) */
