@@ -25,9 +25,16 @@ from cdprhost.errors import InputError
 from firmware_protocol.device.faults import FaultSpec, FaultyChannel
 
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
-ELF = FIRMWARE_DIR / "build" / "cdpr-sim.elf"  # the simulator target (mailbox hooks)
-BOARD_ELF = FIRMWARE_DIR / "build" / "cdpr.elf"  # the board target, the one flashed
-HARNESS = FIRMWARE_DIR / "build" / "cdpr-sim"
+# CDPRHOST_STEP_ENGINE=1: the firmware built with the step engine (-DSTEP_ENGINE=1) into its
+# own directory, firmware/build/engine, so that the default build is not disturbed (the
+# tests and `cdprhost sim-device --firmware avr` then run that build)
+STEP_ENGINE_ENV = "CDPRHOST_STEP_ENGINE"
+STEP_ENGINE = os.environ.get(STEP_ENGINE_ENV, "") not in ("", "0")
+BUILD_DIR = FIRMWARE_DIR / "build" / "engine" if STEP_ENGINE else FIRMWARE_DIR / "build"
+BUILD_FLAGS = ["BUILD=build/engine", "EXTRA_CFLAGS=-DSTEP_ENGINE=1"] if STEP_ENGINE else []
+ELF = BUILD_DIR / "cdpr-sim.elf"  # the simulator target (mailbox hooks)
+BOARD_ELF = BUILD_DIR / "cdpr.elf"  # the board target, the one flashed
+HARNESS = BUILD_DIR / "cdpr-sim"
 # the Mega 2560's stock bootloader (Debian's arduino-core-avr), for `harness_command(bootloader=...)`
 BOOTLOADER_HEX = Path(
     "/usr/share/arduino/hardware/arduino/avr/bootloaders/stk500v2/stk500boot_v2_mega2560.hex"
@@ -58,14 +65,14 @@ def build() -> None:
     if missing:
         raise InputError(missing, source="--firmware avr")
     proc = subprocess.run(
-        ["make", "-s", "-C", str(FIRMWARE_DIR), "all", "sim"],
+        ["make", "-s", "-C", str(FIRMWARE_DIR), *BUILD_FLAGS, "all", "sim"],
         check=False,
         capture_output=True,
         text=True,
     )
     if proc.returncode != 0:
         raise InputError(
-            f"building the firmware failed (make -C {FIRMWARE_DIR} all sim):\n{proc.stderr[-2000:]}",
+            f"building the firmware failed (make -C {FIRMWARE_DIR} {' '.join(BUILD_FLAGS)} all sim):\n{proc.stderr[-2000:]}",
             source="--firmware avr",
         )
 

@@ -53,6 +53,7 @@
 #include <avr_uart.h>
 
 #include "mailbox_layout.h"
+#include "overflow_compares.h"
 #include "pins.h"
 #include "thermal.h"
 
@@ -777,6 +778,7 @@ static void hang_main_loop(void)
 static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)param; (void)when;
+    overflow_compares_poll(avr);
     if (reset_request) {
         reset_request = 0;
         chip_reset(0x02, "RESET pin");
@@ -862,7 +864,8 @@ static void write_stats(void)
             "\"min_pulse_high_us\":%.3f,\"min_step_interval_us\":%.3f,\"min_dir_setup_us\":%.3f,"
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
             "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u,\"heaters_off_after_hang_s\":%.4f,"
-            "\"step_isr_cycles\":%llu,\"step_isr_count\":%llu,\"step_isr_max_cycles\":%llu}\n",
+            "\"step_isr_cycles\":%llu,\"step_isr_count\":%llu,\"step_isr_max_cycles\":%llu,"
+            "\"overflow_compares_served\":%u}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -873,7 +876,8 @@ static void write_stats(void)
             motion_clock_slips, (unsigned long long)isr_count, (unsigned long long)b_cycles_sum,
             (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask,
             heaters_off_after_hang, (unsigned long long)step_cycles_sum,
-            (unsigned long long)step_count, (unsigned long long)step_cycles_max);
+            (unsigned long long)step_count, (unsigned long long)step_cycles_max,
+            overflow_compares_served);
     fclose(f);
 }
 
@@ -963,6 +967,7 @@ int main(int argc, char **argv)
     avr_register_io_write(avr, TIMSK1_ADDR, timsk_write, (void *)&timer1_irqs);
     avr_register_io_write(avr, 0x71, timsk_write, (void *)&timer3_irqs); /* TIMSK3 */
     avr_register_io_write(avr, 0x73, timsk_write, (void *)&timer5_irqs); /* TIMSK5 */
+    overflow_compares_init(avr); /* simavr's compares just after an overflow */
     for (int k = 0; k < 4; k++) {
         watch(STEP_PINS[k].port, STEP_PINS[k].bit, step_cb, k);
         watch(DIR_PINS[k].port, DIR_PINS[k].bit, dir_cb, k);

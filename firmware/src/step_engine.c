@@ -240,10 +240,16 @@ static inline __attribute__((always_inline)) void arm(uint8_t k, struct step_axi
         /* the matches before the right one, counted from now, not from the edge `ahead`
          * is measured from: C's own time (under 2^15 cycles) may have taken the first
          * one past (an interval just over 2^16 cycles then came a period late) */
-        uint16_t low = (uint16_t)(ocr - *tcnt_of(k)); /* the first match, 0: a period */
-        uint32_t first = low ? low : 0x10000UL;
-        a->wraps = (uint8_t)((ahead - ISR_LEAD - first + 0x8000UL) >> 16);
+        /* The first match, `low` cycles from the read, must not come before the write:
+         * one due within C_ARM_MARGIN cycles (or 3 just past) is let pass first (a wait
+         * of at most that, about one slow arming in a thousand), then the compare is
+         * written at once. (Before, a first match a few cycles ahead passed during the
+         * computation and the edge came a period late, on the chip too.) */
+        uint16_t low;
+        while ((uint16_t)((low = (uint16_t)(ocr - *tcnt_of(k))) + 3u) < C_ARM_MARGIN + 3u)
+            ;
         *ocr_of(k) = ocr;
+        a->wraps = (uint8_t)((ahead - ISR_LEAD - low + 0x8000UL) >> 16);
         return;
     }
     a->wraps = 0;

@@ -3,11 +3,40 @@
 #include <avr/io.h>
 
 #include "board_ramps14.h"
+#include "config.h"
 #include "step_events.h"
 #include "step_pins.h"
 
 struct event *stepper_next;
 
+
+/* The event's pulses ended (step_pins.h, pulse_off): all four pins without the step
+ * engine; with it, the event's own (its mask, 3 bytes before Z: 10 cycles more) */
+#if STEP_ENGINE
+#define LOWER_PULSES                                                                       \
+    "sbiw r30, 3\n\t"                                                                      \
+    "ld r24, Z\n\t"                                                                        \
+    "sbrc r24, 0\n\t"                                                                      \
+    "cbi %[pf], %[xb]\n\t"                                                                 \
+    "sbrc r24, 1\n\t"                                                                      \
+    "cbi %[pf], %[yb]\n\t"                                                                 \
+    "sbrc r24, 3\n\t"                                                                      \
+    "cbi %[pa], %[eb]\n\t"                                                                 \
+    "sbrs r24, 2\n\t"                                                                      \
+    "rjmp 6f\n\t"                                                                          \
+    "lds r24, %[pl]\n\t"                                                                   \
+    "andi r24, %[nzm]\n\t"                                                                 \
+    "sts %[pl], r24\n"                                                                      \
+    "6:\n\t"
+#else
+#define LOWER_PULSES                                                                       \
+    "cbi %[pf], %[xb]\n\t"                                                                 \
+    "cbi %[pf], %[yb]\n\t"                                                                 \
+    "cbi %[pa], %[eb]\n\t"                                                                 \
+    "lds r24, %[pl]\n\t"                                                                   \
+    "andi r24, %[nzm]\n\t"                                                                 \
+    "sts %[pl], r24\n\t"
+#endif
 
 /* Compare B: a tick's events after the first, one per interrupt, 50-odd cycles
  * (hand-written: the compiler's version took twice that). Raises the event's pulses,
@@ -70,12 +99,7 @@ ISR(TIMER1_COMPB_vect, ISR_NAKED)
         "pop r27\n\t"
         "pop r26\n\t"
         "pop r25\n\t"
-        "cbi %[pf], %[xb]\n\t" /* high since the sbi: >= 34 cycles on every path */
-        "cbi %[pf], %[yb]\n\t"
-        "cbi %[pa], %[eb]\n\t"
-        "lds r24, %[pl]\n\t"
-        "andi r24, %[nzm]\n\t"
-        "sts %[pl], r24\n\t"
+        LOWER_PULSES /* high since the sbi: >= 34 cycles on every path */
         "pop r31\n\t"
         "pop r30\n\t"
         "pop r24\n\t"

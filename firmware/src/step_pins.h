@@ -7,6 +7,7 @@
 #include <stdint.h>
 
 #include "board_ramps14.h"
+#include "config.h"
 
 /* step pins of an axis mask on the X/Y port (the Z and E pins have ports of their own) */
 static const uint8_t xy_bits[4] = {0, _BV(X_STEP_BIT), _BV(Y_STEP_BIT), _BV(X_STEP_BIT) | _BV(Y_STEP_BIT)};
@@ -20,11 +21,25 @@ static inline __attribute__((always_inline)) void pulse_on(uint8_t m)
         E_STEP_PORT |= _BV(E_STEP_BIT);
 }
 
-static inline __attribute__((always_inline)) void pulse_off(void)
+/* End the tick's pulses of the axis mask m (raised by pulse_on(m)). Without the step
+ * engine the tick drives every axis and lowers all four pins; with it, only its own: a
+ * stepper's pin is the engine's, and lowering it would cut its pulse short or, when
+ * another stepper's interrupt raised it early (its compare pending, RAISE_PENDING in
+ * step_engine.c), make its own interrupt raise it a second time: a step too many. */
+static inline __attribute__((always_inline)) void pulse_off(uint8_t m)
 {
+#if STEP_ENGINE
+    X_STEP_PORT &= (uint8_t)~xy_bits[m & 3];
+    if (m & 4)
+        Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
+    if (m & 8)
+        E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+#else
+    (void)m;
     X_STEP_PORT &= (uint8_t)~(_BV(X_STEP_BIT) | _BV(Y_STEP_BIT));
     Z_STEP_PORT &= (uint8_t)~_BV(Z_STEP_BIT);
     E_STEP_PORT &= (uint8_t)~_BV(E_STEP_BIT);
+#endif
 }
 
 static inline void apply_enables(uint8_t mask)

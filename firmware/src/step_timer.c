@@ -78,7 +78,7 @@ static void __attribute__((noinline)) event_now(uint8_t m, uint16_t at, uint16_t
     if (l > LATE_TOLERANCE_CYCLES)
         stepper_late_tolerance++;
     __builtin_avr_delay_cycles(PULSE_CYCLES - 8);
-    pulse_off();
+    pulse_off(m);
 }
 
 /* Events of the tick that just ended that compare B has not issued yet (the tick
@@ -99,9 +99,10 @@ static void __attribute__((noinline)) flush_events(void)
             stepper_late_pulses++;
             stepper_late_tolerance++;
         }
+        uint8_t m = prepulsed; /* (the axes it raised) */
         prepulsed = 0;
         __builtin_avr_delay_cycles(PULSE_CYCLES);
-        pulse_off();
+        pulse_off(m);
         __builtin_avr_delay_cycles(PULSE_CYCLES);
         e++;
     }
@@ -115,7 +116,7 @@ static void __attribute__((noinline)) flush_events(void)
             stepper_late_tolerance++;
         }
         __builtin_avr_delay_cycles(PULSE_CYCLES);
-        pulse_off();
+        pulse_off(e->mask);
         __builtin_avr_delay_cycles(PULSE_CYCLES);
     }
     TIMSK1 &= (uint8_t)~_BV(OCIE1B);
@@ -173,8 +174,8 @@ static void __attribute__((noinline)) tick_start(void)
                 stepper_late_worst = l;
             if (l > LATE_TOLERANCE_CYCLES)
                 stepper_late_tolerance++;
+            first = ev->mask; /* (not 0) */
             ev++;
-            first = 1;
         }
     }
     uint8_t units = e->units;
@@ -196,7 +197,7 @@ static void __attribute__((noinline)) tick_start(void)
     if (first) {
         while ((uint16_t)(TCNT1 - high_from) < PULSE_CYCLES)
             ;
-        pulse_off();
+        pulse_off(first);
         __builtin_avr_delay_cycles(PULSE_CYCLES); /* low before another pulse */
     }
     if (!ev->mask)
