@@ -452,15 +452,16 @@ static void pos_cb(struct avr_irq_t *irq, uint32_t value, void *param)
 }
 
 /* The host watchdog seen from outside: the longest time a heater pin was high after the
- * host's last byte (wall time, the clock of the firmware's link timers). */
+ * host's last byte (the device's wall time, the clock of the firmware's link timers). */
 static double last_host_byte_wall = -1.0, heater_on_silence_max;
 static double wall_seconds(void);
+static double device_seconds(void);
 
 static void note_heater_silence(void)
 {
     if (last_host_byte_wall < 0)
         return;
-    double gap = wall_seconds() - last_host_byte_wall;
+    double gap = device_seconds() - last_host_byte_wall;
     if (gap > heater_on_silence_max)
         heater_on_silence_max = gap;
 }
@@ -593,12 +594,36 @@ static double wall_seconds(void)
     return (double)(now.tv_sec - wall0.tv_sec) + 1e-9 * (double)(now.tv_nsec - wall0.tv_nsec);
 }
 
-/* the most the simulation fell behind the wall clock (s): it then runs flat out until
- * it has caught up, faster than the device would */
+/* The device's wall clock: wall time less the time this process was not running. A chip
+ * never stops, but a simulator on a busy PC can be descheduled for seconds; the host's
+ * bytes then wait in the pty, and if the device's clock counted that time its link timers
+ * (the host watchdog: 2 s) would fire on a host that spoke all along. A poll comes every
+ * POLL_US of simulated time (under a millisecond of wall time when running); a longer gap
+ * is counted as MAX_POLL_GAP_S, so a stall is lost time for the device and for the host
+ * alike, like a frozen link, never silence. */
+#define MAX_POLL_GAP_S 0.05
+static double device_wall, device_wall_seen, stalled_s;
+static void advance_device_wall(void)
+{
+    /* a paced poll at a slow speed-up sleeps POLL_US / speedup: never a stall */
+    double gap_max = fmax(MAX_POLL_GAP_S, 4e-6 * POLL_US / speedup);
+    double now = wall_seconds(), dt = now - device_wall_seen;
+    device_wall_seen = now;
+    if (dt > gap_max) {
+        stalled_s += dt - gap_max;
+        dt = gap_max;
+    }
+    device_wall += dt;
+}
+
+static double device_seconds(void) { return device_wall; }
+
+/* the most the simulation fell behind the device's wall clock (s): it then runs flat out
+ * until it has caught up, faster than the device would */
 static double behind_max;
 static void pace(void)
 {
-    double ahead = sim_seconds() / speedup - wall_seconds();
+    double ahead = sim_seconds() / speedup - device_seconds();
     if (-ahead > behind_max)
         behind_max = -ahead;
     if (ahead > 0.0005) {
@@ -621,7 +646,7 @@ static void poll_pty(void)
             }
             host_seen = 1;
             en_watch = 0;
-            last_host_byte_wall = wall_seconds();
+            last_host_byte_wall = device_seconds();
         } else if (n < 0 && errno == EIO && exit_on_hangup && host_seen) {
             stop_flag = 1;
         }
@@ -778,6 +803,7 @@ static void hang_main_loop(void)
 static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
 {
     (void)a; (void)param; (void)when;
+    advance_device_wall();
     overflow_compares_poll(avr);
     if (reset_request) {
         reset_request = 0;
@@ -817,8 +843,8 @@ static void poll_timer(struct avr_t *a, avr_cycle_count_t when, void *param)
     }
     poll_pty();
     if (mailbox_addr) {
-        /* the link's clock for the firmware: wall time in clock units */
-        uint64_t u = (uint64_t)(wall_seconds() * (double)CLOCK_HZ);
+        /* the link's clock for the firmware: the device's wall time in clock units */
+        uint64_t u = (uint64_t)(device_seconds() * (double)CLOCK_HZ);
         for (int i = 0; i < 4; i++)
             avr->data[mailbox_addr + MB_LINK_CLOCK + i] = (uint8_t)(u >> (8 * i));
         avr->data[mailbox_addr + MB_LINK_VALID] = 1;
@@ -865,7 +891,7 @@ static void write_stats(void)
             "\"isr_max_cycles\":%u,\"lost_steps\":%u,\"plan_stalls\":%u,\"overruns\":%u,\"late_pulses\":%u,\"tick_latency_max_cycles\":%u,\"main_loop_max_us\":%u,"
             "\"segments_parsed\":%u,\"isr_profiled_max_cycles\":%llu,\"isr_profiled_mean_cycles\":%.1f,\"hotend_c\":%.3f,\"bed_c\":%.3f,\"heater_on_silence_max_s\":%.4f,\"stack_free_bytes\":%u,\"motion_clock_slips\":%u,\"isr_profiled_count\":%llu,\"compare_b_outside_cycles\":%llu,\"compare_b_outside_count\":%llu,\"behind_wall_max_ms\":%.1f,\"resets\":%u,\"enable_released_mask\":%u,\"enable_high_mask\":%u,\"heaters_off_after_hang_s\":%.4f,"
             "\"step_isr_cycles\":%llu,\"step_isr_count\":%llu,\"step_isr_max_cycles\":%llu,"
-            "\"overflow_compares_served\":%u}\n",
+            "\"overflow_compares_served\":%u,\"stalled_s\":%.3f}\n",
             sim_seconds(), wall, (unsigned long long)avr->cycle, repairs, unrepaired,
             (unsigned long long)segments_recorded, (unsigned long long)steps_total,
             min_high == UINT64_MAX ? -1.0 : (double)min_high / 16.0,
@@ -877,7 +903,7 @@ static void write_stats(void)
             (unsigned long long)b_count, behind_max * 1000.0, resets, en_released_mask, en_high_mask,
             heaters_off_after_hang, (unsigned long long)step_cycles_sum,
             (unsigned long long)step_count, (unsigned long long)step_cycles_max,
-            overflow_compares_served);
+            overflow_compares_served, stalled_s);
     fclose(f);
 }
 
