@@ -72,6 +72,10 @@ uint8_t step_fast;
 #define ARM_MARGIN 24
 /* the same in C (its compare write lands later) */
 #define C_ARM_MARGIN 64
+/* the assembly takes a waiting chunk whose first edge is under NEXT_FAR * 256 cycles after
+ * the running chunk's last edge (with its lateness test's 16-bit times, up to 32,511 of
+ * the 32,768 cycles it can tell ahead from past); C takes a farther one */
+#define NEXT_FAR "0x7E" /* (a string: the assembly's operands are at their limit) */
 
 #define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
 
@@ -382,8 +386,12 @@ static inline __attribute__((always_inline)) void step_work(uint8_t k, uint8_t m
     }
     {
         uint8_t slow = chunk_is_slow(k, a);
+        uint32_t ahead = cycles_of(a->t - was);
+        if (ahead & 0x800000UL)
+            ahead = 0; /* a chunk whose first edge has passed: at once (late), not a
+                        * 2^24-cycle wait */
         cli();
-        arm(k, a, cycles_of(a->t - was));
+        arm(k, a, ahead);
         set_slow_as(k, a, slow);
     }
 low:
@@ -596,7 +604,21 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
         "jmp " end_fn "\n"                                                                 \
-        "6:\n\t"                                                                           \
+        "6:\n\t" /* a waiting chunk whose first edge is about 32,000 cycles or more    \
+                    * after this edge (a slow stretch across a segment's boundary) is     \
+                    * C's: the lateness test below compares 16-bit times and would take   \
+                    * an edge that far ahead for one past (it and the next ones then went \
+                    * out at once, in the segment before theirs). Compared on T's bits    \
+                    * 16..31 (cycles / 256): 15 cycles. */                                \
+        "lds r24, %[nt]+2\n\t"                                                             \
+        "lds r25, %[t]+2\n\t"                                                              \
+        "sub r24, r25\n\t"                                                                 \
+        "lds r25, %[nt]+3\n\t"                                                             \
+        "lds r26, %[t]+3\n\t"                                                              \
+        "sbc r25, r26\n\t"                                                                 \
+        "brne 11b\n\t"                                                                     \
+        "cpi r24, " NEXT_FAR "\n\t"                                                       \
+        "brsh 11b\n\t"                                                                     \
         "clr r24\n\t"                                                                      \
         "sts %[rdy], r24\n\t"                                                              \
         /* a steady chunk (add 0, no further chunks: nblk is 0 here); a ramp's first      \

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from cdprhost.sim import avr_device
+from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
 
 TOOL = Path(__file__).resolve().parents[2] / "firmware" / "tools" / "engine_rates.py"
 
@@ -109,3 +110,32 @@ def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine):
     issued = [int((edges[:, 0] == k).sum()) for k in range(4)]
     assert 0 < issued[0] < 40 * 200  # stopped mid-stream
     assert list(st.steps) == issued
+
+
+def _slow_boundaries() -> SegmentBatch:
+    """A module slowing to about 420 steps/s (its last edge 1.12 ms before the segment's
+    end), then speeding up from about 390 steps/s (its first edge 1.14 ms in): 2.25 ms
+    (36,000 cycles) between the two edges, each interval under 2^15 cycles (the
+    assembly's), three times, and a stop."""
+    steady = (2000, (32, 0, 0, 0), RAMP_CONSTANT)  # 1,600 steps/s
+    slowing = (2000, (20, 0, 0, 0), 202)  # 1,580 down to 420 steps/s
+    rising = (2000, (26, 0, 0, 0), 38)  # 390 up to 2,210 steps/s
+    stop = (2000, (20, 0, 0, 0), RAMP_TO_REST)
+    rows = [steady, slowing, rising] * 3 + [stop]
+    return SegmentBatch(
+        np.array([r[0] for r in rows]),
+        np.array([r[1] for r in rows], dtype=np.int64),
+        np.array([r[2] for r in rows], dtype=np.int16),
+    )
+
+
+def test_a_next_segment_first_edge_far_after_the_last_one_keeps_its_time(engine):
+    # the assembly took the next segment's chunk at the ramp's last edge and tested its
+    # first edge for lateness on 16-bit times: 2.25 ms (36,000 cycles) ahead read as
+    # past, so it and the next one went out at once, in the segment before theirs (the
+    # record a step or two off at that end, then right again: the first layer's segment
+    # 2079, module 1 +2). C now takes such a chunk.
+    fr = engine.firmware_rates
+    p = fr.run_batch(engine._build, _slow_boundaries())
+    assert p["record_exact"] and p["edges_missing_or_extra"] == 0, p
+    assert p["worst_us"] <= 10.0 and p["late_pulses"] == 0, p
