@@ -609,13 +609,14 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
                     * C's: the lateness test below compares 16-bit times and would take   \
                     * an edge that far ahead for one past (it and the next ones then went \
                     * out at once, in the segment before theirs). Compared on T's bits    \
-                    * 16..31 (cycles / 256): 15 cycles. */                                \
+                    * 16..31 (cycles / 256): 16 cycles. */                                \
         "lds r24, %[nt]+2\n\t"                                                             \
         "lds r25, %[t]+2\n\t"                                                              \
         "sub r24, r25\n\t"                                                                 \
         "lds r25, %[nt]+3\n\t"                                                             \
         "lds r26, %[t]+3\n\t"                                                              \
         "sbc r25, r26\n\t"                                                                 \
+        "tst r25\n\t" /* (sbc's Z holds the whole difference's) */                        \
         "brne 11b\n\t"                                                                     \
         "cpi r24, " NEXT_FAR "\n\t"                                                       \
         "brsh 11b\n\t"                                                                     \
@@ -852,6 +853,13 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
+    /* A stopped stepper's compare stays where its last edge was and matches once a timer
+     * period: it is moved just behind now before its flag is cleared, else a match of it
+     * between the clearing and the new compare's write is taken by irq_on for the new
+     * one's, and the first edge went out at once (up to a period early: the first layer's
+     * extruder at segment 3450, its last edge 262,240 cycles, four periods and 96 cycles,
+     * before). */
+    *ocr_of(k) = (uint16_t)(*tcnt_of(k) - 1);
     irq_clear(k);
     arm(k, a, ahead);
     a->running = 1;
