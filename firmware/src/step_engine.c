@@ -205,8 +205,16 @@ static inline __attribute__((always_inline)) void irq_clear(uint8_t k)
 /* Its interrupt on, after the new compare was written: a match since then (its first
  * timer period gone by, so close was it) is served here, as simavr 1.6 never raises an
  * interrupt enabled after its flag rose; an edge that close is armed again just ahead
- * (late). */
-static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_axis *a)
+ * (late). Only a compare whose first match was `near` (within 256 cycles) can have matched:
+ * a flag seen after a farther one is its old compare's (a stopped stepper's compare stays
+ * where its last edge was and matches once a period; one match came between the flag's
+ * clearing and the new compare's write, and was taken for the new one's: the first edge
+ * went out at once, up to a period early, the first layer's extruder at segment 3450),
+ * and is only cleared. (Moving the old compare away first costs a compare write, and in
+ * simavr 1.6 a write of any of the timer's compares drops another's match due in the same
+ * cycles: a module's edge a period late.) */
+static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_axis *a,
+                                                          uint8_t near)
 {
     uint8_t matched;
     if (k == 3) {
@@ -220,6 +228,8 @@ static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_
     if (!matched)
         return;
     irq_clear(k);
+    if (!near)
+        return;
     if (a->wraps)
         a->wraps--;
     else
@@ -853,18 +863,13 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
-    /* A stopped stepper's compare stays where its last edge was and matches once a timer
-     * period: it is moved just behind now before its flag is cleared, else a match of it
-     * between the clearing and the new compare's write is taken by irq_on for the new
-     * one's, and the first edge went out at once (up to a period early: the first layer's
-     * extruder at segment 3450, its last edge 262,240 cycles, four periods and 96 cycles,
-     * before). */
-    *ocr_of(k) = (uint16_t)(*tcnt_of(k) - 1);
     irq_clear(k);
     arm(k, a, ahead);
+    /* the compare's first match from now (its timer periods to let pass aside) */
+    uint16_t first = (uint16_t)(*ocr_of(k) - *tcnt_of(k));
     a->running = 1;
     set_slow_as(k, a, slow);
-    irq_on(k, a);
+    irq_on(k, a, (uint16_t)(first + 0x100) < 0x200);
     SREG = s;
 }
 

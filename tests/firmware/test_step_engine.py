@@ -182,8 +182,9 @@ def test_a_stopped_stepper_old_compare_does_not_start_its_next_chunk_early(engin
     # segment 3450's chunk starts it again: its compare, left there, matched while the
     # start cleared the flag and wrote the new one, irq_on took that match for the new
     # compare's, and the first edge went out at once, 3.6 ms early in segment 3449 (the
-    # next 15 a timer period early: the record +1, -1). The start now moves the old
-    # compare away first. (Deterministic in simavr: the same in every run of the layer.)
+    # next 15 a timer period early: the record +1, -1). A flag seen after a compare armed
+    # farther than 256 cycles is now the old one's, and only cleared. (Deterministic in
+    # simavr: the same in every run of the layer.)
     from cdprhost.link import segment_feed
     from firmware_protocol.step_schedule import AxisSchedule, Chunk
 
