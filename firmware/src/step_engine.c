@@ -72,6 +72,10 @@ uint8_t step_fast;
 #define ARM_MARGIN 24
 /* the same in C (its compare write lands later) */
 #define C_ARM_MARGIN 64
+/* the assembly takes a waiting chunk whose first edge is under NEXT_FAR * 256 cycles after
+ * the running chunk's last edge (with its lateness test's 16-bit times, up to 32,511 of
+ * the 32,768 cycles it can tell ahead from past); C takes a farther one */
+#define NEXT_FAR "0x7E" /* (a string: the assembly's operands are at their limit) */
 
 #define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
 
@@ -201,8 +205,16 @@ static inline __attribute__((always_inline)) void irq_clear(uint8_t k)
 /* Its interrupt on, after the new compare was written: a match since then (its first
  * timer period gone by, so close was it) is served here, as simavr 1.6 never raises an
  * interrupt enabled after its flag rose; an edge that close is armed again just ahead
- * (late). */
-static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_axis *a)
+ * (late). Only a compare whose first match was `near` (within 256 cycles) can have matched:
+ * a flag seen after a farther one is its old compare's (a stopped stepper's compare stays
+ * where its last edge was and matches once a period; one match came between the flag's
+ * clearing and the new compare's write, and was taken for the new one's: the first edge
+ * went out at once, up to a period early, the first layer's extruder at segment 3450),
+ * and is only cleared. (Moving the old compare away first costs a compare write, and in
+ * simavr 1.6 a write of any of the timer's compares drops another's match due in the same
+ * cycles: a module's edge a period late.) */
+static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_axis *a,
+                                                          uint8_t near)
 {
     uint8_t matched;
     if (k == 3) {
@@ -216,6 +228,8 @@ static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_
     if (!matched)
         return;
     irq_clear(k);
+    if (!near)
+        return;
     if (a->wraps)
         a->wraps--;
     else
@@ -382,8 +396,12 @@ static inline __attribute__((always_inline)) void step_work(uint8_t k, uint8_t m
     }
     {
         uint8_t slow = chunk_is_slow(k, a);
+        uint32_t ahead = cycles_of(a->t - was);
+        if (ahead & 0x800000UL)
+            ahead = 0; /* a chunk whose first edge has passed: at once (late), not a
+                        * 2^24-cycle wait */
         cli();
-        arm(k, a, cycles_of(a->t - was));
+        arm(k, a, ahead);
         set_slow_as(k, a, slow);
     }
 low:
@@ -596,7 +614,22 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
         "jmp " end_fn "\n"                                                                 \
-        "6:\n\t"                                                                           \
+        "6:\n\t" /* a waiting chunk whose first edge is about 32,000 cycles or more    \
+                    * after this edge (a slow stretch across a segment's boundary) is     \
+                    * C's: the lateness test below compares 16-bit times and would take   \
+                    * an edge that far ahead for one past (it and the next ones then went \
+                    * out at once, in the segment before theirs). Compared on T's bits    \
+                    * 16..31 (cycles / 256): 16 cycles. */                                \
+        "lds r24, %[nt]+2\n\t"                                                             \
+        "lds r25, %[t]+2\n\t"                                                              \
+        "sub r24, r25\n\t"                                                                 \
+        "lds r25, %[nt]+3\n\t"                                                             \
+        "lds r26, %[t]+3\n\t"                                                              \
+        "sbc r25, r26\n\t"                                                                 \
+        "tst r25\n\t" /* (sbc's Z holds the whole difference's) */                        \
+        "brne 11b\n\t"                                                                     \
+        "cpi r24, " NEXT_FAR "\n\t"                                                       \
+        "brsh 11b\n\t"                                                                     \
         "clr r24\n\t"                                                                      \
         "sts %[rdy], r24\n\t"                                                              \
         /* a steady chunk (add 0, no further chunks: nblk is 0 here); a ramp's first      \
@@ -832,9 +865,11 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
         ahead = 0; /* past already: at once (late) */
     irq_clear(k);
     arm(k, a, ahead);
+    /* the compare's first match from now (its timer periods to let pass aside) */
+    uint16_t first = (uint16_t)(*ocr_of(k) - *tcnt_of(k));
     a->running = 1;
     set_slow_as(k, a, slow);
-    irq_on(k, a);
+    irq_on(k, a, (uint16_t)(first + 0x100) < 0x200);
     SREG = s;
 }
 

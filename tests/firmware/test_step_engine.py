@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from cdprhost.sim import avr_device
+from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
 
 TOOL = Path(__file__).resolve().parents[2] / "firmware" / "tools" / "engine_rates.py"
 
@@ -109,3 +110,104 @@ def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine):
     issued = [int((edges[:, 0] == k).sum()) for k in range(4)]
     assert 0 < issued[0] < 40 * 200  # stopped mid-stream
     assert list(st.steps) == issued
+
+
+def _slow_boundaries() -> SegmentBatch:
+    """A module slowing to about 420 steps/s (its last edge 1.12 ms before the segment's
+    end), then speeding up from about 390 steps/s (its first edge 1.14 ms in): 2.25 ms
+    (36,000 cycles) between the two edges, each interval under 2^15 cycles (the
+    assembly's), three times, and a stop."""
+    steady = (2000, (32, 0, 0, 0), RAMP_CONSTANT)  # 1,600 steps/s
+    slowing = (2000, (20, 0, 0, 0), 202)  # 1,580 down to 420 steps/s
+    rising = (2000, (26, 0, 0, 0), 38)  # 390 up to 2,210 steps/s
+    stop = (2000, (20, 0, 0, 0), RAMP_TO_REST)
+    rows = [steady, slowing, rising] * 3 + [stop]
+    return SegmentBatch(
+        np.array([r[0] for r in rows]),
+        np.array([r[1] for r in rows], dtype=np.int64),
+        np.array([r[2] for r in rows], dtype=np.int16),
+    )
+
+
+def test_a_next_segment_first_edge_far_after_the_last_one_keeps_its_time(engine):
+    # the assembly took the next segment's chunk at the ramp's last edge and tested its
+    # first edge for lateness on 16-bit times: 2.25 ms (36,000 cycles) ahead read as
+    # past, so it and the next one went out at once, in the segment before theirs (the
+    # record a step or two off at that end, then right again: the first layer's segment
+    # 2079, module 1 +2). C now takes such a chunk.
+    fr = engine.firmware_rates
+    p = fr.run_batch(engine._build, _slow_boundaries())
+    assert p["record_exact"] and p["edges_missing_or_extra"] == 0, p
+    assert p["worst_us"] <= 10.0 and p["late_pulses"] == 0, p
+
+
+#: the first layer's segments 3447-3452 (tests/firmware/test_first_layer.py) with the
+#: schedule blocks the host sent: the extruder steady and slow (an interval of 87,760
+#: cycles) on the engine, then two ramps on the tick's DDA (their extruder without a
+#: block), then steady and slow on the engine again
+_LAYER_3447 = [
+    (2194, (158, -39, -121, 4), RAMP_CONSTANT, {}),
+    (
+        737,
+        (33, -8, -26, 1),
+        202,
+        {
+            0: (289723, [(10, 583216, 10399), (6, 695833, 16029), (5, 799693, 25304),
+                         (4, 936563, 41205), (3, 1118284, 69841), (2, 1356277, 119054),
+                         (3, 1633923, 224362)]),
+            1: (1208725, [(2, 2535146, 186001), (2, 2955309, 307573), (2, 3692790, 664416),
+                          (2, 5605339, 0)]),
+        },
+    ),
+    (
+        670,
+        (-12, 31, -24, 1),
+        56,
+        {
+            0: (2347124, [(2, 3739540, -691344), (2, 2639341, -278408), (2, 2155557, -159598),
+                          (3, 1864714, -98813), (3, 1593809, -68559)]),
+            2: (1231191, [(2, 2143960, -285084), (2, 1664122, -143955), (3, 1405708, -83073),
+                          (4, 1176990, -48730), (5, 995813, -29907), (8, 854629, -18661)]),
+        },
+    ),
+    (10209, (-278, 727, -582, 16), RAMP_CONSTANT, {}),
+    (10209, (-274, 728, -581, 17), RAMP_CONSTANT, {}),
+    (10209, (-271, 728, -578, 16), RAMP_CONSTANT, {}),
+    (2000, (0, 0, 0, 0), RAMP_CONSTANT, {}),
+]  # fmt: skip
+
+
+def test_a_stopped_stepper_old_compare_does_not_start_its_next_chunk_early(engine, monkeypatch):
+    # the extruder's last edge of segment 3447 is four timer periods and 96 cycles before
+    # segment 3450's chunk starts it again: its compare, left there, matched while the
+    # start cleared the flag and wrote the new one, irq_on took that match for the new
+    # compare's, and the first edge went out at once, 3.6 ms early in segment 3449 (the
+    # next 15 a timer period early: the record +1, -1). A flag seen after a compare armed
+    # farther than 256 cycles is now the old one's, and only cleared. (Deterministic in
+    # simavr: the same in every run of the layer.)
+    from cdprhost.link import segment_feed
+    from firmware_protocol.step_schedule import AxisSchedule, Chunk
+
+    by_segment = {
+        (t, d, c): {
+            k: AxisSchedule(lead, tuple(Chunk(*x) for x in ch)) for k, (lead, ch) in b.items()
+        }
+        for t, d, c, b in _LAYER_3447
+    }
+
+    def recorded(batch, ctx, tol, payload, fit_budget_s=None):
+        out = {}
+        for i in range(len(batch)):
+            key = (int(batch.ticks[i]), tuple(int(v) for v in batch.deltas[i]), int(batch.ramps[i]))
+            out.update({(i, k): s for k, s in by_segment.get(key, {}).items()})
+        return out
+
+    monkeypatch.setattr(segment_feed, "wire_schedules", recorded)
+    batch = SegmentBatch(
+        np.array([r[0] for r in _LAYER_3447]),
+        np.array([r[1] for r in _LAYER_3447], dtype=np.int64),
+        np.array([r[2] for r in _LAYER_3447], dtype=np.int16),
+    )
+    p = engine.firmware_rates.run_batch(engine._build, batch, blocks=False)
+    assert p["record_exact"] and p["edges"][3] == "55/55", p
+    assert p["worst_us"] < 50.0, p  # (the DDA's ramps: up to about 13 us; here 4,096 us)
