@@ -438,6 +438,16 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         session_boot_on_data();
         return PROTO_REFUSED;
     }
+    /* The step engine: a segment whose block finds no room in the ring of chunks waits
+     * with its frame (proto_execute), and the ring frees only as the steppers run; while
+     * the queue holds still (a heating wait) the frames behind it, held too, filled the
+     * deframer, the host's next frames stayed in the UART and its watchdog tripped on a
+     * host that spoke all along (the first layer at its heating wait). Refused (the host
+     * sends it again), a frame leaves the room a next one needs. */
+    if (STEP_ENGINE && blocks_stalled && !deframer_room_behind(len)) {
+        machine.overflow_rejects++;
+        return PROTO_REFUSED;
+    }
     struct seg_ctx work = pend.check;
     uint8_t queued, bad_op = 0, bad_at = 0, wrong;
     if (pend.n < HELD_FRAMES && stage_segments(payload, len, &work, &queued)) {
