@@ -99,6 +99,9 @@ static void parse_fields(struct reader *r, const struct message_desc *m, uint32_
 
 /* Check a whole DATA payload; counts its queue items. Returns 0 with the
  * offending opcode and offset when it does not decode. */
+/* The step engine: the frame just checked renews the heater lease (check_payload) */
+static uint8_t lease_in_frame;
+
 static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx *work,
                              uint8_t *queued, uint8_t *bad_op, uint8_t *bad_at, uint8_t *wrong)
 {
@@ -120,6 +123,8 @@ static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx
             *queued += m.queued;
             if (m.urgent)
                 *wrong = op; /* an URGENT-only message in a DATA frame */
+            if (STEP_ENGINE && op == OP_HEATER_LEASE)
+                lease_in_frame = 1;
         } else {
             r.err = 1;
         }
@@ -444,13 +449,10 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
      * deframer, the host's next frames stayed in the UART and its watchdog tripped on a
      * host that spoke all along (the first layer at its heating wait). Refused (the host
      * sends it again), a frame leaves the room a next one needs. */
-    if (STEP_ENGINE && blocks_stalled && !deframer_room_behind(len)) {
-        machine.overflow_rejects++;
-        return PROTO_REFUSED;
-    }
+    uint8_t no_room = STEP_ENGINE && blocks_stalled && !deframer_room_behind(len);
     struct seg_ctx work = pend.check;
     uint8_t queued, bad_op = 0, bad_at = 0, wrong;
-    if (pend.n < HELD_FRAMES && stage_segments(payload, len, &work, &queued)) {
+    if (!no_room && pend.n < HELD_FRAMES && stage_segments(payload, len, &work, &queued)) {
         pend.staged++;
         /* every frame before it is executed or staged: the next decode at execution
          * (an unstaged frame, behind all staged ones) starts from here */
@@ -458,6 +460,7 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         goto held;
     }
     work = pend.check;
+    lease_in_frame = 0;
     if (!check_payload(payload, len, &work, &queued, &bad_op, &bad_at, &wrong)) {
         machine_fail(ERR_BAD_COMMAND, machine.items_received, machine.segments_received, bad_op, bad_at);
         return PROTO_DONE;
@@ -466,7 +469,15 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         machine_fail(ERR_BAD_COMMAND, machine.items_received, 0, wrong, 0);
         return PROTO_DONE;
     }
-    if ((queued > machine_free() && !machine.fault) || pend.n == HELD_FRAMES) {
+    /* The step engine: a renewal of the heater lease counts from its arrival, its frame
+     * held or refused (sent by the host's job itself, it shows that job alive). Held, it
+     * may wait behind a segment waiting for the ring, refused it may come again only
+     * after that: behind a heating wait longer than the lease, the renewals waited and
+     * the lease ran out on a host that renewed it all along (the first layer at its
+     * heating wait). Executed, it sets the lease again. */
+    if (STEP_ENGINE && lease_in_frame && machine.lease_armed)
+        machine.lease_at = link_now;
+    if ((queued > machine_free() && !machine.fault) || pend.n == HELD_FRAMES || no_room) {
         machine.overflow_rejects++;
         return PROTO_REFUSED;
     }
