@@ -99,9 +99,6 @@ static void parse_fields(struct reader *r, const struct message_desc *m, uint32_
 
 /* Check a whole DATA payload; counts its queue items. Returns 0 with the
  * offending opcode and offset when it does not decode. */
-/* The step engine: the frame just checked renews the heater lease (check_payload) */
-static uint8_t lease_in_frame;
-
 static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx *work,
                              uint8_t *queued, uint8_t *bad_op, uint8_t *bad_at, uint8_t *wrong)
 {
@@ -123,8 +120,6 @@ static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx
             *queued += m.queued;
             if (m.urgent)
                 *wrong = op; /* an URGENT-only message in a DATA frame */
-            if (STEP_ENGINE && op == OP_HEATER_LEASE)
-                lease_in_frame = 1;
         } else {
             r.err = 1;
         }
@@ -460,7 +455,6 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         goto held;
     }
     work = pend.check;
-    lease_in_frame = 0;
     if (!check_payload(payload, len, &work, &queued, &bad_op, &bad_at, &wrong)) {
         machine_fail(ERR_BAD_COMMAND, machine.items_received, machine.segments_received, bad_op, bad_at);
         return PROTO_DONE;
@@ -469,14 +463,6 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         machine_fail(ERR_BAD_COMMAND, machine.items_received, 0, wrong, 0);
         return PROTO_DONE;
     }
-    /* The step engine: a renewal of the heater lease counts from its arrival, its frame
-     * held or refused (sent by the host's job itself, it shows that job alive). Held, it
-     * may wait behind a segment waiting for the ring, refused it may come again only
-     * after that: behind a heating wait longer than the lease, the renewals waited and
-     * the lease ran out on a host that renewed it all along (the first layer at its
-     * heating wait). Executed, it sets the lease again. */
-    if (STEP_ENGINE && lease_in_frame && machine.lease_armed)
-        machine.lease_at = link_now;
     if ((queued > machine_free() && !machine.fault) || pend.n == HELD_FRAMES || no_room) {
         machine.overflow_rejects++;
         return PROTO_REFUSED;
@@ -494,6 +480,24 @@ static void took_item(void)
 {
     pend.items[pend.head]--;
     pend.items_total--;
+}
+
+/* The step engine: a WAIT item executes (a heater), so the steppers stand still and the
+ * ring of chunks frees nothing until it ends. A segment whose block finds no room then
+ * does not wait for it: behind a heating wait the queued ramps' blocks filled the ring,
+ * the next segment's frame waited (held), the frames after it were held or refused, and
+ * the device heard no frame of the host's for longer than its watchdog (the first layer
+ * at its heating wait, segment 154), or the lease renewals waited behind it until the
+ * lease ran out. Its block is checked and left out instead, and the tick's DDA steps its
+ * axes (PROTOCOL.md 5.5, an axis without a block). */
+static uint8_t queue_holds_still(void)
+{
+    uint8_t heater, s = SREG;
+    uint16_t tolerance;
+    cli();
+    uint8_t wait = stepper_waiting_for(&heater, &tolerance);
+    SREG = s;
+    return wait != WAIT_NONE;
 }
 
 void proto_execute(uint16_t units)
@@ -532,11 +536,20 @@ void proto_execute(uint16_t units)
             motion_prepare_ahead(1);
             uint8_t op = r->buf[r->pos];
             if (op >= SEG_BASE) {
+                uint8_t unkept = 0;
                 if (STEP_ENGINE && (op & SEG_F_SCHEDULE) &&
-                    !(segment_sched_out = blocks_sink((uint8_t)(r->len - r->pos))))
-                    return; /* its block waits for room in the steppers' ring of chunks */
+                    !(segment_sched_out = blocks_sink((uint8_t)(r->len - r->pos)))) {
+                    if (!queue_holds_still())
+                        return; /* its block waits for room in the steppers' ring of chunks */
+                    unkept = 1;
+                }
                 segment_decode(r, &ctx, &s); /* checked before: it decodes */
                 segment_sched_out = 0;
+                if (unkept) {
+                    /* its axes on the tick's DDA, as an axis the host sent no block for */
+                    s.sched.mask = 0;
+                    blocks_stalled = 0; /* (nothing waits for the ring) */
+                }
                 took_item();
                 enqueue_segment(&s, 0);
             } else {

@@ -221,8 +221,8 @@ def test_a_heating_wait_with_the_ring_of_chunks_full_keeps_hearing_the_host(engi
     # until the deframer was full: the host's next frames stayed in the UART, and the
     # device's watchdog ("no word from the host for 2000 ms") stopped a host that spoke
     # all along (the first layer at its heating wait, segment 154, in about 5 runs of 12).
-    # A frame that would leave no room for a next one is now refused while the ring is
-    # full (the host sends it again).
+    # While a WAIT holds the queue still, a segment whose block finds no room now leaves
+    # its block out (the tick's DDA steps it), so nothing waits for the ring.
     from cdprhost.link.errors import LinkError
 
     fr = engine.firmware_rates
@@ -242,4 +242,4 @@ def test_a_heating_wait_with_the_ring_of_chunks_full_keeps_hearing_the_host(engi
             failed = e
         fault = link.fault
     assert failed is None and fault is None, (failed, fault)
-    assert 0 < sent < len(ramps), sent  # the ring filled: the stream waited on it
+    assert sent >= 60, sent  # the queue (64 items) filled behind the wait, not just the ring
