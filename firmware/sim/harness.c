@@ -1054,6 +1054,14 @@ int main(int argc, char **argv)
     int profile_isr = getenv("CDPR_SIM_PROFILE_ISR") != NULL;
     int profile_all = getenv("CDPR_SIM_PROFILE_ALL") != NULL;
     FILE *cli_log = getenv("CDPR_SIM_CLI_LOG") ? fopen(getenv("CDPR_SIM_CLI_LOG"), "w") : NULL;
+    /* debugging: every 20 ms of simulated time, the device's wall clock, the link's
+     * bytes waiting each way, the cycles run with interrupts masked, the hits of the PC at
+     * CDPR_SIM_DBG_PC (hex byte address), the timers' enables and flags, u32 words of RAM
+     * at CDPR_SIM_DBG_U32 (hex data addresses, comma-separated) and each vector's entries */
+    FILE *dbg_log = getenv("CDPR_SIM_DBG_LOG") ? fopen(getenv("CDPR_SIM_DBG_LOG"), "w") : NULL;
+    avr_flashaddr_t dbg_pc = getenv("CDPR_SIM_DBG_PC") ? (avr_flashaddr_t)strtoul(getenv("CDPR_SIM_DBG_PC"), NULL, 16) : 0;
+    static uint32_t dbg_vec[64];
+    uint64_t dbg_masked = 0, dbg_hits = 0, dbg_next = 0;
     avr_cycle_count_t cli_start = 0;
     avr_flashaddr_t cli_pc = 0;
     avr_flashaddr_t prev_pc = 0;
@@ -1084,6 +1092,40 @@ int main(int argc, char **argv)
                         prev_pc, avr->data[0x5D] | avr->data[0x5E] << 8);
         }
         prev_pc = avr->pc;
+        if (dbg_log) {
+            if (avr->pc < 57 * 4 && !(avr->pc & 3))
+                dbg_vec[avr->pc / 4]++;
+            if (!avr->sreg[S_I])
+                dbg_masked += avr->cycle - run_cycle;
+            if (avr->pc == dbg_pc)
+                dbg_hits++;
+            if (avr->cycle >= dbg_next) {
+                dbg_next = avr->cycle + F_CPU / 50;
+                fprintf(dbg_log, "%.3f %.3f xon=%d in=%zu out=%zu masked=%llu hits=%llu pc=%x T3=%02x/%02x T5=%02x/%02x UCSR0B=%02x v:", sim_seconds(), device_seconds(), xon, in_len - in_pos, out_len, (unsigned long long)dbg_masked, (unsigned long long)dbg_hits, avr->pc, avr->data[0x71], avr->data[0x38], avr->data[0x73], avr->data[0x3A], avr->data[0xC1]);
+                static unsigned dbg_addr[8], dbg_naddr;
+                static int dbg_addr_read;
+                if (!dbg_addr_read) {
+                    dbg_addr_read = 1;
+                    const char *e = getenv("CDPR_SIM_DBG_U32");
+                    while (e && *e && dbg_naddr < 8) {
+                        char *end;
+                        dbg_addr[dbg_naddr++] = (unsigned)strtoul(e, &end, 16);
+                        e = *end ? end + 1 : end;
+                    }
+                }
+                for (unsigned i = 0; i < dbg_naddr; i++) {
+                    unsigned a = dbg_addr[i];
+                    fprintf(dbg_log, " u%x=%lu", a, (unsigned long)(avr->data[a] | avr->data[a + 1] << 8 | (uint32_t)avr->data[a + 2] << 16 | (uint32_t)avr->data[a + 3] << 24));
+                }
+                for (int i = 0; i < 57; i++)
+                    if (dbg_vec[i])
+                        fprintf(dbg_log, " %d:%u", i, dbg_vec[i]);
+                fprintf(dbg_log, "\n");
+                fflush(dbg_log);
+                memset(dbg_vec, 0, sizeof dbg_vec);
+                dbg_masked = dbg_hits = 0;
+            }
+        }
         if (profile_all && run_pc < sizeof pc_hist / sizeof pc_hist[0])
             pc_hist[run_pc] += (uint32_t)(avr->cycle - run_cycle); /* where the cycles go */
         if (profile_isr) {

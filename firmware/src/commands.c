@@ -438,9 +438,16 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         session_boot_on_data();
         return PROTO_REFUSED;
     }
+    /* The step engine: a segment whose block finds no room in the ring of chunks waits
+     * with its frame (proto_execute), and the ring frees only as the steppers run; while
+     * the queue holds still (a heating wait) the frames behind it, held too, filled the
+     * deframer, the host's next frames stayed in the UART and its watchdog tripped on a
+     * host that spoke all along (the first layer at its heating wait). Refused (the host
+     * sends it again), a frame leaves the room a next one needs. */
+    uint8_t no_room = STEP_ENGINE && blocks_stalled && !deframer_room_behind(len);
     struct seg_ctx work = pend.check;
     uint8_t queued, bad_op = 0, bad_at = 0, wrong;
-    if (pend.n < HELD_FRAMES && stage_segments(payload, len, &work, &queued)) {
+    if (!no_room && pend.n < HELD_FRAMES && stage_segments(payload, len, &work, &queued)) {
         pend.staged++;
         /* every frame before it is executed or staged: the next decode at execution
          * (an unstaged frame, behind all staged ones) starts from here */
@@ -456,7 +463,7 @@ uint8_t proto_accept(const uint8_t *payload, uint8_t len)
         machine_fail(ERR_BAD_COMMAND, machine.items_received, 0, wrong, 0);
         return PROTO_DONE;
     }
-    if ((queued > machine_free() && !machine.fault) || pend.n == HELD_FRAMES) {
+    if ((queued > machine_free() && !machine.fault) || pend.n == HELD_FRAMES || no_room) {
         machine.overflow_rejects++;
         return PROTO_REFUSED;
     }
@@ -473,6 +480,24 @@ static void took_item(void)
 {
     pend.items[pend.head]--;
     pend.items_total--;
+}
+
+/* The step engine: a WAIT item executes (a heater), so the steppers stand still and the
+ * ring of chunks frees nothing until it ends. A segment whose block finds no room then
+ * does not wait for it: behind a heating wait the queued ramps' blocks filled the ring,
+ * the next segment's frame waited (held), the frames after it were held or refused, and
+ * the device heard no frame of the host's for longer than its watchdog (the first layer
+ * at its heating wait, segment 154), or the lease renewals waited behind it until the
+ * lease ran out. Its block is checked and left out instead, and the tick's DDA steps its
+ * axes (PROTOCOL.md 5.5, an axis without a block). */
+static uint8_t queue_holds_still(void)
+{
+    uint8_t heater, s = SREG;
+    uint16_t tolerance;
+    cli();
+    uint8_t wait = stepper_waiting_for(&heater, &tolerance);
+    SREG = s;
+    return wait != WAIT_NONE;
 }
 
 void proto_execute(uint16_t units)
@@ -511,11 +536,20 @@ void proto_execute(uint16_t units)
             motion_prepare_ahead(1);
             uint8_t op = r->buf[r->pos];
             if (op >= SEG_BASE) {
+                uint8_t unkept = 0;
                 if (STEP_ENGINE && (op & SEG_F_SCHEDULE) &&
-                    !(segment_sched_out = blocks_sink((uint8_t)(r->len - r->pos))))
-                    return; /* its block waits for room in the steppers' ring of chunks */
+                    !(segment_sched_out = blocks_sink((uint8_t)(r->len - r->pos)))) {
+                    if (!queue_holds_still())
+                        return; /* its block waits for room in the steppers' ring of chunks */
+                    unkept = 1;
+                }
                 segment_decode(r, &ctx, &s); /* checked before: it decodes */
                 segment_sched_out = 0;
+                if (unkept) {
+                    /* its axes on the tick's DDA, as an axis the host sent no block for */
+                    s.sched.mask = 0;
+                    blocks_stalled = 0; /* (nothing waits for the ring) */
+                }
                 took_item();
                 enqueue_segment(&s, 0);
             } else {

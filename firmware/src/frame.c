@@ -5,6 +5,7 @@
  * frame sits behind it. */
 #include <string.h>
 
+#include "config.h"
 #include "crc.h"
 #include "frame.h"
 #include "uart.h"
@@ -43,6 +44,13 @@ void deframer_drop_held(void)
 {
     drop_held = 1;
 }
+
+#if STEP_ENGINE /* (only its frames wait on more than the queue's room) */
+uint8_t deframer_room_behind(uint8_t len)
+{
+    return held + FRAME_SIZE(len) + FRAME_MAX <= DEFRAME_BUF;
+}
+#endif
 
 void deframer_receive(void)
 {

@@ -33,6 +33,11 @@ void deframer_run(void);
 const uint8_t *deframer_first(uint8_t *len);
 void deframer_pop(void);        /* the oldest held frame was executed */
 void deframer_drop_held(void);  /* a new session: forget the held frames */
+/* Whether the frame being checked (a payload of `len`, right behind the held frames),
+ * held too, would leave room behind it for a whole frame of the longest payload: while
+ * the held frames cannot be executed, the host's next frames must still come in, or the
+ * device stops hearing it (its watchdog counts frames received). */
+uint8_t deframer_room_behind(uint8_t len);
 
 /* Bytes a frame of this payload takes on the wire. */
 #define FRAME_SIZE(len) ((uint16_t)(len) + FRAME_OVERHEAD)

@@ -8,6 +8,7 @@
 #include "queue.h"
 #include "sched.h"
 #include "stepper.h"
+#include "step_blocks.h"
 
 struct machine machine;
 static const struct machine_upper *upper;
@@ -19,6 +20,14 @@ void machine_attach(const struct machine_upper *u)
 
 uint8_t machine_free(void)
 {
+#if STEP_ENGINE
+    /* a segment waits for room in the ring of chunks (step_blocks.h): none until it has
+     * it, so the host holds its next segments instead of sending frames the command layer
+     * must refuse (each refused one is sent again after a timeout: the queue ran dry
+     * after a heating wait) */
+    if (blocks_stalled)
+        return 0;
+#endif
     /* the items of a frame acknowledged but not yet executed are taken */
     return (uint8_t)(queue_free() - upper->pending_items());
 }

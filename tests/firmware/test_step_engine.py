@@ -5,6 +5,7 @@ period (firmware/tools/engine_rates.py builds it into firmware/build/engine-rate
 from __future__ import annotations
 
 import importlib.util
+import time
 from pathlib import Path
 from types import ModuleType
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 
 from cdprhost.sim import avr_device
+from firmware_protocol.host_messages import SetHeater, WaitHeater
 from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
 
 TOOL = Path(__file__).resolve().parents[2] / "firmware" / "tools" / "engine_rates.py"
@@ -211,3 +213,33 @@ def test_a_stopped_stepper_old_compare_does_not_start_its_next_chunk_early(engin
     p = engine.firmware_rates.run_batch(engine._build, batch, blocks=False)
     assert p["record_exact"] and p["edges"][3] == "55/55", p
     assert p["worst_us"] < 50.0, p  # (the DDA's ramps: up to about 13 us; here 4,096 us)
+
+
+def test_a_heating_wait_with_the_ring_of_chunks_full_keeps_hearing_the_host(engine):
+    # behind a heating wait the queued ramps' blocks fill the ring of chunks, the next
+    # segment's frame waits for room (held, acknowledged) and so did the frames after it
+    # until the deframer was full: the host's next frames stayed in the UART, and the
+    # device's watchdog ("no word from the host for 2000 ms") stopped a host that spoke
+    # all along (the first layer at its heating wait, segment 154, in about 5 runs of 12).
+    # While a WAIT holds the queue still, a segment whose block finds no room now leaves
+    # its block out (the tick's DDA steps it), so nothing waits for the ring.
+    from cdprhost.link.errors import LinkError
+
+    fr = engine.firmware_rates
+    ramps = fr.cut_for_blocks(fr.ramp_batch([20_000, 15_000, 10_000, 2_000], cycles=6))
+    with fr.harness(engine._build, profile=False) as (link, _):
+        fr.warm_link(link)
+        link.send(SetHeater(0, 2400), WaitHeater(0))  # from 25 C: not reached in this test
+        sent, failed = 0, None
+        end = time.monotonic() + 6.0  # 3 host watchdogs' worth, the host pumping all along
+        try:
+            while time.monotonic() < end:
+                if sent < len(ramps):
+                    sent = link.feed(ramps, sent, max_wait=0.1)
+                else:
+                    link.poll(0.1)
+        except LinkError as e:
+            failed = e
+        fault = link.fault
+    assert failed is None and fault is None, (failed, fault)
+    assert sent >= 60, sent  # the queue (64 items) filled behind the wait, not just the ring
