@@ -188,19 +188,48 @@ static void __attribute__((noinline)) relost(uint8_t lost)
 }
 
 /* A stopped stepper's compare flag cleared (a match while it was off), before its new
- * compare is written */
-static inline __attribute__((always_inline)) void irq_clear(uint8_t k)
+ * compare is written (interrupts off). A flag another stepper's compare raises between
+ * the read of TIFR3 and its write is not among the pending ones read, and simavr 1.6's
+ * write clears it too: module 1's edge a whole period late when a stepper's start
+ * came within those 3 cycles of its match (ramps without blocks between engine
+ * segments). So an enabled compare whose count lies between the timer's count before
+ * the read (less the 4 cycles simavr may raise a flag late) and after the write is
+ * counted as lost as well, unless it was read as pending or is up after the write (read
+ * once a flag that late has risen). */
+static void __attribute__((noinline)) flags3_clear(uint8_t f, uint8_t s)
 {
-    if (k == 3) {
-        TIFR5 = _BV(OCF5A);
-    } else {
-        uint8_t f = (uint8_t)(_BV(OCF3A) << k);
-        uint8_t up = (uint8_t)(TIFR3 & TIMSK3 & (uint8_t)~f); /* the others' pending */
-        TIFR3 = f;
-        uint8_t lost = (uint8_t)(up & ~TIFR3);
-        if (lost)
-            relost(lost);
+    /* with `s` (the caller's SREG) allowing it, another stepper's pending match is
+     * served first (its interrupt clears its flag): it would go out only after the
+     * arming, and its flag is one the write would lose. Once: in simavr a flag that rose
+     * before its interrupt was enabled stays up unserved. */
+    if ((s & _BV(SREG_I)) && (TIFR3 & TIMSK3 & (uint8_t)~f)) {
+        SREG = s;
+        /* (the chip runs one instruction after the enable first, simavr 1.6 two) */
+        __asm__ volatile("nop\n\tnop");
+        cli();
     }
+    uint16_t from = (uint16_t)(TCNT3 - 4u);
+    uint8_t on = (uint8_t)(TIMSK3 & (uint8_t)~f);
+    uint8_t up = (uint8_t)(TIFR3 & on); /* the others' pending */
+    TIFR3 = f;
+    uint16_t span = (uint16_t)(TCNT3 - from);
+    __builtin_avr_delay_cycles(6); /* a flag of a match up to `span` is up by now */
+    uint8_t now_up = TIFR3;
+    uint8_t lost = (uint8_t)(up & ~now_up);
+    for (uint8_t j = 0; j < 3; j++) {
+        uint8_t b = (uint8_t)(_BV(OCF3A) << j);
+        if ((on & b) && !((up | now_up) & b) && (uint16_t)(*ocr_of(j) - from) <= span)
+            lost |= b;
+    }
+    if (lost)
+        relost(lost);
+}
+static inline __attribute__((always_inline)) void irq_clear(uint8_t k, uint8_t s)
+{
+    if (k == 3)
+        TIFR5 = _BV(OCF5A);
+    else
+        flags3_clear((uint8_t)(_BV(OCF3A) << k), s);
 }
 /* Its interrupt on, after the new compare was written: a match since then (its first
  * timer period gone by, so close was it) is served here, as simavr 1.6 never raises an
@@ -227,7 +256,7 @@ static inline __attribute__((always_inline)) void irq_on(uint8_t k, struct step_
     }
     if (!matched)
         return;
-    irq_clear(k);
+    irq_clear(k, 0);
     if (!near)
         return;
     if (a->wraps)
@@ -863,7 +892,7 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     uint32_t ahead = cycles_of(a->t - now);
     if (ahead & 0x800000UL)
         ahead = 0; /* past already: at once (late) */
-    irq_clear(k);
+    irq_clear(k, s);
     arm(k, a, ahead);
     /* the compare's first match from now (its timer periods to let pass aside) */
     uint16_t first = (uint16_t)(*ocr_of(k) - *tcnt_of(k));

@@ -243,3 +243,20 @@ def test_a_heating_wait_with_the_ring_of_chunks_full_keeps_hearing_the_host(engi
         fault = link.fault
     assert failed is None and fault is None, (failed, fault)
     assert sent >= 60, sent  # the queue (64 items) filled behind the wait, not just the ring
+
+
+def test_ramps_without_their_blocks_between_engine_segments_keep_their_time(engine):
+    # Once a frame was resent the host sends a ramp's blocks only where they fit its now
+    # shorter frames (segment_feed): in the first layer the rest of its ramps then step on
+    # the tick's DDA (PROTOCOL.md 5.5) and the steady segments between them on the engine.
+    # Streamed so (module 1's blocks fit once the frames grew, module 2's ramps stay on
+    # the DDA), module 2's start on the engine at each ramp's end came within cycles of
+    # module 1's edge: before, simavr's clearing of the starting stepper's flag took module
+    # 1's flag with it (the edge a whole timer period, 4.1 ms, late, and every later one),
+    # or the arming held it masked (24 us late). The same segments with their blocks, or
+    # on the default build, are exact.
+    fr = engine.firmware_rates
+    p = fr.run_batch(engine._build, fr.ramp_batch([6_000, 4_500, 0, 0]), blocks=False)
+    # the fault cost a whole period (4,096 us); module 2's DDA edges themselves come within
+    # 9.7-10.0 us here (the tick's placement, not the engine: a matter of its own)
+    assert p["record_exact"] and p["worst_us"] < 50.0, p
