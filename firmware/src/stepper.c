@@ -456,7 +456,10 @@ static void __attribute__((noinline)) dispatch(void)
         struct item *it = queue_slot(queue_tail);
         switch (it->kind) {
         case IT_SEG: {
-            if (stepper.at_rest && !stepper_start_ok && !(STEP_ENGINE && chunks_ahead))
+            /* (a start from rest whose chunks are going out goes on: they run at their
+             * time, the segment must start with them) */
+            if (stepper.at_rest && !stepper_start_ok &&
+                !(STEP_ENGINE && (chunks_ahead || axes_ahead)))
                 return;
             struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
             if (plan_tail == plan_head || p->index != queue_tail) {
