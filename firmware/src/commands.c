@@ -377,6 +377,9 @@ void commands_reset_session(void)
     memset(&ctx, 0, sizeof ctx);
     memset(&pend, 0, sizeof pend);
     deframer_drop_held();
+#if STEP_ENGINE
+    blocks_stalled = 0; /* the segment that waited for the ring's room is forgotten */
+#endif
 }
 
 uint8_t proto_pending_items(void)

@@ -28,6 +28,7 @@ uint8_t machine_free(void)
 /* entries of the ring the credit leaves for blocks larger than the queue's mix: half of
  * what a frame's blocks can take */
 #define CREDIT_SPARE (BLOCK_MOST / 2)
+#define CREDIT_FLOOR 4
 uint8_t machine_credit(void)
 {
     /* a segment waits for room in the ring: none until it has it (the frames sent
@@ -49,6 +50,12 @@ uint8_t machine_credit(void)
     if (used >= BLOCK_CHUNKS - CREDIT_SPARE)
         return 0;
     uint16_t fit = (uint16_t)((uint16_t)(BLOCK_CHUNKS - CREDIT_SPARE - used) * items / used);
+    /* the ring's blocks of items already out of the queue (prepared, executing, held to
+     * their ends) count in `used` too, so with a short queue the mix reads too large: the
+     * host was held back while the ring had room and the queue ran dry. While the ring is
+     * at most half full, a few items go in any case */
+    if (used <= BLOCK_CHUNKS / 2 && fit < CREDIT_FLOOR)
+        fit = CREDIT_FLOOR;
     uint8_t pending = upper->pending_items();
     fit = fit > pending ? (uint16_t)(fit - pending) : 0;
     return fit < free ? (uint8_t)fit : free;
