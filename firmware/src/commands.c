@@ -366,6 +366,10 @@ static struct {
     /* how many of the held frames, from the oldest, are staged (stage_segments): their
      * segments decoded once, into the queue slots they will take */
     uint8_t staged;
+#if STEP_ENGINE
+    /* the entries the block of the segment being executed takes, once known (0: not) */
+    uint8_t block_need;
+#endif
 } pend;
 
 void commands_reset_session(void)
@@ -373,6 +377,9 @@ void commands_reset_session(void)
     memset(&ctx, 0, sizeof ctx);
     memset(&pend, 0, sizeof pend);
     deframer_drop_held();
+#if STEP_ENGINE
+    blocks_stalled = 0; /* the segment that waited for the ring's room is forgotten */
+#endif
 }
 
 uint8_t proto_pending_items(void)
@@ -482,6 +489,7 @@ static void took_item(void)
     pend.items_total--;
 }
 
+#if STEP_ENGINE
 /* The step engine: a WAIT item executes (a heater), so the steppers stand still and the
  * ring of chunks frees nothing until it ends. A segment whose block finds no room then
  * does not wait for it: behind a heating wait the queued ramps' blocks filled the ring,
@@ -499,6 +507,43 @@ static uint8_t queue_holds_still(void)
     SREG = s;
     return wait != WAIT_NONE;
 }
+
+/* The segment at r->pos, which carries a schedule block, decoded into `s`, its block's
+ * chunks into the steppers' ring (step_blocks.h). The ring reserves only what the block
+ * takes: it is read into the free run at the ring's head, and when it turns out longer
+ * (blocks_sink_short), read again where it fits, or it waits, its size known, until the
+ * steppers have freed that much (it reserved the most the rest of its frame could hold,
+ * up to 42 entries, and waited for that room in a fifth of the first layer's motion:
+ * its frame held, the next ones refused for the deframer's room and sent again).
+ * Returns 0 while it waits (r->pos and the coder context as they were). */
+static uint8_t __attribute__((noinline)) decode_with_block(struct reader *r, struct segment *s)
+{
+    uint8_t at = r->pos;
+    struct seg_ctx from = ctx;
+    for (;;) {
+        segment_sched_out = blocks_sink(pend.block_need);
+        if (!segment_sched_out) {
+            if (!queue_holds_still())
+                return 0;
+            /* its axes on the tick's DDA, as an axis the host sent no block for */
+            segment_decode(r, &ctx, s);
+            s->sched.mask = 0;
+            blocks_stalled = 0; /* (nothing waits for the ring) */
+            break;
+        }
+        segment_decode(r, &ctx, s); /* checked before: it decodes */
+        segment_sched_out = 0;
+        uint8_t need = blocks_sink_short();
+        if (!need)
+            break;
+        pend.block_need = need;
+        r->pos = at;
+        ctx = from;
+    }
+    pend.block_need = 0;
+    return 1;
+}
+#endif
 
 void proto_execute(uint16_t units)
 {
@@ -536,19 +581,15 @@ void proto_execute(uint16_t units)
             motion_prepare_ahead(1);
             uint8_t op = r->buf[r->pos];
             if (op >= SEG_BASE) {
-                uint8_t unkept = 0;
-                if (STEP_ENGINE && (op & SEG_F_SCHEDULE) &&
-                    !(segment_sched_out = blocks_sink((uint8_t)(r->len - r->pos)))) {
-                    if (!queue_holds_still())
+#if STEP_ENGINE
+                if (op & SEG_F_SCHEDULE) {
+                    if (!decode_with_block(r, &s))
                         return; /* its block waits for room in the steppers' ring of chunks */
-                    unkept = 1;
-                }
-                segment_decode(r, &ctx, &s); /* checked before: it decodes */
-                segment_sched_out = 0;
-                if (unkept) {
-                    /* its axes on the tick's DDA, as an axis the host sent no block for */
-                    s.sched.mask = 0;
-                    blocks_stalled = 0; /* (nothing waits for the ring) */
+                } else
+#endif
+                {
+                    segment_decode(r, &ctx, &s); /* checked before: it decodes */
+                    segment_sched_out = 0;
                 }
                 took_item();
                 enqueue_segment(&s, 0);

@@ -20,17 +20,47 @@ void machine_attach(const struct machine_upper *u)
 
 uint8_t machine_free(void)
 {
-#if STEP_ENGINE
-    /* a segment waits for room in the ring of chunks (step_blocks.h): none until it has
-     * it, so the host holds its next segments instead of sending frames the command layer
-     * must refuse (each refused one is sent again after a timeout: the queue ran dry
-     * after a heating wait) */
-    if (blocks_stalled)
-        return 0;
-#endif
     /* the items of a frame acknowledged but not yet executed are taken */
     return (uint8_t)(queue_free() - upper->pending_items());
 }
+
+#if STEP_ENGINE
+/* entries of the ring the credit leaves for blocks larger than the queue's mix: half of
+ * what a frame's blocks can take */
+#define CREDIT_SPARE (BLOCK_MOST / 2)
+#define CREDIT_FLOOR 4
+uint8_t machine_credit(void)
+{
+    /* a segment waits for room in the ring: none until it has it (the frames sent
+     * meanwhile wait in the deframer, or are refused when it is full: sent again) */
+    if (blocks_stalled)
+        return 0;
+    uint8_t free = machine_free();
+    uint8_t used = blocks_used();
+    uint8_t items = queue_used();
+    if (!free || !used || !items)
+        return free; /* (an empty queue's blocks end with the segment executing) */
+    /* The queue's items hold `used` entries of the ring between them (its blocks still
+     * held to their segments' ends too): the items of that mix the free entries take,
+     * less the items acknowledged and not queued yet. The queue's room alone let the host
+     * send up to a second of ramps, whose blocks take several times the ring's 128
+     * entries: a segment then waited for room (in 15 % of the first layer's 20 ms
+     * samples), its frame held, and the frames behind it were refused for the deframer's
+     * room and sent again (about 1,600 refusals and 2,000 retransmissions a layer). */
+    if (used >= BLOCK_CHUNKS - CREDIT_SPARE)
+        return 0;
+    uint16_t fit = (uint16_t)((uint16_t)(BLOCK_CHUNKS - CREDIT_SPARE - used) * items / used);
+    /* the ring's blocks of items already out of the queue (prepared, executing, held to
+     * their ends) count in `used` too, so with a short queue the mix reads too large: the
+     * host was held back while the ring had room and the queue ran dry. While the ring is
+     * at most half full, a few items go in any case */
+    if (used <= BLOCK_CHUNKS / 2 && fit < CREDIT_FLOOR)
+        fit = CREDIT_FLOOR;
+    uint8_t pending = upper->pending_items();
+    fit = fit > pending ? (uint16_t)(fit - pending) : 0;
+    return fit < free ? (uint8_t)fit : free;
+}
+#endif
 
 /* HOMED, ENABLED and WAITING from the interrupt's progress (in a frame of its own: the
  * snapshot is not on the stack under machine_flags' callers' deeper calls). */

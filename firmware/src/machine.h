@@ -37,6 +37,18 @@ extern struct machine machine;
 
 uint8_t machine_flags(void);
 uint8_t machine_free(void);
+#if STEP_ENGINE
+/* The credit FLOW gives the host (PROTOCOL.md 6): machine_free, less with the step
+ * engine when the ring of chunks would not take that many items' blocks at the mix of
+ * blocks the queue holds now (step_blocks.h). Only what the host is told: the frames it
+ * sent under an older credit are taken against machine_free. */
+uint8_t machine_credit(void);
+#else
+static inline uint8_t machine_credit(void)
+{
+    return machine_free();
+}
+#endif
 /* Account for the items the interrupt completed (main loop). */
 void machine_account(void);
 /* An item was queued at head (before queue_head moves on). */

@@ -185,7 +185,7 @@ uint8_t report_flow(uint8_t *out)
     stepper_counts(&items, &segs);
     wr_u8(&w, CDPR_OP_FLOW);
     wr_u8(&w, machine_flags());
-    wr_uv(&w, machine_free());
+    wr_uv(&w, machine_credit());
     wr_uv(&w, items);
     wr_uv(&w, segs);
     wr_uv(&w, buffered);

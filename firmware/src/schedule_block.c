@@ -64,6 +64,10 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
     verdict->mask = mask;
     verdict->axis = -1;
     uint8_t used = 0;
+#if STEP_ENGINE
+    struct sched_block *sink = out;
+    uint8_t over = 0;
+#endif
     for (uint8_t k = 0; k < CDPR_SCHED_AXES; k++) {
         if (!(mask >> k & 1))
             continue;
@@ -71,11 +75,22 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
         int32_t interval = interval_of(guess_interval(ticks, steps[k]), rd_i32(r));
         int32_t add = rd_i32(r);
         uint8_t more = rd_u8(r);
+#if STEP_ENGINE
+        /* a block longer than the sink is read to its end, its chunks not kept: `used`
+         * then says how many entries it takes (step_blocks.h, blocks_sink) */
+        if (r->err || more >= CDPR_SCHED_MAX_CHUNKS) {
+            r->err = 1;
+            return;
+        }
+        if (out && used + 2 + more > out->capacity)
+            out = 0, over = 1;
+#else
         if (r->err || more >= CDPR_SCHED_MAX_CHUNKS ||
             (out && used + 2 + more > out->capacity)) {
             r->err = 1;
             return;
         }
+#endif
         if (!steps[k])
             refuse(verdict, k, 0);
         int64_t lead64 = (int64_t)(interval >> 1) + lead_c; /* >= -2^31 */
@@ -133,4 +148,8 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
         if (out)
             out->used = used;
     }
+#if STEP_ENGINE
+    if (over)
+        sink->used = used; /* over its capacity: the entries it takes */
+#endif
 }

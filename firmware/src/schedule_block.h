@@ -26,7 +26,9 @@ struct sched_chunk {
 /* One block's chunks for the step engine; `capacity` entries in `chunk`, filled in axis
  * order: for each axis of `mask` a header (its count the axis's chunks, its interval the
  * first edge, `lead`) and then its chunks (`first[k]` the header's index, `chunks[k]`
- * the chunks after it); `used` the entries filled. */
+ * the chunks after it); `used` the entries filled. With the step engine a block that
+ * needs more than `capacity` is not an error: it is read to its end, none of its
+ * chunks kept, and `used` says how many entries it takes (more than `capacity`). */
 struct sched_block {
     uint8_t mask;
     uint32_t lead[CDPR_SCHED_AXES]; /* first edge, fixed point, from the segment's start */
@@ -47,7 +49,8 @@ struct sched_verdict {
 };
 
 /* The block at r->pos for a segment of `ticks` ticks and |n| `steps`; sets r->err when it
- * is malformed (or when `out` has no room for its chunks). `out` may be NULL. */
+ * is malformed (or, without the step engine, when `out` has no room for its chunks).
+ * `out` may be NULL. */
 void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCHED_AXES],
                  struct sched_verdict *verdict, struct sched_block *out);
 

@@ -71,7 +71,7 @@ uint8_t proto_flow(uint8_t *out)
 {
     flow_items = items_executed();
     flow_flags = machine_flags();
-    flow_free = machine_free();
+    flow_free = machine_credit();
     flow_motion = motion_executed();
     flow_at = link_now;
     flow_valid = 1;
@@ -93,6 +93,9 @@ uint8_t session_may_start(void)
         return 0;
     uint32_t head_item = items_executed() + 1;
     return machine.block_ends > 0 || machine.queued_units >= machine.start_ticks || queue_free() == 0 || blocks_stalled ||
+#if STEP_ENGINE
+           !machine_credit() || /* the host may send no more: the ring of chunks is full */
+#endif
            head_item <= machine.flush_item;
 }
 
@@ -134,9 +137,15 @@ void session_poll(uint32_t now)
         uint32_t items = items_executed();
         uint8_t flags = machine_flags();
         if (items != flow_items || flags != flow_flags)
-            want = flags != flow_flags || machine_free() >= flow_free + QUEUE_SIZE / 8 ||
+            want = flags != flow_flags || machine_credit() >= flow_free + QUEUE_SIZE / 8 ||
                    now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS);
     }
+#if STEP_ENGINE
+    /* a credit the ring of chunks keeps short (machine_credit): each item more at once
+     * (the ring frees as the steppers pass the segments' ends) */
+    if (!want && flow_free < QUEUE_SIZE / 8 && machine_credit() > flow_free)
+        want = 1;
+#endif
     if (want)
         link_request_ack();
 }

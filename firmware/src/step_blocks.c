@@ -16,30 +16,45 @@ volatile uint8_t blocks_head, blocks_tail, blocks_stalled;
 static struct sched_block sink;
 #endif
 
-struct sched_block *blocks_sink(uint8_t bytes)
+struct sched_block *blocks_sink(uint8_t need)
 {
 #if STEP_ENGINE
-    uint8_t most = bytes > DEV_MAX_PAYLOAD ? BLOCK_MOST : (uint8_t)BLOCK_ENTRIES(bytes);
     uint8_t head = blocks_head, tail = blocks_tail;
     uint8_t at = head & (BLOCK_CHUNKS - 1);
-    if (at + most > BLOCK_CHUNKS)
-        head = (uint8_t)(head + (BLOCK_CHUNKS - at)); /* a block never wraps: skip the end */
-    if ((uint8_t)(head + most - tail) > BLOCK_CHUNKS) {
-        blocks_stalled = 1;
-        return 0;
+    uint8_t free = (uint8_t)(BLOCK_CHUNKS - (uint8_t)(head - tail));
+    uint8_t to_end = (uint8_t)(BLOCK_CHUNKS - at);
+    uint8_t run = free < to_end ? free : to_end; /* free entries from the head on */
+    uint8_t want = need ? need : 2; /* unknown: at least an axis's header and chunk */
+    if (want > run) {
+        /* at the ring's start, the end skipped (freed with the block after it), when the
+         * block does not fit before the end and fits after it */
+        if (run < free && want <= (uint8_t)(free - to_end)) {
+            head = (uint8_t)(head + to_end);
+            run = (uint8_t)(free - to_end);
+        } else {
+            blocks_stalled = 1;
+            return 0;
+        }
     }
     blocks_stalled = 0;
-    blocks_head = head; /* the skipped end is freed with the block after it */
+    blocks_head = head;
     sink.chunk = &block_chunks[head & (BLOCK_CHUNKS - 1)];
-    sink.capacity = most;
+    sink.capacity = run;
     sink.used = 0;
     sink.mask = 0;
     return &sink;
 #else
-    (void)bytes;
+    (void)need;
     return 0;
 #endif
 }
+
+#if STEP_ENGINE
+uint8_t blocks_sink_short(void)
+{
+    return sink.used > sink.capacity ? sink.used : 0;
+}
+#endif
 
 void blocks_commit(struct item *it)
 {

@@ -5,7 +5,7 @@
  * block straight into it (blocks_sink) as it queues the segment, the segment's item keeps
  * where its block lies (blocks_commit), and the step tick frees a segment's chunks once
  * the steppers are past them (blocks_release). A block takes one run of entries (a
- * block never wraps: the end of the ring is skipped when the block might not fit before
+ * block never wraps: the end of the ring is skipped when the block does not fit before
  * it), for each of its axes a header (count: the axis's chunks, interval: its first edge
  * from the segment's start) and then the chunks. The engine reads a chunk when it starts
  * it; its first edge is where the last chunk left off (the recurrence's T after its last
@@ -31,12 +31,17 @@
 
 extern struct sched_chunk block_chunks[BLOCK_CHUNKS];
 
-/* Room for one more block (main loop), whose segment's opcode is `bytes` from its
- * payload's end: returns the sink to read it into (its capacity the entries a block in
- * those bytes can take, BLOCK_MOST at the most), or 0 while the ring is too full (the
- * steppers free it as they go; meanwhile blocks_stalled is set, so a machine at rest
- * starts: PROTOCOL.md 5.4). */
-struct sched_block *blocks_sink(uint8_t bytes);
+/* The sink to read the next block into (main loop): the free entries from the ring's
+ * head on, up to its end or its tail (`capacity`), or 0 while there is no room. `need`:
+ * the entries the block takes once known (blocks_sink_short), else 0. A block known not
+ * to fit before the ring's end is placed at its start (the end skipped); the sink is 0,
+ * and blocks_stalled set, while the ring has no room for it (the steppers free it as
+ * they go: a machine at rest starts, PROTOCOL.md 5.4). Only what the block takes is
+ * reserved, not what the rest of its frame could hold. */
+struct sched_block *blocks_sink(uint8_t need);
+/* After a block was read into the sink: the entries it takes when that is more than the
+ * sink held (its chunks were not kept: read it again into blocks_sink(that)), else 0. */
+uint8_t blocks_sink_short(void);
 extern volatile uint8_t blocks_stalled;
 /* The block just read into the sink belongs to item `it` (queued): its entries are
  * kept until the item's segment is done. */
@@ -47,6 +52,11 @@ static inline void blocks_release(uint8_t end);
 void blocks_reset(void);
 
 extern volatile uint8_t blocks_head, blocks_tail; /* counters modulo 256 */
+/* The entries the queued segments' blocks hold (a skipped end counted with them). */
+static inline uint8_t blocks_used(void)
+{
+    return (uint8_t)(blocks_head - blocks_tail);
+}
 static inline void blocks_release(uint8_t end)
 {
     blocks_tail = end;

@@ -54,6 +54,7 @@ INDIRECT = {
     "send_ack": ("proto_flow",),
     "machine_shutdown": ("report_error",),
     "machine_free": ("proto_pending_items",),
+    "machine_credit": ("proto_pending_items",),
     "autotune_poll": ("report_event", "machine_fail"),
     "heater_poll": ("autotune_heater", "autotune_relay"),
     "report_status": ("health_read",),
