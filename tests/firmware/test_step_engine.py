@@ -278,7 +278,9 @@ def test_a_segment_the_engine_steps_alone_takes_few_ticks(engine):
     # the 400 us tick kept its fixed cost (about 750 cycles: entry and exit, the chores,
     # the computation) while it only kept the segment clock: 25 interrupts a 10 ms
     # segment, a ninth of the CPU beside the steppers (three modules out of step at 33K
-    # braking overran it). A tick of engine-only motion now takes up to six ticks' time.
+    # braking overran it). A tick of engine-only motion now takes up to six ticks' time
+    # away from the segment's end (whose last five ticks stay 400 us): 9 tick interrupts
+    # a 10 ms segment.
     fr = engine.firmware_rates
     batch = engine.steady_batch([20_000, 15_000, 10_000, 2_000], 20)
     p = fr.run_batch(engine._build, batch)
@@ -286,7 +288,7 @@ def test_a_segment_the_engine_steps_alone_takes_few_ticks(engine):
     assert p["overruns"] == 0 and p["late_pulses"] == 0, p
     assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
     per_tick = 25 * len(batch)  # 400 us ticks in the motion (21 segments of 10 ms)
-    assert _motion_ticks(p) < 0.35 * per_tick, (p["tick_interrupts"], p)
+    assert _motion_ticks(p) < 0.4 * per_tick, (p["tick_interrupts"], p)
 
 
 def test_four_steppers_starting_from_rest_keep_the_tick(engine):
