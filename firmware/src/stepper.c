@@ -779,34 +779,67 @@ static void __attribute__((noinline)) limit_hit(const struct plan *p)
     }
 }
 
-/* A tick of a segment whose steps are all the step engine's, no limit switch pressed,
- * far from the segment's end: the tick keeps only the segment clock, so it takes the
- * segment's next ticks with it, LONG_TICKS at most, and its fixed cost (the interrupt's
- * entry and exit, the chores, the computation: about 750 cycles) comes once in that
- * time instead of once every 400 us. It stops short of the segment's last ticks, which
- * stay 400 us as in any segment: AXES_AHEAD_TICKS + 1 of them before the next segment
- * (each of the first four puts out one axis's chunk of it, chunks_early; the last ends
- * the segment on its exact clock unit), two before rest (the main loop sees the motion
- * ended once the last one is computed, at the start of the one before: the host then
- * takes the device for idle). A 10 ms segment takes 9 tick interrupts instead of 25.
- * (A long last tick, the segment's end merged into it, put out all four chunks in one
- * interrupt and moved the segment's end, and with it the device's FLOW report, 1.2 ms
- * earlier: the report's bytes then went out across the boundary, where the three
- * modules' chunks start together, and the boundary's first edges came 10-27 us late at
- * 3 x 33K + E.) A limit switch pressed during a long tick is seen at the next one (the
- * ticks are 400 us again from then on). Returns with ticks_left as it was when the
- * segment is near its end (the tick stays 400 us). */
+/* A tick of a segment whose steps are all the step engine's, no limit switch pressed:
+ * the tick keeps only the segment clock, so it takes the segment's next ticks with it,
+ * LONG_TICKS at most, and its fixed cost (the interrupt's entry and exit, the chores,
+ * the computation: about 750 cycles) comes once in that time instead of once every
+ * 400 us. Returns 0 when the tick stays a 400 us one (ticks_left as it was).
+ *
+ * A segment of LONG_END_TICKS or more (a steady one of 10 ms: 9 tick interrupts, not 25)
+ * takes long ticks only far from its end: its last ticks stay 400 us as in any
+ * segment, AXES_AHEAD_TICKS + 1 of them before the next segment (each of the first four
+ * puts out one axis's chunk of it, chunks_early; the last ends the segment on its exact
+ * clock unit), two before rest (the main loop sees the motion ended once the last one is
+ * computed, at the start of the one before: the host then takes the device for idle).
+ * Merged into a long last tick, the segment's end (with all four chunks in one
+ * interrupt) came 1.2 ms earlier, and the device's FLOW report with it, whose bytes then
+ * went out across the boundary where the three modules' chunks start together: at 3 x
+ * 33K + E the boundary's first edges came 10-27 us late.
+ *
+ * A shorter segment (a ramp's piece, 1-4 ms) would keep next to no long tick that way:
+ * its end is merged into a long last tick on its exact clock unit when what is left fits
+ * one tick (a byte of units) and this is not the segment's first tick (computed with
+ * the end of the segment before: the steppers then hold the chunks of one segment ahead,
+ * not two), with the next segment's chunks (chunks_early in seg_last_tick); else the
+ * next tick is left to end it, about as long as this one (the end's work, the next
+ * piece's block chunks, then has a long tick beside the steppers: 400 us ticks overran
+ * at the braking's start). A limit switch pressed during a long tick is seen at the next
+ * one (the ticks are 400 us again from then on). */
 #define LONG_TICKS 6
+#define LONG_END_TICKS (2 * (AXES_AHEAD_TICKS + 1))
+/* a long tick's units in a byte, a merged last one's too (LONG_TICKS - 2 ticks and the
+ * segment's last, up to 79 units) */
 _Static_assert(LONG_TICKS * TICK_UNITS <= 255, "a long tick in a byte");
-static void __attribute__((noinline)) long_tick(const struct plan *p, struct out *o)
+_Static_assert((LONG_TICKS - 2) * TICK_UNITS + 2 * TICK_UNITS - 1 <= 255, "a last one in a byte");
+static uint8_t __attribute__((noinline)) long_tick(struct plan *p, struct out *o)
 {
     uint32_t left = ticks_left; /* ticks after this one (>= 1), the last one included */
-    uint8_t keep = p->at_rest ? 2 : AXES_AHEAD_TICKS + 1; /* the end's 400 us ticks */
-    if (left <= keep)
-        return;
-    uint8_t more = left - keep < LONG_TICKS - 1 ? (uint8_t)(left - keep) : LONG_TICKS - 1;
+    uint8_t more = LONG_TICKS - 1;
+    if (p->at_rest || p->ticks >= LONG_END_TICKS) {
+        uint8_t keep = p->at_rest ? 2 : AXES_AHEAD_TICKS + 1; /* the end's 400 us ticks */
+        if (left <= keep)
+            return 0;
+        if (left - keep < more)
+            more = (uint8_t)(left - keep);
+    } else if (left < LONG_TICKS && left + 1 != p->ticks &&
+               (uint16_t)((uint8_t)left * TICK_UNITS + p->last_units) <= 255) {
+        /* this one and the rest: (left) whole ticks and the last (40-79 units) */
+        o->units = (uint8_t)((uint8_t)left * TICK_UNITS + p->last_units);
+        ticks_left = 0;
+        seg_last_tick(p);
+        return 1;
+    } else if (left <= 2 * LONG_TICKS - 1) {
+        /* the next tick to end the segment, about as long as this one */
+        uint8_t last = (uint8_t)((uint8_t)(left - 1) / 2); /* the next tick's whole ticks */
+        if (last > LONG_TICKS - 2)
+            last = LONG_TICKS - 2;
+        more = (uint8_t)((uint8_t)left - last - 1);
+        if (more > LONG_TICKS - 1)
+            more = LONG_TICKS - 1;
+    }
     ticks_left = left - more;
     o->units = (uint8_t)((uint8_t)(more + 1) * TICK_UNITS);
+    return 1;
 }
 
 static void __attribute__((noinline)) seg_tick(void)
@@ -833,8 +866,8 @@ static void __attribute__((noinline)) seg_tick(void)
         /* every step is the step engine's: this tick only keeps the segment clock, and
          * far from the end takes the next ticks with it (long_tick); the last ticks put
          * out the next segment's chunks */
-        if (!limits)
-            long_tick(p, o);
+        if (!limits && long_tick(p, o))
+            return;
         if (ticks_left <= AXES_AHEAD_TICKS && !p->at_rest)
             chunks_early((uint16_t)((uint16_t)ticks_left * TICK_CYCLES +
                                     (uint16_t)(p->last_units * UNIT_CYCLES)),
