@@ -791,10 +791,10 @@ static void __attribute__((noinline)) limit_hit(const struct plan *p)
  * puts out one axis's chunk of it, chunks_early; the last ends the segment on its exact
  * clock unit), two before rest (the main loop sees the motion ended once the last one is
  * computed, at the start of the one before: the host then takes the device for idle).
- * Merged into a long last tick, the segment's end (with all four chunks in one
- * interrupt) came 1.2 ms earlier, and the device's FLOW report with it, whose bytes then
- * went out across the boundary where the three modules' chunks start together: at 3 x
- * 33K + E the boundary's first edges came 10-27 us late.
+ * Merged into a long last tick, a 10 ms segment's end (with all four chunks in one
+ * interrupt) was computed 2 ms earlier, and the device's FLOW report with it, whose bytes
+ * then went out across the boundary where the three modules' chunks start together: at
+ * 3 x 33K + E the boundary's first edges came 10-27 us late.
  *
  * A shorter segment (a ramp's piece, 1-4 ms) would keep next to no long tick that way:
  * its end is merged into a long last tick on its exact clock unit when what is left fits
