@@ -783,7 +783,7 @@ static void __attribute__((noinline)) limit_hit(const struct plan *p)
  * the tick keeps only the segment clock, so it takes the segment's next ticks with it,
  * LONG_TICKS at most, and its fixed cost (the interrupt's entry and exit, the chores,
  * the computation: about 750 cycles) comes once in that time instead of once every
- * 400 us. Returns 0 when the tick stays a 400 us one (ticks_left as it was).
+ * 400 us.
  *
  * A segment of LONG_END_TICKS or more (a steady one of 10 ms: 9 tick interrupts, not 25)
  * takes long ticks only far from its end: its last ticks stay 400 us as in any
@@ -804,21 +804,24 @@ static void __attribute__((noinline)) limit_hit(const struct plan *p)
  * next tick is left to end it, about as long as this one (the end's work, the next
  * piece's block chunks, then has a long tick beside the steppers: 400 us ticks overran
  * at the braking's start). A limit switch pressed during a long tick is seen at the next
- * one (the ticks are 400 us again from then on). */
+ * one (the ticks are 400 us again from then on). Returns LONG_NONE (the tick stays a
+ * 400 us one, ticks_left as it was), LONG_TICK, or LONG_END (this tick ends the segment:
+ * the caller computes its end, seg_last_tick, from a frame less deep). */
+enum { LONG_NONE, LONG_TICK, LONG_END };
 #define LONG_TICKS 6
 #define LONG_END_TICKS (2 * (AXES_AHEAD_TICKS + 1))
 /* a long tick's units in a byte, a merged last one's too (LONG_TICKS - 2 ticks and the
  * segment's last, up to 79 units) */
 _Static_assert(LONG_TICKS * TICK_UNITS <= 255, "a long tick in a byte");
 _Static_assert((LONG_TICKS - 2) * TICK_UNITS + 2 * TICK_UNITS - 1 <= 255, "a last one in a byte");
-static uint8_t __attribute__((noinline)) long_tick(struct plan *p, struct out *o)
+static uint8_t __attribute__((noinline)) long_tick(const struct plan *p, struct out *o)
 {
     uint32_t left = ticks_left; /* ticks after this one (>= 1), the last one included */
     uint8_t more = LONG_TICKS - 1;
     if (p->at_rest || p->ticks >= LONG_END_TICKS) {
         uint8_t keep = p->at_rest ? 2 : AXES_AHEAD_TICKS + 1; /* the end's 400 us ticks */
         if (left <= keep)
-            return 0;
+            return LONG_NONE;
         if (left - keep < more)
             more = (uint8_t)(left - keep);
     } else if (left < LONG_TICKS && left + 1 != p->ticks &&
@@ -826,8 +829,7 @@ static uint8_t __attribute__((noinline)) long_tick(struct plan *p, struct out *o
         /* this one and the rest: (left) whole ticks and the last (40-79 units) */
         o->units = (uint8_t)((uint8_t)left * TICK_UNITS + p->last_units);
         ticks_left = 0;
-        seg_last_tick(p);
-        return 1;
+        return LONG_END;
     } else if (left <= 2 * LONG_TICKS - 1) {
         /* the next tick to end the segment, about as long as this one */
         uint8_t last = (uint8_t)((uint8_t)(left - 1) / 2); /* the next tick's whole ticks */
@@ -839,7 +841,7 @@ static uint8_t __attribute__((noinline)) long_tick(struct plan *p, struct out *o
     }
     ticks_left = left - more;
     o->units = (uint8_t)((uint8_t)(more + 1) * TICK_UNITS);
-    return 1;
+    return LONG_TICK;
 }
 
 static void __attribute__((noinline)) seg_tick(void)
@@ -866,7 +868,10 @@ static void __attribute__((noinline)) seg_tick(void)
         /* every step is the step engine's: this tick only keeps the segment clock, and
          * far from the end takes the next ticks with it (long_tick); the last ticks put
          * out the next segment's chunks */
-        if (!limits && long_tick(p, o))
+        uint8_t t = limits ? LONG_NONE : long_tick(p, o);
+        if (t == LONG_END)
+            seg_last_tick(p);
+        if (t != LONG_NONE)
             return;
         if (ticks_left <= AXES_AHEAD_TICKS && !p->at_rest)
             chunks_early((uint16_t)((uint16_t)ticks_left * TICK_CYCLES +
