@@ -334,6 +334,8 @@ def run_batch(
         "clock_slips": s.get("motion_clock_slips", -1),
         "record_exact": not refused and rows == expected_record(batch),
         "isr_cycles": s["isr_cycles"],
+        # Timer1's tick interrupts over the whole run (idle ticks included: 400 us each)
+        "tick_interrupts": s.get("isr_profiled_count", -1),
         "run_cycles": s.get("cycles", 0),
         "motion_cycles": int(batch.ticks.sum()) * CYCLES_PER_UNIT,
     }

@@ -456,7 +456,10 @@ static void __attribute__((noinline)) dispatch(void)
         struct item *it = queue_slot(queue_tail);
         switch (it->kind) {
         case IT_SEG: {
-            if (stepper.at_rest && !stepper_start_ok)
+            /* (a start from rest whose chunks are going out goes on: they run at their
+             * time, the segment must start with them) */
+            if (stepper.at_rest && !stepper_start_ok &&
+                !(STEP_ENGINE && (chunks_ahead || axes_ahead)))
                 return;
             struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
             if (plan_tail == plan_head || p->index != queue_tail) {
@@ -473,6 +476,21 @@ static void __attribute__((noinline)) dispatch(void)
             if ((stepper.enabled_mask | p->moving) != stepper.enabled_mask) {
                 stepper.enabled_mask |= p->moving;
                 apply_enables(stepper.enabled_mask);
+            }
+            if (STEP_ENGINE && stepper.at_rest && !chunks_ahead && p->moving &&
+                PLAN_ENGINE(p) == p->moving) {
+                /* from rest, every axis the step engine's: its chunks go out in two idle
+                 * ticks, two axes in each, and the segment starts after them. Starting a
+                 * stepper from rest costs about 1,000 cycles: all four with the segment's
+                 * first tick took up to 6,370 of the 6,400 cycles of the tick that
+                 * computed it (an overrun in some runs, the motion's marker missed) */
+                uint8_t later = axes_ahead ? 1 : 2; /* ticks to the segment's start */
+                axes_ahead = seg_chunks(
+                    p, step_clock_next_tick + ((uint32_t)(later * TICK_CYCLES) << STEP_FRAC_BITS),
+                    axes_ahead, 2);
+                if (later == 1) /* (the second tick, whatever the first put out) */
+                    chunks_ahead = 1;
+                return;
             }
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
@@ -614,27 +632,26 @@ static inline __attribute__((always_inline)) uint8_t dda_tick(struct axis_plan *
  * enabled, nothing to wait for); else dispatch does it (after a ramp, whose last steps
  * the tick's wheel issues, an early start of the steppers put the ramp's last step
  * 135 us late). `ahead`: the plans between the running one and the next (1 during the
- * segment, 0 in its last tick, after plan_tail moved on); `ticks`: the whole ticks
- * from the one being computed to the segment's last one, that one excluded; `most`: the
- * moving axes to put out now. */
+ * segment, 0 in its last tick, after plan_tail moved on); `to_end`: the cycles from the
+ * start of the tick being computed to the segment's end; `most`: the moving axes to put
+ * out now. */
 #define AXES_AHEAD_TICKS 4
-static void chunks_early(const struct plan *p, uint8_t tail, uint8_t ahead, uint8_t ticks,
-                         uint8_t most)
+static void chunks_early(uint16_t to_end, uint8_t tail, uint8_t ahead, uint8_t most)
 {
     if (!STEP_ENGINE || settle_ticks || (uint8_t)(plan_head - plan_tail) <= ahead ||
         queue_slot(tail)->kind != IT_SEG)
         return;
     const struct plan *n = &plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)];
-    if (n->index != tail || PLAN_ENGINE(n) != n->moving ||
+    if (n->index != tail || !n->moving || PLAN_ENGINE(n) != n->moving ||
         (stepper.enabled_mask | n->moving) != stepper.enabled_mask)
-        return;
-    uint16_t to_end = (uint16_t)(ticks * TICK_CYCLES + (uint16_t)(p->last_units * UNIT_CYCLES));
+        return; /* (a segment that moves no axis: nothing out, nothing marked out, or the
+                 * next moving one would take the mark and put out none of its own) */
     axes_ahead = seg_chunks(n, step_clock_next_tick + ((uint32_t)to_end << STEP_FRAC_BITS),
                             axes_ahead, most);
     if (!ahead)
         chunks_ahead = 1;
 }
-_Static_assert(AXES_AHEAD_TICKS * TICK_CYCLES + TICK_CYCLES < 0x10000UL, "to_end in 16 bits");
+_Static_assert(AXES_AHEAD_TICKS * TICK_CYCLES + 2 * TICK_CYCLES < 0x10000UL, "to_end in 16 bits");
 
 /* The last tick of a segment whose steps the tick's wheel places: each axis issues what
  * is left (the exact total), and the positions move by what was issued. */
@@ -681,8 +698,8 @@ static void __attribute__((noinline)) last_steps(struct plan *p, int32_t *pos)
         pos[k] += d[k];
 }
 
-/* A segment ends (its last tick, starting at step_clock_next_tick, is being computed):
- * its block is held until the time its tick ends. */
+/* A segment ends (its last tick, starting at step_clock_next_tick and next_tick->units
+ * long, is being computed): its block is held until the time its tick ends. */
 static void blocks_done(const struct plan *p)
 {
 #if !STEP_ENGINE
@@ -690,8 +707,8 @@ static void blocks_done(const struct plan *p)
 #else
     if (!p->blk_mask || blk_held == BLK_HELD)
         return; /* (full: never; the next block's release frees it) */
-    blk_fifo[blk_held].end =
-        step_clock_next_tick + ((uint32_t)(uint16_t)(p->last_units * UNIT_CYCLES) << STEP_FRAC_BITS);
+    uint16_t span = (uint16_t)(next_tick->units * UNIT_CYCLES);
+    blk_fifo[blk_held].end = step_clock_next_tick + ((uint32_t)span << STEP_FRAC_BITS);
     blk_fifo[blk_held].blk_end = p->blk_end;
     blk_held++;
 #endif
@@ -741,7 +758,7 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
     if (!p->at_rest && queue_head == tail)
         raise_error(ERR_UNDERRUN, s->items_done, s->segments_done, 0xFF, 0);
     else if (STEP_ENGINE && !p->at_rest && PLAN_ENGINE(p) == p->moving && axes_ahead < 4)
-        chunks_early(p, tail, 0, 0, 4);
+        chunks_early((uint16_t)(o->units * UNIT_CYCLES), tail, 0, 4);
     else if (STEP_ENGINE && !p->at_rest && PLAN_ENGINE(p) == p->moving)
         chunks_ahead = 1; /* every axis went out during the segment */
 }
@@ -762,11 +779,77 @@ static void __attribute__((noinline)) limit_hit(const struct plan *p)
     }
 }
 
+/* A tick of a segment whose steps are all the step engine's, no limit switch pressed:
+ * the tick keeps only the segment clock, so it takes the segment's next ticks with it,
+ * LONG_TICKS at most, and its fixed cost (the interrupt's entry and exit, the chores,
+ * the computation: about 750 cycles) comes once in that time instead of once every
+ * 400 us.
+ *
+ * A segment of LONG_END_TICKS or more (a steady one of 10 ms: 9 tick interrupts, not 25)
+ * takes long ticks only far from its end: its last ticks stay 400 us as in any
+ * segment, AXES_AHEAD_TICKS + 1 of them before the next segment (each of the first four
+ * puts out one axis's chunk of it, chunks_early; the last ends the segment on its exact
+ * clock unit), two before rest (the main loop sees the motion ended once the last one is
+ * computed, at the start of the one before: the host then takes the device for idle).
+ * Merged into a long last tick, a 10 ms segment's end (with all four chunks in one
+ * interrupt) was computed 2 ms earlier, and the device's FLOW report with it, whose bytes
+ * then went out across the boundary where the three modules' chunks start together: at
+ * 3 x 33K + E the boundary's first edges came 10-27 us late.
+ *
+ * A shorter segment (a ramp's piece, 1-4 ms) would keep next to no long tick that way:
+ * its end is merged into a long last tick on its exact clock unit when what is left fits
+ * one tick (a byte of units) and this is not the segment's first tick (computed with
+ * the end of the segment before: the steppers then hold the chunks of one segment ahead,
+ * not two), with the next segment's chunks (chunks_early in seg_last_tick); else the
+ * next tick is left to end it, about as long as this one (the end's work, the next
+ * piece's block chunks, then has a long tick beside the steppers: 400 us ticks overran
+ * at the braking's start). A limit switch pressed during a long tick is seen at the next
+ * one (the ticks are 400 us again from then on). Returns LONG_NONE (the tick stays a
+ * 400 us one, ticks_left as it was), LONG_TICK, or LONG_END (this tick ends the segment:
+ * the caller computes its end, seg_last_tick, from a frame less deep). */
+enum { LONG_NONE, LONG_TICK, LONG_END };
+#define LONG_TICKS 6
+#define LONG_END_TICKS (2 * (AXES_AHEAD_TICKS + 1))
+/* a long tick's units in a byte, a merged last one's too (LONG_TICKS - 2 ticks and the
+ * segment's last, up to 79 units) */
+_Static_assert(LONG_TICKS * TICK_UNITS <= 255, "a long tick in a byte");
+_Static_assert((LONG_TICKS - 2) * TICK_UNITS + 2 * TICK_UNITS - 1 <= 255, "a last one in a byte");
+static uint8_t __attribute__((noinline)) long_tick(const struct plan *p, struct out *o)
+{
+    uint32_t left = ticks_left; /* ticks after this one (>= 1), the last one included */
+    uint8_t more = LONG_TICKS - 1;
+    if (p->at_rest || p->ticks >= LONG_END_TICKS) {
+        uint8_t keep = p->at_rest ? 2 : AXES_AHEAD_TICKS + 1; /* the end's 400 us ticks */
+        if (left <= keep)
+            return LONG_NONE;
+        if (left - keep < more)
+            more = (uint8_t)(left - keep);
+    } else if (left < LONG_TICKS && left + 1 != p->ticks &&
+               (uint16_t)((uint8_t)left * TICK_UNITS + p->last_units) <= 255) {
+        /* this one and the rest: (left) whole ticks and the last (40-79 units) */
+        o->units = (uint8_t)((uint8_t)left * TICK_UNITS + p->last_units);
+        ticks_left = 0;
+        return LONG_END;
+    } else if (left <= 2 * LONG_TICKS - 1) {
+        /* the next tick to end the segment, about as long as this one */
+        uint8_t last = (uint8_t)((uint8_t)(left - 1) / 2); /* the next tick's whole ticks */
+        if (last > LONG_TICKS - 2)
+            last = LONG_TICKS - 2;
+        more = (uint8_t)((uint8_t)left - last - 1);
+        if (more > LONG_TICKS - 1)
+            more = LONG_TICKS - 1;
+    }
+    ticks_left = left - more;
+    o->units = (uint8_t)((uint8_t)(more + 1) * TICK_UNITS);
+    return LONG_TICK;
+}
+
 static void __attribute__((noinline)) seg_tick(void)
 {
     struct plan *p = seg_plan;
     struct out *o = next_tick;
-    if (limits_active()) {
+    uint8_t limits = limits_active();
+    if (limits) {
         limit_hit(p);
         if (!stepper.running)
             return;
@@ -782,10 +865,18 @@ static void __attribute__((noinline)) seg_tick(void)
     }
     uint8_t moving = p->moving, accel = p->accel, any = 0;
     if (STEP_ENGINE && PLAN_ENGINE(p) == moving) {
-        /* a steady segment's steps are the step engine's chunks; its last ticks put out
-         * the next segment's */
+        /* every step is the step engine's: this tick only keeps the segment clock, and
+         * far from the end takes the next ticks with it (long_tick); the last ticks put
+         * out the next segment's chunks */
+        uint8_t t = limits ? LONG_NONE : long_tick(p, o);
+        if (t == LONG_END)
+            seg_last_tick(p);
+        if (t != LONG_NONE)
+            return;
         if (ticks_left <= AXES_AHEAD_TICKS && !p->at_rest)
-            chunks_early(p, (uint8_t)(queue_tail + 1), 1, (uint8_t)ticks_left, 1);
+            chunks_early((uint16_t)((uint16_t)ticks_left * TICK_CYCLES +
+                                    (uint16_t)(p->last_units * UNIT_CYCLES)),
+                         (uint8_t)(queue_tail + 1), 1, 1);
         return;
     }
     struct axis_plan *x = p->ax;
@@ -927,4 +1018,8 @@ void __attribute__((noinline)) stepper_tick_chores(void)
     markers_tick_start(e, &stepper.motion_ticks); /* through this tick (computed) */
     sched_clock_advance(e->units);
     heater_lease_tick();
+    if (STEP_ENGINE)
+        /* a long tick (long_tick) counts as the 400 us ticks it holds */
+        for (uint8_t u = e->units; u >= 2 * TICK_UNITS; u = (uint8_t)(u - TICK_UNITS))
+            heater_lease_tick();
 }

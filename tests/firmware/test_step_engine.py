@@ -267,6 +267,55 @@ def test_ramps_without_their_blocks_between_engine_segments_keep_their_time(engi
     assert p["record_exact"] and p["worst_us"] < 50.0, p
 
 
+def _motion_ticks(p: dict) -> float:
+    """The tick interrupts of a point's motion: all of them less the idle ones around it
+    (400 us each)."""
+    idle = max(p["run_cycles"] - p["motion_cycles"], 0) / 6400
+    return p["tick_interrupts"] - idle
+
+
+def test_a_segment_the_engine_steps_alone_takes_few_ticks(engine):
+    # the 400 us tick kept its fixed cost (about 750 cycles: entry and exit, the chores,
+    # the computation) while it only kept the segment clock: 25 interrupts a 10 ms
+    # segment, a ninth of the CPU beside the steppers (three modules out of step at 33K
+    # braking overran it). A tick of engine-only motion now takes up to six ticks' time
+    # away from the segment's end (whose last five ticks stay 400 us): 9 tick interrupts
+    # a 10 ms segment.
+    fr = engine.firmware_rates
+    batch = engine.steady_batch([20_000, 15_000, 10_000, 2_000], 20)
+    p = fr.run_batch(engine._build, batch)
+    assert p["record_exact"] and p["edges_missing_or_extra"] == 0, p
+    assert p["overruns"] == 0 and p["late_pulses"] == 0, p
+    assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
+    per_tick = 25 * len(batch)  # 400 us ticks in the motion (21 segments of 10 ms)
+    assert _motion_ticks(p) < 0.4 * per_tick, (p["tick_interrupts"], p)
+
+
+def test_four_steppers_starting_from_rest_keep_the_tick(engine):
+    # the segment's first tick was computed in the idle tick before it, and starting a
+    # stepper from rest costs about 1,000 cycles: four of them, the tick's own work and a
+    # late entry took 5,800-6,400 of its 6,400 cycles (an overrun at many starts, and with
+    # the motion's marker missed the harness's clock a tick off). The chunks now go out a
+    # tick ahead, the segment starting at the next tick.
+    fr = engine.firmware_rates
+    piece = engine.steady_batch([5_000, -4_900, 4_800, 500], 2)  # from rest to rest
+    starts = 8
+    with fr.harness(engine._build) as (link, tmp):
+        for _ in range(starts):
+            link.queue_segments(piece)
+            link.wait_idle(60)
+    stats = fr._stats(tmp)
+    edges = np.loadtxt(tmp / "steps.txt", dtype=np.int64, ndmin=2)
+    whole = SegmentBatch(
+        np.tile(piece.ticks, starts),
+        np.tile(piece.deltas, (starts, 1)),
+        np.tile(piece.ramps, starts),
+    )
+    err, miscount = fr.edge_errors(edges, whole)
+    assert miscount == 0 and stats["overruns"] == 0 and stats["late_pulses"] == 0, stats
+    assert float(err.max()) <= 10.0 and float(np.percentile(err, 99)) <= 5.0, err.max()
+
+
 def _data_address(elf: Path, symbol: str) -> int:
     """The RAM address of ``symbol`` in ``elf`` (as the harness's debugging log takes it)."""
     out = subprocess.run(["avr-nm", str(elf)], capture_output=True, text=True, check=True)
