@@ -291,11 +291,55 @@ static void engine_issued(struct seg_snapshot *sn)
         sn->pos[k] += out - step_engine_unissued(k);
     }
 }
+
+/* Whether a segment that has ended (its last tick computed: it is counted done, its
+ * record row will say so) still has edges the engine has not raised. Between segments
+ * each stepper holds what is left of the ended segment and, for the axes put out early,
+ * the next segment's whole chunk. Interrupts off. */
+static uint8_t ended_edges_left(void)
+{
+    if (stepper.current == IT_SEG)
+        return 0;
+    const struct plan *n = &plans[plan_tail & (PLAN_SLOTS - 1)];
+    uint8_t next_out = plan_head != plan_tail;
+    for (uint8_t k = 0; k < 4; k++) {
+        int32_t ahead = k < axes_ahead && next_out ? n->delta[k] : 0;
+        if (step_engine_unissued(k) != ahead)
+            return 1;
+    }
+    return 0;
+}
+
+/* A halt between segments lets the ended segment's last edges out first, as the
+ * tick's wheel does for the tick it computed (the default build): the engine would drop
+ * them, and the segment counted done would end a few steps short (an underrun, which
+ * comes at the ended segment's last tick, always did: its record row said "done" with
+ * 3-5 steps missing, and a resume after it started from a position the record did not
+ * hold). A segment's end is at most its last tick away, two tick starts or so;
+ * stepper.running is already 0, so no segment starts meanwhile. Interrupts on (the
+ * main loop's halt); with them off the edges are dropped and counted as before. */
+static void let_ended_segment_out(void)
+{
+    if (!(SREG & _BV(SREG_I)))
+        return;
+    uint8_t since = tick_gen;
+    for (;;) {
+        cli();
+        uint8_t left = ended_edges_left();
+        sei();
+        if (!left || (uint8_t)(tick_gen - since) > 3)
+            return;
+    }
+}
 #endif
 
 void stepper_halt(void)
 {
     struct seg_snapshot sn;
+#if STEP_ENGINE
+    stepper.running = 0;
+    let_ended_segment_out();
+#endif
     uint8_t s = SREG;
     cli();
     seg_snapshot(&sn);

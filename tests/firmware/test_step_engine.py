@@ -116,6 +116,31 @@ def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine):
     assert list(st.steps) == issued
 
 
+def test_an_underrun_lets_the_ended_segment_finish_as_its_record_says(engine):
+    # the host stops sending (killed, its cable pulled) while the machine moves: the
+    # queue runs empty at the last segment's last tick, which is an underrun. The tick
+    # had counted that segment done a tick ahead of the steppers, and the halt stopped the
+    # engine at once: its record row said the segment ended, its steps 3-5 short on
+    # every axis (the default build's wheel lets the computed tick run), and a resume
+    # after a reset started from where the record said the machine was not
+    from cdprhost.link.errors import LinkError
+    from firmware_protocol.streams import expected_record
+
+    fr = engine.firmware_rates
+    for rates in ([7_500, 5_000, 3_000, 500], [7_300, 7_100, 6_900, 700]):
+        steady = engine.steady_batch(rates, 20)
+        moving = SegmentBatch(steady.ticks[:-1], steady.deltas[:-1], steady.ramps[:-1])
+        with fr.harness(engine._build, profile=False) as (link, tmp):
+            with pytest.raises(LinkError, match="underrun"):
+                link.queue_segments(moving)
+                link.wait_idle(60)
+        rows = [json.loads(x) for x in (tmp / "record.jsonl").read_text().splitlines()]
+        assert rows == expected_record(moving), rows[-2:]
+        edges = np.loadtxt(tmp / "steps.txt", dtype=np.int64, ndmin=2)
+        issued = [int((edges[:, 0] == k).sum()) for k in range(4)]
+        assert issued == [int(d) for d in np.abs(moving.deltas).sum(axis=0)]
+
+
 def _slow_boundaries() -> SegmentBatch:
     """A module slowing to about 420 steps/s (its last edge 1.12 ms before the segment's
     end), then speeding up from about 390 steps/s (its first edge 1.14 ms in): 2.25 ms
