@@ -73,6 +73,59 @@ ISR(USART0_RX_vect, ISR_NAKED)
         [udr] "n"(_SFR_MEM_ADDR(UDR0)), [errs] "M"(_BV(DOR0) | _BV(FE0)));
 }
 
+#if STEP_ENGINE
+/* The next byte to send, or the interrupt left off when the ring is empty. Its own
+ * enable off first, then interrupts on: USART0's vectors outrank the steppers' compares,
+ * and a FLOW report sent across a segment's boundary (where every stepper takes its next
+ * chunk) held a stepper's pending compare for whole handlers (its edges 10-27 us late);
+ * now a due compare waits about 12 cycles. The enable comes back masked at the end, when
+ * a byte went out (simavr raises the interrupt again once the byte has left, or at once
+ * if it left while the enable was off). */
+ISR(USART0_UDRE_vect, ISR_NAKED)
+{
+    __asm__ volatile(
+        "push r24\n\t"
+        "in r24, __SREG__\n\t"
+        "push r24\n\t"
+        "lds r24, %[ucsrb]\n\t"
+        "andi r24, %[noudrie]\n\t"
+        "sts %[ucsrb], r24\n\t"
+        "sei\n\t"
+        "push r30\n\t"
+        "push r31\n\t"
+        "lds r30, tx_tail\n\t"
+        "lds r24, tx_head\n\t"
+        "cp r30, r24\n\t"
+        "breq 2f\n\t" /* empty: the enable stays off (uart_write sets it) */
+        "ldi r31, 0\n\t"
+        "subi r30, lo8(-(tx_buf))\n\t"
+        "sbci r31, hi8(-(tx_buf))\n\t"
+        "ld r24, Z\n\t"
+        "sts %[udr], r24\n\t"
+        "lds r24, tx_tail\n\t"
+        "inc r24\n\t"
+        "sts tx_tail, r24\n\t"
+        "pop r31\n\t"
+        "pop r30\n\t"
+        /* masked from here: on the chip the flag is up again at once when the byte
+         * went straight to the shift register, and the next byte waits for this reti */
+        "cli\n\t"
+        "lds r24, %[ucsrb]\n\t"
+        "ori r24, %[udrie]\n\t"
+        "sts %[ucsrb], r24\n\t"
+        "rjmp 3f\n"
+        "2:\n\t"
+        "pop r31\n\t"
+        "pop r30\n"
+        "3:\n\t"
+        "pop r24\n\t"
+        "out __SREG__, r24\n\t"
+        "pop r24\n\t"
+        "reti\n\t" ::[ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)),
+        [udr] "n"(_SFR_MEM_ADDR(UDR0)), [noudrie] "M"(0xFF ^ _BV(UDRIE0)),
+        [udrie] "M"(_BV(UDRIE0)));
+}
+#else
 /* The next byte to send, or the interrupt off when the ring is empty. */
 ISR(USART0_UDRE_vect, ISR_NAKED)
 {
@@ -108,6 +161,7 @@ ISR(USART0_UDRE_vect, ISR_NAKED)
         "reti\n\t" ::[ucsrb] "n"(_SFR_MEM_ADDR(UCSR0B)),
         [udr] "n"(_SFR_MEM_ADDR(UDR0)), [noudrie] "M"(0xFF ^ _BV(UDRIE0)));
 }
+#endif
 
 uint16_t uart_read(uint8_t *dst, uint16_t max)
 {
