@@ -25,6 +25,7 @@ from cdprhost.link.tuning import (
     START_PAYLOAD,
     STATUS_TIMEOUTS,
 )
+from firmware_protocol.codes import BootCause
 from firmware_protocol.framing import Kind
 from firmware_protocol.messages import (
     MINOR_SAFETY,
@@ -82,7 +83,8 @@ class SessionSetup:
         with c.locked():
             nonce = int.from_bytes(os.urandom(2), "little") or 1
             c.new_session()
-            listen = BOOTLOADER_WAIT_S if getattr(c.t, "reset_at_open", False) else BOOT_LISTEN_S
+            reset = bool(getattr(c.t, "reset_at_open", False))
+            listen = BOOTLOADER_WAIT_S if reset else BOOT_LISTEN_S
             start = c.t.now() + listen  # the first HELLO: sooner when the device speaks first
             dfr = c.ep.deframer
             hello = c.urgent_frame(Hello(nonce, PROTOCOL_MAJOR, PROTOCOL_MINOR))
@@ -111,12 +113,8 @@ class SessionSetup:
                     interval = min(interval * HELLO_BACKOFF, max(HELLO_FIRST_S, c.timeout_s / 8))
                 data = c.read(min(SLICE_S * 5, max(0.0, resend_at - now)))
                 rx_bytes += len(data)
-                if data.replace(hello, b""):  # (a loopback's echo of HELLO is no answer)
-                    now = c.t.now()
-                    if now < start:  # still listening: a device that speaks gets HELLO now
-                        resend_at = now
-                    else:
-                        heard = now
+                if data.replace(hello, b"") and c.t.now() >= start:
+                    heard = c.t.now()  # (a loopback's echo of HELLO is no answer)
                 frames = dfr.feed(data)
                 for k, fr in enumerate(frames):
                     if fr.kind != Kind.URGENT:
@@ -133,6 +131,15 @@ class SessionSetup:
                         if msg.major != PROTOCOL_MAJOR:
                             self._mismatch(msg.major, msg.minor)
                         boots.append(msg)
+                        if c.t.now() < start and (
+                            not reset or msg.cause == BootCause.EXTERNAL_RESET
+                        ):
+                            # still listening: a device that announces its boot gets HELLO
+                            # now. After a reset at open only the reset's own BOOT counts:
+                            # the tail of an announcement the reset cut, or one sent before
+                            # the open, came while the bootloader may still wait, and a
+                            # HELLO then holds it about 5 s more (DeviceSilent, CI15)
+                            resend_at = c.t.now()
         assert identity is not None
         # the announcement of this boot (an older one's, from before a reset, is stale)
         self.boot = next((b for b in reversed(boots) if b.boot_id == identity.boot_id), None)

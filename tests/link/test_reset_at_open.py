@@ -12,6 +12,10 @@ import pytest
 from cdprhost.link import DeviceSilent, HostLink
 from cdprhost.link.serial_port import open_serial
 from cdprhost.link.session_setup import BOOT_LISTEN_S, BOOTLOADER_WAIT_S
+from firmware_protocol.codes import BootCause
+from firmware_protocol.framing import Kind, encode_frame
+from firmware_protocol.message_codec import encode_message
+from firmware_protocol.messages import PROTOCOL_MAJOR, PROTOCOL_MINOR, Boot
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="Linux ttys")
 
@@ -67,3 +71,38 @@ def test_the_first_hello_waits_for_a_boot_and_longer_after_a_reset(reset):
     wait = BOOTLOADER_WAIT_S if reset else BOOT_LISTEN_S
     assert line.first_write is not None and wait <= line.first_write < wait + 0.1
     assert line.t >= line.first_write + 1.0  # the silence is counted from the first HELLO
+
+
+class ResetAtOpen(Silent):
+    """A Mega whose open reset it: before the reset's own BOOT (cause EXTERNAL_RESET, at
+    ``boot_at``) the line carries the tail of an announcement the reset cut and a whole
+    announcement sent before the open (cause POWER_ON); then nothing."""
+
+    def __init__(self, boot_at: float) -> None:
+        super().__init__(True)
+        self.boot_at = boot_at
+        self.sent = 0
+
+    def read(self, timeout: float) -> bytes:
+        before = self.t
+        self.t += max(timeout, 0.001)
+        if self.sent == 0:
+            self.sent = 1
+            stale = Boot(7, BootCause.POWER_ON, PROTOCOL_MAJOR, PROTOCOL_MINOR, 0, 0, 0)
+            frame = encode_frame(Kind.URGENT, 0, 0, encode_message(stale))
+            return frame[5:] + frame  # a cut announcement's tail, then an older one whole
+        if self.sent == 1 and before < self.boot_at <= self.t:
+            self.sent = 2
+            fresh = Boot(8, BootCause.EXTERNAL_RESET, PROTOCOL_MAJOR, PROTOCOL_MINOR, 1, 0, 0)
+            return encode_frame(Kind.URGENT, 0, 0, encode_message(fresh))
+        return b""
+
+
+def test_after_a_reset_at_open_only_the_resets_own_boot_ends_the_listening():
+    # bytes or an older BOOT that came while the stk500v2 bootloader still waited made the
+    # host say HELLO at once, and a byte reaching the bootloader then holds it about 5 s
+    # more: the handshake ran out (DeviceSilent, 4 bytes and no frame, in CI)
+    line = ResetAtOpen(boot_at=1.2)
+    with pytest.raises(DeviceSilent):
+        HostLink(line, timeout_s=1.0).handshake()
+    assert line.first_write is not None and 1.2 <= line.first_write < 1.3
