@@ -73,6 +73,18 @@ ISR(USART0_RX_vect, ISR_NAKED)
         [udr] "n"(_SFR_MEM_ADDR(UDR0)), [errs] "M"(_BV(DOR0) | _BV(FE0)));
 }
 
+/* Both UDRE handlers' sending of the byte at tx_tail (r30 holds tx_tail; r24 and r31
+ * are free): into UDR0, and the tail moved on. */
+#define UDRE_SEND_NEXT                                                                        \
+    "ldi r31, 0\n\t"                                                                         \
+    "subi r30, lo8(-(tx_buf))\n\t"                                                           \
+    "sbci r31, hi8(-(tx_buf))\n\t"                                                           \
+    "ld r24, Z\n\t"                                                                          \
+    "sts %[udr], r24\n\t"                                                                    \
+    "lds r24, tx_tail\n\t"                                                                   \
+    "inc r24\n\t"                                                                            \
+    "sts tx_tail, r24\n\t"
+
 #if STEP_ENGINE
 /* The next byte to send, or the interrupt left off when the ring is empty. Its own
  * enable off first, then interrupts on: USART0's vectors outrank the steppers' compares,
@@ -97,14 +109,7 @@ ISR(USART0_UDRE_vect, ISR_NAKED)
         "lds r24, tx_head\n\t"
         "cp r30, r24\n\t"
         "breq 2f\n\t" /* empty: the enable stays off (uart_write sets it) */
-        "ldi r31, 0\n\t"
-        "subi r30, lo8(-(tx_buf))\n\t"
-        "sbci r31, hi8(-(tx_buf))\n\t"
-        "ld r24, Z\n\t"
-        "sts %[udr], r24\n\t"
-        "lds r24, tx_tail\n\t"
-        "inc r24\n\t"
-        "sts tx_tail, r24\n\t"
+        UDRE_SEND_NEXT
         "pop r31\n\t"
         "pop r30\n\t"
         /* masked from here: on the chip the flag is up again at once when the byte
@@ -144,14 +149,7 @@ ISR(USART0_UDRE_vect, ISR_NAKED)
         "sts %[ucsrb], r24\n\t"
         "rjmp 2f\n"
         "1:\n\t"
-        "ldi r31, 0\n\t"
-        "subi r30, lo8(-(tx_buf))\n\t"
-        "sbci r31, hi8(-(tx_buf))\n\t"
-        "ld r24, Z\n\t"
-        "sts %[udr], r24\n\t"
-        "lds r24, tx_tail\n\t"
-        "inc r24\n\t"
-        "sts tx_tail, r24\n"
+        UDRE_SEND_NEXT
         "2:\n\t"
         "pop r31\n\t"
         "pop r30\n\t"
