@@ -158,14 +158,8 @@ from step_schedule import print_like
 from cdprhost.link import LinkError, open_link
 from cdprhost.sim import avr_device
 from firmware_protocol.framing import OVERHEAD
-from firmware_protocol.segments import (
-    RAMP_CONSTANT,
-    RAMP_TO_REST,
-    SegmentBatch,
-    SegmentContext,
-    encode_segments,
-    ramp_share,
-)
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST, ramp_share
+from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_segments
 from firmware_protocol.streams import demo_stream, expected_record
 
 CLOCK_HZ = 100_000

@@ -34,16 +34,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from cdprhost.link import HostLink, LinkError, open_link
 from cdprhost.sim import avr_device
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST, step_times
 from firmware_protocol.segment_split import split_segment
-from firmware_protocol.segments import (
-    RAMP_CONSTANT,
-    RAMP_FROM_REST,
-    RAMP_TO_REST,
-    SegmentBatch,
-    SegmentContext,
-    encode_block_for,
-    step_times,
-)
+from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_block_for
 from firmware_protocol.step_schedule import predictable
 from firmware_protocol.streams import expected_record
 

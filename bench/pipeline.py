@@ -85,12 +85,8 @@ def run_preflight(path: Path, profile, model):
 def encoder():
     """The wire-encode hook: the protocol's vectorised segment encoder, when present."""
     try:
-        from firmware_protocol.segments import (
-            SegmentBatch,
-            SegmentContext,
-            encode_segments,
-            ramp_codes_from_speeds,
-        )
+        from firmware_protocol.ramp_profile import ramp_codes_from_speeds
+        from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_segments
     except ImportError:
         return None
     ctx = SegmentContext()

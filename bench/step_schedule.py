@@ -40,15 +40,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from firmware_protocol.ramp_profile import RAMP_FROM_REST, RAMP_TO_REST
 from firmware_protocol.schedule_block import encode_block
 from firmware_protocol.schedule_fit import fit_axis, plan_schedules
-from firmware_protocol.segments import (
-    RAMP_FROM_REST,
-    RAMP_TO_REST,
-    SegmentBatch,
-    SegmentContext,
-    encode_segments,
-)
+from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_segments
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
     AxisSchedule,

@@ -12,7 +12,14 @@ import re
 import sys
 from enum import IntEnum, IntFlag
 
-from firmware_protocol import framing, messages, schedule_block, segments, step_schedule
+from firmware_protocol import (
+    framing,
+    messages,
+    ramp_profile,
+    schedule_block,
+    segments,
+    step_schedule,
+)
 from firmware_protocol.messages import MESSAGES, Field, Message
 
 C_TYPES = {
@@ -115,7 +122,7 @@ def header() -> str:
         f"#define CDPR_SEG_F_SCHEDULE 0x{segments.F_SCHEDULE:02X}",
         f"#define CDPR_SEG_F_RESERVED 0x{segments.F_RESERVED:02X}",
         f"#define CDPR_SEG_MAX_DELTA {segments.MAX_DELTA}L",
-        f"#define CDPR_RAMP_TO_REST {segments.RAMP_TO_REST}",
+        f"#define CDPR_RAMP_TO_REST {ramp_profile.RAMP_TO_REST}",
         "",
         "/* step schedules (3.0, PROTOCOL.md 5.5): fixed point of a cpu_hz cycle */",
         f"#define CDPR_SCHED_AXES {schedule_block.AXES}",

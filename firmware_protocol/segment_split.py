@@ -15,16 +15,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from firmware_protocol.schedule_block import MAX_CHUNKS
-from firmware_protocol.schedule_fit import plan_schedules
-from firmware_protocol.segments import (
+from firmware_protocol.ramp_profile import (
     RAMP_CONSTANT,
     RAMP_FROM_REST,
     RAMP_TO_REST,
-    SegmentBatch,
     ramp_share,
     steps_done,
 )
+from firmware_protocol.schedule_block import MAX_CHUNKS
+from firmware_protocol.schedule_fit import plan_schedules
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.step_schedule import AxisSchedule, reciprocal_table
 
 Piece = tuple[int, tuple[int, int, int, int], int]  # ticks, deltas, ramp code

@@ -1,13 +1,9 @@
-"""Timed joint-space move segments: the shared time profile, step timing, and the
-vectorised wire encoder (the device side decodes one segment at a time).
+"""Timed joint-space move segments and their vectorised wire encoder (the device side
+decodes one segment at a time).
 
 A segment is a duration ``D`` in device ticks, signed step deltas ``n`` for the four
-axes (three slider modules, extruder) and a ramp code. Every axis follows the one
-normalised profile ``p(tau) = 2 r tau + (1 - 2 r) tau**2`` with ``tau = t / D``, so the
-joint-space path is the straight line between the endpoints and the speed changes
-linearly from ``2 r n / D`` (start) to ``(2 - 2 r) n / D`` (end). ``r = code / 255``
-for codes 0..255; ``RAMP_CONSTANT`` (no ramp byte on the wire) is ``r = 1/2``.
-Code 0 starts from rest; code 255 ends at rest.
+axes (three slider modules, extruder) and a ramp code: the time profile every axis
+follows (:mod:`firmware_protocol.ramp_profile`).
 
 Protocol 3.0: a segment may carry a schedule block after its ramp byte (flag
 ``F_SCHEDULE``): the step schedules of the axes the device cannot predict
@@ -19,11 +15,12 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
 
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST, ramp_share
+from firmware_protocol.schedule_block import ScheduleBlockError, encode_block, parse_block
+from firmware_protocol.step_schedule import AxisSchedule, reciprocal_table
 from firmware_protocol.varint import (
     VarintError,
     encode_uvarint,
@@ -33,13 +30,7 @@ from firmware_protocol.varint import (
     zigzag_array,
 )
 
-if TYPE_CHECKING:
-    from firmware_protocol.step_schedule import AxisSchedule
-
 AXES = 4
-RAMP_CONSTANT = -1
-RAMP_FROM_REST = 0
-RAMP_TO_REST = 255
 MAX_TICKS = (1 << 32) - 1  # durations are u32
 MAX_DELTA = (1 << 31) - 1  # deltas (and positions) are i32
 
@@ -108,38 +99,6 @@ def segments_from_positions(
     return SegmentBatch(ticks, np.diff(pos, axis=0), ramps)
 
 
-# ------------------------------------------------------------------ profile math
-
-
-def ramp_share(codes: np.ndarray | int) -> np.ndarray:
-    """``r`` for each ramp code (0.5 for RAMP_CONSTANT)."""
-    c = np.asarray(codes, dtype=np.float64)
-    return np.where(c < 0, 0.5, c / 255.0)
-
-
-def ramp_codes_from_speeds(v_start: np.ndarray, v_end: np.ndarray, tol: float = 1e-3) -> np.ndarray:
-    """Ramp codes for segments whose speed goes linearly from ``v_start`` to ``v_end`` (>= 0)."""
-    v0 = np.asarray(v_start, dtype=np.float64)
-    v1 = np.asarray(v_end, dtype=np.float64)
-    total = v0 + v1
-    with np.errstate(invalid="ignore", divide="ignore"):
-        code = np.rint(255.0 * v0 / total)
-    constant = (total <= 0) | (np.abs(v0 - v1) <= tol * total)
-    return np.where(constant, RAMP_CONSTANT, code).astype(np.int16)
-
-
-def profile(tau: np.ndarray | float, codes: np.ndarray | int) -> np.ndarray:
-    """Normalised position ``p(tau)`` in [0, 1]."""
-    r = ramp_share(codes)
-    t = np.asarray(tau, dtype=np.float64)
-    return 2.0 * r * t + (1.0 - 2.0 * r) * t * t
-
-
-def ends_at_rest(deltas: np.ndarray, codes: np.ndarray | int) -> np.ndarray:
-    d = np.asarray(deltas).reshape(-1, AXES)
-    return (np.asarray(codes).reshape(-1) == RAMP_TO_REST) | ~d.any(axis=1)
-
-
 def peak_step_rates(batch: SegmentBatch, clock_hz: int) -> np.ndarray:
     """(N, 4) peak step rate of each axis in steps/s: the larger of start and end speed."""
     r = ramp_share(batch.ramps)
@@ -147,36 +106,11 @@ def peak_step_rates(batch: SegmentBatch, clock_hz: int) -> np.ndarray:
     return np.abs(batch.deltas) * (factor * clock_hz / batch.ticks)[:, None]
 
 
-def step_times(steps: int, ticks: int, code: int) -> np.ndarray:
-    """Tick offsets of the |steps| step pulses of one axis within a segment.
-
-    Step j (1-based) is issued when ``|n| p(tau)`` crosses ``j - 1/2``, so pulses are
-    spread evenly along the profile and exactly |n| pulses are issued. The form
-    ``x / (r + sqrt(r^2 + (1 - 2r) x))`` is the stable root of ``p(tau) = x``.
-    """
-    n = abs(int(steps))
-    if n == 0:
-        return np.zeros(0)
-    r = float(ramp_share(code))
-    x = (np.arange(1, n + 1) - 0.5) / n
-    tau = x / (r + np.sqrt(r * r + (1.0 - 2.0 * r) * x))
-    return tau * ticks
-
-
-def steps_done(deltas: ArrayLike, code: int, tau: float) -> np.ndarray:
-    """Signed steps already issued at normalised time ``tau`` (consistent with step_times)."""
-    d = np.asarray(deltas, dtype=np.int64)
-    p = float(profile(min(max(tau, 0.0), 1.0), code))
-    return np.sign(d) * np.floor(np.abs(d) * p + 0.5).astype(np.int64)
-
-
 # ------------------------------------------------------------------ wire codec
 
 
 @lru_cache(maxsize=8)
 def _table(cycles_per_tick: int) -> np.ndarray:
-    from firmware_protocol.step_schedule import reciprocal_table
-
     table = reciprocal_table(cycles_per_tick)
     table.setflags(write=False)
     return table
@@ -201,7 +135,7 @@ class SegmentContext:
         return _table(self.cycles_per_tick)
 
 
-Schedules = Mapping[int, "AxisSchedule"]
+Schedules = Mapping[int, AxisSchedule]
 
 
 def encode_block_for(
@@ -210,8 +144,6 @@ def encode_block_for(
     """The schedule block of one segment (empty when it carries none)."""
     if not schedules:
         return b""
-    from firmware_protocol.schedule_block import encode_block
-
     return encode_block(deltas, ticks, schedules, ctx.table)
 
 
@@ -427,8 +359,6 @@ def decode_segment(
     deltas = (c0, c1, c2, c3)
     schedules: dict[int, AxisSchedule] = {}
     if op & F_SCHEDULE:
-        from firmware_protocol.schedule_block import ScheduleBlockError, parse_block
-
         try:
             schedules, pos = parse_block(buf, pos, deltas, ticks, ctx.table)
         except ScheduleBlockError as exc:

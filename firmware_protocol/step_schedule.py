@@ -9,7 +9,7 @@ CPU cycles, with no division per step: a segment's axis starts with its first ed
 ``T``, ``interval`` and ``add`` are fixed point with ``FRAC_BITS`` fraction bits of a
 cycle; an edge goes out at ``(T + HALF) >> FRAC_BITS`` cycles. The host chooses the
 schedule (:func:`firmware_protocol.schedule_fit.fit_axis`) so that every edge lies within ``tol_cycles`` of its ideal time
-on the segment's profile (PROTOCOL.md 5.1, :func:`firmware_protocol.segments.step_times`),
+on the segment's profile (PROTOCOL.md 5.1, :func:`firmware_protocol.ramp_profile.step_times`),
 splitting an axis's steps into several chunks where one recurrence would stray further;
 the counts add up to ``|n|`` exactly, so the record stays exact whatever the timing.
 :func:`device_edges` is the device's arithmetic, integer for integer, which is what the
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from firmware_protocol.segments import RAMP_CONSTANT, ramp_share, step_times
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, ramp_share, step_times
 
 CPU_HZ = 16_000_000
 FRAC_BITS = 8

@@ -6,7 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST
+from firmware_protocol.segments import SegmentBatch
 
 
 def demo_stream(

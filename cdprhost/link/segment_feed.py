@@ -18,10 +18,10 @@ from cdprhost.link.core import LinkCore
 from cdprhost.link.errors import StepRateError
 from cdprhost.link.events import DeviceCaps, Identity
 from firmware_protocol.messages import Flag
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_block import MAX_CHUNKS
 from firmware_protocol.schedule_fit import plan_schedules
 from firmware_protocol.segments import (
-    RAMP_CONSTANT,
     SegmentBatch,
     SegmentContext,
     encode_block_for,

@@ -17,7 +17,8 @@ from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.planner import Planner
 from cdprhost.motion.segments import PlannedSegments, Segmenter, SegmentState
 from cdprhost.profile.models import MachineProfile
-from firmware_protocol.segments import SegmentBatch, ramp_codes_from_speeds
+from firmware_protocol.ramp_profile import ramp_codes_from_speeds
+from firmware_protocol.segments import SegmentBatch
 
 
 def to_wire(batch: PlannedSegments) -> SegmentBatch:

@@ -30,7 +30,8 @@ from cdprhost.effects.backlash import path_directions
 from cdprhost.effects.base import MotionContext
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.trapezoid import PlannedMoves
-from firmware_protocol.segments import SegmentBatch, peak_step_rates, ramp_codes_from_speeds
+from firmware_protocol.ramp_profile import ramp_codes_from_speeds
+from firmware_protocol.segments import SegmentBatch, peak_step_rates
 
 DEFAULT_CLOCK_HZ = 1_000_000
 # the shortest segment planned: a 2.1 device announces the shortest it takes (CAPS; the

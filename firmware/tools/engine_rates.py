@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 
 import firmware_rates
 
-from firmware_protocol.segments import RAMP_CONSTANT, SegmentBatch
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
+from firmware_protocol.segments import SegmentBatch
 
 TICKS = firmware_rates.SEGMENT_TICKS  # 10 ms segments
 

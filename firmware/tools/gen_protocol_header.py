@@ -19,7 +19,7 @@ import re
 import sys
 from pathlib import Path
 
-from firmware_protocol import c_header, framing, reliability, segments
+from firmware_protocol import c_header, framing, ramp_profile, reliability, segments
 from firmware_protocol import messages as m
 from firmware_protocol.device.config import SimConfig
 
@@ -82,7 +82,7 @@ def render() -> str:
         "#define SEG_BASE CDPR_SEG_BASE",
         "#define SEG_MAX_DELTA CDPR_SEG_MAX_DELTA",
         "#define SEG_RAMP_TO_REST CDPR_RAMP_TO_REST",
-        f"#define SEG_RAMP_CONSTANT ({segments.RAMP_CONSTANT})",
+        f"#define SEG_RAMP_CONSTANT ({ramp_profile.RAMP_CONSTANT})",
     ]
     flags = ("F_RAMP", "F_DURATION", "F_PREDICTED", "F_SLIDERS", "F_EXTRUDER", "F_SCHEDULE")
     for flag in (*flags, "F_RESERVED"):

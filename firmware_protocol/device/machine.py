@@ -51,7 +51,8 @@ from firmware_protocol.messages import (
     Flag,
     Message,
 )
-from firmware_protocol.segments import MAX_DELTA, RAMP_TO_REST, steps_done
+from firmware_protocol.ramp_profile import RAMP_TO_REST, steps_done
+from firmware_protocol.segments import MAX_DELTA
 
 _MOVING, _FAULT, _ESTOP, _HOMED, _ENABLED, _HEATING, _WAITING = (
     int(f)

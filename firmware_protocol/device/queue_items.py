@@ -17,7 +17,7 @@ from firmware_protocol.messages import (
     SetPosition,
     WaitHeater,
 )
-from firmware_protocol.segments import RAMP_TO_REST
+from firmware_protocol.ramp_profile import RAMP_TO_REST
 
 SEG, DWELL, HOME, SETPOS, ENABLE, HEATER, FAN, WAIT, TUNE = range(9)
 TIMED = (SEG, DWELL, HOME)

@@ -11,8 +11,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_block import ScheduleBlockError, check_block
-from firmware_protocol.segments import RAMP_CONSTANT
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
     AxisSchedule,

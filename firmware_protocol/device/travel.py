@@ -8,7 +8,8 @@ import math
 from collections.abc import Sequence
 
 from firmware_protocol.codes import ErrorCode
-from firmware_protocol.segments import MAX_DELTA, SEG_BASE, ramp_share
+from firmware_protocol.ramp_profile import ramp_share
+from firmware_protocol.segments import MAX_DELTA, SEG_BASE
 
 
 class SoftLimits:

@@ -22,7 +22,8 @@ from cdprhost.profile import load_profile, save_profile
 from cdprhost.sim.embedded import open_embedded
 from cdprhost.sim.measurement import achieved_points
 from cdprhost.sim.virtual_mocap import make_observer, mocap_config
-from firmware_protocol.segments import SegmentBatch, ramp_codes_from_speeds
+from firmware_protocol.ramp_profile import ramp_codes_from_speeds
+from firmware_protocol.segments import SegmentBatch
 
 from .conftest import paper_truth_geometry
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from cdprhost.sim import avr_device
-from firmware_protocol.segments import RAMP_CONSTANT, peak_step_rates
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
+from firmware_protocol.segments import peak_step_rates
 
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "firmware_rates.py"
 

@@ -16,7 +16,8 @@ import pytest
 
 from cdprhost.sim import avr_device
 from firmware_protocol.host_messages import SetHeater, WaitHeater
-from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST
+from firmware_protocol.segments import SegmentBatch
 
 TOOL = Path(__file__).resolve().parents[2] / "firmware" / "tools" / "engine_rates.py"
 

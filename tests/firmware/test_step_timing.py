@@ -15,13 +15,8 @@ import numpy as np
 import pytest
 
 from cdprhost.link import open_link
-from firmware_protocol.segments import (
-    RAMP_CONSTANT,
-    RAMP_FROM_REST,
-    RAMP_TO_REST,
-    SegmentBatch,
-    step_times,
-)
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST, step_times
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.streams import expected_record
 
 pytestmark = pytest.mark.usefixtures("avr_built")

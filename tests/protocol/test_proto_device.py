@@ -11,7 +11,8 @@ from cdprhost.link.events import DeviceEvent
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.messages import ErrorCode
-from firmware_protocol.segments import RAMP_TO_REST, SegmentBatch
+from firmware_protocol.ramp_profile import RAMP_TO_REST
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.streams import demo_stream, expected_record
 
 

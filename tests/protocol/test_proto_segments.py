@@ -8,19 +8,21 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from firmware_protocol.segments import (
+from firmware_protocol.ramp_profile import (
     RAMP_CONSTANT,
-    SegmentBatch,
-    SegmentContext,
-    decode_segment,
-    encode_segments,
     ends_at_rest,
-    peak_step_rates,
     profile,
     ramp_codes_from_speeds,
     ramp_share,
     step_times,
     steps_done,
+)
+from firmware_protocol.segments import (
+    SegmentBatch,
+    SegmentContext,
+    decode_segment,
+    encode_segments,
+    peak_step_rates,
 )
 
 ramp_st = st.integers(-1, 255)

@@ -16,7 +16,8 @@ from firmware_protocol.device.machine import DeviceMachine
 from firmware_protocol.device.queue_items import SEG, make_item
 from firmware_protocol.device.record import SegmentRecord, read_record
 from firmware_protocol.messages import ErrorCode, Flag, SetHeater
-from firmware_protocol.segments import RAMP_CONSTANT, RAMP_TO_REST, SegmentBatch
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.streams import demo_stream, expected_record
 
 

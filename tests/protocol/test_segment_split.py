@@ -7,15 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST, step_times
 from firmware_protocol.schedule_block import MAX_CHUNKS, encode_block
 from firmware_protocol.segment_split import fit_for_blocks, split_segment
-from firmware_protocol.segments import (
-    RAMP_CONSTANT,
-    RAMP_FROM_REST,
-    RAMP_TO_REST,
-    SegmentBatch,
-    step_times,
-)
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.step_schedule import check_segment, reciprocal_table
 
 CPT = 160

@@ -10,8 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from firmware_protocol import schedule_fit, step_schedule
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_fit import fit_axis, plan_schedules
-from firmware_protocol.segments import RAMP_CONSTANT, SegmentBatch
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
     MAX_COUNT,
