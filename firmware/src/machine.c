@@ -166,7 +166,7 @@ void machine_shutdown(uint8_t code, uint32_t item, uint32_t segment, uint8_t axi
     if (how & SD_MOTORS_OFF)
         stepper_disable_all(); /* positions are no longer trustworthy */
     machine.tail_homed = stepper_homed_mask();
-    upper->report_error(code, item, segment, axis, value);
+    upper->on_fault(code, item, segment, axis, value);
 }
 
 void machine_fail(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis, int32_t value)

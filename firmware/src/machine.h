@@ -83,8 +83,8 @@ void machine_session_defaults(void);
  * names neither the command layer nor the reports): the report of every fault, and
  * the queue items of acknowledged frames not queued yet (not free for the host). */
 struct machine_upper {
-    void (*report_error)(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
-                         int32_t value);
+    void (*on_fault)(uint8_t code, uint32_t item, uint32_t segment, uint8_t axis,
+                     int32_t value);
     uint8_t (*pending_items)(void);
 };
 void machine_attach(const struct machine_upper *upper);
