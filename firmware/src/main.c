@@ -18,6 +18,7 @@
 #include "sched.h"
 #include "session.h"
 #include "sim_hooks.h"
+#include "step_timer.h"
 #include "stepper.h"
 #include "uart.h"
 #include "watchdog.h"

@@ -58,7 +58,7 @@ _Static_assert(offsetof(struct sched_chunk, interval) == 2 && offsetof(struct sc
  * its waiting chunk (next_*) has an add or further chunks (a block's) */
 #define GPIOR0_IO "0x1E"
 
-uint32_t step_clock_next_tick;
+uint32_t step_clock_next_tick, step_clock_this_tick;
 volatile uint16_t step_engine_late;
 /* The steppers whose armed compare is an edge (running, no timer period left to wait), at
  * their flags' bits in TIFR3 (X, Y, Z: bits 1-3) and E at bit 4: another one's interrupt

@@ -5,9 +5,10 @@
  * start the interrupt sets the tick's directions and issues the steps due at once, all
  * computed during the previous interrupt, and arms compare B (step_events.c) for the
  * rest of the tick's events; then, with its own interrupt masked and the others allowed
- * (so compare B keeps its time), it has stepper.c compute the next tick. It notes the
- * ticks that overran their boundary (their steps keep their times) and hands a step due
- * at the next tick's very start to this tick's compare B.
+ * (so compare B keeps its time), stepper.c computes the next tick (the interrupt itself,
+ * which runs these parts in their order, is step_tick_isr.c). It notes the ticks that
+ * overran their boundary (their steps keep their times) and hands a step due at the
+ * next tick's very start to this tick's compare B.
  *
  * Pulses are high for at least 2 us and a direction change leads the next pulse by at
  * least 1 us (A4988: 1 us / 200 ns, DRV8825: 1.9 us / 650 ns, TMC2208: 0.1 us /
@@ -23,34 +24,23 @@
 #include "step_engine.h"
 #include "step_events.h"
 #include "step_pins.h"
-#include "step_tick.h"
+#include "step_timer.h"
 #include "step_wheel.h"
-#include "stepper.h"
 
 volatile uint16_t stepper_isr_max_cycles;
 volatile uint16_t stepper_overruns, stepper_late_pulses;
 volatile uint8_t stepper_latency_max;
 volatile uint16_t stepper_late_worst;
 volatile uint32_t stepper_late_tolerance;
-volatile uint8_t tick_gen;
-#if STEP_ENGINE
-uint32_t step_clock_this_tick; /* the start of the tick in progress, Q24.8 (step_engine.h) */
-#endif
-static volatile uint8_t computing, tick_missed;
+volatile uint8_t tick_missed;
 static uint8_t handed_over; /* the next tick's first event went out with this one's */
-/* the axes of a pending compare B event that compare A's entry raised */
-static volatile uint8_t prepulsed __attribute__((used));
-
-static struct out ticks_out[2];
-struct out *this_tick = &ticks_out[0];
-struct out *next_tick = &ticks_out[1];
-uint8_t cur_dir = 0xFF;
+volatile uint8_t prepulsed;
 static uint8_t ocr_units = TICK_UNITS; /* the length of the tick in progress */
 
 void step_timer_init(void)
 {
-    ticks_out[0].units = ticks_out[1].units = TICK_UNITS;
-    ticks_out[0].own = ticks_out[1].own = STEP_ENGINE ? 0 : 0x0F;
+    this_tick->units = next_tick->units = TICK_UNITS;
+    this_tick->own = next_tick->own = STEP_ENGINE ? 0 : 0x0F;
     /* Timer1: CTC on OCR1A, no prescaler; in the simulator build compare C toggles OC1C
      * (MARK_EDGE) when OCR1C is set to match one cycle into the next tick */
     TCCR1A = SIM_HOOKS ? _BV(COM1C0) : 0;
@@ -129,7 +119,7 @@ static void __attribute__((noinline)) flush_events(void)
 
 /* The start of a tick, with interrupts off and as short as it can be: this tick's
  * length, directions, the events due at once, compare B armed for the rest. */
-static void __attribute__((noinline)) tick_start(void)
+void __attribute__((noinline)) tick_start(void)
 {
     uint8_t entry = TCNT1L; /* cycles since the compare match (< 256 unless late) */
     if (TIMSK1 & _BV(OCIE1B))
@@ -227,14 +217,14 @@ static void __attribute__((noinline)) tick_start(void)
 
 /* Motion starts or stops at the next tick boundary: MARK_EDGE toggles there
  * (armed just after the next tick's computation, before that boundary). */
-static void __attribute__((noinline)) motion_marker(void)
+void __attribute__((noinline)) motion_marker(void)
 {
     markers_motion_change(this_tick, next_tick);
 }
 
 /* After a tick's computation: the interrupt's length so far, and whether the
  * next tick has already begun (returns 1: start it now). */
-static uint8_t __attribute__((noinline)) tick_end(void)
+uint8_t __attribute__((noinline)) tick_end(void)
 {
     uint16_t used = TCNT1 + late_cycles;
     if (tick_missed) {
@@ -250,32 +240,12 @@ static uint8_t __attribute__((noinline)) tick_end(void)
     return late_cycles != 0;
 }
 
-/* The computation runs with interrupts on, so compare B keeps its phases'
- * time. Should it overrun into the next tick, that tick's interrupt only
- * notes it and this one starts the tick at once (late), as silicon would
- * (without masking compare A: simavr 1.6 never queues an interrupt that was
- * enabled after its flag rose). Nothing lives across the calls, so the entry
- * saves only what a call clobbers. */
-/* The tick's tail runs with interrupts off (~130 cycles to its return): a compare B
- * event due in that time goes out first, unless it is so close to the tick's end
- * that waiting for it would run the tail into the next tick. */
-#define TAIL_CYCLES 144
-static inline void tail_guard(void)
-{
-    uint16_t last = (uint16_t)(OCR1A - TAIL_CYCLES);
-    while (TIMSK1 & _BV(OCIE1B)) {
-        uint16_t b = OCR1B;
-        if ((uint16_t)(b - TCNT1) >= TAIL_CYCLES || b > last)
-            break;
-    }
-}
-
 /* A step due in the first cycles of the next tick goes out from this tick's compare
  * B, HANDOVER_LEAD cycles before the boundary (its pulse rises about when the tick
  * begins), rather than from compare A once its entry has run (~130 cycles, 8 us,
  * late). Only when the next tick keeps the directions and this one ends on time. */
 #define HANDOVER_LEAD 8
-static void __attribute__((noinline)) hand_over_first(void)
+void __attribute__((noinline)) hand_over_first(void)
 {
     const struct event *f = next_tick->ev;
     uint8_t n = this_tick->n;
@@ -297,88 +267,4 @@ static void __attribute__((noinline)) hand_over_first(void)
         TIFR1 = _BV(OCF1B);
         TIMSK1 |= _BV(OCIE1B);
     }
-}
-/* Compare A's entry, before the compiler's prologue (about 50 cycles): a compare B
- * event still pending at the boundary (another interrupt held compare B past it, and
- * compare A comes first) has its pulses raised at once; flush_events ends them. Then
- * the tick proper, a signal handler entered as if from the vector. */
-#if STEP_ENGINE
-/* interrupts on from its first instruction: the steppers' edges do not wait for its
- * prologue (compare A cannot come again before the tick's end) */
-void __vector_tick(void) __attribute__((interrupt, used));
-#else
-void __vector_tick(void) __attribute__((signal, used));
-#endif
-ISR(TIMER1_COMPA_vect, ISR_NAKED)
-{
-    __asm__ volatile(
-        "push r24\n\t"
-        "in r24, __SREG__\n\t"
-        "push r24\n\t"
-        "lds r24, %[timsk]\n\t"
-        "sbrs r24, %[ocieb]\n\t"
-        "rjmp 1f\n\t"
-        "lds r24, computing\n\t"
-        "tst r24\n\t"
-        "brne 1f\n\t" /* an overrun: the interrupted tick flushes */
-        "push r30\n\t"
-        "push r31\n\t"
-        "lds r30, stepper_next\n\t"
-        "lds r31, stepper_next+1\n\t"
-        "ld r24, Z\n\t"
-        "sts prepulsed, r24\n\t"
-        STEP_PULSE_ASM("2")
-        "pop r31\n\t"
-        "pop r30\n"
-        "1:\n\t"
-        "pop r24\n\t"
-        "out __SREG__, r24\n\t"
-        "pop r24\n\t"
-        "jmp __vector_tick\n\t"
-        :
-        : STEP_PULSE_ASM_OPERANDS, [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), [ocieb] "I"(OCIE1B));
-}
-
-/* The tick that starts now issues no step and keeps the directions, and no step of the
- * tick that ends is pending (tick_start then touches no pin). */
-static inline __attribute__((always_inline)) uint8_t quiet_start(void)
-{
-    return !next_tick->ev[0].mask && !((next_tick->dir ^ cur_dir) & next_tick->own) &&
-           !(TIMSK1 & _BV(OCIE1B));
-}
-
-void __vector_tick(void)
-{
-    tick_gen++;
-    if (computing) {
-        tick_missed = 1;
-        return;
-    }
-    do {
-        if (STEP_ENGINE && quiet_start()) {
-            /* nothing at this tick's start is due at an exact time (the steps are the
-             * step engine's): the steppers' interrupts may come first */
-            computing = 1;
-            sei();
-            tick_start();
-        } else {
-            cli();
-            tick_start();
-            computing = 1;
-            sei();
-        }
-        stepper_tick_chores();
-        stepper_compute();
-        tail_guard();
-        if (STEP_ENGINE)
-            motion_marker(); /* computing: a compare A now only notes itself */
-        cli();
-        computing = 0;
-        if (!STEP_ENGINE)
-            motion_marker();
-    } while (tick_end());
-    hand_over_first();
-    if (STEP_ENGINE)
-        sei(); /* the epilogue (about 40 cycles of pops) need not hold the steppers' edges:
-                * the next tick is not due before it ends */
 }

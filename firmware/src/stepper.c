@@ -1,5 +1,6 @@
 /* The move queue's execution, one step tick at a time: what each tick does, computed
- * one tick ahead (step_timer.c times the ticks and issues their steps).
+ * one tick ahead (step_timer.c times the ticks and issues their steps, the interrupt
+ * step_tick_isr.c runs both).
  *
  * A tick is TICK_UNITS clock units long, except the last tick of a segment or dwell,
  * which is as long as the item needs, so items start and end on exact clock units.
@@ -32,6 +33,7 @@
 #include "step_events.h"
 #include "step_rate.h"
 #include "step_tick.h"
+#include "step_timer.h"
 #include "step_wheel.h"
 #include "motion.h"
 #include "protocol_gen.h"

@@ -1,4 +1,4 @@
-/* The step timer interrupt: executes the move queue, one tick at a time. */
+/* The move queue's execution, one step tick at a time (the tick's interrupt runs it). */
 #ifndef STEPPER_H
 #define STEPPER_H
 #include <stdint.h>
@@ -57,19 +57,17 @@ void stepper_flush(uint32_t items_received, uint32_t segments_received);
 void stepper_disable_all(void);
 uint8_t stepper_moving(void);
 
-/* figures for the harness and the benchmark */
-extern volatile uint16_t stepper_isr_max_cycles;
+/* figures for the harness and the benchmark (the tick's timing has its own,
+ * step_timer.h) */
 extern volatile uint16_t stepper_lost_steps;  /* pulses a tick had no room for */
 extern volatile uint16_t stepper_plan_stalls; /* ticks motion waited for a plan */
-extern volatile uint16_t stepper_overruns;    /* ticks computed after their start */
-/* pulses issued after their tick ended, later than LATE_TOLERANCE_US */
-extern volatile uint16_t stepper_late_pulses;
-extern volatile uint8_t stepper_latency_max; /* cycles from a compare match to its tick's work */
-/* cycles: the worst lateness of a pulse against its time on the profile (HEALTH) */
-extern volatile uint16_t stepper_late_worst;
-/* pulses issued more than LATE_TOLERANCE_US after their time (HEALTH late_pulses) */
-extern volatile uint32_t stepper_late_tolerance;
 /* Step positions now (mid-segment: the steps issued so far). */
 void stepper_positions(int32_t *out);
+
+/* What the tick interrupt (step_tick_isr.c) asks of the execution each tick. */
+/* At a tick's start, with interrupts on: the markers, the scheduler's clock, the lease. */
+void stepper_tick_chores(void);
+/* The next tick, into next_tick (interrupts on, compare A masked). */
+void stepper_compute(void);
 
 #endif
