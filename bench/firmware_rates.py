@@ -242,6 +242,20 @@ def edge_errors(edges: np.ndarray, batch: SegmentBatch) -> tuple[np.ndarray, int
     return (e if len(e) else np.zeros(1)), miscount
 
 
+def step_log_edges(log: Path) -> np.ndarray:
+    """The harness's step log (CDPR_SIM_STEP_LOG) as rows ``axis cycles``, one a rising
+    edge (none when the log is empty)."""
+    return np.loadtxt(log, dtype=np.int64, ndmin=2) if log.stat().st_size else np.zeros((0, 2))
+
+
+def edge_figures(err: np.ndarray) -> dict[str, float]:
+    """The worst and 99th-percentile edge error (us, rounded to 0.01) of ``err``."""
+    return {
+        "worst_us": round(float(err.max()), 2),
+        "p99_us": round(float(np.percentile(err, 99)), 2),
+    }
+
+
 @contextmanager
 def harness(
     build: Build, *, speedup: float = 4.0, profile: bool = True
@@ -313,12 +327,11 @@ def run_batch(
     record, log = tmp / "record.jsonl", tmp / "steps.txt"
     rows = [json.loads(x) for x in record.read_text().splitlines() if x.strip()]
     s = _stats(tmp)
-    edges = np.loadtxt(log, dtype=np.int64, ndmin=2) if log.stat().st_size else np.zeros((0, 2))
+    edges = step_log_edges(log)
     err, miscount = edge_errors(edges, batch)
     out = {
         "steps_per_s": [int(x) for x in np.abs(batch.deltas[0]) * CLOCK_HZ // batch.ticks[0]],
-        "worst_us": round(float(err.max()), 2),
-        "p99_us": round(float(np.percentile(err, 99)), 2),
+        **edge_figures(err),
         "edges_missing_or_extra": miscount,
         "edges": axis_edge_counts(edges, batch),
         "overruns": s.get("overruns", -1),

@@ -2,7 +2,7 @@
 
     python bench/stream_rates.py [--engine] [--seconds S] [--rate R] [--ladder] [--profile]
 
-Issue 29's streaming acceptance (bench/firmware.py's `_print_like_streams`, the same
+Issue 29's streaming acceptance (bench/firmware_measure.py's `print_like_streams`, the same
 segments): print-like segments (bench/step_schedule.py: joint speeds along a curve, 97 %
 of segments differ from the one before), the busiest module at ``--rate`` steps/s
 (default 7,200: 90 % of the 8,000 the AVR announces), streamed at 1x over the harness's
@@ -95,9 +95,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import firmware_measure as measure
 import firmware_rates as rates_bench
 
-import firmware as fw_bench
 from cdprhost.link import LinkError, open_link
 from cdprhost.sim.avr_device import Relay
 from firmware_protocol.device.faults import FaultSpec
@@ -300,13 +300,13 @@ def main() -> int:
         name = "step engine" if engine else "default"
         fig: dict[str, Any] = {}
         if args.profile:
-            batch = fw_bench._print_like_batch(args.rate, args.ticks, args.seconds, args.limit)
+            batch = measure.print_like_batch(args.rate, args.ticks, args.seconds, args.limit)
             fig[f"profile_{CLOCK_HZ // args.ticks}_per_s"] = profile(build, batch)
         else:
             if args.ladder:
                 fig["ladder_clean_3_s"] = []
                 for ticks in (200, 100, 80, 65, 50, 40):
-                    batch = fw_bench._print_like_batch(args.rate, ticks, 3.0, args.limit)
+                    batch = measure.print_like_batch(args.rate, ticks, 3.0, args.limit)
                     r = stream(build, batch, speedup=args.speedup)
                     r.pop("tmp")
                     fig["ladder_clean_3_s"].append(
@@ -316,7 +316,7 @@ def main() -> int:
             if not args.no_faults:
                 runs.append(("faults_1000_per_s", 100, "corrupt=0.001,drop=0.001"))
             for row, ticks, faults in runs:
-                batch = fw_bench._print_like_batch(args.rate, ticks, args.seconds, args.limit)
+                batch = measure.print_like_batch(args.rate, ticks, args.seconds, args.limit)
                 r = stream(build, batch, faults=faults, speedup=args.speedup)
                 r.pop("tmp")
                 deltas_differ = np.any(np.diff(batch.deltas, axis=0) != 0, axis=1).mean()
