@@ -273,6 +273,16 @@ void stepper_positions(int32_t *out)
 }
 
 #if STEP_ENGINE
+/* The chunk of axis k put out early (chunks_early): the whole delta of the segment
+ * `ahead` places from the queue's tail (1 while a segment runs at the tail, 0 between
+ * segments), or 0 if there is none or that axis was not put out early. */
+static int32_t chunk_out_early(uint8_t k, uint8_t ahead)
+{
+    if (k >= axes_ahead || (uint8_t)(plan_head - plan_tail) <= ahead)
+        return 0;
+    return plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)].delta[k];
+}
+
 /* A halt's engine axes (interrupts off, before the engine stops): the steps the engine
  * issued, not the profile's estimate (which put a halted stream one step off). Every
  * chunk out is a whole segment's delta: the running segment's engine axes, and the next
@@ -281,15 +291,12 @@ void stepper_positions(int32_t *out)
 static void engine_issued(struct seg_snapshot *sn)
 {
     uint8_t ahead = sn->running ? 1 : 0;
-    const struct plan *n = &plans[(uint8_t)(plan_tail + ahead) & (PLAN_SLOTS - 1)];
     for (uint8_t k = 0; k < 4; k++) {
-        int32_t out = 0;
+        int32_t out = chunk_out_early(k, ahead);
         if (sn->running && (sn->engine >> k & 1)) {
             out += sn->delta[k];
             sn->delta[k] = 0; /* counted here: seg_positions leaves it */
         }
-        if (k < axes_ahead && (uint8_t)(plan_head - plan_tail) > ahead)
-            out += n->delta[k];
         sn->pos[k] += out - step_engine_unissued(k);
     }
 }
@@ -302,13 +309,9 @@ static uint8_t ended_edges_left(void)
 {
     if (stepper.current == IT_SEG)
         return 0;
-    const struct plan *n = &plans[plan_tail & (PLAN_SLOTS - 1)];
-    uint8_t next_out = plan_head != plan_tail;
-    for (uint8_t k = 0; k < 4; k++) {
-        int32_t ahead = k < axes_ahead && next_out ? n->delta[k] : 0;
-        if (step_engine_unissued(k) != ahead)
+    for (uint8_t k = 0; k < 4; k++)
+        if (step_engine_unissued(k) != chunk_out_early(k, 0))
             return 1;
-    }
     return 0;
 }
 
