@@ -31,9 +31,10 @@ from cdprhost.sim.embedded import open_embedded
 PROFILE = "paper-prototype"
 
 
-def small_part(layers: int = 3, side: float = 20.0) -> str:
-    """A tiny printable part (heats, squares on a few layers)."""
-    lines = ["G28", "M140 S40", "M104 S200", "M109 S200", "G92 E0"]
+def small_part(layers: int = 3, side: float = 20.0, *, heat_wait: bool = True) -> str:
+    """A tiny printable part (heats, squares on a few layers). ``heat_wait`` False: the
+    hotend's target is set but not waited for (M109: 75 s of device time from cold)."""
+    lines = ["G28", "M140 S40", "M104 S200", *(["M109 S200"] if heat_wait else []), "G92 E0"]
     e = 0.0
     for n in range(layers):
         lines += [";LAYER_CHANGE", f"G1 Z{0.3 * (n + 1):.2f} F3000"]

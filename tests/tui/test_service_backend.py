@@ -267,3 +267,40 @@ def test_a_print_this_ui_started_is_not_adopted_a_second_time(backend, tmp_path)
     runner.join(120)
     assert result.get("status") == "completed", result
     assert _folded(events).state is JobState.DONE
+
+
+class _Unanswering:
+    """A connection to a service that takes every request and answers none."""
+
+    def __init__(self) -> None:
+        self.sent: list = []
+
+    def send(self, message) -> int:
+        self.sent.append(message)
+        return len(self.sent)
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_request_waiting_for_its_answer_ends_when_the_ui_disconnects():
+    """The UI lets go of the service (it quits, or picks another port) while a status
+    request is out: the request ends with the reason, not after its 15 s timeout (the
+    UI's closing waits for it)."""
+    b = ServiceBackend("paper-prototype")
+    b._client = _Unanswering()  # type: ignore[assignment]
+    outcome: queue.Queue = queue.Queue()
+
+    def status() -> None:
+        try:
+            outcome.put(b.operate(wire.Status()))
+        except CdprError as exc:
+            outcome.put(exc)
+
+    threading.Thread(target=status, daemon=True).start()
+    wait_until(lambda: b._client is not None and b._client.sent, 10, "the request sent")
+    b.disconnect()
+    ended = outcome.get(timeout=60)
+    # (a request that waited out its 15 s would say the service did not answer)
+    assert isinstance(ended, CdprError), ended
+    assert "the connection to the printer service was closed" in str(ended)

@@ -9,7 +9,6 @@ import sys
 from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import output_file
 from cdprhost.errors import InputError
-from cdprhost.sim.virtual_mocap import make_observer
 from firmware_protocol.device.config import MAX_SPEEDUP, SimConfig
 from firmware_protocol.device.faults import FaultSpec, FaultSpecError
 from firmware_protocol.device.firmware import SimDevice
@@ -79,7 +78,12 @@ def run(args: argparse.Namespace) -> int:
         from cdprhost.sim.avr_device import run as run_avr
 
         return run_avr(args, faults)
-    observer = make_observer(args.truth, args.mocap_dir) if args.truth else None
+    observer = None
+    if args.truth:
+        # imported here: its calibration statistics (scipy) cost every other start 0.7 s
+        from cdprhost.sim.virtual_mocap import make_observer
+
+        observer = make_observer(args.truth, args.mocap_dir)
 
     def notice(text: str) -> None:
         print(f"cdprhost sim-device: {text}", file=sys.stderr, flush=True)

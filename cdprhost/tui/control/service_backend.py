@@ -124,13 +124,22 @@ class ServiceBackend:
             return self._answers.get(number)
 
     def ask(self, message: Any, timeout_s: float | None = None) -> Any:
-        """Send a request and wait for its answer (None: none in ``timeout_s``)."""
+        """Send a request and wait for its answer (None: none in ``timeout_s``). A connection
+        closed meanwhile (``disconnect``, another ``connect``) ends the wait: its answers
+        are dropped unread."""
+        client = self._client
         number = self.send(message)
+
+        def over() -> bool:
+            return number in self._answers or bool(self.gone) or self._client is not client
+
         with self._cond:
-            self._cond.wait_for(lambda: number in self._answers or bool(self.gone), timeout_s)
+            self._cond.wait_for(over, timeout_s)
             answer = self._answers.pop(number, None)
         if answer is None and self.gone:
             raise CdprError(f"the printer service went away ({self.gone})")
+        if answer is None and self._client is not client:
+            raise CdprError("the connection to the printer service was closed")
         return answer
 
     def operate(self, message: Any) -> wire.DeviceState | None:
@@ -236,7 +245,9 @@ class ServiceBackend:
         return self._identity
 
     def disconnect(self) -> None:
-        client, self._client = self._client, None
+        with self._cond:
+            client, self._client = self._client, None
+            self._cond.notify_all()  # the asks waiting on it: no answer comes now
         self.local.announced = None
         if client is None:
             return
