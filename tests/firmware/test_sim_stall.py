@@ -34,7 +34,9 @@ def _harness_pid(dev: Device) -> int:
 
 def test_a_stalled_simulator_is_not_host_silence_but_silence_still_trips(avr_built, tmp_path):
     dev = start("avr", tmp_path, "--speedup", "1")
-    h = RawHost(dev.path)
+    # keep-alives at a quarter of the watchdog, as the host's link sends them: at the
+    # watchdog's own period (RawHost's default) a busy test PC alone made a gap past it
+    h = RawHost(dev.path, keepalive=WATCHDOG_MS / 1000 / 4)
     try:
         h.hello()
         h.send(Configure(watchdog_ms=WATCHDOG_MS, start_ticks=100_000, flow_ticks=12_500))
