@@ -115,8 +115,6 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import firmware_acceptance as acceptance
@@ -126,12 +124,7 @@ from firmware_rates import CLOCK_HZ
 
 from cdprhost.sim import avr_device
 from firmware_protocol.framing import OVERHEAD
-from firmware_protocol.segments import (
-    SegmentBatch,
-    SegmentContext,
-    encode_segments,
-    peak_step_rates,
-)
+from firmware_protocol.segments import SegmentContext, encode_segments
 from firmware_protocol.streams import demo_stream
 
 BAUD = 250_000
@@ -209,20 +202,10 @@ def _print_rates(args: argparse.Namespace) -> None:
     print("\n".join([command, "", *acceptance.rates_table(searches)]))
 
 
-def _within_rate(batch: SegmentBatch, rate: int) -> SegmentBatch:
-    """``batch`` with each segment slowed, where needed, to 90 % of ``rate`` on its busiest
-    axis (the same steps: the host refuses a stream over the device's announced rate; the
-    demo's last segment, braking to rest from twice its mean speed, is the one over)."""
-    peak = peak_step_rates(batch, CLOCK_HZ).max(axis=1)
-    stretch = np.maximum(1.0, peak / (0.9 * rate))
-    ticks = np.ceil(batch.ticks * stretch).astype(np.int64)
-    return SegmentBatch(ticks, batch.deltas, batch.ramps)
-
-
 def _isr_profile(quick: bool) -> dict[str, Any]:
     """The step interrupt's worst and mean cycles over the demo stream, and the stack's
     high-water mark after it."""
-    demo = _within_rate(demo_stream(60 if quick else 200, seed=4), measure.advertised_rate())
+    demo = measure.within_rate(demo_stream(60 if quick else 200, seed=4), measure.advertised_rate())
     s, _, ok, _ = measure.stream("avr", demo, profile=True)
     return {
         "isr_worst_cycles": s["isr_profiled_max_cycles"],

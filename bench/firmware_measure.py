@@ -59,7 +59,12 @@ from cdprhost.link import LinkError, open_link
 from cdprhost.sim import avr_device
 from firmware_protocol.messages import Configure, Flush, Message, Segment, SetHeater, WaitHeater
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST
-from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_segments
+from firmware_protocol.segments import (
+    SegmentBatch,
+    SegmentContext,
+    encode_segments,
+    peak_step_rates,
+)
 from firmware_protocol.streams import expected_record
 
 #: the device states the host falls silent in (heaters_off_latency), each with what puts
@@ -312,6 +317,16 @@ def print_like_batch(rate: int, ticks: int, seconds: float, limit: int) -> Segme
     deltas = np.concatenate(out)[: len(deltas)]
     deltas[[0, -1]] = np.trunc(deltas[[0, -1]] / 2).astype(np.int64)
     return SegmentBatch(b.ticks, deltas, b.ramps)
+
+
+def within_rate(batch: SegmentBatch, rate: int) -> SegmentBatch:
+    """``batch`` with each segment slowed, where needed, to 90 % of ``rate`` on its busiest
+    axis (the same steps: the host refuses a stream over the device's announced rate; the
+    demo's last segment, braking to rest from twice its mean speed, is the one over)."""
+    peak = peak_step_rates(batch, CLOCK_HZ).max(axis=1)
+    stretch = np.maximum(1.0, peak / (0.9 * rate))
+    ticks = np.ceil(batch.ticks * stretch).astype(np.int64)
+    return SegmentBatch(ticks, batch.deltas, batch.ramps)
 
 
 def print_like_streams(
