@@ -43,7 +43,8 @@ def _print_over_pty(gcode, tmp_path, name, faults=None):
         "--record",
         str(record),
     ]
-    cmd += ["--faults", ",".join([*([faults] if faults else []), "hotend_start_c=200"])]
+    warm = "hotend_start_c=200"
+    cmd += ["--faults", f"{faults},{warm}" if faults else warm]
     dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         pty = dev.stdout.readline().strip()

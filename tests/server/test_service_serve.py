@@ -270,7 +270,7 @@ def test_a_service_that_dies_mid_print_is_said_and_the_server_prints_again(tmp_p
         os.kill(pid, signal.SIGKILL)  # the service, not the server
         failed = server.wait_job(lambda j: "went away" in j.get("error", ""), timeout=60)
         assert failed["job"]["file"]["name"] == "doomed.gcode"
-        # a new service prints it (from a cold device: no heat-up, which it does not prove)
+        # a new service prints it (without the M109 wait: heating is not what it proves)
         _upload_and_print(server, "next.gcode", small_part(2, heat_wait=False))
         done = server.wait_job(printed_to_the_end)
         assert done["job"]["file"]["name"] == "next.gcode"
