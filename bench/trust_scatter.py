@@ -94,6 +94,7 @@ class Scatter:
     share_top: float  # the largest direction's share of the predicted mean squared error
     whitened: float  # mean squared whitened error over every direction (1 when right)
     dof: float = float("nan")  # effective directions: (sum lam)^2 / sum lam^2
+    quantile: float = float("nan")  # where the true RMS falls in the gate's distribution
 
 
 def _psd_root(cov: np.ndarray) -> np.ndarray:
@@ -328,6 +329,7 @@ def scatter(
         float(lam[top] / lam.sum()),
         float(np.mean(z[keep] ** 2)),
         float(lam[keep].sum() ** 2 / np.sum(lam[keep] ** 2)),
+        trust.quantile_of(true_rms),
     )
 
 
@@ -354,6 +356,8 @@ def summary(kind: str, rows: list[Scatter]) -> str:
     share = np.array([r.share_top for r in rows])
     dof = np.array([r.dof for r in rows])
     lo, hi = np.quantile(ratio, [0.1, 0.9])
+    q = np.array([r.quantile for r in rows])
+    in_range = np.mean((q >= 0.1) & (q <= 0.9))
     return (
         f"{kind:8s} {len(rows)} sessions: true RMS {np.sqrt(true2.mean()):.3f} mm, predicted "
         f"{np.sqrt(pred2.mean()):.3f} mm; top direction {100 * np.median(share):.0f} % of the "
@@ -364,7 +368,8 @@ def summary(kind: str, rows: list[Scatter]) -> str:
         f"{np.median(ratio):.2f}, range {ratio.min():.2f}-{ratio.max():.2f}, within 1.5x "
         f"{100 * within:.0f} %; largest direction mean z^2 {np.mean(z**2):.2f} (mean z "
         f"{np.mean(z):+.2f}), others mean z^2 {np.nanmean(rest):.2f}, every direction "
-        f"{np.mean(whitened):.2f}"
+        f"{np.mean(whitened):.2f}; the stated 8-in-10 range holds the true RMS in "
+        f"{100 * in_range:.0f} %"
     )
 
 
