@@ -8,6 +8,9 @@ import numpy as np
 import pytest
 
 from cdprhost.calibration.camera import Intrinsics, effector_positions, fit_session
+from cdprhost.calibration.camera.detection import BoardDetection
+from cdprhost.calibration.camera.session_fit import TakeDetections
+from cdprhost.calibration.camera.take_drift import camera_drift
 from cdprhost.calibration.commanding import commanded_path
 from cdprhost.calibration.fitting import Observations
 from cdprhost.calibration.identification import identify
@@ -139,3 +142,40 @@ def test_frames_without_the_effector_board_are_skipped_and_named(session):
     assert all(s == "" for s in fit.frame_skipped[0][1:])
     assert np.isnan(fit.frame_positions[0][0]).all()
     assert np.isfinite(fit.positions[0]).all()
+
+
+def test_a_frame_that_lost_a_marker_is_not_taken_for_creep(sim_model):
+    """Each corner's error has a part that stays for the whole take (the picture at that
+    place); a frame that lost three corners must be compared with its take's other frames
+    on the corners they share, or that part shows as a jump along the line of sight."""
+    rng = np.random.default_rng(11)
+    poses = plan_poses(sim_model, 12, seed=11).poses
+    s_cmd, _ = commanded_path(sim_model, poses)
+    scene = make_scene()
+    takes = analytic_takes(scene, sim_model.fk(s_cmd), 3, rng, sigma_px=0.03, bias_px=0.08)
+    lost = []
+    for take in takes:
+        first = take.effector[0]
+        assert first is not None
+        keep = np.ones(len(first.ids), bool)
+        keep[:3] = False  # the corners around one marker
+        cut = BoardDetection(
+            first.ids[keep], first.corners_px[keep], first.n_markers - 1, 1000.0, first.image_size
+        )
+        lost.append(TakeDetections(take.reference, (cut, *take.effector[1:])))
+    fit = fit_session(lost, scene.setup, scene.intrinsics, s_cmd, sim_model)
+    p = [
+        camera_drift(fit.frame_positions[k], np.arange(3) / 30.0, fit.frame_noise_covariances[k]).p
+        for k in range(len(lost))
+    ]
+    assert min(p) > 1e-3, p
+    # and the test still sees a creep of 1 mm in those takes
+    crept = [
+        fp + np.linspace(-0.5, 0.5, 3)[:, None] * np.array([0.0, 0.0, 1.0])
+        for fp in fit.frame_positions
+    ]
+    caught = [
+        camera_drift(c, np.arange(3) / 30.0, fit.frame_noise_covariances[k]).p < 1e-3
+        for k, c in enumerate(crept)
+    ]
+    assert np.mean(caught) > 0.8, caught

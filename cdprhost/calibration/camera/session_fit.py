@@ -318,22 +318,25 @@ def fit_session(
         covariances[k] = sigma_px**2 * np.linalg.inv(j.T @ j)
     frame_sigma = _frame_pixel_sigma(takes, good, eff_means)
     frame_noise = np.full((k_poses, 3, 3), np.nan)
-    for k in idx:
-        j = jacs[k]
-        assert j is not None
-        frame_noise[k] = frame_sigma**2 * np.linalg.inv(j.T @ j)
     frame_pos = []
     for kk, take in enumerate(takes):
         fp = np.full((len(take.effector), 3), np.nan)
-        for i in good[kk]:
-            d = take.effector[i]
-            if d is None or not np.isfinite(origins[kk]).all():
-                continue
-            c, _ = _solve_position(
-                d.corners_px, board_pts[d.ids], rot_eff, v, cam_r, cam_t, origins[kk], 3
+        frame_pos.append(fp)
+        if not np.isfinite(origins[kk]).all():
+            continue
+        seen = {i: d for i in good[kk] if (d := take.effector[i]) is not None}
+        shared = _shared_corners(list(seen.values()))
+        frame_jac: np.ndarray | None = jacs[kk]
+        for i, d in seen.items():
+            sel = np.isin(d.ids, shared) if shared is not None else np.ones(len(d.ids), bool)
+            c, solved_jac = _solve_position(
+                d.corners_px[sel], board_pts[d.ids[sel]], rot_eff, v, cam_r, cam_t, origins[kk], 3
             )
             fp[i] = c + rot_eff @ offset
-        frame_pos.append(fp)
+            if shared is not None:
+                frame_jac = solved_jac
+        if frame_jac is not None:
+            frame_noise[kk] = frame_sigma**2 * np.linalg.inv(frame_jac.T @ frame_jac)
     # the vector shared by every B: board orientation error x offset, offset as printed
     lever = skew(rot_eff @ offset)
     off_sigma = setup.effector.offset_sigma_mm or DEFAULT_OFFSET_SIGMA_MM
@@ -381,6 +384,25 @@ def fit_session(
 #: A take whose corners scatter (variance) more than this many times the session's median
 #: take is not pooled into the frame noise (a shaking or creeping effector).
 FRAME_NOISE_OUTLIER = 10.0
+#: The fewest corners shared by a take's frames that its frames are compared on.
+MIN_SHARED_CORNERS = 6
+
+
+def _shared_corners(dets: list[BoardDetection]) -> np.ndarray | None:
+    """The effector corners every frame of a take found, when they pin a position (at
+    least :data:`MIN_SHARED_CORNERS`); else None (each frame then uses all it found).
+
+    The frames of a take are compared with each other (drift, scatter) on these alone: a
+    corner's error has a part that stays the same for the whole take (the picture at that
+    place), which cancels between frames that use the same corners but not between a frame
+    that lost a marker and one that kept it (a 0.5 mm jump along the line of sight, several
+    times the frame-to-frame noise, from three corners fewer)."""
+    if not dets:
+        return None
+    shared = dets[0].ids
+    for d in dets[1:]:
+        shared = np.intersect1d(shared, d.ids)
+    return shared if len(shared) >= MIN_SHARED_CORNERS else None
 
 
 def _frame_pixel_sigma(
