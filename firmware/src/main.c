@@ -218,7 +218,11 @@ int main(void)
         heater_poll(now);
         autotune_poll(now);
         motion_prepare_ahead(PLAN_SLOTS); /* 0.5 ms segments: 8 plans last 4 ms */
+#if STEP_ENGINE
+        stepper_start_for = session_start_for();
+#else
         stepper_start_ok = session_may_start();
+#endif
         session_poll(link_now);
         link_poll(link_now);
         motion_prepare_ahead(PLAN_SLOTS);

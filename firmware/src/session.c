@@ -83,6 +83,18 @@ void proto_frame_seen(void)
     machine.last_frame_at = link_now;
 }
 
+#if STEP_ENGINE
+/* The host may send nothing more until the steppers free some of the ring of chunks:
+ * FLOW's credit is 0 and every frame acknowledged is queued. A credit of 0 while
+ * acknowledged frames still wait to be queued says only that the host waits for them
+ * (a ramp's first pieces took it to 0 with 5 of them queued and 56 of the ring's 128
+ * entries used: the motion started with 7.5 ms queued and ran dry). */
+static uint8_t host_held_back(void)
+{
+    return !machine_credit() && machine_free() == queue_free();
+}
+#endif
+
 /* PROTOCOL 5.4: at rest with a segment at the head of the queue, start when the
  * queue holds a whole block (an item that ends one), start_ticks of motion, a
  * full queue, or after FLUSH. O(1): the counts are kept as items come and go. */
@@ -94,10 +106,19 @@ uint8_t session_may_start(void)
     uint32_t head_item = items_executed() + 1;
     return machine.block_ends > 0 || machine.queued_units >= machine.start_ticks || queue_free() == 0 || blocks_stalled ||
 #if STEP_ENGINE
-           !machine_credit() || /* the host may send no more: the ring of chunks is full */
+           host_held_back() ||
 #endif
            head_item <= machine.flush_item;
 }
+
+#if STEP_ENGINE
+uint8_t session_start_for(void)
+{
+    uint8_t ok = session_may_start();
+    uint8_t head = machine.accounted; /* queue_tail as session_may_start counted it */
+    return ok ? head : (uint8_t)(head - 1);
+}
+#endif
 
 /* Anything to do: motion executing or queued, a heater on (the watchdog guards it). */
 static uint8_t active(void)

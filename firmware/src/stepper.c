@@ -64,7 +64,12 @@ static volatile uint16_t heater_targets[2];
 static volatile uint8_t heater_targets_changed; /* heater bit set: a target to take */
 
 volatile struct stepper_report stepper_report;
-volatile uint8_t stepper_start_ok, stepper_wait_ok;
+#if STEP_ENGINE
+volatile uint8_t stepper_start_for;
+#else
+volatile uint8_t stepper_start_ok;
+#endif
+volatile uint8_t stepper_wait_ok;
 volatile uint16_t stepper_lost_steps, stepper_plan_stalls;
 
 /* steps the wheel had no room for (never at the advertised rate): counted, not lost
@@ -507,9 +512,13 @@ static void __attribute__((noinline)) dispatch(void)
         case IT_SEG: {
             /* (a start from rest whose chunks are going out goes on: they run at their
              * time, the segment must start with them) */
-            if (stepper.at_rest && !stepper_start_ok &&
-                !(STEP_ENGINE && (chunks_ahead || axes_ahead)))
+#if STEP_ENGINE
+            if (stepper.at_rest && stepper_start_for != queue_tail && !chunks_ahead && !axes_ahead)
                 return;
+#else
+            if (stepper.at_rest && !stepper_start_ok)
+                return;
+#endif
             struct plan *p = &plans[plan_tail & (PLAN_SLOTS - 1)];
             if (plan_tail == plan_head || p->index != queue_tail) {
                 if (!stepper.at_rest) {

@@ -22,7 +22,15 @@ void stepper_counts(uint32_t *items, uint32_t *segments);
 uint8_t stepper_homed_mask(void);
 
 /* set by the main loop */
+#if STEP_ENGINE
+/* The queue position (queue_tail) of the segment the start rule lets leave rest. A verdict
+ * holds only for the queue it was taken on: one taken while the block before was still
+ * executing (that block's end counted as queued) started the next block as soon as the
+ * first ended at rest, with two of its pieces queued. */
+extern volatile uint8_t stepper_start_for;
+#else
 extern volatile uint8_t stepper_start_ok; /* the start rule allows leaving rest */
+#endif
 extern volatile uint8_t stepper_wait_ok;  /* the waited-for heater is within tolerance */
 
 /* SET_HEATER items the interrupt executed since the last call: a mask of the heaters

@@ -74,6 +74,56 @@ def test_a_ramp_steps_from_its_schedule_blocks(engine):
     assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
 
 
+def test_a_start_from_rest_waits_for_the_frames_it_acknowledged(engine):
+    # the print's mix at R = 30,000 from rest to speed, three steady segments, back to
+    # rest, the ramps cut into pieces that carry their blocks. FLOW's credit counts the
+    # ring of chunks at the queue's mix less the items acknowledged and not queued yet:
+    # it fell to 0 with a few pieces queued and more waiting in their frames, and a
+    # machine at rest took a zero credit for a full ring and started (at R = 39,000 with
+    # 5 pieces, 7.5 ms of motion, 56 of the ring's 128 entries used): the queue ran dry
+    # at segment 11 in every run
+    fr = engine.firmware_rates
+    batch = fr.ramp_batch(fr.rates_of("a print's mix", 30_000), cycles=1)
+    p = fr.run_batch(engine._build, batch)
+    assert "refused" not in p, p
+    assert p["record_exact"] and p["edges_missing_or_extra"] == 0, p
+
+
+def test_a_block_ended_at_rest_starts_the_next_by_the_start_rule(engine):
+    # ramps from rest and back (the print's mix at R = 10,000, pieces with their blocks),
+    # each cycle sent with the first two pieces of the next, the rest once the cycle has
+    # ended. The main loop's start verdict was taken while a cycle still executed (its
+    # block's end counted as queued), and when that block ended at rest the interrupt
+    # started the next one on it with two of its pieces queued: the queue ran dry at the
+    # third (at segment 13 or 24 of 66 in 2 runs of 3). A verdict now holds only for the
+    # queue position it was taken on, and the next block waits for its end.
+    from cdprhost.link.errors import LinkError
+    from firmware_protocol.streams import expected_record
+
+    fr = engine.firmware_rates
+    rates = fr.rates_of("a print's mix", 10_000)
+    cycle = len(fr.cut_for_blocks(fr.ramp_batch(rates, cycles=1)))
+    cycles = 6
+    batch = fr.cut_for_blocks(fr.ramp_batch(rates, cycles=cycles))
+    failed = ""
+    with fr.harness(engine._build, profile=False) as (link, tmp):
+        fr.warm_link(link)
+        try:
+            sent = 0
+            for k in range(1, cycles + 1):
+                upto = min(len(batch), k * cycle + 2)
+                link.queue_segments(batch[sent:upto])
+                sent = upto
+                while link.request_status().segments_done < k * cycle:
+                    pass
+            link.wait_idle(60)
+        except LinkError as e:
+            failed = str(e)
+    assert not failed, failed
+    rows = [json.loads(x) for x in (tmp / "record.jsonl").read_text().splitlines() if x.strip()]
+    assert rows == expected_record(batch)
+
+
 def _holds_33k(r: dict) -> bool:
     return bool(
         r["record_exact"]
