@@ -9,6 +9,7 @@ import pytest
 
 from cdprhost.calibration.camera import Intrinsics, effector_positions, fit_session
 from cdprhost.calibration.camera.detection import BoardDetection
+from cdprhost.calibration.camera.positions import FrameQuality, without_stray_corners
 from cdprhost.calibration.camera.session_fit import TakeDetections
 from cdprhost.calibration.camera.take_drift import camera_drift
 from cdprhost.calibration.commanding import commanded_path
@@ -179,3 +180,49 @@ def test_a_frame_that_lost_a_marker_is_not_taken_for_creep(sim_model):
         for k, c in enumerate(crept)
     ]
     assert np.mean(caught) > 0.8, caught
+
+
+def test_a_reference_board_partly_hidden_by_the_effector_costs_neither_the_take_nor_the_frame(
+    session, sim_model
+):
+    """The effector in front of the reference board pulls the corners beside its edge a few
+    pixels off: those corners are dropped, the frame keeps its effector position, and the
+    session's camera pose takes no corner from it."""
+    _, scene, takes, s_cmd, _ = session
+    hidden = []
+    for k, take in enumerate(takes):
+        if k != 4:
+            hidden.append(take)
+            continue
+        refs = []
+        for d in take.reference:
+            assert d is not None
+            px = d.corners_px.copy()
+            px[:4] += (8.0, -6.0)  # four corners beside the effector's edge
+            refs.append(BoardDetection(d.ids, px, d.n_markers, d.sharpness, d.image_size))
+        hidden.append(TakeDetections(tuple(refs), take.effector, take.times_s))
+    clean = fit_session(takes, scene.setup, scene.intrinsics, s_cmd, sim_model)
+    fit = fit_session(hidden, scene.setup, scene.intrinsics, s_cmd, sim_model)
+    assert fit.frame_skipped[4] == ("",) * len(takes[4].reference), fit.frame_skipped[4]
+    assert np.isfinite(fit.positions[4]).all()
+    # the frames' own stray corners (pulled 10 px) do not reach the camera pose: what
+    # changes is four frames fewer in it, well within the poses' own noise
+    d = np.linalg.norm(fit.positions - clean.positions, axis=1)
+    sd = np.sqrt(np.trace(clean.covariances, axis1=1, axis2=2))
+    assert np.all(d < 0.5 * sd), (d, sd)
+
+
+def test_stray_corners_are_dropped_up_to_a_quarter_of_the_board():
+    scene = make_scene()
+    board = scene.setup.reference.board
+    ref, _ = scene.corners(np.array([0.0, 0.0, 200.0]))
+    ids = np.arange(len(ref))
+    few = ref.copy()
+    few[[3, 10]] += 5.0
+    det = BoardDetection(ids, few, 12, 1000.0, scene.intrinsics.image_size)
+    kept = without_stray_corners(det, board, scene.intrinsics, FrameQuality())
+    assert kept is not None and sorted(set(ids) - set(kept.ids)) == [3, 10]
+    many = ref.copy()
+    many[: len(ref) // 2] += np.random.default_rng(0).normal(0, 5.0, (len(ref) // 2, 2))
+    det = BoardDetection(ids, many, 12, 1000.0, scene.intrinsics.image_size)
+    assert without_stray_corners(det, board, scene.intrinsics, FrameQuality()) is det

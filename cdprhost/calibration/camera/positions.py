@@ -2,16 +2,20 @@
 board -> offset -> B in the base frame, with the covariance of each B.
 
 A frame where a board is not seen well (too few corners, too blurred, a reprojection error
-too large) is skipped and counted with its reason.
+too large) is skipped and counted with its reason. A few corners far off the board's own
+pose are dropped first (:func:`without_stray_corners`): a board partly hidden behind
+another (the effector in front of the reference board) gets its corners next to the
+hiding edge pulled by that edge, and they, not the frame, are what is wrong.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-from cdprhost.calibration.camera.boards import CameraSetup
+from cdprhost.calibration.camera.boards import CameraSetup, CharucoBoard
 from cdprhost.calibration.camera.detection import BoardDetection
 from cdprhost.calibration.camera.intrinsics import Intrinsics
 from cdprhost.calibration.camera.pose import solve_board_pose
@@ -25,6 +29,10 @@ class FrameQuality:
     min_corners: int = 6
     min_sharpness: float = 0.0  # variance of the Laplacian; 0 = not checked
     max_reprojection_px: float = 1.5
+    # a corner this far (px) from where its board's pose puts it is a stray ...
+    max_corner_px: float = 1.0
+    # ... and at most this share of a board's corners are dropped as strays
+    max_stray_fraction: float = 0.25
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,6 +48,47 @@ class FramePositions:
     @property
     def valid(self) -> np.ndarray:
         return np.array([s == "" for s in self.skipped], dtype=bool)
+
+
+def without_stray_corners(
+    det: BoardDetection | None,
+    board: CharucoBoard,
+    intr: Intrinsics,
+    quality: FrameQuality,
+) -> BoardDetection | None:
+    """``det`` less the corners its board's pose (solved again after each) puts more than
+    ``quality.max_corner_px`` away, worst first, at most ``max_stray_fraction`` of them and
+    never below ``min_corners``. A detection with more strays than that is returned as it
+    came (:func:`judge_frame` then says what is wrong with it)."""
+    if det is None:
+        return None
+    k = np.asarray(intr.matrix, np.float64)
+    keep = np.ones(len(det), bool)
+    budget = int(quality.max_stray_fraction * len(det))
+    while True:
+        cut = _subset(det, keep)
+        pose = solve_board_pose(cut, board, intr)
+        if pose is None:
+            return det
+        proj, _ = cv2.projectPoints(
+            board.corners_mm[cut.ids].astype(np.float64), pose.rvec, pose.tvec, k, intr.distortion_5
+        )
+        off = np.linalg.norm(proj.reshape(-1, 2) - cut.corners_px, axis=1)
+        worst = int(np.argmax(off))
+        if off[worst] <= quality.max_corner_px:
+            return cut
+        if budget == 0 or keep.sum() <= quality.min_corners:
+            return det
+        keep[np.flatnonzero(keep)[worst]] = False
+        budget -= 1
+
+
+def _subset(det: BoardDetection, keep: np.ndarray) -> BoardDetection:
+    if keep.all():
+        return det
+    return BoardDetection(
+        det.ids[keep], det.corners_px[keep], det.n_markers, det.sharpness, det.image_size
+    )
 
 
 def judge_frame(
@@ -85,7 +134,9 @@ def effector_positions(
     positions = np.full((n, 3), np.nan)
     covariances = np.full((n, 3, 3), np.nan)
     skipped = []
-    for i, (r, e) in enumerate(zip(reference, effector)):
+    for i, (r0, e0) in enumerate(zip(reference, effector)):
+        r = without_stray_corners(r0, setup.reference.board, intrinsics, q_cfg)
+        e = without_stray_corners(e0, setup.effector.board, intrinsics, q_cfg)
         why = judge_frame(r, "reference", setup, intrinsics, q_cfg) or judge_frame(
             e, "effector", setup, intrinsics, q_cfg
         )

@@ -50,7 +50,11 @@ from cdprhost.calibration.camera.pose_covariance import (
     frame_covariance,
     skew,
 )
-from cdprhost.calibration.camera.positions import FrameQuality, judge_frame
+from cdprhost.calibration.camera.positions import (
+    FrameQuality,
+    judge_frame,
+    without_stray_corners,
+)
 from cdprhost.calibration.camera.projection import project, rotvec_matrix
 from cdprhost.kinematics.machine import MachineModel
 
@@ -212,18 +216,30 @@ def fit_session(
     ref_board, eff_board = setup.reference.board, setup.effector.board
     v0 = intrinsics.vector
     k_poses = len(takes)
-    # 1. frames
+    # 1. frames. A frame whose reference board is seen whole and well gives its corners to
+    # the session's camera pose; a frame whose reference board is only good less a few stray
+    # corners (the effector in front of it) still gives its effector board, but not those
+    # corners: the ones beside the hiding edge that stay under the stray limit would pull
+    # the base frame (measured: a worse workspace RMS, and a gate that under-predicts)
+    whole = [
+        tuple(judge_frame(r, "reference", setup, intrinsics, q_cfg) == "" for r in t.reference)
+        for t in takes
+    ]
     skipped: list[tuple[str, ...]] = []
     for take in takes:
         reasons = []
         for r, e in zip(take.reference, take.effector):
+            r = without_stray_corners(r, ref_board, intrinsics, q_cfg)
             why = judge_frame(r, "reference", setup, intrinsics, q_cfg)
             why = why or judge_frame(e, "effector", setup, intrinsics, q_cfg)
             reasons.append(why)
         skipped.append(tuple(reasons))
     good = [[i for i, s in enumerate(sk) if not s] for sk in skipped]
     ref_dets = [
-        d for take, g in zip(takes, good) for i in g if (d := take.reference[i]) is not None
+        d
+        for take, g, w in zip(takes, good, whole)
+        for i in g
+        if w[i] and (d := take.reference[i]) is not None
     ]
     if not ref_dets:
         raise ValueError(
