@@ -54,4 +54,9 @@ struct sched_verdict {
 void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCHED_AXES],
                  struct sched_verdict *verdict, struct sched_block *out);
 
+/* The block at r->pos read past, its form checked as sched_parse checks it (r->err), what
+ * it says of its segment not: a frame's check on receipt, whose segments are queued (and
+ * their blocks' verdicts taken, sched_parse) only when the frame is executed. */
+void sched_skip(struct reader *r);
+
 #endif
