@@ -115,7 +115,8 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
         int32_t lead;
         if (__builtin_add_overflow(interval >> 1, lead_c, &lead))
             lead = INT32_MAX;
-        int32_t left = (int32_t)steps[k]; /* |n| <= 2^31 - 1 */
+        /* |n| <= 2^31 - 1 less at most 31 counts of at most 65,535: no overflow */
+        int32_t left = (int32_t)steps[k];
         int32_t shortest = 0;
         for (uint8_t i = 1; i <= more; i++) {
             int32_t count = (int32_t)rd_bounded(r, 16);
