@@ -183,16 +183,16 @@ void sched_skip(struct reader *r)
         return;
     }
     for (; mask && !r->err; mask &= (uint8_t)(mask - 1)) {
-        rd_bounded(r, 32); /* the first edge, interval and add */
-        rd_bounded(r, 32);
-        rd_bounded(r, 32);
+        rd_skip(r, 32); /* the first edge, interval and add */
+        rd_skip(r, 32);
+        rd_skip(r, 32);
         uint8_t more = rd_u8(r);
         if (more >= CDPR_SCHED_MAX_CHUNKS)
             r->err = 1;
         for (; more && !r->err; more--) {
-            rd_bounded(r, 16); /* a chunk's count, interval and add */
-            rd_bounded(r, 32);
-            rd_bounded(r, 32);
+            rd_skip(r, 16); /* a chunk's count, interval and add */
+            rd_skip(r, 32);
+            rd_skip(r, 32);
         }
     }
 }

@@ -77,6 +77,28 @@ bad:
     return 0;
 }
 
+void rd_skip(struct reader *r, uint8_t bits)
+{
+    uint8_t pos = r->pos, len = r->len;
+    uint8_t last = bits > 16 ? 4 : 2; /* the field's last byte, as rd_bounded */
+    uint8_t beyond = bits > 16 ? 0xF0 : 0xFC;
+    for (uint8_t i = 0;; i++, pos++) {
+        if (pos >= len) {
+            r->err = 1;
+            return;
+        }
+        uint8_t g = r->buf[pos];
+        if (i == last) {
+            if (g & beyond)
+                r->err = 1;
+            break;
+        }
+        if (!(g & 0x80))
+            break;
+    }
+    r->pos = (uint8_t)(pos + 1);
+}
+
 uint32_t rd_field(struct reader *r, uint8_t type)
 {
     switch (type) {
