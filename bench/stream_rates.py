@@ -1,6 +1,7 @@
 """Print-like segment streams on the AVR in simavr, per build, and where the CPU goes.
 
     python bench/stream_rates.py [--engine] [--seconds S] [--rate R] [--ladder] [--profile]
+    python bench/stream_rates.py --only-engine --limit 200000 --profile --ramps R
 
 Issue 29's streaming acceptance (bench/firmware_measure.py's `print_like_streams`, the same
 segments): print-like segments (bench/step_schedule.py: joint speeds along a curve, 97 %
@@ -16,6 +17,10 @@ instruction (CDPR_SIM_PROFILE_ALL) and prints the functions that took them, as a
 of the run's instructions and per segment: where the main loop's and the interrupts'
 time goes while segments stream (the frame receive and CRC, the two decodes, the queue
 push, the plans, the step interrupts, the acknowledgements).
+``--profile --ramps R`` profiles instead the print's mix from rest to R steps/s and back,
+8 times (firmware_rates.ramp_batch, the ramps cut into pieces with their schedule blocks,
+the link's frames grown first), the figures per ramp piece: what a piece of a ramp costs
+(firmware/README.md, the step engine, "Starting from rest").
 
 A row's verdict: the record equals the segments asked for (no underrun, no refused
 segment); the host's retransmits and timeouts beside it; the line's payload bytes a
@@ -102,6 +107,7 @@ from cdprhost.link import LinkError, open_link
 from cdprhost.sim.avr_device import Relay
 from firmware_protocol.device.faults import FaultSpec
 from firmware_protocol.framing import OVERHEAD
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_segments
 from firmware_protocol.streams import expected_record
 
@@ -123,9 +129,12 @@ def stream(
     faults: str | None = None,
     env_extra: dict[str, str] | None = None,
     speedup: float = 1.0,
+    warm: bool = False,
 ) -> dict[str, Any]:
     """Stream ``batch`` at 1x to the harness running ``build`` (through a lossy relay
-    with ``faults``): the harness's figures, the host's counters and the verdict."""
+    with ``faults``): the harness's figures, the host's counters and the verdict.
+    ``warm``: the link's frames grown to full length first (firmware_rates.warm_link), so
+    a ramp's schedule blocks go with it."""
     tmp = Path(tempfile.mkdtemp())
     env = dict(os.environ, **(env_extra or {}))
     cmd = [str(build.harness), str(build.elf), "--speedup", f"{speedup:g}"]
@@ -149,6 +158,8 @@ def stream(
     try:
         link = open_link(relay.path if relay else path)
         try:
+            if warm:
+                rates_bench.warm_link(link)
             link.queue_segments(batch)
             link.wait_idle(600)
         except LinkError as e:  # an underrun or another device fault
@@ -243,32 +254,40 @@ def _idle_session(build: rates_bench.Build, env_extra: dict[str, str], seconds: 
 TURN_MARK = "watchdog_canary_ok"
 
 
-def profile(build: rates_bench.Build, batch: SegmentBatch, top: int = 30) -> dict[str, Any]:
+def profile(
+    build: rates_bench.Build,
+    batch: SegmentBatch,
+    top: int = 30,
+    warm: bool = False,
+    per: int | None = None,
+) -> dict[str, Any]:
     """Where the cycles go per segment: one stream with the harness counting every
     executed instruction's cycles by address (CDPR_SIM_PROFILE_ALL), summed per function,
     less the main loop's turns. The turns are measured on an idle session first (every
     function's cycles per turn, TURN_MARK counting the turns) and taken out at the
     stream's count of turns: what is left is the work the segments cost (the stream's
     first moments, before its first segment, count as turns). The top ``top`` functions
-    by that work, per segment."""
+    by that work, per segment (or per ``per`` of the stream's segments: its ramp pieces).
+    ``warm``: as stream's."""
     tmp = Path(tempfile.mkdtemp())
     env = {"CDPR_SIM_PROFILE_ALL": "1", "CDPR_SIM_PC_HIST": str(tmp / "idle.txt")}
     _idle_session(build, env, 2.0)
     idle = _cycles_by_function(build.elf, tmp / "idle.txt")
     env["CDPR_SIM_PC_HIST"] = str(tmp / "stream.txt")
-    r = stream(build, batch, env_extra=env)
+    r = stream(build, batch, env_extra=env, warm=warm)
     load = _cycles_by_function(build.elf, tmp / "stream.txt")
     turns = load.get(TURN_MARK, 0) / max(idle.get(TURN_MARK, 0), 1)  # in idle sessions
     work = {k: v - turns * idle.get(k, 0) for k, v in load.items()}
     total = sum(load.values())
-    done = max(int(r["segments_done"]), 1)
+    done = max(per or int(r["segments_done"]), 1)
+    each = "ramp_piece" if per else "segment"
     rows = sorted(work.items(), key=lambda kv: -kv[1])[:top]
     return {
         "run": {k: v for k, v in r.items() if k != "tmp"},
-        "cycles_per_segment": round(total / done),
+        f"cycles_per_{each}": round(total / done),
         "turns_share_pct": round(100 * turns * sum(idle.values()) / total, 1),
-        "work_cycles_per_segment": round(sum(work.values()) / done),
-        # name: the segments' work in it, cycles per segment
+        f"work_cycles_per_{each}": round(sum(work.values()) / done),
+        # name: the segments' work in it, cycles per segment (or ramp piece)
         "functions": [f"{n}: {c / done:.0f}" for n, c in rows],
     }
 
@@ -283,6 +302,14 @@ def main() -> int:
     ap.add_argument("--ladder", action="store_true", help="500..2500 segments/s, 3 s each")
     ap.add_argument("--profile", action="store_true", help="where the instructions go")
     ap.add_argument("--ticks", type=int, default=50, help="--profile: segment length (units)")
+    ap.add_argument(
+        "--ramps",
+        type=int,
+        default=0,
+        help="--profile: instead of the print-like stream, the print's mix from rest to R "
+        "steps/s and back 8 times (firmware_rates.ramp_batch), the ramps cut into pieces with "
+        "their schedule blocks: where a ramp piece's cycles go",
+    )
     ap.add_argument(
         "--speedup",
         type=float,
@@ -299,7 +326,16 @@ def main() -> int:
         build = _build(engine, args.limit)
         name = "step engine" if engine else "default"
         fig: dict[str, Any] = {}
-        if args.profile:
+        if args.profile and args.ramps:
+            mix = rates_bench.rates_of("a print's mix", args.ramps)
+            batch = rates_bench.cut_for_blocks(rates_bench.ramp_batch(mix, cycles=8))
+            pieces = int(np.count_nonzero(batch.ramps != RAMP_CONSTANT))
+            # the figures per ramp piece, not per segment
+            fig[f"profile_ramps_to_{args.ramps}_per_ramp_piece"] = {
+                "ramp_pieces": pieces,
+                **profile(build, batch, top=60, warm=True, per=pieces),
+            }
+        elif args.profile:
             batch = measure.print_like_batch(args.rate, args.ticks, args.seconds, args.limit)
             fig[f"profile_{CLOCK_HZ // args.ticks}_per_s"] = profile(build, batch)
         else:

@@ -102,7 +102,7 @@ static uint64_t steps_total;
 static unsigned repairs, unrepaired;
 static int suspect[2];
 
-static uint32_t pc_hist[65536];
+static uint32_t pc_hist[1 << 18]; /* per byte address of the 256 KB flash */
 static uint64_t isr_entry, isr_cycles_max, isr_cycles_sum, isr_count, isr_hist[64];
 static uint16_t isr_sp;
 /* compare B interrupts outside compare A's (the steps it issues between ticks) */
@@ -1216,7 +1216,7 @@ int main(int argc, char **argv)
     if (getenv("CDPR_SIM_PROFILE_ISR") || profile_all) {
         const char *hist_path = getenv("CDPR_SIM_PC_HIST");
         FILE *f = fopen(hist_path ? hist_path : "/tmp/cdpr-pc-hist.txt", "w");
-        for (unsigned i = 0; f && i < 65536; i++)
+        for (unsigned i = 0; f && i < sizeof pc_hist / sizeof pc_hist[0]; i++)
             if (pc_hist[i])
                 fprintf(f, "%x %u\n", i, pc_hist[i]);
         if (f)

@@ -108,6 +108,7 @@ static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx
     uint32_t v[MAX_VALUES];
     *queued = 0;
     *wrong = 0;
+    segment_form_only = 1; /* the blocks' verdicts are taken as their segments are queued */
     while (r.pos < len) {
         motion_prepare_ahead(1); /* a frame of short segments takes milliseconds */
         uint8_t at = r.pos, op = payload[at];
@@ -126,10 +127,11 @@ static uint8_t check_payload(const uint8_t *payload, uint8_t len, struct seg_ctx
         if (r.err) {
             *bad_op = op;
             *bad_at = at;
-            return 0;
+            break;
         }
     }
-    return 1;
+    segment_form_only = 0;
+    return !r.err;
 }
 
 static struct item *new_item(uint8_t kind)

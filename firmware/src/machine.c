@@ -49,7 +49,16 @@ uint8_t machine_credit(void)
      * room and sent again (about 1,600 refusals and 2,000 retransmissions a layer). */
     if (used >= BLOCK_CHUNKS - CREDIT_SPARE)
         return 0;
-    uint16_t fit = (uint16_t)((uint16_t)(BLOCK_CHUNKS - CREDIT_SPARE - used) * items / used);
+    /* the main loop asks every turn and the mix changes only as items come and go: the
+     * division (about 200 cycles) again only then */
+    static uint8_t mix_used, mix_items;
+    static uint16_t mix_fit;
+    if (used != mix_used || items != mix_items) {
+        mix_used = used;
+        mix_items = items;
+        mix_fit = (uint16_t)((uint16_t)(BLOCK_CHUNKS - CREDIT_SPARE - used) * items / used);
+    }
+    uint16_t fit = mix_fit;
     /* the ring's blocks of items already out of the queue (prepared, executing, held to
      * their ends) count in `used` too, so with a short queue the mix reads too large: the
      * host was held back while the ring had room and the queue ran dry. While the ring is

@@ -26,21 +26,39 @@ static int32_t rd_i32(struct reader *r)
     return unzigzag(rd_bounded(r, 32));
 }
 
-/* base + delta, or 0 outside 1..2^31 - 1 (refused) */
-static int32_t interval_of(int64_t base, int32_t delta)
+/* base + delta, or 0 outside 1..2^31 - 1 (refused), in 32 bits: base (a guess from
+ * guess_interval, under 2^32, or a first interval, under 2^31) plus delta (-2^31..2^31 - 1)
+ * lies in -2^31..2^33; the sum modulo 2^32 is the true one when it is in range, except
+ * for a sum of 2^32 or more, which wraps below base with delta >= 0 */
+static int32_t interval_of(uint32_t base, int32_t delta)
 {
-    int64_t v = base + delta;
-    return v < 1 || v > INT32_MAX ? 0 : (int32_t)v;
+    uint32_t v = base + (uint32_t)delta;
+    if (delta >= 0 && v < base)
+        return 0;
+    return v >= 1 && v <= (uint32_t)INT32_MAX ? (int32_t)v : 0;
 }
 
 /* The shortest of the `used` intervals a chunk sets (fixed point): they change linearly,
- * so it is at one end. */
+ * so it is at one end; 0 for an end below 0 (as the 64-bit form it replaces). In 32 bits:
+ * interval 0..2^31 - 1 and used 1..65535 wherever the result counts (a count outside
+ * 1..65535 is refused before the shortest is looked at, and a larger `used` only comes
+ * with such a count), so with add < 0 the drop (used - 1) |add| is compared with
+ * interval as |add|'s two 16-bit halves times used - 1: a high half's product of 2^15
+ * or more drops past any interval. */
 static int32_t chunk_shortest(int32_t interval, int32_t add, int32_t used)
 {
-    if (add >= 0)
+    if (add >= 0 || used <= 1)
         return interval;
-    int64_t end = (int64_t)interval + (int64_t)(used - 1) * add;
-    return end < 0 ? 0 : (int32_t)end;
+    uint32_t mag = 0u - (uint32_t)add; /* 1..2^31 */
+    uint16_t n = (uint16_t)(used - 1);
+    uint32_t high = mul16x16((uint16_t)(mag >> 16), n); /* < 2^15 * 2^16 below */
+    if (used > 65536L || high >= 0x8000UL)
+        return 0;
+    uint32_t drop;
+    if (__builtin_add_overflow(high << 16, mul16x16((uint16_t)mag, n), &drop) ||
+        drop > (uint32_t)interval)
+        return 0;
+    return (int32_t)((uint32_t)interval - drop);
 }
 
 /* The first refusal of an axis wins: later ones leave the verdict as it is. */
@@ -93,13 +111,16 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
 #endif
         if (!steps[k])
             refuse(verdict, k, 0);
-        int64_t lead64 = (int64_t)(interval >> 1) + lead_c; /* >= -2^31 */
-        int32_t lead = lead64 > INT32_MAX ? INT32_MAX : (int32_t)lead64;
-        int32_t left = (int32_t)steps[k]; /* |n| <= 2^31 - 1 */
+        /* interval / 2 (0..2^30 - 1) + lead_c (-2^31..2^31 - 1): overflows only upward */
+        int32_t lead;
+        if (__builtin_add_overflow(interval >> 1, lead_c, &lead))
+            lead = INT32_MAX;
+        /* |n| <= 2^31 - 1 less at most 31 counts of at most 65,535: no overflow */
+        int32_t left = (int32_t)steps[k];
         int32_t shortest = 0;
         for (uint8_t i = 1; i <= more; i++) {
             int32_t count = (int32_t)rd_bounded(r, 16);
-            int32_t c_int = interval_of(interval, rd_i32(r));
+            int32_t c_int = interval_of((uint32_t)interval, rd_i32(r));
             int32_t c_add = rd_i32(r);
             if (r->err)
                 return;
@@ -152,4 +173,26 @@ void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCH
     if (over)
         sink->used = used; /* over its capacity: the entries it takes */
 #endif
+}
+
+void sched_skip(struct reader *r)
+{
+    uint8_t mask = rd_u8(r);
+    if (r->err || !mask || mask >> CDPR_SCHED_AXES) {
+        r->err = 1;
+        return;
+    }
+    for (; mask && !r->err; mask &= (uint8_t)(mask - 1)) {
+        rd_skip(r, 32); /* the first edge, interval and add */
+        rd_skip(r, 32);
+        rd_skip(r, 32);
+        uint8_t more = rd_u8(r);
+        if (more >= CDPR_SCHED_MAX_CHUNKS)
+            r->err = 1;
+        for (; more && !r->err; more--) {
+            rd_skip(r, 16); /* a chunk's count, interval and add */
+            rd_skip(r, 32);
+            rd_skip(r, 32);
+        }
+    }
 }

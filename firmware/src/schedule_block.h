@@ -2,14 +2,17 @@
  * axes the device cannot predict, each a first edge and chunks (count, interval, add) in
  * fixed point of a CPU cycle (CDPR_SCHED_FRAC_BITS).
  *
- * sched_parse reads a block once, as its segment is read: its form (a malformed block is
- * r->err: BAD_COMMAND) and, in the same pass, what it says of its segment (the result:
- * BAD_VALUE when the segment is queued): the counts add up to |n| (the first chunk takes
- * what the others leave, at least 1), every count 1..65535, every interval 1..2^31 - 1,
- * the first edge not before the segment, no interval under MIN_STEP_INTERVAL_CYCLES.
- * It keeps O(1) state and no copy of the block; a caller that wants the chunks (the step
- * engine) passes a struct sched_block to fill. Today's DDA keeps its own edges within
- * the same tolerance of the same ideal edges, so nothing else reads them yet. */
+ * A frame's check on receipt reads each block's form only (sched_skip: a malformed block
+ * is r->err, BAD_COMMAND, and nothing of the frame runs). sched_parse reads it once more
+ * as its segment is queued: its form again and, in the same pass, what it says of its
+ * segment (the verdict: BAD_VALUE, nothing of the segment queued): the counts add up to
+ * |n| (the first chunk takes what the others leave, at least 1), every count 1..65535,
+ * every interval 1..2^31 - 1, the first edge not before the segment, no interval under
+ * MIN_STEP_INTERVAL_CYCLES; all in 32-bit arithmetic (the ranges are in
+ * schedule_block.c). It keeps O(1) state and no copy of the block; a caller that wants
+ * the chunks (the step engine) passes a struct sched_block to fill. Today's DDA keeps its
+ * own edges within the same tolerance of the same ideal edges, so nothing else reads
+ * them yet. */
 #ifndef SCHEDULE_BLOCK_H
 #define SCHEDULE_BLOCK_H
 #include <stdint.h>
@@ -53,5 +56,10 @@ struct sched_verdict {
  * `out` may be NULL. */
 void sched_parse(struct reader *r, uint32_t ticks, const uint32_t steps[CDPR_SCHED_AXES],
                  struct sched_verdict *verdict, struct sched_block *out);
+
+/* The block at r->pos read past, its form checked as sched_parse checks it (r->err), what
+ * it says of its segment not: a frame's check on receipt, whose segments are queued (and
+ * their blocks' verdicts taken, sched_parse) only when the frame is executed. */
+void sched_skip(struct reader *r);
 
 #endif

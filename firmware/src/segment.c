@@ -4,6 +4,7 @@
 #include "segment.h"
 
 struct sched_block *segment_sched_out;
+uint8_t segment_form_only;
 
 /* A coded delta: an i32 (zigzag u32, at most 5 bytes). Inline for the one-byte
  * case (a print's small corrections to the predicted deltas): the call and the
@@ -84,8 +85,12 @@ void __attribute__((optimize("O2"))) segment_decode_full(struct reader *r, struc
     }
     out->sched.mask = 0;
     if ((op & SEG_F_SCHEDULE) && !r->err) {
-        uint32_t steps[4] = {magnitude(d0), magnitude(d1), magnitude(d2), magnitude(d3)};
-        sched_parse(r, ticks, steps, &out->sched, segment_sched_out);
+        if (segment_form_only) {
+            sched_skip(r);
+        } else {
+            uint32_t steps[4] = {magnitude(d0), magnitude(d1), magnitude(d2), magnitude(d3)};
+            sched_parse(r, ticks, steps, &out->sched, segment_sched_out);
+        }
     }
     if (r->err)
         return;

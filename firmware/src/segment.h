@@ -21,6 +21,9 @@ struct segment {
 /* Where segment_decode reads a schedule block's chunks (the step engine's ring while a
  * segment is decoded to be queued, step_blocks.h); 0: checked only. */
 extern struct sched_block *segment_sched_out;
+/* 1 while a frame is checked on receipt (check_payload): a schedule block's form only
+ * (sched_skip), its verdict (sched_parse) taken once, when the segment is queued. */
+extern uint8_t segment_form_only;
 
 /* Decode the segment whose opcode is at r->pos; sets r->err on any bad field. */
 void segment_decode_full(struct reader *r, struct seg_ctx *ctx, struct segment *out);

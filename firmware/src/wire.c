@@ -11,27 +11,92 @@ uint8_t rd_u8(struct reader *r)
 
 uint32_t rd_bounded(struct reader *r, uint8_t bits)
 {
-    if (r->pos < r->len && !(r->buf[r->pos] & 0x80))
-        return r->buf[r->pos++]; /* one byte (most fields): fits every width */
-    uint8_t max_bytes = (uint8_t)((bits + 6) / 7);
-    uint32_t value = 0;
-    for (uint8_t i = 0; i < max_bytes; i++) {
-        if (r->pos >= r->len) {
-            r->err = 1;
-            return 0;
-        }
-        uint8_t b = r->buf[r->pos++];
-        uint8_t shift = (uint8_t)(7 * i);
-        uint32_t part = (uint32_t)(b & 0x7F);
-        /* the bits that would fall beyond the field's width */
-        if (shift + 7 > bits && (part >> (bits - shift)))
-            r->err = 1;
-        value |= part << shift;
-        if (!(b & 0x80))
-            return r->err ? 0 : value;
+    uint8_t pos = r->pos;
+    uint8_t left = pos < r->len ? (uint8_t)(r->len - pos) : 0;
+    const uint8_t *p = r->buf + pos;
+    if (!left)
+        goto bad;
+    uint8_t g = p[0];
+    if (!(g & 0x80)) {
+        r->pos = (uint8_t)(pos + 1);
+        return g; /* one byte (most fields): fits every width */
     }
-    r->err = 1; /* longer than the field allows */
+    /* each 7-bit group into the value's bytes as it comes, unrolled (a variable 32-bit
+     * shift is a loop on the AVR): group i holds bits 7i..7i + 6 */
+    union {
+        uint32_t u;
+        uint8_t b[4];
+    } v;
+    uint8_t n;
+    v.u = g & 0x7F;
+    if (left < 2)
+        goto bad;
+    g = p[1];
+    v.b[0] |= (uint8_t)(g << 7);
+    v.b[1] = (uint8_t)((g & 0x7F) >> 1);
+    if (!(g & 0x80)) {
+        n = 2;
+        goto done;
+    }
+    if (left < 3)
+        goto bad;
+    g = p[2];
+    v.b[1] |= (uint8_t)(g << 6);
+    v.b[2] = (uint8_t)((g & 0x7F) >> 2);
+    if (bits <= 16) {
+        if (g & 0xFC)
+            goto bad; /* a fourth byte, or bits beyond 16 */
+        n = 3;
+        goto done;
+    }
+    if (!(g & 0x80)) {
+        n = 3;
+        goto done;
+    }
+    if (left < 4)
+        goto bad;
+    g = p[3];
+    v.b[2] |= (uint8_t)(g << 5);
+    v.b[3] = (uint8_t)((g & 0x7F) >> 3);
+    if (!(g & 0x80)) {
+        n = 4;
+        goto done;
+    }
+    if (left < 5)
+        goto bad;
+    g = p[4];
+    if (g & 0xF0)
+        goto bad; /* a sixth byte, or bits beyond 32 */
+    v.b[3] |= (uint8_t)(g << 4);
+    n = 5;
+done:
+    r->pos = (uint8_t)(pos + n);
+    return v.u;
+bad:
+    r->err = 1; /* cut short, longer than the field allows or beyond its width */
     return 0;
+}
+
+void rd_skip(struct reader *r, uint8_t bits)
+{
+    uint8_t pos = r->pos, len = r->len;
+    uint8_t last = bits > 16 ? 4 : 2; /* the field's last byte, as rd_bounded */
+    uint8_t beyond = bits > 16 ? 0xF0 : 0xFC;
+    for (uint8_t i = 0;; i++, pos++) {
+        if (pos >= len) {
+            r->err = 1;
+            return;
+        }
+        uint8_t g = r->buf[pos];
+        if (i == last) {
+            if (g & beyond)
+                r->err = 1;
+            break;
+        }
+        if (!(g & 0x80))
+            break;
+    }
+    r->pos = (uint8_t)(pos + 1);
 }
 
 uint32_t rd_field(struct reader *r, uint8_t type)

@@ -20,6 +20,7 @@ struct writer {
 uint8_t rd_u8(struct reader *r);
 uint32_t rd_bounded(struct reader *r, uint8_t bits);       /* unsigned, 16 or 32 bits */
 uint32_t rd_field(struct reader *r, uint8_t type);         /* any descriptor type, raw bits */
+void rd_skip(struct reader *r, uint8_t bits); /* a varint passed, its form checked as rd_bounded's */
 static inline int32_t unzigzag(uint32_t u)
 {
     return (int32_t)((u >> 1) ^ (uint32_t)-(int32_t)(u & 1));

@@ -97,3 +97,21 @@ def test_a_malformed_block_is_bad_command(device_factory, host_factory):
     h.hello()
     err = _refused(h, _with_block(10_000, (10, 0, 0, 0), bytes([0x10]), h))  # reserved axis
     assert err.code == ErrorCode.BAD_COMMAND
+
+
+def test_a_block_malformed_in_a_further_chunk_refuses_its_whole_frame(device_factory, host_factory):
+    """The frame's check on receipt reads every block to its end: a further chunk's count
+    wider than 16 bits, in the second segment of a frame, is BAD_COMMAND and the first
+    segment does not move either."""
+    dev = device_factory()
+    h = host_factory(dev.path)
+    h.hello()
+    first = encode_one_segment(10_000, (10, 0, 0, 0), -1, h.ctx)
+    wide = bytes([0x80, 0x80, 0x04])  # 65,536
+    block = bytes([0x01, 0, 0, 0, 1]) + wide + bytes([0, 0])
+    h.ep.send(first + _with_block(10_000, (10, 0, 0, 0), block, h), items=2)
+    err = h.wait_for(lambda: h.of(Error), what="an ERROR")
+    assert err.code == ErrorCode.BAD_COMMAND
+    st = h.status()
+    assert st.flags & Flag.FAULT and st.motion_ticks == 0
+    assert st.steps == (0, 0, 0, 0)
