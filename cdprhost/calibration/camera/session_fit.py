@@ -221,19 +221,21 @@ def fit_session(
     # corners (the effector in front of it) still gives its effector board, but not those
     # corners: the ones beside the hiding edge that stay under the stray limit would pull
     # the base frame (measured: a worse workspace RMS, and a gate that under-predicts)
-    whole = [
-        tuple(judge_frame(r, "reference", setup, intrinsics, q_cfg) == "" for r in t.reference)
-        for t in takes
-    ]
+    whole: list[tuple[bool, ...]] = []
     skipped: list[tuple[str, ...]] = []
     for take in takes:
-        reasons = []
-        for r, e in zip(take.reference, take.effector):
-            r = without_stray_corners(r, ref_board, intrinsics, q_cfg)
-            why = judge_frame(r, "reference", setup, intrinsics, q_cfg)
-            why = why or judge_frame(e, "effector", setup, intrinsics, q_cfg)
-            reasons.append(why)
+        reasons, seen_whole = [], []
+        for raw, e in zip(take.reference, take.effector):
+            ref = without_stray_corners(raw, ref_board, intrinsics, q_cfg)
+            why = judge_frame(ref, "reference", setup, intrinsics, q_cfg)
+            seen_whole.append(
+                why == ""
+                if ref is raw
+                else judge_frame(raw, "reference", setup, intrinsics, q_cfg) == ""
+            )
+            reasons.append(why or judge_frame(e, "effector", setup, intrinsics, q_cfg))
         skipped.append(tuple(reasons))
+        whole.append(tuple(seen_whole))
     good = [[i for i, s in enumerate(sk) if not s] for sk in skipped]
     ref_dets = [
         d
