@@ -36,7 +36,12 @@ from cdprhost.link import HostLink, LinkError, open_link
 from cdprhost.sim import avr_device
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST, step_times
 from firmware_protocol.segment_split import split_segment
-from firmware_protocol.segments import SegmentBatch, SegmentContext, encode_block_for
+from firmware_protocol.segments import (
+    SEGMENT_MAX_BYTES,
+    SegmentBatch,
+    SegmentContext,
+    encode_block_for,
+)
 from firmware_protocol.step_schedule import predictable
 from firmware_protocol.streams import expected_record
 
@@ -164,7 +169,6 @@ def ramp_batch(
 #: the device's longest payload (IDENT max_payload), a segment without its block at most
 #: SEGMENT_MAX_BYTES of it (PROTOCOL.md 5.2)
 MAX_PAYLOAD = 120
-SEGMENT_MAX_BYTES = 27
 #: frames acknowledged before a point's stream (the link's frames start short and grow by 2
 #: bytes with each clean one: at MAX_PAYLOAD after about 45)
 WARM_FRAMES = 48

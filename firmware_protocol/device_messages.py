@@ -266,3 +266,24 @@ class Caps(Message):
             lo=1,
         ),
     )
+
+
+@dataclass(frozen=True)
+class Stepping(Message):
+    """Protocol 3.1: what the device steps without a schedule block, sent after ``CAPS``
+    in a session whose minor is 1 or more. An axis the host leaves without its block (a
+    ramp: section 5.5's fallback) is stepped from the segment's profile by the device's
+    own means, which may be slower than its schedules: the host sends a block for every
+    ramp axis faster than ``profile_step_rate`` at its peak."""
+
+    profile_step_rate: int
+    OPCODE: ClassVar[int] = 0x4A
+    CLASS: ClassVar[str] = "D"
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F(
+            "profile_step_rate",
+            "u32",
+            "3.1: peak steps/s it takes on an axis stepped from the profile, without a block",
+            lo=1,
+        ),
+    )

@@ -41,6 +41,7 @@ from firmware_protocol.device_messages import (
     Health,
     Ident,
     Status,
+    Stepping,
 )
 from firmware_protocol.fields import MAX_TEXT, TYPE_RANGE, F, Field, MessageError
 from firmware_protocol.host_messages import (
@@ -74,6 +75,7 @@ from firmware_protocol.message_base import (
     LEASE_MS_RANGE,
     MAX_EVENT_VALUES,
     MINOR_SAFETY,
+    MINOR_STEPPING,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     TOLERANCE_DC_RANGE,
@@ -111,6 +113,7 @@ MESSAGES: tuple[type[Message], ...] = (
     Flow,
     Health,
     Caps,
+    Stepping,
 )
 _BY_OPCODE: dict[int, type[Message]] = {cls.OPCODE: cls for cls in MESSAGES}
 
@@ -126,6 +129,7 @@ __all__ = [
     "MAX_TEXT",
     "MESSAGES",
     "MINOR_SAFETY",
+    "MINOR_STEPPING",
     "PROTOCOL_MAJOR",
     "PROTOCOL_MINOR",
     "THERMAL_ERRORS",
@@ -171,5 +175,6 @@ __all__ = [
     "SetPid",
     "SetPosition",
     "Status",
+    "Stepping",
     "WaitHeater",
 ]

@@ -22,7 +22,7 @@ from firmware_protocol.ramp_profile import (
     ramp_share,
     steps_done,
 )
-from firmware_protocol.schedule_block import MAX_CHUNKS
+from firmware_protocol.schedule_block import MAX_CHUNKS, encode_block
 from firmware_protocol.schedule_fit import plan_schedules
 from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.step_schedule import AxisSchedule, reciprocal_table
@@ -109,3 +109,23 @@ def fit_for_blocks(
     )
     out = {(j, k): s for j, (_, scheds) in enumerate(pieces) for k, s in scheds.items()}
     return cut, out
+
+
+def block_bytes(
+    ticks: int,
+    deltas: tuple[int, ...],
+    code: int,
+    cycles_per_tick: int,
+    tol_cycles: float,
+    table: np.ndarray,
+) -> int | None:
+    """Payload bytes of the schedule block the segment ``(ticks, deltas, code)`` needs
+    (0: every moving axis runs the device's prediction), or None when one of its axes needs
+    more chunks than a block holds (``MAX_CHUNKS``)."""
+    one = SegmentBatch(np.array([ticks]), np.array([deltas]), np.array([code], dtype=np.int16))
+    explicit = {
+        k: s for (_, k), s in plan_schedules(one, cycles_per_tick, tol_cycles, table).items()
+    }
+    if any(len(s.chunks) > MAX_CHUNKS for s in explicit.values()):
+        return None
+    return len(encode_block(deltas, ticks, explicit, table)) if explicit else 0

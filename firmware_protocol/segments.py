@@ -41,6 +41,8 @@ F_PREDICTED = 0x04  # coded deltas are differences from the previous segment's d
 F_SLIDERS = 0x08  # three slider svarints present; else coded values are 0
 F_EXTRUDER = 0x10  # extruder svarint present; else coded value is 0
 F_SCHEDULE = 0x20  # 3.0: a schedule block follows the ramp byte
+#: a segment without its block takes at most this many bytes (section 5.2)
+SEGMENT_MAX_BYTES = 27
 F_RESERVED = 0x40
 CYCLES_PER_TICK = 160  # cpu_hz / clock_hz of the AVR (16 MHz, 100 kHz): the default
 

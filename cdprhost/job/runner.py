@@ -24,7 +24,7 @@ from typing import Any
 
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
-from cdprhost.job.board import announced_record
+from cdprhost.job.board import announced_record, block_limits
 from cdprhost.job.exact import ExactPlaceUnknown, device_stop, refine_point, reset_notice
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
@@ -370,7 +370,7 @@ class PrintJob:
             ident, dev_caps = link.identity, link.caps
             rate = ident.max_step_rate if ident else None
             shortest = dev_caps.min_segment_ticks / ident.clock_hz if ident and dev_caps else None
-            caps = caps_for_device(self.profile, rate, shortest)
+            caps = caps_for_device(self.profile, rate, shortest, block_limits(ident, dev_caps))
             self._plan_profile = caps.profile
             self._segment_limits = caps.segments
             for text in [*check.notices, *([caps.notice] if caps.notice else [])]:

@@ -323,8 +323,7 @@ class LinkCore:
                 sender.window,
             )
         elif clean:
-            ceiling = self._payload_for(FRAME_LOSS_CEILING, rate)
-            grown = min(self.max_payload, ceiling, self.payload_limit + 2 * clean)
+            grown = min(self.max_payload, self.payload_ceiling(), self.payload_limit + 2 * clean)
             self.payload_limit = max(self.payload_limit, grown)
             sender.window = min(self.max_window, sender.window + clean)
         self._last_retx = retx
@@ -389,6 +388,10 @@ class LinkCore:
     def payload_floor(self) -> int:
         """The shortest payload worth sending on this line (FRAME_LOSS_SHARE)."""
         return self._payload_for(FRAME_LOSS_SHARE, self.loss_rate())
+
+    def payload_ceiling(self) -> int:
+        """The longest payload this line lets through about half the time (FRAME_LOSS_CEILING)."""
+        return self._payload_for(FRAME_LOSS_CEILING, self.loss_rate())
 
     def wait(
         self,

@@ -119,6 +119,9 @@ class DeviceCaps:
     late_tolerance_us: int = 0
     schedule_tolerance_cycles: int = 16
     min_step_interval_cycles: int = 1
+    #: STEPPING (3.1, after CAPS): the peak rate of an axis it steps without a schedule
+    #: block (None: a 3.0 device, which steps such an axis at any rate it announces)
+    profile_step_rate: int | None = None
 
     @classmethod
     def from_message(cls, m: Caps) -> DeviceCaps:

@@ -17,11 +17,13 @@ import numpy as np
 from cdprhost.link.core import LinkCore
 from cdprhost.link.errors import StepRateError
 from cdprhost.link.events import DeviceCaps, Identity
+from cdprhost.motion.block_cuts import BLOCK_FRAME_BYTES
 from firmware_protocol.messages import Flag
 from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_block import MAX_CHUNKS
 from firmware_protocol.schedule_fit import plan_schedules
 from firmware_protocol.segments import (
+    SEGMENT_MAX_BYTES,
     SegmentBatch,
     SegmentContext,
     encode_block_for,
@@ -30,8 +32,6 @@ from firmware_protocol.segments import (
 )
 from firmware_protocol.step_schedule import AxisSchedule, predictable
 
-#: a segment without its block takes at most this many bytes (PROTOCOL.md 5.2)
-SEGMENT_MAX_BYTES = 27
 #: ramps (schedules fitted in Python, milliseconds each) sent per turn of the feed, which
 #: holds the link's lock meanwhile: the keep-alive and the reports wait that long
 RAMPS_PER_TURN = 16
@@ -51,6 +51,7 @@ def wire_schedules(
     tol_cycles: float,
     max_payload: int,
     fit_budget_s: float | None = None,
+    needed: np.ndarray | None = None,
 ) -> dict[tuple[int, int], AxisSchedule]:
     """The schedule blocks ``batch`` carries (PROTOCOL.md 5.5), by ``(segment, axis)``:
     every moving axis whose prediction the device cannot make or that strays past
@@ -60,7 +61,9 @@ def wire_schedules(
     axis whose block does not fit is left to the device's own stepping of the profile
     (3.0's fallback, until segments are cut where their blocks are too long:
     docs/step-engine.md section 7). ``fit_budget_s``: host time the ramps' fits may take
-    (they run in Python, milliseconds a ramp); the ramps after it go without a block too.
+    (they run in Python, milliseconds a ramp); the ramps after it go without a block too,
+    except those ``needed`` marks (bool per segment: faster at their peak than the device
+    steps without a block, STEPPING), which always get theirs.
     """
     ramp = batch.ramps != RAMP_CONSTANT
     steady = np.flatnonzero(~ramp)
@@ -69,12 +72,14 @@ def wire_schedules(
         some = SegmentBatch(batch.ticks[steady], batch.deltas[steady], batch.ramps[steady])
         part = plan_schedules(some, ctx.cycles_per_tick, tol_cycles, ctx.table)
         planned.update({(int(steady[j]), k): sched for (j, k), sched in part.items()})
+    if needed is None:
+        needed = np.zeros(len(batch), bool)
     start = time.perf_counter()
     for fits, i in enumerate(np.flatnonzero(ramp).tolist()):
         spent = time.perf_counter() - start
         each = spent / fits if fits else RAMP_FIT_S  # what one more is likely to take
-        if fit_budget_s is not None and spent + each > fit_budget_s:
-            break
+        if fit_budget_s is not None and spent + each > fit_budget_s and not needed[i]:
+            continue
         part = plan_schedules(batch[i : i + 1], ctx.cycles_per_tick, tol_cycles, ctx.table)
         planned.update({(i, k): sched for (_, k), sched in part.items()})
     if not planned:
@@ -164,16 +169,38 @@ class SegmentFeed:
         cum = np.cumsum(ticks[:limit])
         return min(limit, int(np.searchsorted(cum, room, side="right")) + 1)
 
+    def block_payload(self) -> int:
+        """Payload bytes a segment with its schedule block may take: the line's frames, and
+        up to a frame of BLOCK_FRAME_BYTES (within the device's longest), the size the plan
+        cut its ramps for (block_cuts), while the line's frames are shorter only because
+        they start short or the line lets such a frame through at least half the time: the
+        segment then goes alone in a longer frame rather than without its block. On a
+        line that loses more the block stays home and the device steps the ramp itself."""
+        c = self.core
+        return max(c.payload_limit, min(c.max_payload, BLOCK_FRAME_BYTES, c.payload_ceiling()))
+
+    def _needs_block(self, batch: SegmentBatch) -> np.ndarray | None:
+        """Per segment: faster at its peak than the device steps an axis without its
+        schedule block (STEPPING, 3.1), so its ramp's block goes whatever the fit budget."""
+        caps, ident = self.core.dev.caps, self.core.dev.identity
+        if caps is None or caps.profile_step_rate is None or ident is None or not len(batch):
+            return None
+        peak = peak_step_rates(batch, ident.clock_hz).max(axis=1)
+        return np.asarray(peak > caps.profile_step_rate)
+
     def _send_segments(self, batch: SegmentBatch, i: int, j: int) -> None:
         c = self.core
         sub = batch[i:j]
         caps = c.dev.caps or DeviceCaps()
-        # a block goes only where its segment fits the frames the line carries now (they
-        # shrink on a lossy line: a long frame would rarely get through)
         now = time.perf_counter()
         budget = min(FIT_TURN_S, FIT_SHARE * (now - self._began) - self._fit_s)
         blocks = wire_schedules(
-            sub, c.ctx, caps.schedule_tolerance_cycles, c.payload_limit, fit_budget_s=budget
+            sub,
+            c.ctx,
+            caps.schedule_tolerance_cycles,
+            self.block_payload(),
+            fit_budget_s=budget,
+            needed=self._needs_block(sub),
         )
         self._fit_s += time.perf_counter() - now
         data, offsets = encode_segments(sub, c.ctx, blocks)

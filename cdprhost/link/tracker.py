@@ -41,6 +41,7 @@ from firmware_protocol.messages import (
     Message,
     MessageError,
     Status,
+    Stepping,
 )
 from firmware_protocol.messages import Error as ErrorReport
 from firmware_protocol.segments import SegmentContext
@@ -150,6 +151,10 @@ class DeviceTracker:
                     self.status = replace(self.status, health=self.health)
             elif isinstance(msg, Caps):
                 self.caps = DeviceCaps.from_message(msg)
+            elif isinstance(msg, Stepping):  # follows its CAPS (3.1)
+                self.caps = replace(
+                    self.caps or DeviceCaps(), profile_step_rate=msg.profile_step_rate
+                )
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:

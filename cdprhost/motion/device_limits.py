@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cdprhost.motion.block_cuts import BlockLimits
 from cdprhost.motion.moves import MIN_MOVE_MM
 from cdprhost.motion.segments import DEFAULT_LIMITS, MIN_SEGMENT_S, SegmentLimits
 from cdprhost.profile.models import MachineProfile
@@ -36,14 +37,18 @@ def caps_for_device(
     profile: MachineProfile,
     max_step_rate: float | None,
     min_segment_s: float | None = None,
+    blocks: BlockLimits | None = None,
 ) -> DeviceCaps:
     """``profile`` with module and extruder speeds capped to ``max_step_rate`` (steps/s
     on any one axis, as the device announced); unchanged when it already fits or the
     device announced nothing. The segments keep to the rate and to the device's
-    shortest segment (``min_segment_s``, from its CAPS) after rounding."""
+    shortest segment (``min_segment_s``, from its CAPS) after rounding, and with
+    ``blocks`` (a device that steps from schedule blocks) ramps are cut until their blocks
+    fit a frame (block_cuts)."""
     segments = SegmentLimits(
         max(MIN_SEGMENT_S, min_segment_s or 0.0),
         None if max_step_rate is None else float(max_step_rate),
+        blocks,
     )
     if max_step_rate is None:
         return DeviceCaps(profile, None, segments)

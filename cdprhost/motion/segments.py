@@ -29,8 +29,9 @@ import numpy as np
 from cdprhost.effects.backlash import path_directions
 from cdprhost.effects.base import MotionContext
 from cdprhost.kinematics.machine import MachineModel
+from cdprhost.motion.block_cuts import BlockLimits, block_cuts, equal_pieces
 from cdprhost.motion.trapezoid import PlannedMoves
-from firmware_protocol.ramp_profile import ramp_codes_from_speeds
+from firmware_protocol.ramp_profile import profile, ramp_codes_from_speeds
 from firmware_protocol.segments import SegmentBatch, peak_step_rates
 
 DEFAULT_CLOCK_HZ = 1_000_000
@@ -52,6 +53,8 @@ class SegmentLimits:
 
     min_segment_s: float = MIN_SEGMENT_S
     max_step_rate: float | None = None
+    #: a device that steps ramps from schedule blocks: ramps cut until their blocks fit
+    blocks: BlockLimits | None = None
 
 
 #: a device that announced nothing
@@ -285,6 +288,20 @@ def segment_moves_ends(
         batch, move_end = _within_step_rate(
             batch, state.steps, move_end, limits.max_step_rate, clock_hz
         )
+    if n and limits.blocks is not None:
+        rate = limits.max_step_rate
+        cuts = block_cuts(
+            batch.ticks,
+            batch.delta,
+            batch.v_start,
+            batch.v_end,
+            limits.blocks,
+            min_ticks,
+            int(clock_hz),
+            None if rate is None else rate * (1.0 - 1e-6),
+        )
+        if cuts:
+            batch, move_end = _cut(batch, state, move_end, cuts, clock_hz, e_steps_per_mm)
     if n:
         state = replace(
             state,
@@ -348,6 +365,73 @@ def _at_least(
         ticks[-1] = min_ticks
         batch = replace(batch, ticks=ticks)
     return batch, move_end
+
+
+def _cut(
+    batch: PlannedSegments,
+    state: SegmentState,
+    move_end: np.ndarray,
+    cuts: dict[int, int],
+    clock_hz: float,
+    e_steps_per_mm: float,
+) -> tuple[PlannedSegments, np.ndarray]:
+    """Segments ``cuts`` names split into that many equal-time pieces (block_cuts): the
+    pieces keep the segment's line in joint space, its steps and its time; their points are
+    where the segment's profile is at each cut, their filament positions those of the
+    extruder steps issued by then (a restart from a piece sets the extruder to that E's
+    rounding: it must be the steps the device stood at)."""
+    codes = ramp_codes_from_speeds(batch.v_start, batch.v_end)
+    parts: list[PlannedSegments] = []
+    start = 0
+    for i in sorted(cuts):
+        if i > start:
+            parts.append(batch.take(slice(start, i)))
+        prev_steps = batch.steps_abs[i - 1] if i else state.steps
+        prev_point = batch.point[i - 1] if i else state.point
+        tau, ticks, steps, speeds = equal_pieces(
+            int(batch.ticks[i]),
+            batch.delta[i],
+            float(batch.v_start[i]),
+            float(batch.v_end[i]),
+            int(codes[i]),
+            cuts[i],
+        )
+        p = profile(tau, int(codes[i]))[:, None]
+        k = tau.shape[0]
+        steps_abs = prev_steps[None, :] + np.cumsum(steps, axis=0)
+        e = batch.e[i] - (batch.steps_abs[i, 3] - steps_abs[:, 3]) / e_steps_per_mm
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ramp = np.where(
+                speeds[:-1] + speeds[1:] > 0, speeds[:-1] / (speeds[:-1] + speeds[1:]), 0.5
+            )
+        parts.append(
+            PlannedSegments(
+                steps_abs,
+                steps,
+                ticks,
+                ramp,
+                speeds[:-1],
+                speeds[1:],
+                np.repeat(batch.line[i], k),
+                np.repeat(batch.layer[i], k),
+                prev_point[None, :] + (batch.point[i] - prev_point)[None, :] * p,
+                e,
+                batch.t_end[i] - (1.0 - tau) * batch.ticks[i] / clock_hz,
+            )
+        )
+        start = i + 1
+    if start < len(batch):
+        parts.append(batch.take(slice(start, len(batch))))
+    merged = PlannedSegments(
+        *(
+            np.concatenate([getattr(b, f) for b in parts])
+            for f in PlannedSegments.__dataclass_fields__
+        )
+    )
+    pieces = np.ones(len(batch), np.int64)
+    pieces[list(cuts)] = list(cuts.values())
+    counted = np.cumsum(pieces)
+    return merged, np.where(move_end > 0, counted[np.maximum(move_end, 1) - 1], 0)
 
 
 def peak_rates(batch: PlannedSegments, clock_hz: float) -> np.ndarray:

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define CDPR_PROTOCOL_MAJOR 3
-#define CDPR_PROTOCOL_MINOR 0
+#define CDPR_PROTOCOL_MINOR 1
 
 /* frames */
 #define CDPR_SYNC 0xA5
@@ -150,6 +150,8 @@
 #define CDPR_HEALTH_MAX_LEN 36
 #define CDPR_OP_CAPS 0x49
 #define CDPR_CAPS_MAX_LEN 22
+#define CDPR_OP_STEPPING 0x4A
+#define CDPR_STEPPING_MAX_LEN 6
 
 /* Identify: class I, opcode 0x01 */
 
@@ -576,5 +578,12 @@ typedef struct cdpr_caps {
 #define CDPR_CAPS_SCHEDULE_TOLERANCE_CYCLES_MAX (65535UL)
 #define CDPR_CAPS_MIN_STEP_INTERVAL_CYCLES_MIN (1)
 #define CDPR_CAPS_MIN_STEP_INTERVAL_CYCLES_MAX (4294967295UL)
+
+/* Stepping: class D, opcode 0x4A */
+typedef struct cdpr_stepping {
+    uint32_t profile_step_rate; /* 3.1: peak steps/s it takes on an axis stepped from the profile, without a block */
+} cdpr_stepping_t;
+#define CDPR_STEPPING_PROFILE_STEP_RATE_MIN (1)
+#define CDPR_STEPPING_PROFILE_STEP_RATE_MAX (4294967295UL)
 
 #endif /* CDPR_PROTOCOL_H */

@@ -115,6 +115,11 @@ void report_caps(void)
     wr_uv(&w, SCHEDULE_TOLERANCE_CYCLES);
     wr_uv(&w, MIN_STEP_INTERVAL_CYCLES);
     send(&w, 0);
+    if (machine.host_minor >= 1) { /* 3.1: what the tick steps without a block */
+        struct writer s = start(CDPR_OP_STEPPING);
+        wr_uv(&s, PROFILE_STEP_RATE);
+        send(&s, 0);
+    }
 }
 
 void report_ident(uint16_t nonce, uint8_t urgent)

@@ -30,6 +30,9 @@ class SimConfig:
     clock_hz: int = 100_000  # unit of segment and dwell durations
     cpu_hz: int = 16_000_000  # unit of step schedules (the AVR's clock: 160 cycles a tick)
     max_step_rate: int = 100_000  # steps/s, any one axis
+    #: STEPPING (3.1): the peak rate of an axis it steps from the profile, without a
+    #: schedule block (None: max_step_rate; this model steps every axis exactly)
+    profile_step_rate: int | None = None
     max_payload: int = MAX_PAYLOAD
     rx_window: int = 4096  # bytes of unacknowledged host frames it buffers (a pty holds 4 KB)
     window: int = 4  # device -> host DATA frames in flight
@@ -73,6 +76,11 @@ class SimConfig:
         ``max_step_rate`` less what a schedule within its tolerance may take off it (an
         edge early by the tolerance after one late by it, and the rounding of both)."""
         return max(1, self.cpu_hz // self.max_step_rate - 2 * self.schedule_tolerance_cycles - 1)
+
+    @property
+    def profile_rate(self) -> int:
+        """STEPPING's ``profile_step_rate``."""
+        return self.max_step_rate if self.profile_step_rate is None else self.profile_step_rate
 
     @property
     def slots(self) -> int:

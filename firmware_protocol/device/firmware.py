@@ -29,6 +29,7 @@ from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
     MAX_EVENT_VALUES,
     MINOR_SAFETY,
+    MINOR_STEPPING,
     PROTOCOL_MAJOR,
     PROTOCOL_MINOR,
     Boot,
@@ -57,6 +58,7 @@ from firmware_protocol.messages import (
     SetLimits,
     SetPid,
     Status,
+    Stepping,
 )
 from firmware_protocol.messages import Error as ErrorReport
 from firmware_protocol.segments import SegmentContext
@@ -472,7 +474,8 @@ class SimDevice:
         if isinstance(msg, Identify):
             return [self.ident(0)]
         if isinstance(msg, GetCaps):
-            return [self.caps()]
+            stepping = [Stepping(self.config.profile_rate)]
+            return [self.caps(), *(stepping if self.session_minor >= MINOR_STEPPING else [])]
         if isinstance(msg, ClearFault):
             if mc.latched:  # a thermal fault: only a reset clears it
                 return [Event(EventCode.CLEAR_REFUSED, mc.items_done, (mc.latched,))]

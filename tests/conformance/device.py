@@ -122,8 +122,9 @@ class RawHost:
                 return hit
         raise AssertionError(f"{what} did not happen within {timeout} s")
 
-    def hello(self, nonce: int = 0x1234, timeout: float = 5.0) -> Ident:
-        frame = encode_frame(Kind.URGENT, 0, 0, encode_message(Hello(nonce)))
+    def hello(self, nonce: int = 0x1234, timeout: float = 5.0, minor: int | None = None) -> Ident:
+        hello = Hello(nonce) if minor is None else Hello(nonce, minor=minor)
+        frame = encode_frame(Kind.URGENT, 0, 0, encode_message(hello))
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             self.port.write(frame)

@@ -7,7 +7,16 @@ from __future__ import annotations
 
 import pytest
 
-from firmware_protocol.messages import Caps, Error, ErrorCode, Flag, Flush, GetCaps, Segment
+from firmware_protocol.messages import (
+    Caps,
+    Error,
+    ErrorCode,
+    Flag,
+    Flush,
+    GetCaps,
+    Segment,
+    Stepping,
+)
 from firmware_protocol.schedule_block import encode_block
 from firmware_protocol.schedule_fit import fit_axis
 from firmware_protocol.segments import F_SCHEDULE, encode_one_segment
@@ -25,6 +34,24 @@ def _fitted(steps: int, ticks: int, ramp: int, tol: int) -> AxisSchedule:
 def _caps(h) -> Caps:
     h.send(GetCaps())
     return h.wait_for(lambda: h.of(Caps), what="CAPS")
+
+
+def test_caps_is_followed_by_stepping_in_a_3_1_session_only(device_factory, host_factory):
+    """3.1: STEPPING after CAPS says what the device steps without a block (the AVR's step
+    engine its tick's 8,000 steps/s, under the engine's own rate); a 3.0 host's session
+    (HELLO minor 0) gets CAPS alone, as a 3.0 device would send it."""
+    dev = device_factory()
+    h = host_factory(dev.path)
+    ident = h.hello()
+    assert (ident.major, ident.minor) == (3, 1)
+    _caps(h)
+    stepping = h.wait_for(lambda: h.of(Stepping), what="STEPPING")
+    assert 1 <= stepping.profile_step_rate <= ident.max_step_rate
+    h.reports.clear()
+    h.hello(nonce=0x2345, minor=0)
+    _caps(h)
+    h.status()  # answered after anything GET_CAPS brought
+    assert h.of(Stepping) is None
 
 
 def test_segments_with_schedule_blocks_run_and_land_exactly(device_factory, host_factory):

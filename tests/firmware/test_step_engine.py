@@ -275,7 +275,7 @@ def test_a_stopped_stepper_old_compare_does_not_start_its_next_chunk_early(engin
         for t, d, c, b in _LAYER_3447
     }
 
-    def recorded(batch, ctx, tol, payload, fit_budget_s=None):
+    def recorded(batch, ctx, tol, payload, fit_budget_s=None, needed=None):
         out = {}
         for i in range(len(batch)):
             key = (int(batch.ticks[i]), tuple(int(v) for v in batch.deltas[i]), int(batch.ramps[i]))

@@ -40,32 +40,32 @@ def _record(dev) -> list[dict]:
 
 
 @pytest.mark.parametrize(
-    ("over", "axis", "rate"),
+    ("ticks", "axis", "ramp"),
     [
-        # 5 steps in 0.5 ms at constant speed: 10,000 steps/s
-        (Segment(ticks=50, deltas=(0, 0, 0, 5), ramp=CONSTANT), 3, 10_000),
-        # 5 steps in 1 ms braking to rest: a peak of twice the mean, 10,000 steps/s
-        (Segment(ticks=100, deltas=(0, 0, -5, 0), ramp=TO_REST), 2, 10_000),
+        (50, 3, CONSTANT),  # n steps in 0.5 ms at constant speed: 2,000 n steps/s
+        (100, 2, TO_REST),  # n steps in 1 ms braking to rest: a peak of twice the mean
     ],
 )
-def test_the_rate_check_boundary_on_short_segments(avr_built, tmp_path, over, axis, rate):
+def test_the_rate_check_boundary_on_short_segments(avr_built, tmp_path, ticks, axis, ramp):
     dev = start("avr", tmp_path, "--speedup", "4")
     h = RawHost(dev.path)
     try:
         ident = h.hello()
-        assert ident.max_step_rate == 8_000  # the figures below are for this rate
+        n = ident.max_step_rate // 2_000  # steps at exactly the rate, both shapes
+        assert n * 2_000 == ident.max_step_rate  # (8,000 as built by default)
         h.send(
-            # 4 steps in 0.5 ms: 8,000 steps/s on every axis, exactly the rate
-            Segment(ticks=50, deltas=(4, -4, 4, -4), ramp=CONSTANT),
-            # 4 steps in 1 ms to rest: a peak of 8,000 steps/s
-            Segment(ticks=100, deltas=(-4, 4, -4, 4), ramp=TO_REST),
+            # n steps in 0.5 ms: exactly the rate on every axis
+            Segment(ticks=50, deltas=(n, -n, n, -n), ramp=CONSTANT),
+            # n steps in 1 ms to rest: a peak of exactly the rate
+            Segment(ticks=100, deltas=(-n, n, -n, n), ramp=TO_REST),
             Flush(),
         )
         h.wait_for(lambda: h.status().segments_done == 2, timeout=30, what="both segments")
         assert not errors(h, ErrorCode.STEP_RATE)
-        h.send(over, Flush())
+        deltas = tuple(n + 1 if k == axis else 0 for k in range(4))
+        h.send(Segment(ticks=ticks, deltas=deltas, ramp=ramp), Flush())
         err = h.wait_for(lambda: errors(h, ErrorCode.STEP_RATE), what="STEP_RATE")[0]
-        assert (err.axis, err.value, err.segment) == (axis, rate, 3)
+        assert (err.axis, err.value, err.segment) == (axis, (n + 1) * 2_000, 3)
     finally:
         h.close()
         dev.stop()

@@ -54,6 +54,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="steps/s per axis the Python device announces and enforces (default "
         f"{SimConfig.max_step_rate}); the AVR firmware announces its own",
     )
+    p.add_argument(
+        "--profile-step-rate",
+        type=bounded_int(1, 10_000_000),
+        default=None,
+        metavar="N",
+        help="steps/s the Python device announces for an axis stepped without a schedule "
+        "block (STEPPING; default: the max step rate), as the AVR's step engine announces "
+        "its tick's: the host then sends a block for every faster ramp axis",
+    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -70,11 +79,16 @@ def run(args: argparse.Namespace) -> int:
             f"{given} needs {missing} as well (the virtual mocap needs both)", source=given
         )
     if args.firmware == "avr":
-        if args.max_step_rate is not None:
-            raise InputError(
-                "the AVR firmware announces its own rate (MAX_STEP_RATE, firmware/src/config.h)",
-                source="--max-step-rate",
-            )
+        for given, value in (
+            ("--max-step-rate", args.max_step_rate),
+            ("--profile-step-rate", args.profile_step_rate),
+        ):
+            if value is not None:
+                raise InputError(
+                    "the AVR firmware announces its own rates (MAX_STEP_RATE, "
+                    "PROFILE_STEP_RATE: firmware/src/config.h)",
+                    source=given,
+                )
         from cdprhost.sim.avr_device import run as run_avr
 
         return run_avr(args, faults)
@@ -93,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
             SimConfig(
                 speedup=args.speedup,
                 max_step_rate=args.max_step_rate or SimConfig.max_step_rate,
+                profile_step_rate=args.profile_step_rate,
             ),
             faults,
             observer,

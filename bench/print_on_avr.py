@@ -1,0 +1,173 @@
+"""A whole print on the AVR firmware in simavr against the Python device at the same limits.
+
+    python bench/print_on_avr.py [--gcode examples/example.gcode] [--profile paper-prototype]
+                                 [--engine] [--rate N] [--speedup 1] [--python-only]
+
+Builds the firmware (the default build, or with ``--engine`` the step engine's build;
+``--rate`` sets the ``MAX_STEP_RATE`` it announces, else the build's own), prints the file
+with ``cdprhost print --port`` on it in simavr (the hotend warm at 190 C, as the first-layer
+test), prints it again on ``cdprhost sim-device --firmware python`` announcing the AVR's
+rate, and prints JSON figures:
+
+- ``avr`` / ``python``: the job's status, device time of the print (``print_time_s``) and
+  the job's own estimate;
+- ``records_equal``: every executed segment's number, step totals and device-clock times
+  the same on both (the AVR's record is read from its pins);
+- ``unlimited_s``: the same file planned with the profile's own limits (no step-rate cap:
+  what the board costs is ``avr.print_time_s / unlimited_s - 1``, less the homing time
+  that counts in the device's motion time only);
+- ``harness``: the simulator's figures (late or lost pulses, tick overruns, stalls).
+
+A print in simavr runs in real time at ``--speedup 1`` (a real board's pace): the cup takes
+about 15 minutes at 26,000 steps/s. Use ``--keep DIR`` to keep both records.
+
+Measured (issue 29), ``--engine --rate 26000`` (26,000 steps/s announced, 8,000 without a block), the
+cup with paper-prototype, nothing else running: printed in 749.47 s on the AVR, +0.66 % on
+the plan with no step-rate cap (744.59 s; +0.39 % without the start's 2.00 s of homing),
+the job's estimate 747.47 s, the AVR's record equal to the Python device's (24,371
+segments), 0 late pulses, 0 lost steps, 17 tick overruns. Before the host cut its ramps for
+their blocks: 2,958 tick overruns, 7 steps lost, the record off by 6 steps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cdprhost.preflight.run import preflight  # noqa: E402
+from cdprhost.profile import load_profile  # noqa: E402
+
+
+def build(engine: bool, rate: int | None) -> Path:
+    """The build directory with ``cdpr-sim`` and ``cdpr-sim.elf`` for these options."""
+    flags = (["-DSTEP_ENGINE=1"] if engine else []) + (
+        [f"-DMAX_STEP_RATE={rate}UL"] if rate else []
+    )
+    name = ("engine" if engine else "default") + (f"-rate-{rate}" if rate else "")
+    build_dir = f"build/print-{name}"
+    cmd = ["make", "-s", "-C", str(ROOT / "firmware"), f"BUILD={build_dir}"]
+    cmd += [f"EXTRA_CFLAGS={' '.join(flags)}", "all", "sim"]
+    subprocess.run(cmd, check=True)
+    return ROOT / "firmware" / build_dir
+
+
+def announced_rates(build_dir: Path) -> tuple[int, int | None]:
+    """The build's MAX_STEP_RATE (IDENT) and PROFILE_STEP_RATE (STEPPING), read from a
+    short session."""
+    from cdprhost.link.connect import open_link  # the host's own handshake
+
+    proc = subprocess.Popen(
+        [str(build_dir / "cdpr-sim"), str(build_dir / "cdpr-sim.elf"), "--speedup", "1"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        pty = proc.stdout.readline().strip() if proc.stdout else ""
+        link = open_link(pty)
+        try:
+            assert link.identity is not None and link.caps is not None
+            return int(link.identity.max_step_rate), link.caps.profile_step_rate
+        finally:
+            link.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def print_on(cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict) -> tuple[dict, list]:
+    """``cdprhost print`` on the device ``cmd`` starts (it prints its pty first)."""
+    dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        pty = dev.stdout.readline().strip() if dev.stdout else ""
+        if not pty.startswith("/dev/"):
+            raise SystemExit(f"the device printed {pty!r}")
+        report = tmp / "job.json"
+        args = [sys.executable, "-m", "cdprhost", "print", gcode, "--profile", profile]
+        subprocess.run(
+            [*args, "--port", pty, "--json", str(report)], check=False, env=env, stdout=sys.stderr
+        )
+        job = json.loads(report.read_text()) if report.exists() else {"status": "no report"}
+    finally:
+        dev.send_signal(signal.SIGTERM)
+        dev.wait(timeout=120)
+    return job, []
+
+
+def rows(path: Path) -> list[dict]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gcode", default=str(ROOT / "examples" / "example.gcode"))
+    ap.add_argument("--profile", default="paper-prototype")
+    ap.add_argument("--engine", action="store_true", help="the step engine's build")
+    ap.add_argument("--rate", type=int, help="MAX_STEP_RATE of the build (default: its own)")
+    ap.add_argument("--speedup", type=float, default=1.0)
+    ap.add_argument("--keep", type=Path, help="copy both records and the job logs here")
+    args = ap.parse_args()
+    build_dir = build(args.engine, args.rate)
+    rate, profile_rate = announced_rates(build_dir)
+    unlimited = preflight(
+        args.gcode, load_profile(args.profile).model_copy(update={"device": None})
+    )
+    out: dict = {"gcode": args.gcode, "profile": args.profile, "engine": args.engine, "rate": rate}
+    out["profile_step_rate"] = profile_rate
+    out["unlimited_s"] = unlimited.estimated_time_s
+    with tempfile.TemporaryDirectory() as tmp_s:
+        tmp = Path(tmp_s)
+        env = {**os.environ, "CDPRHOST_STATE": str(tmp / "state")}
+        fields = ("status", "print_time_s", "estimated_time_s", "notices")
+        for kind in ("avr", "python"):
+            (tmp / kind).mkdir()
+            record = tmp / kind / "record.jsonl"
+            if kind == "avr":
+                stats = tmp / kind / "stats.json"
+                cmd = [str(build_dir / "cdpr-sim"), str(build_dir / "cdpr-sim.elf")]
+                cmd += ["--speedup", f"{args.speedup:g}", "--record", str(record)]
+                cmd += ["--stats", str(stats), "--hotend-start-c", "190"]
+            else:
+                cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--firmware", "python"]
+                cmd += ["--speedup", "25", "--record", str(record), "--max-step-rate", str(rate)]
+                cmd += ["--faults", "hotend_start_c=190"]
+                if profile_rate is not None and profile_rate < rate:
+                    cmd += ["--profile-step-rate", str(profile_rate)]
+            t0 = time.monotonic()
+            job, _ = print_on(cmd, args.gcode, args.profile, tmp / kind, env)
+            out[kind] = {k: job.get(k) for k in fields} | {
+                "wall_s": round(time.monotonic() - t0, 1)
+            }
+            if kind == "avr":
+                out["harness"] = json.loads(stats.read_text()) if stats.exists() else {}
+            out[kind]["segments"] = len(rows(record)) if record.exists() else 0
+            (tmp / kind / "rows").write_text(record.read_text() if record.exists() else "")
+        if args.keep:
+            shutil.copytree(tmp, args.keep, dirs_exist_ok=True)
+        a, p = rows(tmp / "avr" / "rows"), rows(tmp / "python" / "rows")
+        out["records_equal"] = a == p
+        if a != p:
+            first = next((i for i, (x, y) in enumerate(zip(a, p)) if x != y), min(len(a), len(p)))
+            out["first_difference"] = {
+                "index": first,
+                "avr": a[first : first + 1],
+                "python": p[first : first + 1],
+            }
+    printed = out["avr"].get("print_time_s") or 0.0
+    if printed and out["unlimited_s"]:
+        out["board_cost_pct"] = round(100.0 * (printed / out["unlimited_s"] - 1.0), 2)
+    print(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
