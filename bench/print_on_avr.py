@@ -85,7 +85,7 @@ def announced_rates(build_dir: Path) -> tuple[int, int | None]:
         proc.wait(timeout=30)
 
 
-def print_on(cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict) -> tuple[dict, list]:
+def print_on(cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict) -> dict:
     """``cdprhost print`` on the device ``cmd`` starts (it prints its pty first)."""
     dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
     try:
@@ -101,10 +101,13 @@ def print_on(cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict) -> 
     finally:
         dev.send_signal(signal.SIGTERM)
         dev.wait(timeout=120)
-    return job, []
+    return job
 
 
 def rows(path: Path) -> list[dict]:
+    """A record's rows (none when the device wrote no record)."""
+    if not path.exists():
+        return []
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
@@ -144,17 +147,16 @@ def main() -> None:
                 if profile_rate is not None and profile_rate < rate:
                     cmd += ["--profile-step-rate", str(profile_rate)]
             t0 = time.monotonic()
-            job, _ = print_on(cmd, args.gcode, args.profile, tmp / kind, env)
+            job = print_on(cmd, args.gcode, args.profile, tmp / kind, env)
             out[kind] = {k: job.get(k) for k in fields} | {
                 "wall_s": round(time.monotonic() - t0, 1)
             }
             if kind == "avr":
                 out["harness"] = json.loads(stats.read_text()) if stats.exists() else {}
-            out[kind]["segments"] = len(rows(record)) if record.exists() else 0
-            (tmp / kind / "rows").write_text(record.read_text() if record.exists() else "")
+            out[kind]["segments"] = len(rows(record))
         if args.keep:
             shutil.copytree(tmp, args.keep, dirs_exist_ok=True)
-        a, p = rows(tmp / "avr" / "rows"), rows(tmp / "python" / "rows")
+        a, p = rows(tmp / "avr" / "record.jsonl"), rows(tmp / "python" / "record.jsonl")
         out["records_equal"] = a == p
         if a != p:
             first = next((i for i, (x, y) in enumerate(zip(a, p)) if x != y), min(len(a), len(p)))

@@ -111,21 +111,20 @@ def fit_for_blocks(
     return cut, out
 
 
-def block_bytes(
-    ticks: int,
-    deltas: tuple[int, ...],
-    code: int,
-    cycles_per_tick: int,
-    tol_cycles: float,
-    table: np.ndarray,
-) -> int | None:
-    """Payload bytes of the schedule block the segment ``(ticks, deltas, code)`` needs
-    (0: every moving axis runs the device's prediction), or None when one of its axes needs
-    more chunks than a block holds (``MAX_CHUNKS``)."""
-    one = SegmentBatch(np.array([ticks]), np.array([deltas]), np.array([code], dtype=np.int16))
-    explicit = {
-        k: s for (_, k), s in plan_schedules(one, cycles_per_tick, tol_cycles, table).items()
-    }
-    if any(len(s.chunks) > MAX_CHUNKS for s in explicit.values()):
-        return None
-    return len(encode_block(deltas, ticks, explicit, table)) if explicit else 0
+def block_sizes(
+    batch: SegmentBatch, cycles_per_tick: int, tol_cycles: float, table: np.ndarray
+) -> np.ndarray:
+    """(n,) payload bytes of the schedule block each segment of ``batch`` needs (0: every
+    moving axis runs the device's prediction; -1: one of its axes needs more chunks than a
+    block holds, ``MAX_CHUNKS``). The batch's schedules are fitted together."""
+    by_segment: dict[int, dict[int, AxisSchedule]] = {}
+    for (i, k), sched in plan_schedules(batch, cycles_per_tick, tol_cycles, table).items():
+        by_segment.setdefault(i, {})[k] = sched
+    sizes = np.zeros(len(batch), np.int64)
+    for i, scheds in by_segment.items():
+        if any(len(s.chunks) > MAX_CHUNKS for s in scheds.values()):
+            sizes[i] = -1
+        else:
+            deltas = tuple(int(v) for v in batch.deltas[i])
+            sizes[i] = len(encode_block(deltas, int(batch.ticks[i]), scheds, table))
+    return sizes

@@ -75,11 +75,13 @@ def wire_schedules(
     if needed is None:
         needed = np.zeros(len(batch), bool)
     start = time.perf_counter()
-    for fits, i in enumerate(np.flatnonzero(ramp).tolist()):
+    fits = 0
+    for i in np.flatnonzero(ramp).tolist():
         spent = time.perf_counter() - start
         each = spent / fits if fits else RAMP_FIT_S  # what one more is likely to take
         if fit_budget_s is not None and spent + each > fit_budget_s and not needed[i]:
             continue
+        fits += 1
         part = plan_schedules(batch[i : i + 1], ctx.cycles_per_tick, tol_cycles, ctx.table)
         planned.update({(i, k): sched for (_, k), sched in part.items()})
     if not planned:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, ramp_codes_from_speeds, steps_done
-from firmware_protocol.segment_split import block_bytes
+from firmware_protocol.segment_split import block_sizes
 from firmware_protocol.segments import SEGMENT_MAX_BYTES, SegmentBatch, peak_step_rates
 from firmware_protocol.step_schedule import reciprocal_table
 
@@ -38,7 +38,7 @@ class BlockLimits:
 
     cycles_per_tick: int
     tolerance_cycles: float
-    profile_step_rate: float = 0.0
+    profile_step_rate: float
     block_bytes: int = BLOCK_FRAME_BYTES - SEGMENT_MAX_BYTES
 
     @classmethod
@@ -75,26 +75,10 @@ def equal_pieces(
     return tau, np.diff(cut, prepend=0), steps, speeds
 
 
-def _fits(
-    ticks: np.ndarray,
-    steps: np.ndarray,
-    codes: np.ndarray,
-    limits: BlockLimits,
-    table: np.ndarray,
-    max_step_rate: float | None,
-    clock_hz: int,
-) -> bool:
-    if max_step_rate is not None:
-        wire = SegmentBatch(ticks, steps, codes)
-        if (peak_step_rates(wire, clock_hz) > max_step_rate).any():
-            return False
-    for t, d, c in zip(ticks.tolist(), steps.tolist(), codes.tolist()):
-        size = block_bytes(
-            int(t), tuple(d), int(c), limits.cycles_per_tick, limits.tolerance_cycles, table
-        )
-        if size is None or size > limits.block_bytes:
-            return False
-    return True
+def _fit(batch: SegmentBatch, limits: BlockLimits, table: np.ndarray) -> np.ndarray:
+    """(n,) bool: each segment's schedule block fits ``limits``."""
+    sizes = block_sizes(batch, limits.cycles_per_tick, limits.tolerance_cycles, table)
+    return np.asarray((sizes >= 0) & (sizes <= limits.block_bytes))
 
 
 def block_cuts(
@@ -115,17 +99,24 @@ def block_cuts(
     codes = ramp_codes_from_speeds(v_start, v_end)
     table = reciprocal_table(limits.cycles_per_tick)
     out: dict[int, int] = {}
-    ramp = codes != RAMP_CONSTANT
     peak = peak_step_rates(SegmentBatch(ticks, delta, codes), clock_hz).max(axis=1)
-    for i in np.flatnonzero(ramp & (peak > limits.profile_step_rate)).tolist():
-        t, d, c = int(ticks[i]), delta[i], int(codes[i])
-        whole = np.array([t]), d[None, :], np.array([c], dtype=np.int16)
-        if _fits(*whole, limits, table, None, clock_hz):
-            continue
+    fast = np.flatnonzero((codes != RAMP_CONSTANT) & (peak > limits.profile_step_rate))
+    if not fast.size:
+        return out
+    whole = _fit(SegmentBatch(ticks[fast], delta[fast], codes[fast]), limits, table)
+    for i in fast[~whole].tolist():
+        t, d = int(ticks[i]), delta[i]
         for k in range(2, min(MAX_PIECES, t // max(1, min_ticks)) + 1):
-            _, pt, ps, speeds = equal_pieces(t, d, float(v_start[i]), float(v_end[i]), c, k)
-            pc = ramp_codes_from_speeds(speeds[:-1], speeds[1:])
-            if _fits(pt, ps, pc, limits, table, max_step_rate, clock_hz):
+            _, pt, ps, speeds = equal_pieces(
+                t, d, float(v_start[i]), float(v_end[i]), int(codes[i]), k
+            )
+            pieces = SegmentBatch(pt, ps, ramp_codes_from_speeds(speeds[:-1], speeds[1:]))
+            if (
+                max_step_rate is not None
+                and (peak_step_rates(pieces, clock_hz) > max_step_rate).any()
+            ):
+                continue
+            if _fit(pieces, limits, table).all():
                 out[i] = k
                 break
     return out

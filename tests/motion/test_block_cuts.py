@@ -15,8 +15,8 @@ from cdprhost.motion.device_limits import caps_for_device
 from cdprhost.motion.direct import to_wire
 from cdprhost.profile import load_profile
 from firmware_protocol.ramp_profile import ramp_codes_from_speeds
-from firmware_protocol.segment_split import block_bytes
-from firmware_protocol.segments import SegmentContext, peak_step_rates
+from firmware_protocol.segment_split import block_sizes
+from firmware_protocol.segments import SegmentBatch, SegmentContext, peak_step_rates
 from firmware_protocol.step_schedule import reciprocal_table
 from tests.motion.test_device_limits import _first_segments
 
@@ -58,18 +58,16 @@ def _cut_pieces(ticks, delta, vs, ve):
 def test_a_long_ramp_from_rest_is_cut_until_every_piece_fits_a_frame():
     ticks, delta, vs, ve = 1500, [62, 27, -89, 1], 0.0, 30.0  # 15 ms from rest (the cup's)
     codes = ramp_codes_from_speeds(np.array([vs]), np.array([ve]))
-    whole = block_bytes(ticks, tuple(delta), int(codes[0]), 160, 16.0, TABLE)
-    assert whole is None or whole > LIMITS.block_bytes  # does not fit whole
+    one = SegmentBatch(np.array([ticks]), np.array([delta]), codes)
+    (whole,) = block_sizes(one, 160, 16.0, TABLE)
+    assert whole == -1 or whole > LIMITS.block_bytes  # does not fit whole
     k = _cut_pieces(ticks, delta, vs, ve)
     assert k >= 2
     pt, ps, _, pc = _pieces(ticks, delta, vs, ve, k)
-    for t, d, c in zip(pt.tolist(), ps.tolist(), pc.tolist()):
-        size = block_bytes(t, tuple(d), c, 160, 16.0, TABLE)
-        assert size is not None and size <= LIMITS.block_bytes
-    # and the link sends each piece with its block (none left to the device's stepping)
-    from firmware_protocol.segments import SegmentBatch
-
     batch = SegmentBatch(pt, ps, pc.astype(np.int16))
+    sizes = block_sizes(batch, 160, 16.0, TABLE)
+    assert ((sizes >= 0) & (sizes <= LIMITS.block_bytes)).all(), sizes
+    # and the link sends each piece with its block (none left to the device's stepping)
     sent = wire_schedules(batch, SegmentContext(), 16, 120)
     moving = {(i, a) for i in range(k) for a in range(4) if ps[i, a]}
     assert moving <= set(sent)
