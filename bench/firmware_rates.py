@@ -32,17 +32,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from cdprhost.link import HostLink, LinkError, open_link
+from cdprhost.link import HostLink, LinkError, open_link, wire_cuts
 from cdprhost.sim import avr_device
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST, step_times
-from firmware_protocol.segment_split import split_segment
 from firmware_protocol.segments import (
-    SEGMENT_MAX_BYTES,
     SegmentBatch,
-    SegmentContext,
-    encode_block_for,
 )
-from firmware_protocol.step_schedule import predictable
 from firmware_protocol.streams import expected_record
 
 CLOCK_HZ = 100_000
@@ -175,43 +170,10 @@ WARM_FRAMES = 48
 
 
 def cut_for_blocks(batch: SegmentBatch, payload: int = MAX_PAYLOAD) -> SegmentBatch:
-    """``batch`` with each ramp cut in halves along its own profile (segment_split) until
-    the schedule blocks of all its moving axes fit one payload with the segment, as the
-    host is to cut them (PROTOCOL.md 5.5): every axis of a ramp then steps from its block
-    (the step engine's), none on the device's own stepping (3.0's fallback)."""
-    from cdprhost.link.segment_feed import wire_schedules  # the host's choice of blocks
-
-    ctx = SegmentContext()
-    out: list[tuple[int, tuple[int, ...], int]] = []
-
-    def fits(t: int, d: tuple[int, ...], c: int) -> bool:
-        one = SegmentBatch(np.array([t]), np.array([d]), np.array([c], dtype=np.int16))
-        blocks = wire_schedules(one, ctx, 16, payload)
-        moving = [k for k in range(4) if d[k]]
-        return all((0, k) in blocks for k in moving if not predictable(d[k], t, c)) and (
-            len(encode_block_for(t, d, {k: s for (_, k), s in blocks.items()}, ctx))
-            <= payload - SEGMENT_MAX_BYTES
-        )
-
-    def add(t: int, d: tuple[int, ...], c: int) -> None:
-        if c == RAMP_CONSTANT or t < 2 * 40 or fits(t, d, c):
-            out.append((t, d, c))
-            return
-        a, b = split_segment(t, d, c, t // 2)
-        add(*a)
-        add(*b)
-
-    for i in range(len(batch)):
-        add(
-            int(batch.ticks[i]),
-            tuple(int(v) for v in batch.deltas[i]),
-            int(batch.ramps[i]),
-        )
-    return SegmentBatch(
-        np.array([p[0] for p in out]),
-        np.array([p[1] for p in out], dtype=np.int64),
-        np.array([p[2] for p in out], dtype=np.int16),
-    )
+    """``batch`` with its ramps cut until their blocks fit a payload, as the host cuts a
+    batch it did not plan (cdprhost.link.wire_cuts): every axis of a ramp then steps from
+    its block (the step engine's), none on the device's own stepping."""
+    return wire_cuts.cut_for_blocks(batch, payload)
 
 
 def warm_link(link: HostLink, frames: int = WARM_FRAMES) -> None:

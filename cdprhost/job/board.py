@@ -9,7 +9,6 @@ from datetime import UTC, datetime
 from pydantic import ValidationError
 
 from cdprhost.link.events import DeviceCaps, Identity
-from cdprhost.motion.block_cuts import BlockLimits
 from cdprhost.profile.device_record import DeviceRecord
 
 log = logging.getLogger(__name__)
@@ -30,21 +29,3 @@ def announced_record(ident: Identity | None, caps: DeviceCaps | None) -> DeviceR
     except ValidationError as exc:
         log.warning("the board announced limits a profile cannot record: %s", exc)
         return None
-
-
-def block_limits(ident: Identity | None, caps: DeviceCaps | None) -> BlockLimits | None:
-    """How a board whose schedules step faster than its own stepping of a profile
-    (STEPPING's rate under IDENT's, protocol 3.1: the AVR's step engine beside its 400 us
-    tick) wants its ramps cut; None when it steps every axis alike, or before the
-    handshake."""
-    if ident is None or caps is None or caps.profile_step_rate is None:
-        return None
-    if caps.profile_step_rate >= ident.max_step_rate:
-        return None
-    return BlockLimits.for_device(
-        ident.cpu_hz,
-        ident.clock_hz,
-        caps.schedule_tolerance_cycles,
-        ident.max_payload,
-        caps.profile_step_rate,
-    )

@@ -24,7 +24,7 @@ from typing import Any
 
 from cdprhost.errors import CdprError
 from cdprhost.gcode.errors import GcodeError
-from cdprhost.job.board import announced_record, block_limits
+from cdprhost.job.board import announced_record
 from cdprhost.job.exact import ExactPlaceUnknown, device_stop, refine_point, reset_notice
 from cdprhost.job.log import JobLog
 from cdprhost.job.options import PrintOptions, PrintResult, violations_reason
@@ -46,8 +46,9 @@ from cdprhost.link import DeviceReset, DeviceStatus, HostLink, LinkError
 from cdprhost.link.events import DeviceCaps as AnnouncedCaps
 from cdprhost.link.events import Identity
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
+from cdprhost.machine.board_limits import board_caps
 from cdprhost.machine.commands import estop_flags, heaters_off
-from cdprhost.motion.device_limits import caps_for_device, same_plan
+from cdprhost.motion.device_limits import same_plan
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.motion.segments import DEFAULT_LIMITS
@@ -368,9 +369,7 @@ class PrintJob:
         try:
             check = prepare_device(machine, clear_fault=self.options.clear_fault)
             ident, dev_caps = link.identity, link.caps
-            rate = ident.max_step_rate if ident else None
-            shortest = dev_caps.min_segment_ticks / ident.clock_hz if ident and dev_caps else None
-            caps = caps_for_device(self.profile, rate, shortest, block_limits(ident, dev_caps))
+            caps = board_caps(link, self.profile)
             self._plan_profile = caps.profile
             self._segment_limits = caps.segments
             for text in [*check.notices, *([caps.notice] if caps.notice else [])]:

@@ -18,6 +18,7 @@ from cdprhost.link.device_setup import setup_from_profile
 from cdprhost.link.errors import LinkError
 from cdprhost.link.events import DeviceStatus
 from cdprhost.link.host_link import HostLink
+from cdprhost.machine.board_limits import board_caps
 from cdprhost.machine.commands import enable_all, heater_messages, home_commands, motors_off
 from cdprhost.machine.faults import DeviceFaulted, describe_fault, fault_clearable, refusal
 from cdprhost.motion.direct import direct_path, state_at_steps
@@ -172,13 +173,15 @@ class Machine:
         # counter at zero, so a move never tries to undo the filament a print pushed (a print
         # or a cancelled print leaves that counter far from zero).
         modules_only = (*st.steps[:3], 0)
+        board = board_caps(self.link, self.profile)  # as a print plans: the board's limits
         wire, seconds, reached = direct_path(
-            self.profile,
+            board.profile,
             self.model,
             state_at_steps(self.model, modules_only),
             points,
             feedrate_mm_s=self.feed_mm_s if feed_mm_s is None else float(feed_mm_s),
             clock_hz=self.clock_hz,
+            limits=board.segments,
         )
         limit = timeout_s if timeout_s is not None else seconds + 60.0
         if end_steps is not None:

@@ -15,7 +15,13 @@ from cdprhost.kinematics.machine import MachineModel
 from cdprhost.motion.limits import Caps
 from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.planner import Planner
-from cdprhost.motion.segments import PlannedSegments, Segmenter, SegmentState
+from cdprhost.motion.segments import (
+    DEFAULT_LIMITS,
+    PlannedSegments,
+    Segmenter,
+    SegmentLimits,
+    SegmentState,
+)
 from cdprhost.profile.models import MachineProfile
 from firmware_protocol.ramp_profile import ramp_codes_from_speeds
 from firmware_protocol.segments import SegmentBatch
@@ -43,8 +49,11 @@ def direct_path(
     *,
     feedrate_mm_s: float,
     clock_hz: int,
+    limits: SegmentLimits = DEFAULT_LIMITS,
 ) -> tuple[SegmentBatch, float, SegmentState]:
-    """Segments through ``points`` (machine frame, in order) starting from ``state``.
+    """Segments through ``points`` (machine frame, in order) starting from ``state``, for
+    a device that takes ``limits`` (``profile`` already capped to its step rate, as a
+    print's: :func:`~cdprhost.motion.device_limits.caps_for_device`).
 
     Returns the wire batch, its duration in seconds, and the state after it.
     """
@@ -57,6 +66,7 @@ def direct_path(
         profile.drive.home_mm,
         e_steps_per_mm=profile.extruder.steps_per_mm,
         clock_hz=clock_hz,
+        limits=limits,
     )
     segmenter.state = state
     planned = (

@@ -114,7 +114,7 @@ def test_only_a_board_whose_own_stepping_is_slower_gets_its_ramps_cut():
     """STEPPING (3.1) reaches the plan: a device that steps every axis alike (the model's
     default, a 3.0 device) gets no cuts; one whose profile stepping is slower than its
     schedules (the AVR's engine: 8,000 under 26,000) gets them, for its ramps over 8,000."""
-    from cdprhost.job.board import block_limits
+    from cdprhost.machine.board_limits import block_limits
     from cdprhost.sim.embedded import open_embedded
     from firmware_protocol.device.config import SimConfig
 
