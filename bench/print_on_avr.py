@@ -1,7 +1,7 @@
 """A whole print on the AVR firmware in simavr against the Python device at the same limits.
 
     python bench/print_on_avr.py [--gcode examples/example.gcode] [--profile paper-prototype]
-                                 [--engine] [--rate N] [--speedup 1] [--python-only]
+                                 [--engine] [--rate N] [--speedup 1] [--busy-host] [--keep DIR]
 
 Builds the firmware (the default build, or with ``--engine`` the step engine's build;
 ``--rate`` sets the ``MAX_STEP_RATE`` it announces, else the build's own), prints the file
@@ -12,11 +12,18 @@ rate, and prints JSON figures:
 - ``avr`` / ``python``: the job's status, device time of the print (``print_time_s``) and
   the job's own estimate;
 - ``records_equal``: every executed segment's number, step totals and device-clock times
-  the same on both (the AVR's record is read from its pins);
+  the same on both (the AVR's record is read from its pins, at its motion marker); else the
+  rows that differ or are missing; ``final_steps_equal``: the step counters each device
+  reported when the job ended (what moved, whatever the record says);
 - ``unlimited_s``: the same file planned with the profile's own limits (no step-rate cap:
   what the board costs is ``avr.print_time_s / unlimited_s - 1``, less the homing time
   that counts in the device's motion time only);
 - ``harness``: the simulator's figures (late or lost pulses, tick overruns, stalls).
+
+``--busy-host``: the host fits no schedule block it is not bound to (its time for the fits,
+``segment_feed.FIT_TURN_S``, at 0), as a host with no time to spare: every ramp the device
+may step from its profile (under ``STEPPING``'s rate) goes without its block, to the tick's
+DDA beside the engine.
 
 A print in simavr runs in real time at ``--speedup 1`` (a real board's pace): the cup takes
 about 15 minutes at 26,000 steps/s. Use ``--keep DIR`` to keep both records.
@@ -85,7 +92,16 @@ def announced_rates(build_dir: Path) -> tuple[int, int | None]:
         proc.wait(timeout=30)
 
 
-def print_on(cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict) -> dict:
+#: ``cdprhost`` with the host's time for the ramps' fits at 0 (``--busy-host``)
+BUSY_HOST = (
+    "import sys; import cdprhost.link.segment_feed as feed; feed.FIT_TURN_S = 0.0; "
+    "from cdprhost.cli.main import main; sys.exit(main())"
+)
+
+
+def print_on(
+    cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict, busy: bool = False
+) -> dict:
     """``cdprhost print`` on the device ``cmd`` starts (it prints its pty first)."""
     dev = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=env)
     try:
@@ -93,7 +109,8 @@ def print_on(cmd: list[str], gcode: str, profile: str, tmp: Path, env: dict) -> 
         if not pty.startswith("/dev/"):
             raise SystemExit(f"the device printed {pty!r}")
         report = tmp / "job.json"
-        args = [sys.executable, "-m", "cdprhost", "print", gcode, "--profile", profile]
+        host = [sys.executable, "-c", BUSY_HOST] if busy else [sys.executable, "-m", "cdprhost"]
+        args = [*host, "print", gcode, "--profile", profile]
         subprocess.run(
             [*args, "--port", pty, "--json", str(report)], check=False, env=env, stdout=sys.stderr
         )
@@ -119,6 +136,9 @@ def main() -> None:
     ap.add_argument("--rate", type=int, help="MAX_STEP_RATE of the build (default: its own)")
     ap.add_argument("--speedup", type=float, default=1.0)
     ap.add_argument("--keep", type=Path, help="copy both records and the job logs here")
+    ap.add_argument(
+        "--busy-host", action="store_true", help="no schedule block the host is not bound to"
+    )
     args = ap.parse_args()
     build_dir = build(args.engine, args.rate)
     rate, profile_rate = announced_rates(build_dir)
@@ -126,12 +146,13 @@ def main() -> None:
         args.gcode, load_profile(args.profile).model_copy(update={"device": None})
     )
     out: dict = {"gcode": args.gcode, "profile": args.profile, "engine": args.engine, "rate": rate}
+    out["busy_host"] = args.busy_host
     out["profile_step_rate"] = profile_rate
     out["unlimited_s"] = unlimited.estimated_time_s
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
         env = {**os.environ, "CDPRHOST_STATE": str(tmp / "state")}
-        fields = ("status", "print_time_s", "estimated_time_s", "notices")
+        fields = ("status", "print_time_s", "estimated_time_s", "final_steps", "notices")
         for kind in ("avr", "python"):
             (tmp / kind).mkdir()
             record = tmp / kind / "record.jsonl"
@@ -147,7 +168,7 @@ def main() -> None:
                 if profile_rate is not None and profile_rate < rate:
                     cmd += ["--profile-step-rate", str(profile_rate)]
             t0 = time.monotonic()
-            job = print_on(cmd, args.gcode, args.profile, tmp / kind, env)
+            job = print_on(cmd, args.gcode, args.profile, tmp / kind, env, args.busy_host)
             out[kind] = {k: job.get(k) for k in fields} | {
                 "wall_s": round(time.monotonic() - t0, 1)
             }
@@ -158,7 +179,12 @@ def main() -> None:
             shutil.copytree(tmp, args.keep, dirs_exist_ok=True)
         a, p = rows(tmp / "avr" / "record.jsonl"), rows(tmp / "python" / "record.jsonl")
         out["records_equal"] = a == p
+        # the step counters each device reported at the end: what moved, whatever its record
+        out["final_steps_equal"] = out["avr"].get("final_steps") == out["python"].get("final_steps")
         if a != p:
+            by_seq = {r["seq"]: r for r in p}
+            out["rows_differing"] = sum(by_seq.get(r["seq"]) not in (None, r) for r in a)
+            out["rows_missing"] = len(set(by_seq) - {r["seq"] for r in a})
             first = next((i for i, (x, y) in enumerate(zip(a, p)) if x != y), min(len(a), len(p)))
             out["first_difference"] = {
                 "index": first,
