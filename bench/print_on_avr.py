@@ -33,7 +33,10 @@ cup with paper-prototype, nothing else running: printed in 749.47 s on the AVR, 
 the plan with no step-rate cap (744.59 s; +0.39 % without the start's 2.00 s of homing),
 the job's estimate 747.47 s, the AVR's record equal to the Python device's (24,371
 segments), 0 late pulses, 0 lost steps, 17 tick overruns. Before the host cut its ramps for
-their blocks: 2,958 tick overruns, 7 steps lost, the record off by 6 steps.
+their blocks: 2,958 tick overruns, 7 steps lost, the record off by 6 steps. With
+``--busy-host``: the same time, both devices' final step counters equal, no step lost or
+late, but 424 tick overruns and 19,278 record rows off by 1-3 steps (2 missing) from
+segment 3,004: the record's marker late under overruns (firmware/README.md).
 """
 
 from __future__ import annotations
