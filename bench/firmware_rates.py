@@ -35,9 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from cdprhost.link import HostLink, LinkError, open_link, wire_cuts
 from cdprhost.sim import avr_device
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST, step_times
-from firmware_protocol.segments import (
-    SegmentBatch,
-)
+from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.streams import expected_record
 
 CLOCK_HZ = 100_000

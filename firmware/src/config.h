@@ -46,9 +46,9 @@
  * -DMAX_STEP_RATE=26000UL (bench/print_on_avr.py --engine --rate 26000) it prints the cup
  * 0.4 % slower than with no cap and exactly as the Python device at the same limits, its
  * first layer and its resume after a reset are exact, but one cup under a loaded host
- * ended 14 steps off on module 1 (not traced yet), a stream of fast ramps back to back
- * costs more of the main loop than its pieces last, and four axes in step at that rate
- * are too many (firmware/README.md, the step engine). */
+ * ended 14 steps off on module 1 (not traced yet), a stream that is mostly fast ramps
+ * runs dry, and four axes in step at that rate are too many (firmware/README.md, the
+ * step engine). */
 #ifndef MAX_STEP_RATE
 #define MAX_STEP_RATE 8000UL /* steps/s, any one axis */
 #endif
