@@ -45,8 +45,10 @@ late, but 424 tick overruns and 19,278 record rows off by 1-3 steps (2 missing) 
 segment 3,004: the record's marker late under overruns (firmware/README.md).
 ``--engine --rate 26000 --from-layer 10`` (layers 10-40, 266 s of print, 14,337 segments):
 clean in none of 6 runs; 4 ran dry (UNDERRUN), 2 completed with 51-187 tick overruns and
-thousands of record rows off, every run with about 3,300-3,500 frames sent again: the
-ring of schedule chunks full, frames refused (firmware/README.md, "Not yet").
+thousands of record rows off, with up to about 3,500 frames sent again: the ring of
+schedule chunks full, frames refused (firmware/README.md, "Not yet"). The whole cup again
+on 0c69937 (``--engine --rate 26000``, idle): UNDERRUN at segment 17,990 (628 s in), 2,887
+frames sent again by then. The clean run above was not the rule.
 """
 
 from __future__ import annotations
