@@ -27,7 +27,8 @@ may step from its profile (under ``STEPPING``'s rate) goes without its block, to
 DDA beside the engine.
 
 ``--from-layer N``: the file's start (its lines before the first layer: homing, heating)
-and its layers from the Nth on (1-based; ``;LAYER_CHANGE`` or Cura's ``;LAYER:``), as one
+and its layers from the Nth on (1-based, marked as the host's reader marks them:
+``;LAYER_CHANGE``, Cura's ``;LAYER:``, Simplify3D's ``; layer N, Z =``), as one
 file for both devices and the plan with no cap: the cup's upper layers in 5 minutes
 instead of all of it in 15.
 
@@ -56,7 +57,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -68,6 +68,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cdprhost.gcode import annotations  # noqa: E402
 from cdprhost.preflight.run import preflight  # noqa: E402
 from cdprhost.profile import load_profile  # noqa: E402
 
@@ -115,14 +116,13 @@ BUSY_HOST = (
 )
 
 
-#: a slicer's layer change: PrusaSlicer's ``;LAYER_CHANGE``, Cura's ``;LAYER:<n>``
-LAYER_MARK = re.compile(r"^;(LAYER_CHANGE|LAYER:)")
-
-
 def from_layer(gcode: str, layer: int) -> str:
-    """``gcode``'s lines before its first layer and its layers from ``layer`` (1-based) on."""
+    """``gcode``'s lines before its first layer and its layers from ``layer`` (1-based) on,
+    the layers as the host's reader marks them (``cdprhost.gcode.annotations``)."""
     lines = gcode.splitlines(keepends=True)
-    marks = [i for i, line in enumerate(lines) if LAYER_MARK.match(line)]
+    found = annotations.scan(gcode.encode())
+    style = annotations.choose_style(found)
+    marks = [a.index for a in found if a.tag == style.value]
     if not 1 <= layer <= len(marks):
         raise SystemExit(f"--from-layer {layer}: the file has {len(marks)} marked layers")
     return "".join(lines[: marks[0]] + lines[marks[layer - 1] :])

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
@@ -16,6 +18,19 @@ from cdprhost.profile import load_profile
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("CDPRHOST_SHARED", REPO.parent / "shared"))
+
+
+def load_script(path: Path, name: str) -> ModuleType:
+    """A script outside the packages (``bench/``, ``firmware/tools/``) imported as the module
+    ``name``, registered in ``sys.modules`` (a dataclass of its looks its module up there)."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None, path
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 FIXTURE_GCODE = SHARED / "fixtures" / "part-prusaslicer.gcode"
 
 settings.register_profile("ci", max_examples=200, deadline=None)

@@ -8,13 +8,12 @@ with few effective directions, not a bias."""
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 
 import numpy as np
 import pytest
 
-from tests.conftest import REPO
+from tests.conftest import REPO, load_script
 
 SEEDS = range(1, 7)
 
@@ -23,12 +22,7 @@ SEEDS = range(1, 7)
 def scatter(tmp_path_factory):
     sys.path.insert(0, str(REPO / "bench"))
     try:
-        spec = importlib.util.spec_from_file_location(
-            "bench_trust_scatter", REPO / "bench" / "trust_scatter.py"
-        )
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module  # its dataclasses look their module up
-        spec.loader.exec_module(module)
+        module = load_script(REPO / "bench" / "trust_scatter.py", "bench_trust_scatter")
         tmp = tmp_path_factory.mktemp("unused")  # no session folder: no pictures
         return [module.scatter("known", s, tmp, False, False, True) for s in SEEDS]
     finally:

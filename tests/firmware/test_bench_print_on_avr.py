@@ -3,24 +3,16 @@ the print itself is a benchmark)."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "print_on_avr.py"
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "example.gcode"
+from tests.conftest import REPO, load_script
+
+EXAMPLE = REPO / "examples" / "example.gcode"
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("print_on_avr", BENCH)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["print_on_avr"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script(REPO / "bench" / "print_on_avr.py", "print_on_avr")
 
 
 PRUSA = "G28\nM109 S215\n;LAYER_CHANGE\n;Z:0.2\nG1 X1 E1\n;LAYER_CHANGE\n;Z:0.4\nG1 X2 E1\n"

@@ -4,8 +4,6 @@ either engine (one short simavr run a rate; the search itself is a benchmark).""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,18 +12,14 @@ import pytest
 from cdprhost.sim import avr_device
 from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.segments import peak_step_rates
+from tests.conftest import load_script
 
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "firmware_rates.py"
 
 
 @pytest.fixture(scope="module")
 def fr():
-    spec = importlib.util.spec_from_file_location("firmware_rates", BENCH)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["firmware_rates"] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script(BENCH, "firmware_rates")
 
 
 OUT_OF_STEP = "three modules out of step, extruder running"

@@ -2,20 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
 
+from tests.conftest import load_script
+
 TOOLS = Path(__file__).resolve().parents[2] / "firmware" / "tools"
 
 
 def _tool(name: str):
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(TOOLS / f"{name}.py", name)
 
 
 @pytest.mark.parametrize(

@@ -4,7 +4,6 @@ period (firmware/tools/engine_rates.py builds it into firmware/build/engine-rate
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import time
@@ -18,6 +17,7 @@ from cdprhost.sim import avr_device
 from firmware_protocol.host_messages import SetHeater, WaitHeater
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST
 from firmware_protocol.segments import SegmentBatch
+from tests.conftest import load_script
 
 TOOL = Path(__file__).resolve().parents[2] / "firmware" / "tools" / "engine_rates.py"
 
@@ -27,10 +27,7 @@ def engine() -> ModuleType:
     missing = avr_device.toolchain_missing()
     if missing:
         pytest.skip(missing)
-    spec = importlib.util.spec_from_file_location("engine_rates", TOOL)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script(TOOL, "engine_rates")
     mod.build(200_000)
     return mod
 
