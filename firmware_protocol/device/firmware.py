@@ -15,7 +15,9 @@ import os
 import secrets
 from collections.abc import Callable
 
+from firmware_protocol.block_ring import block_entries
 from firmware_protocol.device import queue_items as m
+from firmware_protocol.device.block_store import BlockStore
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
 from firmware_protocol.device.flow_reports import FlowReports
@@ -28,6 +30,7 @@ from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
     MAX_EVENT_VALUES,
+    MINOR_RING,
     MINOR_SAFETY,
     MINOR_STEPPING,
     PROTOCOL_MAJOR,
@@ -116,6 +119,8 @@ class SimDevice:
         self.machine = DeviceMachine(
             cfg, self.record, boot=self.boots, physical=physical, observer=self.observer
         )
+        # the ring of schedule-block entries (a step engine's; None: blocks need no room)
+        self.ring = BlockStore(cfg.ring_entries, cfg.max_payload) if cfg.ring_entries else None
         if self.faults.reset_after and not self._reset_done:
             self.machine.halt_at = self.faults.reset_after
         elif self.faults.stall_after:
@@ -131,7 +136,7 @@ class SimDevice:
         self.endpoint = Endpoint(
             window=cfg.window,
             accept=self._accept,
-            flow=lambda: self.flow.payload(self.machine, self._now, self.device_time(self._now)),
+            flow=self._flow_payload,
             rto_initial=0.05,
             rto_floor=0.02,
             rto_ceiling=0.25,
@@ -152,7 +157,35 @@ class SimDevice:
             round(cfg.flow_s * cfg.clock_hz), cfg.flow_interval_s, self.machine.capacity // 8
         )
         self.lease_ms = 0  # the session's heater lease (0: not armed)
+        self._ring_sent: tuple[int, bool] | None = None  # the last RING's tail, and short
         self.lease_until = math.inf
+
+    def _flow_payload(self) -> bytes:
+        """FLOW for an ACK or NAK, and RING after it (3.2, a device with a ring)."""
+        flow = self.flow.payload(self.machine, self._now, self.device_time(self._now))
+        ring = self._session_ring()
+        if ring is None:
+            return flow
+        self._ring_sent = (ring.tail, ring.short())
+        return flow + encode_message(ring.report())
+
+    def _session_ring(self) -> BlockStore | None:
+        """The ring, its blocks freed to now, in a session that reports it (3.2)."""
+        ring = self.ring
+        if ring is None or self.session_minor < MINOR_RING:
+            return None
+        mc = self.machine
+        ring.free_through(mc.segments_done, mc.current is None and not mc.queue)
+        mc.ring_full = ring.short()  # the host may hold a block back: start
+        return ring
+
+    def _ring_wants_report(self) -> bool:
+        """A ring that may hold the host back (3.2) reports each room the steppers free."""
+        ring = self._session_ring()
+        if ring is None or self._ring_sent is None:
+            return False
+        tail, short = self._ring_sent
+        return short and ring.tail != tail
 
     @property
     def flow_ticks(self) -> int:
@@ -294,7 +327,7 @@ class SimDevice:
                 self.last_rx = now
             self._report(self.machine.advance(T))
         self._watchdog(now, T)
-        if self.synced and self.flow.wanted(self.machine, now, T):
+        if self.synced and (self.flow.wanted(self.machine, now, T) or self._ring_wants_report()):
             self.endpoint.request_ack()
         if not self.synced and now >= self._boot_sent + self.config.boot_announce_s:
             self._announce_boot(now)
@@ -313,8 +346,8 @@ class SimDevice:
         if cur is not None:
             if cur.kind == m.WAIT:
                 cands.append(now + 0.2 / sp)
-            elif not mc.queue:
-                cands.append(mc.cur_end / sp)
+            elif not mc.queue or (self._ring_sent is not None and self._ring_sent[1]):
+                cands.append(mc.cur_end / sp)  # (a short ring frees room at its end)
         start = mc.next_start()
         if start is not None:
             cands.append(start / sp)
@@ -453,6 +486,10 @@ class SimDevice:
         if queued > mc.free_slots() and not mc.fault:
             mc.overflow_rejects += 1
             return False
+        ring = self._session_ring() if not mc.fault else None
+        if ring is not None and not ring.takes(_block_needs(msgs)):
+            ring.rejects += 1  # (its blocks would wait for room: refused, sent again)
+            return False
         self.ctx = work
         reports: list[Message] = []
         for msg in msgs:
@@ -527,11 +564,25 @@ class SimDevice:
             )
             if refused is not None:  # before any of it moves
                 return [mc.fail(ErrorCode.BAD_VALUE, n, seg, T, *refused)]
-        return mc.enqueue(item, T)
+            ring = self._session_ring()
+            if ring is not None and msg.schedules:
+                ring.put(seg, _block_needs([msg])[0])
+        reports = mc.enqueue(item, T)
+        self._session_ring()  # (its start rule after this block)
+        return reports
 
     def close(self) -> None:
         """Flush and close the streamed record."""
         self.record.close()
+
+
+def _block_needs(msgs: list[Message]) -> list[int]:
+    """Entries of the ring each segment's block takes, in order (segments with one)."""
+    return [
+        block_entries(len(sched.chunks) for _, sched in msg.schedules)
+        for msg in msgs
+        if isinstance(msg, Segment) and msg.schedules
+    ]
 
 
 __all__ = ["ErrorReport", "SimDevice"]
