@@ -240,7 +240,7 @@ class SegmentFeed:
         ring = c.dev.ring
         self.ring.follow(ring, c.ep.sender.items_after(ring.ack) if ring else 0)
         n = self.ring.admit(ring, self._ring_needs(j - i, blocks))
-        later: dict[int, dict[int, AxisSchedule]] = {}
+        later = {a: axes for a, axes in kept.items() if a >= j}  # (fitted, not in this turn)
         for (a, k), sched in blocks.items():
             if a >= n:
                 later.setdefault(i + a, {})[k] = sched

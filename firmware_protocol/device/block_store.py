@@ -11,9 +11,11 @@ queue's free slots is: only a guard, counted in ``rejects`` (a 3.2 host never se
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 
-from firmware_protocol.block_ring import COUNTER, admit, place
-from firmware_protocol.messages import Ring
+from firmware_protocol.block_ring import COUNTER, admit, block_entries, place
+from firmware_protocol.message_base import Message
+from firmware_protocol.messages import Ring, Segment
 
 
 def most_entries(max_payload: int) -> int:
@@ -30,6 +32,10 @@ class BlockStore:
         self.head = self.tail = 0
         self.ends: deque[tuple[int, int]] = deque()  # (segment, counter after its block)
         self.rejects = 0
+        self.sent: tuple[int, bool] | None = None  # the session's last RING: tail, short
+
+    def new_session(self) -> None:
+        self.sent = None
 
     def free_through(self, segments_done: int, idle: bool) -> None:
         """Free the blocks of the segments done (all of them once the machine is idle: a
@@ -57,4 +63,24 @@ class BlockStore:
         return place(self.head, self.tail, self.most, self.entries) is None
 
     def report(self) -> Ring:
-        return Ring(self.entries, self.head, self.tail, 0)  # every frame queued at once
+        """RING for an ACK or NAK (every frame is queued as it arrives: ``held`` 0)."""
+        self.sent = (self.tail, self.short())
+        return Ring(self.entries, self.head, self.tail, 0)
+
+    @property
+    def may_hold_host(self) -> bool:
+        """The last RING said a block of the most would wait."""
+        return self.sent is not None and self.sent[1]
+
+    def wants_report(self) -> bool:
+        """A ring that may hold the host back reports each room the steppers free."""
+        return self.sent is not None and self.sent[1] and self.tail != self.sent[0]
+
+
+def block_needs(msgs: Sequence[Message]) -> list[int]:
+    """Entries of the ring each segment's block takes, in order (segments with one)."""
+    return [
+        block_entries(len(sched.chunks) for _, sched in msg.schedules)
+        for msg in msgs
+        if isinstance(msg, Segment) and msg.schedules
+    ]

@@ -15,9 +15,8 @@ import os
 import secrets
 from collections.abc import Callable
 
-from firmware_protocol.block_ring import block_entries
 from firmware_protocol.device import queue_items as m
-from firmware_protocol.device.block_store import BlockStore
+from firmware_protocol.device.block_store import BlockStore, block_needs
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
 from firmware_protocol.device.flow_reports import FlowReports
@@ -157,17 +156,15 @@ class SimDevice:
             round(cfg.flow_s * cfg.clock_hz), cfg.flow_interval_s, self.machine.capacity // 8
         )
         self.lease_ms = 0  # the session's heater lease (0: not armed)
-        self._ring_sent: tuple[int, bool] | None = None  # the last RING's tail, and short
+        if self.ring is not None:
+            self.ring.new_session()
         self.lease_until = math.inf
 
     def _flow_payload(self) -> bytes:
         """FLOW for an ACK or NAK, and RING after it (3.2, a device with a ring)."""
         flow = self.flow.payload(self.machine, self._now, self.device_time(self._now))
         ring = self._session_ring()
-        if ring is None:
-            return flow
-        self._ring_sent = (ring.tail, ring.short())
-        return flow + encode_message(ring.report())
+        return flow if ring is None else flow + encode_message(ring.report())
 
     def _session_ring(self) -> BlockStore | None:
         """The ring, its blocks freed to now, in a session that reports it (3.2)."""
@@ -178,14 +175,6 @@ class SimDevice:
         ring.free_through(mc.segments_done, mc.current is None and not mc.queue)
         mc.ring_full = ring.short()  # the host may hold a block back: start
         return ring
-
-    def _ring_wants_report(self) -> bool:
-        """A ring that may hold the host back (3.2) reports each room the steppers free."""
-        ring = self._session_ring()
-        if ring is None or self._ring_sent is None:
-            return False
-        tail, short = self._ring_sent
-        return short and ring.tail != tail
 
     @property
     def flow_ticks(self) -> int:
@@ -327,7 +316,10 @@ class SimDevice:
                 self.last_rx = now
             self._report(self.machine.advance(T))
         self._watchdog(now, T)
-        if self.synced and (self.flow.wanted(self.machine, now, T) or self._ring_wants_report()):
+        ring = self._session_ring()
+        if self.synced and (
+            self.flow.wanted(self.machine, now, T) or (ring and ring.wants_report())
+        ):
             self.endpoint.request_ack()
         if not self.synced and now >= self._boot_sent + self.config.boot_announce_s:
             self._announce_boot(now)
@@ -346,7 +338,7 @@ class SimDevice:
         if cur is not None:
             if cur.kind == m.WAIT:
                 cands.append(now + 0.2 / sp)
-            elif not mc.queue or (self._ring_sent is not None and self._ring_sent[1]):
+            elif not mc.queue or (self.ring is not None and self.ring.may_hold_host):
                 cands.append(mc.cur_end / sp)  # (a short ring frees room at its end)
         start = mc.next_start()
         if start is not None:
@@ -487,7 +479,7 @@ class SimDevice:
             mc.overflow_rejects += 1
             return False
         ring = self._session_ring() if not mc.fault else None
-        if ring is not None and not ring.takes(_block_needs(msgs)):
+        if ring is not None and not ring.takes(block_needs(msgs)):
             ring.rejects += 1  # (its blocks would wait for room: refused, sent again)
             return False
         self.ctx = work
@@ -566,7 +558,7 @@ class SimDevice:
                 return [mc.fail(ErrorCode.BAD_VALUE, n, seg, T, *refused)]
             ring = self._session_ring()
             if ring is not None and msg.schedules:
-                ring.put(seg, _block_needs([msg])[0])
+                ring.put(seg, block_needs([msg])[0])
         reports = mc.enqueue(item, T)
         self._session_ring()  # (its start rule after this block)
         return reports
@@ -574,15 +566,6 @@ class SimDevice:
     def close(self) -> None:
         """Flush and close the streamed record."""
         self.record.close()
-
-
-def _block_needs(msgs: list[Message]) -> list[int]:
-    """Entries of the ring each segment's block takes, in order (segments with one)."""
-    return [
-        block_entries(len(sched.chunks) for _, sched in msg.schedules)
-        for msg in msgs
-        if isinstance(msg, Segment) and msg.schedules
-    ]
 
 
 __all__ = ["ErrorReport", "SimDevice"]

@@ -12,7 +12,7 @@ from cdprhost.link.wire_cuts import cut_for_blocks
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST
-from firmware_protocol.segments import SegmentBatch
+from firmware_protocol.segments import SegmentBatch, peak_step_rates
 from firmware_protocol.streams import expected_record
 
 
@@ -97,3 +97,33 @@ def test_ring_rides_after_flow_only_in_a_32_session_of_a_device_with_a_ring():
     assert kinds(SimDevice(SimConfig()), 2) == [Flow]  # no ring: blocks need no room
     with pytest.raises(ValueError, match="power of two"):
         SimConfig(ring_entries=96)
+
+
+def test_a_ramp_held_back_for_the_ring_is_fitted_once(monkeypatch):
+    """The blocks fitted for segments the ring had no room for yet are kept for the next
+    turn (a ramp's fit takes milliseconds in Python): each ramp piece is fitted once."""
+    from cdprhost.link import segment_feed
+
+    fitted: list[int] = []
+    plan = segment_feed.plan_schedules
+
+    def counted(batch, *args, **kw):
+        if len(batch) == 1 and int(batch.ramps[0]) != RAMP_CONSTANT:
+            fitted.append(int(batch.ticks[0]))
+        return plan(batch, *args, **kw)
+
+    monkeypatch.setattr(segment_feed, "plan_schedules", counted)
+    batch = cut_for_blocks(_ramps([12_000, 9_000, 6_000, 800], cycles=4), 120)
+    fitted.clear()  # (the cut's own fits)
+    monkeypatch.setattr(segment_feed, "FIT_SHARE", 0.0)  # only the ramps that need a block
+    link = open_embedded(config=SimConfig(**ENGINE, ring_entries=128))
+    try:
+        link.queue_segments(batch)
+        link.wait_idle()
+        assert link.counters.ring_held > 0 and link.device.ring.rejects == 0
+        assert link.device.record == expected_record(batch)
+    finally:
+        link.close()
+    peak = peak_step_rates(batch, 100_000).max(axis=1)
+    needed = int(np.sum((batch.ramps != RAMP_CONSTANT) & (peak > ENGINE["profile_step_rate"])))
+    assert len(fitted) == needed, (len(fitted), needed)
