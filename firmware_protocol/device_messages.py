@@ -287,3 +287,28 @@ class Stepping(Message):
             lo=1,
         ),
     )
+
+
+@dataclass(frozen=True)
+class Ring(Message):
+    """Protocol 3.2: the ring of entries a device keeps its schedule blocks in (the AVR's
+    step engine), carried right after ``FLOW`` in every ``ACK``/``NAK`` of a session whose
+    minor is 2 or more, by a device that keeps one (none: blocks need no room). ``head``
+    and ``tail`` are counters modulo 256 (an entry lies at ``counter % entries``), read
+    when the report is sent; ``held``: queue items of frames acknowledged and not queued
+    yet, whose blocks are not in ``head`` (PROTOCOL.md 6: the host places each block by
+    the device's rule, :mod:`firmware_protocol.block_ring`, and sends it only when it
+    fits)."""
+
+    entries: int
+    head: int
+    tail: int
+    held: int
+    OPCODE: ClassVar[int] = 0x4B
+    CLASS: ClassVar[str] = "D"
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F("entries", "u8", "3.2: the ring's entries, a power of two (2..128)", lo=2, hi=128),
+        F("head", "u8", "3.2: where the next block goes, counted modulo 256"),
+        F("tail", "u8", "3.2: the first entry still held, counted modulo 256"),
+        F("held", "u8", "3.2: items acknowledged and not queued yet (saturates)"),
+    )

@@ -9,12 +9,15 @@ from typing import ClassVar
 from firmware_protocol.fields import Field
 
 PROTOCOL_MAJOR = 3
-PROTOCOL_MINOR = 1
+PROTOCOL_MINOR = 2
 # the first minor version with soft limits, PID gains and autotune, the heater lease,
 # CAPS and HEALTH (2.1; every 3.x has them, so 0 in this major)
 MINOR_SAFETY = 0
 # the first minor version whose CAPS is followed by STEPPING (3.1)
 MINOR_STEPPING = 1
+# the first minor version whose ACK and NAK carry RING after FLOW, from a device that
+# keeps its schedule blocks in a ring of entries (3.2)
+MINOR_RING = 2
 
 HOTEND, BED = 0, 1
 MAX_EVENT_VALUES = 4

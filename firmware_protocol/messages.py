@@ -40,6 +40,7 @@ from firmware_protocol.device_messages import (
     Flow,
     Health,
     Ident,
+    Ring,
     Status,
     Stepping,
 )
@@ -74,6 +75,7 @@ from firmware_protocol.message_base import (
     HOTEND,
     LEASE_MS_RANGE,
     MAX_EVENT_VALUES,
+    MINOR_RING,
     MINOR_SAFETY,
     MINOR_STEPPING,
     PROTOCOL_MAJOR,
@@ -114,6 +116,7 @@ MESSAGES: tuple[type[Message], ...] = (
     Health,
     Caps,
     Stepping,
+    Ring,
 )
 _BY_OPCODE: dict[int, type[Message]] = {cls.OPCODE: cls for cls in MESSAGES}
 
@@ -128,6 +131,7 @@ __all__ = [
     "MAX_EVENT_VALUES",
     "MAX_TEXT",
     "MESSAGES",
+    "MINOR_RING",
     "MINOR_SAFETY",
     "MINOR_STEPPING",
     "PROTOCOL_MAJOR",
@@ -168,6 +172,7 @@ __all__ = [
     "Identify",
     "Message",
     "MessageError",
+    "Ring",
     "Segment",
     "SetFan",
     "SetHeater",

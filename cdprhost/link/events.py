@@ -234,6 +234,10 @@ class LinkCounters:
     late_pulses: int = 0
     late_worst_us: int = 0
     rx_overruns: int = 0
+    # the device's ring of block entries (3.2, RING): turns a block waited on the host for
+    # room, and heads the device reported where the host had counted another
+    ring_held: int = 0
+    ring_disagreements: int = 0
 
 
 LinkEvent = Union[DeviceProgress, DeviceEvent, DeviceErrorEvent]  # noqa: UP007

@@ -225,6 +225,8 @@ class HostLink:
             h.late_pulses,
             h.late_worst_us,
             h.rx_overruns,
+            self._feed.ring.held,
+            self._feed.ring.disagreements,
         )
 
     def now(self) -> float:

@@ -9,7 +9,7 @@ new configuration when the measured clock rate has moved) for nothing else.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Protocol
 
 import numpy as np
@@ -17,8 +17,10 @@ import numpy as np
 from cdprhost.link.core import LinkCore
 from cdprhost.link.errors import StepRateError
 from cdprhost.link.events import DeviceCaps, Identity
+from cdprhost.link.ring_room import RingRoom
 from cdprhost.motion.block_cuts import BLOCK_FRAME_BYTES
-from firmware_protocol.messages import Flag
+from firmware_protocol.block_ring import block_entries
+from firmware_protocol.messages import Flag, GetStatus
 from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_block import MAX_CHUNKS
 from firmware_protocol.schedule_fit import plan_schedules
@@ -52,6 +54,7 @@ def wire_schedules(
     max_payload: int,
     fit_budget_s: float | None = None,
     needed: np.ndarray | None = None,
+    fitted: Mapping[int, Mapping[int, AxisSchedule]] | None = None,
 ) -> dict[tuple[int, int], AxisSchedule]:
     """The schedule blocks ``batch`` carries (PROTOCOL.md 5.5), by ``(segment, axis)``:
     every moving axis whose prediction the device cannot make or that strays past
@@ -63,7 +66,8 @@ def wire_schedules(
     docs/step-engine.md section 7). ``fit_budget_s``: host time the ramps' fits may take
     (they run in Python, milliseconds a ramp); the ramps after it go without a block too,
     except those ``needed`` marks (bool per segment: faster at their peak than the device
-    steps without a block, STEPPING), which always get theirs.
+    steps without a block, STEPPING), which always get theirs. ``fitted``: the blocks of
+    ramps fitted before (by segment, then axis), taken as they are.
     """
     ramp = batch.ramps != RAMP_CONSTANT
     steady = np.flatnonzero(~ramp)
@@ -76,7 +80,10 @@ def wire_schedules(
         needed = np.zeros(len(batch), bool)
     start = time.perf_counter()
     fits = 0
+    fitted = fitted or {}
     for i in np.flatnonzero(ramp).tolist():
+        if i in fitted:
+            continue
         spent = time.perf_counter() - start
         each = spent / fits if fits else RAMP_FIT_S  # what one more is likely to take
         if fit_budget_s is not None and spent + each > fit_budget_s and not needed[i]:
@@ -85,7 +92,7 @@ def wire_schedules(
         part = plan_schedules(batch[i : i + 1], ctx.cycles_per_tick, tol_cycles, ctx.table)
         planned.update({(i, k): sched for (_, k), sched in part.items()})
     if not planned:
-        return planned
+        return {(i, k): s for i, axes in fitted.items() for k, s in axes.items()}
     budget = max_payload - SEGMENT_MAX_BYTES
     by_segment: dict[int, list[int]] = {}
     for i, k in planned:
@@ -103,6 +110,7 @@ def wire_schedules(
             if ok[k] or len(encode_block_for(ticks, deltas, trial, ctx)) <= budget:
                 kept = trial  # a prediction that strays always has its (one-chunk) block
         out.update({(i, k): s for k, s in kept.items()})
+    out.update({(i, k): s for i, axes in fitted.items() for k, s in axes.items()})
     return out
 
 
@@ -128,6 +136,10 @@ class SegmentFeed:
         self.renew = renew or (lambda: None)
         self._began = time.perf_counter()
         self._fit_s = 0.0  # host time spent planning schedule blocks
+        self.ring = RingRoom()  # the device's ring of block entries (3.2)
+        # the blocks of ramps fitted and not sent (their ring had no room yet), by segment
+        # of the batch they belong to: fitted once, sent later
+        self._kept: tuple[SegmentBatch | None, dict[int, dict[int, AxisSchedule]]] = (None, {})
 
     def ahead_ticks(self) -> float:
         """Device ticks of motion held ahead of the device's now (estimated; see flow.py)."""
@@ -190,12 +202,31 @@ class SegmentFeed:
         peak = peak_step_rates(batch, ident.clock_hz).max(axis=1)
         return np.asarray(peak > caps.profile_step_rate)
 
-    def _send_segments(self, batch: SegmentBatch, i: int, j: int) -> None:
+    def _ring_needs(self, n: int, blocks: dict[tuple[int, int], AxisSchedule]) -> list[int]:
+        """Entries each of the ``n`` segments' blocks takes in the device's ring (0: none);
+        a block larger than the whole ring is left out (the device steps that ramp itself)."""
+        needs = [0] * n
+        for (i, _), sched in blocks.items():
+            needs[i] += block_entries([len(sched.chunks)])
+        ring = self.core.dev.ring
+        if ring is not None:
+            for i in [i for i, need in enumerate(needs) if need > ring.entries]:
+                for key in [key for key in blocks if key[0] == i]:
+                    del blocks[key]
+                needs[i] = 0
+        return needs
+
+    def _send_segments(self, batch: SegmentBatch, i: int, j: int) -> int:
+        """Send segments ``i..j`` of ``batch``, up to the first whose block the device's
+        ring has no room for yet (3.2); returns how many went."""
         c = self.core
         sub = batch[i:j]
         caps = c.dev.caps or DeviceCaps()
         now = time.perf_counter()
         budget = min(FIT_TURN_S, FIT_SHARE * (now - self._began) - self._fit_s)
+        kept_batch, kept = self._kept
+        if kept_batch is not batch:
+            kept = {}
         blocks = wire_schedules(
             sub,
             c.ctx,
@@ -203,10 +234,23 @@ class SegmentFeed:
             self.block_payload(),
             fit_budget_s=budget,
             needed=self._needs_block(sub),
+            fitted={a - i: axes for a, axes in kept.items() if i <= a < j},
         )
         self._fit_s += time.perf_counter() - now
+        ring = c.dev.ring
+        self.ring.follow(ring, c.ep.sender.items_after(ring.ack) if ring else 0)
+        n = self.ring.admit(ring, self._ring_needs(j - i, blocks))
+        later = {a: axes for a, axes in kept.items() if a >= j}  # (fitted, not in this turn)
+        for (a, k), sched in blocks.items():
+            if a >= n:
+                later.setdefault(i + a, {})[k] = sched
+        self._kept = (batch, later)
+        if n == 0:
+            return 0
+        if n < j - i:
+            sub = sub[:n]
+            blocks = {key: s for key, s in blocks.items() if key[0] < n}
         data, offsets = encode_segments(sub, c.ctx, blocks)
-        n = j - i
         pos = 0
         limit = c.payload_limit
         ticks = sub.ticks
@@ -222,6 +266,7 @@ class SegmentFeed:
         c.items_sent += n
         c.segments_sent += n
         c.write(c.ep.flush(c.t.now()))
+        return n
 
     def check_step_rates(self, batch: SegmentBatch, identity: Identity) -> None:
         """Raise :class:`StepRateError` for a segment over the device's max step rate, or
@@ -271,9 +316,24 @@ class SegmentFeed:
                 k = self._sendable(batch.ticks[i:n])
                 if k > 0:
                     ramps = np.cumsum(batch.ramps[i : i + k] != RAMP_CONSTANT)
-                    k = max(1, int(np.searchsorted(ramps, RAMPS_PER_TURN, side="right")))
-                    self._send_segments(batch, i, i + k)
-                    i += k
+                    most = RAMPS_PER_TURN
+                    room = self.ring.blocks_room(c.dev.ring)
+                    if room is not None:  # the ramps the ring takes, fitted in one turn
+                        most = min(most, room)
+                    k = max(1, int(np.searchsorted(ramps, most, side="right")))
+                    sent = self._send_segments(batch, i, i + k)
+                    i += sent
+                    if sent:
+                        continue
+                    # the next block waits for room in the device's ring: for a report
+                    if c.t.now() >= until:
+                        break
+                    if self.ring.head is None and c.ep.sender.idle():
+                        # not known yet where the device's head is (its last report held
+                        # frames not queued): ask for a report that counts them all
+                        c.send_immediate(GetStatus())
+                        c.write(c.ep.flush(c.t.now()))
+                    c.pump(min(until - c.t.now(), 0.25))
                     continue
                 now = c.t.now()
                 if now >= until:

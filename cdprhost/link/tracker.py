@@ -25,6 +25,8 @@ from cdprhost.link.events import (
     error_text,
 )
 from cdprhost.link.flow import FlowReport
+from cdprhost.link.ring_room import RingReport
+from firmware_protocol.block_ring import valid_entries
 from firmware_protocol.codes import BootCause
 from firmware_protocol.endpoint import Incoming
 from firmware_protocol.message_codec import decode_messages
@@ -40,6 +42,7 @@ from firmware_protocol.messages import (
     Ident,
     Message,
     MessageError,
+    Ring,
     Status,
     Stepping,
 )
@@ -64,6 +67,7 @@ class DeviceTracker:
         self.identity: Identity | None = None
         self.progress = DeviceProgress(0, 0, 0, 0)
         self.flow = FlowReport()
+        self.ring: RingReport | None = None  # the latest RING (3.2; None: no ring)
         self.clock = ClockSync(100_000)
         self.flows = 0  # FLOW reports received (the streaming loop wakes on them)
         self.status: DeviceStatus | None = None
@@ -83,6 +87,7 @@ class DeviceTracker:
         self.identity = Identity.from_message(msg)
         free = msg.queue_capacity - (msg.items_received - msg.items_done)
         self.flow = FlowReport(free=free, ack=0, t=now)
+        self.ring = None
         self.progress = DeviceProgress(msg.items_done, msg.segments_done, free, 0)
         self.clock = ClockSync(msg.clock_hz)
         self.clock.add(now, msg.clock)
@@ -141,6 +146,15 @@ class DeviceTracker:
                 self.flows += 1
                 self.clock.add(now, msg.clock)
                 self.set_progress(msg.items_done, msg.segments_done, msg.queue_free, msg.flags)
+            elif isinstance(msg, Ring):  # follows FLOW (3.2)
+                if valid_entries(msg.entries):
+                    self.ring = RingReport(msg.entries, msg.head, msg.tail, msg.held, inc.ack)
+                else:
+                    log.warning(
+                        "%s: a RING of %d entries (not a power of two) was ignored",
+                        self.name,
+                        msg.entries,
+                    )
             elif isinstance(msg, Status):
                 # no clock sample: a status may be a retransmission (an old clock, late)
                 self.status = DeviceStatus.from_message(msg, self.identity, now)

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define CDPR_PROTOCOL_MAJOR 3
-#define CDPR_PROTOCOL_MINOR 1
+#define CDPR_PROTOCOL_MINOR 2
 
 /* frames */
 #define CDPR_SYNC 0xA5
@@ -152,6 +152,8 @@
 #define CDPR_CAPS_MAX_LEN 22
 #define CDPR_OP_STEPPING 0x4A
 #define CDPR_STEPPING_MAX_LEN 6
+#define CDPR_OP_RING 0x4B
+#define CDPR_RING_MAX_LEN 5
 
 /* Identify: class I, opcode 0x01 */
 
@@ -585,5 +587,21 @@ typedef struct cdpr_stepping {
 } cdpr_stepping_t;
 #define CDPR_STEPPING_PROFILE_STEP_RATE_MIN (1)
 #define CDPR_STEPPING_PROFILE_STEP_RATE_MAX (4294967295UL)
+
+/* Ring: class D, opcode 0x4B */
+typedef struct cdpr_ring {
+    uint8_t entries; /* 3.2: the ring's entries, a power of two (2..128) */
+    uint8_t head; /* 3.2: where the next block goes, counted modulo 256 */
+    uint8_t tail; /* 3.2: the first entry still held, counted modulo 256 */
+    uint8_t held; /* 3.2: items acknowledged and not queued yet (saturates) */
+} cdpr_ring_t;
+#define CDPR_RING_ENTRIES_MIN (2)
+#define CDPR_RING_ENTRIES_MAX (128)
+#define CDPR_RING_HEAD_MIN (0)
+#define CDPR_RING_HEAD_MAX (255)
+#define CDPR_RING_TAIL_MIN (0)
+#define CDPR_RING_TAIL_MAX (255)
+#define CDPR_RING_HELD_MIN (0)
+#define CDPR_RING_HELD_MAX (255)
 
 #endif /* CDPR_PROTOCOL_H */

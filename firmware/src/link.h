@@ -8,7 +8,11 @@
 #include "config.h"
 #include "protocol_gen.h"
 
-#define FLOW_MAX CDPR_FLOW_MAX_LEN /* a FLOW payload's bytes at most */
+#if STEP_ENGINE /* a FLOW payload's bytes at most, with RING after it (3.2) */
+#define FLOW_MAX (CDPR_FLOW_MAX_LEN + CDPR_RING_MAX_LEN)
+#else
+#define FLOW_MAX CDPR_FLOW_MAX_LEN
+#endif
 
 struct link_counters {
     uint16_t retransmits, naks_sent, duplicates, rejected;

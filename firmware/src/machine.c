@@ -24,9 +24,14 @@ uint8_t machine_free(void)
     return (uint8_t)(queue_free() - upper->pending_items());
 }
 
+uint8_t machine_held_items(void)
+{
+    return upper->pending_items();
+}
+
 #if STEP_ENGINE
 /* entries of the ring the credit leaves for blocks larger than the queue's mix: half of
- * what a frame's blocks can take */
+ * what a frame's blocks can take (a 3.1 host, which does not count the ring) */
 #define CREDIT_SPARE (BLOCK_MOST / 2)
 #define CREDIT_FLOOR 4
 uint8_t machine_credit(void)
@@ -36,6 +41,10 @@ uint8_t machine_credit(void)
     if (blocks_stalled)
         return 0;
     uint8_t free = machine_free();
+    /* 3.2: the host counts the ring's entries itself (RING) and sends a block only when
+     * it fits: the credit is the queue's again */
+    if (machine.host_minor >= 2)
+        return free;
     uint8_t used = blocks_used();
     uint8_t items = queue_used();
     if (!free || !used || !items)

@@ -37,11 +37,14 @@ extern struct machine machine;
 
 uint8_t machine_flags(void);
 uint8_t machine_free(void);
+/* Queue items of frames acknowledged and not executed yet (RING's `held`). */
+uint8_t machine_held_items(void);
 #if STEP_ENGINE
-/* The credit FLOW gives the host (PROTOCOL.md 6): machine_free, less with the step
- * engine when the ring of chunks would not take that many items' blocks at the mix of
- * blocks the queue holds now (step_blocks.h). Only what the host is told: the frames it
- * sent under an older credit are taken against machine_free. */
+/* The credit FLOW gives the host (PROTOCOL.md 6): machine_free; for a 3.1 host (which
+ * does not count the ring itself, RING) less with the step engine when the ring of
+ * chunks would not take that many items' blocks at the mix of blocks the queue holds now
+ * (step_blocks.h). Only what the host is told: the frames it sent under an older credit
+ * are taken against machine_free. */
 uint8_t machine_credit(void);
 #else
 static inline uint8_t machine_credit(void)

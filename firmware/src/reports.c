@@ -8,6 +8,7 @@
 #include "queue.h"
 #include "reports.h"
 #include "stepper.h"
+#include "step_blocks.h"
 #include "watchdog.h"
 #include "wire.h"
 #include <avr/interrupt.h>
@@ -195,5 +196,14 @@ uint8_t report_flow(uint8_t *out)
     wr_uv(&w, segs);
     wr_uv(&w, buffered);
     wr_uv(&w, sched_clock());
+#if STEP_ENGINE
+    if (machine.host_minor >= 2) { /* 3.2: the ring of the schedule blocks' chunks */
+        wr_u8(&w, CDPR_OP_RING);
+        wr_u8(&w, BLOCK_CHUNKS);
+        wr_u8(&w, blocks_head);
+        wr_u8(&w, blocks_tail);
+        wr_u8(&w, machine_held_items());
+    }
+#endif
     return w.pos;
 }

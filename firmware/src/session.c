@@ -20,6 +20,16 @@ static uint8_t boot_sent_once;
 static uint8_t flow_valid;
 static uint32_t flow_items, flow_motion, flow_at;
 static uint8_t flow_flags, flow_free;
+#if STEP_ENGINE
+static uint8_t flow_tail, flow_ring_short; /* the ring's tail; it might hold the host back */
+
+/* 3.2: the host sends a block only where the ring has room (RING); while a block of the
+ * most a frame can carry would not fit, the host may be holding one back */
+static uint8_t ring_short_for_host(void)
+{
+    return machine.host_minor >= 2 && !blocks_fit(BLOCK_MOST);
+}
+#endif
 
 void session_opened(void)
 {
@@ -75,6 +85,10 @@ uint8_t proto_flow(uint8_t *out)
     flow_motion = motion_executed();
     flow_at = link_now;
     flow_valid = 1;
+#if STEP_ENGINE
+    flow_tail = blocks_tail;
+    flow_ring_short = ring_short_for_host();
+#endif
     return report_flow(out);
 }
 
@@ -106,7 +120,7 @@ uint8_t session_may_start(void)
     uint32_t head_item = items_executed() + 1;
     return machine.block_ends > 0 || machine.queued_units >= machine.start_ticks || queue_free() == 0 || blocks_stalled ||
 #if STEP_ENGINE
-           host_held_back() ||
+           host_held_back() || ring_short_for_host() ||
 #endif
            head_item <= machine.flush_item;
 }
@@ -165,6 +179,9 @@ void session_poll(uint32_t now)
     /* a credit the ring of chunks keeps short (machine_credit): each item more at once
      * (the ring frees as the steppers pass the segments' ends) */
     if (!want && flow_free < QUEUE_SIZE / 8 && machine_credit() > flow_free)
+        want = 1;
+    /* 3.2: a ring that may hold the host back reports each room the steppers free */
+    if (!want && flow_ring_short && blocks_tail != flow_tail)
         want = 1;
 #endif
     if (want)

@@ -16,25 +16,46 @@ volatile uint8_t blocks_head, blocks_tail, blocks_stalled;
 static struct sched_block sink;
 #endif
 
+#if STEP_ENGINE
+/* Where a block of `want` entries goes: the counter of its first entry into *at and the
+ * free run from there into *run; 0 while it would wait (the rule the host follows too,
+ * firmware_protocol/block_ring.py) */
+static uint8_t place(uint8_t want, uint8_t *at, uint8_t *run)
+{
+    uint8_t head = blocks_head, tail = blocks_tail;
+    uint8_t free = (uint8_t)(BLOCK_CHUNKS - (uint8_t)(head - tail));
+    uint8_t to_end = (uint8_t)(BLOCK_CHUNKS - (head & (BLOCK_CHUNKS - 1)));
+    uint8_t r = free < to_end ? free : to_end; /* free entries from the head on */
+    if (want > r) {
+        /* at the ring's start, the end skipped (freed with the block after it), when the
+         * block does not fit before the end and fits after it */
+        if (r < free && want <= (uint8_t)(free - to_end)) {
+            head = (uint8_t)(head + to_end);
+            r = (uint8_t)(free - to_end);
+        } else {
+            return 0;
+        }
+    }
+    *at = head;
+    *run = r;
+    return 1;
+}
+
+uint8_t blocks_fit(uint8_t need)
+{
+    uint8_t at, run;
+    return place(need, &at, &run);
+}
+#endif
+
 struct sched_block *blocks_sink(uint8_t need)
 {
 #if STEP_ENGINE
-    uint8_t head = blocks_head, tail = blocks_tail;
-    uint8_t at = head & (BLOCK_CHUNKS - 1);
-    uint8_t free = (uint8_t)(BLOCK_CHUNKS - (uint8_t)(head - tail));
-    uint8_t to_end = (uint8_t)(BLOCK_CHUNKS - at);
-    uint8_t run = free < to_end ? free : to_end; /* free entries from the head on */
-    uint8_t want = need ? need : 2; /* unknown: at least an axis's header and chunk */
-    if (want > run) {
-        /* at the ring's start, the end skipped (freed with the block after it), when the
-         * block does not fit before the end and fits after it */
-        if (run < free && want <= (uint8_t)(free - to_end)) {
-            head = (uint8_t)(head + to_end);
-            run = (uint8_t)(free - to_end);
-        } else {
-            blocks_stalled = 1;
-            return 0;
-        }
+    uint8_t head, run;
+    /* unknown: at least an axis's header and chunk */
+    if (!place(need ? need : 2, &head, &run)) {
+        blocks_stalled = 1;
+        return 0;
     }
     blocks_stalled = 0;
     blocks_head = head;

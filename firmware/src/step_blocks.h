@@ -39,6 +39,9 @@ extern struct sched_chunk block_chunks[BLOCK_CHUNKS];
  * they go: a machine at rest starts, PROTOCOL.md 5.4). Only what the block takes is
  * reserved, not what the rest of its frame could hold. */
 struct sched_block *blocks_sink(uint8_t need);
+/* Whether a block of `need` entries would be placed now without a wait (the step engine
+ * only). */
+uint8_t blocks_fit(uint8_t need);
 /* After a block was read into the sink: the entries it takes when that is more than the
  * sink held (its chunks were not kept: read it again into blocks_sink(that)), else 0. */
 uint8_t blocks_sink_short(void);

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from firmware_protocol.block_ring import valid_entries
 from firmware_protocol.device.heaters import BED_MODEL, HOTEND_MODEL, HeaterModel
 from firmware_protocol.framing import MAX_PAYLOAD
 from firmware_protocol.messages import WATCHDOG_MS_DEFAULT
@@ -34,6 +35,9 @@ class SimConfig:
     #: schedule block (None: max_step_rate; this model steps every axis exactly)
     profile_step_rate: int | None = None
     max_payload: int = MAX_PAYLOAD
+    #: RING (3.2): entries of a ring its schedule blocks take room in, as the AVR's step
+    #: engine keeps (a power of two, at most 128; None: blocks need no room)
+    ring_entries: int | None = None
     rx_window: int = 4096  # bytes of unacknowledged host frames it buffers (a pty holds 4 KB)
     window: int = 4  # device -> host DATA frames in flight
     fans: int = 1
@@ -63,6 +67,8 @@ class SimConfig:
             )
         if self.cpu_hz % self.clock_hz:
             raise ValueError(f"cpu_hz {self.cpu_hz} is not a multiple of clock_hz {self.clock_hz}")
+        if self.ring_entries is not None and not valid_entries(self.ring_entries):
+            raise ValueError(f"ring_entries must be a power of two 2..128, got {self.ring_entries}")
         if not 1 <= self.queue_capacity <= MAX_QUEUE:
             raise ValueError(f"queue_capacity must be 1..{MAX_QUEUE}")
 

@@ -16,6 +16,7 @@ import secrets
 from collections.abc import Callable
 
 from firmware_protocol.device import queue_items as m
+from firmware_protocol.device.block_store import BlockStore, block_needs
 from firmware_protocol.device.config import SimConfig
 from firmware_protocol.device.faults import FaultSpec
 from firmware_protocol.device.flow_reports import FlowReports
@@ -28,6 +29,7 @@ from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
     MAX_EVENT_VALUES,
+    MINOR_RING,
     MINOR_SAFETY,
     MINOR_STEPPING,
     PROTOCOL_MAJOR,
@@ -116,6 +118,8 @@ class SimDevice:
         self.machine = DeviceMachine(
             cfg, self.record, boot=self.boots, physical=physical, observer=self.observer
         )
+        # the ring of schedule-block entries (a step engine's; None: blocks need no room)
+        self.ring = BlockStore(cfg.ring_entries, cfg.max_payload) if cfg.ring_entries else None
         if self.faults.reset_after and not self._reset_done:
             self.machine.halt_at = self.faults.reset_after
         elif self.faults.stall_after:
@@ -131,7 +135,7 @@ class SimDevice:
         self.endpoint = Endpoint(
             window=cfg.window,
             accept=self._accept,
-            flow=lambda: self.flow.payload(self.machine, self._now, self.device_time(self._now)),
+            flow=self._flow_payload,
             rto_initial=0.05,
             rto_floor=0.02,
             rto_ceiling=0.25,
@@ -152,7 +156,25 @@ class SimDevice:
             round(cfg.flow_s * cfg.clock_hz), cfg.flow_interval_s, self.machine.capacity // 8
         )
         self.lease_ms = 0  # the session's heater lease (0: not armed)
+        if self.ring is not None:
+            self.ring.new_session()
         self.lease_until = math.inf
+
+    def _flow_payload(self) -> bytes:
+        """FLOW for an ACK or NAK, and RING after it (3.2, a device with a ring)."""
+        flow = self.flow.payload(self.machine, self._now, self.device_time(self._now))
+        ring = self._session_ring()
+        return flow if ring is None else flow + encode_message(ring.report())
+
+    def _session_ring(self) -> BlockStore | None:
+        """The ring, its blocks freed to now, in a session that reports it (3.2)."""
+        ring = self.ring
+        if ring is None or self.session_minor < MINOR_RING:
+            return None
+        mc = self.machine
+        ring.free_through(mc.segments_done, mc.current is None and not mc.queue)
+        mc.ring_full = ring.short()  # the host may hold a block back: start
+        return ring
 
     @property
     def flow_ticks(self) -> int:
@@ -294,7 +316,10 @@ class SimDevice:
                 self.last_rx = now
             self._report(self.machine.advance(T))
         self._watchdog(now, T)
-        if self.synced and self.flow.wanted(self.machine, now, T):
+        ring = self._session_ring()
+        if self.synced and (
+            self.flow.wanted(self.machine, now, T) or (ring and ring.wants_report())
+        ):
             self.endpoint.request_ack()
         if not self.synced and now >= self._boot_sent + self.config.boot_announce_s:
             self._announce_boot(now)
@@ -313,8 +338,8 @@ class SimDevice:
         if cur is not None:
             if cur.kind == m.WAIT:
                 cands.append(now + 0.2 / sp)
-            elif not mc.queue:
-                cands.append(mc.cur_end / sp)
+            elif not mc.queue or (self.ring is not None and self.ring.may_hold_host):
+                cands.append(mc.cur_end / sp)  # (a short ring frees room at its end)
         start = mc.next_start()
         if start is not None:
             cands.append(start / sp)
@@ -453,6 +478,10 @@ class SimDevice:
         if queued > mc.free_slots() and not mc.fault:
             mc.overflow_rejects += 1
             return False
+        ring = self._session_ring() if not mc.fault else None
+        if ring is not None and not ring.takes(block_needs(msgs)):
+            ring.rejects += 1  # (its blocks would wait for room: refused, sent again)
+            return False
         self.ctx = work
         reports: list[Message] = []
         for msg in msgs:
@@ -527,7 +556,12 @@ class SimDevice:
             )
             if refused is not None:  # before any of it moves
                 return [mc.fail(ErrorCode.BAD_VALUE, n, seg, T, *refused)]
-        return mc.enqueue(item, T)
+            ring = self._session_ring()
+            if ring is not None and msg.schedules:
+                ring.put(seg, block_needs([msg])[0])
+        reports = mc.enqueue(item, T)
+        self._session_ring()  # (its start rule after this block)
+        return reports
 
     def close(self) -> None:
         """Flush and close the streamed record."""

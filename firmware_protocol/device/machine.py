@@ -125,6 +125,9 @@ class DeviceMachine:
         self.heater_fail_at: float | None = None
         self.sensor_fault: tuple[float, str] | None = None  # (device time, open / short)
         self.overflow_rejects = 0
+        # a ring of schedule-block entries too full for the largest block (3.2): the host
+        # may hold one back, so the queue starts (firmware_protocol/device/block_store.py)
+        self.ring_full = False
 
     # ------------------------------------------------------------------ state
 
@@ -282,6 +285,7 @@ class DeviceMachine:
             self.block_ends > 0
             or self.queued_ticks >= self.start_ticks
             or self.free_slots() <= 0
+            or self.ring_full
             or self.queue[0].item <= self.flush_item
         )
 

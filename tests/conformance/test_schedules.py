@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 
 from firmware_protocol.messages import (
+    PROTOCOL_MINOR,
     Caps,
     Error,
     ErrorCode,
@@ -43,7 +44,7 @@ def test_caps_is_followed_by_stepping_in_a_3_1_session_only(device_factory, host
     dev = device_factory()
     h = host_factory(dev.path)
     ident = h.hello()
-    assert (ident.major, ident.minor) == (3, 1)
+    assert (ident.major, ident.minor) == (3, PROTOCOL_MINOR)
     _caps(h)
     stepping = h.wait_for(lambda: h.of(Stepping), what="STEPPING")
     assert 1 <= stepping.profile_step_rate <= ident.max_step_rate

@@ -272,8 +272,8 @@ def test_a_stopped_stepper_old_compare_does_not_start_its_next_chunk_early(engin
         for t, d, c, b in _LAYER_3447
     }
 
-    def recorded(batch, ctx, tol, payload, fit_budget_s=None, needed=None):
-        out = {}
+    def recorded(batch, ctx, tol, payload, fit_budget_s=None, needed=None, fitted=None):
+        out = {(i, k): s for i, axes in (fitted or {}).items() for k, s in axes.items()}
         for i in range(len(batch)):
             key = (int(batch.ticks[i]), tuple(int(v) for v in batch.deltas[i]), int(batch.ramps[i]))
             out.update({(i, k): s for k, s in by_segment.get(key, {}).items()})
@@ -297,9 +297,10 @@ def test_a_heating_wait_with_the_ring_of_chunks_full_keeps_hearing_the_host(engi
     # device's watchdog ("no word from the host for 2000 ms") stopped a host that spoke
     # all along (the first layer at its heating wait, segment 154, in about 5 runs of 12).
     # While a WAIT holds the queue still, a segment whose block finds no room now leaves
-    # its block out (the tick's DDA steps it), so nothing waits for the ring; and FLOW's
-    # credit counts the ring's room, so the host sends no more than the ring takes.
+    # its block out (the tick's DDA steps it), so nothing waits for the ring; and the host
+    # counts the ring's room (RING), so it sends no more than the ring takes.
     from cdprhost.link.errors import LinkError
+    from firmware_protocol.block_ring import place
 
     fr = engine.firmware_rates
     ramps = fr.cut_for_blocks(fr.ramp_batch([20_000, 15_000, 10_000, 2_000], cycles=6))
@@ -317,10 +318,13 @@ def test_a_heating_wait_with_the_ring_of_chunks_full_keeps_hearing_the_host(engi
         except LinkError as e:
             failed = e
         fault = link.fault
+        ring, held = link._core.dev.ring, link.counters.ring_held
     assert failed is None and fault is None, (failed, fault)
-    # the ring's worth of ramps went behind the wait (before the credit counted the ring:
-    # the queue's 64 items, the rest of the blocks left to the tick's DDA)
-    assert sent >= 16, sent
+    # the ring's worth of ramps went behind the wait, and no more: the host holds the
+    # next block (3.2: RING; before the credit counted the ring, the queue's 64 items
+    # went, the rest of their blocks left to the tick's DDA)
+    assert sent >= 8 and held > 0, (sent, held)
+    assert ring is not None and place(ring.head, ring.tail, 42, ring.entries) is None, ring
 
 
 def test_ramps_without_their_blocks_between_engine_segments_keep_their_time(engine):
@@ -446,10 +450,11 @@ def test_a_stream_of_ramps_whose_blocks_overfill_the_ring_is_never_refused(engin
     # blocks than the ring takes: a segment waited for room with its frame held, the
     # frames behind it were refused, NAKed and sent again (4-6 retransmissions and 1-2
     # NAKs in 3 runs of 4, the queue run dry in 3 of them and in the fourth). A block now
-    # reserves what it takes, and FLOW's credit counts the ring's room at the queue's mix
-    # of blocks. The credit is an estimate and the ring holds a few tens of ms of these
-    # ramps: on a loaded PC a run may still see a refusal or run dry at the start (3 of 12
-    # runs), so a run may be tried three times; the old ring failed every run.
+    # reserves what it takes, and the host counts the ring's entries (RING, protocol 3.2)
+    # and sends a block only where it fits: no refusal. The ring holds a few tens of ms of
+    # these ramps, so on a loaded PC a run may still run dry at the start (with the
+    # credit guessed from the queue's mix of blocks: 3 of 12 runs), and a run may be tried
+    # three times; the old ring failed every run.
     fr = engine.firmware_rates
     ramps = fr.ramp_batch([8_000, 6_000, 4_000, 800], cycles=8, steady=1, ticks=4_000)
     batch = fr.cut_for_blocks(ramps)
@@ -460,3 +465,32 @@ def test_a_stream_of_ramps_whose_blocks_overfill_the_ring_is_never_refused(engin
             break
     assert not r["failed"] and r["rejected"] == 0 and r["naks"] == 0, r
     assert r["exact"], r
+
+
+def test_the_engine_reports_its_ring_and_the_host_places_every_block_as_it_does(engine):
+    # Protocol 3.2: the engine's ACKs carry RING after FLOW; the host follows the ring's
+    # head over the blocks it sends and sends a block only where it fits, so no frame is
+    # refused for the ring, and the head it counted is the device's at the end. Ramps
+    # just over the 8,000 the tick steps, each piece's blocks sent, 1.2 s at 1x.
+    from cdprhost.link.wire_cuts import cut_for_blocks
+    from firmware_protocol.streams import expected_record
+    from tests.link.test_ring_credit import _ramps
+
+    fr = engine.firmware_rates
+    batch = cut_for_blocks(_ramps([9_000, 7_000, 5_000, 800], cycles=2, ticks=20_000), 120)
+    with fr.harness(engine._build, speedup=1.0, profile=False) as (link, tmp):
+        fr.warm_link(link)
+        ring = link._core.dev.ring
+        assert ring is not None and ring.entries == 128 and ring.head == ring.tail, ring
+        start = ring.head
+        link.queue_segments(batch)
+        link.wait_idle(60)
+        link.request_status()
+        ring, c = link._core.dev.ring, link.counters
+        assert ring is not None and ring.head == ring.tail and ring.held == 0, ring
+        assert ring.head != start  # the blocks went round the ring
+        assert link._feed.ring.head == ring.head and c.ring_disagreements == 0, c
+        assert c.naks_received == 0 and c.retransmits == 0, c
+        assert link._core.dev.flow.free == link.identity.queue_capacity  # the whole queue
+    record = [json.loads(x) for x in (tmp / "record.jsonl").read_text().splitlines() if x]
+    assert record == expected_record(batch)
