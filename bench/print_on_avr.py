@@ -86,8 +86,9 @@ def build(engine: bool, rate: int | None) -> Path:
     return ROOT / "firmware" / build_dir
 
 
-def announced_rates(build_dir: Path) -> tuple[int, int | None]:
-    """The build's MAX_STEP_RATE (IDENT) and PROFILE_STEP_RATE (STEPPING), read from a
+def announced_rates(build_dir: Path) -> tuple[int, int | None, int | None]:
+    """The build's MAX_STEP_RATE (IDENT), PROFILE_STEP_RATE (STEPPING) and the entries of
+    its ring of schedule blocks (RING; None: the default build keeps none), read from a
     short session."""
     from cdprhost.link.connect import open_link  # the host's own handshake
 
@@ -101,7 +102,8 @@ def announced_rates(build_dir: Path) -> tuple[int, int | None]:
         link = open_link(pty)
         try:
             assert link.identity is not None and link.caps is not None
-            return int(link.identity.max_step_rate), link.caps.profile_step_rate
+            ring = link.ring.entries if link.ring is not None else None
+            return int(link.identity.max_step_rate), link.caps.profile_step_rate, ring
         finally:
             link.close()
     finally:
@@ -183,7 +185,7 @@ def run(args: argparse.Namespace, work: Path) -> None:
         part.write_text(from_layer(Path(args.gcode).read_text(), args.from_layer))
         args.gcode = str(part)
     build_dir = build(args.engine, args.rate)
-    rate, profile_rate = announced_rates(build_dir)
+    rate, profile_rate, ring = announced_rates(build_dir)
     unlimited = preflight(
         args.gcode, load_profile(args.profile).model_copy(update={"device": None})
     )
@@ -191,6 +193,7 @@ def run(args: argparse.Namespace, work: Path) -> None:
     out["from_layer"] = args.from_layer
     out["busy_host"] = args.busy_host
     out["profile_step_rate"] = profile_rate
+    out["ring_entries"] = ring
     out["unlimited_s"] = unlimited.estimated_time_s
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
@@ -210,6 +213,8 @@ def run(args: argparse.Namespace, work: Path) -> None:
                 cmd += ["--faults", "hotend_start_c=190"]
                 if profile_rate is not None and profile_rate < rate:
                     cmd += ["--profile-step-rate", str(profile_rate)]
+                if ring is not None:  # the same ring as the build's, the same waits
+                    cmd += ["--ring-entries", str(ring)]
             t0 = time.monotonic()
             job = print_on(cmd, args.gcode, args.profile, tmp / kind, env, args.busy_host)
             out[kind] = {k: job.get(k) for k in fields} | {

@@ -39,6 +39,7 @@ from cdprhost.link.events import (
 )
 from cdprhost.link.flow import Watermarks
 from cdprhost.link.keepalive import KeepAlive
+from cdprhost.link.ring_room import RingReport
 from cdprhost.link.segment_feed import SegmentFeed
 from cdprhost.link.session_setup import SessionSetup
 from cdprhost.link.tuning import (
@@ -149,6 +150,12 @@ class HostLink:
     def caps(self) -> DeviceCaps | None:
         """What a 2.1 device announced (None: a 2.0 device)."""
         return self._dev.caps
+
+    @property
+    def ring(self) -> RingReport | None:
+        """The device's ring of schedule blocks as it last reported it (3.2: RING; None:
+        it keeps none)."""
+        return self._dev.ring
 
     @property
     def health(self) -> DeviceHealth | None:

@@ -30,6 +30,9 @@ from cdprhost.job.state import Failure, Planned
         (["print", "{g}", "-p", "paper-prototype", "--port", " "], "--port"),
         (["sim-device", "--speedup", "nan"], "--speedup"),
         (["sim-device", "--speedup", "-1"], "--speedup"),
+        (["sim-device", "--ring-entries", "96"], "--ring-entries"),  # not a power of two
+        (["sim-device", "--ring-entries", "256"], "--ring-entries"),
+        (["sim-device", "--firmware", "avr", "--ring-entries", "64"], "--ring-entries"),
         (
             [
                 "calibrate",

@@ -4,6 +4,8 @@ behind a block are never refused for it (docs/step-engine.md section 8)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -127,3 +129,25 @@ def test_a_ramp_held_back_for_the_ring_is_fitted_once(monkeypatch):
     peak = peak_step_rates(batch, 100_000).max(axis=1)
     needed = int(np.sum((batch.ramps != RAMP_CONSTANT) & (peak > ENGINE["profile_step_rate"])))
     assert len(fitted) == needed, (len(fitted), needed)
+
+
+def test_sim_device_with_a_ring_on_a_pty_reports_it_and_the_stream_waits_for_it(tmp_path):
+    """`cdprhost sim-device --ring-entries 128`, as the AVR's step engine: a host on its
+    pty sees the ring and streams ramps that overfill it without a refusal."""
+    from cdprhost.link.connect import open_link
+    from tests.e2e.processes import SimDeviceProcess
+
+    batch = cut_for_blocks(_ramps([12_000, 9_000, 6_000, 800], cycles=4), 120)
+    args = ("--speedup", "4", "--max-step-rate", "26000", "--profile-step-rate", "8000")
+    with SimDeviceProcess(tmp_path, *args, "--ring-entries", "128") as dev:
+        link = open_link(dev.path)
+        try:
+            assert link.ring is not None and link.ring.entries == 128
+            link.queue_segments(batch)
+            link.wait_idle(60)
+            c = link.counters
+            assert c.ring_held > 0 and c.naks_received == 0 and c.ring_disagreements == 0, c
+        finally:
+            link.close()
+    record = [json.loads(x) for x in dev.record.read_text().splitlines() if x.strip()]
+    assert record == expected_record(batch)

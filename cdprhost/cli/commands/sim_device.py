@@ -9,6 +9,7 @@ import sys
 from cdprhost.cli.numbers import bounded_float, bounded_int
 from cdprhost.cli.options import output_file
 from cdprhost.errors import InputError
+from firmware_protocol.block_ring import valid_entries
 from firmware_protocol.device.config import MAX_SPEEDUP, SimConfig
 from firmware_protocol.device.faults import FaultSpec, FaultSpecError
 from firmware_protocol.device.firmware import SimDevice
@@ -63,6 +64,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "block (STEPPING; default: the max step rate), as the AVR's step engine announces "
         "its tick's: the host then sends a block for every faster ramp axis",
     )
+    p.add_argument(
+        "--ring-entries",
+        type=bounded_int(2, 128),
+        default=None,
+        metavar="N",
+        help="entries of a ring the Python device keeps its schedule blocks in (RING, "
+        "protocol 3.2; a power of two), as the AVR's step engine keeps 128: the host then "
+        "sends a block only where it fits (default: none, blocks need no room)",
+    )
     p.add_argument("--truth", metavar="PROFILE", help="truth machine profile for the virtual mocap")
     p.add_argument("--mocap-dir", metavar="DIR", help="where the virtual mocap writes its takes")
     p.set_defaults(func=run)
@@ -82,11 +92,13 @@ def run(args: argparse.Namespace) -> int:
         for given, value in (
             ("--max-step-rate", args.max_step_rate),
             ("--profile-step-rate", args.profile_step_rate),
+            ("--ring-entries", args.ring_entries),
         ):
             if value is not None:
                 raise InputError(
-                    "the AVR firmware announces its own rates (MAX_STEP_RATE, "
-                    "PROFILE_STEP_RATE: firmware/src/config.h)",
+                    "the AVR firmware announces its own rates and ring (MAX_STEP_RATE, "
+                    "PROFILE_STEP_RATE: firmware/src/config.h; BLOCK_CHUNKS: "
+                    "src/step_blocks.h)",
                     source=given,
                 )
         from cdprhost.sim.avr_device import run as run_avr
@@ -102,12 +114,19 @@ def run(args: argparse.Namespace) -> int:
     def notice(text: str) -> None:
         print(f"cdprhost sim-device: {text}", file=sys.stderr, flush=True)
 
+    if args.ring_entries is not None and not valid_entries(args.ring_entries):
+        raise InputError(
+            f"{args.ring_entries} entries: a ring's size is a power of two (2..128), its "
+            "counters modulo 256",
+            source="--ring-entries",
+        )
     try:
         device = SimDevice(
             SimConfig(
                 speedup=args.speedup,
                 max_step_rate=args.max_step_rate or SimConfig.max_step_rate,
                 profile_step_rate=args.profile_step_rate,
+                ring_entries=args.ring_entries,
             ),
             faults,
             observer,
