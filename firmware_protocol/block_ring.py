@@ -35,6 +35,13 @@ def block_entries(chunks_per_axis: Iterable[int]) -> int:
     return sum(1 + int(n) for n in chunks_per_axis)
 
 
+def most_entries(max_payload: int) -> int:
+    """The most entries one block in a payload of ``max_payload`` bytes can take (the
+    AVR's BLOCK_MOST): a header and a first chunk of at least 4 bytes an axis, 3 bytes
+    each further chunk, after the segment's opcode and the block's mask."""
+    return (max_payload + 6) // 3
+
+
 def place(head: int, tail: int, need: int, entries: int) -> int | None:
     """The counter of the first entry a block of ``need`` entries takes, the ring's head
     at ``head`` and its tail at ``tail``; None when it would wait for room."""

@@ -13,16 +13,9 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 
-from firmware_protocol.block_ring import COUNTER, admit, block_entries, place
+from firmware_protocol.block_ring import COUNTER, admit, block_entries, most_entries, place
 from firmware_protocol.message_base import Message
 from firmware_protocol.messages import Ring, Segment
-
-
-def most_entries(max_payload: int) -> int:
-    """The most entries one block in a payload of ``max_payload`` bytes can take (the
-    AVR's BLOCK_MOST: a header and a first chunk of at least 4 bytes an axis, 3 bytes each
-    further chunk, after the opcode and the mask)."""
-    return (max_payload + 6) // 3
 
 
 class BlockStore:

@@ -6,7 +6,14 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_protocol.block_ring import COUNTER, admit, block_entries, place, valid_entries
+from firmware_protocol.block_ring import (
+    COUNTER,
+    admit,
+    block_entries,
+    most_entries,
+    place,
+    valid_entries,
+)
 
 
 def test_a_block_goes_at_the_head_when_it_fits_before_the_end():
@@ -37,6 +44,7 @@ def test_admit_stops_at_the_first_block_that_would_wait_and_moves_the_head():
 def test_block_sizes_and_ring_sizes():
     assert block_entries([1, 3]) == 2 + 4  # a header and the chunks of each axis
     assert [valid_entries(n) for n in (1, 2, 96, 128, 256)] == [False, True, False, True, False]
+    assert most_entries(120) == 42  # the AVR's BLOCK_MOST at its 120-byte payload
 
 
 @settings(max_examples=300, deadline=None)
