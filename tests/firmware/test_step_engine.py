@@ -471,14 +471,17 @@ def test_the_engine_reports_its_ring_and_the_host_places_every_block_as_it_does(
     # Protocol 3.2: the engine's ACKs carry RING after FLOW; the host follows the ring's
     # head over the blocks it sends and sends a block only where it fits, so no frame is
     # refused for the ring, and the head it counted is the device's at the end. Ramps
-    # just over the 8,000 the tick steps, each piece's blocks sent, 1.2 s at 1x.
+    # just over the 8,000 the tick steps, each piece's blocks sent: 1.2 s of device time,
+    # run at half speed, so that a host slowed by a loaded PC (a whole test run beside it:
+    # the ring holds a few tens of ms of these ramps) still keeps it fed; what is checked
+    # is the ring's count, not the host's pace.
     from cdprhost.link.wire_cuts import cut_for_blocks
     from firmware_protocol.streams import expected_record
     from tests.link.test_ring_credit import _ramps
 
     fr = engine.firmware_rates
     batch = cut_for_blocks(_ramps([9_000, 7_000, 5_000, 800], cycles=2, ticks=20_000), 120)
-    with fr.harness(engine._build, speedup=1.0, profile=False) as (link, tmp):
+    with fr.harness(engine._build, speedup=0.5, profile=False) as (link, tmp):
         fr.warm_link(link)
         ring = link._core.dev.ring
         assert ring is not None and ring.entries == 128 and ring.head == ring.tail, ring
