@@ -44,6 +44,7 @@ from firmware_protocol.messages import (
     MessageError,
     Ring,
     Status,
+    StepBudget,
     Stepping,
 )
 from firmware_protocol.messages import Error as ErrorReport
@@ -168,6 +169,10 @@ class DeviceTracker:
             elif isinstance(msg, Stepping):  # follows its CAPS (3.1)
                 self.caps = replace(
                     self.caps or DeviceCaps(), profile_step_rate=msg.profile_step_rate
+                )
+            elif isinstance(msg, StepBudget):  # follows its STEPPING (3.3)
+                self.caps = replace(
+                    self.caps or DeviceCaps(), total_step_rate=msg.total_step_rate
                 )
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))

@@ -608,9 +608,9 @@ typedef struct cdpr_ring {
 
 /* StepBudget: class D, opcode 0x4C */
 typedef struct cdpr_step_budget {
-    uint32_t total_step_rate; /* 3.3: peak steps/s summed over the four axes (0: no budget beyond each axis's) */
+    uint32_t total_step_rate; /* 3.3: peak steps/s summed over the four axes */
 } cdpr_step_budget_t;
-#define CDPR_STEP_BUDGET_TOTAL_STEP_RATE_MIN (0)
+#define CDPR_STEP_BUDGET_TOTAL_STEP_RATE_MIN (1)
 #define CDPR_STEP_BUDGET_TOTAL_STEP_RATE_MAX (4294967295UL)
 
 #endif /* CDPR_PROTOCOL_H */

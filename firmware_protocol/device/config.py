@@ -34,6 +34,9 @@ class SimConfig:
     #: STEPPING (3.1): the peak rate of an axis it steps from the profile, without a
     #: schedule block (None: max_step_rate; this model steps every axis exactly)
     profile_step_rate: int | None = None
+    #: STEP_BUDGET (3.3): peak steps/s summed over the four axes (None: no budget beyond
+    #: each axis's, and no STEP_BUDGET sent)
+    total_step_rate: int | None = None
     max_payload: int = MAX_PAYLOAD
     #: RING (3.2): entries of a ring its schedule blocks take room in, as the AVR's step
     #: engine keeps (a power of two, at most 128; None: blocks need no room)
