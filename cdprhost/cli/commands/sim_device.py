@@ -130,6 +130,13 @@ def run(args: argparse.Namespace) -> int:
             "counters modulo 256",
             source="--ring-entries",
         )
+    rate = args.max_step_rate or SimConfig.max_step_rate
+    if args.total_step_rate is not None and args.total_step_rate < rate:
+        raise InputError(
+            f"{args.total_step_rate} steps/s in all is under the {rate} steps/s one axis "
+            "takes alone (--max-step-rate)",
+            source="--total-step-rate",
+        )
     try:
         device = SimDevice(
             SimConfig(
