@@ -171,9 +171,7 @@ class DeviceTracker:
                     self.caps or DeviceCaps(), profile_step_rate=msg.profile_step_rate
                 )
             elif isinstance(msg, StepBudget):  # follows its STEPPING (3.3)
-                self.caps = replace(
-                    self.caps or DeviceCaps(), total_step_rate=msg.total_step_rate
-                )
+                self.caps = replace(self.caps or DeviceCaps(), total_step_rate=msg.total_step_rate)
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:
