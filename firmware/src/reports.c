@@ -121,6 +121,11 @@ void report_caps(void)
         wr_uv(&s, PROFILE_STEP_RATE);
         send(&s, 0);
     }
+    if (machine.host_minor >= 3) { /* 3.3: the step rate the four axes share */
+        struct writer b = start(CDPR_OP_STEP_BUDGET);
+        wr_uv(&b, TOTAL_STEP_RATE);
+        send(&b, 0);
+    }
 }
 
 void report_ident(uint16_t nonce, uint8_t urgent)
