@@ -64,7 +64,10 @@ def acceptance_rows(engines: tuple[str, ...] = ("",)) -> list[Row]:
     ):
         rates = rates_bench.rates_of(config, rate)
         for cflags in engines:
-            build = rates_bench.variant(max(rates), cflags)
+            # what the engine takes, not what it announces: 3 x 33,000 + 3,300 is over the
+            # budget its axes share (STEP_BUDGET, 80,000), which the build leaves out here
+            measured = f"{cflags} -DTOTAL_STEP_RATE=0UL" if "STEP_ENGINE" in cflags else cflags
+            build = rates_bench.variant(max(rates), measured)
             p = rates_bench.run_batch(build, rates_bench.constant_batch(rates))
             got = f"worst {p['worst_us']} us, p99 {p['p99_us']} us"
             if not p["passed"]:

@@ -16,6 +16,11 @@ class Flag(IntFlag):
     WAITING = 0x80
 
 
+#: ``STEP_RATE``'s axis for the four axes' peak rates summed over ``STEP_BUDGET``'s total
+#: (3.3)
+ALL_AXES = 4
+
+
 class ErrorCode(IntEnum):
     UNDERRUN = 1
     THERMAL_RUNAWAY = 2

@@ -312,3 +312,25 @@ class Ring(Message):
         F("tail", "u8", "3.2: the first entry still held, counted modulo 256"),
         F("held", "u8", "3.2: items acknowledged and not queued yet (saturates)"),
     )
+
+
+@dataclass(frozen=True)
+class StepBudget(Message):
+    """Protocol 3.3: the step rate the axes share, sent after ``STEPPING`` in a session
+    whose minor is 3 or more, by a device that has such a budget (none: no budget beyond
+    each axis's own). ``max_step_rate`` (``IDENT``) holds for any one axis; a device whose
+    axes draw on one CPU (the AVR's step engine: four steppers in step hold less each than
+    one alone) also caps their sum: a segment whose axes' peak rates add up to more is
+    refused (``STEP_RATE``, axis 4), and the host plans under it."""
+
+    total_step_rate: int
+    OPCODE: ClassVar[int] = 0x4C
+    CLASS: ClassVar[str] = "D"
+    FIELDS: ClassVar[tuple[Field, ...]] = (
+        F(
+            "total_step_rate",
+            "u32",
+            "3.3: peak steps/s summed over the four axes",
+            lo=1,
+        ),
+    )

@@ -9,7 +9,7 @@ from typing import ClassVar
 from firmware_protocol.fields import Field
 
 PROTOCOL_MAJOR = 3
-PROTOCOL_MINOR = 2
+PROTOCOL_MINOR = 3
 # the first minor version with soft limits, PID gains and autotune, the heater lease,
 # CAPS and HEALTH (2.1; every 3.x has them, so 0 in this major)
 MINOR_SAFETY = 0
@@ -18,6 +18,9 @@ MINOR_STEPPING = 1
 # the first minor version whose ACK and NAK carry RING after FLOW, from a device that
 # keeps its schedule blocks in a ring of entries (3.2)
 MINOR_RING = 2
+# the first minor version whose STEPPING is followed by STEP_BUDGET, the step rate the
+# axes share (3.3)
+MINOR_BUDGET = 3
 
 HOTEND, BED = 0, 1
 MAX_EVENT_VALUES = 4

@@ -42,6 +42,7 @@ from firmware_protocol.device_messages import (
     Ident,
     Ring,
     Status,
+    StepBudget,
     Stepping,
 )
 from firmware_protocol.fields import MAX_TEXT, TYPE_RANGE, F, Field, MessageError
@@ -75,6 +76,7 @@ from firmware_protocol.message_base import (
     HOTEND,
     LEASE_MS_RANGE,
     MAX_EVENT_VALUES,
+    MINOR_BUDGET,
     MINOR_RING,
     MINOR_SAFETY,
     MINOR_STEPPING,
@@ -117,6 +119,7 @@ MESSAGES: tuple[type[Message], ...] = (
     Caps,
     Stepping,
     Ring,
+    StepBudget,
 )
 _BY_OPCODE: dict[int, type[Message]] = {cls.OPCODE: cls for cls in MESSAGES}
 
@@ -131,6 +134,7 @@ __all__ = [
     "MAX_EVENT_VALUES",
     "MAX_TEXT",
     "MESSAGES",
+    "MINOR_BUDGET",
     "MINOR_RING",
     "MINOR_SAFETY",
     "MINOR_STEPPING",
@@ -180,6 +184,7 @@ __all__ = [
     "SetPid",
     "SetPosition",
     "Status",
+    "StepBudget",
     "Stepping",
     "WaitHeater",
 ]

@@ -23,6 +23,7 @@ def announced_record(ident: Identity | None, caps: DeviceCaps | None) -> DeviceR
         return DeviceRecord(
             max_step_rate=ident.max_step_rate,
             min_segment_s=None if caps is None else caps.min_segment_ticks / ident.clock_hz,
+            total_step_rate=None if caps is None else caps.total_step_rate,
             firmware=f"{ident.firmware_name} {ident.firmware_version}".strip(),
             recorded=datetime.now(UTC).isoformat(timespec="seconds"),
         )

@@ -48,7 +48,7 @@ from cdprhost.link.events import Identity
 from cdprhost.machine import DeviceNotReady, Machine, prepare_device
 from cdprhost.machine.board_limits import board_caps
 from cdprhost.machine.commands import estop_flags, heaters_off
-from cdprhost.motion.device_limits import same_plan
+from cdprhost.motion.device_limits import same_board_plan
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.prepared import Prepared, prepare
 from cdprhost.motion.segments import DEFAULT_LIMITS
@@ -334,9 +334,7 @@ class PrintJob:
             except (CdprError, OSError) as exc:  # the print goes on; the next estimate guesses
                 log.warning("the board's limits were not recorded: %s", exc)
         record = self.profile.device
-        if same_plan(
-            self.profile, announced.max_step_rate, record.max_step_rate if record else None
-        ):
+        if same_board_plan(self.profile, announced, record):
             return
         report, planned = self._estimate(self._prepare(), announced)
         self._emit(planned)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Union
 
+from firmware_protocol.codes import ALL_AXES
 from firmware_protocol.messages import (
     AutotuneFailure,
     Caps,
@@ -122,6 +123,9 @@ class DeviceCaps:
     #: STEPPING (3.1, after CAPS): the peak rate of an axis it steps without a schedule
     #: block (None: a 3.0 device, which steps such an axis at any rate it announces)
     profile_step_rate: int | None = None
+    #: STEP_BUDGET (3.3, after STEPPING): the peak steps/s its four axes take summed
+    #: (None: no budget beyond each axis's, or a device before 3.3)
+    total_step_rate: int | None = None
 
     @classmethod
     def from_message(cls, m: Caps) -> DeviceCaps:
@@ -269,7 +273,9 @@ def error_text(m: Error) -> str:
     name = _name(ErrorCode, m.code)
     axis = (
         ""
-        if m.axis == 0xFF or m.code in (ErrorCode.BAD_VALUE, ErrorCode.BAD_COMMAND)
+        if m.axis == 0xFF
+        or m.code in (ErrorCode.BAD_VALUE, ErrorCode.BAD_COMMAND)
+        or (m.code == ErrorCode.STEP_RATE and m.axis == ALL_AXES)
         else f", axis {m.axis}"
     )
     details: dict[int, str] = {
@@ -278,7 +284,11 @@ def error_text(m: Error) -> str:
         ErrorCode.ENDSTOP_HIT: (
             f"the motion would take the module past the end of its travel (step {m.value})"
         ),
-        ErrorCode.STEP_RATE: f"step rate {m.value}/s over the limit",
+        ErrorCode.STEP_RATE: (
+            f"the four axes' step rates add up to {m.value}/s, over the board's total"
+            if m.axis == ALL_AXES
+            else f"step rate {m.value}/s over the limit"
+        ),
         ErrorCode.OVERTEMP: f"temperature {m.value / 10:g} C over the maximum",
         ErrorCode.HEATER_RANGE: f"target {m.value / 10:g} C over the maximum",
         ErrorCode.HOMING_FAILED: f"no endstop within travel ({m.value} steps)",

@@ -269,8 +269,9 @@ class SegmentFeed:
         return n
 
     def check_step_rates(self, batch: SegmentBatch, identity: Identity) -> None:
-        """Raise :class:`StepRateError` for a segment over the device's max step rate, or
-        shorter than the shortest one it takes (CAPS)."""
+        """Raise :class:`StepRateError` for a segment over the device's max step rate, over
+        the total its axes share (STEP_BUDGET), or shorter than the shortest one it takes
+        (CAPS)."""
         caps = self.core.dev.caps
         if caps is not None and len(batch) and int(batch.ticks.min()) < caps.min_segment_ticks:
             k = int(np.argmin(batch.ticks))
@@ -286,6 +287,15 @@ class SegmentFeed:
                 f"segment {k} of the batch: peak step rate {rates[k].max():.0f}/s exceeds the device "
                 f"limit {identity.max_step_rate}/s"
             )
+        total = caps.total_step_rate if caps is not None else None
+        if total is not None:
+            over = np.flatnonzero(rates.sum(axis=1) > total)
+            if over.size:
+                k = int(over[0])
+                raise StepRateError(
+                    f"segment {k} of the batch: its axes' peak step rates add up to "
+                    f"{rates[k].sum():.0f}/s, over the device's total of {total}/s"
+                )
 
     def feed(
         self,

@@ -44,6 +44,7 @@ from firmware_protocol.messages import (
     MessageError,
     Ring,
     Status,
+    StepBudget,
     Stepping,
 )
 from firmware_protocol.messages import Error as ErrorReport
@@ -169,6 +170,8 @@ class DeviceTracker:
                 self.caps = replace(
                     self.caps or DeviceCaps(), profile_step_rate=msg.profile_step_rate
                 )
+            elif isinstance(msg, StepBudget):  # follows its STEPPING (3.3)
+                self.caps = replace(self.caps or DeviceCaps(), total_step_rate=msg.total_step_rate)
             elif isinstance(msg, ErrorReport):
                 self.events.append(device_event(msg))
                 if not self.clearing:

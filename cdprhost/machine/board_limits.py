@@ -38,4 +38,5 @@ def board_caps(link: HostLink, profile: MachineProfile) -> DeviceCaps:
     ident, announced = link.identity, link.caps
     rate = ident.max_step_rate if ident else None
     shortest = announced.min_segment_ticks / ident.clock_hz if ident and announced else None
-    return caps_for_device(profile, rate, shortest, block_limits(ident, announced))
+    total = announced.total_step_rate if announced else None
+    return caps_for_device(profile, rate, shortest, block_limits(ident, announced), total)

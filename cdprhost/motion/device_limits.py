@@ -17,6 +17,7 @@ import numpy as np
 from cdprhost.motion.block_cuts import BlockLimits
 from cdprhost.motion.moves import MIN_MOVE_MM
 from cdprhost.motion.segments import DEFAULT_LIMITS, MIN_SEGMENT_S, SegmentLimits
+from cdprhost.profile.device_record import DeviceRecord
 from cdprhost.profile.models import MachineProfile
 
 #: plan for at most this fraction of the announced rate
@@ -38,25 +39,35 @@ def caps_for_device(
     max_step_rate: float | None,
     min_segment_s: float | None = None,
     blocks: BlockLimits | None = None,
+    total_step_rate: float | None = None,
 ) -> DeviceCaps:
     """``profile`` with module and extruder speeds capped to ``max_step_rate`` (steps/s
     on any one axis, as the device announced); unchanged when it already fits or the
     device announced nothing. The segments keep to the rate and to the device's
     shortest segment (``min_segment_s``, from its CAPS) after rounding, and with
     ``blocks`` (a device that steps from schedule blocks) ramps are cut until their blocks
-    fit a frame (block_cuts)."""
+    fit a frame (block_cuts). ``total_step_rate`` (STEP_BUDGET, 3.3: what the device's
+    axes take summed) caps each move's speed by the steps all its axes take per mm."""
     segments = SegmentLimits(
         max(MIN_SEGMENT_S, min_segment_s or 0.0),
         None if max_step_rate is None else float(max_step_rate),
         blocks,
+        None if total_step_rate is None else float(total_step_rate),
     )
+    said = []
+    motion = profile.motion
+    if total_step_rate is not None:
+        total = STEP_RATE_MARGIN * float(total_step_rate)
+        if motion.max_total_step_rate is None or motion.max_total_step_rate > total:
+            motion = motion.model_copy(update={"max_total_step_rate": total})
     if max_step_rate is None:
+        if motion is not profile.motion:
+            profile = profile.model_copy(update={"motion": motion})
         return DeviceCaps(profile, None, segments)
     rate = STEP_RATE_MARGIN * float(max_step_rate)
     module_cap = rate / max(profile.drive.steps_per_mm)
     extruder_cap = rate / profile.extruder.steps_per_mm
-    motion, extruder = profile.motion, profile.extruder
-    said = []
+    extruder = profile.extruder
     if motion.module_max_velocity_mm_s > module_cap:
         said.append(
             f"module speed {module_cap:.1f} mm/s (profile {motion.module_max_velocity_mm_s:g})"
@@ -68,6 +79,8 @@ def caps_for_device(
         )
         extruder = extruder.model_copy(update={"max_velocity_mm_s": extruder_cap})
     if not said:
+        if motion is not profile.motion:
+            profile = profile.model_copy(update={"motion": motion})
         return DeviceCaps(profile, None, segments)
     notice = f"the device steps at most {max_step_rate:g}/s per axis: planned with " + " and ".join(
         said
@@ -117,21 +130,40 @@ def slowed_axes(lost_s: np.ndarray) -> list[tuple[str, float]]:
 
 
 def slowdown_message(
-    max_step_rate: int, axes: list[tuple[str, float]], board_s: float, free_s: float
+    max_step_rate: int,
+    axes: list[tuple[str, float]],
+    board_s: float,
+    free_s: float,
+    total_step_rate: int | None = None,
 ) -> str:
-    """e.g. "the board's 10,000 steps/s limits module 2: +31 % (978 s instead of 747 s)"."""
+    """e.g. "the board's 10,000 steps/s limits module 2: +31 % (978 s instead of 747 s)";
+    a board with a budget its axes share (``total_step_rate``) says "the board's 26,000
+    steps/s (80,000 in all) limits ..."."""
     if len(axes) == 1:
         names = axes[0][0]
     else:
         names = ", ".join(f"{name} ({100.0 * share:.0f} %)" for name, share in axes)
     pct = 100.0 * (board_s - free_s) / free_s if free_s > 0 else 0.0
+    rate = f"{max_step_rate:,} steps/s"
+    if total_step_rate is not None:
+        rate += f" ({total_step_rate:,} in all)"
     return (
-        f"the board's {max_step_rate:,} steps/s limits {names or 'no axis'}: {pct:+.0f} % "
+        f"the board's {rate} limits {names or 'no axis'}: {pct:+.0f} % "
         f"({board_s:.0f} s instead of {free_s:.0f} s at the profile's own limits)"
     )
 
 
-def same_plan(profile: MachineProfile, a: int | None, b: int | None) -> bool:
-    """Boards announcing step rates ``a`` and ``b`` (None: unknown) get the same plan
-    (their estimates agree) from ``profile``."""
-    return caps_for_device(profile, a).profile == caps_for_device(profile, b).profile
+def same_board_plan(
+    profile: MachineProfile, a: DeviceRecord | None, b: DeviceRecord | None
+) -> bool:
+    """Boards recorded as ``a`` and ``b`` (None: unknown) get the same plan from
+    ``profile`` (their estimates agree)."""
+
+    def plan(rec: DeviceRecord | None) -> MachineProfile:
+        if rec is None:
+            return caps_for_device(profile, None).profile
+        return caps_for_device(
+            profile, rec.max_step_rate, total_step_rate=rec.total_step_rate
+        ).profile
+
+    return plan(a) == plan(b)

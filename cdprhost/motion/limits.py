@@ -49,6 +49,11 @@ class Caps:
     chord_tolerance: float
     e_velocity: float
     e_accel: float
+    #: the board's step budget (steps/s summed over the axes; inf: none) and what each
+    #: axis steps per mm (modules, extruder) to spend it
+    total_step_rate: float = float("inf")
+    module_steps_per_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    e_steps_per_mm: float = 0.0
 
     @classmethod
     def from_profile(
@@ -58,13 +63,20 @@ class Caps:
         a_max_statics: float = 0.0,
         *,
         module_limits: bool = True,
+        steps_per_mm: tuple[float, float, float] | None = None,
     ) -> Caps:
+        """``steps_per_mm`` (the modules', ``profile.drive``): with it, the motion's
+        ``max_total_step_rate`` caps each move's speed (without it the budget is left out)."""
         accel = (
             motion.max_accel_mm_s2
             if a_max_statics <= 0
             else min(motion.max_accel_mm_s2, a_max_statics)
         )
         inf = float("inf")
+        total, spm = inf, (0.0, 0.0, 0.0)
+        if steps_per_mm is not None and motion.max_total_step_rate is not None:
+            total = motion.max_total_step_rate
+            spm = (float(steps_per_mm[0]), float(steps_per_mm[1]), float(steps_per_mm[2]))
         return cls(
             motion.max_velocity_mm_s,
             accel,
@@ -74,6 +86,9 @@ class Caps:
             motion.chord_tolerance_mm,
             extruder.max_velocity_mm_s,
             extruder.max_accel_mm_s2,
+            total,
+            spm,
+            extruder.steps_per_mm,
         )
 
 
@@ -147,15 +162,24 @@ class _PointTerms:
         )
 
     def along(
-        self, ux: np.ndarray, uy: np.ndarray, uz: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """max_k |c_k|, max_k kappa_k and |J^-1 kappa| for moves of direction u through these points."""
+        self,
+        ux: np.ndarray,
+        uy: np.ndarray,
+        uz: np.ndarray,
+        steps_per_mm: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
+        """max_k |c_k|, max_k kappa_k, |J^-1 kappa| and sum_k |c_k| n_k (the modules'
+        steps per mm of path, ``steps_per_mm`` n_k) for moves of direction u through these
+        points."""
         c, kap = [], []
+        steps = np.zeros_like(ux)
         for k in range(3):
             ex, ey, ez = self.e[k]
             ck = ex * ux + ey * uy + ez * uz
             c.append(np.abs(ck))
             kap.append((1.0 - ck * ck) * self.inv_length[k])
+            if steps_per_mm[k]:
+                steps = steps + c[k] * steps_per_mm[k]
         w = None
         if self.cof is not None:
             comps = [
@@ -163,7 +187,7 @@ class _PointTerms:
                 for i in range(3)
             ]
             w = np.sqrt(comps[0] * comps[0] + comps[1] * comps[1] + comps[2] * comps[2])
-        return _max3(*c), _max3(*kap), w
+        return _max3(*c), _max3(*kap), w, steps
 
 
 def _interior_samples(
@@ -207,7 +231,12 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     v2_cap = v2_cart.copy()
     chord_step = np.full(n, np.inf)
     unit = np.column_stack([ux, uy, uz])
-    modules = np.isfinite(caps.module_velocity) or np.isfinite(caps.module_accel)
+    budget = np.isfinite(caps.total_step_rate)
+    if budget and caps.e_steps_per_mm > 0:  # extrude-only moves: the extruder spends it all
+        v2_cap = np.where(
+            kin, v2_cap, np.minimum(v2_cap, (caps.total_step_rate / caps.e_steps_per_mm) ** 2)
+        )
+    modules = np.isfinite(caps.module_velocity) or np.isfinite(caps.module_accel) or budget
     if not (kin.any() and (modules or chord)):
         return MoveCaps(length, kin, unit, accel, v2_cap, v2_cart, chord_step)
 
@@ -219,20 +248,22 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     terms = _PointTerms.at(pts[:, 0], pts[:, 1], pts[:, 2], outlets, chord)
     i0 = slice(0, n)  # views, not copies
     i1 = slice(1, n + 1) if chained else slice(n, 2 * n)
-    c0, k0, w0 = terms.take(i0).along(ux, uy, uz)
-    c1, k1, w1 = terms.take(i1).along(ux, uy, uz)
-    c_max, k_max = np.maximum(c0, c1), np.maximum(k0, k1)
+    spm = caps.module_steps_per_mm
+    c0, k0, w0, s0 = terms.take(i0).along(ux, uy, uz, spm)
+    c1, k1, w1, s1 = terms.take(i1).along(ux, uy, uz, spm)
+    c_max, k_max, s_max = np.maximum(c0, c1), np.maximum(k0, k1), np.maximum(s0, s1)
     w_max = np.maximum(w0, w1) if w0 is not None and w1 is not None else None
     spacing_req = np.maximum(SAMPLE_SPACING_MM, dist / MAX_SAMPLES_PER_MOVE)
     spacing_req = np.where(dist > ABSURD_MOVE_MM, dist / 4.0, spacing_req)
     owner, frac = _interior_samples(np.where(kin, dist, 0.0), spacing_req)
     if owner.size:
         p = block.start[owner] + frac[:, None] * delta[owner]
-        ci, ki, wi = _PointTerms.at(p[:, 0], p[:, 1], p[:, 2], outlets, chord).along(
-            ux[owner], uy[owner], uz[owner]
+        ci, ki, wi, si = _PointTerms.at(p[:, 0], p[:, 1], p[:, 2], outlets, chord).along(
+            ux[owner], uy[owner], uz[owner], spm
         )
         np.maximum.at(c_max, owner, ci)
         np.maximum.at(k_max, owner, ki)
+        np.maximum.at(s_max, owner, si)
         if w_max is not None and wi is not None:
             np.maximum.at(w_max, owner, wi)
     spacing = dist / (np.floor(dist / spacing_req) + 1.0)
@@ -241,6 +272,12 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     # module speed, then keep the J-dot term within 3/4 of the module acceleration
     v2_mod = np.minimum((caps.module_velocity / c_bound) ** 2, 0.75 * caps.module_accel / k_bound)
     v2_cap = np.where(kin, np.minimum(v2_cap, v2_mod), v2_cap)
+    if budget:
+        # the board's budget: the modules' steps per mm of path (each |c_k| moves by at
+        # most kappa_k per mm between samples) and the extruder's share of it
+        s_bound = s_max + 0.5 * k_max * spacing * sum(spm)
+        v_total = caps.total_step_rate / np.maximum(s_bound + ratio * caps.e_steps_per_mm, 1e-12)
+        v2_cap = np.where(kin, np.minimum(v2_cap, v_total * v_total), v2_cap)
     a_mod = (caps.module_accel - v2_cap * k_bound) / c_bound
     accel = np.where(kin, np.minimum(accel, a_mod), accel)
     if w_max is not None:

@@ -145,12 +145,19 @@ def retime(
     )
     mc = move_caps(block, outlets, caps, chord=False)
     seg_v2 = np.where(moving, mc.v2_cap, 0.0)
-    # the device: its step rate on any axis and its shortest segment bound the average speed
+    # the device: its step rate on any axis, the budget its axes share and its shortest
+    # segment bound the average speed
     worst = np.abs(batch.delta).max(axis=1).astype(float)
+    summed = np.abs(batch.delta).sum(axis=1).astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
         if limits.max_step_rate is not None:
             seg_v2 = np.minimum(
                 seg_v2, np.where(worst > 0, (limits.max_step_rate * length / worst) ** 2, np.inf)
+            )
+        if limits.total_step_rate is not None:
+            seg_v2 = np.minimum(
+                seg_v2,
+                np.where(summed > 0, (limits.total_step_rate * length / summed) ** 2, np.inf),
             )
         seg_v2 = np.minimum(seg_v2, (length / limits.min_segment_s) ** 2)
         plan_a = np.where(moving, np.abs(np.diff(vp**2)) / (2.0 * np.maximum(length, 1e-12)), 0.0)

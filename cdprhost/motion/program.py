@@ -131,6 +131,7 @@ class ProgramPlanner:
             profile.extruder,
             profile.statics.a_max_mm_s2,
             module_limits=module_limits,
+            steps_per_mm=profile.drive.steps_per_mm,
         )
         self.profile_accel = caps.max_accel
         self.file_limits = FileLimits()

@@ -55,6 +55,8 @@ class SegmentLimits:
     max_step_rate: float | None = None
     #: a device that steps ramps from schedule blocks: ramps cut until their blocks fit
     blocks: BlockLimits | None = None
+    #: the step rate the device's axes take summed (STEP_BUDGET; None: no such budget)
+    total_step_rate: float | None = None
 
 
 #: a device that announced nothing
@@ -284,9 +286,14 @@ def segment_moves_ends(
     min_ticks = max(1, math.ceil(limits.min_segment_s * clock_hz - 1e-9))
     if n and ticks.min() < min_ticks:
         batch, move_end = _at_least(batch, state.steps, move_end, min_ticks)
-    if n and limits.max_step_rate is not None:
+    if n and (limits.max_step_rate is not None or limits.total_step_rate is not None):
         batch, move_end = _within_step_rate(
-            batch, state.steps, move_end, limits.max_step_rate, clock_hz
+            batch,
+            state.steps,
+            move_end,
+            limits.max_step_rate or np.inf,
+            clock_hz,
+            limits.total_step_rate or np.inf,
         )
     if n and limits.blocks is not None:
         rate = limits.max_step_rate
@@ -437,9 +444,14 @@ def _cut(
 def peak_rates(batch: PlannedSegments, clock_hz: float) -> np.ndarray:
     """(n,) the fastest axis's peak step rate of each segment, as the device checks it
     (PROTOCOL.md 5.1, from the ramp codes the wire carries)."""
+    return np.asarray(axis_peak_rates(batch, clock_hz).max(axis=1))
+
+
+def axis_peak_rates(batch: PlannedSegments, clock_hz: float) -> np.ndarray:
+    """(n, 4) each axis's peak step rate of each segment, as the device checks it."""
     codes = ramp_codes_from_speeds(batch.v_start, batch.v_end)
     wire = SegmentBatch(batch.ticks, batch.delta, codes)
-    return np.asarray(peak_step_rates(wire, int(clock_hz)).max(axis=1))
+    return np.asarray(peak_step_rates(wire, int(clock_hz)))
 
 
 def _within_step_rate(
@@ -448,15 +460,19 @@ def _within_step_rate(
     move_end: np.ndarray,
     max_step_rate: float,
     clock_hz: float,
+    total_step_rate: float = np.inf,
 ) -> tuple[PlannedSegments, np.ndarray]:
-    """Segments whose rounded steps exceed ``max_step_rate`` merged into the next (the
+    """Segments whose rounded steps exceed ``max_step_rate`` on an axis, or
+    ``total_step_rate`` summed over the axes, merged into the next (the
     last one into the one before), a few passes: the speeds were planned under the
     rate, so what exceeds it is the rounding of a short piece, which its neighbour
     averages out. What is still over after the passes is left to the feed's check
     (StepRateError names it)."""
     limit = max_step_rate * (1.0 - 1e-6)  # the device's integer test, with float slack
+    total = total_step_rate * (1.0 - 1e-6)
     for _ in range(RATE_MERGE_PASSES):
-        over = peak_rates(batch, clock_hz) > limit
+        rates = axis_peak_rates(batch, clock_hz)
+        over = (rates.max(axis=1) > limit) | (rates.sum(axis=1) > total)
         if not over.any() or len(batch) < 2:
             break
         keep = ~over

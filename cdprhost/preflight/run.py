@@ -95,8 +95,13 @@ class Preflight:
         plan_profile = profile
         self.free: ProgramPlanner | None = None  # at the profile's limits, when the board slows it
         if self.device is not None:
-            caps = caps_for_device(profile, self.device.max_step_rate, self.device.min_segment_s)
-            if caps.notice is not None:
+            caps = caps_for_device(
+                profile,
+                self.device.max_step_rate,
+                self.device.min_segment_s,
+                total_step_rate=self.device.total_step_rate,
+            )
+            if caps.profile is not profile:  # the board slows it (its rates, its budget)
                 plan_profile = caps.profile
                 self.free = ProgramPlanner(
                     profile, self.model, chord=False, marked=True, **planner_options
@@ -263,7 +268,9 @@ class Preflight:
             source=self.device_source,
             time_at_profile_limits_s=round(free_s, 3),
             slowed_axes={name: round(share, 3) for name, share in axes},
-            message=slowdown_message(self.device.max_step_rate, axes, board_s, free_s)
+            message=slowdown_message(
+                self.device.max_step_rate, axes, board_s, free_s, self.device.total_step_rate
+            )
             if slows
             else "",
         )

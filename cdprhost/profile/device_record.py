@@ -39,6 +39,11 @@ class DeviceRecord(BaseModel):
     min_segment_s: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)] | None = Field(
         default=None, description="the shortest segment it takes, s (CAPS); none: any"
     )
+    total_step_rate: Annotated[int, Field(ge=1, le=40_000_000)] | None = Field(
+        default=None,
+        description="steps/s its four axes take summed (STEP_BUDGET, protocol 3.3); none: "
+        "no budget beyond each axis's",
+    )
     firmware: str = Field(default="", description="the firmware that announced it, for people")
     recorded: str = Field(
         default="", description="when cdprhost recorded it (UTC, ISO 8601); empty: by hand"
@@ -46,10 +51,11 @@ class DeviceRecord(BaseModel):
 
     def same_limits(self, other: DeviceRecord | None) -> bool:
         """The same planning limits (what was recorded when and by whom aside)."""
-        return other is not None and (self.max_step_rate, self.min_segment_s) == (
-            other.max_step_rate,
-            other.min_segment_s,
-        )
+        return other is not None and (
+            self.max_step_rate,
+            self.min_segment_s,
+            self.total_step_rate,
+        ) == (other.max_step_rate, other.min_segment_s, other.total_step_rate)
 
 
 def sidecar_path(profile_path: str | Path, shipped_dir: Path, user_dir: Path) -> Path:

@@ -107,6 +107,12 @@ class MotionLimits(_Strict):
     module_max_velocity_mm_s: Positive = 150.0
     module_max_accel_mm_s2: Positive = 3000.0
     chord_tolerance_mm: Positive = 0.01
+    max_total_step_rate: Positive | None = Field(
+        default=None,
+        description="steps/s the three modules and the extruder may take summed (a board "
+        "whose axes share one CPU: the AVR's step engine announces it, STEP_BUDGET); "
+        "unset: no limit beyond each axis's",
+    )
 
     @property
     def junction_deviation_mm(self) -> float:

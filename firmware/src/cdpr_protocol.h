@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define CDPR_PROTOCOL_MAJOR 3
-#define CDPR_PROTOCOL_MINOR 2
+#define CDPR_PROTOCOL_MINOR 3
 
 /* frames */
 #define CDPR_SYNC 0xA5
@@ -154,6 +154,8 @@
 #define CDPR_STEPPING_MAX_LEN 6
 #define CDPR_OP_RING 0x4B
 #define CDPR_RING_MAX_LEN 5
+#define CDPR_OP_STEP_BUDGET 0x4C
+#define CDPR_STEP_BUDGET_MAX_LEN 6
 
 /* Identify: class I, opcode 0x01 */
 
@@ -603,5 +605,12 @@ typedef struct cdpr_ring {
 #define CDPR_RING_TAIL_MAX (255)
 #define CDPR_RING_HELD_MIN (0)
 #define CDPR_RING_HELD_MAX (255)
+
+/* StepBudget: class D, opcode 0x4C */
+typedef struct cdpr_step_budget {
+    uint32_t total_step_rate; /* 3.3: peak steps/s summed over the four axes */
+} cdpr_step_budget_t;
+#define CDPR_STEP_BUDGET_TOTAL_STEP_RATE_MIN (1)
+#define CDPR_STEP_BUDGET_TOTAL_STEP_RATE_MAX (4294967295UL)
 
 #endif /* CDPR_PROTOCOL_H */

@@ -64,6 +64,29 @@
 #endif
 #endif
 _Static_assert(PROFILE_STEP_RATE <= MAX_STEP_RATE, "the profile's stepping is the tick's");
+/* STEP_BUDGET (protocol 3.3): the peak steps/s of the four axes summed (X, Y, Z modules
+ * and the extruder); a segment over it is refused on receipt (STEP_RATE, axis 4). 0: no
+ * budget beyond each axis's own MAX_STEP_RATE, and no test (motion.c).
+ * Without the engine 0: the tick's rate is set by a print's mix already (above).
+ * With it, each stepper's compare interrupts cost the CPU per edge, so what runs out with
+ * several axes fast is the chip, not an axis: four steppers in step hold 22,000 each and
+ * overrun their ticks from 24,000 (the four vectors then take 96 % of the CPU), three in
+ * step with braking about 80,000 in all (docs/step-engine.md section 9): 80,000, at least
+ * MAX_STEP_RATE (one axis alone always gets its own rate). A build announcing 100,000 or
+ * more on one axis is a measurement build (firmware/tools/engine_rates.py and
+ * bench/firmware_rates.py at 200,000: 3 x 33,000 + 3,300, four axes in step, to find
+ * where the engine ends): 0, so it takes the streams it measures with; a measurement at
+ * a lower MAX_STEP_RATE of more than 80,000 in all builds with -DTOTAL_STEP_RATE=0UL.
+ * A multiple of 200 (motion.c's integer test). */
+#ifndef TOTAL_STEP_RATE
+#if STEP_ENGINE && MAX_STEP_RATE < 100000UL
+#define TOTAL_STEP_RATE (MAX_STEP_RATE > 80000UL ? MAX_STEP_RATE : 80000UL)
+#else
+#define TOTAL_STEP_RATE 0UL
+#endif
+#endif
+_Static_assert(TOTAL_STEP_RATE == 0 || TOTAL_STEP_RATE >= MAX_STEP_RATE,
+               "the axes together take at least what one takes");
 
 /* CAPS (protocol 2.1). The shortest segment: one whole tick, 400 us (a shorter one would
  * make the step interrupt's period shorter than its own run time; BAD_VALUE). The segment

@@ -28,6 +28,14 @@ uint8_t motion_cursor; /* next queue position to look at */
  * of 200). */
 #define RATE_K100 (MAX_STEP_RATE * 255UL / (CLOCK_HZ / 100))
 _Static_assert(RATE_K100 * (CLOCK_HZ / 100) == MAX_STEP_RATE * 255UL, "RATE_K100 must be exact");
+/* The same for the four axes together (STEP_BUDGET, TOTAL_STEP_RATE; 0: no such test):
+ * 100 (sum |n|) F > TOTAL_K100 D. */
+#if TOTAL_STEP_RATE
+#define TOTAL_K100 (TOTAL_STEP_RATE * 255UL / (CLOCK_HZ / 100))
+_Static_assert(TOTAL_K100 * (CLOCK_HZ / 100) == TOTAL_STEP_RATE * 255UL, "TOTAL_K100 must be exact");
+_Static_assert(TOTAL_K100 < 65536UL, "the fast test's 16 x 16-bit product");
+#define RATE_ALL_AXES 4 /* STEP_RATE's axis for the sum */
+#endif
 
 /* |d| of a delta that is not INT32_MIN (the decoder refuses it) */
 static inline uint32_t abs32(int32_t d)
@@ -35,8 +43,39 @@ static inline uint32_t abs32(int32_t d)
     return (uint32_t)(d < 0 ? -d : d);
 }
 
+#if TOTAL_STEP_RATE
+/* The four axes' steps summed against the total, in 64 bits (sum |n| < 2^33): 4 when
+ * over (the summed peak rate in *rate), else -1. Every axis counts, one with a schedule
+ * block too: the budget is the CPU's. Out of line, as rate_check_axes. */
+static int8_t __attribute__((noinline)) rate_check_total(const struct segment *s, uint16_t f,
+                                                          uint32_t *rate)
+{
+    /* 100 F <= 51000 <= TOTAL_FAST_K TOTAL_K100: a long slow segment passes on
+     * TOTAL_FAST_K sum |n| <= D, without the 64-bit products */
+#define TOTAL_FAST_K ((51000UL + TOTAL_K100 - 1) / TOTAL_K100)
+    _Static_assert(TOTAL_FAST_K <= 64, "the fast test's bound");
+    uint64_t n = 0;
+    for (uint8_t k = 0; k < 4; k++)
+        n += abs32(s->deltas[k]);
+    if (n < (1UL << 24) && (uint32_t)n * TOTAL_FAST_K <= s->ticks)
+        return -1;
+    if (n * f * 100U <= (uint64_t)s->ticks * TOTAL_K100)
+        return -1;
+    float fn = 0.0f; /* the sum again, in float: no 64-bit conversion (124 B of library) */
+    for (uint8_t k = 0; k < 4; k++)
+        fn += (float)abs32(s->deltas[k]);
+    float r = fn * (float)f * (float)CLOCK_HZ / (255.0f * (float)s->ticks);
+    *rate = r > 2147483647.0f ? 0x7FFFFFFFUL : (uint32_t)r;
+    return RATE_ALL_AXES;
+}
+#define AXES_PASSED(s, f, rate) rate_check_total(s, f, rate)
+#else
+#define AXES_PASSED(s, f, rate) (-1)
+#endif
+
 /* Each axis against the rate, in 64 bits where the figures need them: the axis over
- * (its peak rate in *rate), or -1. Out of line: its frame would cost the fast test. */
+ * (its peak rate in *rate), else the four together against the total (AXES_PASSED), or
+ * -1. Out of line: its frame would cost the fast test. */
 static int8_t __attribute__((noinline)) rate_check_axes(const struct segment *s, uint16_t f,
                                                          uint32_t *rate)
 {
@@ -47,7 +86,7 @@ static int8_t __attribute__((noinline)) rate_check_axes(const struct segment *s,
     uint32_t most = abs32(s->deltas[0]) | abs32(s->deltas[1]) | abs32(s->deltas[2]) |
                     abs32(s->deltas[3]); /* >= max |n|, < 2 max |n| */
     if (most < (1UL << 24) && most * FAST_K <= s->ticks)
-        return -1;
+        return AXES_PASSED(s, f, rate);
     for (uint8_t k = 0; k < 4; k++) {
         if (s->sched.mask >> k & 1)
             continue; /* its schedule block decides (schedule_block.h) */
@@ -65,7 +104,7 @@ static int8_t __attribute__((noinline)) rate_check_axes(const struct segment *s,
             return (int8_t)k;
         }
     }
-    return -1;
+    return AXES_PASSED(s, f, rate);
 }
 
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
@@ -78,17 +117,31 @@ int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
     /* A short fast segment (a print's, thousands a second): the exact test on the
      * busiest axis in 16 x 16-bit products (100 n F < 2^31 for n < 2^15, F <= 510), the
      * per-axis 64-bit search only for a segment over or a long one (it cost about 1,300
-     * cycles a segment: a sixth of the CPU at 2,000 segments/s) */
+     * cycles a segment: a sixth of the CPU at 2,000 segments/s). With a total, the
+     * summed steps the same way, in two more 16 x 16-bit products while the sum and D
+     * fit 16 bits (the sum < 2^17 here; D < 2^16: 655 ms, longer segments are few a
+     * second); else rate_check_axes ends with the 64-bit test. */
     uint16_t n = 0;
+#if TOTAL_STEP_RATE
+    uint32_t sum = 0;
+#endif
     for (uint8_t k = 0; k < 4; k++) {
         uint32_t a = abs32(s->deltas[k]);
         if (a & 0xFFFF8000UL) /* a mask: -Os shifts 15 times in a loop */
             return rate_check_axes(s, f, rate);
         if ((uint16_t)a > n)
             n = (uint16_t)a;
+#if TOTAL_STEP_RATE
+        sum += (uint16_t)a;
+#endif
     }
-    if (s->ticks <= 0xFFFFFFFFUL / RATE_K100 &&
-        mul16x16(n, (uint16_t)(f * 100U)) <= s->ticks * RATE_K100)
+    uint16_t f100 = (uint16_t)(f * 100U);
+    if (s->ticks <= 0xFFFFFFFFUL / RATE_K100 && mul16x16(n, f100) <= s->ticks * RATE_K100
+#if TOTAL_STEP_RATE
+        && !(uint16_t)(s->ticks >> 16) && !(uint8_t)(sum >> 16) &&
+        mul16x16((uint16_t)sum, f100) <= mul16x16((uint16_t)s->ticks, (uint16_t)TOTAL_K100)
+#endif
+    )
         return -1;
     return rate_check_axes(s, f, rate);
 }

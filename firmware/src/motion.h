@@ -5,8 +5,9 @@
 #include "queue.h"
 #include "segment.h"
 
-/* Peak step rate check (PROTOCOL 5.1): returns the first axis over MAX_STEP_RATE
- * and its rate through *rate, or -1. */
+/* Peak step rate check (PROTOCOL 5.1): returns the first axis over MAX_STEP_RATE and its
+ * rate through *rate, else 4 when the four axes' rates summed are over a nonzero
+ * TOTAL_STEP_RATE (STEP_BUDGET, 3.3) and that sum through *rate, or -1. */
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate);
 /* Store a decoded segment in a queue item (no arithmetic beyond signs). */
 void motion_store(struct item *it, const struct segment *s);

@@ -121,6 +121,12 @@ void report_caps(void)
         wr_uv(&s, PROFILE_STEP_RATE);
         send(&s, 0);
     }
+    if (TOTAL_STEP_RATE && machine.host_minor >= 3) { /* 3.3: the step rate the four axes
+                                                         * share, from a build that has one */
+        struct writer b = start(CDPR_OP_STEP_BUDGET);
+        wr_uv(&b, TOTAL_STEP_RATE);
+        send(&b, 0);
+    }
 }
 
 void report_ident(uint16_t nonce, uint8_t urgent)

@@ -4,6 +4,8 @@
 #define SESSION_H
 #include <stdint.h>
 
+#include "config.h"
+
 void session_opened(void);
 void session_boot_on_data(void);
 /* A HELLO before any session since this boot: BOOT goes out ahead of its IDENT. */

@@ -293,7 +293,7 @@ static int32_t chunk_out_early(uint8_t k, uint8_t ahead)
  * chunk out is a whole segment's delta: the running segment's engine axes, and the next
  * segment's axes put out early (chunks_early); stepper.pos holds the ended segments',
  * whose last edges may still be queued. The edges not raised yet are taken off. */
-static void engine_issued(struct seg_snapshot *sn)
+static void __attribute__((noinline)) engine_issued(struct seg_snapshot *sn)
 {
     uint8_t ahead = sn->running ? 1 : 0;
     for (uint8_t k = 0; k < 4; k++) {
@@ -328,7 +328,7 @@ static uint8_t ended_edges_left(void)
  * hold). A segment's end is at most its last tick away, two tick starts or so;
  * stepper.running is already 0, so no segment starts meanwhile. Interrupts on (the
  * main loop's halt); with them off the edges are dropped and counted as before. */
-static void let_ended_segment_out(void)
+static void __attribute__((noinline)) let_ended_segment_out(void)
 {
     if (!(SREG & _BV(SREG_I)))
         return;

@@ -3,6 +3,8 @@
 #define STEPPER_H
 #include <stdint.h>
 
+#include "config.h"
+
 /* What the interrupt has executed, one consistent snapshot (stepper_progress). */
 struct stepper_progress {
     uint32_t items_done, segments_done;

@@ -47,7 +47,11 @@ SIM_ONLY = {"sim_hooks.c"}
 #: vectors of which at most one has interrupts enabled at a time: the step engine's
 #: steppers (Timer3 compare A-C, Timer5 compare A), whose C paths run one at a time
 #: (src/step_engine.c, step_c_open: a second one leaves its work to the first)
+#: A member nested inside another's C path (the one that enabled interrupts) finds the C
+#: path open and returns from its entry: its C functions (``C_PATH``) are not on the
+#: stack then.
 EXCLUSIVE = ({"__vector_32", "__vector_33", "__vector_34", "__vector_47"},)
+C_PATH = re.compile(r"__vector_\w+_c")
 INDIRECT = {
     "deframer_run": ("link_frame_received", "link_frame_rejected", "prepare_one"),
     "link_frame_received": ("proto_accept", "proto_urgent", "proto_frame_seen"),
@@ -65,14 +69,16 @@ CALL = re.compile(r"\b(r?call)\s+[^<]*<([\w.]+)(\+0x[0-9a-f]+)?>")
 JUMP = re.compile(r"\b(r?jmp)\s+[^<]*<([\w.]+)(\+0x[0-9a-f]+)?>")
 
 
-def frames(tmp: Path) -> dict[str, int]:
+def frames(tmp: Path, cflags: list[str]) -> dict[str, int]:
+    """Each function's frame from -fstack-usage, compiled as the build was (``cflags``:
+    its EXTRA_CFLAGS; a build option such as STEP_ENGINE changes the frames)."""
     out: dict[str, int] = {}
     for src in sorted((FIRMWARE / "src").glob("*.c")):
         if src.name in SIM_ONLY:
             continue
         obj = tmp / (src.stem + ".o")
         subprocess.run(
-            ["avr-gcc", *CFLAGS, "-c", str(src), "-o", str(obj)], cwd=FIRMWARE, check=True
+            ["avr-gcc", *CFLAGS, *cflags, "-c", str(src), "-o", str(obj)], cwd=FIRMWARE, check=True
         )
         su = obj.with_suffix(".su")
         for line in su.read_text().splitlines() if su.exists() else []:
@@ -97,9 +103,9 @@ def disassembly(elf: Path) -> dict[str, tuple[int, list[str]]]:
     return funcs
 
 
-def analyse(elf: Path) -> dict[str, int | str]:
+def analyse(elf: Path, cflags: list[str] | None = None) -> dict[str, int | str]:
     with tempfile.TemporaryDirectory() as tmp:
-        frame_of = frames(Path(tmp))
+        frame_of = frames(Path(tmp), cflags or [])
     funcs = disassembly(elf)
 
     def frame(name: str) -> int:
@@ -108,7 +114,9 @@ def analyse(elf: Path) -> dict[str, int | str]:
         return sum(1 for ln in funcs[name][1] if "\tpush\t" in ln)
 
     @cache
-    def depth(name: str, stack: tuple[str, ...] = ()) -> tuple[int, tuple[str, ...]]:
+    def depth(
+        name: str, stack: tuple[str, ...] = (), entry_only: bool = False
+    ) -> tuple[int, tuple[str, ...]]:
         if name in stack:
             raise SystemExit(f"stack_usage: recursion through {' -> '.join((*stack, name))}")
         here = (*stack, name)
@@ -128,9 +136,9 @@ def analyse(elf: Path) -> dict[str, int | str]:
                     )
                 callees += [(f, RET) for f in INDIRECT[name]]
             for callee, ret in callees:
-                if callee not in funcs:
+                if callee not in funcs or (entry_only and C_PATH.fullmatch(callee)):
                     continue
-                d, p = depth(callee, here)
+                d, p = depth(callee, here, entry_only)
                 total = (frame(name) + ret + d) if ret else max(frame(name), d)
                 if total > best:
                     best, path = total, (name, *p)
@@ -140,6 +148,7 @@ def analyse(elf: Path) -> dict[str, int | str]:
     main += RET  # the C runtime's call
     isrs = {n: depth(n) for n in funcs if re.fullmatch(r"__vector_\d+", n)}
     isr_depth = {n: RET + d for n, (d, _) in isrs.items()}
+    isr_depth_entry: dict[str, int] = {}  # a nested EXCLUSIVE member: its entry only
 
     def reachable(n: str) -> set[str]:
         seen, todo = set(), [n]
@@ -173,7 +182,11 @@ def analyse(elf: Path) -> dict[str, int | str]:
                 keep = max(inside, key=lambda n: isr_depth[n])
                 below = [n for n in below if n not in group or n == keep]
         below.sort(key=lambda n: -isr_depth[n])
-        return sum(isr_depth[n] for n in below) + isr_depth[top], [*below, top]
+        top_depth = isr_depth[top]
+        if any(top in group and any(n in group for n in below) for group in EXCLUSIVE):
+            top_depth = RET + depth(top, (), True)[0]
+            isr_depth_entry[top] = top_depth
+        return sum(isr_depth[n] for n in below) + top_depth, [*below, top]
 
     worst_isr, worst_name, worst_chain = 0, "", []
     for n in isr_depth:
@@ -196,9 +209,14 @@ def analyse(elf: Path) -> dict[str, int | str]:
         "main": main,
         "main_path": " -> ".join(main_path),
         "interrupts": worst_isr,
-        "interrupt": " > ".join(f"{n} {isr_depth[n]} B" for n in worst_chain)
+        "interrupt": " > ".join(
+            f"{n} {isr_depth_entry[n] if n == worst_name and n in isr_depth_entry else isr_depth[n]} B"
+            for n in worst_chain
+        )
         + (" (nested, each enabling interrupts but the last)" if len(worst_chain) > 1 else ""),
-        "interrupt_path": " -> ".join(isrs[worst_name][1]) if worst_name else "",
+        "interrupt_path": " -> ".join(
+            depth(worst_name, (), worst_name in isr_depth_entry)[1] if worst_name else ()
+        ),
     }
 
 
@@ -206,8 +224,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--margin", type=int, default=MARGIN)
     ap.add_argument("--elf", type=Path, default=FIRMWARE / "build" / "cdpr.elf")
+    ap.add_argument(
+        "--cflags",
+        default="",
+        help="the build's EXTRA_CFLAGS (e.g. -DSTEP_ENGINE=1): the frames are compiled so",
+    )
     args = ap.parse_args()
-    r = analyse(args.elf)
+    r = analyse(args.elf, args.cflags.split())
     print(
         f"stack: {r['available']} B above static data (less the canary); worst case "
         f"{r['worst']} B = main {r['main']} B ({r['main_path']}) + interrupts "

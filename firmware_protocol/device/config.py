@@ -34,6 +34,9 @@ class SimConfig:
     #: STEPPING (3.1): the peak rate of an axis it steps from the profile, without a
     #: schedule block (None: max_step_rate; this model steps every axis exactly)
     profile_step_rate: int | None = None
+    #: STEP_BUDGET (3.3): peak steps/s summed over the four axes (None: no budget beyond
+    #: each axis's, and no STEP_BUDGET sent)
+    total_step_rate: int | None = None
     max_payload: int = MAX_PAYLOAD
     #: RING (3.2): entries of a ring its schedule blocks take room in, as the AVR's step
     #: engine keeps (a power of two, at most 128; None: blocks need no room)
@@ -69,6 +72,11 @@ class SimConfig:
             raise ValueError(f"cpu_hz {self.cpu_hz} is not a multiple of clock_hz {self.clock_hz}")
         if self.ring_entries is not None and not valid_entries(self.ring_entries):
             raise ValueError(f"ring_entries must be a power of two 2..128, got {self.ring_entries}")
+        if self.total_step_rate is not None and self.total_step_rate < self.max_step_rate:
+            raise ValueError(
+                f"total_step_rate {self.total_step_rate} is under max_step_rate "
+                f"{self.max_step_rate}: one axis alone takes the per-axis rate"
+            )
         if not 1 <= self.queue_capacity <= MAX_QUEUE:
             raise ValueError(f"queue_capacity must be 1..{MAX_QUEUE}")
 

@@ -29,6 +29,7 @@ from firmware_protocol.endpoint import Endpoint
 from firmware_protocol.message_codec import decode_messages, encode_message
 from firmware_protocol.messages import (
     MAX_EVENT_VALUES,
+    MINOR_BUDGET,
     MINOR_RING,
     MINOR_SAFETY,
     MINOR_STEPPING,
@@ -60,6 +61,7 @@ from firmware_protocol.messages import (
     SetLimits,
     SetPid,
     Status,
+    StepBudget,
     Stepping,
 )
 from firmware_protocol.messages import Error as ErrorReport
@@ -503,8 +505,12 @@ class SimDevice:
         if isinstance(msg, Identify):
             return [self.ident(0)]
         if isinstance(msg, GetCaps):
-            stepping = [Stepping(self.config.profile_rate)]
-            return [self.caps(), *(stepping if self.session_minor >= MINOR_STEPPING else [])]
+            after: list[Message] = (
+                [Stepping(self.config.profile_rate)] if self.session_minor >= MINOR_STEPPING else []
+            )
+            if self.session_minor >= MINOR_BUDGET and self.config.total_step_rate:
+                after.append(StepBudget(self.config.total_step_rate))
+            return [self.caps(), *after]
         if isinstance(msg, ClearFault):
             if mc.latched:  # a thermal fault: only a reset clears it
                 return [Event(EventCode.CLEAR_REFUSED, mc.items_done, (mc.latched,))]

@@ -199,6 +199,7 @@ class DeviceMachine:
                 limits=self.limits,
                 clock_hz=self.clock_hz,
                 max_step_rate=self.cfg.max_step_rate,
+                total_step_rate=self.cfg.total_step_rate,
                 scheduled=item.arg[0] if item.arg else 0,
             )
             if refused is not None:  # before any of it moves

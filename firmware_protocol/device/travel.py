@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from firmware_protocol.codes import ErrorCode
+from firmware_protocol.codes import ALL_AXES, ErrorCode
 from firmware_protocol.ramp_profile import ramp_share
 from firmware_protocol.segments import MAX_DELTA, SEG_BASE
 
@@ -60,12 +60,15 @@ def segment_refusal(
     clock_hz: int,
     max_step_rate: int,
     scheduled: int = 0,
+    total_step_rate: int | None = None,
 ) -> tuple[int, int, int] | None:
     """Why the device refuses a segment on receipt, as (ErrorCode, axis, value): a step rate
     over the limit, an end position outside i32, a homed module leaving its soft limits.
     ``tail``: where everything queued before it leaves the axes; ``scheduled``: the mask of
     the axes its schedule block carries (their schedule was checked instead of the rate,
-    PROTOCOL.md 5.5). None: accepted."""
+    PROTOCOL.md 5.5); ``total_step_rate``: the budget the four axes share (STEP_BUDGET,
+    3.3: their peak rates summed, the scheduled axes too; over it: ``STEP_RATE`` on axis
+    4). None: accepted."""
     r = float(ramp_share(ramp))
     factor = max(2 * r, 2 - 2 * r) * clock_hz / ticks
     for axis, d in enumerate(deltas):
@@ -74,6 +77,10 @@ def segment_refusal(
         rate = abs(d) * factor
         if rate > max_step_rate * (1 + 1e-9):
             return ErrorCode.STEP_RATE, axis, int(rate)
+    if total_step_rate:
+        total = sum(abs(d) for d in deltas) * factor
+        if total > total_step_rate * (1 + 1e-9):
+            return ErrorCode.STEP_RATE, ALL_AXES, min(int(total), 0x7FFFFFFF)
     end = [p + d for p, d in zip(tail, deltas)]
     if any(abs(p) > MAX_DELTA for p in end):
         worst = max(range(4), key=lambda k: abs(end[k]))

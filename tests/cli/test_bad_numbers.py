@@ -33,6 +33,8 @@ from cdprhost.job.state import Failure, Planned
         (["sim-device", "--ring-entries", "96"], "--ring-entries"),  # not a power of two
         (["sim-device", "--ring-entries", "256"], "--ring-entries"),
         (["sim-device", "--firmware", "avr", "--ring-entries", "64"], "--ring-entries"),
+        (["sim-device", "--total-step-rate", "5000"], "--total-step-rate"),  # < one axis's
+        (["sim-device", "--firmware", "avr", "--total-step-rate", "90000"], "--total-step-rate"),
         (
             [
                 "calibrate",

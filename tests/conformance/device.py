@@ -22,6 +22,7 @@ from firmware_protocol.messages import (
     Hello,
     Ident,
     Message,
+    Ring,
     Status,
 )
 from firmware_protocol.segments import SegmentContext
@@ -76,6 +77,7 @@ class RawHost:
     reports: list = field(default_factory=list)
     urgent: list = field(default_factory=list)
     flows: list = field(default_factory=list)
+    rings: list = field(default_factory=list)  # RING after FLOW (3.2, a device with a ring)
     keepalive: float = 0.5  # GET_STATUS when nothing was sent for this long (0: never)
     _sent_at: float = 0.0
     _open: bool = False
@@ -101,6 +103,9 @@ class RawHost:
             now = self.now()
             for inc in self.ep.feed(data, now) if data else []:
                 msgs = decode_messages(inc.payload, SegmentContext())
+                if inc.kind == "flow":
+                    self.rings += [m for m in msgs if isinstance(m, Ring)]
+                    msgs = [m for m in msgs if not isinstance(m, Ring)]
                 {"data": self.reports, "urgent": self.urgent, "flow": self.flows}[inc.kind].extend(
                     msgs
                 )

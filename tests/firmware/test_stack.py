@@ -51,3 +51,41 @@ def test_the_static_worst_case_stack_keeps_its_margin(avr_built):
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "worst case" in proc.stdout
+
+
+def test_the_step_engine_build_keeps_the_margin_with_its_own_frames(tmp_path):
+    # `make stack` compiles the frames with the build's options: the engine build's own
+    # frames are larger than the default build's, so reading its ELF with the default
+    # frames under-counts its worst case.
+    missing = avr_device.toolchain_missing()
+    if missing:
+        pytest.skip(missing)
+    build = tmp_path / "engine"
+    proc = subprocess.run(
+        ["make", "-s", f"BUILD={build}", "EXTRA_CFLAGS=-DSTEP_ENGINE=1", "stack"],
+        cwd=ROOT / "firmware",
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "worst case" in proc.stdout
+    # the same ELF read with the default build's frames is not what the tool reports
+    plain = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "firmware" / "tools" / "stack_usage.py"),
+            "--elf",
+            str(build / "cdpr.elf"),
+            "--margin",
+            "0",
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert _worst(plain.stdout) < _worst(proc.stdout), (plain.stdout, proc.stdout)
+
+
+def _worst(report: str) -> int:
+    return int(report.split("worst case ", 1)[1].split(" B", 1)[0])

@@ -65,6 +65,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         "its tick's: the host then sends a block for every faster ramp axis",
     )
     p.add_argument(
+        "--total-step-rate",
+        type=bounded_int(1, 40_000_000),
+        default=None,
+        metavar="N",
+        help="steps/s the Python device takes summed over its four axes (STEP_BUDGET, "
+        "protocol 3.3), as the AVR's step engine announces the budget its steppers "
+        "share: the host plans under it (default: none beyond each axis's)",
+    )
+    p.add_argument(
         "--ring-entries",
         type=bounded_int(2, 128),
         default=None,
@@ -93,11 +102,12 @@ def run(args: argparse.Namespace) -> int:
             ("--max-step-rate", args.max_step_rate),
             ("--profile-step-rate", args.profile_step_rate),
             ("--ring-entries", args.ring_entries),
+            ("--total-step-rate", args.total_step_rate),
         ):
             if value is not None:
                 raise InputError(
                     "the AVR firmware announces its own rates and ring (MAX_STEP_RATE, "
-                    "PROFILE_STEP_RATE: firmware/src/config.h; BLOCK_CHUNKS: "
+                    "PROFILE_STEP_RATE, TOTAL_STEP_RATE: firmware/src/config.h; BLOCK_CHUNKS: "
                     "src/step_blocks.h)",
                     source=given,
                 )
@@ -120,6 +130,13 @@ def run(args: argparse.Namespace) -> int:
             "counters modulo 256",
             source="--ring-entries",
         )
+    rate = args.max_step_rate or SimConfig.max_step_rate
+    if args.total_step_rate is not None and args.total_step_rate < rate:
+        raise InputError(
+            f"{args.total_step_rate} steps/s in all is under the {rate} steps/s one axis "
+            "takes alone (--max-step-rate)",
+            source="--total-step-rate",
+        )
     try:
         device = SimDevice(
             SimConfig(
@@ -127,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
                 max_step_rate=args.max_step_rate or SimConfig.max_step_rate,
                 profile_step_rate=args.profile_step_rate,
                 ring_entries=args.ring_entries,
+                total_step_rate=args.total_step_rate,
             ),
             faults,
             observer,
