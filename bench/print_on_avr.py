@@ -86,10 +86,10 @@ def build(engine: bool, rate: int | None) -> Path:
     return ROOT / "firmware" / build_dir
 
 
-def announced_rates(build_dir: Path) -> tuple[int, int | None, int | None]:
-    """The build's MAX_STEP_RATE (IDENT), PROFILE_STEP_RATE (STEPPING) and the entries of
-    its ring of schedule blocks (RING; None: the default build keeps none), read from a
-    short session."""
+def announced_rates(build_dir: Path) -> tuple[int, int | None, int | None, int | None]:
+    """The build's MAX_STEP_RATE (IDENT), PROFILE_STEP_RATE (STEPPING), the entries of
+    its ring of schedule blocks (RING; None: the default build keeps none) and the budget
+    its axes share (STEP_BUDGET; None: none), read from a short session."""
     from cdprhost.link.connect import open_link  # the host's own handshake
 
     proc = subprocess.Popen(
@@ -103,7 +103,13 @@ def announced_rates(build_dir: Path) -> tuple[int, int | None, int | None]:
         try:
             assert link.identity is not None and link.caps is not None
             ring = link.ring.entries if link.ring is not None else None
-            return int(link.identity.max_step_rate), link.caps.profile_step_rate, ring
+            caps = link.caps
+            return (
+                int(link.identity.max_step_rate),
+                caps.profile_step_rate,
+                ring,
+                caps.total_step_rate,
+            )
         finally:
             link.close()
     finally:
@@ -185,7 +191,7 @@ def run(args: argparse.Namespace, work: Path) -> None:
         part.write_text(from_layer(Path(args.gcode).read_text(), args.from_layer))
         args.gcode = str(part)
     build_dir = build(args.engine, args.rate)
-    rate, profile_rate, ring = announced_rates(build_dir)
+    rate, profile_rate, ring, total = announced_rates(build_dir)
     unlimited = preflight(
         args.gcode, load_profile(args.profile).model_copy(update={"device": None})
     )
@@ -194,6 +200,7 @@ def run(args: argparse.Namespace, work: Path) -> None:
     out["busy_host"] = args.busy_host
     out["profile_step_rate"] = profile_rate
     out["ring_entries"] = ring
+    out["total_step_rate"] = total
     out["unlimited_s"] = unlimited.estimated_time_s
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
@@ -213,6 +220,8 @@ def run(args: argparse.Namespace, work: Path) -> None:
                 cmd += ["--faults", "hotend_start_c=190"]
                 if profile_rate is not None and profile_rate < rate:
                     cmd += ["--profile-step-rate", str(profile_rate)]
+                if total is not None:  # the same plan: the budget reaches the host's plan
+                    cmd += ["--total-step-rate", str(total)]
                 # no --ring-entries: the reference runs at 25x, where the ring's tens of ms
                 # of fast ramps are a ms or two of the host's time (it ran dry at once);
                 # its record does not depend on the ring, only its waits do
