@@ -8,12 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.link.errors import StepRateError
 from cdprhost.link.events import error_text
 from cdprhost.motion.device_limits import STEP_RATE_MARGIN, caps_for_device
 from cdprhost.motion.direct import to_wire
+from cdprhost.motion.limits import Caps, move_caps
+from cdprhost.motion.moves import MoveBlock
 from cdprhost.motion.pipeline import segment_program
 from cdprhost.motion.program import read_items
 from cdprhost.preflight.run import preflight
@@ -110,3 +114,31 @@ def test_the_host_learns_the_budget_and_checks_it_before_sending():
         assert plain.caps is not None and plain.caps.total_step_rate is None  # none sent
     finally:
         plain.close()
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    start=st.tuples(*(st.floats(-60, 60),) * 2, st.floats(40, 200)),
+    end=st.tuples(*(st.floats(-60, 60),) * 2, st.floats(40, 200)),
+    extrusion=st.floats(0.0, 5.0),
+    total=st.floats(5_000, 200_000),
+)
+def test_a_move_capped_by_the_budget_keeps_it_everywhere_along_it(start, end, extrusion, total):
+    # the cap is bounded from samples every 10 mm; checked here every 0.5 mm along the move
+    profile = load_profile("paper-prototype")
+    model = MachineModel.from_profile(profile)
+    motion = profile.motion.model_copy(update={"max_total_step_rate": total})
+    steps = profile.drive.steps_per_mm
+    caps = Caps.from_profile(motion, profile.extruder, steps_per_mm=steps)
+    a, b = np.array(start), np.array(end)
+    length = float(np.linalg.norm(b - a))
+    assume(length > 1.0)
+    block = MoveBlock.from_arrays(a, b, e_start=0.0, e_end=extrusion, feedrate=1e6)
+    v = float(np.sqrt(move_caps(block, model.geometry.outlets, caps, chord=False).v2_cap[0]))
+    u = (b - a) / length
+    pts = a + np.linspace(0.0, 1.0, int(length / 0.5) + 2)[:, None] * (b - a)
+    cables = pts[:, None, :] - model.geometry.outlets[None, :, :]
+    cables /= np.linalg.norm(cables, axis=2, keepdims=True)
+    modules = np.abs(cables @ u) @ np.asarray(steps)  # steps per mm of path, per point
+    rate = v * (modules + extrusion / length * profile.extruder.steps_per_mm)
+    assert rate.max() <= total * (1 + 1e-9)
