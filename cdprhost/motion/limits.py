@@ -220,7 +220,7 @@ def move_caps(block: MoveBlock, outlets: np.ndarray, caps: Caps, *, chord: bool 
     # extruder-only moves: the extruder's own limits; kinematic moves: Cartesian,
     # and the extruder limits scaled by its share of the motion
     ratio = np.where(kin, de * inv, 1.0)
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):  # (a vanishing share: no limit)
         e_v = np.where(ratio > 0, caps.e_velocity / ratio, np.inf)
         e_a = np.where(ratio > 0, caps.e_accel / ratio, np.inf)
     v_cart = np.minimum(feed, np.where(kin, np.minimum(caps.max_velocity, e_v), caps.e_velocity))
