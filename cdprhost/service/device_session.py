@@ -141,11 +141,14 @@ def path_refusal(model: Any, st: Any, targets: Any, home: Any = None) -> str:
 
 
 def identity_json(identity: Any, caps: Any = None) -> dict[str, Any]:
-    """The device's identity for the wire, with its CAPS' shortest segment when announced."""
+    """The device's identity for the wire, with its CAPS' shortest segment and the step
+    budget its axes share (STEP_BUDGET) when announced."""
     out = {name: getattr(identity, name, None) for name in IDENTITY_FIELDS}
     out["protocol"] = list(out["protocol"] or ())
     if caps is not None:
         out["min_segment_ticks"] = int(caps.min_segment_ticks)
+        if caps.total_step_rate is not None:
+            out["total_step_rate"] = int(caps.total_step_rate)
     return out
 
 

@@ -142,3 +142,28 @@ def test_a_move_capped_by_the_budget_keeps_it_everywhere_along_it(start, end, ex
     modules = np.abs(cables @ u) @ np.asarray(steps)  # steps per mm of path, per point
     rate = v * (modules + extrusion / length * profile.extruder.steps_per_mm)
     assert rate.max() <= total * (1 + 1e-9)
+
+
+def test_the_tui_and_the_service_carry_the_budget_to_the_estimate_and_the_screen():
+    # the service's identity for the wire keeps the budget; a TUI on the service builds the
+    # board's record from it (the preflight plans under it) and shows it
+    from types import SimpleNamespace
+
+    from cdprhost.link.events import DeviceCaps
+    from cdprhost.service.device_session import identity_json
+    from cdprhost.tui.control.live import identity_rows
+    from cdprhost.tui.control.service_backend import announced_board
+
+    link = open_embedded(config=SimConfig(max_step_rate=30_000, total_step_rate=80_000))
+    try:
+        wire = identity_json(link.identity, link.caps)
+    finally:
+        link.close()
+    assert wire["total_step_rate"] == 80_000
+    record = announced_board(wire)
+    assert record is not None and record.total_step_rate == 80_000
+    rows = dict(identity_rows(SimpleNamespace(**wire), "/dev/x", 250000, 80_000))
+    assert rows["step budget"] == "80,000 steps/s, the axes summed"
+    plain = identity_json(SimpleNamespace(**{k: wire[k] for k in wire}), DeviceCaps())
+    assert "total_step_rate" not in plain
+    assert "step budget" not in dict(identity_rows(SimpleNamespace(**plain), "/dev/x", 250000))

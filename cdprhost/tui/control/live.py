@@ -73,8 +73,11 @@ def device_status_view(model: Any, st: Any, fault: str, clearable: bool) -> Devi
     )
 
 
-def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str], ...]:
-    """The device identity as (key, value) rows for the connection screen."""
+def identity_rows(
+    identity: Any, port: str, baud: int, total_step_rate: int | None = None
+) -> tuple[tuple[str, str], ...]:
+    """The device identity as (key, value) rows for the connection screen, with the step
+    budget its axes share when it announced one (STEP_BUDGET)."""
     rows = [
         ("port", port if port != EMBEDDED else "embedded simulated device (no hardware)"),
         ("firmware", f"{identity.firmware_name} {identity.firmware_version}"),
@@ -83,6 +86,11 @@ def identity_rows(identity: Any, port: str, baud: int) -> tuple[tuple[str, str],
         ("queue capacity", f"{identity.queue_capacity} items"),
         ("clock", f"{identity.clock_hz:,} Hz"),
         ("max step rate", f"{identity.max_step_rate:,} steps/s"),
+        *(
+            [("step budget", f"{total_step_rate:,} steps/s, the axes summed")]
+            if total_step_rate is not None
+            else []
+        ),
         ("heaters / fans", f"{identity.heaters} / {identity.fans}"),
         ("boot id", str(identity.boot_id)),
     ]
@@ -223,7 +231,8 @@ class LiveBackend:
         else:
             refuse_if_served(port)
             link = open_link(port, baud, self.profile.serial.timeout_s)
-        rows = identity_rows(link.identity, port, baud)
+        caps = link.caps
+        rows = identity_rows(link.identity, port, baud, caps.total_step_rate if caps else None)
         with self._lock:
             self._link, self._embedded, self._where = link, port == EMBEDDED, (port, baud)
             self._identity = rows

@@ -240,7 +240,12 @@ class ServiceBackend:
             raise CdprError(answer.error if answer is not None else "the service did not answer")
         if answer.status is not None:
             self._device = (time.monotonic(), wire.DeviceMsg(connected=True, status=answer.status))
-        self._identity = identity_rows(SimpleNamespace(**answer.identity), port, baud)
+        self._identity = identity_rows(
+            SimpleNamespace(**answer.identity),
+            port,
+            baud,
+            answer.identity.get("total_step_rate"),
+        )
         self.local.announced = announced_board(answer.identity)
         return self._identity
 
@@ -445,8 +450,15 @@ def announced_board(identity: dict[str, Any]) -> Any:
     from cdprhost.job.board import announced_record
     from cdprhost.link.events import DeviceCaps
 
-    ticks = identity.get("min_segment_ticks")
-    caps = None if ticks is None else DeviceCaps(min_segment_ticks=int(ticks))
+    ticks, total = identity.get("min_segment_ticks"), identity.get("total_step_rate")
+    caps = (
+        None
+        if ticks is None
+        else DeviceCaps(
+            min_segment_ticks=int(ticks),
+            total_step_rate=None if total is None else int(total),
+        )
+    )
     try:
         return announced_record(cast("Any", SimpleNamespace(**identity)), caps)
     except (TypeError, ValueError):  # an identity without the figures (another device)
