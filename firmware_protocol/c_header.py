@@ -20,6 +20,7 @@ from firmware_protocol import (
     segments,
     step_schedule,
 )
+from firmware_protocol.codes import ALL_AXES
 from firmware_protocol.messages import MESSAGES, Field, Message
 
 C_TYPES = {
@@ -147,6 +148,7 @@ def header() -> str:
         "/* status flags, codes */",
         *_enum("FLAG", messages.Flag),
         *_enum("ERR", messages.ErrorCode),
+        f"#define CDPR_STEP_RATE_ALL_AXES {ALL_AXES} /* STEP_RATE's axis for the sum (3.3) */",
         *_enum("EVT", messages.EventCode),
         *_enum("BOOT", messages.BootCause),
         *_enum("ESTOP", messages.EstopFlag),

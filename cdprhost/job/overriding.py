@@ -94,12 +94,7 @@ class Overriding:
         limits: SegmentLimits = DEFAULT_LIMITS,
     ):
         self.e_steps_per_mm = float(profile.extruder.steps_per_mm)
-        self.caps = Caps.from_profile(
-            profile.motion,
-            profile.extruder,
-            profile.statics.a_max_mm_s2,
-            steps_per_mm=profile.drive.steps_per_mm,
-        )
+        self.caps = Caps.for_profile(profile)
         self.outlets = outlets
         self.clock_hz = float(clock_hz)
         self.limits = limits

@@ -54,39 +54,34 @@ def caps_for_device(
         blocks,
         None if total_step_rate is None else float(total_step_rate),
     )
-    said = []
-    motion = profile.motion
+    motion, extruder = profile.motion, profile.extruder
     if total_step_rate is not None:
         total = STEP_RATE_MARGIN * float(total_step_rate)
         if motion.max_total_step_rate is None or motion.max_total_step_rate > total:
             motion = motion.model_copy(update={"max_total_step_rate": total})
-    if max_step_rate is None:
-        if motion is not profile.motion:
-            profile = profile.model_copy(update={"motion": motion})
-        return DeviceCaps(profile, None, segments)
-    rate = STEP_RATE_MARGIN * float(max_step_rate)
-    module_cap = rate / max(profile.drive.steps_per_mm)
-    extruder_cap = rate / profile.extruder.steps_per_mm
-    extruder = profile.extruder
-    if motion.module_max_velocity_mm_s > module_cap:
-        said.append(
-            f"module speed {module_cap:.1f} mm/s (profile {motion.module_max_velocity_mm_s:g})"
-        )
-        motion = motion.model_copy(update={"module_max_velocity_mm_s": module_cap})
-    if extruder.max_velocity_mm_s > extruder_cap:
-        said.append(
-            f"filament speed {extruder_cap:.1f} mm/s (profile {extruder.max_velocity_mm_s:g})"
-        )
-        extruder = extruder.model_copy(update={"max_velocity_mm_s": extruder_cap})
-    if not said:
-        if motion is not profile.motion:
-            profile = profile.model_copy(update={"motion": motion})
-        return DeviceCaps(profile, None, segments)
-    notice = f"the device steps at most {max_step_rate:g}/s per axis: planned with " + " and ".join(
-        said
+    said = []
+    if max_step_rate is not None:
+        rate = STEP_RATE_MARGIN * float(max_step_rate)
+        module_cap = rate / max(profile.drive.steps_per_mm)
+        extruder_cap = rate / profile.extruder.steps_per_mm
+        if motion.module_max_velocity_mm_s > module_cap:
+            said.append(
+                f"module speed {module_cap:.1f} mm/s (profile {motion.module_max_velocity_mm_s:g})"
+            )
+            motion = motion.model_copy(update={"module_max_velocity_mm_s": module_cap})
+        if extruder.max_velocity_mm_s > extruder_cap:
+            said.append(
+                f"filament speed {extruder_cap:.1f} mm/s (profile {extruder.max_velocity_mm_s:g})"
+            )
+            extruder = extruder.model_copy(update={"max_velocity_mm_s": extruder_cap})
+    notice = (
+        f"the device steps at most {max_step_rate:g}/s per axis: planned with " + " and ".join(said)
+        if said
+        else None
     )
-    slowed = profile.model_copy(update={"motion": motion, "extruder": extruder})
-    return DeviceCaps(slowed, notice, segments)
+    if motion is not profile.motion or extruder is not profile.extruder:
+        profile = profile.model_copy(update={"motion": motion, "extruder": extruder})
+    return DeviceCaps(profile, notice, segments)
 
 
 #: the axes a board's step rate can limit, in the order :func:`busiest_axis` numbers them

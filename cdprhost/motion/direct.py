@@ -59,12 +59,7 @@ def direct_path(
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     start = np.vstack([state.point[None, :], pts[:-1]])
-    caps = Caps.from_profile(
-        profile.motion,
-        profile.extruder,
-        profile.statics.a_max_mm_s2,
-        steps_per_mm=profile.drive.steps_per_mm,
-    )
+    caps = Caps.for_profile(profile)
     planner = Planner(caps, model.geometry.outlets)
     segmenter = Segmenter(
         model,

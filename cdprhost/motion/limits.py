@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdprhost.motion.moves import MIN_MOVE_MM, MoveBlock
-from cdprhost.profile.models import Extruder, MotionLimits
+from cdprhost.profile.models import Extruder, MachineProfile, MotionLimits
 
 Vec3 = tuple[np.ndarray, np.ndarray, np.ndarray]  # one array per coordinate
 
@@ -54,6 +54,19 @@ class Caps:
     total_step_rate: float = float("inf")
     module_steps_per_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     e_steps_per_mm: float = 0.0
+
+    @classmethod
+    def for_profile(cls, profile: MachineProfile, *, module_limits: bool = True) -> Caps:
+        """A profile's limits as a move plan keeps them: Cartesian, statics, modules and
+        the board's step budget (``motion.max_total_step_rate``, spent through the modules'
+        steps per mm)."""
+        return cls.from_profile(
+            profile.motion,
+            profile.extruder,
+            profile.statics.a_max_mm_s2,
+            module_limits=module_limits,
+            steps_per_mm=profile.drive.steps_per_mm,
+        )
 
     @classmethod
     def from_profile(

@@ -126,13 +126,7 @@ class ProgramPlanner:
     ):
         self.origin = np.asarray(profile.build_volume.bed_origin, dtype=float)
         self.home = home_position(profile, model)
-        caps = Caps.from_profile(
-            profile.motion,
-            profile.extruder,
-            profile.statics.a_max_mm_s2,
-            module_limits=module_limits,
-            steps_per_mm=profile.drive.steps_per_mm,
-        )
+        caps = Caps.for_profile(profile, module_limits=module_limits)
         self.profile_accel = caps.max_accel
         self.file_limits = FileLimits()
         self.planner = Planner(

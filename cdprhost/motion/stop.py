@@ -55,12 +55,7 @@ def path_accel(
 ) -> float:
     """The tightest acceleration (mm/s^2) the profile's limits allow along the path
     ``start -> pts`` (Cartesian, statics and module limits, as the planner computes them)."""
-    caps = Caps.from_profile(
-        profile.motion,
-        profile.extruder,
-        profile.statics.a_max_mm_s2,
-        steps_per_mm=profile.drive.steps_per_mm,
-    )
+    caps = Caps.for_profile(profile)
     starts = np.vstack([np.asarray(start, dtype=float).reshape(1, 3), pts[:-1]])
     moving = np.linalg.norm(pts - starts, axis=1) > NO_PATH_MM
     if not moving.any():

@@ -34,7 +34,6 @@ _Static_assert(RATE_K100 * (CLOCK_HZ / 100) == MAX_STEP_RATE * 255UL, "RATE_K100
 #define TOTAL_K100 (TOTAL_STEP_RATE * 255UL / (CLOCK_HZ / 100))
 _Static_assert(TOTAL_K100 * (CLOCK_HZ / 100) == TOTAL_STEP_RATE * 255UL, "TOTAL_K100 must be exact");
 _Static_assert(TOTAL_K100 < 65536UL, "the fast test's 16 x 16-bit product");
-#define RATE_ALL_AXES 4 /* STEP_RATE's axis for the sum */
 #endif
 
 /* |d| of a delta that is not INT32_MIN (the decoder refuses it) */
@@ -66,7 +65,7 @@ static int8_t __attribute__((noinline)) rate_check_total(const struct segment *s
         fn += (float)abs32(s->deltas[k]);
     float r = fn * (float)f * (float)CLOCK_HZ / (255.0f * (float)s->ticks);
     *rate = r > 2147483647.0f ? 0x7FFFFFFFUL : (uint32_t)r;
-    return RATE_ALL_AXES;
+    return CDPR_STEP_RATE_ALL_AXES;
 }
 #define AXES_PASSED(s, f, rate) rate_check_total(s, f, rate)
 #else
