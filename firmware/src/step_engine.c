@@ -975,7 +975,7 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     cli();
     take(k, a);
     SREG = s;
-    uint8_t slow = chunk_is_slow(k, a);
+    uint8_t slow = step_chunk_slow_here(a->interval, has_add(k) ? a->add : 0, a->count);
     cli();
     uint32_t now = now_q(k, step_clock_this_tick);
     uint32_t ahead = cycles_of(a->t - now);

@@ -59,10 +59,13 @@ uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
 uint8_t step_engine_push_steady(uint8_t k, const struct step_chunk *c);
 
 /* Whether the assembly may not run a chunk (C does): its intervals, the last one too,
- * of 2^15 cycles or more (its lateness test compares 16-bit times). Inline: called out of
- * line it sat at the end of the step tick's deepest path (tools/stack_usage.py). */
-static inline __attribute__((always_inline)) uint8_t step_chunk_slow(uint32_t interval, int32_t add,
-                                                                     uint16_t count)
+ * of 2^15 cycles or more (its lateness test compares 16-bit times). The body inline where
+ * a call would deepen the step tick's deepest path (start_axis: tools/stack_usage.py);
+ * out of line elsewhere (inline in the steppers' C paths too, their module 3's edge at a
+ * ramp's end came 2.5 us later: tests/firmware/test_step_timing.py's 25 us crossed). */
+static inline __attribute__((always_inline)) uint8_t step_chunk_slow_here(uint32_t interval,
+                                                                          int32_t add,
+                                                                          uint16_t count)
 {
     uint32_t longest = interval;
     if (add > 0 && count > 1) {
@@ -75,6 +78,11 @@ static inline __attribute__((always_inline)) uint8_t step_chunk_slow(uint32_t in
         longest += (grow << 8) + mul16x16((uint8_t)add, n);
     }
     return longest >= 0x800000UL;
+}
+
+static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t count)
+{
+    return step_chunk_slow_here(interval, add, count);
 }
 
 /* No stepper runs and none has a chunk waiting. */
