@@ -117,6 +117,61 @@ static uint64_t step_entry, step_cycles_sum, step_cycles_max, step_count;
 static uint16_t step_sp;
 static uint32_t trace_pc[8192];
 static size_t trace_len;
+/* Debugging: every instruction (its address, its cycle; interrupts included) of a stretch
+ * of the run, written to CDPR_SIM_LONG_TURN as "pc cycle" lines. The stretch: the
+ * cycles CDPR_SIM_WINDOW="from,to"; or the main loop's turn, from one call of the function
+ * at CDPR_SIM_TURN_PC (hex byte address; one the loop calls once a turn at its top) to the
+ * next: each new longest one, or (CDPR_SIM_TURN_STOP_PC) the one reaching that address,
+ * up to it. */
+#define TRACE_MAX (1u << 21)
+static uint32_t *trace_at_pc, *trace_at_cycle;
+static size_t trace_n;
+static avr_flashaddr_t turn_top, turn_stop;
+static avr_cycle_count_t turn_start, turn_longest, window_from, window_to;
+
+static void trace_write(const char *path)
+{
+    FILE *f = fopen(path, "w");
+    for (size_t i = 0; f && i < trace_n; i++)
+        fprintf(f, "%x %u\n", trace_at_pc[i], trace_at_cycle[i]);
+    if (f)
+        fclose(f);
+}
+
+static void trace_add(avr_flashaddr_t pc, avr_cycle_count_t since)
+{
+    if (trace_n < TRACE_MAX) {
+        trace_at_pc[trace_n] = pc;
+        trace_at_cycle[trace_n++] = (uint32_t)since;
+    }
+}
+
+static void trace_step(avr_flashaddr_t pc, avr_cycle_count_t cycle, const char *path)
+{
+    if (window_to) {
+        if (cycle >= window_to) {
+            window_to = 0;
+            trace_write(path);
+        } else if (cycle >= window_from) {
+            trace_add(pc, cycle - window_from);
+        }
+        return;
+    }
+    if (turn_stop && pc == turn_stop) {
+        turn_stop = 0;
+        turn_longest = ~(avr_cycle_count_t)0; /* this one stays */
+        trace_write(path);
+    }
+    if (pc == turn_top) {
+        if (turn_start && cycle - turn_start > turn_longest) {
+            turn_longest = cycle - turn_start;
+            trace_write(path);
+        }
+        turn_start = cycle;
+        trace_n = 0;
+    }
+    trace_add(pc, cycle - turn_start);
+}
 
 /* resets and the enable pins across them */
 static volatile sig_atomic_t reset_request, watchdog_request;
@@ -1065,6 +1120,24 @@ int main(int argc, char **argv)
     avr_cycle_count_t cli_start = 0;
     avr_flashaddr_t cli_pc = 0;
     avr_flashaddr_t prev_pc = 0;
+    const char *trace_path = getenv("CDPR_SIM_LONG_TURN");
+    if (trace_path) {
+        const char *e;
+        if ((e = getenv("CDPR_SIM_TURN_PC")))
+            turn_top = (avr_flashaddr_t)strtoul(e, NULL, 16);
+        if ((e = getenv("CDPR_SIM_TURN_STOP_PC")))
+            turn_stop = (avr_flashaddr_t)strtoul(e, NULL, 16);
+        if ((e = getenv("CDPR_SIM_WINDOW"))) {
+            unsigned long long from = 0, to = 0;
+            sscanf(e, "%llu,%llu", &from, &to);
+            window_from = from;
+            window_to = to;
+        }
+        trace_at_pc = malloc(TRACE_MAX * sizeof *trace_at_pc);
+        trace_at_cycle = malloc(TRACE_MAX * sizeof *trace_at_cycle);
+        if (!trace_at_pc || !trace_at_cycle)
+            trace_path = NULL;
+    }
     while (!stop_flag && state != cpu_Done && state != cpu_Crashed) {
         avr_flashaddr_t run_pc = avr->pc;
         avr_cycle_count_t run_cycle = avr->cycle;
@@ -1126,6 +1199,8 @@ int main(int argc, char **argv)
                 dbg_masked = dbg_hits = 0;
             }
         }
+        if (trace_path)
+            trace_step(run_pc, run_cycle, trace_path);
         if (profile_all && run_pc < sizeof pc_hist / sizeof pc_hist[0])
             pc_hist[run_pc] += (uint32_t)(avr->cycle - run_cycle); /* where the cycles go */
         if (profile_isr) {
@@ -1181,8 +1256,8 @@ int main(int argc, char **argv)
                     if (trace_lo)
                         trace_lo = 1; /* the first one only */
                     /* the first over-long tick: its instruction trace, for the profile */
-                    const char *trace_path = getenv("CDPR_SIM_LONG_ISR");
-                    FILE *f = fopen(trace_path ? trace_path : "/tmp/cdpr-long-isr.txt", "w");
+                    const char *isr_path = getenv("CDPR_SIM_LONG_ISR");
+                    FILE *f = fopen(isr_path ? isr_path : "/tmp/cdpr-long-isr.txt", "w");
                     for (size_t i = 0; f && i < trace_len; i++)
                         fprintf(f, "%x %u\n", trace_pc[i] & 0xFFFF, trace_pc[i] >> 16);
                     if (f)

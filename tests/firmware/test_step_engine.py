@@ -15,7 +15,7 @@ import pytest
 
 from cdprhost.sim import avr_device
 from firmware_protocol.host_messages import SetHeater, WaitHeater
-from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_TO_REST
+from firmware_protocol.ramp_profile import RAMP_CONSTANT, RAMP_FROM_REST, RAMP_TO_REST
 from firmware_protocol.segments import SegmentBatch
 from tests.conftest import load_script
 
@@ -342,6 +342,53 @@ def test_ramps_without_their_blocks_between_engine_segments_keep_their_time(engi
     # the fault cost a whole period (4,096 us); module 2's DDA edges themselves come within
     # 9.7-10.0 us here (the tick's placement, not the engine: a matter of its own)
     assert p["record_exact"] and p["worst_us"] < 50.0, p
+
+
+def test_an_axis_handed_back_to_the_dda_keeps_its_plan(engine):
+    # A steady segment's engine axes are planned with their interval alone (motion.c),
+    # but the dispatch hands one back to the tick's DDA when the DDA stepped it in the tick
+    # before and it reverses (a ramp sent without its block, then a reversal). Here
+    # module 1 reverses after its ramp on the DDA, reverses again (the DDA still has it),
+    # then goes on the same way (the engine's again, planned lean): each plan must keep
+    # what its dispatch uses, or the device stops (PLANNER_LATE) or steps it wrong.
+    fr = engine.firmware_rates
+    codes = [RAMP_FROM_REST, RAMP_CONSTANT, RAMP_CONSTANT, RAMP_CONSTANT, RAMP_TO_REST]
+    deltas = [[20, 15, 0, 0], [-40, -30, 0, 0], [40, 30, 0, 0], [40, 30, 0, 0], [20, 15, 0, 0]]
+    batch = SegmentBatch(
+        np.full(5, 1_000), np.array(deltas, dtype=np.int64), np.array(codes, dtype=np.int16)
+    )
+    p = fr.run_batch(engine._build, batch, blocks=False)
+    assert not p.get("refused") and p["record_exact"], p
+    assert p["edges_missing_or_extra"] == 0 and p["worst_us"] < 50.0, p
+
+
+def test_segments_shorter_than_two_ticks_queue_their_chunks_two_deep(engine):
+    # With 0.5 ms segments the tick puts a segment's chunks out while the segment before
+    # still waits for its stepper (next): the chunk goes one further (next2), and the
+    # stepper's assembly moves it up as it takes next, after setting the direction of the
+    # chunk it takes (set after the move, module 2's zigzag, which reverses every segment,
+    # went the way of the chunk behind: 30 steps off). 60 segments of three modules out of
+    # step and the extruder, queued whole before they start (the last one to rest).
+    fr = engine.firmware_rates
+    n = 60
+    steps = np.array([4, 3, 2, 1], dtype=np.int64)  # 8,000 / 6,000 / 4,000 / 2,000 steps/s
+    i = np.arange(n)
+    signs = np.stack(
+        [
+            np.where(i % 20 < 10, 1, -1),
+            np.where(i % 2 == 0, 1, -1),
+            np.where(i % 6 < 3, 1, -1),
+            np.ones(n),
+        ],
+        axis=1,
+    ).astype(np.int64)
+    deltas = steps * signs
+    codes = np.full(n, RAMP_CONSTANT, dtype=np.int16)
+    codes[-1] = RAMP_TO_REST
+    p = fr.run_batch(engine._build, SegmentBatch(np.full(n, 50), deltas, codes))
+    assert not p.get("refused") and p["record_exact"], p
+    assert p["edges_missing_or_extra"] == 0 and p["overruns"] == 0, p
+    assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
 
 
 def _motion_ticks(p: dict) -> float:
