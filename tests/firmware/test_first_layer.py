@@ -45,8 +45,11 @@ pytestmark = [
 ]
 
 SPEEDUP = {"python": "25", "avr": "1" if avr_device.STEP_ENGINE else "2"}
-#: the Python device announces the firmware's rate, so the host plans the same segments
-EXTRA = {"python": ["--max-step-rate", "8000"], "avr": []}
+#: the Python device announces the firmware's rates, so the host plans the same segments:
+#: 8,000 steps/s an axis, and with the engine build its step budget (STEP_BUDGET, 3.3:
+#: config.h's TOTAL_STEP_RATE, 80,000 at that rate), which the host names in its notices
+ENGINE_BUDGET = ["--total-step-rate", "80000"] if avr_device.STEP_ENGINE else []
+EXTRA = {"python": ["--max-step-rate", "8000", *ENGINE_BUDGET], "avr": []}
 
 
 def _print_on(kind: str, gcode: Path, tmp: Path) -> tuple[dict, list[dict], dict]:
