@@ -345,12 +345,13 @@ def test_ramps_without_their_blocks_between_engine_segments_keep_their_time(engi
 
 
 def test_an_axis_handed_back_to_the_dda_keeps_its_plan(engine):
-    # A steady segment's engine axes are planned with their interval alone (motion.c),
-    # but the dispatch hands one back to the tick's DDA when the DDA stepped it in the tick
-    # before and it reverses (a ramp sent without its block, then a reversal). Here
-    # module 1 reverses after its ramp on the DDA, reverses again (the DDA still has it),
-    # then goes on the same way (the engine's again, planned lean): each plan must keep
-    # what its dispatch uses, or the device stops (PLANNER_LATE) or steps it wrong.
+    # The dispatch hands a steady segment's engine axis back to the tick's DDA when the DDA
+    # stepped it in the tick before and it reverses (a ramp sent without its block, then a
+    # reversal). Here the modules reverse after their ramp (a module left on the DDA goes
+    # back to it), reverse again (the DDA still has it), then go on the same way (the
+    # engine's again): each plan must hold what its dispatch uses (with plans that skipped
+    # the DDA's constants for engine axes, docs/step-engine.md section 10, this caught one
+    # handed back without them), or the device stops (PLANNER_LATE) or steps it wrong.
     fr = engine.firmware_rates
     codes = [RAMP_FROM_REST, RAMP_CONSTANT, RAMP_CONSTANT, RAMP_CONSTANT, RAMP_TO_REST]
     deltas = [[20, 15, 0, 0], [-40, -30, 0, 0], [40, 30, 0, 0], [40, 30, 0, 0], [20, 15, 0, 0]]
