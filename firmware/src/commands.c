@@ -193,32 +193,27 @@ static uint8_t segment_in_limits(const struct segment *s)
 }
 
 /* move_tail's refusal, out of line: the fault (axis k's position out of 32 bits, or k 4:
- * a module out of its travel) and the tail as it was (axes 0..k-1 had moved). */
+ * a module out of its travel). The tail needs no undoing: the fault sets it to the
+ * steppers' positions (machine_shutdown). */
 static void __attribute__((noinline)) tail_refused(const struct item *it, uint8_t k)
 {
-    int32_t *tail = machine.tail_pos;
-    uint8_t flags = it->flags;
     if (k == 4) {
         int32_t at;
-        int8_t module = machine_limits_violation(tail, &at);
+        int8_t module = machine_limits_violation(machine.tail_pos, &at);
         /* refused on receipt: nothing of it moves */
         machine_fail(ERR_ENDSTOP_HIT, machine.items_received, machine.segments_received,
                      (uint8_t)module, at);
     } else {
-        bad_value(SEG_BASE, (flags & (0x10 << k)) ? -SEG_MAX_DELTA : SEG_MAX_DELTA,
+        bad_value(SEG_BASE, (it->flags & (0x10 << k)) ? -SEG_MAX_DELTA : SEG_MAX_DELTA,
                   machine.segments_received);
-    }
-    for (uint8_t j = 0; j < k; j++) {
-        int32_t n = (int32_t)it->u.n[j];
-        tail[j] += (flags & (0x10 << j)) ? n : -n; /* (undone: it was within range) */
     }
 }
 
 /* The checks that depend on where the queue's tail ends (the positions within 32 bits and
  * the modules' travel, at the time the segment is queued), for the segment stored at
- * queue_head: 1 with machine.tail_pos moved by its steps, or 0 with the fault raised and
- * the tail as it was. In place, inline in the staged segments' loop (a copy of the four
- * positions and a frame of its own cost more than the checks). */
+ * queue_head: 1 with machine.tail_pos moved by its steps, or 0 with the fault raised. In
+ * place, inline in the staged segments' loop (a copy of the four positions and a frame of
+ * its own cost more than the checks). */
 static inline __attribute__((always_inline)) uint8_t move_tail(void)
 {
     const struct item *it = queue_slot(queue_head);
