@@ -174,25 +174,14 @@ int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
     return rate_fast_ok(n, sum, f, s->ticks) ? -1 : rate_check_axes(s, f, rate);
 }
 
-void motion_store(struct item *it, const struct segment *s)
-{
-    /* thousands of segments a second: no 64-bit negation (the decoder refuses
-     * INT32_MIN), no variable shifts, the flags in a register (the item and the segment
-     * could alias: every |= would be a load and a store) */
-    uint8_t flags = 0, bit = 0x10;
-    uint32_t any = 0;
-    for (uint8_t k = 0; k < 4; k++, bit <<= 1) {
-        int32_t d = s->deltas[k];
-        uint32_t n = abs32(d);
-        if (d < 0)
-            flags |= bit;
-        any |= n;
-        it->u.n[k] = n;
-    }
-    finish_item(it, s, flags, any);
-}
-
-uint8_t motion_store_checked(struct item *it, const struct segment *s)
+/* The item of a segment, and (`check`) its rate test in the same pass over the axes:
+ * thousands of segments a second, so no 64-bit negation (the decoder refuses INT32_MIN),
+ * no variable shifts, the flags in a register (should the item and the segment alias,
+ * every |= would be a load and a store). 0: `check` found it over (the item written in
+ * part). */
+static inline __attribute__((always_inline)) uint8_t store_item(struct item *it,
+                                                                const struct segment *s,
+                                                                uint8_t check)
 {
     uint8_t flags = 0, bit = 0x10, wide = 0;
     uint16_t most = 0;
@@ -213,11 +202,21 @@ uint8_t motion_store_checked(struct item *it, const struct segment *s)
         }
     }
     uint32_t rate;
-    if ((wide || !rate_fast_ok(most, sum, rate_factor(s), s->ticks)) &&
+    if (check && (wide || !rate_fast_ok(most, sum, rate_factor(s), s->ticks)) &&
         motion_rate_check(s, &rate) >= 0)
         return 0;
     finish_item(it, s, flags, any);
     return 1;
+}
+
+void motion_store(struct item *it, const struct segment *s)
+{
+    store_item(it, s, 0);
+}
+
+uint8_t motion_store_checked(struct item *it, const struct segment *s)
+{
+    return store_item(it, s, 1);
 }
 
 uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units)
