@@ -119,7 +119,8 @@ static uint32_t trace_pc[8192];
 static size_t trace_len;
 /* Debugging: every instruction (its address, its cycle; interrupts included) of a stretch
  * of the run, written to CDPR_SIM_LONG_TURN as "pc cycle" lines. The stretch: the
- * cycles CDPR_SIM_WINDOW="from,to"; or the main loop's turn, from one call of the function
+ * cycles CDPR_SIM_WINDOW="from,to" (CDPR_SIM_WINDOW_MOTION: counted from the first start of
+ * motion, the step log's clock while motion has not paused); or the main loop's turn, from one call of the function
  * at CDPR_SIM_TURN_PC (hex byte address; one the loop calls once a turn at its top) to the
  * next: each new longest one, or (CDPR_SIM_TURN_STOP_PC) the one reaching that address,
  * up to it. */
@@ -128,6 +129,7 @@ static uint32_t *trace_at_pc, *trace_at_cycle;
 static size_t trace_n;
 static avr_flashaddr_t turn_top, turn_stop;
 static avr_cycle_count_t turn_start, turn_longest, window_from, window_to;
+static avr_cycle_count_t window_motion_from, window_motion_to; /* 0, 0: none */
 
 static void trace_write(const char *path)
 {
@@ -148,6 +150,8 @@ static void trace_add(avr_flashaddr_t pc, avr_cycle_count_t since)
 
 static void trace_step(avr_flashaddr_t pc, avr_cycle_count_t cycle, const char *path)
 {
+    if (window_motion_to)
+        return; /* the window is not placed yet */
     if (window_to) {
         if (cycle >= window_to) {
             window_to = 0;
@@ -471,6 +475,12 @@ static void edge_cb(struct avr_irq_t *irq, uint32_t value, void *param)
         fprintf(stderr, "edge %x at %llu\n", edge, (unsigned long long)avr->cycle);
     if ((edge & EDGE_MOTION_START) && !motion_level) {
         motion_since = avr->cycle;
+        if (window_motion_to) {
+            window_from = avr->cycle + window_motion_from;
+            window_to = avr->cycle + window_motion_to;
+            window_motion_to = 0;
+            trace_n = 0;
+        }
         motion_level = 1;
     }
     if (edge & EDGE_SEG_END) {
@@ -1132,6 +1142,12 @@ int main(int argc, char **argv)
             sscanf(e, "%llu,%llu", &from, &to);
             window_from = from;
             window_to = to;
+        }
+        if ((e = getenv("CDPR_SIM_WINDOW_MOTION"))) {
+            unsigned long long from = 0, to = 0;
+            sscanf(e, "%llu,%llu", &from, &to);
+            window_motion_from = from;
+            window_motion_to = to;
         }
         trace_at_pc = malloc(TRACE_MAX * sizeof *trace_at_pc);
         trace_at_cycle = malloc(TRACE_MAX * sizeof *trace_at_cycle);

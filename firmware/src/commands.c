@@ -165,53 +165,106 @@ static void bad_value(uint8_t op, int32_t value, uint32_t segment)
     machine_fail(ERR_BAD_VALUE, machine.items_received, segment, op, value);
 }
 
-/* A segment in order: checked against this device's limits, stored, pushed. `staged`:
- * its item is already stored in the slot at queue_head (stage_segments). */
-static void enqueue_segment(const struct segment *s, uint8_t staged)
+/* A segment counted in order; 0 when a fault discards it */
+static uint8_t count_segment(void)
 {
     machine.items_received++;
     machine.segments_received++;
     sim_segment_parsed();
-    if (discard_if_fault())
-        return;
+    return !discard_if_fault();
+}
+
+/* What a segment's own values allow (its duration and step rates against this
+ * device's): 1, or 0 with the fault raised. */
+static uint8_t segment_in_limits(const struct segment *s)
+{
     if (s->ticks < MIN_SEGMENT_TICKS) { /* CAPS min_segment_ticks */
         bad_value(SEG_BASE, (int32_t)s->ticks, machine.segments_received);
-        return;
+        return 0;
     }
+    uint32_t rate;
+    int8_t axis = motion_rate_check(s, &rate);
+    if (axis >= 0) {
+        machine_fail(ERR_STEP_RATE, machine.items_received, machine.segments_received,
+                     (uint8_t)axis, (int32_t)rate);
+        return 0;
+    }
+    return 1;
+}
+
+/* move_tail's refusal, out of line: the fault (axis k's position out of 32 bits, or k 4:
+ * a module out of its travel). The tail needs no undoing: the fault sets it to the
+ * steppers' positions (machine_shutdown). */
+static void __attribute__((noinline)) tail_refused(const struct item *it, uint8_t k)
+{
+    if (k == 4) {
+        int32_t at;
+        int8_t module = machine_limits_violation(machine.tail_pos, &at);
+        /* refused on receipt: nothing of it moves */
+        machine_fail(ERR_ENDSTOP_HIT, machine.items_received, machine.segments_received,
+                     (uint8_t)module, at);
+    } else {
+        bad_value(SEG_BASE, (it->flags & (0x10 << k)) ? -SEG_MAX_DELTA : SEG_MAX_DELTA,
+                  machine.segments_received);
+    }
+}
+
+/* The checks that depend on where the queue's tail ends (the positions within 32 bits and
+ * the modules' travel, at the time the segment is queued), for the segment stored at
+ * queue_head: 1 with machine.tail_pos moved by its steps, or 0 with the fault raised. In
+ * place, inline in the staged segments' loop (a copy of the four positions and a frame of
+ * its own cost more than the checks). */
+static inline __attribute__((always_inline)) uint8_t move_tail(void)
+{
+    const struct item *it = queue_slot(queue_head);
+    int32_t *tail = machine.tail_pos;
+    const uint32_t *np = it->u.n;
+    uint8_t flags = it->flags, k = 0;
+    for (uint8_t bit = 0x10; k < 4; k++, bit <<= 1, tail++, np++) {
+        int32_t n = (int32_t)*np; /* |delta| <= 2^31 - 1: the decoder's bound */
+        int32_t p;
+        /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic (no 64-bit library calls) */
+        if ((flags & bit) ? __builtin_sub_overflow(*tail, n, &p)
+                          : __builtin_add_overflow(*tail, n, &p))
+            break;
+        if (p == INT32_MIN)
+            break;
+        *tail = p;
+    }
+    if (k == 4) {
+        int32_t at;
+        if (machine_limits_violation(machine.tail_pos, &at) < 0)
+            return 1;
+    }
+    tail_refused(it, k);
+    return 0;
+}
+
+/* A segment in order: checked against this device's limits, stored, pushed. */
+static void enqueue_segment(const struct segment *s)
+{
+    if (!count_segment())
+        return;
+    if (!segment_in_limits(s))
+        return;
     if (s->sched.mask && s->sched.axis >= 0) { /* its schedule block, read with it */
         machine_fail(ERR_BAD_VALUE, machine.items_received, machine.segments_received,
                      (uint8_t)s->sched.axis, s->sched.value);
         return;
     }
-    uint32_t rate;
-    int8_t axis = motion_rate_check(s, &rate);
-    if (axis >= 0) {
-        machine_fail(ERR_STEP_RATE, machine.items_received, machine.segments_received, (uint8_t)axis,
-                     (int32_t)rate);
-        return;
-    }
-    int32_t tail[4];
-    for (uint8_t k = 0; k < 4; k++) {
-        /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic (no 64-bit library calls) */
-        int32_t p;
-        if (__builtin_add_overflow(machine.tail_pos[k], s->deltas[k], &p) || p == INT32_MIN) {
-            bad_value(SEG_BASE, s->deltas[k] > 0 ? SEG_MAX_DELTA : -SEG_MAX_DELTA,
-                      machine.segments_received);
-            return;
-        }
-        tail[k] = p;
-    }
-    int32_t at;
-    int8_t module = machine_limits_violation(tail, &at);
-    if (module >= 0) { /* refused on receipt: nothing of it moves */
-        machine_fail(ERR_ENDSTOP_HIT, machine.items_received, machine.segments_received, (uint8_t)module,
-                     at);
-        return;
-    }
-    memcpy(machine.tail_pos, tail, sizeof tail);
-    if (!staged)
-        motion_store(new_item(IT_SEG), s);
-    push_item();
+    /* stored first (nothing reads the slot at queue_head before it is pushed; no frame
+     * is staged behind one executed this way) */
+    motion_store(new_item(IT_SEG), s);
+    if (move_tail())
+        push_item();
+}
+
+/* The staged segment at queue_head (stage_segments stored it, its own limits checked):
+ * counted, its tail's checks, pushed. */
+static void enqueue_staged(void)
+{
+    if (count_segment() && move_tail())
+        push_item();
 }
 
 static void enqueue_command(uint8_t op, const uint32_t *v)
@@ -418,27 +471,15 @@ static uint8_t stage_segments(const uint8_t *payload, uint8_t len, struct seg_ct
         if (op < SEG_BASE || (op & SEG_F_SCHEDULE) || n == room)
             return 0;
         segment_decode(&r, work, &s);
-        if (r.err)
+        /* its own limits checked here (the checked way raises their fault at its
+         * segment), where it is in the queue when it is queued (enqueue_staged) */
+        if (r.err || s.ticks < MIN_SEGMENT_TICKS ||
+            !motion_store_checked(queue_slot((uint8_t)(at + n)), &s))
             return 0;
-        motion_store(queue_slot((uint8_t)(at + n)), &s);
         n++;
     }
     *queued = n;
     return 1;
-}
-
-/* The staged segment at queue_head as the decoder gave it (motion_store's inverse). */
-static void staged_segment(struct segment *s)
-{
-    const struct item *it = queue_slot(queue_head);
-    s->ticks = it->ticks;
-    s->ramp = (it->flags & SEGF_RAMP) ? it->ramp : SEG_RAMP_CONSTANT;
-    s->sched.mask = 0;
-    uint8_t bit = 0x10;
-    for (uint8_t k = 0; k < 4; k++, bit <<= 1) {
-        int32_t n = (int32_t)it->u.n[k]; /* |delta| <= 2^31 - 1: the decoder's bound */
-        s->deltas[k] = (it->flags & bit) ? -n : n;
-    }
 }
 
 uint8_t proto_accept(const uint8_t *payload, uint8_t len)
@@ -570,9 +611,8 @@ void proto_execute(uint16_t units)
             /* a staged frame: its segments wait in the queue, decoded */
             while (pend.items[pend.head]) {
                 motion_prepare_ahead(1);
-                staged_segment(&s);
                 took_item();
-                enqueue_segment(&s, 1);
+                enqueue_staged();
                 if (sched_clock() - start >= units)
                     return; /* the rest next turn */
             }
@@ -594,7 +634,7 @@ void proto_execute(uint16_t units)
                     segment_sched_out = 0;
                 }
                 took_item();
-                enqueue_segment(&s, 0);
+                enqueue_segment(&s);
             } else {
                 find(op, &m);
                 r->pos++;

@@ -42,6 +42,59 @@ static inline uint32_t abs32(int32_t d)
     return (uint32_t)(d < 0 ? -d : d);
 }
 
+/* F of a segment's ramp: its peak speed over its mean, x 255 (255: steady) */
+static inline __attribute__((always_inline)) uint16_t rate_factor(const struct segment *s)
+{
+    if (s->ramp < 0)
+        return 255;
+    return (uint16_t)(s->ramp * 2 > 510 - s->ramp * 2 ? s->ramp * 2 : 510 - s->ramp * 2);
+}
+
+/* A short fast segment (a print's, thousands a second): the exact test on the busiest
+ * axis (`most` < 2^15 steps) in 16 x 16-bit products (100 n F < 2^31, F <= 510), and with
+ * a total the summed steps the same way while the sum and D fit 16 bits (D < 2^16: 655 ms;
+ * longer segments are few a second). 1: within the rates; 0: not decided here (the
+ * per-axis search, rate_check_axes, then decides: it cost about 1,300 cycles a segment, a
+ * sixth of the CPU at 2,000 segments/s). */
+static inline __attribute__((always_inline)) uint8_t rate_fast_ok(uint16_t most, uint32_t sum,
+                                                                  uint16_t f, uint32_t ticks)
+{
+    uint16_t f100 = (uint16_t)(f * 100U);
+    (void)sum;
+    if ((uint16_t)(ticks >> 16)) /* (RATE_K100 <= 51,000: 16 x 16 bits while D fits) */
+        return 0;
+    return mul16x16(most, f100) <= mul16x16((uint16_t)ticks, (uint16_t)RATE_K100)
+#if TOTAL_STEP_RATE
+           && !(uint8_t)(sum >> 16) &&
+           mul16x16((uint16_t)sum, f100) <= mul16x16((uint16_t)ticks, (uint16_t)TOTAL_K100)
+#endif
+        ;
+}
+_Static_assert(RATE_K100 < 65536UL, "the fast test's 16 x 16-bit product");
+
+/* motion_store's item from its flags and whether any axis moves */
+static inline __attribute__((always_inline)) void finish_item(struct item *it,
+                                                              const struct segment *s,
+                                                              uint8_t flags, uint32_t any)
+{
+    uint8_t ramp = 0;
+    if (s->ramp >= 0) {
+        flags |= SEGF_RAMP;
+        ramp = (uint8_t)s->ramp;
+    }
+    if (s->ramp == SEG_RAMP_TO_REST || !any)
+        flags |= SEGF_AT_REST;
+    it->kind = IT_SEG;
+    it->ticks = s->ticks;
+    it->flags = flags;
+    it->ramp = ramp;
+#if STEP_ENGINE
+    it->blk_mask = 0;
+    if (s->sched.mask)
+        blocks_commit(it); /* read into the ring as the segment was decoded */
+#endif
+}
+
 #if TOTAL_STEP_RATE
 /* The four axes' steps summed against the total, in 64 bits (sum |n| < 2^33): 4 when
  * over (the summed peak rate in *rate), else -1. Every axis counts, one with a schedule
@@ -108,54 +161,31 @@ static int8_t __attribute__((noinline)) rate_check_axes(const struct segment *s,
 
 int8_t motion_rate_check(const struct segment *s, uint32_t *rate)
 {
-    uint16_t f;
-    if (s->ramp < 0)
-        f = 255;
-    else
-        f = (uint16_t)(s->ramp * 2 > 510 - s->ramp * 2 ? s->ramp * 2 : 510 - s->ramp * 2);
-    /* A short fast segment (a print's, thousands a second): the exact test on the
-     * busiest axis in 16 x 16-bit products (100 n F < 2^31 for n < 2^15, F <= 510), the
-     * per-axis 64-bit search only for a segment over or a long one (it cost about 1,300
-     * cycles a segment: a sixth of the CPU at 2,000 segments/s). With a total, the
-     * summed steps the same way, in two more 16 x 16-bit products while the sum and D
-     * fit 16 bits (the sum < 2^17 here; D < 2^16: 655 ms, longer segments are few a
-     * second); else rate_check_axes ends with the 64-bit test. */
-    uint16_t n = 0;
-#if TOTAL_STEP_RATE
+    uint16_t f = rate_factor(s), n = 0;
     uint32_t sum = 0;
-#endif
     for (uint8_t k = 0; k < 4; k++) {
         uint32_t a = abs32(s->deltas[k]);
         if (a & 0xFFFF8000UL) /* a mask: -Os shifts 15 times in a loop */
             return rate_check_axes(s, f, rate);
         if ((uint16_t)a > n)
             n = (uint16_t)a;
-#if TOTAL_STEP_RATE
         sum += (uint16_t)a;
-#endif
     }
-    uint16_t f100 = (uint16_t)(f * 100U);
-    if (s->ticks <= 0xFFFFFFFFUL / RATE_K100 && mul16x16(n, f100) <= s->ticks * RATE_K100
-#if TOTAL_STEP_RATE
-        && !(uint16_t)(s->ticks >> 16) && !(uint8_t)(sum >> 16) &&
-        mul16x16((uint16_t)sum, f100) <= mul16x16((uint16_t)s->ticks, (uint16_t)TOTAL_K100)
-#endif
-    )
-        return -1;
-    return rate_check_axes(s, f, rate);
+    return rate_fast_ok(n, sum, f, s->ticks) ? -1 : rate_check_axes(s, f, rate);
 }
 
-void motion_store(struct item *it, const struct segment *s)
+/* The item of a segment, and (`check`) its rate test in the same pass over the axes:
+ * thousands of segments a second, so no 64-bit negation (the decoder refuses INT32_MIN),
+ * no variable shifts, the flags in a register (should the item and the segment alias,
+ * every |= would be a load and a store). 0: `check` found it over (the item written in
+ * part). */
+static inline __attribute__((always_inline)) uint8_t store_item(struct item *it,
+                                                                const struct segment *s,
+                                                                uint8_t check)
 {
-    /* thousands of segments a second: no 64-bit negation (the decoder refuses
-     * INT32_MIN), no variable shifts, the flags in a register (the item and the segment
-     * could alias: every |= would be a load and a store) */
-    uint8_t flags = 0, ramp = 0, bit = 0x10;
-    uint32_t any = 0;
-    if (s->ramp >= 0) {
-        flags = SEGF_RAMP;
-        ramp = (uint8_t)s->ramp;
-    }
+    uint8_t flags = 0, bit = 0x10, wide = 0;
+    uint16_t most = 0;
+    uint32_t any = 0, sum = 0;
     for (uint8_t k = 0; k < 4; k++, bit <<= 1) {
         int32_t d = s->deltas[k];
         uint32_t n = abs32(d);
@@ -163,18 +193,30 @@ void motion_store(struct item *it, const struct segment *s)
             flags |= bit;
         any |= n;
         it->u.n[k] = n;
+        if (n & 0xFFFF8000UL) {
+            wide = 1;
+        } else {
+            if ((uint16_t)n > most)
+                most = (uint16_t)n;
+            sum += (uint16_t)n;
+        }
     }
-    if (s->ramp == SEG_RAMP_TO_REST || !any)
-        flags |= SEGF_AT_REST;
-    it->kind = IT_SEG;
-    it->ticks = s->ticks;
-    it->flags = flags;
-    it->ramp = ramp;
-#if STEP_ENGINE
-    it->blk_mask = 0;
-    if (s->sched.mask)
-        blocks_commit(it); /* read into the ring as the segment was decoded */
-#endif
+    uint32_t rate;
+    if (check && (wide || !rate_fast_ok(most, sum, rate_factor(s), s->ticks)) &&
+        motion_rate_check(s, &rate) >= 0)
+        return 0;
+    finish_item(it, s, flags, any);
+    return 1;
+}
+
+void motion_store(struct item *it, const struct segment *s)
+{
+    store_item(it, s, 0);
+}
+
+uint8_t motion_store_checked(struct item *it, const struct segment *s)
+{
+    return store_item(it, s, 1);
 }
 
 uint32_t motion_ticks_of(uint32_t units, uint8_t *last_units)
@@ -345,6 +387,14 @@ static void __attribute__((noinline)) axis_constants(struct axis_plan *x, uint32
     }
 }
 
+#if STEP_ENGINE
+/* What the plan before the next one leaves the step tick: the axes its DDA may drive in
+ * its last tick (those it steps without a chunk, and those the dispatch may hand back to
+ * the DDA, below) and their directions; 0xFF, unknown, after a flush or an item that is
+ * not a segment (a homing's ticks are the DDA's). */
+static uint8_t dda_after = 0xFF, dir_after;
+#endif
+
 static void prepare(struct plan *p, const struct item *it, uint8_t index)
 {
     shape_of(it);
@@ -357,8 +407,19 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
     p->last_units = shape.last_units;
     p->ka = shape.ka;
     p->kb = shape.kb;
-    struct axis_plan *x = p->ax;
     const uint32_t *np = it->u.n;
+    /* The dispatch hands an engine axis back to the DDA if the DDA drove it in the tick
+     * before and it reverses (stepper.c): those keep the DDA's constants; a steady
+     * segment's other axes, the engine's throughout, need only their interval (about
+     * 2,000 cycles of a plan's 3,400 when n is not kept in the memo). */
+    uint8_t risk = 0x0F, lean = 0;
+#if STEP_ENGINE
+    if (dda_after != 0xFF)
+        risk = dda_after & (uint8_t)(dir ^ dir_after);
+    if (!p->accel)
+        lean = (uint8_t)~risk & 0x0F; /* (of the moving axes) */
+#endif
+    struct axis_plan *x = p->ax;
     int32_t *delta = p->delta;
     for (; bit != 0x10; bit <<= 1, x++, np++, delta++) {
         uint32_t n = *np;
@@ -381,24 +442,37 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             x->last_n = memo[n].last_n;
             x->est_low = memo[n].est_low;
             x->period = memo[n].period;
+        } else if (STEP_ENGINE && (lean & bit) && n >= MEMO_N) {
+            /* the chunk's interval alone (a small n's constants go to the memo: kept, they
+             * cost less than the interval computed again) */
+            x->interval = step_interval(n, shape.units);
         } else {
             axis_constants(x, n, p->accel);
         }
     }
     p->moving = moving;
+#if STEP_ENGINE
     /* the step engine's axes: a steady segment's (each one chunk, its interval predicted
      * or from its block), a ramp's with a schedule block; the DDA steps the rest (an
      * axis the host left without a block: PROTOCOL.md 5.5, 3.0's rule) */
-#if STEP_ENGINE
-    p->blk_mask = it->blk_mask & moving;
+    uint8_t engine = p->accel ? (uint8_t)(it->blk_mask & moving) : moving;
+    dda_after = (uint8_t)((moving & (uint8_t)~engine) | (engine & risk));
+    dir_after = dir;
+    p->blk_mask = (uint8_t)((it->blk_mask & moving) | (lean & moving) << 4);
     p->blk_at = it->blk_at;
     p->blk_end = it->blk_end;
-    p->engine = p->accel ? p->blk_mask : moving;
+    p->engine = engine;
+#else
+    (void)risk;
+    (void)lean;
 #endif
 }
 
 void motion_plans_reset(void)
 {
+#if STEP_ENGINE
+    dda_after = 0xFF;
+#endif
     uint8_t s = SREG;
     cli();
     plan_head = plan_tail = 0;
@@ -421,6 +495,10 @@ void motion_prepare_some(uint8_t budget)
             sei();
             budget--;
         }
+#if STEP_ENGINE
+        else
+            dda_after = 0xFF; /* (a homing's ticks, a dwell: the DDA's last tick unknown) */
+#endif
         motion_cursor++;
     }
 }

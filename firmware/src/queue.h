@@ -94,7 +94,8 @@ struct plan {
     uint8_t last_units; /* length of the last tick in clock units */
     uint8_t at_rest;    /* SEGF_AT_REST of the item */
     /* the step engine's axes (the others are the DDA's): a steady segment's moving axes,
-     * a ramp's axes with a schedule block; blk_mask, blk_at, blk_end: the item's */
+     * a ramp's axes with a schedule block; blk_mask, blk_at, blk_end: the item's (the
+     * high nibble of blk_mask: the axes planned with their interval only, motion.c) */
 #if STEP_ENGINE
     uint8_t engine, blk_mask, blk_at, blk_end;
 #define PLAN_ENGINE(p) ((p)->engine)

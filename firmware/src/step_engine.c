@@ -30,12 +30,13 @@ struct step_axis {
     /* The chunk after the running one, where the assembly takes it at the running one's
      * last edge (the ring's are C's): a segment's, put here a tick before it starts. */
     volatile uint8_t next_ready;
-    uint32_t next_t, next_interval;
-    uint16_t next_count;
-    uint8_t next_neg;
-    int32_t next_add;
-    uint8_t next_nblk;
-    const struct sched_chunk *next_blk;
+    struct step_chunk next;
+    /* A steady chunk after that one, moved into next as the assembly takes next: with
+     * segments shorter than two ticks the tick puts a segment's chunks out while the
+     * segment before still waits in next (its flags: next_ready's). Set only while next
+     * is: the ring's chunks come after both. */
+    volatile uint8_t next2_ready;
+    struct step_chunk next2;
     volatile uint8_t head, tail;
     struct step_chunk ring[CHUNK_SLOTS];
 };
@@ -45,9 +46,13 @@ _Static_assert(offsetof(struct step_axis, spare) == offsetof(struct step_axis, r
                    offsetof(struct step_axis, add) == offsetof(struct step_axis, running) + 2 &&
                    offsetof(struct step_axis, nblk) == offsetof(struct step_axis, running) + 6 &&
                    offsetof(struct step_axis, blk) == offsetof(struct step_axis, running) + 7 &&
-                   offsetof(struct step_axis, next_add) == offsetof(struct step_axis, next_neg) + 1 &&
-                   offsetof(struct step_axis, next_nblk) == offsetof(struct step_axis, next_neg) + 5 &&
-                   offsetof(struct step_axis, next_blk) == offsetof(struct step_axis, next_neg) + 6,
+                   offsetof(struct step_axis, next2_ready) ==
+                       offsetof(struct step_axis, next) + 18 &&
+                   offsetof(struct step_axis, next2) == offsetof(struct step_axis, next2_ready) + 1 &&
+                   sizeof(struct step_chunk) == 18 &&
+                   offsetof(struct step_chunk, add) == offsetof(struct step_chunk, neg) + 1 &&
+                   offsetof(struct step_chunk, nblk) == offsetof(struct step_chunk, neg) + 5 &&
+                   offsetof(struct step_chunk, blk) == offsetof(struct step_chunk, neg) + 6,
                "the assembly's offsets");
 /* a block's chunk: count, interval, add (schedule_block.h), bit 31 of the interval set
  * where the assembly may not run it (step_blocks.c) */
@@ -85,7 +90,9 @@ uint8_t step_fast;
  * instead, 14 cycles a take less, cost the tick 20-40 cycles in the segment's last ticks:
  * 57-95 tick overruns in a run.) */
 #define NEXT_READY 1
+#define NEXT_ADD 2 /* (next's chunk has an add or a block's further chunks: bit 4 + k) */
 #define NEXT_SAME_DIR 4
+#define NEXT2 8 /* a steady chunk waits in next2 too (next then never NEXT_SAME_DIR or NEXT_ADD) */
 
 #define OCR_OF(t) ((uint16_t)(cycles_of((t) + (1UL << (STEP_FRAC_BITS - 1))) - ISR_LEAD))
 
@@ -341,13 +348,20 @@ static inline __attribute__((always_inline)) uint8_t take(uint8_t k, struct step
         return 1;
     }
     if (a->next_ready) {
-        a->t = a->next_t;
-        load(k, a, a->next_interval, a->next_add, a->next_count);
-        a->nblk = a->next_nblk;
-        a->blk = a->next_blk;
-        if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next_neg)
-            set_dir(k, a->next_neg);
+        a->t = a->next.t;
+        load(k, a, a->next.interval, a->next.add, a->next.count);
+        a->nblk = a->next.nblk;
+        a->blk = a->next.blk;
+        if ((uint8_t)!!(cur_dir & bit_of_k[k]) != a->next.neg)
+            set_dir(k, a->next.neg);
         a->next_ready = 0;
+        uint8_t flags = a->next2_ready;
+        if (flags) { /* (as the assembly does: a steady chunk) */
+            a->next = a->next2;
+            GPIOR0 &= (uint8_t)~(bit_of_k[k] << 4);
+            a->next_ready = flags;
+            a->next2_ready = 0;
+        }
         return 1;
     }
     uint8_t tail = a->tail;
@@ -585,6 +599,8 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
 #define IF_Z "sbrs r24, 3\n\trjmp 21f\n\tlds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n21:\n\t"
 #define IF_E "sbrc r24, 4\n\tsbi %[pa], %[eb]\n\t"
 
+/* One stepper's compare interrupt (`a` its state, its timer's registers, its pins' code:
+ * dir_pos and dir_neg may use r24 only, r25 holds next's flags through them). */
 #define STEP_ASM(a, ocr, tcnt, timsk, mask_bit, pin_on, pin_off, dir_pos, dir_neg, dbit, slow_fn, end_fn, partners, \
                  late_partners, kidx, wrap_fn)                                            \
     __asm__ volatile(                                                                      \
@@ -700,7 +716,8 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "sts %[t], r24\n\t"                                                                \
         "bst r24, 7\n\t"                                                                   \
         /* the direction: the pin, and cur_dir's bit (step_tick.h), unless the push found \
-         * it the running chunk's (NEXT_SAME_DIR: 3 cycles, not 13-16) */                  \
+         * it the running chunk's (NEXT_SAME_DIR: 3 cycles, not 13-16; never set with     \
+         * NEXT2: a take with next2 waiting goes this way and moves it up at 55) */        \
         "sbrc r25, 2\n\t"                                                                  \
         "rjmp 5f\n\t"                                                                      \
         "lds r24, %[nneg]\n\t"                                                             \
@@ -714,7 +731,9 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "ori r24, %[bit]\n"                                                                \
         "8:\n\t"                                                                           \
         "sts cur_dir, r24\n\t"                                                             \
-        "rjmp 5f\n"                                                                        \
+        "sbrs r25, 3\n\t" /* NEXT2 in r25, next's flags (the direction code keeps r25) */  \
+        "rjmp 5f\n\t"                                                                      \
+        "rjmp 55f\n"                                                                        \
         "2:\n\t"                                                                           \
         T_PLUS_I                                                                           \
         /* a ramp's chunk: I += add, out of line (2 cycles an edge without) */            \
@@ -744,6 +763,42 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "out __SREG__, r24\n\t"                                                            \
         "pop r24\n\t"                                                                      \
         "reti\n"                                                                           \
+        /* next2 waiting (its direction code done): next2 (at %[nt]+18 its flags, then its  \
+         * chunk: a steady one) moves up into next: its time, interval, count and        \
+         * direction, add and nblk zeroed (about 70 cycles) */                           \
+        "55:\n\t"                                                                          \
+        "lds r24, %[nt]+19\n\t"                                                            \
+        "sts %[nt]+0, r24\n\t"                                                             \
+        "lds r24, %[nt]+20\n\t"                                                            \
+        "sts %[nt]+1, r24\n\t"                                                             \
+        "lds r24, %[nt]+21\n\t"                                                            \
+        "sts %[nt]+2, r24\n\t"                                                             \
+        "lds r24, %[nt]+22\n\t"                                                            \
+        "sts %[nt]+3, r24\n\t"                                                             \
+        "lds r24, %[nt]+23\n\t"                                                            \
+        "sts %[nt]+4, r24\n\t"                                                             \
+        "lds r24, %[nt]+24\n\t"                                                            \
+        "sts %[nt]+5, r24\n\t"                                                             \
+        "lds r24, %[nt]+25\n\t"                                                            \
+        "sts %[nt]+6, r24\n\t"                                                             \
+        "lds r24, %[nt]+26\n\t"                                                            \
+        "sts %[nt]+7, r24\n\t"                                                             \
+        "lds r24, %[nt]+27\n\t"                                                            \
+        "sts %[nt]+8, r24\n\t"                                                             \
+        "lds r24, %[nt]+28\n\t"                                                            \
+        "sts %[nt]+9, r24\n\t"                                                             \
+        "lds r24, %[nt]+29\n\t"                                                            \
+        "sts %[nt]+10, r24\n\t"                                                            \
+        "lds r24, %[nt]+18\n\t"                                                            \
+        "sts %[rdy], r24\n\t"                                                              \
+        "clr r24\n\t"                                                                      \
+        "sts %[nt]+18, r24\n\t"                                                            \
+        "sts %[nt]+11, r24\n\t"                                                            \
+        "sts %[nt]+12, r24\n\t"                                                            \
+        "sts %[nt]+13, r24\n\t"                                                            \
+        "sts %[nt]+14, r24\n\t"                                                            \
+        "sts %[nt]+15, r24\n\t"                                                            \
+        "rjmp 5b\n"                                                                        \
         "30:\n\t" /* I += add (the flags change; T's bit 7 lives in SREG's T); I's top     \
                      * byte stays 0: an assembly chunk's intervals are all under 2^23     \
                      * (step_chunk_slow), so the sum's is 0 whatever add's */             \
@@ -813,19 +868,19 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "rjmp 11b\n"                                                                       \
         "46:\n\t" /* the waiting chunk's add and block (a ramp's first chunk) */          \
         "cbi " GPIOR0_IO ", 4+" kidx "\n\t"                                               \
-        "clr r25\n\t"                                                                      \
+        "clr r26\n\t" /* (r25 keeps next's flags: NEXT_SAME_DIR, NEXT2) */          \
         "lds r24, %[nneg]+1\n\t"                                                           \
         "sts %[run]+2, r24\n\t"                                                            \
-        "or r25, r24\n\t"                                                                  \
+        "or r26, r24\n\t"                                                                  \
         "lds r24, %[nneg]+2\n\t"                                                           \
         "sts %[run]+3, r24\n\t"                                                            \
-        "or r25, r24\n\t"                                                                  \
+        "or r26, r24\n\t"                                                                  \
         "lds r24, %[nneg]+3\n\t"                                                           \
         "sts %[run]+4, r24\n\t"                                                            \
-        "or r25, r24\n\t"                                                                  \
+        "or r26, r24\n\t"                                                                  \
         "lds r24, %[nneg]+4\n\t"                                                           \
         "sts %[run]+5, r24\n\t"                                                            \
-        "or r25, r24\n\t"                                                                  \
+        "or r26, r24\n\t"                                                                  \
         "breq 47f\n\t"                                                                     \
         "sbi " GPIOR0_IO ", " kidx "\n"                                                    \
         "47:\n\t"                                                                          \
@@ -835,13 +890,12 @@ _Static_assert(offsetof(struct step_axis, wraps) + 1 == offsetof(struct step_axi
         "sts %[run]+7, r24\n\t"                                                            \
         "lds r24, %[nneg]+7\n\t"                                                           \
         "sts %[run]+8, r24\n\t"                                                            \
-        "clr r25\n\t" /* (the direction written) */                                       \
         "rjmp 45b\n\t"                                                                     \
         :                                                                                  \
         : [slow] "i"(&(a).slow), [cnt] "i"(&(a).count), [t] "i"(&(a).t),                   \
-          [i] "i"(&(a).interval), [rdy] "i"(&(a).next_ready), [nt] "i"(&(a).next_t),       \
-          [ni] "i"(&(a).next_interval), [ncnt] "i"(&(a).next_count),                       \
-          [nneg] "i"(&(a).next_neg), [bit] "M"(dbit), [lead] "n"(ISR_LEAD),                 \
+          [i] "i"(&(a).interval), [rdy] "i"(&(a).next_ready), [nt] "i"(&(a).next.t),       \
+          [ni] "i"(&(a).next.interval), [ncnt] "i"(&(a).next.count),                       \
+          [nneg] "i"(&(a).next.neg), [bit] "M"(dbit), [lead] "n"(ISR_LEAD),                 \
           [head] "i"(&(a).head), [tail] "i"(&(a).tail), [run] "i"(&(a).running),           \
           [msk] "n"(_SFR_MEM_ADDR(timsk)), [mbit] "M"(mask_bit),                               \
           [margin] "n"(ARM_MARGIN), [tc] "n"(_SFR_MEM_ADDR(tcnt)),                         \
@@ -869,8 +923,8 @@ ISR(TIMER3_COMPC_vect, ISR_NAKED)
 {
     STEP_ASM(axes[2], OCR3C, TCNT3, TIMSK3, _BV(OCIE3C), "lds r25, %[pl]\n\tori r25, %[zb]\n\tsts %[pl], r25\n\t",
              "lds r25, %[pl]\n\tandi r25, lo8(~%[zb])\n\tsts %[pl], r25\n\t",
-             "lds r25, %[pl]\n\tori r25, %[zd]\n\tsts %[pl], r25\n\t",
-             "lds r25, %[pl]\n\tandi r25, lo8(~%[zd])\n\tsts %[pl], r25\n\t", 4,
+             "lds r24, %[pl]\n\tori r24, %[zd]\n\tsts %[pl], r24\n\t",
+             "lds r24, %[pl]\n\tandi r24, lo8(~%[zd])\n\tsts %[pl], r24\n\t", 4,
              "__vector_step_z", "__vector_end_z", RAISE_PENDING(PENDING_T3_T5, "0x16", IF_X IF_Y IF_E),
              RAISE_PENDING(PENDING_T3, "0x06", IF_X IF_Y), "2", "__vector_wrap_z");
 }
@@ -901,7 +955,7 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     cli();
     take(k, a);
     SREG = s;
-    uint8_t slow = chunk_is_slow(k, a);
+    uint8_t slow = step_chunk_slow_here(a->interval, has_add(k) ? a->add : 0, a->count);
     cli();
     uint32_t now = now_q(k, step_clock_this_tick);
     uint32_t ahead = cycles_of(a->t - now);
@@ -917,36 +971,114 @@ static void __attribute__((noinline)) start_axis(uint8_t k, struct step_axis *a)
     SREG = s;
 }
 
+/* whether the assembly may not run chunk c (a steady one's test without the outlined
+ * general case's products) */
+static inline __attribute__((always_inline)) uint8_t slow_chunk(const struct step_chunk *c)
+{
+    return c->add ? step_chunk_slow(c->interval, c->add, c->count) : c->interval >= 0x800000UL;
+}
+
+/* A chunk waits for the assembly of stepper `bit` in next (the running chunk's last edge
+ * takes it) or, while next holds one, in next2 (next's last edge takes it). Written with
+ * interrupts on (the interrupt reads a slot only once its flag is set), then placed with
+ * them off if the stepper still runs, its ring is empty and next is as it was (`second`:
+ * it held a chunk; the assembly may have taken it meanwhile). */
+
+/* the slot's flags for a chunk toward `neg` with `flags` (NEXT_READY, NEXT_ADD) */
+static inline __attribute__((always_inline)) uint8_t slot_flags(const struct step_axis *a,
+                                                                uint8_t bit, uint8_t second,
+                                                                uint8_t neg, uint8_t flags)
+{
+    /* the direction is the chunk's before it (next's, or the running one's: cur_dir) */
+    uint8_t before = second ? a->next.neg : !!(cur_dir & bit);
+    return before == neg ? flags | NEXT_SAME_DIR : flags;
+}
+
+static inline __attribute__((always_inline)) uint8_t place(struct step_axis *a, uint8_t bit,
+                                                           uint8_t second, uint8_t flags)
+{
+    uint8_t s = SREG;
+    cli();
+    if (!a->running || a->next2_ready || a->head != a->tail || (a->next_ready != 0) != second) {
+        SREG = s;
+        return 0;
+    }
+    if (second) {
+        /* next's take then goes through the direction code, which moves next2 up */
+        a->next2_ready = flags;
+        a->next_ready = (uint8_t)((a->next_ready & (uint8_t)~NEXT_SAME_DIR) | NEXT2);
+    } else {
+        if (flags & NEXT_ADD)
+            GPIOR0 |= (uint8_t)(bit << 4);
+        else
+            GPIOR0 &= (uint8_t)~(bit << 4);
+        a->next_ready = flags;
+    }
+    SREG = s;
+    return 1;
+}
+
+/* whether the slots may take a chunk now (else the ring does, after what it holds) */
+static inline __attribute__((always_inline)) uint8_t slots_open(const struct step_axis *a)
+{
+    return a->running && !a->next2_ready && a->head == a->tail;
+}
+
+/* Any chunk the assembly may run into next (tried again once should the assembly take
+ * next meanwhile); 0: the ring's. Only steady chunks go to next2 (push_steady): the
+ * assembly moves next2 up with its 11 bytes, a ramp's chunk has 18. */
+static uint8_t __attribute__((noinline)) offer(struct step_axis *a, uint8_t bit,
+                                                const struct step_chunk *c)
+{
+    uint8_t flags = c->add || c->nblk ? NEXT_READY | NEXT_ADD : NEXT_READY;
+    for (uint8_t tries = 0; tries < 2 && slots_open(a) && !a->next_ready; tries++) {
+        a->next = *c;
+        if (place(a, bit, 0, slot_flags(a, bit, 0, c->neg, flags)))
+            return 1;
+    }
+    return 0;
+}
+
+/* A steady chunk written in place, no copy: the segments' common case, about a third of
+ * a generic push's cycles. */
+static inline __attribute__((always_inline)) uint8_t push_steady(uint8_t k,
+                                                                  const struct step_chunk *c)
+{
+    struct step_axis *a = &axes[k];
+    uint8_t bit = bit_of_k[k];
+    uint32_t interval = c->interval;
+    if (interval >= 0x800000UL || !slots_open(a))
+        return 0;
+    uint8_t second = a->next_ready != 0;
+    struct step_chunk *slot = second ? &a->next2 : &a->next;
+    slot->t = c->t;
+    slot->interval = interval;
+    slot->count = c->count;
+    slot->neg = c->neg;
+    slot->add = 0;
+    slot->nblk = 0;
+    return place(a, bit, second, slot_flags(a, bit, second, c->neg, NEXT_READY));
+}
+
+/* one copy a stepper: its state at addresses known when compiled (no pointer arithmetic);
+ * 0: the chunk goes through step_engine_push (the caller's: a frame of its own here would
+ * sit on the step tick's deepest path) */
+uint8_t step_engine_push_steady(uint8_t k, const struct step_chunk *c)
+{
+    switch (k) {
+    case 0: return push_steady(0, c);
+    case 1: return push_steady(1, c);
+    case 2: return push_steady(2, c);
+    default: return push_steady(3, c);
+    }
+}
+
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
 {
     struct step_axis *a = &axes[k];
+    if (!slow_chunk(c) && offer(a, bit_of_k[k], c))
+        return 1;
     uint8_t s = SREG;
-    if (!a->next_ready && !step_chunk_slow(c->interval, c->add, c->count)) {
-        /* the assembly takes it at the running chunk's end (which is less than a timer
-         * period before it: the segments follow each other); written with interrupts on
-         * (the interrupt reads it only once it is ready) */
-        a->next_t = c->t;
-        a->next_interval = c->interval;
-        a->next_count = c->count;
-        a->next_neg = c->neg;
-        a->next_add = c->add;
-        a->next_nblk = c->nblk;
-        a->next_blk = c->blk;
-        cli();
-        if (a->running && a->head == a->tail) {
-            if (c->add || c->nblk)
-                GPIOR0 |= (uint8_t)(bit_of_k[k] << 4);
-            else
-                GPIOR0 &= (uint8_t)~(bit_of_k[k] << 4);
-            /* (the running chunk is the last before c: its direction stays) */
-            a->next_ready = (uint8_t)!!(cur_dir & bit_of_k[k]) == c->neg
-                                ? NEXT_READY | NEXT_SAME_DIR
-                                : NEXT_READY;
-            SREG = s;
-            return 1;
-        }
-    }
-    SREG = s;
     uint8_t head = a->head;
     if ((uint8_t)(head - a->tail) >= CHUNK_SLOTS)
         return 0;
@@ -978,6 +1110,7 @@ void step_engine_stop(void)
     for (uint8_t k = 0; k < 4; k++) {
         axes[k].running = 0;
         axes[k].next_ready = 0;
+        axes[k].next2_ready = 0;
         axes[k].tail = axes[k].head;
         axes[k].count = 0;
         axes[k].nblk = 0;
@@ -1006,8 +1139,12 @@ int32_t step_engine_unissued(uint8_t k)
         n = (cur_dir & bit_of_k[k]) ? -(int32_t)left : (int32_t)left;
     }
     if (a->next_ready) {
-        int32_t m = (int32_t)chunk_edges(a->next_count, a->next_nblk, a->next_blk);
-        n += a->next_neg ? -m : m;
+        int32_t m = (int32_t)chunk_edges(a->next.count, a->next.nblk, a->next.blk);
+        n += a->next.neg ? -m : m;
+    }
+    if (a->next2_ready) {
+        int32_t m = (int32_t)chunk_edges(a->next2.count, a->next2.nblk, a->next2.blk);
+        n += a->next2.neg ? -m : m;
     }
     for (uint8_t t = a->tail; t != a->head; t++) {
         const struct step_chunk *c = &a->ring[t & (CHUNK_SLOTS - 1)];
@@ -1021,7 +1158,7 @@ uint8_t step_engine_idle(void)
 {
     for (uint8_t k = 0; k < 4; k++) {
         const struct step_axis *a = &axes[k];
-        if (a->running || a->next_ready || a->head != a->tail)
+        if (a->running || a->next_ready || a->next2_ready || a->head != a->tail)
             return 0;
     }
     return 1;

@@ -22,16 +22,17 @@
 #include "mul16.h"
 
 #define STEP_FRAC_BITS 8
-#define CHUNK_SLOTS 2 /* a power of two: the chunks of a stepper queued ahead for C (the
-                       * assembly's next chunk has a slot of its own) */
+#define CHUNK_SLOTS 1 /* a power of two: the chunks of a stepper queued ahead for C (the
+                       * assembly's next two chunks have slots of their own) */
 
 struct sched_chunk;
+/* (the layout is the assembly's: it reads a stepper's waiting chunk by offset) */
 struct step_chunk {
     uint32_t t;        /* the first edge, Q24.8 cycles on the steppers' time base */
     uint32_t interval; /* Q24.8 cycles between its first two edges */
-    int32_t add;       /* added to the interval at each edge (a ramp's; 0: steady) */
     uint16_t count;    /* edges, >= 1 */
     uint8_t neg;       /* the direction: 1 toward negative steps */
+    int32_t add;       /* added to the interval at each edge (a ramp's; 0: steady) */
     /* a schedule block's further chunks, run after this one (step_blocks.h): each starts
      * where the one before left off */
     uint8_t nblk;
@@ -51,10 +52,20 @@ void step_engine_start_timers(uint8_t timer1_b);
  * it. Returns 0 when the stepper's ring is full (never: a segment is one chunk an axis
  * and a tick computes one ahead). */
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
+/* The common case of step_engine_push, a steady chunk the assembly runs (its t, interval,
+ * count and neg read: add 0, no block) going straight to where the assembly takes it, at a
+ * third of the cost. Returns 0 when it cannot (the stepper stopped, its ring in use, a
+ * slow interval): then push it. */
+uint8_t step_engine_push_steady(uint8_t k, const struct step_chunk *c);
 
 /* Whether the assembly may not run a chunk (C does): its intervals, the last one too,
- * of 2^15 cycles or more (its lateness test compares 16-bit times). */
-static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t count)
+ * of 2^15 cycles or more (its lateness test compares 16-bit times). The body inline where
+ * a call would deepen the step tick's deepest path (start_axis: tools/stack_usage.py);
+ * out of line elsewhere (inline in the steppers' C paths too, their module 3's edge at a
+ * ramp's end came 2.5 us later: tests/firmware/test_step_timing.py's 25 us crossed). */
+static inline __attribute__((always_inline)) uint8_t step_chunk_slow_here(uint32_t interval,
+                                                                          int32_t add,
+                                                                          uint16_t count)
 {
     uint32_t longest = interval;
     if (add > 0 && count > 1) {
@@ -67,6 +78,11 @@ static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t c
         longest += (grow << 8) + mul16x16((uint8_t)add, n);
     }
     return longest >= 0x800000UL;
+}
+
+static inline uint8_t step_chunk_slow(uint32_t interval, int32_t add, uint16_t count)
+{
+    return step_chunk_slow_here(interval, add, count);
 }
 
 /* No stepper runs and none has a chunk waiting. */

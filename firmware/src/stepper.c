@@ -474,7 +474,15 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
             continue;
         most--;
         c.neg = n < 0;
-        if (blk & 1) {
+        if (!(blk & 1)) {
+            c.interval = x->interval;
+            c.t = start + (c.interval >> 1);
+            c.count = (uint16_t)(n < 0 ? -n : n);
+            if (step_engine_push_steady(k, &c))
+                continue;
+            c.add = 0;
+            c.nblk = 0;
+        } else {
             c.t = start + own->interval; /* the header's: the first edge */
             c.nblk = (uint8_t)(own->count - 1);
             c.blk = own + 2;
@@ -482,12 +490,6 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
             c.count = own->count;
             c.interval = own->interval & 0x7FFFFFFFUL; /* (the assembly's mark off) */
             c.add = own->add;
-        } else {
-            c.count = (uint16_t)(n < 0 ? -n : n);
-            c.interval = x->interval;
-            c.t = start + (c.interval >> 1);
-            c.add = 0;
-            c.nblk = 0;
         }
         step_engine_push(k, &c);
     }
@@ -500,6 +502,24 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
     return 4;
 #endif
 }
+
+#if STEP_ENGINE
+/* An axis the tick's DDA drives in the tick now ending (a ramp without its block) that
+ * reverses: the DDA keeps it for segment p too (the engine would set its direction pin
+ * now, under the DDA's last steps). One planned without the DDA's constants (motion.c:
+ * the high nibble of blk_mask) never is (its plan saw the DDA's last tick): if it were,
+ * stop rather than step it wrong (0). */
+static uint8_t __attribute__((noinline)) hand_back(struct plan *p)
+{
+    uint8_t flip = this_tick->own & p->engine & (uint8_t)(p->dir ^ cur_dir);
+    if (flip & (p->blk_mask >> 4)) {
+        raise_error(ERR_PLANNER_LATE, stepper.items_done, stepper.segments_done, 0xFF, 0);
+        return 0;
+    }
+    p->engine &= (uint8_t)~flip;
+    return 1;
+}
+#endif
 
 /* Start queue items until a timed one runs (or nothing may start); at most a
  * few instantaneous items per tick, so a queue of them cannot stretch a tick. */
@@ -553,13 +573,8 @@ static void __attribute__((noinline)) dispatch(void)
             ticks_left = p->ticks;
             stepper.current = IT_SEG;
 #if STEP_ENGINE
-            {
-                /* an axis the tick's DDA drives in the tick now ending (a ramp without
-                 * its block) that reverses: the DDA keeps it for this segment too (the
-                 * engine would set its direction pin now, under the DDA's last steps) */
-                uint8_t flip = this_tick->own & p->engine & (uint8_t)(p->dir ^ cur_dir);
-                p->engine &= (uint8_t)~flip;
-            }
+            if (this_tick->own && !hand_back(p))
+                return;
 #endif
             if (STEP_ENGINE && PLAN_ENGINE(p)) {
                 if (chunks_ahead)
@@ -763,7 +778,7 @@ static void blocks_done(const struct plan *p)
 #if !STEP_ENGINE
     (void)p;
 #else
-    if (!p->blk_mask || blk_held == BLK_HELD)
+    if (!(p->blk_mask & 0x0F) || blk_held == BLK_HELD)
         return; /* (full: never; the next block's release frees it) */
     uint16_t span = (uint16_t)(next_tick->units * UNIT_CYCLES);
     blk_fifo[blk_held].end = step_clock_next_tick + ((uint32_t)span << STEP_FRAC_BITS);

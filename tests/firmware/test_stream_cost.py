@@ -72,6 +72,26 @@ def test_the_rate_check_boundary_on_short_segments(avr_built, tmp_path, ticks, a
     assert [r["seq"] for r in _record(dev) if "error" not in r] == [1, 2]
 
 
+def test_a_staged_frame_refuses_its_segment_over_the_rate_at_that_segment(avr_built, tmp_path):
+    # a frame of segments only is staged on receipt, each segment's own limits checked as
+    # it is stored; the one over the rate sends the frame the checked way, which refuses
+    # it at its own number (STEP_RATE naming the axis and its peak) with nothing of it or
+    # after it run, as a frame that is not staged
+    dev = start("avr", tmp_path, "--speedup", "4")
+    h = RawHost(dev.path)
+    try:
+        n = h.hello().max_step_rate // 2_000  # steps in 0.5 ms at exactly the rate
+        ok = [Segment(ticks=50, deltas=(n, -n, 1, 0), ramp=CONSTANT) for _ in range(3)]
+        over = Segment(ticks=50, deltas=(1, -(n + 1), 1, 0), ramp=CONSTANT)
+        h.send(*ok, over, *ok[:2], Segment(ticks=100, deltas=(1, 0, 0, 0), ramp=TO_REST))
+        err = h.wait_for(lambda: errors(h, ErrorCode.STEP_RATE), what="STEP_RATE")[0]
+        assert (err.axis, err.value, err.segment) == (1, (n + 1) * 2_000, 4)
+    finally:
+        h.close()
+        dev.stop()
+    assert all(r["seq"] <= 3 for r in _record(dev) if "error" not in r)
+
+
 def test_staged_and_checked_frames_keep_the_coder_context(avr_built, tmp_path):
     # segments only (staged on receipt), then segments with a queued command (checked,
     # decoded when executed): the second frame's first segments repeat or predict from
