@@ -434,7 +434,10 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             continue;
         }
         moving |= bit;
-        if (n < MEMO_N && memo[n].gen == shape_gen) {
+        if (STEP_ENGINE && (lean & bit) && n < MEMO_N && memo[n].gen == shape_gen) {
+            /* kept: its interval alone (a steady shape's memo holds it in a_hi's place) */
+            x->interval = (uint32_t)memo[n].a_hi;
+        } else if (n < MEMO_N && memo[n].gen == shape_gen) {
             x->v_lo = memo[n].v_lo;
             x->v_hi = memo[n].v_hi;
             x->a_lo = memo[n].a_lo;
@@ -443,8 +446,8 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             x->est_low = memo[n].est_low;
             x->period = memo[n].period;
         } else if (STEP_ENGINE && (lean & bit) && n >= MEMO_N) {
-            /* the chunk's interval alone (a small n's constants go to the memo: kept, they
-             * cost less than the interval computed again) */
+            /* the chunk's interval alone (a small n's constants go to the memo: kept, the
+             * memo's interval costs less than the interval computed again) */
             x->interval = step_interval(n, shape.units);
         } else {
             axis_constants(x, n, p->accel);
