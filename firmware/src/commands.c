@@ -471,8 +471,9 @@ static uint8_t stage_segments(const uint8_t *payload, uint8_t len, struct seg_ct
         if (op < SEG_BASE || (op & SEG_F_SCHEDULE) || n == room)
             return 0;
         segment_decode(&r, work, &s);
-        /* its own limits checked here (the checked way raises their fault at its
-         * segment), where it is in the queue when it is queued (enqueue_staged) */
+        /* its own limits checked here (one over sends the frame the checked way, which
+         * raises the fault at its segment); its tail's checks wait for its turn
+         * (enqueue_staged) */
         if (r.err || s.ticks < MIN_SEGMENT_TICKS ||
             !motion_store_checked(queue_slot((uint8_t)(at + n)), &s))
             return 0;

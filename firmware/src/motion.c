@@ -434,10 +434,12 @@ static void prepare(struct plan *p, const struct item *it, uint8_t index)
             continue;
         }
         moving |= bit;
-        if (STEP_ENGINE && (lean & bit) && n < MEMO_N && memo[n].gen == shape_gen) {
-            /* kept: its interval alone (a steady shape's memo holds it in a_hi's place) */
-            x->interval = (uint32_t)memo[n].a_hi;
-        } else if (n < MEMO_N && memo[n].gen == shape_gen) {
+        if (n < MEMO_N && memo[n].gen == shape_gen) {
+            if (STEP_ENGINE && (lean & bit)) {
+                /* its interval alone (a steady shape's memo holds it in a_hi's place) */
+                x->interval = (uint32_t)memo[n].a_hi;
+                continue;
+            }
             x->v_lo = memo[n].v_lo;
             x->v_hi = memo[n].v_hi;
             x->a_lo = memo[n].a_lo;
