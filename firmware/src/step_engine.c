@@ -1057,7 +1057,9 @@ static inline __attribute__((always_inline)) uint8_t steady_of(uint8_t k, uint32
         return 0;
     int32_t d = n[k];
     uint8_t neg = d < 0;
-    uint16_t count = (uint16_t)(neg ? -d : d);
+    uint16_t count = (uint16_t)d; /* (|d| < 2^16: the segment passed the rate check) */
+    if (neg)
+        count = (uint16_t)-count;
     uint32_t t = start + (interval >> 1);
     uint8_t bit = bit_of_k[k];
     uint8_t s;

@@ -852,10 +852,12 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
         int32_t *pos = s->pos;
         for (uint8_t k = 0; k < 4; k++)
             pos[k] += d[k];
+        if (occ_lo <= occ_hi) /* (no axis of the tick's wheel: empty, its events cleared) */
+            lost_count(wheel_take(o));
     } else {
         last_steps(p, s->pos);
+        lost_count(wheel_take(o));
     }
-    lost_count(wheel_take(o));
     if (STEP_ENGINE)
         blocks_done(p);
     s->current = 0xFF;
