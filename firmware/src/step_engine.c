@@ -1039,6 +1039,19 @@ static uint8_t __attribute__((noinline)) offer(struct step_axis *a, uint8_t bit,
     return 0;
 }
 
+/* a steady chunk's fields in its slot (the assembly reads t, interval, count, neg) */
+static inline __attribute__((always_inline)) void put_steady(struct step_chunk *slot, uint32_t t,
+                                                             uint32_t interval, uint16_t count,
+                                                             uint8_t neg)
+{
+    slot->t = t;
+    slot->interval = interval;
+    slot->count = count;
+    slot->neg = neg;
+    slot->add = 0;
+    slot->nblk = 0;
+}
+
 /* One stepper's steady chunk of a segment (step_engine_push_steadies), at addresses known
  * when compiled: the slot written with interrupts on, placed with them off if the stepper
  * still runs and its next slot is as it was (the assembly may take next meanwhile: a
@@ -1064,24 +1077,14 @@ static inline __attribute__((always_inline)) uint8_t steady_of(uint8_t k, uint32
     uint8_t bit = bit_of_k[k];
     uint8_t s;
     if (!a->running) {
-        a->next.t = t;
-        a->next.interval = interval;
-        a->next.count = count;
-        a->next.neg = neg;
-        a->next.add = 0;
-        a->next.nblk = 0;
+        put_steady(&a->next, t, interval, count, neg);
         GPIOR0 &= (uint8_t)~(bit << 4);
         a->next_ready = NEXT_READY;
         start_axis(k, a);
         return 1;
     }
     if (a->next_ready) {
-        a->next2.t = t;
-        a->next2.interval = interval;
-        a->next2.count = count;
-        a->next2.neg = neg;
-        a->next2.add = 0;
-        a->next2.nblk = 0;
+        put_steady(&a->next2, t, interval, count, neg);
         uint8_t flags = a->next.neg == neg ? NEXT_READY | NEXT_SAME_DIR : NEXT_READY;
         s = SREG;
         cli();
@@ -1093,12 +1096,7 @@ static inline __attribute__((always_inline)) uint8_t steady_of(uint8_t k, uint32
         a->next2_ready = flags;
         a->next_ready = (uint8_t)((a->next_ready & (uint8_t)~NEXT_SAME_DIR) | NEXT2);
     } else {
-        a->next.t = t;
-        a->next.interval = interval;
-        a->next.count = count;
-        a->next.neg = neg;
-        a->next.add = 0;
-        a->next.nblk = 0;
+        put_steady(&a->next, t, interval, count, neg);
         uint8_t flags = !!(cur_dir & bit) == neg ? NEXT_READY | NEXT_SAME_DIR : NEXT_READY;
         s = SREG;
         cli();
