@@ -78,9 +78,11 @@ static const uint8_t crc8_table[256] PROGMEM = {
     0xFA, 0xFD, 0xF4, 0xF3,
 };
 
-uint32_t crc32_update(uint32_t crc, uint8_t byte)
+uint32_t crc32_run(uint32_t crc, const uint8_t *data, uint8_t len)
 {
-    return (crc >> 8) ^ pgm_read_dword(&crc32_table[(uint8_t)crc ^ byte]);
+    while (len--)
+        crc = (crc >> 8) ^ pgm_read_dword(&crc32_table[(uint8_t)crc ^ *data++]);
+    return crc;
 }
 
 uint32_t crc32(const uint8_t *data, uint16_t len)

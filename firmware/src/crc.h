@@ -4,7 +4,8 @@
 #include <stdint.h>
 
 #define CRC32_INIT 0xFFFFFFFFUL
-uint32_t crc32_update(uint32_t crc, uint8_t byte); /* running value, no final XOR */
+/* the running value over `len` bytes more (no final XOR): a frame sent in pieces */
+uint32_t crc32_run(uint32_t crc, const uint8_t *data, uint8_t len);
 uint32_t crc32(const uint8_t *data, uint16_t len);  /* final value (XOR applied) */
 uint8_t crc8(const uint8_t *data, uint8_t len);
 

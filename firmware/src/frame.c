@@ -150,11 +150,7 @@ void frame_send(uint8_t kind, uint8_t seq, uint8_t ack, const uint8_t *payload, 
 {
     uint8_t head[FRAME_HEADER_LEN] = {FRAME_SYNC, len, kind, seq, ack, 0};
     head[5] = crc8(head + 1, 4);
-    uint32_t crc = CRC32_INIT;
-    for (uint8_t i = 1; i < FRAME_HEADER_LEN; i++)
-        crc = crc32_update(crc, head[i]);
-    for (uint8_t i = 0; i < len; i++)
-        crc = crc32_update(crc, payload[i]);
+    uint32_t crc = crc32_run(crc32_run(CRC32_INIT, head + 1, FRAME_HEADER_LEN - 1), payload, len);
     crc ^= 0xFFFFFFFFUL;
     uint8_t tail[FRAME_CRC_LEN + 1] = {(uint8_t)(crc >> 24), (uint8_t)(crc >> 16),
                                        (uint8_t)(crc >> 8), (uint8_t)crc, FRAME_END};

@@ -1025,7 +1025,7 @@ static inline __attribute__((always_inline)) uint8_t slots_open(const struct ste
 }
 
 /* Any chunk the assembly may run into next (tried again once should the assembly take
- * next meanwhile); 0: the ring's. Only steady chunks go to next2 (push_steady): the
+ * next meanwhile); 0: the ring's. Only steady chunks go to next2 (step_engine_push_steadies): the
  * assembly moves next2 up with its 11 bytes, a ramp's chunk has 18. */
 static uint8_t __attribute__((noinline)) offer(struct step_axis *a, uint8_t bit,
                                                 const struct step_chunk *c)
@@ -1039,38 +1039,91 @@ static uint8_t __attribute__((noinline)) offer(struct step_axis *a, uint8_t bit,
     return 0;
 }
 
-/* A steady chunk written in place, no copy: the segments' common case, about a third of
- * a generic push's cycles. */
-static inline __attribute__((always_inline)) uint8_t push_steady(uint8_t k,
-                                                                  const struct step_chunk *c)
+/* a steady chunk's fields in its slot (the assembly reads t, interval, count, neg) */
+static inline __attribute__((always_inline)) void put_steady(struct step_chunk *slot, uint32_t t,
+                                                             uint32_t interval, uint16_t count,
+                                                             uint8_t neg)
 {
-    struct step_axis *a = &axes[k];
-    uint8_t bit = bit_of_k[k];
-    uint32_t interval = c->interval;
-    if (interval >= 0x800000UL || !slots_open(a))
-        return 0;
-    uint8_t second = a->next_ready != 0;
-    struct step_chunk *slot = second ? &a->next2 : &a->next;
-    slot->t = c->t;
+    slot->t = t;
     slot->interval = interval;
-    slot->count = c->count;
-    slot->neg = c->neg;
+    slot->count = count;
+    slot->neg = neg;
     slot->add = 0;
     slot->nblk = 0;
-    return place(a, bit, second, slot_flags(a, bit, second, c->neg, NEXT_READY));
 }
 
-/* one copy a stepper: its state at addresses known when compiled (no pointer arithmetic);
- * 0: the chunk goes through step_engine_push (the caller's: a frame of its own here would
- * sit on the step tick's deepest path) */
-uint8_t step_engine_push_steady(uint8_t k, const struct step_chunk *c)
+/* One stepper's steady chunk of a segment (step_engine_push_steadies), at addresses known
+ * when compiled: the slot written with interrupts on, placed with them off if the stepper
+ * still runs and its next slot is as it was (the assembly may take next meanwhile: a
+ * chunk written to next2 would then wait behind nothing). A stopped stepper (its slots
+ * and its ring empty) takes it from next at once (start_axis): a stepper stops in every
+ * segment it has no step in (the extruder's, at a tenth of the modules' rate), and
+ * through the ring its start cost about twice as much. Only the tick, the caller, pushes
+ * or starts a stepper: one found running may stop meanwhile, one found stopped stays so. */
+static inline __attribute__((always_inline)) uint8_t steady_of(uint8_t k, uint32_t start,
+                                                                const uint8_t *interval_at,
+                                                                const int32_t *n)
 {
-    switch (k) {
-    case 0: return push_steady(0, c);
-    case 1: return push_steady(1, c);
-    case 2: return push_steady(2, c);
-    default: return push_steady(3, c);
+    struct step_axis *a = &axes[k];
+    uint32_t interval = *(const uint32_t *)(interval_at + k * STEP_STEADY_STRIDE);
+    if (interval >= 0x800000UL || a->next2_ready || a->head != a->tail)
+        return 0;
+    int32_t d = n[k];
+    uint8_t neg = d < 0;
+    uint16_t count = (uint16_t)d; /* (|d| < 2^16: the segment passed the rate check) */
+    if (neg)
+        count = (uint16_t)-count;
+    uint32_t t = start + (interval >> 1);
+    uint8_t bit = bit_of_k[k];
+    uint8_t s;
+    if (!a->running) {
+        put_steady(&a->next, t, interval, count, neg);
+        GPIOR0 &= (uint8_t)~(bit << 4);
+        a->next_ready = NEXT_READY;
+        start_axis(k, a);
+        return 1;
     }
+    if (a->next_ready) {
+        put_steady(&a->next2, t, interval, count, neg);
+        uint8_t flags = a->next.neg == neg ? NEXT_READY | NEXT_SAME_DIR : NEXT_READY;
+        s = SREG;
+        cli();
+        if (!a->running || !a->next_ready) {
+            SREG = s;
+            return 0;
+        }
+        /* next's take then goes through the direction code, which moves next2 up */
+        a->next2_ready = flags;
+        a->next_ready = (uint8_t)((a->next_ready & (uint8_t)~NEXT_SAME_DIR) | NEXT2);
+    } else {
+        put_steady(&a->next, t, interval, count, neg);
+        uint8_t flags = !!(cur_dir & bit) == neg ? NEXT_READY | NEXT_SAME_DIR : NEXT_READY;
+        s = SREG;
+        cli();
+        if (!a->running || a->next_ready) {
+            SREG = s;
+            return 0;
+        }
+        GPIOR0 &= (uint8_t)~(bit << 4);
+        a->next_ready = flags;
+    }
+    SREG = s;
+    return 1;
+}
+
+uint8_t step_engine_push_steadies(uint32_t start, uint8_t mask, const uint8_t *interval_at,
+                                  const int32_t *n)
+{
+    uint8_t left = mask;
+    if ((mask & 1) && steady_of(0, start, interval_at, n))
+        left &= (uint8_t)~1;
+    if ((mask & 2) && steady_of(1, start, interval_at, n))
+        left &= (uint8_t)~2;
+    if ((mask & 4) && steady_of(2, start, interval_at, n))
+        left &= (uint8_t)~4;
+    if ((mask & 8) && steady_of(3, start, interval_at, n))
+        left &= (uint8_t)~8;
+    return left;
 }
 
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)

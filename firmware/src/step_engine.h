@@ -52,11 +52,16 @@ void step_engine_start_timers(uint8_t timer1_b);
  * it. Returns 0 when the stepper's ring is full (never: a segment is one chunk an axis
  * and a tick computes one ahead). */
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
-/* The common case of step_engine_push, a steady chunk the assembly runs (its t, interval,
- * count and neg read: add 0, no block) going straight to where the assembly takes it, at a
- * third of the cost. Returns 0 when it cannot (the stepper stopped, its ring in use, a
- * slow interval): then push it. */
-uint8_t step_engine_push_steady(uint8_t k, const struct step_chunk *c);
+/* A segment's steady chunks in one pass, the tick's common case: the ones the assembly
+ * runs (add 0, no block) straight to where it takes them, at a third of a push's cycles.
+ * Stepper k of `mask` (bit k) makes |n[k]|
+ * edges toward n[k]'s sign, the first half its interval after `start`, its interval (Q24.8)
+ * the uint32_t at interval_at + k * STEP_STEADY_STRIDE (the caller's layout: the plan's
+ * axes, stepper.c). Returns the steppers of `mask` it could not place so (stopped, a
+ * chunk in the ring, an interval of 2^15 cycles or more): push those. */
+#define STEP_STEADY_STRIDE 23
+uint8_t step_engine_push_steadies(uint32_t start, uint8_t mask, const uint8_t *interval_at,
+                                  const int32_t *n);
 
 /* Whether the assembly may not run a chunk (C does): its intervals, the last one too,
  * of 2^15 cycles or more (its lateness test compares 16-bit times). The body inline where

@@ -447,39 +447,34 @@ static void __attribute__((noinline)) home_step(uint8_t stepping, uint8_t backin
     }
 }
 
-/* The step engine's axes of a segment: from the segment's start `start` (Q24.8 on the
- * steppers' clock), a steady axis one chunk (its first edge half an interval in,
- * PROTOCOL.md 5.1), an axis with a schedule block its block's chunks (the first one
- * here, the engine reads the others from the ring as it goes); the axes from `from` on,
- * at most `most` moving ones. Returns the axis after the last one put out (4: all). */
-static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p, uint32_t start,
-                                                            uint8_t from, uint8_t most)
-{
 #if STEP_ENGINE
+_Static_assert(sizeof(struct axis_plan) == STEP_STEADY_STRIDE, "the engine reads the plan's intervals");
+#endif
+
+
+#if STEP_ENGINE
+/* seg_chunks' axes of `rest` (bit k: stepper k) that go through step_engine_push: a
+ * block's, a steady one the one pass could not place */
+static void __attribute__((noinline)) push_rest(const struct plan *p, uint32_t start,
+                                                uint8_t rest)
+{
     struct step_chunk c;
-    const struct axis_plan *x = p->ax + from;
-    const int32_t *d = p->delta + from;
+    const struct axis_plan *x = p->ax;
+    const int32_t *d = p->delta;
     const struct sched_chunk *h = &block_chunks[p->blk_at];
     uint8_t blk = p->blk_mask;
-    for (uint8_t j = 0; j < from; j++, blk >>= 1)
-        if (blk & 1)
-            h += 1 + h->count; /* the axis's header and chunks */
-    uint8_t k = from, engine = PLAN_ENGINE(p) >> from;
-    for (; k < 4 && most; k++, x++, d++, blk >>= 1, engine >>= 1) {
-        int32_t n = *d;
+    for (uint8_t j = 0; j < 4; j++, x++, d++, blk >>= 1, rest >>= 1) {
         const struct sched_chunk *own = h;
         if (blk & 1)
-            h += 1 + h->count;
-        if (!(engine & 1))
+            h += 1 + h->count; /* the axis's header and chunks */
+        if (!(rest & 1))
             continue;
-        most--;
+        int32_t n = *d;
         c.neg = n < 0;
         if (!(blk & 1)) {
             c.interval = x->interval;
             c.t = start + (c.interval >> 1);
             c.count = (uint16_t)(n < 0 ? -n : n);
-            if (step_engine_push_steady(k, &c))
-                continue;
             c.add = 0;
             c.nblk = 0;
         } else {
@@ -491,9 +486,39 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
             c.interval = own->interval & 0x7FFFFFFFUL; /* (the assembly's mark off) */
             c.add = own->add;
         }
-        step_engine_push(k, &c);
+        step_engine_push(j, &c);
     }
-    return k;
+}
+#endif
+
+/* The step engine's axes of a segment: from the segment's start `start` (Q24.8 on the
+ * steppers' clock), a steady axis one chunk (its first edge half an interval in,
+ * PROTOCOL.md 5.1), an axis with a schedule block its block's chunks (the first one
+ * here, the engine reads the others from the ring as it goes); the axes from `from` on,
+ * at most `most` moving ones. The steady ones go out in one pass (the common case: every
+ * axis); returns the axis after the last one chosen (4: all) and, in the high byte, the
+ * axes left to push_rest: a block's, a steady one the pass could not place. */
+static uint16_t __attribute__((noinline, unused)) seg_steady(const struct plan *p, uint32_t start,
+                                                             uint8_t from, uint8_t most)
+{
+#if STEP_ENGINE
+    uint8_t chosen = 0, k = from;
+    if (!from && most >= 4) {
+        chosen = PLAN_ENGINE(p);
+        k = 4;
+    } else {
+        for (; k < 4 && most; k++)
+            if (PLAN_ENGINE(p) & bit_of[k]) {
+                chosen |= bit_of[k];
+                most--;
+            }
+    }
+    uint8_t steady = (uint8_t)(chosen & ~p->blk_mask), rest = chosen;
+    if (steady)
+        rest &= (uint8_t)(~steady | step_engine_push_steadies(start, steady,
+                                                              (const uint8_t *)&p->ax[0].interval,
+                                                              p->delta));
+    return (uint16_t)rest << 8 | k;
 #else
     (void)p;
     (void)start;
@@ -501,6 +526,18 @@ static uint8_t __attribute__((noinline, unused)) seg_chunks(const struct plan *p
     (void)most;
     return 4;
 #endif
+}
+
+/* (inline: the two calls one frame deep from the caller, not two) */
+static inline __attribute__((always_inline)) uint8_t seg_chunks(const struct plan *p, uint32_t start,
+                                                                uint8_t from, uint8_t most)
+{
+    uint16_t r = seg_steady(p, start, from, most);
+#if STEP_ENGINE
+    if (r >> 8)
+        push_rest(p, start, (uint8_t)(r >> 8));
+#endif
+    return (uint8_t)r;
 }
 
 #if STEP_ENGINE
@@ -815,10 +852,12 @@ static void __attribute__((noinline)) seg_last_tick(struct plan *p)
         int32_t *pos = s->pos;
         for (uint8_t k = 0; k < 4; k++)
             pos[k] += d[k];
+        if (occ_lo <= occ_hi) /* (no axis of the tick's wheel: empty, its events cleared) */
+            lost_count(wheel_take(o));
     } else {
         last_steps(p, s->pos);
+        lost_count(wheel_take(o));
     }
-    lost_count(wheel_take(o));
     if (STEP_ENGINE)
         blocks_done(p);
     s->current = 0xFF;

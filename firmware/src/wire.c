@@ -121,13 +121,36 @@ void wr_u8(struct writer *w, uint8_t v)
     w->buf[w->pos++] = v;
 }
 
+/* v >> 7 by moving bytes (-Os makes a loop of seven 32-bit shifts) */
+static inline __attribute__((always_inline)) uint32_t shr7(uint32_t v)
+{
+    union { uint32_t u; uint8_t b[4]; } x = {v}, y;
+    y.b[0] = x.b[1];
+    y.b[1] = x.b[2];
+    y.b[2] = x.b[3];
+    y.b[3] = 0;
+    return (y.u << 1) | (x.b[0] >> 7);
+}
+
+/* (a report's every FLOW: its bytes written in place when five fit, not one call each) */
 void wr_uv(struct writer *w, uint32_t v)
 {
-    while (v >= 0x80) {
-        wr_u8(w, (uint8_t)(v | 0x80));
-        v >>= 7;
+    uint8_t pos = w->pos;
+    if ((uint8_t)(w->cap - pos) < 5 || pos > w->cap) {
+        while (v >= 0x80) {
+            wr_u8(w, (uint8_t)(v | 0x80));
+            v = shr7(v);
+        }
+        wr_u8(w, (uint8_t)v);
+        return;
     }
-    wr_u8(w, (uint8_t)v);
+    uint8_t *p = w->buf + pos;
+    while (v >= 0x80) {
+        *p++ = (uint8_t)(v | 0x80);
+        v = shr7(v);
+    }
+    *p++ = (uint8_t)v;
+    w->pos = (uint8_t)(p - w->buf);
 }
 
 void wr_sv(struct writer *w, int32_t v)

@@ -392,6 +392,36 @@ def test_segments_shorter_than_two_ticks_queue_their_chunks_two_deep(engine):
     assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
 
 
+def test_a_stepper_stopped_between_its_steps_starts_again_from_its_slot(engine):
+    # An axis with no step in a segment stops at its last edge; its next chunk starts it
+    # from the slot the assembly takes chunks from (start_axis takes it there), not
+    # through the ring: the extruder here steps once every third 0.5 ms segment, toward
+    # alternating directions, between modules that keep stepping. Its edges are judged
+    # alone (the modules' worst edge, near 10 us on main too in some runs, is another
+    # test's: the two-deep one above).
+    from firmware_protocol.streams import expected_record
+
+    fr = engine.firmware_rates
+    n = 60
+    i = np.arange(n)
+    e = np.where(i % 3 == 2, np.where(i % 6 == 2, 1, -1), 0)
+    deltas = np.stack([np.full(n, 4), np.where(i % 2 == 0, 3, -3), np.full(n, 2), e], axis=1)
+    codes = np.full(n, RAMP_CONSTANT, dtype=np.int16)
+    codes[-1] = RAMP_TO_REST
+    batch = fr.cut_for_blocks(SegmentBatch(np.full(n, 50), deltas.astype(np.int64), codes))
+    with fr.harness(engine._build, profile=False) as (link, tmp):
+        fr.warm_link(link)
+        link.queue_segments(batch)
+        link.wait_idle(300)
+    rows = [json.loads(x) for x in (tmp / "record.jsonl").read_text().splitlines() if x.strip()]
+    assert rows == expected_record(batch)
+    edges = fr.step_log_edges(tmp / "steps.txt")
+    got = edges[edges[:, 0] == 3, 1] / (fr.CYCLES_PER_UNIT / 10)
+    want = fr.ideal_edges_us(batch, 3)
+    assert len(got) == len(want) == 20
+    assert np.abs(got - want).max() <= 10.0, np.abs(got - want).max()
+
+
 def _motion_ticks(p: dict) -> float:
     """The tick interrupts of a point's motion: all of them less the idle ones around it
     (400 us each)."""
