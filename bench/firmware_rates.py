@@ -15,6 +15,7 @@ fails, to ``RESOLUTION`` steps/s.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -222,11 +223,22 @@ def edge_figures(err: np.ndarray) -> dict[str, float]:
 
 @contextmanager
 def harness(
-    build: Build, *, speedup: float = 4.0, profile: bool = True
+    build: Build, *, speedup: float = 4.0, profile: bool = True, folder: Path | None = None
 ) -> Iterator[tuple[HostLink, Path]]:
     """The harness running ``build`` and a link to it; the folder of its record
-    (record.jsonl), step log (steps.txt) and figures (stats.json, written on exit)."""
-    tmp = Path(tempfile.mkdtemp())
+    (record.jsonl), step log (steps.txt) and figures (stats.json), written as the harness
+    exits: ``folder`` (the caller's, kept), or a temporary one removed with the block
+    (each run's step log is about 200 kB: a temporary folder left behind by every run
+    filled /tmp)."""
+    with contextlib.ExitStack() as stack:
+        if folder is None:
+            folder = Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        with _running(build, speedup, profile, folder) as link:
+            yield link, folder
+
+
+@contextmanager
+def _running(build: Build, speedup: float, profile: bool, tmp: Path) -> Iterator[HostLink]:
     env = dict(os.environ, CDPR_SIM_STEP_LOG=str(tmp / "steps.txt"))
     if profile:
         env["CDPR_SIM_PROFILE_ISR"] = "1"
@@ -239,7 +251,7 @@ def harness(
     try:
         link = open_link(proc.stdout.readline().strip())
         try:
-            yield link, tmp
+            yield link
         finally:
             link.close()
     finally:
@@ -279,8 +291,21 @@ def run_batch(
         blocks = bool(build.cflags)
     if blocks:
         batch = cut_for_blocks(batch)
+    with tempfile.TemporaryDirectory() as folder:
+        return _judged(build, batch, speedup, profile, blocks, Path(folder))
+
+
+def _judged(
+    build: Build,
+    batch: SegmentBatch,
+    speedup: float,
+    profile: bool,
+    blocks: bool,
+    tmp: Path,
+) -> dict[str, Any]:
+    """run_batch's run, its harness's files in ``tmp``."""
     refused = ""
-    with harness(build, speedup=speedup, profile=profile) as (link, tmp):
+    with harness(build, speedup=speedup, profile=profile, folder=tmp) as (link, _):
         try:
             if blocks:
                 warm_link(link)
@@ -340,9 +365,10 @@ def isr_load_pct(point: dict[str, Any], idle_share: float) -> float:
 def idle_isr_share(build: Build, seconds: float = 0.5) -> float:
     """The step interrupts' share of the CPU with nothing moving (a session open,
     ``seconds`` of wall time)."""
-    with harness(build) as (_link, tmp):
-        time.sleep(seconds)
-    s = _stats(tmp)
+    with tempfile.TemporaryDirectory() as folder:
+        with harness(build, folder=Path(folder)) as (_link, tmp):
+            time.sleep(seconds)
+        s = _stats(tmp)
     return float(s["isr_cycles"]) / max(int(s.get("cycles", 0)), 1)
 
 

@@ -86,6 +86,7 @@ import argparse
 import bisect
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -178,6 +179,7 @@ def stream(
     rows = [json.loads(x) for x in (tmp / "record.jsonl").read_text().splitlines() if x.strip()]
     stats = tmp / "stats.json"
     s = json.loads(stats.read_text()) if stats.exists() else {}
+    shutil.rmtree(tmp, ignore_errors=True)  # (read: a run's folder left behind filled /tmp)
     return {
         "record_exact": not error and rows == expected_record(batch),
         "error": error,
@@ -188,7 +190,6 @@ def stream(
         "host_timeouts": timeouts,
         "sim_behind_wall_max_ms": s.get("behind_wall_max_ms"),
         "main_loop_max_us": s.get("main_loop_max_us"),
-        "tmp": str(tmp),
     }
 
 
@@ -276,6 +277,7 @@ def profile(
     env["CDPR_SIM_PC_HIST"] = str(tmp / "stream.txt")
     r = stream(build, batch, env_extra=env, warm=warm)
     load = _cycles_by_function(build.elf, tmp / "stream.txt")
+    shutil.rmtree(tmp, ignore_errors=True)
     turns = load.get(TURN_MARK, 0) / max(idle.get(TURN_MARK, 0), 1)  # in idle sessions
     work = {k: v - turns * idle.get(k, 0) for k, v in load.items()}
     total = sum(load.values())
@@ -283,7 +285,7 @@ def profile(
     each = "ramp_piece" if per else "segment"
     rows = sorted(work.items(), key=lambda kv: -kv[1])[:top]
     return {
-        "run": {k: v for k, v in r.items() if k != "tmp"},
+        "run": r,
         f"cycles_per_{each}": round(total / done),
         "turns_share_pct": round(100 * turns * sum(idle.values()) / total, 1),
         f"work_cycles_per_{each}": round(sum(work.values()) / done),

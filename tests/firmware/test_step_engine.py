@@ -86,7 +86,7 @@ def test_a_start_from_rest_waits_for_the_frames_it_acknowledged(engine):
     assert p["record_exact"] and p["edges_missing_or_extra"] == 0, p
 
 
-def test_a_block_ended_at_rest_starts_the_next_by_the_start_rule(engine):
+def test_a_block_ended_at_rest_starts_the_next_by_the_start_rule(engine, tmp_path):
     # ramps from rest and back (the print's mix at R = 10,000, pieces with their blocks),
     # each cycle sent with the first two pieces of the next, the rest once the cycle has
     # ended. The main loop's start verdict was taken while a cycle still executed (its
@@ -103,7 +103,7 @@ def test_a_block_ended_at_rest_starts_the_next_by_the_start_rule(engine):
     cycles = 6
     batch = fr.cut_for_blocks(fr.ramp_batch(rates, cycles=cycles))
     failed = ""
-    with fr.harness(engine._build, profile=False) as (link, tmp):
+    with fr.harness(engine._build, profile=False, folder=tmp_path) as (link, tmp):
         fr.warm_link(link)
         try:
             sent = 0
@@ -147,13 +147,13 @@ def test_three_modules_out_of_step_at_33k_keep_the_tick(engine):
     assert r["p99_us"] <= 5.0 and r["worst_us"] <= 10.0, r
 
 
-def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine):
+def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine, tmp_path):
     # the halt's positions came from the profile's estimate at the end of the tick being
     # computed, a tick ahead of the steppers, which the engine stops at once: 1-8 steps
     # an axis more than were issued (a resume after a reset then started off the path)
     fr = engine.firmware_rates
     rates = [20_000, 15_000, 10_000, 2_000]
-    with fr.harness(engine._build, profile=False) as (link, tmp):
+    with fr.harness(engine._build, profile=False, folder=tmp_path) as (link, tmp):
         items = link.queue_segments(engine.steady_batch(rates, 40))
         link.wait_items(items[10])
         assert link.emergency_stop()
@@ -164,7 +164,7 @@ def test_a_halt_mid_segment_counts_the_edges_the_engine_raised(engine):
     assert list(st.steps) == issued
 
 
-def test_an_underrun_lets_the_ended_segment_finish_as_its_record_says(engine):
+def test_an_underrun_lets_the_ended_segment_finish_as_its_record_says(engine, tmp_path):
     # the host stops sending (killed, its cable pulled) while the machine moves: the
     # queue runs empty at the last segment's last tick, which is an underrun. The tick
     # had counted that segment done a tick ahead of the steppers, and the halt stopped the
@@ -178,7 +178,10 @@ def test_an_underrun_lets_the_ended_segment_finish_as_its_record_says(engine):
     for rates in ([7_500, 5_000, 3_000, 500], [7_300, 7_100, 6_900, 700]):
         steady = engine.steady_batch(rates, 20)
         moving = SegmentBatch(steady.ticks[:-1], steady.deltas[:-1], steady.ramps[:-1])
-        with fr.harness(engine._build, profile=False) as (link, tmp):
+        with fr.harness(engine._build, profile=False, folder=_fresh(tmp_path, rates[0])) as (
+            link,
+            tmp,
+        ):
             with pytest.raises(LinkError, match="underrun"):
                 link.queue_segments(moving)
                 link.wait_idle(60)
@@ -187,6 +190,13 @@ def test_an_underrun_lets_the_ended_segment_finish_as_its_record_says(engine):
         edges = np.loadtxt(tmp / "steps.txt", dtype=np.int64, ndmin=2)
         issued = [int((edges[:, 0] == k).sum()) for k in range(4)]
         assert issued == [int(d) for d in np.abs(moving.deltas).sum(axis=0)]
+
+
+def _fresh(tmp_path: Path, name: object) -> Path:
+    """A folder of its own for one run of a test's harness."""
+    folder = tmp_path / str(name)
+    folder.mkdir()
+    return folder
 
 
 def _slow_boundaries() -> SegmentBatch:
@@ -392,7 +402,7 @@ def test_segments_shorter_than_two_ticks_queue_their_chunks_two_deep(engine):
     assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
 
 
-def test_a_stepper_stopped_between_its_steps_starts_again_from_its_slot(engine):
+def test_a_stepper_stopped_between_its_steps_starts_again_from_its_slot(engine, tmp_path):
     # An axis with no step in a segment stops at its last edge; its next chunk starts it
     # from the slot the assembly takes chunks from (start_axis takes it there), not
     # through the ring: the extruder here steps once every third 0.5 ms segment, toward
@@ -409,7 +419,7 @@ def test_a_stepper_stopped_between_its_steps_starts_again_from_its_slot(engine):
     codes = np.full(n, RAMP_CONSTANT, dtype=np.int16)
     codes[-1] = RAMP_TO_REST
     batch = fr.cut_for_blocks(SegmentBatch(np.full(n, 50), deltas.astype(np.int64), codes))
-    with fr.harness(engine._build, profile=False) as (link, tmp):
+    with fr.harness(engine._build, profile=False, folder=tmp_path) as (link, tmp):
         fr.warm_link(link)
         link.queue_segments(batch)
         link.wait_idle(300)
@@ -446,7 +456,7 @@ def test_a_segment_the_engine_steps_alone_takes_few_ticks(engine):
     assert _motion_ticks(p) < 0.4 * per_tick, (p["tick_interrupts"], p)
 
 
-def test_four_steppers_starting_from_rest_keep_the_tick(engine):
+def test_four_steppers_starting_from_rest_keep_the_tick(engine, tmp_path):
     # the segment's first tick was computed in the idle tick before it, and starting a
     # stepper from rest costs about 1,000 cycles: four of them, the tick's own work and a
     # late entry took 5,800-6,400 of its 6,400 cycles (an overrun at many starts, and with
@@ -455,7 +465,7 @@ def test_four_steppers_starting_from_rest_keep_the_tick(engine):
     fr = engine.firmware_rates
     piece = engine.steady_batch([5_000, -4_900, 4_800, 500], 2)  # from rest to rest
     starts = 8
-    with fr.harness(engine._build) as (link, tmp):
+    with fr.harness(engine._build, folder=tmp_path) as (link, tmp):
         for _ in range(starts):
             link.queue_segments(piece)
             link.wait_idle(60)
@@ -496,7 +506,10 @@ def _ring_stream_run(engine, batch: SegmentBatch, log: Path) -> dict:
     with pytest.MonkeyPatch.context() as mp:
         for k, v in env.items():
             mp.setenv(k, v)
-        with fr.harness(engine._build, profile=False) as (link, tmp):
+        with fr.harness(engine._build, profile=False, folder=_fresh(log.parent, log.stem)) as (
+            link,
+            tmp,
+        ):
             fr.warm_link(link)
             try:
                 link.queue_segments(batch)
@@ -545,7 +558,7 @@ def test_a_stream_of_ramps_whose_blocks_overfill_the_ring_is_never_refused(engin
     assert r["exact"], r
 
 
-def test_the_engine_reports_its_ring_and_the_host_places_every_block_as_it_does(engine):
+def test_the_engine_reports_its_ring_and_the_host_places_every_block_as_it_does(engine, tmp_path):
     # Protocol 3.2: the engine's ACKs carry RING after FLOW; the host follows the ring's
     # head over the blocks it sends and sends a block only where it fits, so no frame is
     # refused for the ring, and the head it counted is the device's at the end. Ramps
@@ -559,7 +572,7 @@ def test_the_engine_reports_its_ring_and_the_host_places_every_block_as_it_does(
 
     fr = engine.firmware_rates
     batch = cut_for_blocks(_ramps([9_000, 7_000, 5_000, 800], cycles=2, ticks=20_000), 120)
-    with fr.harness(engine._build, speedup=0.5, profile=False) as (link, tmp):
+    with fr.harness(engine._build, speedup=0.5, profile=False, folder=tmp_path) as (link, tmp):
         fr.warm_link(link)
         ring = link._core.dev.ring
         assert ring is not None and ring.entries == 128 and ring.head == ring.tail, ring
