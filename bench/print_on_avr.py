@@ -2,7 +2,7 @@
 
     python bench/print_on_avr.py [--gcode examples/example.gcode] [--profile paper-prototype]
                                  [--engine] [--rate N] [--speedup 1] [--busy-host]
-                                 [--from-layer N] [--keep DIR]
+                                 [--from-layer N [--to-layer M]] [--keep DIR]
 
 Builds the firmware (the default build, or with ``--engine`` the step engine's build;
 ``--rate`` sets the ``MAX_STEP_RATE`` it announces, else the build's own), prints the file
@@ -50,6 +50,11 @@ thousands of record rows off, with up to about 3,500 frames sent again: the ring
 schedule chunks full, frames refused (firmware/README.md, "Not yet"). The whole cup again
 on 0c69937 (``--engine --rate 26000``, idle): UNDERRUN at segment 17,990 (628 s in), 2,887
 frames sent again by then. The clean run above was not the rule.
+Stop 50 found the records apart again (the counters equal): a steady segment after two
+0.65 ms ramps lost its module steps (the engine's ring full, docs/step-engine.md section
+10). Fixed in stop 51: the whole cup at 26,000 in 749.47 s, records equal over 24,371
+segments, 0 steps lost or late, 7 tick overruns (``--from-layer 6 --to-layer 6`` shows the
+fault in 4 minutes).
 """
 
 from __future__ import annotations
@@ -124,16 +129,20 @@ BUSY_HOST = (
 )
 
 
-def from_layer(gcode: str, layer: int) -> str:
+def from_layer(gcode: str, layer: int, last: int | None = None) -> str:
     """``gcode``'s lines before its first layer and its layers from ``layer`` (1-based) on,
-    the layers as the host's reader marks them (``cdprhost.gcode.annotations``)."""
+    up to ``last`` (its end; None: the file's), the layers as the host's reader marks them
+    (``cdprhost.gcode.annotations``)."""
     lines = gcode.splitlines(keepends=True)
     found = annotations.scan(gcode.encode())
     style = annotations.choose_style(found)
     marks = [a.index for a in found if a.tag == style.value]
     if not 1 <= layer <= len(marks):
         raise SystemExit(f"--from-layer {layer}: the file has {len(marks)} marked layers")
-    return "".join(lines[: marks[0]] + lines[marks[layer - 1] :])
+    if last is not None and not layer <= last <= len(marks):
+        raise SystemExit(f"--to-layer {last}: not between {layer} and {len(marks)}")
+    end = marks[last] if last is not None and last < len(marks) else len(lines)
+    return "".join(lines[: marks[0]] + lines[marks[layer - 1] : end])
 
 
 def print_on(
@@ -177,6 +186,7 @@ def main() -> None:
         "--busy-host", action="store_true", help="no schedule block the host is not bound to"
     )
     ap.add_argument("--from-layer", type=int, help="the file's start, then its layers from N on")
+    ap.add_argument("--to-layer", type=int, help="with --from-layer: its layers up to N only")
     args = ap.parse_args()
     work = Path(tempfile.mkdtemp(prefix="print-on-avr-"))
     try:
@@ -188,7 +198,8 @@ def main() -> None:
 def run(args: argparse.Namespace, work: Path) -> None:
     if args.from_layer is not None:
         part = work / f"{Path(args.gcode).stem}-from-layer-{args.from_layer}.gcode"
-        part.write_text(from_layer(Path(args.gcode).read_text(), args.from_layer))
+        text = Path(args.gcode).read_text()
+        part.write_text(from_layer(text, args.from_layer, args.to_layer))
         args.gcode = str(part)
     build_dir = build(args.engine, args.rate)
     rate, profile_rate, ring, total = announced_rates(build_dir)
@@ -197,6 +208,7 @@ def run(args: argparse.Namespace, work: Path) -> None:
     )
     out: dict = {"gcode": args.gcode, "profile": args.profile, "engine": args.engine, "rate": rate}
     out["from_layer"] = args.from_layer
+    out["to_layer"] = args.to_layer
     out["busy_host"] = args.busy_host
     out["profile_step_rate"] = profile_rate
     out["ring_entries"] = ring

@@ -295,7 +295,11 @@ def error_text(m: Error) -> str:
         ErrorCode.WATCHDOG: f"no word from the host for {m.value} ms: motion stopped, heaters off",
         ErrorCode.BAD_VALUE: f"value {m.value} out of range in command 0x{m.axis:02X}",
         ErrorCode.BAD_COMMAND: f"malformed command 0x{m.axis:02X} at byte {m.value}",
-        ErrorCode.PLANNER_LATE: f"the device's segment preparation fell {m.value} ticks behind",
+        ErrorCode.PLANNER_LATE: (
+            f"the device's segment preparation fell {m.value} ticks behind"
+            if m.value
+            else "the device could not prepare the segment's steps in time"
+        ),
         ErrorCode.HEATER_LEASE: f"the host did not renew its {m.value} ms heater lease: heaters off",
         ErrorCode.AUTOTUNE_FAILED: f"PID autotune failed ({_failure(m.value)})",
     }

@@ -1126,6 +1126,39 @@ uint8_t step_engine_push_steadies(uint32_t start, uint8_t mask, const uint8_t *i
     return left;
 }
 
+/* The ring's first chunk moved up into next, which the assembly emptied as it took the
+ * chunk there: the ring's chunk went to the ring only because next held one then (a
+ * block's chunk, which next2 does not take, behind a short segment's), and a chunk after
+ * it may not pass it. Frees the ring's slot for that chunk (three 0.65 ms segments, two
+ * ramps with their blocks and a steady one: the steady one found the ring full and its
+ * steps were lost). Written with interrupts on (next is not read while next_ready is 0),
+ * moved with them off if the ring's chunk is still there (C takes it at the running
+ * chunk's end when next is empty). */
+static uint8_t __attribute__((noinline)) promote(struct step_axis *a, uint8_t bit)
+{
+    uint8_t tail = a->tail;
+    const struct step_chunk *c = &a->ring[tail & (CHUNK_SLOTS - 1)];
+    if (!a->running || a->next_ready || a->next2_ready || tail == a->head || slow_chunk(c))
+        return 0;
+    a->next = *c;
+    uint8_t add = c->add || c->nblk;
+    uint8_t flags = slot_flags(a, bit, 0, c->neg, add ? NEXT_READY | NEXT_ADD : NEXT_READY);
+    uint8_t s = SREG;
+    cli();
+    if (!a->running || a->next_ready || a->tail != tail) {
+        SREG = s;
+        return 0;
+    }
+    if (add)
+        GPIOR0 |= (uint8_t)(bit << 4);
+    else
+        GPIOR0 &= (uint8_t)~(bit << 4);
+    a->next_ready = flags;
+    a->tail = (uint8_t)(tail + 1);
+    SREG = s;
+    return 1;
+}
+
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
 {
     struct step_axis *a = &axes[k];
@@ -1133,7 +1166,7 @@ uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
         return 1;
     uint8_t s = SREG;
     uint8_t head = a->head;
-    if ((uint8_t)(head - a->tail) >= CHUNK_SLOTS)
+    if ((uint8_t)(head - a->tail) >= CHUNK_SLOTS && !promote(a, bit_of_k[k]))
         return 0;
     a->ring[head & (CHUNK_SLOTS - 1)] = *c;
     cli();

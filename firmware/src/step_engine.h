@@ -49,8 +49,11 @@ extern uint32_t step_clock_this_tick; /* the start of the tick in progress */
 void step_engine_start_timers(uint8_t timer1_b);
 
 /* Queue a chunk for stepper k (interrupts on or off); it runs after the chunks before
- * it. Returns 0 when the stepper's ring is full (never: a segment is one chunk an axis
- * and a tick computes one ahead). */
+ * it. Returns 0 when nothing can take it: next and the ring both hold a chunk. A tick
+ * puts a segment's chunks out at most two segments ahead of the running chunk (segments
+ * shorter than a tick: the one in next, this one), so the ring's chunk moves up into next
+ * as soon as next is free and this one takes the ring; the caller stops (PLANNER_LATE)
+ * rather than lose its steps. */
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c);
 /* A segment's steady chunks in one pass, the tick's common case: the ones the assembly
  * runs (add 0, no block) straight to where it takes them, at a third of a push's cycles.

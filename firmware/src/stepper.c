@@ -486,7 +486,10 @@ static void __attribute__((noinline)) push_rest(const struct plan *p, uint32_t s
             c.interval = own->interval & 0x7FFFFFFFUL; /* (the assembly's mark off) */
             c.add = own->add;
         }
-        step_engine_push(j, &c);
+        if (!step_engine_push(j, &c))
+            /* (no slot: the motion stops where it is rather than go on without the axis's
+             * steps, its position counted as if they were made) */
+            raise_error(ERR_PLANNER_LATE, stepper.items_done, stepper.segments_done, j, 0);
     }
 }
 #endif

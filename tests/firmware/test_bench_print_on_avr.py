@@ -1,5 +1,5 @@
-"""bench/print_on_avr.py's ``--from-layer``: the file a print from layer N starts with (pure;
-the print itself is a benchmark)."""
+"""bench/print_on_avr.py's ``--from-layer`` and ``--to-layer``: the file a print of layers
+N to M starts with (pure; the print itself is a benchmark)."""
 
 from __future__ import annotations
 
@@ -37,3 +37,18 @@ def test_the_cups_upper_layers_start_at_its_tenth_layer_change(bench):
 def test_a_layer_the_file_does_not_have_is_refused_by_name(bench, layer):
     with pytest.raises(SystemExit, match=f"--from-layer {layer}: the file has 2 marked layers"):
         bench.from_layer(PRUSA, layer)
+
+
+def test_to_layer_keeps_the_start_and_layers_n_to_m_only(bench):
+    assert bench.from_layer(CURA, 2, 2) == ";FLAVOR:Marlin\nG28\n;LAYER:1\nG1 X2 E1\n"
+    assert bench.from_layer(CURA, 1, 3) == CURA
+    text = EXAMPLE.read_text()
+    part = bench.from_layer(text, 6, 6).splitlines()
+    assert sum(line == ";LAYER_CHANGE" for line in part) == 1
+    assert set(part) < set(text.splitlines())
+
+
+@pytest.mark.parametrize("last", [1, 4])
+def test_a_to_layer_before_the_first_or_past_the_end_is_refused_by_name(bench, last):
+    with pytest.raises(SystemExit, match=f"--to-layer {last}: not between 2 and 3"):
+        bench.from_layer(CURA, 2, last)

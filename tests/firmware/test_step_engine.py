@@ -402,6 +402,31 @@ def test_segments_shorter_than_two_ticks_queue_their_chunks_two_deep(engine):
     assert p["p99_us"] <= 5.0 and p["worst_us"] <= 10.0, p
 
 
+def test_a_steady_segment_after_two_short_ramps_on_their_blocks_keeps_its_steps(
+    engine, monkeypatch
+):
+    # The cup's layer 6 (segments 515-519 of its stream at 26,000 steps/s): two 0.65 ms
+    # ramps stepped from their blocks, then a steady 35 ms segment. The second ramp's
+    # chunks went out while the first's still waited in next (next2 takes only steady
+    # chunks), so they waited in the ring; the assembly then took next, and the steady
+    # segment's chunks, which may not pass the ring's, found it full: the three modules
+    # lost all their steps of that segment (the firmware's counters, which add each
+    # segment's deltas, agreed all the same). The ring's chunk now moves up into next.
+    import cdprhost.link.segment_feed as feed
+
+    monkeypatch.setattr(feed, "FIT_SHARE", 1e3)  # every ramp on its block, however fast
+    monkeypatch.setattr(feed, "FIT_TURN_S", 10.0)
+    fr = engine.firmware_rates
+    ticks = np.array([11354, 65, 65, 3520, 640])
+    deltas = np.array(
+        [[-659, 184, 498, 5], [-3, 1, 3, 0], [-3, -2, 3, 0], [-133, -76, 209, 2], [-13, -8, 22, 0]]
+    )
+    codes = np.array([RAMP_CONSTANT, 133, 122, RAMP_CONSTANT, RAMP_TO_REST], dtype=np.int16)
+    p = fr.run_batch(engine._build, SegmentBatch(ticks, deltas, codes), profile=False)
+    assert not p.get("refused") and p["record_exact"], p
+    assert p["edges_missing_or_extra"] == 0 and p["lost_steps"] == 0, p
+
+
 def test_a_stepper_stopped_between_its_steps_starts_again_from_its_slot(engine, tmp_path):
     # An axis with no step in a segment stops at its last edge; its next chunk starts it
     # from the slot the assembly takes chunks from (start_axis takes it there), not

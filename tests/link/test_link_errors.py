@@ -130,3 +130,17 @@ def test_sim_device_cli_rejects_bad_options(capsys):
     assert "unknown key 'bogus'" in capsys.readouterr().err
     assert main(["sim-device", "--truth", "paper-simulation"]) == 2
     assert "--truth needs --mocap-dir" in capsys.readouterr().err
+
+
+def test_a_planner_late_error_says_how_late_or_that_a_segment_could_not_be_queued():
+    from cdprhost.link.events import error_text
+    from firmware_protocol.codes import ErrorCode
+    from firmware_protocol.messages import Error
+
+    late = error_text(Error(ErrorCode.PLANNER_LATE, 9, 7, 0xFF, 3))
+    assert late.endswith("segment 7: the device's segment preparation fell 3 ticks behind")
+    # value 0: the step engine found no slot for an axis's chunk (it stops rather than
+    # go on without that axis's steps)
+    stuck = error_text(Error(ErrorCode.PLANNER_LATE, 9, 7, 2, 0))
+    assert "axis 2" in stuck and "could not prepare the segment's steps" in stuck
+    assert "0 ticks" not in stuck
