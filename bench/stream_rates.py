@@ -346,7 +346,6 @@ def main() -> int:
                 for ticks in (200, 100, 80, 65, 50, 40):
                     batch = measure.print_like_batch(args.rate, ticks, 3.0, args.limit)
                     r = stream(build, batch, speedup=args.speedup)
-                    r.pop("tmp")
                     fig["ladder_clean_3_s"].append(
                         {"segments_per_s": CLOCK_HZ // ticks, **line_figures(batch), **r}
                     )
@@ -356,7 +355,6 @@ def main() -> int:
             for row, ticks, faults in runs:
                 batch = measure.print_like_batch(args.rate, ticks, args.seconds, args.limit)
                 r = stream(build, batch, faults=faults, speedup=args.speedup)
-                r.pop("tmp")
                 deltas_differ = np.any(np.diff(batch.deltas, axis=0) != 0, axis=1).mean()
                 fig[row] = {
                     "segments": len(batch),

@@ -52,6 +52,11 @@ uint8_t deframer_room_behind(uint8_t len)
 }
 #endif
 
+uint8_t deframer_more_behind(uint8_t len)
+{
+    return fill > held + FRAME_SIZE(len);
+}
+
 void deframer_receive(void)
 {
     fill += uart_read(buf + fill, DEFRAME_BUF - fill);

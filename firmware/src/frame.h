@@ -38,6 +38,9 @@ void deframer_drop_held(void);  /* a new session: forget the held frames */
  * the held frames cannot be executed, the host's next frames must still come in, or the
  * device stops hearing it (its watchdog counts frames received). */
 uint8_t deframer_room_behind(uint8_t len);
+/* Whether bytes of another frame have come in behind the frame being checked (a payload
+ * of `len`, right behind the held frames): the next main-loop turn checks that one. */
+uint8_t deframer_more_behind(uint8_t len);
 
 /* Bytes a frame of this payload takes on the wire. */
 #define FRAME_SIZE(len) ((uint16_t)(len) + FRAME_OVERHEAD)
