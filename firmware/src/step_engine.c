@@ -481,7 +481,12 @@ static void work_of(uint8_t k, uint8_t mode)
  * compare not yet armed, so it cannot come again) and returns at once, so the stack
  * holds one C path however many steppers need one (tools/stack_usage.py). The entry in
  * assembly decides with interrupts off (a few cycles); the C path it opens runs with
- * them on from its first instruction. */
+ * them on from its first instruction, but with the tick's interrupt masked until it
+ * ends: the tick's computation (interrupts on, up to a few hundred us) on top of an open
+ * C path held every stepper whose work waited there, its compare not armed yet (a
+ * module's first edge of a segment 290 us late, a ramp's chunk taken from the ring as
+ * the tick came). The tick then starts at most a C path late (the harness, like the
+ * chip, runs an interrupt whose flag rose while it was masked once it is enabled). */
 uint8_t step_c_open;
 uint8_t step_c_pending[4];
 static inline __attribute__((always_inline)) void step_drain(uint8_t k, uint8_t mode)
@@ -499,6 +504,7 @@ static inline __attribute__((always_inline)) void step_drain(uint8_t k, uint8_t 
         work_of(j, m);
     }
     step_c_open = 0;
+    TIMSK1 |= _BV(OCIE1A); /* (the tick, masked while the C path was open: below) */
 }
 
 /* The rare cases, entered from the assembly as if from the vector. */
@@ -523,12 +529,16 @@ static inline __attribute__((always_inline)) void step_drain(uint8_t k, uint8_t 
                          "1:\n\t"                                                          \
                          "ldi r24, 1\n\t"                                                  \
                          "sts step_c_open, r24\n\t"                                        \
+                         "lds r24, %[timsk]\n\t"                                           \
+                         "andi r24, %[noa]\n\t"                                            \
+                         "sts %[timsk], r24\n\t"                                           \
                          "pop r24\n\t"                                                     \
                          "out __SREG__, r24\n\t"                                           \
                          "pop r24\n\t"                                                     \
                          "jmp " #name "_c\n\t"                                            \
                          :                                                                 \
-                         : [m] "M"((md) + 1), [k] "M"(kk));                               \
+                         : [m] "M"((md) + 1), [k] "M"(kk), [timsk] "n"(_SFR_MEM_ADDR(TIMSK1)), \
+                           [noa] "M"(0xFF & ~_BV(OCIE1A)));                                \
     }
 STEP_C(__vector_wrap_x, 0, WRAP)
 STEP_C(__vector_wrap_y, 1, WRAP)

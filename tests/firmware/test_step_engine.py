@@ -427,6 +427,37 @@ def test_a_steady_segment_after_two_short_ramps_on_their_blocks_keeps_its_steps(
     assert p["edges_missing_or_extra"] == 0 and p["lost_steps"] == 0, p
 
 
+def test_a_stepper_whose_work_waits_for_another_s_c_path_is_not_held_by_the_tick(
+    engine, monkeypatch
+):
+    # Short ramps on their blocks (a random stream's, cut for their blocks): module 3's
+    # chunk of the fifth segment waited in the ring, to be taken in C at the fourth's
+    # last edge; module 2's C path was open then, so module 3's work waited for it, and
+    # the tick came in between: its computation (interrupts on, about 300 us here) ran on
+    # top of the open C path, and module 3's first two edges came 290 and 170 us late
+    # (the record exact). The C path now masks the tick until it ends.
+    import cdprhost.link.segment_feed as feed
+
+    monkeypatch.setattr(feed, "FIT_SHARE", 1e3)  # every ramp on its block
+    monkeypatch.setattr(feed, "FIT_TURN_S", 10.0)
+    fr = engine.firmware_rates
+    ticks = np.array([1760, 65, 65, 65, 160, 160])
+    deltas = np.array(
+        [
+            [-2, 6, 4, 0],
+            [0, 5, 7, 0],
+            [-1, -2, 2, 2],
+            [3, 2, -6, 1],
+            [-14, -13, 11, 1],
+            [-10, -10, 8, 0],
+        ]
+    )
+    codes = np.array([203, 0, 0, 0, 146, RAMP_TO_REST], dtype=np.int16)
+    p = fr.run_batch(engine._build, SegmentBatch(ticks, deltas, codes), profile=False)
+    assert not p.get("refused") and p["record_exact"] and p["edges_missing_or_extra"] == 0, p
+    assert p["worst_us"] <= 10.0, p
+
+
 def test_a_stepper_stopped_between_its_steps_starts_again_from_its_slot(engine, tmp_path):
     # An axis with no step in a segment stops at its last edge; its next chunk starts it
     # from the slot the assembly takes chunks from (start_axis takes it there), not
