@@ -37,10 +37,11 @@ static uint8_t base_seq, next_seq;
 static uint8_t expected;
 static uint8_t ack_due, nak_due, resend;
 /* An in-order frame's ACK waits for the next frame's when that one's bytes are already
- * coming in (one cumulative ACK for both: each ACK with its FLOW costs the chip about
- * 2,500 cycles, a tenth of a frame of 0.5 ms segments): ACK_HELD while the turn that
- * checked the frame ends, ACK_HELD_TURN after it; the next frame checked or the next
- * turn's link_poll sends it, so an ACK waits one turn at most. */
+ * coming in (one cumulative ACK for both: the replies with their FLOW cost about 200
+ * cycles less a 0.5 ms segment so, bench/stream_rates.py --profile): ACK_HELD while the
+ * turn that checked the frame ends, ACK_HELD_TURN after it; the next frame checked or the
+ * next turn's link_poll sends it, so an ACK waits one turn (unless, as any reply, it
+ * finds no room in the UART). */
 enum { ACK_SENT, ACK_HELD, ACK_HELD_TURN };
 static uint8_t ack_held;
 static uint8_t last_nak_expected;

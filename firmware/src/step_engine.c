@@ -989,43 +989,27 @@ static inline __attribute__((always_inline)) uint8_t slow_chunk(const struct ste
 }
 
 /* A chunk waits for the assembly of stepper `bit` in next (the running chunk's last edge
- * takes it) or, while next holds one, in next2 (next's last edge takes it). Written with
- * interrupts on (the interrupt reads a slot only once its flag is set), then placed with
- * them off if the stepper still runs, its ring is empty and next is as it was (`second`:
- * it held a chunk; the assembly may have taken it meanwhile). */
+ * takes it). Written with interrupts on (the interrupt reads next only once its flag is
+ * set), then marked ready with them off if the stepper is still as it was. */
 
-/* the slot's flags for a chunk toward `neg` with `flags` (NEXT_READY, NEXT_ADD) */
-static inline __attribute__((always_inline)) uint8_t slot_flags(const struct step_axis *a,
-                                                                uint8_t bit, uint8_t second,
-                                                                uint8_t neg, uint8_t flags)
+/* next's flags for chunk c: NEXT_ADD (an add, or a block's further chunks), and
+ * NEXT_SAME_DIR when it goes the running chunk's way (cur_dir) */
+static inline __attribute__((always_inline)) uint8_t next_flags(uint8_t bit,
+                                                                const struct step_chunk *c)
 {
-    /* the direction is the chunk's before it (next's, or the running one's: cur_dir) */
-    uint8_t before = second ? a->next.neg : !!(cur_dir & bit);
-    return before == neg ? flags | NEXT_SAME_DIR : flags;
+    uint8_t flags = c->add || c->nblk ? NEXT_READY | NEXT_ADD : NEXT_READY;
+    return !!(cur_dir & bit) == c->neg ? flags | NEXT_SAME_DIR : flags;
 }
 
-static inline __attribute__((always_inline)) uint8_t place(struct step_axis *a, uint8_t bit,
-                                                           uint8_t second, uint8_t flags)
+/* next marked ready with `flags` (interrupts off): bit 4 + k of GPIOR0 is its NEXT_ADD */
+static inline __attribute__((always_inline)) void mark_next(struct step_axis *a, uint8_t bit,
+                                                            uint8_t flags)
 {
-    uint8_t s = SREG;
-    cli();
-    if (!a->running || a->next2_ready || a->head != a->tail || (a->next_ready != 0) != second) {
-        SREG = s;
-        return 0;
-    }
-    if (second) {
-        /* next's take then goes through the direction code, which moves next2 up */
-        a->next2_ready = flags;
-        a->next_ready = (uint8_t)((a->next_ready & (uint8_t)~NEXT_SAME_DIR) | NEXT2);
-    } else {
-        if (flags & NEXT_ADD)
-            GPIOR0 |= (uint8_t)(bit << 4);
-        else
-            GPIOR0 &= (uint8_t)~(bit << 4);
-        a->next_ready = flags;
-    }
-    SREG = s;
-    return 1;
+    if (flags & NEXT_ADD)
+        GPIOR0 |= (uint8_t)(bit << 4);
+    else
+        GPIOR0 &= (uint8_t)~(bit << 4);
+    a->next_ready = flags;
 }
 
 /* whether the slots may take a chunk now (else the ring does, after what it holds) */
@@ -1040,10 +1024,16 @@ static inline __attribute__((always_inline)) uint8_t slots_open(const struct ste
 static uint8_t __attribute__((noinline)) offer(struct step_axis *a, uint8_t bit,
                                                 const struct step_chunk *c)
 {
-    uint8_t flags = c->add || c->nblk ? NEXT_READY | NEXT_ADD : NEXT_READY;
     for (uint8_t tries = 0; tries < 2 && slots_open(a) && !a->next_ready; tries++) {
         a->next = *c;
-        if (place(a, bit, 0, slot_flags(a, bit, 0, c->neg, flags)))
+        uint8_t flags = next_flags(bit, c);
+        uint8_t s = SREG;
+        cli();
+        uint8_t still = slots_open(a) && !a->next_ready;
+        if (still)
+            mark_next(a, bit, flags);
+        SREG = s;
+        if (still)
             return 1;
     }
     return 0;
@@ -1148,25 +1138,19 @@ static uint8_t __attribute__((noinline)) promote(struct step_axis *a, uint8_t bi
 {
     uint8_t tail = a->tail;
     const struct step_chunk *c = &a->ring[tail & (CHUNK_SLOTS - 1)];
-    if (!a->running || a->next_ready || a->next2_ready || tail == a->head || slow_chunk(c))
-        return 0;
+    if (!a->running || a->next_ready || tail == a->head || slow_chunk(c))
+        return 0; /* (next2 holds a chunk only while next does) */
     a->next = *c;
-    uint8_t add = c->add || c->nblk;
-    uint8_t flags = slot_flags(a, bit, 0, c->neg, add ? NEXT_READY | NEXT_ADD : NEXT_READY);
+    uint8_t flags = next_flags(bit, c);
     uint8_t s = SREG;
     cli();
-    if (!a->running || a->next_ready || a->tail != tail) {
-        SREG = s;
-        return 0;
+    uint8_t still = a->running && !a->next_ready && a->tail == tail;
+    if (still) {
+        mark_next(a, bit, flags);
+        a->tail = (uint8_t)(tail + 1);
     }
-    if (add)
-        GPIOR0 |= (uint8_t)(bit << 4);
-    else
-        GPIOR0 &= (uint8_t)~(bit << 4);
-    a->next_ready = flags;
-    a->tail = (uint8_t)(tail + 1);
     SREG = s;
-    return 1;
+    return still;
 }
 
 uint8_t step_engine_push(uint8_t k, const struct step_chunk *c)
