@@ -78,6 +78,17 @@ behind); 1,000/s with 1e-3 corruption and drop exact for 30 s (801 resends, 31
 timeouts). ``--speedup 0.5`` exact for 30 s, twice, and so is the base (once, this day):
 at 2,000/s the firmware's CPU keeps up when the host and simavr do, and the 1x underruns
 follow the machine's load.
+
+Stop 52: some of those underruns were the host's own: a full garbage collection (20-25 ms)
+inside the feed. The stream now runs inside ``quiet_collection()`` (cdprhost/link/
+collector.py). Three 30 s runs each, idle, same hour: the default build's 2,000/s exact 3 of
+3; the step engine at 1,613/s (``--ticks 62``) exact 3 of 3 (before 1 of 3), at 2,000/s dry
+at 0.4-5.4 s (before 1.0-2.9 s), with the main-loop turn's fixed work 2,740 -> 1,574 cycles
+idle; 1,000/s with 1e-3 corruption and drop on the engine exact in 2 of 7 runs (the build
+before: 1 of 5; stop 51 had 3 of 3): its 64 ms of queue against the link's go-back-N
+resends. ``--speedup`` below 1 is no longer a clean test of the firmware: the host's
+timeouts run in wall time, so the device's slower replies look lost (retransmissions,
+halved windows) and the stream runs dry sooner.
 """
 
 from __future__ import annotations

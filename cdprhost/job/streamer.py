@@ -40,7 +40,7 @@ from cdprhost.job.state import (
 from cdprhost.job.stopping import Stop, StopControl
 from cdprhost.kinematics.machine import MachineModel
 from cdprhost.kinematics.statics import tensions
-from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError
+from cdprhost.link import DeviceErrorEvent, DeviceStatus, HostLink, LinkError, quiet_collection
 from cdprhost.machine.commands import device_messages
 from cdprhost.motion.direct import to_wire
 from cdprhost.motion.prepared import Setup
@@ -145,14 +145,15 @@ class Streamer:
     # ------------------------------------------------------------------ the stream
     def run(self, planned: Iterable[Any]) -> None:
         self.source = iter(planned)
-        while True:
-            out = self.pending.popleft() if self.pending else next(self.source, _END)
-            if out is _END:
-                break
-            if isinstance(out, PlannedSegments):
-                self._segments(out)
-            else:
-                self._command(out)
+        with quiet_collection():  # (no full collection of the host's heap mid-stream)
+            while True:
+                out = self.pending.popleft() if self.pending else next(self.source, _END)
+                if out is _END:
+                    break
+                if isinstance(out, PlannedSegments):
+                    self._segments(out)
+                else:
+                    self._command(out)
         self.link.flush()
         self.drain()
 

@@ -49,6 +49,10 @@ holds the session while nobody calls)::
                              from the device's counters
     link.items_sent, link.segments_sent, link.now(), link.close()
 
+A stream's caller (the job; queue_segments does it itself) runs it inside
+``quiet_collection()``: the garbage collector then scans only what the stream made lately,
+so it never pauses the feed longer than a device fed short segments holds (collector.py).
+
 Segments (firmware_protocol.segments): ``ticks`` durations in device ticks
 (``identity.clock_hz``), ``deltas`` (N, 4) signed steps for modules 1..3 and the
 extruder, ``ramps`` codes from ``ramp_codes_from_speeds(v_start, v_end)`` (-1 =
@@ -61,6 +65,7 @@ PortBusy, PortVanished, DeviceSilent, ProtocolMismatch, DeviceReset(last_segment
 last_item, exact), DeviceFault(code, item, segment, axis, value), LinkTimeout.
 """
 
+from cdprhost.link.collector import quiet_collection
 from cdprhost.link.connect import open_link
 from cdprhost.link.errors import (
     DeviceFault,
@@ -105,4 +110,5 @@ __all__ = [
     "StepRateError",
     "Watermarks",
     "open_link",
+    "quiet_collection",
 ]

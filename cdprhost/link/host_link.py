@@ -24,6 +24,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
+from cdprhost.link.collector import quiet_collection
 from cdprhost.link.core import LinkCore, Transport
 from cdprhost.link.device_setup import DeviceSetup
 from cdprhost.link.errors import DeviceFault, DeviceReset, DeviceSilent, LinkError, LinkTimeout
@@ -389,13 +390,14 @@ class HostLink:
         n = len(batch)
         start = self._t.now()
         i = 0
-        while i < n:
-            left = None if timeout is None else timeout - (self._t.now() - start)
-            if left is not None and left <= 0:
-                raise LinkTimeout(
-                    f"{self._core.name}: could not queue segments within {timeout:g} s"
-                )
-            i = self.feed(batch, i, max_wait=0.25 if left is None else min(0.25, left))
+        with quiet_collection():  # (no full collection of the host's heap mid-stream)
+            while i < n:
+                left = None if timeout is None else timeout - (self._t.now() - start)
+                if left is not None and left <= 0:
+                    raise LinkTimeout(
+                        f"{self._core.name}: could not queue segments within {timeout:g} s"
+                    )
+                i = self.feed(batch, i, max_wait=0.25 if left is None else min(0.25, left))
         return range(first, first + n)
 
     def flush(self) -> None:

@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from cdprhost.link.collector import keep_pauses_short
 from cdprhost.link.core import LinkCore
 from cdprhost.link.errors import StepRateError
 from cdprhost.link.events import DeviceCaps, Identity
@@ -319,6 +320,7 @@ class SegmentFeed:
         i = start
         while i < n:
             c.let_others_in()
+            keep_pauses_short()
             self.renew()
             with c.locked():
                 if c.dev.failure is not None:

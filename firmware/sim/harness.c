@@ -1126,6 +1126,10 @@ int main(int argc, char **argv)
     FILE *dbg_log = getenv("CDPR_SIM_DBG_LOG") ? fopen(getenv("CDPR_SIM_DBG_LOG"), "w") : NULL;
     avr_flashaddr_t dbg_pc = getenv("CDPR_SIM_DBG_PC") ? (avr_flashaddr_t)strtoul(getenv("CDPR_SIM_DBG_PC"), NULL, 16) : 0;
     static uint32_t dbg_vec[64];
+    /* samples a second (CDPR_SIM_DBG_HZ, 50 unless told) */
+    unsigned dbg_hz = getenv("CDPR_SIM_DBG_HZ") ? (unsigned)atoi(getenv("CDPR_SIM_DBG_HZ")) : 50;
+    if (!dbg_hz)
+        dbg_hz = 50;
     uint64_t dbg_masked = 0, dbg_hits = 0, dbg_next = 0;
     avr_cycle_count_t cli_start = 0;
     avr_flashaddr_t cli_pc = 0;
@@ -1189,7 +1193,7 @@ int main(int argc, char **argv)
             if (avr->pc == dbg_pc)
                 dbg_hits++;
             if (avr->cycle >= dbg_next) {
-                dbg_next = avr->cycle + F_CPU / 50;
+                dbg_next = avr->cycle + F_CPU / dbg_hz;
                 fprintf(dbg_log, "%.3f %.3f xon=%d in=%zu out=%zu masked=%llu hits=%llu pc=%x T3=%02x/%02x T5=%02x/%02x UCSR0B=%02x v:", sim_seconds(), device_seconds(), xon, in_len - in_pos, out_len, (unsigned long long)dbg_masked, (unsigned long long)dbg_hits, avr->pc, avr->data[0x71], avr->data[0x38], avr->data[0x73], avr->data[0x3A], avr->data[0xC1]);
                 static unsigned dbg_addr[8], dbg_naddr;
                 static int dbg_addr_read;

@@ -315,6 +315,6 @@ void link_poll(uint32_t now)
     }
     if (ack_held == ACK_HELD && !nak_due)
         ack_held = ACK_HELD_TURN; /* the next frame's covers it */
-    else
+    else if (nak_due || ack_due) /* (send_ack's frame costs a turn with none 50 cycles) */
         send_ack(now);
 }

@@ -82,23 +82,15 @@ uint8_t machine_credit(void)
 
 /* HOMED, ENABLED and WAITING from the interrupt's progress (in a frame of its own: the
  * snapshot is not on the stack under machine_flags' callers' deeper calls). */
-static uint8_t __attribute__((noinline)) executed_flags(void)
+uint8_t machine_flags_of(const struct stepper_progress *done)
 {
-    struct stepper_progress done;
-    stepper_progress(&done);
     uint8_t f = 0;
-    if ((done.homed_mask & 7) == 7)
+    if ((done->homed_mask & 7) == 7)
         f |= FLAG_HOMED;
-    if (done.enabled_mask)
+    if (done->enabled_mask)
         f |= FLAG_ENABLED;
-    if (done.current == IT_WAIT || done.current == IT_TUNE)
+    if (done->current == IT_WAIT || done->current == IT_TUNE)
         f |= FLAG_WAITING;
-    return f;
-}
-
-uint8_t machine_flags(void)
-{
-    uint8_t f = executed_flags();
     if (stepper_moving())
         f |= FLAG_MOVING;
     if (machine.fault)
@@ -108,6 +100,13 @@ uint8_t machine_flags(void)
     if (heaters[0].target_dc || heaters[1].target_dc)
         f |= FLAG_HEATING;
     return f;
+}
+
+uint8_t machine_flags(void)
+{
+    struct stepper_progress done;
+    stepper_progress(&done);
+    return machine_flags_of(&done);
 }
 
 static uint8_t ends_block(const struct item *it)

@@ -3,6 +3,7 @@
 #define MACHINE_H
 #include <stdint.h>
 #include "queue.h"
+#include "stepper.h"
 
 struct machine {
     uint32_t items_received, segments_received;
@@ -36,6 +37,8 @@ struct machine {
 extern struct machine machine;
 
 uint8_t machine_flags(void);
+/* The same from a progress read the caller already holds. */
+uint8_t machine_flags_of(const struct stepper_progress *done);
 uint8_t machine_free(void);
 /* Queue items of frames acknowledged and not executed yet (RING's `held`). */
 uint8_t machine_held_items(void);

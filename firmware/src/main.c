@@ -117,6 +117,11 @@ static void take_interrupt_reports(uint32_t now)
     }
     if (r.error)
         machine_fail(r.error, r.item, r.segment, r.axis, r.value);
+    if (!(heaters[0].reached_event | heaters[0].fault | heaters[1].reached_event |
+          heaters[1].fault)) {
+        decide_wait();
+        return;
+    }
     uint32_t items, segs;
     stepper_counts(&items, &segs);
     for (uint8_t i = 0; i < 2; i++) {

@@ -22,7 +22,7 @@ uint8_t motion_store_checked(struct item *it, const struct segment *s);
  * half a millisecond the plans last only a few milliseconds. */
 void motion_prepare_some(uint8_t budget);
 extern uint8_t motion_cursor; /* the next queue position to prepare */
-static inline void motion_prepare_ahead(uint8_t budget)
+static inline __attribute__((always_inline)) void motion_prepare_ahead(uint8_t budget)
 {
     /* inline, what most calls find: every plan ready, or nothing queued to prepare */
     if ((uint8_t)(plan_head - plan_tail) < PLAN_SLOTS && motion_cursor != queue_head)

@@ -134,6 +134,25 @@ uint8_t session_start_for(void)
 }
 #endif
 
+/* An unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of the
+ * queue freed, or any other change after DEV_FLOW_INTERVAL_MS. Every turn asks: one
+ * progress read for all of it (it was three), in a frame of its own (not on the stack
+ * under session_poll's stops). */
+static uint8_t __attribute__((noinline)) flow_due(uint32_t now)
+{
+    if (!flow_valid)
+        return 1;
+    struct stepper_progress done;
+    stepper_progress(&done);
+    if (machine.flow_ticks && done.motion_ticks - flow_motion >= machine.flow_ticks)
+        return 1;
+    uint8_t flags = machine_flags_of(&done);
+    if (done.items_done == flow_items && flags == flow_flags)
+        return 0;
+    return flags != flow_flags || machine_credit() >= flow_free + QUEUE_SIZE / 8 ||
+           now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS);
+}
+
 /* Anything to do: motion executing or queued, a heater on (the watchdog guards it). */
 static uint8_t active(void)
 {
@@ -163,18 +182,7 @@ void session_poll(uint32_t now)
         machine_stop(ERR_HEATER_LEASE, 0, 1, machine.lease_ms);
         return;
     }
-    /* unsolicited FLOW: flow_ticks of motion executed, flags changed, an eighth of
-     * the queue freed, or any other change after DEV_FLOW_INTERVAL_MS */
-    uint8_t want = !flow_valid;
-    if (!want && machine.flow_ticks && motion_executed() - flow_motion >= machine.flow_ticks)
-        want = 1;
-    if (!want) {
-        uint32_t items = items_executed();
-        uint8_t flags = machine_flags();
-        if (items != flow_items || flags != flow_flags)
-            want = flags != flow_flags || machine_credit() >= flow_free + QUEUE_SIZE / 8 ||
-                   now - flow_at >= MS_TO_CLOCK(DEV_FLOW_INTERVAL_MS);
-    }
+    uint8_t want = flow_due(now);
 #if STEP_ENGINE
     /* a credit the ring of chunks keeps short (machine_credit): each item more at once
      * (the ring frees as the steppers pass the segments' ends) */

@@ -59,8 +59,8 @@ INDIRECT = {
     "machine_shutdown": ("report_error",),
     "machine_free": ("proto_pending_items",),
     "machine_credit": ("proto_pending_items",),
-    "autotune_poll": ("report_event", "machine_fail"),
-    "heater_poll": ("autotune_heater", "autotune_relay"),
+    "autotune_step": ("report_event", "machine_fail"),
+    "heater_control": ("autotune_heater", "autotune_relay"),
     "report_status": ("health_read",),
 }
 
