@@ -9,6 +9,8 @@
   items take (commands.c, stage_segments); a frame with anything else is checked and
   decoded again when executed, from the coder context the staged frames before it
   left: the record is exact either way, predicted deltas across the two included;
+- such a frame behind nothing held is queued as it is checked: the FLOW of its own ACK
+  already counts its motion as buffered (it waited for a main-loop turn's execution);
 - a segment whose deltas are plain one-byte codes takes the decoder's short path; a
   longer code or a segment cut short by the frame's end takes the full one (the cut one
   is BAD_COMMAND naming its opcode and offset, and nothing of its frame runs).
@@ -21,7 +23,7 @@ import os
 
 import pytest
 
-from firmware_protocol.messages import ErrorCode, Flush, Segment, SetFan
+from firmware_protocol.messages import ErrorCode, Flow, Flush, Segment, SetFan
 from firmware_protocol.segments import SegmentBatch
 from firmware_protocol.streams import expected_record
 from tests.conformance.device import RawHost, start
@@ -90,6 +92,24 @@ def test_a_staged_frame_refuses_its_segment_over_the_rate_at_that_segment(avr_bu
         h.close()
         dev.stop()
     assert all(r["seq"] <= 3 for r in _record(dev) if "error" not in r)
+
+
+def test_a_frame_of_segments_behind_nothing_held_is_queued_as_it_is_checked(avr_built, tmp_path):
+    dev = start("avr", tmp_path, "--speedup", "4")
+    h = RawHost(dev.path)
+    try:
+        capacity = h.hello().queue_capacity
+        h.pump(0.2)
+        seen = len(h.flows)
+        frame = [Segment(ticks=1_000, deltas=(2, -1, 1, 0), ramp=CONSTANT) for _ in range(8)]
+        h.send(*frame)  # no block's end, no FLUSH: nothing starts
+        ack = h.wait_for(lambda: h.flows[seen:], what="the frame's ACK")[0]
+        assert isinstance(ack, Flow)
+        assert ack.buffered_ticks == 8 * 1_000  # queued already, not held for a later turn
+        assert h.status().queue_free == capacity - 8
+    finally:
+        h.close()
+        dev.stop()
 
 
 def test_staged_and_checked_frames_keep_the_coder_context(avr_built, tmp_path):
