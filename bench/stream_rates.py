@@ -27,6 +27,11 @@ segment); the host's retransmits and timeouts beside it; the line's payload byte
 segment and what 250000 baud leaves (``line_limit_per_s``: 25,000 B/s over the bytes a
 segment takes on the wire, frame overhead included).
 
+Stop 53: the host cuts a stream's frames at 48 payload bytes (segment_feed's
+STREAM_FRAME_BYTES); the engine's clean 2,000/s row then ran 30 s exact in 10 runs of 15
+(main the same hour 0 of 7), its faults row 3 of 8 (main 1 of 7): docs/step-engine.md
+section 10, "A frame's length against the queue's lead".
+
 Figures (issue 29, 2026-11-29, 2 cores shared with three other sessions, load 3-5; the
 busiest module at 7,200 steps/s, the others at 0.75/0.5/0.1 of it: 16,500 steps/s in
 all). The line is not the limit: 4.12 payload bytes a segment (4.5 on the wire in 120-byte

@@ -46,6 +46,16 @@ FIT_SHARE = 0.1
 FIT_TURN_S = 0.05
 #: a ramp's fit, before one was timed (four axes, about 5 ms in Python: bench/step_schedule.py)
 RAMP_FIT_S = 0.005
+#: the most payload bytes a frame of the stream carries, however long the line lets frames
+#: grow (a segment longer than that, with its schedule block, still goes alone): a device
+#: reads a frame only once it is whole, so its segments reach the queue a frame's time on
+#: the wire and its check later. At 250000 baud a full 120-byte frame of a print's short
+#: segments (27 of 0.5 ms) is 5.2 ms on the wire and 4-6 ms in the AVR's check; with the
+#: step engine's queue of 64 (32 ms of them) and the host's own delays that ran the queue
+#: dry within seconds at 2,000 segments/s. Frames of 48 bytes (about 11 such segments,
+#: 2.4 ms on the wire) cost the AVR no more CPU a segment, and the stream ran 30 s exact in
+#: most runs (docs/step-engine.md section 10: 64 and 36 bytes ran dry sooner).
+STREAM_FRAME_BYTES = 48
 
 
 def wire_schedules(
@@ -253,7 +263,7 @@ class SegmentFeed:
             blocks = {key: s for key, s in blocks.items() if key[0] < n}
         data, offsets = encode_segments(sub, c.ctx, blocks)
         pos = 0
-        limit = c.payload_limit
+        limit = min(c.payload_limit, STREAM_FRAME_BYTES)
         ticks = sub.ticks
         while pos < n:
             end = int(np.searchsorted(offsets, offsets[pos] + limit, side="right")) - 1

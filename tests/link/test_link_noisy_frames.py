@@ -5,6 +5,7 @@ from __future__ import annotations
 from cdprhost.link.tuning import CLEAN_RTO_FLOOR_S
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.streams import demo_stream
+from tests.link.wire_spy import data_frames
 
 
 def test_frames_stay_short_on_a_one_percent_line():
@@ -13,21 +14,14 @@ def test_frames_stay_short_on_a_one_percent_line():
     # read far too low) and its floor raised the limit to full frames at the first loss.
     link = open_embedded(faults="corrupt=0.01,drop=0.01,seed=3", baud=None)
     _fast(link)  # as on a pty (a UART keeps its old rule: the AVR's frames)
-    sizes: list[int] = []
-    write = link._core.t.write
-
-    def spy(data: bytes) -> None:
-        if data[2] == 1:  # DATA frames
-            sizes.append(len(data))
-        write(data)
-
-    link._core.t.write = spy  # type: ignore[method-assign]
     try:
-        link.queue_segments(demo_stream(1500, seed=4))
-        link.wait_idle(timeout=120)
+        with data_frames(link) as frames:
+            link.queue_segments(demo_stream(1500, seed=4))
+            link.wait_idle(timeout=120)
         assert link.progress.segments_done == 1500
     finally:
         link.close()
+    sizes = [n for n, _ in frames]
     late = sizes[len(sizes) // 3 :]
     assert max(late) <= 64 and link._core.payload_limit <= 48
     assert link.counters.retransmits > 50  # the faults did bite
