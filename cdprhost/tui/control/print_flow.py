@@ -134,7 +134,7 @@ class PrintFlow(ControllerBase):
         path, started_at, job = found
         self._status_gen += 1
         self.update(
-            job=JobSnapshot(),
+            job=JobSnapshot(state=JobState.PREFLIGHT),  # active at once, as for :meth:`start`
             job_id=job_id,
             job_path=path,
             job_started=started_at or self.app.wall_clock(),
@@ -173,7 +173,9 @@ class PrintFlow(ControllerBase):
         job_id = self.state.job_id + 1
         self._status_gen += 1  # a status asked before now is old news
         self.update(
-            job=JobSnapshot(),
+            # the job is under way from now (its first event, preflight, comes from a worker):
+            # until then no status poll may show the device as it was before the print
+            job=JobSnapshot(state=JobState.PREFLIGHT),
             job_id=job_id,
             job_path=path,
             job_started=self.app.wall_clock(),

@@ -63,14 +63,10 @@ class TuiPrinter:
         threading.Thread(target=later, name="upload-api-announce", daemon=True).start()
 
     # -------------------------------------------------------------- status
-    def _starting(self, state: Any) -> bool:
-        """A job started here whose first event has not arrived yet (still IDLE): busy."""
-        return self._who[0] == state.job_id > 0 and state.job.state is JobState.IDLE
-
     def _busy(self, state: Any) -> str:
         """Why the machine is not idle now ("" when it is): a job, or a device operation
         (jog, home, heaters) the operator started."""
-        if state.job_active or self._starting(state):
+        if state.job_active:  # a job started here is active (preflight) at once
             return busy_reason(self.status())
         if state.busy:
             return f"the machine is busy at the terminal UI ({state.busy}); nothing started"
@@ -82,8 +78,6 @@ class TuiPrinter:
         if not job_id or job_id != state.job_id:
             who = "the terminal UI" if state.job_path else ""
         job = state.job
-        if self._starting(state):
-            job = replace(job, state=JobState.PREFLIGHT)
         return PrinterStatus(
             connected=state.connected,
             file=Path(state.job_path) if state.job_path else None,
@@ -171,7 +165,7 @@ class TuiPrinter:
     def _cancel_in_ui(self) -> str:
         state = self.app.state
         s = state.job.state
-        if s is JobState.PREFLIGHT or self._starting(state):
+        if s is JobState.PREFLIGHT:
             return "the print is starting (preflight): cancel again in a moment"
         if not s.active:
             return f"no print is running ({s.value}): nothing to cancel"
