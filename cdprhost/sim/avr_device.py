@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import fcntl
 import os
 import select
 import shutil
@@ -64,12 +65,17 @@ def build() -> None:
     missing = toolchain_missing()
     if missing:
         raise InputError(missing, source="--firmware avr")
-    proc = subprocess.run(
-        ["make", "-s", "-C", str(FIRMWARE_DIR), *BUILD_FLAGS, "all", "sim"],
-        check=False,
-        capture_output=True,
-        text=True,
-    )
+    # one make at a time: two test workers (or a test and `sim-device`) starting on a fresh
+    # tree would otherwise compile into the same objects at once
+    BUILD_DIR.mkdir(parents=True, exist_ok=True)
+    with open(BUILD_DIR / ".make.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        proc = subprocess.run(
+            ["make", "-s", "-C", str(FIRMWARE_DIR), *BUILD_FLAGS, "all", "sim"],
+            check=False,
+            capture_output=True,
+            text=True,
+        )
     if proc.returncode != 0:
         raise InputError(
             f"building the firmware failed (make -C {FIRMWARE_DIR} {' '.join(BUILD_FLAGS)} all sim):\n{proc.stderr[-2000:]}",

@@ -213,23 +213,28 @@ static void __attribute__((noinline)) tail_refused(const struct item *it, uint8_
  * the modules' travel, at the time the segment is queued), for a stored segment: moves
  * machine.tail_pos by its steps axis by axis and returns 4 when all is well, k < 4 when
  * axis k would leave 32 bits (axes 0..k-1 moved), 5 when the moved tail leaves a module's
- * travel. In place, inline in the staged segments' loop (a copy of the four positions and
+ * travel. In place, inline in move_tail and tails_moved (a copy of the four positions and
  * a frame of its own cost more than the checks). */
 static inline __attribute__((always_inline)) uint8_t tail_steps(const struct item *it)
 {
     int32_t *tail = machine.tail_pos;
     const uint32_t *np = it->u.n;
-    uint8_t flags = it->flags, k = 0;
-    for (uint8_t bit = 0x10; k < 4; k++, bit <<= 1, tail++, np++) {
-        int32_t n = (int32_t)*np; /* |delta| <= 2^31 - 1: the decoder's bound */
-        int32_t p;
-        /* within -(2^31 - 1)..2^31 - 1, in 32-bit arithmetic (no 64-bit library calls) */
-        if ((flags & bit) ? __builtin_sub_overflow(*tail, n, &p)
-                          : __builtin_add_overflow(*tail, n, &p))
-            break;
-        if (p == INT32_MIN)
-            break;
-        *tail = p;
+    uint8_t neg = it->flags >> 4, k = 0; /* bit k: axis k steps backwards */
+    for (; k < 4; k++, neg >>= 1, tail++, np++) {
+        /* |delta| <= 2^31 - 1 (the decoder's bound), so a sum leaves 32 bits only from
+         * >= 0 to < 0, a difference only from < 0 to >= 0, and -2^31 is refused too:
+         * sign tests in 32-bit arithmetic (no 64-bit library calls) */
+        uint32_t t = (uint32_t)*tail, p;
+        if (neg & 1) {
+            p = t - *np;
+            if ((int32_t)t < 0 && ((int32_t)p >= 0 || p == 0x80000000UL))
+                break;
+        } else {
+            p = t + *np;
+            if ((int32_t)t >= 0 && (int32_t)p < 0)
+                break;
+        }
+        *tail = (int32_t)p;
     }
     if (k == 4) {
         int32_t at;
@@ -461,6 +466,26 @@ uint8_t proto_pending_items(void)
     return (uint8_t)pend.items_total;
 }
 
+/* The tail's checks for the n segments stored from slot `at` (a frame queued as it is
+ * checked): machine.tail_pos moved segment by segment, 1 when all are within 32 bits and
+ * the travel; else 0 with the tail moved back to where it was (the checked way then
+ * raises the fault at its segment). Out of the staging loop, once a frame: inline there,
+ * its registers cost every segment's decode a frame of their own. */
+static uint8_t __attribute__((noinline)) tails_moved(uint8_t at, uint8_t n)
+{
+    for (uint8_t i = 0; i < n; i++) {
+        const struct item *it = queue_slot((uint8_t)(at + i));
+        uint8_t k = tail_steps(it);
+        if (k != 4) {
+            tail_back(it, k < 4 ? k : 4);
+            while (i)
+                tail_back(queue_slot((uint8_t)(at + --i)), 4);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* A frame of segments only (no schedule block) behind staged frames only, no fault:
  * decoded once, here, each segment stored (motion_store) straight into the queue slot
  * its item will take: queue_head + the held items before it. Nothing reads a slot
@@ -494,31 +519,26 @@ static uint8_t stage_segments(const uint8_t *payload, uint8_t len, struct seg_ct
         motion_prepare_ahead(1); /* a frame of short segments takes milliseconds */
         uint8_t op = payload[r.pos];
         if (op < SEG_BASE || (op & SEG_F_SCHEDULE) || n == room)
-            goto checked_way;
+            return STAGE_NO;
         segment_decode(&r, work, &s);
         /* its own limits checked here (one over sends the frame the checked way, which
          * raises the fault at its segment); its tail's checks wait for its turn
          * (enqueue_staged) unless it goes to the queue at once */
         struct item *it = queue_slot((uint8_t)(at + n));
         if (r.err || s.ticks < MIN_SEGMENT_TICKS || !motion_store_checked(it, &s))
-            goto checked_way;
-        if (direct) {
-            uint8_t k = tail_steps(it);
-            if (k != 4) {
-                tail_back(it, k < 4 ? k : 4);
-                goto checked_way;
-            }
-        }
+            return STAGE_NO;
         n++;
     }
     if (direct) {
+        if (!tails_moved(at, n))
+            return STAGE_NO;
         /* A frame of segments behind nothing held: checked whole and queued now, without
          * being held for proto_execute (at 2,000 segments/s its execution took a quarter
          * of the work a segment costs the main loop and left the segments out of the
          * queue for 3 ms after their check) */
+        machine.items_received += n;
+        machine.segments_received += n;
         for (uint8_t i = 0; i < n; i++) {
-            machine.items_received++;
-            machine.segments_received++;
             sim_segment_parsed();
             machine_queued(queue_slot((uint8_t)(at + i)));
         }
@@ -529,10 +549,6 @@ static uint8_t stage_segments(const uint8_t *payload, uint8_t len, struct seg_ct
     }
     *queued = n;
     return STAGE_HELD;
-checked_way: /* it does not qualify: the checked way decides, from the start */
-    while (direct && n)
-        tail_back(queue_slot((uint8_t)(at + --n)), 4);
-    return STAGE_NO;
 }
 
 uint8_t proto_accept(const uint8_t *payload, uint8_t len)

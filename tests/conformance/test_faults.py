@@ -33,9 +33,10 @@ from firmware_protocol.messages import (
     Segment,
     SetHeater,
     SetLimits,
+    SetPosition,
     Status,
 )
-from firmware_protocol.segments import SegmentBatch
+from firmware_protocol.segments import MAX_DELTA, SEG_BASE, SegmentBatch
 from firmware_protocol.streams import expected_record
 from tests.protocol.test_proto_fuzz import MALFORMED_FRAMES, malformed_frame
 
@@ -127,13 +128,44 @@ def test_motion_leaving_the_travel_is_refused(device_factory, host_factory, pend
     h.send(SetLimits(0, -1000, 1000), SetLimits(1, -1000, 1000), SetLimits(2, -1000, 1000))
     h.send(Segment(20_000, (800, 0, 0, 0), 255))  # inside: runs
     h.wait_for(lambda: h.flows and h.flows[-1].segments_done == 1, timeout=20, what="inside")
-    h.send(Segment(20_000, (0, 0, 0, 0), 255), Segment(20_000, (400, 0, 0, 0), 255))
+    # one frame: the first segment back inside, the second out (a frame checked as it is
+    # queued moves the tail back over both before the checked way names the second)
+    h.send(Segment(20_000, (-300, 0, 0, 0), 255), Segment(20_000, (700, 0, 0, 0), 255))
     err = h.wait_for(lambda: h.of(Error, code=ErrorCode.ENDSTOP_HIT), timeout=20, what="ENDSTOP")
     assert (err.axis, err.value, err.segment) == (0, 1200, 3)
     st = h.status()
     assert st.steps[0] == 800 and st.flags & Flag.FAULT
     assert dev.stop() == 0
     assert [row["seq"] for row in _record(dev) if "error" not in row] == [1]  # nothing of 3
+
+
+def test_a_position_leaving_32_bits_is_refused(device_factory, host_factory, pending):
+    """A segment that would take the queue's end position out of 32 bits (positions are
+    i32, -2^31 excluded) is refused on receipt, BAD_VALUE naming the bound, whichever way
+    the axis goes; a segment that ends exactly on the bound is taken."""
+    dev = device_factory()
+    h = host_factory(dev.path)
+    h.hello()
+    h.send(Configure(500, 0, 10_000))
+    h.send(SetPosition((MAX_DELTA - 10, 0, 0, 0)), Segment(20_000, (10, 0, 0, 0), 255), Flush())
+    h.wait_for(lambda: h.status().steps[0] == MAX_DELTA, timeout=20, what="at 2^31 - 1")
+    h.send(Segment(20_000, (1, 0, 0, 0), 255), Flush())
+    err = h.wait_for(lambda: h.of(Error, code=ErrorCode.BAD_VALUE), timeout=20, what="+2^31")
+    assert (err.axis, err.value, err.segment) == (SEG_BASE, MAX_DELTA, 2)
+    st = h.status()
+    assert st.steps[0] == MAX_DELTA and st.flags & Flag.FAULT
+    h.send(ClearFault())
+    h.wait_for(lambda: h.of(Event, code=EventCode.FAULT_CLEARED), what="cleared")
+    h.send(SetPosition((0, 10 - MAX_DELTA, 0, 0)), Segment(20_000, (0, -10, 0, 0), 255), Flush())
+    h.wait_for(lambda: h.status().steps[1] == -MAX_DELTA, timeout=20, what="at -(2^31 - 1)")
+    h.send(Segment(20_000, (0, -1, 0, 0), 255), Flush())
+    err = h.wait_for(
+        lambda: h.of(Error, code=ErrorCode.BAD_VALUE, value=-MAX_DELTA), timeout=20, what="-2^31"
+    )
+    assert err.axis == SEG_BASE
+    st = h.status()
+    assert tuple(st.steps[:2]) == (0, -MAX_DELTA) and st.flags & Flag.FAULT
+    assert dev.stop() == 0
 
 
 def test_shortest_segments_run_exactly_or_are_refused(device_factory, host_factory, pending):

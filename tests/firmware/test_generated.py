@@ -65,9 +65,10 @@ def test_crc_tables_in_flash_are_the_polynomials():
     import zlib
 
     src = (TOOLS.parent / "src" / "crc.c").read_text()
-    body32 = src[src.index("crc32_table[256]") : src.index("crc8_table[256]")]
-    t32 = [int(x, 16) for x in re.findall(r"0x([0-9A-F]{8})UL", body32)]
-    assert len(t32) == 256
+    body32 = src[src.index("crc32_planes[4][256]") : src.index("crc8_table[256]")]
+    planes = [int(x, 16) for x in re.findall(r"0x([0-9A-F]{2})[,\n]", body32)]
+    assert len(planes) == 4 * 256  # plane k holds byte k of every entry
+    t32 = [sum(planes[256 * k + i] << (8 * k) for k in range(4)) for i in range(256)]
     for i, v in enumerate(t32):  # the register after byte i from 0 (zlib's ~ undone)
         assert v == zlib.crc32(bytes([i]), 0xFFFFFFFF) ^ 0xFFFFFFFF, i
     body8 = src[src.index("crc8_table[256]") :]
