@@ -300,6 +300,12 @@ class PrintJob:
             yield item
 
     def _cancelled_early(self) -> PrintResult:
+        if self.requests.has("estop"):
+            # an e-stop ends a job FAILED wherever it comes (the device is left stopped
+            # and needs a reset), the preflight included
+            result = PrintResult("failed")
+            self._fail_early(result, "emergency stop before anything moved")
+            return result
         self._set(JobState.CANCELLED, "cancelled before anything moved")
         return PrintResult("cancelled", reason=self.requests.cancel_reason)
 

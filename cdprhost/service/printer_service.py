@@ -262,6 +262,10 @@ class PrinterService:
             job.request_cancel(request.reason)
         elif isinstance(request, wire.Estop):
             threading.Thread(target=job.emergency_stop, name="estop", daemon=True).start()
+            if job.link is None and self.session.open:
+                # a job in its preflight holds no link yet: the device session's link
+                # stops the device now (motors kept, heaters off), as with no job
+                self.session.emergency_stop(request.id)
         elif isinstance(request, wire.Override):
             try:
                 getattr(job, f"request_{request.what}")(request.percent)

@@ -7,6 +7,7 @@ from cdprhost.job.before_start import before_start
 from cdprhost.job.runner import PrintJob, PrintOptions
 from cdprhost.job.state import (
     STALE_S,
+    Failure,
     JobSnapshot,
     JobState,
     Planned,
@@ -169,3 +170,29 @@ def test_a_cancel_during_the_preflight_ends_it_there(tmp_path):
     )
     result = job.run()
     assert result.status == "cancelled" and result.reason == "SIGTERM" and not opened
+
+
+def test_an_emergency_stop_during_the_preflight_ends_it_failed(tmp_path):
+    """An e-stop ends a job FAILED wherever it comes: in the preflight too (the device a
+    service holds is left stopped; "cancelled" would pass for a clean stop)."""
+    gcode = tmp_path / "part.gcode"
+    gcode.write_text("G28\n" + "".join(f"G1 X{i % 20} Y{i % 7} Z1 F3000\n" for i in range(2000)))
+    opened, seen = [], []
+
+    def on_event(e):
+        seen.append(e)
+        if isinstance(e, StateChanged) and e.state is JobState.PREFLIGHT:
+            job.emergency_stop()
+
+    job = PrintJob(
+        gcode,
+        load_profile("paper-prototype"),
+        lambda: opened.append(True),
+        PrintOptions(resume_dir=tmp_path),
+        on_event=on_event,
+    )
+    result = job.run()
+    assert result.status == "failed" and not opened
+    assert result.reason == "emergency stop before anything moved"
+    assert job.state is JobState.FAILED
+    assert any(isinstance(e, Failure) for e in seen)

@@ -162,7 +162,9 @@ def test_under_tui_listen_the_ui_and_the_page_are_two_clients_of_one_service(ser
         assert Path(path).name == "both.gcode"
         page.click("#estop")
         server.wait_state("failed")
-        machine = service._job.link.device.machine
+        machine = _idle_machine(
+            service
+        )  # the job's link is the session's (none yet in its preflight)
         assert machine.estopped and machine.enabled_mask  # motors kept
 
         def folded() -> JobSnapshot:
