@@ -27,7 +27,8 @@ async def _console(pilot, app, command: str) -> list[str]:
 
 async def test_keys_and_console_set_speed_and_flow_while_printing(tmp_path):
     part = tmp_path / "tube.gcode"
-    part.write_text(small_part(layers=30), encoding="utf-8")
+    # long enough to be printing still when the console's last request goes, on a busy PC
+    part.write_text(small_part(layers=90), encoding="utf-8")
     backend = LiveBackend(
         "paper-prototype",
         speedup=10.0,
