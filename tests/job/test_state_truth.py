@@ -152,29 +152,9 @@ def test_a_job_cancelled_before_it_moves_ends_at_once(tmp_path):
     assert job.state is JobState.CANCELLED and not opened  # never connected
 
 
-def test_a_cancel_during_the_preflight_ends_it_there(tmp_path):
-    gcode = tmp_path / "part.gcode"
-    gcode.write_text("G28\n" + "".join(f"G1 X{i % 20} Y{i % 7} Z1 F3000\n" for i in range(2000)))
-    opened = []
-
-    def on_event(e):
-        if isinstance(e, StateChanged) and e.state is JobState.PREFLIGHT:
-            job.request_cancel("SIGTERM")
-
-    job = PrintJob(
-        gcode,
-        load_profile("paper-prototype"),
-        lambda: opened.append(True),
-        PrintOptions(resume_dir=tmp_path),
-        on_event=on_event,
-    )
-    result = job.run()
-    assert result.status == "cancelled" and result.reason == "SIGTERM" and not opened
-
-
-def test_an_emergency_stop_during_the_preflight_ends_it_failed(tmp_path):
-    """An e-stop ends a job FAILED wherever it comes: in the preflight too (the device a
-    service holds is left stopped; "cancelled" would pass for a clean stop)."""
+def _job_asked_in_its_preflight(tmp_path, ask):
+    """A long file's job that calls ``ask(job)`` as its preflight starts: the job, the
+    events it sent, and whether it ever opened a link."""
     gcode = tmp_path / "part.gcode"
     gcode.write_text("G28\n" + "".join(f"G1 X{i % 20} Y{i % 7} Z1 F3000\n" for i in range(2000)))
     opened, seen = [], []
@@ -182,7 +162,7 @@ def test_an_emergency_stop_during_the_preflight_ends_it_failed(tmp_path):
     def on_event(e):
         seen.append(e)
         if isinstance(e, StateChanged) and e.state is JobState.PREFLIGHT:
-            job.emergency_stop()
+            ask(job)
 
     job = PrintJob(
         gcode,
@@ -191,6 +171,19 @@ def test_an_emergency_stop_during_the_preflight_ends_it_failed(tmp_path):
         PrintOptions(resume_dir=tmp_path),
         on_event=on_event,
     )
+    return job, seen, opened
+
+
+def test_a_cancel_during_the_preflight_ends_it_there(tmp_path):
+    job, _, opened = _job_asked_in_its_preflight(tmp_path, lambda j: j.request_cancel("SIGTERM"))
+    result = job.run()
+    assert result.status == "cancelled" and result.reason == "SIGTERM" and not opened
+
+
+def test_an_emergency_stop_during_the_preflight_ends_it_failed(tmp_path):
+    """An e-stop ends a job FAILED wherever it comes: in the preflight too (the device a
+    service holds is left stopped; "cancelled" would pass for a clean stop)."""
+    job, seen, opened = _job_asked_in_its_preflight(tmp_path, lambda j: j.emergency_stop())
     result = job.run()
     assert result.status == "failed" and not opened
     assert result.reason == "emergency stop before anything moved"
