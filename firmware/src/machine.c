@@ -119,15 +119,19 @@ static uint32_t duration(const struct item *it)
     return (it->kind == IT_SEG || it->kind == IT_DWELL) ? it->ticks : 0;
 }
 
-void machine_account(void)
+static void account_to(uint8_t tail)
 {
-    uint8_t tail = queue_tail;
     while (machine.accounted != tail) {
         const struct item *it = queue_slot(machine.accounted);
         machine.queued_units -= duration(it);
         machine.block_ends -= ends_block(it);
         machine.accounted++;
     }
+}
+
+void machine_account(void)
+{
+    account_to(queue_tail);
 }
 
 void machine_queued(const struct item *it)
@@ -137,16 +141,14 @@ void machine_queued(const struct item *it)
     machine.block_ends += ends_block(it);
 }
 
-uint32_t machine_buffered_ticks(void)
+uint32_t machine_buffered_of(const struct stepper_progress *done)
 {
-    machine_account();
+    account_to(done->tail);
     uint32_t executed = 0;
-    struct stepper_progress done;
-    stepper_progress(&done);
-    uint32_t left = done.ticks_left;
-    if (done.current == IT_SEG || done.current == IT_DWELL) {
+    uint32_t left = done->ticks_left;
+    if (done->current == IT_SEG || done->current == IT_DWELL) {
         /* the executing item (at tail) is still counted whole */
-        uint32_t d = duration(queue_slot(queue_tail));
+        uint32_t d = duration(queue_slot(done->tail));
         uint32_t rest = left * TICK_UNITS;
         executed = rest < d ? d - rest : 0;
     }

@@ -59,8 +59,10 @@ static inline uint8_t machine_credit(void)
 void machine_account(void);
 /* An item was queued at head (before queue_head moves on). */
 void machine_queued(const struct item *it);
-/* Motion not yet executed: the rest of the executing item and the queue (saturates). */
-uint32_t machine_buffered_ticks(void);
+/* Motion not yet executed when ``done`` was taken: the rest of the executing item and
+ * the queue. A report takes its counts and this from one snapshot, so that a FLOW never
+ * counts an item done while its motion is still buffered. */
+uint32_t machine_buffered_of(const struct stepper_progress *done);
 /* The one shutdown path: stop the steppers where they are (motors stay enabled
  * unless SD_MOTORS_OFF), flush the queue (flushed items count as done), drive the
  * heater and fan pins low when SD_HEATERS_OFF, record the cause (a thermal fault

@@ -65,12 +65,12 @@ void report_status(void)
     int32_t pos[4];
     struct stepper_progress done;
     stepper_positions(pos);
-    uint32_t buffered = machine_buffered_ticks();
     stepper_progress(&done);
+    uint32_t buffered = machine_buffered_of(&done);
     uint32_t items = done.items_done, segs = done.segments_done, ticks = done.motion_ticks;
     uint8_t fan = pwm_fan(), en = done.enabled_mask, homed = done.homed_mask;
     struct writer w = start(CDPR_OP_STATUS);
-    wr_u8(&w, (uint8_t)(machine_flags() | (machine.synced ? FLAG_SYNCED : 0)));
+    wr_u8(&w, (uint8_t)(machine_flags_of(&done) | (machine.synced ? FLAG_SYNCED : 0)));
     wr_uv(&w, machine_free());
     wr_uv(&w, machine.items_received);
     wr_uv(&w, items);
@@ -192,15 +192,14 @@ void report_estop_ack(void)
 uint8_t report_flow(uint8_t *out)
 {
     struct writer w = {out, 0, FLOW_MAX, 0};
-    uint32_t buffered = machine_buffered_ticks();
-    uint32_t items, segs;
-    stepper_counts(&items, &segs);
+    struct stepper_progress done; /* one snapshot: counts, flags and buffered agree */
+    stepper_progress(&done);
     wr_u8(&w, CDPR_OP_FLOW);
-    wr_u8(&w, machine_flags());
+    wr_u8(&w, machine_flags_of(&done));
     wr_uv(&w, machine_credit());
-    wr_uv(&w, items);
-    wr_uv(&w, segs);
-    wr_uv(&w, buffered);
+    wr_uv(&w, done.items_done);
+    wr_uv(&w, done.segments_done);
+    wr_uv(&w, machine_buffered_of(&done));
     wr_uv(&w, sched_clock());
 #if STEP_ENGINE
     if (machine.host_minor >= 2) { /* 3.2: the ring of the schedule blocks' chunks */

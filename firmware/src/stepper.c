@@ -143,6 +143,7 @@ void stepper_progress(struct stepper_progress *out)
         out->segments_done = stepper.segments_done;
         out->motion_ticks = stepper.motion_ticks;
         out->current = stepper.current;
+        out->tail = queue_tail; /* (moves with items_done: one snapshot of both) */
         out->ticks_left =
             (out->current == IT_SEG || out->current == IT_DWELL) ? ticks_left : 0;
         out->enabled_mask = stepper.enabled_mask;

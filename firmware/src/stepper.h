@@ -11,6 +11,7 @@ struct stepper_progress {
     uint32_t motion_ticks;     /* executed durations, clock units */
     uint32_t ticks_left;       /* ticks the executing segment or dwell has left */
     uint8_t current;           /* kind of the executing timed item (IT_*), or 0xFF */
+    uint8_t tail;              /* the queue's tail (its executing or next item) then */
     uint8_t enabled_mask, homed_mask;
 };
 /* The one way the main loop reads the interrupt's progress: without masking it. */
