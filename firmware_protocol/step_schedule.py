@@ -170,6 +170,21 @@ def predicted_error(
     return np.asarray(np.maximum(np.abs(first_err), np.abs(last_err)) + 0.5, dtype=np.float64)
 
 
+def predicted_error_one(steps: int, ticks: int, table: np.ndarray, cycles_per_tick: int) -> float:
+    """:func:`predicted_error` of one predictable axis (``1 <= |steps| <= PREDICT_MAX_STEPS``)
+    in Python's integers and floats: the same operations in the same order, so the same
+    float, without an array's overhead (the device model checks every received segment's
+    four axes with it)."""
+    n = abs(steps)
+    interval = (ticks * int(table[n]) + (1 << (RECIP_BITS - 1))) >> RECIP_BITS
+    lead = interval >> 1
+    last = n - 1
+    true = ticks * cycles_per_tick / n
+    first_err = lead / ONE - 0.5 * true
+    last_err = (lead + last * interval) / ONE - (last + 0.5) * true
+    return max(abs(first_err), abs(last_err)) + 0.5
+
+
 def schedule_error(schedule: AxisSchedule, ideal: np.ndarray) -> np.ndarray:
     """Each device edge's distance from its ideal time, in cycles (signed: late > 0)."""
     edges = device_edges(schedule)

@@ -11,15 +11,15 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_block import ScheduleBlockError, check_block
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
+    PREDICT_MAX_STEPS,
+    PREDICT_MAX_TICKS,
     AxisSchedule,
     device_edges,
     ideal_edges,
-    predictable,
-    predicted_error,
+    predicted_error_one,
     segment_schedules,
     shortest_interval,
 )
@@ -74,22 +74,29 @@ def schedule_refusal(
         shortest = shortest_interval(explicit[axis])
         if shortest and shortest < min_interval_cycles << FRAC_BITS:
             return axis, shortest >> FRAC_BITS
-    n = np.asarray(deltas, dtype=np.int64)
-    ok = predictable(n, np.full(4, ticks), np.full(4, ramp if ramp >= 0 else RAMP_CONSTANT))
-    bound = predicted_error(n, np.full(4, ticks), table, cycles_per_tick)
-    checked = n.copy()
+    constant = ramp < 0
+    checked = [0, 0, 0, 0]
     for k in range(4):
-        if k in explicit:
+        d = int(deltas[k])
+        if k in explicit or not d:
             continue
-        if not ok[k] or bound[k] <= tol_cycles:
-            # within the tolerance in closed form, or (3.0, until the host cuts every
-            # segment whose block is too long) an axis it steps along its own profile
-            checked[k] = 0
-    schedules = segment_schedules(checked, ticks, ramp, dict(explicit), table)
+        if (
+            constant
+            and abs(d) <= PREDICT_MAX_STEPS
+            and ticks <= PREDICT_MAX_TICKS
+            and predicted_error_one(d, ticks, table, cycles_per_tick) > tol_cycles
+        ):
+            # predictable, but not within the tolerance in closed form: its edges are
+            # checked (an axis it cannot predict, 3.0 until the host cuts every segment
+            # whose block is too long, it steps along its own profile)
+            checked[k] = d
+    if not explicit and not any(checked):
+        return None
+    schedules = segment_schedules(np.array(checked), ticks, ramp, dict(explicit), table)
     end = ticks * cycles_per_tick
     for k, sched in sorted(schedules.items()):
         edges = device_edges(sched)
-        ideal = ideal_edges(int(n[k]), ticks, ramp, cycles_per_tick)
+        ideal = ideal_edges(int(deltas[k]), ticks, ramp, cycles_per_tick)
         if edges[0] < 0 or edges[-1] >= end:
             return k, _clamp(int(edges[0] if edges[0] < 0 else edges[-1]))
         err = float(np.abs(edges - ideal).max())

@@ -2,14 +2,25 @@
 
 from __future__ import annotations
 
+from unittest.mock import patch
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware_protocol.device import schedules as device_schedules
 from firmware_protocol.device.schedules import schedule_refusal
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_fit import fit_axis
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
     AxisSchedule,
     Chunk,
+    device_edges,
     ideal_edges,
+    predictable,
     predicted,
+    predicted_error,
     reciprocal_table,
 )
 
@@ -73,3 +84,32 @@ def test_a_block_outside_the_segment_or_too_fast_is_refused():
 def test_counts_that_do_not_add_up_are_refused_with_the_first_chunks_count():
     sched = AxisSchedule(0, (Chunk(-2, 16_000 << FRAC_BITS, 0), Chunk(12, 16_000 << FRAC_BITS, 0)))
     assert _refusal(100_000, (10, 0, 0, 0), -1, {0: sched}) == (0, -2)
+
+
+def _array_form_checks(ticks, deltas, ramp, tol):
+    """The axes whose edges the device must check, by the array functions of
+    step_schedule.py (the device model once ran these on every segment)."""
+    n = np.asarray(deltas, dtype=np.int64)
+    ok = predictable(n, np.full(4, ticks), np.full(4, ramp if ramp >= 0 else RAMP_CONSTANT))
+    bound = predicted_error(n, np.full(4, ticks), TABLE, CPT)
+    return [k for k in range(4) if ok[k] and bound[k] > tol]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.integers(40, 70_000),
+    st.lists(st.integers(-1100, 1100), min_size=4, max_size=4),
+    st.sampled_from([-1, -1, 0, 128, 255]),
+    st.sampled_from([0, 1, 2, 16]),
+)
+def test_the_device_checks_the_edges_of_exactly_the_predictions_the_bound_does_not_clear(
+    ticks, deltas, ramp, tol
+):
+    """An axis predicted within the tolerance in closed form, or not predictable, is not
+    edge-checked; every other predicted axis is, and a stray edge refuses the segment."""
+    checked = _array_form_checks(ticks, deltas, ramp, tol)
+    with patch.object(device_schedules, "device_edges", side_effect=device_edges) as edges:
+        refused = _refusal(ticks, tuple(deltas), ramp, {}, tol=tol)
+    assert edges.call_count == (len(checked) if refused is None else checked.index(refused[0]) + 1)
+    if refused is not None:
+        assert refused[0] in checked and refused[1] > tol

@@ -27,6 +27,7 @@ from firmware_protocol.step_schedule import (
     predictable,
     predicted,
     predicted_error,
+    predicted_error_one,
     reciprocal_table,
     schedule_error,
     shortest_interval,
@@ -105,6 +106,22 @@ def test_the_closed_form_bound_of_a_prediction_holds_for_its_every_edge(steps, t
     bound = float(predicted_error(np.array([steps]), np.array([ticks]), TABLE, CPT)[0])
     assert worst <= bound + 1e-9
     assert bound - worst <= 1.0  # and it is tight: no schedule sent that was not needed
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.integers(1, 1024),
+    st.integers(1, 0xFFFF),
+    st.sampled_from([1, -1]),
+    st.sampled_from([80, 160]),
+)
+def test_one_axis_bound_is_the_arrays_bound_to_the_bit(steps, ticks, sign, cpt):
+    """The device model's scalar bound (every received segment's axes) is the array
+    version's float, not merely close to it."""
+    table = reciprocal_table(cpt)
+    n = sign * steps
+    one = predicted_error_one(n, ticks, table, cpt)
+    assert one == float(predicted_error(np.array([n]), np.array([ticks]), table, cpt)[0])
 
 
 def test_a_constant_speed_axis_within_the_table_is_predicted_to_within_a_cycle():
