@@ -23,7 +23,7 @@ pytestmark = [
 
 
 def test_pause_and_resume_on_a_pty_at_1x_continue_exactly(tmp_path):
-    gcode = square_part(tmp_path / "part.gcode", layers=2)
+    gcode = square_part(tmp_path / "part.gcode", layers=1)
     profile = load_profile("paper-prototype")
     clean = {}
 
