@@ -640,7 +640,9 @@ def test_the_engine_reports_its_ring_and_the_host_places_every_block_as_it_does(
         assert ring is not None and ring.head == ring.tail and ring.held == 0, ring
         assert ring.head != start  # the blocks went round the ring
         assert link._feed.ring.head == ring.head and c.ring_disagreements == 0, c
-        assert c.naks_received == 0 and c.retransmits == 0, c
+        # no frame refused (a NAK): a frame sent again only after its ACK came late (a
+        # timeout: on a loaded PC simavr can fall behind its pace) is the link's work
+        assert c.naks_received == 0 and c.retransmits <= c.timeouts, c
         assert link._core.dev.flow.free == link.identity.queue_capacity  # the whole queue
     record = [json.loads(x) for x in (tmp / "record.jsonl").read_text().splitlines() if x]
     assert record == expected_record(batch)
