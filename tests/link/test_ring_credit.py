@@ -132,13 +132,16 @@ def test_a_ramp_held_back_for_the_ring_is_fitted_once(monkeypatch):
 
 
 def test_sim_device_with_a_ring_on_a_pty_reports_it_and_the_stream_waits_for_it(tmp_path):
-    """`cdprhost sim-device --ring-entries 128` at 1x, as the AVR's step engine: a host on its
-    pty sees the ring and streams ramps that overfill it without a refusal."""
+    """`cdprhost sim-device --ring-entries 128`, as the AVR's step engine: a host on its pty
+    sees the ring and streams ramps that overfill it without a refusal. At half speed, as
+    the AVR's ring test: the ring holds a few tens of ms of these ramps, and at 1x a host
+    starved on a loaded PC (three test workers and a busy process on two cores) let the
+    queue run dry once; what is checked is the ring's count, not the host's pace."""
     from cdprhost.link.connect import open_link
     from tests.e2e.processes import SimDeviceProcess
 
     batch = cut_for_blocks(_ramps([12_000, 9_000, 6_000, 800], cycles=4), 120)
-    args = ("--speedup", "1", "--max-step-rate", "26000", "--profile-step-rate", "8000")
+    args = ("--speedup", "0.5", "--max-step-rate", "26000", "--profile-step-rate", "8000")
     with SimDeviceProcess(tmp_path, *args, "--ring-entries", "128") as dev:
         link = open_link(dev.path)
         try:
