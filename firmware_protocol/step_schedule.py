@@ -137,6 +137,16 @@ def predictable(steps: np.ndarray, ticks: np.ndarray, codes: np.ndarray) -> np.n
     return np.asarray(ok, dtype=bool)
 
 
+def predictable_one(steps: int, ticks: int, code: int) -> bool:
+    """:func:`predictable` of one axis, in Python's numbers (the device model asks it of
+    every received segment's axes)."""
+    return (
+        code == RAMP_CONSTANT
+        and 1 <= abs(steps) <= PREDICT_MAX_STEPS
+        and ticks <= PREDICT_MAX_TICKS
+    )
+
+
 def predicted_interval(steps: np.ndarray, ticks: np.ndarray, table: np.ndarray) -> np.ndarray:
     """The device's interval for a predictable axis: ``(D table[|n|] + 2**15) >> 16``."""
     n = np.abs(np.asarray(steps, dtype=np.int64))
@@ -211,7 +221,7 @@ def segment_schedules(
         if k in explicit:
             out[k] = explicit[k]
         elif n:
-            if not predictable(np.array(n), np.array(ticks), np.array(code)):
+            if not predictable_one(n, ticks, code):
                 raise ScheduleError(f"axis {k}: {abs(n)} steps with no schedule to run them")
             out[k] = predicted(n, ticks, table)
     return out

@@ -11,14 +11,14 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from firmware_protocol.ramp_profile import RAMP_CONSTANT
 from firmware_protocol.schedule_block import ScheduleBlockError, check_block
 from firmware_protocol.step_schedule import (
     FRAC_BITS,
-    PREDICT_MAX_STEPS,
-    PREDICT_MAX_TICKS,
     AxisSchedule,
     device_edges,
     ideal_edges,
+    predictable_one,
     predicted_error_one,
     segment_schedules,
     shortest_interval,
@@ -74,16 +74,14 @@ def schedule_refusal(
         shortest = shortest_interval(explicit[axis])
         if shortest and shortest < min_interval_cycles << FRAC_BITS:
             return axis, shortest >> FRAC_BITS
-    constant = ramp < 0
+    code = ramp if ramp >= 0 else RAMP_CONSTANT
     checked = [0, 0, 0, 0]
     for k in range(4):
         d = int(deltas[k])
-        if k in explicit or not d:
+        if k in explicit:
             continue
         if (
-            constant
-            and abs(d) <= PREDICT_MAX_STEPS
-            and ticks <= PREDICT_MAX_TICKS
+            predictable_one(d, ticks, code)
             and predicted_error_one(d, ticks, table, cycles_per_tick) > tol_cycles
         ):
             # predictable, but not within the tolerance in closed form: its edges are

@@ -25,6 +25,7 @@ from firmware_protocol.step_schedule import (
     device_times,
     ideal_edges,
     predictable,
+    predictable_one,
     predicted,
     predicted_error,
     predicted_error_one,
@@ -131,12 +132,11 @@ def test_a_constant_speed_axis_within_the_table_is_predicted_to_within_a_cycle()
 
 
 def test_what_the_device_cannot_predict():
-    ok = predictable(
-        np.array([5, 5, 0, 1025, 5]),
-        np.array([100, 100, 100, 100, 70_000]),
-        np.array([RAMP_CONSTANT, 0, RAMP_CONSTANT, RAMP_CONSTANT, RAMP_CONSTANT]),
-    )
+    steps, ticks = [5, 5, 0, 1025, 5], [100, 100, 100, 100, 70_000]
+    codes = [RAMP_CONSTANT, 0, RAMP_CONSTANT, RAMP_CONSTANT, RAMP_CONSTANT]
+    ok = predictable(np.array(steps), np.array(ticks), np.array(codes))
     assert ok.tolist() == [True, False, False, False, False]
+    assert [predictable_one(*a) for a in zip(steps, ticks, codes)] == ok.tolist()
 
 
 def test_a_ramp_from_rest_needs_several_chunks_and_each_edge_still_holds():
