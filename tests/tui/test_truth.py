@@ -185,9 +185,18 @@ async def test_the_key_bar_keeps_no_dead_keys(fake_backend):
         for _ in range(5):
             app.screen.refresh_bindings()
             await pilot.pause(0.1)
-        bar = app.screen.query_one(KeyBar)
-        bound = [node for node, _ in getattr(bar, "__watchers")["compact"]]
-        assert bound and all(node.is_attached for node in bound)  # only the keys on show
+
+        def bound() -> list:
+            bar = app.screen.query_one(KeyBar)
+            return [node for node, _ in getattr(bar, "__watchers")["compact"]]
+
+        # A recompose is asynchronous: on a loaded PC the last one may still be under way, so
+        # wait for the bar to settle; with the leak the dead keys stay bound and this times out.
+        await wait_for(
+            pilot,
+            lambda _: bool(bound()) and all(node.is_attached for node in bound()),
+            what="only the keys on show bound to the bar",
+        )
 
 
 def test_a_resumed_jobs_progress_counts_from_the_resume_point():
