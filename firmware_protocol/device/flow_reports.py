@@ -5,6 +5,7 @@ when an eighth of the queue was freed, and any other change after ``interval_s``
 from __future__ import annotations
 
 import math
+from itertools import islice
 
 from firmware_protocol.device import queue_items as m
 from firmware_protocol.device.machine import DeviceMachine
@@ -32,6 +33,8 @@ class FlowReports:
         self.free_sent = 0
         self.motion_sent = 0
         self.time = -math.inf
+        self._freed_key: tuple[int, int, float] | None = None
+        self._freed: float | None = None
 
     def wanted(self, mc: DeviceMachine, now: float, T: float) -> bool:
         sent = self.sent
@@ -56,12 +59,37 @@ class FlowReports:
         if (mc.items_done, mc.flags()) != self.sent:
             due = self.time + self.interval_s
         cur = mc.current
+        freed = self._freed_at(mc)
+        if freed is not None:
+            due = min(due, freed / speedup)
         if self.flow_ticks > 0 and cur is not None and cur.kind in m.TIMED:
             # when the executed motion reaches the threshold if it runs on without a gap
             # (an absolute time: the machine may not have been advanced to ``now`` yet)
             need = self.motion_sent + self.flow_ticks - mc.motion_ticks + 1
             due = min(due, (mc.cur_start + need / mc.clock_hz) / speedup)
         return None if due == math.inf else max(now, due)
+
+    def _freed_at(self, mc: DeviceMachine) -> float | None:
+        """Machine time at which an eighth of the queue will have been freed since the last
+        report, the items ahead running back to back (None: not foreseeable, or not before
+        a homing or a wait, whose lengths are known only once they run). Without it a queue
+        of short segments ran dry before the report that would have refilled it: the
+        firmware notices the freed slots as they come, the model only at a deadline."""
+        cur = mc.current
+        more = self.free_sent + self.step - mc.free_slots()  # items still to end
+        if cur is None or cur.kind not in m.TIMED or more < 1 or mc.cur_end == math.inf:
+            return None
+        key = (mc.items_done, more, mc.cur_end)
+        if key == self._freed_key:
+            return self._freed
+        end = mc.cur_end
+        ahead = list(islice(mc.queue, more - 1))
+        if all(it.kind in (m.SEG, m.DWELL) for it in ahead):
+            end += sum(it.ticks for it in ahead) / mc.clock_hz
+            self._freed_key, self._freed = key, end
+        else:
+            self._freed_key, self._freed = key, None
+        return self._freed
 
     def payload(self, mc: DeviceMachine, now: float, T: float) -> bytes:
         flags = mc.flags()
