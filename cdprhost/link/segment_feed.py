@@ -8,6 +8,7 @@ new configuration when the measured clock rate has moved) for nothing else.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable, Mapping
 from typing import Protocol
@@ -34,6 +35,8 @@ from firmware_protocol.segments import (
     peak_step_rates,
 )
 from firmware_protocol.step_schedule import AxisSchedule, predictable
+
+log = logging.getLogger("cdprhost.link.host_link")
 
 #: ramps (schedules fitted in Python, milliseconds each) sent per turn of the feed, which
 #: holds the link's lock meanwhile: the keep-alive and the reports wait that long
@@ -174,6 +177,7 @@ class SegmentFeed:
         c = self.core
         slots = c.credit()
         if slots <= 0:
+            c.flow.held_by_device()
             return 0
         rate = c.clock_rate()
         if abs(rate - self.session.configured_rate) > 0.1 * self.session.configured_rate:
@@ -184,7 +188,17 @@ class SegmentFeed:
             # from the low watermark (a refill then takes many rounds, and a stall of
             # either process meanwhile could let the device run dry)
             c.flow.filling = True
-        room = c.flow.room_ticks(self.ahead_ticks(), rate, moving, self.session.start_ticks)
+        late = c.flow.late_worst_s
+        room = c.flow.room_ticks(
+            self.ahead_ticks(), rate, moving, self.session.start_ticks, now=c.t.now()
+        )
+        if c.flow.late_worst_s > late and c.flow.lead_s()[0] > c.watermarks.low_s:
+            log.info(
+                "%s: the host came %.3f s late to refill; keeping %.2f-%.2f s of motion ahead",
+                c.name,
+                c.flow.late_worst_s,
+                *c.flow.lead_s(),
+            )
         if room <= 0:
             return 0
         window = self._window_room()
@@ -361,7 +375,7 @@ class SegmentFeed:
                 if now >= until:
                     break
                 wake = c.flow.wake_in(
-                    self.ahead_ticks(), c.clock_rate(), bool(c.dev.flow.flags & Flag.MOVING)
+                    self.ahead_ticks(), c.clock_rate(), bool(c.dev.flow.flags & Flag.MOVING), now
                 )
                 # below the low watermark already: only a report can give room
                 wait = until - now if not wake else min(until - now, wake)

@@ -143,9 +143,10 @@ class DeviceTracker:
             return
         for msg in msgs:
             if isinstance(msg, Flow):
-                self.flow = FlowReport(msg.queue_free, inc.ack, msg.buffered_ticks, msg.flags, now)
+                # its motion counted from when it was sent (a report read late is not fresh)
+                sent = self.clock.add(now, msg.clock)
+                self.flow = FlowReport(msg.queue_free, inc.ack, msg.buffered_ticks, msg.flags, sent)
                 self.flows += 1
-                self.clock.add(now, msg.clock)
                 self.set_progress(msg.items_done, msg.segments_done, msg.queue_free, msg.flags)
             elif isinstance(msg, Ring):  # follows FLOW (3.2)
                 if valid_entries(msg.entries):

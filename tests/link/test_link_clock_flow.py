@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cdprhost.link.clock_sync import ClockSync
+from cdprhost.link.clock_sync import QUICK_LEAK, ClockSync
 from cdprhost.link.flow import FlowReport, TimeFlow, Watermarks
 from cdprhost.sim.embedded import open_embedded
 from firmware_protocol.device.config import SimConfig
@@ -64,3 +64,28 @@ def test_the_estimate_of_motion_ahead_follows_the_device_clock():
 def test_bad_watermarks_are_refused(low, high):
     with pytest.raises(ValueError):
         Watermarks(low, high)
+
+
+def test_a_report_read_late_is_dated_when_it_was_sent():
+    """Reports every 10 ms, each 1 ms on the way; one waits 300 ms in the port's buffer (a
+    busy host): it is dated when it was sent, not when it was read, so the motion it
+    reports is not counted as 300 ms fresher than it is. Prompt ones keep their receipt."""
+    sync = ClockSync(100_000)
+    for k in range(100):
+        sent = sync.add(k * 0.01 + 0.001, k * 1000)
+        assert sent == pytest.approx(k * 0.01 + 0.001)
+    late = sync.add(1.0 + 0.3, 100 * 1000)  # sent at 1.0
+    assert late == pytest.approx(1.001, abs=0.002)
+    assert sync.add(1.011, 101 * 1000) == pytest.approx(1.011)  # back to prompt
+
+
+@given(st.floats(0.0, 2.0), st.floats(0.0005, 0.005))
+def test_a_late_reports_date_is_never_later_than_its_receipt(delay, line):
+    sync = ClockSync(100_000)
+    for k in range(50):
+        sync.add(k * 0.02 + line, k * 2000)
+    sent = sync.add(1.0 + line + delay, 100_000)
+    assert sent <= 1.0 + line + delay
+    # the quickest sample 20 ms before it, forgotten by QUICK_LEAK a second since
+    forgotten = QUICK_LEAK * (0.02 + delay)
+    assert sent == pytest.approx(1.0 + line + min(delay, forgotten), abs=1e-6)
