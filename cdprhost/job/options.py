@@ -46,6 +46,10 @@ class PrintResult:
     resume_file: str | None = None
     notices: list[str] = field(default_factory=list)
     board: str = ""  # how much the board slows the print against the profile, and why
+    # the host's own timeliness: the latest it came to refill the device (s), and the most
+    # motion it then kept ahead (the low watermark raised for it, s; link/flow.py)
+    host_late_s: float = 0.0
+    lead_s: float = 0.0
     bad_input: bool = False  # failed on bad input (a port that does not exist): exit 2
 
     @property

@@ -420,7 +420,10 @@ class Streamer:
         link = self.link
         info = self.executed(last)
         result.segments = max(0, (last or link.progress.segments_done) - self.first_segment + 1)
-        result.retransmits = link.counters.retransmits
+        counters = link.counters
+        result.retransmits = counters.retransmits
+        result.host_late_s = counters.host_late_worst_s
+        result.lead_s = counters.lead_low_max_s
         result.last_line = info.line if info else None
         result.last_layer = info.layer + 1 if info else None
         result.final_steps = list(info.steps) if info else None

@@ -38,8 +38,8 @@ holds the session while nobody calls)::
     link.counters            LinkCounters(retransmits, timeouts, naks_received, naks_sent,
                              bad_frames, frames_sent, frames_received, bytes_sent, ...,
                              late_pulses, late_worst_us, rx_overruns: the device's HEALTH;
-                             host_late_worst_s, lead_low_s: the host's own lateness to a
-                             refill and the low watermark it raised, flow.py)
+                             host_late_worst_s, lead_low_max_s: the host's own lateness to
+                             a refill and the highest low watermark it kept, flow.py)
     link.set_machine(DeviceSetup)  travel limits and PID gains, sent at every connect
                              (Machine does it from the profile: device_setup.setup_from_profile)
     link.caps, link.health   a 2.1 device's CAPS and latest HEALTH (None from a 2.0 device)

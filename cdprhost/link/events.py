@@ -243,9 +243,9 @@ class LinkCounters:
     ring_held: int = 0
     ring_disagreements: int = 0
     # the host's own timeliness (flow.py): the latest it came to a refill that fell due
-    # (seconds below the low watermark), and the low watermark in force because of it
+    # (seconds below the low watermark), and the highest low watermark it kept for it
     host_late_worst_s: float = 0.0
-    lead_low_s: float = 0.0
+    lead_low_max_s: float = 0.0
 
 
 LinkEvent = Union[DeviceProgress, DeviceEvent, DeviceErrorEvent]  # noqa: UP007

@@ -61,6 +61,7 @@ class TimeFlow:
         self.filling = True
         self.late_s = 0.0  # the worst refill lateness lately (decayed), host seconds
         self.late_worst_s = 0.0  # the worst ever seen by this flow
+        self.low_max_s = marks.low_s  # the highest low watermark it kept
         self._late_at = 0.0  # when late_s was last decayed or raised
         self._held = False  # the device's slots held the host back since it last filled up
         self.refills = 0  # refills that fell due while the host waited for them
@@ -82,6 +83,7 @@ class TimeFlow:
             self._late_at = now
         self.late_s = max(self.late_s, late_s)
         self.late_worst_s = max(self.late_worst_s, late_s)
+        self.low_max_s = max(self.low_max_s, self.lead_s(now)[0])
 
     @property
     def refill_due(self) -> float | None:

@@ -236,7 +236,7 @@ class HostLink:
             self._feed.ring.held,
             self._feed.ring.disagreements,
             host_late_worst_s=round(self._core.flow.late_worst_s, 4),
-            lead_low_s=round(self._core.flow.lead_s(self._t.now())[0], 4),
+            lead_low_max_s=round(self._core.flow.low_max_s, 4),
         )
 
     def now(self) -> float:

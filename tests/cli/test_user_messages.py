@@ -130,3 +130,20 @@ def test_sim_device_avr_prints_its_pty_path_first_and_no_loader_chatter(tmp_path
         proc.terminate()
         _, err = proc.communicate(timeout=60)
     assert "Loaded" not in err
+
+
+def test_the_print_summary_names_a_host_that_came_late_to_refill(capsys):
+    """A busy PC that made the host keep more motion ahead is named in the summary with
+    what it cost (pauses and speed changes later); a prompt one is not mentioned."""
+    import argparse
+
+    from cdprhost.cli.commands.print_cmd import _report
+    from cdprhost.job.options import PrintResult
+
+    args = argparse.Namespace(port=None, json=None)
+    late = PrintResult("completed", segments=10, host_late_s=0.42, lead_s=1.26)
+    _report(late, args, None)
+    said = capsys.readouterr().out
+    assert "0.42 s late to refill the device" in said and "1.3 s of motion ahead" in said
+    _report(PrintResult("completed", segments=10, host_late_s=0.02, lead_s=0.5), args, None)
+    assert "late to refill" not in capsys.readouterr().out

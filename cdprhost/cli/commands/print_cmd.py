@@ -40,6 +40,7 @@ from cdprhost.service.client import ServiceClient, attach
 
 MAX_SPEEDUP = 100_000.0
 START_ID = 1  # the start is the first command a print sends
+HOST_LATE_TOLD_S = 0.1  # the summary names a host that came this late to a refill, or later
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -340,6 +341,12 @@ def _report(result: Any, args: argparse.Namespace, log_path: Path | None) -> Non
         )
         if result.board:
             print(f"  ({result.board})")
+        if result.host_late_s >= HOST_LATE_TOLD_S:
+            print(
+                f"  (this PC came up to {result.host_late_s:.2f} s late to refill the device, "
+                f"so the host kept {result.lead_s:.1f} s of motion ahead or more: a pause or a "
+                "speed change took effect that much later; a less busy PC needs less)"
+            )
         print(
             f"last line: {result.last_line}  last layer: {result.last_layer}  final steps: {result.final_steps}"
         )
