@@ -35,6 +35,7 @@ class ClockSync:
         self._last_raw: int | None = None
         self._base = 0
         self._quick: tuple[float, int] | None = None  # the quickest sample lately
+        self._measured: float | None = None  # the rate, once the samples span MIN_SPAN_S
 
     def add(self, host_t: float, raw_clock: int) -> float:
         """A clock value received at host time ``host_t``; returns when it was sent, in host
@@ -51,15 +52,19 @@ class ClockSync:
             return host_t
         sent = host_t
         quick = self._quick
-        if quick is not None and self.known:  # (the rate of the samples before this one)
+        rate = self._measured  # (of the samples before this one)
+        if quick is not None and rate is not None:
             q_t, q_clock = quick
-            sent = min(host_t, q_t + (clock - q_clock) / self.rate() + QUICK_LEAK * (host_t - q_t))
+            sent = min(host_t, q_t + (clock - q_clock) / rate + QUICK_LEAK * (host_t - q_t))
         if sent >= host_t or quick is None:  # as quick as that one, or quicker: the reference
             self._quick = (host_t, clock)
         # (the rate stays on the receipts: dated by a rate, the samples would bend it)
         samples.append((host_t, clock))
         while len(samples) > 2 and host_t - samples[1][0] > WINDOW_S:
             samples.popleft()
+        (t0, c0), (t1, c1) = samples[0], samples[-1]
+        if t1 - t0 >= MIN_SPAN_S:
+            self._measured = max((c1 - c0) / (t1 - t0), 1e-9)
         return sent
 
     @property
@@ -73,8 +78,5 @@ class ClockSync:
 
     def rate(self) -> float:
         """Device ticks per host second (the nominal clock until enough samples)."""
-        s = self._samples
-        if not self.known:
-            return float(self.nominal_hz)
-        (t0, c0), (t1, c1) = s[0], s[-1]
-        return max((c1 - c0) / (t1 - t0), 1e-9)
+        rate = self._measured
+        return float(self.nominal_hz) if rate is None else rate

@@ -71,6 +71,8 @@ class TimeFlow:
         """The (low, high) watermarks in force: the configured ones, raised to cover
         :data:`LEAD_MARGIN` times the recent lateness (at ``now``; None: as last updated)."""
         late = self.late_s
+        if LEAD_MARGIN * late <= self.marks.low_s:  # (most of the time: the configured ones)
+            return self.marks.low_s, self.marks.high_s
         if now is not None and now > self._late_at:
             late *= 0.5 ** ((now - self._late_at) / LEAD_HALF_LIFE_S)
         low = max(self.marks.low_s, min(LEAD_MAX_LOW_S, LEAD_MARGIN * late))

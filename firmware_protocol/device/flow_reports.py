@@ -33,7 +33,7 @@ class FlowReports:
         self.free_sent = 0
         self.motion_sent = 0
         self.time = -math.inf
-        self._freed_key: tuple[int, int, float] | None = None
+        self._freed_key: tuple[int, int, int, float] | None = None
         self._freed: float | None = None
 
     def wanted(self, mc: DeviceMachine, now: float, T: float) -> bool:
@@ -59,31 +59,32 @@ class FlowReports:
         if (mc.items_done, mc.flags()) != self.sent:
             due = self.time + self.interval_s
         cur = mc.current
-        freed = self._freed_at(mc)
-        if freed is not None:
-            due = min(due, freed / speedup)
-        if self.flow_ticks > 0 and cur is not None and cur.kind in m.TIMED:
-            # when the executed motion reaches the threshold if it runs on without a gap
-            # (an absolute time: the machine may not have been advanced to ``now`` yet)
-            need = self.motion_sent + self.flow_ticks - mc.motion_ticks + 1
-            due = min(due, (mc.cur_start + need / mc.clock_hz) / speedup)
+        if cur is not None and cur.kind in m.TIMED:
+            if self.flow_ticks > 0:
+                # when the executed motion reaches the threshold if it runs on without a gap
+                # (an absolute time: the machine may not have been advanced to ``now`` yet)
+                need = self.motion_sent + self.flow_ticks - mc.motion_ticks + 1
+                due = min(due, (mc.cur_start + need / mc.clock_hz) / speedup)
+            key = (mc.items_done, len(mc.queue), self.free_sent, mc.cur_end)
+            freed = self._freed if key == self._freed_key else self._freed_at(mc, key)
+            if freed is not None:
+                due = min(due, freed / speedup)
         return None if due == math.inf else max(now, due)
 
-    def _freed_at(self, mc: DeviceMachine) -> float | None:
+    def _freed_at(self, mc: DeviceMachine, key: tuple[int, int, int, float]) -> float | None:
         """Machine time at which an eighth of the queue will have been freed since the last
         report, the items ahead running back to back (None: not foreseeable, or not before
         a homing or a wait, whose lengths are known only once they run). Without it a queue
         of short segments ran dry before the report that would have refilled it: the
-        firmware notices the freed slots as they come, the model only at a deadline."""
-        cur = mc.current
+        firmware notices the freed slots as they come, the model only at a deadline. Kept
+        for its ``key``: the items done, queued and free at the last report, the current
+        one's end (a TIMED one)."""
+        queue, end = mc.queue, mc.cur_end
         more = self.free_sent + self.step - mc.free_slots()  # items still to end
-        if cur is None or cur.kind not in m.TIMED or more < 1 or mc.cur_end == math.inf:
+        if more < 1 or end == math.inf:
+            self._freed_key, self._freed = key, None
             return None
-        key = (mc.items_done, more, mc.cur_end)
-        if key == self._freed_key:
-            return self._freed
-        end = mc.cur_end
-        ahead = list(islice(mc.queue, more - 1))
+        ahead = list(islice(queue, more - 1))
         if all(it.kind in (m.SEG, m.DWELL) for it in ahead):
             end += sum(it.ticks for it in ahead) / mc.clock_hz
             self._freed_key, self._freed = key, end
