@@ -37,18 +37,17 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
-import signal
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import lossy_link
 
 import cdprhost.link.flow as flow_mod
 from cdprhost.link.errors import LinkError
@@ -124,75 +123,35 @@ def compare(
     return out
 
 
-REPO = Path(__file__).resolve().parents[1]
-FIXTURE = (
-    Path(os.environ.get("CDPRHOST_SHARED", REPO.parent / "shared"))
-    / "fixtures"
-    / "part-prusaslicer.gcode"
-)
-
-
-def first_layer(out: Path) -> Path:
-    """The fixture's start up to its second layer (the repository's example without it)."""
-    if not FIXTURE.exists():
-        return REPO / "examples" / "example.gcode"
-    lines, seen = [], 0
-    for line in FIXTURE.read_text().splitlines():
-        if line.startswith(";LAYER_CHANGE"):
-            seen += 1
-            if seen > 1:
-                break
-        lines.append(line)
-    path = out / "first-layer.gcode"
-    path.write_text("\n".join([*lines, "M104 S0"]) + "\n")
-    return path
-
-
 def loaded_print(burners: int, speedup: float) -> dict[str, Any]:
     """A print over a pty with ``burners`` CPU-bound processes beside it: what the host says
     of its own lateness."""
     from cdprhost.sim import avr_device
 
     firmware = "python" if avr_device.toolchain_missing() else "avr"
-    tmp = Path(tempfile.mkdtemp())
-    gcode = first_layer(tmp)
-    env = {**os.environ, "CDPRHOST_STATE": str(tmp / "state"), "XDG_STATE_HOME": str(tmp)}
     burn = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(burners)]
-    t0 = time.monotonic()
     try:
-        cmd = [sys.executable, "-m", "cdprhost", "sim-device", "--firmware", firmware]
-        cmd += ["--speedup", f"{speedup:g}", "--faults", "hotend_start_c=190"]
-        dev = subprocess.Popen(
-            cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env
-        )
-        assert dev.stdout is not None
-        port = dev.stdout.readline().strip()
-        report = tmp / "print.json"
-        run = [
-            sys.executable,
-            "-m",
-            "cdprhost",
-            "print",
-            str(gcode),
-            "--profile",
-            "paper-prototype",
-        ]
-        run += ["--port", port, "--json", str(report)]
-        subprocess.run(run, capture_output=True, text=True, env=env, check=False)
-        dev.send_signal(signal.SIGTERM)
-        dev.wait(60)
+        with tempfile.TemporaryDirectory() as tmp:
+            has_fixture = lossy_link.FIXTURE.exists()
+            gcode = (
+                lossy_link.first_layers(lossy_link.FIXTURE, Path(tmp), 1)
+                if has_fixture
+                else lossy_link.REPO / "examples" / "example.gcode"
+            )
+            res, _, wall = lossy_link.print_over_pty(
+                gcode, speedup, "hotend_start_c=190", firmware=firmware
+            )
     finally:
         for b in burn:
             b.kill()
-    res = json.loads(report.read_text())
     keys = ("status", "segments", "print_time_s", "host_late_s", "lead_s", "reason")
     return {
-        "file": gcode.name if gcode.parent == tmp else str(gcode.relative_to(REPO)),
+        "file": "the fixture's first layer" if has_fixture else "examples/example.gcode",
         "firmware": firmware,
         "speedup": speedup,
         "burners": burners,
         **{k: res.get(k) for k in keys},
-        "wall_s": round(time.monotonic() - t0, 1),
+        "wall_s": round(wall, 1),
     }
 
 

@@ -107,13 +107,18 @@ def reference_record(gcode: Path) -> list[dict]:
 
 
 def print_over_pty(
-    gcode: Path, speedup: float, faults: str, why: list[str] | None = None
+    gcode: Path,
+    speedup: float,
+    faults: str,
+    why: list[str] | None = None,
+    firmware: str = "python",
 ) -> tuple[dict, list[dict], float]:
-    """A print over a pty; ``why`` collects the host's log lines on each retransmission."""
+    """A print over a pty on ``sim-device --firmware firmware``; ``why`` collects the host's
+    log lines on each retransmission."""
     with tempfile.TemporaryDirectory() as tmp:
         t = Path(tmp)
         record = t / "record.jsonl"
-        args = ["--speedup", f"{speedup:g}", "--record", str(record)]
+        args = ["--firmware", firmware, "--speedup", f"{speedup:g}", "--record", str(record)]
         dev, port = start_device(*args, *(["--faults", faults] if faults else []))
         report = t / "report.json"
         # a printer service of its own (the print runs in it; its log is read below)

@@ -192,13 +192,16 @@ class SegmentFeed:
         room = c.flow.room_ticks(
             self.ahead_ticks(), rate, moving, self.session.start_ticks, now=c.t.now()
         )
-        if c.flow.late_worst_s > late and c.flow.lead_s()[0] > c.watermarks.low_s:
-            log.info(
-                "%s: the host came %.3f s late to refill; keeping %.2f-%.2f s of motion ahead",
-                c.name,
-                c.flow.late_worst_s,
-                *c.flow.lead_s(),
-            )
+        if c.flow.late_worst_s > late:
+            low, high = c.flow.lead_s()
+            if low > c.watermarks.low_s:
+                log.info(
+                    "%s: the host came %.3f s late to refill; keeping %.2f-%.2f s of motion ahead",
+                    c.name,
+                    c.flow.late_worst_s,
+                    low,
+                    high,
+                )
         if room <= 0:
             return 0
         window = self._window_room()

@@ -79,18 +79,17 @@ class FlowReports:
         firmware notices the freed slots as they come, the model only at a deadline. Kept
         for its ``key``: the items done, queued and free at the last report, the current
         one's end (a TIMED one)."""
-        queue, end = mc.queue, mc.cur_end
         more = self.free_sent + self.step - mc.free_slots()  # items still to end
-        if more < 1 or end == math.inf:
-            self._freed_key, self._freed = key, None
-            return None
-        ahead = list(islice(queue, more - 1))
-        if all(it.kind in (m.SEG, m.DWELL) for it in ahead):
-            end += sum(it.ticks for it in ahead) / mc.clock_hz
-            self._freed_key, self._freed = key, end
-        else:
-            self._freed_key, self._freed = key, None
-        return self._freed
+        ahead = list(islice(mc.queue, max(0, more - 1)))
+        freed = None
+        if (
+            more >= 1
+            and mc.cur_end != math.inf
+            and all(it.kind in (m.SEG, m.DWELL) for it in ahead)
+        ):
+            freed = mc.cur_end + sum(it.ticks for it in ahead) / mc.clock_hz
+        self._freed_key, self._freed = key, freed
+        return freed
 
     def payload(self, mc: DeviceMachine, now: float, T: float) -> bytes:
         flags = mc.flags()
