@@ -305,6 +305,7 @@ def error_text(m: Error) -> str:
             else "the device could not prepare the segment's steps in time"
         ),
         ErrorCode.HEATER_LEASE: f"the host did not renew its {m.value} ms heater lease: heaters off",
+        ErrorCode.ESTOP: "emergency stop",
         ErrorCode.AUTOTUNE_FAILED: f"PID autotune failed ({_failure(m.value)})",
     }
 

@@ -144,3 +144,14 @@ def test_a_planner_late_error_says_how_late_or_that_a_segment_could_not_be_queue
     stuck = error_text(Error(ErrorCode.PLANNER_LATE, 9, 7, 2, 0))
     assert "axis 2" in stuck and "could not prepare the segment's steps" in stuck
     assert "0 ticks" not in stuck
+
+
+def test_an_emergency_stop_error_says_so_in_words():
+    """The device's ESTOP error, however it reaches the user (a wait that the stop broke, or
+    an operation refused after it), names an emergency stop, not just its code."""
+    from cdprhost.link.events import error_text
+    from firmware_protocol.codes import ErrorCode
+    from firmware_protocol.messages import Error
+
+    text = error_text(Error(ErrorCode.ESTOP, 2, 0, 0xFF, 0))
+    assert text == "estop at item 2, segment 0: emergency stop"
