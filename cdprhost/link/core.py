@@ -276,7 +276,9 @@ class LinkCore:
         self.write(ep.flush(now))
         deadline = ep.next_deadline()
         wait = max_wait if deadline is None else min(max_wait, max(0.0, deadline - now))
-        data = self.read(wait)
+        # what arrived already is news for the caller (a report that gives room): the slice
+        # ends with it, not after a wait for more
+        data = self.read(0.0 if early else wait)
         now = self.t.now()
         if data:
             self._take(data, now)
