@@ -131,6 +131,10 @@ class LinkCore:
         finally:
             self._lock.release()
 
+    def others_waiting(self) -> bool:
+        """Whether another thread waits for the lock (the holder should let go soon)."""
+        return self._waiters > 0
+
     def let_others_in(self) -> None:
         """Between pump slices, let a thread that waits for the lock have its turn."""
         if self._waiters:

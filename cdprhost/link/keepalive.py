@@ -74,7 +74,13 @@ class KeepAlive:
             with core.locked():
                 core.pump(0.0, fault_ok=True)
                 end = core.t.now() + min(interval / 2, 4 * core.ep.sender.rto.rto)
-                while not core.ep.sender.idle() and core.t.now() < end:
+                # the acknowledgements are awaited only while nobody else wants the link:
+                # frames in flight may be a stream's, whose thread waits for the lock with
+                # the report that gives it room (it held a feeding AVR 25-55 ms, its ring of
+                # fast ramps about 30 ms, dry)
+                while (
+                    not core.ep.sender.idle() and core.t.now() < end and not core.others_waiting()
+                ):
                     core.pump(min(SLICE_S, max(0.0, end - core.t.now())), fault_ok=True)
         except (LinkError, OSError):
             pass

@@ -31,10 +31,15 @@ class _Core:
         self.pumping = pumping
         self.last_pump = self.t.now_s - since_pump_s
         self.dev = SimpleNamespace(failure=None)
+        self.in_flight = False  # frames not acknowledged yet
+        self.waiting = False  # another thread waits for the lock
         self.ep = SimpleNamespace(
-            sender=SimpleNamespace(idle=lambda: True, rto=SimpleNamespace(rto=0.025))
+            sender=SimpleNamespace(idle=lambda: not self.in_flight, rto=SimpleNamespace(rto=0.025))
         )
         self.pumps: list[float] = []
+
+    def others_waiting(self) -> bool:
+        return self.waiting
 
     def keepalive_interval(self) -> float:
         return 1.0
@@ -48,6 +53,7 @@ class _Core:
 
     def pump(self, timeout: float, *, fault_ok: bool = False) -> None:
         self.pumps.append(timeout)
+        self.t.now_s += timeout
 
 
 def _turn(core: _Core) -> None:
@@ -75,3 +81,20 @@ def test_a_waiting_report_is_left_to_a_caller_inside_a_pump():
     core = _Core(pumping=True, since_pump_s=0.0)
     _turn(core)
     assert core.pumps == []
+
+
+def test_frames_in_flight_are_awaited_while_nobody_else_wants_the_link():
+    core = _Core(pumping=False, since_pump_s=0.2)
+    core.in_flight = True  # its own keep-alive, say: it waits for the acknowledgement
+    _turn(core)
+    assert len(core.pumps) > 2 and sum(core.pumps) >= 4 * 0.025 - 1e-9
+
+
+def test_a_stream_waiting_for_the_lock_is_not_held_for_its_own_frames():
+    # the feed's frames are in flight and its thread waits for the lock (with the report
+    # that gives it room): the keep-alive reads what came and lets go
+    core = _Core(pumping=False, since_pump_s=0.2)
+    core.in_flight = True
+    core.waiting = True
+    _turn(core)
+    assert core.pumps == [0.0]
