@@ -41,6 +41,12 @@ log = logging.getLogger("cdprhost.link.host_link")
 #: ramps (schedules fitted in Python, milliseconds each) sent per turn of the feed, which
 #: holds the link's lock meanwhile: the keep-alive and the reports wait that long
 RAMPS_PER_TURN = 16
+#: while the device has no room (its window, slots or ring), the feed fits the blocks the
+#: next ramps must carry, at most PREFIT_RAMPS a wait and PREFIT_AHEAD segments ahead: the
+#: send the next report allows then only encodes them (a block's fit takes about 0.5 ms of
+#: Python, and the AVR engine's ring of fast ramps holds about 30 ms)
+PREFIT_RAMPS = 4
+PREFIT_AHEAD = 32
 #: the ramps' fits may take this share of the host's time since the feed began, and at
 #: most FIT_TURN_S in one turn (a fast stream of a simulated device gets few blocks for its
 #: ramps: the rest run on the device's own stepping, PROTOCOL.md 5.5), until the fitter is
@@ -296,6 +302,39 @@ class SegmentFeed:
         c.write(c.ep.flush(c.t.now()))
         return n
 
+    def _prefit(self, batch: SegmentBatch, i: int, n: int) -> None:
+        """While the feed waits for room: the blocks of the next ramps that must carry one
+        (STEPPING), fitted and kept as a send fits them, so the send does not wait on them."""
+        kept_batch, kept = self._kept
+        if kept_batch is not batch:
+            kept = {}
+        j = min(n, i + PREFIT_AHEAD)
+        needed = self._needs_block(batch[i:j])
+        if needed is None:
+            return
+        ramps = needed & (batch.ramps[i:j] != RAMP_CONSTANT)
+        todo = [a for a in (np.flatnonzero(ramps) + i).tolist() if a not in kept][:PREFIT_RAMPS]
+        if not todo:
+            return
+        c = self.core
+        caps = c.dev.caps or DeviceCaps()
+        now = time.perf_counter()
+        idx = np.asarray(todo)
+        blocks = wire_schedules(
+            SegmentBatch(batch.ticks[idx], batch.deltas[idx], batch.ramps[idx]),
+            c.ctx,
+            caps.schedule_tolerance_cycles,
+            self.block_payload(),
+            fit_budget_s=0.0,
+            needed=np.ones(len(todo), bool),
+        )
+        self._fit_s += time.perf_counter() - now
+        for a in todo:
+            kept.setdefault(a, {})  # fitted, even where no axis keeps a block
+        for (a, k), sched in blocks.items():
+            kept[todo[a]][k] = sched
+        self._kept = (batch, kept)
+
     def check_step_rates(self, batch: SegmentBatch, identity: Identity) -> None:
         """Raise :class:`StepRateError` for a segment over the device's max step rate, over
         the total its axes share (STEP_BUDGET), or shorter than the shortest one it takes
@@ -372,6 +411,7 @@ class SegmentFeed:
                         # frames not queued): ask for a report that counts them all
                         c.send_immediate(GetStatus())
                         c.write(c.ep.flush(c.t.now()))
+                    self._prefit(batch, i, n)
                     c.pump(min(until - c.t.now(), 0.25))
                     continue
                 now = c.t.now()
@@ -382,5 +422,6 @@ class SegmentFeed:
                 )
                 # below the low watermark already: only a report can give room
                 wait = until - now if not wake else min(until - now, wake)
+                self._prefit(batch, i, n)
                 c.pump(min(wait, 0.25))
         return i
