@@ -97,13 +97,20 @@ class Prepared:
     setup: Setup
     placement: tuple[float, float]  # the X/Y shift applied to the file (mm)
     plan: RetargetPlan | None
+    #: the file as prepared (size, modification time, inode; None: not a file to stat)
+    stamp: tuple[int, int, int] | None = None
 
     def items(self) -> Iterator[ProgramItem]:
-        """A fresh stream of the program's items (every call reads the file again)."""
+        """A fresh stream of the program's items (every call reads the file again). A file
+        changed since it was prepared (overwritten by a new slice, truncated while read)
+        is a GcodeError, before its first item or after its last: never a shorter print
+        that looks whole."""
         settings = reader_settings(self.profile, self.model)
         mute = self.plan.mute if self.plan else ()
-        items: Iterable[ProgramItem] = read_program(
-            self.path, placement=self.placement, mute=mute, **settings
+        items: Iterable[ProgramItem] = _unchanged(
+            read_program(self.path, placement=self.placement, mute=mute, **settings),
+            self.path,
+            self.stamp,
         )
         if self.plan is not None:
             items = retarget_items(
@@ -138,6 +145,35 @@ class Prepared:
         return self._profile_code("end", here)
 
 
+def file_stamp(path: str) -> tuple[int, int, int] | None:
+    """What tells a file changed: its size, modification time and inode (None: no file)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns, st.st_ino
+
+
+def _unchanged(
+    items: Iterable[ProgramItem], path: str, stamp: tuple[int, int, int] | None
+) -> Iterator[ProgramItem]:
+    """``items``, checked against the file's ``stamp`` before the first and after the last."""
+
+    def check() -> None:
+        if stamp is not None and file_stamp(path) != stamp:
+            raise GcodeError(
+                path,
+                0,
+                0,
+                "the file changed after it was checked (written again or truncated); "
+                "nothing more of it is printed: check and print it again",
+            )
+
+    check()
+    yield from items
+    check()
+
+
 def prepare(
     path: str | os.PathLike[str],
     profile: MachineProfile,
@@ -149,6 +185,7 @@ def prepare(
     model = model or MachineModel.from_profile(profile)
     setup = setup or Setup()
     source = os.fspath(path)
+    stamp = file_stamp(source)
     offset = setup.offset
     plan = None
     if setup.center or setup.retarget:
@@ -164,4 +201,5 @@ def prepare(
             )
         dx, dy = centre_offset(extent, build_volume_centre(profile))
         offset = (dx + offset[0], dy + offset[1])
-    return Prepared(source, profile, model, setup, (float(offset[0]), float(offset[1])), plan)
+    placement = (float(offset[0]), float(offset[1]))
+    return Prepared(source, profile, model, setup, placement, plan, stamp)

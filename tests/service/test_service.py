@@ -167,7 +167,9 @@ def test_one_print_at_a_time(run_dir, monkeypatch, tmp_path):
     so_far, _ = _follow(first, until=lambda s: s.state is JobState.PRINTING)
     second = connect(first.files, "second", replay=False)
     try:
-        second.send(_start(tmp_path))
+        # its own file: the part's again in the same place would rewrite the one printing
+        (tmp_path / "second").mkdir()
+        second.send(_start(tmp_path / "second"))
         reply = wait_until(lambda: _reply(second), 30, "a reply")
         assert not reply.ok and "--attach" in reply.error
         second.send(wire.Cancel(reason="test"))  # any front end may stop it
