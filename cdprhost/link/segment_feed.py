@@ -255,22 +255,14 @@ class SegmentFeed:
         ring has no room for yet (3.2); returns how many went."""
         c = self.core
         sub = batch[i:j]
-        caps = c.dev.caps or DeviceCaps()
-        now = time.perf_counter()
-        budget = min(FIT_TURN_S, FIT_SHARE * (now - self._began) - self._fit_s)
-        kept_batch, kept = self._kept
-        if kept_batch is not batch:
-            kept = {}
-        blocks = wire_schedules(
+        budget = min(FIT_TURN_S, FIT_SHARE * (time.perf_counter() - self._began) - self._fit_s)
+        kept = self._kept_for(batch)
+        blocks = self._fit_blocks(
             sub,
-            c.ctx,
-            caps.schedule_tolerance_cycles,
-            self.block_payload(),
-            fit_budget_s=budget,
-            needed=self._needs_block(sub),
-            fitted={a - i: axes for a, axes in kept.items() if i <= a < j},
+            budget,
+            self._needs_block(sub),
+            {a - i: axes for a, axes in kept.items() if i <= a < j},
         )
-        self._fit_s += time.perf_counter() - now
         ring = c.dev.ring
         self.ring.follow(ring, c.ep.sender.items_after(ring.ack) if ring else 0)
         n = self.ring.admit(ring, self._ring_needs(j - i, blocks))
@@ -302,12 +294,38 @@ class SegmentFeed:
         c.write(c.ep.flush(c.t.now()))
         return n
 
+    def _kept_for(self, batch: SegmentBatch) -> dict[int, dict[int, AxisSchedule]]:
+        """The blocks fitted and not sent yet, by segment of ``batch`` (none of another's)."""
+        kept_batch, kept = self._kept
+        return kept if kept_batch is batch else {}
+
+    def _fit_blocks(
+        self,
+        sub: SegmentBatch,
+        budget_s: float,
+        needed: np.ndarray | None,
+        fitted: Mapping[int, Mapping[int, AxisSchedule]] | None = None,
+    ) -> dict[tuple[int, int], AxisSchedule]:
+        """:func:`wire_schedules` for the device's tolerance and frames, its time counted."""
+        c = self.core
+        caps = c.dev.caps or DeviceCaps()
+        now = time.perf_counter()
+        blocks = wire_schedules(
+            sub,
+            c.ctx,
+            caps.schedule_tolerance_cycles,
+            self.block_payload(),
+            fit_budget_s=budget_s,
+            needed=needed,
+            fitted=fitted,
+        )
+        self._fit_s += time.perf_counter() - now
+        return blocks
+
     def _prefit(self, batch: SegmentBatch, i: int, n: int) -> None:
         """While the feed waits for room: the blocks of the next ramps that must carry one
         (STEPPING), fitted and kept as a send fits them, so the send does not wait on them."""
-        kept_batch, kept = self._kept
-        if kept_batch is not batch:
-            kept = {}
+        kept = self._kept_for(batch)
         j = min(n, i + PREFIT_AHEAD)
         needed = self._needs_block(batch[i:j])
         if needed is None:
@@ -316,19 +334,9 @@ class SegmentFeed:
         todo = [a for a in (np.flatnonzero(ramps) + i).tolist() if a not in kept][:PREFIT_RAMPS]
         if not todo:
             return
-        c = self.core
-        caps = c.dev.caps or DeviceCaps()
-        now = time.perf_counter()
         idx = np.asarray(todo)
-        blocks = wire_schedules(
-            SegmentBatch(batch.ticks[idx], batch.deltas[idx], batch.ramps[idx]),
-            c.ctx,
-            caps.schedule_tolerance_cycles,
-            self.block_payload(),
-            fit_budget_s=0.0,
-            needed=np.ones(len(todo), bool),
-        )
-        self._fit_s += time.perf_counter() - now
+        some = SegmentBatch(batch.ticks[idx], batch.deltas[idx], batch.ramps[idx])
+        blocks = self._fit_blocks(some, 0.0, np.ones(len(todo), bool))
         for a in todo:
             kept.setdefault(a, {})  # fitted, even where no axis keeps a block
         for (a, k), sched in blocks.items():
