@@ -214,7 +214,8 @@ class PrintJob:
 
     def _prepare(self) -> Prepared:
         if self._prepared is None:
-            prepared = prepare(self.gcode, self.profile, self.model, self.setup)
+            # the job's own copy: the preflight and the print read the same bytes
+            prepared = prepare(self.gcode, self.profile, self.model, self.setup, copy=True)
             point = self.options.resume
             if point is not None and point.placement is not None:
                 saved = (float(point.placement[0]), float(point.placement[1]))
@@ -240,14 +241,21 @@ class PrintJob:
         try:
             return self._run()
         finally:
+            self._drop_copy()
             self.log.close()
             self._done.set()
+
+    def _drop_copy(self) -> None:
+        """The job's copy of its file goes with the job (a later read copies it again)."""
+        prepared, self._prepared = self._prepared, None
+        if prepared is not None and prepared.copy is not None:
+            prepared.copy.remove()
 
     def _run(self) -> PrintResult:
         self._set(JobState.PREFLIGHT, str(self.gcode))
         try:
-            self._sha256 = file_sha256(self.gcode)
             prepared = self._prepare()
+            self._sha256 = prepared.sha256 or file_sha256(self.gcode)
             report, planned = self._estimate(prepared)
         except _CancelledEarly:
             return self._cancelled_early()

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cdprhost.gcode.errors import GcodeError
+from cdprhost.gcode.file_copy import FileCopy, copy_file, file_stamp
 from cdprhost.gcode.items import ProgramItem
 from cdprhost.gcode.objects import exclude_objects
 from cdprhost.gcode.placement import PartExtent, centre_offset
@@ -99,19 +100,36 @@ class Prepared:
     plan: RetargetPlan | None
     #: the file as prepared (size, modification time, inode; None: not a file to stat)
     stamp: tuple[int, int, int] | None = None
+    #: the job's private copy of the file (``prepare(copy=True)``), which every read reads
+    copy: FileCopy | None = None
+
+    @property
+    def sha256(self) -> str | None:
+        """The hash of the bytes printed (those of the copy; None without one)."""
+        return None if self.copy is None else self.copy.sha256
 
     def items(self) -> Iterator[ProgramItem]:
-        """A fresh stream of the program's items (every call reads the file again). A file
-        changed since it was prepared (overwritten by a new slice, truncated while read)
-        is a GcodeError, before its first item or after its last: never a shorter print
-        that looks whole."""
+        """A fresh stream of the program's items (every call reads the file again). With
+        a copy, the copy's: the file may change meanwhile. Without one, a file changed
+        since it was prepared (overwritten by a new slice, truncated while read) is a
+        GcodeError, before its first item or after its last: never a shorter print that
+        looks whole."""
         settings = reader_settings(self.profile, self.model)
         mute = self.plan.mute if self.plan else ()
-        items: Iterable[ProgramItem] = _unchanged(
-            read_program(self.path, placement=self.placement, mute=mute, **settings),
-            self.path,
-            self.stamp,
-        )
+        items: Iterable[ProgramItem]
+        if self.copy is not None:
+            items = _holding(
+                read_program(
+                    self.copy.path, placement=self.placement, mute=mute, name=self.path, **settings
+                ),
+                self.copy,
+            )
+        else:
+            items = _unchanged(
+                read_program(self.path, placement=self.placement, mute=mute, **settings),
+                self.path,
+                self.stamp,
+            )
         if self.plan is not None:
             items = retarget_items(
                 items,
@@ -145,15 +163,6 @@ class Prepared:
         return self._profile_code("end", here)
 
 
-def file_stamp(path: str) -> tuple[int, int, int] | None:
-    """What tells a file changed: its size, modification time and inode (None: no file)."""
-    try:
-        st = os.stat(path)
-    except OSError:
-        return None
-    return st.st_size, st.st_mtime_ns, st.st_ino
-
-
 def _unchanged(
     items: Iterable[ProgramItem], path: str, stamp: tuple[int, int, int] | None
 ) -> Iterator[ProgramItem]:
@@ -174,24 +183,36 @@ def _unchanged(
     check()
 
 
+def _holding(items: Iterable[ProgramItem], copy: FileCopy) -> Iterator[ProgramItem]:
+    """``items``, keeping ``copy`` (and so its file) while they are read."""
+    yield from items
+    del copy
+
+
 def prepare(
     path: str | os.PathLike[str],
     profile: MachineProfile,
     model: MachineModel | None = None,
     setup: Setup | None = None,
+    copy: bool = False,
+    copy_folder: str | os.PathLike[str] | None = None,
 ) -> Prepared:
     """Decide the placement (and the blocks to replace): one extra read of the file for
-    ``--center`` and ``--retarget``, none otherwise."""
+    ``--center`` and ``--retarget``, none otherwise. ``copy``: read the file once into a
+    private copy (in ``copy_folder``, default the system's temporary folder) that every
+    later read reads, as a print must (`cdprhost.gcode.file_copy`)."""
     model = model or MachineModel.from_profile(profile)
     setup = setup or Setup()
     source = os.fspath(path)
     stamp = file_stamp(source)
+    kept = copy_file(source, copy_folder) if copy else None
+    readable = kept.path if kept is not None else source
     offset = setup.offset
     plan = None
     if setup.center or setup.retarget:
-        first = read_program(source, **reader_settings(profile, model))
+        first = read_program(readable, name=source, **reader_settings(profile, model))
         if setup.retarget:
-            plan = plan_retarget(first, source)
+            plan = plan_retarget(first, readable)
             extent = plan.extent
         else:
             extent = PartExtent.of(first)
@@ -202,4 +223,4 @@ def prepare(
         dx, dy = centre_offset(extent, build_volume_centre(profile))
         offset = (dx + offset[0], dy + offset[1])
     placement = (float(offset[0]), float(offset[1]))
-    return Prepared(source, profile, model, setup, placement, plan, stamp)
+    return Prepared(source, profile, model, setup, placement, plan, stamp, kept)
