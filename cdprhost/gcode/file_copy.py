@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import stat
 import tempfile
 import weakref
 
@@ -63,6 +64,12 @@ def copy_file(
     before = file_stamp(name)
     digest = hashlib.sha256()
     size = 0
+    try:
+        mode = os.stat(name).st_mode
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", source=name) from None
+    if not stat.S_ISREG(mode):  # a folder, a pipe, a device: no G-code file to copy
+        raise InputError("not a regular file: nothing to print from", source=name)
     try:
         src = open(name, "rb")  # noqa: SIM115 - closed by the with below; open errors named
     except OSError as exc:

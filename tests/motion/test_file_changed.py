@@ -105,6 +105,13 @@ def test_a_missing_file_is_named(tmp_path):
     assert "gone.gcode" in str(err.value)
 
 
+def test_what_is_not_a_regular_file_is_refused_before_any_copy(tmp_path):
+    for path in (tmp_path, Path("/dev/zero")):
+        with pytest.raises(InputError, match="not a regular file") as err:
+            prepare(path, PROFILE, copy=True)
+        assert str(path) in str(err.value)
+
+
 def test_a_file_written_while_it_is_copied_is_refused_and_no_copy_is_left(tmp_path, monkeypatch):
     gcode = square_part(tmp_path / "part.gcode", layers=1)
     copies = tmp_path / "copies"
